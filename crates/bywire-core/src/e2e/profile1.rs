@@ -1,0 +1,231 @@
+//! AUTOSAR E2E Profile 1: CRC-8 SAE J1850 over the data ID and the data, a 4-bit counter 0–14.
+//!
+//! Standard layout (`E2E_P01_DATAID_*` variants): the CRC in byte 0 (bit offset 0), the counter
+//! in the low nibble of byte 1 (bit offset 8); in `Nibble` mode the high nibble of byte 1 carries
+//! the data ID's high nibble.
+
+use super::sequence::SequenceState;
+use super::{CheckStatus, SequenceConfig};
+use crate::crc::{crc8_sae_j1850, crc8_sae_j1850_continue};
+
+/// How the 16-bit data ID enters the CRC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum DataIdMode {
+    /// Both bytes, low then high.
+    Both,
+    /// Low byte for even counters, high byte for odd ones.
+    Alt,
+    /// Low byte only (the high byte must be 0).
+    Low,
+    /// Low byte, then the high nibble sent in the data and a zero byte in the CRC.
+    Nibble,
+}
+
+/// Profile 1 settings (the standard layout, offsets in bits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Config {
+    /// The data ID.
+    pub data_id: u16,
+    /// Data ID inclusion mode.
+    pub data_id_mode: DataIdMode,
+    /// Bytes of the protected data (CRC byte included), at least 2.
+    pub length: usize,
+    /// Receiver sequence settings.
+    pub sequence: SequenceConfig,
+}
+
+/// Why data cannot be protected or checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum E2eError {
+    /// The buffer is shorter than the configured length, or the length is below 2.
+    #[error("protected data needs {needed} bytes, buffer has {actual}")]
+    Length {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes there.
+        actual: usize,
+    },
+}
+
+const CRC_BYTE: usize = 0;
+const COUNTER_BYTE: usize = 1;
+/// Counter values run 0..=14; 15 is never sent.
+const MODULUS: u8 = 15;
+
+fn region(config: &Config, data: &[u8]) -> Result<usize, E2eError> {
+    if config.length < 2 || data.len() < config.length {
+        return Err(E2eError::Length {
+            needed: config.length.max(2),
+            actual: data.len(),
+        });
+    }
+    Ok(config.length)
+}
+
+/// The profile's CRC of `data` (whose counter is already written).
+pub fn crc(config: &Config, data: &[u8]) -> Result<u8, E2eError> {
+    let len = region(config, data)?;
+    let [low, high] = config.data_id.to_le_bytes();
+    let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
+    let start = match config.data_id_mode {
+        DataIdMode::Both => crc8_sae_j1850_continue(crc8_sae_j1850(&[low]), &[high]),
+        DataIdMode::Alt if counter % 2 == 0 => crc8_sae_j1850(&[low]),
+        DataIdMode::Alt => crc8_sae_j1850(&[high]),
+        DataIdMode::Low => crc8_sae_j1850(&[low]),
+        DataIdMode::Nibble => crc8_sae_j1850_continue(crc8_sae_j1850(&[low]), &[0]),
+    };
+    // CRC over the bytes after the CRC byte, then inverted once more (the profile's final XOR).
+    let body = data.get(COUNTER_BYTE..len).unwrap_or(&[]);
+    Ok(crc8_sae_j1850_continue(start, body) ^ 0xFF)
+}
+
+/// The sender's state: the counter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct Protector {
+    counter: u8,
+}
+
+impl Protector {
+    /// A sender starting at counter 0.
+    pub fn new() -> Self {
+        Protector::default()
+    }
+
+    /// Write counter (and data ID nibble) and CRC into `data`, then advance the counter.
+    pub fn protect(&mut self, config: &Config, data: &mut [u8]) -> Result<(), E2eError> {
+        region(config, data)?;
+        if let Some(b) = data.get_mut(COUNTER_BYTE) {
+            let high = if config.data_id_mode == DataIdMode::Nibble {
+                // the data ID's bits 8..12 in the high nibble
+                u8::try_from((config.data_id >> 8) & 0x0F).unwrap_or(0) << 4
+            } else {
+                *b & 0xF0
+            };
+            *b = high | self.counter;
+        }
+        let crc = crc(config, data)?;
+        if let Some(b) = data.get_mut(CRC_BYTE) {
+            *b = crc;
+        }
+        self.counter = (self.counter + 1) % MODULUS;
+        Ok(())
+    }
+}
+
+/// The receiver's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Checker {
+    state: SequenceState,
+}
+
+impl Default for Checker {
+    fn default() -> Self {
+        Checker {
+            state: SequenceState::new(MODULUS),
+        }
+    }
+}
+
+impl Checker {
+    /// A receiver waiting for its first data.
+    pub fn new() -> Self {
+        Checker::default()
+    }
+
+    /// Check `data` (`None`: the check ran with no new data).
+    pub fn check(&mut self, config: &Config, data: Option<&[u8]>) -> Result<CheckStatus, E2eError> {
+        let received = match data {
+            None => None,
+            Some(data) => {
+                let expected = crc(config, data)?;
+                let nibble_ok = config.data_id_mode != DataIdMode::Nibble
+                    || data.get(COUNTER_BYTE).map(|b| b >> 4)
+                        == u8::try_from((config.data_id >> 8) & 0x0F).ok();
+                let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
+                Some(
+                    if data.get(CRC_BYTE) == Some(&expected) && nibble_ok && counter < MODULUS {
+                        Ok(counter)
+                    } else {
+                        Err(())
+                    },
+                )
+            }
+        };
+        Ok(self.state.check(&config.sequence, received))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(mode: DataIdMode) -> Config {
+        Config {
+            data_id: 0x1234,
+            data_id_mode: mode,
+            length: 8,
+            sequence: SequenceConfig {
+                max_delta_counter_init: 2,
+                max_no_new_or_repeated_data: 1,
+                sync_counter_init: 0,
+            },
+        }
+    }
+
+    #[test]
+    fn protect_then_check_through_the_statuses() {
+        let cfg = config(DataIdMode::Both);
+        let mut tx = Protector::new();
+        let mut rx = Checker::new();
+        let mut frames = [[0u8, 0, 1, 2, 3, 4, 5, 6]; 20];
+        for f in frames.iter_mut() {
+            tx.protect(&cfg, f).unwrap();
+        }
+        assert_eq!(frames[14][1] & 0x0F, 14);
+        assert_eq!(frames[15][1] & 0x0F, 0, "counter skips 15");
+        assert_eq!(rx.check(&cfg, Some(&frames[0])), Ok(CheckStatus::Initial));
+        assert_eq!(rx.check(&cfg, Some(&frames[1])), Ok(CheckStatus::Ok));
+        assert_eq!(rx.check(&cfg, Some(&frames[1])), Ok(CheckStatus::Repeated));
+        assert_eq!(rx.check(&cfg, Some(&frames[2])), Ok(CheckStatus::Ok));
+        assert_eq!(rx.check(&cfg, None), Ok(CheckStatus::NoNewData));
+        assert_eq!(
+            rx.check(&cfg, Some(&frames[4])),
+            Ok(CheckStatus::OkSomeLost)
+        );
+        assert_eq!(
+            rx.check(&cfg, Some(&frames[9])),
+            Ok(CheckStatus::WrongSequence)
+        );
+        let mut bad = frames[5];
+        bad[4] ^= 0x01;
+        assert_eq!(rx.check(&cfg, Some(&bad)), Ok(CheckStatus::WrongCrc));
+        // Another data ID gives another CRC.
+        let other = Config {
+            data_id: 0x1235,
+            ..cfg
+        };
+        assert_eq!(
+            rx.check(&other, Some(&frames[5])),
+            Ok(CheckStatus::WrongCrc)
+        );
+        assert_eq!(
+            rx.check(&cfg, Some(&[0u8; 3])),
+            Err(E2eError::Length {
+                needed: 8,
+                actual: 3
+            })
+        );
+    }
+
+    #[test]
+    fn nibble_mode_sends_the_high_nibble() {
+        let cfg = config(DataIdMode::Nibble);
+        let mut data = [0u8; 8];
+        Protector::new().protect(&cfg, &mut data).unwrap();
+        assert_eq!(data[1] >> 4, 0x2);
+        assert_eq!(
+            Checker::new().check(&cfg, Some(&data)),
+            Ok(CheckStatus::Initial)
+        );
+    }
+}

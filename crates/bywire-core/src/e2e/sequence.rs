@@ -1,0 +1,135 @@
+//! The receive-side state machine shared by AUTOSAR E2E Profiles 1 and 2.
+
+/// Outcome of checking one reception (`E2E_P01CheckStatusType` / `E2E_P02CheckStatusType`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CheckStatus {
+    /// New data, correct CRC, counter one ahead.
+    Ok,
+    /// The check was called with no new data.
+    NoNewData,
+    /// The CRC does not match: the data are corrupted or not for this data ID.
+    WrongCrc,
+    /// Correct, but the receiver is still resynchronising after a sequence error; do not use
+    /// the data yet.
+    Sync,
+    /// The first correct data after start: nothing to compare the counter with yet.
+    Initial,
+    /// Correct CRC, same counter as before: repeated data.
+    Repeated,
+    /// Correct, with some values lost in between, within the allowed gap.
+    OkSomeLost,
+    /// The counter jumped further than allowed.
+    WrongSequence,
+}
+
+/// Receiver configuration common to both profiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SequenceConfig {
+    /// Largest counter step accepted right after a correct reception (`MaxDeltaCounterInit`).
+    pub max_delta_counter_init: u8,
+    /// Most calls without new or with repeated data before a resynchronisation
+    /// (`MaxNoNewOrRepeatedData`).
+    pub max_no_new_or_repeated_data: u8,
+    /// Correct receptions needed to leave resynchronisation (`SyncCounterInit`).
+    pub sync_counter_init: u8,
+}
+
+impl Default for SequenceConfig {
+    fn default() -> Self {
+        SequenceConfig {
+            max_delta_counter_init: 1,
+            max_no_new_or_repeated_data: 0,
+            sync_counter_init: 0,
+        }
+    }
+}
+
+/// The check state (`E2E_P0xCheckStateType`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) struct SequenceState {
+    pub modulus: u8,
+    pub last_valid_counter: u8,
+    pub max_delta_counter: u8,
+    pub wait_for_first_data: bool,
+    pub lost_data: u8,
+    pub no_new_or_repeated_data_counter: u8,
+    pub sync_counter: u8,
+}
+
+impl SequenceState {
+    pub fn new(modulus: u8) -> Self {
+        SequenceState {
+            modulus: modulus.max(2),
+            last_valid_counter: 0,
+            max_delta_counter: 0,
+            wait_for_first_data: true,
+            lost_data: 0,
+            no_new_or_repeated_data_counter: 0,
+            sync_counter: 0,
+        }
+    }
+
+    /// One check, after the profile has read the counter and verified the CRC.
+    /// `received` is `None` when there was no new data, `Some(Err(()))` on a CRC mismatch.
+    pub fn check(
+        &mut self,
+        config: &SequenceConfig,
+        received: Option<Result<u8, ()>>,
+    ) -> CheckStatus {
+        let top = self.modulus - 1;
+        if self.max_delta_counter < top {
+            self.max_delta_counter += 1;
+        }
+        let counter = match received {
+            None => {
+                if self.no_new_or_repeated_data_counter < top {
+                    self.no_new_or_repeated_data_counter += 1;
+                }
+                return CheckStatus::NoNewData;
+            }
+            Some(Err(())) => return CheckStatus::WrongCrc,
+            Some(Ok(counter)) => counter % self.modulus,
+        };
+        if self.wait_for_first_data {
+            self.wait_for_first_data = false;
+            self.max_delta_counter = config.max_delta_counter_init;
+            self.last_valid_counter = counter;
+            return CheckStatus::Initial;
+        }
+        let delta = (counter + self.modulus - self.last_valid_counter) % self.modulus;
+        if delta == 0 {
+            if self.no_new_or_repeated_data_counter < top {
+                self.no_new_or_repeated_data_counter += 1;
+            }
+            return CheckStatus::Repeated;
+        }
+        if delta > self.max_delta_counter {
+            self.no_new_or_repeated_data_counter = 0;
+            self.sync_counter = config.sync_counter_init;
+            if self.sync_counter > 0 {
+                self.max_delta_counter = config.max_delta_counter_init;
+                self.last_valid_counter = counter;
+            }
+            return CheckStatus::WrongSequence;
+        }
+        self.max_delta_counter = config.max_delta_counter_init;
+        self.last_valid_counter = counter;
+        self.lost_data = delta - 1;
+        if self.no_new_or_repeated_data_counter <= config.max_no_new_or_repeated_data {
+            self.no_new_or_repeated_data_counter = 0;
+            if self.sync_counter > 0 {
+                self.sync_counter -= 1;
+                return CheckStatus::Sync;
+            }
+            if delta == 1 {
+                CheckStatus::Ok
+            } else {
+                CheckStatus::OkSomeLost
+            }
+        } else {
+            self.sync_counter = config.sync_counter_init;
+            self.no_new_or_repeated_data_counter = 0;
+            CheckStatus::Sync
+        }
+    }
+}
