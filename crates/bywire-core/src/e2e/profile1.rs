@@ -6,7 +6,7 @@
 
 use super::sequence::SequenceState;
 use super::{CheckStatus, SequenceConfig};
-use crate::crc::{crc8_sae_j1850, crc8_sae_j1850_continue};
+use crate::crc::crc8_sae_j1850_continue;
 
 /// How the 16-bit data ID enters the CRC.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -67,12 +67,15 @@ pub fn crc(config: &Config, data: &[u8]) -> Result<u8, E2eError> {
     let len = region(config, data)?;
     let [low, high] = config.data_id.to_le_bytes();
     let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
+    // The profile calls the CRC routine with start value 0xFF, which the routine XORs with its
+    // 0xFF: the register starts at 0x00, not at SAE J1850's usual 0xFF.
+    let first = |byte: u8| crc8_sae_j1850_continue(0xFF, &[byte]);
     let start = match config.data_id_mode {
-        DataIdMode::Both => crc8_sae_j1850_continue(crc8_sae_j1850(&[low]), &[high]),
-        DataIdMode::Alt if counter % 2 == 0 => crc8_sae_j1850(&[low]),
-        DataIdMode::Alt => crc8_sae_j1850(&[high]),
-        DataIdMode::Low => crc8_sae_j1850(&[low]),
-        DataIdMode::Nibble => crc8_sae_j1850_continue(crc8_sae_j1850(&[low]), &[0]),
+        DataIdMode::Both => crc8_sae_j1850_continue(first(low), &[high]),
+        DataIdMode::Alt if counter % 2 == 0 => first(low),
+        DataIdMode::Alt => first(high),
+        DataIdMode::Low => first(low),
+        DataIdMode::Nibble => crc8_sae_j1850_continue(first(low), &[0]),
     };
     // CRC over the bytes after the CRC byte, then inverted once more (the profile's final XOR).
     let body = data.get(COUNTER_BYTE..len).unwrap_or(&[]);
