@@ -1,0 +1,111 @@
+//! Property tests: text and wire round trips, error detection, length bounds, and no panics on
+//! arbitrary input.
+// Tests fail by panicking; helpers outside #[test] functions may unwrap too.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use bywire_core::frame::{ClassicFrame, Dlc, FdFrame, Frame, Id};
+use bywire_core::wire::{self, length_bounds, BitSeq, Field, FrameShape};
+use proptest::prelude::*;
+
+fn id() -> impl Strategy<Value = Id> {
+    prop_oneof![
+        (0u32..=0x7FF).prop_map(|v| Id::standard(v).unwrap()),
+        (0u32..=0x1FFF_FFFF).prop_map(|v| Id::extended(v).unwrap()),
+    ]
+}
+
+/// Payloads biased towards long runs of equal bits, where stuffing happens.
+fn payload(max: usize) -> impl Strategy<Value = Vec<u8>> {
+    prop::collection::vec(prop_oneof![Just(0x00u8), Just(0xFF), any::<u8>()], 0..=max)
+}
+
+fn frame() -> impl Strategy<Value = Frame> {
+    prop_oneof![
+        (id(), payload(8)).prop_map(|(id, d)| Frame::classic(id, &d).unwrap()),
+        (id(), 0u8..=15).prop_map(|(id, dlc)| Frame::remote(id, Dlc::new(dlc).unwrap())),
+        (id(), prop::array::uniform8(any::<u8>()), 9u8..=15).prop_map(|(id, d, dlc)| {
+            Frame::Classic(ClassicFrame::with_dlc(id, Dlc::new(dlc).unwrap(), &d).unwrap())
+        }),
+        (id(), payload(64), any::<bool>(), any::<bool>())
+            .prop_map(|(id, d, brs, esi)| Frame::Fd(FdFrame::padded(id, &d, brs, esi).unwrap())),
+    ]
+}
+
+fn shape(f: &Frame) -> FrameShape {
+    FrameShape {
+        extended: f.id().unwrap().is_extended(),
+        remote: f.is_remote(),
+        fd: f.is_fd(),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    #[test]
+    fn text_round_trip(f in frame()) {
+        let text = f.to_string();
+        prop_assert_eq!(text.parse::<Frame>(), Ok(f));
+    }
+
+    #[test]
+    fn error_frame_text_round_trip(class in 0u32..=0x3FF, data in prop::collection::vec(any::<u8>(), 8)) {
+        let f = Frame::Error(bywire_core::ErrorFrame::new(class, &data).unwrap());
+        prop_assert_eq!(f.to_string().parse::<Frame>(), Ok(f));
+    }
+
+    #[test]
+    fn wire_round_trip_within_bounds(f in frame()) {
+        let w = wire::encode(&f).unwrap();
+        prop_assert_eq!(wire::decode(w.bits()), Ok(f));
+        let (lo, hi) = length_bounds(shape(&f), f.dlc());
+        prop_assert!(lo <= w.len() && w.len() <= hi, "{} not in {}..={}", w.len(), lo, hi);
+        // Never six equal levels in the stuffed part (SOF through the CRC).
+        let crc = w.spans().iter().find(|s| s.field == Field::Crc).unwrap();
+        let mut run = 0;
+        let mut last = None;
+        for bit in w.bits().iter().take(crc.start + crc.len) {
+            run = if Some(bit) == last { run + 1 } else { 1 };
+            last = Some(bit);
+            prop_assert!(run <= 5);
+        }
+    }
+
+    #[test]
+    fn any_single_bit_flip_in_the_stuffed_region_is_detected(f in frame(), pick in any::<prop::sample::Index>()) {
+        let w = wire::encode(&f).unwrap();
+        let crc = w.spans().iter().find(|s| s.field == Field::Crc).unwrap();
+        let end = crc.start + crc.len;
+        let i = pick.index(end);
+        let mut bits = *w.bits();
+        bits.flip(i);
+        prop_assert!(wire::decode(&bits).is_err(), "flip at {} of {} went unnoticed", i, f);
+    }
+
+    #[test]
+    fn decoding_arbitrary_levels_never_panics(levels in prop::collection::vec(any::<bool>(), 0..800)) {
+        let mut bits = BitSeq::new();
+        for b in levels.iter().take(wire::MAX_FRAME_BITS) {
+            bits.push(*b).unwrap();
+        }
+        let _ = wire::decode(&bits);
+    }
+
+    #[test]
+    fn parsing_arbitrary_text_never_panics(text in ".{0,160}") {
+        let _ = text.parse::<Frame>();
+        let _ = text.parse::<bywire_core::filter::FilterItem>();
+    }
+
+    #[test]
+    fn parsing_frame_like_text_never_panics(text in "[0-9A-Fa-f]{0,9}#{1,2}[0-9A-FRr._#]{0,140}") {
+        if let Ok(f) = text.parse::<Frame>() {
+            prop_assert_eq!(f.to_string().parse::<Frame>(), Ok(f));
+        }
+    }
+}

@@ -1,0 +1,154 @@
+//! The command line as a user runs it.
+// Tests fail by panicking; helpers outside #[test] functions may unwrap too.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use std::process::Command;
+
+fn bywire(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+fn json(args: &[&str]) -> serde_json::Value {
+    let (code, out, err) = bywire(args);
+    assert_eq!(code, 0, "{err}");
+    serde_json::from_str(&out).unwrap()
+}
+
+#[test]
+fn wire_json_has_the_documented_keys() {
+    let j = json(&["wire", "000#", "--bitrate", "500000", "--json"]);
+    assert_eq!(
+        j["bits"],
+        "00000100000100000100000100000100000100001011111111"
+    );
+    assert_eq!(j["length_bits"], 50);
+    assert_eq!(j["stuff_bits"], 6);
+    assert_eq!(j["crc"], 0);
+    assert_eq!(j["time_ns"], 100_000.0);
+    let j = json(&[
+        "wire",
+        "123##1DEADBEEF",
+        "--bitrate",
+        "500000",
+        "--dbitrate",
+        "2000000",
+        "--json",
+    ]);
+    let len = j["length_bits"].as_u64().unwrap() as usize;
+    assert_eq!(j["bits"].as_str().unwrap().len(), len);
+    assert_eq!(j["crc_width"], 17);
+    assert_eq!(j["fixed_stuff_bits"], 6);
+    assert!(j["time_ns"].as_f64().unwrap() < len as f64 * 2000.0);
+}
+
+#[test]
+fn wire_human_output_marks_stuff_bits() {
+    let (code, out, _) = bywire(&["wire", "000#"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("00000[1]"), "{out}");
+    assert!(out.contains("length  50 bits"), "{out}");
+}
+
+#[test]
+fn bittiming_json_has_the_documented_keys() {
+    let j = json(&[
+        "bittiming",
+        "--clock",
+        "8000000",
+        "--bitrate",
+        "500000",
+        "--sample-point",
+        "0.875",
+        "--controller",
+        "sja1000",
+        "--json",
+    ]);
+    for (key, value) in [
+        ("bitrate", 500_000.0),
+        ("sample_point", 0.875),
+        ("tq_ns", 125.0),
+        ("brp", 1.0),
+        ("prop_seg", 6.0),
+        ("phase_seg1", 7.0),
+        ("phase_seg2", 2.0),
+        ("sjw", 1.0),
+        ("bitrate_error", 0.0),
+    ] {
+        assert_eq!(j[key].as_f64(), Some(value), "{key}");
+    }
+    // Percent works as well as a fraction; FD adds the data phase.
+    let j = json(&[
+        "bittiming",
+        "--clock",
+        "80000000",
+        "--bitrate",
+        "500000",
+        "--sample-point",
+        "80",
+        "--dbitrate",
+        "2000000",
+        "--json",
+    ]);
+    assert_eq!(j["sample_point"], 0.8);
+    assert_eq!(j["data"]["bitrate"], 2_000_000);
+}
+
+#[test]
+fn bad_input_is_a_clear_error_with_exit_1() {
+    let (code, _, err) = bywire(&["wire", "12G#00"]);
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("column 3") && err.contains("'G' is not a hex digit"),
+        "{err}"
+    );
+    let (code, _, err) = bywire(&[
+        "bittiming",
+        "--clock",
+        "8000000",
+        "--bitrate",
+        "950000",
+        "--controller",
+        "sja1000",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("5.2% off"), "{err}");
+    let (code, _, err) = bywire(&[
+        "bittiming",
+        "--clock",
+        "8000000",
+        "--bitrate",
+        "500000",
+        "--controller",
+        "nope",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("unknown controller 'nope'"), "{err}");
+    let (code, _, err) = bywire(&[
+        "bittiming",
+        "--clock",
+        "8000000",
+        "--bitrate",
+        "1000000",
+        "--controller",
+        "sja1000",
+        "--bus-length",
+        "40",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("does not fit"), "{err}");
+    let (code, _, _) = bywire(&["wire"]);
+    assert_eq!(code, 2, "usage errors exit 2");
+}

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Installs the independent implementations the tests compare against (from the package
+# registries) and prepares the SocketCAN VM. Safe to run again.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export DEBIAN_FRONTEND=noninteractive
+SUDO=""
+[ "$(id -u)" = 0 ] || SUDO=sudo
+if ! command -v sigrok-cli >/dev/null; then
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli >/dev/null
+fi
+# crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle.
+python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0
+# Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
+../shared/tools/canvm.sh prepare
