@@ -128,6 +128,17 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// `count` successive protections of `start`, as hex.
+fn protect_run(start: [u8; 8], count: usize, mut protect: impl FnMut(&mut [u8; 8])) -> Vec<String> {
+    let mut data = start;
+    (0..count)
+        .map(|_| {
+            protect(&mut data);
+            hex(&data)
+        })
+        .collect()
+}
+
 #[test]
 fn e2e_profile1_matches_autosar_e2e() {
     let modes = [
@@ -154,13 +165,7 @@ fn e2e_profile1_matches_autosar_e2e() {
             );
             input.push('\n');
             let mut tx = profile1::Protector::new();
-            let mut data = start;
-            let mut frames = Vec::new();
-            for _ in 0..20 {
-                tx.protect(&config, &mut data).unwrap();
-                frames.push(hex(&data));
-            }
-            ours.push(frames);
+            ours.push(protect_run(start, 20, |d| tx.protect(&config, d).unwrap()));
         }
     }
     let theirs: Vec<Vec<String>> = run_python("e2e_profiles.py", &input)
@@ -190,13 +195,7 @@ fn e2e_profile2_matches_autosar_e2e() {
         );
         input.push('\n');
         let mut tx = profile2::Protector::new();
-        let mut data = start;
-        let mut frames = Vec::new();
-        for _ in 0..34 {
-            tx.protect(&config, &mut data).unwrap();
-            frames.push(hex(&data));
-        }
-        ours.push(frames);
+        ours.push(protect_run(start, 34, |d| tx.protect(&config, d).unwrap()));
     }
     let theirs: Vec<Vec<String>> = run_python("e2e_profiles.py", &input)
         .lines()

@@ -137,24 +137,15 @@ impl Checker {
 
     /// Check `data` (`None`: the check ran with no new data).
     pub fn check(&mut self, config: &Config, data: Option<&[u8]>) -> Result<CheckStatus, E2eError> {
-        let received = match data {
-            None => None,
-            Some(data) => {
-                let expected = crc(config, data)?;
-                let nibble_ok = config.data_id_mode != DataIdMode::Nibble
-                    || data.get(COUNTER_BYTE).map(|b| b >> 4)
-                        == u8::try_from((config.data_id >> 8) & 0x0F).ok();
-                let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
-                Some(
-                    if data.get(CRC_BYTE) == Some(&expected) && nibble_ok && counter < MODULUS {
-                        Ok(counter)
-                    } else {
-                        Err(())
-                    },
-                )
-            }
-        };
-        Ok(self.state.check(&config.sequence, received))
+        self.state.check_data(&config.sequence, data, |data| {
+            let expected = crc(config, data)?;
+            let nibble_ok = config.data_id_mode != DataIdMode::Nibble
+                || data.get(COUNTER_BYTE).map(|b| b >> 4)
+                    == u8::try_from((config.data_id >> 8) & 0x0F).ok();
+            let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
+            let intact = data.get(CRC_BYTE) == Some(&expected) && nibble_ok && counter < MODULUS;
+            Ok(if intact { Ok(counter) } else { Err(()) })
+        })
     }
 }
 

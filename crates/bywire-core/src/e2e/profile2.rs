@@ -87,19 +87,15 @@ impl Checker {
 
     /// Check `data` (`None`: the check ran with no new data).
     pub fn check(&mut self, config: &Config, data: Option<&[u8]>) -> Result<CheckStatus, E2eError> {
-        let received = match data {
-            None => None,
-            Some(data) => {
-                let expected = crc(config, data)?;
-                let counter = data.get(1).map_or(0, |b| b & 0x0F);
-                Some(if data.first() == Some(&expected) {
-                    Ok(counter)
-                } else {
-                    Err(())
-                })
-            }
-        };
-        Ok(self.state.check(&config.sequence, received))
+        self.state.check_data(&config.sequence, data, |data| {
+            let expected = crc(config, data)?;
+            let counter = data.get(1).map_or(0, |b| b & 0x0F);
+            Ok(if data.first() == Some(&expected) {
+                Ok(counter)
+            } else {
+                Err(())
+            })
+        })
     }
 }
 

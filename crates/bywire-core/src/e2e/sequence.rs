@@ -69,6 +69,18 @@ impl SequenceState {
         }
     }
 
+    /// One check of `data` (`None`: no new data), with `read` giving the counter of data whose
+    /// CRC (and data ID) is right and `Err(())` otherwise: the part both profiles share.
+    pub fn check_data<E>(
+        &mut self,
+        config: &SequenceConfig,
+        data: Option<&[u8]>,
+        read: impl FnOnce(&[u8]) -> Result<Result<u8, ()>, E>,
+    ) -> Result<CheckStatus, E> {
+        let received = data.map(read).transpose()?;
+        Ok(self.check(config, received))
+    }
+
     /// One check, after the profile has read the counter and verified the CRC.
     /// `received` is `None` when there was no new data, `Some(Err(()))` on a CRC mismatch.
     pub fn check(
