@@ -443,6 +443,57 @@ mod tests {
         assert_eq!(controller("nope"), None);
     }
 
+    /// What the controllers' reference manuals allow, from their register field widths (a field
+    /// of n bits holding value − 1 gives 1..=2^n): (TSEG1 range, TSEG2 range, SJW max, BRP range).
+    /// Combined TSEG1 ranges add the PROP_SEG and PHASE_SEG1 fields where a controller has two.
+    type Range = (u32, u32);
+    const DATASHEETS: [(&str, Range, Range, u32, Range); 8] = [
+        // SJA1000 BTR0/BTR1: TSEG1 4 bits, TSEG2 3 bits, SJW 2 bits, BRP 6 bits.
+        ("sja1000", (1, 16), (1, 8), 4, (1, 64)),
+        // MCP2515 CNF1-3: PRSEG 3 + PHSEG1 3 bits, PHSEG2 3 bits (at least 2 tq), SJW 2, BRP 6.
+        ("mcp2515", (2, 16), (2, 8), 4, (1, 64)),
+        // bxCAN CAN_BTR: TS1 4 bits, TS2 3 bits, SJW 2 bits, BRP 10 bits.
+        ("bxcan", (1, 16), (1, 8), 4, (1, 1024)),
+        // M_CAN NBTP: NTSEG1 8 bits (0 not allowed), NTSEG2 7 bits, NSJW 7 bits, NBRP 9 bits.
+        ("m_can", (2, 256), (1, 128), 128, (1, 512)),
+        // M_CAN DBTP: DTSEG1 5 bits, DTSEG2 4 bits, DSJW 4 bits, DBRP 5 bits.
+        ("m_can-data", (1, 32), (1, 16), 16, (1, 32)),
+        // FlexCAN CTRL1: PROPSEG 3 + PSEG1 3 bits, PSEG2 3 bits (at least 2 tq), RJW 2, PRESDIV 8.
+        ("flexcan", (2, 16), (2, 8), 4, (1, 256)),
+        // FlexCAN CBT: EPROPSEG 6 + EPSEG1 5 bits, EPSEG2 5 bits, ERJW 5 bits, EPRESDIV 10 bits.
+        ("flexcan-fd", (2, 96), (1, 32), 32, (1, 1024)),
+        // FlexCAN FDCBT: FPROPSEG 5 bits (from 0) + FPSEG1 3 bits, FPSEG2 3, FRJW 3, FPRESDIV 10.
+        ("flexcan-fd-data", (1, 39), (1, 8), 8, (1, 1024)),
+    ];
+
+    #[test]
+    fn controller_limits_lie_within_their_datasheets() {
+        for (name, tseg1, tseg2, sjw, brp) in DATASHEETS {
+            let c = controller(name).unwrap();
+            let within =
+                |ours: (u32, u32), sheet: (u32, u32)| sheet.0 <= ours.0 && ours.1 <= sheet.1;
+            assert!(
+                within(c.tseg1, tseg1),
+                "{name} tseg1 {:?} vs {tseg1:?}",
+                c.tseg1
+            );
+            assert!(
+                within(c.tseg2, tseg2),
+                "{name} tseg2 {:?} vs {tseg2:?}",
+                c.tseg2
+            );
+            assert!(within(c.brp, brp), "{name} brp {:?} vs {brp:?}", c.brp);
+            assert!(c.sjw_max <= sjw, "{name} sjw");
+            // The largest register values are usable: no range is cut short at the top.
+            assert_eq!(
+                (c.tseg1.1, c.tseg2.1, c.brp.1),
+                (tseg1.1, tseg2.1, brp.1),
+                "{name}"
+            );
+        }
+        assert_eq!(CONTROLLERS.len(), DATASHEETS.len());
+    }
+
     #[test]
     fn bus_length_follows_the_rule_of_thumb() {
         // 40 MHz M_CAN: 500 kbit/s allows about 100 m, 1 Mbit/s a few tens of metres.
