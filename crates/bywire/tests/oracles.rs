@@ -1,5 +1,5 @@
 //! Differential tests against implementations that share no code with bywire:
-//! crccheck and sigrok's CAN decoder for the wire model, the `autosar-e2e` package for the E2E
+//! crccheck and sigrok's CAN decoder for the wire model (classic and ISO CAN FD), the `autosar-e2e` package for the E2E
 //! profiles. `.ci/run` installs them (pip: crccheck, autosar-e2e; apt: sigrok-cli).
 // Tests fail by panicking; helpers outside #[test] functions may unwrap too.
 #![allow(
@@ -51,6 +51,33 @@ impl Lcg {
     }
 }
 
+fn fd_frames(count: usize) -> Vec<String> {
+    let mut rng = Lcg(11);
+    let lengths = [0, 1, 5, 8, 12, 16, 20, 24, 32, 48, 64];
+    (0..count)
+        .map(|i| {
+            let id = if rng.next() % 2 == 0 {
+                format!("{:08X}", rng.next() & 0x1FFF_FFFF)
+            } else {
+                format!("{:03X}", rng.next() & 0x7FF)
+            };
+            let len = lengths[i % lengths.len()];
+            let fill = [0x00, 0xFF, 0x0F, 0xF0][(rng.next() % 4) as usize];
+            let data: String = (0..len)
+                .map(|_| {
+                    if rng.next() % 2 == 0 {
+                        fill
+                    } else {
+                        rng.next() & 0xFF
+                    }
+                })
+                .map(|b| format!("{b:02X}"))
+                .collect();
+            format!("{id}##{:X}{data}", rng.next() % 4)
+        })
+        .collect()
+}
+
 fn classic_frames(count: usize) -> Vec<String> {
     let mut rng = Lcg(7);
     let mut frames = vec![
@@ -96,8 +123,9 @@ fn classic_frames(count: usize) -> Vec<String> {
 }
 
 #[test]
-fn classic_bit_sequences_agree_with_crccheck_and_sigrok() {
-    let frames = classic_frames(300);
+fn bit_sequences_agree_with_crccheck_and_sigrok() {
+    let mut frames = classic_frames(300);
+    frames.extend(fd_frames(200));
     let mut input = String::new();
     for text in &frames {
         let out = Command::new(env!("CARGO_BIN_EXE_bywire"))
@@ -111,8 +139,8 @@ fn classic_bit_sequences_agree_with_crccheck_and_sigrok() {
         input.push('\n');
     }
     let summary: serde_json::Value =
-        serde_json::from_str(&run_python("classic_frames.py", &input)).unwrap();
-    assert_eq!(summary["checked"], 300, "{summary:#}");
+        serde_json::from_str(&run_python("wire_frames.py", &input)).unwrap();
+    assert_eq!(summary["checked"], 500, "{summary:#}");
     assert_eq!(
         summary["sigrok_frames"], summary["sigrok_checked"],
         "{summary:#}"
