@@ -1,0 +1,555 @@
+//! Compiled decode/encode plans.
+//!
+//! [`MessageCodec::new`] turns a message into one plan per signal: the byte where a 16-byte
+//! window around the signal starts, the shift and the mask, so decoding a signal is one load,
+//! one shift, one mask and the scaling. Decoding writes into a caller-provided slice and never
+//! allocates; no byte string makes it panic.
+//!
+//! Physical values follow Python's (and so cantools') number rules, which the vectors in the
+//! corpus are made with: a signal whose scale and offset are whole numbers decodes to an exact
+//! integer ([`Value::Int`]); otherwise `raw * scale + offset` is computed in `f64`, converting
+//! an integer operand at each operation exactly as Python does, so floats agree bit for bit.
+
+use crate::model::{ByteOrder, Message, Multiplexing, Num, Signal, ValueType};
+use crate::parser::signal_bits;
+
+/// Bytes of slack after the largest (64-byte) payload so every window load stays in bounds.
+const WINDOW: usize = 16;
+const BUFFER: usize = 64 + WINDOW;
+
+/// A physical value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Value {
+    /// An exact integer (integer raw value with whole-number scale and offset).
+    Int(i128),
+    /// A floating-point value.
+    Float(f64),
+}
+
+impl Value {
+    /// The value as `f64`.
+    pub fn as_f64(self) -> f64 {
+        match self {
+            // Python's float(int): correctly rounded, as `as` is.
+            #[allow(clippy::cast_precision_loss)]
+            Value::Int(i) => i as f64,
+            Value::Float(f) => f,
+        }
+    }
+}
+
+/// One decoded signal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decoded {
+    /// The raw bits, zero-extended (two's complement for signed signals).
+    pub raw: u64,
+    /// The physical value.
+    pub physical: Value,
+}
+
+/// Why a frame does not decode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    /// Fewer bytes than the message's size.
+    #[error("{got} bytes, but the message has {needed}")]
+    TooShort {
+        /// The message's size.
+        needed: usize,
+        /// Bytes given.
+        got: usize,
+    },
+    /// A multiplexor's value selects no signal.
+    #[error("multiplexer value {value} selects no signal")]
+    UnknownMultiplexerValue {
+        /// Index of the multiplexor signal.
+        signal: usize,
+        /// Its raw value.
+        value: u64,
+    },
+    /// The output slice is shorter than the message's signal count.
+    #[error("output has room for {got} signals, the message has {needed}")]
+    Output {
+        /// Signals in the message.
+        needed: usize,
+        /// Room given.
+        got: usize,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Conversion {
+    /// Scale 1, offset 0: the raw value itself.
+    Identity,
+    /// Whole-number scale and offset on an integer signal: exact integer arithmetic.
+    Integer { scale: i128, offset: i128 },
+    /// Anything else: Python float arithmetic.
+    Linear { scale: Num, offset: Num },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Presence {
+    Always,
+    /// Present when signal `switch` has raw value `value`.
+    Selected {
+        switch: usize,
+        value: u64,
+    },
+    /// Present when signal `switch` has a raw value in one of `ranges`.
+    Ranges {
+        switch: usize,
+        ranges: Vec<(u64, u64)>,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Plan {
+    window: usize,
+    shift: u32,
+    mask: u128,
+    big_endian: bool,
+    length: u32,
+    value_type: ValueType,
+    conversion: Conversion,
+    presence: Presence,
+    /// Runs past the message's size: never decoded.
+    past_end: bool,
+}
+
+/// A message compiled for decoding and encoding.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MessageCodec {
+    size: usize,
+    plans: Vec<Plan>,
+    /// Decode order: every switch before the signals it selects.
+    order: Vec<usize>,
+    /// Multiplexors with the values their dependents accept.
+    multiplexors: Vec<(usize, Vec<(u64, u64)>)>,
+}
+
+fn conversion(s: &Signal) -> Conversion {
+    let is_float = !matches!(s.value_type, ValueType::Integer { .. });
+    let whole = |n: Num| match n {
+        Num::Int(i) => Some(i),
+        // A float with no fraction: exact as an integer below 2^53.
+        #[allow(clippy::cast_possible_truncation)]
+        Num::Float(f) if f.is_finite() && f.fract() == 0.0 && f.abs() < 9.0e15 => Some(f as i128),
+        Num::Float(_) => None,
+    };
+    match (whole(s.factor), whole(s.offset)) {
+        (Some(1), Some(0)) => Conversion::Identity,
+        (Some(scale), Some(offset)) if !is_float => Conversion::Integer { scale, offset },
+        _ => Conversion::Linear {
+            scale: s.factor,
+            offset: s.offset,
+        },
+    }
+}
+
+fn plan(s: &Signal, size: usize) -> Plan {
+    let length = s.length.clamp(1, 64);
+    let mask = (1u128 << length) - 1;
+    let past_end =
+        signal_bits(s).is_none_or(|(_, last)| usize::try_from(last).map_or(true, |l| l >= size));
+    let (window, shift, big_endian) = match s.byte_order {
+        ByteOrder::LittleEndian => {
+            let start = usize::try_from(s.start_bit).unwrap_or(usize::MAX);
+            (start / 8, s.start_bit % 8, false)
+        }
+        ByteOrder::BigEndian => {
+            // Linear numbering: bit 0 is the MSB of byte 0.
+            let msb = (s.start_bit / 8) * 8 + (7 - s.start_bit % 8);
+            let lsb = msb + length - 1;
+            let window = usize::try_from(msb / 8).unwrap_or(usize::MAX);
+            let lsb_in_window = lsb - (msb / 8) * 8;
+            (window, 127 - lsb_in_window, true)
+        }
+    };
+    Plan {
+        window: if window + WINDOW <= BUFFER { window } else { 0 },
+        shift,
+        mask,
+        big_endian,
+        length,
+        value_type: s.value_type,
+        conversion: conversion(s),
+        presence: Presence::Always,
+        past_end: past_end || window + WINDOW > BUFFER,
+    }
+}
+
+impl MessageCodec {
+    /// Compile a message.
+    pub fn new(message: &Message) -> Self {
+        let size = usize::try_from(message.size).unwrap_or(usize::MAX).min(64);
+        let mut plans: Vec<Plan> = message.signals.iter().map(|s| plan(s, size)).collect();
+        let index = |name: &str| message.signals.iter().position(|s| s.name == name);
+        // Simple multiplexing: the message's `M` signal selects the `mN` ones.
+        let simple_switch = message
+            .signals
+            .iter()
+            .position(|s| s.multiplexing == Multiplexing::Multiplexor)
+            .or_else(|| {
+                message
+                    .signals
+                    .iter()
+                    .position(|s| matches!(s.multiplexing, Multiplexing::MultiplexedMultiplexor(_)))
+            });
+        for (i, s) in message.signals.iter().enumerate() {
+            let presence = match (&s.mux_condition, s.multiplexing) {
+                (Some(c), _) => match index(&c.switch) {
+                    Some(switch) => Presence::Ranges {
+                        switch,
+                        ranges: c.ranges.clone(),
+                    },
+                    None => Presence::Always,
+                },
+                (
+                    None,
+                    Multiplexing::Multiplexed(value) | Multiplexing::MultiplexedMultiplexor(value),
+                ) => match simple_switch.filter(|&sw| sw != i) {
+                    Some(switch) => Presence::Selected { switch, value },
+                    None => Presence::Always,
+                },
+                (None, _) => Presence::Always,
+            };
+            if let Some(p) = plans.get_mut(i) {
+                p.presence = presence;
+            }
+        }
+        let mut multiplexors: Vec<(usize, Vec<(u64, u64)>)> = Vec::new();
+        for p in &plans {
+            let (switch, accepted) = match &p.presence {
+                Presence::Always => continue,
+                Presence::Selected { switch, value } => (*switch, vec![(*value, *value)]),
+                Presence::Ranges { switch, ranges } => (*switch, ranges.clone()),
+            };
+            match multiplexors.iter_mut().find(|(s, _)| *s == switch) {
+                Some((_, values)) => values.extend(accepted),
+                None => multiplexors.push((switch, accepted)),
+            }
+        }
+        // A multiplexor value listed in its value descriptions is valid even when it selects no
+        // signal (cantools accepts it too).
+        for (switch, values) in &mut multiplexors {
+            if let Some(sig) = message.signals.get(*switch) {
+                for (v, _) in &sig.value_descriptions {
+                    if let Ok(v) = u64::try_from(*v) {
+                        values.push((v, v));
+                    }
+                }
+            }
+        }
+        let order = decode_order(&plans);
+        MessageCodec {
+            size,
+            plans,
+            order,
+            multiplexors,
+        }
+    }
+
+    /// Number of signals (the length `decode` needs).
+    pub fn signal_count(&self) -> usize {
+        self.plans.len()
+    }
+
+    /// The message's size in bytes.
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// Decode `data` into `out` (one entry per signal, in the message's order; `None` for a
+    /// signal that multiplexing leaves out or that runs past the message's end).
+    pub fn decode(&self, data: &[u8], out: &mut [Option<Decoded>]) -> Result<(), DecodeError> {
+        if out.len() < self.plans.len() {
+            return Err(DecodeError::Output {
+                needed: self.plans.len(),
+                got: out.len(),
+            });
+        }
+        let payload = data.get(..self.size).ok_or(DecodeError::TooShort {
+            needed: self.size,
+            got: data.len(),
+        })?;
+        let mut buf = [0u8; BUFFER];
+        if let Some(dst) = buf.get_mut(..payload.len()) {
+            dst.copy_from_slice(payload);
+        }
+        for &i in &self.order {
+            let (Some(p), Some(slot)) = (self.plans.get(i), out.get(i)) else {
+                continue;
+            };
+            let _ = slot;
+            let present = !p.past_end
+                && match &p.presence {
+                    Presence::Always => true,
+                    Presence::Selected { switch, value } => out
+                        .get(*switch)
+                        .copied()
+                        .flatten()
+                        .is_some_and(|d| d.raw == *value),
+                    Presence::Ranges { switch, ranges } => {
+                        out.get(*switch).copied().flatten().is_some_and(|d| {
+                            ranges.iter().any(|(lo, hi)| (*lo..=*hi).contains(&d.raw))
+                        })
+                    }
+                };
+            let value = present.then(|| decode_signal(p, &buf));
+            if let Some(slot) = out.get_mut(i) {
+                *slot = value;
+            }
+        }
+        for (switch, accepted) in &self.multiplexors {
+            if let Some(Some(d)) = out.get(*switch) {
+                if !accepted.iter().any(|(lo, hi)| (*lo..=*hi).contains(&d.raw)) {
+                    return Err(DecodeError::UnknownMultiplexerValue {
+                        signal: *switch,
+                        value: d.raw,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Encode physical values (one entry per signal; `None` leaves its bits 0) into `out`,
+    /// which must hold the message's size; returns the size. Values are converted as cantools
+    /// does (`round` half to even) and masked to the signal's width.
+    pub fn encode(&self, values: &[Option<Value>], out: &mut [u8]) -> Result<usize, DecodeError> {
+        let target = out.get_mut(..self.size).ok_or(DecodeError::TooShort {
+            needed: self.size,
+            got: 0,
+        })?;
+        let mut buf = [0u8; BUFFER];
+        for (p, v) in self.plans.iter().zip(values) {
+            let Some(v) = v else { continue };
+            if p.past_end {
+                continue;
+            }
+            let raw = to_raw(p, *v);
+            write_window(p, &mut buf, u128::from(raw) & p.mask);
+        }
+        if let Some(src) = buf.get(..self.size) {
+            target.copy_from_slice(src);
+        }
+        Ok(self.size)
+    }
+}
+
+/// Switches before the signals they select (depth-first; bounded by the signal count).
+fn decode_order(plans: &[Plan]) -> Vec<usize> {
+    let mut order = Vec::with_capacity(plans.len());
+    let mut placed = vec![false; plans.len()];
+    let switch_of = |i: usize| match plans.get(i).map(|p| &p.presence) {
+        Some(Presence::Selected { switch, .. } | Presence::Ranges { switch, .. }) => Some(*switch),
+        _ => None,
+    };
+    for i in 0..plans.len() {
+        let mut chain = Vec::new();
+        let mut cur = Some(i);
+        // A chain of switches is at most as long as the message; cycles stop there.
+        while let Some(c) = cur {
+            if chain.len() > plans.len()
+                || placed.get(c).copied().unwrap_or(true)
+                || chain.contains(&c)
+            {
+                break;
+            }
+            chain.push(c);
+            cur = switch_of(c);
+        }
+        for &c in chain.iter().rev() {
+            if let Some(slot) = placed.get_mut(c) {
+                if !*slot {
+                    *slot = true;
+                    order.push(c);
+                }
+            }
+        }
+    }
+    order
+}
+
+fn read_window(p: &Plan, buf: &[u8; BUFFER]) -> u128 {
+    let mut w = [0u8; WINDOW];
+    if let Some(src) = buf.get(p.window..p.window + WINDOW) {
+        w.copy_from_slice(src);
+    }
+    if p.big_endian {
+        u128::from_be_bytes(w)
+    } else {
+        u128::from_le_bytes(w)
+    }
+}
+
+fn write_window(p: &Plan, buf: &mut [u8; BUFFER], raw: u128) {
+    let Some(dst) = buf.get_mut(p.window..p.window + WINDOW) else {
+        return;
+    };
+    let mut w = [0u8; WINDOW];
+    w.copy_from_slice(dst);
+    let mut word = if p.big_endian {
+        u128::from_be_bytes(w)
+    } else {
+        u128::from_le_bytes(w)
+    };
+    word = (word & !(p.mask << p.shift)) | (raw << p.shift);
+    let bytes = if p.big_endian {
+        word.to_be_bytes()
+    } else {
+        word.to_le_bytes()
+    };
+    dst.copy_from_slice(&bytes);
+}
+
+fn decode_signal(p: &Plan, buf: &[u8; BUFFER]) -> Decoded {
+    // The mask keeps at most 64 bits.
+    #[allow(clippy::cast_possible_truncation)]
+    let raw = ((read_window(p, buf) >> p.shift) & p.mask) as u64;
+    let number = match p.value_type {
+        ValueType::Integer { signed: false } => Value::Int(i128::from(raw)),
+        ValueType::Integer { signed: true } => {
+            let unused = 64 - p.length;
+            // Sign-extend: move the sign bit to bit 63 and shift back arithmetically.
+            #[allow(clippy::cast_possible_wrap)]
+            let v = ((raw << unused) as i64) >> unused;
+            Value::Int(i128::from(v))
+        }
+        // The raw bits of a float signal are its IEEE representation; 32 low bits for f32.
+        #[allow(clippy::cast_possible_truncation)]
+        ValueType::Float32 => Value::Float(f64::from(f32::from_bits(raw as u32))),
+        ValueType::Float64 => Value::Float(f64::from_bits(raw)),
+    };
+    Decoded {
+        raw,
+        physical: scale(&p.conversion, number),
+    }
+}
+
+/// Python's `a * b` and `a + b` on int/float operands.
+fn mul(a: Value, b: Num) -> Value {
+    match (a, b) {
+        (Value::Int(x), Num::Int(y)) => x.checked_mul(y).map_or(
+            Value::Float(Value::Int(x).as_f64() * Num::Int(y).as_f64()),
+            Value::Int,
+        ),
+        (a, b) => Value::Float(a.as_f64() * b.as_f64()),
+    }
+}
+
+fn add(a: Value, b: Num) -> Value {
+    match (a, b) {
+        (Value::Int(x), Num::Int(y)) => x.checked_add(y).map_or(
+            Value::Float(Value::Int(x).as_f64() + Num::Int(y).as_f64()),
+            Value::Int,
+        ),
+        (a, b) => Value::Float(a.as_f64() + b.as_f64()),
+    }
+}
+
+fn scale(c: &Conversion, raw: Value) -> Value {
+    match c {
+        Conversion::Identity => raw,
+        Conversion::Integer { scale, offset } => add(mul(raw, Num::Int(*scale)), Num::Int(*offset)),
+        Conversion::Linear { scale, offset } => add(mul(raw, *scale), *offset),
+    }
+}
+
+/// Python's `round()` of a float to an integer: half to even; non-finite and huge values clamp.
+fn round_even(f: f64) -> i128 {
+    let r = f.round_ties_even();
+    if r.is_nan() {
+        0
+    } else {
+        // Saturating float-to-int conversion is what we want for out-of-range values.
+        #[allow(clippy::cast_possible_truncation)]
+        let i = r as i128;
+        i
+    }
+}
+
+fn to_raw(p: &Plan, v: Value) -> u64 {
+    let as_bits = |i: i128| {
+        // Two's complement truncated to 64 bits, then masked by the caller.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let r = i as u64;
+        r
+    };
+    let physical_to_float = |v: Value| match &p.conversion {
+        Conversion::Identity => v.as_f64(),
+        Conversion::Integer { scale, offset } => {
+            (v.as_f64() - Num::Int(*offset).as_f64()) / Num::Int(*scale).as_f64()
+        }
+        Conversion::Linear { scale, offset } => (v.as_f64() - offset.as_f64()) / scale.as_f64(),
+    };
+    match p.value_type {
+        #[allow(clippy::cast_possible_truncation)]
+        ValueType::Float32 => u64::from((physical_to_float(v) as f32).to_bits()),
+        ValueType::Float64 => physical_to_float(v).to_bits(),
+        ValueType::Integer { .. } => match (&p.conversion, v) {
+            (Conversion::Identity, Value::Int(i)) => as_bits(i),
+            (Conversion::Integer { scale, offset }, Value::Int(i)) if *scale != 0 => {
+                let shifted = i - offset;
+                if shifted % scale == 0 {
+                    as_bits(shifted.div_euclid(*scale))
+                } else {
+                    as_bits(round_even(physical_to_float(v)))
+                }
+            }
+            _ => as_bits(round_even(physical_to_float(v))),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{parse_str, Mode};
+
+    fn codec(sg: &str) -> MessageCodec {
+        let text = format!("BO_ 1 M: 8 X\n{sg}\n");
+        let (db, diags) = parse_str(&text, Mode::Lenient).unwrap();
+        assert!(diags.is_empty(), "{diags:?}");
+        MessageCodec::new(&db.messages[0])
+    }
+
+    fn decode(c: &MessageCodec, data: &[u8]) -> Vec<Option<Value>> {
+        let mut out = vec![None; c.signal_count()];
+        c.decode(data, &mut out).unwrap();
+        out.into_iter().map(|d| d.map(|d| d.physical)).collect()
+    }
+
+    #[test]
+    fn intel_and_motorola_with_python_numbers() {
+        let c = codec(" SG_ A : 0|12@1+ (1,0) [0|0] \"\" X\n SG_ B : 23|12@0- (0.5,-1) [0|0] \"\" X\n SG_ C : 63|8@0+ (2,3) [0|0] \"\" X");
+        let data = [0x34, 0x02, 0x34, 0x10, 0, 0, 0, 0x05];
+        let d = decode(&c, &data);
+        // A: the 12 low bits of the little-endian bytes 0-1.
+        assert_eq!(d[0], Some(Value::Int(0x234)));
+        // B: byte 2, then the high nibble of byte 3: 0x341 = 833, signed 12 bits stays positive.
+        assert_eq!(d[1], Some(Value::Float(833.0 * 0.5 - 1.0)));
+        assert_eq!(d[2], Some(Value::Int(5 * 2 + 3)));
+        let mut out = [0u8; 8];
+        c.encode(&d, &mut out).unwrap();
+        assert_eq!(out, data);
+    }
+
+    #[test]
+    fn short_payload_is_an_error_and_mux_selects() {
+        let c = codec(" SG_ Mux M : 0|4@1+ (1,0) [0|0] \"\" X\n SG_ A m1 : 8|8@1+ (1,0) [0|0] \"\" X\n SG_ B m2 : 8|8@1+ (1,0) [0|0] \"\" X");
+        let mut out = vec![None; 3];
+        assert_eq!(
+            c.decode(&[1, 2], &mut out),
+            Err(DecodeError::TooShort { needed: 8, got: 2 })
+        );
+        let d = decode(&c, &[2, 7, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(d, vec![Some(Value::Int(2)), None, Some(Value::Int(7))]);
+        assert_eq!(
+            c.decode(&[3, 0, 0, 0, 0, 0, 0, 0], &mut out),
+            Err(DecodeError::UnknownMultiplexerValue {
+                signal: 0,
+                value: 3
+            })
+        );
+    }
+}

@@ -1,0 +1,334 @@
+//! Everything a DBC file carries.
+
+use std::fmt;
+
+/// A number as written in the file: integers stay integers (as cantools and Python keep them),
+/// so that `(1,0)` scaling yields exact integer values and `(0.5,0)` floating ones.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Num {
+    /// Written without a fraction or exponent.
+    Int(i128),
+    /// Anything else.
+    Float(f64),
+}
+
+impl Num {
+    /// The value as a float.
+    pub fn as_f64(self) -> f64 {
+        match self {
+            // Integers in DBC files are far below 2^53 in practice; above, rounding is Python's.
+            #[allow(clippy::cast_precision_loss)]
+            Num::Int(i) => i as f64,
+            Num::Float(f) => f,
+        }
+    }
+
+    /// Whether the value is a whole number (Python's `float.is_integer()` for floats).
+    pub fn is_integer(self) -> bool {
+        match self {
+            Num::Int(_) => true,
+            Num::Float(f) => f.is_finite() && f.fract() == 0.0,
+        }
+    }
+}
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Num::Int(i) => write!(f, "{i}"),
+            // Debug keeps a fraction or exponent (1.0, 1e300), so the text reads back as a float.
+            Num::Float(x) => write!(f, "{x:?}"),
+        }
+    }
+}
+
+/// Byte order of a signal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ByteOrder {
+    /// `@1`: Intel, the start bit is the least significant bit.
+    LittleEndian,
+    /// `@0`: Motorola, the start bit is the most significant bit (sawtooth numbering).
+    BigEndian,
+}
+
+/// How the raw bits are read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ValueType {
+    /// Two's complement (`-`) or unsigned (`+`) integer.
+    Integer {
+        /// Signed.
+        signed: bool,
+    },
+    /// IEEE 754 single (`SIG_VALTYPE_ ... : 1`).
+    Float32,
+    /// IEEE 754 double (`SIG_VALTYPE_ ... : 2`).
+    Float64,
+}
+
+/// A signal's role in multiplexing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Multiplexing {
+    /// Always present.
+    None,
+    /// `M`: selects which multiplexed signals are present.
+    Multiplexor,
+    /// `mN`: present when the multiplexor has value N.
+    Multiplexed(u64),
+    /// `mNM`: present for value N of its multiplexor, and itself a multiplexor.
+    MultiplexedMultiplexor(u64),
+}
+
+/// Extended multiplexing (`SG_MUL_VAL_`): the switch this signal depends on and the value ranges.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MuxCondition {
+    /// The multiplexor signal's name.
+    pub switch: String,
+    /// Inclusive ranges of the switch's raw value.
+    pub ranges: Vec<(u64, u64)>,
+}
+
+/// An attribute value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AttrValue {
+    /// A number (INT, HEX, FLOAT, or an ENUM index).
+    Number(Num),
+    /// A string (STRING, or an ENUM given by name).
+    Str(String),
+}
+
+/// A signal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signal {
+    /// Name.
+    pub name: String,
+    /// Start bit (LSB for little endian, MSB in sawtooth numbering for big endian).
+    pub start_bit: u32,
+    /// Length in bits (1–64).
+    pub length: u32,
+    /// Byte order.
+    pub byte_order: ByteOrder,
+    /// Raw value type.
+    pub value_type: ValueType,
+    /// Scale.
+    pub factor: Num,
+    /// Offset.
+    pub offset: Num,
+    /// Minimum physical value.
+    pub minimum: Num,
+    /// Maximum physical value.
+    pub maximum: Num,
+    /// Unit.
+    pub unit: String,
+    /// Receiving nodes.
+    pub receivers: Vec<String>,
+    /// Simple multiplexing.
+    pub multiplexing: Multiplexing,
+    /// Extended multiplexing, when `SG_MUL_VAL_` gives it.
+    pub mux_condition: Option<MuxCondition>,
+    /// Comment.
+    pub comment: Option<String>,
+    /// Attribute values (`BA_ "name" SG_ ...`), in file order.
+    pub attributes: Vec<(String, AttrValue)>,
+    /// Value descriptions (`VAL_`).
+    pub value_descriptions: Vec<(i128, String)>,
+}
+
+/// A message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    /// Identifier without the extended flag.
+    pub id: u32,
+    /// 29-bit identifier (bit 31 set in the file).
+    pub extended: bool,
+    /// Name.
+    pub name: String,
+    /// Size in bytes.
+    pub size: u32,
+    /// Transmitting node (`Vector__XXX` when none).
+    pub transmitter: String,
+    /// Further senders (`BO_TX_BU_`).
+    pub senders: Vec<String>,
+    /// Signals in file order.
+    pub signals: Vec<Signal>,
+    /// Comment.
+    pub comment: Option<String>,
+    /// Attribute values, in file order.
+    pub attributes: Vec<(String, AttrValue)>,
+}
+
+impl Message {
+    /// The identifier as written in the file (bit 31 marks extended).
+    pub fn raw_id(&self) -> u32 {
+        if self.extended {
+            self.id | 0x8000_0000
+        } else {
+            self.id
+        }
+    }
+
+    /// An attribute's value on this message.
+    pub fn attribute(&self, name: &str) -> Option<&AttrValue> {
+        self.attributes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v)
+    }
+
+    /// A signal by name.
+    pub fn signal(&self, name: &str) -> Option<&Signal> {
+        self.signals.iter().find(|s| s.name == name)
+    }
+
+    /// The full name: `SystemMessageLongSymbol` when the file gives one (DBC names are limited
+    /// to 32 characters, longer ones live in that attribute), else the name.
+    pub fn display_name(&self) -> &str {
+        long_symbol(&self.attributes, "SystemMessageLongSymbol").unwrap_or(&self.name)
+    }
+}
+
+fn long_symbol<'a>(attributes: &'a [(String, AttrValue)], key: &str) -> Option<&'a str> {
+    attributes.iter().find_map(|(n, v)| match v {
+        AttrValue::Str(s) if n == key && !s.is_empty() => Some(s.as_str()),
+        _ => None,
+    })
+}
+
+impl Signal {
+    /// The full name: `SystemSignalLongSymbol` when the file gives one, else the name.
+    pub fn display_name(&self) -> &str {
+        long_symbol(&self.attributes, "SystemSignalLongSymbol").unwrap_or(&self.name)
+    }
+}
+
+/// A node (ECU).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    /// Name.
+    pub name: String,
+    /// Comment.
+    pub comment: Option<String>,
+    /// Attribute values.
+    pub attributes: Vec<(String, AttrValue)>,
+}
+
+/// An environment variable (`EV_`), kept as declared.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvVar {
+    /// Name.
+    pub name: String,
+    /// The declaration after the name, as written.
+    pub definition: String,
+    /// Comment.
+    pub comment: Option<String>,
+    /// Attribute values.
+    pub attributes: Vec<(String, AttrValue)>,
+    /// Value descriptions.
+    pub value_descriptions: Vec<(i128, String)>,
+}
+
+/// What an attribute definition applies to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AttrScope {
+    /// The network (database).
+    Network,
+    /// `BU_`.
+    Node,
+    /// `BO_`.
+    Message,
+    /// `SG_`.
+    Signal,
+    /// `EV_`.
+    EnvVar,
+}
+
+/// The type of an attribute.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AttrType {
+    /// `INT min max`.
+    Int(Num, Num),
+    /// `HEX min max`.
+    Hex(Num, Num),
+    /// `FLOAT min max`.
+    Float(Num, Num),
+    /// `STRING`.
+    Str,
+    /// `ENUM "a","b"`.
+    Enum(Vec<String>),
+}
+
+/// An attribute definition (`BA_DEF_`) with its default (`BA_DEF_DEF_`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AttrDef {
+    /// Scope.
+    pub scope: AttrScope,
+    /// Name.
+    pub name: String,
+    /// Type.
+    pub kind: AttrType,
+    /// Default value.
+    pub default: Option<AttrValue>,
+}
+
+/// A signal group (`SIG_GROUP_`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SignalGroup {
+    /// The message's identifier as written.
+    pub message_raw_id: u32,
+    /// Name.
+    pub name: String,
+    /// Repetitions.
+    pub repetitions: u32,
+    /// Member signals.
+    pub signals: Vec<String>,
+}
+
+/// A whole database.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Database {
+    /// `VERSION`.
+    pub version: String,
+    /// `NS_` symbols.
+    pub new_symbols: Vec<String>,
+    /// `BS_` contents as written (usually empty).
+    pub bit_timing: String,
+    /// `BU_`.
+    pub nodes: Vec<Node>,
+    /// `VAL_TABLE_`.
+    pub value_tables: Vec<(String, Vec<(i128, String)>)>,
+    /// `BO_` with their signals.
+    pub messages: Vec<Message>,
+    /// `EV_`.
+    pub env_vars: Vec<EnvVar>,
+    /// Network comment.
+    pub comment: Option<String>,
+    /// `BA_DEF_` / `BA_DEF_DEF_`.
+    pub attribute_defs: Vec<AttrDef>,
+    /// Network attribute values.
+    pub attributes: Vec<(String, AttrValue)>,
+    /// `SIG_GROUP_`.
+    pub signal_groups: Vec<SignalGroup>,
+    /// Statements this parser does not interpret, kept verbatim in file order.
+    pub unknown: Vec<String>,
+}
+
+impl Database {
+    /// A message by identifier and format.
+    pub fn message(&self, id: u32, extended: bool) -> Option<&Message> {
+        self.messages
+            .iter()
+            .find(|m| m.id == id && m.extended == extended)
+    }
+
+    /// A message by name.
+    pub fn message_by_name(&self, name: &str) -> Option<&Message> {
+        self.messages.iter().find(|m| m.name == name)
+    }
+
+    /// The network attribute value or, failing that, the definition's default.
+    pub fn attribute_default(&self, name: &str) -> Option<&AttrValue> {
+        self.attribute_defs
+            .iter()
+            .find(|d| d.name == name)
+            .and_then(|d| d.default.as_ref())
+    }
+}
