@@ -28,11 +28,16 @@ pub enum Value {
 
 impl Value {
     /// The value as `f64`.
+    #[inline]
     pub fn as_f64(self) -> f64 {
         match self {
-            // Python's float(int): correctly rounded, as `as` is.
+            // Python's float(int): correctly rounded, as `as` is. Through i64 when it fits: the
+            // i128 conversion is a slow software routine.
             #[allow(clippy::cast_precision_loss)]
-            Value::Int(i) => i as f64,
+            Value::Int(i) => match i64::try_from(i) {
+                Ok(small) => small as f64,
+                Err(_) => i as f64,
+            },
             Value::Float(f) => f,
         }
     }
@@ -82,6 +87,9 @@ enum Conversion {
     Identity,
     /// Whole-number scale and offset on an integer signal: exact integer arithmetic.
     Integer { scale: i128, offset: i128 },
+    /// A fractional scale on an integer signal: Python computes
+    /// `float(raw) * scale + float(offset)`.
+    Float { scale: f64, offset: f64 },
     /// Anything else: Python float arithmetic.
     Linear { scale: Num, offset: Num },
 }
@@ -107,6 +115,11 @@ struct Plan {
     shift: u32,
     mask: u128,
     big_endian: bool,
+    /// The signal lies within the first 8 bytes of its window: a 64-bit load suffices.
+    narrow: bool,
+    /// For messages of at most 8 bytes: the shift that brings the signal's LSB to bit 0 of the
+    /// whole payload read as one little-endian (Intel) or big-endian (Motorola) word.
+    word_shift: u32,
     length: u32,
     value_type: ValueType,
     conversion: Conversion,
@@ -124,6 +137,8 @@ pub struct MessageCodec {
     order: Vec<usize>,
     /// Multiplexors with the values their dependents accept.
     multiplexors: Vec<(usize, Vec<(u64, u64)>)>,
+    /// No multiplexing: every signal decodes in message order.
+    plain: bool,
 }
 
 fn conversion(s: &Signal) -> Conversion {
@@ -138,6 +153,10 @@ fn conversion(s: &Signal) -> Conversion {
     match (whole(s.factor), whole(s.offset)) {
         (Some(1), Some(0)) => Conversion::Identity,
         (Some(scale), Some(offset)) if !is_float => Conversion::Integer { scale, offset },
+        _ if !is_float && matches!(s.factor, Num::Float(_)) => Conversion::Float {
+            scale: s.factor.as_f64(),
+            offset: s.offset.as_f64(),
+        },
         _ => Conversion::Linear {
             scale: s.factor,
             offset: s.offset,
@@ -164,11 +183,26 @@ fn plan(s: &Signal, size: usize) -> Plan {
             (window, 127 - lsb_in_window, true)
         }
     };
+    // Whether the signal's bits lie in the first 8 bytes of its 16-byte window.
+    let narrow = if big_endian {
+        shift >= 64
+    } else {
+        shift + length <= 64
+    };
+    let word_shift = if big_endian {
+        // shift = 127 - (LSB within the window); in the payload word: 63 - LSB overall.
+        let lsb = u32::try_from(window).unwrap_or(0) * 8 + (127 - shift);
+        63u32.saturating_sub(lsb)
+    } else {
+        s.start_bit.min(63)
+    };
     Plan {
         window: if window + WINDOW <= BUFFER { window } else { 0 },
         shift,
         mask,
         big_endian,
+        narrow,
+        word_shift,
         length,
         value_type: s.value_type,
         conversion: conversion(s),
@@ -240,11 +274,13 @@ impl MessageCodec {
             }
         }
         let order = decode_order(&plans);
+        let plain = multiplexors.is_empty() && plans.iter().all(|p| p.presence == Presence::Always);
         MessageCodec {
             size,
             plans,
             order,
             multiplexors,
+            plain,
         }
     }
 
@@ -275,6 +311,34 @@ impl MessageCodec {
         if let Some(dst) = buf.get_mut(..payload.len()) {
             dst.copy_from_slice(payload);
         }
+        if self.plain && self.size <= 8 {
+            // The whole payload as one word in each byte order: one shift and mask per signal.
+            // Eight bytes (the common case) convert without a copy loop or a library call.
+            let bytes: [u8; 8] = payload.try_into().unwrap_or_else(|_| {
+                let mut padded = [0u8; 8];
+                for (dst, src) in padded.iter_mut().zip(payload) {
+                    *dst = *src;
+                }
+                padded
+            });
+            let words = [u64::from_le_bytes(bytes), u64::from_be_bytes(bytes)];
+            for (p, slot) in self.plans.iter().zip(out.iter_mut()) {
+                *slot = (!p.past_end).then(|| {
+                    let word = if p.big_endian { words[1] } else { words[0] };
+                    // The mask keeps at most 64 bits.
+                    #[allow(clippy::cast_possible_truncation)]
+                    let raw = (word >> p.word_shift) & (p.mask as u64);
+                    physical(p, raw)
+                });
+            }
+            return Ok(());
+        }
+        if self.plain {
+            for (p, slot) in self.plans.iter().zip(out.iter_mut()) {
+                *slot = (!p.past_end).then(|| decode_signal(p, payload, &buf));
+            }
+            return Ok(());
+        }
         for &i in &self.order {
             let (Some(p), Some(slot)) = (self.plans.get(i), out.get(i)) else {
                 continue;
@@ -294,7 +358,7 @@ impl MessageCodec {
                         })
                     }
                 };
-            let value = present.then(|| decode_signal(p, &buf));
+            let value = present.then(|| decode_signal(p, payload, &buf));
             if let Some(slot) = out.get_mut(i) {
                 *slot = value;
             }
@@ -370,6 +434,7 @@ fn decode_order(plans: &[Plan]) -> Vec<usize> {
     order
 }
 
+#[inline(always)]
 fn read_window(p: &Plan, buf: &[u8; BUFFER]) -> u128 {
     let mut w = [0u8; WINDOW];
     if let Some(src) = buf.get(p.window..p.window + WINDOW) {
@@ -402,10 +467,44 @@ fn write_window(p: &Plan, buf: &mut [u8; BUFFER], raw: u128) {
     dst.copy_from_slice(&bytes);
 }
 
-fn decode_signal(p: &Plan, buf: &[u8; BUFFER]) -> Decoded {
+#[inline(always)]
+fn read_narrow(p: &Plan, payload: &[u8], buf: &[u8; BUFFER]) -> u64 {
+    // Straight from the payload when the 8 bytes are in it, else from the zero-padded copy.
+    let w: [u8; 8] = match payload
+        .get(p.window..p.window + 8)
+        .and_then(|b| b.try_into().ok())
+    {
+        Some(w) => w,
+        None => buf
+            .get(p.window..p.window + 8)
+            .and_then(|b| b.try_into().ok())
+            .unwrap_or([0; 8]),
+    };
+    // The mask keeps at most 64 bits; a big-endian signal in the first 8 bytes has shift >= 64.
+    #[allow(clippy::cast_possible_truncation)]
+    let mask = p.mask as u64;
+    if p.big_endian {
+        (u64::from_be_bytes(w) >> (p.shift - 64)) & mask
+    } else {
+        (u64::from_le_bytes(w) >> p.shift) & mask
+    }
+}
+
+#[inline(always)]
+fn decode_signal(p: &Plan, payload: &[u8], buf: &[u8; BUFFER]) -> Decoded {
     // The mask keeps at most 64 bits.
     #[allow(clippy::cast_possible_truncation)]
-    let raw = ((read_window(p, buf) >> p.shift) & p.mask) as u64;
+    let raw = if p.narrow {
+        read_narrow(p, payload, buf)
+    } else {
+        ((read_window(p, buf) >> p.shift) & p.mask) as u64
+    };
+    physical(p, raw)
+}
+
+/// The physical value of a signal's raw bits.
+#[inline(always)]
+fn physical(p: &Plan, raw: u64) -> Decoded {
     let number = match p.value_type {
         ValueType::Integer { signed: false } => Value::Int(i128::from(raw)),
         ValueType::Integer { signed: true } => {
@@ -427,6 +526,7 @@ fn decode_signal(p: &Plan, buf: &[u8; BUFFER]) -> Decoded {
 }
 
 /// Python's `a * b` and `a + b` on int/float operands.
+#[inline(always)]
 fn mul(a: Value, b: Num) -> Value {
     match (a, b) {
         (Value::Int(x), Num::Int(y)) => x.checked_mul(y).map_or(
@@ -437,6 +537,7 @@ fn mul(a: Value, b: Num) -> Value {
     }
 }
 
+#[inline(always)]
 fn add(a: Value, b: Num) -> Value {
     match (a, b) {
         (Value::Int(x), Num::Int(y)) => x.checked_add(y).map_or(
@@ -447,10 +548,12 @@ fn add(a: Value, b: Num) -> Value {
     }
 }
 
+#[inline(always)]
 fn scale(c: &Conversion, raw: Value) -> Value {
     match c {
         Conversion::Identity => raw,
         Conversion::Integer { scale, offset } => add(mul(raw, Num::Int(*scale)), Num::Int(*offset)),
+        Conversion::Float { scale, offset } => Value::Float(raw.as_f64() * scale + offset),
         Conversion::Linear { scale, offset } => add(mul(raw, *scale), *offset),
     }
 }
@@ -480,6 +583,7 @@ fn to_raw(p: &Plan, v: Value) -> u64 {
         Conversion::Integer { scale, offset } => {
             (v.as_f64() - Num::Int(*offset).as_f64()) / Num::Int(*scale).as_f64()
         }
+        Conversion::Float { scale, offset } => (v.as_f64() - offset) / scale,
         Conversion::Linear { scale, offset } => (v.as_f64() - offset.as_f64()) / scale.as_f64(),
     };
     match p.value_type {
