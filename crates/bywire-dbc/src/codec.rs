@@ -17,28 +17,51 @@ use crate::parser::signal_bits;
 const WINDOW: usize = 16;
 const BUFFER: usize = 64 + WINDOW;
 
-/// A physical value.
+/// A physical value. Integers are exact over the whole range a raw value or a whole-number
+/// scaling of one can take in practice (i64 and u64); an integer result beyond both, which only
+/// an enormous whole-number scale could produce, becomes the nearest float.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Value {
-    /// An exact integer (integer raw value with whole-number scale and offset).
-    Int(i128),
+    /// An exact integer.
+    Int(i64),
+    /// An exact integer above `i64::MAX` (64-bit unsigned signals).
+    UInt(u64),
     /// A floating-point value.
     Float(f64),
 }
 
 impl Value {
-    /// The value as `f64`.
+    /// The value as `f64` (Python's `float(int)`: correctly rounded, as `as` is).
     #[inline]
+    #[allow(clippy::cast_precision_loss)]
     pub fn as_f64(self) -> f64 {
         match self {
-            // Python's float(int): correctly rounded, as `as` is. Through i64 when it fits: the
-            // i128 conversion is a slow software routine.
-            #[allow(clippy::cast_precision_loss)]
-            Value::Int(i) => match i64::try_from(i) {
-                Ok(small) => small as f64,
-                Err(_) => i as f64,
-            },
+            Value::Int(i) => i as f64,
+            Value::UInt(u) => u as f64,
             Value::Float(f) => f,
+        }
+    }
+
+    /// The exact integer, if this is one.
+    pub fn as_i128(self) -> Option<i128> {
+        match self {
+            Value::Int(i) => Some(i128::from(i)),
+            Value::UInt(u) => Some(i128::from(u)),
+            Value::Float(_) => None,
+        }
+    }
+
+    /// An integer in the narrowest variant that holds it.
+    #[inline]
+    pub fn integer(i: i128) -> Value {
+        match i64::try_from(i) {
+            Ok(small) => Value::Int(small),
+            Err(_) => match u64::try_from(i) {
+                Ok(big) => Value::UInt(big),
+                // Beyond u64: the nearest float (see the type's documentation).
+                #[allow(clippy::cast_precision_loss)]
+                Err(_) => Value::Float(i as f64),
+            },
         }
     }
 }
@@ -109,8 +132,29 @@ enum Presence {
     },
 }
 
+/// The common value type and conversion pairs, resolved when the plan is made so decoding
+/// takes one branch per signal for them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kernel {
+    /// Unsigned, scale 1, offset 0.
+    UnsignedRaw,
+    /// Signed (sign bit at `64 - unused`), scale 1, offset 0.
+    SignedRaw { unused: u32 },
+    /// Unsigned with a fractional scale.
+    UnsignedFloat { scale: f64, offset: f64 },
+    /// Signed with a fractional scale.
+    SignedFloat {
+        unused: u32,
+        scale: f64,
+        offset: f64,
+    },
+    /// Everything else, through the general path.
+    General,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 struct Plan {
+    kernel: Kernel,
     window: usize,
     shift: u32,
     mask: u128,
@@ -196,7 +240,28 @@ fn plan(s: &Signal, size: usize) -> Plan {
     } else {
         s.start_bit.min(63)
     };
+    let conversion = conversion(s);
+    let unused = 64 - length;
+    let kernel = match (s.value_type, &conversion) {
+        (ValueType::Integer { signed: false }, Conversion::Identity) => Kernel::UnsignedRaw,
+        (ValueType::Integer { signed: true }, Conversion::Identity) => Kernel::SignedRaw { unused },
+        (ValueType::Integer { signed: false }, Conversion::Float { scale, offset }) => {
+            Kernel::UnsignedFloat {
+                scale: *scale,
+                offset: *offset,
+            }
+        }
+        (ValueType::Integer { signed: true }, Conversion::Float { scale, offset }) => {
+            Kernel::SignedFloat {
+                unused,
+                scale: *scale,
+                offset: *offset,
+            }
+        }
+        _ => Kernel::General,
+    };
     Plan {
+        kernel,
         window: if window + WINDOW <= BUFFER { window } else { 0 },
         shift,
         mask,
@@ -205,7 +270,7 @@ fn plan(s: &Signal, size: usize) -> Plan {
         word_shift,
         length,
         value_type: s.value_type,
-        conversion: conversion(s),
+        conversion,
         presence: Presence::Always,
         past_end: past_end || window + WINDOW > BUFFER,
     }
@@ -505,34 +570,57 @@ fn decode_signal(p: &Plan, payload: &[u8], buf: &[u8; BUFFER]) -> Decoded {
 /// The physical value of a signal's raw bits.
 #[inline(always)]
 fn physical(p: &Plan, raw: u64) -> Decoded {
+    // Two's complement from `64 - unused` bits: move the sign bit to bit 63, shift back.
+    #[allow(clippy::cast_possible_wrap)]
+    let signed = |unused: u32| ((raw << unused) as i64) >> unused;
+    #[allow(clippy::cast_precision_loss)]
+    let physical = match p.kernel {
+        Kernel::UnsignedRaw => match i64::try_from(raw) {
+            Ok(small) => Value::Int(small),
+            Err(_) => Value::UInt(raw),
+        },
+        Kernel::SignedRaw { unused } => Value::Int(signed(unused)),
+        Kernel::UnsignedFloat { scale, offset } => Value::Float(raw as f64 * scale + offset),
+        Kernel::SignedFloat {
+            unused,
+            scale,
+            offset,
+        } => Value::Float(signed(unused) as f64 * scale + offset),
+        Kernel::General => general(p, raw),
+    };
+    Decoded { raw, physical }
+}
+
+/// Any value type with any conversion, by Python's rules.
+fn general(p: &Plan, raw: u64) -> Value {
     let number = match p.value_type {
-        ValueType::Integer { signed: false } => Value::Int(i128::from(raw)),
+        ValueType::Integer { signed: false } => match i64::try_from(raw) {
+            Ok(small) => Value::Int(small),
+            Err(_) => Value::UInt(raw),
+        },
         ValueType::Integer { signed: true } => {
             let unused = 64 - p.length;
             // Sign-extend: move the sign bit to bit 63 and shift back arithmetically.
             #[allow(clippy::cast_possible_wrap)]
             let v = ((raw << unused) as i64) >> unused;
-            Value::Int(i128::from(v))
+            Value::Int(v)
         }
         // The raw bits of a float signal are its IEEE representation; 32 low bits for f32.
         #[allow(clippy::cast_possible_truncation)]
         ValueType::Float32 => Value::Float(f64::from(f32::from_bits(raw as u32))),
         ValueType::Float64 => Value::Float(f64::from_bits(raw)),
     };
-    Decoded {
-        raw,
-        physical: scale(&p.conversion, number),
-    }
+    scale(&p.conversion, number)
 }
 
 /// Python's `a * b` and `a + b` on int/float operands.
 #[inline(always)]
 fn mul(a: Value, b: Num) -> Value {
     match (a, b) {
-        (Value::Int(x), Num::Int(y)) => x.checked_mul(y).map_or(
-            Value::Float(Value::Int(x).as_f64() * Num::Int(y).as_f64()),
-            Value::Int,
-        ),
+        (a, Num::Int(y)) => match a.as_i128().and_then(|x| x.checked_mul(y)) {
+            Some(product) => Value::integer(product),
+            None => Value::Float(a.as_f64() * Num::Int(y).as_f64()),
+        },
         (a, b) => Value::Float(a.as_f64() * b.as_f64()),
     }
 }
@@ -540,10 +628,10 @@ fn mul(a: Value, b: Num) -> Value {
 #[inline(always)]
 fn add(a: Value, b: Num) -> Value {
     match (a, b) {
-        (Value::Int(x), Num::Int(y)) => x.checked_add(y).map_or(
-            Value::Float(Value::Int(x).as_f64() + Num::Int(y).as_f64()),
-            Value::Int,
-        ),
+        (a, Num::Int(y)) => match a.as_i128().and_then(|x| x.checked_add(y)) {
+            Some(sum) => Value::integer(sum),
+            None => Value::Float(a.as_f64() + Num::Int(y).as_f64()),
+        },
         (a, b) => Value::Float(a.as_f64() + b.as_f64()),
     }
 }
@@ -590,9 +678,9 @@ fn to_raw(p: &Plan, v: Value) -> u64 {
         #[allow(clippy::cast_possible_truncation)]
         ValueType::Float32 => u64::from((physical_to_float(v) as f32).to_bits()),
         ValueType::Float64 => physical_to_float(v).to_bits(),
-        ValueType::Integer { .. } => match (&p.conversion, v) {
-            (Conversion::Identity, Value::Int(i)) => as_bits(i),
-            (Conversion::Integer { scale, offset }, Value::Int(i)) if *scale != 0 => {
+        ValueType::Integer { .. } => match (&p.conversion, v.as_i128()) {
+            (Conversion::Identity, Some(i)) => as_bits(i),
+            (Conversion::Integer { scale, offset }, Some(i)) if *scale != 0 => {
                 let shifted = i - offset;
                 if shifted % scale == 0 {
                     as_bits(shifted.div_euclid(*scale))
