@@ -10,7 +10,7 @@ if ! command -v sigrok-cli >/dev/null; then
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli >/dev/null
 fi
-# crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle.
-python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0
+# crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
+python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
 ../shared/tools/canvm.sh prepare

@@ -2,6 +2,7 @@
 //! prints; the work is in the library crates.
 
 mod bittiming_cmd;
+mod dbc_cmd;
 mod wire_cmd;
 
 use std::io::{self, Write};
@@ -23,6 +24,13 @@ enum Command {
     Wire(wire_cmd::Args),
     /// Compute bit-timing registers for a bitrate and sample point on a controller.
     Bittiming(bittiming_cmd::Args),
+    /// Work with DBC files: dump.
+    Dbc {
+        #[command(subcommand)]
+        command: dbc_cmd::DbcCommand,
+    },
+    /// Decode candump lines from standard input with a DBC file, like `cantools decode`.
+    Decode(dbc_cmd::DecodeArgs),
 }
 
 fn main() -> ExitCode {
@@ -31,6 +39,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Wire(args) => wire_cmd::run(&args, &mut out),
         Command::Bittiming(args) => bittiming_cmd::run(&args, &mut out),
+        Command::Dbc { command } => dbc_cmd::run(&command, &mut out),
+        Command::Decode(args) => dbc_cmd::decode(&args, &mut io::stdin().lock(), &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {

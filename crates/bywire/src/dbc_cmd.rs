@@ -1,0 +1,362 @@
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use bywire_dbc::codec::{Decoded, MessageCodec, Value};
+use bywire_dbc::{ByteOrder, Database, Message, Mode, Multiplexing, ValueType};
+use serde_json::{json, Map};
+
+#[derive(clap::Subcommand)]
+pub enum DbcCommand {
+    /// Print messages, signals and a bit-layout picture per message.
+    #[command(
+        after_help = "Examples:\n  bywire dbc dump vehicle.dbc\n  bywire dbc dump --strict vehicle.dbc\n\nLoads leniently: problems are printed on stderr as file:line:column and the dump goes on;\nwith --strict the first problem is an error (exit 1)."
+    )]
+    Dump {
+        /// The DBC file.
+        file: PathBuf,
+        /// Fail on the first problem instead of loading leniently.
+        #[arg(long)]
+        strict: bool,
+    },
+}
+
+#[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  candump -L can0 | bywire decode vehicle.dbc\n  bywire decode vehicle.dbc --json < candump-2024-01-01_120000.log\n\nReads candump's log form `(1699999999.123456) can0 123#DEADBEEF` and its screen form\n`  can0  123   [4]  DE AD BE EF`; other lines are passed through unchanged."
+)]
+pub struct DecodeArgs {
+    /// The DBC file.
+    file: PathBuf,
+    /// One line per frame instead of one line per signal.
+    #[arg(long)]
+    single_line: bool,
+    /// Show raw values instead of value descriptions.
+    #[arg(long)]
+    no_decode_choices: bool,
+    /// Print one JSON object per frame: id, extended, name, signals, error.
+    #[arg(long)]
+    json: bool,
+    /// Fail on the first problem in the DBC file.
+    #[arg(long)]
+    strict: bool,
+}
+
+pub fn load(path: &Path, strict: bool) -> Result<Database> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mode = if strict { Mode::Strict } else { Mode::Lenient };
+    let (db, diagnostics) = bywire_dbc::parse(&bytes, mode)
+        .map_err(|e| anyhow::anyhow!("{}:{}", path.display(), e.0))?;
+    for d in &diagnostics {
+        eprintln!("{}:{d}", path.display());
+    }
+    Ok(db)
+}
+
+pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
+    match command {
+        DbcCommand::Dump { file, strict } => {
+            let db = load(file, *strict)?;
+            dump(&db, out)
+        }
+    }
+}
+
+fn dump(db: &Database, out: &mut impl Write) -> Result<()> {
+    writeln!(
+        out,
+        "================================= Messages ================================="
+    )?;
+    for m in &db.messages {
+        writeln!(out)?;
+        writeln!(
+            out,
+            "  ------------------------------------------------------------------------"
+        )?;
+        writeln!(out)?;
+        writeln!(out, "  Name:       {}", m.display_name())?;
+        writeln!(
+            out,
+            "  Id:         0x{:x}{}",
+            m.id,
+            if m.extended { " (extended)" } else { "" }
+        )?;
+        writeln!(out, "  Length:     {} bytes", m.size)?;
+        if let Some(bywire_dbc::AttrValue::Number(n)) = m.attribute("GenMsgCycleTime") {
+            writeln!(out, "  Cycle time: {n} ms")?;
+        }
+        let senders: Vec<&str> = std::iter::once(m.transmitter.as_str())
+            .chain(m.senders.iter().map(String::as_str))
+            .collect();
+        writeln!(out, "  Senders:    {}", senders.join(", "))?;
+        if let Some(c) = &m.comment {
+            writeln!(out, "  Comment:    {c}")?;
+        }
+        layout(m, out)?;
+        writeln!(out, "  Signals:")?;
+        for s in &m.signals {
+            let order = match s.byte_order {
+                ByteOrder::LittleEndian => "little",
+                ByteOrder::BigEndian => "big",
+            };
+            let kind = match s.value_type {
+                ValueType::Integer { signed: true } => "signed",
+                ValueType::Integer { signed: false } => "unsigned",
+                ValueType::Float32 => "float32",
+                ValueType::Float64 => "float64",
+            };
+            let mux = match s.multiplexing {
+                Multiplexing::None => String::new(),
+                Multiplexing::Multiplexor => " multiplexor".into(),
+                Multiplexing::Multiplexed(v) => format!(" when multiplexor = {v}"),
+                Multiplexing::MultiplexedMultiplexor(v) => {
+                    format!(" multiplexor, when multiplexor = {v}")
+                }
+            };
+            writeln!(
+                out,
+                "    {} [{}|{} {order}-endian {kind}]{mux}",
+                s.display_name(),
+                s.start_bit,
+                s.length
+            )?;
+            writeln!(
+                out,
+                "      scale {} offset {} range [{}, {}] {}",
+                s.factor, s.offset, s.minimum, s.maximum, s.unit
+            )?;
+            if let Some(c) = &s.comment {
+                writeln!(out, "      {c}")?;
+            }
+            for (v, d) in &s.value_descriptions {
+                writeln!(out, "        {v}: {d}")?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A byte-by-byte grid of the message's bits: each signal drawn with its letter, the most
+/// significant bit marked with `>`.
+fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
+    let size = usize::try_from(m.size).unwrap_or(0).min(64);
+    if size == 0 {
+        return Ok(());
+    }
+    let letters: Vec<char> = ('A'..='Z').chain('a'..='z').collect();
+    let mut grid = vec![vec![String::from("   "); 8]; size];
+    for (i, s) in m.signals.iter().enumerate() {
+        let letter = letters.get(i % letters.len()).copied().unwrap_or('?');
+        // Walk the signal's bits from MSB to LSB in the file's numbering.
+        let mut positions = Vec::new();
+        let mut pos = s.start_bit;
+        for _ in 0..s.length.min(512) {
+            positions.push(pos);
+            pos = match s.byte_order {
+                ByteOrder::LittleEndian => pos + 1,
+                ByteOrder::BigEndian if pos % 8 == 0 => pos + 15,
+                ByteOrder::BigEndian => pos.saturating_sub(1),
+            };
+        }
+        let msb = match s.byte_order {
+            ByteOrder::LittleEndian => positions.last().copied(),
+            ByteOrder::BigEndian => positions.first().copied(),
+        };
+        for &p in &positions {
+            let (byte, bit) = (
+                usize::try_from(p / 8).unwrap_or(usize::MAX),
+                usize::try_from(p % 8).unwrap_or(0),
+            );
+            if let Some(cell) = grid.get_mut(byte).and_then(|row| row.get_mut(7 - bit)) {
+                let mark = if Some(p) == msb { '>' } else { ' ' };
+                *cell = if cell.trim().is_empty() {
+                    format!("{mark}{letter} ")
+                } else {
+                    " ! ".into()
+                };
+            }
+        }
+    }
+    writeln!(
+        out,
+        "  Layout (bit 7 left; '!' where signals overlap, '>' marks the MSB):"
+    )?;
+    writeln!(out, "           7  6  5  4  3  2  1  0")?;
+    for (byte, row) in grid.iter().enumerate() {
+        writeln!(out, "    {byte:>4} |{}|", row.concat())?;
+    }
+    for (i, s) in m.signals.iter().enumerate() {
+        writeln!(
+            out,
+            "      {} = {}",
+            letters.get(i % letters.len()).copied().unwrap_or('?'),
+            s.display_name()
+        )?;
+    }
+    Ok(())
+}
+
+/// A frame read from a candump line: identifier, extended, data (remote frames: none).
+struct LineFrame {
+    id: u32,
+    extended: bool,
+    data: Vec<u8>,
+}
+
+/// candump's log form `(ts) if 123#DEAD` or screen form `if 123 [2] DE AD` (with an optional
+/// leading `(ts)`).
+fn parse_candump(line: &str) -> Option<LineFrame> {
+    let mut words = line.split_whitespace().peekable();
+    if words.peek().is_some_and(|w| w.starts_with('(')) {
+        words.next();
+    }
+    let _interface = words.next()?;
+    let first = words.next()?;
+    if first.contains('#') {
+        let frame: bywire_core::Frame = first.parse().ok()?;
+        let id = frame.id()?;
+        let data = if frame.is_remote() {
+            Vec::new()
+        } else {
+            frame.data().to_vec()
+        };
+        return Some(LineFrame {
+            id: id.as_raw(),
+            extended: id.is_extended(),
+            data,
+        });
+    }
+    let id = u32::from_str_radix(first, 16).ok()?;
+    let extended = first.len() == 8;
+    let len_word = words.next()?;
+    let len: usize = len_word
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .parse()
+        .ok()?;
+    let rest: Vec<&str> = words.collect();
+    if rest.first() == Some(&"remote") {
+        return Some(LineFrame {
+            id,
+            extended,
+            data: Vec::new(),
+        });
+    }
+    let data: Vec<u8> = rest
+        .iter()
+        .take(len)
+        .map(|b| u8::from_str_radix(b, 16))
+        .collect::<Result<_, _>>()
+        .ok()?;
+    (data.len() == len).then_some(LineFrame { id, extended, data })
+}
+
+fn json_value(v: Value) -> serde_json::Value {
+    match v {
+        Value::Int(i) => json!(i),
+        Value::UInt(u) => json!(u),
+        Value::Float(f) if f.is_nan() => json!("NaN"),
+        Value::Float(f) if f.is_infinite() => json!(if f > 0.0 { "inf" } else { "-inf" }),
+        Value::Float(f) => json!(f),
+    }
+}
+
+fn text_value(v: Value) -> String {
+    match v {
+        Value::Int(i) => i.to_string(),
+        Value::UInt(u) => u.to_string(),
+        Value::Float(f) => format!("{f:?}"),
+    }
+}
+
+pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
+    let db = load(&args.file, args.strict)?;
+    let codecs: Vec<MessageCodec> = db.messages.iter().map(MessageCodec::new).collect();
+    let mut values: Vec<Option<Decoded>> = Vec::new();
+    let mut line = String::new();
+    // One line at a time: logs of any size stream through in constant memory.
+    while {
+        line.clear();
+        input.read_line(&mut line)? > 0
+    } {
+        let text = line.trim_end_matches(['\n', '\r']);
+        let Some(frame) = parse_candump(text) else {
+            if !args.json {
+                writeln!(out, "{text}")?;
+            }
+            continue;
+        };
+        let found = db
+            .messages
+            .iter()
+            .zip(&codecs)
+            .find(|(m, _)| m.id == frame.id && m.extended == frame.extended);
+        let Some((message, codec)) = found else {
+            if args.json {
+                let o = json!({"id": frame.id, "extended": frame.extended, "name": null, "signals": {}, "error": "unknown message"});
+                writeln!(out, "{o}")?;
+            } else {
+                writeln!(out, "{text}")?;
+            }
+            continue;
+        };
+        values.clear();
+        values.resize(codec.signal_count(), None);
+        let result = codec.decode(&frame.data, &mut values);
+        if args.json {
+            let mut signals = Map::new();
+            for (s, v) in message.signals.iter().zip(&values) {
+                if let Some(v) = v {
+                    signals.insert(s.display_name().to_string(), json_value(v.physical));
+                }
+            }
+            let mut o = json!({"id": frame.id, "extended": frame.extended, "name": message.display_name(), "signals": signals});
+            if let Err(e) = result {
+                o["error"] = json!(e.to_string());
+            }
+            writeln!(out, "{o}")?;
+            continue;
+        }
+        if let Err(e) = result {
+            writeln!(out, "{text} :: {e}")?;
+            continue;
+        }
+        let shown: Vec<String> = message
+            .signals
+            .iter()
+            .zip(&values)
+            .filter_map(|(s, v)| {
+                let v = (*v)?;
+                let choice = (!args.no_decode_choices)
+                    .then(|| {
+                        s.value_descriptions.iter().find(|(k, _)| {
+                            i128::from(v.raw) == *k || v.physical.as_i128() == Some(*k)
+                        })
+                    })
+                    .flatten();
+                let value = match choice {
+                    Some((_, name)) => name.clone(),
+                    None if s.unit.is_empty() => text_value(v.physical),
+                    None => format!("{} {}", text_value(v.physical), s.unit),
+                };
+                Some(format!("{}: {value}", s.display_name()))
+            })
+            .collect();
+        if args.single_line {
+            writeln!(
+                out,
+                "{text} :: {}({})",
+                message.display_name(),
+                shown.join(", ")
+            )?;
+        } else {
+            writeln!(
+                out,
+                "{text} ::\n{}(\n    {}\n)",
+                message.display_name(),
+                shown.join(",\n    ")
+            )?;
+        }
+    }
+    Ok(())
+}

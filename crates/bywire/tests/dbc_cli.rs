@@ -1,0 +1,156 @@
+//! `bywire decode` and `bywire dbc dump` as a user runs them, on corpus files.
+// Tests fail by panicking; helpers outside #[test] functions may unwrap too.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+fn corpus(file: &str) -> String {
+    format!(
+        "{}/../../../shared/corpus/dbc/{file}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+fn run(args: &[&str], input: &str) -> (i32, String, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code().unwrap(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+const MOTOHAWK: &str = "cantools/tests__files__dbc__motohawk.dbc";
+
+/// The items after `::` of a single-line decode, as a set (cantools orders them differently).
+fn items(line: &str) -> std::collections::BTreeSet<String> {
+    let decoded = line.split(" :: ").nth(1).unwrap();
+    let inner = decoded.split_once('(').unwrap().1.trim_end_matches(')');
+    inner.split(", ").map(str::to_string).collect()
+}
+
+#[test]
+fn decode_agrees_with_cantools_decode() {
+    let frames = [
+        "(1600000000.000000) vcan0 1F0#A5B6D90000000000",
+        "(1600000000.000000) vcan0 1F0#0000000000000000",
+        "(1600000000.000000) vcan0 1F0#FFFFFFFFFFFFFFFF",
+        "(1600000000.000000) vcan0 1F0#7F12C40000000000",
+    ];
+    let input = frames.join("\n") + "\n";
+    let (code, ours, err) = run(&["decode", &corpus(MOTOHAWK), "--single-line"], &input);
+    assert_eq!(code, 0, "{err}");
+    let theirs = Command::new("python3")
+        .args([
+            "-m",
+            "cantools",
+            "decode",
+            "--single-line",
+            &corpus(MOTOHAWK),
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .and_then(|mut c| {
+            c.stdin.take().unwrap().write_all(input.as_bytes())?;
+            c.wait_with_output()
+        })
+        .expect("cantools is installed (scripts/install-test-deps.sh)");
+    let theirs = String::from_utf8(theirs.stdout).unwrap();
+    assert_eq!(theirs.lines().count(), frames.len(), "{theirs}");
+    for (o, t) in ours.lines().zip(theirs.lines()) {
+        assert_eq!(items(o), items(t), "bywire: {o}\ncantools: {t}");
+    }
+}
+
+#[test]
+fn decode_reads_the_screen_form_and_passes_other_lines_through() {
+    let input = "(1600000000.000000) vcan0 1F0#A5B6D90000000000\n  vcan0  1F0   [8]  A5 B6 D9 00 00 00 00 00\nhello\n";
+    let (code, out, _) = run(&["decode", &corpus(MOTOHAWK), "--single-line"], input);
+    assert_eq!(code, 0);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(items(lines[0]), items(lines[1]));
+    assert_eq!(lines[2], "hello");
+}
+
+#[test]
+fn decode_json_objects_and_errors() {
+    let input = "(0.0) vcan0 1F0#A5B6D90000000000\n(0.0) vcan0 1F0#A5B6\n(0.0) vcan0 123#00\n";
+    let (code, out, _) = run(&["decode", &corpus(MOTOHAWK), "--json"], input);
+    assert_eq!(code, 0);
+    let objects: Vec<serde_json::Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(objects[0]["id"], 0x1F0);
+    assert_eq!(objects[0]["extended"], false);
+    assert_eq!(objects[0]["name"], "ExampleMessage");
+    assert_eq!(objects[0]["signals"]["Enable"], 1);
+    assert_eq!(objects[0]["signals"]["AverageRadius"], 1.8);
+    assert!(objects[1]["error"]
+        .as_str()
+        .unwrap()
+        .contains("2 bytes, but the message has 8"));
+    assert_eq!(objects[2]["error"], "unknown message");
+}
+
+#[test]
+fn dump_is_lenient_by_default_and_strict_on_request() {
+    // cantools refuses this file (a signal comment without a signal name).
+    let broken = corpus("opendbc_generated/acura_ilx_2016_can_generated.dbc");
+    let (code, out, err) = run(&["dbc", "dump", &broken], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Name:       STEERING_CONTROL"), "{out}");
+    assert!(
+        err.contains("signal comment without a signal name"),
+        "{err}"
+    );
+    assert!(err
+        .lines()
+        .next()
+        .unwrap()
+        .starts_with(&format!("{broken}:")));
+    let (code, _, err) = run(&["dbc", "dump", "--strict", &broken], "");
+    assert_eq!(code, 1);
+    let position = err
+        .trim_start_matches("error: ")
+        .trim_start_matches(&broken);
+    assert!(
+        position.starts_with(':')
+            && position[1..]
+                .split(':')
+                .next()
+                .unwrap()
+                .parse::<u32>()
+                .unwrap()
+                > 0,
+        "{err}"
+    );
+}
+
+#[test]
+fn dump_draws_the_layout() {
+    let (code, out, _) = run(&["dbc", "dump", &corpus(MOTOHAWK)], "");
+    assert_eq!(code, 0);
+    assert!(out.contains("       0 |>C >B  B  B  B  B  B >A |"), "{out}");
+    assert!(out.contains("      A = Temperature"));
+}
