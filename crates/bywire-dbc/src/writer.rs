@@ -101,9 +101,6 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
     for e in &db.env_vars {
         writeln!(o, "EV_ {}: {};", e.name, e.definition)?;
     }
-    for u in &db.unknown {
-        writeln!(o, "{u}")?;
-    }
     if let Some(c) = &db.comment {
         writeln!(o, "CM_ {};", quoted(c))?;
     }
@@ -239,6 +236,11 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
                 )?;
             }
         }
+    }
+    // Statements kept verbatim go last: one whose string runs to the end of the file (which is
+    // how it was read) would otherwise swallow whatever followed it.
+    for u in &db.unknown {
+        writeln!(o, "{u}")?;
     }
     Ok(())
 }

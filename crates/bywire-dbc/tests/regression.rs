@@ -1,0 +1,24 @@
+//! Inputs that once broke something, named after the problem, kept as files in `regressions/`.
+// Tests fail by panicking.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use bywire_dbc::{parse, parse_str, write, Mode};
+
+fn round_trips(name: &str) {
+    let path = format!("{}/tests/regressions/{name}", env!("CARGO_MANIFEST_DIR"));
+    let (db, _) = parse(&std::fs::read(path).unwrap(), Mode::Lenient).unwrap();
+    let (again, _) = parse_str(&write(&db), Mode::Lenient).unwrap();
+    assert_eq!(again, db);
+}
+
+/// Found by fuzzing: an unknown statement whose string runs to the end of the file used to be
+/// written before the comments and attribute definitions, and swallowed them on reload.
+#[test]
+fn unterminated_string_in_unknown_statement() {
+    round_trips("unterminated_string_in_unknown_statement.dbc");
+}
