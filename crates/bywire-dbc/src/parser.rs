@@ -581,13 +581,18 @@ impl Parser<'_> {
         })
     }
 
-    /// Keep a statement this parser does not interpret, verbatim.
+    /// Keep a statement this parser does not interpret, verbatim: up to its `;`, or up to the
+    /// next line that starts with a keyword, or with any name in column 1 (where the writer puts
+    /// every statement, so that what was one statement stays one on reload).
     fn unknown(&mut self, kw: &str, at: &Token) -> Step<()> {
         let known = KEYWORDS.contains(&kw);
         while let Some(t) = self.peek() {
-            if t.line_start
-                && matches!(&t.tok, Tok::Ident { text, .. } if KEYWORDS.contains(&text.as_str()))
-            {
+            let starts_statement = t.line_start
+                && match &t.tok {
+                    Tok::Ident { text, .. } => KEYWORDS.contains(&text.as_str()) || t.col == 1,
+                    _ => false,
+                };
+            if starts_statement {
                 break;
             }
             let semicolon = t.tok == Tok::Punct(';');

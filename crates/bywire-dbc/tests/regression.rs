@@ -22,3 +22,10 @@ fn round_trips(name: &str) {
 fn unterminated_string_in_unknown_statement() {
     round_trips("unterminated_string_in_unknown_statement.dbc");
 }
+
+/// Found by fuzzing: two statements kept verbatim, the first without a `;`, merged into one when
+/// read back, because an unknown statement only ended at `;` or a known keyword.
+#[test]
+fn unknown_statements_merged_on_reload() {
+    round_trips("unknown_statements_merged_on_reload.dbc");
+}
