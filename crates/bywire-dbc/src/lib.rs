@@ -24,6 +24,7 @@
 
 pub mod codec;
 mod lexer;
+pub mod lint;
 pub mod model;
 mod parser;
 mod writer;

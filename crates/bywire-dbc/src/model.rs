@@ -42,6 +42,23 @@ impl fmt::Display for Num {
     }
 }
 
+/// Where something was defined in its file (line and column, 1-based; 0 when it was not read
+/// from a file). Not part of a database's identity: two databases that differ only in where
+/// their objects stood compare equal, so a written-back file loads to an equal database.
+#[derive(Debug, Clone, Copy, Default, Eq)]
+pub struct Position {
+    /// 1-based line.
+    pub line: u32,
+    /// 1-based column.
+    pub column: u32,
+}
+
+impl PartialEq for Position {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
 /// Byte order of a signal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ByteOrder {
@@ -131,6 +148,8 @@ pub struct Signal {
     pub attributes: Vec<(String, AttrValue)>,
     /// Value descriptions (`VAL_`).
     pub value_descriptions: Vec<(i128, String)>,
+    /// Where the `SG_` statement stood.
+    pub position: Position,
 }
 
 /// A message.
@@ -154,6 +173,8 @@ pub struct Message {
     pub comment: Option<String>,
     /// Attribute values, in file order.
     pub attributes: Vec<(String, AttrValue)>,
+    /// Where the `BO_` statement stood.
+    pub position: Position,
 }
 
 impl Message {

@@ -18,6 +18,8 @@ pub enum Mode {
 /// How bad a problem is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Severity {
+    /// Worth knowing (lint only).
+    Info,
     /// Not standard, but unambiguous.
     Warning,
     /// Something was dropped or guessed.
@@ -42,6 +44,7 @@ pub struct Diagnostic {
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let sev = match self.severity {
+            Severity::Info => "info",
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
@@ -820,6 +823,10 @@ impl Parser<'_> {
             signals: Vec::new(),
             comment: None,
             attributes: Vec::new(),
+            position: Position {
+                line: at.line,
+                column: at.col,
+            },
         });
         Ok(())
     }
@@ -921,6 +928,10 @@ impl Parser<'_> {
             comment: None,
             attributes: Vec::new(),
             value_descriptions: Vec::new(),
+            position: Position {
+                line: at.line,
+                column: at.col,
+            },
         });
         Ok(())
     }
@@ -1058,7 +1069,7 @@ impl Parser<'_> {
 
     /// Layout problems a codec cannot resolve silently: signals past the end, overlaps.
     fn check_layout(&mut self) {
-        let mut found = Vec::new();
+        let mut found: Vec<(Position, String)> = Vec::new();
         for m in self
             .db
             .messages
@@ -1071,27 +1082,33 @@ impl Parser<'_> {
                     continue;
                 };
                 if last_byte >= m.size {
-                    found.push(format!(
-                        "signal {} of message {} runs past the message's {} bytes",
-                        s.name, m.name, m.size
+                    found.push((
+                        s.position,
+                        format!(
+                            "signal {} of message {} runs past the message's {} bytes",
+                            s.name, m.name, m.size
+                        ),
                     ));
                 }
                 let clash = used.iter().find(|(other, other_bits)| {
                     may_coexist(other, s) && other_bits.iter().zip(&bits).any(|(a, b)| a & b != 0)
                 });
                 if let Some((other, _)) = clash {
-                    found.push(format!(
-                        "signals {} and {} of message {} overlap",
-                        other.name, s.name, m.name
+                    found.push((
+                        s.position,
+                        format!(
+                            "signals {} and {} of message {} overlap",
+                            other.name, s.name, m.name
+                        ),
                     ));
                 }
                 used.push((s, bits));
             }
         }
-        for message in found {
+        for (at, message) in found {
             self.diags.push(Diagnostic {
-                line: 0,
-                column: 0,
+                line: at.line,
+                column: at.column,
                 severity: Severity::Error,
                 message,
                 resolution: "loaded; each signal decodes from its own bits, none past the end"

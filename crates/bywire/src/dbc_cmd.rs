@@ -19,6 +19,15 @@ pub enum DbcCommand {
         #[arg(long)]
         strict: bool,
     },
+    /// Check for overlaps, signals past the end, bad ranges, missing cycle times, unprotected
+    /// commands and more.
+    #[command(
+        after_help = "Examples:\n  bywire dbc lint vehicle.dbc\n\nPrints file:line:column: severity: [check] what. Exit 1 when there is an error."
+    )]
+    Lint {
+        /// The DBC file.
+        file: PathBuf,
+    },
 }
 
 #[derive(clap::Args)]
@@ -58,6 +67,32 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
         DbcCommand::Dump { file, strict } => {
             let db = load(file, *strict)?;
             dump(&db, out)
+        }
+        DbcCommand::Lint { file } => {
+            let db = load(file, false)?;
+            let findings = bywire_dbc::lint::lint(&db);
+            for f in &findings {
+                let severity = match f.severity {
+                    bywire_dbc::Severity::Info => "info",
+                    bywire_dbc::Severity::Warning => "warning",
+                    bywire_dbc::Severity::Error => "error",
+                };
+                writeln!(
+                    out,
+                    "{}:{}:{}: {severity}: [{}] {}",
+                    file.display(),
+                    f.position.line,
+                    f.position.column,
+                    f.code,
+                    f.text
+                )?;
+            }
+            let errors = findings
+                .iter()
+                .filter(|f| f.severity == bywire_dbc::Severity::Error)
+                .count();
+            anyhow::ensure!(errors == 0, "{errors} error(s) in {}", file.display());
+            Ok(())
         }
     }
 }

@@ -154,3 +154,22 @@ fn dump_draws_the_layout() {
     assert!(out.contains("       0 |>C >B  B  B  B  B  B >A |"), "{out}");
     assert!(out.contains("      A = Temperature"));
 }
+
+#[test]
+fn lint_reports_positions_and_fails_on_errors() {
+    // A corpus file with overlapping signals (cantools refuses it in strict mode).
+    let file = corpus("opendbc/opendbc__dbc__generator__honda___steering_control_c.dbc");
+    let (code, out, _) = run(&["dbc", "lint", &file], "");
+    assert_eq!(code, 1);
+    let overlap = out
+        .lines()
+        .find(|l| l.contains("[overlap]"))
+        .expect("an overlap finding");
+    let position: Vec<&str> = overlap.trim_start_matches(&file).splitn(4, ':').collect();
+    assert!(
+        position[1].parse::<u32>().unwrap() > 0 && position[2].parse::<u32>().unwrap() > 0,
+        "{overlap}"
+    );
+    let (code, _, _) = run(&["dbc", "lint", &corpus(MOTOHAWK)], "");
+    assert_eq!(code, 0);
+}
