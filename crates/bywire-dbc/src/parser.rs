@@ -897,6 +897,14 @@ impl Parser<'_> {
             }
             receivers.push(self.name()?);
         }
+        if receivers.is_empty() {
+            self.warn(
+                at,
+                format!("signal {name} has no receiver"),
+                "Vector__XXX assumed",
+            );
+            receivers.push("Vector__XXX".to_string());
+        }
         if length == 0 || length > 64 {
             return Err(self.error_at(
                 &t,

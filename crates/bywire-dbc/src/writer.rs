@@ -75,11 +75,7 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
                 ValueType::Integer { signed: false } => '+',
                 _ => '-',
             };
-            let receivers = if s.receivers.is_empty() {
-                "Vector__XXX".to_string()
-            } else {
-                s.receivers.join(",")
-            };
+            let receivers = s.receivers.join(",");
             writeln!(
                 o,
                 " SG_ {}{mux} : {}|{}@{order}{sign} ({},{}) [{}|{}] {} {receivers}",

@@ -29,3 +29,10 @@ fn unterminated_string_in_unknown_statement() {
 fn unknown_statements_merged_on_reload() {
     round_trips("unknown_statements_merged_on_reload.dbc");
 }
+
+/// Found by fuzzing: a signal with no receivers was written back with `Vector__XXX`, which read
+/// back as a receiver list of one.
+#[test]
+fn signal_without_receivers() {
+    round_trips("signal_without_receivers.dbc");
+}
