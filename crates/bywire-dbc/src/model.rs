@@ -1,6 +1,9 @@
-//! Everything a DBC file carries.
+//! Everything a DBC file carries. Every type is serde-serializable (`bywire dbc convert` writes
+//! and reads JSON with it); positions are not serialized.
 
 use std::fmt;
+
+use serde::{Deserialize, Serialize};
 
 /// A number as written in the file: integers stay integers (as cantools and Python keep them),
 /// so that `(1,0)` scaling yields exact integer values and `(0.5,0)` floating ones.
@@ -32,6 +35,46 @@ impl Num {
     }
 }
 
+/// Integers as JSON integers (as a string beyond 64 bits), floats as JSON floats, so a number
+/// keeps its kind through JSON.
+impl Serialize for Num {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Num::Int(i) => match (i64::try_from(*i), u64::try_from(*i)) {
+                (Ok(v), _) => s.serialize_i64(v),
+                (_, Ok(v)) => s.serialize_u64(v),
+                _ => s.serialize_str(&i.to_string()),
+            },
+            Num::Float(f) => s.serialize_f64(*f),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Num {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Num, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = Num;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a number")
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<Num, E> {
+                Ok(Num::Int(i128::from(v)))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<Num, E> {
+                Ok(Num::Int(i128::from(v)))
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<Num, E> {
+                Ok(Num::Float(v))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Num, E> {
+                v.parse().map(Num::Int).map_err(E::custom)
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
+}
+
 impl fmt::Display for Num {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -60,7 +103,7 @@ impl PartialEq for Position {
 }
 
 /// Byte order of a signal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum ByteOrder {
     /// `@1`: Intel, the start bit is the least significant bit.
     LittleEndian,
@@ -69,7 +112,7 @@ pub enum ByteOrder {
 }
 
 /// How the raw bits are read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum ValueType {
     /// Two's complement (`-`) or unsigned (`+`) integer.
     Integer {
@@ -83,7 +126,7 @@ pub enum ValueType {
 }
 
 /// A signal's role in multiplexing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Multiplexing {
     /// Always present.
     None,
@@ -96,7 +139,7 @@ pub enum Multiplexing {
 }
 
 /// Extended multiplexing (`SG_MUL_VAL_`): the switch this signal depends on and the value ranges.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MuxCondition {
     /// The multiplexor signal's name.
     pub switch: String,
@@ -105,7 +148,7 @@ pub struct MuxCondition {
 }
 
 /// An attribute value.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum AttrValue {
     /// A number (INT, HEX, FLOAT, or an ENUM index).
     Number(Num),
@@ -114,7 +157,7 @@ pub enum AttrValue {
 }
 
 /// A signal.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Signal {
     /// Name.
     pub name: String,
@@ -149,11 +192,12 @@ pub struct Signal {
     /// Value descriptions (`VAL_`).
     pub value_descriptions: Vec<(i128, String)>,
     /// Where the `SG_` statement stood.
+    #[serde(skip)]
     pub position: Position,
 }
 
 /// A message.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Message {
     /// Identifier without the extended flag.
     pub id: u32,
@@ -174,6 +218,7 @@ pub struct Message {
     /// Attribute values, in file order.
     pub attributes: Vec<(String, AttrValue)>,
     /// Where the `BO_` statement stood.
+    #[serde(skip)]
     pub position: Position,
 }
 
@@ -222,7 +267,7 @@ impl Signal {
 }
 
 /// A node (ECU).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Node {
     /// Name.
     pub name: String,
@@ -233,7 +278,7 @@ pub struct Node {
 }
 
 /// An environment variable (`EV_`), kept as declared.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EnvVar {
     /// Name.
     pub name: String,
@@ -248,7 +293,7 @@ pub struct EnvVar {
 }
 
 /// What an attribute definition applies to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum AttrScope {
     /// The network (database).
     Network,
@@ -263,7 +308,7 @@ pub enum AttrScope {
 }
 
 /// The type of an attribute.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum AttrType {
     /// `INT min max`.
     Int(Num, Num),
@@ -278,7 +323,7 @@ pub enum AttrType {
 }
 
 /// An attribute definition (`BA_DEF_`) with its default (`BA_DEF_DEF_`).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AttrDef {
     /// Scope.
     pub scope: AttrScope,
@@ -291,7 +336,7 @@ pub struct AttrDef {
 }
 
 /// A signal group (`SIG_GROUP_`).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SignalGroup {
     /// The message's identifier as written.
     pub message_raw_id: u32,
@@ -304,7 +349,7 @@ pub struct SignalGroup {
 }
 
 /// A whole database.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Database {
     /// `VERSION`.
     pub version: String,

@@ -1,6 +1,7 @@
 //! The real-world corpus in `../shared/corpus/`, one test case per DBC file:
 //! - `load/<file>`: lenient loading keeps every `BO_` and `SG_` statement of the file;
 //! - `roundtrip/<file>`: load → write → load gives an equal database;
+//! - `json/<file>`: load → JSON → database gives an equal database;
 //! - `vectors/<file>`: decoding agrees with every cantools vector of the file (same signals,
 //!   same values, floats bit-exact, same multiplexer selection) and re-encoding gives the
 //!   vector's `reencoded_hex`.
@@ -66,6 +67,16 @@ fn check_load(path: &Path) -> Result<(), Failed> {
             statements(&text, "SG_ ")
         )
         .into());
+    }
+    Ok(())
+}
+
+fn check_json(path: &Path) -> Result<(), Failed> {
+    let db = load(path);
+    let json = serde_json::to_string(&db).map_err(|e| e.to_string())?;
+    let again: Database = serde_json::from_str(&json).map_err(|e| e.to_string())?;
+    if again != db {
+        return Err("database differs after DBC -> JSON -> database".into());
     }
     Ok(())
 }
@@ -283,6 +294,8 @@ fn main() {
             trials.push(Trial::test(format!("roundtrip/{rel}"), move || {
                 check_roundtrip(&p)
             }));
+            let p = path.clone();
+            trials.push(Trial::test(format!("json/{rel}"), move || check_json(&p)));
             if summary["files"][&rel]["nonstrict_ok"] == Json::Bool(false) {
                 let p = path.clone();
                 trials.push(Trial::test(format!("strict/{rel}"), move || {

@@ -28,6 +28,16 @@ pub enum DbcCommand {
         /// The DBC file.
         file: PathBuf,
     },
+    /// Convert between DBC and JSON, chosen by the files' extensions (.dbc, .json).
+    #[command(
+        after_help = "Examples:\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc convert vehicle.json vehicle.dbc\n\nThe output is written to a temporary file and renamed, so a failed conversion leaves no\nhalf-written file."
+    )]
+    Convert {
+        /// The input file.
+        input: PathBuf,
+        /// The output file.
+        output: PathBuf,
+    },
 }
 
 #[derive(clap::Args)]
@@ -62,11 +72,43 @@ pub fn load(path: &Path, strict: bool) -> Result<Database> {
     Ok(db)
 }
 
+fn is_json(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+}
+
 pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
     match command {
         DbcCommand::Dump { file, strict } => {
             let db = load(file, *strict)?;
             dump(&db, out)
+        }
+        DbcCommand::Convert { input, output } => {
+            let db = if is_json(input) {
+                let text = std::fs::read_to_string(input)
+                    .with_context(|| format!("cannot read {}", input.display()))?;
+                serde_json::from_str(&text).map_err(|e| {
+                    anyhow::anyhow!("{}:{}:{}: {e}", input.display(), e.line(), e.column())
+                })?
+            } else {
+                load(input, false)?
+            };
+            let text = if is_json(output) {
+                serde_json::to_string_pretty(&db)? + "\n"
+            } else if output
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("dbc"))
+            {
+                bywire_dbc::write(&db)
+            } else {
+                anyhow::bail!("{}: the output must end in .dbc or .json", output.display());
+            };
+            let partial = output.with_extension("partial");
+            std::fs::write(&partial, text)
+                .with_context(|| format!("cannot write {}", partial.display()))?;
+            std::fs::rename(&partial, output)
+                .with_context(|| format!("cannot write {}", output.display()))?;
+            Ok(())
         }
         DbcCommand::Lint { file } => {
             let db = load(file, false)?;

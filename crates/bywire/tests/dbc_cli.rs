@@ -173,3 +173,59 @@ fn lint_reports_positions_and_fails_on_errors() {
     let (code, _, _) = run(&["dbc", "lint", &corpus(MOTOHAWK)], "");
     assert_eq!(code, 0);
 }
+
+#[test]
+fn convert_dbc_to_json_and_back() {
+    let dir = std::env::temp_dir().join(format!("bywire-convert-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (json, dbc) = (dir.join("m.json"), dir.join("m.dbc"));
+    let (code, _, err) = run(
+        &["dbc", "convert", &corpus(MOTOHAWK), json.to_str().unwrap()],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(value["messages"][0]["name"], "ExampleMessage");
+    assert_eq!(value["messages"][0]["signals"][0]["factor"], 0.01);
+    let (code, _, err) = run(
+        &[
+            "dbc",
+            "convert",
+            json.to_str().unwrap(),
+            dbc.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let (_, from_original, _) = run(&["dbc", "dump", &corpus(MOTOHAWK)], "");
+    let (_, from_converted, _) = run(&["dbc", "dump", dbc.to_str().unwrap()], "");
+    assert_eq!(from_original, from_converted);
+    // A bad output name fails without leaving a file.
+    let (code, _, err) = run(
+        &[
+            "dbc",
+            "convert",
+            &corpus(MOTOHAWK),
+            dir.join("m.txt").to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("must end in .dbc or .json"));
+    assert!(!dir.join("m.txt").exists() && !dir.join("m.partial").exists());
+    // Broken JSON names its line and column.
+    std::fs::write(&json, "{\n  \"version\": 3\n}").unwrap();
+    let (code, _, err) = run(
+        &[
+            "dbc",
+            "convert",
+            json.to_str().unwrap(),
+            dbc.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("m.json:2:"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
