@@ -395,14 +395,27 @@ impl Parser<'_> {
             "BS_" => {
                 self.eat_punct(':');
                 let start = self.peek().map(|t| t.start);
-                while self.peek().is_some_and(|t| !t.line_start) {
+                let mut has_string = false;
+                while let Some(t) = self.peek().filter(|t| !t.line_start) {
+                    has_string |= matches!(t.tok, Tok::Str(_));
                     self.pos += 1;
                 }
                 let end = self.toks.get(self.pos.saturating_sub(1)).map(|t| t.end);
-                if let (Some(s), Some(e)) = (start, end) {
-                    if e > s {
-                        self.db.bit_timing = self.text.get(s..e).unwrap_or("").trim().to_string();
-                    }
+                let (Some(s), Some(e)) = (start, end) else {
+                    return Ok(());
+                };
+                let content = self.text.get(s..e).unwrap_or("").trim();
+                // BS_ holds a baudrate and BTR values: numbers on one line. Anything else would
+                // not survive being written back, so it is reported and dropped.
+                if has_string || content.contains('\n') {
+                    return Err(self.error_at(
+                        at,
+                        "BS_ holds text other than a baudrate and BTR values",
+                        "BS_ content dropped",
+                    ));
+                }
+                if e > s {
+                    self.db.bit_timing = content.to_string();
                 }
                 Ok(())
             }

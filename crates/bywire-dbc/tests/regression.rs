@@ -36,3 +36,10 @@ fn unknown_statements_merged_on_reload() {
 fn signal_without_receivers() {
     round_trips("signal_without_receivers.dbc");
 }
+
+/// Found by fuzzing: `BS_` content with a string running over several lines was kept verbatim
+/// and swallowed the statements after it when written back.
+#[test]
+fn string_in_bit_timing_section() {
+    round_trips("string_in_bit_timing_section.dbc");
+}
