@@ -441,6 +441,41 @@ impl MessageCodec {
         Ok(())
     }
 
+    /// The raw bits of signal `index` in `payload` (`None` past the payload or the signal list).
+    pub fn read_raw(&self, index: usize, payload: &[u8]) -> Option<u64> {
+        let p = self.plans.get(index).filter(|p| !p.past_end)?;
+        let bytes = payload.get(..self.size)?;
+        let mut buf = [0u8; BUFFER];
+        buf.get_mut(..bytes.len())?.copy_from_slice(bytes);
+        // The mask keeps at most 64 bits.
+        #[allow(clippy::cast_possible_truncation)]
+        Some(((read_window(p, &buf) >> p.shift) & p.mask) as u64)
+    }
+
+    /// Overwrite the bits of signal `index` in `payload` with `raw` (masked to its width);
+    /// false when the signal or the payload does not allow it.
+    pub fn write_raw(&self, index: usize, raw: u64, payload: &mut [u8]) -> bool {
+        let Some(p) = self.plans.get(index).filter(|p| !p.past_end) else {
+            return false;
+        };
+        let Some(bytes) = payload.get_mut(..self.size) else {
+            return false;
+        };
+        let mut buf = [0u8; BUFFER];
+        let Some(dst) = buf.get_mut(..bytes.len()) else {
+            return false;
+        };
+        dst.copy_from_slice(bytes);
+        write_window(p, &mut buf, u128::from(raw) & p.mask);
+        match buf.get(..bytes.len()) {
+            Some(src) => {
+                bytes.copy_from_slice(src);
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Encode physical values (one entry per signal; `None` leaves its bits 0) into `out`,
     /// which must hold the message's size; returns the size. Values are converted as cantools
     /// does (`round` half to even) and masked to the signal's width.

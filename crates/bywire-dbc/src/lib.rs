@@ -23,6 +23,7 @@
 //! ```
 
 pub mod codec;
+pub mod e2e;
 mod lexer;
 pub mod lint;
 pub mod model;
