@@ -23,6 +23,7 @@
 //! ```
 
 pub mod codec;
+pub mod codegen;
 pub mod e2e;
 mod lexer;
 pub mod lint;

@@ -28,6 +28,14 @@ pub enum DbcCommand {
         /// The DBC file.
         file: PathBuf,
     },
+    /// Generate Rust: a no_std module with a typed struct per message.
+    #[command(
+        after_help = "Examples:\n  bywire dbc gen-rust vehicle.dbc > src/vehicle.rs\n\nFrom a build.rs, call bywire_dbc::codegen::generate(&db) instead."
+    )]
+    GenRust {
+        /// The DBC file.
+        file: PathBuf,
+    },
     /// Convert between DBC and JSON, chosen by the files' extensions (.dbc, .json).
     #[command(
         after_help = "Examples:\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc convert vehicle.json vehicle.dbc\n\nThe output is written to a temporary file and renamed, so a failed conversion leaves no\nhalf-written file."
@@ -108,6 +116,11 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
                 .with_context(|| format!("cannot write {}", partial.display()))?;
             std::fs::rename(&partial, output)
                 .with_context(|| format!("cannot write {}", output.display()))?;
+            Ok(())
+        }
+        DbcCommand::GenRust { file } => {
+            let db = load(file, false)?;
+            out.write_all(bywire_dbc::codegen::generate(&db).as_bytes())?;
             Ok(())
         }
         DbcCommand::Lint { file } => {

@@ -229,3 +229,14 @@ fn convert_dbc_to_json_and_back() {
     assert!(err.contains("m.json:2:"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn gen_rust_prints_a_module() {
+    let (code, out, _) = run(&["dbc", "gen-rust", &corpus(MOTOHAWK)], "");
+    assert_eq!(code, 0);
+    assert!(
+        out.contains("pub struct ExampleMessage(pub [u8; 8]);"),
+        "{out}"
+    );
+    assert!(out.contains("pub fn set_temperature(&mut self, value: f64) -> Result<(), OutOfRange>"));
+}
