@@ -75,6 +75,29 @@ pub struct Decoded {
     pub physical: Value,
 }
 
+/// How [`MessageCodec::encode_checked`] treats values outside a signal's range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EncodeMode {
+    /// Refuse a value outside the declared physical range or the raw width.
+    Strict,
+    /// Clamp it to the declared range and the raw width.
+    Clamp,
+}
+
+/// A value [`MessageCodec::encode_checked`] refused.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("signal {signal}: value {value} is outside [{min}, {max}]")]
+pub struct RangeError {
+    /// Index of the signal.
+    pub signal: usize,
+    /// The value given.
+    pub value: f64,
+    /// Lowest accepted.
+    pub min: f64,
+    /// Highest accepted.
+    pub max: f64,
+}
+
 /// Why a frame does not decode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum DecodeError {
@@ -170,6 +193,8 @@ struct Plan {
     presence: Presence,
     /// Runs past the message's size: never decoded.
     past_end: bool,
+    /// Declared physical range, when the file declares one (not `[0|0]`).
+    range: Option<(f64, f64)>,
 }
 
 /// A message compiled for decoding and encoding.
@@ -271,6 +296,10 @@ fn plan(s: &Signal, size: usize) -> Plan {
         length,
         value_type: s.value_type,
         conversion,
+        range: {
+            let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
+            (min != 0.0 || max != 0.0).then_some((min, max))
+        },
         presence: Presence::Always,
         past_end: past_end || window + WINDOW > BUFFER,
     }
@@ -474,6 +503,72 @@ impl MessageCodec {
             }
             None => false,
         }
+    }
+
+    /// Encode with range checks: in [`EncodeMode::Strict`] a value outside the signal's
+    /// declared physical range, or whose raw value does not fit its width, is an error naming
+    /// the signal; in [`EncodeMode::Clamp`] it is clamped to both. Returns the size.
+    pub fn encode_checked(
+        &self,
+        values: &[Option<Value>],
+        out: &mut [u8],
+        mode: EncodeMode,
+    ) -> Result<usize, RangeError> {
+        let mut adjusted: Vec<Option<Value>> = values.to_vec();
+        for (signal, (p, v)) in self.plans.iter().zip(adjusted.iter_mut()).enumerate() {
+            let Some(value) = v else { continue };
+            let physical = value.as_f64();
+            // The raw width's limits, in physical units.
+            let raw_limits = match (p.value_type, &p.conversion) {
+                (ValueType::Integer { signed }, conversion) => {
+                    let bits = i32::try_from(p.length).unwrap_or(64);
+                    let (lo, hi) = if signed {
+                        (-(2f64.powi(bits - 1)), 2f64.powi(bits - 1) - 1.0)
+                    } else {
+                        (0.0, 2f64.powi(bits) - 1.0)
+                    };
+                    let (scale, offset) = match conversion {
+                        Conversion::Identity => (1.0, 0.0),
+                        Conversion::Integer { scale, offset } => {
+                            (Num::Int(*scale).as_f64(), Num::Int(*offset).as_f64())
+                        }
+                        Conversion::Float { scale, offset } => (*scale, *offset),
+                        Conversion::Linear { scale, offset } => (scale.as_f64(), offset.as_f64()),
+                    };
+                    let (a, b) = (lo * scale + offset, hi * scale + offset);
+                    Some((a.min(b), a.max(b)))
+                }
+                _ => None,
+            };
+            let (min, max) = match (p.range, raw_limits) {
+                (Some((a, b)), Some((c, d))) => (a.max(c), b.min(d)),
+                (Some(r), None) | (None, Some(r)) => r,
+                (None, None) => (f64::NEG_INFINITY, f64::INFINITY),
+            };
+            if physical >= min && physical <= max {
+                continue;
+            }
+            match mode {
+                EncodeMode::Strict => {
+                    return Err(RangeError {
+                        signal,
+                        value: physical,
+                        min,
+                        max,
+                    })
+                }
+                EncodeMode::Clamp if physical.is_nan() => {
+                    *v = Some(Value::Float(min.max(0.0).min(max)))
+                }
+                EncodeMode::Clamp => *v = Some(Value::Float(physical.clamp(min, max))),
+            }
+        }
+        self.encode(&adjusted, out).map_err(|_| RangeError {
+            signal: 0,
+            value: f64::NAN,
+            min: 0.0,
+            max: 0.0,
+        })
     }
 
     /// Encode physical values (one entry per signal; `None` leaves its bits 0) into `out`,
@@ -759,6 +854,37 @@ mod tests {
         let mut out = [0u8; 8];
         c.encode(&d, &mut out).unwrap();
         assert_eq!(out, data);
+    }
+
+    #[test]
+    fn strict_encoding_refuses_and_clamping_clamps() {
+        let c = codec(
+            " SG_ Speed : 0|8@1+ (0.5,0) [0|100] \"km/h\" X\n SG_ Free : 8|4@1- (1,0) [0|0] \"\" X",
+        );
+        let mut out = [0u8; 8];
+        let ok = [Some(Value::Float(100.0)), Some(Value::Int(-8))];
+        assert_eq!(c.encode_checked(&ok, &mut out, EncodeMode::Strict), Ok(8));
+        assert_eq!(out[..2], [200, 0x08]);
+        let high = [Some(Value::Float(100.5)), None];
+        let e = c
+            .encode_checked(&high, &mut out, EncodeMode::Strict)
+            .unwrap_err();
+        assert_eq!((e.signal, e.min, e.max), (0, 0.0, 100.0));
+        // No declared range: the raw width (4 bits signed: -8..7) is the limit.
+        let wide = [None, Some(Value::Int(9))];
+        assert_eq!(
+            c.encode_checked(&wide, &mut out, EncodeMode::Strict)
+                .unwrap_err()
+                .max,
+            7.0
+        );
+        c.encode_checked(
+            &[Some(Value::Float(250.0)), Some(Value::Int(-100))],
+            &mut out,
+            EncodeMode::Clamp,
+        )
+        .unwrap();
+        assert_eq!(out[..2], [200, 0x08]);
     }
 
     #[test]
