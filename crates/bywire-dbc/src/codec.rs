@@ -197,6 +197,17 @@ struct Plan {
     range: Option<(f64, f64)>,
 }
 
+/// What the fast path for payloads of at most 8 bytes needs of a signal, kept small so a whole
+/// database's plans stay in the first-level cache.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Hot {
+    kernel: Kernel,
+    mask: u64,
+    word_shift: u32,
+    big_endian: bool,
+    past_end: bool,
+}
+
 /// A message compiled for decoding and encoding.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MessageCodec {
@@ -208,6 +219,8 @@ pub struct MessageCodec {
     multiplexors: Vec<(usize, Vec<(u64, u64)>)>,
     /// No multiplexing: every signal decodes in message order.
     plain: bool,
+    /// The fast path's view of `plans`.
+    hot: Vec<Hot>,
 }
 
 fn conversion(s: &Signal) -> Conversion {
@@ -270,7 +283,10 @@ fn plan(s: &Signal, size: usize) -> Plan {
     let kernel = match (s.value_type, &conversion) {
         (ValueType::Integer { signed: false }, Conversion::Identity) => Kernel::UnsignedRaw,
         (ValueType::Integer { signed: true }, Conversion::Identity) => Kernel::SignedRaw { unused },
-        (ValueType::Integer { signed: false }, Conversion::Float { scale, offset }) => {
+        // Below 64 bits the top bit is never set: the raw value converts as a signed one.
+        (ValueType::Integer { signed: false }, Conversion::Float { scale, offset })
+            if length < 64 =>
+        {
             Kernel::UnsignedFloat {
                 scale: *scale,
                 offset: *offset,
@@ -369,12 +385,25 @@ impl MessageCodec {
         }
         let order = decode_order(&plans);
         let plain = multiplexors.is_empty() && plans.iter().all(|p| p.presence == Presence::Always);
+        // The mask keeps at most 64 bits.
+        #[allow(clippy::cast_possible_truncation)]
+        let hot = plans
+            .iter()
+            .map(|p| Hot {
+                kernel: p.kernel,
+                mask: p.mask as u64,
+                word_shift: p.word_shift,
+                big_endian: p.big_endian,
+                past_end: p.past_end,
+            })
+            .collect();
         MessageCodec {
             size,
             plans,
             order,
             multiplexors,
             plain,
+            hot,
         }
     }
 
@@ -416,13 +445,14 @@ impl MessageCodec {
                 padded
             });
             let words = [u64::from_le_bytes(bytes), u64::from_be_bytes(bytes)];
-            for (p, slot) in self.plans.iter().zip(out.iter_mut()) {
-                *slot = (!p.past_end).then(|| {
-                    let word = if p.big_endian { words[1] } else { words[0] };
-                    // The mask keeps at most 64 bits.
-                    #[allow(clippy::cast_possible_truncation)]
-                    let raw = (word >> p.word_shift) & (p.mask as u64);
-                    physical(p, raw)
+            for ((h, p), slot) in self.hot.iter().zip(&self.plans).zip(out.iter_mut()) {
+                *slot = (!h.past_end).then(|| {
+                    let word = if h.big_endian { words[1] } else { words[0] };
+                    let raw = (word >> h.word_shift) & h.mask;
+                    Decoded {
+                        raw,
+                        physical: value_of(h.kernel, p, raw),
+                    }
                 });
             }
             return Ok(());
@@ -700,25 +730,37 @@ fn decode_signal(p: &Plan, payload: &[u8], buf: &[u8; BUFFER]) -> Decoded {
 /// The physical value of a signal's raw bits.
 #[inline(always)]
 fn physical(p: &Plan, raw: u64) -> Decoded {
+    Decoded {
+        raw,
+        physical: value_of(p.kernel, p, raw),
+    }
+}
+
+/// The physical value of `raw` by the signal's kernel: one flat match, so the value stays in
+/// registers (a nested dispatch made the compiler build it in memory and reload it).
+#[inline(always)]
+#[allow(clippy::cast_precision_loss, clippy::cast_possible_wrap)]
+fn value_of(kernel: Kernel, p: &Plan, raw: u64) -> Value {
     // Two's complement from `64 - unused` bits: move the sign bit to bit 63, shift back.
-    #[allow(clippy::cast_possible_wrap)]
     let signed = |unused: u32| ((raw << unused) as i64) >> unused;
-    #[allow(clippy::cast_precision_loss)]
-    let physical = match p.kernel {
+    match kernel {
         Kernel::UnsignedRaw => match i64::try_from(raw) {
             Ok(small) => Value::Int(small),
             Err(_) => Value::UInt(raw),
         },
         Kernel::SignedRaw { unused } => Value::Int(signed(unused)),
-        Kernel::UnsignedFloat { scale, offset } => Value::Float(raw as f64 * scale + offset),
+        // Fewer than 64 bits (see the kernel's choice): the one-instruction signed conversion
+        // gives what the unsigned one would.
+        Kernel::UnsignedFloat { scale, offset } => {
+            Value::Float((raw as i64) as f64 * scale + offset)
+        }
         Kernel::SignedFloat {
             unused,
             scale,
             offset,
         } => Value::Float(signed(unused) as f64 * scale + offset),
         Kernel::General => general(p, raw),
-    };
-    Decoded { raw, physical }
+    }
 }
 
 /// Any value type with any conversion, by Python's rules.
