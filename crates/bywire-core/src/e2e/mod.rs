@@ -14,4 +14,4 @@ pub mod profile2;
 mod sequence;
 
 pub use counter::{CounterChecker, CounterStatus, RollingCounter};
-pub use sequence::{CheckStatus, SequenceConfig};
+pub use sequence::{CheckStatus, Checker, Profile, SequenceConfig};

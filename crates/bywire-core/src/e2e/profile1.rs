@@ -4,8 +4,8 @@
 //! in the low nibble of byte 1 (bit offset 8); in `Nibble` mode the high nibble of byte 1 carries
 //! the data ID's high nibble.
 
-use super::sequence::SequenceState;
-use super::{CheckStatus, SequenceConfig};
+use super::sequence::{self, Profile};
+use super::SequenceConfig;
 use crate::crc::crc8_sae_j1850_continue;
 
 /// How the 16-bit data ID enters the CRC.
@@ -115,43 +115,36 @@ impl Protector {
     }
 }
 
-/// The receiver's state.
+/// This profile, for the shared receiver.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Checker {
-    state: SequenceState,
-}
+pub enum Rules {}
 
-impl Default for Checker {
-    fn default() -> Self {
-        Checker {
-            state: SequenceState::new(MODULUS),
-        }
+impl Profile for Rules {
+    type Config = Config;
+    const MODULUS: u8 = MODULUS;
+
+    fn sequence(config: &Config) -> &SequenceConfig {
+        &config.sequence
+    }
+
+    fn read(config: &Config, data: &[u8]) -> Result<Result<u8, ()>, E2eError> {
+        let expected = crc(config, data)?;
+        let nibble_ok = config.data_id_mode != DataIdMode::Nibble
+            || data.get(COUNTER_BYTE).map(|b| b >> 4)
+                == u8::try_from((config.data_id >> 8) & 0x0F).ok();
+        let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
+        let intact = data.get(CRC_BYTE) == Some(&expected) && nibble_ok && counter < MODULUS;
+        Ok(if intact { Ok(counter) } else { Err(()) })
     }
 }
 
-impl Checker {
-    /// A receiver waiting for its first data.
-    pub fn new() -> Self {
-        Checker::default()
-    }
-
-    /// Check `data` (`None`: the check ran with no new data).
-    pub fn check(&mut self, config: &Config, data: Option<&[u8]>) -> Result<CheckStatus, E2eError> {
-        self.state.check_data(&config.sequence, data, |data| {
-            let expected = crc(config, data)?;
-            let nibble_ok = config.data_id_mode != DataIdMode::Nibble
-                || data.get(COUNTER_BYTE).map(|b| b >> 4)
-                    == u8::try_from((config.data_id >> 8) & 0x0F).ok();
-            let counter = data.get(COUNTER_BYTE).map_or(0, |b| b & 0x0F);
-            let intact = data.get(CRC_BYTE) == Some(&expected) && nibble_ok && counter < MODULUS;
-            Ok(if intact { Ok(counter) } else { Err(()) })
-        })
-    }
-}
+/// The receiver's state.
+pub type Checker = sequence::Checker<Rules>;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::e2e::CheckStatus;
 
     fn config(mode: DataIdMode) -> Config {
         Config {

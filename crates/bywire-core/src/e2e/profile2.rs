@@ -2,8 +2,8 @@
 //! of 16, a 4-bit counter 0–15 in the low nibble of byte 1, the CRC in byte 0.
 
 use super::profile1::E2eError;
-use super::sequence::SequenceState;
-use super::{CheckStatus, SequenceConfig};
+use super::sequence::{self, Profile};
+use super::SequenceConfig;
 use crate::crc::crc8_h2f;
 
 /// Profile 2 settings.
@@ -65,43 +65,36 @@ impl Protector {
     }
 }
 
-/// The receiver's state.
+/// This profile, for the shared receiver.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Checker {
-    state: SequenceState,
-}
+pub enum Rules {}
 
-impl Default for Checker {
-    fn default() -> Self {
-        Checker {
-            state: SequenceState::new(MODULUS),
-        }
-    }
-}
+impl Profile for Rules {
+    type Config = Config;
+    const MODULUS: u8 = MODULUS;
 
-impl Checker {
-    /// A receiver waiting for its first data.
-    pub fn new() -> Self {
-        Checker::default()
+    fn sequence(config: &Config) -> &SequenceConfig {
+        &config.sequence
     }
 
-    /// Check `data` (`None`: the check ran with no new data).
-    pub fn check(&mut self, config: &Config, data: Option<&[u8]>) -> Result<CheckStatus, E2eError> {
-        self.state.check_data(&config.sequence, data, |data| {
-            let expected = crc(config, data)?;
-            let counter = data.get(1).map_or(0, |b| b & 0x0F);
-            Ok(if data.first() == Some(&expected) {
-                Ok(counter)
-            } else {
-                Err(())
-            })
+    fn read(config: &Config, data: &[u8]) -> Result<Result<u8, ()>, E2eError> {
+        let expected = crc(config, data)?;
+        let counter = data.get(1).map_or(0, |b| b & 0x0F);
+        Ok(if data.first() == Some(&expected) {
+            Ok(counter)
+        } else {
+            Err(())
         })
     }
 }
 
+/// The receiver's state.
+pub type Checker = sequence::Checker<Rules>;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::e2e::CheckStatus;
 
     #[test]
     fn protect_then_check() {

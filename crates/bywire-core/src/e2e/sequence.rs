@@ -145,3 +145,52 @@ impl SequenceState {
         }
     }
 }
+
+/// What a profile tells the shared receiver: its counter range, its settings and how to read
+/// one reception.
+pub trait Profile {
+    /// The profile's settings.
+    type Config;
+    /// Counter values run `0..MODULUS`.
+    const MODULUS: u8;
+    /// The receiver sequence settings within `config`.
+    fn sequence(config: &Self::Config) -> &SequenceConfig;
+    /// The counter of `data` when its CRC (and data ID) check out, `Err(())` when not.
+    fn read(
+        config: &Self::Config,
+        data: &[u8],
+    ) -> Result<Result<u8, ()>, super::profile1::E2eError>;
+}
+
+/// The receiver of a profile: waits for its first data, then judges each reception.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Checker<P> {
+    state: SequenceState,
+    profile: core::marker::PhantomData<P>,
+}
+
+impl<P: Profile> Default for Checker<P> {
+    fn default() -> Self {
+        Checker {
+            state: SequenceState::new(P::MODULUS),
+            profile: core::marker::PhantomData,
+        }
+    }
+}
+
+impl<P: Profile> Checker<P> {
+    /// A receiver waiting for its first data.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Check `data` (`None`: the check ran with no new data).
+    pub fn check(
+        &mut self,
+        config: &P::Config,
+        data: Option<&[u8]>,
+    ) -> Result<CheckStatus, super::profile1::E2eError> {
+        self.state
+            .check_data(P::sequence(config), data, |d| P::read(config, d))
+    }
+}
