@@ -7,18 +7,10 @@
     clippy::indexing_slicing
 )]
 
-use std::process::Command;
+mod common;
 
 fn bywire(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
+    common::bywire(args, "")
 }
 
 fn json(args: &[&str]) -> serde_json::Value {

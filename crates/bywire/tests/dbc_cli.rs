@@ -7,36 +7,14 @@
     clippy::indexing_slicing
 )]
 
-use std::io::Write;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
-fn corpus(file: &str) -> String {
-    format!(
-        "{}/../../../shared/corpus/dbc/{file}",
-        env!("CARGO_MANIFEST_DIR")
-    )
-}
+mod common;
+
+use common::corpus;
 
 fn run(args: &[&str], input: &str) -> (i32, String, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(input.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
-    (
-        out.status.code().unwrap(),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
+    common::bywire(args, input)
 }
 
 const MOTOHAWK: &str = "cantools/tests__files__dbc__motohawk.dbc";
@@ -59,23 +37,20 @@ fn decode_agrees_with_cantools_decode() {
     let input = frames.join("\n") + "\n";
     let (code, ours, err) = run(&["decode", &corpus(MOTOHAWK), "--single-line"], &input);
     assert_eq!(code, 0, "{err}");
-    let theirs = Command::new("python3")
-        .args([
+    let (code, theirs, err) = common::run_with_input(
+        Command::new("python3").args([
             "-m",
             "cantools",
             "decode",
             "--single-line",
             &corpus(MOTOHAWK),
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .and_then(|mut c| {
-            c.stdin.take().unwrap().write_all(input.as_bytes())?;
-            c.wait_with_output()
-        })
-        .expect("cantools is installed (scripts/install-test-deps.sh)");
-    let theirs = String::from_utf8(theirs.stdout).unwrap();
+        ]),
+        &input,
+    );
+    assert_eq!(
+        code, 0,
+        "cantools is installed (scripts/install-test-deps.sh): {err}"
+    );
     assert_eq!(theirs.lines().count(), frames.len(), "{theirs}");
     for (o, t) in ours.lines().zip(theirs.lines()) {
         assert_eq!(items(o), items(t), "bywire: {o}\ncantools: {t}");

@@ -9,33 +9,17 @@
     clippy::indexing_slicing
 )]
 
-use std::io::Write;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 use bywire_core::e2e::{profile1, profile2, SequenceConfig};
 
+mod common;
+
 fn run_python(script: &str, input: &str) -> String {
     let path = format!("{}/tests/oracles/{script}", env!("CARGO_MANIFEST_DIR"));
-    let mut child = Command::new("python3")
-        .arg(&path)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("python3 runs");
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(input.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{script} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
+    let (code, out, err) = common::run_with_input(Command::new("python3").arg(&path), input);
+    assert_eq!(code, 0, "{script} failed: {err}");
+    out
 }
 
 /// A small deterministic generator, so a failure names a reproducible frame.

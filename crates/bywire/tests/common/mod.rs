@@ -1,0 +1,41 @@
+//! Helpers shared by the integration tests: run a program with standard input, find corpus files.
+// Each test file uses some of these.
+#![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+/// Run `command` with `input` on standard input: (exit code, stdout, stderr).
+pub fn run_with_input(command: &mut Command, input: &str) -> (i32, String, String) {
+    let mut child = command
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the program starts");
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// Run the `bywire` binary.
+pub fn bywire(args: &[&str], input: &str) -> (i32, String, String) {
+    run_with_input(Command::new(env!("CARGO_BIN_EXE_bywire")).args(args), input)
+}
+
+/// A file of the shared DBC corpus.
+pub fn corpus(file: &str) -> String {
+    format!(
+        "{}/../../../shared/corpus/dbc/{file}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
