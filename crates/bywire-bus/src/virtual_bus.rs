@@ -1,0 +1,252 @@
+//! The in-process virtual bus: any number of endpoints in one process share a named bus.
+//!
+//! Every frame reaches every other endpoint whose filters accept it (and the sender when it
+//! asked for its own frames), all endpoints see frames in one global order (delivery happens
+//! under one lock), and each endpoint has a bounded queue: when a reader does not keep up, new
+//! frames for it are dropped and counted in its [`Stats::rx_dropped`], never blocking the bus or
+//! the other readers.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, OnceLock, PoisonError, Weak};
+use std::time::{Duration, Instant};
+
+use bywire_core::{Frame, Timestamp};
+
+use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, Stats};
+
+/// Frames an endpoint holds before it starts dropping.
+pub const DEFAULT_QUEUE: usize = 4096;
+
+struct Endpoint {
+    queue: VecDeque<Received>,
+    capacity: usize,
+    filtering: Filtering,
+    receive_own: bool,
+    stats: Stats,
+}
+
+#[derive(Default)]
+struct State {
+    endpoints: HashMap<u64, Endpoint>,
+    next_id: u64,
+}
+
+struct Shared {
+    state: Mutex<State>,
+    arrived: Condvar,
+}
+
+impl Shared {
+    /// The state; a panic in another thread while holding the lock cannot leave it
+    /// inconsistent (every update is a single push or counter change), so poisoning is ignored.
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+fn registry() -> &'static Mutex<HashMap<String, Weak<Shared>>> {
+    static REGISTRY: OnceLock<Mutex<HashMap<String, Weak<Shared>>>> = OnceLock::new();
+    REGISTRY.get_or_init(Mutex::default)
+}
+
+/// Nanoseconds since the first use of any virtual bus in this process (a monotonic clock).
+fn now() -> Timestamp {
+    static ORIGIN: OnceLock<Instant> = OnceLock::new();
+    let origin = *ORIGIN.get_or_init(Instant::now);
+    Timestamp::from_nanos(u64::try_from(origin.elapsed().as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// An endpoint's membership: removed from the bus when the last half is dropped.
+struct Membership {
+    shared: Arc<Shared>,
+    id: u64,
+}
+
+impl Drop for Membership {
+    fn drop(&mut self) {
+        self.shared.lock().endpoints.remove(&self.id);
+    }
+}
+
+/// One endpoint on a virtual bus.
+pub struct VirtualBus {
+    member: Arc<Membership>,
+}
+
+impl VirtualBus {
+    /// Join (or create) the bus called `name` with the default queue length.
+    pub fn join(name: &str) -> VirtualBus {
+        Self::join_with_queue(name, DEFAULT_QUEUE)
+    }
+
+    /// Join (or create) the bus called `name`; this endpoint holds up to `capacity` frames.
+    pub fn join_with_queue(name: &str, capacity: usize) -> VirtualBus {
+        let shared = {
+            let mut buses = registry().lock().unwrap_or_else(PoisonError::into_inner);
+            match buses.get(name).and_then(Weak::upgrade) {
+                Some(shared) => shared,
+                None => {
+                    let shared = Arc::new(Shared {
+                        state: Mutex::default(),
+                        arrived: Condvar::new(),
+                    });
+                    buses.retain(|_, bus| bus.strong_count() > 0);
+                    buses.insert(name.to_string(), Arc::downgrade(&shared));
+                    shared
+                }
+            }
+        };
+        let id = {
+            let mut state = shared.lock();
+            let id = state.next_id;
+            state.next_id += 1;
+            state.endpoints.insert(
+                id,
+                Endpoint {
+                    queue: VecDeque::new(),
+                    capacity: capacity.max(1),
+                    filtering: Filtering::default(),
+                    receive_own: false,
+                    stats: Stats::default(),
+                },
+            );
+            id
+        };
+        VirtualBus {
+            member: Arc::new(Membership { shared, id }),
+        }
+    }
+}
+
+fn send(member: &Membership, frame: &Frame) -> Result<(), BusError> {
+    let mut state = member.shared.lock();
+    let timestamp = now();
+    let bytes = u64::try_from(frame.data().len()).unwrap_or(0);
+    for (&id, endpoint) in state.endpoints.iter_mut() {
+        let own = id == member.id;
+        if own {
+            endpoint.stats.tx_frames += 1;
+            endpoint.stats.tx_bytes += bytes;
+        }
+        if (own && !endpoint.receive_own) || !endpoint.filtering.accepts(frame) {
+            continue;
+        }
+        if endpoint.queue.len() >= endpoint.capacity {
+            endpoint.stats.rx_dropped += 1;
+            continue;
+        }
+        endpoint.queue.push_back(Received {
+            frame: *frame,
+            timestamp,
+            own,
+        });
+    }
+    drop(state);
+    member.shared.arrived.notify_all();
+    Ok(())
+}
+
+fn recv(member: &Membership, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+    let deadline = timeout.map(|t| Instant::now() + t);
+    let mut state = member.shared.lock();
+    // Each pass either returns or waits on the condition variable; spurious wake-ups go round
+    // again until the deadline.
+    loop {
+        let endpoint = state
+            .endpoints
+            .get_mut(&member.id)
+            .ok_or(BusError::Closed)?;
+        if let Some(received) = endpoint.queue.pop_front() {
+            endpoint.stats.rx_frames += 1;
+            endpoint.stats.rx_bytes += u64::try_from(received.frame.data().len()).unwrap_or(0);
+            if received.frame.is_error() {
+                endpoint.stats.rx_errors += 1;
+            }
+            return Ok(Some(received));
+        }
+        state = match deadline {
+            None => member
+                .shared
+                .arrived
+                .wait(state)
+                .unwrap_or_else(PoisonError::into_inner),
+            Some(deadline) => {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    return Ok(None);
+                }
+                member
+                    .shared
+                    .arrived
+                    .wait_timeout(state, left)
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .0
+            }
+        };
+    }
+}
+
+impl BusTx for VirtualBus {
+    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
+        send(&self.member, frame)
+    }
+}
+
+impl BusRx for VirtualBus {
+    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        recv(&self.member, timeout)
+    }
+}
+
+struct Half(Arc<Membership>);
+
+impl BusTx for Half {
+    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
+        send(&self.0, frame)
+    }
+}
+
+impl BusRx for Half {
+    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        recv(&self.0, timeout)
+    }
+}
+
+impl Bus for VirtualBus {
+    fn set_filtering(&mut self, filtering: Filtering) -> Result<(), BusError> {
+        let mut state = self.member.shared.lock();
+        let endpoint = state
+            .endpoints
+            .get_mut(&self.member.id)
+            .ok_or(BusError::Closed)?;
+        endpoint.filtering = filtering;
+        Ok(())
+    }
+
+    fn set_receive_own(&mut self, on: bool) -> Result<(), BusError> {
+        let mut state = self.member.shared.lock();
+        let endpoint = state
+            .endpoints
+            .get_mut(&self.member.id)
+            .ok_or(BusError::Closed)?;
+        endpoint.receive_own = on;
+        Ok(())
+    }
+
+    fn stats(&self) -> Stats {
+        self.member
+            .shared
+            .lock()
+            .endpoints
+            .get(&self.member.id)
+            .map(|e| e.stats)
+            .unwrap_or_default()
+    }
+
+    fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {
+        (
+            Box::new(Half(Arc::clone(&self.member))),
+            Box::new(Half(self.member)),
+        )
+    }
+}
