@@ -1,0 +1,457 @@
+//! The bit-timed bus: a deterministic discrete-event simulation of one CAN bus.
+//!
+//! Nodes hand frames to their controller's transmit queue ([`SimBus::submit`]); whenever the bus
+//! is idle, every node with a frame ready offers its highest-priority one and the lowest
+//! identifier wins arbitration, as on a wire. A frame occupies the bus for its exact stuffed
+//! length from the wire model (the data phase at the data bitrate for FD frames with BRS), then
+//! 3 bits of intermission; receivers get it at the end of its EOF, with that timestamp.
+//!
+//! Faults ([`SimBus::corrupt`]) destroy transmissions: the receivers detect a CRC error at the
+//! CRC delimiter, an error flag (6 bits) and delimiter (8 bits) follow, the counters change by
+//! the ISO 11898-1 rules through `bywire-core`'s [`Confinement`], and the transmitter retries.
+//! An error-passive transmitter waits 8 more bits (suspend transmission) before its next attempt;
+//! a bus-off node takes no part until it has seen 128 sequences of 11 recessive bits.
+//!
+//! Time is simulated: [`SimBus::advance`] runs the bus up to a given instant, as fast as the
+//! host computes it. Nothing here reads a clock.
+
+use std::collections::VecDeque;
+
+use bywire_core::confinement::{Confinement, Event, NodeState, TransmitErrorCause};
+use bywire_core::wire::{self, Field};
+use bywire_core::{Frame, Id, Timestamp};
+
+use crate::{Filtering, Received};
+
+/// Bits of intermission after every frame.
+const INTERMISSION: u64 = 3;
+/// Error flag (6) and error delimiter (8).
+const ERROR_FRAME: u64 = 14;
+/// Extra recessive bits an error-passive transmitter waits before sending again.
+const SUSPEND: u64 = 8;
+/// Recessive bits that make one bus-off recovery sequence.
+const RECOVERY_BITS: u64 = 11;
+
+/// A node's index on the bus.
+pub type NodeId = usize;
+
+/// What happened on the bus, in time order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BusEvent {
+    /// A frame was sent successfully.
+    Transmitted {
+        /// The sender.
+        node: NodeId,
+        /// Its identifier.
+        id: Id,
+        /// Start of frame.
+        start: Timestamp,
+        /// End of EOF (when receivers get it).
+        end: Timestamp,
+        /// From `submit` to `end`: queueing, arbitration and transmission.
+        latency_ns: u64,
+    },
+    /// A transmission was destroyed by an error frame; the frame will be retried.
+    Destroyed {
+        /// The sender.
+        node: NodeId,
+        /// Its identifier.
+        id: Id,
+        /// Start of frame.
+        start: Timestamp,
+        /// End of the error delimiter.
+        end: Timestamp,
+    },
+    /// A node offered a frame but another won arbitration.
+    ArbitrationLost {
+        /// The loser.
+        node: NodeId,
+        /// The identifier it offered.
+        id: Id,
+        /// When.
+        at: Timestamp,
+    },
+    /// A node's fault-confinement state changed.
+    StateChanged {
+        /// The node.
+        node: NodeId,
+        /// Its new state.
+        state: NodeState,
+        /// When.
+        at: Timestamp,
+    },
+}
+
+struct Pending {
+    frame: Frame,
+    submitted: Timestamp,
+    /// Submission order, for equal identifiers.
+    seq: u64,
+}
+
+struct Node {
+    queue: Vec<Pending>,
+    rx: VecDeque<Received>,
+    filtering: Filtering,
+    receive_own: bool,
+    confinement: Confinement,
+    /// Earliest start of its next transmission (suspend transmission).
+    not_before: Timestamp,
+    /// Recessive bits seen in a row while bus-off.
+    recessive_run: u64,
+}
+
+/// A fault: destroy the next `count` transmissions that match.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Fault {
+    /// Only this sender's frames (any sender when `None`).
+    pub node: Option<NodeId>,
+    /// Only this identifier (any when `None`).
+    pub id: Option<Id>,
+    /// How many more transmissions to destroy.
+    pub count: u32,
+}
+
+/// One simulated bus.
+pub struct SimBus {
+    nominal: u32,
+    data: Option<u32>,
+    /// The bus is idle from here on (after the last intermission).
+    idle_from: Timestamp,
+    /// Simulated up to here.
+    now: Timestamp,
+    nodes: Vec<Node>,
+    faults: Vec<Fault>,
+    events: Vec<BusEvent>,
+    next_seq: u64,
+    busy_ns: u64,
+}
+
+impl SimBus {
+    /// A bus at `nominal` bit/s, with FD data phases at `data` bit/s when given.
+    pub fn new(nominal: u32, data: Option<u32>) -> Self {
+        SimBus {
+            nominal: nominal.max(1),
+            data,
+            idle_from: Timestamp::ZERO,
+            now: Timestamp::ZERO,
+            nodes: Vec::new(),
+            faults: Vec::new(),
+            events: Vec::new(),
+            next_seq: 0,
+            busy_ns: 0,
+        }
+    }
+
+    /// Add a node; it receives every data frame until its filtering says otherwise.
+    pub fn add_node(&mut self) -> NodeId {
+        self.nodes.push(Node {
+            queue: Vec::new(),
+            rx: VecDeque::new(),
+            filtering: Filtering::default(),
+            receive_own: false,
+            confinement: Confinement::default(),
+            not_before: Timestamp::ZERO,
+            recessive_run: 0,
+        });
+        self.nodes.len() - 1
+    }
+
+    /// Replace a node's receive filtering.
+    pub fn set_filtering(&mut self, node: NodeId, filtering: Filtering) {
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.filtering = filtering;
+        }
+    }
+
+    /// Whether a node receives its own frames.
+    pub fn set_receive_own(&mut self, node: NodeId, on: bool) {
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.receive_own = on;
+        }
+    }
+
+    /// Hand a frame to a node's controller at `at` (not before the current simulated time).
+    /// Error frames are controller reports, not frames to send: they are ignored.
+    pub fn submit(&mut self, node: NodeId, frame: Frame, at: Timestamp) {
+        if frame.is_error() {
+            return;
+        }
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.queue.push(Pending {
+                frame,
+                submitted: at.max(self.now),
+                seq,
+            });
+        }
+    }
+
+    /// Destroy the next matching transmissions.
+    pub fn corrupt(&mut self, fault: Fault) {
+        self.faults.push(fault);
+    }
+
+    /// The next frame a node received.
+    pub fn receive(&mut self, node: NodeId) -> Option<Received> {
+        self.nodes.get_mut(node).and_then(|n| n.rx.pop_front())
+    }
+
+    /// A node's fault-confinement state and counters.
+    pub fn confinement(&self, node: NodeId) -> Option<Confinement> {
+        self.nodes.get(node).map(|n| n.confinement)
+    }
+
+    /// Events since the last call.
+    pub fn take_events(&mut self) -> Vec<BusEvent> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Simulated time so far.
+    pub fn now(&self) -> Timestamp {
+        self.now
+    }
+
+    /// Time the bus spent carrying frames and error frames, in nanoseconds.
+    pub fn busy_ns(&self) -> u64 {
+        self.busy_ns
+    }
+
+    fn bits(&self, n: u64) -> u64 {
+        // Nanoseconds for n nominal bits, exact when the bit time is a whole number of ns.
+        let ns = u128::from(n) * 1_000_000_000 / u128::from(self.nominal);
+        u64::try_from(ns).unwrap_or(u64::MAX)
+    }
+
+    fn set_state(&mut self, node: NodeId, event: Event, at: Timestamp) {
+        let Some(n) = self.nodes.get_mut(node) else {
+            return;
+        };
+        if let Some(change) = n.confinement.on_event(event) {
+            if change.to == NodeState::BusOff {
+                n.recessive_run = 0;
+            }
+            self.events.push(BusEvent::StateChanged {
+                node,
+                state: change.to,
+                at,
+            });
+        }
+    }
+
+    /// Count idle recessive bits from `from` towards bus-off recovery, up to `to` or to the first
+    /// recovery, whichever comes first; returns the time of that recovery.
+    fn idle(&mut self, from: Timestamp, to: Timestamp) -> Option<Timestamp> {
+        let bit = self.bits(1).max(1);
+        let at_bits = |bits: u64| {
+            from.saturating_add(std::time::Duration::from_nanos(bits.saturating_mul(bit)))
+        };
+        // The earliest moment a bus-off node completes its 128th sequence.
+        let recovery = self
+            .nodes
+            .iter()
+            .filter(|n| n.confinement.state() == NodeState::BusOff)
+            .map(|n| {
+                let remaining = u64::from(128u16.saturating_sub(n.confinement.recovery_progress()));
+                at_bits((remaining * RECOVERY_BITS).saturating_sub(n.recessive_run))
+            })
+            .min()
+            .filter(|r| *r <= to);
+        let end = recovery.unwrap_or(to);
+        let gap_bits = u64::try_from(end.saturating_since(from).as_nanos() / u128::from(bit))
+            .unwrap_or(u64::MAX);
+        for node in 0..self.nodes.len() {
+            let Some(n) = self.nodes.get_mut(node) else {
+                continue;
+            };
+            if n.confinement.state() != NodeState::BusOff {
+                continue;
+            }
+            let before = n.recessive_run;
+            let total = before.saturating_add(gap_bits);
+            n.recessive_run = total % RECOVERY_BITS;
+            // One event per completed sequence, at its own instant; at most 128 matter.
+            let complete = (total / RECOVERY_BITS).min(128);
+            for k in 1..=complete {
+                self.set_state(
+                    node,
+                    Event::RecessiveSequence,
+                    at_bits(k * RECOVERY_BITS - before),
+                );
+            }
+            if let (Some(r), Some(n)) = (recovery, self.nodes.get_mut(node)) {
+                if n.confinement.state() != NodeState::BusOff {
+                    n.not_before = r;
+                    n.recessive_run = 0;
+                }
+            }
+        }
+        recovery
+    }
+
+    /// Run the bus up to `until`.
+    pub fn advance(&mut self, until: Timestamp) {
+        // Each pass sends or destroys one frame, brings a node back from bus-off, or ends:
+        // bounded by the work queued and the nodes.
+        loop {
+            let start = self
+                .nodes
+                .iter()
+                .filter(|n| n.confinement.state() != NodeState::BusOff)
+                .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
+                .min()
+                .map(|ready| ready.max(self.idle_from));
+            let limit = start.unwrap_or(until).min(until);
+            if let Some(recovered) = self.idle(self.idle_from.max(self.now), limit) {
+                self.now = recovered;
+                continue;
+            }
+            match start {
+                Some(start) if start <= until => self.transmit_at(start),
+                _ => {
+                    self.now = self.now.max(until);
+                    return;
+                }
+            }
+        }
+    }
+
+    fn transmit_at(&mut self, start: Timestamp) {
+        // Every ready node offers its highest-priority frame; the lowest identifier wins.
+        let mut offers: Vec<(NodeId, usize, Id, u64)> = Vec::new();
+        for (node, n) in self.nodes.iter().enumerate() {
+            if n.confinement.state() == NodeState::BusOff || n.not_before > start {
+                continue;
+            }
+            let best = n
+                .queue
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.submitted <= start)
+                .filter_map(|(i, p)| p.frame.id().map(|id| (i, id, p.seq)))
+                .min_by_key(|&(_, id, seq)| (id, seq));
+            if let Some((i, id, seq)) = best {
+                offers.push((node, i, id, seq));
+            }
+        }
+        let Some(&(winner, index, id, _)) = offers
+            .iter()
+            .min_by_key(|&&(node, _, id, seq)| (id, seq, node))
+        else {
+            return;
+        };
+        for &(node, _, lost_id, _) in &offers {
+            if node != winner {
+                self.events.push(BusEvent::ArbitrationLost {
+                    node,
+                    id: lost_id,
+                    at: start,
+                });
+            }
+        }
+        let Some(pending) = self.nodes.get(winner).and_then(|n| n.queue.get(index)) else {
+            return;
+        };
+        let (frame, submitted) = (pending.frame, pending.submitted);
+        let Ok(bits) = wire::encode(&frame) else {
+            return;
+        };
+        let fault = self.faults.iter_mut().find(|f| {
+            f.count > 0 && f.node.is_none_or(|n| n == winner) && f.id.is_none_or(|i| i == id)
+        });
+        let ns = |bus: &SimBus, n: u64| std::time::Duration::from_nanos(bus.bits(n));
+        let end;
+        if let Some(fault) = fault {
+            fault.count -= 1;
+            // Receivers find the CRC wrong at the CRC delimiter, then the error frame follows.
+            let detected = bits
+                .spans()
+                .iter()
+                .find(|s| s.field == Field::CrcDelimiter)
+                .map_or(bits.len(), |s| s.start + 1);
+            let error_end =
+                start.saturating_add(ns(self, u64::try_from(detected).unwrap_or(0) + ERROR_FRAME));
+            end = error_end;
+            self.events.push(BusEvent::Destroyed {
+                node: winner,
+                id,
+                start,
+                end: error_end,
+            });
+            self.set_state(
+                winner,
+                Event::TransmitError(TransmitErrorCause::Other),
+                error_end,
+            );
+            for node in 0..self.nodes.len() {
+                let on_bus = self
+                    .nodes
+                    .get(node)
+                    .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
+                if node != winner && on_bus {
+                    self.set_state(node, Event::ReceiveError, error_end);
+                }
+            }
+        } else {
+            let brs = matches!(frame, Frame::Fd(f) if f.brs());
+            let time = bits.time_ns(self.nominal, if brs { self.data } else { None });
+            // Frame times are whole nanoseconds at common bitrates; round the rest to nearest.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let eof = start.saturating_add(std::time::Duration::from_nanos(time.round() as u64));
+            end = eof;
+            if let Some(n) = self.nodes.get_mut(winner) {
+                n.queue.remove(index);
+            }
+            self.events.push(BusEvent::Transmitted {
+                node: winner,
+                id,
+                start,
+                end: eof,
+                latency_ns: u64::try_from(eof.saturating_since(submitted).as_nanos())
+                    .unwrap_or(u64::MAX),
+            });
+            for (node, n) in self.nodes.iter_mut().enumerate() {
+                let own = node == winner;
+                if n.confinement.state() == NodeState::BusOff
+                    || (own && !n.receive_own)
+                    || !n.filtering.accepts(&frame)
+                {
+                    continue;
+                }
+                n.rx.push_back(Received {
+                    frame,
+                    timestamp: eof,
+                    own,
+                });
+            }
+            self.set_state(winner, Event::TransmitSuccess, eof);
+            for node in 0..self.nodes.len() {
+                let on_bus = self
+                    .nodes
+                    .get(node)
+                    .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
+                if node != winner && on_bus {
+                    self.set_state(node, Event::ReceiveSuccess, eof);
+                }
+            }
+        }
+        self.busy_ns = self
+            .busy_ns
+            .saturating_add(u64::try_from(end.saturating_since(start).as_nanos()).unwrap_or(0));
+        self.idle_from = end.saturating_add(ns(self, INTERMISSION));
+        self.now = self.idle_from;
+        let passive = self
+            .nodes
+            .get(winner)
+            .is_some_and(|n| n.confinement.state() == NodeState::ErrorPassive);
+        let suspend_until = self.idle_from.saturating_add(ns(self, SUSPEND));
+        if let Some(n) = self.nodes.get_mut(winner) {
+            n.not_before = if passive {
+                suspend_until
+            } else {
+                self.idle_from
+            };
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! The bit-timed bus against the textbook: arbitration order, exact frame times from the wire
+//! model, and the fault-confinement path to bus-off and back, with exact simulated timestamps.
+// Tests fail by panicking; helpers outside #[test] functions may unwrap too.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use bywire_bus::sim::{BusEvent, Fault, SimBus};
+use bywire_core::confinement::NodeState;
+use bywire_core::wire::{self, Field};
+use bywire_core::{Frame, Timestamp};
+
+/// 500 kbit/s: 2 µs per bit.
+const BIT_NS: u64 = 2_000;
+
+fn frame(t: &str) -> Frame {
+    t.parse().unwrap()
+}
+
+fn ns(t: Timestamp) -> u64 {
+    t.as_nanos()
+}
+
+#[test]
+fn three_nodes_start_together_and_leave_in_id_order() {
+    let mut bus = SimBus::new(500_000, None);
+    let nodes = [bus.add_node(), bus.add_node(), bus.add_node()];
+    let listener = bus.add_node();
+    let frames = ["300#0102", "100#0A0B0C", "200#FF"];
+    for (n, f) in nodes.iter().zip(frames) {
+        bus.submit(*n, frame(f), Timestamp::ZERO);
+    }
+    bus.advance(Timestamp::from_millis(10));
+    let events = bus.take_events();
+    let sent: Vec<(u32, u64, u64)> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::Transmitted { id, start, end, .. } => {
+                Some((id.as_raw(), ns(*start), ns(*end)))
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        sent.iter().map(|s| s.0).collect::<Vec<_>>(),
+        [0x100, 0x200, 0x300]
+    );
+    // Each frame lasts its exact stuffed length; the next starts after 3 bits of intermission.
+    let mut expected_start = 0;
+    for (id, start, end) in &sent {
+        let text = frames
+            .iter()
+            .find(|f| u32::from_str_radix(&f[..3], 16).unwrap() == *id)
+            .unwrap();
+        let length = u64::try_from(wire::encode(&frame(text)).unwrap().len()).unwrap();
+        assert_eq!(*start, expected_start, "{id:X}");
+        assert_eq!(end - start, length * BIT_NS, "{id:X}");
+        expected_start = end + 3 * BIT_NS;
+    }
+    // Losers at the first arbitration: 0x300 and 0x200; at the second: 0x300.
+    let losses: Vec<(u32, u64)> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::ArbitrationLost { id, at, .. } => Some((id.as_raw(), ns(*at))),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(losses, [(0x300, 0), (0x200, 0), (0x300, sent[1].1)]);
+    // The listener got all three, stamped at their end of frame.
+    let got: Vec<(String, u64)> = std::iter::from_fn(|| bus.receive(listener))
+        .map(|r| (r.frame.to_string(), ns(r.timestamp)))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("100#0A0B0C".to_string(), sent[0].2),
+            ("200#FF".to_string(), sent[1].2),
+            ("300#0102".to_string(), sent[2].2)
+        ]
+    );
+}
+
+#[test]
+fn repeated_corruption_leads_to_bus_off_and_recovery_at_exact_times() {
+    let mut bus = SimBus::new(500_000, None);
+    let sender = bus.add_node();
+    let receiver = bus.add_node();
+    let f = frame("123#DEADBEEF");
+    bus.corrupt(Fault {
+        node: Some(sender),
+        id: None,
+        count: 32,
+    });
+    bus.submit(sender, f, Timestamp::ZERO);
+    bus.advance(Timestamp::from_millis(100));
+    let events = bus.take_events();
+
+    // Each destroyed attempt: up to the CRC delimiter, 14 bits of error flag and delimiter,
+    // 3 of intermission; an error-passive sender waits 8 bits more (suspend transmission).
+    let encoded = wire::encode(&f).unwrap();
+    let detected = u64::try_from(
+        encoded
+            .spans()
+            .iter()
+            .find(|s| s.field == Field::CrcDelimiter)
+            .unwrap()
+            .start
+            + 1,
+    )
+    .unwrap();
+    let attempt = detected + 14;
+    let mut t = 0;
+    let mut passive_at = None;
+    let mut bus_off_at = None;
+    let destroyed: Vec<(u64, u64)> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::Destroyed { start, end, .. } => Some((ns(*start), ns(*end))),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(destroyed.len(), 32);
+    for (k, (start, end)) in destroyed.iter().enumerate() {
+        assert_eq!(*start, t, "attempt {}", k + 1);
+        assert_eq!(*end, t + attempt * BIT_NS, "attempt {}", k + 1);
+        let passive = k + 1 >= 16;
+        if k + 1 == 16 {
+            passive_at = Some(*end);
+        }
+        if k + 1 == 32 {
+            bus_off_at = Some(*end);
+        }
+        t = end + (3 + if passive { 8 } else { 0 }) * BIT_NS;
+    }
+    let changes: Vec<(NodeState, u64)> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::StateChanged { node, state, at } if *node == sender => {
+                Some((*state, ns(*at)))
+            }
+            _ => None,
+        })
+        .collect();
+    // TEC reaches 128 with the 16th error (error passive) and 256 with the 32nd (bus-off);
+    // recovery after 128 sequences of 11 recessive bits counted from the end of intermission.
+    let bus_off = bus_off_at.unwrap();
+    let recovered = bus_off + 3 * BIT_NS + 128 * 11 * BIT_NS;
+    assert_eq!(
+        changes,
+        [
+            (NodeState::ErrorPassive, passive_at.unwrap()),
+            (NodeState::BusOff, bus_off),
+            (NodeState::ErrorActive, recovered)
+        ]
+    );
+    // The receiver counted one receive error per destroyed frame, and the recovered sender
+    // delivers the frame it still held, as soon as it is back.
+    assert_eq!(bus.confinement(receiver).unwrap().rec(), 32 - 1);
+    let sent: Vec<u64> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::Transmitted { start, .. } => Some(ns(*start)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(sent, [recovered]);
+    let r = bus.receive(receiver).unwrap();
+    assert_eq!(r.frame, f);
+    assert_eq!(bus.confinement(sender).unwrap().tec(), 0);
+    assert_eq!(bus.now(), Timestamp::from_millis(100));
+}
