@@ -14,6 +14,7 @@
 //! assert_eq!(got.frame.to_string(), "123#DEADBEEF");
 //! ```
 
+pub mod faults;
 pub mod sim;
 mod spec;
 pub mod virtual_bus;
