@@ -240,6 +240,19 @@ impl SimBus {
         }
     }
 
+    /// Apply `event` to every node on the bus except the sender.
+    fn tell_receivers(&mut self, sender: NodeId, event: Event, at: Timestamp) {
+        for node in 0..self.nodes.len() {
+            let on_bus = self
+                .nodes
+                .get(node)
+                .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
+            if node != sender && on_bus {
+                self.set_state(node, event, at);
+            }
+        }
+    }
+
     /// Count idle recessive bits from `from` towards bus-off recovery, up to `to` or to the first
     /// recovery, whichever comes first; returns the time of that recovery.
     fn idle(&mut self, from: Timestamp, to: Timestamp) -> Option<Timestamp> {
@@ -384,15 +397,7 @@ impl SimBus {
                 Event::TransmitError(TransmitErrorCause::Other),
                 error_end,
             );
-            for node in 0..self.nodes.len() {
-                let on_bus = self
-                    .nodes
-                    .get(node)
-                    .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
-                if node != winner && on_bus {
-                    self.set_state(node, Event::ReceiveError, error_end);
-                }
-            }
+            self.tell_receivers(winner, Event::ReceiveError, error_end);
         } else {
             let brs = matches!(frame, Frame::Fd(f) if f.brs());
             let time = bits.time_ns(self.nominal, if brs { self.data } else { None });
@@ -426,15 +431,7 @@ impl SimBus {
                 });
             }
             self.set_state(winner, Event::TransmitSuccess, eof);
-            for node in 0..self.nodes.len() {
-                let on_bus = self
-                    .nodes
-                    .get(node)
-                    .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
-                if node != winner && on_bus {
-                    self.set_state(node, Event::ReceiveSuccess, eof);
-                }
-            }
+            self.tell_receivers(winner, Event::ReceiveSuccess, eof);
         }
         self.busy_ns = self
             .busy_ns

@@ -44,7 +44,7 @@ pub fn frame_bits(frame: &Frame, stuffing: Stuffing) -> u32 {
         fd: frame.is_fd(),
     };
     let bits = match stuffing {
-        Stuffing::Exact => wire::encode(frame).map_or(0, |w| w.len()),
+        Stuffing::Exact => return exact(frame, None).0,
         Stuffing::None => wire::unstuffed_length(shape, frame.dlc()),
         Stuffing::WorstCase => wire::length_bounds(shape, frame.dlc()).1,
     };
@@ -53,13 +53,22 @@ pub fn frame_bits(frame: &Frame, stuffing: Stuffing) -> u32 {
 
 /// Time a frame occupies the bus, interframe space included, in nanoseconds.
 pub fn frame_time_ns(frame: &Frame, rates: Bitrates) -> f64 {
+    exact(frame, Some(rates)).1
+}
+
+/// Exact bits and (with bitrates) time of a frame, interframe space included, from one encoding.
+fn exact(frame: &Frame, rates: Option<Bitrates>) -> (u32, f64) {
     let Ok(w) = wire::encode(frame) else {
-        return 0.0;
+        return (0, 0.0);
     };
-    let brs = matches!(frame, Frame::Fd(f) if f.brs());
-    let data = if brs { rates.data } else { None };
-    w.time_ns(rates.nominal, data)
-        + f64::from(INTERFRAME_BITS) * 1e9 / f64::from(rates.nominal.max(1))
+    let bits = u32::try_from(w.len()).unwrap_or(u32::MAX) + INTERFRAME_BITS;
+    let ns = rates.map_or(0.0, |rates| {
+        let brs = matches!(frame, Frame::Fd(f) if f.brs());
+        let data = if brs { rates.data } else { None };
+        w.time_ns(rates.nominal, data)
+            + f64::from(INTERFRAME_BITS) * 1e9 / f64::from(rates.nominal.max(1))
+    });
+    (bits, ns)
 }
 
 /// One measured window.
@@ -142,15 +151,20 @@ impl LoadMeter {
         if self.start.is_none() {
             self.start = Some(now);
         }
-        let bits = frame_bits(frame, self.stuffing);
-        self.frames = self.frames.saturating_add(u32::from(bits > 0));
-        self.bits = self.bits.saturating_add(u64::from(bits));
-        self.busy_ns += match self.stuffing {
-            Stuffing::Exact => frame_time_ns(frame, self.rates),
+        // Exact counting encodes the frame once for both its bits and its time.
+        let (bits, ns) = match self.stuffing {
+            Stuffing::Exact => exact(frame, Some(self.rates)),
             Stuffing::None | Stuffing::WorstCase => {
-                f64::from(bits) * 1e9 / f64::from(self.rates.nominal.max(1))
+                let bits = frame_bits(frame, self.stuffing);
+                (
+                    bits,
+                    f64::from(bits) * 1e9 / f64::from(self.rates.nominal.max(1)),
+                )
             }
         };
+        self.frames = self.frames.saturating_add(u32::from(bits > 0));
+        self.bits = self.bits.saturating_add(u64::from(bits));
+        self.busy_ns += ns;
         report
     }
 }

@@ -195,6 +195,8 @@ struct Plan {
     past_end: bool,
     /// Declared physical range, when the file declares one (not `[0|0]`).
     range: Option<(f64, f64)>,
+    /// Physical values the raw width can express (integer signals).
+    reachable: Option<(f64, f64)>,
 }
 
 /// What the fast path for payloads of at most 8 bytes needs of a signal, kept small so a whole
@@ -316,6 +318,7 @@ fn plan(s: &Signal, size: usize) -> Plan {
             let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
             (min != 0.0 || max != 0.0).then_some((min, max))
         },
+        reachable: s.reachable_range(),
         presence: Presence::Always,
         past_end: past_end || window + WINDOW > BUFFER,
     }
@@ -500,6 +503,13 @@ impl MessageCodec {
         Ok(())
     }
 
+    /// The mask of signal `index`'s raw width (`None` for no such signal).
+    pub fn raw_mask(&self, index: usize) -> Option<u64> {
+        // The mask keeps at most 64 bits.
+        #[allow(clippy::cast_possible_truncation)]
+        self.plans.get(index).map(|p| p.mask as u64)
+    }
+
     /// The raw bits of signal `index` in `payload` (`None` past the payload or the signal list).
     pub fn read_raw(&self, index: usize, payload: &[u8]) -> Option<u64> {
         let p = self.plans.get(index).filter(|p| !p.past_end)?;
@@ -549,27 +559,7 @@ impl MessageCodec {
             let Some(value) = v else { continue };
             let physical = value.as_f64();
             // The raw width's limits, in physical units.
-            let raw_limits = match (p.value_type, &p.conversion) {
-                (ValueType::Integer { signed }, conversion) => {
-                    let bits = i32::try_from(p.length).unwrap_or(64);
-                    let (lo, hi) = if signed {
-                        (-(2f64.powi(bits - 1)), 2f64.powi(bits - 1) - 1.0)
-                    } else {
-                        (0.0, 2f64.powi(bits) - 1.0)
-                    };
-                    let (scale, offset) = match conversion {
-                        Conversion::Identity => (1.0, 0.0),
-                        Conversion::Integer { scale, offset } => {
-                            (Num::Int(*scale).as_f64(), Num::Int(*offset).as_f64())
-                        }
-                        Conversion::Float { scale, offset } => (*scale, *offset),
-                        Conversion::Linear { scale, offset } => (scale.as_f64(), offset.as_f64()),
-                    };
-                    let (a, b) = (lo * scale + offset, hi * scale + offset);
-                    Some((a.min(b), a.max(b)))
-                }
-                _ => None,
-            };
+            let raw_limits = p.reachable;
             let (min, max) = match (p.range, raw_limits) {
                 (Some((a, b)), Some((c, d))) => (a.max(c), b.min(d)),
                 (Some(r), None) | (None, Some(r)) => r,

@@ -250,16 +250,7 @@ fn signal_code(o: &mut String, s: &Signal, name: &str) -> std::fmt::Result {
     } else {
         "!value.is_finite()".into()
     };
-    let raw_limits = match s.value_type {
-        ValueType::Integer { signed: false } => {
-            Some((0.0, 2f64.powi(i32::try_from(len).unwrap_or(64)) - 1.0))
-        }
-        ValueType::Integer { signed: true } => {
-            let half = 2f64.powi(i32::try_from(len).unwrap_or(64) - 1);
-            Some((-half, half - 1.0))
-        }
-        _ => None,
-    };
+    let raw_limits = s.value_type.raw_range(len);
     writeln!(
         o,
         "    /// Set `{}`{unit}; refuses values outside its range or its raw width.",

@@ -203,7 +203,7 @@ impl Protection {
             let found = codec
                 .read_raw(index, payload)
                 .ok_or(ProtectionError::Payload)?;
-            let width_mask = self.checksum_width_mask(codec, index);
+            let width_mask = codec.raw_mask(index).unwrap_or(u64::MAX);
             if found != expected & width_mask {
                 return Err(ProtectionError::Checksum {
                     found,
@@ -214,12 +214,6 @@ impl Protection {
         Ok(self
             .counter
             .and_then(|(index, _)| codec.read_raw(index, payload)))
-    }
-
-    fn checksum_width_mask(&self, codec: &MessageCodec, index: usize) -> u64 {
-        let mut probe = vec![0u8; codec.size()];
-        codec.write_raw(index, u64::MAX, &mut probe);
-        codec.read_raw(index, &probe).unwrap_or(u64::MAX)
     }
 }
 

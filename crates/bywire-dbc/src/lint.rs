@@ -2,7 +2,7 @@
 //! position and a sentence.
 
 use crate::model::*;
-use crate::parser::{signal_bits, Severity};
+use crate::parser::{may_coexist, signal_bits, Severity};
 
 /// One finding.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -27,18 +27,6 @@ const COMMAND_NAMES: &[&str] = &["CMD", "COMMAND", "CONTROL", "CTRL", "REQUEST",
 fn contains_any(name: &str, words: &[&str]) -> bool {
     let upper = name.to_ascii_uppercase();
     words.iter().any(|w| upper.contains(w))
-}
-
-fn raw_range(s: &Signal) -> Option<(f64, f64)> {
-    let ValueType::Integer { signed } = s.value_type else {
-        return None;
-    };
-    let bits = i32::try_from(s.length).ok()?;
-    Some(if signed {
-        (-(2f64.powi(bits - 1)), 2f64.powi(bits - 1) - 1.0)
-    } else {
-        (0.0, 2f64.powi(bits) - 1.0)
-    })
 }
 
 /// The enum value name of a message attribute, or its number as text.
@@ -136,15 +124,8 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                         ),
                     );
                 }
-                let exclusive = |a: &Signal, b: &Signal| match (a.multiplexing, b.multiplexing) {
-                    (
-                        Multiplexing::Multiplexed(x) | Multiplexing::MultiplexedMultiplexor(x),
-                        Multiplexing::Multiplexed(y) | Multiplexing::MultiplexedMultiplexor(y),
-                    ) => x != y,
-                    _ => a.mux_condition.is_some() || b.mux_condition.is_some(),
-                };
                 if let Some((other, _)) = used.iter().find(|(o, ob)| {
-                    !exclusive(o, s) && ob.iter().zip(&bits).any(|(a, b)| a & b != 0)
+                    may_coexist(o, s) && ob.iter().zip(&bits).any(|(a, b)| a & b != 0)
                 }) {
                     push(
                         Severity::Error,
@@ -185,9 +166,7 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                         s.name
                     ),
                 );
-            } else if let Some((lo, hi)) = raw_range(s) {
-                let (a, b) = (lo * factor + offset, hi * factor + offset);
-                let (phys_lo, phys_hi) = (a.min(b), a.max(b));
+            } else if let Some((phys_lo, phys_hi)) = s.reachable_range() {
                 let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
                 let declared = !(min == 0.0 && max == 0.0);
                 // Half a step of slack: limits are often written rounded.

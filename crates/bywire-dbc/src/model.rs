@@ -259,7 +259,48 @@ fn long_symbol<'a>(attributes: &'a [(String, AttrValue)], key: &str) -> Option<&
     })
 }
 
+impl ValueType {
+    /// The raw values an integer signal of `length` bits holds, as floats; `None` for float
+    /// signals.
+    pub fn raw_range(self, length: u32) -> Option<(f64, f64)> {
+        let ValueType::Integer { signed } = self else {
+            return None;
+        };
+        let bits = i32::try_from(length.clamp(1, 64)).unwrap_or(64);
+        Some(if signed {
+            (-(2f64.powi(bits - 1)), 2f64.powi(bits - 1) - 1.0)
+        } else {
+            (0.0, 2f64.powi(bits) - 1.0)
+        })
+    }
+}
+
 impl Signal {
+    /// The signal's bits as absolute positions (byte × 8 + bit, bit 0 the LSB), in the order
+    /// the DBC numbering walks them from the start bit: LSB first for little endian, MSB first
+    /// for big endian (down through a byte, then on to the next byte's bit 7).
+    pub fn bit_positions(&self) -> impl Iterator<Item = u32> + '_ {
+        let mut pos = Some(self.start_bit);
+        (0..self.length.min(512)).map_while(move |_| {
+            let here = pos?;
+            pos = match self.byte_order {
+                ByteOrder::LittleEndian => here.checked_add(1),
+                ByteOrder::BigEndian if here % 8 == 0 => here.checked_add(15),
+                ByteOrder::BigEndian => here.checked_sub(1),
+            };
+            Some(here)
+        })
+    }
+
+    /// The physical values the raw bits can express with this scaling (low, high); `None` for
+    /// float signals.
+    pub fn reachable_range(&self) -> Option<(f64, f64)> {
+        let (lo, hi) = self.value_type.raw_range(self.length)?;
+        let (factor, offset) = (self.factor.as_f64(), self.offset.as_f64());
+        let (a, b) = (lo * factor + offset, hi * factor + offset);
+        Some((a.min(b), a.max(b)))
+    }
+
     /// The full name: `SystemSignalLongSymbol` when the file gives one, else the name.
     pub fn display_name(&self) -> &str {
         long_symbol(&self.attributes, "SystemSignalLongSymbol").unwrap_or(&self.name)

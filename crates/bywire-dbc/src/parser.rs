@@ -1145,23 +1145,16 @@ type BitMap = [u64; 8];
 /// last byte it touches; `None` past 64 bytes.
 pub(crate) fn signal_bits(s: &Signal) -> Option<(BitMap, u32)> {
     let mut map = [0u64; 8];
-    let mut pos = s.start_bit;
     let mut last_byte = 0;
-    for _ in 0..s.length.min(64) {
+    for pos in s.bit_positions().take(64) {
         *map.get_mut(usize::try_from(pos / 64).ok()?)? |= 1 << (pos % 64);
         last_byte = last_byte.max(pos / 8);
-        pos = match s.byte_order {
-            ByteOrder::LittleEndian => pos + 1,
-            // Motorola runs from the MSB down through the byte, then on to the next byte's bit 7.
-            ByteOrder::BigEndian if pos % 8 == 0 => pos + 15,
-            ByteOrder::BigEndian => pos - 1,
-        };
     }
     Some((map, last_byte))
 }
 
 /// Whether two signals can be in the same frame (not two values of one multiplexor).
-fn may_coexist(a: &Signal, b: &Signal) -> bool {
+pub(crate) fn may_coexist(a: &Signal, b: &Signal) -> bool {
     let value = |s: &Signal| match s.multiplexing {
         Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) => Some(v),
         Multiplexing::None | Multiplexing::Multiplexor => None,

@@ -237,17 +237,7 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     let mut grid = vec![vec![String::from("   "); 8]; size];
     for (i, s) in m.signals.iter().enumerate() {
         let letter = letters.get(i % letters.len()).copied().unwrap_or('?');
-        // Walk the signal's bits from MSB to LSB in the file's numbering.
-        let mut positions = Vec::new();
-        let mut pos = s.start_bit;
-        for _ in 0..s.length.min(512) {
-            positions.push(pos);
-            pos = match s.byte_order {
-                ByteOrder::LittleEndian => pos + 1,
-                ByteOrder::BigEndian if pos % 8 == 0 => pos + 15,
-                ByteOrder::BigEndian => pos.saturating_sub(1),
-            };
-        }
+        let positions: Vec<u32> = s.bit_positions().collect();
         let msb = match s.byte_order {
             ByteOrder::LittleEndian => positions.last().copied(),
             ByteOrder::BigEndian => positions.first().copied(),

@@ -10,16 +10,11 @@
     clippy::indexing_slicing
 )]
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
 use bywire_core::bittiming::{calculate, SJA1000};
 
 const CLOCK: u32 = 8_000_000;
-
-fn canvm() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tools/canvm.sh")
-}
 
 fn cases() -> Vec<(u32, Option<u32>)> {
     let mut cases = Vec::new();
@@ -87,26 +82,7 @@ fn sja1000_timing_agrees_with_the_linux_kernel() {
              then ip -details link show can0 | grep -E 'bitrate|prop-seg'; else echo FAIL; fi\n"
         ));
     }
-    let out = Command::new(canvm())
-        .args([
-            "run",
-            "--sja1000",
-            "1",
-            "--timeout",
-            "300",
-            "--",
-            "/bin/sh",
-            "-c",
-            &script,
-        ])
-        .output()
-        .expect("canvm.sh runs (see ../shared/tools/README.md)");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "canvm failed: {text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = common::in_canvm(&["--sja1000", "1"], &script);
     let blocks: Vec<&str> = text.split("CASE ").skip(1).collect();
     assert_eq!(blocks.len(), cases.len(), "{text}");
     let mut agreed = 0;

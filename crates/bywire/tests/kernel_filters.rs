@@ -10,8 +10,7 @@
     clippy::indexing_slicing
 )]
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
 use bywire_core::filter::{ErrorMask, FilterItem};
 use bywire_core::{FilterSet, Frame};
@@ -77,7 +76,6 @@ fn ours(filters: &str, frame: &Frame) -> bool {
 
 #[test]
 fn filters_agree_with_the_kernel() {
-    let canvm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tools/canvm.sh");
     let mut script = String::from("set -e\n");
     for (i, f) in FILTERS.iter().enumerate() {
         script += &format!("candump -L vcan0,{f} > /tmp/f{i} & \n");
@@ -90,25 +88,7 @@ fn filters_agree_with_the_kernel() {
     for i in 0..FILTERS.len() {
         script += &format!("echo FILTER {i}; cat /tmp/f{i}\n");
     }
-    let out = Command::new(&canvm)
-        .args([
-            "run",
-            "--can-utils",
-            "--timeout",
-            "300",
-            "--",
-            "/bin/sh",
-            "-c",
-            &script,
-        ])
-        .output()
-        .expect("canvm.sh runs (see ../shared/tools/README.md)");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "canvm failed: {text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = common::in_canvm(&["--can-utils"], &script);
     let blocks: Vec<&str> = text.split("FILTER ").skip(1).collect();
     assert_eq!(blocks.len(), FILTERS.len(), "{text}");
     let mut compared = 0;

@@ -15,8 +15,8 @@
 //! sequence back as a receiver would, destuffing and checking, and reports the first of the five
 //! CAN error kinds it meets ([`ErrorKind`]); [`check_transmission`] compares what a transmitter
 //! sent with what it monitored, which is how bit errors and lost arbitration are told apart.
-//! [`length_bounds`] gives the shortest and longest stuffed length any frame of a format and DLC
-//! can have.
+//! [`length_bounds`] bounds the stuffed length of every frame of a format and DLC (exact over
+//! identifier and data, with the CRC treated as free).
 
 mod bits;
 mod bounds;

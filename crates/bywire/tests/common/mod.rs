@@ -39,3 +39,25 @@ pub fn corpus(file: &str) -> String {
         env!("CARGO_MANIFEST_DIR")
     )
 }
+
+/// Run a shell script in the SocketCAN VM (`../shared/tools/canvm.sh run OPTIONS -- sh -c
+/// SCRIPT`) and return what it printed; panics with the VM's output if it failed.
+pub fn in_canvm(options: &[&str], script: &str) -> String {
+    let canvm = format!(
+        "{}/../../../shared/tools/canvm.sh",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = Command::new(canvm)
+        .arg("run")
+        .args(options)
+        .args(["--timeout", "300", "--", "/bin/sh", "-c", script])
+        .output()
+        .expect("canvm.sh runs (see ../shared/tools/README.md)");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "canvm failed: {text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
