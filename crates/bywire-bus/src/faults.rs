@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use bywire_core::frame::{ClassicFrame, FdFrame};
 use bywire_core::{Frame, Id};
 
-use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, Stats};
+use crate::{Bus, BusError, BusRx, BusStatus, BusTx, Filtering, Received, Stats};
 
 /// Which frames a rule looks at.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -229,8 +229,16 @@ impl<B: Bus + 'static> Bus for FaultyBus<B> {
         self.inner.set_receive_own(on)
     }
 
+    fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
+        self.inner.set_loopback(on)
+    }
+
     fn stats(&self) -> Stats {
         self.inner.stats()
+    }
+
+    fn status(&self) -> Result<Option<BusStatus>, BusError> {
+        self.inner.status()
     }
 
     /// The faults go with the sending half; delayed frames are sent by its later sends.

@@ -3,7 +3,8 @@
 //! A [`Bus`] sends frames and receives them with timestamps, applies SocketCAN-style filters,
 //! reports counts, and can be split into a sending and a receiving half for two threads. One
 //! string names any bus ([`BusSpec`]): `virtual:NAME` is an in-process bus that any number of
-//! endpoints share; further schemes (`sim:`, `socketcan:`) come with their backends.
+//! endpoints share, `sim:NAME@BITRATE` the same with a wire's timing (arbitration, frame times,
+//! error confinement), `socketcan:IFACE` a Linux interface.
 //!
 //! ```
 //! use bywire_bus::{open, Bus};
@@ -16,6 +17,9 @@
 
 pub mod faults;
 pub mod sim;
+pub mod sim_endpoint;
+#[cfg(target_os = "linux")]
+pub mod socketcan;
 mod spec;
 pub mod virtual_bus;
 
@@ -24,7 +28,7 @@ use std::time::Duration;
 use bywire_core::filter::{ErrorMask, Filter};
 use bywire_core::{Frame, Timestamp};
 
-pub use spec::{open, BusSpec, SpecError};
+pub use spec::{open, BusSpec, OpenError, SpecError};
 
 /// A frame as received.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,8 +37,12 @@ pub struct Received {
     pub frame: Frame,
     /// When it was on the bus (nanoseconds on the backend's clock).
     pub timestamp: Timestamp,
-    /// Whether this endpoint sent it (delivered only with receive-own on).
+    /// Whether this endpoint sent it (delivered only with receive-own on). An own frame is the
+    /// transmit confirmation: its timestamp is when it left (SocketCAN echoes it after the
+    /// controller sent it; the bit-timed bus at its end of frame).
     pub own: bool,
+    /// The controller's own timestamp, on its clock, where the backend has one.
+    pub hardware: Option<Timestamp>,
 }
 
 /// Counts an endpoint keeps.
@@ -52,6 +60,51 @@ pub struct Stats {
     pub rx_dropped: u64,
     /// Error frames received.
     pub rx_errors: u64,
+}
+
+impl Stats {
+    /// Count a frame this endpoint sent.
+    pub fn count_sent(&mut self, frame: &Frame) {
+        self.tx_frames += 1;
+        self.tx_bytes += u64::try_from(frame.data().len()).unwrap_or(0);
+    }
+
+    /// Count a frame this endpoint received.
+    pub fn count_received(&mut self, frame: &Frame) {
+        self.rx_frames += 1;
+        self.rx_bytes += u64::try_from(frame.data().len()).unwrap_or(0);
+        if frame.is_error() {
+            self.rx_errors += 1;
+        }
+    }
+}
+
+/// A controller's fault-confinement state, as SocketCAN names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ControllerState {
+    /// Both error counters below 96.
+    ErrorActive,
+    /// A counter at 96 or more (a warning; still error active on the wire).
+    ErrorWarning,
+    /// A counter above 127.
+    ErrorPassive,
+    /// Off the bus (transmit counter above 255).
+    BusOff,
+    /// The interface is down.
+    Stopped,
+    /// The controller sleeps.
+    Sleeping,
+}
+
+/// A controller's state and error counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BusStatus {
+    /// The state.
+    pub state: ControllerState,
+    /// Transmit error counter.
+    pub tec: u16,
+    /// Receive error counter.
+    pub rec: u16,
 }
 
 /// What can go wrong on a bus.
@@ -120,8 +173,15 @@ pub trait Bus: BusTx + BusRx {
     fn set_filtering(&mut self, filtering: Filtering) -> Result<(), BusError>;
     /// Receive the frames this endpoint sends (off by default, as in SocketCAN).
     fn set_receive_own(&mut self, on: bool) -> Result<(), BusError>;
+    /// Deliver this endpoint's frames to the other endpoints of this host (on by default, as
+    /// SocketCAN's `CAN_RAW_LOOPBACK`). Backends without local endpoints ignore it.
+    fn set_loopback(&mut self, on: bool) -> Result<(), BusError>;
     /// This endpoint's counts.
     fn stats(&self) -> Stats;
+    /// The controller's state and error counters, where the backend knows them.
+    fn status(&self) -> Result<Option<BusStatus>, BusError> {
+        Ok(None)
+    }
     /// Split into a sending and a receiving half (for two threads).
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>);
 }

@@ -17,7 +17,8 @@
 
 use std::collections::VecDeque;
 
-use bywire_core::confinement::{Confinement, Event, NodeState, TransmitErrorCause};
+use bywire_core::confinement::{Confinement, Event, NodeState, StateChange, TransmitErrorCause};
+use bywire_core::frame::{ErrorClass, ErrorFrame};
 use bywire_core::wire::{self, Field};
 use bywire_core::{Frame, Id, Timestamp};
 
@@ -31,6 +32,9 @@ const ERROR_FRAME: u64 = 14;
 const SUSPEND: u64 = 8;
 /// Recessive bits that make one bus-off recovery sequence.
 const RECOVERY_BITS: u64 = 11;
+
+/// Frames a node's receive queue holds by default.
+pub const DEFAULT_RX_CAPACITY: usize = 4096;
 
 /// A node's index on the bus.
 pub type NodeId = usize;
@@ -92,6 +96,10 @@ struct Pending {
 struct Node {
     queue: Vec<Pending>,
     rx: VecDeque<Received>,
+    /// Frames `rx` holds before new ones are dropped.
+    rx_capacity: usize,
+    /// Frames dropped because `rx` was full.
+    rx_dropped: u64,
     filtering: Filtering,
     receive_own: bool,
     confinement: Confinement,
@@ -99,6 +107,34 @@ struct Node {
     not_before: Timestamp,
     /// Recessive bits seen in a row while bus-off.
     recessive_run: u64,
+}
+
+impl Node {
+    fn deliver(&mut self, received: Received) {
+        if self.rx.len() >= self.rx_capacity {
+            self.rx_dropped += 1;
+        } else {
+            self.rx.push_back(received);
+        }
+    }
+}
+
+/// The error frame a SocketCAN driver sends its sockets on a state change (the kernel's
+/// `can_change_state` and bus-off handling): controller problem with the passive/active detail,
+/// bus-off, or restarted, always with the counters.
+fn state_report(change: StateChange, now: &Confinement) -> ErrorFrame {
+    let (tec, rec) = (now.tec(), now.rec());
+    let tec_byte = u8::try_from(tec).unwrap_or(u8::MAX);
+    let rec_byte = u8::try_from(rec).unwrap_or(u8::MAX);
+    let (class, detail) = match (change.from, change.to) {
+        (_, NodeState::BusOff) => (ErrorClass::BusOff.bit(), 0),
+        (NodeState::BusOff, _) => (ErrorClass::Restarted.bit(), 0),
+        (_, NodeState::ErrorPassive) if tec >= rec => (ErrorClass::Controller.bit(), 0x20),
+        (_, NodeState::ErrorPassive) => (ErrorClass::Controller.bit(), 0x10),
+        (_, NodeState::ErrorActive) => (ErrorClass::Controller.bit(), 0x40),
+    };
+    let data = [0, detail, 0, 0, 0, 0, tec_byte, rec_byte];
+    ErrorFrame::from_array(class | ErrorClass::Counters.bit(), data)
 }
 
 /// A fault: destroy the next `count` transmissions that match.
@@ -148,6 +184,8 @@ impl SimBus {
         self.nodes.push(Node {
             queue: Vec::new(),
             rx: VecDeque::new(),
+            rx_capacity: DEFAULT_RX_CAPACITY,
+            rx_dropped: 0,
             filtering: Filtering::default(),
             receive_own: false,
             confinement: Confinement::default(),
@@ -162,6 +200,18 @@ impl SimBus {
         if let Some(n) = self.nodes.get_mut(node) {
             n.filtering = filtering;
         }
+    }
+
+    /// How many received frames a node holds before new ones are dropped and counted.
+    pub fn set_rx_capacity(&mut self, node: NodeId, capacity: usize) {
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.rx_capacity = capacity.max(1);
+        }
+    }
+
+    /// Frames a node dropped because its receive queue was full.
+    pub fn rx_dropped(&self, node: NodeId) -> u64 {
+        self.nodes.get(node).map_or(0, |n| n.rx_dropped)
     }
 
     /// Whether a node receives its own frames.
@@ -188,6 +238,14 @@ impl SimBus {
         }
     }
 
+    /// Empty a node's transmit and receive queues (the node leaves the bus).
+    pub fn withdraw(&mut self, node: NodeId) {
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.queue.clear();
+            n.rx.clear();
+        }
+    }
+
     /// Destroy the next matching transmissions.
     pub fn corrupt(&mut self, fault: Fault) {
         self.faults.push(fault);
@@ -196,6 +254,56 @@ impl SimBus {
     /// The next frame a node received.
     pub fn receive(&mut self, node: NodeId) -> Option<Received> {
         self.nodes.get_mut(node).and_then(|n| n.rx.pop_front())
+    }
+
+    /// The next frame a node received by `at` (a frame whose transmission the simulation has
+    /// already decided may end later than the caller's present).
+    pub fn receive_by(&mut self, node: NodeId, at: Timestamp) -> Option<Received> {
+        let n = self.nodes.get_mut(node)?;
+        if n.rx.front()?.timestamp > at {
+            return None;
+        }
+        n.rx.pop_front()
+    }
+
+    /// When something next happens that a runner must [`advance`](Self::advance) to: the next
+    /// frame a node receives, the start of the next transmission, or a bus-off recovery.
+    pub fn next_change(&self, node: NodeId) -> Option<Timestamp> {
+        let delivery = self
+            .nodes
+            .get(node)
+            .and_then(|n| n.rx.front())
+            .map(|r| r.timestamp);
+        let from = self.idle_from.max(self.now);
+        [delivery, self.next_start(), self.next_recovery(from)]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// The earliest start of a transmission with the frames queued now.
+    fn next_start(&self) -> Option<Timestamp> {
+        self.nodes
+            .iter()
+            .filter(|n| n.confinement.state() != NodeState::BusOff)
+            .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
+            .min()
+            .map(|ready| ready.max(self.idle_from))
+    }
+
+    /// The earliest moment a bus-off node completes its 128th recovery sequence, counting idle
+    /// bits from `from`.
+    fn next_recovery(&self, from: Timestamp) -> Option<Timestamp> {
+        let bit = self.bits(1).max(1);
+        self.nodes
+            .iter()
+            .filter(|n| n.confinement.state() == NodeState::BusOff)
+            .map(|n| {
+                let remaining = u64::from(128u16.saturating_sub(n.confinement.recovery_progress()));
+                let bits = (remaining * RECOVERY_BITS).saturating_sub(n.recessive_run);
+                from.saturating_add(std::time::Duration::from_nanos(bits.saturating_mul(bit)))
+            })
+            .min()
     }
 
     /// A node's fault-confinement state and counters.
@@ -232,6 +340,15 @@ impl SimBus {
             if change.to == NodeState::BusOff {
                 n.recessive_run = 0;
             }
+            let report = Frame::Error(state_report(change, &n.confinement));
+            if n.filtering.accepts(&report) {
+                n.deliver(Received {
+                    frame: report,
+                    timestamp: at,
+                    own: false,
+                    hardware: None,
+                });
+            }
             self.events.push(BusEvent::StateChanged {
                 node,
                 state: change.to,
@@ -260,17 +377,7 @@ impl SimBus {
         let at_bits = |bits: u64| {
             from.saturating_add(std::time::Duration::from_nanos(bits.saturating_mul(bit)))
         };
-        // The earliest moment a bus-off node completes its 128th sequence.
-        let recovery = self
-            .nodes
-            .iter()
-            .filter(|n| n.confinement.state() == NodeState::BusOff)
-            .map(|n| {
-                let remaining = u64::from(128u16.saturating_sub(n.confinement.recovery_progress()));
-                at_bits((remaining * RECOVERY_BITS).saturating_sub(n.recessive_run))
-            })
-            .min()
-            .filter(|r| *r <= to);
+        let recovery = self.next_recovery(from).filter(|r| *r <= to);
         let end = recovery.unwrap_or(to);
         let gap_bits = u64::try_from(end.saturating_since(from).as_nanos() / u128::from(bit))
             .unwrap_or(u64::MAX);
@@ -308,13 +415,7 @@ impl SimBus {
         // Each pass sends or destroys one frame, brings a node back from bus-off, or ends:
         // bounded by the work queued and the nodes.
         loop {
-            let start = self
-                .nodes
-                .iter()
-                .filter(|n| n.confinement.state() != NodeState::BusOff)
-                .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
-                .min()
-                .map(|ready| ready.max(self.idle_from));
+            let start = self.next_start();
             let limit = start.unwrap_or(until).min(until);
             if let Some(recovered) = self.idle(self.idle_from.max(self.now), limit) {
                 self.now = recovered;
@@ -424,10 +525,11 @@ impl SimBus {
                 {
                     continue;
                 }
-                n.rx.push_back(Received {
+                n.deliver(Received {
                     frame,
                     timestamp: eof,
                     own,
+                    hardware: None,
                 });
             }
             self.set_state(winner, Event::TransmitSuccess, eof);

@@ -3,6 +3,7 @@
 use std::fmt;
 use std::str::FromStr;
 
+use crate::sim_endpoint::Bitrates;
 use crate::Bus;
 
 /// A parsed bus spec.
@@ -12,6 +13,34 @@ pub enum BusSpec {
     Virtual {
         /// The bus's name.
         name: String,
+    },
+    /// `sim:NAME@BITRATE[/DATA_BITRATE]`: the in-process bit-timed bus called NAME.
+    Sim {
+        /// The bus's name.
+        name: String,
+        /// Its bitrates.
+        bitrates: Bitrates,
+    },
+    /// `socketcan:IFACE`: a Linux CAN interface.
+    SocketCan {
+        /// The interface name (`can0`, `vcan0`).
+        interface: String,
+    },
+}
+
+/// A spec that parsed but whose bus cannot be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// The spec names no bus.
+    #[error(transparent)]
+    Spec(#[from] SpecError),
+    /// The bus is there in name only: the backend refused.
+    #[error("cannot open {spec}: {reason}")]
+    Refused {
+        /// The spec.
+        spec: String,
+        /// Why.
+        reason: String,
     },
 }
 
@@ -39,7 +68,47 @@ pub enum SpecError {
     },
 }
 
-const KNOWN: &str = "virtual";
+const KNOWN: &str = "virtual, sim, socketcan";
+
+fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
+    let valid = !text.is_empty()
+        && text
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c));
+    if valid {
+        Ok(text.to_string())
+    } else {
+        Err(SpecError::Parameters {
+            scheme,
+            reason: format!("'{text}' is not a bus name (letters, digits, '-', '_', '.')"),
+        })
+    }
+}
+
+fn bitrate(text: &str) -> Result<u32, SpecError> {
+    match text.parse::<u32>() {
+        Ok(rate) if (1_000..=20_000_000).contains(&rate) => Ok(rate),
+        _ => Err(SpecError::Parameters {
+            scheme: "sim",
+            reason: format!("'{text}' is not a bitrate (1000 to 20000000 bit/s)"),
+        }),
+    }
+}
+
+fn sim_spec(rest: &str) -> Result<BusSpec, SpecError> {
+    let (name, rates) = rest.split_once('@').ok_or_else(|| SpecError::Parameters {
+        scheme: "sim",
+        reason: format!("'{rest}' lacks the bitrate: sim:NAME@BITRATE[/DATA_BITRATE]"),
+    })?;
+    let (nominal, data) = match rates.split_once('/') {
+        Some((nominal, data)) => (bitrate(nominal)?, Some(bitrate(data)?)),
+        None => (bitrate(rates)?, None),
+    };
+    Ok(BusSpec::Sim {
+        name: bus_name("sim", name)?,
+        bitrates: Bitrates { nominal, data },
+    })
+}
 
 impl FromStr for BusSpec {
     type Err = SpecError;
@@ -49,21 +118,23 @@ impl FromStr for BusSpec {
             .split_once(':')
             .ok_or_else(|| SpecError::NoScheme(text.to_string()))?;
         match scheme {
-            "virtual" => {
+            "virtual" => Ok(BusSpec::Virtual {
+                name: bus_name("virtual", rest)?,
+            }),
+            "sim" => sim_spec(rest),
+            // Linux interface names: up to 15 bytes, no '/', ':' or whitespace.
+            "socketcan" => {
                 let valid = !rest.is_empty()
-                    && rest
-                        .chars()
-                        .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c));
+                    && rest.len() <= 15
+                    && !rest.contains(|c: char| c == '/' || c == ':' || c.is_whitespace());
                 if !valid {
                     return Err(SpecError::Parameters {
-                        scheme: "virtual",
-                        reason: format!(
-                            "'{rest}' is not a bus name (letters, digits, '-', '_', '.')"
-                        ),
+                        scheme: "socketcan",
+                        reason: format!("'{rest}' is not an interface name (1 to 15 characters)"),
                     });
                 }
-                Ok(BusSpec::Virtual {
-                    name: rest.to_string(),
+                Ok(BusSpec::SocketCan {
+                    interface: rest.to_string(),
                 })
             }
             other => Err(SpecError::UnknownScheme {
@@ -78,14 +149,37 @@ impl fmt::Display for BusSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             BusSpec::Virtual { name } => write!(f, "virtual:{name}"),
+            BusSpec::Sim { name, bitrates } => {
+                write!(f, "sim:{name}@{}", bitrates.nominal)?;
+                match bitrates.data {
+                    Some(data) => write!(f, "/{data}"),
+                    None => Ok(()),
+                }
+            }
+            BusSpec::SocketCan { interface } => write!(f, "socketcan:{interface}"),
         }
     }
 }
 
 /// Open the bus a spec names.
-pub fn open(spec: &str) -> Result<Box<dyn Bus>, SpecError> {
+pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
+    let refused = |reason: String| OpenError::Refused {
+        spec: spec.to_string(),
+        reason,
+    };
     match spec.parse::<BusSpec>()? {
         BusSpec::Virtual { name } => Ok(Box::new(crate::virtual_bus::VirtualBus::join(&name))),
+        BusSpec::Sim { name, bitrates } => {
+            crate::sim_endpoint::SimEndpoint::join(&name, bitrates, crate::sim::DEFAULT_RX_CAPACITY)
+                .map(|bus| Box::new(bus) as Box<dyn Bus>)
+                .map_err(|e| refused(e.to_string()))
+        }
+        #[cfg(target_os = "linux")]
+        BusSpec::SocketCan { interface } => crate::socketcan::SocketCan::open(&interface)
+            .map(|bus| Box::new(bus) as Box<dyn Bus>)
+            .map_err(|e| refused(e.to_string())),
+        #[cfg(not(target_os = "linux"))]
+        BusSpec::SocketCan { .. } => Err(refused("SocketCAN exists only on Linux".into())),
     }
 }
 
@@ -112,7 +206,7 @@ mod tests {
         let e = "carrier:pigeon".parse::<BusSpec>().unwrap_err();
         assert_eq!(
             e.to_string(),
-            "unknown bus scheme 'carrier' (known: virtual)"
+            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan)"
         );
         assert!(matches!(
             "virtual:".parse::<BusSpec>(),
@@ -122,5 +216,34 @@ mod tests {
             "virtual:a b".parse::<BusSpec>(),
             Err(SpecError::Parameters { .. })
         ));
+        for (text, bitrates) in [
+            ("sim:tug@500000", (500_000, None)),
+            ("sim:b2@1000000/5000000", (1_000_000, Some(5_000_000))),
+        ] {
+            let spec: BusSpec = text.parse().unwrap();
+            let BusSpec::Sim { bitrates: b, .. } = &spec else {
+                panic!("{spec:?}")
+            };
+            assert_eq!((b.nominal, b.data), bitrates);
+            assert_eq!(spec.to_string(), text);
+        }
+        for (text, says) in [
+            ("sim:tug", "lacks the bitrate"),
+            ("sim:tug@fast", "'fast' is not a bitrate"),
+            ("sim:tug@500000/0", "'0' is not a bitrate"),
+            ("sim:@500000", "'' is not a bus name"),
+            ("socketcan:", "'' is not an interface name"),
+            (
+                "socketcan:a_very_long_interface",
+                "is not an interface name",
+            ),
+        ] {
+            let e = text.parse::<BusSpec>().unwrap_err().to_string();
+            assert!(e.contains(says), "{text}: {e}");
+        }
+        assert_eq!(
+            "socketcan:vcan0".parse::<BusSpec>().unwrap().to_string(),
+            "socketcan:vcan0"
+        );
     }
 }

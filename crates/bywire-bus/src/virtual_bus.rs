@@ -22,6 +22,7 @@ struct Endpoint {
     capacity: usize,
     filtering: Filtering,
     receive_own: bool,
+    loopback: bool,
     stats: Stats,
 }
 
@@ -107,6 +108,7 @@ impl VirtualBus {
                     capacity: capacity.max(1),
                     filtering: Filtering::default(),
                     receive_own: false,
+                    loopback: true,
                     stats: Stats::default(),
                 },
             );
@@ -118,17 +120,33 @@ impl VirtualBus {
     }
 }
 
+impl VirtualBus {
+    fn update(&mut self, change: impl FnOnce(&mut Endpoint)) -> Result<(), BusError> {
+        let mut state = self.member.shared.lock();
+        let endpoint = state
+            .endpoints
+            .get_mut(&self.member.id)
+            .ok_or(BusError::Closed)?;
+        change(endpoint);
+        Ok(())
+    }
+}
+
 fn send(member: &Membership, frame: &Frame) -> Result<(), BusError> {
     let mut state = member.shared.lock();
     let timestamp = now();
-    let bytes = u64::try_from(frame.data().len()).unwrap_or(0);
+    let loopback = state
+        .endpoints
+        .get(&member.id)
+        .is_none_or(|sender| sender.loopback);
     for (&id, endpoint) in state.endpoints.iter_mut() {
         let own = id == member.id;
         if own {
-            endpoint.stats.tx_frames += 1;
-            endpoint.stats.tx_bytes += bytes;
+            endpoint.stats.count_sent(frame);
         }
-        if (own && !endpoint.receive_own) || !endpoint.filtering.accepts(frame) {
+        // As in SocketCAN, own frames come back only through the loopback.
+        let wanted = loopback && (!own || endpoint.receive_own);
+        if !wanted || !endpoint.filtering.accepts(frame) {
             continue;
         }
         if endpoint.queue.len() >= endpoint.capacity {
@@ -139,6 +157,7 @@ fn send(member: &Membership, frame: &Frame) -> Result<(), BusError> {
             frame: *frame,
             timestamp,
             own,
+            hardware: None,
         });
     }
     drop(state);
@@ -157,11 +176,7 @@ fn recv(member: &Membership, timeout: Option<Duration>) -> Result<Option<Receive
             .get_mut(&member.id)
             .ok_or(BusError::Closed)?;
         if let Some(received) = endpoint.queue.pop_front() {
-            endpoint.stats.rx_frames += 1;
-            endpoint.stats.rx_bytes += u64::try_from(received.frame.data().len()).unwrap_or(0);
-            if received.frame.is_error() {
-                endpoint.stats.rx_errors += 1;
-            }
+            endpoint.stats.count_received(&received.frame);
             return Ok(Some(received));
         }
         state = match deadline {
@@ -214,23 +229,15 @@ impl BusRx for Half {
 
 impl Bus for VirtualBus {
     fn set_filtering(&mut self, filtering: Filtering) -> Result<(), BusError> {
-        let mut state = self.member.shared.lock();
-        let endpoint = state
-            .endpoints
-            .get_mut(&self.member.id)
-            .ok_or(BusError::Closed)?;
-        endpoint.filtering = filtering;
-        Ok(())
+        self.update(|endpoint| endpoint.filtering = filtering)
     }
 
     fn set_receive_own(&mut self, on: bool) -> Result<(), BusError> {
-        let mut state = self.member.shared.lock();
-        let endpoint = state
-            .endpoints
-            .get_mut(&self.member.id)
-            .ok_or(BusError::Closed)?;
-        endpoint.receive_own = on;
-        Ok(())
+        self.update(|endpoint| endpoint.receive_own = on)
+    }
+
+    fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
+        self.update(|endpoint| endpoint.loopback = on)
     }
 
     fn stats(&self) -> Stats {

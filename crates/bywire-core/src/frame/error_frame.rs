@@ -148,6 +148,15 @@ impl ErrorFrame {
         Ok(ErrorFrame { class, data: bytes })
     }
 
+    /// An error frame from class bits and all 8 detail bytes; class bits outside the 29 the
+    /// `can_id` has room for are dropped.
+    pub const fn from_array(class: u32, data: [u8; 8]) -> Self {
+        ErrorFrame {
+            class: class & EFF_MASK,
+            data,
+        }
+    }
+
     /// The class bits (the `can_id` without the ERR flag).
     pub fn class_bits(&self) -> u32 {
         self.class

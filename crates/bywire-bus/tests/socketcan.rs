@@ -1,0 +1,260 @@
+//! SocketCAN against the Linux kernel. This machine's kernel has no CAN, so each test re-runs
+//! itself inside `../shared/tools/canvm.sh` (a VM with the stock kernel's can, can-raw, vcan and
+//! SJA1000 drivers, and can-utils as the peer): on the host it boots the VM with this test
+//! binary and checks that the same test passed in there.
+// Tests fail by panicking; helpers outside #[test] functions may unwrap too.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+#![cfg(target_os = "linux")]
+
+mod common;
+
+use std::process::{Command, Stdio};
+use std::time::{Duration, SystemTime};
+
+use bywire_bus::socketcan::{self, LinkConfig, SocketCan};
+use bywire_bus::{open, Bus, ControllerState};
+use common::*;
+
+const IN_VM: &str = "BYWIRE_IN_CANVM";
+
+/// True inside the VM; on the host, runs `test` inside the VM and checks it passed there.
+fn inside_canvm(test: &str, options: &[&str]) -> bool {
+    if std::env::var_os(IN_VM).is_some() {
+        return true;
+    }
+    let exe = std::env::current_exe().unwrap();
+    let canvm = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/tools/canvm.sh"
+    );
+    let out = Command::new(canvm)
+        .arg("run")
+        .args(options)
+        .args(["--timeout", "300", "--include"])
+        .arg(&exe)
+        .arg("--")
+        .arg(&exe)
+        .args(["--exact", test, "--nocapture", "--test-threads", "1"])
+        .env(IN_VM, "1")
+        .env("CANVM_ENV", IN_VM)
+        .output()
+        .expect("canvm.sh runs (see ../shared/tools/README.md)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("test result: ok. 1 passed"),
+        "{test} in canvm: {text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    false
+}
+
+fn sh(command: &str) -> String {
+    let out = Command::new("/bin/sh")
+        .args(["-c", command])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{command}: {out:?}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn socketcan_passes_the_conformance_suite_on_vcan() {
+    if !inside_canvm(
+        "socketcan_passes_the_conformance_suite_on_vcan",
+        &["--vcan", "8"],
+    ) {
+        return;
+    }
+    // One interface per check, so that no check sees another's frames.
+    let checks = [
+        "order", "global", "filters", "own", "fd", "split", "timeout",
+    ];
+    let open_for = |check: &str| -> Box<Opener> {
+        let n = checks.iter().position(|c| *c == check).unwrap();
+        let spec = format!("socketcan:vcan{n}");
+        Box::new(move || open(&spec).unwrap())
+    };
+    run_all(&open_for, false);
+    loopback_off_keeps_frames_from_local_endpoints(&|| open("socketcan:vcan7").unwrap());
+    // The smallest receive buffer holds a handful of frames; the rest of a burst is dropped
+    // by the kernel and counted through SO_RXQ_OVFL.
+    bounded_queue_counts_drops(
+        &|| {
+            let bus = SocketCan::open("vcan7").unwrap();
+            bus.set_receive_buffer(0).unwrap();
+            Box::new(bus)
+        },
+        200,
+    );
+    assert_eq!(
+        socketcan::interfaces().unwrap(),
+        (0..8).map(|n| format!("vcan{n}")).collect::<Vec<_>>()
+    );
+    let vcan = open("socketcan:vcan0").unwrap();
+    assert_eq!(vcan.status().unwrap(), None, "vcan has no controller state");
+    let e = match open("socketcan:nosuch0") {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("opened an interface that does not exist"),
+    };
+    assert!(e.contains("nosuch0"), "{e}");
+}
+
+#[test]
+fn can_utils_see_our_frames_and_we_see_theirs() {
+    if !inside_canvm(
+        "can_utils_see_our_frames_and_we_see_theirs",
+        &["--can-utils"],
+    ) {
+        return;
+    }
+    let mut bus = open("socketcan:vcan0").unwrap();
+    bus.set_receive_own(true).unwrap();
+    let ours = [
+        "123#DEADBEEF",
+        "1ABCDEF0#R",
+        "7FF#",
+        "321##1000102030405060708090A0B0C",
+        "12345678##30011",
+    ];
+    // candump -L prints "(secs.usecs) vcan0 FRAME" with frames in cansend syntax.
+    let candump = Command::new("candump")
+        .args(["-L", "-n", "5", "vcan0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    for text in ours {
+        bus.send(&frame(text)).unwrap();
+        // The echo confirms the transmission, with the time it left.
+        let echo = bus.recv(Some(WAIT)).unwrap().unwrap();
+        assert!(echo.own && echo.frame == frame(text), "{echo:?}");
+        let now = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap();
+        let at = Duration::from_nanos(echo.timestamp.as_nanos());
+        assert!(
+            now >= at && now - at < Duration::from_secs(1),
+            "{at:?} vs {now:?}"
+        );
+    }
+    let out = candump.wait_with_output().unwrap();
+    // Compared as frames: candump shows the kernel's FD-frame flag (FDF) in the flags nibble.
+    let dumped: Vec<_> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| frame(l.split_whitespace().nth(2).unwrap()))
+        .collect();
+    let expected: Vec<_> = ours.iter().map(|t| frame(t)).collect();
+    assert_eq!(dumped, expected);
+
+    let theirs = [
+        "456#0102",
+        "00000456#",
+        "100#R3",
+        "200##1AABBCCDDEEFF0011223344",
+        "7FF#1122334455667788",
+    ];
+    for text in theirs {
+        sh(&format!("cansend vcan0 '{text}'"));
+        let got = bus.recv(Some(WAIT)).unwrap().unwrap();
+        assert_eq!(got.frame, frame(text));
+        assert!(!got.own, "cansend's frame is not ours");
+    }
+    let stats = bus.stats();
+    assert_eq!((stats.tx_frames, stats.rx_frames), (5, 10));
+}
+
+#[test]
+fn sja1000_controllers_are_configured_and_talk_through_netlink() {
+    if !inside_canvm(
+        "sja1000_controllers_are_configured_and_talk_through_netlink",
+        &["--sja1000", "2", "--can-utils"],
+    ) {
+        return;
+    }
+    assert_eq!(socketcan::interfaces().unwrap(), ["can0", "can1", "vcan0"]);
+    // A controller that is down reports itself stopped.
+    let down = SocketCan::open("can0").unwrap();
+    assert_eq!(
+        down.status().unwrap().map(|s| s.state),
+        Some(ControllerState::Stopped)
+    );
+    for (interface, restart_ms) in [("can0", 100), ("can1", 0)] {
+        socketcan::configure(
+            interface,
+            &LinkConfig {
+                bitrate: Some(500_000),
+                sample_point: Some(875),
+                restart_ms: Some(restart_ms),
+                ..LinkConfig::default()
+            },
+        )
+        .unwrap();
+    }
+    // What the kernel computed, as we read it and as `ip` shows it.
+    assert_eq!(socketcan::bit_timing("can0").unwrap(), Some((500_000, 875)));
+    let details = sh("ip -details link show can0");
+    assert!(
+        details.contains("bitrate 500000 sample-point 0.875"),
+        "{details}"
+    );
+    assert!(details.contains("restart-ms 100"), "{details}");
+    assert!(
+        details.contains("state ERROR-ACTIVE (berr-counter tx 0 rx 0)"),
+        "{details}"
+    );
+
+    let mut can0 = open("socketcan:can0").unwrap();
+    let mut can1 = open("socketcan:can1").unwrap();
+    let status = can0.status().unwrap().unwrap();
+    assert_eq!(
+        (status.state, status.tec, status.rec),
+        (ControllerState::ErrorActive, 0, 0)
+    );
+    can0.set_receive_own(true).unwrap();
+    let candump = Command::new("candump")
+        .args(["-L", "-n", "2", "can1"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    for text in ["123#0102030405060708", "1FFFFFFF#AA"] {
+        can0.send(&frame(text)).unwrap();
+        let confirmation = can0.recv(Some(WAIT)).unwrap().unwrap();
+        assert!(confirmation.own && confirmation.frame == frame(text));
+        // Across the emulated wire to the other controller.
+        let got = can1.recv(Some(WAIT)).unwrap().unwrap();
+        assert!(!got.own && got.frame == frame(text), "{got:?}");
+    }
+    let dumped = String::from_utf8_lossy(&candump.wait_with_output().unwrap().stdout).into_owned();
+    assert!(dumped.contains("can1 123#0102030405060708"), "{dumped}");
+    assert!(dumped.contains("can1 1FFFFFFF#AA"), "{dumped}");
+    // And back the other way, from can-utils.
+    sh("cansend can1 7FF#99");
+    assert_eq!(
+        can0.recv(Some(WAIT)).unwrap().unwrap().frame,
+        frame("7FF#99")
+    );
+    // An SJA1000 has no FD: asking for a data bitrate is refused, naming the interface.
+    let e = socketcan::configure(
+        "can1",
+        &LinkConfig {
+            bitrate: Some(500_000),
+            data_bitrate: Some(2_000_000),
+            ..LinkConfig::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("can1"), "{e}");
+    // A classic-only interface refuses FD frames clearly.
+    let fd = can0.send(&frame("123##1AA"));
+    assert!(
+        matches!(fd, Err(bywire_bus::BusError::Unsupported(_))),
+        "{fd:?}"
+    );
+}
