@@ -76,8 +76,14 @@ fn socketcan_passes_the_conformance_suite_on_vcan() {
     ];
     let open_for = |check: &str| -> Box<Opener> {
         let n = checks.iter().position(|c| *c == check).unwrap();
-        let spec = format!("socketcan:vcan{n}");
-        Box::new(move || open(&spec).unwrap())
+        // Readers here share two slow emulated CPUs with the senders: a large receive buffer
+        // (as `candump -r`) keeps the kernel from dropping while they catch up.
+        let interface = format!("vcan{n}");
+        Box::new(move || {
+            let bus = SocketCan::open(&interface).unwrap();
+            bus.set_receive_buffer(1 << 22).unwrap();
+            Box::new(bus) as Box<dyn Bus>
+        })
     };
     run_all(&open_for, false);
     loopback_off_keeps_frames_from_local_endpoints(&|| open("socketcan:vcan7").unwrap());
@@ -257,4 +263,64 @@ fn sja1000_controllers_are_configured_and_talk_through_netlink() {
         matches!(fd, Err(bywire_bus::BusError::Unsupported(_))),
         "{fd:?}"
     );
+}
+
+#[cfg(feature = "tokio")]
+#[test]
+fn async_socketcan_receives_and_sends_without_blocking_the_runtime() {
+    if !inside_canvm(
+        "async_socketcan_receives_and_sends_without_blocking_the_runtime",
+        &["--can-utils"],
+    ) {
+        return;
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let bus = socketcan::AsyncSocketCan::new(SocketCan::open("vcan0").unwrap()).unwrap();
+        // A timer on the same single thread keeps running while recv waits.
+        let ticker = tokio::spawn(async {
+            let mut ticks = 0;
+            for _ in 0..5 {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                ticks += 1;
+            }
+            ticks
+        });
+        let peer = std::thread::spawn(|| {
+            std::thread::sleep(Duration::from_millis(200));
+            sh("cansend vcan0 5A5#0102 && cansend vcan0 1F334455##1AA");
+        });
+        let first = tokio::time::timeout(WAIT, bus.recv())
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(first.frame, frame("5A5#0102"));
+        assert_eq!(
+            ticker.await.unwrap(),
+            5,
+            "the runtime ran other tasks meanwhile"
+        );
+        let second = tokio::time::timeout(WAIT, bus.recv())
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(second.frame, frame("1F334455##1AA"));
+        peer.join().unwrap();
+        let candump = Command::new("candump")
+            .args(["-L", "-n", "1", "vcan0"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        bus.send(&frame("0AA#CAFE")).await.unwrap();
+        let dumped =
+            String::from_utf8_lossy(&candump.wait_with_output().unwrap().stdout).into_owned();
+        assert!(dumped.contains("vcan0 0AA#CAFE"), "{dumped}");
+        assert_eq!(bus.get_ref().stats().tx_frames, 1);
+    });
+    // Outside a runtime, registration is an error, not a panic.
+    assert!(socketcan::AsyncSocketCan::new(SocketCan::open("vcan0").unwrap()).is_err());
 }

@@ -6,8 +6,13 @@
 //! time the frame left — from identical frames of other nodes, plus the kernel's drop counter and
 //! hardware timestamps from the same `recvmsg`, which the crate does not return together.
 
+#[cfg(feature = "tokio")]
+mod async_bus;
 mod layout;
 mod sys;
+
+#[cfg(feature = "tokio")]
+pub use async_bus::AsyncSocketCan;
 
 use std::io;
 use std::os::fd::AsFd;
@@ -42,6 +47,12 @@ pub struct SocketCan {
     shared: Arc<Shared>,
 }
 
+impl std::os::fd::AsRawFd for SocketCan {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        self.shared.socket.as_raw_fd()
+    }
+}
+
 fn io_error(context: &str, e: impl std::fmt::Display) -> BusError {
     BusError::Io(io::Error::other(format!("{context}: {e}")))
 }
@@ -67,14 +78,16 @@ impl SocketCan {
         })
     }
 
-    /// Ask for a receive buffer of `bytes` (the kernel doubles it for bookkeeping and keeps
-    /// a minimum of its own); frames that find it full are dropped and counted.
+    /// Ask for a receive buffer of `bytes` (the kernel doubles it for bookkeeping and keeps a
+    /// minimum of its own); frames that find it full are dropped and counted. As candump's
+    /// `-r`: beyond `net.core.rmem_max` with `CAP_NET_ADMIN` (`SO_RCVBUFFORCE`), else capped.
     pub fn set_receive_buffer(&self, bytes: usize) -> Result<(), BusError> {
         let bytes = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
-        Ok(self
-            .shared
-            .socket
-            .set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUF, bytes)?)
+        let socket = &self.shared.socket;
+        socket
+            .set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, bytes)
+            .or_else(|_| socket.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUF, bytes))
+            .map_err(BusError::from)
     }
 
     /// The interface this socket is bound to.
@@ -83,43 +96,68 @@ impl SocketCan {
     }
 }
 
-fn send(shared: &Shared, frame: &Frame) -> Result<(), BusError> {
+/// One attempt to hand a frame to the kernel.
+enum Attempt {
+    Sent,
+    /// The interface's queue (or the socket's send buffer) is full; try again shortly.
+    Full,
+}
+
+fn try_send(shared: &Shared, frame: &Frame, wait: bool) -> Result<Attempt, BusError> {
     let mut buf = [0u8; layout::CANFD_MTU];
     let size = layout::frame_to_bytes(frame, &mut buf)
         .ok_or_else(|| BusError::Unsupported("error frames (only controllers make them)".into()))?;
     let bytes = buf.get(..size).unwrap_or(&buf);
+    match sys::send(shared.socket.as_fd(), bytes, wait) {
+        Ok(n) if n == size => {
+            shared.stats().count_sent(frame);
+            Ok(Attempt::Sent)
+        }
+        Ok(n) => Err(BusError::Io(io::Error::other(format!(
+            "{}: wrote {n} of {size} bytes",
+            shared.interface
+        )))),
+        Err(e)
+            if e.raw_os_error() == Some(libc::ENOBUFS) || e.kind() == io::ErrorKind::WouldBlock =>
+        {
+            Ok(Attempt::Full)
+        }
+        Err(e) if e.raw_os_error() == Some(libc::EINVAL) && frame.is_fd() => {
+            Err(BusError::Unsupported(format!(
+                "FD frames on {} (its MTU is for classic frames)",
+                shared.interface
+            )))
+        }
+        Err(e) => Err(BusError::Io(io::Error::new(
+            e.kind(),
+            format!("{}: {e}", shared.interface),
+        ))),
+    }
+}
+
+fn queue_full(shared: &Shared) -> BusError {
+    BusError::Io(io::Error::new(
+        io::ErrorKind::TimedOut,
+        format!(
+            "{}: transmit queue full for {SEND_PATIENCE:?} (is the bus connected?)",
+            shared.interface
+        ),
+    ))
+}
+
+fn send(shared: &Shared, frame: &Frame) -> Result<(), BusError> {
     let give_up = Instant::now() + SEND_PATIENCE;
     let mut pause = Duration::from_micros(50);
-    // Bounded by SEND_PATIENCE: ENOBUFS means the interface's queue is full, and poll() cannot
-    // wait for room on a CAN socket, so back off and retry.
+    // Bounded by SEND_PATIENCE: a full queue cannot be waited for with poll() on a CAN socket
+    // (ENOBUFS), so back off and retry.
     loop {
-        match sys::send(shared.socket.as_fd(), bytes) {
-            Ok(n) if n == size => {
-                shared.stats().count_sent(frame);
-                return Ok(());
-            }
-            Ok(n) => {
-                return Err(BusError::Io(io::Error::other(format!(
-                    "{}: wrote {n} of {size} bytes",
-                    shared.interface
-                ))))
-            }
-            Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) && Instant::now() < give_up => {
+        match try_send(shared, frame, true)? {
+            Attempt::Sent => return Ok(()),
+            Attempt::Full if Instant::now() < give_up => {
                 std::thread::sleep(pause);
                 pause = (pause * 2).min(Duration::from_millis(5));
             }
-            Err(e) if e.raw_os_error() == Some(libc::EINVAL) && frame.is_fd() => {
-                return Err(BusError::Unsupported(format!(
-                    "FD frames on {} (its MTU is for classic frames)",
-                    shared.interface
-                )))
-            }
-            Err(e) => {
-                return Err(BusError::Io(io::Error::new(
-                    e.kind(),
-                    format!("{}: {e}", shared.interface),
-                )))
-            }
+            Attempt::Full => return Err(queue_full(shared)),
         }
     }
 }
@@ -128,38 +166,52 @@ fn since_epoch(d: Duration) -> Timestamp {
     Timestamp::from_nanos(u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
+/// Read one frame the socket has ready; `None` if there was none after all.
+fn receive_ready(shared: &Shared) -> Result<Option<Received>, BusError> {
+    let mut buf = [0u8; layout::CANFD_MTU];
+    let message = match sys::receive(shared.socket.as_fd(), &mut buf) {
+        Ok(message) => message,
+        Err(e)
+            if e.kind() == io::ErrorKind::WouldBlock || e.kind() == io::ErrorKind::Interrupted =>
+        {
+            return Ok(None)
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let bytes = buf.get(..message.len).unwrap_or(&buf);
+    let frame = layout::frame_from_bytes(bytes)
+        .map_err(|e| BusError::Io(io::Error::new(io::ErrorKind::InvalidData, e)))?;
+    let software = message.software.unwrap_or_else(|| {
+        SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap_or_default()
+    });
+    let mut stats = shared.stats();
+    stats.count_received(&frame);
+    if let Some(dropped) = message.dropped {
+        stats.rx_dropped = u64::from(dropped);
+    }
+    Ok(Some(Received {
+        frame,
+        timestamp: since_epoch(software),
+        own: message.confirm,
+        hardware: message.hardware.map(since_epoch),
+    }))
+}
+
 fn recv(shared: &Shared, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
     let deadline = timeout.map(|t| Instant::now() + t);
-    let mut buf = [0u8; layout::CANFD_MTU];
-    // Each pass waits up to the deadline; it repeats only when a signal interrupted the wait.
+    // Each pass waits up to the deadline; it repeats only after a signal or a spurious wake-up.
     loop {
         let left = deadline.map(|d| d.saturating_duration_since(Instant::now()));
-        if !sys::wait_readable(shared.socket.as_fd(), left)? {
-            if left.is_some_and(|l| l.is_zero()) || deadline.is_some_and(|d| Instant::now() >= d) {
-                return Ok(None);
+        if sys::wait_readable(shared.socket.as_fd(), left)? {
+            if let Some(received) = receive_ready(shared)? {
+                return Ok(Some(received));
             }
-            continue;
         }
-        let message = sys::receive(shared.socket.as_fd(), &mut buf)?;
-        let bytes = buf.get(..message.len).unwrap_or(&buf);
-        let frame = layout::frame_from_bytes(bytes)
-            .map_err(|e| BusError::Io(io::Error::new(io::ErrorKind::InvalidData, e)))?;
-        let software = message.software.unwrap_or_else(|| {
-            SystemTime::now()
-                .duration_since(SystemTime::UNIX_EPOCH)
-                .unwrap_or_default()
-        });
-        let mut stats = shared.stats();
-        stats.count_received(&frame);
-        if let Some(dropped) = message.dropped {
-            stats.rx_dropped = u64::from(dropped);
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            return Ok(None);
         }
-        return Ok(Some(Received {
-            frame,
-            timestamp: since_epoch(software),
-            own: message.confirm,
-            hardware: message.hardware.map(since_epoch),
-        }));
     }
 }
 

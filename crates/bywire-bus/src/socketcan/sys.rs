@@ -6,7 +6,7 @@
 //!   identical frames another node sent; we also read the drop counter (`SO_RXQ_OVFL`) and both
 //!   timestamps (`SO_TIMESTAMPING`) from the same call.
 //! - `poll`, to wait for a frame with a timeout without changing socket options per call.
-//! - `write` of a frame we laid out ourselves.
+//! - `send` of a frame we laid out ourselves, blocking or not per call.
 #![allow(unsafe_code)]
 
 use std::io;
@@ -40,7 +40,7 @@ fn duration(ts: &libc::timespec) -> Option<Duration> {
     (secs != 0 || nanos != 0).then(|| Duration::new(secs, nanos))
 }
 
-/// Receive one frame into `buf` (which must hold a `canfd_frame`).
+/// Receive one frame into `buf` (which must hold a `canfd_frame`), without waiting.
 pub fn receive(fd: BorrowedFd<'_>, buf: &mut [u8]) -> io::Result<Message> {
     let mut iov = libc::iovec {
         iov_base: buf.as_mut_ptr().cast(),
@@ -55,7 +55,7 @@ pub fn receive(fd: BorrowedFd<'_>, buf: &mut [u8]) -> io::Result<Message> {
     msg.msg_controllen = control.0.len();
     // SAFETY: `msg` points at `iov` (which points at `buf`) and `control`, all alive and
     // exclusively borrowed for the call, with their true lengths.
-    let n = unsafe { libc::recvmsg(fd.as_raw_fd(), &mut msg, 0) };
+    let n = unsafe { libc::recvmsg(fd.as_raw_fd(), &mut msg, libc::MSG_DONTWAIT) };
     let len = usize::try_from(n).map_err(|_| io::Error::last_os_error())?;
     let mut out = Message {
         len,
@@ -120,9 +120,24 @@ pub fn wait_readable(fd: BorrowedFd<'_>, timeout: Option<Duration>) -> io::Resul
     }
 }
 
-/// Write one frame structure; the number of bytes written.
-pub fn send(fd: BorrowedFd<'_>, bytes: &[u8]) -> io::Result<usize> {
+/// Send one frame structure; the number of bytes sent. `wait`: block while the socket's send
+/// buffer is full (the kernel's back-pressure for a fast sender), else fail with `WouldBlock`.
+pub fn send(fd: BorrowedFd<'_>, bytes: &[u8], wait: bool) -> io::Result<usize> {
+    let flags = if wait { 0 } else { libc::MSG_DONTWAIT };
     // SAFETY: `bytes` is a valid buffer of its length for the duration of the call.
-    let n = unsafe { libc::write(fd.as_raw_fd(), bytes.as_ptr().cast(), bytes.len()) };
+    let n = unsafe { libc::send(fd.as_raw_fd(), bytes.as_ptr().cast(), bytes.len(), flags) };
     usize::try_from(n).map_err(|_| io::Error::last_os_error())
+}
+
+/// Register a socket with the current tokio reactor.
+#[cfg(feature = "tokio")]
+pub fn register_async(
+    bus: super::SocketCan,
+) -> io::Result<tokio::io::unix::AsyncFd<super::SocketCan>> {
+    // Registration panics outside a runtime; refuse with an error instead.
+    tokio::runtime::Handle::try_current().map_err(io::Error::other)?;
+    // SAFETY: the socket's descriptor is owned by `bus` (through its shared state, which the
+    // AsyncFd owns) and is closed only when the last owner drops it, after the AsyncFd;
+    // `as_raw_fd` always returns that same descriptor.
+    unsafe { tokio::io::unix::AsyncFd::register(bus) }.map_err(|e| e.into_parts().1)
 }
