@@ -61,6 +61,11 @@ impl RateLimiter {
         self.value = Some(value);
     }
 
+    /// The current value (`None` before the first input).
+    pub fn value(&self) -> Option<f64> {
+        self.value
+    }
+
     /// Move towards `target` by at most the allowed change in `dt` seconds; the new value.
     /// Non-finite targets and non-positive `dt` hold the value.
     pub fn step(&mut self, dt: f64, target: f64) -> f64 {

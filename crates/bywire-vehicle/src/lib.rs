@@ -1,0 +1,11 @@
+//! # bywire-vehicle: the vehicle interface and its safety logic
+//!
+//! - [`reference_tug`]: the reference tug's CAN messages (`dbc/reference-tug.dbc`), as structs
+//!   generated from the DBC at build time, plus the E2E protection (counter, CRC-8 with data ID)
+//!   every message carries.
+//! - [`supervisor`]: the logic a vehicle control ECU runs on the other end of the wire: command
+//!   validation, the watchdog cascade, the E-stop latch, control modes with driver takeover,
+//!   and the actuator outputs. A sans-IO node: frames and time in, frames and outputs out.
+
+pub mod reference_tug;
+pub mod supervisor;

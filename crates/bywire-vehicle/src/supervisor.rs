@@ -1,0 +1,776 @@
+//! The vehicle-side supervisor: what a vehicle control ECU runs between the ADS and the
+//! actuators. A sans-IO node: [`Supervisor::on_frame`] takes the ADS's commands and the
+//! E-stop chain's frames, [`Supervisor::poll`] advances time and emits the state frame,
+//! [`Supervisor::actuators`] says what the actuators must do.
+//!
+//! Three state machines, each with one exhaustive transition function:
+//!
+//! - **Watchdog** ([`Watchdog::next`]): 1–2 missed command cycles hold the last command and
+//!   raise the warning flag; 3–4 decelerate under control; 5 or more brake fully and disable
+//!   steering, latched until a run of valid commands *and* an explicit re-engage request.
+//! - **E-stop latch** ([`EstopState::next`]): NORMAL → E_STOP_REQUESTED → MOTORS_DISABLED →
+//!   BRAKES_APPLIED → STOPPED, and back only through OPERATOR_RESET → E_STOP_RESET →
+//!   RESET_CONFIRMED and a re-engage; never automatically.
+//! - **Control mode** ([`next_mode`]): driver input above a threshold drops autonomous to
+//!   manual at once; autonomous needs a request with an engage edge, no driver input, a
+//!   normal watchdog and no E-stop.
+//!
+//! It starts failed closed: watchdog at full braking (no command seen yet), manual mode.
+//! Time is passed in; nothing allocates after construction; every loop is bounded.
+
+use core::time::Duration;
+
+use bywire_control::stages::RateLimiter;
+use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::{Frame, Id, Timestamp};
+
+use crate::reference_tug::{
+    self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
+    VehicleToAdsState,
+};
+
+/// Tuning of the supervisor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupervisorConfig {
+    /// The command period the ADS promises.
+    pub cycle: Duration,
+    /// Valid commands in a row needed before a re-engage is accepted after full braking.
+    pub recovery_run: u32,
+    /// Deceleration at watchdog levels 3–4, m/s².
+    pub controlled_deceleration: f64,
+    /// Largest steering angle accepted, degrees.
+    pub steering_range: f64,
+    /// Largest steering rate sent to the actuator, degrees per second.
+    pub steering_rate: f64,
+    /// Largest speed accepted, m/s.
+    pub speed_limit: f64,
+    /// Steering-wheel torque that means a driver takes over, N·m.
+    pub takeover_torque: f64,
+    /// Pedal travel (0–1) that means a driver takes over.
+    pub takeover_pedal: f64,
+    /// Motor revolutions per wheel revolution.
+    pub gear_ratio: f64,
+    /// Wheel diameter, m.
+    pub wheel_diameter: f64,
+    /// Speed below which the vehicle counts as stopped, m/s.
+    pub standstill: f64,
+}
+
+impl Default for SupervisorConfig {
+    /// The reference tug's values.
+    fn default() -> Self {
+        SupervisorConfig {
+            cycle: Duration::from_millis(20),
+            recovery_run: 10,
+            controlled_deceleration: 1.5,
+            steering_range: 40.0,
+            steering_rate: 30.0,
+            speed_limit: 5.0,
+            takeover_torque: 3.0,
+            takeover_pedal: 0.1,
+            gear_ratio: 20.0,
+            wheel_diameter: 0.5,
+            standstill: 0.05,
+        }
+    }
+}
+
+/// The watchdog's level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Watchdog {
+    /// Commands arrive.
+    Normal,
+    /// 1–2 cycles missed: hold the last command, warn.
+    Holding {
+        /// Cycles missed.
+        missed: u32,
+    },
+    /// 3–4 cycles missed: decelerate under control, steering held.
+    Decelerating {
+        /// Cycles missed.
+        missed: u32,
+    },
+    /// 5 or more missed (or never a command): full braking, steering disabled. Latched.
+    FullBraking,
+    /// Valid commands again after full braking: still braking until `recovery_run` of them
+    /// and a re-engage request.
+    Recovering {
+        /// Valid commands in a row so far.
+        valid_run: u32,
+    },
+}
+
+/// What the watchdog sees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WatchdogEvent {
+    /// A valid command; `engage` when it carries a re-engage request edge.
+    Valid {
+        /// A re-engage request (rising edge).
+        engage: bool,
+    },
+    /// Whole command cycles missed since the last valid command (≥ 1).
+    Missed(u32),
+}
+
+impl Watchdog {
+    /// The one transition function.
+    pub fn next(self, event: WatchdogEvent, recovery_run: u32) -> Watchdog {
+        use Watchdog::*;
+        use WatchdogEvent::*;
+        let by_missed = |missed: u32| match missed {
+            0 => Normal,
+            1..=2 => Holding { missed },
+            3..=4 => Decelerating { missed },
+            _ => FullBraking,
+        };
+        match (self, event) {
+            (Normal | Holding { .. } | Decelerating { .. }, Valid { .. }) => Normal,
+            (Normal | Holding { .. } | Decelerating { .. }, Missed(n)) => by_missed(n),
+            (FullBraking, Valid { .. }) => Recovering { valid_run: 1 },
+            (FullBraking, Missed(_)) => FullBraking,
+            (Recovering { valid_run }, Valid { engage }) => {
+                if engage && valid_run >= recovery_run {
+                    Normal
+                } else {
+                    Recovering {
+                        valid_run: valid_run.saturating_add(1),
+                    }
+                }
+            }
+            (Recovering { .. }, Missed(_)) => FullBraking,
+        }
+    }
+
+    /// The level reported in `WatchdogLevel` (0 normal … 4 awaiting re-engage).
+    pub fn level(self) -> u64 {
+        match self {
+            Watchdog::Normal => 0,
+            Watchdog::Holding { .. } => 1,
+            Watchdog::Decelerating { .. } => 2,
+            Watchdog::FullBraking => 3,
+            Watchdog::Recovering { .. } => 4,
+        }
+    }
+}
+
+/// The E-stop latch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EstopState {
+    /// No E-stop.
+    Normal,
+    /// The chain opened.
+    EstopRequested,
+    /// Drive motors disabled.
+    MotorsDisabled,
+    /// Brakes applied.
+    BrakesApplied,
+    /// At standstill, latched.
+    Stopped,
+    /// An operator pressed reset with the chain closed.
+    OperatorReset,
+    /// The chain was verified closed.
+    EstopReset,
+    /// The operator confirmed; a re-engage returns to normal.
+    ResetConfirmed,
+}
+
+/// What the E-stop latch sees at one evaluation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EstopInputs {
+    /// The chain is open (an E-stop frame with the request set, or a timed-out chain).
+    pub active: bool,
+    /// The operator-reset input rose.
+    pub operator_reset: bool,
+    /// A re-engage request rose.
+    pub engage: bool,
+    /// The vehicle is at standstill.
+    pub standstill: bool,
+}
+
+impl EstopState {
+    /// The one transition function; evaluated until nothing changes (at most 8 steps).
+    pub fn next(self, i: EstopInputs) -> EstopState {
+        use EstopState::*;
+        match self {
+            Normal if i.active => EstopRequested,
+            Normal => Normal,
+            EstopRequested => MotorsDisabled,
+            MotorsDisabled => BrakesApplied,
+            BrakesApplied if i.standstill => Stopped,
+            BrakesApplied => BrakesApplied,
+            Stopped if i.operator_reset && !i.active => OperatorReset,
+            Stopped => Stopped,
+            // A new press during the reset sequence starts over.
+            OperatorReset | EstopReset | ResetConfirmed if i.active => EstopRequested,
+            OperatorReset => EstopReset,
+            EstopReset if i.operator_reset => ResetConfirmed,
+            EstopReset => EstopReset,
+            ResetConfirmed if i.engage => Normal,
+            ResetConfirmed => ResetConfirmed,
+        }
+    }
+
+    /// The value reported in `EstopState`.
+    pub fn code(self) -> u64 {
+        self as u64
+    }
+
+    /// Whether the latch holds the vehicle.
+    pub fn is_latched(self) -> bool {
+        self != EstopState::Normal
+    }
+}
+
+/// What the control-mode machine sees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ModeInputs {
+    /// The mode the ADS asks for.
+    pub requested: ControlMode,
+    /// An engage request rose with this command.
+    pub engage: bool,
+    /// A driver's steering torque or pedal is above its threshold.
+    pub driver_input: bool,
+    /// The E-stop latch holds.
+    pub estop: bool,
+    /// The watchdog is normal.
+    pub watchdog_normal: bool,
+    /// The vehicle is at standstill.
+    pub standstill: bool,
+}
+
+/// The control-mode transition function.
+pub fn next_mode(current: ControlMode, i: ModeInputs) -> ControlMode {
+    use ControlMode::*;
+    if i.estop {
+        return Estop;
+    }
+    match current {
+        // Leaving E-stop goes to manual, never straight back to autonomous.
+        Estop => Manual,
+        Autonomous if i.driver_input => Manual,
+        Autonomous if i.requested != Autonomous => Manual,
+        Autonomous => Autonomous,
+        Manual if i.requested == Autonomous && i.engage && !i.driver_input && i.watchdog_normal => {
+            Autonomous
+        }
+        Manual if i.requested == Calibration && i.standstill => Calibration,
+        Manual => Manual,
+        Calibration if i.requested != Calibration => Manual,
+        Calibration => Calibration,
+    }
+}
+
+/// Why a command was rejected (each counted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Rejection {
+    /// Not 8 bytes, not a classic data frame.
+    Malformed,
+    /// CRC wrong.
+    Checksum,
+    /// Same counter as the last one: no new data.
+    RepeatedCounter,
+    /// Counter jumped: frames were lost or replayed.
+    SkippedCounter,
+    /// A setpoint outside its limits, or an undefined steering mode.
+    OutOfRange,
+}
+
+/// Counts of accepted and rejected commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CommandStats {
+    /// Valid commands.
+    pub accepted: u64,
+    /// Malformed frames.
+    pub malformed: u64,
+    /// Checksum failures.
+    pub checksum: u64,
+    /// Repeated counters.
+    pub repeated: u64,
+    /// Skipped counters.
+    pub skipped: u64,
+    /// Out-of-range setpoints.
+    pub out_of_range: u64,
+}
+
+impl CommandStats {
+    fn count(&mut self, r: Rejection) {
+        let slot = match r {
+            Rejection::Malformed => &mut self.malformed,
+            Rejection::Checksum => &mut self.checksum,
+            Rejection::RepeatedCounter => &mut self.repeated,
+            Rejection::SkippedCounter => &mut self.skipped,
+            Rejection::OutOfRange => &mut self.out_of_range,
+        };
+        *slot = slot.saturating_add(1);
+    }
+
+    /// All rejections.
+    pub fn rejected(&self) -> u64 {
+        self.malformed + self.checksum + self.repeated + self.skipped + self.out_of_range
+    }
+}
+
+/// A validated command.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    /// Steering angle, degrees.
+    pub steering: f64,
+    /// Speed, m/s.
+    pub velocity: f64,
+    /// Brake, %.
+    pub brake: f64,
+    /// Gear.
+    pub gear: Gear,
+    /// Requested control mode.
+    pub mode: ControlMode,
+    /// Steering mode.
+    pub steering_mode: SteeringMode,
+    /// Re-engage request bit.
+    pub engage: bool,
+    /// Operator-reset bit.
+    pub operator_reset: bool,
+    /// Heartbeat counter.
+    pub counter: u8,
+}
+
+/// What the actuators must do now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Actuators {
+    /// The ADS's commands drive the vehicle (autonomous mode).
+    pub ads_in_control: bool,
+    /// The steering actuator is enabled.
+    pub steering_enabled: bool,
+    /// Steering angle setpoint, degrees (rate limited).
+    pub steering: f64,
+    /// Steering mode.
+    pub steering_mode: SteeringMode,
+    /// Drive motors enabled.
+    pub motors_enabled: bool,
+    /// Speed setpoint, m/s.
+    pub velocity: f64,
+    /// Motor speed setpoint, rpm.
+    pub motor_rpm: f64,
+    /// Friction brake, %.
+    pub brake: f64,
+    /// Gear.
+    pub gear: Gear,
+    /// The warning flag (reported to the ADS).
+    pub warning: bool,
+}
+
+/// Motor rpm for a vehicle speed: `v · ratio · 60 / (π · d)`.
+pub fn motor_rpm(velocity: f64, gear_ratio: f64, wheel_diameter: f64) -> f64 {
+    if wheel_diameter > 0.0 {
+        velocity * gear_ratio * 60.0 / (core::f64::consts::PI * wheel_diameter)
+    } else {
+        0.0
+    }
+}
+
+/// The supervisor node.
+#[derive(Debug, Clone)]
+pub struct Supervisor {
+    config: SupervisorConfig,
+    counter: CounterChecker,
+    stats: CommandStats,
+    command: Option<Command>,
+    last_valid: Option<Timestamp>,
+    last_engage_bit: bool,
+    last_reset_bit: bool,
+    watchdog: Watchdog,
+    /// Whole missed cycles already reported to the watchdog.
+    missed_reported: u32,
+    decelerating_since: Option<(Timestamp, f64)>,
+    estop: EstopState,
+    estop_active: bool,
+    emergency_brake_until: Option<Timestamp>,
+    mode: ControlMode,
+    driver_input: bool,
+    speed: f64,
+    steering_actual: f64,
+    steering: RateLimiter,
+    last_poll: Option<Timestamp>,
+    next_state_frame: Timestamp,
+    state_counter: u8,
+    echo: u8,
+}
+
+impl Supervisor {
+    /// A supervisor failed closed: full braking until commands arrive and it is engaged.
+    pub fn new(config: SupervisorConfig) -> Self {
+        let mut steering = RateLimiter::new(config.steering_rate, config.steering_rate);
+        steering.reset(0.0);
+        Supervisor {
+            config,
+            counter: CounterChecker::new(4, 0, config.cycle.saturating_mul(5)),
+            stats: CommandStats::default(),
+            command: None,
+            last_valid: None,
+            last_engage_bit: false,
+            last_reset_bit: false,
+            watchdog: Watchdog::FullBraking,
+            missed_reported: 0,
+            decelerating_since: None,
+            estop: EstopState::Normal,
+            estop_active: false,
+            emergency_brake_until: None,
+            mode: ControlMode::Manual,
+            driver_input: false,
+            speed: 0.0,
+            steering_actual: 0.0,
+            steering,
+            last_poll: None,
+            next_state_frame: Timestamp::ZERO,
+            state_counter: 0,
+            echo: 0,
+        }
+    }
+
+    /// The watchdog's level.
+    pub fn watchdog(&self) -> Watchdog {
+        self.watchdog
+    }
+
+    /// The E-stop latch's state.
+    pub fn estop(&self) -> EstopState {
+        self.estop
+    }
+
+    /// The control mode.
+    pub fn mode(&self) -> ControlMode {
+        self.mode
+    }
+
+    /// Command counts.
+    pub fn stats(&self) -> CommandStats {
+        self.stats
+    }
+
+    /// The last valid command.
+    pub fn command(&self) -> Option<Command> {
+        self.command
+    }
+
+    /// What the vehicle measures: speed (m/s) and steering angle (degrees).
+    pub fn set_feedback(&mut self, speed: f64, steering: f64) {
+        if speed.is_finite() {
+            self.speed = speed;
+        }
+        if steering.is_finite() {
+            self.steering_actual = steering;
+        }
+    }
+
+    /// The driver's steering torque (N·m) and pedal travel (0–1); above the thresholds this
+    /// takes over at once.
+    pub fn set_driver_input(&mut self, now: Timestamp, torque: f64, pedal: f64) {
+        // Non-finite readings count as input present: fail towards the driver.
+        self.driver_input = !(torque.abs() < self.config.takeover_torque
+            && pedal.abs() < self.config.takeover_pedal);
+        self.evaluate(now, false, false);
+    }
+
+    fn standstill(&self) -> bool {
+        self.speed.abs() < self.config.standstill
+    }
+
+    /// Validate a command frame.
+    fn validate(&mut self, now: Timestamp, frame: &Frame) -> Result<Command, Rejection> {
+        let payload = payload(frame).ok_or(Rejection::Malformed)?;
+        if !reference_tug::is_sealed(AdsToVehicleControl::ID, &payload) {
+            return Err(Rejection::Checksum);
+        }
+        let m = AdsToVehicleControl(payload);
+        let counter = u8::try_from(m.heartbeat_counter_raw()).unwrap_or(0);
+        match self.counter.check(now, counter) {
+            CounterStatus::Initial | CounterStatus::InSequence => {}
+            // After a silence the stream may restart anywhere, but not with the value it
+            // froze on: a frozen sender must not get a frame through every timeout.
+            CounterStatus::Stale if self.command.is_some_and(|c| c.counter == counter) => {
+                return Err(Rejection::RepeatedCounter)
+            }
+            CounterStatus::Stale => {}
+            CounterStatus::Repeated => return Err(Rejection::RepeatedCounter),
+            CounterStatus::Skipped { .. } | CounterStatus::OutOfSequence => {
+                return Err(Rejection::SkippedCounter)
+            }
+        }
+        let c = self.config;
+        let steering = m.steering_angle_cmd();
+        let velocity = m.velocity_cmd();
+        let brake = m.brake_cmd();
+        let steering_mode =
+            SteeringMode::from_raw(m.steering_mode_cmd_raw()).ok_or(Rejection::OutOfRange)?;
+        if steering.abs() > c.steering_range || velocity.abs() > c.speed_limit || brake > 100.0 {
+            return Err(Rejection::OutOfRange);
+        }
+        Ok(Command {
+            steering,
+            velocity,
+            brake,
+            gear: Gear::from_raw(m.gear_cmd_raw()),
+            mode: ControlMode::from_raw(m.control_mode_cmd_raw()),
+            steering_mode,
+            engage: m.engage_request_raw() == 1,
+            operator_reset: m.operator_reset_raw() == 1,
+            counter,
+        })
+    }
+
+    /// A frame from the bus.
+    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        let Some(id) = frame.id() else {
+            return;
+        };
+        match id.as_raw() {
+            AdsToVehicleControl::ID if !id.is_extended() => self.on_command(now, frame),
+            EmergencyStop::ID if !id.is_extended() => {
+                if let Some(m) = sealed(frame, EmergencyStop::ID).map(EmergencyStop) {
+                    self.estop_active = m.estop_request_raw() == 1;
+                    self.evaluate(now, false, false);
+                }
+            }
+            EmergencyBrake::ID if !id.is_extended() => {
+                if let Some(m) = sealed(frame, EmergencyBrake::ID).map(EmergencyBrake) {
+                    // Each brake frame holds full braking for 3 cycles (the burst, then 20 Hz).
+                    self.emergency_brake_until = (m.brake_request_raw() == 1)
+                        .then(|| now.saturating_add(self.config.cycle.saturating_mul(3)));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn on_command(&mut self, now: Timestamp, frame: &Frame) {
+        match self.validate(now, frame) {
+            Err(r) => self.stats.count(r),
+            Ok(command) => {
+                self.stats.accepted = self.stats.accepted.saturating_add(1);
+                let engage = command.engage && !self.last_engage_bit;
+                let reset = command.operator_reset && !self.last_reset_bit;
+                self.last_engage_bit = command.engage;
+                self.last_reset_bit = command.operator_reset;
+                self.echo = command.counter;
+                self.command = Some(command);
+                self.last_valid = Some(now);
+                self.missed_reported = 0;
+                self.decelerating_since = None;
+                self.watchdog = self
+                    .watchdog
+                    .next(WatchdogEvent::Valid { engage }, self.config.recovery_run);
+                self.evaluate(now, engage, reset);
+            }
+        }
+    }
+
+    /// Run the E-stop latch and the mode machine on the current inputs.
+    fn evaluate(&mut self, _now: Timestamp, engage: bool, operator_reset: bool) {
+        let mut inputs = EstopInputs {
+            active: self.estop_active,
+            operator_reset,
+            engage,
+            standstill: self.standstill(),
+        };
+        // The latch moves through its stages in order within one evaluation: bounded by its
+        // eight states. An edge (reset, engage) is used by one transition only.
+        for _ in 0..8 {
+            let next = self.estop.next(inputs);
+            if next == self.estop {
+                break;
+            }
+            self.estop = next;
+            inputs.operator_reset = false;
+            inputs.engage = false;
+        }
+        let requested = self.command.map_or(ControlMode::Manual, |c| c.mode);
+        self.mode = next_mode(
+            self.mode,
+            ModeInputs {
+                requested,
+                engage,
+                driver_input: self.driver_input,
+                estop: self.estop.is_latched(),
+                watchdog_normal: self.watchdog == Watchdog::Normal,
+                standstill: self.standstill(),
+            },
+        );
+    }
+
+    /// When [`poll`](Self::poll) next has something to do.
+    pub fn next_deadline(&self) -> Option<Timestamp> {
+        let tick = self.last_valid.map(|t| {
+            // Half a cycle of tolerance for jitter: cycle k is missed at (k + ½) cycles.
+            let k = u32::try_from(u64::from(self.missed_reported) + 1).unwrap_or(u32::MAX);
+            t.saturating_add(self.config.cycle.saturating_mul(k))
+                .saturating_add(self.config.cycle / 2)
+        });
+        Some(tick.map_or(self.next_state_frame, |t| t.min(self.next_state_frame)))
+    }
+
+    /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due.
+    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        if let Some(last) = self.last_valid {
+            let cycle = self.config.cycle.as_nanos().max(1);
+            let elapsed = now.saturating_since(last).as_nanos();
+            let tolerance = cycle / 2;
+            let missed =
+                u32::try_from(elapsed.saturating_sub(tolerance) / cycle).unwrap_or(u32::MAX);
+            if missed > self.missed_reported {
+                self.missed_reported = missed;
+                let before = self.watchdog;
+                self.watchdog = self
+                    .watchdog
+                    .next(WatchdogEvent::Missed(missed), self.config.recovery_run);
+                if matches!(self.watchdog, Watchdog::Decelerating { .. })
+                    && !matches!(before, Watchdog::Decelerating { .. })
+                {
+                    let held = self.command.map_or(0.0, |c| c.velocity);
+                    self.decelerating_since = Some((now, held));
+                }
+            }
+        }
+        if self.emergency_brake_until.is_some_and(|until| now >= until) {
+            self.emergency_brake_until = None;
+        }
+        self.evaluate(now, false, false);
+        let dt = self
+            .last_poll
+            .map_or(0.0, |last| now.saturating_since(last).as_secs_f64());
+        self.last_poll = Some(now);
+        let target = self.steering_target();
+        self.steering.step(dt, target);
+        if now >= self.next_state_frame {
+            self.next_state_frame = now.saturating_add(self.config.cycle);
+            out(self.state_frame());
+        }
+    }
+
+    fn steering_target(&self) -> f64 {
+        match (self.mode, self.watchdog) {
+            (ControlMode::Autonomous, Watchdog::Normal | Watchdog::Holding { .. }) => {
+                self.command.map_or(self.steering_actual, |c| c.steering)
+            }
+            // Held where it is (decelerating), or where the driver puts it.
+            _ => self.steering_actual,
+        }
+    }
+
+    /// What the actuators must do now.
+    pub fn actuators(&self, now: Timestamp) -> Actuators {
+        let c = self.config;
+        let command = self.command;
+        let steering_mode = command.map_or(SteeringMode::Normal, |c| c.steering_mode);
+        let gear = command.map_or(Gear::Park, |c| c.gear);
+        let full_brake = Actuators {
+            ads_in_control: self.mode == ControlMode::Autonomous,
+            steering_enabled: false,
+            steering: self.steering_actual,
+            steering_mode,
+            motors_enabled: false,
+            velocity: 0.0,
+            motor_rpm: 0.0,
+            brake: 100.0,
+            gear,
+            warning: true,
+        };
+        if self.estop.is_latched() {
+            return Actuators {
+                // Motors go off first; brakes follow from BRAKES_APPLIED on.
+                brake: if self.estop == EstopState::EstopRequested
+                    || self.estop == EstopState::MotorsDisabled
+                {
+                    0.0
+                } else {
+                    100.0
+                },
+                ..full_brake
+            };
+        }
+        if self.mode != ControlMode::Autonomous {
+            // The driver (or a service tool) drives; the ADS's setpoints are ignored.
+            return Actuators {
+                ads_in_control: false,
+                steering_enabled: false,
+                steering: self.steering_actual,
+                steering_mode,
+                motors_enabled: true,
+                velocity: 0.0,
+                motor_rpm: 0.0,
+                brake: 0.0,
+                gear,
+                warning: self.watchdog != Watchdog::Normal,
+            };
+        }
+        if self.emergency_brake_until.is_some_and(|until| now < until) {
+            return full_brake;
+        }
+        let steering = self.steering.value().unwrap_or(self.steering_actual);
+        let (velocity, brake, warning) = match (self.watchdog, command) {
+            (Watchdog::Normal, Some(cmd)) => (cmd.velocity, cmd.brake, false),
+            (Watchdog::Holding { .. }, Some(cmd)) => (cmd.velocity, cmd.brake, true),
+            (Watchdog::Decelerating { .. }, _) => {
+                let (since, held) = self.decelerating_since.unwrap_or((now, 0.0));
+                let drop = c.controlled_deceleration * now.saturating_since(since).as_secs_f64();
+                let v = (held.abs() - drop).max(0.0).copysign(held);
+                (v, 0.0, true)
+            }
+            _ => return full_brake,
+        };
+        Actuators {
+            ads_in_control: true,
+            steering_enabled: true,
+            steering,
+            steering_mode,
+            motors_enabled: true,
+            velocity,
+            motor_rpm: motor_rpm(velocity, c.gear_ratio, c.wheel_diameter),
+            brake,
+            gear,
+            warning,
+        }
+    }
+
+    /// The `VehicleToAds_State` frame.
+    fn state_frame(&mut self) -> Frame {
+        let mut m = VehicleToAdsState::default();
+        // Out-of-range actuals are reported at their limit rather than dropped.
+        let clamp = |v: f64, limit: f64| v.clamp(-limit, limit);
+        let _ = m.set_steering_angle_actual(clamp(self.steering_actual, 45.0));
+        let _ = m.set_velocity_actual(clamp(self.speed, 5.0));
+        m.set_control_mode_raw(self.mode as u64);
+        m.set_steering_mode_raw(self.command.map_or(0, |c| c.steering_mode as u64));
+        m.set_gear_raw(self.command.map_or(0, |c| c.gear as u64));
+        m.set_watchdog_level_raw(self.watchdog.level());
+        m.set_estop_state_raw(self.estop.code());
+        m.set_warning_flag_raw(u64::from(self.watchdog != Watchdog::Normal));
+        m.set_driver_override_raw(u64::from(self.driver_input));
+        let enabled = self.mode == ControlMode::Autonomous
+            && matches!(
+                self.watchdog,
+                Watchdog::Normal | Watchdog::Holding { .. } | Watchdog::Decelerating { .. }
+            )
+            && !self.estop.is_latched();
+        m.set_steering_enabled_raw(u64::from(enabled));
+        m.set_heartbeat_echo_raw(u64::from(self.echo));
+        m.set_counter_raw(u64::from(self.state_counter));
+        self.state_counter = (self.state_counter + 1) & 0x0F;
+        let mut payload = m.0;
+        reference_tug::seal(VehicleToAdsState::ID, &mut payload);
+        let id = Id::standard(VehicleToAdsState::ID)
+            .unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
+        Frame::classic(id, &payload).unwrap_or(Frame::remote(id, bywire_core::Dlc::from_nibble(0)))
+    }
+}
+
+/// The payload of a classic 8-byte data frame.
+fn payload(frame: &Frame) -> Option<[u8; 8]> {
+    match frame {
+        Frame::Classic(f) if !f.is_remote() => f.data().try_into().ok(),
+        _ => None,
+    }
+}
+
+/// The payload of a classic 8-byte data frame whose CRC checks out.
+fn sealed(frame: &Frame, id: u32) -> Option<[u8; 8]> {
+    payload(frame).filter(|p| reference_tug::is_sealed(id, p))
+}

@@ -1,0 +1,67 @@
+//! The supervisor allocates nothing after construction: frames in, polls, actuator reads and
+//! the state frames out run under `allocation-counter`'s counting allocator.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use bywire_core::{Frame, Id, Timestamp};
+use bywire_vehicle::reference_tug::{self, AdsToVehicleControl, EmergencyStop};
+use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
+
+fn sealed(id: u32, mut payload: [u8; 8]) -> Frame {
+    reference_tug::seal(id, &mut payload);
+    Frame::classic(Id::standard(id).unwrap(), &payload).unwrap()
+}
+
+#[test]
+fn the_supervisor_never_allocates() {
+    // Frames prepared before counting: 200 commands with rolling counters, some bad ones, and
+    // the E-stop chain opening and closing.
+    let commands: Vec<Frame> = (0..200u64)
+        .map(|k| {
+            let mut m = AdsToVehicleControl::default();
+            m.set_velocity_cmd(1.0).unwrap();
+            m.set_control_mode_cmd_raw(1);
+            m.set_engage_request_raw(u64::from(k == 20));
+            m.set_heartbeat_counter_raw(k % 16);
+            let mut f = sealed(AdsToVehicleControl::ID, m.0);
+            if k % 37 == 0 {
+                f = Frame::classic(f.id().unwrap(), &[0; 8]).unwrap();
+            }
+            f
+        })
+        .collect();
+    let estop = |on: bool| {
+        let mut m = EmergencyStop::default();
+        m.set_estop_request_raw(u64::from(on));
+        sealed(EmergencyStop::ID, m.0)
+    };
+    let (open, closed) = (estop(true), estop(false));
+    let mut supervisor = Supervisor::new(SupervisorConfig::default());
+    let mut frames_out = 0;
+    let mut checksum = 0.0;
+    let counted = allocation_counter::measure(|| {
+        for (k, frame) in commands.iter().enumerate() {
+            let now = Timestamp::from_millis(20 * k as u64);
+            supervisor.on_frame(now, frame);
+            if k == 150 {
+                supervisor.on_frame(now, &open);
+            }
+            if k == 160 {
+                supervisor.on_frame(now, &closed);
+            }
+            supervisor.set_driver_input(now, 0.0, 0.0);
+            supervisor.poll(now, &mut |_| frames_out += 1);
+            let a = supervisor.actuators(now);
+            supervisor.set_feedback(a.velocity, a.steering);
+            checksum += a.motor_rpm + a.brake;
+        }
+    });
+    assert!(checksum.is_finite());
+    assert!(frames_out >= 199, "{frames_out} state frames");
+    assert!(supervisor.stats().checksum > 0 && supervisor.stats().accepted > 100);
+    assert_eq!(counted.count_total, 0, "allocations in the supervisor");
+}
