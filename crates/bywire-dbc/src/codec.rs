@@ -98,6 +98,17 @@ pub struct RangeError {
     pub max: f64,
 }
 
+/// Why [`MessageCodec::encode_checked`] wrote nothing.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum EncodeError {
+    /// A value outside its signal's range (strict mode).
+    #[error(transparent)]
+    Range(#[from] RangeError),
+    /// The output buffer is shorter than the message.
+    #[error(transparent)]
+    Buffer(#[from] DecodeError),
+}
+
 /// Why a frame does not decode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum DecodeError {
@@ -553,7 +564,7 @@ impl MessageCodec {
         values: &[Option<Value>],
         out: &mut [u8],
         mode: EncodeMode,
-    ) -> Result<usize, RangeError> {
+    ) -> Result<usize, EncodeError> {
         let mut adjusted: Vec<Option<Value>> = values.to_vec();
         for (signal, (p, v)) in self.plans.iter().zip(adjusted.iter_mut()).enumerate() {
             let Some(value) = v else { continue };
@@ -570,12 +581,12 @@ impl MessageCodec {
             }
             match mode {
                 EncodeMode::Strict => {
-                    return Err(RangeError {
+                    return Err(EncodeError::Range(RangeError {
                         signal,
                         value: physical,
                         min,
                         max,
-                    })
+                    }))
                 }
                 EncodeMode::Clamp if physical.is_nan() => {
                     *v = Some(Value::Float(min.max(0.0).min(max)))
@@ -583,12 +594,7 @@ impl MessageCodec {
                 EncodeMode::Clamp => *v = Some(Value::Float(physical.clamp(min, max))),
             }
         }
-        self.encode(&adjusted, out).map_err(|_| RangeError {
-            signal: 0,
-            value: f64::NAN,
-            min: 0.0,
-            max: 0.0,
-        })
+        Ok(self.encode(&adjusted, out)?)
     }
 
     /// Encode physical values (one entry per signal; `None` leaves its bits 0) into `out`,
@@ -898,18 +904,23 @@ mod tests {
         assert_eq!(c.encode_checked(&ok, &mut out, EncodeMode::Strict), Ok(8));
         assert_eq!(out[..2], [200, 0x08]);
         let high = [Some(Value::Float(100.5)), None];
-        let e = c
-            .encode_checked(&high, &mut out, EncodeMode::Strict)
-            .unwrap_err();
+        let Err(EncodeError::Range(e)) = c.encode_checked(&high, &mut out, EncodeMode::Strict)
+        else {
+            panic!("a range error")
+        };
         assert_eq!((e.signal, e.min, e.max), (0, 0.0, 100.0));
         // No declared range: the raw width (4 bits signed: -8..7) is the limit.
         let wide = [None, Some(Value::Int(9))];
-        assert_eq!(
-            c.encode_checked(&wide, &mut out, EncodeMode::Strict)
-                .unwrap_err()
-                .max,
-            7.0
-        );
+        let Err(EncodeError::Range(e)) = c.encode_checked(&wide, &mut out, EncodeMode::Strict)
+        else {
+            panic!("a range error")
+        };
+        assert_eq!(e.max, 7.0);
+        // A buffer shorter than the message is said to be that, not a range problem.
+        assert!(matches!(
+            c.encode_checked(&ok, &mut [0u8; 4], EncodeMode::Strict),
+            Err(EncodeError::Buffer(DecodeError::TooShort { .. }))
+        ));
         c.encode_checked(
             &[Some(Value::Float(250.0)), Some(Value::Int(-100))],
             &mut out,

@@ -150,6 +150,22 @@ fn set_bits(data: &mut [u8], start: u32, len: u32, big_endian: bool, raw: u64) {
     }
 }
 
+/// Round half to even (what the codec does), without std: exact for every f64, since values
+/// of 2^52 and beyond are integers already.
+fn round_half_even(x: f64) -> f64 {
+    if !(x.abs() < 4_503_599_627_370_496.0) {
+        return x;
+    }
+    let truncated = x as i64 as f64;
+    let fraction = x - truncated;
+    let step = if x < 0.0 { -1.0 } else { 1.0 };
+    if fraction.abs() > 0.5 || (fraction.abs() == 0.5 && (truncated as i64) % 2 != 0) {
+        truncated + step
+    } else {
+        truncated
+    }
+}
+
 fn sign_extend(raw: u64, len: u32) -> i64 {
     let unused = 64 - len;
     ((raw << unused) as i64) >> unused
@@ -266,17 +282,16 @@ fn signal_code(o: &mut String, s: &Signal, name: &str) -> std::fmt::Result {
         s.display_name()
     )?;
     writeln!(o, "        if {range_check} {{ return Err(err); }}")?;
-    let rounding = if matches!(s.value_type, ValueType::Integer { .. }) {
-        ".round_ties_even()"
-    } else {
-        ""
-    };
-    writeln!(
-        o,
-        "        let raw_f = ((value - {}) / {}){rounding};",
+    let scaled = format!(
+        "(value - {}) / {}",
         float(offset),
         float(if factor == 0.0 { 1.0 } else { factor })
-    )?;
+    );
+    if matches!(s.value_type, ValueType::Integer { .. }) {
+        writeln!(o, "        let raw_f = round_half_even({scaled});")?;
+    } else {
+        writeln!(o, "        let raw_f = {scaled};")?;
+    }
     if let Some((lo, hi)) = raw_limits {
         writeln!(
             o,

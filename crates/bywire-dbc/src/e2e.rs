@@ -47,12 +47,31 @@ impl ChecksumAlgorithm {
         })
     }
 
-    fn compute(self, bytes: &[u8]) -> u8 {
+    /// The checksum of a byte stream, fed one byte at a time (the CRCs chain exactly).
+    fn compute(self, bytes: impl Iterator<Item = u8>) -> u8 {
+        let chain = |first: fn(&[u8]) -> u8,
+                     next: fn(u8, &[u8]) -> u8,
+                     bytes: &mut dyn Iterator<Item = u8>| {
+            let start = first(&[]);
+            let mut crc: Option<u8> = None;
+            for b in bytes {
+                crc = Some(match crc {
+                    None => first(&[b]),
+                    Some(c) => next(c, &[b]),
+                });
+            }
+            crc.unwrap_or(start)
+        };
+        let mut bytes = bytes;
         match self {
-            ChecksumAlgorithm::Xor8 => crc::xor8(bytes),
-            ChecksumAlgorithm::Sum8 => bytes.iter().fold(0u8, |a, b| a.wrapping_add(*b)),
-            ChecksumAlgorithm::Crc8SaeJ1850 => crc::crc8_sae_j1850(bytes),
-            ChecksumAlgorithm::Crc8H2f => crc::crc8_h2f(bytes),
+            ChecksumAlgorithm::Xor8 => bytes.fold(0u8, |a, b| a ^ b),
+            ChecksumAlgorithm::Sum8 => bytes.fold(0u8, u8::wrapping_add),
+            ChecksumAlgorithm::Crc8SaeJ1850 => chain(
+                crc::crc8_sae_j1850,
+                crc::crc8_sae_j1850_continue,
+                &mut bytes,
+            ),
+            ChecksumAlgorithm::Crc8H2f => chain(crc::crc8_h2f, crc::crc8_h2f_continue, &mut bytes),
         }
     }
 }
@@ -143,23 +162,23 @@ impl Protection {
         algorithm: ChecksumAlgorithm,
         payload: &[u8],
     ) -> Option<u8> {
-        let mut copy = payload.get(..codec.size())?.to_vec();
-        codec.write_raw(index, 0, &mut copy);
+        let payload = payload.get(..codec.size())?;
+        // The checksum's own bits, on the stack (payloads are at most 64 bytes): no
+        // allocation per frame.
+        let mut mask = [0u8; 64];
+        let mask = mask.get_mut(..payload.len())?;
+        if !codec.write_raw(index, u64::MAX, mask) {
+            return None;
+        }
         // Bytes the checksum fills entirely are left out; partly filled ones count with its
-        // bits cleared.
-        let mut marked = copy.clone();
-        codec.write_raw(index, u64::MAX, &mut marked);
-        let mut input: Vec<u8> = self
-            .data_id
-            .map(|id| id.to_le_bytes().to_vec())
-            .unwrap_or_default();
-        input.extend(
-            copy.iter()
-                .zip(&marked)
-                .filter(|(c, m)| !(**c == 0 && **m == 0xFF))
-                .map(|(c, _)| *c),
-        );
-        Some(algorithm.compute(&input))
+        // bits cleared; the data ID goes first.
+        let data = payload
+            .iter()
+            .zip(mask.iter())
+            .filter(|(_, m)| **m != 0xFF)
+            .map(|(c, m)| c & !m);
+        let id = self.data_id.map(u16::to_le_bytes).into_iter().flatten();
+        Some(algorithm.compute(id.chain(data)))
     }
 
     /// Write `counter` (masked to the counter's width) and the checksum into an encoded payload.

@@ -84,6 +84,22 @@ fn generated_accessors_agree_with_the_codec() {
         std::fs::write(&main, harness(&db, &generated)).unwrap();
         let binary = dir.join(format!("bin{fi}"));
         let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+        // The generated module builds without std, as ECU code needs.
+        let no_std = dir.join(format!("nostd{fi}.rs"));
+        std::fs::write(&no_std, format!("#![no_std]\n{}", codegen::generate(&db))).unwrap();
+        let compiled = Command::new(&rustc)
+            .args(["--edition", "2021", "--crate-type", "lib", "--crate-name"])
+            .arg(format!("nostd{fi}"))
+            .arg("-o")
+            .arg(dir.join(format!("libnostd{fi}.rlib")))
+            .arg(&no_std)
+            .output()
+            .unwrap();
+        assert!(
+            compiled.status.success(),
+            "{file} without std: {}",
+            String::from_utf8_lossy(&compiled.stderr)
+        );
         let compiled = Command::new(rustc)
             .args(["--edition", "2021", "-C", "opt-level=0", "-o"])
             .arg(&binary)
