@@ -6,6 +6,12 @@
 //! - [`supervisor`]: the logic a vehicle control ECU runs on the other end of the wire: command
 //!   validation, the watchdog cascade, the E-stop latch, control modes with driver takeover,
 //!   and the actuator outputs. A sans-IO node: frames and time in, frames and outputs out.
+//! - [`ads`]: the ADS side: commands out at the command rate with counter and CRC (a stale
+//!   command becomes a controlled stop), the emergency-brake burst, and feedback validated into
+//!   a [`ads::VehicleState`] whose fields carry their age.
+//! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
 
+pub mod ads;
+pub mod redundancy;
 pub mod reference_tug;
 pub mod supervisor;

@@ -65,3 +65,41 @@ fn the_supervisor_never_allocates() {
     assert!(supervisor.stats().checksum > 0 && supervisor.stats().accepted > 100);
     assert_eq!(counted.count_total, 0, "allocations in the supervisor");
 }
+
+#[test]
+fn the_ads_side_never_allocates() {
+    use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+    use bywire_vehicle::reference_tug::{ControlMode, VehicleToAdsState};
+    let states: Vec<Frame> = (0..100u64)
+        .map(|k| {
+            let mut m = VehicleToAdsState::default();
+            m.set_control_mode_raw(1);
+            m.set_counter_raw(k % 16);
+            m.set_heartbeat_echo_raw(k % 16);
+            sealed(VehicleToAdsState::ID, m.0)
+        })
+        .collect();
+    let mut ads = Ads::new(AdsConfig::default());
+    let command = AdsCommand {
+        velocity: 1.0,
+        mode: ControlMode::Autonomous,
+        ..AdsCommand::default()
+    };
+    let mut sent = 0;
+    let counted = allocation_counter::measure(|| {
+        for (k, state) in states.iter().enumerate() {
+            let now = Timestamp::from_millis(20 * k as u64);
+            ads.set_command(now, command);
+            if k == 50 {
+                ads.emergency_brake(now, 3.0);
+            }
+            ads.poll(now, &mut |_| sent += 1);
+            ads.on_frame(
+                now.saturating_add(std::time::Duration::from_millis(1)),
+                state,
+            );
+        }
+    });
+    assert!(sent >= 100 && ads.stats().accepted > 0);
+    assert_eq!(counted.count_total, 0, "allocations on the ADS side");
+}

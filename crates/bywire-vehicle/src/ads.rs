@@ -1,0 +1,419 @@
+//! The ADS side of the wire: a sans-IO node that turns the ADS's latest command into
+//! `AdsToVehicle_Control` frames at the command rate (rolling counter, CRC), sends the
+//! emergency-brake burst, and validates every feedback frame into a [`VehicleState`] whose
+//! fields carry validity and age.
+//!
+//! The ADS side fails safe too: a command older than its staleness limit is replaced by a
+//! controlled stop (speed 0, brake applied, steering held) until a fresh one arrives.
+
+use core::time::Duration;
+
+use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::{Frame, Id, StandardId, Timestamp};
+
+use crate::reference_tug::{
+    self, AdsToVehicleControl, ControlMode, EmergencyBrake, Gear, SteeringMode,
+    VehicleToAdsSensors, VehicleToAdsState,
+};
+
+/// Tuning of the ADS side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdsConfig {
+    /// Command period.
+    pub cycle: Duration,
+    /// A command older than this is replaced by a controlled stop.
+    pub staleness: Duration,
+    /// Brake applied by the controlled stop, %.
+    pub stop_brake: f64,
+    /// Feedback older than this many of its cycles is invalid.
+    pub feedback_timeout_cycles: u32,
+    /// The heartbeat echo must match one of the last this many commands sent.
+    pub echo_window: u8,
+    /// Emergency-brake frames: the burst's spacing and the repeat period after it.
+    pub brake_burst_spacing: Duration,
+    /// Repeat period after the burst (20 Hz).
+    pub brake_repeat: Duration,
+}
+
+impl Default for AdsConfig {
+    fn default() -> Self {
+        AdsConfig {
+            cycle: Duration::from_millis(20),
+            staleness: Duration::from_millis(200),
+            stop_brake: 30.0,
+            feedback_timeout_cycles: 3,
+            echo_window: 3,
+            brake_burst_spacing: Duration::from_millis(4),
+            brake_repeat: Duration::from_millis(50),
+        }
+    }
+}
+
+/// What the ADS wants the vehicle to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdsCommand {
+    /// Steering angle, degrees.
+    pub steering: f64,
+    /// Speed, m/s.
+    pub velocity: f64,
+    /// Brake, %.
+    pub brake: f64,
+    /// Gear.
+    pub gear: Gear,
+    /// Control mode requested.
+    pub mode: ControlMode,
+    /// Steering mode.
+    pub steering_mode: SteeringMode,
+    /// Re-engage request.
+    pub engage: bool,
+    /// Operator reset (E-stop sequence).
+    pub operator_reset: bool,
+}
+
+impl Default for AdsCommand {
+    fn default() -> Self {
+        AdsCommand {
+            steering: 0.0,
+            velocity: 0.0,
+            brake: 0.0,
+            gear: Gear::Park,
+            mode: ControlMode::Manual,
+            steering_mode: SteeringMode::Normal,
+            engage: false,
+            operator_reset: false,
+        }
+    }
+}
+
+/// A feedback value with its time and validity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Field<T> {
+    /// The last valid value.
+    pub value: Option<T>,
+    /// When it arrived.
+    pub at: Option<Timestamp>,
+}
+
+impl<T> Default for Field<T> {
+    fn default() -> Self {
+        Field {
+            value: None,
+            at: None,
+        }
+    }
+}
+
+impl<T: Copy> Field<T> {
+    fn set(&mut self, now: Timestamp, value: T) {
+        self.value = Some(value);
+        self.at = Some(now);
+    }
+
+    /// Its age at `now`.
+    pub fn age(&self, now: Timestamp) -> Option<Duration> {
+        self.at.map(|at| now.saturating_since(at))
+    }
+
+    /// The value if it is younger than `timeout` at `now`.
+    pub fn fresh(&self, now: Timestamp, timeout: Duration) -> Option<T> {
+        self.value
+            .filter(|_| self.age(now).is_some_and(|a| a <= timeout))
+    }
+}
+
+/// Why a feedback frame was not used (each counted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FeedbackStats {
+    /// Frames used.
+    pub accepted: u64,
+    /// Wrong CRC or malformed.
+    pub checksum: u64,
+    /// Counter repeated or jumped.
+    pub counter: u64,
+    /// Physical values outside their ranges.
+    pub range: u64,
+    /// State frames whose heartbeat echo matched none of the recent commands.
+    pub echo: u64,
+}
+
+/// The vehicle as the ADS sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VehicleState {
+    /// Steering angle, degrees.
+    pub steering: Field<f64>,
+    /// Speed, m/s.
+    pub velocity: Field<f64>,
+    /// Control mode.
+    pub mode: Field<ControlMode>,
+    /// Watchdog level (0 normal … 4 awaiting re-engage).
+    pub watchdog_level: Field<u8>,
+    /// E-stop latch state code.
+    pub estop_state: Field<u8>,
+    /// The vehicle's warning flag.
+    pub warning: Field<bool>,
+    /// A driver has taken over.
+    pub driver_override: Field<bool>,
+    /// Wheel speeds FL, FR, RL, RR, m/s.
+    pub wheel_speeds: Field<[f64; 4]>,
+    /// Time from sending a command to seeing its heartbeat echoed.
+    pub echo_latency: Field<Duration>,
+}
+
+/// The ADS-side node.
+#[derive(Debug, Clone)]
+pub struct Ads {
+    config: AdsConfig,
+    command: Option<(Timestamp, AdsCommand)>,
+    counter: u8,
+    /// When each counter value was last sent.
+    sent_at: [Option<Timestamp>; 16],
+    next_command: Option<Timestamp>,
+    brake: Option<BrakeBurst>,
+    state: VehicleState,
+    state_counter: CounterChecker,
+    sensors_counter: CounterChecker,
+    stats: FeedbackStats,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BrakeBurst {
+    deceleration: f64,
+    sent: u32,
+    next: Timestamp,
+}
+
+fn frame(id: u32, mut payload: [u8; 8]) -> Frame {
+    reference_tug::seal(id, &mut payload);
+    let id = StandardId::new(u16::try_from(id).unwrap_or(0)).unwrap_or(StandardId::ZERO);
+    Frame::classic(Id::Standard(id), &payload).unwrap_or(Frame::remote(
+        Id::Standard(id),
+        bywire_core::Dlc::from_nibble(0),
+    ))
+}
+
+impl Ads {
+    /// A node that sends nothing until it has a command.
+    pub fn new(config: AdsConfig) -> Self {
+        let timeout = config.cycle.saturating_mul(config.feedback_timeout_cycles);
+        Ads {
+            config,
+            command: None,
+            counter: 0,
+            sent_at: [None; 16],
+            next_command: None,
+            brake: None,
+            state: VehicleState::default(),
+            state_counter: CounterChecker::new(4, 0, timeout),
+            sensors_counter: CounterChecker::new(4, 0, timeout),
+            stats: FeedbackStats::default(),
+        }
+    }
+
+    /// The latest command (latest wins); non-finite values are refused and the previous
+    /// command stays (and ages).
+    pub fn set_command(&mut self, now: Timestamp, command: AdsCommand) -> bool {
+        let finite = command.steering.is_finite()
+            && command.velocity.is_finite()
+            && command.brake.is_finite();
+        if finite {
+            self.command = Some((now, command));
+            self.next_command.get_or_insert(now);
+        }
+        finite
+    }
+
+    /// Start the emergency-brake burst: 3 frames `brake_burst_spacing` apart, then one every
+    /// `brake_repeat` until [`release_brake`](Self::release_brake).
+    pub fn emergency_brake(&mut self, now: Timestamp, deceleration: f64) {
+        self.brake = Some(BrakeBurst {
+            deceleration,
+            sent: 0,
+            next: now,
+        });
+    }
+
+    /// Stop sending emergency-brake frames.
+    pub fn release_brake(&mut self) {
+        self.brake = None;
+    }
+
+    /// The vehicle's state as validated so far.
+    pub fn state(&self) -> &VehicleState {
+        &self.state
+    }
+
+    /// Feedback counts.
+    pub fn stats(&self) -> FeedbackStats {
+        self.stats
+    }
+
+    /// Whether the vehicle's state frame is fresh at `now`.
+    pub fn feedback_alive(&self, now: Timestamp) -> bool {
+        let timeout = self
+            .config
+            .cycle
+            .saturating_mul(self.config.feedback_timeout_cycles);
+        self.state.mode.fresh(now, timeout).is_some()
+    }
+
+    /// The command to send at `now`: the latest, or a controlled stop if it is stale.
+    pub fn effective_command(&self, now: Timestamp) -> Option<AdsCommand> {
+        let (at, command) = self.command?;
+        if now.saturating_since(at) <= self.config.staleness {
+            return Some(command);
+        }
+        Some(AdsCommand {
+            velocity: 0.0,
+            brake: command.brake.max(self.config.stop_brake),
+            engage: false,
+            operator_reset: false,
+            ..command
+        })
+    }
+
+    fn command_frame(&mut self, now: Timestamp, c: AdsCommand) -> Frame {
+        let mut m = AdsToVehicleControl::default();
+        // The DBC's ranges are wider than any vehicle's limits: clamp rather than drop, the
+        // vehicle side rejects what its own limits refuse.
+        let _ = m.set_steering_angle_cmd(c.steering.clamp(-45.0, 45.0));
+        let _ = m.set_velocity_cmd(c.velocity.clamp(-5.0, 8.0));
+        let _ = m.set_brake_cmd(c.brake.clamp(0.0, 100.0));
+        m.set_gear_cmd_raw(c.gear as u64);
+        m.set_control_mode_cmd_raw(c.mode as u64);
+        m.set_steering_mode_cmd_raw(c.steering_mode as u64);
+        m.set_engage_request_raw(u64::from(c.engage));
+        m.set_operator_reset_raw(u64::from(c.operator_reset));
+        m.set_heartbeat_counter_raw(u64::from(self.counter));
+        if let Some(slot) = self.sent_at.get_mut(usize::from(self.counter)) {
+            *slot = Some(now);
+        }
+        self.counter = (self.counter + 1) & 0x0F;
+        frame(AdsToVehicleControl::ID, m.0)
+    }
+
+    /// When [`poll`](Self::poll) next has something to send.
+    pub fn next_deadline(&self) -> Option<Timestamp> {
+        match (self.next_command, self.brake.map(|b| b.next)) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Send what is due at `now`: the emergency-brake frame first (it has the highest
+    /// priority on the bus too), then the command.
+    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        if let Some(mut burst) = self.brake {
+            if now >= burst.next {
+                let mut m = EmergencyBrake::default();
+                m.set_brake_request_raw(1);
+                let _ = m.set_deceleration(burst.deceleration.clamp(0.0, 25.5));
+                m.set_counter_raw(u64::from(burst.sent & 0x0F));
+                out(frame(EmergencyBrake::ID, m.0));
+                burst.sent = burst.sent.saturating_add(1);
+                let gap = if burst.sent < 3 {
+                    self.config.brake_burst_spacing
+                } else {
+                    self.config.brake_repeat
+                };
+                burst.next = burst.next.saturating_add(gap).max(now);
+                self.brake = Some(burst);
+            }
+        }
+        if let (Some(due), Some(command)) = (self.next_command, self.effective_command(now)) {
+            if now >= due {
+                let f = self.command_frame(now, command);
+                out(f);
+                // Keep the schedule (no drift); skip cycles missed while not polled.
+                let mut next = due.saturating_add(self.config.cycle);
+                if next <= now {
+                    next = now.saturating_add(self.config.cycle);
+                }
+                self.next_command = Some(next);
+            }
+        }
+    }
+
+    /// A frame from the vehicle.
+    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        let Some(Id::Standard(id)) = frame.id() else {
+            return;
+        };
+        let id = u32::from(id.as_raw());
+        let payload: Option<[u8; 8]> = match frame {
+            Frame::Classic(f) if !f.is_remote() => f.data().try_into().ok(),
+            _ => None,
+        };
+        let known = id == VehicleToAdsState::ID || id == VehicleToAdsSensors::ID;
+        if !known {
+            return;
+        }
+        let Some(payload) = payload.filter(|p| reference_tug::is_sealed(id, p)) else {
+            self.stats.checksum += 1;
+            return;
+        };
+        match id {
+            VehicleToAdsState::ID => self.on_state(now, VehicleToAdsState(payload)),
+            _ => self.on_sensors(now, VehicleToAdsSensors(payload)),
+        }
+    }
+
+    fn counter_ok(checker: &mut CounterChecker, now: Timestamp, value: u64) -> bool {
+        matches!(
+            checker.check(now, u8::try_from(value).unwrap_or(0)),
+            CounterStatus::Initial | CounterStatus::InSequence | CounterStatus::Stale
+        )
+    }
+
+    fn on_state(&mut self, now: Timestamp, m: VehicleToAdsState) {
+        if !Self::counter_ok(&mut self.state_counter, now, m.counter_raw()) {
+            self.stats.counter += 1;
+            return;
+        }
+        let (steering, velocity) = (m.steering_angle_actual(), m.velocity_actual());
+        if steering.abs() > 45.0 || !(-5.0..=8.0).contains(&velocity) || m.watchdog_level_raw() > 4
+        {
+            self.stats.range += 1;
+            return;
+        }
+        // The echo must be one of the last few commands sent.
+        let echo = u8::try_from(m.heartbeat_echo_raw()).unwrap_or(0);
+        let recent = (1..=self.config.echo_window)
+            .any(|back| self.counter.wrapping_sub(back) & 0x0F == echo);
+        let sent = self.sent_at.get(usize::from(echo)).copied().flatten();
+        if !recent || sent.is_none() {
+            self.stats.echo += 1;
+            return;
+        }
+        self.stats.accepted += 1;
+        let s = &mut self.state;
+        s.steering.set(now, steering);
+        s.velocity.set(now, velocity);
+        s.mode.set(now, ControlMode::from_raw(m.control_mode_raw()));
+        s.watchdog_level
+            .set(now, u8::try_from(m.watchdog_level_raw()).unwrap_or(u8::MAX));
+        s.estop_state
+            .set(now, u8::try_from(m.estop_state_raw()).unwrap_or(u8::MAX));
+        s.warning.set(now, m.warning_flag_raw() == 1);
+        s.driver_override.set(now, m.driver_override_raw() == 1);
+        if let Some(sent) = sent {
+            s.echo_latency.set(now, now.saturating_since(sent));
+        }
+    }
+
+    fn on_sensors(&mut self, now: Timestamp, m: VehicleToAdsSensors) {
+        if !Self::counter_ok(&mut self.sensors_counter, now, m.counter_raw()) {
+            self.stats.counter += 1;
+            return;
+        }
+        self.stats.accepted += 1;
+        self.state.wheel_speeds.set(
+            now,
+            [
+                m.wheel_speed_fl(),
+                m.wheel_speed_fr(),
+                m.wheel_speed_rl(),
+                m.wheel_speed_rr(),
+            ],
+        );
+    }
+}

@@ -1,0 +1,151 @@
+//! Redundancy: the same command sent on two buses and voted on at the receiver, and a
+//! 2-out-of-3 voter for triplicated sensors.
+//!
+//! [`DualVoter`] follows the reference logic: both copies fresh and equal → accept; one fresh
+//! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
+//! or both timed out → fail (the caller goes to its safe state). Copies are compared only when
+//! they arrived within the skew window of each other; in between, the vote is pending.
+
+use core::time::Duration;
+
+use bywire_core::Timestamp;
+
+/// Which bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Channel {
+    /// The first bus.
+    A,
+    /// The second bus.
+    B,
+}
+
+/// Why a vote failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum VoteFailure {
+    /// Nothing fresh from either bus.
+    BothLost,
+    /// Fresh copies that differ.
+    Disagree,
+}
+
+/// The outcome of a vote.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Vote<T> {
+    /// Both copies agree.
+    Agreed(T),
+    /// Only one bus delivers.
+    Degraded {
+        /// The value from the healthy bus.
+        value: T,
+        /// Which bus is healthy.
+        healthy: Channel,
+    },
+    /// The copies arrived too far apart to compare yet.
+    Pending,
+    /// Go to the safe state.
+    Failed(VoteFailure),
+}
+
+/// Votes on one message received on two buses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DualVoter<T> {
+    /// A copy older than this is lost.
+    pub timeout: Duration,
+    /// Copies arriving further apart than this are not compared.
+    pub skew: Duration,
+    a: Option<(Timestamp, T)>,
+    b: Option<(Timestamp, T)>,
+}
+
+impl<T: Copy + PartialEq> DualVoter<T> {
+    /// A voter with nothing received.
+    pub fn new(timeout: Duration, skew: Duration) -> Self {
+        DualVoter {
+            timeout,
+            skew,
+            a: None,
+            b: None,
+        }
+    }
+
+    /// A copy arrived on `channel`.
+    pub fn receive(&mut self, channel: Channel, now: Timestamp, value: T) {
+        match channel {
+            Channel::A => self.a = Some((now, value)),
+            Channel::B => self.b = Some((now, value)),
+        }
+    }
+
+    /// The vote at `now`.
+    pub fn vote(&self, now: Timestamp) -> Vote<T> {
+        let fresh = |copy: Option<(Timestamp, T)>| {
+            copy.filter(|(at, _)| now.saturating_since(*at) <= self.timeout)
+        };
+        match (fresh(self.a), fresh(self.b)) {
+            (None, None) => Vote::Failed(VoteFailure::BothLost),
+            (Some((_, value)), None) => Vote::Degraded {
+                value,
+                healthy: Channel::A,
+            },
+            (None, Some((_, value))) => Vote::Degraded {
+                value,
+                healthy: Channel::B,
+            },
+            (Some((ta, va)), Some((tb, vb))) => {
+                let apart = if ta > tb {
+                    ta.saturating_since(tb)
+                } else {
+                    tb.saturating_since(ta)
+                };
+                if apart > self.skew {
+                    Vote::Pending
+                } else if va == vb {
+                    Vote::Agreed(va)
+                } else {
+                    Vote::Failed(VoteFailure::Disagree)
+                }
+            }
+        }
+    }
+}
+
+/// The outcome of a 2-out-of-3 vote.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TwoOfThree {
+    /// All three agree: their median.
+    Agreed(f64),
+    /// Two agree: their mean, and the index of the one outvoted.
+    Outvoted {
+        /// The voted value.
+        value: f64,
+        /// The sensor that disagreed (or was not finite).
+        outlier: usize,
+    },
+    /// No two agree.
+    Failed,
+}
+
+/// Vote on three readings of one quantity: two agree when within `tolerance` of each other.
+pub fn two_of_three(readings: [f64; 3], tolerance: f64) -> TwoOfThree {
+    let agree = |x: f64, y: f64| x.is_finite() && y.is_finite() && (x - y).abs() <= tolerance;
+    let [a, b, c] = readings;
+    match (agree(a, b), agree(a, c), agree(b, c)) {
+        (true, true, true) => {
+            let median = a.max(b).min(a.min(b).max(c));
+            TwoOfThree::Agreed(median)
+        }
+        (true, _, _) => TwoOfThree::Outvoted {
+            value: (a + b) / 2.0,
+            outlier: 2,
+        },
+        (_, true, _) => TwoOfThree::Outvoted {
+            value: (a + c) / 2.0,
+            outlier: 1,
+        },
+        (_, _, true) => TwoOfThree::Outvoted {
+            value: (b + c) / 2.0,
+            outlier: 0,
+        },
+        _ => TwoOfThree::Failed,
+    }
+}

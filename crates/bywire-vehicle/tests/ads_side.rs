@@ -1,0 +1,262 @@
+//! The ADS side against the real supervisor on the bit-timed bus, its own fail-safes, its
+//! feedback validation, and the redundancy voters.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use std::time::Duration;
+
+use bywire_bus::sim::SimBus;
+use bywire_core::{Frame, Id, Timestamp};
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, Vote, VoteFailure};
+use bywire_vehicle::reference_tug::{self, ControlMode, Gear, VehicleToAdsState};
+use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
+
+fn ms(t: u64) -> Timestamp {
+    Timestamp::from_millis(t)
+}
+
+/// ADS and supervisor on one 500 kbit/s bus, stepped by the millisecond.
+struct Loop {
+    bus: SimBus,
+    ads_node: usize,
+    vcu_node: usize,
+    ads: Ads,
+    vcu: Supervisor,
+    now: u64,
+    ads_frames: Vec<(u64, Frame)>,
+}
+
+impl Loop {
+    fn new() -> Loop {
+        let mut bus = SimBus::new(500_000, None);
+        let (ads_node, vcu_node) = (bus.add_node(), bus.add_node());
+        Loop {
+            bus,
+            ads_node,
+            vcu_node,
+            ads: Ads::new(AdsConfig::default()),
+            vcu: Supervisor::new(SupervisorConfig::default()),
+            now: 0,
+            ads_frames: Vec::new(),
+        }
+    }
+
+    fn run_to(&mut self, until: u64) {
+        while self.now < until {
+            self.now += 1;
+            let now = ms(self.now);
+            self.bus.advance(now);
+            while let Some(r) = self.bus.receive(self.vcu_node) {
+                self.vcu.on_frame(r.timestamp, &r.frame);
+            }
+            while let Some(r) = self.bus.receive(self.ads_node) {
+                self.ads.on_frame(r.timestamp, &r.frame);
+            }
+            let mut out = Vec::new();
+            self.ads.poll(now, &mut |f| out.push(f));
+            for f in out {
+                self.ads_frames.push((self.now, f));
+                self.bus.submit(self.ads_node, f, now);
+            }
+            let mut out = Vec::new();
+            self.vcu.poll(now, &mut |f| out.push(f));
+            for f in out {
+                self.bus.submit(self.vcu_node, f, now);
+            }
+            let a = self.vcu.actuators(now);
+            self.vcu
+                .set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
+        }
+    }
+
+    fn command(&mut self, c: AdsCommand) {
+        assert!(self.ads.set_command(ms(self.now), c));
+    }
+}
+
+fn drive(velocity: f64) -> AdsCommand {
+    AdsCommand {
+        velocity,
+        gear: Gear::Drive,
+        mode: ControlMode::Autonomous,
+        ..AdsCommand::default()
+    }
+}
+
+#[test]
+fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
+    let mut l = Loop::new();
+    l.command(drive(1.5));
+    l.run_to(400);
+    l.command(AdsCommand {
+        engage: true,
+        ..drive(1.5)
+    });
+    l.run_to(440);
+    l.command(drive(1.5));
+    l.run_to(600);
+    assert_eq!(l.vcu.watchdog(), Watchdog::Normal);
+    assert_eq!(l.vcu.mode(), ControlMode::Autonomous);
+    assert_eq!(l.vcu.stats().rejected(), 0);
+    let now = ms(l.now);
+    assert!(l.ads.feedback_alive(now));
+    let state = l.ads.state();
+    assert_eq!(state.mode.value, Some(ControlMode::Autonomous));
+    assert_eq!(state.velocity.value, Some(1.5));
+    // The echo comes back within a cycle or two (state frames are sent every 20 ms).
+    let latency = state.echo_latency.value.unwrap();
+    assert!(latency <= Duration::from_millis(40), "{latency:?}");
+    assert!(l.ads.stats().accepted > 20 && l.ads.stats().echo == 0);
+    // Commands every 20 ms exactly, with counters rolling and CRCs good.
+    let commands: Vec<&(u64, Frame)> = l
+        .ads_frames
+        .iter()
+        .filter(|(_, f)| f.id() == Some(Id::standard(0x100).unwrap()))
+        .collect();
+    // (The first went at the first poll after the command, 1 ms late; the schedule holds.)
+    assert!(commands[1..].windows(2).all(|w| w[1].0 - w[0].0 == 20));
+    assert!(commands.len() >= 29);
+    for (k, (_, f)) in commands.iter().enumerate() {
+        let p: [u8; 8] = f.data().try_into().unwrap();
+        assert!(reference_tug::is_sealed(0x100, &p));
+        assert_eq!(usize::from(p[6] & 0x0F), k % 16);
+    }
+}
+
+#[test]
+fn a_stale_command_becomes_a_controlled_stop() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(ms(0), drive(3.0));
+    assert_eq!(ads.effective_command(ms(200)).unwrap().velocity, 3.0);
+    let stop = ads.effective_command(ms(201)).unwrap();
+    assert_eq!((stop.velocity, stop.brake), (0.0, 30.0));
+    // Non-finite commands are refused; the old one keeps ageing.
+    assert!(!ads.set_command(ms(250), drive(f64::NAN)));
+    assert_eq!(ads.effective_command(ms(250)).unwrap().velocity, 0.0);
+    assert!(ads.set_command(ms(260), drive(1.0)));
+    assert_eq!(ads.effective_command(ms(260)).unwrap().velocity, 1.0);
+}
+
+#[test]
+fn emergency_brake_burst_is_three_frames_in_10_ms_then_20_hz() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.emergency_brake(ms(100), 4.0);
+    let mut sent = Vec::new();
+    for t in 100..=300 {
+        ads.poll(ms(t), &mut |f| sent.push((t, f)));
+    }
+    let times: Vec<u64> = sent.iter().map(|(t, _)| *t).collect();
+    assert_eq!(&times[..3], &[100, 104, 108]);
+    assert!(times[2] - times[0] <= 10);
+    assert!(
+        times[3..].windows(2).all(|w| w[1] - w[0] == 50),
+        "{times:?}"
+    );
+    assert_eq!(sent[0].1.id(), Some(Id::standard(0).unwrap()));
+    ads.release_brake();
+    let mut after = 0;
+    for t in 301..400 {
+        ads.poll(ms(t), &mut |_| after += 1);
+    }
+    assert_eq!(after, 0);
+}
+
+fn state_frame(counter: u8, echo: u8, mode: ControlMode) -> Frame {
+    let mut m = VehicleToAdsState::default();
+    m.set_velocity_actual(1.0).unwrap();
+    m.set_control_mode_raw(mode as u64);
+    m.set_heartbeat_echo_raw(u64::from(echo));
+    m.set_counter_raw(u64::from(counter));
+    let mut p = m.0;
+    reference_tug::seal(VehicleToAdsState::ID, &mut p);
+    Frame::classic(Id::standard(VehicleToAdsState::ID).unwrap(), &p).unwrap()
+}
+
+#[test]
+fn feedback_is_validated_and_times_out() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(ms(0), drive(1.0));
+    for t in 0..=40 {
+        ads.poll(ms(t), &mut |_| {});
+    }
+    // Commands 0, 1, 2 were sent at 0, 20, 40 ms.
+    ads.on_frame(ms(41), &state_frame(0, 2, ControlMode::Autonomous));
+    assert_eq!(ads.stats().accepted, 1);
+    assert_eq!(
+        ads.state().echo_latency.value,
+        Some(Duration::from_millis(1))
+    );
+    // A bad CRC, a repeated counter, an echo of a command never sent recently.
+    let mut bad = state_frame(1, 2, ControlMode::Autonomous);
+    if let Frame::Classic(f) = &bad {
+        let mut d: [u8; 8] = f.data().try_into().unwrap();
+        d[2] ^= 1;
+        bad = Frame::classic(f.id(), &d).unwrap();
+    }
+    ads.on_frame(ms(42), &bad);
+    ads.on_frame(ms(43), &state_frame(0, 2, ControlMode::Autonomous));
+    ads.on_frame(ms(44), &state_frame(1, 9, ControlMode::Autonomous));
+    let s = ads.stats();
+    assert_eq!((s.checksum, s.counter, s.echo, s.accepted), (1, 1, 1, 1));
+    // Fresh for 3 cycles, then not.
+    assert!(ads.feedback_alive(ms(41 + 60)));
+    assert!(!ads.feedback_alive(ms(41 + 61)));
+    assert_eq!(
+        ads.state().mode.age(ms(141)),
+        Some(Duration::from_millis(100))
+    );
+}
+
+#[test]
+fn dual_voter_follows_the_reference_logic() {
+    let timeout = Duration::from_millis(60);
+    let mut v = DualVoter::new(timeout, Duration::from_millis(5));
+    assert_eq!(v.vote(ms(0)), Vote::Failed(VoteFailure::BothLost));
+    v.receive(Channel::A, ms(10), 7u8);
+    v.receive(Channel::B, ms(12), 7u8);
+    assert_eq!(v.vote(ms(12)), Vote::Agreed(7));
+    // B goes silent: degraded on A once B's copy is older than the timeout.
+    v.receive(Channel::A, ms(30), 8);
+    assert_eq!(v.vote(ms(30)), Vote::Pending);
+    assert_eq!(
+        v.vote(ms(73)),
+        Vote::Degraded {
+            value: 8,
+            healthy: Channel::A
+        }
+    );
+    // Both silent.
+    assert_eq!(v.vote(ms(91)), Vote::Failed(VoteFailure::BothLost));
+    // Disagreeing fresh copies.
+    v.receive(Channel::A, ms(100), 1);
+    v.receive(Channel::B, ms(101), 2);
+    assert_eq!(v.vote(ms(101)), Vote::Failed(VoteFailure::Disagree));
+}
+
+#[test]
+fn two_of_three_outvotes_one_sensor() {
+    assert_eq!(
+        two_of_three([1.0, 1.01, 0.99], 0.05),
+        TwoOfThree::Agreed(1.0)
+    );
+    assert_eq!(
+        two_of_three([1.0, 5.0, 1.02], 0.05),
+        TwoOfThree::Outvoted {
+            value: 1.01,
+            outlier: 1
+        }
+    );
+    assert_eq!(
+        two_of_three([f64::NAN, 2.0, 2.0], 0.05),
+        TwoOfThree::Outvoted {
+            value: 2.0,
+            outlier: 0
+        }
+    );
+    assert_eq!(two_of_three([1.0, 2.0, 3.0], 0.05), TwoOfThree::Failed);
+}
