@@ -10,8 +10,11 @@
 //!   command becomes a controlled stop), the emergency-brake burst, and feedback validated into
 //!   a [`ads::VehicleState`] whose fields carry their age.
 //! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
+//! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
+//!   and its decoder.
 
 pub mod ads;
+pub mod autoware;
 pub mod redundancy;
 pub mod reference_tug;
 pub mod supervisor;
