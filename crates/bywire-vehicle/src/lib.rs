@@ -12,9 +12,12 @@
 //! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
+//! - [`profile`]: TOML vehicle profiles checked against their DBC; `reference-tug` and
+//!   `autoware-can` ship.
 
 pub mod ads;
 pub mod autoware;
+pub mod profile;
 pub mod redundancy;
 pub mod reference_tug;
 pub mod supervisor;

@@ -34,8 +34,8 @@ use crate::reference_tug::{
 pub struct SupervisorConfig {
     /// The command period the ADS promises.
     pub cycle: Duration,
-    /// Valid commands in a row needed before a re-engage is accepted after full braking.
-    pub recovery_run: u32,
+    /// The watchdog cascade.
+    pub cascade: Cascade,
     /// Deceleration at watchdog levels 3–4, m/s².
     pub controlled_deceleration: f64,
     /// Largest steering angle accepted, degrees.
@@ -61,7 +61,7 @@ impl Default for SupervisorConfig {
     fn default() -> Self {
         SupervisorConfig {
             cycle: Duration::from_millis(20),
-            recovery_run: 10,
+            cascade: Cascade::default(),
             controlled_deceleration: 1.5,
             steering_range: 40.0,
             steering_rate: 30.0,
@@ -71,6 +71,28 @@ impl Default for SupervisorConfig {
             gear_ratio: 20.0,
             wheel_diameter: 0.5,
             standstill: 0.05,
+        }
+    }
+}
+
+/// The watchdog cascade: up to `hold` missed cycles hold the last command, up to
+/// `decelerate` decelerate under control, more brake fully.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cascade {
+    /// Last missed-cycle count that still holds (2 on the reference tug).
+    pub hold: u32,
+    /// Last missed-cycle count that still decelerates under control (4).
+    pub decelerate: u32,
+    /// Valid commands in a row needed before a re-engage is accepted after full braking (10).
+    pub recovery_run: u32,
+}
+
+impl Default for Cascade {
+    fn default() -> Self {
+        Cascade {
+            hold: 2,
+            decelerate: 4,
+            recovery_run: 10,
         }
     }
 }
@@ -114,15 +136,16 @@ pub enum WatchdogEvent {
 
 impl Watchdog {
     /// The one transition function.
-    pub fn next(self, event: WatchdogEvent, recovery_run: u32) -> Watchdog {
+    pub fn next(self, event: WatchdogEvent, cascade: Cascade) -> Watchdog {
         use Watchdog::*;
         use WatchdogEvent::*;
         let by_missed = |missed: u32| match missed {
             0 => Normal,
-            1..=2 => Holding { missed },
-            3..=4 => Decelerating { missed },
+            m if m <= cascade.hold => Holding { missed },
+            m if m <= cascade.decelerate => Decelerating { missed },
             _ => FullBraking,
         };
+        let recovery_run = cascade.recovery_run;
         match (self, event) {
             (Normal | Holding { .. } | Decelerating { .. }, Valid { .. }) => Normal,
             (Normal | Holding { .. } | Decelerating { .. }, Missed(n)) => by_missed(n),
@@ -557,7 +580,7 @@ impl Supervisor {
                 self.decelerating_since = None;
                 self.watchdog = self
                     .watchdog
-                    .next(WatchdogEvent::Valid { engage }, self.config.recovery_run);
+                    .next(WatchdogEvent::Valid { engage }, self.config.cascade);
                 self.evaluate(now, engage, reset);
             }
         }
@@ -620,7 +643,7 @@ impl Supervisor {
                 let before = self.watchdog;
                 self.watchdog = self
                     .watchdog
-                    .next(WatchdogEvent::Missed(missed), self.config.recovery_run);
+                    .next(WatchdogEvent::Missed(missed), self.config.cascade);
                 if matches!(self.watchdog, Watchdog::Decelerating { .. })
                     && !matches!(before, Watchdog::Decelerating { .. })
                 {

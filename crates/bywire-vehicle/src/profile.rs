@@ -1,0 +1,550 @@
+//! Vehicle profiles: a TOML file that says which messages and signals of a vehicle's DBC play
+//! which role, with the rates, timeouts, limits, enum values and watchdog cascade. Loading
+//! checks everything against the DBC and names the key at fault.
+//!
+//! Two profiles ship: `reference-tug` and `autoware-can` ([`Profile::builtin`]).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Duration;
+
+use bywire_dbc::{Database, Message};
+use serde::Deserialize;
+
+use crate::ads::AdsConfig;
+use crate::supervisor::{Cascade, SupervisorConfig};
+
+/// Why a profile did not load.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    /// Not TOML, or not the profile's shape (the message has the line, column and key).
+    #[error("{file}: {message}")]
+    Syntax {
+        /// The profile.
+        file: String,
+        /// What the TOML reader said.
+        message: String,
+    },
+    /// A key's value is wrong.
+    #[error("{file}: {key}: {reason}")]
+    Invalid {
+        /// The profile.
+        file: String,
+        /// The key, dotted (`command.steering`).
+        key: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The DBC could not be read or parsed.
+    #[error("{file}: dbc: {reason}")]
+    Dbc {
+        /// The profile.
+        file: String,
+        /// What went wrong.
+        reason: String,
+    },
+    /// No such built-in profile.
+    #[error("no built-in profile '{0}' (reference-tug, autoware-can)")]
+    UnknownBuiltin(String),
+}
+
+/// The command message's roles.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandRoles {
+    /// The message.
+    pub message: String,
+    /// Send period, ms.
+    pub period_ms: u64,
+    /// Age after which the ADS side replaces a command by a controlled stop, ms.
+    pub staleness_ms: u64,
+    /// Steering angle setpoint signal.
+    pub steering: String,
+    /// Speed setpoint signal.
+    pub velocity: String,
+    /// Brake setpoint signal.
+    pub brake: String,
+    /// Gear signal.
+    pub gear: String,
+    /// Control-mode request signal.
+    pub control_mode: String,
+    /// Steering-mode signal.
+    pub steering_mode: String,
+    /// Re-engage request signal.
+    pub engage: String,
+    /// Operator-reset signal.
+    pub operator_reset: String,
+    /// Rolling counter signal.
+    pub counter: String,
+    /// Checksum signal.
+    pub checksum: String,
+    /// Checksum algorithm (`crc8_sae_j1850`, `crc8_h2f`, `xor8`, `sum8`).
+    pub checksum_algorithm: String,
+}
+
+/// The state (feedback) message's roles.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StateRoles {
+    /// The message.
+    pub message: String,
+    /// Its period, ms.
+    pub period_ms: u64,
+    /// Periods after which it is invalid.
+    pub timeout_cycles: u32,
+    /// Actual steering angle.
+    pub steering: String,
+    /// Actual speed.
+    pub velocity: String,
+    /// Reported control mode.
+    pub control_mode: String,
+    /// Reported steering mode.
+    pub steering_mode: String,
+    /// Heartbeat echo.
+    pub heartbeat_echo: String,
+    /// The echo must match one of this many recent commands.
+    pub echo_window: u8,
+    /// Rolling counter.
+    pub counter: String,
+    /// Checksum.
+    pub checksum: String,
+}
+
+/// Wheel speed feedback.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelSpeeds {
+    /// The message.
+    pub message: String,
+    /// FL, FR, RL, RR.
+    pub signals: Vec<String>,
+}
+
+/// The E-stop message.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstopRoles {
+    /// The message.
+    pub message: String,
+    /// The request signal.
+    pub request: String,
+}
+
+/// The emergency-brake message and its burst.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmergencyBrakeRoles {
+    /// The message.
+    pub message: String,
+    /// Frames in the burst.
+    pub burst_frames: u32,
+    /// Spacing in the burst, ms.
+    pub burst_spacing_ms: u64,
+    /// Repeat period after it, ms.
+    pub repeat_ms: u64,
+}
+
+/// Physical limits.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Steering angle, degrees.
+    pub steering_deg: f64,
+    /// Steering rate, degrees per second.
+    pub steering_rate_deg_s: f64,
+    /// Speed, m/s.
+    pub speed_m_s: f64,
+    /// Deceleration, m/s².
+    pub deceleration_m_s2: f64,
+}
+
+/// The watchdog cascade.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WatchdogRoles {
+    /// Missed cycles that still hold.
+    pub hold_cycles: u32,
+    /// Missed cycles that still decelerate under control.
+    pub decelerate_cycles: u32,
+    /// Valid commands before a re-engage is accepted.
+    pub recovery_run: u32,
+    /// Controlled deceleration, m/s².
+    pub controlled_deceleration_m_s2: f64,
+}
+
+/// Driver takeover thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Takeover {
+    /// Steering-wheel torque, N·m.
+    pub steering_torque_nm: f64,
+    /// Pedal travel, 0–1.
+    pub pedal: f64,
+}
+
+/// Geometry and drive train.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// Wheelbase, m.
+    pub wheelbase_m: f64,
+    /// Track, m.
+    pub track_m: f64,
+    /// Wheel diameter, m.
+    pub wheel_diameter_m: f64,
+    /// Motor revolutions per wheel revolution.
+    pub gear_ratio: f64,
+}
+
+/// The `autoware-can` output's messages.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AutowareRoles {
+    /// Angle and rate message.
+    pub steering: String,
+    /// Velocity and acceleration message.
+    pub velocity: String,
+    /// Status message.
+    pub status: String,
+    /// Send period, ms.
+    pub period_ms: u64,
+    /// `dds-only`, `can-only` or `dds-and-can`.
+    pub output: String,
+}
+
+/// A vehicle profile.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    /// Its name.
+    pub name: String,
+    /// The DBC, relative to the profile file.
+    pub dbc: String,
+    /// Bus bitrate, bit/s.
+    pub bitrate: u32,
+    /// The command message (a vehicle interface).
+    pub command: Option<CommandRoles>,
+    /// The state message.
+    pub state: Option<StateRoles>,
+    /// Wheel speeds.
+    pub wheel_speeds: Option<WheelSpeeds>,
+    /// E-stop.
+    pub estop: Option<EstopRoles>,
+    /// Emergency brake.
+    pub emergency_brake: Option<EmergencyBrakeRoles>,
+    /// Enum mappings: role → name → raw value.
+    #[serde(default)]
+    pub enums: BTreeMap<String, BTreeMap<String, u64>>,
+    /// Limits.
+    pub limits: Limits,
+    /// Watchdog cascade.
+    pub watchdog: Option<WatchdogRoles>,
+    /// Takeover thresholds.
+    pub takeover: Option<Takeover>,
+    /// Geometry.
+    pub vehicle: Option<Geometry>,
+    /// Autoware output.
+    pub autoware: Option<AutowareRoles>,
+}
+
+/// A profile checked against its DBC.
+#[derive(Debug, Clone)]
+pub struct LoadedProfile {
+    /// The profile.
+    pub profile: Profile,
+    /// Its DBC.
+    pub database: Database,
+}
+
+const BUILTIN: [(&str, &str, &str); 2] = [
+    (
+        "reference-tug",
+        include_str!("../profiles/reference-tug.toml"),
+        crate::reference_tug::DBC,
+    ),
+    (
+        "autoware-can",
+        include_str!("../profiles/autoware-can.toml"),
+        crate::autoware::DBC,
+    ),
+];
+
+impl Profile {
+    /// A shipped profile by name, with its shipped DBC.
+    pub fn builtin(name: &str) -> Result<LoadedProfile, ProfileError> {
+        let (_, text, dbc) = BUILTIN
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .ok_or_else(|| ProfileError::UnknownBuiltin(name.to_string()))?;
+        Self::parse(name, text, |_| Ok((*dbc).to_string()))
+    }
+
+    /// A profile file; its DBC is read relative to it.
+    pub fn load(path: &Path) -> Result<LoadedProfile, ProfileError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ProfileError::Syntax {
+            file: file.clone(),
+            message: e.to_string(),
+        })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        Self::parse(&file, &text, |dbc| {
+            std::fs::read_to_string(dir.join(dbc)).map_err(|e| format!("{dbc}: {e}"))
+        })
+    }
+
+    /// A profile from text; `read_dbc` fetches the DBC it names.
+    pub fn parse(
+        file: &str,
+        text: &str,
+        read_dbc: impl FnOnce(&str) -> Result<String, String>,
+    ) -> Result<LoadedProfile, ProfileError> {
+        let profile: Profile = toml::from_str(text).map_err(|e| ProfileError::Syntax {
+            file: file.to_string(),
+            message: e.to_string().trim_end().replace('\n', " "),
+        })?;
+        let dbc_error = |reason: String| ProfileError::Dbc {
+            file: file.to_string(),
+            reason,
+        };
+        let dbc_text = read_dbc(&profile.dbc).map_err(dbc_error)?;
+        let (database, _) = bywire_dbc::parse_str(&dbc_text, bywire_dbc::Mode::Lenient)
+            .map_err(|e| dbc_error(format!("{}: {e}", profile.dbc)))?;
+        Checker {
+            file,
+            db: &database,
+        }
+        .check(&profile)?;
+        Ok(LoadedProfile { profile, database })
+    }
+}
+
+struct Checker<'a> {
+    file: &'a str,
+    db: &'a Database,
+}
+
+impl Checker<'_> {
+    fn invalid(&self, key: &str, reason: impl Into<String>) -> ProfileError {
+        ProfileError::Invalid {
+            file: self.file.to_string(),
+            key: key.to_string(),
+            reason: reason.into(),
+        }
+    }
+
+    fn message(&self, key: &str, name: &str) -> Result<&Message, ProfileError> {
+        self.db
+            .messages
+            .iter()
+            .find(|m| m.name == name)
+            .ok_or_else(|| self.invalid(key, format!("no message '{name}' in the DBC")))
+    }
+
+    fn signal(&self, message: &Message, key: &str, name: &str) -> Result<u32, ProfileError> {
+        message
+            .signals
+            .iter()
+            .find(|s| s.name == name)
+            .map(|s| s.length)
+            .ok_or_else(|| {
+                self.invalid(
+                    key,
+                    format!("no signal '{name}' in message '{}'", message.name),
+                )
+            })
+    }
+
+    fn positive(&self, key: &str, value: f64) -> Result<(), ProfileError> {
+        if value > 0.0 && value.is_finite() {
+            Ok(())
+        } else {
+            Err(self.invalid(key, format!("{value} is not a positive number")))
+        }
+    }
+
+    fn check(&self, p: &Profile) -> Result<(), ProfileError> {
+        if p.bitrate == 0 || p.bitrate > 1_000_000 {
+            return Err(self.invalid("bitrate", format!("{} is not a CAN bitrate", p.bitrate)));
+        }
+        if p.command.is_none() && p.autoware.is_none() {
+            return Err(self.invalid("command", "a profile needs [command] or [autoware]"));
+        }
+        let l = &p.limits;
+        self.positive("limits.steering_deg", l.steering_deg)?;
+        self.positive("limits.steering_rate_deg_s", l.steering_rate_deg_s)?;
+        self.positive("limits.speed_m_s", l.speed_m_s)?;
+        self.positive("limits.deceleration_m_s2", l.deceleration_m_s2)?;
+        if let Some(c) = &p.command {
+            let m = self.message("command.message", &c.message)?;
+            if c.period_ms == 0 {
+                return Err(self.invalid("command.period_ms", "must be at least 1"));
+            }
+            let mut widths = BTreeMap::new();
+            for (key, name) in [
+                ("steering", &c.steering),
+                ("velocity", &c.velocity),
+                ("brake", &c.brake),
+                ("gear", &c.gear),
+                ("control_mode", &c.control_mode),
+                ("steering_mode", &c.steering_mode),
+                ("engage", &c.engage),
+                ("operator_reset", &c.operator_reset),
+                ("counter", &c.counter),
+                ("checksum", &c.checksum),
+            ] {
+                let width = self.signal(m, &format!("command.{key}"), name)?;
+                widths.insert(key, width);
+            }
+            if bywire_dbc::e2e::ChecksumAlgorithm::from_name(&c.checksum_algorithm).is_none() {
+                return Err(self.invalid(
+                    "command.checksum_algorithm",
+                    format!(
+                        "'{}' is not one of crc8_sae_j1850, crc8_h2f, xor8, sum8",
+                        c.checksum_algorithm
+                    ),
+                ));
+            }
+            // Enum values must fit the signals they go into.
+            for (role, values) in &p.enums {
+                let Some(width) = widths.get(role.as_str()) else {
+                    return Err(self.invalid(
+                        &format!("enums.{role}"),
+                        "not a command role (gear, control_mode, steering_mode)",
+                    ));
+                };
+                for (name, value) in values {
+                    if *width < 64 && *value >> width != 0 {
+                        return Err(self.invalid(
+                            &format!("enums.{role}.{name}"),
+                            format!("{value} does not fit the {width}-bit signal"),
+                        ));
+                    }
+                }
+            }
+        }
+        if let Some(s) = &p.state {
+            let m = self.message("state.message", &s.message)?;
+            for (key, name) in [
+                ("steering", &s.steering),
+                ("velocity", &s.velocity),
+                ("control_mode", &s.control_mode),
+                ("steering_mode", &s.steering_mode),
+                ("heartbeat_echo", &s.heartbeat_echo),
+                ("counter", &s.counter),
+                ("checksum", &s.checksum),
+            ] {
+                self.signal(m, &format!("state.{key}"), name)?;
+            }
+            if s.period_ms == 0 || s.timeout_cycles == 0 {
+                return Err(self.invalid(
+                    "state.timeout_cycles",
+                    "period and timeout must be at least 1",
+                ));
+            }
+        }
+        if let Some(w) = &p.wheel_speeds {
+            let m = self.message("wheel_speeds.message", &w.message)?;
+            if w.signals.len() != 4 {
+                return Err(self.invalid("wheel_speeds.signals", "four signals: FL, FR, RL, RR"));
+            }
+            for (i, name) in w.signals.iter().enumerate() {
+                self.signal(m, &format!("wheel_speeds.signals[{i}]"), name)?;
+            }
+        }
+        if let Some(e) = &p.estop {
+            let m = self.message("estop.message", &e.message)?;
+            self.signal(m, "estop.request", &e.request)?;
+        }
+        if let Some(b) = &p.emergency_brake {
+            self.message("emergency_brake.message", &b.message)?;
+            if b.burst_frames == 0 || b.repeat_ms == 0 {
+                return Err(self.invalid(
+                    "emergency_brake.burst_frames",
+                    "the burst needs frames and a repeat period",
+                ));
+            }
+        }
+        if let Some(w) = &p.watchdog {
+            if w.hold_cycles == 0 || w.decelerate_cycles < w.hold_cycles {
+                return Err(self.invalid(
+                    "watchdog.decelerate_cycles",
+                    format!(
+                        "the cascade needs 1 <= hold_cycles ({}) <= decelerate_cycles ({})",
+                        w.hold_cycles, w.decelerate_cycles
+                    ),
+                ));
+            }
+            self.positive(
+                "watchdog.controlled_deceleration_m_s2",
+                w.controlled_deceleration_m_s2,
+            )?;
+        }
+        if let Some(v) = &p.vehicle {
+            self.positive("vehicle.wheel_diameter_m", v.wheel_diameter_m)?;
+            self.positive("vehicle.gear_ratio", v.gear_ratio)?;
+            self.positive("vehicle.wheelbase_m", v.wheelbase_m)?;
+            self.positive("vehicle.track_m", v.track_m)?;
+        }
+        if let Some(a) = &p.autoware {
+            self.message("autoware.steering", &a.steering)?;
+            self.message("autoware.velocity", &a.velocity)?;
+            self.message("autoware.status", &a.status)?;
+            a.output
+                .parse::<crate::autoware::OutputMode>()
+                .map_err(|e| self.invalid("autoware.output", e))?;
+        }
+        Ok(())
+    }
+}
+
+impl LoadedProfile {
+    /// The supervisor's configuration from this profile (defaults where it is silent).
+    pub fn supervisor_config(&self) -> SupervisorConfig {
+        let p = &self.profile;
+        let mut c = SupervisorConfig {
+            steering_range: p.limits.steering_deg,
+            steering_rate: p.limits.steering_rate_deg_s,
+            speed_limit: p.limits.speed_m_s,
+            ..SupervisorConfig::default()
+        };
+        if let Some(command) = &p.command {
+            c.cycle = Duration::from_millis(command.period_ms);
+        }
+        if let Some(w) = &p.watchdog {
+            c.cascade = Cascade {
+                hold: w.hold_cycles,
+                decelerate: w.decelerate_cycles,
+                recovery_run: w.recovery_run,
+            };
+            c.controlled_deceleration = w.controlled_deceleration_m_s2;
+        }
+        if let Some(t) = &p.takeover {
+            c.takeover_torque = t.steering_torque_nm;
+            c.takeover_pedal = t.pedal;
+        }
+        if let Some(v) = &p.vehicle {
+            c.gear_ratio = v.gear_ratio;
+            c.wheel_diameter = v.wheel_diameter_m;
+        }
+        c
+    }
+
+    /// The ADS side's configuration from this profile.
+    pub fn ads_config(&self) -> AdsConfig {
+        let p = &self.profile;
+        let mut c = AdsConfig::default();
+        if let Some(command) = &p.command {
+            c.cycle = Duration::from_millis(command.period_ms);
+            c.staleness = Duration::from_millis(command.staleness_ms);
+        }
+        if let Some(s) = &p.state {
+            c.feedback_timeout_cycles = s.timeout_cycles;
+            c.echo_window = s.echo_window;
+        }
+        if let Some(b) = &p.emergency_brake {
+            c.brake_burst_spacing = Duration::from_millis(b.burst_spacing_ms);
+            c.brake_repeat = Duration::from_millis(b.repeat_ms);
+        }
+        c
+    }
+}
