@@ -2,6 +2,7 @@
 //! prints; the work is in the library crates.
 
 mod bittiming_cmd;
+mod bridge_cmd;
 mod dbc_cmd;
 mod wire_cmd;
 
@@ -31,6 +32,8 @@ enum Command {
     },
     /// Decode candump lines from standard input with a DBC file, like `cantools decode`.
     Decode(dbc_cmd::DecodeArgs),
+    /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
+    Bridge(bridge_cmd::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
         Command::Bittiming(args) => bittiming_cmd::run(&args, &mut out),
         Command::Dbc { command } => dbc_cmd::run(&command, &mut out),
         Command::Decode(args) => dbc_cmd::decode(&args, &mut io::stdin().lock(), &mut out),
+        Command::Bridge(args) => bridge_cmd::run(&args, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {
