@@ -24,6 +24,7 @@ use bywire_control::stages::RateLimiter;
 use bywire_core::e2e::{CounterChecker, CounterStatus};
 use bywire_core::{Frame, Id, Timestamp};
 
+use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::reference_tug::{
     self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
     VehicleToAdsState,
@@ -54,6 +55,17 @@ pub struct SupervisorConfig {
     pub wheel_diameter: f64,
     /// Speed below which the vehicle counts as stopped, m/s.
     pub standstill: f64,
+    /// Commands arrive on two buses and are voted on (`None`: one bus).
+    pub redundancy: Option<Redundancy>,
+}
+
+/// Voting on commands received on two buses (see [`crate::redundancy::DualVoter`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Redundancy {
+    /// A bus whose last copy is older than this is lost.
+    pub timeout: Duration,
+    /// Copies further apart than this are not compared.
+    pub skew: Duration,
 }
 
 impl Default for SupervisorConfig {
@@ -71,6 +83,7 @@ impl Default for SupervisorConfig {
             gear_ratio: 20.0,
             wheel_diameter: 0.5,
             standstill: 0.05,
+            redundancy: None,
         }
     }
 }
@@ -132,6 +145,8 @@ pub enum WatchdogEvent {
     },
     /// Whole command cycles missed since the last valid command (≥ 1).
     Missed(u32),
+    /// Redundant copies of a command disagree: fail closed at once.
+    Disagreement,
 }
 
 impl Watchdog {
@@ -147,6 +162,7 @@ impl Watchdog {
         };
         let recovery_run = cascade.recovery_run;
         match (self, event) {
+            (_, Disagreement) => FullBraking,
             (Normal | Holding { .. } | Decelerating { .. }, Valid { .. }) => Normal,
             (Normal | Holding { .. } | Decelerating { .. }, Missed(n)) => by_missed(n),
             (FullBraking, Valid { .. }) => Recovering { valid_run: 1 },
@@ -296,6 +312,8 @@ pub enum Rejection {
     SkippedCounter,
     /// A setpoint outside its limits, or an undefined steering mode.
     OutOfRange,
+    /// The copies from the two buses differ.
+    Disagreement,
 }
 
 /// Counts of accepted and rejected commands.
@@ -313,6 +331,8 @@ pub struct CommandStats {
     pub skipped: u64,
     /// Out-of-range setpoints.
     pub out_of_range: u64,
+    /// Redundant copies that disagreed.
+    pub disagreements: u64,
 }
 
 impl CommandStats {
@@ -323,13 +343,19 @@ impl CommandStats {
             Rejection::RepeatedCounter => &mut self.repeated,
             Rejection::SkippedCounter => &mut self.skipped,
             Rejection::OutOfRange => &mut self.out_of_range,
+            Rejection::Disagreement => &mut self.disagreements,
         };
         *slot = slot.saturating_add(1);
     }
 
     /// All rejections.
     pub fn rejected(&self) -> u64 {
-        self.malformed + self.checksum + self.repeated + self.skipped + self.out_of_range
+        self.malformed
+            + self.checksum
+            + self.repeated
+            + self.skipped
+            + self.out_of_range
+            + self.disagreements
     }
 }
 
@@ -395,6 +421,9 @@ pub fn motor_rpm(velocity: f64, gear_ratio: f64, wheel_diameter: f64) -> f64 {
 pub struct Supervisor {
     config: SupervisorConfig,
     counter: CounterChecker,
+    counter_b: CounterChecker,
+    voter: Option<DualVoter<[u8; 8]>>,
+    degraded: Option<Channel>,
     stats: CommandStats,
     command: Option<Command>,
     last_valid: Option<Timestamp>,
@@ -426,6 +455,9 @@ impl Supervisor {
         Supervisor {
             config,
             counter: CounterChecker::new(4, 0, config.cycle.saturating_mul(5)),
+            counter_b: CounterChecker::new(4, 0, config.cycle.saturating_mul(5)),
+            voter: config.redundancy.map(|r| DualVoter::new(r.timeout, r.skew)),
+            degraded: None,
             stats: CommandStats::default(),
             command: None,
             last_valid: None,
@@ -497,19 +529,34 @@ impl Supervisor {
         self.speed.abs() < self.config.standstill
     }
 
-    /// Validate a command frame.
-    fn validate(&mut self, now: Timestamp, frame: &Frame) -> Result<Command, Rejection> {
+    /// Which bus delivers alone, when redundancy is degraded.
+    pub fn degraded(&self) -> Option<Channel> {
+        self.degraded
+    }
+
+    /// Validate a command frame from `channel`.
+    fn validate(
+        &mut self,
+        now: Timestamp,
+        channel: Channel,
+        frame: &Frame,
+    ) -> Result<Command, Rejection> {
         let payload = payload(frame).ok_or(Rejection::Malformed)?;
         if !reference_tug::is_sealed(AdsToVehicleControl::ID, &payload) {
             return Err(Rejection::Checksum);
         }
         let m = AdsToVehicleControl(payload);
         let counter = u8::try_from(m.heartbeat_counter_raw()).unwrap_or(0);
-        match self.counter.check(now, counter) {
+        let last = self.command.map(|c| c.counter);
+        let checker = match channel {
+            Channel::A => &mut self.counter,
+            Channel::B => &mut self.counter_b,
+        };
+        match checker.check(now, counter) {
             CounterStatus::Initial | CounterStatus::InSequence => {}
             // After a silence the stream may restart anywhere, but not with the value it
             // froze on: a frozen sender must not get a frame through every timeout.
-            CounterStatus::Stale if self.command.is_some_and(|c| c.counter == counter) => {
+            CounterStatus::Stale if last == Some(counter) => {
                 return Err(Rejection::RepeatedCounter)
             }
             CounterStatus::Stale => {}
@@ -540,13 +587,18 @@ impl Supervisor {
         })
     }
 
-    /// A frame from the bus.
+    /// A frame from the bus (bus A when redundant).
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        self.on_frame_from(now, Channel::A, frame);
+    }
+
+    /// A frame from one of the two buses.
+    pub fn on_frame_from(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
         let Some(id) = frame.id() else {
             return;
         };
         match id.as_raw() {
-            AdsToVehicleControl::ID if !id.is_extended() => self.on_command(now, frame),
+            AdsToVehicleControl::ID if !id.is_extended() => self.on_command(now, channel, frame),
             EmergencyStop::ID if !id.is_extended() => {
                 if let Some(m) = sealed(frame, EmergencyStop::ID).map(EmergencyStop) {
                     self.estop_active = m.estop_request_raw() == 1;
@@ -564,26 +616,52 @@ impl Supervisor {
         }
     }
 
-    fn on_command(&mut self, now: Timestamp, frame: &Frame) {
-        match self.validate(now, frame) {
-            Err(r) => self.stats.count(r),
-            Ok(command) => {
-                self.stats.accepted = self.stats.accepted.saturating_add(1);
-                let engage = command.engage && !self.last_engage_bit;
-                let reset = command.operator_reset && !self.last_reset_bit;
-                self.last_engage_bit = command.engage;
-                self.last_reset_bit = command.operator_reset;
-                self.echo = command.counter;
-                self.command = Some(command);
-                self.last_valid = Some(now);
-                self.missed_reported = 0;
-                self.decelerating_since = None;
-                self.watchdog = self
-                    .watchdog
-                    .next(WatchdogEvent::Valid { engage }, self.config.cascade);
-                self.evaluate(now, engage, reset);
+    fn on_command(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
+        let command = match self.validate(now, channel, frame) {
+            Err(r) => return self.stats.count(r),
+            Ok(command) => command,
+        };
+        if let (Some(voter), Some(copy)) = (self.voter.as_mut(), payload(frame)) {
+            voter.receive(channel, now, copy);
+            match voter.vote(now) {
+                Vote::Agreed(_) => self.degraded = None,
+                Vote::Degraded { healthy, .. } => self.degraded = Some(healthy),
+                Vote::Pending | Vote::Failed(VoteFailure::BothLost) => return,
+                Vote::Failed(VoteFailure::Disagree) => {
+                    self.stats.count(Rejection::Disagreement);
+                    self.watchdog = self
+                        .watchdog
+                        .next(WatchdogEvent::Disagreement, self.config.cascade);
+                    return self.evaluate(now, false, false);
+                }
+            }
+            // The other bus's copy of a command already taken.
+            let skew = self.config.redundancy.map_or(Duration::ZERO, |r| r.skew);
+            let recent = self
+                .last_valid
+                .is_some_and(|t| now.saturating_since(t) <= skew);
+            if recent && self.echo == command.counter {
+                return;
             }
         }
+        self.accept(now, command);
+    }
+
+    fn accept(&mut self, now: Timestamp, command: Command) {
+        self.stats.accepted = self.stats.accepted.saturating_add(1);
+        let engage = command.engage && !self.last_engage_bit;
+        let reset = command.operator_reset && !self.last_reset_bit;
+        self.last_engage_bit = command.engage;
+        self.last_reset_bit = command.operator_reset;
+        self.echo = command.counter;
+        self.command = Some(command);
+        self.last_valid = Some(now);
+        self.missed_reported = 0;
+        self.decelerating_since = None;
+        self.watchdog = self
+            .watchdog
+            .next(WatchdogEvent::Valid { engage }, self.config.cascade);
+        self.evaluate(now, engage, reset);
     }
 
     /// Run the E-stop latch and the mode machine on the current inputs.
@@ -729,7 +807,7 @@ impl Supervisor {
         }
         let steering = self.steering.value().unwrap_or(self.steering_actual);
         let (velocity, brake, warning) = match (self.watchdog, command) {
-            (Watchdog::Normal, Some(cmd)) => (cmd.velocity, cmd.brake, false),
+            (Watchdog::Normal, Some(cmd)) => (cmd.velocity, cmd.brake, self.degraded.is_some()),
             (Watchdog::Holding { .. }, Some(cmd)) => (cmd.velocity, cmd.brake, true),
             (Watchdog::Decelerating { .. }, _) => {
                 let (since, held) = self.decelerating_since.unwrap_or((now, 0.0));
@@ -765,7 +843,9 @@ impl Supervisor {
         m.set_gear_raw(self.command.map_or(0, |c| c.gear as u64));
         m.set_watchdog_level_raw(self.watchdog.level());
         m.set_estop_state_raw(self.estop.code());
-        m.set_warning_flag_raw(u64::from(self.watchdog != Watchdog::Normal));
+        m.set_warning_flag_raw(u64::from(
+            self.watchdog != Watchdog::Normal || self.degraded.is_some(),
+        ));
         m.set_driver_override_raw(u64::from(self.driver_input));
         let enabled = self.mode == ControlMode::Autonomous
             && matches!(
