@@ -11,9 +11,11 @@ use core::time::Duration;
 use bywire_core::e2e::{CounterChecker, CounterStatus};
 use bywire_core::{Frame, Id, StandardId, Timestamp};
 
+use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
+
 use crate::reference_tug::{
     self, AdsToVehicleControl, ControlMode, EmergencyBrake, Gear, SteeringMode,
-    VehicleToAdsSensors, VehicleToAdsState,
+    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 
 /// Tuning of the ADS side.
@@ -33,6 +35,12 @@ pub struct AdsConfig {
     pub brake_burst_spacing: Duration,
     /// Repeat period after the burst (20 Hz).
     pub brake_repeat: Duration,
+    /// Wheelbase and track, m, for odometry from the four wheels.
+    pub wheelbase: f64,
+    /// Track, m.
+    pub track: f64,
+    /// Steering within this of its setpoint counts as reached, degrees.
+    pub steering_tolerance: f64,
 }
 
 impl Default for AdsConfig {
@@ -45,6 +53,9 @@ impl Default for AdsConfig {
             echo_window: 3,
             brake_burst_spacing: Duration::from_millis(4),
             brake_repeat: Duration::from_millis(50),
+            wheelbase: 3.2,
+            track: 1.8,
+            steering_tolerance: 0.5,
         }
     }
 }
@@ -157,6 +168,12 @@ pub struct VehicleState {
     pub wheel_speeds: Field<[f64; 4]>,
     /// Time from sending a command to seeing its heartbeat echoed.
     pub echo_latency: Field<Duration>,
+    /// Wheel angles FL, FR, RL, RR, degrees.
+    pub wheel_angles: Field<[f64; 4]>,
+    /// The pose integrated from wheel speeds and angles (4WS kinematics, least squares).
+    pub odometry: Field<Pose>,
+    /// Time from a steering setpoint change to the actual angle reaching it.
+    pub steering_response: Field<Duration>,
 }
 
 /// The ADS-side node.
@@ -172,7 +189,13 @@ pub struct Ads {
     state: VehicleState,
     state_counter: CounterChecker,
     sensors_counter: CounterChecker,
+    angles_counter: CounterChecker,
     stats: FeedbackStats,
+    wheels: Swerve<4>,
+    odometry: Odometry,
+    last_sensors: Option<Timestamp>,
+    /// A steering setpoint not yet reached: (setpoint, since).
+    steering_pending: Option<(f64, Timestamp)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -205,7 +228,12 @@ impl Ads {
             state: VehicleState::default(),
             state_counter: CounterChecker::new(4, 0, timeout),
             sensors_counter: CounterChecker::new(4, 0, timeout),
+            angles_counter: CounterChecker::new(4, 0, timeout),
             stats: FeedbackStats::default(),
+            wheels: four_wheel(config.wheelbase, config.track),
+            odometry: Odometry::default(),
+            last_sensors: None,
+            steering_pending: None,
         }
     }
 
@@ -216,6 +244,12 @@ impl Ads {
             && command.velocity.is_finite()
             && command.brake.is_finite();
         if finite {
+            let changed = self.command.is_none_or(|(_, c)| {
+                (c.steering - command.steering).abs() > self.config.steering_tolerance
+            });
+            if changed {
+                self.steering_pending = Some((command.steering, now));
+            }
             self.command = Some((now, command));
             self.next_command.get_or_insert(now);
         }
@@ -343,7 +377,9 @@ impl Ads {
             Frame::Classic(f) if !f.is_remote() => f.data().try_into().ok(),
             _ => None,
         };
-        let known = id == VehicleToAdsState::ID || id == VehicleToAdsSensors::ID;
+        let known = id == VehicleToAdsState::ID
+            || id == VehicleToAdsSensors::ID
+            || id == VehicleToAdsWheelAngles::ID;
         if !known {
             return;
         }
@@ -353,6 +389,7 @@ impl Ads {
         };
         match id {
             VehicleToAdsState::ID => self.on_state(now, VehicleToAdsState(payload)),
+            VehicleToAdsWheelAngles::ID => self.on_angles(now, VehicleToAdsWheelAngles(payload)),
             _ => self.on_sensors(now, VehicleToAdsSensors(payload)),
         }
     }
@@ -398,6 +435,29 @@ impl Ads {
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));
         }
+        if let Some((setpoint, since)) = self.steering_pending {
+            if (steering - setpoint).abs() <= self.config.steering_tolerance {
+                s.steering_response.set(now, now.saturating_since(since));
+                self.steering_pending = None;
+            }
+        }
+    }
+
+    fn on_angles(&mut self, now: Timestamp, m: VehicleToAdsWheelAngles) {
+        if !Self::counter_ok(&mut self.angles_counter, now, m.counter_raw()) {
+            self.stats.counter += 1;
+            return;
+        }
+        self.stats.accepted += 1;
+        self.state.wheel_angles.set(
+            now,
+            [
+                m.wheel_angle_fl(),
+                m.wheel_angle_fr(),
+                m.wheel_angle_rl(),
+                m.wheel_angle_rr(),
+            ],
+        );
     }
 
     fn on_sensors(&mut self, now: Timestamp, m: VehicleToAdsSensors) {
@@ -406,14 +466,34 @@ impl Ads {
             return;
         }
         self.stats.accepted += 1;
-        self.state.wheel_speeds.set(
-            now,
-            [
-                m.wheel_speed_fl(),
-                m.wheel_speed_fr(),
-                m.wheel_speed_rl(),
-                m.wheel_speed_rr(),
-            ],
-        );
+        let speeds = [
+            m.wheel_speed_fl(),
+            m.wheel_speed_fr(),
+            m.wheel_speed_rl(),
+            m.wheel_speed_rr(),
+        ];
+        self.state.wheel_speeds.set(now, speeds);
+        // Odometry needs fresh wheel angles; integrate over the time since the last sensors
+        // frame (the wheels' twist is taken as constant in between).
+        let timeout = self
+            .config
+            .cycle
+            .saturating_mul(self.config.feedback_timeout_cycles);
+        let angles = self.state.wheel_angles.fresh(now, timeout);
+        if let (Some(angles), Some(last)) = (angles, self.last_sensors) {
+            let mut states = [WheelState::default(); 4];
+            for ((state, speed), angle) in states.iter_mut().zip(speeds).zip(angles) {
+                *state = WheelState {
+                    angle: angle.to_radians(),
+                    speed,
+                };
+            }
+            if let Some(twist) = self.wheels.forward(&states) {
+                let dt = now.saturating_since(last).as_secs_f64();
+                let pose = self.odometry.update(dt, twist);
+                self.state.odometry.set(now, pose);
+            }
+        }
+        self.last_sensors = Some(now);
     }
 }

@@ -545,6 +545,10 @@ impl LoadedProfile {
             c.brake_burst_spacing = Duration::from_millis(b.burst_spacing_ms);
             c.brake_repeat = Duration::from_millis(b.repeat_ms);
         }
+        if let Some(v) = &p.vehicle {
+            c.wheelbase = v.wheelbase_m;
+            c.track = v.track_m;
+        }
         c
     }
 }

@@ -260,3 +260,86 @@ fn two_of_three_outvotes_one_sensor() {
     );
     assert_eq!(two_of_three([1.0, 2.0, 3.0], 0.05), TwoOfThree::Failed);
 }
+
+fn sealed(id: u32, mut payload: [u8; 8]) -> Frame {
+    reference_tug::seal(id, &mut payload);
+    Frame::classic(Id::standard(id).unwrap(), &payload).unwrap()
+}
+
+/// Feed the ADS 2 s of wheel feedback at 50 Hz: every wheel at `angles` (degrees) and
+/// `speeds` (m/s); the odometry pose at the end.
+fn odometry_after(angles: [f64; 4], speeds: [f64; 4]) -> bywire_control::kinematics::Pose {
+    use bywire_vehicle::reference_tug::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
+    let mut ads = Ads::new(AdsConfig::default());
+    for k in 0..=100u64 {
+        let now = ms(20 * k);
+        let mut a = VehicleToAdsWheelAngles::default();
+        a.set_wheel_angle_fl(angles[0]).unwrap();
+        a.set_wheel_angle_fr(angles[1]).unwrap();
+        a.set_wheel_angle_rl(angles[2]).unwrap();
+        a.set_wheel_angle_rr(angles[3]).unwrap();
+        a.set_counter_raw(k % 16);
+        ads.on_frame(now, &sealed(VehicleToAdsWheelAngles::ID, a.0));
+        let mut s = VehicleToAdsSensors::default();
+        s.set_wheel_speed_fl(speeds[0]).unwrap();
+        s.set_wheel_speed_fr(speeds[1]).unwrap();
+        s.set_wheel_speed_rl(speeds[2]).unwrap();
+        s.set_wheel_speed_rr(speeds[3]).unwrap();
+        s.set_counter_raw(k % 16);
+        ads.on_frame(now, &sealed(VehicleToAdsSensors::ID, s.0));
+    }
+    ads.state().odometry.value.unwrap()
+}
+
+#[test]
+fn odometry_follows_the_four_wheels() {
+    // Crab at 30°, 1 m/s, for 2 s: (√3, 1) without turning.
+    let p = odometry_after([30.0; 4], [1.0; 4]);
+    assert!(
+        (p.x - 3f64.sqrt()).abs() < 0.02 && (p.y - 1.0).abs() < 0.02,
+        "{p:?}"
+    );
+    assert!(p.yaw.abs() < 1e-3, "{p:?}");
+    // Tank turn at 0.5 rad/s: wheels tangent to the circle through them, speed ω·r.
+    let (a, b) = (1.6f64, 0.9f64);
+    let r = a.hypot(b);
+    let tangent = (a / b).atan().to_degrees(); // angle of (-b, a) folded into ±90°
+    let v = 0.5 * r;
+    let p = odometry_after([-tangent, tangent, tangent, -tangent], [-v, v, -v, v]);
+    assert!(p.x.abs() < 0.02 && p.y.abs() < 0.02, "{p:?}");
+    assert!((p.yaw - 1.0).abs() < 0.01, "{p:?}");
+}
+
+#[test]
+fn steering_response_is_measured_from_setpoint_to_actual() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(
+        ms(0),
+        AdsCommand {
+            steering: 0.0,
+            ..drive(1.0)
+        },
+    );
+    for t in (0..=1000u32).step_by(20) {
+        let now = ms(u64::from(t));
+        if t >= 100 {
+            let steer = AdsCommand {
+                steering: 10.0,
+                ..drive(1.0)
+            };
+            ads.set_command(now, steer);
+        }
+        ads.poll(now, &mut |_| {});
+        // The vehicle steers at 30°/s from 120 ms on.
+        let actual = (f64::from(t.saturating_sub(120)) * 0.03).min(10.0);
+        let mut m = VehicleToAdsState::default();
+        m.set_steering_angle_actual(actual).unwrap();
+        m.set_counter_raw(u64::from(t / 20 % 16));
+        // Echo the command just sent.
+        m.set_heartbeat_echo_raw(u64::from((t / 20) % 16));
+        ads.on_frame(ms(u64::from(t) + 1), &sealed(VehicleToAdsState::ID, m.0));
+    }
+    // 9.5° (within 0.5° of 10°) is reached at 120 + 9.5/0.03 ≈ 437 → the 441 ms frame.
+    let response = ads.state().steering_response.value.unwrap();
+    assert_eq!(response, Duration::from_millis(441 - 100));
+}

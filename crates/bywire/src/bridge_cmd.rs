@@ -185,6 +185,8 @@ fn state_json(ads: &Ads, now: Timestamp) -> serde_json::Value {
         "driver_override": s.driver_override.value,
         "wheel_speeds": s.wheel_speeds.value,
         "echo_latency_ms": s.echo_latency.value.map(|d| d.as_secs_f64() * 1e3),
+        "steering_response_ms": s.steering_response.value.map(|d| d.as_secs_f64() * 1e3),
+        "odometry": s.odometry.value.map(|p| json!({"x": p.x, "y": p.y, "yaw": p.yaw})),
         "state_age_ms": age_ms(s.mode.age(now)),
         "rejected": {
             "checksum": ads.stats().checksum,
