@@ -13,8 +13,9 @@ use bywire_bus::{Bus, BusRx};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::reference_tug::{ControlMode, Gear, SteeringMode};
-use bywire_vehicle::supervisor::Supervisor;
+use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 use serde::Deserialize;
 use serde_json::json;
 
@@ -29,6 +30,8 @@ pub struct Args {
     profile: String,
     /// The bus (virtual:NAME, sim:NAME@BITRATE, socketcan:IFACE).
     bus: String,
+    /// A redundant second bus: every command goes on both, feedback is taken from either.
+    bus2: Option<String>,
     /// State lines per second on stdout.
     #[arg(long, default_value_t = 10.0)]
     rate: f64,
@@ -135,24 +138,41 @@ fn load_profile(name: &str) -> Result<LoadedProfile> {
 /// A simulated vehicle: the supervisor on its own endpoint, with speed and steering following
 /// the actuators, on a thread until `stop` closes.
 fn spawn_vehicle(
-    bus: Box<dyn Bus>,
+    buses: Vec<(Channel, Box<dyn Bus>)>,
     profile: &LoadedProfile,
     start: Instant,
     stop: Receiver<()>,
 ) -> std::thread::JoinHandle<()> {
-    let mut supervisor = Supervisor::new(profile.supervisor_config());
+    let mut config = profile.supervisor_config();
+    if buses.len() > 1 {
+        config.redundancy = Some(Redundancy {
+            timeout: config.cycle.saturating_mul(3),
+            skew: Duration::from_millis(5),
+        });
+    }
+    let mut supervisor = Supervisor::new(config);
     std::thread::spawn(move || {
-        let (mut tx, mut rx) = bus.split();
+        let (mut txs, mut rxs): (Vec<_>, Vec<_>) = buses
+            .into_iter()
+            .map(|(channel, bus)| {
+                let (tx, rx) = bus.split();
+                (tx, (channel, rx))
+            })
+            .unzip();
         // Bounded by the bridge: it closes `stop` when it ends.
         while matches!(stop.try_recv(), Err(TryRecvError::Empty)) {
             let now = since(start);
-            while let Ok(Some(r)) = rx.recv(Some(Duration::from_millis(1))) {
-                supervisor.on_frame(since(start), &r.frame);
+            for (channel, rx) in &mut rxs {
+                while let Ok(Some(r)) = rx.recv(Some(Duration::from_micros(500))) {
+                    supervisor.on_frame_from(since(start), *channel, &r.frame);
+                }
             }
             let mut out = Vec::new();
             supervisor.poll(now, &mut |f| out.push(f));
             for f in out {
-                let _ = tx.send(&f);
+                for tx in &mut txs {
+                    let _ = tx.send(&f);
+                }
             }
             let a = supervisor.actuators(now);
             let speed = if a.brake > 0.0 || !a.motors_enabled {
@@ -210,24 +230,43 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         bail!("--rate {}: between 0 and 1000 lines per second", args.rate);
     }
     let profile = load_profile(&args.profile)?;
-    let bus = bywire_bus::open(&args.bus).with_context(|| format!("bus {}", args.bus))?;
+    let specs: Vec<(Channel, &String)> = [
+        (Channel::A, Some(&args.bus)),
+        (Channel::B, args.bus2.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(channel, spec)| spec.map(|s| (channel, s)))
+    .collect();
+    let mut buses = Vec::new();
+    for (_, spec) in &specs {
+        buses.push(bywire_bus::open(spec).with_context(|| format!("bus {spec}"))?);
+    }
     let start = Instant::now();
     let (stop_vehicle, vehicle_stop) = mpsc::channel();
     let vehicle = if args.with_vehicle {
-        let spec: bywire_bus::BusSpec = args.bus.parse()?;
-        if matches!(spec, bywire_bus::BusSpec::SocketCan { .. }) {
-            bail!(
-                "--with-vehicle needs an in-process bus (virtual: or sim:), not {}",
-                args.bus
-            );
+        let mut vehicle_buses = Vec::new();
+        for (channel, spec) in &specs {
+            let parsed: bywire_bus::BusSpec = spec.parse()?;
+            if matches!(parsed, bywire_bus::BusSpec::SocketCan { .. }) {
+                bail!("--with-vehicle needs in-process buses (virtual: or sim:), not {spec}");
+            }
+            vehicle_buses.push((*channel, bywire_bus::open(spec)?));
         }
-        let second = bywire_bus::open(&args.bus)?;
-        Some(spawn_vehicle(second, &profile, start, vehicle_stop))
+        Some(spawn_vehicle(vehicle_buses, &profile, start, vehicle_stop))
     } else {
         None
     };
-    let (mut tx, rx) = bus.split();
-    let frames = receive_thread(rx);
+    let (frames_in, frames) = mpsc::channel();
+    let mut txs = Vec::new();
+    for bus in buses {
+        let (tx, rx) = bus.split();
+        txs.push(tx);
+        receive_thread(rx, frames_in.clone());
+    }
+    drop(frames_in);
+    // The same feedback frame arrives once per bus: take the first copy.
+    let mut recent: std::collections::VecDeque<(Timestamp, Frame)> =
+        std::collections::VecDeque::new();
     let lines = stdin_thread();
     let mut ads = Ads::new(profile.ads_config());
     let mut command = AdsCommand::default();
@@ -304,12 +343,21 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
             }
         }
         while let Ok(frame) = frames.try_recv() {
+            recent.retain(|(at, _)| now.saturating_since(*at) < Duration::from_millis(10));
+            if recent.iter().any(|(_, seen)| *seen == frame) {
+                continue;
+            }
+            if recent.len() < 64 {
+                recent.push_back((now, frame));
+            }
             ads.on_frame(now, &frame);
         }
         let mut outgoing = Vec::new();
         ads.poll(now, &mut |f| outgoing.push(f));
         for f in outgoing {
-            tx.send(&f).context("sending")?;
+            for tx in &mut txs {
+                tx.send(&f).context("sending")?;
+            }
         }
         if now >= next_report {
             writeln!(out, "{}", state_json(&ads, now))?;
@@ -327,8 +375,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     }
 }
 
-fn receive_thread(mut rx: Box<dyn BusRx>) -> Receiver<Frame> {
-    let (send, frames) = mpsc::channel();
+fn receive_thread(mut rx: Box<dyn BusRx>, send: mpsc::Sender<Frame>) {
     std::thread::spawn(move || {
         // Ends when the bridge drops its end or the bus fails.
         while let Ok(received) = rx.recv(Some(Duration::from_millis(50))) {
@@ -339,7 +386,6 @@ fn receive_thread(mut rx: Box<dyn BusRx>) -> Receiver<Frame> {
             }
         }
     });
-    frames
 }
 
 fn stdin_thread() -> Receiver<std::io::Result<String>> {

@@ -131,3 +131,51 @@ fn bridge_refuses_bad_arguments_clearly() {
     assert_eq!(code, 0);
     assert!(!out.contains("end_of_input"));
 }
+
+#[test]
+fn bridge_drives_over_two_redundant_buses() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "bridge",
+            "--profile",
+            "reference-tug",
+            "sim:redundant-a@500000",
+            "sim:redundant-b@500000",
+            "--with-vehicle",
+            "--rate",
+            "20",
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
+    for k in 0..50 {
+        let line = if k == 20 {
+            r#"{"engage": true}"#
+        } else {
+            drive
+        };
+        writeln!(stdin, "{line}").unwrap();
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let states: Vec<Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .filter(|v: &Value| v.get("mode").is_some())
+        .collect();
+    // Both copies agree: the vehicle drives, not degraded (no warning), and the feedback
+    // that arrives twice is taken once (no counter rejections).
+    let driving: Vec<&Value> = states
+        .iter()
+        .filter(|s| s["mode"] == "autonomous" && s["velocity"] == 1.0)
+        .collect();
+    assert!(!driving.is_empty(), "{states:?}");
+    assert!(driving.iter().any(|s| s["warning"] == false));
+    assert_eq!(states.last().unwrap()["rejected"]["counter"], 0);
+}
