@@ -196,6 +196,8 @@ pub struct Ads {
     last_sensors: Option<Timestamp>,
     /// A steering setpoint not yet reached: (setpoint, since).
     steering_pending: Option<(f64, Timestamp)>,
+    /// The last setpoint whose response was (or is being) measured.
+    steering_reference: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -234,6 +236,7 @@ impl Ads {
             odometry: Odometry::default(),
             last_sensors: None,
             steering_pending: None,
+            steering_reference: None,
         }
     }
 
@@ -244,10 +247,13 @@ impl Ads {
             && command.velocity.is_finite()
             && command.brake.is_finite();
         if finite {
-            let changed = self.command.is_none_or(|(_, c)| {
-                (c.steering - command.steering).abs() > self.config.steering_tolerance
-            });
+            // A new setpoint when it moved beyond the tolerance from the last one measured
+            // (so that a slow creep is measured too).
+            let changed = self
+                .steering_reference
+                .is_none_or(|r| (r - command.steering).abs() > self.config.steering_tolerance);
             if changed {
+                self.steering_reference = Some(command.steering);
                 self.steering_pending = Some((command.steering, now));
             }
             self.command = Some((now, command));

@@ -774,18 +774,10 @@ impl Supervisor {
             gear,
             warning: true,
         };
+        // The latch passes MOTORS_DISABLED to BRAKES_APPLIED within one evaluation, so a
+        // latched E-stop always reads as motors off and brakes on.
         if self.estop.is_latched() {
-            return Actuators {
-                // Motors go off first; brakes follow from BRAKES_APPLIED on.
-                brake: if self.estop == EstopState::EstopRequested
-                    || self.estop == EstopState::MotorsDisabled
-                {
-                    0.0
-                } else {
-                    100.0
-                },
-                ..full_brake
-            };
+            return full_brake;
         }
         if self.mode != ControlMode::Autonomous {
             // The driver (or a service tool) drives; the ADS's setpoints are ignored.

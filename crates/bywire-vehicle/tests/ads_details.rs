@@ -1,0 +1,187 @@
+//! The ADS side's details, call by call: schedules and deadlines, the burst's counters and
+//! gaps, each feedback check and its counter, and the response-time trigger.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::reference_tug::{
+    ControlMode, EmergencyBrake, Gear, VehicleToAdsSensors, VehicleToAdsState,
+    VehicleToAdsWheelAngles,
+};
+use common::{ms, sealed};
+
+fn drive(steering: f64) -> AdsCommand {
+    AdsCommand {
+        steering,
+        velocity: 1.0,
+        gear: Gear::Drive,
+        mode: ControlMode::Autonomous,
+        engage: true,
+        operator_reset: true,
+        ..AdsCommand::default()
+    }
+}
+
+/// A state frame with `counter`, echoing `echo`, edited by `edit`.
+fn state(counter: u64, echo: u64, edit: impl FnOnce(&mut VehicleToAdsState)) -> bywire_core::Frame {
+    let mut m = VehicleToAdsState::default();
+    m.set_control_mode_raw(1);
+    m.set_counter_raw(counter);
+    m.set_heartbeat_echo_raw(echo);
+    edit(&mut m);
+    sealed(VehicleToAdsState::ID, m.0)
+}
+
+/// An ADS that has sent commands 0..n (one per 20 ms from 0).
+fn sent(n: u64) -> Ads {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(ms(0), drive(0.0));
+    for t in 0..n {
+        ads.poll(ms(20 * t), &mut |_| {});
+    }
+    ads
+}
+
+#[test]
+fn a_stale_command_drops_its_requests() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(ms(0), drive(0.0));
+    let fresh = ads.effective_command(ms(0)).unwrap();
+    assert!(fresh.engage && fresh.operator_reset);
+    let stale = ads.effective_command(ms(500)).unwrap();
+    assert!(!stale.engage && !stale.operator_reset);
+}
+
+#[test]
+fn deadlines_and_a_late_poll() {
+    let mut ads = Ads::new(AdsConfig::default());
+    assert_eq!(ads.next_deadline(), None);
+    ads.set_command(ms(5), drive(0.0));
+    assert_eq!(ads.next_deadline(), Some(ms(5)));
+    ads.poll(ms(5), &mut |_| {});
+    assert_eq!(ads.next_deadline(), Some(ms(25)));
+    // Polled 100 ms late: one frame, and the schedule restarts from now.
+    let mut n = 0;
+    ads.poll(ms(125), &mut |_| n += 1);
+    assert_eq!(n, 1);
+    assert_eq!(ads.next_deadline(), Some(ms(145)));
+    ads.emergency_brake(ms(130), 3.0);
+    assert_eq!(ads.next_deadline(), Some(ms(130)));
+}
+
+#[test]
+fn the_burst_counts_and_spaces_its_frames() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.emergency_brake(ms(0), 3.0);
+    let mut frames = Vec::new();
+    for t in 0..1000 {
+        ads.poll(ms(t), &mut |f| frames.push((t, f)));
+    }
+    let counters: Vec<u64> = frames
+        .iter()
+        .map(|(_, f)| EmergencyBrake(f.data().try_into().unwrap()).counter_raw())
+        .collect();
+    assert_eq!(
+        &counters[..18],
+        &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1]
+    );
+    let times: Vec<u64> = frames.iter().map(|(t, _)| *t).collect();
+    assert_eq!(&times[..5], &[0, 4, 8, 58, 108]);
+}
+
+#[test]
+fn each_feedback_check_counts() {
+    let mut ads = sent(6); // commands 0..=5 sent; the echo window holds 5, 4, 3
+    ads.on_frame(ms(101), &state(0, 5, |_| {}));
+    assert_eq!(ads.stats().accepted, 1);
+    // Out of range: steering, velocity, watchdog level.
+    ads.on_frame(
+        ms(102),
+        &state(1, 5, |m| m.set_steering_angle_actual_raw(460)),
+    );
+    ads.on_frame(ms(103), &state(2, 5, |m| m.set_velocity_actual_raw(900)));
+    ads.on_frame(ms(104), &state(3, 5, |m| m.set_watchdog_level_raw(5)));
+    assert_eq!(ads.stats().range, 3);
+    // An echo of a command sent, but too long ago.
+    ads.on_frame(ms(105), &state(4, 1, |_| {}));
+    assert_eq!(ads.stats().echo, 1);
+    // The oldest in the window is still fine.
+    ads.on_frame(ms(106), &state(5, 3, |_| {}));
+    assert_eq!(ads.stats().accepted, 2);
+    // Flags come through.
+    ads.on_frame(
+        ms(107),
+        &state(6, 5, |m| {
+            m.set_warning_flag_raw(1);
+            m.set_driver_override_raw(1);
+        }),
+    );
+    let s = ads.state();
+    assert_eq!(
+        (s.warning.value, s.driver_override.value),
+        (Some(true), Some(true))
+    );
+    ads.on_frame(ms(108), &state(7, 5, |_| {}));
+    let s = ads.state();
+    assert_eq!(
+        (s.warning.value, s.driver_override.value),
+        (Some(false), Some(false))
+    );
+}
+
+#[test]
+fn wheel_frames_count_and_check_their_counters() {
+    let mut ads = Ads::new(AdsConfig::default());
+    let angles = |c| {
+        sealed(VehicleToAdsWheelAngles::ID, {
+            let mut m = VehicleToAdsWheelAngles::default();
+            m.set_counter_raw(c);
+            m.0
+        })
+    };
+    let speeds = |c| {
+        sealed(VehicleToAdsSensors::ID, {
+            let mut m = VehicleToAdsSensors::default();
+            m.set_counter_raw(c);
+            m.0
+        })
+    };
+    ads.on_frame(ms(0), &angles(0));
+    ads.on_frame(ms(0), &speeds(0));
+    assert_eq!(ads.stats().accepted, 2);
+    ads.on_frame(ms(20), &angles(0));
+    ads.on_frame(ms(20), &speeds(5));
+    assert_eq!((ads.stats().counter, ads.stats().accepted), (2, 2));
+    ads.on_frame(ms(40), &angles(1));
+    ads.on_frame(ms(40), &speeds(6));
+    assert_eq!((ads.stats().counter, ads.stats().accepted), (2, 4));
+}
+
+#[test]
+fn a_change_within_the_tolerance_is_not_a_new_setpoint() {
+    let mut ads = Ads::new(AdsConfig::default());
+    ads.set_command(ms(0), drive(0.0));
+    ads.poll(ms(0), &mut |_| {});
+    ads.on_frame(ms(10), &state(0, 0, |_| {}));
+    let first = ads.state().steering_response;
+    assert_eq!(first.value, Some(std::time::Duration::from_millis(10)));
+    // 0.5° is the tolerance: not a new setpoint, so no new measurement.
+    ads.set_command(ms(20), drive(0.5));
+    ads.poll(ms(20), &mut |_| {});
+    ads.on_frame(ms(30), &state(1, 1, |_| {}));
+    assert_eq!(ads.state().steering_response, first);
+    // 0.6° is.
+    ads.set_command(ms(40), drive(0.6));
+    ads.poll(ms(40), &mut |_| {});
+    ads.on_frame(ms(45), &state(2, 2, |m| m.set_steering_angle_actual_raw(6)));
+    assert_eq!(
+        ads.state().steering_response.value,
+        Some(std::time::Duration::from_millis(5))
+    );
+}
