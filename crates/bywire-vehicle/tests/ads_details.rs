@@ -108,16 +108,22 @@ fn each_feedback_check_counts() {
     ads.on_frame(ms(103), &state(2, 5, |m| m.set_velocity_actual_raw(900)));
     ads.on_frame(ms(104), &state(3, 5, |m| m.set_watchdog_level_raw(5)));
     assert_eq!(ads.stats().range, 3);
+    // Exactly 45° is still in range.
+    ads.on_frame(
+        ms(104),
+        &state(4, 5, |m| m.set_steering_angle_actual_raw(450)),
+    );
+    assert_eq!((ads.stats().range, ads.stats().accepted), (3, 2));
     // An echo of a command sent, but too long ago.
-    ads.on_frame(ms(105), &state(4, 1, |_| {}));
+    ads.on_frame(ms(105), &state(5, 1, |_| {}));
     assert_eq!(ads.stats().echo, 1);
     // The oldest in the window is still fine.
-    ads.on_frame(ms(106), &state(5, 3, |_| {}));
-    assert_eq!(ads.stats().accepted, 2);
+    ads.on_frame(ms(106), &state(6, 3, |_| {}));
+    assert_eq!(ads.stats().accepted, 3);
     // Flags come through.
     ads.on_frame(
         ms(107),
-        &state(6, 5, |m| {
+        &state(7, 5, |m| {
             m.set_warning_flag_raw(1);
             m.set_driver_override_raw(1);
         }),
@@ -127,7 +133,7 @@ fn each_feedback_check_counts() {
         (s.warning.value, s.driver_override.value),
         (Some(true), Some(true))
     );
-    ads.on_frame(ms(108), &state(7, 5, |_| {}));
+    ads.on_frame(ms(108), &state(8, 5, |_| {}));
     let s = ads.state();
     assert_eq!(
         (s.warning.value, s.driver_override.value),
