@@ -155,6 +155,40 @@ impl Filtering {
     }
 }
 
+/// The state both halves of a split endpoint share (behind an `Arc`): one implementation of
+/// sending and receiving per backend, used by the endpoint and by its halves alike.
+pub(crate) trait SharedEndpoint: Send + Sync + 'static {
+    /// As [`BusTx::send`].
+    fn send(&self, frame: &Frame) -> Result<(), BusError>;
+    /// As [`BusRx::recv`].
+    fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError>;
+}
+
+/// One half of a split endpoint.
+struct Half<E>(std::sync::Arc<E>);
+
+impl<E: SharedEndpoint> BusTx for Half<E> {
+    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
+        self.0.send(frame)
+    }
+}
+
+impl<E: SharedEndpoint> BusRx for Half<E> {
+    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        self.0.recv(timeout)
+    }
+}
+
+/// The two halves of an endpoint whose state is `shared`.
+pub(crate) fn split_halves<E: SharedEndpoint>(
+    shared: std::sync::Arc<E>,
+) -> (Box<dyn BusTx>, Box<dyn BusRx>) {
+    (
+        Box::new(Half(std::sync::Arc::clone(&shared))),
+        Box::new(Half(shared)),
+    )
+}
+
 /// The sending half of a bus endpoint.
 pub trait BusTx: Send {
     /// Queue a frame for sending; returns when the backend has taken it.

@@ -16,7 +16,10 @@ use bywire_core::confinement::NodeState;
 use bywire_core::{Frame, Timestamp};
 
 use crate::sim::{Fault, NodeId, SimBus};
-use crate::{Bus, BusError, BusRx, BusStatus, BusTx, ControllerState, Filtering, Received, Stats};
+use crate::{
+    Bus, BusError, BusRx, BusStatus, BusTx, ControllerState, Filtering, Received, SharedEndpoint,
+    Stats,
+};
 
 /// The bitrates a simulated bus runs at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -160,90 +163,77 @@ impl Drop for Member {
     }
 }
 
-fn send(member: &Member, frame: &Frame) -> Result<(), BusError> {
-    if frame.is_error() {
-        return Err(BusError::Unsupported("error frames".into()));
-    }
-    let mut state = member.shared.lock();
-    let now = member.shared.now();
-    state.bus.advance(now);
-    state.bus.submit(member.node, *frame, now);
-    if let Some(stats) = state.stats.get_mut(&member.node) {
-        stats.count_sent(frame);
-    }
-    drop(state);
-    member.shared.changed.notify_all();
-    Ok(())
-}
-
-fn recv(member: &Member, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-    let deadline = timeout.map(|t| Instant::now() + t);
-    let mut state = member.shared.lock();
-    // Each pass returns or sleeps until the next simulated event, a send, or the deadline.
-    loop {
-        let now = member.shared.now();
-        state.bus.advance(now);
-        if let Some(received) = state.bus.receive_by(member.node, now) {
-            if let Some(stats) = state.stats.get_mut(&member.node) {
-                stats.count_received(&received.frame);
-            }
-            return Ok(Some(received));
+impl SharedEndpoint for Member {
+    fn send(&self, frame: &Frame) -> Result<(), BusError> {
+        if frame.is_error() {
+            return Err(BusError::Unsupported("error frames".into()));
         }
-        let until_event = state
-            .bus
-            .next_change(member.node)
-            .map(|at| at.saturating_since(now).max(Duration::from_micros(1)));
-        let until_deadline = match deadline {
-            Some(deadline) => {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    return Ok(None);
+        let mut state = self.shared.lock();
+        let now = self.shared.now();
+        state.bus.advance(now);
+        state.bus.submit(self.node, *frame, now);
+        if let Some(stats) = state.stats.get_mut(&self.node) {
+            stats.count_sent(frame);
+        }
+        drop(state);
+        self.shared.changed.notify_all();
+        Ok(())
+    }
+
+    fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
+        let mut state = self.shared.lock();
+        // Each pass returns or sleeps until the next simulated event, a send, or the deadline.
+        loop {
+            let now = self.shared.now();
+            state.bus.advance(now);
+            if let Some(received) = state.bus.receive_by(self.node, now) {
+                if let Some(stats) = state.stats.get_mut(&self.node) {
+                    stats.count_received(&received.frame);
                 }
-                Some(left)
+                return Ok(Some(received));
             }
-            None => None,
-        };
-        state = match until_event.into_iter().chain(until_deadline).min() {
-            Some(wait) => {
-                member
+            let until_event = state
+                .bus
+                .next_change(self.node)
+                .map(|at| at.saturating_since(now).max(Duration::from_micros(1)));
+            let until_deadline = match deadline {
+                Some(deadline) => {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        return Ok(None);
+                    }
+                    Some(left)
+                }
+                None => None,
+            };
+            state = match until_event.into_iter().chain(until_deadline).min() {
+                Some(wait) => {
+                    self.shared
+                        .changed
+                        .wait_timeout(state, wait)
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .0
+                }
+                None => self
                     .shared
                     .changed
-                    .wait_timeout(state, wait)
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .0
-            }
-            None => member
-                .shared
-                .changed
-                .wait(state)
-                .unwrap_or_else(PoisonError::into_inner),
-        };
+                    .wait(state)
+                    .unwrap_or_else(PoisonError::into_inner),
+            };
+        }
     }
 }
 
 impl BusTx for SimEndpoint {
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.member, frame)
+        self.member.send(frame)
     }
 }
 
 impl BusRx for SimEndpoint {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.member, timeout)
-    }
-}
-
-struct Half(Arc<Member>);
-
-impl BusTx for Half {
-    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.0, frame)
-    }
-}
-
-impl BusRx for Half {
-    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.0, timeout)
+        self.member.recv(timeout)
     }
 }
 
@@ -288,9 +278,6 @@ impl Bus for SimEndpoint {
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {
-        (
-            Box::new(Half(Arc::clone(&self.member))),
-            Box::new(Half(self.member)),
-        )
+        crate::split_halves(self.member)
     }
 }

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use bywire_core::{Frame, Timestamp};
 
-use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, Stats};
+use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, SharedEndpoint, Stats};
 
 /// Frames an endpoint holds before it starts dropping.
 pub const DEFAULT_QUEUE: usize = 4096;
@@ -132,98 +132,82 @@ impl VirtualBus {
     }
 }
 
-fn send(member: &Membership, frame: &Frame) -> Result<(), BusError> {
-    let mut state = member.shared.lock();
-    let timestamp = now();
-    let loopback = state
-        .endpoints
-        .get(&member.id)
-        .is_none_or(|sender| sender.loopback);
-    for (&id, endpoint) in state.endpoints.iter_mut() {
-        let own = id == member.id;
-        if own {
-            endpoint.stats.count_sent(frame);
-        }
-        // As in SocketCAN, own frames come back only through the loopback.
-        let wanted = loopback && (!own || endpoint.receive_own);
-        if !wanted || !endpoint.filtering.accepts(frame) {
-            continue;
-        }
-        if endpoint.queue.len() >= endpoint.capacity {
-            endpoint.stats.rx_dropped += 1;
-            continue;
-        }
-        endpoint.queue.push_back(Received {
-            frame: *frame,
-            timestamp,
-            own,
-            hardware: None,
-        });
-    }
-    drop(state);
-    member.shared.arrived.notify_all();
-    Ok(())
-}
-
-fn recv(member: &Membership, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-    let deadline = timeout.map(|t| Instant::now() + t);
-    let mut state = member.shared.lock();
-    // Each pass either returns or waits on the condition variable; spurious wake-ups go round
-    // again until the deadline.
-    loop {
-        let endpoint = state
+impl SharedEndpoint for Membership {
+    fn send(&self, frame: &Frame) -> Result<(), BusError> {
+        let mut state = self.shared.lock();
+        let timestamp = now();
+        let loopback = state
             .endpoints
-            .get_mut(&member.id)
-            .ok_or(BusError::Closed)?;
-        if let Some(received) = endpoint.queue.pop_front() {
-            endpoint.stats.count_received(&received.frame);
-            return Ok(Some(received));
+            .get(&self.id)
+            .is_none_or(|sender| sender.loopback);
+        for (&id, endpoint) in state.endpoints.iter_mut() {
+            let own = id == self.id;
+            if own {
+                endpoint.stats.count_sent(frame);
+            }
+            // As in SocketCAN, own frames come back only through the loopback.
+            let wanted = loopback && (!own || endpoint.receive_own);
+            if !wanted || !endpoint.filtering.accepts(frame) {
+                continue;
+            }
+            if endpoint.queue.len() >= endpoint.capacity {
+                endpoint.stats.rx_dropped += 1;
+                continue;
+            }
+            endpoint.queue.push_back(Received {
+                frame: *frame,
+                timestamp,
+                own,
+                hardware: None,
+            });
         }
-        state = match deadline {
-            None => member
-                .shared
-                .arrived
-                .wait(state)
-                .unwrap_or_else(PoisonError::into_inner),
-            Some(deadline) => {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    return Ok(None);
-                }
-                member
+        drop(state);
+        self.shared.arrived.notify_all();
+        Ok(())
+    }
+
+    fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
+        let mut state = self.shared.lock();
+        // Each pass either returns or waits on the condition variable; spurious wake-ups go round
+        // again until the deadline.
+        loop {
+            let endpoint = state.endpoints.get_mut(&self.id).ok_or(BusError::Closed)?;
+            if let Some(received) = endpoint.queue.pop_front() {
+                endpoint.stats.count_received(&received.frame);
+                return Ok(Some(received));
+            }
+            state = match deadline {
+                None => self
                     .shared
                     .arrived
-                    .wait_timeout(state, left)
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .0
-            }
-        };
+                    .wait(state)
+                    .unwrap_or_else(PoisonError::into_inner),
+                Some(deadline) => {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        return Ok(None);
+                    }
+                    self.shared
+                        .arrived
+                        .wait_timeout(state, left)
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .0
+                }
+            };
+        }
     }
 }
 
 impl BusTx for VirtualBus {
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.member, frame)
+        self.member.send(frame)
     }
 }
 
 impl BusRx for VirtualBus {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.member, timeout)
-    }
-}
-
-struct Half(Arc<Membership>);
-
-impl BusTx for Half {
-    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.0, frame)
-    }
-}
-
-impl BusRx for Half {
-    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.0, timeout)
+        self.member.recv(timeout)
     }
 }
 
@@ -251,9 +235,6 @@ impl Bus for VirtualBus {
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {
-        (
-            Box::new(Half(Arc::clone(&self.member))),
-            Box::new(Half(self.member)),
-        )
+        crate::split_halves(self.member)
     }
 }

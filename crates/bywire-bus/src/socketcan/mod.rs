@@ -25,7 +25,10 @@ use socketcan::{CanFdSocket, CanInterface, Socket, SocketOptions};
 
 pub use layout::LayoutError;
 
-use crate::{Bus, BusError, BusRx, BusStatus, BusTx, ControllerState, Filtering, Received, Stats};
+use crate::{
+    Bus, BusError, BusRx, BusStatus, BusTx, ControllerState, Filtering, Received, SharedEndpoint,
+    Stats,
+};
 
 /// How long a send waits for room in the interface's transmit queue before giving up.
 const SEND_PATIENCE: Duration = Duration::from_secs(1);
@@ -215,9 +218,19 @@ fn recv(shared: &Shared, timeout: Option<Duration>) -> Result<Option<Received>, 
     }
 }
 
+impl SharedEndpoint for Shared {
+    fn send(&self, frame: &Frame) -> Result<(), BusError> {
+        send(self, frame)
+    }
+
+    fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        recv(self, timeout)
+    }
+}
+
 impl BusTx for SocketCan {
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.shared, frame)
+        self.shared.send(frame)
     }
 }
 
@@ -226,21 +239,7 @@ impl BusRx for SocketCan {
     /// frames the time the echo came back; `hardware` holds the controller's time when the
     /// driver gives one.
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.shared, timeout)
-    }
-}
-
-struct Half(Arc<Shared>);
-
-impl BusTx for Half {
-    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
-        send(&self.0, frame)
-    }
-}
-
-impl BusRx for Half {
-    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
-        recv(&self.0, timeout)
+        self.shared.recv(timeout)
     }
 }
 
@@ -303,10 +302,7 @@ impl Bus for SocketCan {
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {
-        (
-            Box::new(Half(Arc::clone(&self.shared))),
-            Box::new(Half(self.shared)),
-        )
+        crate::split_halves(self.shared)
     }
 }
 
