@@ -200,50 +200,32 @@ impl Ekf {
         Update::Accepted(d2)
     }
 
-    /// Wheel odometry: speed (m/s) and yaw rate (rad/s) with their standard deviations.
-    pub fn update_odometry(&mut self, speed: f64, yaw_rate: f64, sigmas: (f64, f64)) -> Update {
+    /// Two states measured directly, with independent noise.
+    fn update_direct(&mut self, states: [usize; 2], z: [f64; 2], sigmas: (f64, f64)) -> Update {
         let mut h = SMatrix::<f64, 2, STATES>::zeros();
-        h[(0, V)] = 1.0;
-        h[(1, YAW_RATE)] = 1.0;
+        h[(0, states[0])] = 1.0;
+        h[(1, states[1])] = 1.0;
         let r = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::from([
             sigmas.0 * sigmas.0,
             sigmas.1 * sigmas.1,
         ]));
-        self.update(
-            SVector::from([speed, yaw_rate]),
-            h,
-            r,
-            GATE_2DOF,
-            [false; 2],
-        )
+        self.update(SVector::from(z), h, r, GATE_2DOF, [false; 2])
+    }
+
+    /// Wheel odometry: speed (m/s) and yaw rate (rad/s) with their standard deviations.
+    pub fn update_odometry(&mut self, speed: f64, yaw_rate: f64, sigmas: (f64, f64)) -> Update {
+        self.update_direct([V, YAW_RATE], [speed, yaw_rate], sigmas)
     }
 
     /// IMU: yaw rate (rad/s) and longitudinal acceleration (m/s²) with their standard
     /// deviations.
     pub fn update_imu(&mut self, yaw_rate: f64, accel: f64, sigmas: (f64, f64)) -> Update {
-        let mut h = SMatrix::<f64, 2, STATES>::zeros();
-        h[(0, YAW_RATE)] = 1.0;
-        h[(1, ACCEL)] = 1.0;
-        let r = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::from([
-            sigmas.0 * sigmas.0,
-            sigmas.1 * sigmas.1,
-        ]));
-        self.update(
-            SVector::from([yaw_rate, accel]),
-            h,
-            r,
-            GATE_2DOF,
-            [false; 2],
-        )
+        self.update_direct([YAW_RATE, ACCEL], [yaw_rate, accel], sigmas)
     }
 
     /// GNSS position (m, in the filter's frame) with its standard deviation.
     pub fn update_gnss(&mut self, x: f64, y: f64, sigma: f64) -> Update {
-        let mut h = SMatrix::<f64, 2, STATES>::zeros();
-        h[(0, X)] = 1.0;
-        h[(1, Y)] = 1.0;
-        let r = SMatrix::<f64, 2, 2>::identity() * (sigma * sigma);
-        self.update(SVector::from([x, y]), h, r, GATE_2DOF, [false; 2])
+        self.update_direct([X, Y], [x, y], (sigma, sigma))
     }
 
     /// A heading measurement (a dual-antenna GNSS, a compass), rad.

@@ -9,13 +9,13 @@
 use core::time::Duration;
 
 use bywire_core::e2e::{CounterChecker, CounterStatus};
-use bywire_core::{Frame, Id, StandardId, Timestamp};
+use bywire_core::{Frame, Id, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
 use crate::reference_tug::{
-    self, AdsToVehicleControl, ControlMode, EmergencyBrake, Gear, SteeringMode,
-    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+    self, AdsToVehicleControl, ControlMode, EmergencyBrake, VehicleToAdsSensors, VehicleToAdsState,
+    VehicleToAdsWheelAngles,
 };
 
 /// Tuning of the ADS side.
@@ -61,40 +61,7 @@ impl Default for AdsConfig {
 }
 
 /// What the ADS wants the vehicle to do.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AdsCommand {
-    /// Steering angle, degrees.
-    pub steering: f64,
-    /// Speed, m/s.
-    pub velocity: f64,
-    /// Brake, %.
-    pub brake: f64,
-    /// Gear.
-    pub gear: Gear,
-    /// Control mode requested.
-    pub mode: ControlMode,
-    /// Steering mode.
-    pub steering_mode: SteeringMode,
-    /// Re-engage request.
-    pub engage: bool,
-    /// Operator reset (E-stop sequence).
-    pub operator_reset: bool,
-}
-
-impl Default for AdsCommand {
-    fn default() -> Self {
-        AdsCommand {
-            steering: 0.0,
-            velocity: 0.0,
-            brake: 0.0,
-            gear: Gear::Park,
-            mode: ControlMode::Manual,
-            steering_mode: SteeringMode::Normal,
-            engage: false,
-            operator_reset: false,
-        }
-    }
-}
+pub use crate::reference_tug::ControlCommand as AdsCommand;
 
 /// A feedback value with its time and validity.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -207,15 +174,6 @@ struct BrakeBurst {
     next: Timestamp,
 }
 
-fn frame(id: u32, mut payload: [u8; 8]) -> Frame {
-    reference_tug::seal(id, &mut payload);
-    let id = StandardId::new(u16::try_from(id).unwrap_or(0)).unwrap_or(StandardId::ZERO);
-    Frame::classic(Id::Standard(id), &payload).unwrap_or(Frame::remote(
-        Id::Standard(id),
-        bywire_core::Dlc::from_nibble(0),
-    ))
-}
-
 impl Ads {
     /// A node that sends nothing until it has a command.
     pub fn new(config: AdsConfig) -> Self {
@@ -312,23 +270,12 @@ impl Ads {
     }
 
     fn command_frame(&mut self, now: Timestamp, c: AdsCommand) -> Frame {
-        let mut m = AdsToVehicleControl::default();
-        // The DBC's ranges are wider than any vehicle's limits: clamp rather than drop, the
-        // vehicle side rejects what its own limits refuse.
-        let _ = m.set_steering_angle_cmd(c.steering.clamp(-45.0, 45.0));
-        let _ = m.set_velocity_cmd(c.velocity.clamp(-5.0, 8.0));
-        let _ = m.set_brake_cmd(c.brake.clamp(0.0, 100.0));
-        m.set_gear_cmd_raw(c.gear as u64);
-        m.set_control_mode_cmd_raw(c.mode as u64);
-        m.set_steering_mode_cmd_raw(c.steering_mode as u64);
-        m.set_engage_request_raw(u64::from(c.engage));
-        m.set_operator_reset_raw(u64::from(c.operator_reset));
-        m.set_heartbeat_counter_raw(u64::from(self.counter));
+        let m = c.to_message(self.counter);
         if let Some(slot) = self.sent_at.get_mut(usize::from(self.counter)) {
             *slot = Some(now);
         }
         self.counter = (self.counter + 1) & 0x0F;
-        frame(AdsToVehicleControl::ID, m.0)
+        reference_tug::sealed_frame(AdsToVehicleControl::ID, m.0)
     }
 
     /// When [`poll`](Self::poll) next has something to send.
@@ -348,7 +295,7 @@ impl Ads {
                 m.set_brake_request_raw(1);
                 let _ = m.set_deceleration(burst.deceleration.clamp(0.0, 25.5));
                 m.set_counter_raw(u64::from(burst.sent & 0x0F));
-                out(frame(EmergencyBrake::ID, m.0));
+                out(reference_tug::sealed_frame(EmergencyBrake::ID, m.0));
                 burst.sent = burst.sent.saturating_add(1);
                 let gap = if burst.sent < 3 {
                     self.config.brake_burst_spacing
@@ -379,10 +326,7 @@ impl Ads {
             return;
         };
         let id = u32::from(id.as_raw());
-        let payload: Option<[u8; 8]> = match frame {
-            Frame::Classic(f) if !f.is_remote() => f.data().try_into().ok(),
-            _ => None,
-        };
+        let payload = reference_tug::payload(frame);
         let known = id == VehicleToAdsState::ID
             || id == VehicleToAdsSensors::ID
             || id == VehicleToAdsWheelAngles::ID;

@@ -22,7 +22,7 @@ use core::time::Duration;
 
 use bywire_control::stages::RateLimiter;
 use bywire_core::e2e::{CounterChecker, CounterStatus};
-use bywire_core::{Frame, Id, Timestamp};
+use bywire_core::{Frame, Timestamp};
 
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::reference_tug::{
@@ -360,27 +360,7 @@ impl CommandStats {
 }
 
 /// A validated command.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Command {
-    /// Steering angle, degrees.
-    pub steering: f64,
-    /// Speed, m/s.
-    pub velocity: f64,
-    /// Brake, %.
-    pub brake: f64,
-    /// Gear.
-    pub gear: Gear,
-    /// Requested control mode.
-    pub mode: ControlMode,
-    /// Steering mode.
-    pub steering_mode: SteeringMode,
-    /// Re-engage request bit.
-    pub engage: bool,
-    /// Operator-reset bit.
-    pub operator_reset: bool,
-    /// Heartbeat counter.
-    pub counter: u8,
-}
+pub use crate::reference_tug::ControlCommand as Command;
 
 /// What the actuators must do now.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -518,11 +498,11 @@ impl Supervisor {
 
     /// The driver's steering torque (N·m) and pedal travel (0–1); above the thresholds this
     /// takes over at once.
-    pub fn set_driver_input(&mut self, now: Timestamp, torque: f64, pedal: f64) {
+    pub fn set_driver_input(&mut self, torque: f64, pedal: f64) {
         // Non-finite readings count as input present: fail towards the driver.
         self.driver_input = !(torque.abs() < self.config.takeover_torque
             && pedal.abs() < self.config.takeover_pedal);
-        self.evaluate(now, false, false);
+        self.evaluate(false, false);
     }
 
     fn standstill(&self) -> bool {
@@ -540,14 +520,14 @@ impl Supervisor {
         now: Timestamp,
         channel: Channel,
         frame: &Frame,
-    ) -> Result<Command, Rejection> {
-        let payload = payload(frame).ok_or(Rejection::Malformed)?;
+    ) -> Result<(Command, u8), Rejection> {
+        let payload = reference_tug::payload(frame).ok_or(Rejection::Malformed)?;
         if !reference_tug::is_sealed(AdsToVehicleControl::ID, &payload) {
             return Err(Rejection::Checksum);
         }
         let m = AdsToVehicleControl(payload);
         let counter = u8::try_from(m.heartbeat_counter_raw()).unwrap_or(0);
-        let last = self.command.map(|c| c.counter);
+        let last = self.command.map(|_| self.echo);
         let checker = match channel {
             Channel::A => &mut self.counter,
             Channel::B => &mut self.counter_b,
@@ -566,25 +546,14 @@ impl Supervisor {
             }
         }
         let c = self.config;
-        let steering = m.steering_angle_cmd();
-        let velocity = m.velocity_cmd();
-        let brake = m.brake_cmd();
-        let steering_mode =
-            SteeringMode::from_raw(m.steering_mode_cmd_raw()).ok_or(Rejection::OutOfRange)?;
-        if steering.abs() > c.steering_range || velocity.abs() > c.speed_limit || brake > 100.0 {
+        let command = Command::from_message(&m).ok_or(Rejection::OutOfRange)?;
+        if command.steering.abs() > c.steering_range
+            || command.velocity.abs() > c.speed_limit
+            || command.brake > 100.0
+        {
             return Err(Rejection::OutOfRange);
         }
-        Ok(Command {
-            steering,
-            velocity,
-            brake,
-            gear: Gear::from_raw(m.gear_cmd_raw()),
-            mode: ControlMode::from_raw(m.control_mode_cmd_raw()),
-            steering_mode,
-            engage: m.engage_request_raw() == 1,
-            operator_reset: m.operator_reset_raw() == 1,
-            counter,
-        })
+        Ok((command, counter))
     }
 
     /// A frame from the bus (bus A when redundant).
@@ -602,7 +571,7 @@ impl Supervisor {
             EmergencyStop::ID if !id.is_extended() => {
                 if let Some(m) = sealed(frame, EmergencyStop::ID).map(EmergencyStop) {
                     self.estop_active = m.estop_request_raw() == 1;
-                    self.evaluate(now, false, false);
+                    self.evaluate(false, false);
                 }
             }
             EmergencyBrake::ID if !id.is_extended() => {
@@ -617,11 +586,11 @@ impl Supervisor {
     }
 
     fn on_command(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
-        let command = match self.validate(now, channel, frame) {
+        let (command, counter) = match self.validate(now, channel, frame) {
             Err(r) => return self.stats.count(r),
-            Ok(command) => command,
+            Ok(valid) => valid,
         };
-        if let (Some(voter), Some(copy)) = (self.voter.as_mut(), payload(frame)) {
+        if let (Some(voter), Some(copy)) = (self.voter.as_mut(), reference_tug::payload(frame)) {
             voter.receive(channel, now, copy);
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
@@ -632,7 +601,7 @@ impl Supervisor {
                     self.watchdog = self
                         .watchdog
                         .next(WatchdogEvent::Disagreement, self.config.cascade);
-                    return self.evaluate(now, false, false);
+                    return self.evaluate(false, false);
                 }
             }
             // The other bus's copy of a command already taken.
@@ -640,20 +609,20 @@ impl Supervisor {
             let recent = self
                 .last_valid
                 .is_some_and(|t| now.saturating_since(t) <= skew);
-            if recent && self.echo == command.counter {
+            if recent && self.echo == counter {
                 return;
             }
         }
-        self.accept(now, command);
+        self.accept(now, command, counter);
     }
 
-    fn accept(&mut self, now: Timestamp, command: Command) {
+    fn accept(&mut self, now: Timestamp, command: Command, counter: u8) {
         self.stats.accepted = self.stats.accepted.saturating_add(1);
         let engage = command.engage && !self.last_engage_bit;
         let reset = command.operator_reset && !self.last_reset_bit;
         self.last_engage_bit = command.engage;
         self.last_reset_bit = command.operator_reset;
-        self.echo = command.counter;
+        self.echo = counter;
         self.command = Some(command);
         self.last_valid = Some(now);
         self.missed_reported = 0;
@@ -661,11 +630,11 @@ impl Supervisor {
         self.watchdog = self
             .watchdog
             .next(WatchdogEvent::Valid { engage }, self.config.cascade);
-        self.evaluate(now, engage, reset);
+        self.evaluate(engage, reset);
     }
 
     /// Run the E-stop latch and the mode machine on the current inputs.
-    fn evaluate(&mut self, _now: Timestamp, engage: bool, operator_reset: bool) {
+    fn evaluate(&mut self, engage: bool, operator_reset: bool) {
         let mut inputs = EstopInputs {
             active: self.estop_active,
             operator_reset,
@@ -733,7 +702,7 @@ impl Supervisor {
         if self.emergency_brake_until.is_some_and(|until| now >= until) {
             self.emergency_brake_until = None;
         }
-        self.evaluate(now, false, false);
+        self.evaluate(false, false);
         let dt = self
             .last_poll
             .map_or(0.0, |last| now.saturating_since(last).as_secs_f64());
@@ -849,23 +818,11 @@ impl Supervisor {
         m.set_heartbeat_echo_raw(u64::from(self.echo));
         m.set_counter_raw(u64::from(self.state_counter));
         self.state_counter = (self.state_counter + 1) & 0x0F;
-        let mut payload = m.0;
-        reference_tug::seal(VehicleToAdsState::ID, &mut payload);
-        let id = Id::standard(VehicleToAdsState::ID)
-            .unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
-        Frame::classic(id, &payload).unwrap_or(Frame::remote(id, bywire_core::Dlc::from_nibble(0)))
-    }
-}
-
-/// The payload of a classic 8-byte data frame.
-fn payload(frame: &Frame) -> Option<[u8; 8]> {
-    match frame {
-        Frame::Classic(f) if !f.is_remote() => f.data().try_into().ok(),
-        _ => None,
+        reference_tug::sealed_frame(VehicleToAdsState::ID, m.0)
     }
 }
 
 /// The payload of a classic 8-byte data frame whose CRC checks out.
 fn sealed(frame: &Frame, id: u32) -> Option<[u8; 8]> {
-    payload(frame).filter(|p| reference_tug::is_sealed(id, p))
+    reference_tug::payload(frame).filter(|p| reference_tug::is_sealed(id, p))
 }

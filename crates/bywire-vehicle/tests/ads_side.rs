@@ -7,18 +7,17 @@
     clippy::indexing_slicing
 )]
 
+mod common;
+
 use std::time::Duration;
 
 use bywire_bus::sim::SimBus;
-use bywire_core::{Frame, Id, Timestamp};
+use bywire_core::{Frame, Id};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, Vote, VoteFailure};
 use bywire_vehicle::reference_tug::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
-
-fn ms(t: u64) -> Timestamp {
-    Timestamp::from_millis(t)
-}
+use common::{ms, sealed};
 
 /// ADS and supervisor on one 500 kbit/s bus, stepped by the millisecond.
 struct Loop {
@@ -259,11 +258,6 @@ fn two_of_three_outvotes_one_sensor() {
         }
     );
     assert_eq!(two_of_three([1.0, 2.0, 3.0], 0.05), TwoOfThree::Failed);
-}
-
-fn sealed(id: u32, mut payload: [u8; 8]) -> Frame {
-    reference_tug::seal(id, &mut payload);
-    Frame::classic(Id::standard(id).unwrap(), &payload).unwrap()
 }
 
 /// Feed the ADS 2 s of wheel feedback at 50 Hz: every wheel at `angles` (degrees) and

@@ -59,7 +59,7 @@ proptest! {
             t += gap;
             let now = Timestamp::from_millis(t);
             supervisor.on_frame(now, &frame);
-            supervisor.set_driver_input(now, torque, 0.0);
+            supervisor.set_driver_input(torque, 0.0);
             supervisor.set_feedback(speed, speed);
             supervisor.poll(now, &mut |_| {});
             ads.on_frame(now, &frame);

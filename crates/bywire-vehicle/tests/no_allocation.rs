@@ -7,14 +7,12 @@
     clippy::indexing_slicing
 )]
 
-use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::reference_tug::{self, AdsToVehicleControl, EmergencyStop};
-use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
+mod common;
 
-fn sealed(id: u32, mut payload: [u8; 8]) -> Frame {
-    reference_tug::seal(id, &mut payload);
-    Frame::classic(Id::standard(id).unwrap(), &payload).unwrap()
-}
+use bywire_core::{Frame, Timestamp};
+use bywire_vehicle::reference_tug::{AdsToVehicleControl, EmergencyStop};
+use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
+use common::sealed;
 
 #[test]
 fn the_supervisor_never_allocates() {
@@ -53,7 +51,7 @@ fn the_supervisor_never_allocates() {
             if k == 160 {
                 supervisor.on_frame(now, &closed);
             }
-            supervisor.set_driver_input(now, 0.0, 0.0);
+            supervisor.set_driver_input(0.0, 0.0);
             supervisor.poll(now, &mut |_| frames_out += 1);
             let a = supervisor.actuators(now);
             supervisor.set_feedback(a.velocity, a.steering);

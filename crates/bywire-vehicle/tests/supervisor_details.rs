@@ -10,8 +10,6 @@
 
 mod common;
 
-use std::time::Duration;
-
 use bywire_core::{Frame, Id};
 use bywire_vehicle::reference_tug::{
     AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, VehicleToAdsState,
@@ -212,15 +210,15 @@ fn a_restart_after_silence_is_accepted_but_not_the_frozen_value() {
 
 #[test]
 fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
-    let (mut s, _, t) = engaged();
-    s.set_driver_input(ms(t), 3.0, 0.0);
+    let (mut s, _, _) = engaged();
+    s.set_driver_input(3.0, 0.0);
     assert_eq!(
         s.mode(),
         ControlMode::Manual,
         "torque at the threshold takes over"
     );
-    let (mut s, _, t) = engaged();
-    s.set_driver_input(ms(t), 0.0, 0.1);
+    let (mut s, _, _) = engaged();
+    s.set_driver_input(0.0, 0.1);
     assert_eq!(
         s.mode(),
         ControlMode::Manual,
@@ -339,5 +337,4 @@ fn state_frame_bits() {
     s.on_frame(ms(t), &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]));
     let f = state_frame(&mut s, t);
     assert_eq!((f.steering_enabled_raw(), f.estop_state_raw()), (0, 4));
-    let _ = Duration::ZERO;
 }
