@@ -23,10 +23,26 @@ pub mod socketcan;
 mod spec;
 pub mod virtual_bus;
 
-use std::time::Duration;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant, SystemTime};
 
 use bywire_core::filter::{ErrorMask, Filter};
 use bywire_core::{Frame, Timestamp};
+
+/// Unix time in nanoseconds from a monotonic clock: the wall clock is read once per process and
+/// the monotonic time since then added, so in-process buses stamp frames as SocketCAN does
+/// (since the Unix epoch) without going backwards when the wall clock is set.
+pub(crate) fn monotonic_unix_now() -> Timestamp {
+    static ANCHOR: OnceLock<(Instant, Duration)> = OnceLock::new();
+    let (instant, unix) = *ANCHOR.get_or_init(|| {
+        let unix = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap_or_default();
+        (Instant::now(), unix)
+    });
+    let nanos = (unix + instant.elapsed()).as_nanos();
+    Timestamp::from_nanos(u64::try_from(nanos).unwrap_or(u64::MAX))
+}
 
 pub use spec::{open, BusSpec, OpenError, SpecError};
 

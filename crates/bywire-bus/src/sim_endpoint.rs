@@ -40,6 +40,8 @@ struct Shared {
     changed: Condvar,
     bitrates: Bitrates,
     epoch: Instant,
+    /// Unix time at `epoch`: received frames are stamped in Unix time, as SocketCAN does.
+    unix_at_epoch: Timestamp,
 }
 
 impl Shared {
@@ -108,6 +110,7 @@ impl SimEndpoint {
                         changed: Condvar::new(),
                         bitrates,
                         epoch: Instant::now(),
+                        unix_at_epoch: crate::monotonic_unix_now(),
                     });
                     buses.retain(|_, bus| bus.strong_count() > 0);
                     buses.insert(name.to_string(), Arc::downgrade(&shared));
@@ -187,10 +190,14 @@ impl SharedEndpoint for Member {
         loop {
             let now = self.shared.now();
             state.bus.advance(now);
-            if let Some(received) = state.bus.receive_by(self.node, now) {
+            if let Some(mut received) = state.bus.receive_by(self.node, now) {
                 if let Some(stats) = state.stats.get_mut(&self.node) {
                     stats.count_received(&received.frame);
                 }
+                received.timestamp = self
+                    .shared
+                    .unix_at_epoch
+                    .saturating_add(Duration::from_nanos(received.timestamp.as_nanos()));
                 return Ok(Some(received));
             }
             let until_event = state

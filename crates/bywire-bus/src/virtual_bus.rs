@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, OnceLock, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
-use bywire_core::{Frame, Timestamp};
+use bywire_core::Frame;
 
 use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, SharedEndpoint, Stats};
 
@@ -48,13 +48,6 @@ impl Shared {
 fn registry() -> &'static Mutex<HashMap<String, Weak<Shared>>> {
     static REGISTRY: OnceLock<Mutex<HashMap<String, Weak<Shared>>>> = OnceLock::new();
     REGISTRY.get_or_init(Mutex::default)
-}
-
-/// Nanoseconds since the first use of any virtual bus in this process (a monotonic clock).
-fn now() -> Timestamp {
-    static ORIGIN: OnceLock<Instant> = OnceLock::new();
-    let origin = *ORIGIN.get_or_init(Instant::now);
-    Timestamp::from_nanos(u64::try_from(origin.elapsed().as_nanos()).unwrap_or(u64::MAX))
 }
 
 /// An endpoint's membership: removed from the bus when the last half is dropped.
@@ -141,7 +134,7 @@ impl VirtualBus {
 impl SharedEndpoint for Membership {
     fn send(&self, frame: &Frame) -> Result<(), BusError> {
         let mut state = self.shared.lock();
-        let timestamp = now();
+        let timestamp = crate::monotonic_unix_now();
         let loopback = self.loopback.load(Ordering::Relaxed);
         for (&id, endpoint) in state.endpoints.iter_mut() {
             let own = id == self.id;

@@ -210,8 +210,8 @@ pub fn loopback_off_keeps_frames_from_local_endpoints(open: &Opener) {
 pub fn fd_and_remote_frames(open: &Opener) {
     let (mut a, mut b) = (open(), open());
     let texts = [
-        "123##1000102030405060708090A0B0C0D0E0F101112131415161718191A1B1C1D1E1F",
-        "1ABCDEF0##0",
+        "123##5000102030405060708090A0B0C0D0E0F101112131415161718191A1B1C1D1E1F",
+        "1ABCDEF0##4",
         "1ABCDEF0#R3",
         "7FF#1122334455667788",
     ];

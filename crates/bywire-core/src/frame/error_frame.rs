@@ -180,11 +180,17 @@ impl ErrorFrame {
 
     /// The error in words, as can-utils prints it (`bus-error,protocol-violation{{...}{...}}`).
     pub fn describe(&self) -> impl fmt::Display + '_ {
-        Describe(self)
+        Describe(self, ",")
+    }
+
+    /// The same with another separator between the items (`candump -e` puts each on its own
+    /// line with `"\n\t"`).
+    pub fn describe_with<'a>(&'a self, separator: &'a str) -> impl fmt::Display + 'a {
+        Describe(self, separator)
     }
 }
 
-struct Describe<'a>(&'a ErrorFrame);
+struct Describe<'a>(&'a ErrorFrame, &'a str);
 
 fn write_bits(f: &mut fmt::Formatter<'_>, value: u8, names: &[(u8, &str)]) -> fmt::Result {
     let mut first = true;
@@ -202,14 +208,14 @@ fn write_bits(f: &mut fmt::Formatter<'_>, value: u8, names: &[(u8, &str)]) -> fm
 
 impl fmt::Display for Describe<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let frame = self.0;
+        let (frame, separator) = (self.0, self.1);
         let mut first = true;
         for class in ErrorClass::ALL {
             if !frame.has(class) || class == ErrorClass::Counters {
                 continue;
             }
             if !first {
-                f.write_str(",")?;
+                f.write_str(separator)?;
             }
             first = false;
             f.write_str(class.name())?;
@@ -234,7 +240,7 @@ impl fmt::Display for Describe<'_> {
         }
         if let Some((tec, rec)) = frame.counters() {
             if !first {
-                f.write_str(",")?;
+                f.write_str(separator)?;
             }
             write!(f, "error-counter-tx-rx{{{{{tec}}}{{{rec}}}}}")?;
         }

@@ -8,7 +8,7 @@
 //! | `1ABCDEF0#`              | extended ID (8 digits), no data                         |
 //! | `123#R`, `123#R5`        | remote frame, DLC 0 / 5                                 |
 //! | `123#1122334455667788_E` | classic frame with 8 bytes and raw DLC 14               |
-//! | `123##1DEADBEEF`         | CAN FD, flags nibble (1 = BRS, 2 = ESI), then data      |
+//! | `123##5DEADBEEF`         | CAN FD, flags nibble (1 = BRS, 2 = ESI, 4 = FDF), then data |
 //! | `20000080#0000000000000000` | error frame (ERR flag 0x20000000 in the 8-digit ID)  |
 
 use core::fmt;
@@ -20,6 +20,8 @@ use super::{ClassicFrame, Dlc, ErrorFrame, FdFrame, Frame, FrameError, Id, EFF_M
 const FLAG_BRS: u8 = 0x01;
 /// FD flags nibble: error state indicator.
 const FLAG_ESI: u8 = 0x02;
+/// FD flags nibble: FD format (set by Linux on every FD frame).
+const FLAG_FDF: u8 = 0x04;
 
 /// Why a text frame was refused, with the 1-based column where the problem is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -272,7 +274,8 @@ impl fmt::Display for Frame {
             }
             Frame::Fd(d) => {
                 write_id(f, d.id())?;
-                let mut flags = 0;
+                // FDF (4) is always set, as Linux and can-utils write it.
+                let mut flags = FLAG_FDF;
                 if d.brs() {
                     flags |= FLAG_BRS;
                 }
@@ -310,13 +313,13 @@ mod tests {
         assert_eq!(round("123#r5"), "123#R5");
         assert_eq!(round("123#R8_E"), "123#R8_E");
         assert_eq!(round("123#1122334455667788_F"), "123#1122334455667788_F");
-        assert_eq!(round("123##1DEADBEEF"), "123##1DEADBEEF");
-        assert_eq!(round("123##3"), "123##3");
-        assert_eq!(round("123##0.11.22"), "123##01122");
+        assert_eq!(round("123##1DEADBEEF"), "123##5DEADBEEF");
+        assert_eq!(round("123##3"), "123##7");
+        assert_eq!(round("123##0.11.22"), "123##41122");
         // Nine bytes are padded to the next FD length, as the controller sends them.
         assert_eq!(
             round("123##0112233445566778899"),
-            "123##0112233445566778899000000"
+            "123##4112233445566778899000000"
         );
         assert_eq!(
             round("20000080#0000000000000000"),

@@ -1,0 +1,423 @@
+//! The candump log format: one frame per line,
+//!
+//! ```text
+//! (1699999999.123456) can0 123#DEADBEEF
+//! (1699999999.123789) can1 1ABCDEF0##5001122
+//! (1699999999.124000) can0 20000080#0000000000000000
+//! ```
+//!
+//! The timestamp is seconds since the Unix epoch with a fraction (candump writes six digits;
+//! up to nine are read, so nanosecond logs keep their precision); the interface name; the frame
+//! in can-utils' compact form (FD flags, remote frames, raw DLCs and error frames included).
+//! Newer can-utils may append a direction (`R` or `T`); it is read and kept.
+
+use std::fmt::{self, Write as _};
+use std::io::{self, BufRead, Write};
+
+use bywire_core::ParseFrameError;
+use bywire_core::{ClassicFrame, Dlc, Frame, Timestamp};
+
+/// One line of a candump log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogRecord {
+    /// When the frame was on the bus, in nanoseconds since the Unix epoch.
+    pub timestamp: Timestamp,
+    /// The interface it was on (`can0`, `vcan1`).
+    pub interface: String,
+    /// The frame.
+    pub frame: Frame,
+    /// `Some('R')` or `Some('T')` when the line carries a direction.
+    pub direction: Option<char>,
+}
+
+/// A line that is not a candump log line, with where the problem is.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LogError {
+    /// The line is malformed.
+    #[error("line {line}, column {column}: {kind}")]
+    Syntax {
+        /// 1-based line number.
+        line: u64,
+        /// 1-based column (character position).
+        column: usize,
+        /// What is wrong.
+        kind: LogErrorKind,
+    },
+    /// Reading failed.
+    #[error("line {line}: {message}")]
+    Io {
+        /// The line being read.
+        line: u64,
+        /// The I/O error, as text (so the error stays comparable).
+        message: String,
+    },
+}
+
+/// What is wrong with a log line.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LogErrorKind {
+    /// The line does not start with `(`.
+    #[error("expected '(' and a timestamp, as in (1699999999.123456) can0 123#DEADBEEF")]
+    NoTimestamp,
+    /// The timestamp is not SECONDS.FRACTION.
+    #[error("timestamp is not SECONDS.FRACTION with 1-9 fraction digits: {0}")]
+    BadTimestamp(&'static str),
+    /// No interface name after the timestamp.
+    #[error("expected an interface name after the timestamp")]
+    NoInterface,
+    /// No frame after the interface name.
+    #[error("expected a frame after the interface name")]
+    NoFrame,
+    /// The frame text is invalid.
+    #[error("frame: {0}")]
+    Frame(ParseFrameError),
+    /// Something after the frame other than a direction.
+    #[error("unexpected '{0}' after the frame (only a direction R or T may follow)")]
+    Trailing(String),
+}
+
+/// Parse one log line. Columns in errors are 1-based.
+pub fn parse_line(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
+    let rest = text
+        .strip_prefix('(')
+        .ok_or((1, LogErrorKind::NoTimestamp))?;
+    let close = rest
+        .find(')')
+        .ok_or((2, LogErrorKind::BadTimestamp("no closing ')'")))?;
+    let timestamp = parse_timestamp(rest.get(..close).unwrap_or(""))
+        .map_err(|why| (2, LogErrorKind::BadTimestamp(why)))?;
+    // ')' is at column close + 2; one space, then the interface.
+    let mut column = close + 4;
+    let mut fields = rest.get(close + 1..).unwrap_or("").split(' ');
+    if fields.next() != Some("") {
+        return Err((column - 1, LogErrorKind::NoInterface));
+    }
+    let interface = fields
+        .next()
+        .filter(|s| !s.is_empty())
+        .ok_or((column, LogErrorKind::NoInterface))?;
+    column += interface.chars().count() + 1;
+    let frame_text = fields
+        .next()
+        .filter(|s| !s.is_empty())
+        .ok_or((column, LogErrorKind::NoFrame))?;
+    let frame = frame_text.parse::<Frame>().map_err(|e| {
+        (
+            column + e.column - 1,
+            LogErrorKind::Frame(ParseFrameError { column: 1, ..e }),
+        )
+    })?;
+    column += frame_text.chars().count() + 1;
+    let direction = match fields.next() {
+        None => None,
+        Some("R") => Some('R'),
+        Some("T") => Some('T'),
+        Some(other) => return Err((column, LogErrorKind::Trailing(other.to_string()))),
+    };
+    if let Some(extra) = fields.next() {
+        return Err((column + 2, LogErrorKind::Trailing(extra.to_string())));
+    }
+    Ok(LogRecord {
+        timestamp,
+        interface: interface.to_string(),
+        frame,
+        direction,
+    })
+}
+
+fn parse_timestamp(text: &str) -> Result<Timestamp, &'static str> {
+    let (secs, fraction) = text.split_once('.').ok_or("no '.'")?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if !digits(secs) || !digits(fraction) {
+        return Err("not digits");
+    }
+    if fraction.len() > 9 {
+        return Err("more than 9 fraction digits");
+    }
+    let secs: u64 = secs.parse().map_err(|_| "seconds out of range")?;
+    let scale = 10u64.pow(9 - u32::try_from(fraction.len()).unwrap_or(9));
+    let fraction: u64 = fraction.parse().map_err(|_| "not digits")?;
+    secs.checked_mul(1_000_000_000)
+        .and_then(|n| n.checked_add(fraction * scale))
+        .map(Timestamp::from_nanos)
+        .ok_or("seconds out of range")
+}
+
+/// Reads a candump log one line at a time. Blank lines are skipped; every other line is a
+/// record or an error naming its line (reading goes on after an error).
+pub struct Reader<R> {
+    input: R,
+    line: u64,
+    buffer: String,
+}
+
+impl<R: BufRead> Reader<R> {
+    /// A reader over `input`.
+    pub fn new(input: R) -> Self {
+        Reader {
+            input,
+            line: 0,
+            buffer: String::new(),
+        }
+    }
+
+    /// The number of the line read last (1-based; 0 before the first).
+    pub fn line(&self) -> u64 {
+        self.line
+    }
+}
+
+impl<R: BufRead> Iterator for Reader<R> {
+    type Item = Result<LogRecord, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            self.buffer.clear();
+            self.line += 1;
+            match self.input.read_line(&mut self.buffer) {
+                Ok(0) => return None,
+                Ok(_) => {}
+                Err(e) => {
+                    return Some(Err(LogError::Io {
+                        line: self.line,
+                        message: e.to_string(),
+                    }))
+                }
+            }
+            let text = self.buffer.trim_end_matches(['\n', '\r']);
+            if text.trim().is_empty() {
+                continue;
+            }
+            return Some(parse_line(text).map_err(|(column, kind)| LogError::Syntax {
+                line: self.line,
+                column,
+                kind,
+            }));
+        }
+    }
+}
+
+/// How many fraction digits timestamps are written with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Precision {
+    /// Six, as candump writes them (what canplayer expects).
+    #[default]
+    Micros,
+    /// Nine.
+    Nanos,
+}
+
+/// The frame as candump prints it: with `raw_dlc` (candump `-8`) a classic frame's DLC above 8
+/// shows as `_X`; without, the frame is printed as its 8 bytes.
+pub fn frame_text(frame: &Frame, raw_dlc: bool) -> impl fmt::Display + '_ {
+    FrameText(frame, raw_dlc)
+}
+
+struct FrameText<'a>(&'a Frame, bool);
+
+impl fmt::Display for FrameText<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            Frame::Classic(c) if !self.1 && c.dlc().as_raw() > 8 => {
+                let plain = if c.is_remote() {
+                    ClassicFrame::remote(c.id(), Dlc::from_classic_len(8).ok_or(fmt::Error)?)
+                } else {
+                    ClassicFrame::new(c.id(), c.data()).map_err(|_| fmt::Error)?
+                };
+                Frame::Classic(plain).fmt(f)
+            }
+            other => other.fmt(f),
+        }
+    }
+}
+
+/// A timestamp as `SECONDS.FRACTION` (ten-digit zero-padded seconds, as candump prints them).
+pub fn timestamp_text(timestamp: Timestamp, precision: Precision) -> impl fmt::Display {
+    TimestampText(timestamp, precision)
+}
+
+struct TimestampText(Timestamp, Precision);
+
+impl fmt::Display for TimestampText {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let nanos = self.0.as_nanos();
+        let (secs, sub) = (nanos / 1_000_000_000, nanos % 1_000_000_000);
+        match self.1 {
+            Precision::Micros => write!(f, "{secs:010}.{:06}", sub / 1000),
+            Precision::Nanos => write!(f, "{secs:010}.{sub:09}"),
+        }
+    }
+}
+
+/// Writes candump log lines.
+pub struct Writer<W> {
+    output: W,
+    precision: Precision,
+    raw_dlc: bool,
+    line: String,
+}
+
+impl<W: Write> Writer<W> {
+    /// A writer with candump's defaults (microseconds, no raw DLC).
+    pub fn new(output: W) -> Self {
+        Writer {
+            output,
+            precision: Precision::Micros,
+            raw_dlc: false,
+            line: String::new(),
+        }
+    }
+
+    /// Write timestamps with this precision.
+    pub fn precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
+    /// Write classic DLCs above 8 as `_X` (candump `-8`).
+    pub fn raw_dlc(mut self, on: bool) -> Self {
+        self.raw_dlc = on;
+        self
+    }
+
+    /// Write one line; the whole line is formatted first, so a failed write never leaves a
+    /// partial line from this call in the output buffer's logic.
+    pub fn write(
+        &mut self,
+        timestamp: Timestamp,
+        interface: &str,
+        frame: &Frame,
+    ) -> io::Result<()> {
+        self.line.clear();
+        // Writing to a String cannot fail.
+        let _ = writeln!(
+            self.line,
+            "({}) {interface} {}",
+            timestamp_text(timestamp, self.precision),
+            frame_text(frame, self.raw_dlc)
+        );
+        self.output.write_all(self.line.as_bytes())
+    }
+
+    /// Write a record (its direction too).
+    pub fn write_record(&mut self, record: &LogRecord) -> io::Result<()> {
+        match record.direction {
+            None => self.write(record.timestamp, &record.interface, &record.frame),
+            Some(direction) => {
+                self.line.clear();
+                let _ = writeln!(
+                    self.line,
+                    "({}) {} {} {direction}",
+                    timestamp_text(record.timestamp, self.precision),
+                    record.interface,
+                    frame_text(&record.frame, self.raw_dlc)
+                );
+                self.output.write_all(self.line.as_bytes())
+            }
+        }
+    }
+
+    /// Flush the output.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.output.flush()
+    }
+
+    /// The output back.
+    pub fn into_inner(self) -> W {
+        self.output
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_candump_lines() {
+        let r = parse_line("(1699999999.123456) can0 123#DEADBEEF").unwrap();
+        assert_eq!(r.timestamp.as_nanos(), 1_699_999_999_123_456_000);
+        assert_eq!(r.interface, "can0");
+        assert_eq!(r.frame.to_string(), "123#DEADBEEF");
+        let r = parse_line("(0.5) vcan1 1ABCDEF0##5AA T").unwrap();
+        assert_eq!(r.timestamp.as_nanos(), 500_000_000);
+        assert_eq!(r.direction, Some('T'));
+        let r = parse_line("(1.000000001) x 20000080#0000000000000000").unwrap();
+        assert!(r.frame.is_error());
+        assert_eq!(r.timestamp.as_nanos(), 1_000_000_001);
+    }
+
+    #[test]
+    fn names_the_column_of_a_problem() {
+        let e = |t: &str| parse_line(t).unwrap_err();
+        assert_eq!(e("1.0 can0 123#00").0, 1);
+        assert_eq!(e("(1) can0 123#00").1, LogErrorKind::BadTimestamp("no '.'"));
+        assert_eq!(e("(1.0000000001) can0 123#00").0, 2);
+        assert_eq!(e("(1.0)").1, LogErrorKind::NoInterface);
+        assert_eq!(e("(1.0) can0").1, LogErrorKind::NoFrame);
+        // The frame starts at column 12; its G at 14.
+        let (column, kind) = e("(1.0) can0 12G#00");
+        assert_eq!(column, 14);
+        assert!(matches!(kind, LogErrorKind::Frame(_)));
+        let (column, kind) = e("(1.0) can0 123#0G");
+        assert_eq!(column, 17);
+        assert!(matches!(kind, LogErrorKind::Frame(_)));
+        assert_eq!(
+            e("(1.0) can0 123#00 X").1,
+            LogErrorKind::Trailing("X".into())
+        );
+        assert_eq!(e("(99999999999999999999.0) can0 123#00").0, 2);
+    }
+
+    #[test]
+    fn writes_what_it_reads() {
+        let text =
+            "(1699999999.123456) can0 123#DEADBEEF\n\n(1699999999.200000) can1 1ABCDEF0##5AA T\n";
+        let records: Vec<_> = Reader::new(text.as_bytes())
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let mut w = Writer::new(Vec::new());
+        for r in &records {
+            w.write_record(r).unwrap();
+        }
+        assert_eq!(
+            String::from_utf8(w.into_inner()).unwrap(),
+            text.replace("\n\n", "\n")
+        );
+    }
+
+    #[test]
+    fn errors_name_the_line_and_reading_goes_on() {
+        let text = "(1.0) can0 123#00\nnot a log line\n(2.0) can0 124#01\n";
+        let results: Vec<_> = Reader::new(text.as_bytes()).collect();
+        assert_eq!(results.len(), 3);
+        assert!(matches!(
+            results[1],
+            Err(LogError::Syntax {
+                line: 2,
+                column: 1,
+                ..
+            })
+        ));
+        assert_eq!(results[2].as_ref().unwrap().frame.to_string(), "124#01");
+    }
+
+    #[test]
+    fn raw_dlc_and_nanoseconds_on_request() {
+        let frame: Frame = "123#1122334455667788_E".parse().unwrap();
+        let ts = Timestamp::from_nanos(1_000_000_123);
+        let mut w = Writer::new(Vec::new());
+        w.write(ts, "can0", &frame).unwrap();
+        let mut w8 = Writer::new(Vec::new())
+            .raw_dlc(true)
+            .precision(Precision::Nanos);
+        w8.write(ts, "can0", &frame).unwrap();
+        assert_eq!(
+            String::from_utf8(w.into_inner()).unwrap(),
+            "(0000000001.000000) can0 123#1122334455667788\n"
+        );
+        assert_eq!(
+            String::from_utf8(w8.into_inner()).unwrap(),
+            "(0000000001.000000123) can0 123#1122334455667788_E\n"
+        );
+    }
+}

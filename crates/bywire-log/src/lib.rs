@@ -1,0 +1,16 @@
+//! # bywire-log: CAN logs
+//!
+//! - [`candump`]: the candump log format, `(1699999999.123456) can0 123#DEADBEEF`, read as a
+//!   stream of records with errors naming the line and column, written byte-identical to
+//!   `candump -L` (or with nanoseconds).
+//! - [`screen`]: candump's screen form, `  can0  123   [4]  DE AD BE EF`, written as candump
+//!   prints it and read back (for tools that take either form on standard input).
+//!
+//! Readers hold one line at a time, so logs of any size stream in bounded memory, and no input
+//! can make them panic (property-tested).
+
+pub mod candump;
+pub mod screen;
+
+pub use candump::{LogError, LogErrorKind, LogRecord, Precision, Reader, Writer};
+pub use screen::{FrameView, View};

@@ -1,0 +1,96 @@
+//! Property tests: no input makes the readers panic, and every frame written is read back equal.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use bywire_core::{ClassicFrame, Dlc, ErrorFrame, FdFrame, Frame, Id, Timestamp};
+use bywire_log::screen::{self, FrameView, View};
+use bywire_log::{Precision, Reader, Writer};
+use proptest::prelude::*;
+
+fn any_frame() -> impl Strategy<Value = Frame> {
+    let id = prop_oneof![
+        (0u32..=0x7FF).prop_map(|r| Id::standard(r).unwrap()),
+        (0u32..=0x1FFF_FFFF).prop_map(|r| Id::extended(r).unwrap()),
+    ];
+    let data = proptest::collection::vec(any::<u8>(), 0..=64);
+    (id, data, 0u8..6, any::<bool>(), any::<bool>(), 0u8..=15).prop_map(
+        |(id, data, kind, brs, esi, raw_dlc)| match kind {
+            0 | 1 => Frame::Classic(ClassicFrame::new(id, &data[..data.len().min(8)]).unwrap()),
+            2 => Frame::Classic(ClassicFrame::remote(
+                id,
+                Dlc::from_classic_len(data.len() % 9).unwrap(),
+            )),
+            3 => {
+                let dlc = Dlc::new(raw_dlc.max(9)).unwrap();
+                let bytes = [data.first().copied().unwrap_or(0); 8];
+                Frame::Classic(ClassicFrame::with_dlc(id, dlc, &bytes).unwrap())
+            }
+            4 => Frame::Fd(FdFrame::padded(id, &data, brs, esi).unwrap()),
+            _ => {
+                let mut bytes = [0u8; 8];
+                for (b, d) in bytes.iter_mut().zip(&data) {
+                    *b = *d;
+                }
+                let class = (id.as_raw() & 0x1FF).max(1);
+                Frame::Error(ErrorFrame::new(class, &bytes).unwrap())
+            }
+        },
+    )
+}
+
+proptest! {
+    #[test]
+    fn any_text_is_a_record_or_an_error(text in "\\PC{0,80}") {
+        let _ = bywire_log::candump::parse_line(&text);
+        let _ = screen::parse_line(&text);
+        let _ = Reader::new(text.as_bytes()).count();
+    }
+
+    #[test]
+    fn near_miss_lines_never_panic(
+        secs in "[0-9]{0,22}", frac in "[0-9]{0,11}", iface in "[a-z0-9]{0,5}",
+        frame in "[0-9A-FR#._]{0,30}", tail in "( [A-Z])?"
+    ) {
+        let line = format!("({secs}.{frac}) {iface} {frame}{tail}");
+        let _ = bywire_log::candump::parse_line(&line);
+        let _ = screen::parse_line(&format!(" {iface}  {frame}"));
+    }
+
+    #[test]
+    fn written_logs_read_back(
+        frames in proptest::collection::vec((any_frame(), any::<u64>()), 0..20),
+        nanos in any::<bool>()
+    ) {
+        let precision = if nanos { Precision::Nanos } else { Precision::Micros };
+        let mut writer = Writer::new(Vec::new()).raw_dlc(true).precision(precision);
+        for (frame, ts) in &frames {
+            writer.write(Timestamp::from_nanos(*ts), "can0", frame).unwrap();
+        }
+        let bytes = writer.into_inner();
+        let read: Vec<_> = Reader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
+        prop_assert_eq!(read.len(), frames.len());
+        for (record, (frame, ts)) in read.iter().zip(&frames) {
+            prop_assert_eq!(&record.frame, frame);
+            let expected = if nanos { *ts } else { ts - ts % 1000 };
+            prop_assert_eq!(record.timestamp.as_nanos(), expected);
+            prop_assert_eq!(record.interface.as_str(), "can0");
+        }
+    }
+
+    #[test]
+    fn screen_lines_read_back(frame in any_frame()) {
+        // The screen form has no FD flags or raw DLC; compare what it shows.
+        let line = format!("  can0  {}", FrameView { frame: &frame, view: View::default() });
+        let back = screen::parse_line(&line).unwrap();
+        prop_assert_eq!(back.id(), frame.id());
+        prop_assert_eq!(back.is_remote(), frame.is_remote());
+        prop_assert_eq!(back.is_fd(), frame.is_fd());
+        if !frame.is_remote() {
+            prop_assert_eq!(back.data(), frame.data());
+        }
+    }
+}
