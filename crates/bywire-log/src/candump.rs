@@ -14,7 +14,7 @@
 use std::fmt::{self, Write as _};
 use std::io::{self, BufRead, Write};
 
-use bywire_core::ParseFrameError;
+use bywire_core::frame::ParseFrameErrorKind;
 use bywire_core::{ClassicFrame, Dlc, Frame, Timestamp};
 
 /// One line of a candump log.
@@ -70,7 +70,7 @@ pub enum LogErrorKind {
     NoFrame,
     /// The frame text is invalid.
     #[error("frame: {0}")]
-    Frame(ParseFrameError),
+    Frame(ParseFrameErrorKind),
     /// Something after the frame other than a direction.
     #[error("unexpected '{0}' after the frame (only a direction R or T may follow)")]
     Trailing(String),
@@ -101,12 +101,9 @@ pub fn parse_line(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
         .next()
         .filter(|s| !s.is_empty())
         .ok_or((column, LogErrorKind::NoFrame))?;
-    let frame = frame_text.parse::<Frame>().map_err(|e| {
-        (
-            column + e.column - 1,
-            LogErrorKind::Frame(ParseFrameError { column: 1, ..e }),
-        )
-    })?;
+    let frame = frame_text
+        .parse::<Frame>()
+        .map_err(|e| (column + e.column - 1, LogErrorKind::Frame(e.kind)))?;
     column += frame_text.chars().count() + 1;
     let direction = match fields.next() {
         None => None,

@@ -1,10 +1,10 @@
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
+use crate::signals::{Dbc, DecodedFrame};
 use anyhow::{Context, Result};
-use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::{ByteOrder, Database, Message, Mode, Multiplexing, ValueType};
-use serde_json::{json, Map};
+use serde_json::json;
 
 #[derive(clap::Subcommand)]
 pub enum DbcCommand {
@@ -276,83 +276,9 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-/// A frame read from a candump line: identifier, extended, data (remote frames: none).
-struct LineFrame {
-    id: u32,
-    extended: bool,
-    data: Vec<u8>,
-}
-
-/// candump's log form `(ts) if 123#DEAD` or screen form `if 123 [2] DE AD` (with an optional
-/// leading `(ts)`).
-fn parse_candump(line: &str) -> Option<LineFrame> {
-    let mut words = line.split_whitespace().peekable();
-    if words.peek().is_some_and(|w| w.starts_with('(')) {
-        words.next();
-    }
-    let _interface = words.next()?;
-    let first = words.next()?;
-    if first.contains('#') {
-        let frame: bywire_core::Frame = first.parse().ok()?;
-        let id = frame.id()?;
-        let data = if frame.is_remote() {
-            Vec::new()
-        } else {
-            frame.data().to_vec()
-        };
-        return Some(LineFrame {
-            id: id.as_raw(),
-            extended: id.is_extended(),
-            data,
-        });
-    }
-    let id = u32::from_str_radix(first, 16).ok()?;
-    let extended = first.len() == 8;
-    let len_word = words.next()?;
-    let len: usize = len_word
-        .trim_start_matches('[')
-        .trim_end_matches(']')
-        .parse()
-        .ok()?;
-    let rest: Vec<&str> = words.collect();
-    if rest.first() == Some(&"remote") {
-        return Some(LineFrame {
-            id,
-            extended,
-            data: Vec::new(),
-        });
-    }
-    let data: Vec<u8> = rest
-        .iter()
-        .take(len)
-        .map(|b| u8::from_str_radix(b, 16))
-        .collect::<Result<_, _>>()
-        .ok()?;
-    (data.len() == len).then_some(LineFrame { id, extended, data })
-}
-
-fn json_value(v: Value) -> serde_json::Value {
-    match v {
-        Value::Int(i) => json!(i),
-        Value::UInt(u) => json!(u),
-        Value::Float(f) if f.is_nan() => json!("NaN"),
-        Value::Float(f) if f.is_infinite() => json!(if f > 0.0 { "inf" } else { "-inf" }),
-        Value::Float(f) => json!(f),
-    }
-}
-
-fn text_value(v: Value) -> String {
-    match v {
-        Value::Int(i) => i.to_string(),
-        Value::UInt(u) => u.to_string(),
-        Value::Float(f) => format!("{f:?}"),
-    }
-}
-
 pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
-    let db = load(&args.file, args.strict)?;
-    let codecs: Vec<MessageCodec> = db.messages.iter().map(MessageCodec::new).collect();
-    let mut values: Vec<Option<Decoded>> = Vec::new();
+    let decoder = Dbc::new(load(&args.file, args.strict)?);
+    let choices = !args.no_decode_choices;
     let mut line = String::new();
     // One line at a time: logs of any size stream through in constant memory.
     while {
@@ -360,82 +286,36 @@ pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write)
         input.read_line(&mut line)? > 0
     } {
         let text = line.trim_end_matches(['\n', '\r']);
-        let Some(frame) = parse_candump(text) else {
+        let Some(frame) = bywire_log::screen::parse_line(text) else {
             if !args.json {
                 writeln!(out, "{text}")?;
             }
             continue;
         };
-        let found = db
-            .messages
-            .iter()
-            .zip(&codecs)
-            .find(|(m, _)| m.id == frame.id && m.extended == frame.extended);
-        let Some((message, codec)) = found else {
-            if args.json {
-                let o = json!({"id": frame.id, "extended": frame.extended, "name": null, "signals": {}, "error": "unknown message"});
-                writeln!(out, "{o}")?;
-            } else {
-                writeln!(out, "{text}")?;
-            }
-            continue;
-        };
-        values.clear();
-        values.resize(codec.signal_count(), None);
-        let result = codec.decode(&frame.data, &mut values);
+        let id = frame.id().map(|id| (id.as_raw(), id.is_extended()));
+        let decoded = decoder.decode(&frame);
         if args.json {
-            let mut signals = Map::new();
-            for (s, v) in message.signals.iter().zip(&values) {
-                if let Some(v) = v {
-                    signals.insert(s.display_name().to_string(), json_value(v.physical));
+            let (id, extended) = id.unwrap_or_default();
+            let o = match &decoded {
+                None => {
+                    json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})
                 }
-            }
-            let mut o = json!({"id": frame.id, "extended": frame.extended, "name": message.display_name(), "signals": signals});
-            if let Err(e) = result {
-                o["error"] = json!(e.to_string());
-            }
+                Some(d) => {
+                    let mut o = json!({"id": id, "extended": extended, "name": d.message.display_name(), "signals": d.json_signals()});
+                    if let Some(e) = &d.error {
+                        o["error"] = json!(e);
+                    }
+                    o
+                }
+            };
             writeln!(out, "{o}")?;
             continue;
         }
-        if let Err(e) = result {
-            writeln!(out, "{text} :: {e}")?;
-            continue;
-        }
-        let shown: Vec<String> = message
-            .signals
-            .iter()
-            .zip(&values)
-            .filter_map(|(s, v)| {
-                let v = (*v)?;
-                let choice = (!args.no_decode_choices)
-                    .then(|| {
-                        s.value_descriptions.iter().find(|(k, _)| {
-                            i128::from(v.raw) == *k || v.physical.as_i128() == Some(*k)
-                        })
-                    })
-                    .flatten();
-                let value = match choice {
-                    Some((_, name)) => name.clone(),
-                    None if s.unit.is_empty() => text_value(v.physical),
-                    None => format!("{} {}", text_value(v.physical), s.unit),
-                };
-                Some(format!("{}: {value}", s.display_name()))
-            })
-            .collect();
-        if args.single_line {
-            writeln!(
-                out,
-                "{text} :: {}({})",
-                message.display_name(),
-                shown.join(", ")
-            )?;
-        } else {
-            writeln!(
-                out,
-                "{text} ::\n{}(\n    {}\n)",
-                message.display_name(),
-                shown.join(",\n    ")
-            )?;
+        match decoded {
+            None => writeln!(out, "{text}")?,
+            Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
+            Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,
+            Some(d) => writeln!(out, "{text} ::\n{}", d.multi_line(choices, ""))?,
         }
     }
     Ok(())

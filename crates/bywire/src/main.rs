@@ -3,11 +3,20 @@
 
 mod bittiming_cmd;
 mod bridge_cmd;
+mod busarg;
+mod busload_cmd;
 mod dbc_cmd;
+mod dump_cmd;
+mod gen_cmd;
+mod play_cmd;
+mod send_cmd;
+mod signals;
 mod wire_cmd;
 
 use std::io::{self, Write};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use clap::{Parser, Subcommand};
 
@@ -32,6 +41,16 @@ enum Command {
     },
     /// Decode candump lines from standard input with a DBC file, like `cantools decode`.
     Decode(dbc_cmd::DecodeArgs),
+    /// Print frames from one or more buses, like candump (same options, filters and output).
+    Dump(dump_cmd::Args),
+    /// Send one frame, like cansend, or a DBC message by name with its signals.
+    Send(send_cmd::Args),
+    /// Generate traffic like cangen, or every message of a DBC at its cycle time.
+    Gen(gen_cmd::Args),
+    /// Replay candump log files onto buses, like canplayer.
+    Play(play_cmd::Args),
+    /// Show the load of buses each second, like canbusload, per ID and against a DBC.
+    Busload(busload_cmd::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
 }
@@ -45,6 +64,11 @@ fn main() -> ExitCode {
         Command::Dbc { command } => dbc_cmd::run(&command, &mut out),
         Command::Decode(args) => dbc_cmd::decode(&args, &mut io::stdin().lock(), &mut out),
         Command::Bridge(args) => bridge_cmd::run(&args, &mut out),
+        Command::Dump(args) => dump_cmd::run(&args, &mut out),
+        Command::Send(args) => send_cmd::run(&args, &mut out),
+        Command::Gen(args) => gen_cmd::run(&args, &mut out),
+        Command::Play(args) => play_cmd::run(&args, &mut out),
+        Command::Busload(args) => busload_cmd::run(&args, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {
@@ -56,6 +80,19 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Set when the user presses Ctrl-C (SIGINT) or the process gets SIGTERM: long-running
+/// commands stop at the next frame, flush their output and exit 0, as can-utils do.
+pub fn interrupt_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    Arc::clone(FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let set = Arc::clone(&flag);
+        // Without a handler (e.g. one is already installed) Ctrl-C simply ends the process.
+        let _ = ctrlc::set_handler(move || set.store(true, Ordering::Relaxed));
+        flag
+    }))
 }
 
 fn is_broken_pipe(e: &anyhow::Error) -> bool {

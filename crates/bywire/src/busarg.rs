@@ -1,0 +1,181 @@
+//! Bus arguments as the can-utils commands take them: a bus spec (`socketcan:can0`,
+//! `virtual:test`, `sim:a@500000`, or a plain interface name such as `can0` for SocketCAN),
+//! optionally followed by candump's filters (`can0,123:7FF,1F0~7F0,#FFFFFFFF,j`).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use anyhow::{anyhow, Context, Result};
+use bywire_bus::{Bus, Filtering, Received};
+use bywire_core::filter::FilterItem;
+
+/// A bus argument.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BusArg {
+    /// The full spec (`socketcan:can0` for a plain `can0`).
+    pub spec: String,
+    /// The name shown in output and written to logs: the interface for SocketCAN, the spec
+    /// as given otherwise.
+    pub name: String,
+    /// The filters, when any were given.
+    pub filtering: Option<Filtering>,
+}
+
+/// The full spec for what a user typed: a plain interface name means SocketCAN.
+pub fn full_spec(text: &str) -> String {
+    if text.contains(':') {
+        text.to_string()
+    } else {
+        format!("socketcan:{text}")
+    }
+}
+
+/// Parse `SPEC[,FILTER]*`.
+pub fn parse(text: &str) -> Result<BusArg> {
+    let mut parts = text.split(',');
+    let given = parts.next().unwrap_or_default();
+    if given.is_empty() {
+        return Err(anyhow!("bus '{text}': no bus before the filters"));
+    }
+    let spec = full_spec(given);
+    let name = spec.strip_prefix("socketcan:").unwrap_or(given).to_string();
+    let mut filtering: Option<Filtering> = None;
+    let mut data_filters = Vec::new();
+    for item in parts {
+        let f = filtering.get_or_insert_with(Filtering::default);
+        match item
+            .parse::<FilterItem>()
+            .with_context(|| format!("bus '{text}': filter '{item}'"))?
+        {
+            FilterItem::Filter(filter) => data_filters.push(filter),
+            FilterItem::ErrorMask(mask) => f.error_mask = mask,
+            FilterItem::Join => f.join = true,
+        }
+    }
+    // As candump: without data filters every data frame passes (the socket's default).
+    if let Some(f) = filtering.as_mut() {
+        if !data_filters.is_empty() {
+            f.filters = data_filters;
+        }
+    }
+    Ok(BusArg {
+        spec,
+        name,
+        filtering,
+    })
+}
+
+impl BusArg {
+    /// Open the bus and apply the filters.
+    pub fn open(&self) -> Result<Box<dyn Bus>> {
+        let mut bus = bywire_bus::open(&self.spec)?;
+        if let Some(filtering) = &self.filtering {
+            bus.set_filtering(filtering.clone())
+                .with_context(|| format!("{}: cannot set the filters", self.spec))?;
+        }
+        Ok(bus)
+    }
+}
+
+/// One received frame (with the index of its bus), or the error that ended a bus's reader.
+pub type Event = (usize, Result<Received, String>);
+
+/// One reader thread per bus feeding one channel, so several buses print in arrival order.
+/// Dropping it stops and joins the threads.
+pub struct Readers {
+    /// Frames from every bus.
+    pub events: Receiver<Event>,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Readers {
+    /// Start reading `buses` (already opened, in the order their indexes refer to).
+    pub fn start(buses: Vec<Box<dyn Bus>>) -> Readers {
+        let stop = Arc::new(AtomicBool::new(false));
+        // Bounded: a stalled printer holds the readers back instead of growing without end
+        // (the buses' own receive queues count what is lost then).
+        let (tx, events) = mpsc::sync_channel::<Event>(4096);
+        let threads = buses
+            .into_iter()
+            .enumerate()
+            .map(|(index, mut bus)| {
+                let (tx, stop) = (tx.clone(), Arc::clone(&stop));
+                std::thread::spawn(move || {
+                    while !stop.load(Ordering::Relaxed) {
+                        let event = match bus.recv(Some(Duration::from_millis(100))) {
+                            Ok(None) => continue,
+                            Ok(Some(received)) => Ok(received),
+                            Err(e) => Err(e.to_string()),
+                        };
+                        let failed = event.is_err();
+                        if tx.send((index, event)).is_err() || failed {
+                            break;
+                        }
+                    }
+                })
+            })
+            .collect();
+        Readers {
+            events,
+            stop,
+            threads,
+        }
+    }
+}
+
+impl Drop for Readers {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        // Unblock readers waiting to hand over a frame.
+        while self.events.try_recv().is_ok() {}
+        for thread in self.threads.drain(..) {
+            while !thread.is_finished() {
+                while self.events.try_recv().is_ok() {}
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            let _ = thread.join();
+        }
+    }
+}
+
+/// Open every bus argument (all before any is read, so a bad one fails before output starts).
+pub fn open_all(buses: &[BusArg]) -> Result<Vec<Box<dyn Bus>>> {
+    buses
+        .iter()
+        .map(|b| b.open().with_context(|| format!("bus '{}'", b.spec)))
+        .collect()
+}
+
+/// Open a bus named by a plain spec (no filters).
+pub fn open(text: &str) -> Result<Box<dyn Bus>> {
+    Ok(bywire_bus::open(&full_spec(text))?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plain_names_are_socketcan_and_filters_follow_candump() {
+        let a = parse("can0").unwrap();
+        assert_eq!(
+            (a.spec.as_str(), a.name.as_str()),
+            ("socketcan:can0", "can0")
+        );
+        assert!(a.filtering.is_none());
+        let a = parse("virtual:x,123:7FF,#FFFFFFFF,j").unwrap();
+        assert_eq!(a.name, "virtual:x");
+        let f = a.filtering.unwrap();
+        assert_eq!(f.filters.len(), 1);
+        assert!(f.join && f.error_mask.0 == 0xFFFF_FFFF);
+        let f = parse("can0,#4").unwrap().filtering.unwrap();
+        assert_eq!(f.filters, Filtering::default().filters);
+        let e = parse("can0,12G:7FF").unwrap_err();
+        assert!(format!("{e:#}").contains("filter '12G:7FF'"), "{e:#}");
+        assert!(parse(",123:7FF").is_err());
+    }
+}

@@ -1,0 +1,271 @@
+//! `bywire busload`: canbusload — bus load per second per bus, optionally per identifier and
+//! beside the load a DBC's cycle times predict.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::RecvTimeoutError;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Result};
+use bywire_core::busload::{
+    frame_bits, frame_time_ns, predicted_load, Bitrates, PeriodicMessage, Stuffing,
+};
+use bywire_core::Frame;
+use bywire_dbc::codec::EncodeMode;
+
+use crate::busarg::{self, BusArg, Readers};
+use crate::signals::Dbc;
+
+#[derive(clap::Args)]
+#[command(after_help = "Examples:
+  bywire busload can0@500000
+  bywire busload -e -t can0@500000 can1@250000
+  bywire busload -e --per-id vcan0@500000
+  bywire busload -e --dbc vehicle.dbc can0@500000     (measured beside predicted)
+  bywire busload can0@500000,2000000                  (FD: data bitrate after the comma)
+
+Each second, per bus: frames, bits on the bus (stuffing as chosen), payload bits and the load
+in percent, as canbusload prints them. Without -e or -i the worst-case stuffing is counted.")]
+pub struct Args {
+    /// Buses with their bitrate: BUS@BITRATE[,DATA_BITRATE]
+    #[arg(required = true, num_args = 1..=16)]
+    buses: Vec<String>,
+    /// Count stuff bits exactly from each frame's content.
+    #[arg(short = 'e', conflicts_with = "ignore_stuffing")]
+    exact: bool,
+    /// Count no stuff bits.
+    #[arg(short = 'i')]
+    ignore_stuffing: bool,
+    /// Print the time and the stuffing mode above each report.
+    #[arg(short = 't')]
+    time: bool,
+    /// Show a bar graph in 5 % steps.
+    #[arg(short = 'b')]
+    bargraph: bool,
+    /// Redraw the terminal for each report (like top).
+    #[arg(short = 'r')]
+    redraw: bool,
+    /// Also show each identifier's share.
+    #[arg(long)]
+    per_id: bool,
+    /// Show the load this DBC's cycle times predict beside the measured one.
+    #[arg(long, value_name = "FILE")]
+    dbc: Option<PathBuf>,
+    /// Stop after this many reports.
+    #[arg(short = 'n', value_name = "REPORTS")]
+    reports: Option<u64>,
+}
+
+/// One bus's counts in the current second.
+#[derive(Default, Clone)]
+struct Counts {
+    frames: u64,
+    bits: u64,
+    payload_bits: u64,
+    busy_ns: f64,
+    per_id: BTreeMap<u32, (u64, u64)>,
+}
+
+struct Meter {
+    arg: BusArg,
+    rates: Bitrates,
+    counts: Counts,
+    predicted: Option<f64>,
+}
+
+fn parse_bus(text: &str) -> Result<(BusArg, Bitrates)> {
+    let (bus, rates) = text
+        .rsplit_once('@')
+        .ok_or_else(|| anyhow!("bus '{text}': expected BUS@BITRATE, e.g. can0@500000"))?;
+    let (nominal, data) = match rates.split_once(',') {
+        Some((n, d)) => (n, Some(d)),
+        None => (rates, None),
+    };
+    let rate = |s: &str| {
+        s.parse::<u32>()
+            .ok()
+            .filter(|r| (1..=20_000_000).contains(r))
+            .ok_or_else(|| anyhow!("bus '{text}': bitrate '{s}' is not 1 to 20000000 bit/s"))
+    };
+    let rates = Bitrates {
+        nominal: rate(nominal)?,
+        data: data.map(rate).transpose()?,
+    };
+    Ok((busarg::parse(bus)?, rates))
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    let stuffing = if args.exact {
+        Stuffing::Exact
+    } else if args.ignore_stuffing {
+        Stuffing::None
+    } else {
+        Stuffing::WorstCase
+    };
+    let dbc = match &args.dbc {
+        Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
+        None => None,
+    };
+    let mut meters = Vec::new();
+    for text in &args.buses {
+        let (arg, rates) = parse_bus(text)?;
+        let predicted = dbc.as_ref().map(|d| predict(d, rates, stuffing));
+        meters.push(Meter {
+            arg,
+            rates,
+            counts: Counts::default(),
+            predicted,
+        });
+    }
+    let args_only: Vec<BusArg> = meters.iter().map(|m| m.arg.clone()).collect();
+    let readers = Readers::start(busarg::open_all(&args_only)?);
+    let stop = crate::interrupt_flag();
+    if args.redraw {
+        write!(out, "\x1b[2J")?;
+    }
+    let mut next = Instant::now() + Duration::from_secs(1);
+    let mut reports = 0u64;
+    while !stop.load(Ordering::Relaxed) && args.reports.is_none_or(|n| reports < n) {
+        match readers
+            .events
+            .recv_timeout(next.saturating_duration_since(Instant::now()))
+        {
+            Ok((index, event)) => {
+                let received = event.map_err(|e| anyhow!("bus {}: {e}", index))?;
+                if let Some(meter) = meters.get_mut(index) {
+                    count(meter, &received.frame, stuffing);
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                report(args, stuffing, &mut meters, out)?;
+                reports += 1;
+                next += Duration::from_secs(1);
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    Ok(())
+}
+
+fn count(meter: &mut Meter, frame: &Frame, stuffing: Stuffing) {
+    let bits = u64::from(frame_bits(frame, stuffing));
+    if bits == 0 {
+        return; // error frames are reports, not traffic
+    }
+    let c = &mut meter.counts;
+    c.frames += 1;
+    c.bits += bits;
+    let payload = if frame.is_remote() {
+        0
+    } else {
+        frame.data().len()
+    };
+    c.payload_bits += 8 * u64::try_from(payload).unwrap_or(0);
+    c.busy_ns += if meter.rates.data.is_some() {
+        frame_time_ns(frame, meter.rates)
+    } else {
+        // Without a data phase, time is bits over the bitrate (what the percent below uses).
+        0.0
+    };
+    let entry = c.per_id.entry(frame.socketcan_id()).or_default();
+    entry.0 += 1;
+    entry.1 += bits;
+}
+
+/// Load in whole percent as canbusload computes it (bits in the second over the bitrate), or
+/// from the frames' time on the bus when FD frames switch to a data bitrate.
+fn percent(meter: &Meter, bits: u64, busy_ns: f64) -> u64 {
+    if meter.rates.data.is_some() {
+        // Non-negative and far below 2^64 per second.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let p = (busy_ns / 1e7) as u64;
+        p
+    } else {
+        bits * 100 / u64::from(meter.rates.nominal)
+    }
+}
+
+fn report(
+    args: &Args,
+    stuffing: Stuffing,
+    meters: &mut [Meter],
+    out: &mut impl Write,
+) -> Result<()> {
+    if args.redraw {
+        write!(out, "\x1b[H")?;
+    }
+    if args.time {
+        let mode = match stuffing {
+            Stuffing::Exact => "exact bitstuffing",
+            Stuffing::None => "ignore bitstuffing",
+            Stuffing::WorstCase => "worst case bitstuffing",
+        };
+        writeln!(
+            out,
+            "bywire busload {} ({mode})",
+            chrono::Local::now().format("%Y-%m-%d %H:%M:%S")
+        )?;
+    }
+    let name_width = meters.iter().map(|m| m.arg.name.len()).max().unwrap_or(0);
+    let rate_width = meters
+        .iter()
+        .map(|m| m.rates.nominal.to_string().len())
+        .max()
+        .unwrap_or(0);
+    for meter in meters.iter_mut() {
+        let c = std::mem::take(&mut meter.counts);
+        let load = percent(meter, c.bits, c.busy_ns);
+        write!(
+            out,
+            " {:>name_width$}@{:<rate_width$} {:5} {:7} {:6} {:3}%",
+            meter.arg.name, meter.rates.nominal, c.frames, c.bits, c.payload_bits, load
+        )?;
+        if args.bargraph {
+            let filled = usize::try_from(load.min(100) / 5).unwrap_or(20);
+            write!(out, " |{}{}|", "X".repeat(filled), ".".repeat(20 - filled))?;
+        }
+        writeln!(out)?;
+        if let Some(predicted) = meter.predicted {
+            writeln!(
+                out,
+                "   predicted from the DBC's cycle times: {predicted:.1}%"
+            )?;
+        }
+        if args.per_id {
+            for (id, (frames, bits)) in &c.per_id {
+                let id_text = if id & bywire_core::frame::EFF_FLAG != 0 {
+                    format!("{:08X}", id & bywire_core::frame::EFF_MASK)
+                } else {
+                    format!("{:03X}", id & bywire_core::frame::SFF_MASK)
+                };
+                // Each identifier's bits over the nominal bitrate (FD data phases counted slow).
+                let share = bits * 100 / u64::from(meter.rates.nominal);
+                writeln!(out, "   {id_text:>8} {frames:5} {bits:7} {share:3}%")?;
+            }
+        }
+    }
+    writeln!(out)?;
+    out.flush()?;
+    Ok(())
+}
+
+/// The load the DBC's cyclic messages cause at these bitrates, each frame as encoded with its
+/// start values.
+fn predict(dbc: &Dbc, rates: Bitrates, stuffing: Stuffing) -> f64 {
+    let messages: Vec<PeriodicMessage> = dbc
+        .database()
+        .messages
+        .iter()
+        .filter_map(|m| {
+            let period = dbc.cycle_time(m)?;
+            let frame = dbc.encode(m, &[], 0, EncodeMode::Clamp).ok()?;
+            Some(PeriodicMessage {
+                period,
+                bits: frame_bits(&frame, stuffing),
+            })
+        })
+        .collect();
+    predicted_load(&messages, rates.nominal)
+}

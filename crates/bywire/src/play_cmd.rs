@@ -1,0 +1,247 @@
+//! `bywire play`: canplayer — replay candump logs onto buses, in real time or faster.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Write};
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context, Result};
+use bywire_bus::Bus;
+use bywire_log::{LogError, LogRecord, Reader};
+
+use crate::busarg;
+
+#[derive(clap::Args)]
+#[command(after_help = "Examples:
+  bywire play -I candump-2024-01-01_120000.log
+  bywire play -I drive.log vcan0=can0              (frames logged on can0 go to vcan0)
+  bywire play -I drive.log virtual:test=can0 --speed 10
+  bywire play -I drive.log -t -g 5 -l 3            (ignore timestamps, 5 ms apart, 3 times)
+  bywire play -I drive.log stdout=can0             (print can0's lines instead of sending)
+
+Without assignments each frame goes to the interface it was logged on. With assignments only
+the assigned interfaces are replayed. Lines not starting with '(' are ignored, as canplayer
+does; a malformed log line is an error naming its line (a file is checked before anything is
+sent).")]
+pub struct Args {
+    /// Assignments WRITE-BUS=LOG-INTERFACE (WRITE-BUS may be stdout).
+    assignments: Vec<String>,
+    /// The log file (standard input when not given).
+    #[arg(short = 'I', value_name = "FILE")]
+    input: Option<PathBuf>,
+    /// Play the log this many times, or i for ever.
+    #[arg(short = 'l', default_value = "1")]
+    loops: String,
+    /// Ignore the timestamps: send frames one gap apart.
+    #[arg(short = 't')]
+    ignore_timestamps: bool,
+    /// The gap in milliseconds with -t.
+    #[arg(short = 'g', default_value_t = 1.0)]
+    gap_ms: f64,
+    /// Skip gaps in the timestamps longer than this many seconds.
+    #[arg(short = 's', value_name = "SECONDS")]
+    skip_gaps: Option<f64>,
+    /// Stop after this many frames.
+    #[arg(short = 'n')]
+    count: Option<u64>,
+    /// Do not loop sent frames back to other programs on this host.
+    #[arg(short = 'x')]
+    no_loopback: bool,
+    /// Play this many times faster than recorded (0.5 = half speed).
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Print each frame sent as a log line.
+    #[arg(short = 'v')]
+    verbose: bool,
+}
+
+/// Where frames from one logged interface go.
+enum Target {
+    Bus(Box<dyn Bus>),
+    Stdout,
+}
+
+fn lines_starting_with_paren<R: BufRead>(input: R) -> Reader<FilterParen<R>> {
+    Reader::new(FilterParen(input))
+}
+
+/// Keeps lines that start with '(' and blanks the others (canplayer ignores them), so line
+/// numbers in errors stay those of the file.
+struct FilterParen<R>(R);
+
+impl<R: BufRead> io::Read for FilterParen<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let available = self.fill_buf()?;
+        let n = available.len().min(buf.len());
+        if let (Some(dst), Some(src)) = (buf.get_mut(..n), available.get(..n)) {
+            dst.copy_from_slice(src);
+        }
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl<R: BufRead> BufRead for FilterParen<R> {
+    fn fill_buf(&mut self) -> io::Result<&[u8]> {
+        self.0.fill_buf()
+    }
+
+    fn consume(&mut self, amount: usize) {
+        self.0.consume(amount);
+    }
+
+    fn read_line(&mut self, line: &mut String) -> io::Result<usize> {
+        let n = self.0.read_line(line)?;
+        if n > 0 && !line.starts_with('(') {
+            line.clear();
+            line.push('\n');
+        }
+        Ok(n)
+    }
+}
+
+fn open_input(path: Option<&PathBuf>) -> Result<Box<dyn BufRead>> {
+    Ok(match path {
+        Some(p) => Box::new(BufReader::new(
+            File::open(p).with_context(|| format!("cannot open {}", p.display()))?,
+        )),
+        None => Box::new(BufReader::new(io::stdin())),
+    })
+}
+
+fn syntax(path: Option<&PathBuf>, e: LogError) -> anyhow::Error {
+    let name = path.map_or("standard input".to_string(), |p| p.display().to_string());
+    anyhow!("{name}: {e}")
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    let loops = match args.loops.as_str() {
+        "i" => None,
+        n => Some(
+            n.parse::<u64>()
+                .map_err(|_| anyhow!("-l '{n}': expected a number or i"))?,
+        ),
+    };
+    if args.input.is_none() && loops != Some(1) {
+        return Err(anyhow!(
+            "-l needs a file (-I): standard input cannot be read twice"
+        ));
+    }
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        return Err(anyhow!("--speed {}: must be above 0", args.speed));
+    }
+    if !(args.gap_ms.is_finite() && args.gap_ms >= 0.0) {
+        return Err(anyhow!("-g {}: must be 0 or more", args.gap_ms));
+    }
+    let mut assigned: HashMap<String, String> = HashMap::new();
+    for a in &args.assignments {
+        let (write, log) = a
+            .split_once('=')
+            .filter(|(w, l)| !w.is_empty() && !l.is_empty())
+            .ok_or_else(|| anyhow!("assignment '{a}': expected WRITE-BUS=LOG-INTERFACE"))?;
+        assigned.insert(log.to_string(), write.to_string());
+    }
+    // A file is checked whole first, so a bad line stops the replay before it starts.
+    if let Some(path) = &args.input {
+        for record in lines_starting_with_paren(open_input(Some(path))?) {
+            record.map_err(|e| syntax(Some(path), e))?;
+        }
+    }
+    let mut targets: HashMap<String, Option<Target>> = HashMap::new();
+    let stop = crate::interrupt_flag();
+    let mut sent = 0u64;
+    let mut pass = 0u64;
+    while loops.is_none_or(|n| pass < n) {
+        pass += 1;
+        let reader = lines_starting_with_paren(open_input(args.input.as_ref())?);
+        let mut clock: Option<(Instant, u64)> = None;
+        let mut skipped = Duration::ZERO;
+        let mut previous_log_time: Option<u64> = None;
+        for record in reader {
+            let record = record.map_err(|e| syntax(args.input.as_ref(), e))?;
+            if stop.load(Ordering::Relaxed) || args.count.is_some_and(|n| sent >= n) {
+                return Ok(());
+            }
+            let logged = record.timestamp.as_nanos();
+            if let (Some(limit), Some(previous)) = (args.skip_gaps, previous_log_time) {
+                let gap = Duration::from_nanos(logged.saturating_sub(previous));
+                if gap.as_secs_f64() > limit {
+                    skipped += gap;
+                }
+            }
+            previous_log_time = Some(logged);
+            let (start, first) = *clock.get_or_insert((Instant::now(), logged));
+            let due = if args.ignore_timestamps {
+                None
+            } else {
+                let elapsed =
+                    Duration::from_nanos(logged.saturating_sub(first)).saturating_sub(skipped);
+                Some(start + elapsed.div_f64(args.speed))
+            };
+            let Some(target) = target_for(&record, &assigned, &mut targets, args.no_loopback)?
+            else {
+                continue;
+            };
+            match due {
+                Some(due) => std::thread::sleep(due.saturating_duration_since(Instant::now())),
+                None if sent > 0 => {
+                    std::thread::sleep(Duration::from_secs_f64(args.gap_ms / 1000.0));
+                }
+                None => {}
+            }
+            match target {
+                Target::Stdout => print_record(out, &record)?,
+                Target::Bus(bus) => {
+                    bus.send(&record.frame).with_context(|| {
+                        format!(
+                            "cannot send {} (logged on {})",
+                            record.frame, record.interface
+                        )
+                    })?;
+                    if args.verbose {
+                        print_record(out, &record)?;
+                    }
+                }
+            }
+            sent += 1;
+        }
+    }
+    Ok(())
+}
+
+fn print_record(out: &mut impl Write, record: &LogRecord) -> Result<()> {
+    let mut writer = bywire_log::Writer::new(&mut *out).raw_dlc(true);
+    writer.write_record(record)?;
+    Ok(out.flush()?)
+}
+
+/// The bus for a record's interface, opened on first use; `None` when it is not replayed.
+fn target_for<'a>(
+    record: &LogRecord,
+    assigned: &HashMap<String, String>,
+    targets: &'a mut HashMap<String, Option<Target>>,
+    no_loopback: bool,
+) -> Result<Option<&'a mut Target>> {
+    if !targets.contains_key(&record.interface) {
+        let write_bus = if assigned.is_empty() {
+            Some(record.interface.clone())
+        } else {
+            assigned.get(&record.interface).cloned()
+        };
+        let target = match write_bus {
+            None => None,
+            Some(name) if name == "stdout" => Some(Target::Stdout),
+            Some(name) => {
+                let mut bus = busarg::open(&name).with_context(|| format!("bus '{name}'"))?;
+                if no_loopback {
+                    bus.set_loopback(false)?;
+                }
+                Some(Target::Bus(bus))
+            }
+        };
+        targets.insert(record.interface.clone(), target);
+    }
+    Ok(targets.get_mut(&record.interface).and_then(Option::as_mut))
+}

@@ -1,0 +1,219 @@
+//! The can-utils commands against can-utils itself, on the kernel's vcan interfaces inside
+//! `../shared/tools/canvm.sh`: the same traffic through candump and `bywire dump`, cansend and
+//! `bywire send`, canplayer and `bywire play` (each replaying the other's logs), canbusload and
+//! `bywire busload`.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+/// Run `script` in the VM with two vcan interfaces, can-utils and our binary as `$B`.
+fn in_vm(script: &str) -> String {
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let script = format!("B={bin}\ncd /tmp\n{script}");
+    common::in_canvm(&["--can-utils", "--vcan", "2", "--include", bin], &script)
+}
+
+/// The text between `== name` and the next `==` line.
+fn section<'a>(text: &'a str, name: &str) -> &'a str {
+    let start = text
+        .find(&format!("== {name}\n"))
+        .unwrap_or_else(|| panic!("no section {name} in:\n{text}"));
+    let rest = &text[start + name.len() + 4..];
+    &rest[..rest.find("\n== ").map_or(rest.len(), |e| e + 1)]
+}
+
+/// Frames of the same traffic: classic, extended, remote (with DLC), FD with and without BRS,
+/// an empty FD frame, a raw DLC, error frames, ASCII data, FD over 8 bytes.
+const TRAFFIC: &str = "\
+cansend vcan0 123#DEADBEEF; cansend vcan1 12345678#; cansend vcan0 123#R3
+cansend vcan0 123##1112233; cansend vcan0 7FF##0; cansend vcan0 123#1122334455667788_E
+cansend vcan0 2000000C#0108000000000F10; cansend vcan0 20000080#0000000000000000
+cansend vcan0 20000008#00000A1900000000; cansend vcan0 123#414243
+cansend vcan1 1F334455##3112233445566778899; cansend vcan0 000#00
+";
+
+#[test]
+fn dump_prints_what_candump_prints() {
+    let forms = ["", "-L", "-ta", "-a", "-e", "-td", "-tz"];
+    let mut script = String::new();
+    for (i, form) in forms.iter().enumerate() {
+        script += &format!(
+            "candump {form} vcan0,0:0,#FFFFFFFF vcan1 > c{i}.txt & P=\"$P $!\"\n$B dump {form} vcan0,0:0,#FFFFFFFF vcan1 > b{i}.txt & P=\"$P $!\"\n"
+        );
+    }
+    script += "sleep 1.5\n";
+    script += TRAFFIC;
+    script += "sleep 0.5\nkill -INT $P; sleep 0.5\n";
+    for (i, form) in forms.iter().enumerate() {
+        script += &format!(
+            "echo '== candump {form}'; cat c{i}.txt; echo '== bywire {form}'; cat b{i}.txt\n"
+        );
+    }
+    script += "echo '== end'\n";
+    let out = in_vm(&script);
+    for form in forms {
+        let theirs = section(&out, &format!("candump {form}"));
+        let ours = section(&out, &format!("bywire {form}"));
+        assert!(
+            theirs.lines().count() >= 12,
+            "candump {form} printed:\n{theirs}"
+        );
+        if form.starts_with("-t") && form != "-ta" {
+            // Delta and zero-based times depend on when each program read the frame.
+            let strip = |t: &str| -> Vec<String> {
+                t.lines()
+                    .map(|l| l.split_once(") ").map_or(l, |(_, r)| r).to_string())
+                    .collect()
+            };
+            assert_eq!(strip(ours), strip(theirs), "dump {form}");
+            assert!(ours.starts_with(" (000.000000) "), "{ours}");
+        } else {
+            assert_eq!(ours, theirs, "dump {form}");
+        }
+    }
+    // The words for error frames are there (-e).
+    assert!(section(&out, "bywire -e").contains(
+        "\tprotocol-violation{{frame-format-error,tx-dominant-bit-error}{acknowledge-slot}}"
+    ));
+}
+
+#[test]
+fn send_sends_what_cansend_sends() {
+    let frames = [
+        "123#DEADBEEF",
+        "1ABCDEF0#1122",
+        "123#R4",
+        "123#r",
+        "123##1112233",
+        "123##2",
+        "7FF#DE.AD.BE.EF",
+        "000#",
+        "1FFFFFFF##3000102030405060708090A0B0C0D0E0F101112131415161718191A1B1C1D1E1F",
+        "123#1122334455667788",
+    ];
+    let mut script = "candump -L vcan0 > sent.log & P=$!\nsleep 0.5\n".to_string();
+    for f in frames {
+        script += &format!("cansend vcan0 '{f}'; $B send vcan0 '{f}'\n");
+    }
+    script += "sleep 0.3\nkill -INT $P\nsleep 0.2\necho '== sent'\ncat sent.log\n";
+    let out = in_vm(&script);
+    let lines: Vec<&str> = section(&out, "sent")
+        .lines()
+        .map(|l| l.split_whitespace().nth(2).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 2 * frames.len(), "{out}");
+    for pair in lines.chunks(2) {
+        assert_eq!(pair[0], pair[1], "cansend vs bywire send");
+    }
+}
+
+#[test]
+fn logs_replay_both_ways() {
+    let script = "\
+candump -L vcan0 > theirs.log & P1=$!
+sleep 0.5
+cangen vcan0 -n 30 -g 1 -m; cangen vcan0 -n 10 -g 1 -e -R; cangen vcan0 -n 10 -g 2 -f -b
+sleep 0.3; kill -INT $P1; sleep 0.2
+candump -L vcan1 > ours_played.log & P2=$!
+sleep 0.5
+$B play -I theirs.log vcan1=vcan0
+sleep 0.3; kill -INT $P2; sleep 0.2
+$B dump -f ours.log vcan0 & P3=$!
+sleep 0.5
+cangen vcan0 -n 30 -g 1 -m; cangen vcan0 -n 10 -g 1 -f
+sleep 0.5; kill -INT $P3; sleep 0.5
+candump -L vcan1 > canplayer_played.log & P4=$!
+sleep 0.5
+canplayer -I ours.log vcan1=vcan0
+sleep 0.3; kill -INT $P4; sleep 0.2
+echo '== theirs'; cat theirs.log; echo '== ours_played'; cat ours_played.log
+echo '== ours'; cat ours.log; echo '== canplayer_played'; cat canplayer_played.log; echo '== end'
+";
+    let out = in_vm(script);
+    let frames = |name: &str| -> Vec<String> {
+        section(&out, name)
+            .lines()
+            .filter(|l| l.starts_with('('))
+            .map(|l| l.split_whitespace().nth(2).unwrap().to_string())
+            .collect()
+    };
+    let theirs = frames("theirs");
+    assert!(theirs.len() >= 40, "{out}");
+    assert_eq!(
+        frames("ours_played"),
+        theirs,
+        "bywire play of a candump log"
+    );
+    let ours = frames("ours");
+    assert!(ours.len() >= 30, "{out}");
+    assert_eq!(
+        frames("canplayer_played"),
+        ours,
+        "canplayer of a bywire dump log"
+    );
+    // Our log lines are candump's: (secs.usecs) vcan0 frame.
+    for line in section(&out, "ours").lines() {
+        let r = bywire_log::candump::parse_line(line).unwrap();
+        assert_eq!(r.interface, "vcan0");
+    }
+}
+
+#[test]
+fn busload_agrees_with_canbusload() {
+    // Classic data frames only: canbusload reads classic frames, and counts a remote frame's
+    // DLC as data bits it does not have on the wire (checked separately below).
+    let script = "\
+candump -L vcan0 > traffic.log & P0=$!
+sleep 0.5
+cangen vcan0 -n 40 -g 1; cangen vcan0 -n 30 -g 1 -e
+cangen vcan0 -n 20 -g 1 -L 8 -D 0000000000000000; cangen vcan0 -n 20 -g 1 -L 8 -D FFFFFFFFFFFFFFFF -e
+sleep 0.3; kill -INT $P0; sleep 0.2
+printf '(0.000000) vcan0 123#R8\\n(0.001000) vcan0 00000456#R2\\n' > remote.log
+for log in traffic remote; do for m in -e -i x; do
+  flag=$m; [ $m = x ] && flag=
+  canbusload $flag vcan0@500000 > c.txt & P1=$!
+  $B busload $flag vcan0@500000 > b.txt & P2=$!
+  sleep 0.5; canplayer -I $log.log; sleep 1.3
+  kill $P1; kill -INT $P2; sleep 0.3
+  echo \"== $log $m\"; awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' c.txt b.txt
+  awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' b.txt
+done; done
+echo '== end'
+";
+    let out = in_vm(script);
+    let totals = |name: &str| -> (Vec<u64>, Vec<u64>) {
+        let s = section(&out, name);
+        let mut lines = s.lines().map(|l| {
+            l.split_whitespace()
+                .map(|n| n.parse::<u64>().unwrap())
+                .collect::<Vec<u64>>()
+        });
+        let both = lines.next().unwrap();
+        let ours = lines.next().unwrap();
+        // The first awk summed both files: theirs = both - ours.
+        (both.iter().zip(&ours).map(|(b, o)| b - o).collect(), ours)
+    };
+    for mode in ["-e", "-i"] {
+        let (theirs, ours) = totals(&format!("traffic {mode}"));
+        assert!(theirs[0] >= 100, "{out}");
+        assert_eq!(ours, theirs, "frames, bits, payload bits with {mode}");
+    }
+    // Worst case: canbusload uses a closed-form bound on the stuff bits; ours is the true
+    // maximum over every identifier and payload of each format and DLC, never above it.
+    let (theirs, ours) = totals("traffic x");
+    assert_eq!((ours[0], ours[2]), (theirs[0], theirs[2]));
+    assert!(
+        ours[1] <= theirs[1] && theirs[1] - ours[1] < theirs[1] / 50,
+        "{ours:?} vs {theirs:?}"
+    );
+    // Remote frames: canbusload adds 8 data bits per DLC unit (10 here) that are not sent.
+    let (theirs, ours) = totals("remote -i");
+    assert_eq!(ours[0], theirs[0]);
+    assert_eq!(theirs[1] - ours[1], 8 * 10, "{out}");
+    assert_eq!(ours[2], 0);
+}
