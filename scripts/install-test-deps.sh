@@ -6,9 +6,10 @@ cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
 SUDO=""
 [ "$(id -u)" = 0 ] || SUDO=sudo
-if ! command -v sigrok-cli >/dev/null; then
+# sigrok-cli: CAN bit-level decoder oracle; tmux: drives the terminal views end to end.
+if ! command -v sigrok-cli >/dev/null || ! command -v tmux >/dev/null; then
   $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli >/dev/null
+  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux >/dev/null
 fi
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0

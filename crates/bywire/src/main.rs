@@ -8,9 +8,12 @@ mod busload_cmd;
 mod dbc_cmd;
 mod dump_cmd;
 mod gen_cmd;
+mod live;
+mod monitor_cmd;
 mod play_cmd;
 mod send_cmd;
 mod signals;
+mod sniff_cmd;
 mod wire_cmd;
 
 use std::io::{self, Write};
@@ -51,6 +54,10 @@ enum Command {
     Play(play_cmd::Args),
     /// Show the load of buses each second, like canbusload, per ID and against a DBC.
     Busload(busload_cmd::Args),
+    /// Watch identifiers like cansniffer: changing bytes highlighted, rates, DBC values.
+    Sniff(sniff_cmd::Args),
+    /// A live table of decoded messages and signals, like cantools monitor.
+    Monitor(monitor_cmd::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
 }
@@ -68,6 +75,8 @@ fn main() -> ExitCode {
         Command::Send(args) => send_cmd::run(&args, &mut out),
         Command::Gen(args) => gen_cmd::run(&args, &mut out),
         Command::Play(args) => play_cmd::run(&args, &mut out),
+        Command::Sniff(args) => sniff_cmd::run(&args),
+        Command::Monitor(args) => monitor_cmd::run(&args),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));

@@ -190,8 +190,7 @@ impl Dbc {
             .index_of(message)
             .ok_or_else(|| anyhow!("message {} is not in the DBC", message.name))?;
         let codec = self.codecs.get(index).ok_or_else(|| anyhow!("no codec"))?;
-        let mut values: Vec<Option<Value>> =
-            message.signals.iter().map(start_value).collect();
+        let mut values: Vec<Option<Value>> = message.signals.iter().map(start_value).collect();
         for assignment in assignments {
             let (name, text) = assignment
                 .split_once('=')

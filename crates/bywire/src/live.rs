@@ -1,0 +1,181 @@
+//! What the terminal views (`sniff`, `monitor`) share: a source of frames — live buses or a
+//! candump log replayed at its own pace — and the loop that feeds a view, draws it and reads
+//! keys. Views are plain state plus a draw function, so tests render them on ratatui's
+//! `TestBackend` without a terminal.
+
+use std::fs::File;
+use std::io::{BufReader, IsTerminal};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context, Result};
+use bywire_bus::Received;
+use bywire_core::Timestamp;
+use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyEventKind};
+
+use crate::busarg::{self, BusArg, Event, Readers};
+
+/// Where frames come from.
+pub struct Source {
+    frames: Frames,
+    /// The buses' names, by the index events carry.
+    pub names: Vec<String>,
+    stop: Arc<AtomicBool>,
+}
+
+enum Frames {
+    Live(Readers),
+    Log(Receiver<Event>),
+}
+
+impl Source {
+    /// The frames, with the index of their bus in `names`.
+    pub fn events(&self) -> &Receiver<Event> {
+        match &self.frames {
+            Frames::Live(readers) => &readers.events,
+            Frames::Log(events) => events,
+        }
+    }
+}
+
+impl Drop for Source {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Live buses (with candump filters), or with `log` a candump log played in real time.
+pub fn source(buses: &[String], log: Option<&PathBuf>) -> Result<Source> {
+    let stop = Arc::new(AtomicBool::new(false));
+    if let Some(path) = log {
+        if !buses.is_empty() {
+            return Err(anyhow!("give buses or -I FILE, not both"));
+        }
+        return replay(path, stop);
+    }
+    if buses.is_empty() {
+        return Err(anyhow!(
+            "no bus given (e.g. can0, virtual:test) and no -I FILE"
+        ));
+    }
+    let args: Vec<BusArg> = buses
+        .iter()
+        .map(|b| busarg::parse(b))
+        .collect::<Result<_>>()?;
+    let readers = Readers::start(busarg::open_all(&args)?);
+    Ok(Source {
+        frames: Frames::Live(readers),
+        names: args.into_iter().map(|a| a.name).collect(),
+        stop,
+    })
+}
+
+/// A candump log as a source: each record at its time after the first, as it was recorded.
+fn replay(path: &Path, stop: Arc<AtomicBool>) -> Result<Source> {
+    let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    let (tx, events) = mpsc::sync_channel(4096);
+    let shown = path.display().to_string();
+    let thread_stop = Arc::clone(&stop);
+    std::thread::spawn(move || {
+        let started = Instant::now();
+        let mut first: Option<u64> = None;
+        for record in bywire_log::Reader::new(BufReader::new(file)) {
+            if thread_stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let event = match record {
+                Ok(r) => {
+                    let logged = r.timestamp.as_nanos();
+                    let offset = logged.saturating_sub(*first.get_or_insert(logged));
+                    let due = started + Duration::from_nanos(offset);
+                    std::thread::sleep(due.saturating_duration_since(Instant::now()));
+                    Ok(Received {
+                        frame: r.frame,
+                        timestamp: Timestamp::from_nanos(logged),
+                        own: false,
+                        hardware: None,
+                    })
+                }
+                Err(e) => Err(format!("{shown}: {e}")),
+            };
+            let failed = event.is_err();
+            if tx.send((0, event)).is_err() || failed {
+                break;
+            }
+        }
+    });
+    Ok(Source {
+        frames: Frames::Log(events),
+        names: vec![path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )],
+        stop,
+    })
+}
+
+/// A terminal view.
+pub trait View {
+    /// A frame arrived (from bus `bus`), at wall-clock `now`.
+    fn on_frame(&mut self, bus: &str, received: &Received, now: Instant);
+    /// Draw the whole view.
+    fn draw(&mut self, frame: &mut ratatui::Frame<'_>, now: Instant);
+    /// A key was pressed; true to quit.
+    fn on_key(&mut self, key: KeyEvent) -> bool;
+}
+
+/// Run `view` on the terminal until q, Esc or Ctrl-C (or the source ends and a key is pressed).
+pub fn run(view: &mut impl View, source: &Source) -> Result<()> {
+    if !std::io::stdout().is_terminal() {
+        return Err(anyhow!(
+            "this view needs a terminal; use `bywire dump` (or --dbc with it) to print frames"
+        ));
+    }
+    let mut terminal = ratatui::init();
+    let result = event_loop(view, source, &mut terminal);
+    ratatui::restore();
+    result
+}
+
+fn event_loop(
+    view: &mut impl View,
+    source: &Source,
+    terminal: &mut ratatui::DefaultTerminal,
+) -> Result<()> {
+    let frame_interval = Duration::from_millis(100);
+    loop {
+        // Take what has arrived, for at most half a drawing interval, so keys stay responsive
+        // under any load.
+        let deadline = Instant::now() + frame_interval / 2;
+        while Instant::now() < deadline {
+            match source.events().try_recv() {
+                Ok((index, Ok(received))) => {
+                    let name = source.names.get(index).map_or("?", String::as_str);
+                    view.on_frame(name, &received, Instant::now());
+                }
+                Ok((index, Err(e))) => {
+                    let name = source.names.get(index).map_or("?", String::as_str);
+                    return Err(anyhow!("{name}: {e}"));
+                }
+                Err(_) => break,
+            }
+        }
+        terminal.draw(|f| view.draw(f, Instant::now()))?;
+        if event::poll(frame_interval)? {
+            if let TermEvent::Key(key) = event::read()? {
+                if key.kind == KeyEventKind::Press && (is_quit(key) || view.on_key(key)) {
+                    return Ok(());
+                }
+            }
+        }
+    }
+}
+
+fn is_quit(key: KeyEvent) -> bool {
+    use ratatui::crossterm::event::KeyModifiers;
+    matches!(key.code, KeyCode::Esc)
+        || (key.code == KeyCode::Char('c') && key.modifiers.contains(KeyModifiers::CONTROL))
+}

@@ -1,0 +1,163 @@
+//! `bywire monitor` and `bywire sniff` end to end in a real terminal: tmux runs them on a log,
+//! the test reads the screen (capture-pane) and presses keys (send-keys).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+fn tmux(args: &[&str]) -> (bool, String) {
+    let out = Command::new("tmux")
+        .args(args)
+        .output()
+        .expect("tmux is installed (scripts/install-test-deps.sh)");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
+}
+
+/// A session running `command`, closed when dropped.
+struct Session(String);
+
+impl Session {
+    fn start(name: &str, command: &str) -> Session {
+        let name = format!("{name}-{}", std::process::id());
+        let (ok, _) = tmux(&[
+            "new-session",
+            "-d",
+            "-s",
+            &name,
+            "-x",
+            "120",
+            "-y",
+            "30",
+            command,
+        ]);
+        assert!(ok, "tmux new-session");
+        Session(name)
+    }
+
+    fn screen(&self) -> String {
+        tmux(&["capture-pane", "-p", "-t", &self.0]).1
+    }
+
+    /// Wait until the screen contains `text`.
+    fn wait_for(&self, text: &str) -> String {
+        let deadline = Instant::now() + Duration::from_secs(15);
+        loop {
+            let screen = self.screen();
+            if screen.contains(text) {
+                return screen;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "'{text}' never appeared:\n{screen}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    fn keys(&self, keys: &str) {
+        assert!(tmux(&["send-keys", "-t", &self.0, keys]).0);
+    }
+
+    fn wait_closed(&self) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while tmux(&["has-session", "-t", &self.0]).0 {
+            assert!(
+                Instant::now() < deadline,
+                "still running:\n{}",
+                self.screen()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        let _ = tmux(&["kill-session", "-t", &self.0]);
+    }
+}
+
+/// A DBC and a log of 20 s: Speed every 10 ms counting up, Gear once.
+fn fixture(dir: &str) -> (String, String) {
+    let dir = std::env::temp_dir().join(format!("{dir}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let dbc = dir.join("views.dbc");
+    std::fs::write(
+        &dbc,
+        "VERSION \"\"\nBU_: ECU\nBO_ 291 Speed: 2 ECU\n SG_ Kph : 0|16@1+ (0.1,0) [0|6553.5] \"km/h\" X\n\
+         BO_ 292 Gear: 1 ECU\n SG_ Position : 0|8@1+ (1,0) [0|3] \"\" X\n\
+         VAL_ 292 Position 0 \"Park\" 1 \"Drive\" ;\n",
+    )
+    .unwrap();
+    let mut fixed = String::from("(1000.000000) can0 124#01\n");
+    for i in 0..2000u64 {
+        let t = 1_000_000_000 + i * 10_000;
+        fixed += &format!(
+            "({}.{:06}) can0 123#{:02X}{:02X}\n",
+            t / 1_000_000,
+            t % 1_000_000,
+            i % 256,
+            i / 256
+        );
+    }
+    let path = dir.join("views.log");
+    std::fs::write(&path, fixed).unwrap();
+    (
+        dbc.to_str().unwrap().to_string(),
+        path.to_str().unwrap().to_string(),
+    )
+}
+
+#[test]
+fn monitor_in_a_terminal() {
+    let (dbc, log) = fixture("bywire-monitor");
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let s = Session::start("bywire-monitor", &format!("{bin} monitor {dbc} -I {log}"));
+    let screen = s.wait_for("Position: Drive");
+    assert!(screen.contains("bywire monitor"), "{screen}");
+    s.wait_for("Kph:");
+    s.keys("Space");
+    let paused = s.wait_for("PAUSED");
+    std::thread::sleep(Duration::from_millis(500));
+    // Paused: the counts stand still.
+    let count = |screen: &str| {
+        screen
+            .lines()
+            .find(|l| l.starts_with("Speed"))
+            .unwrap()
+            .to_string()
+    };
+    assert_eq!(count(&paused), count(&s.screen()));
+    s.keys("/");
+    s.keys("gear");
+    s.keys("Enter");
+    let filtered = s.wait_for("filter: gear");
+    assert!(!filtered.contains("Kph"), "{filtered}");
+    s.keys("q");
+    s.wait_closed();
+}
+
+#[test]
+fn sniff_in_a_terminal() {
+    let (dbc, log) = fixture("bywire-sniff");
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let s = Session::start("bywire-sniff", &format!("{bin} sniff --dbc {dbc} -I {log}"));
+    let screen = s.wait_for("Speed(Kph:");
+    assert!(screen.contains("2 identifiers"), "{screen}");
+    let row = screen.lines().find(|l| l.contains(" 123 ")).unwrap();
+    assert!(row.contains("10.0"), "a 10 ms cycle: {row}");
+    s.keys("Space");
+    s.wait_for("PAUSED");
+    s.keys("c");
+    s.wait_for("0 identifiers");
+    s.keys("q");
+    s.wait_closed();
+}
