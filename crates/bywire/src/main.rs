@@ -9,8 +9,10 @@ mod dbc_cmd;
 mod dump_cmd;
 mod gen_cmd;
 mod live;
+mod log_cmd;
 mod monitor_cmd;
 mod play_cmd;
+mod plot_cmd;
 mod send_cmd;
 mod signals;
 mod sniff_cmd;
@@ -58,6 +60,13 @@ enum Command {
     Sniff(sniff_cmd::Args),
     /// A live table of decoded messages and signals, like cantools monitor.
     Monitor(monitor_cmd::Args),
+    /// Plot signals from a candump log (or a live capture) to PNG or SVG, like cantools plot.
+    Plot(plot_cmd::Args),
+    /// Read candump logs: print them (log or screen form, filtered) or summarise them.
+    Log {
+        #[command(subcommand)]
+        command: log_cmd::LogCommand,
+    },
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
 }
@@ -77,6 +86,8 @@ fn main() -> ExitCode {
         Command::Play(args) => play_cmd::run(&args, &mut out),
         Command::Sniff(args) => sniff_cmd::run(&args),
         Command::Monitor(args) => monitor_cmd::run(&args),
+        Command::Plot(args) => plot_cmd::run(&args),
+        Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));

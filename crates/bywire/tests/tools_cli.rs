@@ -417,3 +417,151 @@ fn items(line: &str) -> std::collections::BTreeSet<String> {
     let inner = inner.strip_suffix(')').unwrap_or(inner);
     inner.split(", ").map(str::to_string).collect()
 }
+
+#[test]
+fn plot_writes_png_and_svg_and_nothing_on_errors() {
+    let dir = std::env::temp_dir().join(format!("bywire-plot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let dbc = dir.join("motor.dbc");
+    std::fs::write(
+        &dbc,
+        "VERSION \"\"\nBU_: ECU\nBO_ 291 Motor: 4 ECU\n SG_ Rpm : 0|16@1+ (1,0) [0|2000] \"rpm\" X\n \
+         SG_ Current : 16|16@1+ (0.1,-50) [-50|50] \"A\" X\nBO_ 292 Other: 2 ECU\n SG_ Rpm : 0|16@1+ (1,0) [0|9] \"\" X\n",
+    )
+    .unwrap();
+    let log: String = (0..200u32)
+        .map(|i| {
+            format!(
+                "({}.{:06}) can0 123#{:02X}{:02X}E803\n",
+                1000 + i / 50,
+                i % 50 * 20_000,
+                i % 256,
+                i / 256
+            )
+        })
+        .collect();
+    let dbc = dbc.to_str().unwrap();
+    let png = dir.join("motor.png");
+    let (code, _, err) = bywire(
+        &[
+            "plot",
+            dbc,
+            "Motor.Rpm",
+            "Current",
+            "--width",
+            "640",
+            "--height",
+            "480",
+            "-o",
+            png.to_str().unwrap(),
+        ],
+        &log,
+    );
+    assert_eq!(code, 0, "{err}");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let width = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    let height = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!((width, height), (640, 480));
+    let svg = dir.join("motor.svg");
+    let (code, _, err) = bywire(
+        &[
+            "plot",
+            dbc,
+            "Motor.Rpm",
+            "Current",
+            "--subplots",
+            "-o",
+            svg.to_str().unwrap(),
+        ],
+        &log,
+    );
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        text.starts_with("<svg")
+            && text.contains("Motor.Rpm [rpm]")
+            && text.contains("Motor.Current [A]")
+    );
+    assert!(text.contains("time [s]"));
+    // Errors name the problem and leave no file, not even a temporary one.
+    let bad = dir.join("bad.png");
+    let b = bad.to_str().unwrap();
+    fails_with(
+        &["plot", dbc, "Nope", "-o", b],
+        &log,
+        "signal 'Nope' is not in the DBC",
+    );
+    fails_with(
+        &["plot", dbc, "Rpm", "-o", b],
+        &log,
+        "is in 2 messages; name one as MESSAGE.SIGNAL (Motor, Other)",
+    );
+    fails_with(
+        &["plot", dbc, "Other.Rpm", "-o", b],
+        &log,
+        "none of the signals appears in the 200 frames",
+    );
+    fails_with(
+        &[
+            "plot",
+            dbc,
+            "Current",
+            "-o",
+            dir.join("x.jpg").to_str().unwrap(),
+        ],
+        &log,
+        "must end in .png or .svg",
+    );
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n != "motor.dbc" && n != "motor.png" && n != "motor.svg")
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+#[test]
+fn log_cat_and_stats() {
+    let input = "(1.000000) can0 123#00\n(1.010000) can0 123#01\n(1.020000) can1 1ABCDEF0##5AA\n\
+                 (1.030000) can0 123#R2\n(1.040000) can0 20000080#0000000000000000\n";
+    let (code, out, err) = bywire(&["log", "stats"], input);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.starts_with("5 frames (1 FD, 1 remote, 1 error) over 0.040000 s"),
+        "{out}"
+    );
+    assert!(
+        out.contains("can0       123            2         10.000"),
+        "{out}"
+    );
+    assert!(out.contains("can0       123 R          1"), "{out}");
+    let (_, out, _) = bywire(&["log", "cat", "--filter", "123:7FF"], input);
+    assert_eq!(out, "(0000000001.000000) can0 123#00\n(0000000001.010000) can0 123#01\n(0000000001.030000) can0 123#R2\n");
+    let (_, out, _) = bywire(
+        &["log", "cat", "--screen", "--filter", "1ABCDEF0:1FFFFFFF"],
+        input,
+    );
+    assert_eq!(out, " (0000000001.020000)  can1  1ABCDEF0  [01]  AA\n");
+    let (_, out, _) = bywire(
+        &["log", "cat", "--nanoseconds"],
+        "(1.5 ) x\n(1.000000001) can0 123#00\n",
+    );
+    assert!(out.is_empty());
+    fails_with(
+        &["log", "cat"],
+        "(1.000000) can0 123#00\n(1.5) can0 12#00\n",
+        "standard input: line 2, column 12: frame",
+    );
+    let (_, out, _) = bywire(
+        &["log", "cat", "--nanoseconds"],
+        "(1.000000001) can0 123#00\n",
+    );
+    assert_eq!(out, "(0000000001.000000001) can0 123#00\n");
+    fails_with(
+        &["log", "cat", "--filter", "12G:7FF"],
+        "",
+        "filter '12G:7FF'",
+    );
+}
