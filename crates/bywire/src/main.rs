@@ -27,7 +27,21 @@ use clap::{Parser, Subcommand};
 
 /// A drive-by-wire CAN stack: wire model, bit timing and CAN tools.
 #[derive(Parser)]
-#[command(name = "bywire", version, about, long_about = None)]
+#[command(
+    name = "bywire",
+    version,
+    about,
+    long_about = None,
+    after_help = "Examples:
+  bywire dump -ta can0                       (candump; any bus spec: virtual:x, sim:x@500000)
+  bywire send can0 123#DEADBEEF              (cansend)
+  bywire monitor vehicle.dbc can0            (decoded live table)
+  candump -L can0 | bywire decode vehicle.dbc
+  bywire wire 123#DEADBEEF --bitrate 500000  (the frame's bits on the wire)
+
+Exit status: 0 on success (and when the reader of the output goes away), 1 on an error,
+2 on a usage error. `bywire COMMAND --help` shows each command's options and examples."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -40,6 +54,9 @@ enum Command {
     /// Compute bit-timing registers for a bitrate and sample point on a controller.
     Bittiming(bittiming_cmd::Args),
     /// Work with DBC files: dump.
+    #[command(
+        after_help = "Examples:\n  bywire dbc dump vehicle.dbc\n  bywire dbc lint vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc gen-rust vehicle.dbc > src/vehicle.rs"
+    )]
     Dbc {
         #[command(subcommand)]
         command: dbc_cmd::DbcCommand,
@@ -63,6 +80,9 @@ enum Command {
     /// Plot signals from a candump log (or a live capture) to PNG or SVG, like cantools plot.
     Plot(plot_cmd::Args),
     /// Read candump logs: print them (log or screen form, filtered) or summarise them.
+    #[command(
+        after_help = "Examples:\n  bywire log cat --screen drive.log\n  bywire log stats drive.log"
+    )]
     Log {
         #[command(subcommand)]
         command: log_cmd::LogCommand,

@@ -565,3 +565,67 @@ fn log_cat_and_stats() {
         "filter '12G:7FF'",
     );
 }
+
+#[test]
+fn every_help_ends_with_examples_and_a_closed_pipe_is_success() {
+    for command in [
+        &[][..],
+        &["dump"],
+        &["send"],
+        &["gen"],
+        &["play"],
+        &["busload"],
+        &["sniff"],
+        &["monitor"],
+        &["plot"],
+        &["log"],
+        &["log", "cat"],
+        &["log", "stats"],
+        &["decode"],
+        &["dbc"],
+        &["wire"],
+        &["bittiming"],
+        &["bridge"],
+    ] {
+        let mut args = command.to_vec();
+        args.push("--help");
+        let (code, out, _) = bywire(&args, "");
+        assert_eq!(code, 0, "{args:?}");
+        let examples = out
+            .split("Examples:\n")
+            .nth(1)
+            .unwrap_or_else(|| panic!("{args:?}: {out}"));
+        assert!(
+            examples.lines().next().unwrap().contains("bywire "),
+            "{args:?}: {out}"
+        );
+    }
+    // 200,000 lines into `log cat`, whose reader stops after one.
+    let script = format!(
+        "yes '(1.000000) can0 123#00' | head -200000 | {} log cat | head -1; echo \"${{PIPESTATUS[2]}}\"",
+        env!("CARGO_BIN_EXE_bywire")
+    );
+    let out = Command::new("bash").args(["-c", &script]).output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text, "(0000000001.000000) can0 123#00\n0\n");
+}
+
+#[test]
+fn terminal_views_report_bad_input_before_taking_the_terminal() {
+    fails_with(&["sniff", "nosuch:x"], "", "unknown bus scheme 'nosuch'");
+    fails_with(&["sniff", "vcan0,1:2:3"], "", "filter '1:2:3'");
+    fails_with(&["sniff"], "", "no bus given");
+    fails_with(
+        &["monitor", "/nonexistent.dbc", "virtual:t"],
+        "",
+        "cannot read /nonexistent.dbc",
+    );
+    fails_with(
+        &["sniff", "-I", "/nonexistent.log"],
+        "",
+        "cannot open /nonexistent.log",
+    );
+    // Without a terminal the views say so instead of drawing.
+    let m = corpus(MOTOHAWK);
+    fails_with(&["monitor", &m, "virtual:t"], "", "needs a terminal");
+}
