@@ -29,20 +29,6 @@ fn contains_any(name: &str, words: &[&str]) -> bool {
     words.iter().any(|w| upper.contains(w))
 }
 
-/// The enum value name of a message attribute, or its number as text.
-fn attribute_text(db: &Database, m: &Message, name: &str) -> Option<String> {
-    let value = m.attribute(name).or_else(|| db.attribute_default(name))?;
-    let def = db.attribute_defs.iter().find(|d| d.name == name);
-    Some(match (value, def.map(|d| &d.kind)) {
-        (AttrValue::Number(Num::Int(i)), Some(AttrType::Enum(names))) => usize::try_from(*i)
-            .ok()
-            .and_then(|i| names.get(i).cloned())
-            .unwrap_or_else(|| i.to_string()),
-        (AttrValue::Number(n), _) => n.to_string(),
-        (AttrValue::Str(s), _) => s.clone(),
-    })
-}
-
 /// Run every check.
 pub fn lint(db: &Database) -> Vec<Finding> {
     let mut out = Vec::new();
@@ -81,10 +67,12 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                 format!("message name {} is used twice", m.name),
             );
         }
-        let send_type = attribute_text(db, m, "GenMsgSendType")
+        let send_type = db
+            .message_attribute_text(m, "GenMsgSendType")
             .unwrap_or_default()
             .to_ascii_lowercase();
-        let cycle = attribute_text(db, m, "GenMsgCycleTime")
+        let cycle = db
+            .message_attribute_text(m, "GenMsgCycleTime")
             .and_then(|c| c.parse::<f64>().ok())
             .unwrap_or(0.0);
         if send_type.contains("cyclic") && !send_type.contains("no") && cycle <= 0.0 {

@@ -438,4 +438,21 @@ impl Database {
             .find(|d| d.name == name)
             .and_then(|d| d.default.as_ref())
     }
+
+    /// A message's attribute as text, falling back to the file's default: an enum attribute
+    /// by its value name, a number as written, a string as is.
+    pub fn message_attribute_text(&self, message: &Message, name: &str) -> Option<String> {
+        let value = message
+            .attribute(name)
+            .or_else(|| self.attribute_default(name))?;
+        let def = self.attribute_defs.iter().find(|d| d.name == name);
+        Some(match (value, def.map(|d| &d.kind)) {
+            (AttrValue::Number(Num::Int(i)), Some(AttrType::Enum(names))) => usize::try_from(*i)
+                .ok()
+                .and_then(|i| names.get(i).cloned())
+                .unwrap_or_else(|| i.to_string()),
+            (AttrValue::Number(n), _) => n.to_string(),
+            (AttrValue::Str(s), _) => s.clone(),
+        })
+    }
 }

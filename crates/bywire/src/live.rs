@@ -179,3 +179,24 @@ fn is_quit(key: KeyEvent) -> bool {
     matches!(key.code, KeyCode::Esc)
         || (key.code == KeyCode::Char('c') && key.modifiers.contains(KeyModifiers::CONTROL))
 }
+
+/// A view drawn on ratatui's `TestBackend`: the screen as text, and the buffer for styles.
+#[cfg(test)]
+pub fn render(
+    view: &mut impl View,
+    width: u16,
+    height: u16,
+    now: Instant,
+) -> (String, ratatui::buffer::Buffer) {
+    let mut terminal =
+        ratatui::Terminal::new(ratatui::backend::TestBackend::new(width, height)).unwrap();
+    terminal.draw(|f| view.draw(f, now)).unwrap();
+    let buffer = terminal.backend().buffer().clone();
+    let text = buffer
+        .content()
+        .chunks(usize::from(width))
+        .map(|row| row.iter().map(|c| c.symbol()).collect::<String>())
+        .collect::<Vec<_>>()
+        .join("\n");
+    (text, buffer)
+}

@@ -196,8 +196,6 @@ pub fn run(args: &Args) -> Result<()> {
 mod tests {
     use super::*;
     use bywire_core::Timestamp;
-    use ratatui::backend::TestBackend;
-    use ratatui::Terminal;
 
     fn received(text: &str, at_ms: u64) -> Received {
         Received {
@@ -206,18 +204,6 @@ mod tests {
             own: false,
             hardware: None,
         }
-    }
-
-    fn screen(view: &mut Monitor) -> String {
-        let mut terminal = Terminal::new(TestBackend::new(80, 10)).unwrap();
-        terminal.draw(|f| view.draw(f, Instant::now())).unwrap();
-        let buffer = terminal.backend().buffer();
-        buffer
-            .content()
-            .chunks(80)
-            .map(|row| row.iter().map(|c| c.symbol()).collect::<String>())
-            .collect::<Vec<_>>()
-            .join("\n")
     }
 
     #[test]
@@ -248,7 +234,7 @@ mod tests {
             &received("555#01", 13),
             t0 + Duration::from_millis(13),
         );
-        let text = screen(&mut view);
+        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("2 messages, 3 frames decoded, 1 unknown"),
             "{text}"
@@ -260,7 +246,7 @@ mod tests {
             assert!(!view.on_key(KeyEvent::from(KeyCode::Char(c))));
         }
         view.on_key(KeyEvent::from(KeyCode::Enter));
-        let text = screen(&mut view);
+        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("Position: Drive") && !text.contains("Kph"),
             "{text}"
@@ -272,7 +258,7 @@ mod tests {
             &received("124#00", 20),
             t0 + Duration::from_millis(20),
         );
-        let text = screen(&mut view);
+        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("PAUSED") && text.contains("Position: Drive"),
             "{text}"

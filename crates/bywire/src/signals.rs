@@ -9,7 +9,7 @@ use anyhow::{anyhow, Result};
 use bywire_core::{FdFrame, Frame, Id};
 use bywire_dbc::codec::{Decoded, EncodeError, EncodeMode, MessageCodec, Value};
 use bywire_dbc::e2e::Protection;
-use bywire_dbc::{AttrType, AttrValue, Database, Message, Num, Signal};
+use bywire_dbc::{AttrValue, Database, Message, Signal};
 use serde_json::json;
 
 /// One signal of a decoded frame.
@@ -140,26 +140,11 @@ impl Dbc {
         self.by_id.get(&(message.id, message.extended)).copied()
     }
 
-    /// A message's attribute as text (enum attributes by their name), with the file's default.
-    pub fn attribute_text(&self, message: &Message, name: &str) -> Option<String> {
-        let value = message
-            .attribute(name)
-            .or_else(|| self.db.attribute_default(name))?;
-        let def = self.db.attribute_defs.iter().find(|d| d.name == name);
-        Some(match (value, def.map(|d| &d.kind)) {
-            (AttrValue::Number(Num::Int(i)), Some(AttrType::Enum(names))) => usize::try_from(*i)
-                .ok()
-                .and_then(|i| names.get(i).cloned())
-                .unwrap_or_else(|| i.to_string()),
-            (AttrValue::Number(n), _) => n.to_string(),
-            (AttrValue::Str(s), _) => s.clone(),
-        })
-    }
-
     /// The message's cycle time (`GenMsgCycleTime`), when it has a positive one.
     pub fn cycle_time(&self, message: &Message) -> Option<Duration> {
         let ms: f64 = self
-            .attribute_text(message, "GenMsgCycleTime")?
+            .db
+            .message_attribute_text(message, "GenMsgCycleTime")?
             .parse()
             .ok()?;
         (ms > 0.0 && ms.is_finite()).then(|| Duration::from_secs_f64(ms / 1000.0))
@@ -169,7 +154,8 @@ impl Dbc {
     /// and with bit rate switching.
     pub fn fd_format(&self, message: &Message) -> (bool, bool) {
         let format = self
-            .attribute_text(message, "VFrameFormat")
+            .db
+            .message_attribute_text(message, "VFrameFormat")
             .unwrap_or_default();
         let fd = format.contains("FD") || message.size > 8;
         (fd, fd && !format.contains("NoBRS"))

@@ -220,8 +220,6 @@ pub fn run(args: &Args) -> Result<()> {
 mod tests {
     use super::*;
     use bywire_core::Timestamp;
-    use ratatui::backend::TestBackend;
-    use ratatui::Terminal;
 
     fn received(text: &str, at_ms: u64) -> Received {
         Received {
@@ -230,19 +228,6 @@ mod tests {
             own: false,
             hardware: None,
         }
-    }
-
-    fn screen(view: &mut Sniffer, now: Instant) -> (String, ratatui::buffer::Buffer) {
-        let mut terminal = Terminal::new(TestBackend::new(120, 8)).unwrap();
-        terminal.draw(|f| view.draw(f, now)).unwrap();
-        let buffer = terminal.backend().buffer().clone();
-        let text = buffer
-            .content()
-            .chunks(120)
-            .map(|row| row.iter().map(|c| c.symbol()).collect::<String>())
-            .collect::<Vec<_>>()
-            .join("\n");
-        (text, buffer)
     }
 
     #[test]
@@ -270,7 +255,7 @@ mod tests {
             &received("1ABCDEF0#414243", 25),
             t0 + Duration::from_millis(25),
         );
-        let (text, buffer) = screen(&mut view, t0 + Duration::from_millis(30));
+        let (text, buffer) = live::render(&mut view, 120, 8, t0 + Duration::from_millis(30));
         assert!(text.contains("2 identifiers"), "{text}");
         let row = text.lines().find(|l| l.contains(" 123 ")).unwrap();
         assert!(
@@ -290,9 +275,9 @@ mod tests {
             &received("7FF#00", 40),
             t0 + Duration::from_millis(40),
         );
-        let (text, _) = screen(&mut view, t0 + Duration::from_millis(50));
+        let (text, _) = live::render(&mut view, 120, 8, t0 + Duration::from_millis(50));
         assert!(text.contains("PAUSED") && !text.contains("7FF"), "{text}");
-        let (text, _) = screen(&mut view, t0 + Duration::from_secs(6));
+        let (text, _) = live::render(&mut view, 120, 8, t0 + Duration::from_secs(6));
         assert!(text.contains("0 identifiers"), "{text}");
         assert!(view.on_key(KeyEvent::from(KeyCode::Char('q'))));
     }
