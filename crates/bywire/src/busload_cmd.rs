@@ -269,3 +269,39 @@ fn predict(dbc: &Dbc, rates: Bitrates, stuffing: Stuffing) -> f64 {
         .collect();
     predicted_load(&messages, rates.nominal)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn predicts_from_cycle_times_with_each_frames_own_length() {
+        let text =
+            "BA_DEF_ BO_ \"GenMsgCycleTime\" INT 0 10000;\nBA_DEF_DEF_ \"GenMsgCycleTime\" 0;\n\
+                    BO_ 256 Fast: 8 ECU\n SG_ A : 0|8@1+ (1,0) [0|255] \"\" X\n\
+                    BO_ 257 Slow: 2 ECU\n SG_ B : 0|8@1+ (1,0) [0|255] \"\" X\n\
+                    BO_ 258 Never: 8 ECU\n SG_ C : 0|8@1+ (1,0) [0|255] \"\" X\n\
+                    BA_ \"GenMsgCycleTime\" BO_ 256 10;\nBA_ \"GenMsgCycleTime\" BO_ 257 100;\n";
+        let db = bywire_dbc::parse(text.as_bytes(), bywire_dbc::Mode::Strict)
+            .unwrap()
+            .0;
+        let dbc = Dbc::new(db);
+        let rates = Bitrates {
+            nominal: 500_000,
+            data: None,
+        };
+        let fast: Frame = "100#0000000000000000".parse().unwrap();
+        let slow: Frame = "101#0000".parse().unwrap();
+        for stuffing in [Stuffing::Exact, Stuffing::None, Stuffing::WorstCase] {
+            let bits_per_second = f64::from(frame_bits(&fast, stuffing)) * 100.0
+                + f64::from(frame_bits(&slow, stuffing)) * 10.0;
+            let expected = 100.0 * bits_per_second / 500_000.0;
+            assert!(
+                (predict(&dbc, rates, stuffing) - expected).abs() < 1e-9,
+                "{stuffing:?}"
+            );
+        }
+        // 8 zero bytes at 10 ms: 100 frames/s of 111 + stuff bits.
+        assert!(predict(&dbc, rates, Stuffing::Exact) > 2.2);
+    }
+}

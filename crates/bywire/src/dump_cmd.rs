@@ -158,7 +158,12 @@ fn print_frames(
         let event = match rx.recv_timeout(Duration::from_millis(50)) {
             Ok(event) => event,
             Err(RecvTimeoutError::Timeout) => {
+                // Idle: what was received is written out (a log file too, so little is lost
+                // if the process is killed).
                 out.flush()?;
+                if let Some(log) = log.as_mut() {
+                    log.flush()?;
+                }
                 if stop.load(Ordering::Relaxed) || idle.is_some_and(|t| last_frame.elapsed() >= t) {
                     return Ok(());
                 }

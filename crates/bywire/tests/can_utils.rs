@@ -13,9 +13,21 @@ mod common;
 
 /// Run `script` in the VM with two vcan interfaces, can-utils and our binary as `$B`.
 fn in_vm(script: &str) -> String {
+    in_vm_with(script, &[])
+}
+
+/// The same with more host files copied into the VM.
+fn in_vm_with(script: &str, files: &[&str]) -> String {
     let bin = env!("CARGO_BIN_EXE_bywire");
-    let script = format!("B={bin}\ncd /tmp\n{script}");
-    common::in_canvm(&["--can-utils", "--vcan", "2", "--include", bin], &script)
+    // ready FILE IFACE: send warm-up frames (7FE#00) on IFACE until the listener writing FILE
+    // has printed one, so a slow VM never loses the start of the traffic to a late listener.
+    let ready = "ready() { for i in $(seq 50); do cansend $2 7FE#00; sleep 0.2; [ -s $1 ] && return; done; }";
+    let script = format!("B={bin}\ncd /tmp\n{ready}\n{script}");
+    let mut options = vec!["--can-utils", "--vcan", "2", "--include", bin];
+    for f in files {
+        options.extend(["--include", f]);
+    }
+    common::in_canvm(&options, &script)
 }
 
 /// The text between `== name` and the next `==` line.
@@ -25,6 +37,17 @@ fn section<'a>(text: &'a str, name: &str) -> &'a str {
         .unwrap_or_else(|| panic!("no section {name} in:\n{text}"));
     let rest = &text[start + name.len() + 4..];
     &rest[..rest.find("\n== ").map_or(rest.len(), |e| e + 1)]
+}
+
+/// The lines after the one with the 7FD marker frame.
+fn after_marker(text: &str) -> &str {
+    let marker = text
+        .find("7FD")
+        .unwrap_or_else(|| panic!("no marker in:\n{text}"));
+    let end = text[marker..]
+        .find('\n')
+        .map_or(text.len(), |e| marker + e + 1);
+    &text[end..]
 }
 
 /// Frames of the same traffic: classic, extended, remote (with DLC), FD with and without BRS,
@@ -39,31 +62,38 @@ cansend vcan1 1F334455##3112233445566778899; cansend vcan0 000#00
 
 #[test]
 fn dump_prints_what_candump_prints() {
-    let forms = ["", "-L", "-ta", "-a", "-e", "-td", "-tz"];
+    let forms = ["", "-L", "-ta", "-tA", "-a", "-e", "-td", "-tz"];
     let mut script = String::new();
     for (i, form) in forms.iter().enumerate() {
         script += &format!(
             "candump {form} vcan0,0:0,#FFFFFFFF vcan1 > c{i}.txt & P=\"$P $!\"\n$B dump {form} vcan0,0:0,#FFFFFFFF vcan1 > b{i}.txt & P=\"$P $!\"\n"
         );
     }
-    script += "sleep 1.5\n";
+    let dbc = common::corpus("cantools/tests__files__dbc__motohawk.dbc");
+    script += &format!("$B dump --dbc {dbc} vcan0 > decoded.txt & P=\"$P $!\"\n");
+    // Every reader is listening once it has printed a warm-up frame; the marker after that is
+    // the first frame all of them see, and the comparison starts behind it.
+    script += "for i in $(seq 50); do cansend vcan0 7FE#00; cansend vcan1 7FE#00; sleep 0.2; \
+               ready=1; for f in c*.txt b*.txt decoded.txt; do [ -s $f ] || ready=0; done; \
+               [ $ready = 1 ] && break; done\ncansend vcan0 7FD#00\n";
     script += TRAFFIC;
+    script += "cansend vcan0 1F0#A5B6D90000000000\n";
     script += "sleep 0.5\nkill -INT $P; sleep 0.5\n";
     for (i, form) in forms.iter().enumerate() {
         script += &format!(
             "echo '== candump {form}'; cat c{i}.txt; echo '== bywire {form}'; cat b{i}.txt\n"
         );
     }
-    script += "echo '== end'\n";
-    let out = in_vm(&script);
+    script += "echo '== decoded'; cat decoded.txt; echo '== end'\n";
+    let out = in_vm_with(&script, &[&dbc]);
     for form in forms {
-        let theirs = section(&out, &format!("candump {form}"));
-        let ours = section(&out, &format!("bywire {form}"));
+        let theirs = after_marker(section(&out, &format!("candump {form}")));
+        let ours = after_marker(section(&out, &format!("bywire {form}")));
         assert!(
             theirs.lines().count() >= 12,
             "candump {form} printed:\n{theirs}"
         );
-        if form.starts_with("-t") && form != "-ta" {
+        if form == "-td" || form == "-tz" {
             // Delta and zero-based times depend on when each program read the frame.
             let strip = |t: &str| -> Vec<String> {
                 t.lines()
@@ -71,13 +101,25 @@ fn dump_prints_what_candump_prints() {
                     .collect()
             };
             assert_eq!(strip(ours), strip(theirs), "dump {form}");
-            assert!(ours.starts_with(" (000.000000) "), "{ours}");
+            // (SSS.UUUUUU): at least three digits of seconds, six of microseconds.
+            assert!(
+                ours.lines().all(|l| l.starts_with(" (")
+                    && l.find('.')
+                        .is_some_and(|d| d >= 5 && l[d + 7..].starts_with(") "))),
+                "{ours}"
+            );
         } else {
             assert_eq!(ours, theirs, "dump {form}");
         }
     }
+    // With --dbc the signals follow their frame, as cantools shows them.
+    let decoded = after_marker(section(&out, "decoded"));
+    assert!(
+        decoded.contains("  vcan0  1F0   [8]  A5 B6 D9 00 00 00 00 00\n      ExampleMessage(\n          Temperature: 244.14 degK,\n          AverageRadius: 1.8 m,\n          Enable: Enabled\n      )\n"),
+        "{decoded}"
+    );
     // The words for error frames are there (-e).
-    assert!(section(&out, "bywire -e").contains(
+    assert!(after_marker(section(&out, "bywire -e")).contains(
         "\tprotocol-violation{{frame-format-error,tx-dominant-bit-error}{acknowledge-slot}}"
     ));
 }
@@ -96,7 +138,7 @@ fn send_sends_what_cansend_sends() {
         "1FFFFFFF##3000102030405060708090A0B0C0D0E0F101112131415161718191A1B1C1D1E1F",
         "123#1122334455667788",
     ];
-    let mut script = "candump -L vcan0 > sent.log & P=$!\nsleep 0.5\n".to_string();
+    let mut script = "candump -L vcan0 > sent.log & P=$!\nready sent.log vcan0\n".to_string();
     for f in frames {
         script += &format!("cansend vcan0 '{f}'; $B send vcan0 '{f}'\n");
     }
@@ -105,6 +147,7 @@ fn send_sends_what_cansend_sends() {
     let lines: Vec<&str> = section(&out, "sent")
         .lines()
         .map(|l| l.split_whitespace().nth(2).unwrap())
+        .filter(|f| *f != "7FE#00")
         .collect();
     assert_eq!(lines.len(), 2 * frames.len(), "{out}");
     for pair in lines.chunks(2) {
@@ -116,19 +159,19 @@ fn send_sends_what_cansend_sends() {
 fn logs_replay_both_ways() {
     let script = "\
 candump -L vcan0 > theirs.log & P1=$!
-sleep 0.5
+ready theirs.log vcan0
 cangen vcan0 -n 30 -g 1 -m; cangen vcan0 -n 10 -g 1 -e -R; cangen vcan0 -n 10 -g 2 -f -b
 sleep 0.3; kill -INT $P1; sleep 0.2
 candump -L vcan1 > ours_played.log & P2=$!
-sleep 0.5
+ready ours_played.log vcan1
 $B play -I theirs.log vcan1=vcan0
 sleep 0.3; kill -INT $P2; sleep 0.2
 $B dump -f ours.log vcan0 & P3=$!
-sleep 0.5
+ready ours.log vcan0
 cangen vcan0 -n 30 -g 1 -m; cangen vcan0 -n 10 -g 1 -f
 sleep 0.5; kill -INT $P3; sleep 0.5
 candump -L vcan1 > canplayer_played.log & P4=$!
-sleep 0.5
+ready canplayer_played.log vcan1
 canplayer -I ours.log vcan1=vcan0
 sleep 0.3; kill -INT $P4; sleep 0.2
 echo '== theirs'; cat theirs.log; echo '== ours_played'; cat ours_played.log
@@ -140,6 +183,7 @@ echo '== ours'; cat ours.log; echo '== canplayer_played'; cat canplayer_played.l
             .lines()
             .filter(|l| l.starts_with('('))
             .map(|l| l.split_whitespace().nth(2).unwrap().to_string())
+            .filter(|f| f != "7FE#00")
             .collect()
     };
     let theirs = frames("theirs");
@@ -169,7 +213,7 @@ fn busload_agrees_with_canbusload() {
     // DLC as data bits it does not have on the wire (checked separately below).
     let script = "\
 candump -L vcan0 > traffic.log & P0=$!
-sleep 0.5
+ready traffic.log vcan0
 cangen vcan0 -n 40 -g 1; cangen vcan0 -n 30 -g 1 -e
 cangen vcan0 -n 20 -g 1 -L 8 -D 0000000000000000; cangen vcan0 -n 20 -g 1 -L 8 -D FFFFFFFFFFFFFFFF -e
 sleep 0.3; kill -INT $P0; sleep 0.2
@@ -178,7 +222,7 @@ for log in traffic remote; do for m in -e -i x; do
   flag=$m; [ $m = x ] && flag=
   canbusload $flag vcan0@500000 > c.txt & P1=$!
   $B busload $flag vcan0@500000 > b.txt & P2=$!
-  sleep 0.5; canplayer -I $log.log; sleep 1.3
+  sleep 2; canplayer -I $log.log; sleep 1.3
   kill $P1; kill -INT $P2; sleep 0.3
   echo \"== $log $m\"; awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' c.txt b.txt
   awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' b.txt
