@@ -11,6 +11,13 @@ if ! command -v sigrok-cli >/dev/null || ! command -v tmux >/dev/null; then
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux >/dev/null
 fi
+# The udp: tests send bursts of 500 datagrams; the receive buffer they need is capped by
+# net.core.rmem_max (global, not settable inside the test's network namespace).
+if [ "$(cat /proc/sys/net/core/rmem_max)" -lt 4194304 ]; then
+  $SUDO sysctl -qw net.core.rmem_max=4194304
+fi
+# python-can + msgpack: the udp_multicast peer.
+python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.

@@ -21,6 +21,7 @@ pub mod sim_endpoint;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 mod spec;
+pub mod udp;
 pub mod virtual_bus;
 
 use std::sync::OnceLock;

@@ -26,6 +26,11 @@ pub enum BusSpec {
         /// The interface name (`can0`, `vcan0`).
         interface: String,
     },
+    /// `udp:[GROUP[:PORT]]`: python-can's `udp_multicast` bus.
+    Udp {
+        /// The multicast group and port.
+        group: std::net::SocketAddr,
+    },
 }
 
 /// A spec that parsed but whose bus cannot be opened.
@@ -68,7 +73,7 @@ pub enum SpecError {
     },
 }
 
-const KNOWN: &str = "virtual, sim, socketcan";
+const KNOWN: &str = "virtual, sim, socketcan, udp";
 
 fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
     let valid = !text.is_empty()
@@ -137,6 +142,12 @@ impl FromStr for BusSpec {
                     interface: rest.to_string(),
                 })
             }
+            "udp" => crate::udp::parse_spec(rest)
+                .map(|group| BusSpec::Udp { group })
+                .map_err(|reason| SpecError::Parameters {
+                    scheme: "udp",
+                    reason,
+                }),
             other => Err(SpecError::UnknownScheme {
                 scheme: other.to_string(),
                 known: KNOWN,
@@ -157,6 +168,7 @@ impl fmt::Display for BusSpec {
                 }
             }
             BusSpec::SocketCan { interface } => write!(f, "socketcan:{interface}"),
+            BusSpec::Udp { group } => write!(f, "udp:{group}"),
         }
     }
 }
@@ -180,6 +192,9 @@ pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
             .map_err(|e| refused(e.to_string())),
         #[cfg(not(target_os = "linux"))]
         BusSpec::SocketCan { .. } => Err(refused("SocketCAN exists only on Linux".into())),
+        BusSpec::Udp { group } => crate::udp::UdpMulticast::open(group)
+            .map(|bus| Box::new(bus) as Box<dyn Bus>)
+            .map_err(|e| refused(e.to_string())),
     }
 }
 

@@ -150,10 +150,12 @@ fn sniff_in_a_terminal() {
     let (dbc, log) = fixture("bywire-sniff");
     let bin = env!("CARGO_BIN_EXE_bywire");
     let s = Session::start("bywire-sniff", &format!("{bin} sniff --dbc {dbc} -I {log}"));
-    let screen = s.wait_for("Speed(Kph:");
+    s.wait_for("Speed(Kph:");
+    // Once a second frame of 0x123 is in, its cycle (from the log's timestamps) shows.
+    let screen = s.wait_for("     10.0  ");
     assert!(screen.contains("2 identifiers"), "{screen}");
     let row = screen.lines().find(|l| l.contains(" 123 ")).unwrap();
-    assert!(row.contains("10.0"), "a 10 ms cycle: {row}");
+    assert!(row.contains("     10.0  "), "a 10 ms cycle: {row}");
     s.keys("Space");
     s.wait_for("PAUSED");
     s.keys("c");

@@ -629,3 +629,40 @@ fn terminal_views_report_bad_input_before_taking_the_terminal() {
     let m = corpus(MOTOHAWK);
     fails_with(&["monitor", &m, "virtual:t"], "", "needs a terminal");
 }
+
+/// Two bywire processes share a `udp:` bus (python-can's udp_multicast format) inside
+/// `../shared/tools/lonet.sh`, where the multicast cannot leave the machine.
+#[test]
+fn dump_and_send_across_processes_over_udp() {
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let lonet = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/tools/lonet.sh"
+    );
+    let script = format!(
+        "{bin} dump -T 1500 udp:ipv4 > /tmp/udp-dump-$$.txt & P=$!\n\
+         for i in $(seq 20); do {bin} send udp:ipv4 7FE#00; sleep 0.1; [ -s /tmp/udp-dump-$$.txt ] && break; done\n\
+         {bin} send udp:ipv4 123#DEADBEEF; {bin} send udp:ipv4 1ABCDEF0##5AA\n\
+         wait $P; grep -v 7FE /tmp/udp-dump-$$.txt; rm -f /tmp/udp-dump-$$.txt"
+    );
+    let out = Command::new(lonet)
+        .args(["bash", "-c", &script])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines.last().copied(),
+        Some("  udp:ipv4  1ABCDEF0  [01]  AA"),
+        "{text}"
+    );
+    assert!(
+        text.contains("  udp:ipv4  123   [4]  DE AD BE EF\n"),
+        "{text}"
+    );
+}
