@@ -434,6 +434,27 @@ mod tests {
     }
 
     #[test]
+    fn no_datagram_panics_the_decoder() {
+        // Random bytes, and valid datagrams with random bytes changed, truncated or extended.
+        let mut rng = fastrand::Rng::with_seed(5);
+        let valid = encode(&"1ABCDEF0##5000102030405060708090A0B".parse().unwrap(), 1.0);
+        for _ in 0..50_000 {
+            let mut bytes: Vec<u8> = if rng.bool() {
+                (0..rng.usize(..300)).map(|_| rng.u8(..)).collect()
+            } else {
+                valid.clone()
+            };
+            for _ in 0..rng.usize(..4) {
+                if let Some(b) = bytes.get_mut(rng.usize(..valid.len())) {
+                    *b = rng.u8(..);
+                }
+            }
+            bytes.truncate(rng.usize(..=bytes.len()));
+            let _ = decode(&bytes);
+        }
+    }
+
+    #[test]
     fn specs() {
         assert_eq!(
             parse_spec("").unwrap().to_string(),
