@@ -221,7 +221,7 @@ mod tests {
         let e = "carrier:pigeon".parse::<BusSpec>().unwrap_err();
         assert_eq!(
             e.to_string(),
-            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan)"
+            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan, udp)"
         );
         assert!(matches!(
             "virtual:".parse::<BusSpec>(),
