@@ -22,27 +22,11 @@ const IN_LONET: &str = "BYWIRE_IN_LONET";
 
 /// True inside the namespace; on the host, runs `test` in a fresh one and checks it passed.
 fn inside_lonet(test: &str) -> bool {
-    if std::env::var_os(IN_LONET).is_some() {
-        return true;
-    }
-    let exe = std::env::current_exe().unwrap();
     let lonet = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../../shared/tools/lonet.sh"
     );
-    let out = Command::new(lonet)
-        .arg(&exe)
-        .args(["--exact", test, "--nocapture", "--test-threads", "1"])
-        .env(IN_LONET, "1")
-        .output()
-        .expect("lonet.sh runs (see ../shared/tools/README.md)");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && text.contains("test result: ok. 1 passed"),
-        "{test} in lonet: {text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    false
+    inside(IN_LONET, test, &[lonet.as_ref()])
 }
 
 fn opener(spec: String) -> Box<Opener> {

@@ -289,3 +289,30 @@ pub fn run_all(open_for: &dyn Fn(&str) -> Box<Opener>, global: bool) {
     halves_on_two_threads(&*open_for("split"));
     timeout_returns_none(&*open_for("timeout"));
 }
+
+/// For tests that need an environment this machine lacks (a kernel with CAN, a private network
+/// namespace): true when running in it (`marker` is set); otherwise runs this test binary's
+/// `test` there through `launcher` (a command line ending before the binary), checks it passed,
+/// and returns false.
+pub fn inside(marker: &str, test: &str, launcher: &[&std::ffi::OsStr]) -> bool {
+    if std::env::var_os(marker).is_some() {
+        return true;
+    }
+    let exe = std::env::current_exe().unwrap();
+    let (program, args) = launcher.split_first().expect("a launcher");
+    let out = std::process::Command::new(program)
+        .args(args)
+        .arg(&exe)
+        .args(["--exact", test, "--nocapture", "--test-threads", "1"])
+        .env(marker, "1")
+        .env("CANVM_ENV", marker)
+        .output()
+        .expect("the launcher runs (see ../shared/tools/README.md)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("test result: ok. 1 passed"),
+        "{test} in {program:?}: {text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    false
+}
