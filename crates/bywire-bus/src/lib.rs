@@ -20,6 +20,7 @@ pub mod sim;
 pub mod sim_endpoint;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
+pub mod socketcand;
 mod spec;
 pub mod udp;
 pub mod virtual_bus;

@@ -14,6 +14,7 @@ mod monitor_cmd;
 mod play_cmd;
 mod plot_cmd;
 mod send_cmd;
+mod serve_cmd;
 mod signals;
 mod sniff_cmd;
 mod wire_cmd;
@@ -87,6 +88,8 @@ enum Command {
         #[command(subcommand)]
         command: log_cmd::LogCommand,
     },
+    /// Serve a bus over the socketcand protocol (python-can, SavvyCAN and other clients).
+    Serve(serve_cmd::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
 }
@@ -107,6 +110,7 @@ fn main() -> ExitCode {
         Command::Sniff(args) => sniff_cmd::run(&args),
         Command::Monitor(args) => monitor_cmd::run(&args),
         Command::Plot(args) => plot_cmd::run(&args),
+        Command::Serve(args) => serve_cmd::run(&args, &mut out),
         Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
     };

@@ -666,3 +666,102 @@ fn dump_and_send_across_processes_over_udp() {
         "{text}"
     );
 }
+
+/// `bywire serve` on a virtual bus, python-can's socketcand interface as two clients, and a raw
+/// TCP client for the BCM cyclic `add` (its period measured) and malformed commands.
+#[test]
+fn serve_lets_socketcand_clients_share_a_bus() {
+    let port = 29_700 + u16::try_from(std::process::id() % 200).unwrap();
+    let listen = format!("127.0.0.1:{port}");
+    let mut server = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["serve", "virtual:served", "--listen", &listen])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.stdout.as_mut().unwrap()),
+        &mut first,
+    )
+    .unwrap();
+    assert!(first.starts_with("serving virtual:served on"), "{first}");
+    let script = format!(
+        r#"
+import can, socket, time
+a = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="served")
+b = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="served")
+time.sleep(0.3)
+a.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=b"\xde\xad\xbe\xef"))
+a.send(can.Message(arbitration_id=0x1abcdef0, is_extended_id=True, data=b""))
+for _ in range(2):
+    m = b.recv(2)
+    print("frame", hex(m.arbitration_id), m.is_extended_id, m.data.hex())
+s = socket.create_connection(("127.0.0.1", {port}))
+print("greeting", s.recv(100).decode())
+s.sendall(b"< echo >")
+print("before open", s.recv(100).decode())
+s.sendall(b"< open served >")
+print("open", s.recv(100).decode())
+s.sendall(b"< echo >< bogus >< send 12G 0 >< send 123 3 1 2 >< " + b"x" * 300 + b" >< echo >")
+time.sleep(0.3)
+print("replies", s.recv(1000).decode())
+s.sendall(b"< add 0 20000 321 2 aa bb >")
+times = []
+start = time.time()
+while time.time() - start < 1.0:
+    m = b.recv(0.5)
+    if m is not None and m.arbitration_id == 0x321:
+        times.append(m.timestamp)
+        assert m.data == b"\xaa\xbb"
+s.sendall(b"< delete 321 >")
+time.sleep(0.2)
+while b.recv(0.05) is not None:
+    pass
+print("cyclic", len(times), (times[-1] - times[0]) / (len(times) - 1))
+print("after delete", b.recv(0.3))
+"#
+    );
+    let out = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    let _ = Command::new("kill")
+        .args(["-INT", &server.id().to_string()])
+        .status();
+    let status = server.wait().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(status.success());
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "frame 0x123 False deadbeef");
+    assert_eq!(lines[1], "frame 0x1abcdef0 True ");
+    assert_eq!(lines[2], "greeting < hi >");
+    assert_eq!(lines[3], "before open < error open a bus first >");
+    assert_eq!(lines[4], "open < ok >");
+    assert_eq!(
+        lines[5],
+        "replies < echo >< error unknown or malformed command 'bogus' >< error '12G' is not a hex ID >\
+         < error length 3 with 2 data bytes (0 to 8, and equal) >< error command too long >< echo >"
+    );
+    // 20 ms cyclic frames for one second, measured by their receive times.
+    let cyclic: Vec<&str> = lines[6].split_whitespace().collect();
+    let count: usize = cyclic[1].parse().unwrap();
+    let period: f64 = cyclic[2].parse().unwrap();
+    assert!((40..=55).contains(&count), "{}", lines[6]);
+    assert!((period - 0.020).abs() < 0.002, "{}", lines[6]);
+    assert_eq!(lines[7], "after delete None");
+}
+
+#[test]
+fn serve_refuses_remote_listening_without_asking() {
+    fails_with(
+        &["serve", "virtual:x", "--listen", "0.0.0.0:29999"],
+        "",
+        "add --allow-remote",
+    );
+    fails_with(&["serve", "nosuch:x"], "", "unknown bus scheme");
+}

@@ -1,0 +1,528 @@
+//! The socketcand protocol: a server that lets any socketcand client (python-can's
+//! `socketcand` interface, SavvyCAN) join a bywire bus over TCP.
+//!
+//! Text commands between `<` and `>`: the server greets with `< hi >`; the client opens a bus
+//! (`< open NAME >` → `< ok >`) and is then in BCM mode; `< rawmode >` switches to raw mode, in
+//! which every frame goes to the client as `< frame ID SECS.USECS DATA >` and
+//! `< send ID LEN B0 B1 ... >` puts one on the bus. BCM mode: `< add SECS USECS ID LEN B... >`
+//! sends a frame cyclically, `< update ... >` changes its data, `< delete ID >` stops it,
+//! `< subscribe SECS USECS ID >` forwards that identifier (at most once per interval when one
+//! is given), `< unsubscribe ID >` stops it, `< filter SECS USECS ID LEN B... >` subscribes too
+//! (the content mask is not applied). `< echo >` is answered with `< echo >`. Anything
+//! malformed gets `< error TEXT >` and the session goes on.
+//!
+//! Each client gets its own endpoint on the served bus and its own bounded output queue: a
+//! slow client loses frames (counted) and never stalls the bus or the other clients. Raw mode
+//! has no transmit confirmation, no FD and no error frames.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use bywire_core::{ClassicFrame, Frame, Id, Timestamp};
+
+use crate::{Bus, BusError, BusTx};
+
+/// The longest command accepted; longer input is an error and is discarded.
+const MAX_COMMAND: usize = 256;
+/// The same, as a byte count for `Read::take`.
+const MAX_COMMAND_BYTES: u64 = 256;
+/// Frames queued for one client before further ones are dropped and counted.
+pub const CLIENT_QUEUE: usize = 8192;
+
+/// A client command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Command {
+    /// `open NAME`.
+    Open(String),
+    /// `rawmode`.
+    RawMode,
+    /// `bcmmode`.
+    BcmMode,
+    /// `echo`.
+    Echo,
+    /// `send ID LEN DATA`.
+    Send(Frame),
+    /// `add SECS USECS ID LEN DATA`: send every interval.
+    Add(Duration, Frame),
+    /// `update SECS USECS ID LEN DATA`: new data for a cyclic frame (and interval, if not 0).
+    Update(Duration, Frame),
+    /// `delete ID`.
+    Delete(Id),
+    /// `subscribe SECS USECS ID` (and `filter ...`): forward this identifier, throttled.
+    Subscribe(Duration, Id),
+    /// `unsubscribe ID`.
+    Unsubscribe(Id),
+}
+
+fn id(text: &str) -> Result<Id, String> {
+    let raw = u32::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex ID"))?;
+    let result = if text.len() > 3 || raw > 0x7FF {
+        Id::extended(raw)
+    } else {
+        Id::standard(raw)
+    };
+    result.map_err(|e| format!("ID {text}: {e}"))
+}
+
+fn frame(id_text: &str, len_text: &str, bytes: &[&str]) -> Result<Frame, String> {
+    let id = id(id_text)?;
+    let len =
+        usize::from_str_radix(len_text, 16).map_err(|_| format!("'{len_text}' is not a length"))?;
+    if len > 8 || bytes.len() != len {
+        return Err(format!(
+            "length {len} with {} data bytes (0 to 8, and equal)",
+            bytes.len()
+        ));
+    }
+    let mut data = [0u8; 8];
+    for (slot, text) in data.iter_mut().zip(bytes) {
+        if text.is_empty() || text.len() > 2 {
+            return Err(format!("'{text}' is not a byte"));
+        }
+        *slot = u8::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex byte"))?;
+    }
+    ClassicFrame::new(id, data.get(..len).unwrap_or(&[]))
+        .map(Frame::Classic)
+        .map_err(|e| e.to_string())
+}
+
+fn interval(secs: &str, usecs: &str) -> Result<Duration, String> {
+    let s: u64 = secs
+        .parse()
+        .map_err(|_| format!("'{secs}' is not seconds"))?;
+    let u: u64 = usecs
+        .parse()
+        .map_err(|_| format!("'{usecs}' is not microseconds"))?;
+    Ok(Duration::from_secs(s.min(86_400)) + Duration::from_micros(u.min(999_999_999)))
+}
+
+/// Parse the words between `<` and `>`.
+pub fn parse_command(inner: &str) -> Result<Command, String> {
+    let words: Vec<&str> = inner.split_whitespace().collect();
+    match words.as_slice() {
+        ["open", name] => Ok(Command::Open((*name).to_string())),
+        ["rawmode"] => Ok(Command::RawMode),
+        ["bcmmode"] => Ok(Command::BcmMode),
+        ["echo"] => Ok(Command::Echo),
+        ["send", i, l, data @ ..] => frame(i, l, data).map(Command::Send),
+        ["add", s, u, i, l, data @ ..] => Ok(Command::Add(interval(s, u)?, frame(i, l, data)?)),
+        ["update", s, u, i, l, data @ ..] => {
+            Ok(Command::Update(interval(s, u)?, frame(i, l, data)?))
+        }
+        ["delete", i] => id(i).map(Command::Delete),
+        ["subscribe", s, u, i] => Ok(Command::Subscribe(interval(s, u)?, id(i)?)),
+        ["filter", s, u, i, ..] => Ok(Command::Subscribe(interval(s, u)?, id(i)?)),
+        ["unsubscribe", i] => id(i).map(Command::Unsubscribe),
+        [] => Err("empty command".into()),
+        [word, ..] => Err(format!("unknown or malformed command '{word}'")),
+    }
+}
+
+/// A frame as the server sends it: `< frame 123 1699999999.123456 DEADBEEF >`.
+pub fn format_frame(frame: &Frame, timestamp: Timestamp) -> Option<String> {
+    let id = frame.id()?;
+    if frame.is_fd() || frame.is_remote() {
+        return None; // socketcand's text has no way to say either
+    }
+    let id_text = if id.is_extended() {
+        format!("{:08X}", id.as_raw())
+    } else {
+        format!("{:03X}", id.as_raw())
+    };
+    let nanos = timestamp.as_nanos();
+    let data: String = frame.data().iter().map(|b| format!("{b:02X}")).collect();
+    Some(format!(
+        "< frame {id_text} {}.{:06} {data} >",
+        nanos / 1_000_000_000,
+        nanos % 1_000_000_000 / 1000
+    ))
+}
+
+/// Counts the server keeps over all clients.
+#[derive(Debug, Default)]
+pub struct ServerStats {
+    /// Clients accepted.
+    pub clients: AtomicU64,
+    /// Frames not delivered because a client's queue was full.
+    pub dropped: AtomicU64,
+    /// Malformed commands answered with an error.
+    pub errors: AtomicU64,
+}
+
+/// Serve `listener`'s clients: each gets an endpoint from `open_bus` when it opens a bus name
+/// in `names` (empty: any name). Runs until `stop` is set.
+pub fn serve(
+    listener: TcpListener,
+    names: Vec<String>,
+    open_bus: Arc<dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync>,
+    stop: Arc<AtomicBool>,
+    stats: Arc<ServerStats>,
+) -> std::io::Result<()> {
+    listener.set_nonblocking(true)?;
+    while !stop.load(Ordering::Relaxed) {
+        match listener.accept() {
+            Ok((stream, _)) => {
+                stats.clients.fetch_add(1, Ordering::Relaxed);
+                let (names, open_bus, stop, stats) = (
+                    names.clone(),
+                    Arc::clone(&open_bus),
+                    Arc::clone(&stop),
+                    Arc::clone(&stats),
+                );
+                std::thread::spawn(move || {
+                    let _ = session(stream, &names, open_bus.as_ref(), &stop, &stats);
+                });
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+/// What the client's reader shares with the thread that feeds it frames.
+struct Subscriptions {
+    raw: AtomicBool,
+    /// Identifier (SocketCAN form) → throttle interval and when it was last forwarded.
+    by_id: std::sync::Mutex<BTreeMap<u32, (Duration, Option<Instant>)>>,
+}
+
+fn session(
+    stream: TcpStream,
+    names: &[String],
+    open_bus: &(dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync),
+    stop: &Arc<AtomicBool>,
+    stats: &Arc<ServerStats>,
+) -> std::io::Result<()> {
+    stream.set_nodelay(true)?;
+    let (out_tx, out_rx) = mpsc::sync_channel::<String>(CLIENT_QUEUE);
+    let mut writer = stream.try_clone()?;
+    let writer_thread = std::thread::spawn(move || {
+        for line in out_rx {
+            if writer.write_all(line.as_bytes()).is_err() {
+                break;
+            }
+        }
+    });
+    // Replies go through the same queue as frames, so they keep their order; replies are never
+    // dropped (blocking send), frames are when the queue is full.
+    let reply = |text: &str| out_tx.send(format!("< {text} >")).is_ok();
+    reply("hi");
+    let session_stop = Arc::new(AtomicBool::new(false));
+    let subscriptions = Arc::new(Subscriptions {
+        raw: AtomicBool::new(false),
+        by_id: std::sync::Mutex::new(BTreeMap::new()),
+    });
+    let mut sender: Option<Box<dyn BusTx>> = None;
+    let mut cyclic: BTreeMap<u32, Arc<std::sync::Mutex<(Duration, Frame)>>> = BTreeMap::new();
+    let mut cyclic_stops: BTreeMap<u32, Arc<AtomicBool>> = BTreeMap::new();
+    let mut reader = BufReader::new(stream);
+    let mut pending = Vec::new();
+    'session: while !stop.load(Ordering::Relaxed) {
+        pending.clear();
+        // Read up to '>' (bounded): one command.
+        let read = Read::by_ref(&mut reader)
+            .take(MAX_COMMAND_BYTES)
+            .read_until(b'>', &mut pending)?;
+        if read == 0 {
+            break;
+        }
+        if pending.last() != Some(&b'>') {
+            if pending.len() >= MAX_COMMAND {
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                reply("error command too long");
+                // Skip to the next '>' (bounded by the connection).
+                let mut skip = Vec::new();
+                if Read::by_ref(&mut reader)
+                    .take(1 << 20)
+                    .read_until(b'>', &mut skip)?
+                    == 0
+                {
+                    break;
+                }
+                continue;
+            }
+            break; // connection closed mid-command
+        }
+        let text = String::from_utf8_lossy(&pending);
+        let Some(start) = text.find('<') else {
+            stats.errors.fetch_add(1, Ordering::Relaxed);
+            reply("error no '<' before '>'");
+            continue;
+        };
+        let inner = text
+            .get(start + 1..text.len().saturating_sub(1))
+            .unwrap_or("");
+        let command = match parse_command(inner) {
+            Ok(c) => c,
+            Err(e) => {
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                reply(&format!("error {e}"));
+                continue;
+            }
+        };
+        let opened = sender.is_some();
+        match command {
+            Command::Open(name) => {
+                if opened {
+                    reply("error a bus is open already");
+                } else if !names.is_empty() && !names.contains(&name) {
+                    reply(&format!(
+                        "error no bus '{name}' (served: {})",
+                        names.join(", ")
+                    ));
+                } else {
+                    match open_bus() {
+                        Ok(bus) => {
+                            let (tx, rx) = bus.split();
+                            sender = Some(tx);
+                            reply("ok");
+                            spawn_forwarder(
+                                rx,
+                                out_tx.clone(),
+                                Arc::clone(&subscriptions),
+                                Arc::clone(&session_stop),
+                                Arc::clone(stats),
+                            );
+                        }
+                        Err(e) => {
+                            reply(&format!("error cannot open {name}: {e}"));
+                        }
+                    }
+                }
+            }
+            _ if !opened => {
+                reply("error open a bus first");
+            }
+            Command::RawMode => {
+                subscriptions.raw.store(true, Ordering::Relaxed);
+                reply("ok");
+            }
+            Command::BcmMode => {
+                subscriptions.raw.store(false, Ordering::Relaxed);
+                reply("ok");
+            }
+            Command::Echo => {
+                reply("echo");
+            }
+            Command::Send(frame) => {
+                if let Some(tx) = sender.as_mut() {
+                    if let Err(e) = tx.send(&frame) {
+                        reply(&format!("error {e}"));
+                        if matches!(e, BusError::Closed) {
+                            break 'session;
+                        }
+                    }
+                }
+            }
+            Command::Add(every, frame) => {
+                let key = frame.socketcan_id();
+                if let Some(old) = cyclic_stops.remove(&key) {
+                    old.store(true, Ordering::Relaxed);
+                }
+                let job = Arc::new(std::sync::Mutex::new((every, frame)));
+                let job_stop = Arc::new(AtomicBool::new(false));
+                match open_bus() {
+                    Ok(bus) => {
+                        spawn_cyclic(
+                            bus,
+                            Arc::clone(&job),
+                            Arc::clone(&job_stop),
+                            Arc::clone(&session_stop),
+                        );
+                        cyclic.insert(key, job);
+                        cyclic_stops.insert(key, job_stop);
+                    }
+                    Err(e) => {
+                        reply(&format!("error {e}"));
+                    }
+                }
+            }
+            Command::Update(every, frame) => match cyclic.get(&frame.socketcan_id()) {
+                Some(job) => {
+                    let mut job = job
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    if !every.is_zero() {
+                        job.0 = every;
+                    }
+                    job.1 = frame;
+                }
+                None => {
+                    reply("error no cyclic frame with that ID (add it first)");
+                }
+            },
+            Command::Delete(id) => {
+                let key = id_key(id);
+                cyclic.remove(&key);
+                match cyclic_stops.remove(&key) {
+                    Some(s) => s.store(true, Ordering::Relaxed),
+                    None => {
+                        reply("error no cyclic frame with that ID");
+                    }
+                }
+            }
+            Command::Subscribe(every, id) => {
+                let key = id_key(id);
+                lock(&subscriptions.by_id).insert(key, (every, None));
+            }
+            Command::Unsubscribe(id) => {
+                if lock(&subscriptions.by_id).remove(&id_key(id)).is_none() {
+                    reply("error not subscribed to that ID");
+                }
+            }
+        }
+    }
+    session_stop.store(true, Ordering::Relaxed);
+    for s in cyclic_stops.values() {
+        s.store(true, Ordering::Relaxed);
+    }
+    drop(out_tx);
+    let _ = writer_thread.join();
+    Ok(())
+}
+
+fn lock<T>(m: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The SocketCAN identifier of a data frame with this ID (EFF flag for extended).
+fn id_key(id: Id) -> u32 {
+    match id {
+        Id::Standard(s) => u32::from(s.as_raw()),
+        Id::Extended(e) => e.as_raw() | bywire_core::frame::EFF_FLAG,
+    }
+}
+
+/// Frames from the bus to the client: all of them in raw mode, subscribed ones (throttled) in
+/// BCM mode. A full queue drops the frame and counts it.
+fn spawn_forwarder(
+    mut rx: Box<dyn crate::BusRx>,
+    out: SyncSender<String>,
+    subscriptions: Arc<Subscriptions>,
+    stop: Arc<AtomicBool>,
+    stats: Arc<ServerStats>,
+) {
+    std::thread::spawn(move || {
+        while !stop.load(Ordering::Relaxed) {
+            let received = match rx.recv(Some(Duration::from_millis(100))) {
+                Ok(Some(r)) => r,
+                Ok(None) => continue,
+                Err(_) => break,
+            };
+            if !subscriptions.raw.load(Ordering::Relaxed) {
+                let key = received.frame.socketcan_id();
+                let mut by_id = lock(&subscriptions.by_id);
+                let Some((every, last)) = by_id.get_mut(&key) else {
+                    continue;
+                };
+                let now = Instant::now();
+                if last.is_some_and(|l| now.saturating_duration_since(l) < *every) {
+                    continue;
+                }
+                *last = Some(now);
+            }
+            let Some(line) = format_frame(&received.frame, received.timestamp) else {
+                continue;
+            };
+            match out.try_send(line) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => {
+                    stats.dropped.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(TrySendError::Disconnected(_)) => break,
+            }
+        }
+    });
+}
+
+/// A BCM cyclic transmission on its own endpoint: the frame every interval, on a fixed
+/// schedule (no drift), until stopped.
+fn spawn_cyclic(
+    mut bus: Box<dyn Bus>,
+    job: Arc<std::sync::Mutex<(Duration, Frame)>>,
+    stop: Arc<AtomicBool>,
+    session_stop: Arc<AtomicBool>,
+) {
+    std::thread::spawn(move || {
+        let mut next = Instant::now();
+        while !stop.load(Ordering::Relaxed) && !session_stop.load(Ordering::Relaxed) {
+            let (every, frame) = *lock(&job);
+            if bus.send(&frame).is_err() {
+                break;
+            }
+            if every.is_zero() {
+                break; // an interval of 0 sends once
+            }
+            next += every;
+            let now = Instant::now();
+            if next < now {
+                next = now; // fell behind: no burst to catch up
+            }
+            std::thread::sleep(next.saturating_duration_since(now));
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn commands_parse_and_refuse_clearly() {
+        assert_eq!(
+            parse_command(" open vcan0 "),
+            Ok(Command::Open("vcan0".into()))
+        );
+        assert_eq!(
+            parse_command(" send 123 4 de ad be ef "),
+            Ok(Command::Send("123#DEADBEEF".parse().unwrap()))
+        );
+        assert_eq!(
+            parse_command(" send 1ABCDEF0 2 1 2 "),
+            Ok(Command::Send("1ABCDEF0#0102".parse().unwrap()))
+        );
+        assert_eq!(
+            parse_command(" add 0 100000 123 1 ff "),
+            Ok(Command::Add(
+                Duration::from_millis(100),
+                "123#FF".parse().unwrap()
+            ))
+        );
+        assert!(parse_command(" send 123 3 01 02 ")
+            .unwrap_err()
+            .contains("length 3 with 2"));
+        assert!(parse_command(" send 12G 0 ")
+            .unwrap_err()
+            .contains("not a hex ID"));
+        assert!(parse_command(" send 123 9 1 2 3 4 5 6 7 8 9 ").is_err());
+        assert!(parse_command(" send 123 1 100 ")
+            .unwrap_err()
+            .contains("not a byte"));
+        assert!(parse_command(" fly away ")
+            .unwrap_err()
+            .contains("unknown or malformed command 'fly'"));
+        assert!(parse_command("").is_err());
+    }
+
+    #[test]
+    fn frames_print_as_socketcand_does() {
+        let t = Timestamp::from_nanos(1_699_999_999_123_456_789);
+        assert_eq!(
+            format_frame(&"123#DEADBEEF".parse().unwrap(), t).unwrap(),
+            "< frame 123 1699999999.123456 DEADBEEF >"
+        );
+        assert_eq!(
+            format_frame(&"00000123#".parse().unwrap(), t).unwrap(),
+            "< frame 00000123 1699999999.123456  >"
+        );
+        assert_eq!(format_frame(&"123##1AA".parse().unwrap(), t), None);
+    }
+}

@@ -1,0 +1,78 @@
+//! `bywire serve`: a socketcand server for any bus, so socketcand clients (python-can's
+//! `socketcand` interface, SavvyCAN) can join it over TCP.
+
+use std::io::Write;
+use std::net::{SocketAddr, TcpListener};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use anyhow::{anyhow, Context, Result};
+use bywire_bus::socketcand::{self, ServerStats};
+
+use crate::busarg;
+
+#[derive(clap::Args)]
+#[command(after_help = "Examples:
+  bywire serve virtual:test                    (a virtual bus other programs can join)
+  bywire serve can0 --listen 127.0.0.1:29536
+  python3 -c \"import can; b = can.Bus(interface='socketcand', host='127.0.0.1', port=29536, channel='test')\"
+
+Each client gets its own endpoint on the bus and a bounded queue: a slow client loses frames
+(counted, shown when the server stops) and never stalls the bus or the other clients. Clients
+may open any bus name unless --name restricts them. Listening beyond this host needs
+--allow-remote: the protocol has no authentication.")]
+pub struct Args {
+    /// The bus to serve (a plain interface name means SocketCAN).
+    bus: String,
+    /// Address and port to listen on.
+    #[arg(long, default_value = "127.0.0.1:29536")]
+    listen: SocketAddr,
+    /// Bus names clients may open (any when none is given).
+    #[arg(long = "name", value_name = "NAME")]
+    names: Vec<String>,
+    /// Allow listening on an address other hosts can reach.
+    #[arg(long)]
+    allow_remote: bool,
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    if !args.listen.ip().is_loopback() && !args.allow_remote {
+        return Err(anyhow!(
+            "--listen {}: not a loopback address; socketcand has no authentication, so add --allow-remote to serve other hosts",
+            args.listen
+        ));
+    }
+    let spec = busarg::full_spec(&args.bus);
+    // Open once now, so a bad spec fails before anyone connects; the endpoint keeps an
+    // in-process bus alive between clients.
+    let keep = busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
+    let listener = TcpListener::bind(args.listen)
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    writeln!(
+        out,
+        "serving {spec} on {} (socketcand)",
+        listener.local_addr()?
+    )?;
+    out.flush()?;
+    let stats = Arc::new(ServerStats::default());
+    let open_spec = spec.clone();
+    let open = Arc::new(move || {
+        bywire_bus::open(&open_spec).map_err(|e| bywire_bus::BusError::Unsupported(e.to_string()))
+    });
+    socketcand::serve(
+        listener,
+        args.names.clone(),
+        open,
+        crate::interrupt_flag(),
+        Arc::clone(&stats),
+    )?;
+    drop(keep);
+    writeln!(
+        out,
+        "clients {}, frames dropped for slow clients {}, malformed commands {}",
+        stats.clients.load(Ordering::Relaxed),
+        stats.dropped.load(Ordering::Relaxed),
+        stats.errors.load(Ordering::Relaxed)
+    )?;
+    Ok(())
+}
