@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use bywire_core::{ClassicFrame, Frame, Id, Timestamp};
 
-use crate::{Bus, BusError, BusTx};
+use crate::{Bus, BusError, BusTx, Received};
 
 /// The longest command accepted; longer input is an error and is discarded.
 const MAX_COMMAND: usize = 256;
@@ -469,6 +469,280 @@ fn spawn_cyclic(
             std::thread::sleep(next.saturating_duration_since(now));
         }
     });
+}
+
+/// A frame line from a server (`frame ID SECS.USECS DATA`, the words between `<` and `>`):
+/// the frame and its timestamp.
+pub fn parse_frame(inner: &str) -> Result<(Frame, Timestamp), String> {
+    let words: Vec<&str> = inner.split_whitespace().collect();
+    let (id_text, time, data) = match words.as_slice() {
+        ["frame", i, t] => (*i, *t, ""),
+        ["frame", i, t, d] => (*i, *t, *d),
+        _ => return Err(format!("not a frame: '{inner}'")),
+    };
+    let id = if id_text.len() == 3 {
+        Id::standard(u32::from_str_radix(id_text, 16).map_err(|_| format!("bad ID '{id_text}'"))?)
+    } else {
+        Id::extended(u32::from_str_radix(id_text, 16).map_err(|_| format!("bad ID '{id_text}'"))?)
+    }
+    .map_err(|e| e.to_string())?;
+    let (secs, micros) = time.split_once('.').unwrap_or((time, "0"));
+    let secs: u64 = secs.parse().map_err(|_| format!("bad time '{time}'"))?;
+    let micros: u64 = micros.parse().map_err(|_| format!("bad time '{time}'"))?;
+    let timestamp = Timestamp::from_nanos(
+        secs.saturating_mul(1_000_000_000)
+            .saturating_add(micros.min(999_999).saturating_mul(1000)),
+    );
+    if data.len() % 2 != 0 || data.len() > 16 {
+        return Err(format!("bad data '{data}'"));
+    }
+    let mut bytes = [0u8; 8];
+    for (i, slot) in bytes.iter_mut().enumerate().take(data.len() / 2) {
+        let pair = data.get(2 * i..2 * i + 2).unwrap_or("");
+        *slot = u8::from_str_radix(pair, 16).map_err(|_| format!("bad data '{data}'"))?;
+    }
+    let frame = ClassicFrame::new(id, bytes.get(..data.len() / 2).unwrap_or(&[]))
+        .map_err(|e| e.to_string())?;
+    Ok((Frame::Classic(frame), timestamp))
+}
+
+/// The `send` command for a frame (classic data frames only).
+pub fn format_send(frame: &Frame) -> Option<String> {
+    let id = frame.id()?;
+    if frame.is_fd() || frame.is_remote() {
+        return None;
+    }
+    let id_text = if id.is_extended() {
+        format!("{:08X}", id.as_raw())
+    } else {
+        format!("{:03X}", id.as_raw())
+    };
+    let data: Vec<String> = frame.data().iter().map(|b| format!("{b:02X}")).collect();
+    let mut line = format!("< send {id_text} {:X} ", frame.data().len());
+    for byte in data {
+        line.push_str(&byte);
+        line.push(' ');
+    }
+    line.push('>');
+    Some(line)
+}
+
+/// `socketcand:HOST:PORT/BUS`: a client of a socketcand server in raw mode. A lost
+/// connection is re-established on the next send or receive (up to five tries, pauses growing
+/// to a second).
+pub struct Client {
+    shared: Arc<ClientShared>,
+}
+
+struct ClientShared {
+    address: String,
+    bus: String,
+    reader: std::sync::Mutex<Option<BufReader<TcpStream>>>,
+    writer: std::sync::Mutex<Option<TcpStream>>,
+    filtering: std::sync::Mutex<crate::Filtering>,
+    stats: std::sync::Mutex<crate::Stats>,
+}
+
+fn expect(reader: &mut BufReader<TcpStream>, wanted: &str) -> std::io::Result<()> {
+    let mut got = Vec::new();
+    Read::by_ref(reader)
+        .take(MAX_COMMAND_BYTES)
+        .read_until(b'>', &mut got)?;
+    let text = String::from_utf8_lossy(&got);
+    let inner = text
+        .trim()
+        .trim_start_matches('<')
+        .trim_end_matches('>')
+        .trim();
+    if inner == wanted {
+        Ok(())
+    } else {
+        Err(std::io::Error::other(format!(
+            "expected '< {wanted} >', got '{}'",
+            text.trim()
+        )))
+    }
+}
+
+fn connect(address: &str, bus: &str) -> std::io::Result<(BufReader<TcpStream>, TcpStream)> {
+    let stream = TcpStream::connect(address)?;
+    stream.set_nodelay(true)?;
+    stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+    let mut writer = stream.try_clone()?;
+    let mut reader = BufReader::new(stream);
+    expect(&mut reader, "hi")?;
+    writer.write_all(format!("< open {bus} >").as_bytes())?;
+    expect(&mut reader, "ok")?;
+    writer.write_all(b"< rawmode >")?;
+    expect(&mut reader, "ok")?;
+    Ok((reader, writer))
+}
+
+impl Client {
+    /// Connect to the server at `address` (HOST:PORT) and open `bus` in raw mode.
+    pub fn connect(address: &str, bus: &str) -> std::io::Result<Client> {
+        let (reader, writer) = connect(address, bus)?;
+        Ok(Client {
+            shared: Arc::new(ClientShared {
+                address: address.to_string(),
+                bus: bus.to_string(),
+                reader: std::sync::Mutex::new(Some(reader)),
+                writer: std::sync::Mutex::new(Some(writer)),
+                filtering: std::sync::Mutex::new(crate::Filtering::default()),
+                stats: std::sync::Mutex::new(crate::Stats::default()),
+            }),
+        })
+    }
+}
+
+fn is_timeout(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+    )
+}
+
+impl ClientShared {
+    /// Connect again after the connection was lost.
+    fn reconnect(&self) -> Result<(), BusError> {
+        let mut pause = Duration::from_millis(50);
+        let mut last = None;
+        for _ in 0..5 {
+            match connect(&self.address, &self.bus) {
+                Ok((reader, writer)) => {
+                    *lock(&self.reader) = Some(reader);
+                    *lock(&self.writer) = Some(writer);
+                    return Ok(());
+                }
+                Err(e) => {
+                    last = Some(e);
+                    std::thread::sleep(pause);
+                    pause = (pause * 2).min(Duration::from_secs(1));
+                }
+            }
+        }
+        Err(last.map_or(BusError::Closed, BusError::Io))
+    }
+}
+
+impl crate::SharedEndpoint for ClientShared {
+    fn send(&self, frame: &Frame) -> Result<(), BusError> {
+        let line = format_send(frame).ok_or_else(|| {
+            BusError::Unsupported("FD, remote or error frames over socketcand".into())
+        })?;
+        if lock(&self.writer).is_none() {
+            self.reconnect()?;
+        }
+        let mut writer = lock(&self.writer);
+        let stream = writer.as_mut().ok_or(BusError::Closed)?;
+        if let Err(e) = stream.write_all(line.as_bytes()) {
+            *writer = None;
+            return Err(e.into());
+        }
+        drop(writer);
+        lock(&self.stats).count_sent(frame);
+        Ok(())
+    }
+
+    fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        let deadline = timeout.map(|t| Instant::now() + t);
+        // Each pass reads one server message or times out; bounded by the deadline.
+        loop {
+            let slice = deadline.map_or(Duration::from_millis(100), |d| {
+                d.saturating_duration_since(Instant::now())
+                    .min(Duration::from_millis(100))
+            });
+            if slice.is_zero() {
+                return Ok(None);
+            }
+            if lock(&self.reader).is_none() {
+                self.reconnect()?;
+            }
+            let mut reader = lock(&self.reader);
+            let Some(stream) = reader.as_mut() else {
+                continue;
+            };
+            stream.get_ref().set_read_timeout(Some(slice))?;
+            let mut got = Vec::new();
+            match Read::by_ref(stream)
+                .take(MAX_COMMAND_BYTES)
+                .read_until(b'>', &mut got)
+            {
+                Ok(0) => {
+                    *reader = None; // the server closed: reconnect on the next pass
+                    continue;
+                }
+                Ok(_) => {}
+                Err(e) if is_timeout(&e) => continue,
+                Err(e) => {
+                    *reader = None;
+                    return Err(e.into());
+                }
+            }
+            drop(reader);
+            let text = String::from_utf8_lossy(&got);
+            let inner = text.trim().trim_start_matches('<').trim_end_matches('>');
+            match parse_frame(inner) {
+                Ok((frame, timestamp)) => {
+                    if !lock(&self.filtering).accepts(&frame) {
+                        continue;
+                    }
+                    lock(&self.stats).count_received(&frame);
+                    return Ok(Some(Received {
+                        frame,
+                        timestamp,
+                        own: false,
+                        hardware: None,
+                    }));
+                }
+                Err(_) => {
+                    lock(&self.stats).rx_errors += 1;
+                }
+            }
+        }
+    }
+}
+
+impl crate::BusTx for Client {
+    fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
+        crate::SharedEndpoint::send(self.shared.as_ref(), frame)
+    }
+}
+
+impl crate::BusRx for Client {
+    fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
+        crate::SharedEndpoint::recv(self.shared.as_ref(), timeout)
+    }
+}
+
+impl Bus for Client {
+    fn set_filtering(&mut self, filtering: crate::Filtering) -> Result<(), BusError> {
+        *lock(&self.shared.filtering) = filtering;
+        Ok(())
+    }
+
+    /// Raw mode has no transmit confirmation: own frames are never received.
+    fn set_receive_own(&mut self, on: bool) -> Result<(), BusError> {
+        if on {
+            Err(BusError::Unsupported(
+                "receive-own (socketcand raw mode has no echo)".into(),
+            ))
+        } else {
+            Ok(())
+        }
+    }
+
+    fn set_loopback(&mut self, _on: bool) -> Result<(), BusError> {
+        Ok(())
+    }
+
+    fn stats(&self) -> crate::Stats {
+        *lock(&self.shared.stats)
+    }
+
+    fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn crate::BusRx>) {
+        crate::split_halves(self.shared)
+    }
 }
 
 #[cfg(test)]

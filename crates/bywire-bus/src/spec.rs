@@ -26,6 +26,13 @@ pub enum BusSpec {
         /// The interface name (`can0`, `vcan0`).
         interface: String,
     },
+    /// `socketcand:HOST:PORT/BUS`: a bus served by a socketcand server.
+    Socketcand {
+        /// HOST:PORT of the server.
+        address: String,
+        /// The bus name to open there.
+        bus: String,
+    },
     /// `udp:[GROUP[:PORT]]`: python-can's `udp_multicast` bus.
     Udp {
         /// The multicast group and port.
@@ -73,7 +80,7 @@ pub enum SpecError {
     },
 }
 
-const KNOWN: &str = "virtual, sim, socketcan, udp";
+const KNOWN: &str = "virtual, sim, socketcan, socketcand, udp";
 
 fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
     let valid = !text.is_empty()
@@ -142,6 +149,21 @@ impl FromStr for BusSpec {
                     interface: rest.to_string(),
                 })
             }
+            "socketcand" => {
+                let (address, bus) = rest
+                    .rsplit_once('/')
+                    .filter(|(a, b)| a.contains(':') && !b.is_empty())
+                    .ok_or_else(|| SpecError::Parameters {
+                        scheme: "socketcand",
+                        reason: format!(
+                            "'{rest}' is not HOST:PORT/BUS (e.g. socketcand:127.0.0.1:29536/vcan0)"
+                        ),
+                    })?;
+                Ok(BusSpec::Socketcand {
+                    address: address.to_string(),
+                    bus: bus.to_string(),
+                })
+            }
             "udp" => crate::udp::parse_spec(rest)
                 .map(|group| BusSpec::Udp { group })
                 .map_err(|reason| SpecError::Parameters {
@@ -169,6 +191,7 @@ impl fmt::Display for BusSpec {
             }
             BusSpec::SocketCan { interface } => write!(f, "socketcan:{interface}"),
             BusSpec::Udp { group } => write!(f, "udp:{group}"),
+            BusSpec::Socketcand { address, bus } => write!(f, "socketcand:{address}/{bus}"),
         }
     }
 }
@@ -192,6 +215,9 @@ pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
             .map_err(|e| refused(e.to_string())),
         #[cfg(not(target_os = "linux"))]
         BusSpec::SocketCan { .. } => Err(refused("SocketCAN exists only on Linux".into())),
+        BusSpec::Socketcand { address, bus } => crate::socketcand::Client::connect(&address, &bus)
+            .map(|c| Box::new(c) as Box<dyn Bus>)
+            .map_err(|e| refused(e.to_string())),
         BusSpec::Udp { group } => crate::udp::UdpMulticast::open(group)
             .map(|bus| Box::new(bus) as Box<dyn Bus>)
             .map_err(|e| refused(e.to_string())),
@@ -221,7 +247,7 @@ mod tests {
         let e = "carrier:pigeon".parse::<BusSpec>().unwrap_err();
         assert_eq!(
             e.to_string(),
-            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan, udp)"
+            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan, socketcand, udp)"
         );
         assert!(matches!(
             "virtual:".parse::<BusSpec>(),

@@ -1,0 +1,100 @@
+//! The socketcand server and client together: the server in this process on a virtual bus,
+//! clients connected over TCP, and the conformance checks that socketcand's raw mode allows
+//! (it has no transmit confirmation, FD or remote frames).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use std::net::TcpListener;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use bywire_bus::socketcand::{self, Client, ServerStats};
+use bywire_bus::{open, Bus, BusError, BusRx, BusTx};
+use common::*;
+
+/// A server for `virtual:NAME` on a free port; returns its address.
+fn server(name: &str) -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    let spec = format!("virtual:{name}");
+    let open_bus = Arc::new(move || open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
+    std::thread::spawn(move || {
+        socketcand::serve(
+            listener,
+            Vec::new(),
+            open_bus,
+            Arc::new(AtomicBool::new(false)),
+            Arc::new(ServerStats::default()),
+        )
+    });
+    address
+}
+
+fn client_opener(name: &str) -> Box<Opener> {
+    let address = server(name);
+    let name = name.to_string();
+    Box::new(move || {
+        let bus = Box::new(Client::connect(&address, &name).unwrap()) as Box<dyn Bus>;
+        // Frames sent before the server has the client's endpoint would be lost to it.
+        std::thread::sleep(Duration::from_millis(50));
+        bus
+    })
+}
+
+#[test]
+fn socketcand_clients_pass_what_raw_mode_allows() {
+    ordering_and_timestamps(&*client_opener("scd-order"));
+    senders_keep_their_order(&*client_opener("scd-global"), false);
+    filters_follow_socketcan(&*client_opener("scd-filters"));
+    halves_on_two_threads(&*client_opener("scd-split"));
+    timeout_returns_none(&*client_opener("scd-timeout"));
+}
+
+#[test]
+fn what_socketcand_cannot_carry_is_refused() {
+    let mut bus = client_opener("scd-refuse")();
+    assert!(matches!(
+        bus.send(&frame("123##1AA")),
+        Err(BusError::Unsupported(_))
+    ));
+    assert!(matches!(
+        bus.send(&frame("123#R")),
+        Err(BusError::Unsupported(_))
+    ));
+    assert!(matches!(
+        bus.set_receive_own(true),
+        Err(BusError::Unsupported(_))
+    ));
+    assert!(Client::connect("127.0.0.1:1", "x").is_err());
+    assert!(matches!(
+        open("socketcand:nohost"),
+        Err(bywire_bus::OpenError::Spec(_))
+    ));
+}
+
+#[test]
+fn a_client_and_a_local_endpoint_share_the_served_bus() {
+    let address = server("scd-shared");
+    let mut local = open("virtual:scd-shared").unwrap();
+    let mut remote = Client::connect(&address, "scd-shared").unwrap();
+    std::thread::sleep(Duration::from_millis(50));
+    remote.send(&frame("123#DEADBEEF")).unwrap();
+    let got = local.recv(Some(Duration::from_secs(2))).unwrap().unwrap();
+    assert_eq!(got.frame, frame("123#DEADBEEF"));
+    local.send(&frame("1ABCDEF0#0102")).unwrap();
+    let got = remote.recv(Some(Duration::from_secs(2))).unwrap().unwrap();
+    assert_eq!(got.frame, frame("1ABCDEF0#0102"));
+    // The timestamp is the server's, in Unix time.
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    assert!(now.abs_diff(u128::from(got.timestamp.as_nanos())) < 2_000_000_000);
+}
