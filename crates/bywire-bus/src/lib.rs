@@ -18,6 +18,7 @@
 pub mod faults;
 pub mod sim;
 pub mod sim_endpoint;
+pub mod slcan;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 pub mod socketcand;

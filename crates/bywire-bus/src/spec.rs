@@ -33,6 +33,13 @@ pub enum BusSpec {
         /// The bus name to open there.
         bus: String,
     },
+    /// `slcan:PORT@BITRATE`: an SLCAN adapter on a serial port.
+    Slcan {
+        /// The serial port (`/dev/ttyACM0`).
+        port: String,
+        /// The CAN bitrate.
+        bitrate: u32,
+    },
     /// `udp:[GROUP[:PORT]]`: python-can's `udp_multicast` bus.
     Udp {
         /// The multicast group and port.
@@ -80,7 +87,7 @@ pub enum SpecError {
     },
 }
 
-const KNOWN: &str = "virtual, sim, socketcan, socketcand, udp";
+const KNOWN: &str = "virtual, sim, socketcan, socketcand, slcan, udp";
 
 fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
     let valid = !text.is_empty()
@@ -164,6 +171,30 @@ impl FromStr for BusSpec {
                     bus: bus.to_string(),
                 })
             }
+            "slcan" => {
+                let (port, rate) = rest.rsplit_once('@').ok_or_else(|| SpecError::Parameters {
+                    scheme: "slcan",
+                    reason: format!("'{rest}' lacks the bitrate: slcan:PORT@BITRATE (e.g. slcan:/dev/ttyACM0@500000)"),
+                })?;
+                let bitrate = rate
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|r| crate::slcan::bitrate_command(*r).is_some())
+                    .ok_or_else(|| SpecError::Parameters {
+                        scheme: "slcan",
+                        reason: format!("'{rate}' is not an SLCAN bitrate (10000, 20000, 50000, 100000, 125000, 250000, 500000, 750000, 1000000)"),
+                    })?;
+                if port.is_empty() {
+                    return Err(SpecError::Parameters {
+                        scheme: "slcan",
+                        reason: "no serial port".into(),
+                    });
+                }
+                Ok(BusSpec::Slcan {
+                    port: port.to_string(),
+                    bitrate,
+                })
+            }
             "udp" => crate::udp::parse_spec(rest)
                 .map(|group| BusSpec::Udp { group })
                 .map_err(|reason| SpecError::Parameters {
@@ -191,6 +222,7 @@ impl fmt::Display for BusSpec {
             }
             BusSpec::SocketCan { interface } => write!(f, "socketcan:{interface}"),
             BusSpec::Udp { group } => write!(f, "udp:{group}"),
+            BusSpec::Slcan { port, bitrate } => write!(f, "slcan:{port}@{bitrate}"),
             BusSpec::Socketcand { address, bus } => write!(f, "socketcand:{address}/{bus}"),
         }
     }
@@ -217,6 +249,9 @@ pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
         BusSpec::SocketCan { .. } => Err(refused("SocketCAN exists only on Linux".into())),
         BusSpec::Socketcand { address, bus } => crate::socketcand::Client::connect(&address, &bus)
             .map(|c| Box::new(c) as Box<dyn Bus>)
+            .map_err(|e| refused(e.to_string())),
+        BusSpec::Slcan { port, bitrate } => crate::slcan::Slcan::open(&port, bitrate, false)
+            .map(|b| Box::new(b) as Box<dyn Bus>)
             .map_err(|e| refused(e.to_string())),
         BusSpec::Udp { group } => crate::udp::UdpMulticast::open(group)
             .map(|bus| Box::new(bus) as Box<dyn Bus>)
@@ -247,7 +282,7 @@ mod tests {
         let e = "carrier:pigeon".parse::<BusSpec>().unwrap_err();
         assert_eq!(
             e.to_string(),
-            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan, socketcand, udp)"
+            "unknown bus scheme 'carrier' (known: virtual, sim, socketcan, socketcand, slcan, udp)"
         );
         assert!(matches!(
             "virtual:".parse::<BusSpec>(),

@@ -1,0 +1,158 @@
+//! The SLCAN backend against a fake adapter written independently in Python on a pseudo
+//! terminal: opening (close, bitrate, open), frames both ways in every form (standard,
+//! extended, remote, FD with and without BRS, timestamps), error replies and garbage lines.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+#![cfg(target_os = "linux")]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use bywire_bus::slcan::Slcan;
+use bywire_bus::{open, BusError};
+use common::*;
+
+/// A Lawicel adapter: answers commands, acknowledges transmissions with z/Z, logs what it got
+/// to stdout, and after five frames sends its own (with a garbage line and a BEL among them).
+/// With `refuse` as argument it answers BEL to that command.
+const ADAPTER: &str = r#"
+import os, pty, sys, tty, time
+master, slave = pty.openpty()
+tty.setraw(slave)
+print(os.ttyname(slave), flush=True)
+refuse = sys.argv[1] if len(sys.argv) > 1 else None
+buf = b""
+frames = 0
+log = []
+while True:
+    try:
+        chunk = os.read(master, 256)
+    except OSError:
+        break
+    if not chunk:
+        break
+    buf += chunk
+    while b"\r" in buf:
+        line, buf = buf.split(b"\r", 1)
+        text = line.decode()
+        log.append(text)
+        if text == refuse:
+            os.write(master, b"\x07")
+        elif text[:1] in ("t", "r", "d", "b"):
+            os.write(master, b"z\r"); frames += 1
+        elif text[:1] in ("T", "R", "D", "B"):
+            os.write(master, b"Z\r"); frames += 1
+        elif text == "V":
+            os.write(master, b"V1013\r")
+        elif text in ("C", "O", "L") or (text[:1] == "S" and text[1:] in "012345678"):
+            os.write(master, b"\r")
+        else:
+            os.write(master, b"\x07")
+        if frames == 5:
+            frames += 1
+            os.write(master, b"t1232ABCD\rT1ABCDEF00\rr7FF3\rxyz\r\x07d0013112233\rb1239000102030405060708090A0B\rt4561550123\r")
+        if text == "C" and len(log) > 3:
+            print("\n".join(log), flush=True)
+            sys.exit(0)
+"#;
+
+fn adapter(refuse: Option<&str>) -> (Child, String) {
+    let mut child = Command::new("python3")
+        .args(["-c", ADAPTER])
+        .args(refuse)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    (child, line.trim().to_string())
+}
+
+#[test]
+fn frames_both_ways_with_a_fake_adapter() {
+    let (child, path) = adapter(None);
+    let mut bus = open(&format!("slcan:{path}@500000")).unwrap();
+    for text in [
+        "123#DEADBEEF",
+        "1ABCDEF0#",
+        "100#R3",
+        "7FE##5000102030405060708090A0B",
+        "321##4AA",
+    ] {
+        bus.send(&frame(text)).unwrap();
+    }
+    let mut got = Vec::new();
+    while let Some(r) = bus.recv(Some(Duration::from_secs(3))).unwrap() {
+        got.push(r.frame.to_string());
+        if got.len() == 6 {
+            break;
+        }
+    }
+    assert_eq!(
+        got,
+        [
+            "123#ABCD",
+            "1ABCDEF0#",
+            "7FF#R3",
+            "001##4112233",
+            "123##5000102030405060708090A0B",
+            "456#55",
+        ]
+    );
+    // The garbage line and the BEL were counted and skipped.
+    assert_eq!(bus.stats().rx_errors, 2);
+    assert_eq!(bus.stats().tx_frames, 5);
+    drop(bus);
+    let out = child.wait_with_output().unwrap();
+    let log = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(
+        log.lines().collect::<Vec<_>>(),
+        [
+            "C",
+            "S6",
+            "O",
+            "t1234DEADBEEF",
+            "T1ABCDEF00",
+            "r1003",
+            "b7FE9000102030405060708090A0B",
+            "d3211AA",
+            "C",
+        ]
+    );
+}
+
+#[test]
+fn refusals_are_errors_naming_the_command() {
+    let (mut child, path) = adapter(Some("O"));
+    let e = Slcan::open(&path, 500_000, false).err().unwrap();
+    assert!(e.to_string().contains("the adapter refused O"), "{e}");
+    let _ = child.kill();
+    let (mut child, path) = adapter(Some("S4"));
+    let e = Slcan::open(&path, 125_000, false).err().unwrap();
+    assert!(e.to_string().contains("the adapter refused S4"), "{e}");
+    let _ = child.kill();
+    assert!(matches!(
+        Slcan::open(&path, 400_000, false),
+        Err(BusError::Unsupported(_))
+    ));
+    assert!(open("slcan:/dev/nonexistent@500000").is_err());
+    assert!(open("slcan:/dev/ttyACM0@400000")
+        .err()
+        .unwrap()
+        .to_string()
+        .contains("not an SLCAN bitrate"));
+    assert!(open("slcan:/dev/ttyACM0")
+        .err()
+        .unwrap()
+        .to_string()
+        .contains("lacks the bitrate"));
+}
