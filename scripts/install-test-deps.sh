@@ -16,8 +16,8 @@ fi
 if [ "$(cat /proc/sys/net/core/rmem_max)" -lt 4194304 ]; then
   $SUDO sysctl -qw net.core.rmem_max=4194304
 fi
-# python-can + msgpack: the udp_multicast peer.
-python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack
+# python-can + msgpack + pyserial: the udp_multicast, socketcand and slcan peer.
+python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack pyserial
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.

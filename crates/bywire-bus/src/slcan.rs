@@ -361,6 +361,170 @@ impl Drop for Shared {
     }
 }
 
+/// What an emulated adapter does with its host's input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AdapterAction {
+    /// Write these bytes back to the host.
+    Reply(Vec<u8>),
+    /// Put this frame on the bus (and acknowledge it).
+    Send(Frame),
+}
+
+/// The adapter side of the protocol, sans I/O: an emulated SLCAN adapter in front of a bus, so
+/// SLCAN tools (python-can's `slcan`, SavvyCAN) can be tested without hardware.
+#[derive(Debug, Default)]
+pub struct Adapter {
+    open: bool,
+    timestamps: bool,
+    line: Vec<u8>,
+}
+
+impl Adapter {
+    /// Whether the channel is open (frames flow).
+    pub fn is_open(&self) -> bool {
+        self.open
+    }
+
+    /// Handle bytes from the host; actions are appended to `out`.
+    pub fn on_bytes(&mut self, bytes: &[u8], out: &mut Vec<AdapterAction>) {
+        for &byte in bytes {
+            if byte != b'\r' {
+                if self.line.len() < MAX_LINE {
+                    self.line.push(byte);
+                }
+                continue;
+            }
+            let line = String::from_utf8_lossy(&self.line).into_owned();
+            self.line.clear();
+            out.push(self.command(&line));
+        }
+    }
+
+    fn command(&mut self, line: &str) -> AdapterAction {
+        const OK: &[u8] = b"\r";
+        const REFUSED: &[u8] = b"\x07";
+        let reply = |b: &[u8]| AdapterAction::Reply(b.to_vec());
+        match line {
+            "" => reply(OK),
+            "C" => {
+                self.open = false;
+                reply(OK)
+            }
+            "O" | "L" if !self.open => {
+                self.open = true;
+                reply(OK)
+            }
+            "V" => reply(b"V1013\r"),
+            "N" => reply(b"NBYWR\r"),
+            "F" => reply(b"F00\r"),
+            "Z0" | "Z1" if !self.open => {
+                self.timestamps = line == "Z1";
+                reply(OK)
+            }
+            _ if line.starts_with('S') && line.len() == 2 && !self.open => {
+                if line
+                    .get(1..)
+                    .is_some_and(|c| ('0'..='8').any(|d| c.starts_with(d)))
+                {
+                    reply(OK)
+                } else {
+                    reply(REFUSED)
+                }
+            }
+            _ if self.open => match parse_line(line) {
+                Ok(Some(frame)) => AdapterAction::Send(frame),
+                _ => reply(REFUSED),
+            },
+            _ => reply(REFUSED),
+        }
+    }
+
+    /// The line for a frame from the bus, when the channel is open.
+    pub fn frame_line(&self, frame: &Frame, millis: u64) -> Option<String> {
+        if !self.open {
+            return None;
+        }
+        let mut line = format_frame(frame)?;
+        if self.timestamps {
+            line.pop();
+            line.push_str(&format!("{:04X}\r", millis % 60_000));
+        }
+        Some(line)
+    }
+}
+
+/// An emulated adapter for `bus` on a new pseudo terminal: returns the terminal's path (what
+/// SLCAN tools open) and runs until `stop` is set. The adapter acknowledges transmissions
+/// with `z`/`Z` as Lawicel adapters do.
+#[cfg(unix)]
+pub fn emulate(
+    bus: Box<dyn Bus>,
+    stop: Arc<AtomicBool>,
+) -> Result<(String, std::thread::JoinHandle<()>), BusError> {
+    use serialport::SerialPort as _;
+    let other = |e: serialport::Error| BusError::Io(std::io::Error::other(e.to_string()));
+    let (mut master, mut slave) = serialport::TTYPort::pair().map_err(other)?;
+    // Tools must be able to open the terminal while we hold it.
+    slave.set_exclusive(false).map_err(other)?;
+    let path = slave
+        .name()
+        .ok_or_else(|| BusError::Unsupported("pty without a name".into()))?;
+    master
+        .set_timeout(Duration::from_millis(50))
+        .map_err(other)?;
+    let writer = Arc::new(Mutex::new(master.try_clone_native().map_err(other)?));
+    let adapter = Arc::new(Mutex::new(Adapter::default()));
+    let (mut tx, mut rx) = bus.split();
+    let (to_host, adapter_rx, stop_rx) =
+        (Arc::clone(&writer), Arc::clone(&adapter), Arc::clone(&stop));
+    let started = Instant::now();
+    let frames_to_host = std::thread::spawn(move || {
+        while !stop_rx.load(Ordering::Relaxed) {
+            let Ok(Some(received)) = rx.recv(Some(Duration::from_millis(100))) else {
+                continue;
+            };
+            let millis = u64::try_from(started.elapsed().as_millis()).unwrap_or(0);
+            let line = lock(&adapter_rx).frame_line(&received.frame, millis);
+            if let Some(line) = line {
+                let _ = lock(&to_host).write_all(line.as_bytes());
+            }
+        }
+    });
+    let handle = std::thread::spawn(move || {
+        let _keep_slave_open = slave;
+        let mut chunk = [0u8; 256];
+        let mut actions = Vec::new();
+        while !stop.load(Ordering::Relaxed) {
+            let n = match master.read(&mut chunk) {
+                Ok(n) => n,
+                // EIO while no tool has the terminal open; timeouts while idle.
+                Err(_) => {
+                    std::thread::sleep(Duration::from_millis(10));
+                    continue;
+                }
+            };
+            actions.clear();
+            lock(&adapter).on_bytes(chunk.get(..n).unwrap_or(&[]), &mut actions);
+            for action in actions.drain(..) {
+                let reply = match action {
+                    AdapterAction::Reply(bytes) => bytes,
+                    AdapterAction::Send(frame) => {
+                        let extended = frame.id().is_some_and(|id| id.is_extended());
+                        match tx.send(&frame) {
+                            Ok(()) if extended => b"Z\r".to_vec(),
+                            Ok(()) => b"z\r".to_vec(),
+                            Err(_) => b"\x07".to_vec(),
+                        }
+                    }
+                };
+                let _ = lock(&writer).write_all(&reply);
+            }
+        }
+        let _ = frames_to_host.join();
+    });
+    Ok((path, handle))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -156,3 +156,69 @@ fn refusals_are_errors_naming_the_command() {
         .to_string()
         .contains("lacks the bitrate"));
 }
+
+/// python-can's `slcan` interface against our emulated adapter (`slcan::emulate`) in front of a
+/// virtual bus: python-can's frames reach the bus, the bus's frames reach python-can.
+#[test]
+fn python_can_slcan_talks_to_our_adapter() {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let adapter_bus = open("virtual:slcan-emulated").unwrap();
+    let mut ours = open("virtual:slcan-emulated").unwrap();
+    let (path, handle) =
+        bywire_bus::slcan::emulate(adapter_bus, std::sync::Arc::clone(&stop)).unwrap();
+    let script = r#"
+import sys, can, time
+bus = can.Bus(interface="slcan", channel=sys.argv[1], bitrate=500000, sleep_after_open=0.1)
+bus.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=b"\xde\xad\xbe\xef"))
+bus.send(can.Message(arbitration_id=0x1abcdef0, is_extended_id=True, data=b"\x01"))
+bus.send(can.Message(arbitration_id=0x321, is_extended_id=False, is_fd=True, bitrate_switch=True, data=bytes(range(12))))
+print("sent", flush=True)
+for _ in range(3):
+    m = bus.recv(3)
+    print("got", hex(m.arbitration_id), m.is_extended_id, m.is_remote_frame, m.is_fd, m.bitrate_switch, m.dlc, m.data.hex(), flush=True)
+bus.shutdown()
+"#;
+    let peer = Command::new("python3")
+        .args(["-c", script, &path])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut from_python = Vec::new();
+    while from_python.len() < 3 {
+        let r = ours
+            .recv(Some(Duration::from_secs(10)))
+            .unwrap()
+            .expect("python-can's frames arrive");
+        from_python.push(r.frame.to_string());
+    }
+    assert_eq!(
+        from_python,
+        [
+            "123#DEADBEEF",
+            "1ABCDEF0#01",
+            "321##5000102030405060708090A0B"
+        ]
+    );
+    for text in ["456#0102", "00000789#R2", "7FF##4AA"] {
+        ours.send(&frame(text)).unwrap();
+    }
+    let out = peer.wait_with_output().unwrap();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    handle.join().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        text.lines().collect::<Vec<_>>(),
+        [
+            "sent",
+            "got 0x456 False False False False 2 0102",
+            "got 0x789 True True False False 2 ",
+            "got 0x7ff False False True False 1 aa",
+        ]
+    );
+}

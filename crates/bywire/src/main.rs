@@ -16,6 +16,7 @@ mod plot_cmd;
 mod send_cmd;
 mod serve_cmd;
 mod signals;
+mod slcan_adapter_cmd;
 mod sniff_cmd;
 mod wire_cmd;
 
@@ -90,6 +91,8 @@ enum Command {
     },
     /// Serve a bus over the socketcand protocol (python-can, SavvyCAN and other clients).
     Serve(serve_cmd::Args),
+    /// Emulate an SLCAN adapter for a bus on a pseudo terminal (for SLCAN tools).
+    SlcanAdapter(slcan_adapter_cmd::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
 }
@@ -111,6 +114,7 @@ fn main() -> ExitCode {
         Command::Monitor(args) => monitor_cmd::run(&args),
         Command::Plot(args) => plot_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args, &mut out),
+        Command::SlcanAdapter(args) => slcan_adapter_cmd::run(&args, &mut out),
         Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
     };

@@ -765,3 +765,54 @@ fn serve_refuses_remote_listening_without_asking() {
     );
     fails_with(&["serve", "nosuch:x"], "", "unknown bus scheme");
 }
+
+#[test]
+fn slcan_adapter_answers_on_its_terminal() {
+    let mut adapter = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["slcan-adapter", "virtual:slcan-cli"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut path = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(adapter.stdout.as_mut().unwrap()),
+        &mut path,
+    )
+    .unwrap();
+    let script = r#"
+import serial, sys
+port = serial.Serial(sys.argv[1], timeout=2)
+for command in [b"V\r", b"S6\r", b"O\r", b"S6\r", b"t1230\r", b"xyz\r", b"C\r"]:
+    port.write(command)
+    reply = b""
+    while not reply.endswith((b"\r", b"\x07")):
+        reply += port.read(1)
+    print(repr(reply))
+"#;
+    let out = Command::new("python3")
+        .args(["-c", script, path.trim()])
+        .output()
+        .unwrap();
+    let _ = Command::new("kill")
+        .args(["-INT", &adapter.id().to_string()])
+        .status();
+    assert!(adapter.wait().unwrap().success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        text.lines().collect::<Vec<_>>(),
+        [
+            "b'V1013\\r'",
+            "b'\\r'",
+            "b'\\r'",
+            "b'\\x07'",
+            "b'z\\r'",
+            "b'\\x07'",
+            "b'\\r'"
+        ]
+    );
+}
