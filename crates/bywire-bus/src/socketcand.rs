@@ -471,6 +471,44 @@ fn spawn_cyclic(
     });
 }
 
+/// The discovery beacon socketcand servers send (and python-can's `detect_beacon` reads).
+pub fn beacon_xml(listen: std::net::SocketAddr, buses: &[String]) -> String {
+    let escape = |text: &str| {
+        text.replace('&', "&amp;")
+            .replace('<', "&lt;")
+            .replace('>', "&gt;")
+            .replace('"', "&quot;")
+    };
+    let mut xml = format!(
+        "<CANBeacon name=\"bywire\" type=\"SocketCAN\" description=\"bywire serve\"><URL>can://{listen}</URL>"
+    );
+    for bus in buses {
+        xml.push_str(&format!("<Bus name=\"{}\"/>", escape(bus)));
+    }
+    xml.push_str("</CANBeacon>");
+    xml
+}
+
+/// Send the beacon to `to` every three seconds (as socketcand does) until `stop` is set.
+pub fn spawn_beacon(
+    xml: String,
+    to: std::net::SocketAddr,
+    stop: Arc<AtomicBool>,
+) -> std::io::Result<std::thread::JoinHandle<()>> {
+    let socket = std::net::UdpSocket::bind("0.0.0.0:0")?;
+    socket.set_broadcast(true)?;
+    Ok(std::thread::spawn(move || {
+        let mut next = Instant::now();
+        while !stop.load(Ordering::Relaxed) {
+            if Instant::now() >= next {
+                let _ = socket.send_to(xml.as_bytes(), to);
+                next += Duration::from_secs(3);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }))
+}
+
 /// A frame line from a server (`frame ID SECS.USECS DATA`, the words between `<` and `>`):
 /// the frame and its timestamp.
 pub fn parse_frame(inner: &str) -> Result<(Frame, Timestamp), String> {

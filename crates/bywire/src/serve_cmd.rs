@@ -20,7 +20,8 @@ use crate::busarg;
 Each client gets its own endpoint on the bus and a bounded queue: a slow client loses frames
 (counted, shown when the server stops) and never stalls the bus or the other clients. Clients
 may open any bus name unless --name restricts them. Listening beyond this host needs
---allow-remote: the protocol has no authentication.")]
+--allow-remote: the protocol has no authentication. The discovery beacon is off unless
+--beacon is given.")]
 pub struct Args {
     /// The bus to serve (a plain interface name means SocketCAN).
     bus: String,
@@ -33,6 +34,13 @@ pub struct Args {
     /// Allow listening on an address other hosts can reach.
     #[arg(long)]
     allow_remote: bool,
+    /// Send socketcand's discovery beacon every 3 s (to 255.255.255.255:42000 when listening
+    /// beyond this host, else to 127.0.0.1:42000).
+    #[arg(long)]
+    beacon: bool,
+    /// Where to send the beacon instead.
+    #[arg(long, value_name = "ADDR:PORT", requires = "beacon")]
+    beacon_to: Option<SocketAddr>,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -54,6 +62,30 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         listener.local_addr()?
     )?;
     out.flush()?;
+    let stop = crate::interrupt_flag();
+    let beacon = if args.beacon {
+        let to = args.beacon_to.unwrap_or_else(|| {
+            let host = if args.listen.ip().is_loopback() {
+                "127.0.0.1:42000"
+            } else {
+                "255.255.255.255:42000"
+            };
+            host.parse().unwrap_or(args.listen)
+        });
+        let name = spec.rsplit(':').next().unwrap_or(&spec).to_string();
+        let buses = if args.names.is_empty() {
+            vec![name]
+        } else {
+            args.names.clone()
+        };
+        let xml = socketcand::beacon_xml(listener.local_addr()?, &buses);
+        Some(
+            socketcand::spawn_beacon(xml, to, Arc::clone(&stop))
+                .context("cannot send the beacon")?,
+        )
+    } else {
+        None
+    };
     let stats = Arc::new(ServerStats::default());
     let open_spec = spec.clone();
     let open = Arc::new(move || {
@@ -63,9 +95,12 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         listener,
         args.names.clone(),
         open,
-        crate::interrupt_flag(),
+        Arc::clone(&stop),
         Arc::clone(&stats),
     )?;
+    if let Some(beacon) = beacon {
+        let _ = beacon.join();
+    }
     drop(keep);
     writeln!(
         out,

@@ -816,3 +816,49 @@ for command in [b"V\r", b"S6\r", b"O\r", b"S6\r", b"t1230\r", b"xyz\r", b"C\r"]:
         ]
     );
 }
+
+/// The opt-in discovery beacon, read by python-can's `detect_beacon`.
+#[test]
+fn serve_beacon_is_found_by_python_can() {
+    let port = 29_500 + u16::try_from(std::process::id() % 100).unwrap();
+    let beacon_port = 42_100 + u16::try_from(std::process::id() % 100).unwrap();
+    let mut server = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "serve",
+            "virtual:beaconed",
+            "--listen",
+            &format!("127.0.0.1:{port}"),
+            "--name",
+            "vcan7",
+            "--beacon",
+            "--beacon-to",
+            &format!("127.0.0.1:{beacon_port}"),
+        ])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let script = format!(
+        "import can.interfaces.socketcand.socketcand as s\n\
+         s.DEFAULT_SOCKETCAND_DISCOVERY_PORT = {beacon_port}\n\
+         print(s.detect_beacon(4000))"
+    );
+    let out = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    let _ = Command::new("kill")
+        .args(["-INT", &server.id().to_string()])
+        .status();
+    assert!(server.wait().unwrap().success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("'host': '127.0.0.1'") && text.contains(&format!("'port': {port}")),
+        "{text}"
+    );
+    assert!(text.contains("'channel': 'vcan7'"), "{text}");
+}
