@@ -154,11 +154,21 @@ pub struct ServerStats {
     pub errors: AtomicU64,
 }
 
+/// Who may use the server.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Access {
+    /// Bus names clients may open (empty: any name).
+    pub names: Vec<String>,
+    /// When set, clients must send `< auth TOKEN >` before anything else (an extension of
+    /// ours: plain socketcand clients cannot, so it is for listeners beyond this host).
+    pub token: Option<String>,
+}
+
 /// Serve `listener`'s clients: each gets an endpoint from `open_bus` when it opens a bus name
-/// in `names` (empty: any name). Runs until `stop` is set.
+/// `access` allows. Runs until `stop` is set.
 pub fn serve(
     listener: TcpListener,
-    names: Vec<String>,
+    access: Access,
     open_bus: Arc<dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync>,
     stop: Arc<AtomicBool>,
     stats: Arc<ServerStats>,
@@ -168,14 +178,14 @@ pub fn serve(
         match listener.accept() {
             Ok((stream, _)) => {
                 stats.clients.fetch_add(1, Ordering::Relaxed);
-                let (names, open_bus, stop, stats) = (
-                    names.clone(),
+                let (access, open_bus, stop, stats) = (
+                    access.clone(),
                     Arc::clone(&open_bus),
                     Arc::clone(&stop),
                     Arc::clone(&stats),
                 );
                 std::thread::spawn(move || {
-                    let _ = session(stream, &names, open_bus.as_ref(), &stop, &stats);
+                    let _ = session(stream, &access, open_bus.as_ref(), &stop, &stats);
                 });
             }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
@@ -196,7 +206,7 @@ struct Subscriptions {
 
 fn session(
     stream: TcpStream,
-    names: &[String],
+    access: &Access,
     open_bus: &(dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync),
     stop: &Arc<AtomicBool>,
     stats: &Arc<ServerStats>,
@@ -224,6 +234,7 @@ fn session(
     let mut cyclic: BTreeMap<u32, Arc<std::sync::Mutex<(Duration, Frame)>>> = BTreeMap::new();
     let mut cyclic_stops: BTreeMap<u32, Arc<AtomicBool>> = BTreeMap::new();
     let mut reader = BufReader::new(stream);
+    let mut authenticated = access.token.is_none();
     let mut pending = Vec::new();
     'session: while !stop.load(Ordering::Relaxed) {
         pending.clear();
@@ -260,6 +271,17 @@ fn session(
         let inner = text
             .get(start + 1..text.len().saturating_sub(1))
             .unwrap_or("");
+        if let Some(token) = access.token.as_deref().filter(|_| !authenticated) {
+            let words: Vec<&str> = inner.split_whitespace().collect();
+            if words.as_slice() == ["auth", token] {
+                authenticated = true;
+                reply("ok");
+            } else {
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                reply("error authenticate first: < auth TOKEN >");
+            }
+            continue;
+        }
         let command = match parse_command(inner) {
             Ok(c) => c,
             Err(e) => {
@@ -273,10 +295,10 @@ fn session(
             Command::Open(name) => {
                 if opened {
                     reply("error a bus is open already");
-                } else if !names.is_empty() && !names.contains(&name) {
+                } else if !access.names.is_empty() && !access.names.contains(&name) {
                     reply(&format!(
                         "error no bus '{name}' (served: {})",
-                        names.join(", ")
+                        access.names.join(", ")
                     ));
                 } else {
                     match open_bus() {

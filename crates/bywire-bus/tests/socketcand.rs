@@ -28,7 +28,7 @@ fn server(name: &str) -> String {
     std::thread::spawn(move || {
         socketcand::serve(
             listener,
-            Vec::new(),
+            socketcand::Access::default(),
             open_bus,
             Arc::new(AtomicBool::new(false)),
             Arc::new(ServerStats::default()),
@@ -125,7 +125,7 @@ fn four_clients_at_5000_frames_per_second_for_30_s() {
     std::thread::spawn(move || {
         socketcand::serve(
             listener,
-            Vec::new(),
+            socketcand::Access::default(),
             open_bus,
             Arc::new(AtomicBool::new(false)),
             server_stats,
@@ -184,4 +184,49 @@ fn four_clients_at_5000_frames_per_second_for_30_s() {
         growth < 20_000,
         "memory grew by {growth} kB between 5 s and 30 s"
     );
+}
+
+#[test]
+fn a_token_is_asked_for_before_anything_else() {
+    use std::io::{Read, Write};
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = listener.local_addr().unwrap();
+    let open_bus =
+        Arc::new(|| open("virtual:scd-token").map_err(|e| BusError::Unsupported(e.to_string())));
+    let access = socketcand::Access {
+        names: vec!["vcan0".into()],
+        token: Some("s3cret".into()),
+    };
+    std::thread::spawn(move || {
+        socketcand::serve(
+            listener,
+            access,
+            open_bus,
+            Arc::new(AtomicBool::new(false)),
+            Arc::new(ServerStats::default()),
+        )
+    });
+    let mut s = std::net::TcpStream::connect(address).unwrap();
+    let mut exchange = |send: &str| {
+        s.write_all(send.as_bytes()).unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        let mut buf = [0u8; 512];
+        let n = s.read(&mut buf).unwrap();
+        String::from_utf8_lossy(&buf[..n]).into_owned()
+    };
+    assert_eq!(exchange(""), "< hi >");
+    assert_eq!(
+        exchange("< open vcan0 >"),
+        "< error authenticate first: < auth TOKEN > >"
+    );
+    assert_eq!(
+        exchange("< auth wrong >"),
+        "< error authenticate first: < auth TOKEN > >"
+    );
+    assert_eq!(exchange("< auth s3cret >"), "< ok >");
+    assert_eq!(
+        exchange("< open other >"),
+        "< error no bus 'other' (served: vcan0) >"
+    );
+    assert_eq!(exchange("< open vcan0 >"), "< ok >");
 }

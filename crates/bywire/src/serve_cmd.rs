@@ -34,6 +34,10 @@ pub struct Args {
     /// Allow listening on an address other hosts can reach.
     #[arg(long)]
     allow_remote: bool,
+    /// Require clients to send `< auth TOKEN >` first (plain socketcand clients cannot; for
+    /// bywire clients and scripts on other hosts).
+    #[arg(long, value_name = "TOKEN")]
+    token: Option<String>,
     /// Send socketcand's discovery beacon every 3 s (to 255.255.255.255:42000 when listening
     /// beyond this host, else to 127.0.0.1:42000).
     #[arg(long)]
@@ -93,7 +97,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     });
     socketcand::serve(
         listener,
-        args.names.clone(),
+        socketcand::Access {
+            names: args.names.clone(),
+            token: args.token.clone(),
+        },
         open,
         Arc::clone(&stop),
         Arc::clone(&stats),
