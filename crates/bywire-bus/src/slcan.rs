@@ -490,8 +490,9 @@ pub fn emulate(
             }
         }
     });
+    // The tool opens the terminal itself; until it does, reading the master fails and is retried.
+    drop(slave);
     let handle = std::thread::spawn(move || {
-        let _keep_slave_open = slave;
         let mut chunk = [0u8; 256];
         let mut actions = Vec::new();
         while !stop.load(Ordering::Relaxed) {

@@ -222,3 +222,23 @@ bus.shutdown()
         ]
     );
 }
+
+/// Each endpoint an SLCAN adapter of ours (`slcan::emulate`) in front of `virtual:NAME`.
+fn emulated_opener(name: &str) -> Box<Opener> {
+    let spec = format!("virtual:{name}");
+    Box::new(move || {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (path, _running) = bywire_bus::slcan::emulate(open(&spec).unwrap(), stop).unwrap();
+        Box::new(Slcan::open(&path, 500_000, false).unwrap()) as Box<dyn bywire_bus::Bus>
+    })
+}
+
+/// The conformance checks SLCAN allows (it has no receive-own), through emulated adapters.
+#[test]
+fn slcan_endpoints_pass_what_the_protocol_allows() {
+    ordering_and_timestamps(&*emulated_opener("slcan-order"));
+    senders_keep_their_order(&*emulated_opener("slcan-global"), false);
+    filters_follow_socketcan(&*emulated_opener("slcan-filters"));
+    halves_on_two_threads(&*emulated_opener("slcan-split"));
+    timeout_returns_none(&*emulated_opener("slcan-timeout"));
+}
