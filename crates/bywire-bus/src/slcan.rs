@@ -174,6 +174,16 @@ struct Shared {
     filtering: Mutex<Filtering>,
     stats: Mutex<Stats>,
     closed: AtomicBool,
+    versions: Versions,
+}
+
+/// What the adapter says of itself (`V` and `N`), when it answers.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Versions {
+    /// Hardware and software version (`V` reply without the `V`).
+    pub version: Option<String>,
+    /// Serial number (`N` reply without the `N`).
+    pub serial: Option<String>,
 }
 
 /// An SLCAN adapter on a serial port.
@@ -223,6 +233,17 @@ impl Slcan {
         // Close first (an adapter left open refuses S), ignoring its answer.
         port.write_all(b"C\r")?;
         let _ = read_reply(port.as_mut(), Duration::from_millis(200));
+        // Versions, where the adapter answers (many answer BEL or nothing to one of them).
+        let mut ask = |command: &[u8], tag: u8| -> Option<String> {
+            port.write_all(command).ok()?;
+            let reply = read_reply(port.as_mut(), Duration::from_millis(300)).ok()?;
+            let text = reply.strip_prefix(&[tag])?.strip_suffix(b"\r")?;
+            Some(String::from_utf8_lossy(text).into_owned())
+        };
+        let versions = Versions {
+            version: ask(b"V\r", b'V'),
+            serial: ask(b"N\r", b'N'),
+        };
         let open = if listen_only { "L\r" } else { "O\r" };
         for command in [code.as_str(), open] {
             port.write_all(command.as_bytes())?;
@@ -244,8 +265,16 @@ impl Slcan {
                 filtering: Mutex::new(Filtering::default()),
                 stats: Mutex::new(Stats::default()),
                 closed: AtomicBool::new(false),
+                versions,
             }),
         })
+    }
+}
+
+impl Slcan {
+    /// The adapter's version and serial number, as it answered at open.
+    pub fn versions(&self) -> &Versions {
+        &self.shared.versions
     }
 }
 

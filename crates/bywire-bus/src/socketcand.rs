@@ -7,8 +7,8 @@
 //! `< send ID LEN B0 B1 ... >` puts one on the bus. BCM mode: `< add SECS USECS ID LEN B... >`
 //! sends a frame cyclically, `< update ... >` changes its data, `< delete ID >` stops it,
 //! `< subscribe SECS USECS ID >` forwards that identifier (at most once per interval when one
-//! is given), `< unsubscribe ID >` stops it, `< filter SECS USECS ID LEN B... >` subscribes too
-//! (the content mask is not applied). `< echo >` is answered with `< echo >`. Anything
+//! is given), `< unsubscribe ID >` stops it, `< filter SECS USECS ID LEN B... >` forwards it when
+//! the bits under the mask B... change. `< echo >` is answered with `< echo >`. Anything
 //! malformed gets `< error TEXT >` and the session goes on.
 //!
 //! Each client gets its own endpoint on the served bus and its own bounded output queue: a
@@ -53,8 +53,11 @@ pub enum Command {
     Update(Duration, Frame),
     /// `delete ID`.
     Delete(Id),
-    /// `subscribe SECS USECS ID` (and `filter ...`): forward this identifier, throttled.
+    /// `subscribe SECS USECS ID`: forward this identifier, throttled.
     Subscribe(Duration, Id),
+    /// `filter SECS USECS ID LEN MASK`: forward this identifier when the bits under the mask
+    /// change (the first frame always), throttled.
+    Filter(Duration, Id, [u8; 8]),
     /// `unsubscribe ID`.
     Unsubscribe(Id),
 }
@@ -116,7 +119,14 @@ pub fn parse_command(inner: &str) -> Result<Command, String> {
         }
         ["delete", i] => id(i).map(Command::Delete),
         ["subscribe", s, u, i] => Ok(Command::Subscribe(interval(s, u)?, id(i)?)),
-        ["filter", s, u, i, ..] => Ok(Command::Subscribe(interval(s, u)?, id(i)?)),
+        ["filter", s, u, i, l, mask @ ..] => {
+            let mask_frame = frame(i, l, mask)?;
+            let mut bytes = [0u8; 8];
+            for (b, m) in bytes.iter_mut().zip(mask_frame.data()) {
+                *b = *m;
+            }
+            Ok(Command::Filter(interval(s, u)?, id(i)?, bytes))
+        }
         ["unsubscribe", i] => id(i).map(Command::Unsubscribe),
         [] => Err("empty command".into()),
         [word, ..] => Err(format!("unknown or malformed command '{word}'")),
@@ -197,11 +207,47 @@ pub fn serve(
     Ok(())
 }
 
+/// One BCM subscription or content filter.
+struct Subscription {
+    /// At most one frame per interval.
+    every: Duration,
+    /// When the last one was forwarded.
+    last: Option<Instant>,
+    /// Content filter: forward only when these bits change.
+    mask: Option<[u8; 8]>,
+    /// The masked data last forwarded.
+    last_masked: Option<[u8; 8]>,
+}
+
+impl Subscription {
+    /// Whether a frame with `data` arriving at `now` goes to the client (and note it if so).
+    fn wants(&mut self, data: &[u8], now: Instant) -> bool {
+        if self
+            .last
+            .is_some_and(|l| now.saturating_duration_since(l) < self.every)
+        {
+            return false;
+        }
+        if let Some(mask) = self.mask {
+            let mut masked = [0u8; 8];
+            for ((m, d), k) in masked.iter_mut().zip(data).zip(mask) {
+                *m = d & k;
+            }
+            if self.last_masked == Some(masked) {
+                return false;
+            }
+            self.last_masked = Some(masked);
+        }
+        self.last = Some(now);
+        true
+    }
+}
+
 /// What the client's reader shares with the thread that feeds it frames.
 struct Subscriptions {
     raw: AtomicBool,
     /// Identifier (SocketCAN form) → throttle interval and when it was last forwarded.
-    by_id: std::sync::Mutex<BTreeMap<u32, (Duration, Option<Instant>)>>,
+    by_id: std::sync::Mutex<BTreeMap<u32, Subscription>>,
 }
 
 fn session(
@@ -392,8 +438,22 @@ fn session(
                 }
             }
             Command::Subscribe(every, id) => {
-                let key = id_key(id);
-                lock(&subscriptions.by_id).insert(key, (every, None));
+                let subscription = Subscription {
+                    every,
+                    last: None,
+                    mask: None,
+                    last_masked: None,
+                };
+                lock(&subscriptions.by_id).insert(id_key(id), subscription);
+            }
+            Command::Filter(every, id, mask) => {
+                let subscription = Subscription {
+                    every,
+                    last: None,
+                    mask: Some(mask),
+                    last_masked: None,
+                };
+                lock(&subscriptions.by_id).insert(id_key(id), subscription);
             }
             Command::Unsubscribe(id) => {
                 if lock(&subscriptions.by_id).remove(&id_key(id)).is_none() {
@@ -442,14 +502,12 @@ fn spawn_forwarder(
             if !subscriptions.raw.load(Ordering::Relaxed) {
                 let key = received.frame.socketcan_id();
                 let mut by_id = lock(&subscriptions.by_id);
-                let Some((every, last)) = by_id.get_mut(&key) else {
+                let Some(subscription) = by_id.get_mut(&key) else {
                     continue;
                 };
-                let now = Instant::now();
-                if last.is_some_and(|l| now.saturating_duration_since(l) < *every) {
+                if !subscription.wants(received.frame.data(), Instant::now()) {
                     continue;
                 }
-                *last = Some(now);
             }
             let Some(line) = format_frame(&received.frame, received.timestamp) else {
                 continue;
@@ -844,6 +902,37 @@ mod tests {
             .unwrap_err()
             .contains("unknown or malformed command 'fly'"));
         assert!(parse_command("").is_err());
+    }
+
+    #[test]
+    fn content_filters_forward_changes_under_the_mask() {
+        assert_eq!(
+            parse_command(" filter 0 0 123 2 ff 00 "),
+            Ok(Command::Filter(
+                Duration::ZERO,
+                Id::standard(0x123).unwrap(),
+                [0xFF, 0, 0, 0, 0, 0, 0, 0]
+            ))
+        );
+        let t = Instant::now();
+        let mut f = Subscription {
+            every: Duration::ZERO,
+            last: None,
+            mask: Some([0xFF, 0, 0, 0, 0, 0, 0, 0]),
+            last_masked: None,
+        };
+        assert!(f.wants(&[1, 1], t), "the first frame");
+        assert!(!f.wants(&[1, 2], t), "only unmasked bits changed");
+        assert!(f.wants(&[2, 2], t), "a masked bit changed");
+        let mut throttled = Subscription {
+            every: Duration::from_millis(100),
+            last: None,
+            mask: None,
+            last_masked: None,
+        };
+        assert!(throttled.wants(&[], t));
+        assert!(!throttled.wants(&[], t + Duration::from_millis(50)));
+        assert!(throttled.wants(&[], t + Duration::from_millis(100)));
     }
 
     #[test]

@@ -80,7 +80,11 @@ fn adapter(refuse: Option<&str>) -> (Child, String) {
 #[test]
 fn frames_both_ways_with_a_fake_adapter() {
     let (child, path) = adapter(None);
-    let mut bus = open(&format!("slcan:{path}@500000")).unwrap();
+    let slcan = Slcan::open(&path, 500_000, false).unwrap();
+    // The fake adapter answers V and refuses N.
+    assert_eq!(slcan.versions().version.as_deref(), Some("1013"));
+    assert_eq!(slcan.versions().serial, None);
+    let mut bus: Box<dyn bywire_bus::Bus> = Box::new(slcan);
     for text in [
         "123#DEADBEEF",
         "1ABCDEF0#",
@@ -118,6 +122,8 @@ fn frames_both_ways_with_a_fake_adapter() {
         log.lines().collect::<Vec<_>>(),
         [
             "C",
+            "V",
+            "N",
             "S6",
             "O",
             "t1234DEADBEEF",
