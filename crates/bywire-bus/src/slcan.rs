@@ -8,7 +8,8 @@
 //! is the DLC in hex; received frames may end in a 4-digit millisecond timestamp. `z`/`Z`
 //! acknowledge transmissions. Lines that are none of these are counted as receive errors.
 //!
-//! What the protocol cannot do: error frames, receive-own (no echo of our frames), hardware
+//! The adapter's millisecond timestamps, when it sends them, are kept as the hardware
+//! timestamp. What the protocol cannot do: error frames, receive-own (no echo of our frames), hardware
 //! filters (filtering is done here).
 
 use std::io::{Read, Write};
@@ -16,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-use bywire_core::{ClassicFrame, Dlc, FdFrame, Frame, Id};
+use bywire_core::{ClassicFrame, Dlc, FdFrame, Frame, Id, Timestamp};
 
 use crate::{Bus, BusError, BusRx, BusTx, Filtering, Received, SharedEndpoint, Stats};
 
@@ -125,6 +126,22 @@ pub fn parse_line(line: &str) -> Result<Option<Frame>, LineError> {
         ClassicFrame::new(id, payload).map(Frame::Classic)
     };
     frame.map(Some).map_err(|e| error(&e.to_string()))
+}
+
+/// The adapter's timestamp on a received line (milliseconds, wrapping at 60,000), when the
+/// adapter has timestamps on (`Z1`).
+pub fn adapter_millis(line: &str, frame: &Frame) -> Option<u64> {
+    let id_digits = if frame.id()?.is_extended() { 8 } else { 3 };
+    let data_digits = if frame.is_remote() {
+        0
+    } else {
+        2 * frame.data().len()
+    };
+    let stamp = line.get(2 + id_digits + data_digits..)?;
+    (stamp.len() == 4)
+        .then(|| hex_value(stamp))
+        .flatten()
+        .map(u64::from)
 }
 
 /// The transmit command for `frame`, `\r` included.
@@ -313,7 +330,7 @@ impl SharedEndpoint for Shared {
                             frame,
                             timestamp: crate::monotonic_unix_now(),
                             own: false,
-                            hardware: None,
+                            hardware: adapter_millis(&text, &frame).map(Timestamp::from_millis),
                         }));
                     }
                     Ok(None) => {}
@@ -581,6 +598,13 @@ mod tests {
         assert_eq!(
             parse_line("t123110F3A2"),
             Ok(Some("123#10".parse().unwrap()))
+        );
+        let stamped: Frame = "123#10".parse().unwrap();
+        assert_eq!(adapter_millis("t123110F3A2", &stamped), Some(0xF3A2));
+        assert_eq!(adapter_millis("t123110", &stamped), None);
+        assert_eq!(
+            adapter_millis("r12331234", &"123#R3".parse().unwrap()),
+            Some(0x1234)
         );
         assert_eq!(parse_line("z"), Ok(None));
         assert_eq!(parse_line(""), Ok(None));

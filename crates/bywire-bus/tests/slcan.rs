@@ -95,8 +95,10 @@ fn frames_both_ways_with_a_fake_adapter() {
         bus.send(&frame(text)).unwrap();
     }
     let mut got = Vec::new();
+    let mut hardware = Vec::new();
     while let Some(r) = bus.recv(Some(Duration::from_secs(3))).unwrap() {
         got.push(r.frame.to_string());
+        hardware.push(r.hardware.map(|t| t.as_nanos() / 1_000_000));
         if got.len() == 6 {
             break;
         }
@@ -112,6 +114,8 @@ fn frames_both_ways_with_a_fake_adapter() {
             "456#55",
         ]
     );
+    // Only the last line carried the adapter's millisecond timestamp (0x0123).
+    assert_eq!(hardware, [None, None, None, None, None, Some(0x0123)]);
     // The garbage line and the BEL were counted and skipped.
     assert_eq!(bus.stats().rx_errors, 2);
     assert_eq!(bus.stats().tx_frames, 5);
