@@ -6,18 +6,21 @@ cd "$(dirname "$0")/.."
 export DEBIAN_FRONTEND=noninteractive
 SUDO=""
 [ "$(id -u)" = 0 ] || SUDO=sudo
-# sigrok-cli: CAN bit-level decoder oracle; tmux: drives the terminal views end to end.
-if ! command -v sigrok-cli >/dev/null || ! command -v tmux >/dev/null; then
+# sigrok-cli: CAN bit-level decoder oracle; tmux: drives the terminal views end to end;
+# can-utils: the SocketCAN peers the VM tests copy in (installed here, once, because test
+# binaries start several VMs at a time and apt cannot run twice at once).
+if ! command -v sigrok-cli >/dev/null || ! command -v tmux >/dev/null || ! command -v candump >/dev/null; then
   $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux >/dev/null
+  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux can-utils >/dev/null
 fi
 # The udp: tests send bursts of 500 datagrams; the receive buffer they need is capped by
 # net.core.rmem_max (global, not settable inside the test's network namespace).
 if [ "$(cat /proc/sys/net/core/rmem_max)" -lt 4194304 ]; then
   $SUDO sysctl -qw net.core.rmem_max=4194304
 fi
-# python-can + msgpack + pyserial: the udp_multicast, socketcand and slcan peer.
-python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack pyserial
+# python-can + msgpack + pyserial: the udp_multicast, socketcand and slcan peer; canopen: the
+# CANopen peer (master, LocalNode slave, CiA 402 node).
+python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack pyserial canopen==2.4.1
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
