@@ -22,11 +22,14 @@
 extern crate alloc;
 
 pub mod abort;
+pub mod cia402;
 pub mod device;
+pub mod master;
 pub mod nmt;
 pub mod od;
 pub mod pdo;
 pub mod queue;
+pub mod roboteq;
 pub mod sdo;
 
 pub use abort::Abort;

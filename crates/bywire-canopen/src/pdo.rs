@@ -685,7 +685,8 @@ mod tests {
                 .collect();
             entries.insert(
                 0,
-                Entry::new(0, "Count", DataType::U8, Access::ReadWrite).with_int(i64::try_from(count).unwrap()),
+                Entry::new(0, "Count", DataType::U8, Access::ReadWrite)
+                    .with_int(i64::try_from(count).unwrap()),
             );
             od.add_object(base + 0x200, "Mapping", ObjectKind::Record, entries);
         }

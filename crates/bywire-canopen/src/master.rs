@@ -1,0 +1,230 @@
+//! The NMT master as a sans-IO node: NMT commands, its own heartbeat, heartbeat monitoring of
+//! every node with per-node consumer times, the SDO client, SYNC production, EMCY
+//! consumption, and the drives it controls — each stopped safely when its heartbeat is lost,
+//! it sends an emergency, or it reports a fault.
+
+use alloc::vec::Vec;
+use core::time::Duration;
+
+use bywire_core::frame::Frame;
+use bywire_core::time::Timestamp;
+
+use crate::cia402::{DriveController, StopReason};
+use crate::device::Emergency;
+use crate::nmt::{
+    classic, heartbeat_frame, HeartbeatConsumer, HeartbeatEvent, NmtCommand, NmtState,
+};
+use crate::queue::EventQueue;
+use crate::roboteq::RoboteqMotor;
+use crate::sdo::{SdoClient, SdoOutcome};
+
+/// What the master saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// A heartbeat event.
+    Heartbeat(HeartbeatEvent),
+    /// An emergency from `node`.
+    Emergency {
+        /// The node.
+        node: u8,
+        /// The message.
+        emergency: Emergency,
+    },
+}
+
+/// Something the master commands cyclically.
+#[derive(Debug, Clone)]
+pub enum Controlled {
+    /// A CiA 402 drive.
+    Drive(DriveController),
+    /// A Roboteq controller.
+    Roboteq(RoboteqMotor),
+}
+
+impl Controlled {
+    fn node(&self) -> u8 {
+        match self {
+            Controlled::Drive(drive) => drive.node(),
+            Controlled::Roboteq(motor) => motor.node(),
+        }
+    }
+
+    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        match self {
+            Controlled::Drive(drive) => drive.on_frame(now, frame),
+            Controlled::Roboteq(motor) => motor.on_frame(now, frame),
+        }
+    }
+
+    fn stop(&mut self, reason: StopReason) {
+        match self {
+            Controlled::Drive(drive) => drive.stop(reason),
+            Controlled::Roboteq(motor) => motor.stop(reason),
+        }
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        match self {
+            Controlled::Drive(drive) => drive.poll(now, out),
+            Controlled::Roboteq(motor) => motor.poll(now, out),
+        }
+    }
+}
+
+/// The NMT master.
+#[derive(Debug, Clone)]
+pub struct Master {
+    node: u8,
+    heartbeat_period: Duration,
+    next_heartbeat: Option<Timestamp>,
+    sync_period: Duration,
+    next_sync: Option<Timestamp>,
+    cycle: Duration,
+    next_cycle: Option<Timestamp>,
+    consumer: HeartbeatConsumer,
+    sdo: SdoClient,
+    controlled: Vec<Controlled>,
+    outbox: EventQueue<Frame, 64>,
+    events: EventQueue<MasterEvent, 64>,
+}
+
+impl Master {
+    /// A master at `node` sending its heartbeat every `heartbeat_period` (zero: none) and
+    /// commanding its drives every `cycle`.
+    pub fn new(node: u8, heartbeat_period: Duration, cycle: Duration) -> Master {
+        Master {
+            node,
+            heartbeat_period,
+            next_heartbeat: None,
+            sync_period: Duration::ZERO,
+            next_sync: None,
+            cycle,
+            next_cycle: None,
+            consumer: HeartbeatConsumer::default(),
+            sdo: SdoClient::new(16, Duration::from_millis(500)),
+            controlled: Vec::new(),
+            outbox: EventQueue::new(),
+            events: EventQueue::new(),
+        }
+    }
+
+    /// Produce SYNC every `period` (zero: none).
+    pub fn with_sync(mut self, period: Duration) -> Master {
+        self.sync_period = period;
+        self
+    }
+
+    /// Its node ID.
+    pub fn node(&self) -> u8 {
+        self.node
+    }
+
+    /// Watch `node`'s heartbeat with `timeout`.
+    pub fn monitor(&mut self, node: u8, timeout: Duration) -> bool {
+        self.consumer.watch(node, timeout)
+    }
+
+    /// What is known of `node`.
+    pub fn liveness(&self, node: u8) -> Option<crate::nmt::Liveness> {
+        self.consumer.liveness(node)
+    }
+
+    /// Control a drive or motor (at start: the table is fixed after).
+    pub fn add(&mut self, controlled: Controlled) {
+        self.controlled.push(controlled);
+    }
+
+    /// The controlled device at `node`.
+    pub fn controlled(&mut self, node: u8) -> Option<&mut Controlled> {
+        self.controlled.iter_mut().find(|c| c.node() == node)
+    }
+
+    /// Send an NMT command to `node` (0: all).
+    pub fn nmt(&mut self, command: NmtCommand, node: u8) {
+        let _ = self.outbox.push(command.frame(node));
+    }
+
+    /// The SDO client.
+    pub fn sdo(&mut self) -> &mut SdoClient {
+        &mut self.sdo
+    }
+
+    /// The next finished SDO transfer.
+    pub fn take_sdo_outcome(&mut self) -> Option<SdoOutcome> {
+        self.sdo.take_outcome()
+    }
+
+    /// The next event.
+    pub fn next_event(&mut self) -> Option<MasterEvent> {
+        self.events.pop()
+    }
+
+    /// Take in a frame.
+    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        self.consumer.on_frame(now, frame);
+        self.sdo.on_frame(now, frame);
+        if let Some((node, emergency)) = Emergency::parse(frame) {
+            let _ = self.events.push(MasterEvent::Emergency { node, emergency });
+        }
+        for controlled in &mut self.controlled {
+            controlled.on_frame(now, frame);
+        }
+    }
+
+    /// Heartbeat monitoring first (so a loss stops its drive in this very poll), then the
+    /// heartbeat, SYNC, drive commands and SDO.
+    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        self.consumer.poll(now);
+        let mut stop_now = false;
+        while let Some(event) = self.consumer.next_event() {
+            if let HeartbeatEvent::Lost { node } = event {
+                if let Some(controlled) = self.controlled.iter_mut().find(|c| c.node() == node) {
+                    controlled.stop(StopReason::HeartbeatLost);
+                    stop_now = true;
+                }
+            }
+            let _ = self.events.push(MasterEvent::Heartbeat(event));
+        }
+        while let Some(frame) = self.outbox.pop() {
+            out(frame);
+        }
+        if !self.heartbeat_period.is_zero() && self.next_heartbeat.is_none_or(|due| now >= due) {
+            out(heartbeat_frame(self.node, NmtState::Operational));
+            self.next_heartbeat = Some(now.saturating_add(self.heartbeat_period));
+        }
+        if !self.sync_period.is_zero() && self.next_sync.is_none_or(|due| now >= due) {
+            out(classic(0x80, &[]));
+            self.next_sync = Some(now.saturating_add(self.sync_period));
+        }
+        // A stop is sent at once, not at the next cycle.
+        if stop_now || self.next_cycle.is_none_or(|due| now >= due) {
+            for controlled in &mut self.controlled {
+                controlled.poll(now, out);
+            }
+            self.next_cycle = Some(now.saturating_add(self.cycle));
+        }
+        self.sdo.poll(now, out);
+    }
+
+    /// When `poll` next has work.
+    pub fn next_deadline(&self) -> Option<Timestamp> {
+        if !self.outbox.is_empty() {
+            return Some(Timestamp::ZERO);
+        }
+        let heartbeat = (!self.heartbeat_period.is_zero())
+            .then(|| self.next_heartbeat.unwrap_or(Timestamp::ZERO));
+        let sync = (!self.sync_period.is_zero()).then(|| self.next_sync.unwrap_or(Timestamp::ZERO));
+        let cycle =
+            (!self.controlled.is_empty()).then(|| self.next_cycle.unwrap_or(Timestamp::ZERO));
+        [
+            heartbeat,
+            sync,
+            cycle,
+            self.consumer.next_deadline(),
+            self.sdo.next_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+}
