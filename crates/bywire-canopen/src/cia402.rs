@@ -305,6 +305,7 @@ pub struct Drive {
     last_step: Option<Timestamp>,
     position_target: f64,
     fault_pending: Option<u16>,
+    raised: Option<u16>,
     /// Maximum velocity the motor reaches (units/s).
     pub max_velocity: f64,
 }
@@ -320,6 +321,8 @@ impl Default for Drive {
 const DEFAULT_QUICK_STOP_OPTION: i64 = 2;
 /// Abort connection option 1 (CiA 402 default): fault.
 const DEFAULT_ABORT_CONNECTION: i64 = 1;
+/// EMCY code of a fault on a lost connection (heartbeat or life guarding, CiA 301).
+const LOST_CONNECTION: u16 = 0x8130;
 /// Position window within which the target counts as reached.
 const POSITION_WINDOW: f64 = 10.0;
 /// Velocity below which the motor counts as stopped.
@@ -335,6 +338,7 @@ impl Drive {
             last_step: None,
             position_target: 0.0,
             fault_pending: None,
+            raised: None,
             max_velocity: 10_000.0,
         }
     }
@@ -349,9 +353,15 @@ impl Drive {
         self.motor
     }
 
-    /// Report a fault (EMCY `code`, e.g. 0x2310 overcurrent): the drive reacts on its next step.
+    /// Report a fault (EMCY `code`, e.g. 0x2310 overcurrent): the drive reacts on its next
+    /// step and stays in Fault while the cause remains.
     pub fn inject_fault(&mut self, code: u16) {
         self.fault_pending = Some(code);
+    }
+
+    /// The cause of an injected fault is gone: a fault reset now succeeds.
+    pub fn clear_fault(&mut self) {
+        self.fault_pending = None;
     }
 
     fn apply(&mut self, event: Event, od: &mut ObjectDictionary) {
@@ -410,8 +420,9 @@ impl Drive {
             2 => self.apply(Event::Command(Command::DisableVoltage), od),
             3 => self.apply(Event::Command(Command::QuickStop), od),
             _ => {
-                let _ = od.set(object::ERROR_CODE, 0, &0x8130u16.to_le_bytes());
-                emcy.raise(od, 0xFF00, error_register::PROFILE, [0; 5]);
+                let _ = od.set(object::ERROR_CODE, 0, &LOST_CONNECTION.to_le_bytes());
+                emcy.raise(od, LOST_CONNECTION, error_register::COMMUNICATION, [0; 5]);
+                self.raised = Some(LOST_CONNECTION);
                 self.apply(Event::Fault, od);
             }
         }
@@ -456,11 +467,10 @@ impl Application for Drive {
                 let new_set_point = controlword & controlword::NEW_SET_POINT != 0
                     && self.previous_controlword & controlword::NEW_SET_POINT == 0;
                 self.previous_controlword = controlword;
-                if command == Command::FaultReset {
-                    if let Some(code) = self.fault_pending.take() {
-                        // The cause is still there: stay in Fault.
-                        self.fault_pending = Some(code);
-                    }
+                if command == Command::FaultReset && self.fault_pending.is_some() {
+                    // The cause is still there: the reset does nothing.
+                    self.publish(od);
+                    return;
                 }
                 self.apply(Event::Command(command), od);
                 if new_set_point && Drive::mode(od) == Some(Mode::ProfilePosition) {
@@ -507,6 +517,7 @@ impl Application for Drive {
             if !matches!(self.state, State::Fault | State::FaultReactionActive) {
                 let _ = od.set(object::ERROR_CODE, 0, &code.to_le_bytes());
                 emcy.raise(od, code, error_register::PROFILE, [0; 5]);
+                self.raised = Some(code);
                 self.apply(Event::Fault, od);
             }
         }
@@ -583,11 +594,12 @@ impl Application for Drive {
                 self.motor.step_velocity(0.0, quick, dt);
             }
         }
-        if self.state == State::SwitchOnDisabled
-            && self.fault_pending.is_none()
-            && emcy.is_active(0xFF00)
-        {
-            emcy.clear(od, 0xFF00);
+        // Out of Fault by a reset: the errors that caused it are history.
+        if self.state == State::SwitchOnDisabled {
+            if let Some(code) = self.raised.take() {
+                emcy.clear(od, code);
+                let _ = od.set(object::ERROR_CODE, 0, &[0, 0]);
+            }
         }
         if self.state == State::OperationEnabled && Drive::mode(od) == Some(Mode::ProfileVelocity) {
             self.position_target = self.motor.position;

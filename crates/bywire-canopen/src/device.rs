@@ -640,15 +640,21 @@ impl<A: Application> Device<A> {
         }
         self.consumer.poll(now);
         while let Some(event) = self.consumer.next_event() {
-            if let HeartbeatEvent::Lost { .. } = event {
-                self.emcy.raise(
-                    &mut self.od,
-                    emcy_code::HEARTBEAT,
-                    error_register::COMMUNICATION,
-                    [0; 5],
-                );
-                self.app
-                    .on_communication_lost(now, &mut self.od, &mut self.emcy);
+            match event {
+                HeartbeatEvent::Lost { .. } => {
+                    self.emcy.raise(
+                        &mut self.od,
+                        emcy_code::HEARTBEAT,
+                        error_register::COMMUNICATION,
+                        [0; 5],
+                    );
+                    self.app
+                        .on_communication_lost(now, &mut self.od, &mut self.emcy);
+                }
+                HeartbeatEvent::Recovered { .. } => {
+                    self.emcy.clear(&mut self.od, emcy_code::HEARTBEAT)
+                }
+                HeartbeatEvent::BootUp { .. } | HeartbeatEvent::StateChanged { .. } => {}
             }
             let _ = self.events.push(DeviceEvent::Heartbeat(event));
         }
