@@ -24,6 +24,7 @@ extern crate alloc;
 pub mod abort;
 pub mod cia402;
 pub mod device;
+pub mod eds;
 pub mod master;
 pub mod nmt;
 pub mod od;
