@@ -429,10 +429,10 @@ impl Drive {
     }
 }
 
+/// Round to the nearest integer (saturating at the ends of `i64`, as `as` does for floats).
 #[allow(clippy::cast_possible_truncation)]
-fn round(value: f64) -> i64 {
-    // Saturating by definition of `as` on floats; values here are motor positions.
-    value.round() as i64
+pub(crate) fn round(value: f64) -> i64 {
+    libm::round(value) as i64
 }
 
 #[allow(clippy::cast_precision_loss)]
@@ -555,7 +555,7 @@ impl Application for Drive {
                     let limit = read(object::PROFILE_VELOCITY).clamp(1.0, self.max_velocity);
                     let remaining = self.position_target - self.motor.position;
                     // Brake in time: the speed from which `deceleration` stops within `remaining`.
-                    let braking = (2.0 * deceleration * remaining.abs()).sqrt();
+                    let braking = libm::sqrt(2.0 * deceleration * remaining.abs());
                     let speed = limit.min(braking);
                     let target = if remaining.abs() <= POSITION_WINDOW / 2.0 {
                         0.0

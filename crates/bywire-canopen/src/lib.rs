@@ -23,6 +23,8 @@ extern crate alloc;
 
 pub mod abort;
 pub mod cia402;
+#[cfg(feature = "std")]
+pub mod config;
 pub mod device;
 pub mod eds;
 pub mod master;

@@ -15,7 +15,7 @@ use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
 use crate::abort::Abort;
-use crate::cia402::{add_pdo, communication_objects, Motor, PdoDefault, StopReason};
+use crate::cia402::{add_pdo, communication_objects, round, Motor, PdoDefault, StopReason};
 use crate::device::{error_register, Application, EmcyProducer};
 use crate::nmt::{classic, cob_id};
 use crate::od::{Access, DataType, Entry, Number, ObjectDictionary, ObjectKind};
@@ -346,11 +346,6 @@ impl Mdc1460 {
             channel.speed = channel.speed.map(|_| 0);
         }
     }
-}
-
-#[allow(clippy::cast_possible_truncation)]
-fn round(value: f64) -> i64 {
-    value.round() as i64
 }
 
 impl Application for Mdc1460 {
