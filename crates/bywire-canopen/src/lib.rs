@@ -40,16 +40,7 @@ pub use abort::Abort;
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
-/// The shape of every node: frames and time in, frames out, and when to be polled next.
-/// Runners (real-time or simulated) drive nodes only through this.
-pub trait Node {
-    /// Take in a frame seen on the bus (including, on buses that loop back, the node's own).
-    fn on_frame(&mut self, now: Timestamp, frame: &Frame);
-    /// Do what is due at `now`; frames to send go to `out`.
-    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame));
-    /// The latest time `poll` should next be called (`None`: only when a frame arrives).
-    fn next_deadline(&self) -> Option<Timestamp>;
-}
+pub use bywire_core::node::Node;
 
 impl<A: device::Application> Node for device::Device<A> {
     fn on_frame(&mut self, now: Timestamp, frame: &Frame) {

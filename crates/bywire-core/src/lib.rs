@@ -40,6 +40,7 @@ pub mod crc;
 pub mod e2e;
 pub mod filter;
 pub mod frame;
+pub mod node;
 pub mod time;
 pub mod wire;
 
