@@ -263,10 +263,13 @@ network.disconnect()
     assert_eq!(device.app().state(), cia402::State::SwitchOnDisabled);
 }
 
+/// Something done to the master at a time.
+type Action = (Timestamp, Box<dyn FnMut(&mut Master) + Send>);
+
 /// A node that runs `actions` at their times (from the runner's start) around a master.
 struct Scripted {
     master: Master,
-    actions: Vec<(Timestamp, Box<dyn FnMut(&mut Master) + Send>)>,
+    actions: Vec<Action>,
 }
 
 impl Node for Scripted {
