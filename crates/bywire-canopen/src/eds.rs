@@ -591,7 +591,9 @@ fn check_lists(reader: &mut Reader, indices: &[(u16, usize)]) {
 }
 
 /// Write a dictionary as an EDS (CiA 306) that python-canopen and this module read back.
-pub fn write(od: &ObjectDictionary, info: &DeviceInfo) -> String {
+/// With `node`, COB-IDs that hold it (EMCY, PDOs) are written as `$NODEID+base`, so the file
+/// describes the device at any node ID.
+pub fn write(od: &ObjectDictionary, info: &DeviceInfo, node: Option<u8>) -> String {
     use core::fmt::Write;
     let mut out = String::new();
     let _ = writeln!(out, "[FileInfo]\nFileName=device.eds\nFileVersion=1\nFileRevision=0\nEDSVersion=4.0\nDescription=written by bywire-canopen\nCreatedBy=bywire\n");
@@ -656,7 +658,7 @@ pub fn write(od: &ObjectDictionary, info: &DeviceInfo) -> String {
             ObjectKind::Var => {
                 if let Some(entry) = object.entries().first() {
                     let _ = writeln!(out, "[{index:04X}]");
-                    write_entry(&mut out, entry, 7);
+                    write_entry(&mut out, index, entry, node);
                 }
             }
             ObjectKind::Array | ObjectKind::Record => {
@@ -669,7 +671,7 @@ pub fn write(od: &ObjectDictionary, info: &DeviceInfo) -> String {
                 );
                 for entry in object.entries() {
                     let _ = writeln!(out, "[{index:04X}sub{:X}]", entry.sub);
-                    write_entry(&mut out, entry, 7);
+                    write_entry(&mut out, index, entry, node);
                 }
             }
         }
@@ -677,9 +679,23 @@ pub fn write(od: &ObjectDictionary, info: &DeviceInfo) -> String {
     out
 }
 
-fn write_entry(out: &mut String, entry: &Entry, object_type: u8) {
+/// COB-ID entries whose identifier is usually the node ID plus a base.
+fn is_node_cob_id(index: u16, sub: u8) -> bool {
+    (index == 0x1014 && sub == 0)
+        || (matches!(index, 0x1400..=0x15FF | 0x1800..=0x19FF) && sub == 1)
+}
+
+fn write_entry(out: &mut String, index: u16, entry: &Entry, node: Option<u8>) {
     use core::fmt::Write;
-    let default = match entry.data_type {
+    let relative = match (node, Number::decode(entry.data_type, entry.default_value())) {
+        (Some(node), Some(Number::Uint(cob)))
+            if is_node_cob_id(index, entry.sub) && cob & 0x7F == u64::from(node) && node != 0 =>
+        {
+            Some(format!("$NODEID+0x{:X}", cob - u64::from(node)))
+        }
+        _ => None,
+    };
+    let default = relative.unwrap_or_else(|| match entry.data_type {
         DataType::Integer(_) | DataType::Unsigned(_) | DataType::Boolean => {
             match Number::decode(entry.data_type, entry.default_value()) {
                 Some(Number::Uint(v)) => format!("0x{v:X}"),
@@ -696,8 +712,8 @@ fn write_entry(out: &mut String, entry: &Entry, object_type: u8) {
             .iter()
             .map(|b| format!("{b:02X}"))
             .collect(),
-    };
-    let _ = writeln!(out, "ParameterName={}\nObjectType=0x{object_type:X}\nDataType=0x{:04X}\nAccessType={}\nDefaultValue={default}\nPDOMapping={}", entry.name, entry.data_type.code(), entry.access.eds_name(), u8::from(entry.pdo_mappable));
+    });
+    let _ = writeln!(out, "ParameterName={}\nObjectType=0x7\nDataType=0x{:04X}\nAccessType={}\nDefaultValue={default}\nPDOMapping={}", entry.name, entry.data_type.code(), entry.access.eds_name(), u8::from(entry.pdo_mappable));
     for (key, limit) in [("LowLimit", entry.low), ("HighLimit", entry.high)] {
         if let Some(limit) = limit {
             let _ = writeln!(out, "{key}={limit}");
@@ -784,10 +800,15 @@ mod tests {
             bitrates: alloc::vec![1000],
             ..DeviceInfo::default()
         };
-        let text = write(&od, &info);
+        let text = write(&od, &info, Some(3));
+        assert!(text.contains("DefaultValue=$NODEID+0x180\n"), "{text}");
         let eds = parse(&text, Some(3)).unwrap();
         assert_eq!(eds.diagnostics, [], "{text}");
         assert_eq!(eds.dictionary, od);
         assert_eq!(eds.info.product_name, "drive");
+        // The same file describes the device at another node ID.
+        let moved = parse(&text, Some(9)).unwrap().dictionary;
+        assert_eq!(moved.get_unsigned(0x1800, 1), Some(0x189));
+        assert_eq!(moved.get_unsigned(0x1014, 0), Some(0x89));
     }
 }

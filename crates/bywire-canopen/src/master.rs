@@ -114,6 +114,12 @@ impl Master {
         self
     }
 
+    /// Give servers `timeout` to answer SDO requests (500 ms by default).
+    pub fn with_sdo_timeout(mut self, timeout: Duration) -> Master {
+        self.sdo = SdoClient::new(16, timeout);
+        self
+    }
+
     /// Its node ID.
     pub fn node(&self) -> u8 {
         self.node

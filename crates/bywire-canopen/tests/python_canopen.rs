@@ -118,7 +118,7 @@ fn with_our_drive(name: &str, script: &str) -> (Vec<String>, Device<Drive>) {
         bitrates: vec![1000],
         ..DeviceInfo::default()
     };
-    std::fs::write(&eds_path, eds::write(&od, &info)).unwrap();
+    std::fs::write(&eds_path, eds::write(&od, &info, Some(NODE))).unwrap();
     let mut bus = open(&format!("virtual:{name}")).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let device = Device::new(NODE, od, Drive::new());
@@ -318,7 +318,11 @@ fn our_master_reads_writes_and_commands_a_python_local_node() {
         Entry::new(0, "Message", DataType::VisibleString, Access::ReadWrite).with_default(b"hello"),
     );
     let eds_path = dir.join("slave.eds");
-    std::fs::write(&eds_path, eds::write(&od, &DeviceInfo::default())).unwrap();
+    std::fs::write(
+        &eds_path,
+        eds::write(&od, &DeviceInfo::default(), Some(NODE)),
+    )
+    .unwrap();
     let script = format!(
         r#"{PREAMBLE}
 node = network.create_node({NODE}, os.environ["EDS"])

@@ -5,6 +5,7 @@ mod bittiming_cmd;
 mod bridge_cmd;
 mod busarg;
 mod busload_cmd;
+mod canopen_cmd;
 mod dbc_cmd;
 mod dump_cmd;
 mod gen_cmd;
@@ -89,6 +90,11 @@ enum Command {
         #[command(subcommand)]
         command: log_cmd::LogCommand,
     },
+    /// CANopen: scan a bus, SDO read/write, NMT, run a device (EDS, CiA 402 drive, Roboteq).
+    Canopen {
+        #[command(subcommand)]
+        command: canopen_cmd::CanopenCommand,
+    },
     /// Serve a bus over the socketcand protocol (python-can, SavvyCAN and other clients).
     Serve(serve_cmd::Args),
     /// Emulate an SLCAN adapter for a bus on a pseudo terminal (for SLCAN tools).
@@ -114,6 +120,7 @@ fn main() -> ExitCode {
         Command::Monitor(args) => monitor_cmd::run(&args),
         Command::Plot(args) => plot_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args, &mut out),
+        Command::Canopen { command } => canopen_cmd::run(&command, &mut out),
         Command::SlcanAdapter(args) => slcan_adapter_cmd::run(&args, &mut out),
         Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
