@@ -51,11 +51,10 @@ pub trait Objects {
     fn download(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), Abort>;
 }
 
+/// The index and sub-index a request names (as much of them as a short frame has).
 fn index_of(data: &[u8]) -> (u16, u8) {
-    match data {
-        [_, lo, hi, sub, ..] => (u16::from_le_bytes([*lo, *hi]), *sub),
-        _ => (0, 0),
-    }
+    let byte = |at: usize| data.get(at).copied().unwrap_or(0);
+    (u16::from_le_bytes([byte(1), byte(2)]), byte(3))
 }
 
 fn u32_at4(data: &[u8]) -> u32 {
