@@ -14,7 +14,7 @@ use bywire_core::time::Timestamp;
 use crate::abort::Abort;
 use crate::device::{error_register, Application, EmcyProducer};
 use crate::nmt::{classic, cob_id, NmtState};
-use crate::od::{Access, DataType, Entry, Number, ObjectDictionary, ObjectKind};
+use crate::od::{Access, DataType, Entry, ObjectDictionary, ObjectKind};
 
 /// Controlword (0x6040), statusword (0x6041) and the other CiA 402 objects used here.
 pub mod object {
@@ -650,8 +650,7 @@ pub fn communication_objects(
         "Pre-defined error field",
         ObjectKind::Array,
         vec![
-            Entry::new(0, "Number of errors", DataType::U8, Access::ReadWrite)
-                .with_limits(Some(Number::Uint(0)), Some(Number::Uint(0))),
+            Entry::new(0, "Number of errors", DataType::U8, Access::ReadWrite),
             Entry::new(1, "Standard error field", DataType::U32, Access::ReadOnly),
             Entry::new(2, "Standard error field", DataType::U32, Access::ReadOnly),
             Entry::new(3, "Standard error field", DataType::U32, Access::ReadOnly),

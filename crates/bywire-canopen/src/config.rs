@@ -311,6 +311,30 @@ impl BusConfig {
     }
 }
 
+impl BusConfig {
+    /// The master this description calls for: its heartbeat, SYNC and cycle, every node
+    /// monitored with its consumer time, and a controller for every driven node (disabled
+    /// until the application enables it: fail closed).
+    pub fn master(&self) -> crate::master::Master {
+        use crate::master::{Controlled, Master};
+        let mut master =
+            Master::new(self.master_id, self.heartbeat, self.cycle).with_sync(self.sync);
+        for node in &self.nodes {
+            let _ = master.monitor(node.id, node.heartbeat_timeout);
+            match node.driver {
+                Driver::None => {}
+                Driver::Cia402(mode) => master.add(Controlled::Drive(
+                    crate::cia402::DriveController::new(node.id, mode, node.heartbeat_timeout),
+                )),
+                Driver::Roboteq(command) => master.add(Controlled::Roboteq(
+                    crate::roboteq::RoboteqMotor::new(node.id, command),
+                )),
+            }
+        }
+        master
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -337,6 +361,16 @@ mod tests {
         assert!(drive.dictionary.object(0x6040).is_some());
         let steer = bus.nodes.iter().find(|n| n.name == "steer").unwrap();
         assert_eq!(steer.driver, Driver::Roboteq(RoboteqCommand::Velocity(0)));
+        let mut master = bus.master();
+        assert!(matches!(
+            master.controlled(3),
+            Some(crate::master::Controlled::Drive(_))
+        ));
+        assert!(matches!(
+            master.controlled(2),
+            Some(crate::master::Controlled::Roboteq(_))
+        ));
+        assert_eq!(master.liveness(3), Some(crate::nmt::Liveness::Unknown));
     }
 
     #[test]

@@ -179,6 +179,13 @@ impl EmcyProducer {
     }
 }
 
+fn clear_history(od: &mut ObjectDictionary) {
+    let subs = od.object(0x1003).map_or(0, |o| o.entries().len());
+    for sub in 1..u8::try_from(subs).unwrap_or(0) {
+        let _ = od.set(0x1003, sub, &[0; 4]);
+    }
+}
+
 fn record_history(od: &mut ObjectDictionary, code: u16) {
     let Some(object) = od.object(0x1003) else {
         return;
@@ -348,6 +355,10 @@ fn check_communication_write(
     sub: u8,
     data: &[u8],
 ) -> Result<(), Abort> {
+    if index == 0x1003 && sub == 0 && data != [0] {
+        // Only zero may be written: it clears the error history.
+        return Err(Abort::InvalidValue);
+    }
     if index == 0x1016 && sub > 0 {
         // Two consumer entries may not watch the same node.
         let entry = u32::from_le_bytes(data.try_into().map_err(|_| Abort::LengthMismatch)?);
@@ -622,6 +633,7 @@ impl<A: Application> Device<A> {
     fn react(&mut self, now: Timestamp) {
         while let Some((index, sub)) = self.written.pop() {
             match index {
+                0x1003 => clear_history(&mut self.od),
                 0x1016 => self.load_consumers(),
                 0x1017 => self.next_heartbeat = Some(now),
                 0x1400..=0x1BFF => self.pdos.reload(&self.od, index),
@@ -781,5 +793,173 @@ impl<A: Application> Device<A> {
         .into_iter()
         .flatten()
         .min()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cia402::drive_dictionary;
+    use alloc::vec::Vec;
+
+    fn polled(device: &mut Device<Plain>, ms: u64) -> Vec<Frame> {
+        let mut out = Vec::new();
+        device.poll(Timestamp::from_millis(ms), &mut |f| out.push(f));
+        out
+    }
+
+    fn ids(frames: &[Frame]) -> Vec<u16> {
+        frames.iter().filter_map(cob_id).collect()
+    }
+
+    #[test]
+    fn boots_into_pre_operational_and_resets_restore_defaults() {
+        let mut device = Device::new(4, drive_dictionary(4), Plain);
+        let first = polled(&mut device, 0);
+        assert_eq!(
+            first.first().map(|f| (cob_id(f), f.data().to_vec())),
+            Some((Some(0x704), alloc::vec![0x00])),
+            "boot-up first"
+        );
+        assert_eq!(device.state(), NmtState::PreOperational);
+        device
+            .od_mut()
+            .set(0x1017, 0, &500u16.to_le_bytes())
+            .unwrap();
+        device.od_mut().set(0x6081, 0, &9u32.to_le_bytes()).unwrap();
+        device.on_frame(
+            Timestamp::from_millis(1),
+            &NmtCommand::ResetCommunication.frame(4),
+        );
+        assert_eq!(
+            device.od().get_unsigned(0x1017, 0),
+            Some(100),
+            "communication objects back to default"
+        );
+        assert_eq!(
+            device.od().get_unsigned(0x6081, 0),
+            Some(9),
+            "application objects kept"
+        );
+        device.on_frame(Timestamp::from_millis(2), &NmtCommand::ResetNode.frame(0));
+        assert_eq!(
+            device.od().get_unsigned(0x6081, 0),
+            Some(2_000),
+            "reset node restores them too"
+        );
+        let boot = polled(&mut device, 3);
+        assert!(boot
+            .iter()
+            .any(|f| cob_id(f) == Some(0x704) && f.data() == [0x00]));
+        // Stopped: SDO is not answered.
+        device.on_frame(Timestamp::from_millis(4), &NmtCommand::Stop.frame(4));
+        device.on_frame(
+            Timestamp::from_millis(4),
+            &classic(0x604, &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]),
+        );
+        assert!(!ids(&polled(&mut device, 4)).contains(&0x584));
+    }
+
+    #[test]
+    fn node_guarding_is_answered_with_a_toggle_and_its_loss_raises_an_emcy() {
+        let mut device = Device::new(4, drive_dictionary(4), Plain);
+        device.od_mut().set(0x1017, 0, &[0, 0]).unwrap();
+        device
+            .od_mut()
+            .set(0x100C, 0, &100u16.to_le_bytes())
+            .unwrap();
+        device.od_mut().set(0x100D, 0, &[3]).unwrap();
+        polled(&mut device, 0);
+        let guard = Frame::remote(
+            bywire_core::frame::Id::standard(0x704).unwrap(),
+            bywire_core::frame::Dlc::from_nibble(1),
+        );
+        let mut answers = Vec::new();
+        for ms in [10, 110] {
+            device.on_frame(Timestamp::from_millis(ms), &guard);
+            answers.extend(
+                polled(&mut device, ms)
+                    .into_iter()
+                    .filter(|f| cob_id(f) == Some(0x704))
+                    .map(|f| f.data()[0]),
+            );
+        }
+        assert_eq!(answers, [0x7F, 0xFF], "pre-operational, toggle alternating");
+        assert!(polled(&mut device, 409)
+            .iter()
+            .all(|f| cob_id(f) != Some(0x84)));
+        let emcy: Vec<Frame> = polled(&mut device, 410)
+            .into_iter()
+            .filter(|f| cob_id(f) == Some(0x84))
+            .collect();
+        assert_eq!(
+            emcy.first().map(|f| f.data()[..3].to_vec()),
+            Some(alloc::vec![0x30, 0x81, 0x11]),
+            "EMCY 0x8130, register generic + communication"
+        );
+        assert_eq!(
+            device.od().get_unsigned(0x1003, 1),
+            Some(0x8130),
+            "in the error history"
+        );
+        assert_eq!(device.od().get_unsigned(0x1003, 0), Some(1));
+        assert!(
+            core::iter::from_fn(|| device.next_event()).any(|e| e == DeviceEvent::LifeGuardLost)
+        );
+        // The history is cleared by writing zero, and only zero.
+        device.on_frame(
+            Timestamp::from_millis(411),
+            &classic(0x604, &[0x2F, 0x03, 0x10, 0, 1, 0, 0, 0]),
+        );
+        device.on_frame(
+            Timestamp::from_millis(411),
+            &classic(0x604, &[0x2F, 0x03, 0x10, 0, 0, 0, 0, 0]),
+        );
+        let answers: Vec<Vec<u8>> = polled(&mut device, 411)
+            .into_iter()
+            .filter(|f| cob_id(f) == Some(0x584))
+            .map(|f| f.data().to_vec())
+            .collect();
+        assert_eq!(
+            answers,
+            [
+                alloc::vec![0x80, 0x03, 0x10, 0, 0x30, 0, 0x09, 0x06],
+                alloc::vec![0x60, 0x03, 0x10, 0, 0, 0, 0, 0]
+            ]
+        );
+        assert_eq!(device.od().get_unsigned(0x1003, 1), Some(0));
+    }
+
+    #[test]
+    fn sync_is_produced_with_its_counter_when_0x1005_says_so() {
+        let mut device = Device::new(4, drive_dictionary(4), Plain);
+        device.od_mut().add_var(
+            0x1019,
+            crate::od::Entry::new(
+                0,
+                "Synchronous counter overflow value",
+                crate::od::DataType::U8,
+                crate::od::Access::ReadWrite,
+            )
+            .with_int(3),
+        );
+        device
+            .od_mut()
+            .set(0x1005, 0, &0x4000_0080u32.to_le_bytes())
+            .unwrap();
+        device
+            .od_mut()
+            .set(0x1006, 0, &10_000u32.to_le_bytes())
+            .unwrap();
+        let mut counters = Vec::new();
+        for ms in 0..50 {
+            counters.extend(
+                polled(&mut device, ms)
+                    .into_iter()
+                    .filter(|f| cob_id(f) == Some(0x80))
+                    .map(|f| f.data().to_vec()),
+            );
+        }
+        assert_eq!(counters, [[1], [2], [3], [1], [2]]);
     }
 }

@@ -426,3 +426,63 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
     assert_eq!(last.2.data(), [0, 0, 0, 0]);
     assert!(controller.app().speed(1).abs() < 1.0);
 }
+
+#[test]
+fn cyclic_synchronous_modes_follow_the_streamed_targets() {
+    for mode in [
+        Mode::CyclicSynchronousVelocity,
+        Mode::CyclicSynchronousPosition,
+    ] {
+        let mut master = Master::new(MASTER, Duration::from_millis(100), Duration::from_millis(5))
+            .with_sync(Duration::from_millis(5));
+        let mut cyclic = DriveController::new(DRIVE, mode, Duration::from_millis(500));
+        cyclic.set_enabled(true);
+        master.add(Controlled::Drive(cyclic));
+        let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
+        let mut bus = Bus::new(2);
+        bus.run(
+            Duration::from_millis(10),
+            TICK,
+            &mut [&mut master, &mut drive],
+        );
+        master.nmt(NmtCommand::Start, DRIVE);
+        bus.run(
+            Duration::from_millis(300),
+            TICK,
+            &mut [&mut master, &mut drive],
+        );
+        assert_eq!(drive.app().state(), State::OperationEnabled, "{mode:?}");
+        // A ramp streamed every cycle: 0 → 1000 units in one second.
+        for step in 0..=200 {
+            let value = step * 5;
+            let setpoint = if mode == Mode::CyclicSynchronousVelocity {
+                Setpoint::Velocity(value)
+            } else {
+                Setpoint::Position(value)
+            };
+            controller(&mut master).set_setpoint(setpoint);
+            bus.run(
+                Duration::from_millis(5),
+                TICK,
+                &mut [&mut master, &mut drive],
+            );
+        }
+        bus.run(
+            Duration::from_millis(200),
+            TICK,
+            &mut [&mut master, &mut drive],
+        );
+        let motor = drive.app().motor();
+        match mode {
+            Mode::CyclicSynchronousVelocity => {
+                assert!((motor.velocity - 1_000.0).abs() < 1.0, "{motor:?}")
+            }
+            _ => assert!((motor.position - 1_000.0).abs() <= 10.0, "{motor:?}"),
+        }
+        assert_eq!(
+            drive.od().get_signed(0x6061, 0),
+            Some(i64::from(mode.code())),
+            "modes display"
+        );
+    }
+}
