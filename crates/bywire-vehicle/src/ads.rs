@@ -9,14 +9,12 @@
 use core::time::Duration;
 
 use bywire_core::e2e::{CounterChecker, CounterStatus};
-use bywire_core::{Frame, Id, Timestamp};
+use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
-use crate::reference_tug::{
-    self, AdsToVehicleControl, ControlMode, EmergencyBrake, VehicleToAdsSensors, VehicleToAdsState,
-    VehicleToAdsWheelAngles,
-};
+use crate::reference_tug::ControlMode;
+use crate::wire::{AdsWire, Feedback, ReferenceWire, StateFeedback};
 
 /// Tuning of the ADS side.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -143,14 +141,16 @@ pub struct VehicleState {
     pub steering_response: Field<Duration>,
 }
 
-/// The ADS-side node.
+/// The ADS-side node, speaking the reference tug's messages unless given another wire
+/// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
-pub struct Ads {
+pub struct Ads<W: AdsWire = ReferenceWire> {
+    wire: W,
     config: AdsConfig,
     command: Option<(Timestamp, AdsCommand)>,
-    counter: u8,
-    /// When each counter value was last sent.
-    sent_at: [Option<Timestamp>; 16],
+    counter: u64,
+    /// When each counter value was last sent (counters are at most 8 bits wide).
+    sent_at: [Option<Timestamp>; 256],
     next_command: Option<Timestamp>,
     brake: Option<BrakeBurst>,
     state: VehicleState,
@@ -175,20 +175,29 @@ struct BrakeBurst {
 }
 
 impl Ads {
-    /// A node that sends nothing until it has a command.
+    /// A node for the reference tug that sends nothing until it has a command.
     pub fn new(config: AdsConfig) -> Self {
+        Ads::with_wire(config, ReferenceWire)
+    }
+}
+
+impl<W: AdsWire> Ads<W> {
+    /// A node speaking `wire` that sends nothing until it has a command.
+    pub fn with_wire(config: AdsConfig, wire: W) -> Self {
         let timeout = config.cycle.saturating_mul(config.feedback_timeout_cycles);
+        let bits = wire.feedback_counter_bits();
         Ads {
+            wire,
             config,
             command: None,
             counter: 0,
-            sent_at: [None; 16],
+            sent_at: [None; 256],
             next_command: None,
             brake: None,
             state: VehicleState::default(),
-            state_counter: CounterChecker::new(4, 0, timeout),
-            sensors_counter: CounterChecker::new(4, 0, timeout),
-            angles_counter: CounterChecker::new(4, 0, timeout),
+            state_counter: CounterChecker::new(bits, 0, timeout),
+            sensors_counter: CounterChecker::new(bits, 0, timeout),
+            angles_counter: CounterChecker::new(bits, 0, timeout),
             stats: FeedbackStats::default(),
             wheels: four_wheel(config.wheelbase, config.track),
             odometry: Odometry::default(),
@@ -269,13 +278,21 @@ impl Ads {
         })
     }
 
+    /// The command counter's values: `0..modulus`.
+    fn counter_mask(&self) -> u64 {
+        (1u64 << self.wire.command_counter_bits().clamp(1, 8)) - 1
+    }
+
     fn command_frame(&mut self, now: Timestamp, c: AdsCommand) -> Frame {
-        let m = c.to_message(self.counter);
-        if let Some(slot) = self.sent_at.get_mut(usize::from(self.counter)) {
+        let frame = self.wire.command_frame(&c, self.counter);
+        if let Some(slot) = usize::try_from(self.counter)
+            .ok()
+            .and_then(|i| self.sent_at.get_mut(i))
+        {
             *slot = Some(now);
         }
-        self.counter = (self.counter + 1) & 0x0F;
-        reference_tug::sealed_frame(AdsToVehicleControl::ID, m.0)
+        self.counter = (self.counter + 1) & self.counter_mask();
+        frame
     }
 
     /// When [`poll`](Self::poll) next has something to send.
@@ -291,11 +308,12 @@ impl Ads {
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         if let Some(mut burst) = self.brake {
             if now >= burst.next {
-                let mut m = EmergencyBrake::default();
-                m.set_brake_request_raw(1);
-                let _ = m.set_deceleration(burst.deceleration.clamp(0.0, 25.5));
-                m.set_counter_raw(u64::from(burst.sent & 0x0F));
-                out(reference_tug::sealed_frame(EmergencyBrake::ID, m.0));
+                if let Some(frame) = self
+                    .wire
+                    .emergency_brake_frame(burst.deceleration, u64::from(burst.sent))
+                {
+                    out(frame);
+                }
                 burst.sent = burst.sent.saturating_add(1);
                 let gap = if burst.sent < 3 {
                     self.config.brake_burst_spacing
@@ -322,25 +340,12 @@ impl Ads {
 
     /// A frame from the vehicle.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        let Some(Id::Standard(id)) = frame.id() else {
-            return;
-        };
-        let id = u32::from(id.as_raw());
-        let payload = reference_tug::payload(frame);
-        let known = id == VehicleToAdsState::ID
-            || id == VehicleToAdsSensors::ID
-            || id == VehicleToAdsWheelAngles::ID;
-        if !known {
-            return;
-        }
-        let Some(payload) = payload.filter(|p| reference_tug::is_sealed(id, p)) else {
-            self.stats.checksum += 1;
-            return;
-        };
-        match id {
-            VehicleToAdsState::ID => self.on_state(now, VehicleToAdsState(payload)),
-            VehicleToAdsWheelAngles::ID => self.on_angles(now, VehicleToAdsWheelAngles(payload)),
-            _ => self.on_sensors(now, VehicleToAdsSensors(payload)),
+        match self.wire.feedback(frame) {
+            Feedback::Other => {}
+            Feedback::Corrupt => self.stats.checksum += 1,
+            Feedback::State(state) => self.on_state(now, state),
+            Feedback::WheelAngles { counter, angles } => self.on_angles(now, counter, angles),
+            Feedback::WheelSpeeds { counter, speeds } => self.on_sensors(now, counter, speeds),
         }
     }
 
@@ -351,22 +356,26 @@ impl Ads {
         )
     }
 
-    fn on_state(&mut self, now: Timestamp, m: VehicleToAdsState) {
-        if !Self::counter_ok(&mut self.state_counter, now, m.counter_raw()) {
+    fn on_state(&mut self, now: Timestamp, m: StateFeedback) {
+        if !Self::counter_ok(&mut self.state_counter, now, m.counter) {
             self.stats.counter += 1;
             return;
         }
-        let (steering, velocity) = (m.steering_angle_actual(), m.velocity_actual());
-        if steering.abs() > 45.0 || !(-5.0..=8.0).contains(&velocity) || m.watchdog_level_raw() > 4
-        {
+        let (steering, velocity) = (m.steering, m.velocity);
+        if !m.in_range {
             self.stats.range += 1;
             return;
         }
         // The echo must be one of the last few commands sent.
-        let echo = u8::try_from(m.heartbeat_echo_raw()).unwrap_or(0);
-        let recent = (1..=self.config.echo_window)
-            .any(|back| self.counter.wrapping_sub(back) & 0x0F == echo);
-        let sent = self.sent_at.get(usize::from(echo)).copied().flatten();
+        let echo = m.heartbeat_echo;
+        let mask = self.counter_mask();
+        let recent = (1..=u64::from(self.config.echo_window))
+            .any(|back| self.counter.wrapping_sub(back) & mask == echo);
+        let sent = usize::try_from(echo)
+            .ok()
+            .and_then(|i| self.sent_at.get(i))
+            .copied()
+            .flatten();
         if !recent || sent.is_none() {
             self.stats.echo += 1;
             return;
@@ -375,13 +384,20 @@ impl Ads {
         let s = &mut self.state;
         s.steering.set(now, steering);
         s.velocity.set(now, velocity);
-        s.mode.set(now, ControlMode::from_raw(m.control_mode_raw()));
-        s.watchdog_level
-            .set(now, u8::try_from(m.watchdog_level_raw()).unwrap_or(u8::MAX));
-        s.estop_state
-            .set(now, u8::try_from(m.estop_state_raw()).unwrap_or(u8::MAX));
-        s.warning.set(now, m.warning_flag_raw() == 1);
-        s.driver_override.set(now, m.driver_override_raw() == 1);
+        s.mode.set(now, m.mode);
+        // Reported only by vehicles whose state message has them.
+        if let Some(level) = m.watchdog_level {
+            s.watchdog_level.set(now, level);
+        }
+        if let Some(estop) = m.estop_state {
+            s.estop_state.set(now, estop);
+        }
+        if let Some(warning) = m.warning {
+            s.warning.set(now, warning);
+        }
+        if let Some(driver) = m.driver_override {
+            s.driver_override.set(now, driver);
+        }
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));
         }
@@ -393,35 +409,21 @@ impl Ads {
         }
     }
 
-    fn on_angles(&mut self, now: Timestamp, m: VehicleToAdsWheelAngles) {
-        if !Self::counter_ok(&mut self.angles_counter, now, m.counter_raw()) {
+    fn on_angles(&mut self, now: Timestamp, counter: u64, angles: [f64; 4]) {
+        if !Self::counter_ok(&mut self.angles_counter, now, counter) {
             self.stats.counter += 1;
             return;
         }
         self.stats.accepted += 1;
-        self.state.wheel_angles.set(
-            now,
-            [
-                m.wheel_angle_fl(),
-                m.wheel_angle_fr(),
-                m.wheel_angle_rl(),
-                m.wheel_angle_rr(),
-            ],
-        );
+        self.state.wheel_angles.set(now, angles);
     }
 
-    fn on_sensors(&mut self, now: Timestamp, m: VehicleToAdsSensors) {
-        if !Self::counter_ok(&mut self.sensors_counter, now, m.counter_raw()) {
+    fn on_sensors(&mut self, now: Timestamp, counter: u64, speeds: [f64; 4]) {
+        if !Self::counter_ok(&mut self.sensors_counter, now, counter) {
             self.stats.counter += 1;
             return;
         }
         self.stats.accepted += 1;
-        let speeds = [
-            m.wheel_speed_fl(),
-            m.wheel_speed_fr(),
-            m.wheel_speed_rl(),
-            m.wheel_speed_rr(),
-        ];
         self.state.wheel_speeds.set(now, speeds);
         // Odometry needs fresh wheel angles; integrate over the time since the last sensors
         // frame (the wheels' twist is taken as constant in between).

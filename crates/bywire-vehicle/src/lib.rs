@@ -12,6 +12,8 @@
 //! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
+//! - [`wire`]: the ADS side's messages on the wire: the reference tug through its generated
+//!   structs, or any vehicle a profile describes, by role, through the runtime codec.
 //! - [`profile`]: TOML vehicle profiles checked against their DBC; `reference-tug` and
 //!   `autoware-can` ship.
 
@@ -21,3 +23,4 @@ pub mod profile;
 pub mod redundancy;
 pub mod reference_tug;
 pub mod supervisor;
+pub mod wire;

@@ -108,6 +108,18 @@ pub struct StateRoles {
     pub counter: String,
     /// Checksum.
     pub checksum: String,
+    /// Watchdog level (optional).
+    #[serde(default)]
+    pub watchdog_level: Option<String>,
+    /// E-stop latch state (optional).
+    #[serde(default)]
+    pub estop_state: Option<String>,
+    /// Warning flag (optional).
+    #[serde(default)]
+    pub warning: Option<String>,
+    /// Driver override flag (optional).
+    #[serde(default)]
+    pub driver_override: Option<String>,
 }
 
 /// Wheel speed feedback.
@@ -142,6 +154,20 @@ pub struct EmergencyBrakeRoles {
     pub burst_spacing_ms: u64,
     /// Repeat period after it, ms.
     pub repeat_ms: u64,
+    /// The brake-request signal.
+    #[serde(default = "default_brake_request")]
+    pub request: String,
+    /// The deceleration signal.
+    #[serde(default = "default_brake_deceleration")]
+    pub deceleration: String,
+}
+
+fn default_brake_request() -> String {
+    "BrakeRequest".to_string()
+}
+
+fn default_brake_deceleration() -> String {
+    "Deceleration".to_string()
 }
 
 /// Physical limits.
@@ -435,6 +461,16 @@ impl Checker<'_> {
             ] {
                 self.signal(m, &format!("state.{key}"), name)?;
             }
+            for (key, name) in [
+                ("watchdog_level", &s.watchdog_level),
+                ("estop_state", &s.estop_state),
+                ("warning", &s.warning),
+                ("driver_override", &s.driver_override),
+            ] {
+                if let Some(name) = name {
+                    self.signal(m, &format!("state.{key}"), name)?;
+                }
+            }
             if s.period_ms == 0 || s.timeout_cycles == 0 {
                 return Err(self.invalid(
                     "state.timeout_cycles",
@@ -456,7 +492,9 @@ impl Checker<'_> {
             self.signal(m, "estop.request", &e.request)?;
         }
         if let Some(b) = &p.emergency_brake {
-            self.message("emergency_brake.message", &b.message)?;
+            let m = self.message("emergency_brake.message", &b.message)?;
+            self.signal(m, "emergency_brake.request", &b.request)?;
+            self.signal(m, "emergency_brake.deceleration", &b.deceleration)?;
             if b.burst_frames == 0 || b.repeat_ms == 0 {
                 return Err(self.invalid(
                     "emergency_brake.burst_frames",

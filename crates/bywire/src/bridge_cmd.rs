@@ -16,13 +16,14 @@ use bywire_vehicle::profile::{LoadedProfile, Profile};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::reference_tug::{ControlMode, Gear, SteeringMode};
 use bywire_vehicle::supervisor::{Redundancy, Supervisor};
+use bywire_vehicle::wire::ProfileWire;
 use serde::Deserialize;
 use serde_json::json;
 
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
-command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop.\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20"
+command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop.\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role."
 )]
 pub struct Args {
     /// A shipped profile (reference-tug) or a profile file.
@@ -125,14 +126,25 @@ fn load_profile(name: &str) -> Result<LoadedProfile> {
     } else {
         Profile::builtin(name)?
     };
-    match &loaded.profile.command {
-        Some(c) if c.message == "AdsToVehicle_Control" => Ok(loaded),
-        Some(c) => bail!(
-            "--profile {name}: the bridge speaks the reference-tug command layout; this profile's command message is '{}'",
-            c.message
-        ),
-        None => bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)"),
+    if loaded.profile.command.is_none() {
+        bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");
     }
+    Ok(loaded)
+}
+
+/// Whether the profile's vehicle speaks the reference tug's command layout (the simulated
+/// vehicle of `--with-vehicle` is the reference tug's supervisor).
+fn is_reference_layout(profile: &LoadedProfile) -> bool {
+    profile
+        .profile
+        .command
+        .as_ref()
+        .is_some_and(|c| c.message == "AdsToVehicle_Control")
+        && profile
+            .profile
+            .state
+            .as_ref()
+            .is_some_and(|s| s.message == "VehicleToAds_State")
 }
 
 /// A simulated vehicle: the supervisor on its own endpoint, with speed and steering following
@@ -190,7 +202,7 @@ fn since(start: Instant) -> Timestamp {
     Timestamp::from_nanos(u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX))
 }
 
-fn state_json(ads: &Ads, now: Timestamp) -> serde_json::Value {
+fn state_json(ads: &Ads<ProfileWire>, now: Timestamp) -> serde_json::Value {
     let s = ads.state();
     let age_ms = |at: Option<Duration>| at.map(|d| d.as_secs_f64() * 1e3);
     json!({
@@ -244,6 +256,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let start = Instant::now();
     let (stop_vehicle, vehicle_stop) = mpsc::channel();
     let vehicle = if args.with_vehicle {
+        if !is_reference_layout(&profile) {
+            bail!("--with-vehicle: the simulated vehicle is the reference tug; profile '{}' describes another vehicle's messages", profile.profile.name);
+        }
         let mut vehicle_buses = Vec::new();
         for (channel, spec) in &specs {
             let parsed: bywire_bus::BusSpec = spec.parse()?;
@@ -268,7 +283,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let mut recent: std::collections::VecDeque<(Timestamp, Frame)> =
         std::collections::VecDeque::new();
     let lines = stdin_thread();
-    let mut ads = Ads::new(profile.ads_config());
+    // The ADS side speaks the profile's messages by role, through the runtime codec.
+    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
+    let mut ads = Ads::with_wire(profile.ads_config(), wire);
     let mut command = AdsCommand::default();
     let report = Duration::from_secs_f64(1.0 / args.rate);
     let mut next_report = since(start);

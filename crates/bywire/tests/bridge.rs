@@ -179,3 +179,152 @@ fn bridge_drives_over_two_redundant_buses() {
     assert!(driving.iter().any(|s| s["warning"] == false));
     assert_eq!(states.last().unwrap()["rejected"]["counter"], 0);
 }
+
+/// Another vehicle's profile (tests/data/shuttle of bywire-vehicle: its own identifiers,
+/// big-endian setpoints, 8-bit counters, XOR checksums, its own enum numbers) drives that
+/// vehicle's messages: python-can on the same socketcand-served bus plays the shuttle, with
+/// cantools encoding its status (echoing the command counter) and decoding our commands.
+#[test]
+fn bridge_drives_another_vehicle_by_its_profile() {
+    let data = format!(
+        "{}/../bywire-vehicle/tests/data",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut server = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "serve",
+            "virtual:shuttle",
+            "--listen",
+            &format!("127.0.0.1:{port}"),
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.stdout.as_mut().unwrap()),
+        &mut first,
+    )
+    .unwrap();
+    let script = format!(
+        r#"
+import can, cantools, time, json
+from functools import reduce
+db = cantools.database.load_file("{data}/shuttle.dbc")
+bus = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="shuttle")
+print("ready", flush=True)
+commands, alive, end = [], 0, time.time() + 2.5
+while time.time() < end:
+    m = bus.recv(0.05)
+    if m is None or m.arbitration_id != 1280:
+        continue
+    c = db.decode_message(1280, m.data, decode_choices=False)
+    c["xor_ok"] = reduce(lambda a, b: a ^ b, m.data[:7], 0) == m.data[7]
+    commands.append(c)
+    data = bytearray(db.encode_message(1281, {{"St_Steer": c["Cmd_Steer"], "St_Speed": 2.25, "St_Mode": c["Cmd_Mode"], "St_SteerMode": c["Cmd_SteerMode"], "St_Echo": c["Cmd_Alive"], "St_Alive": alive % 256, "St_Xor": 0}}))
+    data[7] = reduce(lambda a, b: a ^ b, data[:7], 0)
+    bus.send(can.Message(arbitration_id=1281, is_extended_id=False, data=bytes(data)))
+    alive += 1
+last = commands[-1]
+print(json.dumps({{"count": len(commands), "xor_ok": all(c["xor_ok"] for c in commands), "gear": last["Cmd_Gear"], "mode": last["Cmd_Mode"], "steer": last["Cmd_Steer"], "speed": last["Cmd_Speed"], "steer_mode": last["Cmd_SteerMode"]}}), flush=True)
+bus.shutdown()
+"#
+    );
+    let mut shuttle = Command::new("python3")
+        .args(["-c", &script])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut shuttle_out = std::io::BufReader::new(shuttle.stdout.take().unwrap());
+    let mut ready = String::new();
+    std::io::BufRead::read_line(&mut shuttle_out, &mut ready).unwrap();
+    assert_eq!(ready.trim(), "ready");
+    let mut bridge = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "bridge",
+            "--profile",
+            &format!("{data}/shuttle.toml"),
+            &format!("socketcand:127.0.0.1:{port}/shuttle"),
+            "--rate",
+            "20",
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = bridge.stdin.take().unwrap();
+    for _ in 0..60 {
+        writeln!(stdin, r#"{{"velocity": 2.5, "gear": "drive", "mode": "autonomous", "steering": -4.2, "steering_mode": "crab"}}"#).unwrap();
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    drop(stdin);
+    let out = bridge.wait_with_output().unwrap();
+    let mut report = String::new();
+    std::io::Read::read_to_string(&mut shuttle_out, &mut report).unwrap();
+    assert!(shuttle.wait().unwrap().success());
+    let _ = server.kill();
+    let _ = server.wait();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let shuttle_saw: Value = serde_json::from_str(report.trim()).unwrap();
+    assert!(
+        shuttle_saw["count"].as_u64().unwrap() >= 20,
+        "{shuttle_saw}"
+    );
+    assert_eq!(shuttle_saw["xor_ok"], true);
+    assert_eq!(
+        (
+            shuttle_saw["gear"].as_f64(),
+            shuttle_saw["mode"].as_f64(),
+            shuttle_saw["steer_mode"].as_f64()
+        ),
+        (Some(1.0), Some(2.0), Some(2.0)),
+        "the shuttle's enum numbers"
+    );
+    assert!(
+        (shuttle_saw["steer"].as_f64().unwrap() + 4.2).abs() < 0.006
+            && (shuttle_saw["speed"].as_f64().unwrap() - 2.5).abs() < 0.001,
+        "{shuttle_saw}"
+    );
+    // The bridge validated the shuttle's status frames by role: fresh, autonomous, its speed.
+    let states: Vec<Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .filter(|l: &Value| l.get("mode").is_some())
+        .collect();
+    let alive: Vec<&Value> = states
+        .iter()
+        .filter(|s| s["feedback_alive"] == true)
+        .collect();
+    assert!(alive.len() >= 5, "{states:?}");
+    let last = alive.last().unwrap();
+    assert_eq!(
+        (last["mode"].as_str(), last["velocity"].as_f64()),
+        (Some("autonomous"), Some(2.25)),
+        "{last}"
+    );
+    assert_eq!(last["rejected"]["checksum"], 0, "{last}");
+    // The simulated vehicle is the reference tug's: refused for another vehicle's profile.
+    let (code, _, err) = common::bywire(
+        &[
+            "bridge",
+            "--profile",
+            &format!("{data}/shuttle.toml"),
+            "virtual:x",
+            "--with-vehicle",
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("--with-vehicle: the simulated vehicle is the reference tug; profile 'shuttle' describes another vehicle's messages"), "{err}");
+}

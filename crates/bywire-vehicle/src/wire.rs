@@ -1,0 +1,717 @@
+//! How the ADS side's messages look on the wire, behind one trait: [`ReferenceWire`] speaks
+//! the reference tug through the structs generated from its DBC (`no_std`, what an ECU
+//! build uses), and [`ProfileWire`] speaks any vehicle a profile describes, by role, through
+//! the runtime DBC codec. The ADS node is the same for both.
+
+use std::collections::BTreeMap;
+
+use bywire_core::{Frame, Id};
+use bywire_dbc::codec::{Decoded, MessageCodec, Value};
+use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
+use bywire_dbc::{Database, Message};
+
+use crate::profile::{LoadedProfile, ProfileError};
+use crate::reference_tug::{
+    self, AdsToVehicleControl, ControlCommand, ControlMode, EmergencyBrake, Gear, SteeringMode,
+    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+};
+
+/// A state (feedback) message, read by role.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateFeedback {
+    /// Its rolling counter.
+    pub counter: u64,
+    /// Actual steering angle, degrees.
+    pub steering: f64,
+    /// Actual speed, m/s.
+    pub velocity: f64,
+    /// Reported control mode.
+    pub mode: ControlMode,
+    /// Watchdog level, where the vehicle reports one.
+    pub watchdog_level: Option<u8>,
+    /// E-stop latch state, where reported.
+    pub estop_state: Option<u8>,
+    /// Warning flag, where reported.
+    pub warning: Option<bool>,
+    /// Driver override, where reported.
+    pub driver_override: Option<bool>,
+    /// The command counter the vehicle echoes.
+    pub heartbeat_echo: u64,
+    /// Every value within its declared range.
+    pub in_range: bool,
+}
+
+/// What a received frame is to the ADS side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Feedback {
+    /// Not a feedback message.
+    Other,
+    /// A feedback message whose checksum or shape is wrong.
+    Corrupt,
+    /// The state message.
+    State(StateFeedback),
+    /// Wheel angles FL, FR, RL, RR, degrees, with the counter.
+    WheelAngles {
+        /// Rolling counter.
+        counter: u64,
+        /// Angles.
+        angles: [f64; 4],
+    },
+    /// Wheel speeds FL, FR, RL, RR, m/s, with the counter.
+    WheelSpeeds {
+        /// Rolling counter.
+        counter: u64,
+        /// Speeds.
+        speeds: [f64; 4],
+    },
+}
+
+/// The ADS side's messages on some vehicle's wire.
+pub trait AdsWire {
+    /// Bits of the command's rolling counter.
+    fn command_counter_bits(&self) -> u8;
+    /// Bits of the feedback messages' counters.
+    fn feedback_counter_bits(&self) -> u8;
+    /// The command frame with `counter` and its checksum.
+    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Frame;
+    /// An emergency-brake frame, if the vehicle has the message.
+    fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame>;
+    /// Read a received frame.
+    fn feedback(&mut self, frame: &Frame) -> Feedback;
+}
+
+/// The reference tug, through its generated structs.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReferenceWire;
+
+impl AdsWire for ReferenceWire {
+    fn command_counter_bits(&self) -> u8 {
+        4
+    }
+
+    fn feedback_counter_bits(&self) -> u8 {
+        4
+    }
+
+    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Frame {
+        let m = command.to_message(u8::try_from(counter & 0x0F).unwrap_or(0));
+        reference_tug::sealed_frame(AdsToVehicleControl::ID, m.0)
+    }
+
+    fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
+        let mut m = EmergencyBrake::default();
+        m.set_brake_request_raw(1);
+        let _ = m.set_deceleration(deceleration.clamp(0.0, 25.5));
+        m.set_counter_raw(counter & 0x0F);
+        Some(reference_tug::sealed_frame(EmergencyBrake::ID, m.0))
+    }
+
+    fn feedback(&mut self, frame: &Frame) -> Feedback {
+        let Some(Id::Standard(id)) = frame.id() else {
+            return Feedback::Other;
+        };
+        let id = u32::from(id.as_raw());
+        if ![
+            VehicleToAdsState::ID,
+            VehicleToAdsSensors::ID,
+            VehicleToAdsWheelAngles::ID,
+        ]
+        .contains(&id)
+        {
+            return Feedback::Other;
+        }
+        let Some(payload) =
+            reference_tug::payload(frame).filter(|p| reference_tug::is_sealed(id, p))
+        else {
+            return Feedback::Corrupt;
+        };
+        match id {
+            VehicleToAdsState::ID => {
+                let m = VehicleToAdsState(payload);
+                let (steering, velocity) = (m.steering_angle_actual(), m.velocity_actual());
+                Feedback::State(StateFeedback {
+                    counter: m.counter_raw(),
+                    steering,
+                    velocity,
+                    mode: ControlMode::from_raw(m.control_mode_raw()),
+                    watchdog_level: Some(u8::try_from(m.watchdog_level_raw()).unwrap_or(u8::MAX)),
+                    estop_state: Some(u8::try_from(m.estop_state_raw()).unwrap_or(u8::MAX)),
+                    warning: Some(m.warning_flag_raw() == 1),
+                    driver_override: Some(m.driver_override_raw() == 1),
+                    heartbeat_echo: m.heartbeat_echo_raw(),
+                    in_range: steering.abs() <= 45.0
+                        && (-5.0..=8.0).contains(&velocity)
+                        && m.watchdog_level_raw() <= 4,
+                })
+            }
+            VehicleToAdsWheelAngles::ID => {
+                let m = VehicleToAdsWheelAngles(payload);
+                Feedback::WheelAngles {
+                    counter: m.counter_raw(),
+                    angles: [
+                        m.wheel_angle_fl(),
+                        m.wheel_angle_fr(),
+                        m.wheel_angle_rl(),
+                        m.wheel_angle_rr(),
+                    ],
+                }
+            }
+            _ => {
+                let m = VehicleToAdsSensors(payload);
+                Feedback::WheelSpeeds {
+                    counter: m.counter_raw(),
+                    speeds: [
+                        m.wheel_speed_fl(),
+                        m.wheel_speed_fr(),
+                        m.wheel_speed_rl(),
+                        m.wheel_speed_rr(),
+                    ],
+                }
+            }
+        }
+    }
+}
+
+/// One message spoken by role: its codec, protection, and the signal index of each role.
+#[derive(Debug, Clone)]
+struct RoleMessage {
+    id: u32,
+    extended: bool,
+    codec: MessageCodec,
+    protection: Protection,
+    /// Declared physical range per signal (`None` where min = max, i.e. undeclared).
+    ranges: Vec<Option<(f64, f64)>>,
+    /// Encode/decode scratch, sized at start.
+    values: Vec<Option<Value>>,
+    decoded: Vec<Option<Decoded>>,
+    counter_bits: u8,
+}
+
+impl RoleMessage {
+    fn new(
+        db: &Database,
+        name: &str,
+        counter: &str,
+        checksum: Option<&str>,
+        algorithm: ChecksumAlgorithm,
+        key: &str,
+        invalid: &dyn Fn(&str, String) -> ProfileError,
+    ) -> Result<RoleMessage, ProfileError> {
+        let message = db
+            .messages
+            .iter()
+            .find(|m| m.name == name)
+            .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))?;
+        let counter_index = index_of(message, counter)
+            .ok_or_else(|| invalid(key, format!("no counter signal '{counter}'")))?;
+        let counter_bits = message.signals.get(counter_index).map_or(0, |s| s.length);
+        if !(1..=8).contains(&counter_bits) {
+            return Err(invalid(
+                key,
+                format!("counter '{counter}' is {counter_bits} bits; 1 to 8 are supported"),
+            ));
+        }
+        let declared = Protection::of(message);
+        let checksum = match checksum {
+            Some(name) => {
+                let index = index_of(message, name)
+                    .ok_or_else(|| invalid(key, format!("no checksum signal '{name}'")))?;
+                // An algorithm the DBC declares on the signal wins over the profile's.
+                let algorithm = declared
+                    .and_then(|p| p.checksum)
+                    .filter(|(i, _)| *i == index)
+                    .and_then(|(_, a)| a)
+                    .unwrap_or(algorithm);
+                Some((index, Some(algorithm)))
+            }
+            None => None,
+        };
+        let protection = Protection {
+            counter: Some((counter_index, counter_bits)),
+            checksum,
+            data_id: declared.and_then(|p| p.data_id),
+        };
+        let codec = MessageCodec::new(message);
+        let ranges = message
+            .signals
+            .iter()
+            .map(|s| {
+                let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
+                (max > min).then_some((min, max))
+            })
+            .collect();
+        Ok(RoleMessage {
+            id: message.raw_id(),
+            extended: message.raw_id() > 0x7FF,
+            values: vec![None; codec.signal_count()],
+            decoded: vec![None; codec.signal_count()],
+            codec,
+            protection,
+            ranges,
+            counter_bits: u8::try_from(counter_bits).unwrap_or(8),
+        })
+    }
+
+    fn is(&self, frame: &Frame) -> bool {
+        frame
+            .id()
+            .is_some_and(|id| id.as_raw() == self.id && id.is_extended() == self.extended)
+            && !frame.is_remote()
+    }
+
+    /// Encode the values set in `self.values`, then counter and checksum.
+    fn frame(&mut self, counter: u64) -> Option<Frame> {
+        let mut payload = [0u8; 64];
+        let size = self.codec.encode(&self.values, &mut payload).ok()?;
+        self.protection
+            .fill(&self.codec, counter, &mut payload)
+            .ok()?;
+        let id = if self.extended {
+            Id::extended(self.id).ok()?
+        } else {
+            Id::standard(self.id).ok()?
+        };
+        let data = payload.get(..size)?;
+        if size <= 8 {
+            Frame::classic(id, data).ok()
+        } else {
+            Frame::fd(id, data, false, false).ok()
+        }
+    }
+
+    /// Set a role's value, clamped to the signal's declared range.
+    fn set(&mut self, index: usize, value: f64) {
+        let value = match self.ranges.get(index).copied().flatten() {
+            Some((min, max)) => value.clamp(min, max),
+            None => value,
+        };
+        if let Some(slot) = self.values.get_mut(index) {
+            *slot = Some(Value::Float(value));
+        }
+    }
+
+    fn set_raw(&mut self, index: usize, raw: u64) {
+        if let Some(slot) = self.values.get_mut(index) {
+            *slot = Some(Value::UInt(raw));
+        }
+    }
+
+    /// Check and decode a frame of this message: its counter, or `None` if corrupt.
+    fn read(&mut self, frame: &Frame) -> Option<u64> {
+        let counter = self.protection.verify(&self.codec, frame.data()).ok()??;
+        self.codec.decode(frame.data(), &mut self.decoded).ok()?;
+        Some(counter)
+    }
+
+    fn physical(&self, index: usize) -> Option<f64> {
+        self.decoded
+            .get(index)
+            .copied()
+            .flatten()
+            .map(|d| d.physical.as_f64())
+    }
+
+    fn raw(&self, index: usize) -> Option<u64> {
+        self.decoded.get(index).copied().flatten().map(|d| d.raw)
+    }
+
+    fn in_range(&self, index: usize) -> bool {
+        match (
+            self.physical(index),
+            self.ranges.get(index).copied().flatten(),
+        ) {
+            (Some(value), Some((min, max))) => value >= min && value <= max,
+            (Some(value), None) => value.is_finite(),
+            (None, _) => false,
+        }
+    }
+}
+
+fn index_of(message: &Message, name: &str) -> Option<usize> {
+    message.signals.iter().position(|s| s.name == name)
+}
+
+/// Raw values of an enum role, by variant name (the profile's `[enums.ROLE]`, or the
+/// reference numbering where the profile has none).
+#[derive(Debug, Clone)]
+struct EnumMap(BTreeMap<String, u64>);
+
+impl EnumMap {
+    fn new(
+        profile: &LoadedProfile,
+        role: &str,
+        names: &[(&str, u64)],
+    ) -> Result<EnumMap, ProfileError> {
+        match profile.profile.enums.get(role) {
+            None => Ok(EnumMap(
+                names.iter().map(|(n, v)| ((*n).to_string(), *v)).collect(),
+            )),
+            Some(table) => {
+                for (name, _) in names {
+                    if !table.contains_key(*name) {
+                        return Err(ProfileError::Invalid {
+                            file: profile.profile.name.clone(),
+                            key: format!("enums.{role}.{name}"),
+                            reason: "missing: every value needs its raw number".to_string(),
+                        });
+                    }
+                }
+                Ok(EnumMap(table.clone()))
+            }
+        }
+    }
+
+    fn raw(&self, name: &str) -> u64 {
+        self.0.get(name).copied().unwrap_or(0)
+    }
+
+    fn name(&self, raw: u64) -> Option<&str> {
+        self.0
+            .iter()
+            .find(|(_, v)| **v == raw)
+            .map(|(n, _)| n.as_str())
+    }
+}
+
+const GEARS: [(&str, u64); 4] = [("Park", 0), ("Reverse", 1), ("Neutral", 2), ("Drive", 3)];
+const MODES: [(&str, u64); 4] = [
+    ("Manual", 0),
+    ("Autonomous", 1),
+    ("Estop", 2),
+    ("Calibration", 3),
+];
+const STEERING_MODES: [(&str, u64); 3] = [("Normal", 0), ("Crab", 1), ("Tank", 2)];
+
+fn gear_name(gear: Gear) -> &'static str {
+    match gear {
+        Gear::Park => "Park",
+        Gear::Reverse => "Reverse",
+        Gear::Neutral => "Neutral",
+        Gear::Drive => "Drive",
+    }
+}
+
+fn mode_name(mode: ControlMode) -> &'static str {
+    match mode {
+        ControlMode::Manual => "Manual",
+        ControlMode::Autonomous => "Autonomous",
+        ControlMode::Estop => "Estop",
+        ControlMode::Calibration => "Calibration",
+    }
+}
+
+fn steering_mode_name(mode: SteeringMode) -> &'static str {
+    match mode {
+        SteeringMode::Normal => "Normal",
+        SteeringMode::Crab => "Crab",
+        SteeringMode::Tank => "Tank",
+    }
+}
+
+/// Signal indices of the command roles.
+#[derive(Debug, Clone, Copy)]
+struct CommandSignals {
+    steering: usize,
+    velocity: usize,
+    brake: usize,
+    gear: usize,
+    control_mode: usize,
+    steering_mode: usize,
+    engage: usize,
+    operator_reset: usize,
+}
+
+/// Signal indices of the state roles.
+#[derive(Debug, Clone, Copy)]
+struct StateSignals {
+    steering: usize,
+    velocity: usize,
+    control_mode: usize,
+    heartbeat_echo: usize,
+    watchdog_level: Option<usize>,
+    estop_state: Option<usize>,
+    warning: Option<usize>,
+    driver_override: Option<usize>,
+}
+
+/// Any vehicle a profile describes, by role, through the runtime codec. Buffers are sized
+/// when it is made: no allocation per frame.
+#[derive(Debug, Clone)]
+pub struct ProfileWire {
+    command: RoleMessage,
+    command_signals: CommandSignals,
+    state: RoleMessage,
+    state_signals: StateSignals,
+    wheel_speeds: Option<(RoleMessage, [usize; 4])>,
+    brake: Option<(RoleMessage, usize, usize)>,
+    gears: EnumMap,
+    modes: EnumMap,
+    steering_modes: EnumMap,
+}
+
+impl ProfileWire {
+    /// The wire of a loaded profile; it needs `[command]` and `[state]`.
+    pub fn new(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
+        let p = &loaded.profile;
+        let db = &loaded.database;
+        let invalid = |key: &str, reason: String| ProfileError::Invalid {
+            file: p.name.clone(),
+            key: key.to_string(),
+            reason,
+        };
+        let c = p
+            .command
+            .as_ref()
+            .ok_or_else(|| invalid("command", "a vehicle interface needs [command]".to_string()))?;
+        let s = p
+            .state
+            .as_ref()
+            .ok_or_else(|| invalid("state", "a vehicle interface needs [state]".to_string()))?;
+        let algorithm = ChecksumAlgorithm::from_name(&c.checksum_algorithm).ok_or_else(|| {
+            invalid(
+                "command.checksum_algorithm",
+                format!("'{}' is not a checksum algorithm", c.checksum_algorithm),
+            )
+        })?;
+        let command = RoleMessage::new(
+            db,
+            &c.message,
+            &c.counter,
+            Some(&c.checksum),
+            algorithm,
+            "command",
+            &invalid,
+        )?;
+        let message = |name: &str| db.messages.iter().find(|m| m.name == name);
+        let signal = |message_name: &str, key: &str, name: &str| -> Result<usize, ProfileError> {
+            message(message_name)
+                .and_then(|m| index_of(m, name))
+                .ok_or_else(|| invalid(key, format!("no signal '{name}' in '{message_name}'")))
+        };
+        let command_signals = CommandSignals {
+            steering: signal(&c.message, "command.steering", &c.steering)?,
+            velocity: signal(&c.message, "command.velocity", &c.velocity)?,
+            brake: signal(&c.message, "command.brake", &c.brake)?,
+            gear: signal(&c.message, "command.gear", &c.gear)?,
+            control_mode: signal(&c.message, "command.control_mode", &c.control_mode)?,
+            steering_mode: signal(&c.message, "command.steering_mode", &c.steering_mode)?,
+            engage: signal(&c.message, "command.engage", &c.engage)?,
+            operator_reset: signal(&c.message, "command.operator_reset", &c.operator_reset)?,
+        };
+        let state = RoleMessage::new(
+            db,
+            &s.message,
+            &s.counter,
+            Some(&s.checksum),
+            algorithm,
+            "state",
+            &invalid,
+        )?;
+        let state_signals = StateSignals {
+            steering: signal(&s.message, "state.steering", &s.steering)?,
+            velocity: signal(&s.message, "state.velocity", &s.velocity)?,
+            control_mode: signal(&s.message, "state.control_mode", &s.control_mode)?,
+            heartbeat_echo: signal(&s.message, "state.heartbeat_echo", &s.heartbeat_echo)?,
+            watchdog_level: s
+                .watchdog_level
+                .as_deref()
+                .map(|n| signal(&s.message, "state.watchdog_level", n))
+                .transpose()?,
+            estop_state: s
+                .estop_state
+                .as_deref()
+                .map(|n| signal(&s.message, "state.estop_state", n))
+                .transpose()?,
+            warning: s
+                .warning
+                .as_deref()
+                .map(|n| signal(&s.message, "state.warning", n))
+                .transpose()?,
+            driver_override: s
+                .driver_override
+                .as_deref()
+                .map(|n| signal(&s.message, "state.driver_override", n))
+                .transpose()?,
+        };
+        let wheel_speeds = match &p.wheel_speeds {
+            None => None,
+            Some(w) => {
+                let m = message(&w.message).ok_or_else(|| {
+                    invalid(
+                        "wheel_speeds.message",
+                        format!("no message '{}'", w.message),
+                    )
+                })?;
+                let protection = Protection::of(m);
+                let counter = protection
+                    .and_then(|p| p.counter)
+                    .and_then(|(i, _)| m.signals.get(i))
+                    .map(|s| s.name.clone());
+                let checksum = protection
+                    .and_then(|p| p.checksum)
+                    .and_then(|(i, _)| m.signals.get(i))
+                    .map(|s| s.name.clone());
+                let counter = counter.ok_or_else(|| {
+                    invalid(
+                        "wheel_speeds.message",
+                        format!("'{}' has no rolling counter", w.message),
+                    )
+                })?;
+                let role = RoleMessage::new(
+                    db,
+                    &w.message,
+                    &counter,
+                    checksum.as_deref(),
+                    algorithm,
+                    "wheel_speeds",
+                    &invalid,
+                )?;
+                let mut indices = [0usize; 4];
+                for (slot, (i, name)) in indices.iter_mut().zip(w.signals.iter().enumerate()) {
+                    *slot = signal(&w.message, &format!("wheel_speeds.signals[{i}]"), name)?;
+                }
+                Some((role, indices))
+            }
+        };
+        let brake = match &p.emergency_brake {
+            None => None,
+            Some(b) => {
+                let m = message(&b.message).ok_or_else(|| {
+                    invalid(
+                        "emergency_brake.message",
+                        format!("no message '{}'", b.message),
+                    )
+                })?;
+                let protection = Protection::of(m);
+                let name_at = |index: Option<usize>| {
+                    index.and_then(|i| m.signals.get(i)).map(|s| s.name.clone())
+                };
+                let counter = name_at(protection.and_then(|p| p.counter).map(|(i, _)| i))
+                    .ok_or_else(|| {
+                        invalid(
+                            "emergency_brake.message",
+                            format!("'{}' has no rolling counter", b.message),
+                        )
+                    })?;
+                let checksum = name_at(protection.and_then(|p| p.checksum).map(|(i, _)| i));
+                let role = RoleMessage::new(
+                    db,
+                    &b.message,
+                    &counter,
+                    checksum.as_deref(),
+                    algorithm,
+                    "emergency_brake",
+                    &invalid,
+                )?;
+                let request = signal(&b.message, "emergency_brake.request", &b.request)?;
+                let deceleration =
+                    signal(&b.message, "emergency_brake.deceleration", &b.deceleration)?;
+                Some((role, request, deceleration))
+            }
+        };
+        Ok(ProfileWire {
+            command,
+            command_signals,
+            state,
+            state_signals,
+            wheel_speeds,
+            brake,
+            gears: EnumMap::new(loaded, "gear", &GEARS)?,
+            modes: EnumMap::new(loaded, "control_mode", &MODES)?,
+            steering_modes: EnumMap::new(loaded, "steering_mode", &STEERING_MODES)?,
+        })
+    }
+}
+
+impl AdsWire for ProfileWire {
+    fn command_counter_bits(&self) -> u8 {
+        self.command.counter_bits
+    }
+
+    fn feedback_counter_bits(&self) -> u8 {
+        self.state.counter_bits
+    }
+
+    fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Frame {
+        let s = self.command_signals;
+        let raws = [
+            (s.gear, self.gears.raw(gear_name(c.gear))),
+            (s.control_mode, self.modes.raw(mode_name(c.mode))),
+            (
+                s.steering_mode,
+                self.steering_modes.raw(steering_mode_name(c.steering_mode)),
+            ),
+            (s.engage, u64::from(c.engage)),
+            (s.operator_reset, u64::from(c.operator_reset)),
+        ];
+        let m = &mut self.command;
+        m.set(s.steering, c.steering);
+        m.set(s.velocity, c.velocity);
+        m.set(s.brake, c.brake);
+        for (index, raw) in raws {
+            m.set_raw(index, raw);
+        }
+        // A command that cannot be encoded is sent as nothing the vehicle would accept: an
+        // empty frame on the command identifier (its checks reject it, which is fail-safe).
+        m.frame(counter).unwrap_or_else(|| {
+            let id =
+                Id::standard(m.id & 0x7FF).unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
+            Frame::remote(id, bywire_core::frame::Dlc::from_nibble(0))
+        })
+    }
+
+    fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
+        let (m, request, decel) = self.brake.as_mut()?;
+        m.set_raw(*request, 1);
+        m.set(*decel, deceleration);
+        m.frame(counter)
+    }
+
+    fn feedback(&mut self, frame: &Frame) -> Feedback {
+        if self.state.is(frame) {
+            let Some(counter) = self.state.read(frame) else {
+                return Feedback::Corrupt;
+            };
+            let s = self.state_signals;
+            let m = &self.state;
+            let mode = match m.raw(s.control_mode).and_then(|raw| self.modes.name(raw)) {
+                Some("Autonomous") => ControlMode::Autonomous,
+                Some("Estop") => ControlMode::Estop,
+                Some("Calibration") => ControlMode::Calibration,
+                // Manual, or a value the profile does not name: the ADS is not in control.
+                _ => ControlMode::Manual,
+            };
+            return Feedback::State(StateFeedback {
+                counter,
+                steering: m.physical(s.steering).unwrap_or(f64::NAN),
+                velocity: m.physical(s.velocity).unwrap_or(f64::NAN),
+                mode,
+                watchdog_level: s
+                    .watchdog_level
+                    .and_then(|i| m.raw(i))
+                    .map(|raw| u8::try_from(raw).unwrap_or(u8::MAX)),
+                estop_state: s
+                    .estop_state
+                    .and_then(|i| m.raw(i))
+                    .map(|raw| u8::try_from(raw).unwrap_or(u8::MAX)),
+                warning: s.warning.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                driver_override: s.driver_override.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
+                in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
+                    .into_iter()
+                    .flatten()
+                    .all(|i| m.in_range(i)),
+            });
+        }
+        if let Some((m, indices)) = self.wheel_speeds.as_mut() {
+            if m.is(frame) {
+                let Some(counter) = m.read(frame) else {
+                    return Feedback::Corrupt;
+                };
+                let speeds = indices.map(|i| m.physical(i).unwrap_or(f64::NAN));
+                return Feedback::WheelSpeeds { counter, speeds };
+            }
+        }
+        Feedback::Other
+    }
+}
