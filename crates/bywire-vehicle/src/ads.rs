@@ -185,7 +185,7 @@ impl<W: AdsWire> Ads<W> {
     /// A node speaking `wire` that sends nothing until it has a command.
     pub fn with_wire(config: AdsConfig, wire: W) -> Self {
         let timeout = config.cycle.saturating_mul(config.feedback_timeout_cycles);
-        let bits = wire.feedback_counter_bits();
+        let (state_bits, wheel_bits) = (wire.state_counter_bits(), wire.wheel_counter_bits());
         Ads {
             wire,
             config,
@@ -195,9 +195,9 @@ impl<W: AdsWire> Ads<W> {
             next_command: None,
             brake: None,
             state: VehicleState::default(),
-            state_counter: CounterChecker::new(bits, 0, timeout),
-            sensors_counter: CounterChecker::new(bits, 0, timeout),
-            angles_counter: CounterChecker::new(bits, 0, timeout),
+            state_counter: CounterChecker::new(state_bits, 0, timeout),
+            sensors_counter: CounterChecker::new(wheel_bits, 0, timeout),
+            angles_counter: CounterChecker::new(wheel_bits, 0, timeout),
             stats: FeedbackStats::default(),
             wheels: four_wheel(config.wheelbase, config.track),
             odometry: Odometry::default(),

@@ -120,6 +120,12 @@ pub struct StateRoles {
     /// Driver override flag (optional).
     #[serde(default)]
     pub driver_override: Option<String>,
+    /// Gear in use (optional).
+    #[serde(default)]
+    pub gear: Option<String>,
+    /// Steering actuator enabled (optional).
+    #[serde(default)]
+    pub steering_enabled: Option<String>,
 }
 
 /// Wheel speed feedback.
@@ -466,6 +472,8 @@ impl Checker<'_> {
                 ("estop_state", &s.estop_state),
                 ("warning", &s.warning),
                 ("driver_override", &s.driver_override),
+                ("gear", &s.gear),
+                ("steering_enabled", &s.steering_enabled),
             ] {
                 if let Some(name) = name {
                     self.signal(m, &format!("state.{key}"), name)?;

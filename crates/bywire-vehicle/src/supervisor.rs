@@ -25,10 +25,8 @@ use bywire_core::e2e::{CounterChecker, CounterStatus};
 use bywire_core::{Frame, Timestamp};
 
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
-use crate::reference_tug::{
-    self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
-    VehicleToAdsState,
-};
+use crate::reference_tug::{self, ControlMode, Gear, SteeringMode};
+use crate::wire::{Incoming, ReferenceWire, Rejected, StateReport, VehicleWire};
 
 /// Tuning of the supervisor.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -396,9 +394,11 @@ pub fn motor_rpm(velocity: f64, gear_ratio: f64, wheel_diameter: f64) -> f64 {
     }
 }
 
-/// The supervisor node.
+/// The supervisor node, reading the reference tug's messages unless given another wire
+/// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
-pub struct Supervisor {
+pub struct Supervisor<W: VehicleWire = ReferenceWire> {
+    wire: W,
     config: SupervisorConfig,
     counter: CounterChecker,
     counter_b: CounterChecker,
@@ -423,19 +423,30 @@ pub struct Supervisor {
     steering: RateLimiter,
     last_poll: Option<Timestamp>,
     next_state_frame: Timestamp,
-    state_counter: u8,
+    state_counter: u64,
     echo: u8,
 }
 
 impl Supervisor {
-    /// A supervisor failed closed: full braking until commands arrive and it is engaged.
+    /// A supervisor for the reference tug, failed closed: full braking until commands arrive
+    /// and it is engaged.
     pub fn new(config: SupervisorConfig) -> Self {
+        Supervisor::with_wire(config, ReferenceWire)
+    }
+}
+
+impl<W: VehicleWire> Supervisor<W> {
+    /// A supervisor reading `wire`, failed closed: full braking until commands arrive and it
+    /// is engaged.
+    pub fn with_wire(config: SupervisorConfig, wire: W) -> Self {
         let mut steering = RateLimiter::new(config.steering_rate, config.steering_rate);
         steering.reset(0.0);
+        let bits = wire.command_counter_bits();
         Supervisor {
+            wire,
             config,
-            counter: CounterChecker::new(4, 0, config.cycle.saturating_mul(5)),
-            counter_b: CounterChecker::new(4, 0, config.cycle.saturating_mul(5)),
+            counter: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
+            counter_b: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
             voter: config.redundancy.map(|r| DualVoter::new(r.timeout, r.skew)),
             degraded: None,
             stats: CommandStats::default(),
@@ -519,14 +530,13 @@ impl Supervisor {
         &mut self,
         now: Timestamp,
         channel: Channel,
-        frame: &Frame,
+        read: Result<(Option<Command>, u64), Rejected>,
     ) -> Result<(Command, u8), Rejection> {
-        let payload = reference_tug::payload(frame).ok_or(Rejection::Malformed)?;
-        if !reference_tug::is_sealed(AdsToVehicleControl::ID, &payload) {
-            return Err(Rejection::Checksum);
-        }
-        let m = AdsToVehicleControl(payload);
-        let counter = u8::try_from(m.heartbeat_counter_raw()).unwrap_or(0);
+        let (command, counter) = read.map_err(|rejected| match rejected {
+            Rejected::Malformed => Rejection::Malformed,
+            Rejected::Checksum => Rejection::Checksum,
+        })?;
+        let counter = u8::try_from(counter).unwrap_or(0);
         let last = self.command.map(|_| self.echo);
         let checker = match channel {
             Channel::A => &mut self.counter,
@@ -546,7 +556,7 @@ impl Supervisor {
             }
         }
         let c = self.config;
-        let command = Command::from_message(&m).ok_or(Rejection::OutOfRange)?;
+        let command = command.ok_or(Rejection::OutOfRange)?;
         if command.steering.abs() > c.steering_range
             || command.velocity.abs() > c.speed_limit
             || command.brake > 100.0
@@ -563,30 +573,29 @@ impl Supervisor {
 
     /// A frame from one of the two buses.
     pub fn on_frame_from(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
-        let Some(id) = frame.id() else {
-            return;
-        };
-        match id.as_raw() {
-            AdsToVehicleControl::ID if !id.is_extended() => self.on_command(now, channel, frame),
-            EmergencyStop::ID if !id.is_extended() => {
-                if let Some(m) = sealed(frame, EmergencyStop::ID).map(EmergencyStop) {
-                    self.estop_active = m.estop_request_raw() == 1;
-                    self.evaluate(false, false);
-                }
+        match self.wire.incoming(frame) {
+            Incoming::Command(read) => self.on_command(now, channel, frame, read),
+            Incoming::Estop(requested) => {
+                self.estop_active = requested;
+                self.evaluate(false, false);
             }
-            EmergencyBrake::ID if !id.is_extended() => {
-                if let Some(m) = sealed(frame, EmergencyBrake::ID).map(EmergencyBrake) {
-                    // Each brake frame holds full braking for 3 cycles (the burst, then 20 Hz).
-                    self.emergency_brake_until = (m.brake_request_raw() == 1)
-                        .then(|| now.saturating_add(self.config.cycle.saturating_mul(3)));
-                }
+            Incoming::EmergencyBrake(requested) => {
+                // Each brake frame holds full braking for 3 cycles (the burst, then 20 Hz).
+                self.emergency_brake_until =
+                    requested.then(|| now.saturating_add(self.config.cycle.saturating_mul(3)));
             }
-            _ => {}
+            Incoming::Other => {}
         }
     }
 
-    fn on_command(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
-        let (command, counter) = match self.validate(now, channel, frame) {
+    fn on_command(
+        &mut self,
+        now: Timestamp,
+        channel: Channel,
+        frame: &Frame,
+        read: Result<(Option<Command>, u64), Rejected>,
+    ) {
+        let (command, counter) = match self.validate(now, channel, read) {
             Err(r) => return self.stats.count(r),
             Ok(valid) => valid,
         };
@@ -794,35 +803,30 @@ impl Supervisor {
 
     /// The `VehicleToAds_State` frame.
     fn state_frame(&mut self) -> Frame {
-        let mut m = VehicleToAdsState::default();
-        // Out-of-range actuals are reported at their limit rather than dropped.
-        let clamp = |v: f64, limit: f64| v.clamp(-limit, limit);
-        let _ = m.set_steering_angle_actual(clamp(self.steering_actual, 45.0));
-        let _ = m.set_velocity_actual(clamp(self.speed, 5.0));
-        m.set_control_mode_raw(self.mode as u64);
-        m.set_steering_mode_raw(self.command.map_or(0, |c| c.steering_mode as u64));
-        m.set_gear_raw(self.command.map_or(0, |c| c.gear as u64));
-        m.set_watchdog_level_raw(self.watchdog.level());
-        m.set_estop_state_raw(self.estop.code());
-        m.set_warning_flag_raw(u64::from(
-            self.watchdog != Watchdog::Normal || self.degraded.is_some(),
-        ));
-        m.set_driver_override_raw(u64::from(self.driver_input));
-        let enabled = self.mode == ControlMode::Autonomous
+        let steering_enabled = self.mode == ControlMode::Autonomous
             && matches!(
                 self.watchdog,
                 Watchdog::Normal | Watchdog::Holding { .. } | Watchdog::Decelerating { .. }
             )
             && !self.estop.is_latched();
-        m.set_steering_enabled_raw(u64::from(enabled));
-        m.set_heartbeat_echo_raw(u64::from(self.echo));
-        m.set_counter_raw(u64::from(self.state_counter));
-        self.state_counter = (self.state_counter + 1) & 0x0F;
-        reference_tug::sealed_frame(VehicleToAdsState::ID, m.0)
+        let report = StateReport {
+            steering: self.steering_actual,
+            velocity: self.speed,
+            mode: self.mode,
+            steering_mode: self
+                .command
+                .map_or(SteeringMode::Normal, |c| c.steering_mode),
+            gear: self.command.map_or(Gear::Park, |c| c.gear),
+            watchdog_level: self.watchdog.level(),
+            estop_state: self.estop.code(),
+            warning: self.watchdog != Watchdog::Normal || self.degraded.is_some(),
+            driver_override: self.driver_input,
+            steering_enabled,
+            heartbeat_echo: u64::from(self.echo),
+        };
+        let frame = self.wire.state_frame(&report, self.state_counter);
+        let mask = (1u64 << self.wire.state_counter_bits().clamp(1, 8)) - 1;
+        self.state_counter = (self.state_counter + 1) & mask;
+        frame
     }
-}
-
-/// The payload of a classic 8-byte data frame whose CRC checks out.
-fn sealed(frame: &Frame, id: u32) -> Option<[u8; 8]> {
-    reference_tug::payload(frame).filter(|p| reference_tug::is_sealed(id, p))
 }

@@ -12,8 +12,8 @@ use bywire_dbc::{Database, Message};
 
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::reference_tug::{
-    self, AdsToVehicleControl, ControlCommand, ControlMode, EmergencyBrake, Gear, SteeringMode,
-    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+    self, AdsToVehicleControl, ControlCommand, ControlMode, EmergencyBrake, EmergencyStop, Gear,
+    SteeringMode, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 
 /// A state (feedback) message, read by role.
@@ -66,12 +66,18 @@ pub enum Feedback {
     },
 }
 
-/// The ADS side's messages on some vehicle's wire.
-pub trait AdsWire {
+/// The widths of the rolling counters both sides check.
+pub trait Counters {
     /// Bits of the command's rolling counter.
     fn command_counter_bits(&self) -> u8;
-    /// Bits of the feedback messages' counters.
-    fn feedback_counter_bits(&self) -> u8;
+    /// Bits of the state message's rolling counter.
+    fn state_counter_bits(&self) -> u8;
+}
+
+/// The ADS side's messages on some vehicle's wire.
+pub trait AdsWire: Counters {
+    /// Bits of the wheel messages' counters.
+    fn wheel_counter_bits(&self) -> u8;
     /// The command frame with `counter` and its checksum.
     fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Frame;
     /// An emergency-brake frame, if the vehicle has the message.
@@ -84,12 +90,18 @@ pub trait AdsWire {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ReferenceWire;
 
-impl AdsWire for ReferenceWire {
+impl Counters for ReferenceWire {
     fn command_counter_bits(&self) -> u8 {
         4
     }
 
-    fn feedback_counter_bits(&self) -> u8 {
+    fn state_counter_bits(&self) -> u8 {
+        4
+    }
+}
+
+impl AdsWire for ReferenceWire {
+    fn wheel_counter_bits(&self) -> u8 {
         4
     }
 
@@ -191,7 +203,7 @@ impl RoleMessage {
     fn new(
         db: &Database,
         name: &str,
-        counter: &str,
+        counter: Option<&str>,
         checksum: Option<&str>,
         algorithm: ChecksumAlgorithm,
         key: &str,
@@ -202,15 +214,21 @@ impl RoleMessage {
             .iter()
             .find(|m| m.name == name)
             .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))?;
-        let counter_index = index_of(message, counter)
-            .ok_or_else(|| invalid(key, format!("no counter signal '{counter}'")))?;
-        let counter_bits = message.signals.get(counter_index).map_or(0, |s| s.length);
-        if !(1..=8).contains(&counter_bits) {
-            return Err(invalid(
-                key,
-                format!("counter '{counter}' is {counter_bits} bits; 1 to 8 are supported"),
-            ));
-        }
+        let counter = match counter {
+            None => None,
+            Some(counter) => {
+                let index = index_of(message, counter)
+                    .ok_or_else(|| invalid(key, format!("no counter signal '{counter}'")))?;
+                let bits = message.signals.get(index).map_or(0, |s| s.length);
+                if !(1..=8).contains(&bits) {
+                    return Err(invalid(
+                        key,
+                        format!("counter '{counter}' is {bits} bits; 1 to 8 are supported"),
+                    ));
+                }
+                Some((index, bits))
+            }
+        };
         let declared = Protection::of(message);
         let checksum = match checksum {
             Some(name) => {
@@ -227,7 +245,7 @@ impl RoleMessage {
             None => None,
         };
         let protection = Protection {
-            counter: Some((counter_index, counter_bits)),
+            counter,
             checksum,
             data_id: declared.and_then(|p| p.data_id),
         };
@@ -248,8 +266,59 @@ impl RoleMessage {
             codec,
             protection,
             ranges,
-            counter_bits: u8::try_from(counter_bits).unwrap_or(8),
+            counter_bits: counter.map_or(0, |(_, bits)| u8::try_from(bits).unwrap_or(8)),
         })
+    }
+
+    /// The message a profile names, with the counter and checksum its DBC declares (or
+    /// opendbc's naming implies).
+    fn declared(
+        db: &Database,
+        name: &str,
+        algorithm: ChecksumAlgorithm,
+        key: &str,
+        invalid: &dyn Fn(&str, String) -> ProfileError,
+    ) -> Result<RoleMessage, ProfileError> {
+        let message = db
+            .messages
+            .iter()
+            .find(|m| m.name == name)
+            .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))?;
+        let protection = Protection::of(message);
+        let name_at = |index: Option<usize>| {
+            index
+                .and_then(|i| message.signals.get(i))
+                .map(|s| s.name.clone())
+        };
+        let counter = name_at(protection.and_then(|p| p.counter).map(|(i, _)| i));
+        let checksum = name_at(protection.and_then(|p| p.checksum).map(|(i, _)| i));
+        RoleMessage::new(
+            db,
+            name,
+            counter.as_deref(),
+            checksum.as_deref(),
+            algorithm,
+            key,
+            invalid,
+        )
+    }
+
+    /// Check a frame of this message: its counter (0 without one), or why not.
+    fn check(&mut self, frame: &Frame) -> Result<u64, Rejected> {
+        if frame.is_remote() || frame.data().len() < self.codec.size() {
+            return Err(Rejected::Malformed);
+        }
+        let counter = match self.protection.verify(&self.codec, frame.data()) {
+            Ok(counter) => counter.unwrap_or(0),
+            Err(bywire_dbc::e2e::ProtectionError::Checksum { .. }) => {
+                return Err(Rejected::Checksum)
+            }
+            Err(_) => return Err(Rejected::Malformed),
+        };
+        self.codec
+            .decode(frame.data(), &mut self.decoded)
+            .map_err(|_| Rejected::Malformed)?;
+        Ok(counter)
     }
 
     fn is(&self, frame: &Frame) -> bool {
@@ -298,9 +367,7 @@ impl RoleMessage {
 
     /// Check and decode a frame of this message: its counter, or `None` if corrupt.
     fn read(&mut self, frame: &Frame) -> Option<u64> {
-        let counter = self.protection.verify(&self.codec, frame.data()).ok()??;
-        self.codec.decode(frame.data(), &mut self.decoded).ok()?;
-        Some(counter)
+        self.check(frame).ok()
     }
 
     fn physical(&self, index: usize) -> Option<f64> {
@@ -428,10 +495,13 @@ struct StateSignals {
     velocity: usize,
     control_mode: usize,
     heartbeat_echo: usize,
+    steering_mode: usize,
     watchdog_level: Option<usize>,
     estop_state: Option<usize>,
     warning: Option<usize>,
     driver_override: Option<usize>,
+    gear: Option<usize>,
+    steering_enabled: Option<usize>,
 }
 
 /// Any vehicle a profile describes, by role, through the runtime codec. Buffers are sized
@@ -444,6 +514,7 @@ pub struct ProfileWire {
     state_signals: StateSignals,
     wheel_speeds: Option<(RoleMessage, [usize; 4])>,
     brake: Option<(RoleMessage, usize, usize)>,
+    estop: Option<(RoleMessage, usize)>,
     gears: EnumMap,
     modes: EnumMap,
     steering_modes: EnumMap,
@@ -476,7 +547,7 @@ impl ProfileWire {
         let command = RoleMessage::new(
             db,
             &c.message,
-            &c.counter,
+            Some(&c.counter),
             Some(&c.checksum),
             algorithm,
             "command",
@@ -501,7 +572,7 @@ impl ProfileWire {
         let state = RoleMessage::new(
             db,
             &s.message,
-            &s.counter,
+            Some(&s.counter),
             Some(&s.checksum),
             algorithm,
             "state",
@@ -512,6 +583,17 @@ impl ProfileWire {
             velocity: signal(&s.message, "state.velocity", &s.velocity)?,
             control_mode: signal(&s.message, "state.control_mode", &s.control_mode)?,
             heartbeat_echo: signal(&s.message, "state.heartbeat_echo", &s.heartbeat_echo)?,
+            steering_mode: signal(&s.message, "state.steering_mode", &s.steering_mode)?,
+            gear: s
+                .gear
+                .as_deref()
+                .map(|n| signal(&s.message, "state.gear", n))
+                .transpose()?,
+            steering_enabled: s
+                .steering_enabled
+                .as_deref()
+                .map(|n| signal(&s.message, "state.steering_enabled", n))
+                .transpose()?,
             watchdog_level: s
                 .watchdog_level
                 .as_deref()
@@ -536,34 +618,11 @@ impl ProfileWire {
         let wheel_speeds = match &p.wheel_speeds {
             None => None,
             Some(w) => {
-                let m = message(&w.message).ok_or_else(|| {
-                    invalid(
-                        "wheel_speeds.message",
-                        format!("no message '{}'", w.message),
-                    )
-                })?;
-                let protection = Protection::of(m);
-                let counter = protection
-                    .and_then(|p| p.counter)
-                    .and_then(|(i, _)| m.signals.get(i))
-                    .map(|s| s.name.clone());
-                let checksum = protection
-                    .and_then(|p| p.checksum)
-                    .and_then(|(i, _)| m.signals.get(i))
-                    .map(|s| s.name.clone());
-                let counter = counter.ok_or_else(|| {
-                    invalid(
-                        "wheel_speeds.message",
-                        format!("'{}' has no rolling counter", w.message),
-                    )
-                })?;
-                let role = RoleMessage::new(
+                let role = RoleMessage::declared(
                     db,
                     &w.message,
-                    &counter,
-                    checksum.as_deref(),
                     algorithm,
-                    "wheel_speeds",
+                    "wheel_speeds.message",
                     &invalid,
                 )?;
                 let mut indices = [0usize; 4];
@@ -576,31 +635,11 @@ impl ProfileWire {
         let brake = match &p.emergency_brake {
             None => None,
             Some(b) => {
-                let m = message(&b.message).ok_or_else(|| {
-                    invalid(
-                        "emergency_brake.message",
-                        format!("no message '{}'", b.message),
-                    )
-                })?;
-                let protection = Protection::of(m);
-                let name_at = |index: Option<usize>| {
-                    index.and_then(|i| m.signals.get(i)).map(|s| s.name.clone())
-                };
-                let counter = name_at(protection.and_then(|p| p.counter).map(|(i, _)| i))
-                    .ok_or_else(|| {
-                        invalid(
-                            "emergency_brake.message",
-                            format!("'{}' has no rolling counter", b.message),
-                        )
-                    })?;
-                let checksum = name_at(protection.and_then(|p| p.checksum).map(|(i, _)| i));
-                let role = RoleMessage::new(
+                let role = RoleMessage::declared(
                     db,
                     &b.message,
-                    &counter,
-                    checksum.as_deref(),
                     algorithm,
-                    "emergency_brake",
+                    "emergency_brake.message",
                     &invalid,
                 )?;
                 let request = signal(&b.message, "emergency_brake.request", &b.request)?;
@@ -609,7 +648,16 @@ impl ProfileWire {
                 Some((role, request, deceleration))
             }
         };
+        let estop = match &p.estop {
+            None => None,
+            Some(e) => {
+                let role =
+                    RoleMessage::declared(db, &e.message, algorithm, "estop.message", &invalid)?;
+                Some((role, signal(&e.message, "estop.request", &e.request)?))
+            }
+        };
         Ok(ProfileWire {
+            estop,
             command,
             command_signals,
             state,
@@ -623,13 +671,21 @@ impl ProfileWire {
     }
 }
 
-impl AdsWire for ProfileWire {
+impl Counters for ProfileWire {
     fn command_counter_bits(&self) -> u8 {
         self.command.counter_bits
     }
 
-    fn feedback_counter_bits(&self) -> u8 {
+    fn state_counter_bits(&self) -> u8 {
         self.state.counter_bits
+    }
+}
+
+impl AdsWire for ProfileWire {
+    fn wheel_counter_bits(&self) -> u8 {
+        self.wheel_speeds
+            .as_ref()
+            .map_or(self.state.counter_bits, |(m, _)| m.counter_bits)
     }
 
     fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Frame {
@@ -713,5 +769,229 @@ impl AdsWire for ProfileWire {
             }
         }
         Feedback::Other
+    }
+}
+
+/// What a received frame is to the vehicle side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Incoming {
+    /// Not for the vehicle side.
+    Other,
+    /// The command message: its command (`None` if a value names nothing, e.g. an undefined
+    /// steering mode) and counter — or why it is no command at all.
+    Command(Result<(Option<ControlCommand>, u64), Rejected>),
+    /// The E-stop message (checked): whether the E-stop is requested.
+    Estop(bool),
+    /// The emergency-brake message (checked): whether braking is requested.
+    EmergencyBrake(bool),
+}
+
+/// Why a command frame was not read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rejected {
+    /// Not the message's shape (length, remote frame).
+    Malformed,
+    /// The checksum does not match.
+    Checksum,
+}
+
+/// What the vehicle side reports in its state message.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateReport {
+    /// Actual steering, degrees.
+    pub steering: f64,
+    /// Actual speed, m/s.
+    pub velocity: f64,
+    /// Control mode.
+    pub mode: ControlMode,
+    /// Steering mode in use.
+    pub steering_mode: SteeringMode,
+    /// Gear in use.
+    pub gear: Gear,
+    /// Watchdog level 0–4.
+    pub watchdog_level: u64,
+    /// E-stop latch state code.
+    pub estop_state: u64,
+    /// Warning flag.
+    pub warning: bool,
+    /// A driver is overriding.
+    pub driver_override: bool,
+    /// The steering actuator is enabled.
+    pub steering_enabled: bool,
+    /// The last accepted command counter, echoed.
+    pub heartbeat_echo: u64,
+}
+
+/// The vehicle side's messages on some vehicle's wire.
+pub trait VehicleWire: Counters {
+    /// Read a received frame.
+    fn incoming(&mut self, frame: &Frame) -> Incoming;
+    /// The state frame with `counter` and its checksum.
+    fn state_frame(&mut self, report: &StateReport, counter: u64) -> Frame;
+}
+
+impl VehicleWire for ReferenceWire {
+    fn incoming(&mut self, frame: &Frame) -> Incoming {
+        let Some(Id::Standard(id)) = frame.id() else {
+            return Incoming::Other;
+        };
+        let id = u32::from(id.as_raw());
+        let sealed = || reference_tug::payload(frame).filter(|p| reference_tug::is_sealed(id, p));
+        match id {
+            AdsToVehicleControl::ID => Incoming::Command(match reference_tug::payload(frame) {
+                None => Err(Rejected::Malformed),
+                Some(p) if !reference_tug::is_sealed(id, &p) => Err(Rejected::Checksum),
+                Some(p) => {
+                    let m = AdsToVehicleControl(p);
+                    Ok((ControlCommand::from_message(&m), m.heartbeat_counter_raw()))
+                }
+            }),
+            EmergencyStop::ID => sealed().map_or(Incoming::Other, |p| {
+                Incoming::Estop(EmergencyStop(p).estop_request_raw() == 1)
+            }),
+            EmergencyBrake::ID => sealed().map_or(Incoming::Other, |p| {
+                Incoming::EmergencyBrake(EmergencyBrake(p).brake_request_raw() == 1)
+            }),
+            _ => Incoming::Other,
+        }
+    }
+
+    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Frame {
+        let mut m = VehicleToAdsState::default();
+        // Out-of-range actuals are reported at their limit rather than dropped.
+        let _ = m.set_steering_angle_actual(r.steering.clamp(-45.0, 45.0));
+        let _ = m.set_velocity_actual(r.velocity.clamp(-5.0, 8.0));
+        m.set_control_mode_raw(r.mode as u64);
+        m.set_steering_mode_raw(r.steering_mode as u64);
+        m.set_gear_raw(r.gear as u64);
+        m.set_watchdog_level_raw(r.watchdog_level);
+        m.set_estop_state_raw(r.estop_state);
+        m.set_warning_flag_raw(u64::from(r.warning));
+        m.set_driver_override_raw(u64::from(r.driver_override));
+        m.set_steering_enabled_raw(u64::from(r.steering_enabled));
+        m.set_heartbeat_echo_raw(r.heartbeat_echo);
+        m.set_counter_raw(counter & 0x0F);
+        reference_tug::sealed_frame(VehicleToAdsState::ID, m.0)
+    }
+}
+
+fn gear_named(name: &str) -> Option<Gear> {
+    Some(match name {
+        "Park" => Gear::Park,
+        "Reverse" => Gear::Reverse,
+        "Neutral" => Gear::Neutral,
+        "Drive" => Gear::Drive,
+        _ => return None,
+    })
+}
+
+fn mode_named(name: &str) -> Option<ControlMode> {
+    Some(match name {
+        "Manual" => ControlMode::Manual,
+        "Autonomous" => ControlMode::Autonomous,
+        "Estop" => ControlMode::Estop,
+        "Calibration" => ControlMode::Calibration,
+        _ => return None,
+    })
+}
+
+fn steering_mode_named(name: &str) -> Option<SteeringMode> {
+    Some(match name {
+        "Normal" => SteeringMode::Normal,
+        "Crab" => SteeringMode::Crab,
+        "Tank" => SteeringMode::Tank,
+        _ => return None,
+    })
+}
+
+impl ProfileWire {
+    /// The command a checked command frame carries; `None` if a value names nothing.
+    fn decoded_command(&self) -> Option<ControlCommand> {
+        let s = self.command_signals;
+        let m = &self.command;
+        // Raw value → the profile's name → the variant (no allocation).
+        fn named<T>(
+            m: &RoleMessage,
+            index: usize,
+            map: &EnumMap,
+            of: fn(&str) -> Option<T>,
+        ) -> Option<T> {
+            m.raw(index).and_then(|raw| map.name(raw)).and_then(of)
+        }
+        Some(ControlCommand {
+            steering: m.physical(s.steering)?,
+            velocity: m.physical(s.velocity)?,
+            brake: m.physical(s.brake)?,
+            gear: named(m, s.gear, &self.gears, gear_named)?,
+            mode: named(m, s.control_mode, &self.modes, mode_named)?,
+            steering_mode: named(
+                m,
+                s.steering_mode,
+                &self.steering_modes,
+                steering_mode_named,
+            )?,
+            engage: m.raw(s.engage)? == 1,
+            operator_reset: m.raw(s.operator_reset)? == 1,
+        })
+    }
+}
+
+impl VehicleWire for ProfileWire {
+    fn incoming(&mut self, frame: &Frame) -> Incoming {
+        if self.command.is(frame) {
+            return Incoming::Command(
+                self.command
+                    .check(frame)
+                    .map(|counter| (self.decoded_command(), counter)),
+            );
+        }
+        if let Some((m, request)) = self.estop.as_mut() {
+            if m.is(frame) {
+                return match m.check(frame) {
+                    Ok(_) => Incoming::Estop(m.raw(*request) == Some(1)),
+                    Err(_) => Incoming::Other,
+                };
+            }
+        }
+        if let Some((m, request, _)) = self.brake.as_mut() {
+            if m.is(frame) {
+                return match m.check(frame) {
+                    Ok(_) => Incoming::EmergencyBrake(m.raw(*request) == Some(1)),
+                    Err(_) => Incoming::Other,
+                };
+            }
+        }
+        Incoming::Other
+    }
+
+    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Frame {
+        let s = self.state_signals;
+        let raws = [
+            (Some(s.control_mode), self.modes.raw(mode_name(r.mode))),
+            (
+                Some(s.steering_mode),
+                self.steering_modes.raw(steering_mode_name(r.steering_mode)),
+            ),
+            (s.gear, self.gears.raw(gear_name(r.gear))),
+            (Some(s.heartbeat_echo), r.heartbeat_echo),
+            (s.watchdog_level, r.watchdog_level),
+            (s.estop_state, r.estop_state),
+            (s.warning, u64::from(r.warning)),
+            (s.driver_override, u64::from(r.driver_override)),
+            (s.steering_enabled, u64::from(r.steering_enabled)),
+        ];
+        let m = &mut self.state;
+        m.set(s.steering, r.steering);
+        m.set(s.velocity, r.velocity);
+        for (index, raw) in raws {
+            if let Some(index) = index {
+                m.set_raw(index, raw);
+            }
+        }
+        m.frame(counter).unwrap_or_else(|| {
+            let id =
+                Id::standard(m.id & 0x7FF).unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
+            Frame::remote(id, bywire_core::frame::Dlc::from_nibble(0))
+        })
     }
 }

@@ -16,6 +16,17 @@ use common::sealed;
 
 #[test]
 fn the_supervisor_never_allocates() {
+    supervisor_never_allocates(Supervisor::new(SupervisorConfig::default()));
+}
+
+#[test]
+fn the_supervisor_reading_by_profile_never_allocates() {
+    let loaded = bywire_vehicle::profile::Profile::builtin("reference-tug").unwrap();
+    let wire = bywire_vehicle::wire::ProfileWire::new(&loaded).unwrap();
+    supervisor_never_allocates(Supervisor::with_wire(SupervisorConfig::default(), wire));
+}
+
+fn supervisor_never_allocates<W: bywire_vehicle::wire::VehicleWire>(mut supervisor: Supervisor<W>) {
     // Frames prepared before counting: 200 commands with rolling counters, some bad ones, and
     // the E-stop chain opening and closing.
     let commands: Vec<Frame> = (0..200u64)
@@ -38,7 +49,6 @@ fn the_supervisor_never_allocates() {
         sealed(EmergencyStop::ID, m.0)
     };
     let (open, closed) = (estop(true), estop(false));
-    let mut supervisor = Supervisor::new(SupervisorConfig::default());
     let mut frames_out = 0;
     let mut checksum = 0.0;
     let counted = allocation_counter::measure(|| {

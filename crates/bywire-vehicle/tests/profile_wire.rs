@@ -19,9 +19,12 @@ use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::profile::Profile;
 use bywire_vehicle::reference_tug::{
-    self, ControlMode, Gear, SteeringMode, VehicleToAdsSensors, VehicleToAdsState,
+    self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
+    VehicleToAdsSensors, VehicleToAdsState,
 };
-use bywire_vehicle::wire::{AdsWire, ProfileWire, ReferenceWire};
+use bywire_vehicle::wire::{
+    AdsWire, Counters, ProfileWire, ReferenceWire, StateReport, VehicleWire,
+};
 use proptest::prelude::*;
 
 fn shuttle() -> bywire_vehicle::profile::LoadedProfile {
@@ -80,6 +83,41 @@ proptest! {
         let id = [VehicleToAdsState::ID, VehicleToAdsSensors::ID, 0x123][which];
         let frame = if seal { reference_tug::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
         prop_assert_eq!(by_role.feedback(&frame), generated.feedback(&frame));
+    }
+}
+
+proptest! {
+    #[test]
+    fn for_the_reference_tug_both_wires_read_commands_alike(payload in any::<[u8; 8]>(), which in 0usize..4, seal in any::<bool>()) {
+        let loaded = Profile::builtin("reference-tug").unwrap();
+        let mut by_role = ProfileWire::new(&loaded).unwrap();
+        let mut generated = ReferenceWire;
+        let id = [AdsToVehicleControl::ID, EmergencyStop::ID, EmergencyBrake::ID, 0x123][which];
+        let frame = if seal { reference_tug::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
+        prop_assert_eq!(by_role.incoming(&frame), generated.incoming(&frame));
+    }
+
+    #[test]
+    fn for_the_reference_tug_both_wires_write_the_same_state(
+        steering in -60.0f64..60.0, velocity in -8.0f64..8.0, mode in 0u64..4, steering_mode in 0usize..3, gear in 0u64..4,
+        watchdog_level in 0u64..5, estop_state in 0u64..8, flags in 0u8..8, echo in 0u64..16, counter in 0u64..16,
+    ) {
+        let loaded = Profile::builtin("reference-tug").unwrap();
+        let mut by_role = ProfileWire::new(&loaded).unwrap();
+        let report = StateReport {
+            steering,
+            velocity,
+            mode: ControlMode::from_raw(mode),
+            steering_mode: [SteeringMode::Normal, SteeringMode::Crab, SteeringMode::Tank][steering_mode],
+            gear: Gear::from_raw(gear),
+            watchdog_level,
+            estop_state,
+            warning: flags & 1 != 0,
+            driver_override: flags & 2 != 0,
+            steering_enabled: flags & 4 != 0,
+            heartbeat_echo: echo,
+        };
+        prop_assert_eq!(VehicleWire::state_frame(&mut by_role, &report, counter), VehicleWire::state_frame(&mut ReferenceWire, &report, counter));
     }
 }
 
@@ -386,4 +424,82 @@ fn profile_wires_refuse_profiles_they_cannot_speak() {
         .unwrap_err()
         .to_string()
         .contains("state: a vehicle interface needs [state]"));
+}
+
+/// The shuttle's ADS side and vehicle side, both by profile, on a bit-timed 500 kbit/s bus:
+/// engaged, driven past an 8-bit counter wrap, then the ADS falls silent and the watchdog
+/// cascade brakes.
+#[test]
+fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
+    use bywire_bus::sim::SimBus;
+    use bywire_vehicle::supervisor::{Supervisor, Watchdog};
+    let loaded = shuttle();
+    let mut bus = SimBus::new(500_000, None);
+    let (ads_node, vcu_node) = (bus.add_node(), bus.add_node());
+    let mut ads = Ads::with_wire(loaded.ads_config(), ProfileWire::new(&loaded).unwrap());
+    let mut vcu = Supervisor::with_wire(
+        loaded.supervisor_config(),
+        ProfileWire::new(&loaded).unwrap(),
+    );
+    let drive = AdsCommand {
+        velocity: 2.0,
+        steering: 5.0,
+        gear: Gear::Drive,
+        mode: ControlMode::Autonomous,
+        steering_mode: SteeringMode::Crab,
+        ..AdsCommand::default()
+    };
+    let mut silent = false;
+    for t in 1..=20_000u64 {
+        let now = Timestamp::from_millis(t);
+        bus.advance(now);
+        while let Some(r) = bus.receive(vcu_node) {
+            vcu.on_frame(r.timestamp, &r.frame);
+        }
+        while let Some(r) = bus.receive(ads_node) {
+            ads.on_frame(r.timestamp, &r.frame);
+        }
+        if t == 19_000 {
+            silent = true;
+        }
+        if !silent {
+            let engage = (500..600).contains(&t);
+            ads.set_command(now, AdsCommand { engage, ..drive });
+            let mut out = Vec::new();
+            ads.poll(now, &mut |f| out.push(f));
+            for f in out {
+                bus.submit(ads_node, f, now);
+            }
+        }
+        let mut out = Vec::new();
+        vcu.poll(now, &mut |f| out.push(f));
+        for f in out {
+            bus.submit(vcu_node, f, now);
+        }
+        let a = vcu.actuators(now);
+        vcu.set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
+        if t == 18_000 {
+            // 360 command cycles of 50 ms: the 8-bit counters have wrapped.
+            assert_eq!(vcu.mode(), ControlMode::Autonomous);
+            assert_eq!(vcu.watchdog(), Watchdog::Normal);
+            assert_eq!(vcu.stats().rejected(), 0, "{:?}", vcu.stats());
+            assert_eq!(a.velocity, 2.0);
+            assert_eq!(a.steering_mode, SteeringMode::Crab);
+            let state = ads.state();
+            assert_eq!(state.mode.value, Some(ControlMode::Autonomous));
+            assert_eq!(state.velocity.value, Some(2.0));
+            assert_eq!(
+                state.watchdog_level.value, None,
+                "the shuttle's status has no watchdog signal"
+            );
+            assert!(
+                ads.stats().accepted > 300 && ads.stats().echo == 0 && ads.stats().counter == 0,
+                "{:?}",
+                ads.stats()
+            );
+        }
+    }
+    // A second of silence: well past the cascade's cycles, full braking.
+    assert_eq!(vcu.watchdog(), Watchdog::FullBraking);
+    assert_eq!(vcu.actuators(Timestamp::from_millis(20_000)).brake, 100.0);
 }

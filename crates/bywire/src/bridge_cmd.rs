@@ -23,7 +23,8 @@ use serde_json::json;
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
-command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop.\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role."
+command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop.\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
+--with-vehicle simulates that vehicle)."
 )]
 pub struct Args {
     /// A shipped profile (reference-tug) or a profile file.
@@ -132,26 +133,12 @@ fn load_profile(name: &str) -> Result<LoadedProfile> {
     Ok(loaded)
 }
 
-/// Whether the profile's vehicle speaks the reference tug's command layout (the simulated
-/// vehicle of `--with-vehicle` is the reference tug's supervisor).
-fn is_reference_layout(profile: &LoadedProfile) -> bool {
-    profile
-        .profile
-        .command
-        .as_ref()
-        .is_some_and(|c| c.message == "AdsToVehicle_Control")
-        && profile
-            .profile
-            .state
-            .as_ref()
-            .is_some_and(|s| s.message == "VehicleToAds_State")
-}
-
 /// A simulated vehicle: the supervisor on its own endpoint, with speed and steering following
 /// the actuators, on a thread until `stop` closes.
 fn spawn_vehicle(
     buses: Vec<(Channel, Box<dyn Bus>)>,
     profile: &LoadedProfile,
+    wire: ProfileWire,
     start: Instant,
     stop: Receiver<()>,
 ) -> std::thread::JoinHandle<()> {
@@ -162,7 +149,7 @@ fn spawn_vehicle(
             skew: Duration::from_millis(5),
         });
     }
-    let mut supervisor = Supervisor::new(config);
+    let mut supervisor = Supervisor::with_wire(config, wire);
     std::thread::spawn(move || {
         let (mut txs, mut rxs): (Vec<_>, Vec<_>) = buses
             .into_iter()
@@ -253,12 +240,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     for (_, spec) in &specs {
         buses.push(bywire_bus::open(spec).with_context(|| format!("bus {spec}"))?);
     }
+    // Both sides speak the profile's messages by role, through the runtime codec.
+    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let start = Instant::now();
     let (stop_vehicle, vehicle_stop) = mpsc::channel();
     let vehicle = if args.with_vehicle {
-        if !is_reference_layout(&profile) {
-            bail!("--with-vehicle: the simulated vehicle is the reference tug; profile '{}' describes another vehicle's messages", profile.profile.name);
-        }
         let mut vehicle_buses = Vec::new();
         for (channel, spec) in &specs {
             let parsed: bywire_bus::BusSpec = spec.parse()?;
@@ -267,7 +253,13 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
             }
             vehicle_buses.push((*channel, bywire_bus::open(spec)?));
         }
-        Some(spawn_vehicle(vehicle_buses, &profile, start, vehicle_stop))
+        Some(spawn_vehicle(
+            vehicle_buses,
+            &profile,
+            wire.clone(),
+            start,
+            vehicle_stop,
+        ))
     } else {
         None
     };
@@ -283,8 +275,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let mut recent: std::collections::VecDeque<(Timestamp, Frame)> =
         std::collections::VecDeque::new();
     let lines = stdin_thread();
-    // The ADS side speaks the profile's messages by role, through the runtime codec.
-    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let mut ads = Ads::with_wire(profile.ads_config(), wire);
     let mut command = AdsCommand::default();
     let report = Duration::from_secs_f64(1.0 / args.rate);
