@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Line coverage of the vehicle interface's safety logic (the supervisor and the ADS side).
+# Line coverage of the vehicle interface's safety logic (the supervisor, the ADS side and their wires).
 # Needs `cargo install cargo-tarpaulin` (ptrace-based; no llvm-tools needed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo tarpaulin -p bywire-vehicle --skip-clean --target-dir target/tarpaulin --out Stdout \
-    --include-files crates/bywire-vehicle/src/supervisor.rs crates/bywire-vehicle/src/ads.rs "$@"
+    --include-files crates/bywire-vehicle/src/supervisor.rs crates/bywire-vehicle/src/ads.rs \
+    crates/bywire-vehicle/src/wire.rs "$@"
