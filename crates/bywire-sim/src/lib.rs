@@ -1,0 +1,19 @@
+//! # bywire-sim: the simulated airside tug
+//!
+//! Plant models, each a small state advanced by `step(dt, ...)`, deterministic for a seed:
+//! - [`steering`]: the electrohydraulic steering chain of one corner — motor controller output
+//!   → DC motor → orbital valve (flow from the input shaft's speed, a dead zone, follow-up that
+//!   holds when the shaft stops, limited by supply pressure) → double-acting cylinder →
+//!   linkage → wheel angle → potentiometer (noise, quantisation, faults);
+//! - [`drive`]: a wheel's drive motor (torque and power limits, regenerative braking limited
+//!   by speed and state of charge), friction and parking brakes, the braking coordinator;
+//! - [`battery`]: the 88 V traction battery (capacity, state of charge, internal resistance);
+//! - [`chassis`]: the tug's body (mass with payload, grade, rolling resistance) moved by the
+//!   four wheels' angles and speeds;
+//! - [`rng`]: the seeded random numbers every noise source draws from.
+
+pub mod battery;
+pub mod chassis;
+pub mod drive;
+pub mod rng;
+pub mod steering;

@@ -1,0 +1,275 @@
+//! One corner's electrohydraulic steering: the motor controller's output turns a DC motor on
+//! the input shaft of an orbital valve (a hydraulic steering unit); the valve meters oil to a
+//! double-acting cylinder in proportion to the shaft's speed, outside a dead zone, and closes
+//! when the shaft stops (follow-up), so the wheel holds; the cylinder moves the wheel through
+//! the steering arm; a potentiometer on the kingpin reports the angle.
+
+use crate::rng::Rng;
+
+/// The chain's parameters (defaults: a baggage tug's corner).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteeringParams {
+    /// Valve input-shaft speed at full motor command, rpm.
+    pub shaft_max_rpm: f64,
+    /// Motor (and gearbox) time constant, s.
+    pub motor_time_constant: f64,
+    /// Valve displacement, m³ per revolution of the input shaft.
+    pub displacement: f64,
+    /// Shaft speed below which the valve stays closed (centering springs), rpm.
+    pub dead_zone_rpm: f64,
+    /// Pump flow limit, m³/s.
+    pub pump_flow: f64,
+    /// Supply (relief) pressure, bar (70–150 on the tug).
+    pub supply_bar: f64,
+    /// Pressure needed to turn the wheel at standstill, bar.
+    pub load_standstill_bar: f64,
+    /// ... and while rolling, bar.
+    pub load_rolling_bar: f64,
+    /// Cylinder piston area on the cap side, m².
+    pub cap_area: f64,
+    /// ... and on the rod side, m².
+    pub rod_area: f64,
+    /// Half the cylinder's stroke, m.
+    pub half_stroke: f64,
+    /// Steering arm radius, m.
+    pub arm: f64,
+    /// Sensor range (±), degrees.
+    pub sensor_range_deg: f64,
+    /// Sensor resolution, bits.
+    pub sensor_bits: u32,
+    /// Sensor noise, degrees (one sigma).
+    pub sensor_noise_deg: f64,
+}
+
+impl Default for SteeringParams {
+    fn default() -> Self {
+        let bore: f64 = 0.050;
+        let rod: f64 = 0.025;
+        let cap = core::f64::consts::PI * bore * bore / 4.0;
+        SteeringParams {
+            shaft_max_rpm: 60.0,
+            motor_time_constant: 0.05,
+            displacement: 100e-6,
+            dead_zone_rpm: 2.0,
+            pump_flow: 16.0 / 60_000.0,
+            supply_bar: 120.0,
+            load_standstill_bar: 40.0,
+            load_rolling_bar: 25.0,
+            cap_area: cap,
+            rod_area: cap - core::f64::consts::PI * rod * rod / 4.0,
+            half_stroke: 0.100,
+            arm: 0.150,
+            sensor_range_deg: 45.0,
+            sensor_bits: 12,
+            sensor_noise_deg: 0.05,
+        }
+    }
+}
+
+/// A fault of the angle sensor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SensorFault {
+    /// Working.
+    None,
+    /// Reads this angle whatever the wheel does, degrees.
+    Stuck(f64),
+    /// Reads the angle plus an error growing at this rate, degrees per second.
+    Drift(f64),
+    /// The wiper lost contact: reads the upper rail.
+    OpenCircuit,
+}
+
+/// The state of one corner's steering chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteeringChain {
+    /// Parameters.
+    pub params: SteeringParams,
+    shaft_rpm: f64,
+    piston: f64,
+    drift: f64,
+    fault: SensorFault,
+}
+
+impl SteeringChain {
+    /// A chain with the wheel straight ahead.
+    pub fn new(params: SteeringParams) -> SteeringChain {
+        SteeringChain {
+            params,
+            shaft_rpm: 0.0,
+            piston: 0.0,
+            drift: 0.0,
+            fault: SensorFault::None,
+        }
+    }
+
+    /// Advance by `dt` seconds with the motor command (−1 … 1, the controller's output) while
+    /// the tug rolls or not.
+    pub fn step(&mut self, dt: f64, command: f64, rolling: bool) {
+        let p = &self.params;
+        let command = if command.is_finite() {
+            command.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        // The motor: first order toward its commanded speed.
+        let target = command * p.shaft_max_rpm;
+        let alpha = if p.motor_time_constant > 0.0 {
+            (dt / p.motor_time_constant).min(1.0)
+        } else {
+            1.0
+        };
+        self.shaft_rpm += (target - self.shaft_rpm) * alpha;
+        // The valve meters in proportion to the shaft's speed beyond its dead zone, within the
+        // pump's flow, and only if the supply pressure can overcome the load.
+        let load = if rolling {
+            p.load_rolling_bar
+        } else {
+            p.load_standstill_bar
+        };
+        let effective_rpm = (self.shaft_rpm.abs() - p.dead_zone_rpm).max(0.0);
+        let flow = if p.supply_bar > load {
+            (p.displacement * effective_rpm / 60.0).min(p.pump_flow)
+        } else {
+            0.0
+        };
+        let area = if self.shaft_rpm >= 0.0 {
+            p.cap_area
+        } else {
+            p.rod_area
+        };
+        let speed = flow / area * self.shaft_rpm.signum();
+        self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
+        if let SensorFault::Drift(rate) = self.fault {
+            self.drift += rate * dt;
+        }
+    }
+
+    /// The wheel's angle, degrees (the linkage: the piston turns the arm).
+    pub fn wheel_angle_deg(&self) -> f64 {
+        libm::asin((self.piston / self.params.arm).clamp(-1.0, 1.0)).to_degrees()
+    }
+
+    /// The valve input shaft's speed, rpm.
+    pub fn shaft_rpm(&self) -> f64 {
+        self.shaft_rpm
+    }
+
+    /// Set (or clear) a sensor fault.
+    pub fn set_fault(&mut self, fault: SensorFault) {
+        self.fault = fault;
+        self.drift = 0.0;
+    }
+
+    /// What the potentiometer reads: the angle with noise, quantised to its resolution,
+    /// clipped to its range — or what a fault makes of it.
+    pub fn sensor_deg(&self, rng: &mut Rng) -> f64 {
+        let p = &self.params;
+        let truth = match self.fault {
+            SensorFault::None => self.wheel_angle_deg(),
+            SensorFault::Stuck(angle) => angle,
+            SensorFault::Drift(_) => self.wheel_angle_deg() + self.drift,
+            SensorFault::OpenCircuit => return p.sensor_range_deg,
+        };
+        let noisy = truth + rng.normal(p.sensor_noise_deg);
+        let steps = f64::from(1u32 << p.sensor_bits.min(24)) - 1.0;
+        let quantum = 2.0 * p.sensor_range_deg / steps;
+        let code = libm::round(
+            (noisy.clamp(-p.sensor_range_deg, p.sensor_range_deg) + p.sensor_range_deg) / quantum,
+        );
+        code * quantum - p.sensor_range_deg
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Run for `millis` milliseconds in 1 ms steps.
+    fn run(chain: &mut SteeringChain, millis: u32, command: f64, rolling: bool) {
+        for _ in 0..millis {
+            chain.step(0.001, command, rolling);
+        }
+    }
+
+    #[test]
+    fn the_wheel_turns_at_the_rate_the_valve_meters_and_holds_when_the_shaft_stops() {
+        let p = SteeringParams::default();
+        let mut chain = SteeringChain::new(p);
+        // Half command: 30 rpm at the shaft, 28 beyond the dead zone, within the pump's flow.
+        run(&mut chain, 500, 0.5, true);
+        let before = chain.wheel_angle_deg();
+        run(&mut chain, 500, 0.5, true);
+        let piston_speed = p.displacement * 28.0 / 60.0 / p.cap_area;
+        let expected =
+            (libm::asin(((before.to_radians().sin() * p.arm) + piston_speed * 0.5) / p.arm))
+                .to_degrees()
+                - before;
+        let turned = chain.wheel_angle_deg() - before;
+        assert!((turned - expected).abs() < 0.01, "{turned} vs {expected}");
+        // The shaft stops: the valve closes and the wheel holds (follow-up).
+        run(&mut chain, 300, 0.0, true);
+        let held = chain.wheel_angle_deg();
+        run(&mut chain, 2000, 0.0, true);
+        assert_eq!(chain.wheel_angle_deg(), held);
+        // The other way, on the rod side: faster for the same flow.
+        let mut left = SteeringChain::new(p);
+        run(&mut left, 1000, -0.5, true);
+        assert!(left.wheel_angle_deg() < 0.0 && left.wheel_angle_deg().abs() > before.abs());
+    }
+
+    #[test]
+    fn dead_zone_pressure_and_stroke_limit_the_motion() {
+        let mut chain = SteeringChain::new(SteeringParams::default());
+        // 1 rpm is inside the 2 rpm dead zone.
+        run(&mut chain, 2000, 1.0 / 60.0, true);
+        assert_eq!(chain.wheel_angle_deg(), 0.0);
+        // A supply below the standstill load cannot turn a standing wheel, but can a rolling one.
+        let weak = SteeringParams {
+            supply_bar: 30.0,
+            ..SteeringParams::default()
+        };
+        let mut standing = SteeringChain::new(weak);
+        run(&mut standing, 1000, 1.0, false);
+        assert_eq!(standing.wheel_angle_deg(), 0.0);
+        let mut rolling = SteeringChain::new(weak);
+        run(&mut rolling, 1000, 1.0, true);
+        assert!(rolling.wheel_angle_deg() > 5.0);
+        // Full command for long: the cylinder's end stop (asin(0.1/0.15) = 41.8°).
+        run(&mut rolling, 10000, 1.0, true);
+        assert!(
+            (rolling.wheel_angle_deg() - 41.81).abs() < 0.01,
+            "{}",
+            rolling.wheel_angle_deg()
+        );
+    }
+
+    #[test]
+    fn the_sensor_quantises_adds_noise_and_shows_its_faults() {
+        let mut chain = SteeringChain::new(SteeringParams {
+            sensor_noise_deg: 0.0,
+            ..SteeringParams::default()
+        });
+        run(&mut chain, 1000, 0.5, true);
+        let mut rng = Rng::new(1);
+        let reading = chain.sensor_deg(&mut rng);
+        let quantum = 90.0 / 4095.0;
+        assert!((reading - chain.wheel_angle_deg()).abs() <= quantum / 2.0 + 1e-9);
+        assert!(
+            ((reading + 45.0) / quantum - libm::round((reading + 45.0) / quantum)).abs() < 1e-6,
+            "on the grid"
+        );
+        chain.set_fault(SensorFault::Stuck(3.0));
+        assert!((chain.sensor_deg(&mut rng) - 3.0).abs() <= quantum);
+        chain.set_fault(SensorFault::Drift(2.0));
+        run(&mut chain, 1500, 0.0, true);
+        let error = chain.sensor_deg(&mut rng) - chain.wheel_angle_deg();
+        assert!((error - 3.0).abs() <= quantum, "{error}");
+        chain.set_fault(SensorFault::OpenCircuit);
+        assert_eq!(chain.sensor_deg(&mut rng), 45.0);
+        // Noise: a thousand readings of a still wheel spread by about sigma.
+        let noisy = SteeringChain::new(SteeringParams::default());
+        let readings: Vec<f64> = (0..1000).map(|_| noisy.sensor_deg(&mut rng)).collect();
+        let sigma = (readings.iter().map(|r| r * r).sum::<f64>() / 1000.0).sqrt();
+        assert!((sigma - 0.05).abs() < 0.01, "{sigma}");
+    }
+}
