@@ -306,6 +306,10 @@ pub struct Drive {
     position_target: f64,
     fault_pending: Option<u16>,
     raised: Option<u16>,
+    /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
+    /// and is told the actual position and velocity.
+    external: bool,
+    demand: f64,
     /// Maximum velocity the motor reaches (units/s).
     pub max_velocity: f64,
 }
@@ -339,7 +343,39 @@ impl Drive {
             position_target: 0.0,
             fault_pending: None,
             raised: None,
+            external: false,
+            demand: 0.0,
             max_velocity: 10_000.0,
+        }
+    }
+
+    /// A drive whose motor is a plant outside it: read [`Drive::demand`] after each poll and
+    /// report what the plant did with [`Drive::set_actual`].
+    pub fn with_external_motor(mut self) -> Drive {
+        self.external = true;
+        self
+    }
+
+    /// The velocity the drive asks of its motor now, units/s (zero with the power stage off).
+    pub fn demand(&self) -> f64 {
+        self.demand
+    }
+
+    /// The plant's actual position (units) and velocity (units/s).
+    pub fn set_actual(&mut self, position: f64, velocity: f64) {
+        if self.external {
+            self.motor = Motor { position, velocity };
+        }
+    }
+
+    /// Drive the motor toward `target` within `rate`: the internal model moves, or the external
+    /// plant gets the ramped demand.
+    fn drive_motor(&mut self, target: f64, rate: f64, dt: f64) {
+        if self.external {
+            self.demand += (target - self.demand).clamp(-rate * dt, rate * dt);
+        } else {
+            self.motor.step_velocity(target, rate, dt);
+            self.demand = self.motor.velocity;
         }
     }
 
@@ -543,13 +579,12 @@ impl Application for Drive {
                     } else {
                         acceleration
                     };
-                    self.motor.step_velocity(target, rate, dt);
+                    self.drive_motor(target, rate, dt);
                 }
                 Some(Mode::CyclicSynchronousVelocity) => {
                     let target =
                         read(object::TARGET_VELOCITY).clamp(-self.max_velocity, self.max_velocity);
-                    self.motor
-                        .step_velocity(target, acceleration.max(quick), dt);
+                    self.drive_motor(target, acceleration.max(quick), dt);
                 }
                 Some(Mode::ProfilePosition | Mode::CyclicSynchronousPosition) => {
                     let limit = read(object::PROFILE_VELOCITY).clamp(1.0, self.max_velocity);
@@ -562,16 +597,18 @@ impl Application for Drive {
                     } else {
                         speed.copysign(remaining)
                     };
-                    self.motor
-                        .step_velocity(target, acceleration.max(deceleration), dt);
+                    self.drive_motor(target, acceleration.max(deceleration), dt);
                 }
-                None => self.motor.step_velocity(0.0, quick, dt),
+                None => self.drive_motor(0.0, quick, dt),
             },
-            State::OperationEnabled => self.motor.step_velocity(0.0, deceleration, dt),
+            State::OperationEnabled => self.drive_motor(0.0, deceleration, dt),
             State::QuickStopActive | State::FaultReactionActive => {
-                self.motor.step_velocity(0.0, quick, dt);
+                self.drive_motor(0.0, quick, dt);
                 if self.motor.velocity.abs() < STANDSTILL {
-                    self.motor.velocity = 0.0;
+                    if !self.external {
+                        self.motor.velocity = 0.0;
+                    }
+                    self.demand = 0.0;
                     let event = if self.state == State::FaultReactionActive {
                         Event::FaultReactionDone
                     } else {
@@ -591,8 +628,12 @@ impl Application for Drive {
             | State::ReadyToSwitchOn
             | State::SwitchedOn
             | State::Fault => {
-                self.motor.step_velocity(0.0, quick, dt);
+                self.drive_motor(0.0, quick, dt);
             }
+        }
+        if !self.state.is_powered() {
+            // Power stage off: the motor gets nothing.
+            self.demand = 0.0;
         }
         // Out of Fault by a reset: the errors that caused it are history.
         if self.state == State::SwitchOnDisabled {
@@ -814,7 +855,8 @@ pub fn add_pdo(od: &mut ObjectDictionary, transmit: bool, pdo: &PdoDefault<'_>) 
 /// The default PDO layout of [`drive_dictionary`], which [`DriveController`] speaks:
 /// RPDO1 `0x200+id` controlword + modes of operation; RPDO2 `0x300+id` target position +
 /// target velocity; TPDO1 `0x180+id` statusword + modes display (on change and every 100 ms);
-/// TPDO2 `0x280+id` position + velocity actual (every 100 ms and on change).
+/// TPDO2 `0x280+id` position + velocity actual (on change, at most every 10 ms, and every
+/// 100 ms).
 pub fn drive_dictionary(node: u8) -> ObjectDictionary {
     use object::*;
     let mut od = ObjectDictionary::new();
@@ -913,6 +955,8 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
             mapping: &[(POSITION_ACTUAL, 0, 32), (VELOCITY_ACTUAL, 0, 32)],
         },
     );
+    // Actual values change with every encoder tick: at most one TPDO2 per 10 ms.
+    let _ = od.set(0x1801, 3, &100u16.to_le_bytes());
     od
 }
 

@@ -10,10 +10,13 @@
 //! - [`battery`]: the 88 V traction battery (capacity, state of charge, internal resistance);
 //! - [`chassis`]: the tug's body (mass with payload, grade, rolling resistance) moved by the
 //!   four wheels' angles and speeds;
-//! - [`rng`]: the seeded random numbers every noise source draws from.
+//! - [`rng`]: the seeded random numbers every noise source draws from;
+//! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
+//!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time.
 
 pub mod battery;
 pub mod chassis;
 pub mod drive;
 pub mod rng;
 pub mod steering;
+pub mod tug;

@@ -1,0 +1,489 @@
+//! The simulated tug network, stepped by the millisecond in simulated time:
+//! - bus 1 (vehicle control, 500 kbit/s, bit-timed): the ADS side following a route with pure
+//!   pursuit, and the vehicle control ECU's supervisor (the `reference-tug` profile);
+//! - bus 2 (drives, CANopen, 1 Mbit/s, bit-timed): the ECU as NMT master commanding four
+//!   steering drives (CiA 402 profile position, each turning its corner's orbital valve) and
+//!   four wheel drives (CiA 402 profile velocity), heartbeats monitored;
+//! - the plants: steering chains, wheel drives and brakes, battery, chassis.
+//!
+//! Every node is the same sans-IO node that runs on hardware; the buses are the bit-timed
+//! simulation, so frame timing and bus load are real figures. Nothing reads a clock: a run
+//! is a function of its parameters and seed.
+
+use core::time::Duration;
+
+use bywire_bus::sim::{NodeId, SimBus};
+use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
+use bywire_canopen::device::Device;
+use bywire_canopen::master::{Controlled, Master};
+use bywire_canopen::nmt::NmtCommand;
+use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
+use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
+use bywire_core::{Frame, Timestamp};
+use bywire_vehicle::ads::{Ads, AdsCommand};
+use bywire_vehicle::profile::Profile;
+use bywire_vehicle::reference_tug::{ControlMode, Gear, SteeringMode};
+use bywire_vehicle::supervisor::Supervisor;
+
+use crate::battery::{Battery, BatteryParams};
+use crate::chassis::{Chassis, ChassisParams, WheelInput};
+use crate::drive::{DriveParams, WheelDrive};
+use crate::rng::Rng;
+use crate::steering::{SteeringChain, SteeringParams};
+
+/// One simulated millisecond.
+pub const TICK: Duration = Duration::from_millis(1);
+
+/// The ECU's node ID on the drives bus.
+pub const MASTER_NODE: u8 = 1;
+/// Steering drives FL, FR, RL, RR.
+pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
+/// Wheel drives FL, FR, RL, RR.
+pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
+
+/// Steering drives count in 0.01°; wheel drives in mm/s and mm.
+const STEERING_UNITS_PER_DEG: f64 = 100.0;
+const DRIVE_UNITS_PER_M: f64 = 1000.0;
+
+/// What a run is given.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TugParams {
+    /// Seed of every noise source.
+    pub seed: u64,
+    /// Payload, kg.
+    pub payload: f64,
+    /// Road grade (rise over run).
+    pub grade: f64,
+    /// The route, m (at least two points).
+    pub route: Vec<Point>,
+    /// Cruising speed, m/s.
+    pub speed: f64,
+}
+
+/// One corner: its two drives (CiA 402 devices with the plant as their motor) and plants.
+struct Corner {
+    steer: Device<Drive>,
+    drive: Device<Drive>,
+    steer_port: NodeId,
+    drive_port: NodeId,
+    chain: SteeringChain,
+    wheel: WheelDrive,
+    distance: f64,
+}
+
+/// A frame seen on a bus, with its end-of-frame time.
+pub type Logged = (Timestamp, Frame);
+
+/// The simulated tug.
+pub struct Tug {
+    now: Timestamp,
+    bus1: SimBus,
+    bus2: SimBus,
+    ads_port: NodeId,
+    ecu_port1: NodeId,
+    ecu_port2: NodeId,
+    log_port1: NodeId,
+    log_port2: NodeId,
+    ads: Ads,
+    ecu: Supervisor,
+    master: Master,
+    corners: Vec<Corner>,
+    swerve: Swerve<4>,
+    wheel_targets: [WheelState; 4],
+    chassis: Chassis,
+    battery: Battery,
+    rng: Rng,
+    route: Vec<Point>,
+    follower: PurePursuit,
+    params: TugParams,
+    next_ads: Timestamp,
+    ads_cycles: u32,
+    engaged_at: Option<Timestamp>,
+    /// Frames on bus 1.
+    pub bus1_log: Vec<Logged>,
+    /// Frames on bus 2.
+    pub bus2_log: Vec<Logged>,
+    /// Cross-track error to the route at every ADS cycle, m.
+    pub tracking_errors: Vec<f64>,
+}
+
+fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
+    let mut od = cia402::drive_dictionary(node);
+    let (velocity, acceleration) = match mode {
+        // Steering: 20°/s, 60°/s².
+        Mode::ProfilePosition | Mode::CyclicSynchronousPosition => (2_000, 6_000),
+        // Wheels: 8 m/s, 1.5 m/s².
+        Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => (8_000, 1_500),
+    };
+    let _ = od.set_int(cia402::object::MODES, 0, i64::from(mode.code()));
+    let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, velocity);
+    let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, acceleration);
+    let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, acceleration);
+    let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, acceleration * 2);
+    // Each drive watches the ECU's heartbeat: silence faults it.
+    let _ = od.set(
+        0x1016,
+        1,
+        &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
+    );
+    Device::new(node, od, Drive::new().with_external_motor())
+}
+
+impl Tug {
+    /// A tug at the start of its route, parked, everything powered on.
+    pub fn new(params: TugParams) -> Tug {
+        let loaded = Profile::builtin("reference-tug");
+        let (ads_config, ecu_config) = match &loaded {
+            Ok(l) => (l.ads_config(), l.supervisor_config()),
+            Err(_) => (Default::default(), Default::default()),
+        };
+        let mut bus1 = SimBus::new(500_000, None);
+        let mut bus2 = SimBus::new(1_000_000, None);
+        let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
+        let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
+        let mut master = Master::new(
+            MASTER_NODE,
+            Duration::from_millis(100),
+            Duration::from_millis(10),
+        );
+        for node in STEERING_NODES {
+            let mut controller =
+                DriveController::new(node, Mode::ProfilePosition, Duration::from_millis(500));
+            controller.set_enabled(true);
+            master.add(Controlled::Drive(controller));
+            master.monitor(node, Duration::from_millis(250));
+        }
+        for node in DRIVE_NODES {
+            let mut controller =
+                DriveController::new(node, Mode::ProfileVelocity, Duration::from_millis(500));
+            controller.set_enabled(true);
+            master.add(Controlled::Drive(controller));
+            master.monitor(node, Duration::from_millis(250));
+        }
+        master.nmt(NmtCommand::Start, 0);
+        let corners = STEERING_NODES
+            .iter()
+            .zip(DRIVE_NODES)
+            .map(|(steer, drive)| Corner {
+                steer: drive_device(*steer, Mode::ProfilePosition),
+                drive: drive_device(drive, Mode::ProfileVelocity),
+                steer_port: bus2.add_node(),
+                drive_port: bus2.add_node(),
+                chain: SteeringChain::new(SteeringParams::default()),
+                wheel: WheelDrive::new(DriveParams::default()),
+                distance: 0.0,
+            })
+            .collect();
+        let chassis_params = ChassisParams {
+            payload: params.payload,
+            ..ChassisParams::default()
+        };
+        let start = match params.route.as_slice() {
+            [a, b, ..] => Pose {
+                x: a.x,
+                y: a.y,
+                yaw: libm::atan2(b.y - a.y, b.x - a.x),
+            },
+            _ => Pose::default(),
+        };
+        Tug {
+            now: Timestamp::ZERO,
+            bus1,
+            bus2,
+            ads_port,
+            ecu_port1,
+            ecu_port2,
+            log_port1,
+            log_port2,
+            ads: Ads::new(ads_config),
+            ecu: Supervisor::new(ecu_config),
+            master,
+            corners,
+            swerve: four_wheel(chassis_params.wheelbase, chassis_params.track),
+            wheel_targets: [WheelState::default(); 4],
+            chassis: Chassis::new(chassis_params, start),
+            battery: Battery::new(BatteryParams::default(), 0.8),
+            rng: Rng::new(params.seed),
+            route: params.route.clone(),
+            follower: PurePursuit {
+                lookahead: Lookahead {
+                    min: 3.0,
+                    max: 8.0,
+                    time: 1.5,
+                },
+                geometry: Geometry::CounterPhase {
+                    wheelbase: chassis_params.wheelbase,
+                    rear_ratio: 1.0,
+                },
+                max_steer: 35f64.to_radians(),
+            },
+            params,
+            next_ads: Timestamp::ZERO,
+            ads_cycles: 0,
+            engaged_at: None,
+            bus1_log: Vec::new(),
+            bus2_log: Vec::new(),
+            tracking_errors: Vec::new(),
+        }
+    }
+
+    /// Simulated time.
+    pub fn now(&self) -> Timestamp {
+        self.now
+    }
+
+    /// Where the tug is.
+    pub fn pose(&self) -> Pose {
+        self.chassis.pose()
+    }
+
+    /// The vehicle control ECU's supervisor.
+    pub fn ecu(&self) -> &Supervisor {
+        &self.ecu
+    }
+
+    /// The route's remaining distance from the tug's projection, m.
+    pub fn remaining(&self) -> f64 {
+        Path::new(&self.route).map_or(0.0, |path| {
+            let pose = self.chassis.pose();
+            let projection = path.project(Point {
+                x: pose.x,
+                y: pose.y,
+            });
+            path.length() - projection.station
+        })
+    }
+
+    /// The battery's state of charge.
+    pub fn soc(&self) -> f64 {
+        self.battery.soc()
+    }
+
+    /// Bus loads over the run so far: busy time over elapsed time, bus 1 and bus 2.
+    #[allow(clippy::cast_precision_loss)]
+    pub fn bus_loads(&self) -> (f64, f64) {
+        let elapsed = self.now.as_nanos().max(1) as f64;
+        (
+            self.bus1.busy_ns() as f64 / elapsed,
+            self.bus2.busy_ns() as f64 / elapsed,
+        )
+    }
+
+    /// One millisecond.
+    pub fn step(&mut self) {
+        let now = self.now.saturating_add(TICK);
+        self.now = now;
+        self.bus1.advance(now);
+        self.bus2.advance(now);
+        self.deliver();
+        self.run_ads(now);
+        self.run_ecu(now);
+        self.run_plants(now);
+    }
+
+    fn deliver(&mut self) {
+        while let Some(r) = self.bus1.receive(self.ads_port) {
+            self.ads.on_frame(r.timestamp, &r.frame);
+        }
+        while let Some(r) = self.bus1.receive(self.ecu_port1) {
+            self.ecu.on_frame(r.timestamp, &r.frame);
+        }
+        while let Some(r) = self.bus1.receive(self.log_port1) {
+            self.bus1_log.push((r.timestamp, r.frame));
+        }
+        while let Some(r) = self.bus2.receive(self.ecu_port2) {
+            self.master.on_frame(r.timestamp, &r.frame);
+        }
+        while let Some(r) = self.bus2.receive(self.log_port2) {
+            self.bus2_log.push((r.timestamp, r.frame));
+        }
+        for corner in &mut self.corners {
+            while let Some(r) = self.bus2.receive(corner.steer_port) {
+                corner.steer.on_frame(r.timestamp, &r.frame);
+            }
+            while let Some(r) = self.bus2.receive(corner.drive_port) {
+                corner.drive.on_frame(r.timestamp, &r.frame);
+            }
+        }
+    }
+
+    /// The ADS: every 20 ms, pure pursuit on the route from the tug's pose, at cruising speed
+    /// slowing to a stop at the end; engaged once the vehicle answers.
+    fn run_ads(&mut self, now: Timestamp) {
+        if now >= self.next_ads {
+            self.next_ads = now.saturating_add(Duration::from_millis(20));
+            let pose = self.chassis.pose();
+            let speed = self.chassis.twist().vx;
+            let (steering, error, remaining) = match Path::new(&self.route) {
+                Some(path) => {
+                    let projection = path.project(Point {
+                        x: pose.x,
+                        y: pose.y,
+                    });
+                    let command = self.follower.steer(pose, speed, &path);
+                    (
+                        command.front.to_degrees(),
+                        projection.offset.abs(),
+                        path.length() - projection.station,
+                    )
+                }
+                None => (0.0, 0.0, 0.0),
+            };
+            if self.engaged_at.is_some() {
+                self.tracking_errors.push(error);
+            }
+            // Slow down for the end: v² = 2·a·d with a gentle 0.5 m/s².
+            let target = self
+                .params
+                .speed
+                .min(libm::sqrt(2.0 * 0.5 * remaining.max(0.0)));
+            let velocity = if remaining < 0.3 || self.engaged_at.is_none() {
+                0.0
+            } else {
+                target
+            };
+            // Engage is an edge, taken once the vehicle's recovery run is complete: request it
+            // every tenth cycle until the vehicle reports autonomous mode.
+            self.ads_cycles = self.ads_cycles.wrapping_add(1);
+            let autonomous = self.ads.state().mode.value == Some(ControlMode::Autonomous);
+            let engage = self.ads.feedback_alive(now) && !autonomous && self.ads_cycles % 10 == 0;
+            if autonomous && self.engaged_at.is_none() {
+                self.engaged_at = Some(now);
+            }
+            let command = AdsCommand {
+                steering,
+                velocity,
+                brake: if velocity == 0.0 { 30.0 } else { 0.0 },
+                gear: Gear::Drive,
+                mode: ControlMode::Autonomous,
+                steering_mode: SteeringMode::Normal,
+                engage,
+                operator_reset: false,
+            };
+            let _ = self.ads.set_command(now, command);
+        }
+        let (bus, port) = (&mut self.bus1, self.ads_port);
+        self.ads.poll(now, &mut |f| bus.submit(port, f, now));
+    }
+
+    /// The vehicle control ECU: the supervisor on bus 1, its actuator outputs turned into
+    /// wheel angles and speeds by 4WS kinematics and sent to the drives on bus 2.
+    fn run_ecu(&mut self, now: Timestamp) {
+        let (bus, port) = (&mut self.bus1, self.ecu_port1);
+        self.ecu.poll(now, &mut |f| bus.submit(port, f, now));
+        let a = self.ecu.actuators(now);
+        let c = self.chassis.params;
+        let speed = if a.motors_enabled { a.velocity } else { 0.0 };
+        let motion = match a.steering_mode {
+            SteeringMode::Normal => Motion::Normal {
+                speed,
+                curvature: 2.0 * libm::tan(a.steering.to_radians()) / c.wheelbase,
+            },
+            SteeringMode::Crab => Motion::Crab {
+                speed,
+                angle: a.steering.to_radians(),
+            },
+            SteeringMode::Tank => Motion::Tank {
+                yaw_rate: speed / libm::hypot(c.wheelbase / 2.0, c.track / 2.0),
+            },
+        };
+        let mut targets = self.swerve.inverse(motion.twist(), &self.wheel_targets);
+        if speed == 0.0 && a.steering_mode == SteeringMode::Normal {
+            // At a standstill the wheels still take the commanded angles (front +, rear −).
+            let angle = a.steering.to_radians();
+            for (target, sign) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]) {
+                target.angle = angle * sign;
+            }
+        }
+        self.wheel_targets = targets;
+        for (target, (steer, drive)) in targets.iter().zip(STEERING_NODES.iter().zip(DRIVE_NODES)) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
+                d.set_enabled(a.steering_enabled || a.motors_enabled);
+                d.set_setpoint(Setpoint::Position(round_i32(
+                    target.angle.to_degrees() * STEERING_UNITS_PER_DEG,
+                )));
+            }
+            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
+                d.set_enabled(true);
+                d.set_setpoint(Setpoint::Velocity(round_i32(
+                    target.speed * DRIVE_UNITS_PER_M,
+                )));
+            }
+        }
+        let (bus, port) = (&mut self.bus2, self.ecu_port2);
+        self.master.poll(now, &mut |f| bus.submit(port, f, now));
+        // Feedback for the supervisor: the wheels' mean speed and the front-left angle, as
+        // the drives report them.
+        let mut speeds = 0.0;
+        let mut angle = 0.0;
+        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
+                speeds += f64::from(d.actual().1) / DRIVE_UNITS_PER_M / 4.0;
+            }
+            if i == 0 {
+                if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
+                    angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+                }
+            }
+        }
+        self.ecu.set_feedback(speeds, angle);
+    }
+
+    /// The drives' devices and the plants they move.
+    fn run_plants(&mut self, now: Timestamp) {
+        let dt = TICK.as_secs_f64();
+        let a = self.ecu.actuators(now);
+        let rolling = self.chassis.twist().vx.abs() > 0.05;
+        let speeds = self.chassis.wheel_speeds();
+        let soc = self.battery.soc();
+        let mut inputs = [WheelInput::default(); 4];
+        let mut power = 0.0;
+        for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
+            let (bus, steer_port, drive_port) =
+                (&mut self.bus2, corner.steer_port, corner.drive_port);
+            corner
+                .steer
+                .poll(now, &mut |f| bus.submit(steer_port, f, now));
+            corner
+                .drive
+                .poll(now, &mut |f| bus.submit(drive_port, f, now));
+            // Steering: the drive's velocity demand is the valve shaft's speed command.
+            let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
+            let command = corner.steer.app().demand() / max_rate;
+            let before = corner.chain.wheel_angle_deg();
+            corner.chain.step(dt, command, rolling);
+            let reading = corner.chain.sensor_deg(&mut self.rng);
+            let rate = (corner.chain.wheel_angle_deg() - before) / dt;
+            corner.steer.app_mut().0.set_actual(
+                reading * STEERING_UNITS_PER_DEG,
+                rate * STEERING_UNITS_PER_DEG,
+            );
+            // Drive: the drive's velocity demand is the motor controller's setpoint.
+            let setpoint = corner.drive.app().demand() / DRIVE_UNITS_PER_M;
+            let output = corner.wheel.motor(setpoint, speed, soc);
+            corner
+                .wheel
+                .set_parked(!a.motors_enabled && speed.abs() < 0.05);
+            corner.wheel.step_brake(dt, a.brake / 100.0);
+            power += output.power;
+            corner.distance += speed * dt;
+            corner.drive.app_mut().0.set_actual(
+                corner.distance * DRIVE_UNITS_PER_M,
+                speed * DRIVE_UNITS_PER_M,
+            );
+            *input = WheelInput {
+                angle_deg: corner.chain.wheel_angle_deg(),
+                drive_torque: output.torque,
+                brake_torque: corner.wheel.holding_torque(),
+            };
+        }
+        self.chassis.step(dt, &inputs, self.params.grade);
+        self.battery.step(dt, power);
+    }
+}
+
+/// Round to the nearest `i32` (saturating).
+#[allow(clippy::cast_possible_truncation)]
+fn round_i32(value: f64) -> i32 {
+    libm::round(value).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+}
