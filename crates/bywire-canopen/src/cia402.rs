@@ -791,6 +791,8 @@ pub struct PdoDefault<'a> {
     pub cob_id: u32,
     /// Transmission type.
     pub transmission: u8,
+    /// Inhibit time, 100 µs.
+    pub inhibit: u16,
     /// Event timer, ms.
     pub event_timer: u16,
     /// Mapped objects: `(index, sub, bits)`.
@@ -810,7 +812,8 @@ pub fn add_pdo(od: &mut ObjectDictionary, transmit: bool, pdo: &PdoDefault<'_>) 
                 .with_int(i64::from(pdo.cob_id)),
             Entry::new(2, "Transmission type", DataType::U8, Access::ReadWrite)
                 .with_int(i64::from(pdo.transmission)),
-            Entry::new(3, "Inhibit time", DataType::U16, Access::ReadWrite),
+            Entry::new(3, "Inhibit time", DataType::U16, Access::ReadWrite)
+                .with_int(i64::from(pdo.inhibit)),
             Entry::new(5, "Event timer", DataType::U16, Access::ReadWrite)
                 .with_int(i64::from(pdo.event_timer)),
             Entry::new(6, "SYNC start value", DataType::U8, Access::ReadWrite),
@@ -918,6 +921,7 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
             number: 1,
             cob_id: 0x200 + id,
             transmission: 255,
+            inhibit: 0,
             event_timer: 0,
             mapping: &[(CONTROLWORD, 0, 16), (MODES, 0, 8)],
         },
@@ -929,6 +933,7 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
             number: 2,
             cob_id: 0x300 + id,
             transmission: 255,
+            inhibit: 0,
             event_timer: 0,
             mapping: &[(TARGET_POSITION, 0, 32), (TARGET_VELOCITY, 0, 32)],
         },
@@ -940,6 +945,7 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
             number: 1,
             cob_id: 0x180 + id,
             transmission: 255,
+            inhibit: 0,
             event_timer: 100,
             mapping: &[(STATUSWORD, 0, 16), (MODES_DISPLAY, 0, 8)],
         },
@@ -951,12 +957,12 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
             number: 2,
             cob_id: 0x280 + id,
             transmission: 255,
+            // Actual values change with every encoder tick: at most one TPDO2 per 10 ms.
+            inhibit: 100,
             event_timer: 100,
             mapping: &[(POSITION_ACTUAL, 0, 32), (VELOCITY_ACTUAL, 0, 32)],
         },
     );
-    // Actual values change with every encoder tick: at most one TPDO2 per 10 ms.
-    let _ = od.set(0x1801, 3, &100u16.to_le_bytes());
     od
 }
 

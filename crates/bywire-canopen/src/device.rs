@@ -495,6 +495,11 @@ impl<A: Application> Device<A> {
         if state == NmtState::Stopped {
             self.sdo.reset();
         }
+        // A heartbeat at once tells the master the new state (as CANopenNode does), rather
+        // than up to a period later; the boot-up message already did after a reset.
+        if self.state != NmtState::BootUp {
+            self.next_heartbeat = Some(now);
+        }
         self.state = state;
         let _ = self.events.push(DeviceEvent::Nmt(state));
         self.app.on_nmt(now, state, &mut self.od, &mut self.emcy);

@@ -178,13 +178,14 @@ except canopen.SdoAbortedError as e:
     say("abort_upload", hex(e.code))
 node.nmt.state = "OPERATIONAL"
 node.nmt.wait_for_heartbeat(timeout=1)
+node.nmt.wait_for_heartbeat(timeout=1)
 say("nmt_operational", node.nmt.state)
 node.tpdo.read()
 say("tpdo1_cob", hex(node.tpdo[1].cob_id), node.tpdo[1].trans_type, node.tpdo[1].event_timer)
 node.tpdo[1].wait_for_reception(timeout=1)
 say("tpdo1_statusword", hex(node.tpdo[1]["Statusword"].raw))
 node.nmt.state = "STOPPED"
-time.sleep(0.3)
+node.nmt.wait_for_heartbeat(timeout=1)
 node.nmt.wait_for_heartbeat(timeout=1)
 say("nmt_stopped", node.nmt.state)
 try:
@@ -193,6 +194,8 @@ try:
 except canopen.SdoCommunicationError:
     say("sdo_in_stopped", "silent")
 node.nmt.state = "PRE-OPERATIONAL"
+# A heartbeat sent just before the command may still be on its way: take the next one too.
+node.nmt.wait_for_heartbeat(timeout=1)
 node.nmt.wait_for_heartbeat(timeout=1)
 say("nmt_preop", node.nmt.state)
 network.disconnect()
