@@ -17,6 +17,7 @@ mod plot_cmd;
 mod send_cmd;
 mod serve_cmd;
 mod signals;
+mod sim_cmd;
 mod slcan_adapter_cmd;
 mod sniff_cmd;
 mod wire_cmd;
@@ -90,6 +91,8 @@ enum Command {
         #[command(subcommand)]
         command: log_cmd::LogCommand,
     },
+    /// The simulated tug on its buses, driven along a route (real time or --fast).
+    Sim(sim_cmd::Args),
     /// CANopen: scan a bus, SDO read/write, NMT, run a device (EDS, CiA 402 drive, Roboteq).
     Canopen {
         #[command(subcommand)]
@@ -121,6 +124,7 @@ fn main() -> ExitCode {
         Command::Plot(args) => plot_cmd::run(&args),
         Command::Serve(args) => serve_cmd::run(&args, &mut out),
         Command::Canopen { command } => canopen_cmd::run(&command, &mut out),
+        Command::Sim(args) => sim_cmd::run(&args, &mut out),
         Command::SlcanAdapter(args) => slcan_adapter_cmd::run(&args, &mut out),
         Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),
