@@ -8,7 +8,13 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use bywire_sim::tug::{apron_loop, Tug, TugParams};
 
 fn one_simulated_second(c: &mut Criterion) {
-    let mut tug = Tug::new(TugParams { seed: 1, payload: 2_000.0, grade: 0.0, route: apron_loop(), speed: 3.0 });
+    let mut tug = Tug::new(TugParams {
+        seed: 1,
+        payload: 2_000.0,
+        grade: 0.0,
+        route: apron_loop(),
+        speed: 3.0,
+    });
     // Engaged and cruising before measuring.
     for _ in 0..5_000 {
         tug.step();

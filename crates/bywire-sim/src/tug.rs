@@ -15,21 +15,22 @@ use core::time::Duration;
 use bywire_bus::sim::{NodeId, SimBus};
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
 use bywire_canopen::device::Device;
-use bywire_canopen::master::{Controlled, Master};
-use bywire_canopen::nmt::NmtCommand;
+use bywire_canopen::master::{Controlled, Master, MasterEvent};
+use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::Profile;
-use bywire_vehicle::reference_tug::{ControlMode, Gear, SteeringMode};
+use bywire_vehicle::reference_tug::{self, ControlMode, EmergencyStop, Gear, SteeringMode};
 use bywire_vehicle::supervisor::Supervisor;
+use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
 use crate::rng::Rng;
-use crate::steering::{SteeringChain, SteeringParams};
+use crate::steering::{SensorFault, SteeringChain, SteeringParams};
 
 /// One simulated millisecond.
 pub const TICK: Duration = Duration::from_millis(1);
@@ -74,6 +75,32 @@ struct Corner {
 /// A frame seen on a bus, with its end-of-frame time.
 pub type Logged = (Timestamp, Frame);
 
+/// A fault (or operator action) a scenario injects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The ADS stops sending.
+    AdsSilence,
+    /// The E-stop chain opens (the safety controller requests an E-stop).
+    Estop,
+    /// The operator's reset: two reset requests a second apart, then engage.
+    OperatorReset,
+    /// A drive node (by node ID) stops sending (cut off, powered down).
+    DriveSilence(u8),
+    /// The angle sensor of a corner (0 FL … 3 RR) fails.
+    SensorFault(usize, SensorFault),
+}
+
+/// Something that happened in a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimEvent {
+    /// When.
+    pub t: Timestamp,
+    /// What kind (`watchdog`, `estop`, `mode`, `fault`, `heartbeat_lost`, ...).
+    pub kind: String,
+    /// Detail (the new state, the fault).
+    pub detail: String,
+}
+
 /// The simulated tug.
 pub struct Tug {
     now: Timestamp,
@@ -105,6 +132,16 @@ pub struct Tug {
     pub bus2_log: Vec<Logged>,
     /// Cross-track error to the route at every ADS cycle, m.
     pub tracking_errors: Vec<f64>,
+    /// What happened, in time order.
+    pub events: Vec<SimEvent>,
+    /// Faults active until their end time (`None`: for good).
+    active: Vec<(Fault, Option<Timestamp>)>,
+    safety_port: NodeId,
+    next_estop_frame: Timestamp,
+    estop_counter: u64,
+    reset_pulses: Vec<Timestamp>,
+    last_seen: (Watchdog, EstopState, ControlMode),
+    drives_lost: bool,
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
@@ -140,6 +177,7 @@ impl Tug {
         let mut bus1 = SimBus::new(500_000, None);
         let mut bus2 = SimBus::new(1_000_000, None);
         let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
+        let safety_port = bus1.add_node();
         let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
         let mut master = Master::new(
             MASTER_NODE,
@@ -224,7 +262,56 @@ impl Tug {
             bus1_log: Vec::new(),
             bus2_log: Vec::new(),
             tracking_errors: Vec::new(),
+            events: Vec::new(),
+            active: Vec::new(),
+            safety_port,
+            next_estop_frame: Timestamp::ZERO,
+            estop_counter: 0,
+            reset_pulses: Vec::new(),
+            last_seen: (
+                Watchdog::FullBraking,
+                EstopState::Normal,
+                ControlMode::Manual,
+            ),
+            drives_lost: false,
         }
+    }
+
+    /// Inject `fault` now, for `duration` (`None`: for good).
+    pub fn inject(&mut self, fault: Fault, duration: Option<Duration>) {
+        let now = self.now;
+        self.record("fault", format!("{fault:?}"));
+        match fault {
+            Fault::SensorFault(corner, sensor) => {
+                if let Some(c) = self.corners.get_mut(corner) {
+                    c.chain.set_fault(sensor);
+                }
+            }
+            Fault::OperatorReset => {
+                self.reset_pulses = vec![now, now.saturating_add(Duration::from_secs(1))];
+                // The operator's reset also acknowledges drives the master stopped.
+                for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
+                    if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
+                        d.acknowledge();
+                    }
+                }
+            }
+            Fault::AdsSilence | Fault::Estop | Fault::DriveSilence(_) => {}
+        }
+        self.active
+            .push((fault, duration.map(|d| now.saturating_add(d))));
+    }
+
+    fn is_active(&self, fault: Fault) -> bool {
+        self.active.iter().any(|(f, _)| *f == fault)
+    }
+
+    fn record(&mut self, kind: &str, detail: String) {
+        self.events.push(SimEvent {
+            t: self.now,
+            kind: kind.to_string(),
+            detail,
+        });
     }
 
     /// Simulated time.
@@ -285,10 +372,78 @@ impl Tug {
         self.now = now;
         self.bus1.advance(now);
         self.bus2.advance(now);
+        let expired: Vec<Fault> = self
+            .active
+            .iter()
+            .filter(|(_, end)| end.is_some_and(|end| now >= end))
+            .map(|(f, _)| *f)
+            .collect();
+        for fault in expired {
+            if let Fault::SensorFault(corner, _) = fault {
+                if let Some(c) = self.corners.get_mut(corner) {
+                    c.chain.set_fault(SensorFault::None);
+                }
+            }
+            self.record("fault_cleared", format!("{fault:?}"));
+        }
+        self.active
+            .retain(|(_, end)| end.is_none_or(|end| now < end));
         self.deliver();
+        self.run_safety(now);
         self.run_ads(now);
         self.run_ecu(now);
         self.run_plants(now);
+        self.note_changes();
+    }
+
+    /// The safety controller: the E-stop chain's state every 20 ms.
+    fn run_safety(&mut self, now: Timestamp) {
+        if now < self.next_estop_frame {
+            return;
+        }
+        self.next_estop_frame = now.saturating_add(Duration::from_millis(20));
+        let mut m = EmergencyStop::default();
+        m.set_estop_request_raw(u64::from(self.is_active(Fault::Estop)));
+        m.set_counter_raw(self.estop_counter & 0x0F);
+        self.estop_counter = self.estop_counter.wrapping_add(1);
+        self.bus1.submit(
+            self.safety_port,
+            reference_tug::sealed_frame(EmergencyStop::ID, m.0),
+            now,
+        );
+    }
+
+    /// Record the supervisor's state changes and the master's heartbeat events.
+    fn note_changes(&mut self) {
+        let seen = (self.ecu.watchdog(), self.ecu.estop(), self.ecu.mode());
+        let (watchdog, estop, mode) = self.last_seen;
+        if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
+            self.record("watchdog", watchdog_name(seen.0).to_string());
+        }
+        if seen.1 != estop {
+            self.record("estop", format!("{:?}", seen.1));
+        }
+        if seen.2 != mode {
+            self.record("mode", format!("{:?}", seen.2));
+        }
+        self.last_seen = seen;
+        while let Some(event) = self.master.next_event() {
+            match event {
+                MasterEvent::Heartbeat(HeartbeatEvent::Lost { node }) => {
+                    self.record("heartbeat_lost", format!("node 0x{node:02X}"))
+                }
+                MasterEvent::Heartbeat(HeartbeatEvent::Recovered { node, .. }) => {
+                    self.record("heartbeat_recovered", format!("node 0x{node:02X}"))
+                }
+                MasterEvent::Emergency { node, emergency } if emergency.code != 0 => {
+                    self.record(
+                        "emcy",
+                        format!("node 0x{node:02X} code 0x{:04X}", emergency.code),
+                    );
+                }
+                _ => {}
+            }
+        }
     }
 
     fn deliver(&mut self) {
@@ -355,8 +510,13 @@ impl Tug {
             // Engage is an edge, taken once the vehicle's recovery run is complete: request it
             // every tenth cycle until the vehicle reports autonomous mode.
             self.ads_cycles = self.ads_cycles.wrapping_add(1);
-            let autonomous = self.ads.state().mode.value == Some(ControlMode::Autonomous);
-            let engage = self.ads.feedback_alive(now) && !autonomous && self.ads_cycles % 10 == 0;
+            // (Watchdog level 4: the vehicle waits for a re-engage after full braking.)
+            let state = self.ads.state();
+            let autonomous = state.mode.value == Some(ControlMode::Autonomous);
+            let awaiting = state.watchdog_level.value == Some(4);
+            let engage = self.ads.feedback_alive(now)
+                && (!autonomous || awaiting)
+                && self.ads_cycles % 10 == 0;
             if autonomous && self.engaged_at.is_none() {
                 self.engaged_at = Some(now);
             }
@@ -368,12 +528,20 @@ impl Tug {
                 mode: ControlMode::Autonomous,
                 steering_mode: SteeringMode::Normal,
                 engage,
-                operator_reset: false,
+                operator_reset: self
+                    .reset_pulses
+                    .iter()
+                    .any(|at| now >= *at && now < at.saturating_add(Duration::from_millis(100))),
             };
             let _ = self.ads.set_command(now, command);
         }
+        let silent = self.is_active(Fault::AdsSilence);
         let (bus, port) = (&mut self.bus1, self.ads_port);
-        self.ads.poll(now, &mut |f| bus.submit(port, f, now));
+        self.ads.poll(now, &mut |f| {
+            if !silent {
+                bus.submit(port, f, now);
+            }
+        });
     }
 
     /// The vehicle control ECU: the supervisor on bus 1, its actuator outputs turned into
@@ -383,7 +551,16 @@ impl Tug {
         self.ecu.poll(now, &mut |f| bus.submit(port, f, now));
         let a = self.ecu.actuators(now);
         let c = self.chassis.params;
-        let speed = if a.motors_enabled { a.velocity } else { 0.0 };
+        // A drive the master had to stop (heartbeat lost, EMCY, fault) stops the vehicle: the
+        // other wheels alone would drag it off its path.
+        self.drives_lost = DRIVE_NODES.iter().chain(&STEERING_NODES).any(|node| {
+            matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+        });
+        let speed = if a.motors_enabled && !self.drives_lost {
+            a.velocity
+        } else {
+            0.0
+        };
         let motion = match a.steering_mode {
             SteeringMode::Normal => Motion::Normal {
                 speed,
@@ -448,15 +625,27 @@ impl Tug {
         let soc = self.battery.soc();
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
+        let active = &self.active;
+        let drives_lost = self.drives_lost;
         for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
+            let steer_silent = active
+                .iter()
+                .any(|(f, _)| *f == Fault::DriveSilence(corner.steer.node()));
+            let drive_silent = active
+                .iter()
+                .any(|(f, _)| *f == Fault::DriveSilence(corner.drive.node()));
             let (bus, steer_port, drive_port) =
                 (&mut self.bus2, corner.steer_port, corner.drive_port);
-            corner
-                .steer
-                .poll(now, &mut |f| bus.submit(steer_port, f, now));
-            corner
-                .drive
-                .poll(now, &mut |f| bus.submit(drive_port, f, now));
+            corner.steer.poll(now, &mut |f| {
+                if !steer_silent {
+                    bus.submit(steer_port, f, now);
+                }
+            });
+            corner.drive.poll(now, &mut |f| {
+                if !drive_silent {
+                    bus.submit(drive_port, f, now);
+                }
+            });
             // Steering: the drive's velocity demand is the valve shaft's speed command.
             let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
             let command = corner.steer.app().demand() / max_rate;
@@ -474,7 +663,9 @@ impl Tug {
             corner
                 .wheel
                 .set_parked(!a.motors_enabled && speed.abs() < 0.05);
-            corner.wheel.step_brake(dt, a.brake / 100.0);
+            corner
+                .wheel
+                .step_brake(dt, if drives_lost { 1.0 } else { a.brake / 100.0 });
             power += output.power;
             corner.distance += speed * dt;
             corner.drive.app_mut().0.set_actual(
@@ -525,4 +716,65 @@ pub fn apron_loop() -> Vec<Point> {
         });
     }
     points
+}
+
+fn watchdog_name(watchdog: Watchdog) -> &'static str {
+    match watchdog {
+        Watchdog::Normal => "normal",
+        Watchdog::Holding { .. } => "holding",
+        Watchdog::Decelerating { .. } => "decelerating",
+        Watchdog::FullBraking => "full_braking",
+        Watchdog::Recovering { .. } => "recovering",
+    }
+}
+
+/// A scenario: a route and what happens on it, at simulated times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// Its name.
+    pub name: &'static str,
+    /// Faults and operator actions: (at, fault, for how long).
+    pub events: Vec<(Duration, Fault, Option<Duration>)>,
+}
+
+impl Scenario {
+    /// A built-in scenario by name: `apron-loop` (the route, nothing happens) or `fault-tour`
+    /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
+    /// and a stuck steering sensor).
+    pub fn builtin(name: &str) -> Option<Scenario> {
+        let s = Duration::from_secs;
+        match name {
+            "apron-loop" => Some(Scenario {
+                name: "apron-loop",
+                events: Vec::new(),
+            }),
+            "fault-tour" => Some(Scenario {
+                name: "fault-tour",
+                events: vec![
+                    (s(8), Fault::AdsSilence, Some(s(1))),
+                    (s(16), Fault::Estop, Some(s(2))),
+                    (s(24), Fault::OperatorReset, None),
+                    (s(32), Fault::DriveSilence(DRIVE_NODES[1]), Some(s(1))),
+                    (s(38), Fault::OperatorReset, None),
+                    (
+                        s(46),
+                        Fault::SensorFault(2, SensorFault::Stuck(0.0)),
+                        Some(s(3)),
+                    ),
+                ],
+            }),
+            _ => None,
+        }
+    }
+
+    /// Inject what is due in the step that reaches `now` (events at or before `now`, after
+    /// `before`).
+    pub fn apply(&self, tug: &mut Tug, before: Timestamp, now: Timestamp) {
+        for (at, fault, duration) in &self.events {
+            let at = Timestamp::ZERO.saturating_add(*at);
+            if at > before && at <= now {
+                tug.inject(*fault, *duration);
+            }
+        }
+    }
 }

@@ -92,3 +92,138 @@ fn the_same_seed_gives_the_same_frames() {
     assert_eq!(a.bus2_log, b.bus2_log);
     assert_eq!(a.pose(), b.pose());
 }
+
+use std::time::Duration;
+
+use bywire_sim::tug::{apron_loop, Fault, SimEvent};
+
+fn cruising() -> Tug {
+    let mut tug = Tug::new(TugParams {
+        seed: 2,
+        payload: 0.0,
+        grade: 0.0,
+        route: apron_loop(),
+        speed: 3.0,
+    });
+    while tug.now().as_nanos() < 8_000_000_000 {
+        tug.step();
+    }
+    assert_eq!(tug.ecu().mode(), ControlMode::Autonomous);
+    assert!(tug.pose_speed() > 2.5, "cruising: {}", tug.pose_speed());
+    tug
+}
+
+fn run_for(tug: &mut Tug, millis: u64) {
+    for _ in 0..millis {
+        tug.step();
+    }
+}
+
+/// Events after `from`, as (ms after it, kind, detail).
+fn after(tug: &Tug, from: u64) -> Vec<(u64, String, String)> {
+    tug.events
+        .iter()
+        .filter(|e: &&SimEvent| e.t.as_nanos() >= from)
+        .map(|e| {
+            (
+                (e.t.as_nanos() - from) / 1_000_000,
+                e.kind.clone(),
+                e.detail.clone(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_silent_ads_walks_the_watchdog_cascade_and_the_tug_stops() {
+    let mut tug = cruising();
+    let injected = tug.now().as_nanos();
+    tug.inject(Fault::AdsSilence, Some(Duration::from_secs(3)));
+    run_for(&mut tug, 2_000);
+    // Times from the last command the ECU received.
+    let from = tug
+        .bus1_log
+        .iter()
+        .rfind(|(t, f)| t.as_nanos() < injected && f.id().unwrap().as_raw() == 0x100)
+        .unwrap()
+        .0
+        .as_nanos();
+    let events = after(&tug, from);
+    let at = |detail: &str| {
+        events
+            .iter()
+            .find(|(_, kind, d)| kind == "watchdog" && d == detail)
+            .map(|(t, _, _)| *t)
+    };
+    // Commands every 20 ms, a cycle counting as missed half a cycle after it was due: hold at
+    // the first missed (30 ms), decelerate at the third (70 ms), full braking at the fifth
+    // (110 ms), each within the millisecond the runner steps by.
+    let (hold, decelerate, brake) = (
+        at("holding").unwrap(),
+        at("decelerating").unwrap(),
+        at("full_braking").unwrap(),
+    );
+    assert!((30..=31).contains(&hold), "{events:?}");
+    assert!((70..=71).contains(&decelerate), "{events:?}");
+    assert!((110..=111).contains(&brake), "{events:?}");
+    assert!(tug.pose_speed() < 0.05, "stopped: {}", tug.pose_speed());
+}
+
+#[test]
+fn an_estop_latches_until_the_operator_resets_it() {
+    let mut tug = cruising();
+    let from = tug.now().as_nanos();
+    tug.inject(Fault::Estop, Some(Duration::from_secs(2)));
+    run_for(&mut tug, 6_000);
+    assert!(tug.pose_speed() < 0.05);
+    // (The latch passes E-stop requested and motors disabled within one evaluation.)
+    let estop = |tug: &Tug| -> Vec<(u64, String)> {
+        after(tug, from)
+            .into_iter()
+            .filter(|(_, k, _)| k == "estop")
+            .map(|(t, _, d)| (t, d))
+            .collect()
+    };
+    let states = estop(&tug);
+    assert_eq!(
+        states.iter().map(|(_, d)| d.as_str()).collect::<Vec<_>>(),
+        ["BrakesApplied", "Stopped"],
+        "latched, no automatic reset: {states:?}"
+    );
+    assert!(
+        states[0].0 <= 21,
+        "braking within a frame of the E-stop: {states:?}"
+    );
+    let reset_at = tug.now().as_nanos() - from;
+    tug.inject(Fault::OperatorReset, None);
+    run_for(&mut tug, 4_000);
+    let states = estop(&tug);
+    assert!(
+        states[2..].iter().all(|(t, _)| t * 1_000_000 >= reset_at),
+        "{states:?}"
+    );
+    assert_eq!(states.last().unwrap().1, "Normal", "{states:?}");
+    assert_eq!(tug.ecu().mode(), ControlMode::Autonomous, "re-engaged");
+    assert!(tug.pose_speed() > 1.0, "driving again");
+}
+
+#[test]
+fn a_silent_drive_is_lost_within_its_consumer_time_and_the_tug_brakes() {
+    let mut tug = cruising();
+    let from = tug.now().as_nanos();
+    tug.inject(Fault::DriveSilence(0x21), Some(Duration::from_secs(2)));
+    run_for(&mut tug, 3_000);
+    let events = after(&tug, from);
+    let lost = events
+        .iter()
+        .find(|(_, k, d)| k == "heartbeat_lost" && d == "node 0x21")
+        .map(|(t, _, _)| *t)
+        .unwrap();
+    // Heartbeats every 100 ms, consumer time 250 ms: lost 150–251 ms after the cut.
+    assert!((150..=251).contains(&lost), "{events:?}");
+    assert!(
+        tug.pose_speed() < 0.05,
+        "braked to a stop: {}",
+        tug.pose_speed()
+    );
+}

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
-use bywire_sim::tug::{apron_loop, Tug, TugParams};
+use bywire_sim::tug::{apron_loop, Scenario, Tug, TugParams};
 use serde_json::json;
 
 #[derive(clap::Args)]
@@ -22,7 +22,7 @@ pub struct Args {
     /// Seed of every noise source.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Scenario (built in: apron-loop).
+    /// Scenario (built in: apron-loop, fault-tour).
     #[arg(long, default_value = "apron-loop")]
     scenario: String,
     /// Folder for the logs and metrics.
@@ -37,10 +37,13 @@ pub struct Args {
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let route = match args.scenario.as_str() {
-        "apron-loop" => apron_loop(),
-        other => bail!("--scenario {other}: not a built-in scenario (apron-loop)"),
+    let Some(scenario) = Scenario::builtin(&args.scenario) else {
+        bail!(
+            "--scenario {}: not a built-in scenario (apron-loop, fault-tour)",
+            args.scenario
+        );
     };
+    let route = apron_loop();
     if !(0.0..=4_500.0).contains(&args.payload) {
         bail!("--payload {}: 0 to 4500 kg", args.payload);
     }
@@ -63,8 +66,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let stop = crate::interrupt_flag();
     let mut next_report = Timestamp::ZERO;
     let completed = loop {
+        let before = tug.now();
         tug.step();
         let now = tug.now();
+        scenario.apply(&mut tug, before, now);
         if tug.engaged_at().is_some() && tug.remaining() < 0.5 && tug.pose_speed().abs() < 0.01 {
             break true;
         }
@@ -113,6 +118,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if let Some(at) = tug.engaged_at() {
         events.push(json!({"t_s": seconds(at), "kind": "engaged", "detail": "the vehicle reports autonomous mode"}));
     }
+    for event in &tug.events {
+        events.push(json!({"t_s": seconds(event.t), "kind": event.kind, "detail": event.detail}));
+    }
+    events.sort_by(|a, b| {
+        a["t_s"]
+            .as_f64()
+            .partial_cmp(&b["t_s"].as_f64())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     if completed {
         events.push(json!({"t_s": seconds(tug.now()), "kind": "arrived", "detail": "stopped at the end of the route"}));
     }

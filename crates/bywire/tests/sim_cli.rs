@@ -50,7 +50,8 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         .iter()
         .map(|e| e["kind"].as_str().unwrap())
         .collect();
-    assert_eq!(kinds, ["engaged", "arrived"]);
+        // Start-up: the watchdog's recovery run, autonomous mode; then nothing until arrival.
+    assert_eq!(kinds, ["watchdog", "watchdog", "mode", "engaged", "arrived"], "{metrics}");
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
     assert!((20.0..120.0).contains(&sim_seconds), "{sim_seconds}");
     sim(&b, "5");
@@ -86,4 +87,71 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         err.contains("--scenario moon-base: not a built-in scenario"),
         "{err}"
     );
+}
+
+/// The fault tour: every fault shows its reaction in metrics.json, at its timing.
+#[test]
+fn the_fault_tour_reacts_to_every_fault_in_time() {
+    let dir = std::env::temp_dir().join(format!("bywire-sim-tour-{}", std::process::id()));
+    let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "sim",
+            "--fast",
+            "--scenario",
+            "fault-tour",
+            "--out",
+            dir.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let metrics: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(
+        metrics["completed"], true,
+        "the route is finished after every fault"
+    );
+    let events: Vec<(f64, String, String)> = metrics["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["t_s"].as_f64().unwrap(),
+                e["kind"].as_str().unwrap().to_string(),
+                e["detail"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    let first = |kind: &str, detail: &str, after: f64| {
+        events
+            .iter()
+            .find(|(t, k, d)| *t >= after && k == kind && d.starts_with(detail))
+            .map(|(t, _, _)| *t)
+            .unwrap_or_else(|| panic!("no {kind} {detail} after {after}: {events:?}"))
+    };
+    // ADS silence: the cascade 40 ms apart, then full braking; re-engaged after.
+    let silence = first("fault", "AdsSilence", 0.0);
+    let hold = first("watchdog", "holding", silence);
+    assert!(hold - silence <= 0.031);
+    assert!((first("watchdog", "decelerating", silence) - hold - 0.040).abs() < 0.0015);
+    assert!((first("watchdog", "full_braking", silence) - hold - 0.080).abs() < 0.0015);
+    assert!(first("watchdog", "normal", silence) < first("fault", "Estop", 0.0));
+    // E-stop: braking within a frame, stopped, and nothing but the operator's reset ends it.
+    let estop = first("fault", "Estop", 0.0);
+    assert!(first("estop", "BrakesApplied", estop) - estop <= 0.021);
+    let reset = first("fault", "OperatorReset", estop);
+    assert!(first("estop", "Stopped", estop) < reset);
+    assert!(
+        first("estop", "Normal", estop) > reset,
+        "no automatic reset"
+    );
+    // A drive cut off: lost within its consumer time (250 ms) of its last heartbeat.
+    let cut = first("fault", "DriveSilence", 0.0);
+    assert!(first("heartbeat_lost", "node", cut) - cut <= 0.251);
+    assert!(first("fault", "SensorFault", 0.0) > cut);
 }
