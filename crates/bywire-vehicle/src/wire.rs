@@ -321,11 +321,11 @@ impl RoleMessage {
         Ok(counter)
     }
 
+    /// A frame on this message's identifier (a remote frame too: `check` refuses it).
     fn is(&self, frame: &Frame) -> bool {
         frame
             .id()
             .is_some_and(|id| id.as_raw() == self.id && id.is_extended() == self.extended)
-            && !frame.is_remote()
     }
 
     /// Encode the values set in `self.values`, then counter and checksum.

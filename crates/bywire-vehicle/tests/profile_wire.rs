@@ -503,3 +503,62 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
     assert_eq!(vcu.watchdog(), Watchdog::FullBraking);
     assert_eq!(vcu.actuators(Timestamp::from_millis(20_000)).brake, 100.0);
 }
+
+#[test]
+fn short_and_remote_command_frames_are_malformed_on_both_wires() {
+    use bywire_core::frame::Dlc;
+    use bywire_vehicle::wire::{Incoming, Rejected};
+    let loaded = Profile::builtin("reference-tug").unwrap();
+    let mut by_role = ProfileWire::new(&loaded).unwrap();
+    let id = Id::standard(AdsToVehicleControl::ID).unwrap();
+    for frame in [
+        Frame::classic(id, &[0; 4]).unwrap(),
+        Frame::remote(id, Dlc::from_nibble(8)),
+        Frame::classic(id, &[]).unwrap(),
+    ] {
+        let expected = Incoming::Command(Err(Rejected::Malformed));
+        assert_eq!(by_role.incoming(&frame), expected, "{frame:?}");
+        assert_eq!(ReferenceWire.incoming(&frame), expected, "{frame:?}");
+    }
+}
+
+#[test]
+fn state_frames_count_through_the_whole_counter() {
+    use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
+    for by_role in [false, true] {
+        let mut counters = Vec::new();
+        let mut take = |f: Frame| {
+            if f.id().unwrap().as_raw() == VehicleToAdsState::ID {
+                counters.push(f.data()[6] >> 4);
+            }
+        };
+        if by_role {
+            let loaded = Profile::builtin("reference-tug").unwrap();
+            let mut vcu = Supervisor::with_wire(
+                SupervisorConfig::default(),
+                ProfileWire::new(&loaded).unwrap(),
+            );
+            for t in 0..400 {
+                vcu.poll(Timestamp::from_millis(t), &mut take);
+            }
+        } else {
+            let mut vcu = Supervisor::new(SupervisorConfig::default());
+            for t in 0..400 {
+                vcu.poll(Timestamp::from_millis(t), &mut take);
+            }
+        }
+        assert_eq!(counters.len(), 20);
+        assert!(
+            counters
+                .iter()
+                .zip(counters.iter().skip(1))
+                .all(|(a, b)| (a + 1) % 16 == *b),
+            "{counters:?}"
+        );
+        assert_eq!(
+            counters.iter().max(),
+            Some(&15),
+            "the 4-bit counter wraps at 16: {counters:?}"
+        );
+    }
+}

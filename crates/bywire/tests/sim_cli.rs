@@ -50,8 +50,12 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         .iter()
         .map(|e| e["kind"].as_str().unwrap())
         .collect();
-        // Start-up: the watchdog's recovery run, autonomous mode; then nothing until arrival.
-    assert_eq!(kinds, ["watchdog", "watchdog", "mode", "engaged", "arrived"], "{metrics}");
+    // Start-up: the watchdog's recovery run, autonomous mode; then nothing until arrival.
+    assert_eq!(
+        kinds,
+        ["watchdog", "watchdog", "mode", "engaged", "arrived"],
+        "{metrics}"
+    );
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
     assert!((20.0..120.0).contains(&sim_seconds), "{sim_seconds}");
     sim(&b, "5");
