@@ -283,7 +283,9 @@ impl<W: AdsWire> Ads<W> {
         (1u64 << self.wire.command_counter_bits().clamp(1, 8)) - 1
     }
 
-    fn command_frame(&mut self, now: Timestamp, c: AdsCommand) -> Frame {
+    /// The command frame (`None` if the wire cannot encode it: nothing is sent, and the
+    /// vehicle's watchdog sees a missed cycle — fail-safe).
+    fn command_frame(&mut self, now: Timestamp, c: AdsCommand) -> Option<Frame> {
         let frame = self.wire.command_frame(&c, self.counter);
         if let Some(slot) = usize::try_from(self.counter)
             .ok()
@@ -326,8 +328,9 @@ impl<W: AdsWire> Ads<W> {
         }
         if let (Some(due), Some(command)) = (self.next_command, self.effective_command(now)) {
             if now >= due {
-                let f = self.command_frame(now, command);
-                out(f);
+                if let Some(frame) = self.command_frame(now, command) {
+                    out(frame);
+                }
                 // Keep the schedule (no drift); skip cycles missed while not polled.
                 let mut next = due.saturating_add(self.config.cycle);
                 if next <= now {

@@ -720,7 +720,9 @@ impl<W: VehicleWire> Supervisor<W> {
         self.steering.step(dt, target);
         if now >= self.next_state_frame {
             self.next_state_frame = now.saturating_add(self.config.cycle);
-            out(self.state_frame());
+            if let Some(frame) = self.state_frame() {
+                out(frame);
+            }
         }
     }
 
@@ -802,7 +804,7 @@ impl<W: VehicleWire> Supervisor<W> {
     }
 
     /// The `VehicleToAds_State` frame.
-    fn state_frame(&mut self) -> Frame {
+    fn state_frame(&mut self) -> Option<Frame> {
         let steering_enabled = self.mode == ControlMode::Autonomous
             && matches!(
                 self.watchdog,

@@ -79,7 +79,7 @@ pub trait AdsWire: Counters {
     /// Bits of the wheel messages' counters.
     fn wheel_counter_bits(&self) -> u8;
     /// The command frame with `counter` and its checksum.
-    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Frame;
+    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Option<Frame>;
     /// An emergency-brake frame, if the vehicle has the message.
     fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame>;
     /// Read a received frame.
@@ -105,9 +105,9 @@ impl AdsWire for ReferenceWire {
         4
     }
 
-    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Frame {
+    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Option<Frame> {
         let m = command.to_message(u8::try_from(counter & 0x0F).unwrap_or(0));
-        reference_tug::sealed_frame(AdsToVehicleControl::ID, m.0)
+        Some(reference_tug::sealed_frame(AdsToVehicleControl::ID, m.0))
     }
 
     fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
@@ -688,7 +688,7 @@ impl AdsWire for ProfileWire {
             .map_or(self.state.counter_bits, |(m, _)| m.counter_bits)
     }
 
-    fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Frame {
+    fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Option<Frame> {
         let s = self.command_signals;
         let raws = [
             (s.gear, self.gears.raw(gear_name(c.gear))),
@@ -707,13 +707,7 @@ impl AdsWire for ProfileWire {
         for (index, raw) in raws {
             m.set_raw(index, raw);
         }
-        // A command that cannot be encoded is sent as nothing the vehicle would accept: an
-        // empty frame on the command identifier (its checks reject it, which is fail-safe).
-        m.frame(counter).unwrap_or_else(|| {
-            let id =
-                Id::standard(m.id & 0x7FF).unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
-            Frame::remote(id, bywire_core::frame::Dlc::from_nibble(0))
-        })
+        m.frame(counter)
     }
 
     fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
@@ -827,7 +821,7 @@ pub trait VehicleWire: Counters {
     /// Read a received frame.
     fn incoming(&mut self, frame: &Frame) -> Incoming;
     /// The state frame with `counter` and its checksum.
-    fn state_frame(&mut self, report: &StateReport, counter: u64) -> Frame;
+    fn state_frame(&mut self, report: &StateReport, counter: u64) -> Option<Frame>;
 }
 
 impl VehicleWire for ReferenceWire {
@@ -856,7 +850,7 @@ impl VehicleWire for ReferenceWire {
         }
     }
 
-    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Frame {
+    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Option<Frame> {
         let mut m = VehicleToAdsState::default();
         // Out-of-range actuals are reported at their limit rather than dropped.
         let _ = m.set_steering_angle_actual(r.steering.clamp(-45.0, 45.0));
@@ -871,7 +865,7 @@ impl VehicleWire for ReferenceWire {
         m.set_steering_enabled_raw(u64::from(r.steering_enabled));
         m.set_heartbeat_echo_raw(r.heartbeat_echo);
         m.set_counter_raw(counter & 0x0F);
-        reference_tug::sealed_frame(VehicleToAdsState::ID, m.0)
+        Some(reference_tug::sealed_frame(VehicleToAdsState::ID, m.0))
     }
 }
 
@@ -964,7 +958,7 @@ impl VehicleWire for ProfileWire {
         Incoming::Other
     }
 
-    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Frame {
+    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Option<Frame> {
         let s = self.state_signals;
         let raws = [
             (Some(s.control_mode), self.modes.raw(mode_name(r.mode))),
@@ -988,10 +982,6 @@ impl VehicleWire for ProfileWire {
                 m.set_raw(index, raw);
             }
         }
-        m.frame(counter).unwrap_or_else(|| {
-            let id =
-                Id::standard(m.id & 0x7FF).unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
-            Frame::remote(id, bywire_core::frame::Dlc::from_nibble(0))
-        })
+        m.frame(counter)
     }
 }

@@ -562,3 +562,38 @@ fn state_frames_count_through_the_whole_counter() {
         );
     }
 }
+
+#[test]
+fn wheel_speed_counters_are_checked_at_their_width() {
+    let loaded = Profile::builtin("reference-tug").unwrap();
+    for by_role in [false, true] {
+        let frames: Vec<Frame> = [0u64, 1, 4, 5]
+            .iter()
+            .map(|counter| {
+                let mut m = VehicleToAdsSensors::default();
+                m.set_counter_raw(*counter);
+                reference_tug::sealed_frame(VehicleToAdsSensors::ID, m.0)
+            })
+            .collect();
+        let stats = if by_role {
+            let mut ads = Ads::with_wire(AdsConfig::default(), ProfileWire::new(&loaded).unwrap());
+            frames
+                .iter()
+                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));
+            ads.stats()
+        } else {
+            let mut ads = Ads::new(AdsConfig::default());
+            frames
+                .iter()
+                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));
+            ads.stats()
+        };
+        // 0, 1 in sequence; 1 → 4 skips two (a 4-bit counter sees it, a 1-bit one would not);
+        // 5 follows 4 again.
+        assert_eq!(
+            (stats.accepted, stats.counter),
+            (3, 1),
+            "by role: {by_role}: {stats:?}"
+        );
+    }
+}
