@@ -296,6 +296,31 @@ impl Motor {
     }
 }
 
+/// The drive parameters a step uses, read from the dictionary once per change.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Params {
+    mode: Option<Mode>,
+    acceleration: f64,
+    deceleration: f64,
+    quick: f64,
+    profile_velocity: f64,
+    target_velocity: f64,
+}
+
+impl Params {
+    fn read(od: &ObjectDictionary) -> Params {
+        let read = |index: u16| real(od.get_signed(index, 0).unwrap_or(0));
+        Params {
+            mode: Mode::from_code(od.get_signed(object::MODES, 0).unwrap_or(0)),
+            acceleration: read(object::PROFILE_ACCELERATION).max(1.0),
+            deceleration: read(object::PROFILE_DECELERATION).max(1.0),
+            quick: read(object::QUICK_STOP_DECELERATION).max(1.0),
+            profile_velocity: read(object::PROFILE_VELOCITY),
+            target_velocity: read(object::TARGET_VELOCITY),
+        }
+    }
+}
+
 /// A CiA 402 drive: the application of a [`crate::device::Device`].
 #[derive(Debug, Clone)]
 pub struct Drive {
@@ -306,6 +331,8 @@ pub struct Drive {
     position_target: f64,
     fault_pending: Option<u16>,
     raised: Option<u16>,
+    /// The dictionary's drive parameters, read again after any write (`None`: stale).
+    params: Option<Params>,
     /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
     /// and is told the actual position and velocity.
     external: bool,
@@ -343,6 +370,7 @@ impl Drive {
             position_target: 0.0,
             fault_pending: None,
             raised: None,
+            params: None,
             external: false,
             demand: 0.0,
             max_velocity: 10_000.0,
@@ -405,8 +433,12 @@ impl Drive {
         self.publish(od);
     }
 
-    fn mode(od: &ObjectDictionary) -> Option<Mode> {
-        Mode::from_code(od.get_signed(object::MODES, 0).unwrap_or(0))
+    /// The mode of operation: from the cache, or the dictionary when a write made it stale.
+    fn mode(&self, od: &ObjectDictionary) -> Option<Mode> {
+        match self.params {
+            Some(params) => params.mode,
+            None => Params::read(od).mode,
+        }
     }
 
     fn publish(&self, od: &mut ObjectDictionary) {
@@ -421,14 +453,14 @@ impl Drive {
             statusword |= 0x0400;
         }
         let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
-        let display = Drive::mode(od).map_or(0, Mode::code);
+        let display = self.mode(od).map_or(0, Mode::code);
         let _ = od.set(object::MODES_DISPLAY, 0, &display.to_le_bytes());
         let _ = od.set_int(object::POSITION_ACTUAL, 0, round(self.motor.position));
         let _ = od.set_int(object::VELOCITY_ACTUAL, 0, round(self.motor.velocity));
     }
 
     fn target_reached(&self, od: &ObjectDictionary) -> bool {
-        match (self.state, Drive::mode(od)) {
+        match (self.state, self.mode(od)) {
             (
                 State::OperationEnabled,
                 Some(Mode::ProfilePosition | Mode::CyclicSynchronousPosition),
@@ -494,6 +526,9 @@ impl Application for Drive {
     }
 
     fn on_written(&mut self, _now: Timestamp, od: &mut ObjectDictionary, index: u16, _sub: u8) {
+        if index != object::CONTROLWORD {
+            self.params = None;
+        }
         match index {
             object::CONTROLWORD => {
                 let controlword =
@@ -509,12 +544,12 @@ impl Application for Drive {
                     return;
                 }
                 self.apply(Event::Command(command), od);
-                if new_set_point && Drive::mode(od) == Some(Mode::ProfilePosition) {
+                if new_set_point && self.mode(od) == Some(Mode::ProfilePosition) {
                     self.position_target =
                         real(od.get_signed(object::TARGET_POSITION, 0).unwrap_or(0));
                 }
             }
-            object::TARGET_POSITION if Drive::mode(od) == Some(Mode::CyclicSynchronousPosition) => {
+            object::TARGET_POSITION if self.mode(od) == Some(Mode::CyclicSynchronousPosition) => {
                 self.position_target = real(od.get_signed(object::TARGET_POSITION, 0).unwrap_or(0));
             }
             _ => self.publish(od),
@@ -562,18 +597,16 @@ impl Application for Drive {
             .map_or(0.0, |last| now.saturating_since(last).as_secs_f64())
             .min(0.1);
         self.last_step = Some(now);
-        let read = |index: u16| real(od.get_signed(index, 0).unwrap_or(0));
-        let (acceleration, deceleration, quick) = (
-            read(object::PROFILE_ACCELERATION).max(1.0),
-            read(object::PROFILE_DECELERATION).max(1.0),
-            read(object::QUICK_STOP_DECELERATION).max(1.0),
-        );
+        let params = *self.params.get_or_insert_with(|| Params::read(od));
+        let (acceleration, deceleration, quick) =
+            (params.acceleration, params.deceleration, params.quick);
         let halted = self.previous_controlword & controlword::HALT != 0;
         match self.state {
-            State::OperationEnabled if !halted => match Drive::mode(od) {
+            State::OperationEnabled if !halted => match self.mode(od) {
                 Some(Mode::ProfileVelocity) => {
-                    let target =
-                        read(object::TARGET_VELOCITY).clamp(-self.max_velocity, self.max_velocity);
+                    let target = params
+                        .target_velocity
+                        .clamp(-self.max_velocity, self.max_velocity);
                     let rate = if target.abs() < self.motor.velocity.abs() {
                         deceleration
                     } else {
@@ -582,12 +615,13 @@ impl Application for Drive {
                     self.drive_motor(target, rate, dt);
                 }
                 Some(Mode::CyclicSynchronousVelocity) => {
-                    let target =
-                        read(object::TARGET_VELOCITY).clamp(-self.max_velocity, self.max_velocity);
+                    let target = params
+                        .target_velocity
+                        .clamp(-self.max_velocity, self.max_velocity);
                     self.drive_motor(target, acceleration.max(quick), dt);
                 }
                 Some(Mode::ProfilePosition | Mode::CyclicSynchronousPosition) => {
-                    let limit = read(object::PROFILE_VELOCITY).clamp(1.0, self.max_velocity);
+                    let limit = params.profile_velocity.clamp(1.0, self.max_velocity);
                     let remaining = self.position_target - self.motor.position;
                     // Brake in time: the speed from which `deceleration` stops within `remaining`.
                     let braking = libm::sqrt(2.0 * deceleration * remaining.abs());
@@ -642,7 +676,7 @@ impl Application for Drive {
                 let _ = od.set(object::ERROR_CODE, 0, &[0, 0]);
             }
         }
-        if self.state == State::OperationEnabled && Drive::mode(od) == Some(Mode::ProfileVelocity) {
+        if self.state == State::OperationEnabled && self.mode(od) == Some(Mode::ProfileVelocity) {
             self.position_target = self.motor.position;
         }
         self.publish(od);
@@ -661,6 +695,7 @@ impl Application for Drive {
     fn reset(&mut self, od: &mut ObjectDictionary) {
         *self = Drive {
             max_velocity: self.max_velocity,
+            external: self.external,
             ..Drive::new()
         };
         self.publish(od);

@@ -282,9 +282,47 @@ impl Application for Plain {}
 /// RPDO maps at most 64).
 type Written = EventQueue<(u16, u8), 72>;
 
+/// The communication objects the device acts on (0x1005, 0x1006, 0x100C, 0x100D, 0x1014,
+/// 0x1015, 0x1017, 0x1019), read once and again after a write or reset, so polls do not
+/// search the dictionary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Communication {
+    heartbeat: Duration,
+    life_time: Duration,
+    sync_cob: u64,
+    sync_period: Duration,
+    sync_overflow: u64,
+    emcy_cob: Option<u16>,
+    emcy_inhibit: Duration,
+}
+
+impl Communication {
+    fn read(od: &ObjectDictionary, node: u8) -> Communication {
+        let get = |index: u16| od.get_unsigned(index, 0);
+        Communication {
+            heartbeat: Duration::from_millis(get(0x1017).unwrap_or(0)),
+            life_time: Duration::from_millis(
+                get(0x100C)
+                    .unwrap_or(0)
+                    .saturating_mul(get(0x100D).unwrap_or(0)),
+            ),
+            sync_cob: get(0x1005).unwrap_or(0x80),
+            sync_period: Duration::from_micros(get(0x1006).unwrap_or(0)),
+            sync_overflow: get(0x1019).unwrap_or(0),
+            emcy_cob: get(0x1014).map_or(Some(0x80 + u16::from(node)), |cob| {
+                (cob & 0x8000_0000 == 0).then(|| u16::try_from(cob & 0x7FF).unwrap_or(0))
+            }),
+            emcy_inhibit: Duration::from_micros(get(0x1015).unwrap_or(0).saturating_mul(100)),
+        }
+    }
+}
+
 /// A CANopen device.
 #[derive(Debug, Clone)]
 pub struct Device<A: Application> {
+    comm: Communication,
+    /// The dictionary was handed out for local changes: read `comm` again.
+    comm_stale: bool,
     node: u8,
     od: ObjectDictionary,
     app: A,
@@ -393,6 +431,8 @@ impl<A: Application> Device<A> {
             .max(889);
         let pdos = Pdos::from_dictionary(&od);
         let mut device = Device {
+            comm: Communication::read(&od, node & 0x7F),
+            comm_stale: false,
             node: node & 0x7F,
             od,
             app,
@@ -438,8 +478,10 @@ impl<A: Application> Device<A> {
         &self.od
     }
 
-    /// Its dictionary, to change values locally.
+    /// Its dictionary, to change values locally (communication objects take effect at the
+    /// next poll).
     pub fn od_mut(&mut self) -> &mut ObjectDictionary {
+        self.comm_stale = true;
         &mut self.od
     }
 
@@ -482,7 +524,7 @@ impl<A: Application> Device<A> {
     }
 
     fn heartbeat_period(&self) -> Duration {
-        Duration::from_millis(self.od.get_unsigned(0x1017, 0).unwrap_or(0))
+        self.comm.heartbeat
     }
 
     fn enter(&mut self, now: Timestamp, state: NmtState) {
@@ -525,6 +567,7 @@ impl<A: Application> Device<A> {
             self.app.reset(&mut self.od);
         }
         self.od.restore_defaults(0x1000..=0x1FFF);
+        self.comm = Communication::read(&self.od, self.node);
         self.emcy.clear_all(&mut self.od);
         self.sdo.reset();
         self.pdos.reload_all(&self.od);
@@ -603,14 +646,11 @@ impl<A: Application> Device<A> {
     }
 
     fn life_time(&self) -> Duration {
-        let guard = self.od.get_unsigned(0x100C, 0).unwrap_or(0);
-        let factor = self.od.get_unsigned(0x100D, 0).unwrap_or(0);
-        Duration::from_millis(guard.saturating_mul(factor))
+        self.comm.life_time
     }
 
     fn sync_id(&self) -> Option<u16> {
-        let cob = self.od.get_unsigned(0x1005, 0).unwrap_or(0x80);
-        u16::try_from(cob & 0x7FF).ok()
+        u16::try_from(self.comm.sync_cob & 0x7FF).ok()
     }
 
     fn on_sync(&mut self, now: Timestamp, counter: Option<u8>) {
@@ -637,6 +677,9 @@ impl<A: Application> Device<A> {
     /// React to written objects: reload what they configure, tell the application.
     fn react(&mut self, now: Timestamp) {
         while let Some((index, sub)) = self.written.pop() {
+            if (0x1000..=0x1FFF).contains(&index) {
+                self.comm = Communication::read(&self.od, self.node);
+            }
             match index {
                 0x1003 => clear_history(&mut self.od),
                 0x1016 => self.load_consumers(),
@@ -652,6 +695,10 @@ impl<A: Application> Device<A> {
 
     /// Boot when first polled; run the application; send heartbeats, SYNC, EMCY and TPDOs.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        if self.comm_stale {
+            self.comm = Communication::read(&self.od, self.node);
+            self.comm_stale = false;
+        }
         if !self.booted {
             self.boot(now);
         }
@@ -703,19 +750,8 @@ impl<A: Application> Device<A> {
         }
         self.sdo.poll(now, out);
         if self.state != NmtState::Stopped {
-            let cob = self
-                .od
-                .get_unsigned(0x1014, 0)
-                .map_or(Some(0x80 + u16::from(self.node)), |cob| {
-                    (cob & 0x8000_0000 == 0).then(|| u16::try_from(cob & 0x7FF).unwrap_or(0))
-                });
-            let inhibit = Duration::from_micros(
-                self.od
-                    .get_unsigned(0x1015, 0)
-                    .unwrap_or(0)
-                    .saturating_mul(100),
-            );
-            self.emcy.poll(now, cob, inhibit, out);
+            self.emcy
+                .poll(now, self.comm.emcy_cob, self.comm.emcy_inhibit, out);
         }
         if self.state == NmtState::Operational {
             let events = &mut self.events;
@@ -746,15 +782,14 @@ impl<A: Application> Device<A> {
     }
 
     fn produce_sync(&mut self, now: Timestamp) {
-        let cob = self.od.get_unsigned(0x1005, 0).unwrap_or(0x80);
-        let period = Duration::from_micros(self.od.get_unsigned(0x1006, 0).unwrap_or(0));
+        let (cob, period) = (self.comm.sync_cob, self.comm.sync_period);
         if cob & 0x4000_0000 == 0 || period.is_zero() || self.state == NmtState::Stopped {
             return;
         }
         if self.next_sync.is_some_and(|due| now < due) {
             return;
         }
-        let overflow = self.od.get_unsigned(0x1019, 0).unwrap_or(0);
+        let overflow = self.comm.sync_overflow;
         let id = u16::try_from(cob & 0x7FF).unwrap_or(0x80);
         let frame = if overflow >= 2 {
             self.sync_counter = if self.sync_counter >= u8::try_from(overflow).unwrap_or(240) {

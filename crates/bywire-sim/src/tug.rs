@@ -142,6 +142,7 @@ pub struct Tug {
     reset_pulses: Vec<Timestamp>,
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
+    remaining: f64,
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
@@ -274,6 +275,7 @@ impl Tug {
                 ControlMode::Manual,
             ),
             drives_lost: false,
+            remaining: f64::INFINITY,
         }
     }
 
@@ -334,16 +336,9 @@ impl Tug {
         &self.ecu
     }
 
-    /// The route's remaining distance from the tug's projection, m.
+    /// The route's remaining distance from the tug's projection at the last ADS cycle, m.
     pub fn remaining(&self) -> f64 {
-        Path::new(&self.route).map_or(0.0, |path| {
-            let pose = self.chassis.pose();
-            let projection = path.project(Point {
-                x: pose.x,
-                y: pose.y,
-            });
-            path.length() - projection.station
-        })
+        self.remaining
     }
 
     /// When the vehicle first reported autonomous mode to the ADS.
@@ -494,6 +489,7 @@ impl Tug {
                 }
                 None => (0.0, 0.0, 0.0),
             };
+            self.remaining = remaining;
             if self.engaged_at.is_some() {
                 self.tracking_errors.push(error);
             }
