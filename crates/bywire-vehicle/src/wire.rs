@@ -303,11 +303,9 @@ impl RoleMessage {
         )
     }
 
-    /// Check a frame of this message: its counter (0 without one), or why not.
+    /// Check a frame of this message: its counter (0 without one), or why not (a remote frame
+    /// has no data, so it is short: malformed).
     fn check(&mut self, frame: &Frame) -> Result<u64, Rejected> {
-        if frame.is_remote() || frame.data().len() < self.codec.size() {
-            return Err(Rejected::Malformed);
-        }
         let counter = match self.protection.verify(&self.codec, frame.data()) {
             Ok(counter) => counter.unwrap_or(0),
             Err(bywire_dbc::e2e::ProtectionError::Checksum { .. }) => {
