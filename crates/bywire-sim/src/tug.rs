@@ -90,6 +90,21 @@ pub enum Fault {
     SensorFault(usize, SensorFault),
 }
 
+/// The run's state every 50 ms, for plots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// When.
+    pub t: Timestamp,
+    /// Pose.
+    pub pose: Pose,
+    /// Speed, m/s.
+    pub speed: f64,
+    /// The ADS's steering command, degrees.
+    pub steering_command: f64,
+    /// The front-left wheel's angle, degrees.
+    pub steering_actual: f64,
+}
+
 /// Something that happened in a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimEvent {
@@ -134,6 +149,9 @@ pub struct Tug {
     pub tracking_errors: Vec<f64>,
     /// What happened, in time order.
     pub events: Vec<SimEvent>,
+    /// The state every 50 ms.
+    pub trace: Vec<Sample>,
+    steering_command: f64,
     /// Faults active until their end time (`None`: for good).
     active: Vec<(Fault, Option<Timestamp>)>,
     safety_port: NodeId,
@@ -264,6 +282,8 @@ impl Tug {
             bus2_log: Vec::new(),
             tracking_errors: Vec::new(),
             events: Vec::new(),
+            trace: Vec::new(),
+            steering_command: 0.0,
             active: Vec::new(),
             safety_port,
             next_estop_frame: Timestamp::ZERO,
@@ -389,6 +409,19 @@ impl Tug {
         self.run_ecu(now);
         self.run_plants(now);
         self.note_changes();
+        if now.as_nanos() % 50_000_000 == 0 {
+            let steering_actual = self
+                .corners
+                .first()
+                .map_or(0.0, |c| c.chain.wheel_angle_deg());
+            self.trace.push(Sample {
+                t: now,
+                pose: self.chassis.pose(),
+                speed: self.pose_speed(),
+                steering_command: self.steering_command,
+                steering_actual,
+            });
+        }
     }
 
     /// The safety controller: the E-stop chain's state every 20 ms.
@@ -516,6 +549,7 @@ impl Tug {
             if autonomous && self.engaged_at.is_none() {
                 self.engaged_at = Some(now);
             }
+            self.steering_command = steering;
             let command = AdsCommand {
                 steering,
                 velocity,

@@ -57,10 +57,10 @@ pub struct Args {
 }
 
 /// One plotted signal: its label, unit and points (seconds, value).
-struct Series {
-    label: String,
-    unit: String,
-    points: Vec<(f64, f64)>,
+pub(crate) struct Series {
+    pub(crate) label: String,
+    pub(crate) unit: String,
+    pub(crate) points: Vec<(f64, f64)>,
 }
 
 /// Where a requested signal is: message index and signal index.
@@ -237,7 +237,10 @@ fn collect(dbc: &Dbc, wanted: &[(usize, usize)], frames: &[(Timestamp, Frame)]) 
 }
 
 /// Render into a temporary file beside `path`, then rename it into place.
-fn write_atomically(path: &Path, render: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+pub(crate) fn write_atomically(
+    path: &Path,
+    render: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
     let name = path
         .file_name()
         .ok_or_else(|| anyhow!("-o {}: not a file name", path.display()))?
@@ -268,7 +271,7 @@ const COLORS: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
-fn draw<DB: DrawingBackend>(
+pub(crate) fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     series: &[Series],
     subplots: bool,

@@ -1,5 +1,5 @@
 //! `bywire sim`: the simulated tug on its buses, driven along a route by the ADS side, in
-//! real time or as fast as possible; candump logs of every bus and a metrics JSON.
+//! real time or as fast as possible; candump logs of every bus, a metrics JSON and a plot.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -13,7 +13,7 @@ use serde_json::json;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s) and bus2.log (CANopen drives,\n1 Mbit/s) in candump -L form, and metrics.json (sim_seconds, completed, events, route\ntracking error, bus loads, battery). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s) and bus2.log (CANopen drives,\n1 Mbit/s) in candump -L form, metrics.json (sim_seconds, completed, events, route\ntracking error, bus loads, battery) and run.png (speed, steering command and actual, heading). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -142,10 +142,56 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "battery_soc": tug.soc(),
         "wall_seconds": start.elapsed().as_secs_f64(),
     });
+    plot(&tug, &args.out.join("run.png"))?;
     let path = args.out.join("metrics.json");
     std::fs::write(&path, serde_json::to_string_pretty(&metrics)? + "\n")
         .with_context(|| format!("{}", path.display()))?;
     writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} % and {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, args.out.display())?;
     Ok(())
+}
+
+/// The run as time series: speed, the ADS's steering command and the front-left wheel's
+/// angle, and the heading.
+fn plot(tug: &Tug, path: &std::path::Path) -> Result<()> {
+    use crate::plot_cmd::{draw, write_atomically, Series};
+    use plotters::prelude::{BitMapBackend, IntoDrawingArea};
+    let seconds = |t: Timestamp| t.as_nanos() as f64 / 1e9;
+    let series =
+        |label: &str, unit: &str, value: &dyn Fn(&bywire_sim::tug::Sample) -> f64| Series {
+            label: label.to_string(),
+            unit: unit.to_string(),
+            points: tug.trace.iter().map(|s| (seconds(s.t), value(s))).collect(),
+        };
+    // The heading unwrapped: a loop reads as 360°, not a jump at ±180°.
+    let mut heading = Series {
+        label: "heading".to_string(),
+        unit: "deg".to_string(),
+        points: Vec::new(),
+    };
+    let mut turned = 0.0;
+    let mut previous: Option<f64> = None;
+    for sample in &tug.trace {
+        let yaw = sample.pose.yaw.to_degrees();
+        if let Some(before) = previous {
+            turned += (yaw - before + 540.0).rem_euclid(360.0) - 180.0;
+        } else {
+            turned = yaw;
+        }
+        previous = Some(yaw);
+        heading.points.push((seconds(sample.t), turned));
+    }
+    let all = [
+        series("speed", "m/s", &|s| s.speed),
+        series("steering command", "deg", &|s| s.steering_command),
+        series("front-left wheel angle", "deg", &|s| s.steering_actual),
+        heading,
+    ];
+    write_atomically(path, |tmp| {
+        draw(
+            BitMapBackend::new(tmp, (1200, 1200)).into_drawing_area(),
+            &all,
+            true,
+        )
+    })
 }

@@ -44,6 +44,11 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         metrics["tracking_error_m"]["max"].as_f64().unwrap() < 0.5,
         "{metrics}"
     );
+    let png = std::fs::read(a.join("run.png")).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000,
+        "a plot of the run"
+    );
     let kinds: Vec<&str> = metrics["events"]
         .as_array()
         .unwrap()
