@@ -4,6 +4,8 @@
 //! - bus 2 (drives, CANopen, 1 Mbit/s, bit-timed): the ECU as NMT master commanding four
 //!   steering drives (CiA 402 profile position, each turning its corner's orbital valve) and
 //!   four wheel drives (CiA 402 profile velocity), heartbeats monitored;
+//! - bus 3 (sensors, 500 kbit/s, bit-timed): the IMU, read by the ECU; the ECU reports wheel
+//!   speeds and angles, vehicle status and (from the BMS) the battery to the ADS on bus 1;
 //! - the plants: steering chains, wheel drives and brakes, battery, chassis.
 //!
 //! Every node is the same sans-IO node that runs on hardware; the buses are the bit-timed
@@ -22,7 +24,10 @@ use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::Profile;
-use bywire_vehicle::reference_tug::{self, ControlMode, EmergencyStop, Gear, SteeringMode};
+use bywire_vehicle::reference_tug::{
+    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringMode,
+    VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles,
+};
 use bywire_vehicle::supervisor::Supervisor;
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
@@ -121,6 +126,15 @@ pub struct Tug {
     now: Timestamp,
     bus1: SimBus,
     bus2: SimBus,
+    bus3: SimBus,
+    imu_port: NodeId,
+    ecu_port3: NodeId,
+    log_port3: NodeId,
+    bms_port: NodeId,
+    next_report: Timestamp,
+    report_counter: u64,
+    /// Frames on bus 3.
+    pub bus3_log: Vec<Logged>,
     ads_port: NodeId,
     ecu_port1: NodeId,
     ecu_port2: NodeId,
@@ -195,8 +209,11 @@ impl Tug {
         };
         let mut bus1 = SimBus::new(500_000, None);
         let mut bus2 = SimBus::new(1_000_000, None);
+        let mut bus3 = SimBus::new(500_000, None);
+        let (imu_port, ecu_port3, log_port3) = (bus3.add_node(), bus3.add_node(), bus3.add_node());
         let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
         let safety_port = bus1.add_node();
+        let bms_port = bus1.add_node();
         let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
         let mut master = Master::new(
             MASTER_NODE,
@@ -247,6 +264,14 @@ impl Tug {
             now: Timestamp::ZERO,
             bus1,
             bus2,
+            bus3,
+            imu_port,
+            ecu_port3,
+            log_port3,
+            bms_port,
+            next_report: Timestamp::ZERO,
+            report_counter: 0,
+            bus3_log: Vec::new(),
             ads_port,
             ecu_port1,
             ecu_port2,
@@ -371,14 +396,16 @@ impl Tug {
         self.battery.soc()
     }
 
-    /// Bus loads over the run so far: busy time over elapsed time, bus 1 and bus 2.
+    /// Bus loads over the run so far: busy time over elapsed time, buses 1, 2 and 3.
     #[allow(clippy::cast_precision_loss)]
-    pub fn bus_loads(&self) -> (f64, f64) {
+    pub fn bus_loads(&self) -> [f64; 3] {
         let elapsed = self.now.as_nanos().max(1) as f64;
-        (
-            self.bus1.busy_ns() as f64 / elapsed,
-            self.bus2.busy_ns() as f64 / elapsed,
-        )
+        [
+            self.bus1.busy_ns(),
+            self.bus2.busy_ns(),
+            self.bus3.busy_ns(),
+        ]
+        .map(|busy| busy as f64 / elapsed)
     }
 
     /// One millisecond.
@@ -387,6 +414,7 @@ impl Tug {
         self.now = now;
         self.bus1.advance(now);
         self.bus2.advance(now);
+        self.bus3.advance(now);
         let expired: Vec<Fault> = self
             .active
             .iter()
@@ -408,6 +436,7 @@ impl Tug {
         self.run_ads(now);
         self.run_ecu(now);
         self.run_plants(now);
+        self.run_reports(now);
         self.note_changes();
         if now.as_nanos() % 50_000_000 == 0 {
             let steering_actual = self
@@ -421,6 +450,95 @@ impl Tug {
                 steering_command: self.steering_command,
                 steering_actual,
             });
+        }
+    }
+
+    /// The periodic reports: the IMU on bus 3 every 10 ms; every 20 ms the ECU's wheel speeds
+    /// and angles and its status on bus 1; the BMS every 100 ms.
+    fn run_reports(&mut self, now: Timestamp) {
+        if now < self.next_report {
+            return;
+        }
+        self.next_report = now.saturating_add(Duration::from_millis(10));
+        let counter = self.report_counter;
+        self.report_counter = self.report_counter.wrapping_add(1);
+        let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
+        let mut imu = Imu::default();
+        let _ = imu.set_yaw_rate(yaw_rate.to_degrees().clamp(-327.0, 327.0));
+        let _ = imu.set_accel_x(accel.clamp(-32.0, 32.0));
+        imu.set_counter_raw(counter & 0x0F);
+        self.bus3.submit(
+            self.imu_port,
+            reference_tug::sealed_frame(Imu::ID, imu.0),
+            now,
+        );
+        if counter % 2 == 0 {
+            let (mut speeds, mut angles) = ([0.0; 4], [0.0; 4]);
+            for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
+                if let (Some(Controlled::Drive(d)), Some(slot)) =
+                    (self.master.controlled(drive), speeds.get_mut(i))
+                {
+                    *slot = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
+                }
+                if let (Some(Controlled::Drive(d)), Some(slot)) =
+                    (self.master.controlled(*steer), angles.get_mut(i))
+                {
+                    *slot = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+                }
+            }
+            let feedback_counter = (counter / 2) & 0x0F;
+            let mut m = VehicleToAdsSensors::default();
+            let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.0, 20.0));
+            let _ = (
+                m.set_wheel_speed_fl(fl),
+                m.set_wheel_speed_fr(fr),
+                m.set_wheel_speed_rl(rl),
+                m.set_wheel_speed_rr(rr),
+            );
+            m.set_counter_raw(feedback_counter);
+            self.bus1.submit(
+                self.ecu_port1,
+                reference_tug::sealed_frame(VehicleToAdsSensors::ID, m.0),
+                now,
+            );
+            let mut m = VehicleToAdsWheelAngles::default();
+            let [fl, fr, rl, rr] = angles.map(|a| a.clamp(-200.0, 200.0));
+            let _ = (
+                m.set_wheel_angle_fl(fl),
+                m.set_wheel_angle_fr(fr),
+                m.set_wheel_angle_rl(rl),
+                m.set_wheel_angle_rr(rr),
+            );
+            m.set_counter_raw(feedback_counter);
+            self.bus1.submit(
+                self.ecu_port1,
+                reference_tug::sealed_frame(VehicleToAdsWheelAngles::ID, m.0),
+                now,
+            );
+            let mut status = VehicleStatus::default();
+            status.set_drive_fault_raw(u64::from(self.drives_lost));
+            status.set_estop_chain_open_raw(u64::from(self.is_active(Fault::Estop)));
+            status.set_parking_brake_applied_raw(u64::from(
+                self.corners.iter().any(|c| c.wheel.is_parked()),
+            ));
+            status.set_counter_raw(feedback_counter);
+            self.bus1.submit(
+                self.ecu_port1,
+                reference_tug::sealed_frame(VehicleStatus::ID, status.0),
+                now,
+            );
+        }
+        if counter % 10 == 0 {
+            let mut m = BatteryMessage::default();
+            let _ = m.set_battery_voltage(self.battery.terminal_v().clamp(0.0, 120.0));
+            let _ = m.set_battery_current(self.battery.current().clamp(-1000.0, 1000.0));
+            let _ = m.set_state_of_charge((self.battery.soc() * 100.0).clamp(0.0, 100.0));
+            m.set_counter_raw((counter / 10) & 0x0F);
+            self.bus1.submit(
+                self.bms_port,
+                reference_tug::sealed_frame(BatteryMessage::ID, m.0),
+                now,
+            );
         }
     }
 
@@ -490,6 +608,11 @@ impl Tug {
         while let Some(r) = self.bus2.receive(self.log_port2) {
             self.bus2_log.push((r.timestamp, r.frame));
         }
+        while let Some(r) = self.bus3.receive(self.log_port3) {
+            self.bus3_log.push((r.timestamp, r.frame));
+        }
+        // The ECU takes the IMU's frames (for its own checks; the ADS localises itself).
+        while self.bus3.receive(self.ecu_port3).is_some() {}
         for corner in &mut self.corners {
             while let Some(r) = self.bus2.receive(corner.steer_port) {
                 corner.steer.on_frame(r.timestamp, &r.frame);

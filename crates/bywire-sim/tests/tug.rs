@@ -77,11 +77,19 @@ fn the_tug_follows_its_route_over_its_buses() {
         "tracking error: worst {worst} m, mean {mean} m"
     );
     // Commands and state at 50 Hz on 500 kbit/s; eight drives' PDOs and heartbeats on 1 Mbit/s.
-    let (load1, load2) = tug.bus_loads();
+    // IMU at 100 Hz on 500 kbit/s.
+    let [load1, load2, load3] = tug.bus_loads();
     assert!(
-        (0.01..0.1).contains(&load1) && (0.1..0.5).contains(&load2),
-        "bus loads {load1} {load2}"
+        (0.01..0.1).contains(&load1)
+            && (0.1..0.5).contains(&load2)
+            && (0.01..0.05).contains(&load3),
+        "bus loads {load1} {load2} {load3}"
     );
+    // The ADS validated the ECU's wheel reports.
+    assert!(tug
+        .bus1_log
+        .iter()
+        .any(|(_, f)| f.id().unwrap().as_raw() == 0x102));
     assert!(tug.soc() < 0.8, "the battery drove it");
 }
 
@@ -90,6 +98,7 @@ fn the_same_seed_gives_the_same_frames() {
     let (a, b) = (run(7), run(7));
     assert_eq!(a.bus1_log, b.bus1_log);
     assert_eq!(a.bus2_log, b.bus2_log);
+    assert_eq!(a.bus3_log, b.bus3_log);
     assert_eq!(a.pose(), b.pose());
 }
 

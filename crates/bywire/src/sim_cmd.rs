@@ -13,7 +13,7 @@ use serde_json::json;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s) and bus2.log (CANopen drives,\n1 Mbit/s) in candump -L form, metrics.json (sim_seconds, completed, events, route\ntracking error, bus loads, battery) and run.png (speed, steering command and actual, heading). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s) and bus3.log (sensors, 500 kbit/s) in candump -L form, metrics.json (sim_seconds, completed, events, route\ntracking error, bus loads, battery) and run.png (speed, steering command and actual, heading). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -96,7 +96,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             }
         }
     };
-    for (name, log) in [("bus1", &tug.bus1_log), ("bus2", &tug.bus2_log)] {
+    for (name, log) in [
+        ("bus1", &tug.bus1_log),
+        ("bus2", &tug.bus2_log),
+        ("bus3", &tug.bus3_log),
+    ] {
         let path = args.out.join(format!("{name}.log"));
         let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
         let mut writer = Writer::new(std::io::BufWriter::new(file));
@@ -112,7 +116,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     } else {
         errors.iter().sum::<f64>() / errors.len() as f64
     };
-    let (load1, load2) = tug.bus_loads();
+    let [load1, load2, load3] = tug.bus_loads();
     let seconds = |t: Timestamp| t.as_nanos() as f64 / 1e9;
     let mut events = Vec::new();
     if let Some(at) = tug.engaged_at() {
@@ -137,8 +141,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "completed": completed,
         "events": events,
         "tracking_error_m": {"max": worst, "mean": mean},
-        "bus_load": {"bus1": load1, "bus2": load2},
-        "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len()},
+                "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3},
+        "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len()},
         "battery_soc": tug.soc(),
         "wall_seconds": start.elapsed().as_secs_f64(),
     });
@@ -146,8 +150,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let path = args.out.join("metrics.json");
     std::fs::write(&path, serde_json::to_string_pretty(&metrics)? + "\n")
         .with_context(|| format!("{}", path.display()))?;
-    writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} % and {:.1} %; logs and metrics in {}",
-        if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, args.out.display())?;
+    writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
+        if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, load3 * 100.0, args.out.display())?;
     Ok(())
 }
 

@@ -64,7 +64,7 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
     assert!((20.0..120.0).contains(&sim_seconds), "{sim_seconds}");
     sim(&b, "5");
-    for log in ["bus1.log", "bus2.log"] {
+    for log in ["bus1.log", "bus2.log", "bus3.log"] {
         let (x, y) = (
             std::fs::read(a.join(log)).unwrap(),
             std::fs::read(b.join(log)).unwrap(),
