@@ -93,6 +93,17 @@ pub enum Fault {
     DriveSilence(u8),
     /// The angle sensor of a corner (0 FL … 3 RR) fails.
     SensorFault(usize, SensorFault),
+    /// The ADS's commands arrive with a flipped bit (their checksum fails).
+    CorruptCommands,
+    /// Every ADS command arrives twice.
+    DuplicateCommands,
+    /// The ADS's commands arrive this many milliseconds late.
+    DelayCommands(u64),
+    /// A driver turns the steering wheel (torque above the takeover threshold).
+    DriverTakeover,
+    /// The ECU's controller on bus 1 meets a burst of bus errors (40 destroyed frames: more
+    /// than enough for bus-off).
+    EcuBusOff,
 }
 
 /// The run's state every 50 ms, for plots.
@@ -175,6 +186,7 @@ pub struct Tug {
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
     remaining: f64,
+    delayed: Vec<(Timestamp, Frame)>,
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
@@ -321,6 +333,7 @@ impl Tug {
             ),
             drives_lost: false,
             remaining: f64::INFINITY,
+            delayed: Vec::new(),
         }
     }
 
@@ -343,7 +356,20 @@ impl Tug {
                     }
                 }
             }
-            Fault::AdsSilence | Fault::Estop | Fault::DriveSilence(_) => {}
+            Fault::EcuBusOff => {
+                self.bus1.corrupt(bywire_bus::sim::Fault {
+                    node: Some(self.ecu_port1),
+                    id: None,
+                    count: 40,
+                });
+            }
+            Fault::AdsSilence
+            | Fault::Estop
+            | Fault::DriveSilence(_)
+            | Fault::CorruptCommands
+            | Fault::DuplicateCommands
+            | Fault::DelayCommands(_)
+            | Fault::DriverTakeover => {}
         }
         self.active
             .push((fault, duration.map(|d| now.saturating_add(d))));
@@ -559,8 +585,19 @@ impl Tug {
         );
     }
 
-    /// Record the supervisor's state changes and the master's heartbeat events.
+    /// Record the supervisor's state changes, bus state changes and the master's heartbeat
+    /// events.
     fn note_changes(&mut self) {
+        for (bus, events) in [
+            ("bus1", self.bus1.take_events()),
+            ("bus2", self.bus2.take_events()),
+        ] {
+            for event in events {
+                if let bywire_bus::sim::BusEvent::StateChanged { node, state, .. } = event {
+                    self.record("bus_state", format!("{bus} node {node}: {state:?}"));
+                }
+            }
+        }
         let seen = (self.ecu.watchdog(), self.ecu.estop(), self.ecu.mode());
         let (watchdog, estop, mode) = self.last_seen;
         if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
@@ -688,18 +725,60 @@ impl Tug {
             };
             let _ = self.ads.set_command(now, command);
         }
+        // What the faults do to the ADS's frames on their way.
         let silent = self.is_active(Fault::AdsSilence);
-        let (bus, port) = (&mut self.bus1, self.ads_port);
-        self.ads.poll(now, &mut |f| {
-            if !silent {
-                bus.submit(port, f, now);
-            }
+        let corrupt = self.is_active(Fault::CorruptCommands);
+        let duplicate = self.is_active(Fault::DuplicateCommands);
+        let delay = self.active.iter().find_map(|(f, _)| match f {
+            Fault::DelayCommands(ms) => Some(Duration::from_millis(*ms)),
+            _ => None,
         });
+        let mut sent = Vec::new();
+        self.ads.poll(now, &mut |f| sent.push(f));
+        for frame in sent {
+            if silent {
+                continue;
+            }
+            let frame = if corrupt && frame.id().is_some_and(|id| id.as_raw() == 0x100) {
+                let mut data = [0u8; 8];
+                data.iter_mut().zip(frame.data()).for_each(|(d, s)| *d = *s);
+                data[0] ^= 0x01;
+                frame
+                    .id()
+                    .and_then(|id| Frame::classic(id, &data).ok())
+                    .unwrap_or(frame)
+            } else {
+                frame
+            };
+            match delay {
+                Some(delay) => self.delayed.push((now.saturating_add(delay), frame)),
+                None => self.bus1.submit(self.ads_port, frame, now),
+            }
+            if duplicate {
+                self.bus1.submit(self.ads_port, frame, now);
+            }
+        }
+        let due: Vec<Frame> = self
+            .delayed
+            .iter()
+            .filter(|(at, _)| *at <= now)
+            .map(|(_, f)| *f)
+            .collect();
+        self.delayed.retain(|(at, _)| *at > now);
+        for frame in due {
+            self.bus1.submit(self.ads_port, frame, now);
+        }
     }
 
     /// The vehicle control ECU: the supervisor on bus 1, its actuator outputs turned into
     /// wheel angles and speeds by 4WS kinematics and sent to the drives on bus 2.
     fn run_ecu(&mut self, now: Timestamp) {
+        let takeover = if self.is_active(Fault::DriverTakeover) {
+            8.0
+        } else {
+            0.0
+        };
+        self.ecu.set_driver_input(takeover, 0.0);
         let (bus, port) = (&mut self.bus1, self.ecu_port1);
         self.ecu.poll(now, &mut |f| bus.submit(port, f, now));
         let a = self.ecu.actuators(now);
@@ -893,7 +972,8 @@ pub struct Scenario {
 impl Scenario {
     /// A built-in scenario by name: `apron-loop` (the route, nothing happens) or `fault-tour`
     /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
-    /// and a stuck steering sensor).
+    /// a stuck steering sensor, corrupted, duplicated and delayed commands, a driver's
+    /// takeover, and the ECU's controller going bus-off).
     pub fn builtin(name: &str) -> Option<Scenario> {
         let s = Duration::from_secs;
         match name {
@@ -914,6 +994,23 @@ impl Scenario {
                         Fault::SensorFault(2, SensorFault::Stuck(0.0)),
                         Some(s(3)),
                     ),
+                    (
+                        s(50),
+                        Fault::CorruptCommands,
+                        Some(Duration::from_millis(50)),
+                    ),
+                    (
+                        s(51),
+                        Fault::DuplicateCommands,
+                        Some(Duration::from_millis(100)),
+                    ),
+                    (
+                        s(52),
+                        Fault::DriverTakeover,
+                        Some(Duration::from_millis(500)),
+                    ),
+                    (s(54), Fault::DelayCommands(15), Some(s(1))),
+                    (s(56), Fault::EcuBusOff, None),
                 ],
             }),
             _ => None,

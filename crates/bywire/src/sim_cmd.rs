@@ -143,7 +143,14 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "tracking_error_m": {"max": worst, "mean": mean},
                 "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3},
         "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len()},
-        "battery_soc": tug.soc(),
+                "battery_soc": tug.soc(),
+        "supervisor": {
+            "accepted": tug.ecu().stats().accepted,
+            "checksum": tug.ecu().stats().checksum,
+            "repeated": tug.ecu().stats().repeated,
+            "skipped": tug.ecu().stats().skipped,
+            "out_of_range": tug.ecu().stats().out_of_range,
+        },
         "wall_seconds": start.elapsed().as_secs_f64(),
     });
     plot(&tug, &args.out.join("run.png"))?;

@@ -163,4 +163,30 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
     let cut = first("fault", "DriveSilence", 0.0);
     assert!(first("heartbeat_lost", "node", cut) - cut <= 0.251);
     assert!(first("fault", "SensorFault", 0.0) > cut);
+    // Corrupted commands fail their checksum: the watchdog holds at once; duplicates are
+    // refused as repeated counters.
+    let corrupt = first("fault", "CorruptCommands", 0.0);
+    assert!(first("watchdog", "holding", corrupt) - corrupt <= 0.031);
+    assert!(
+        metrics["supervisor"]["checksum"].as_u64().unwrap() >= 2,
+        "{}",
+        metrics["supervisor"]
+    );
+    assert!(
+        metrics["supervisor"]["repeated"].as_u64().unwrap() >= 4,
+        "{}",
+        metrics["supervisor"]
+    );
+    // A driver's takeover drops to manual within the step; the ADS re-engages after.
+    let takeover = first("fault", "DriverTakeover", 0.0);
+    assert!(first("mode", "Manual", takeover) - takeover <= 0.0015);
+    assert!(
+        first("mode", "Autonomous", takeover) > first("fault_cleared", "DriverTakeover", takeover)
+    );
+    // The ECU's controller on bus 1: bus-off, then back to error active.
+    let errors = first("fault", "EcuBusOff", 0.0);
+    assert!(
+        first("bus_state", "bus1 node 1: BusOff", errors)
+            < first("bus_state", "bus1 node 1: ErrorActive", errors)
+    );
 }
