@@ -150,6 +150,10 @@ pub struct Fault {
 
 /// One simulated bus.
 pub struct SimBus {
+    /// Frame time (ns) and the bits a receiver reads before it finds a destroyed frame's CRC
+    /// wrong, by frame: the wire model is exact but costly, and periodic traffic repeats the
+    /// same frames (bounded: cleared when full; a pure function, so runs stay deterministic).
+    timings: std::collections::HashMap<Frame, (f64, usize)>,
     nominal: u32,
     data: Option<u32>,
     /// The bus is idle from here on (after the last intermission).
@@ -167,6 +171,7 @@ impl SimBus {
     /// A bus at `nominal` bit/s, with FD data phases at `data` bit/s when given.
     pub fn new(nominal: u32, data: Option<u32>) -> Self {
         SimBus {
+            timings: std::collections::HashMap::new(),
             nominal: nominal.max(1),
             data,
             idle_from: Timestamp::ZERO,
@@ -410,6 +415,28 @@ impl SimBus {
         recovery
     }
 
+    /// A frame's time on this bus (ns) and where receivers find a destroyed copy's CRC wrong
+    /// (bits from its start); `None` for what has no bits on the wire.
+    fn timing(&mut self, frame: &Frame) -> Option<(f64, usize)> {
+        if let Some(timing) = self.timings.get(frame) {
+            return Some(*timing);
+        }
+        let bits = wire::encode(frame).ok()?;
+        let brs = matches!(frame, Frame::Fd(f) if f.brs());
+        let time = bits.time_ns(self.nominal, if brs { self.data } else { None });
+        // Receivers find the CRC wrong at the CRC delimiter, then the error frame follows.
+        let detected = bits
+            .spans()
+            .iter()
+            .find(|s| s.field == Field::CrcDelimiter)
+            .map_or(bits.len(), |s| s.start + 1);
+        if self.timings.len() >= 4_096 {
+            self.timings.clear();
+        }
+        self.timings.insert(*frame, (time, detected));
+        Some((time, detected))
+    }
+
     /// Run the bus up to `until`.
     pub fn advance(&mut self, until: Timestamp) {
         // Each pass sends or destroys one frame, brings a node back from bus-off, or ends:
@@ -468,7 +495,7 @@ impl SimBus {
             return;
         };
         let (frame, submitted) = (pending.frame, pending.submitted);
-        let Ok(bits) = wire::encode(&frame) else {
+        let Some((time, detected)) = self.timing(&frame) else {
             return;
         };
         let fault = self.faults.iter_mut().find(|f| {
@@ -478,12 +505,6 @@ impl SimBus {
         let end;
         if let Some(fault) = fault {
             fault.count -= 1;
-            // Receivers find the CRC wrong at the CRC delimiter, then the error frame follows.
-            let detected = bits
-                .spans()
-                .iter()
-                .find(|s| s.field == Field::CrcDelimiter)
-                .map_or(bits.len(), |s| s.start + 1);
             let error_end =
                 start.saturating_add(ns(self, u64::try_from(detected).unwrap_or(0) + ERROR_FRAME));
             end = error_end;
@@ -500,8 +521,6 @@ impl SimBus {
             );
             self.tell_receivers(winner, Event::ReceiveError, error_end);
         } else {
-            let brs = matches!(frame, Frame::Fd(f) if f.brs());
-            let time = bits.time_ns(self.nominal, if brs { self.data } else { None });
             // Frame times are whole nanoseconds at common bitrates; round the rest to nearest.
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             let eof = start.saturating_add(std::time::Duration::from_nanos(time.round() as u64));

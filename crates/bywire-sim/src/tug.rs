@@ -588,10 +588,12 @@ impl Tug {
     /// Record the supervisor's state changes, bus state changes and the master's heartbeat
     /// events.
     fn note_changes(&mut self) {
-        for (bus, events) in [
+        let events = [
             ("bus1", self.bus1.take_events()),
             ("bus2", self.bus2.take_events()),
-        ] {
+            ("bus3", self.bus3.take_events()),
+        ];
+        for (bus, events) in events {
             for event in events {
                 if let bywire_bus::sim::BusEvent::StateChanged { node, state, .. } = event {
                     self.record("bus_state", format!("{bus} node {node}: {state:?}"));
