@@ -12,11 +12,13 @@
 //!   four wheels' angles and speeds;
 //! - [`rng`]: the seeded random numbers every noise source draws from;
 //! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
-//!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time.
+//!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time;
+//! - [`scenario`]: routes, load, grade and faults, built in or from TOML files.
 
 pub mod battery;
 pub mod chassis;
 pub mod drive;
 pub mod rng;
+pub mod scenario;
 pub mod steering;
 pub mod tug;

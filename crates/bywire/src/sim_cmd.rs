@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
-use bywire_sim::tug::{apron_loop, Scenario, Tug, TugParams};
+use bywire_sim::scenario::Scenario;
+use bywire_sim::tug::{Tug, TugParams};
 use serde_json::json;
 
 #[derive(clap::Args)]
@@ -22,30 +23,36 @@ pub struct Args {
     /// Seed of every noise source.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Scenario (built in: apron-loop, fault-tour).
+    /// Scenario: built in (apron-loop, fault-tour) or a TOML file.
     #[arg(long, default_value = "apron-loop")]
     scenario: String,
     /// Folder for the logs and metrics.
     #[arg(long, default_value = "sim-out")]
     out: PathBuf,
-    /// Payload, kg.
-    #[arg(long, default_value_t = 2_000.0)]
-    payload: f64,
+    /// Payload, kg (instead of the scenario's).
+    #[arg(long)]
+    payload: Option<f64>,
     /// Stop after this many simulated seconds at most.
     #[arg(long, default_value_t = 300.0)]
     max_seconds: f64,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let Some(scenario) = Scenario::builtin(&args.scenario) else {
-        bail!(
-            "--scenario {}: not a built-in scenario (apron-loop, fault-tour)",
+    let scenario = match Scenario::builtin(&args.scenario) {
+        Some(scenario) => scenario,
+        None if std::path::Path::new(&args.scenario).is_file() => {
+            let text = std::fs::read_to_string(&args.scenario)
+                .with_context(|| format!("--scenario {}", args.scenario))?;
+            Scenario::parse(&text, &args.scenario)?
+        }
+        None => bail!(
+            "--scenario {}: not a built-in scenario (apron-loop, fault-tour) nor a file",
             args.scenario
-        );
+        ),
     };
-    let route = apron_loop();
-    if !(0.0..=4_500.0).contains(&args.payload) {
-        bail!("--payload {}: 0 to 4500 kg", args.payload);
+    let payload = args.payload.unwrap_or(scenario.payload);
+    if !(0.0..=4_500.0).contains(&payload) {
+        bail!("--payload {payload}: 0 to 4500 kg");
     }
     if !(args.max_seconds > 0.0 && args.max_seconds <= 86_400.0) {
         bail!(
@@ -56,10 +63,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
     let mut tug = Tug::new(TugParams {
         seed: args.seed,
-        payload: args.payload,
-        grade: 0.0,
-        route,
-        speed: 3.0,
+        payload,
+        grade: scenario.grade,
+        route: scenario.route.clone(),
+        speed: scenario.speed,
     });
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
@@ -135,7 +142,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         events.push(json!({"t_s": seconds(tug.now()), "kind": "arrived", "detail": "stopped at the end of the route"}));
     }
     let metrics = json!({
-        "scenario": args.scenario,
+        "scenario": scenario.name,
         "seed": args.seed,
         "sim_seconds": seconds(tug.now()),
         "completed": completed,

@@ -96,6 +96,48 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         err.contains("--scenario moon-base: not a built-in scenario"),
         "{err}"
     );
+    // A scenario file: its own route, load and grade, and an event.
+    let file = dir.join("short.toml");
+    std::fs::write(&file, "name = \"short\"\nwaypoints = [[0, 0], [25, 0]]\nspeed = 2.0\npayload = 4500\ngrade = 0.02\n\n[[event]]\nat_s = 6\nfault = \"driver_takeover\"\nduration_s = 0.5\n").unwrap();
+    let metrics = sim_scenario(&dir.join("d"), file.to_str().unwrap());
+    assert_eq!(
+        (metrics["scenario"].as_str(), metrics["completed"].as_bool()),
+        (Some("short"), Some(true)),
+        "{metrics}"
+    );
+    assert!(metrics["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|e| e["kind"] == "mode" && e["detail"] == "Manual"));
+    std::fs::write(&file, "payload = 9000\n").unwrap();
+    let (code, _, err) =
+        common::bywire(&["sim", "--fast", "--scenario", file.to_str().unwrap()], "");
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("short.toml: payload: 9000 kg is not 0–4500 kg"),
+        "{err}"
+    );
+}
+
+fn sim_scenario(out: &std::path::Path, scenario: &str) -> Value {
+    let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "sim",
+            "--fast",
+            "--scenario",
+            scenario,
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap()
 }
 
 /// The fault tour: every fault shows its reaction in metrics.json, at its timing.

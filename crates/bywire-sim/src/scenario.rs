@@ -1,0 +1,312 @@
+//! Scenarios: a route, the tug's load and road, and what happens on the way — built in
+//! (`apron-loop`, `fault-tour`) or read from a TOML file with errors naming the key:
+//!
+//! ```toml
+//! name = "stand-approach"
+//! route = "apron-loop"          # or: waypoints = [[0, 0], [40, 0], [40, 30]]
+//! speed = 3.0                   # m/s
+//! payload = 2000                # kg, 0–4500
+//! grade = 0.02                  # rise over run
+//!
+//! [[event]]
+//! at_s = 8.0
+//! fault = "ads_silence"         # ads_silence, estop, operator_reset, drive_silence,
+//! duration_s = 1.0              # sensor_fault, corrupt_commands, duplicate_commands,
+//!                               # delay_commands, driver_takeover, ecu_bus_off
+//! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
+//! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15
+//! ```
+
+use core::time::Duration;
+
+use bywire_control::kinematics::Point;
+use bywire_core::Timestamp;
+use serde::Deserialize;
+
+use crate::steering::SensorFault;
+use crate::tug::{apron_loop, Fault, Tug, DRIVE_NODES, STEERING_NODES};
+
+/// A scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// Its name.
+    pub name: String,
+    /// The route, m.
+    pub route: Vec<Point>,
+    /// Cruising speed, m/s.
+    pub speed: f64,
+    /// Payload, kg.
+    pub payload: f64,
+    /// Road grade.
+    pub grade: f64,
+    /// Faults and operator actions: (at, fault, for how long).
+    pub events: Vec<(Duration, Fault, Option<Duration>)>,
+}
+
+/// Why a scenario file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// Not readable, or not TOML of this shape.
+    #[error("{file}: {message}")]
+    Syntax {
+        /// The file.
+        file: String,
+        /// What, with line and column.
+        message: String,
+    },
+    /// A value is wrong.
+    #[error("{file}: {key}: {reason}")]
+    Invalid {
+        /// The file.
+        file: String,
+        /// The key.
+        key: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    name: Option<String>,
+    route: Option<String>,
+    waypoints: Option<Vec<[f64; 2]>>,
+    #[serde(default = "default_speed")]
+    speed: f64,
+    #[serde(default)]
+    payload: f64,
+    #[serde(default)]
+    grade: f64,
+    #[serde(default)]
+    event: Vec<RawEvent>,
+}
+
+fn default_speed() -> f64 {
+    3.0
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEvent {
+    at_s: f64,
+    fault: String,
+    duration_s: Option<f64>,
+    node: Option<u8>,
+    corner: Option<usize>,
+    sensor: Option<String>,
+    value: Option<f64>,
+    delay_ms: Option<u64>,
+}
+
+impl Scenario {
+    /// A built-in scenario by name: `apron-loop` (the route, nothing happens) or `fault-tour`
+    /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
+    /// a stuck steering sensor, corrupted, duplicated and delayed commands, a driver's
+    /// takeover, and the ECU's controller going bus-off).
+    pub fn builtin(name: &str) -> Option<Scenario> {
+        let s = Duration::from_secs;
+        let ms = Duration::from_millis;
+        let events = match name {
+            "apron-loop" => Vec::new(),
+            "fault-tour" => vec![
+                (s(8), Fault::AdsSilence, Some(s(1))),
+                (s(16), Fault::Estop, Some(s(2))),
+                (s(24), Fault::OperatorReset, None),
+                (s(32), Fault::DriveSilence(DRIVE_NODES[1]), Some(s(1))),
+                (s(38), Fault::OperatorReset, None),
+                (
+                    s(46),
+                    Fault::SensorFault(2, SensorFault::Stuck(0.0)),
+                    Some(s(3)),
+                ),
+                (s(50), Fault::CorruptCommands, Some(ms(50))),
+                (s(51), Fault::DuplicateCommands, Some(ms(100))),
+                (s(52), Fault::DriverTakeover, Some(ms(500))),
+                (s(54), Fault::DelayCommands(15), Some(s(1))),
+                (s(56), Fault::EcuBusOff, None),
+            ],
+            _ => return None,
+        };
+        Some(Scenario {
+            name: name.to_string(),
+            route: apron_loop(),
+            speed: 3.0,
+            payload: 2_000.0,
+            grade: 0.0,
+            events,
+        })
+    }
+
+    /// Read a scenario file's text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Scenario, ScenarioError> {
+        let raw: RawScenario = toml::from_str(text).map_err(|e| ScenarioError::Syntax {
+            file: file.to_string(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        let invalid = |key: &str, reason: String| ScenarioError::Invalid {
+            file: file.to_string(),
+            key: key.to_string(),
+            reason,
+        };
+        let route = match (raw.route.as_deref(), &raw.waypoints) {
+            (Some(_), Some(_)) => {
+                return Err(invalid(
+                    "waypoints",
+                    "give route or waypoints, not both".to_string(),
+                ))
+            }
+            (Some("apron-loop") | None, None) => apron_loop(),
+            (Some(other), None) => {
+                return Err(invalid(
+                    "route",
+                    format!("'{other}' is not a built-in route (apron-loop)"),
+                ))
+            }
+            (None, Some(points)) => {
+                if points.len() < 2 || points.iter().flatten().any(|v| !v.is_finite()) {
+                    return Err(invalid(
+                        "waypoints",
+                        "at least two points of finite coordinates".to_string(),
+                    ));
+                }
+                points.iter().map(|[x, y]| Point { x: *x, y: *y }).collect()
+            }
+        };
+        if !(raw.speed > 0.0 && raw.speed <= 8.0) {
+            return Err(invalid(
+                "speed",
+                format!("{} is not a speed the tug drives (0–8 m/s)", raw.speed),
+            ));
+        }
+        if !(0.0..=4_500.0).contains(&raw.payload) {
+            return Err(invalid(
+                "payload",
+                format!("{} kg is not 0–4500 kg", raw.payload),
+            ));
+        }
+        if !(-0.2..=0.2).contains(&raw.grade) {
+            return Err(invalid(
+                "grade",
+                format!("{} is not a grade (−0.2 … 0.2)", raw.grade),
+            ));
+        }
+        let mut events = Vec::new();
+        for (i, e) in raw.event.iter().enumerate() {
+            let key = |field: &str| format!("event[{i}].{field}");
+            if !(e.at_s >= 0.0 && e.at_s < 86_400.0) {
+                return Err(invalid(
+                    &key("at_s"),
+                    format!("{} is not a time in a run", e.at_s),
+                ));
+            }
+            let duration = match e.duration_s {
+                Some(d) if d > 0.0 && d < 86_400.0 => Some(Duration::from_secs_f64(d)),
+                Some(d) => {
+                    return Err(invalid(
+                        &key("duration_s"),
+                        format!("{d} is not a duration"),
+                    ))
+                }
+                None => None,
+            };
+            let fault = match e.fault.as_str() {
+                "ads_silence" => Fault::AdsSilence,
+                "estop" => Fault::Estop,
+                "operator_reset" => Fault::OperatorReset,
+                "drive_silence" => {
+                    let node = e.node.ok_or_else(|| invalid(&key("node"), "drive_silence needs the node ID".to_string()))?;
+                    if !DRIVE_NODES.contains(&node) && !STEERING_NODES.contains(&node) {
+                        return Err(invalid(&key("node"), format!("0x{node:02X} is not a drive (steering 0x11–0x14, wheels 0x21–0x24)")));
+                    }
+                    Fault::DriveSilence(node)
+                }
+                "sensor_fault" => {
+                    let corner = e.corner.filter(|c| *c < 4).ok_or_else(|| invalid(&key("corner"), "sensor_fault needs corner 0 (FL) … 3 (RR)".to_string()))?;
+                    let value = e.value.unwrap_or(0.0);
+                    let sensor = match e.sensor.as_deref() {
+                        Some("stuck") => SensorFault::Stuck(value),
+                        Some("drift") => SensorFault::Drift(value),
+                        Some("open") => SensorFault::OpenCircuit,
+                        other => return Err(invalid(&key("sensor"), format!("{other:?} is not stuck, drift or open"))),
+                    };
+                    Fault::SensorFault(corner, sensor)
+                }
+                "corrupt_commands" => Fault::CorruptCommands,
+                "duplicate_commands" => Fault::DuplicateCommands,
+                "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
+                "driver_takeover" => Fault::DriverTakeover,
+                "ecu_bus_off" => Fault::EcuBusOff,
+                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off)"))),
+            };
+            events.push((Duration::from_secs_f64(e.at_s), fault, duration));
+        }
+        Ok(Scenario {
+            name: raw.name.unwrap_or_else(|| file.to_string()),
+            route,
+            speed: raw.speed,
+            payload: raw.payload,
+            grade: raw.grade,
+            events,
+        })
+    }
+
+    /// Inject what is due in the step that reaches `now` (events at or before `now`, after
+    /// `before`).
+    pub fn apply(&self, tug: &mut Tug, before: Timestamp, now: Timestamp) {
+        for (at, fault, duration) in &self.events {
+            let at = Timestamp::ZERO.saturating_add(*at);
+            if at > before && at <= now {
+                tug.inject(*fault, *duration);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scenario_file_reads_with_its_events_and_mistakes_name_the_key() {
+        let text = "name = \"approach\"\nwaypoints = [[0, 0], [20, 0], [20, 10]]\nspeed = 2.0\npayload = 4000\ngrade = 0.03\n\n[[event]]\nat_s = 5\nfault = \"sensor_fault\"\ncorner = 1\nsensor = \"drift\"\nvalue = 0.5\nduration_s = 2\n\n[[event]]\nat_s = 9.5\nfault = \"drive_silence\"\nnode = 0x22\n";
+        let scenario = Scenario::parse(text, "s.toml").unwrap();
+        assert_eq!(scenario.name, "approach");
+        assert_eq!(scenario.route.len(), 3);
+        assert_eq!(
+            (scenario.speed, scenario.payload, scenario.grade),
+            (2.0, 4_000.0, 0.03)
+        );
+        assert_eq!(
+            scenario.events,
+            [
+                (
+                    Duration::from_secs(5),
+                    Fault::SensorFault(1, SensorFault::Drift(0.5)),
+                    Some(Duration::from_secs(2))
+                ),
+                (
+                    Duration::from_millis(9_500),
+                    Fault::DriveSilence(0x22),
+                    None
+                ),
+            ]
+        );
+        let error = |text: &str| Scenario::parse(text, "s.toml").unwrap_err().to_string();
+        assert_eq!(
+            error("[[event]]\nat_s = 1\nfault = \"meteor\"\n")
+                .split(':')
+                .take(2)
+                .collect::<Vec<_>>(),
+            ["s.toml", " event[0].fault"]
+        );
+        assert!(
+            error("[[event]]\nat_s = 1\nfault = \"drive_silence\"\nnode = 0x30\n")
+                .contains("event[0].node: 0x30 is not a drive")
+        );
+        assert!(error("payload = 9000\n").contains("payload: 9000 kg"));
+        assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
+        assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
+        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 11));
+    }
+}
