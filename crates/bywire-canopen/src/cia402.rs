@@ -1016,6 +1016,38 @@ pub enum StopReason {
     Commanded,
 }
 
+/// A safe stop that holds until acknowledged: the master-side controllers' latch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StopLatch(Option<StopReason>);
+
+impl StopLatch {
+    /// Stop (the first reason stays until acknowledged).
+    pub fn stop(&mut self, reason: StopReason) {
+        if self.0.is_none() {
+            self.0 = Some(reason);
+        }
+    }
+
+    /// Why it holds, if it does.
+    pub fn reason(&self) -> Option<StopReason> {
+        self.0
+    }
+
+    /// Release.
+    pub fn acknowledge(&mut self) {
+        self.0 = None;
+    }
+
+    /// Stop on an emergency (other than an error reset) from `node`.
+    pub fn on_emergency(&mut self, node: u8, frame: &Frame) {
+        if let Some((from, emergency)) = crate::device::Emergency::parse(frame) {
+            if from == node && emergency.code != 0 {
+                self.stop(StopReason::Emergency(emergency.code));
+            }
+        }
+    }
+}
+
 /// What the controller wants of the drive.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Setpoint {
@@ -1036,7 +1068,7 @@ pub struct DriveController {
     mode: Mode,
     setpoint: Setpoint,
     enable: bool,
-    stopped: Option<StopReason>,
+    stopped: StopLatch,
     statusword: Option<u16>,
     last_status: Option<Timestamp>,
     status_timeout: Duration,
@@ -1058,7 +1090,7 @@ impl DriveController {
                 Mode::ProfilePosition | Mode::CyclicSynchronousPosition => Setpoint::Position(0),
             },
             enable: false,
-            stopped: None,
+            stopped: StopLatch::default(),
             statusword: None,
             last_status: None,
             status_timeout,
@@ -1086,19 +1118,17 @@ impl DriveController {
 
     /// Stop the drive now (quick stop) and hold it until acknowledged.
     pub fn stop(&mut self, reason: StopReason) {
-        if self.stopped.is_none() {
-            self.stopped = Some(reason);
-        }
+        self.stopped.stop(reason);
     }
 
     /// Why the drive is held stopped, if it is.
     pub fn stopped(&self) -> Option<StopReason> {
-        self.stopped
+        self.stopped.reason()
     }
 
     /// Release a stop: the drive may be walked back to Operation enabled (faults are reset).
     pub fn acknowledge(&mut self) {
-        self.stopped = None;
+        self.stopped.acknowledge();
     }
 
     /// The drive state its last statusword reported.
@@ -1130,13 +1160,7 @@ impl DriveController {
                 self.position_actual = i32::from_le_bytes([*a, *b, *c, *d]);
                 self.velocity_actual = i32::from_le_bytes([*e, *f, *g, *h]);
             }
-            (Some(id), [lo, hi, ..]) if id == 0x80 + node && !frame.is_remote() => {
-                let code = u16::from_le_bytes([*lo, *hi]);
-                if code != 0 {
-                    self.stop(StopReason::Emergency(code));
-                }
-            }
-            _ => {}
+            _ => self.stopped.on_emergency(self.node, frame),
         }
     }
 
@@ -1148,7 +1172,7 @@ impl DriveController {
     /// The controlword to send now.
     fn controlword(&mut self) -> u16 {
         let state = self.drive_state();
-        if self.stopped.is_some() {
+        if self.stopped.reason().is_some() {
             return match state {
                 Some(State::OperationEnabled | State::QuickStopActive) | None => {
                     controlword::QUICK_STOP
@@ -1203,7 +1227,8 @@ impl DriveController {
             self.stop(StopReason::StatusTimeout);
         }
         let word = self.controlword();
-        let running = self.stopped.is_none() && self.drive_state() == Some(State::OperationEnabled);
+        let running =
+            self.stopped.reason().is_none() && self.drive_state() == Some(State::OperationEnabled);
         let (position, velocity) = match (running, self.setpoint) {
             (true, Setpoint::Velocity(v)) => (self.position_actual, v),
             (true, Setpoint::Position(p)) => (p, 0),

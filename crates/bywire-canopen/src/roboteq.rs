@@ -15,7 +15,9 @@ use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
 use crate::abort::Abort;
-use crate::cia402::{add_pdo, communication_objects, round, Motor, PdoDefault, StopReason};
+use crate::cia402::{
+    add_pdo, communication_objects, round, Motor, PdoDefault, StopLatch, StopReason,
+};
 use crate::device::{error_register, Application, EmcyProducer};
 use crate::nmt::{classic, cob_id};
 use crate::od::{Access, DataType, Entry, Number, ObjectDictionary, ObjectKind};
@@ -520,7 +522,7 @@ pub enum RoboteqCommand {
 pub struct RoboteqMotor {
     node: u8,
     command: RoboteqCommand,
-    stopped: Option<StopReason>,
+    stopped: StopLatch,
     fault_flags: u16,
     actual_command: i16,
     speed: i32,
@@ -536,7 +538,7 @@ impl RoboteqMotor {
         RoboteqMotor {
             node,
             command,
-            stopped: None,
+            stopped: StopLatch::default(),
             fault_flags: 0,
             actual_command: 0,
             speed: 0,
@@ -558,19 +560,17 @@ impl RoboteqMotor {
 
     /// Stop and hold until acknowledged.
     pub fn stop(&mut self, reason: StopReason) {
-        if self.stopped.is_none() {
-            self.stopped = Some(reason);
-        }
+        self.stopped.stop(reason);
     }
 
     /// Why it is held stopped.
     pub fn stopped(&self) -> Option<StopReason> {
-        self.stopped
+        self.stopped.reason()
     }
 
     /// Release a stop.
     pub fn acknowledge(&mut self) {
-        self.stopped = None;
+        self.stopped.acknowledge();
     }
 
     /// Last reported fault flags, actual command and encoder speed.
@@ -580,7 +580,7 @@ impl RoboteqMotor {
 
     /// The RPDO1 payload to send now.
     pub fn payload(&self) -> [u8; 4] {
-        let value = match (self.stopped, self.command) {
+        let value = match (self.stopped.reason(), self.command) {
             (Some(_), _) => 0,
             (None, RoboteqCommand::Power(p) | RoboteqCommand::Velocity(p)) => p,
         };
@@ -601,13 +601,7 @@ impl RoboteqMotor {
             (Some(id), [a, b, c, d, ..]) if id == 0x280 + node => {
                 self.speed = i32::from_le_bytes([*a, *b, *c, *d])
             }
-            (Some(id), [lo, hi, ..]) if id == 0x80 + node && !frame.is_remote() => {
-                let code = u16::from_le_bytes([*lo, *hi]);
-                if code != 0 {
-                    self.stop(StopReason::Emergency(code));
-                }
-            }
-            _ => {}
+            _ => self.stopped.on_emergency(self.node, frame),
         }
     }
 

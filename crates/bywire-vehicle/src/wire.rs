@@ -576,42 +576,24 @@ impl ProfileWire {
             "state",
             &invalid,
         )?;
+        // Roles a state message may leave out.
+        let optional = |role: &str, name: &Option<String>| -> Result<Option<usize>, ProfileError> {
+            name.as_deref()
+                .map(|n| signal(&s.message, &format!("state.{role}"), n))
+                .transpose()
+        };
         let state_signals = StateSignals {
             steering: signal(&s.message, "state.steering", &s.steering)?,
             velocity: signal(&s.message, "state.velocity", &s.velocity)?,
             control_mode: signal(&s.message, "state.control_mode", &s.control_mode)?,
             heartbeat_echo: signal(&s.message, "state.heartbeat_echo", &s.heartbeat_echo)?,
             steering_mode: signal(&s.message, "state.steering_mode", &s.steering_mode)?,
-            gear: s
-                .gear
-                .as_deref()
-                .map(|n| signal(&s.message, "state.gear", n))
-                .transpose()?,
-            steering_enabled: s
-                .steering_enabled
-                .as_deref()
-                .map(|n| signal(&s.message, "state.steering_enabled", n))
-                .transpose()?,
-            watchdog_level: s
-                .watchdog_level
-                .as_deref()
-                .map(|n| signal(&s.message, "state.watchdog_level", n))
-                .transpose()?,
-            estop_state: s
-                .estop_state
-                .as_deref()
-                .map(|n| signal(&s.message, "state.estop_state", n))
-                .transpose()?,
-            warning: s
-                .warning
-                .as_deref()
-                .map(|n| signal(&s.message, "state.warning", n))
-                .transpose()?,
-            driver_override: s
-                .driver_override
-                .as_deref()
-                .map(|n| signal(&s.message, "state.driver_override", n))
-                .transpose()?,
+            gear: optional("gear", &s.gear)?,
+            steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
+            watchdog_level: optional("watchdog_level", &s.watchdog_level)?,
+            estop_state: optional("estop_state", &s.estop_state)?,
+            warning: optional("warning", &s.warning)?,
+            driver_override: optional("driver_override", &s.driver_override)?,
         };
         let wheel_speeds = match &p.wheel_speeds {
             None => None,

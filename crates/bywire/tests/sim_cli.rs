@@ -14,16 +14,11 @@ use std::process::Command;
 
 use serde_json::Value;
 
-fn sim(out: &std::path::Path, seed: &str) -> Value {
+/// `bywire sim --fast` with `args`, into `out`; its metrics.
+fn sim_with(out: &std::path::Path, args: &[&str]) -> Value {
     let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "sim",
-            "--fast",
-            "--seed",
-            seed,
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        .args(["sim", "--fast", "--out", out.to_str().unwrap()])
+        .args(args)
         .output()
         .unwrap();
     assert!(
@@ -32,6 +27,10 @@ fn sim(out: &std::path::Path, seed: &str) -> Value {
         String::from_utf8_lossy(&status.stderr)
     );
     serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap()
+}
+
+fn sim(out: &std::path::Path, seed: &str) -> Value {
+    sim_with(out, &["--seed", seed])
 }
 
 #[test]
@@ -99,7 +98,7 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     // A scenario file: its own route, load and grade, and an event.
     let file = dir.join("short.toml");
     std::fs::write(&file, "name = \"short\"\nwaypoints = [[0, 0], [25, 0]]\nspeed = 2.0\npayload = 4500\ngrade = 0.02\n\n[[event]]\nat_s = 6\nfault = \"driver_takeover\"\nduration_s = 0.5\n").unwrap();
-    let metrics = sim_scenario(&dir.join("d"), file.to_str().unwrap());
+    let metrics = sim_with(&dir.join("d"), &["--scenario", file.to_str().unwrap()]);
     assert_eq!(
         (metrics["scenario"].as_str(), metrics["completed"].as_bool()),
         (Some("short"), Some(true)),
@@ -120,48 +119,11 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     );
 }
 
-fn sim_scenario(out: &std::path::Path, scenario: &str) -> Value {
-    let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "sim",
-            "--fast",
-            "--scenario",
-            scenario,
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
-    serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap()
-}
-
 /// The fault tour: every fault shows its reaction in metrics.json, at its timing.
 #[test]
 fn the_fault_tour_reacts_to_every_fault_in_time() {
     let dir = std::env::temp_dir().join(format!("bywire-sim-tour-{}", std::process::id()));
-    let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "sim",
-            "--fast",
-            "--scenario",
-            "fault-tour",
-            "--out",
-            dir.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
-    let metrics: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let metrics = sim_with(&dir, &["--scenario", "fault-tour"]);
     assert_eq!(
         metrics["completed"], true,
         "the route is finished after every fault"
