@@ -209,11 +209,7 @@ impl RoleMessage {
         key: &str,
         invalid: &dyn Fn(&str, String) -> ProfileError,
     ) -> Result<RoleMessage, ProfileError> {
-        let message = db
-            .messages
-            .iter()
-            .find(|m| m.name == name)
-            .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))?;
+        let message = find_message(db, name, key, invalid)?;
         let counter = match counter {
             None => None,
             Some(counter) => {
@@ -279,11 +275,7 @@ impl RoleMessage {
         key: &str,
         invalid: &dyn Fn(&str, String) -> ProfileError,
     ) -> Result<RoleMessage, ProfileError> {
-        let message = db
-            .messages
-            .iter()
-            .find(|m| m.name == name)
-            .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))?;
+        let message = find_message(db, name, key, invalid)?;
         let protection = Protection::of(message);
         let name_at = |index: Option<usize>| {
             index
@@ -390,6 +382,18 @@ impl RoleMessage {
             (None, _) => false,
         }
     }
+}
+
+fn find_message<'a>(
+    db: &'a Database,
+    name: &str,
+    key: &str,
+    invalid: &dyn Fn(&str, String) -> ProfileError,
+) -> Result<&'a Message, ProfileError> {
+    db.messages
+        .iter()
+        .find(|m| m.name == name)
+        .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))
 }
 
 fn index_of(message: &Message, name: &str) -> Option<usize> {
