@@ -87,7 +87,7 @@ pub enum Fault {
     AdsSilence,
     /// The E-stop chain opens (the safety controller requests an E-stop).
     Estop,
-    /// The operator's reset: two reset requests a second apart, then engage.
+    /// The operator's reset: reset pressed until the latch clears, then engage.
     OperatorReset,
     /// A drive node (by node ID) stops sending (cut off, powered down).
     DriveSilence(u8),
@@ -182,7 +182,8 @@ pub struct Tug {
     safety_port: NodeId,
     next_estop_frame: Timestamp,
     estop_counter: u64,
-    reset_pulses: Vec<Timestamp>,
+    /// The operator is resetting the E-stop latch (presses reset until it is released).
+    resetting: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
     remaining: f64,
@@ -325,7 +326,7 @@ impl Tug {
             safety_port,
             next_estop_frame: Timestamp::ZERO,
             estop_counter: 0,
-            reset_pulses: Vec::new(),
+            resetting: false,
             last_seen: (
                 Watchdog::FullBraking,
                 EstopState::Normal,
@@ -348,7 +349,7 @@ impl Tug {
                 }
             }
             Fault::OperatorReset => {
-                self.reset_pulses = vec![now, now.saturating_add(Duration::from_secs(1))];
+                self.resetting = true;
                 // The operator's reset also acknowledges drives the master stopped.
                 for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
                     if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
@@ -395,6 +396,25 @@ impl Tug {
     /// Where the tug is.
     pub fn pose(&self) -> Pose {
         self.chassis.pose()
+    }
+
+    /// The four wheels' angles (FL, FR, RL, RR), degrees.
+    pub fn wheel_angles(&self) -> [f64; 4] {
+        let mut angles = [0.0; 4];
+        for (angle, corner) in angles.iter_mut().zip(&self.corners) {
+            *angle = corner.chain.wheel_angle_deg();
+        }
+        angles
+    }
+
+    /// The route, m.
+    pub fn route(&self) -> &[Point] {
+        &self.route
+    }
+
+    /// Faults active now.
+    pub fn active_faults(&self) -> impl Iterator<Item = Fault> + '_ {
+        self.active.iter().map(|(fault, _)| *fault)
     }
 
     /// The tug's speed, m/s.
@@ -712,6 +732,14 @@ impl Tug {
                 self.engaged_at = Some(now);
             }
             self.steering_command = steering;
+            // The operator presses reset (an edge, every half second) while the latch is
+            // stopped or waiting for the confirming press, until the vehicle reports it clear.
+            let estop = self.ads.state().estop_state.value;
+            if estop == Some(0) && self.resetting && autonomous {
+                self.resetting = false;
+            }
+            let operator_reset =
+                self.resetting && matches!(estop, Some(4 | 6)) && self.ads_cycles % 25 == 0;
             let command = AdsCommand {
                 steering,
                 velocity,
@@ -720,10 +748,7 @@ impl Tug {
                 mode: ControlMode::Autonomous,
                 steering_mode: SteeringMode::Normal,
                 engage,
-                operator_reset: self
-                    .reset_pulses
-                    .iter()
-                    .any(|at| now >= *at && now < at.saturating_add(Duration::from_millis(100))),
+                operator_reset,
             };
             let _ = self.ads.set_command(now, command);
         }

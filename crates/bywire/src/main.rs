@@ -18,6 +18,7 @@ mod send_cmd;
 mod serve_cmd;
 mod signals;
 mod sim_cmd;
+mod sim_view;
 mod slcan_adapter_cmd;
 mod sniff_cmd;
 mod wire_cmd;

@@ -35,6 +35,9 @@ pub struct Args {
     /// Stop after this many simulated seconds at most.
     #[arg(long, default_value_t = 300.0)]
     max_seconds: f64,
+    /// No live view, even in a terminal.
+    #[arg(long)]
+    no_view: bool,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -70,38 +73,19 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     });
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
-    let stop = crate::interrupt_flag();
-    let mut next_report = Timestamp::ZERO;
-    let completed = loop {
-        let before = tug.now();
-        tug.step();
-        let now = tug.now();
-        scenario.apply(&mut tug, before, now);
-        if tug.engaged_at().is_some() && tug.remaining() < 0.5 && tug.pose_speed().abs() < 0.01 {
-            break true;
-        }
-        if now >= limit || stop.load(std::sync::atomic::Ordering::Relaxed) {
-            break false;
-        }
-        if now >= next_report {
-            next_report = now.saturating_add(Duration::from_secs(5));
-            let pose = tug.pose();
-            writeln!(
-                out,
-                "t={:6.1}s  x={:7.2} y={:7.2}  {:5.1} m to go",
-                now.as_nanos() as f64 / 1e9,
-                pose.x,
-                pose.y,
-                tug.remaining()
-            )?;
-            out.flush()?;
-        }
-        if !args.fast {
-            let behind = Duration::from_nanos(now.as_nanos()).saturating_sub(start.elapsed());
-            if !behind.is_zero() {
-                std::thread::sleep(behind);
-            }
-        }
+    // In a terminal, in real time: the live view.
+    let live = !args.fast && !args.no_view && std::io::IsTerminal::is_terminal(&std::io::stdout());
+    let completed = if live {
+        matches!(
+            crate::sim_view::run(
+                &mut tug,
+                &scenario,
+                Duration::from_secs_f64(args.max_seconds)
+            )?,
+            crate::sim_view::Ending::Arrived
+        )
+    } else {
+        run_plain(&mut tug, &scenario, args, limit, start, out)?
     };
     for (name, log) in [
         ("bus1", &tug.bus1_log),
@@ -212,4 +196,50 @@ fn plot(tug: &Tug, path: &std::path::Path) -> Result<()> {
             true,
         )
     })
+}
+
+/// Run without the view: progress lines every 5 simulated seconds, paced to real time unless
+/// `--fast`.
+fn run_plain(
+    tug: &mut Tug,
+    scenario: &Scenario,
+    args: &Args,
+    limit: Timestamp,
+    start: Instant,
+    out: &mut impl Write,
+) -> Result<bool> {
+    let stop = crate::interrupt_flag();
+    let mut next_report = Timestamp::ZERO;
+    let completed = loop {
+        let before = tug.now();
+        tug.step();
+        let now = tug.now();
+        scenario.apply(tug, before, now);
+        if tug.engaged_at().is_some() && tug.remaining() < 0.5 && tug.pose_speed().abs() < 0.01 {
+            break true;
+        }
+        if now >= limit || stop.load(std::sync::atomic::Ordering::Relaxed) {
+            break false;
+        }
+        if now >= next_report {
+            next_report = now.saturating_add(Duration::from_secs(5));
+            let pose = tug.pose();
+            writeln!(
+                out,
+                "t={:6.1}s  x={:7.2} y={:7.2}  {:5.1} m to go",
+                now.as_nanos() as f64 / 1e9,
+                pose.x,
+                pose.y,
+                tug.remaining()
+            )?;
+            out.flush()?;
+        }
+        if !args.fast {
+            let behind = Duration::from_nanos(now.as_nanos()).saturating_sub(start.elapsed());
+            if !behind.is_zero() {
+                std::thread::sleep(behind);
+            }
+        }
+    };
+    Ok(completed)
 }

@@ -163,3 +163,46 @@ fn sniff_in_a_terminal() {
     s.keys("q");
     s.wait_closed();
 }
+
+/// `bywire sim` in a terminal: the live view starts, E-stop (e) latches, the operator's reset
+/// (r) releases it and the tug drives again, q quits and the run's files are written.
+#[test]
+fn sim_live_view_in_a_terminal() {
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let dir = std::env::temp_dir().join(format!("bywire-sim-view-{}", std::process::id()));
+    let session = Session::start(
+        "sim",
+        &format!("{bin} sim --out {} --max-seconds 120", dir.display()),
+    );
+    session.wait_for("keys: e E-stop");
+    session.wait_for("mode       Autonomous");
+    // Driving: 2.5 m/s and more.
+    let moving = Instant::now() + Duration::from_secs(15);
+    while !["2.5", "2.6", "2.7", "2.8", "2.9", "3.0"]
+        .iter()
+        .any(|v| session.screen().contains(&format!("speed       {v}")))
+    {
+        assert!(Instant::now() < moving, "{}", session.screen());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    session.keys("e");
+    session.wait_for("E-stop     BrakesApplied");
+    session.wait_for("E-stop     Stopped");
+    // The button released (a second), the operator resets.
+    session.wait_for("faults     none");
+    session.keys("r");
+    session.wait_for("E-stop     Normal");
+    session.wait_for("mode       Autonomous");
+    let screen = session.wait_for("estop            Normal");
+    assert!(
+        screen.contains("route") && screen.contains("tug"),
+        "{screen}"
+    );
+    session.keys("q");
+    session.wait_closed();
+    let metrics = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+    assert!(
+        metrics.contains("\"BrakesApplied\"") && metrics.contains("\"OperatorReset\""),
+        "{metrics}"
+    );
+}
