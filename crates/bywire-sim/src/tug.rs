@@ -186,6 +186,7 @@ pub struct Tug {
     resetting: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
+    ads_external: bool,
     remaining: f64,
     delayed: Vec<(Timestamp, Frame)>,
 }
@@ -333,9 +334,27 @@ impl Tug {
                 ControlMode::Manual,
             ),
             drives_lost: false,
+            ads_external: false,
             remaining: f64::INFINITY,
             delayed: Vec::new(),
         }
+    }
+
+    /// Replace the built-in ADS by a node outside the tug on bus 1 (acceptance checks, another
+    /// ADS): the built-in one stops, and the returned port sends and receives for the outsider.
+    pub fn attach_ads(&mut self) -> NodeId {
+        self.ads_external = true;
+        self.bus1.add_node()
+    }
+
+    /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]).
+    pub fn send_bus1(&mut self, port: NodeId, frame: Frame) {
+        self.bus1.submit(port, frame, self.now);
+    }
+
+    /// The next frame bus 1 delivered to `port`.
+    pub fn receive_bus1(&mut self, port: NodeId) -> Option<(Timestamp, Frame)> {
+        self.bus1.receive(port).map(|r| (r.timestamp, r.frame))
     }
 
     /// Inject `fault` now, for `duration` (`None`: for good).
@@ -685,6 +704,9 @@ impl Tug {
     /// The ADS: every 20 ms, pure pursuit on the route from the tug's pose, at cruising speed
     /// slowing to a stop at the end; engaged once the vehicle answers.
     fn run_ads(&mut self, now: Timestamp) {
+        if self.ads_external {
+            return;
+        }
         if now >= self.next_ads {
             self.next_ads = now.saturating_add(Duration::from_millis(20));
             let pose = self.chassis.pose();

@@ -12,11 +12,14 @@
 //! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
+//! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
+//!   timing) as a node on the command bus, for any profile's vehicle.
 //! - [`wire`]: the ADS side's messages on the wire: the reference tug through its generated
 //!   structs, or any vehicle a profile describes, by role, through the runtime codec.
 //! - [`profile`]: TOML vehicle profiles checked against their DBC; `reference-tug` and
 //!   `autoware-can` ship.
 
+pub mod acceptance;
 pub mod ads;
 pub mod autoware;
 pub mod profile;

@@ -6,6 +6,7 @@ mod bridge_cmd;
 mod busarg;
 mod busload_cmd;
 mod canopen_cmd;
+mod check_cmd;
 mod dbc_cmd;
 mod dump_cmd;
 mod gen_cmd;
@@ -92,6 +93,8 @@ enum Command {
         #[command(subcommand)]
         command: log_cmd::LogCommand,
     },
+    /// Vehicle acceptance checks: steering sweep, speed steps, watchdog and E-stop timing.
+    Check(check_cmd::Args),
     /// The simulated tug on its buses, driven along a route (real time or --fast).
     Sim(sim_cmd::Args),
     /// CANopen: scan a bus, SDO read/write, NMT, run a device (EDS, CiA 402 drive, Roboteq).
@@ -126,6 +129,7 @@ fn main() -> ExitCode {
         Command::Serve(args) => serve_cmd::run(&args, &mut out),
         Command::Canopen { command } => canopen_cmd::run(&command, &mut out),
         Command::Sim(args) => sim_cmd::run(&args, &mut out),
+        Command::Check(args) => check_cmd::run(&args, &mut out),
         Command::SlcanAdapter(args) => slcan_adapter_cmd::run(&args, &mut out),
         Command::Log { command } => log_cmd::run(&command, &mut out),
         Command::Busload(args) => busload_cmd::run(&args, &mut out),

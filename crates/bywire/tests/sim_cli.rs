@@ -194,3 +194,41 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
             < first("bus_state", "bus1 node 1: ErrorActive", errors)
     );
 }
+
+/// `bywire check` passes against the simulated tug and fails, naming the check, when its
+/// front-left steering sensor is stuck.
+#[test]
+fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
+    let (code, out, err) = common::bywire(&["check", "--profile", "reference-tug", "tug"], "");
+    assert_eq!(code, 0, "{out}{err}");
+    let names: Vec<&str> = out
+        .lines()
+        .map(|l| l.split_whitespace().nth(1).unwrap_or(""))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "engage", "feedback", "steering", "speed", "speed", "watchdog", "E-stop", "E-stop",
+            "operator"
+        ],
+        "{out}"
+    );
+    assert!(out.lines().all(|l| l.starts_with("PASS")), "{out}");
+    let (code, out, err) = common::bywire(
+        &[
+            "check",
+            "--profile",
+            "reference-tug",
+            "tug",
+            "--tug-fault",
+            "stuck-sensor",
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(
+        out.contains("FAIL  steering sweep   at -40.0°: actual +0.0°"),
+        "{out}"
+    );
+    assert!(err.contains("failed: steering sweep"), "{err}");
+}

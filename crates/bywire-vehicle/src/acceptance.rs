@@ -1,0 +1,537 @@
+//! Vehicle acceptance checks, as a sans-IO node on the vehicle's command bus: it engages the
+//! vehicle, sweeps the steering across its range, steps the speed, falls silent to time the
+//! watchdog, and presses the E-stop to time the latch — then reports each check with its
+//! figures. The same node runs against a real vehicle (real-time runner) or the simulated tug.
+
+use core::time::Duration;
+
+use bywire_core::{Frame, Timestamp};
+
+use crate::ads::{Ads, AdsCommand};
+use crate::profile::LoadedProfile;
+use crate::reference_tug::{self, ControlMode, EmergencyStop, Gear};
+use crate::wire::ProfileWire;
+
+/// One check's outcome.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckResult {
+    /// Its name.
+    pub name: &'static str,
+    /// Passed.
+    pub passed: bool,
+    /// Figures, or why it failed.
+    pub detail: String,
+}
+
+/// What the checks ask of the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckConfig {
+    /// Steering sweep range (±), degrees, and step.
+    pub sweep_deg: f64,
+    /// Sweep step, degrees.
+    pub sweep_step_deg: f64,
+    /// Time at each sweep step before judging it.
+    pub dwell: Duration,
+    /// Largest steering error accepted, degrees.
+    pub steering_tolerance_deg: f64,
+    /// Speeds to step to, m/s.
+    pub speeds: [f64; 2],
+}
+
+impl Default for CheckConfig {
+    fn default() -> Self {
+        CheckConfig {
+            sweep_deg: 40.0,
+            sweep_step_deg: 1.0,
+            dwell: Duration::from_millis(600),
+            steering_tolerance_deg: 2.0,
+            speeds: [1.0, 2.5],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Engage {
+        since: Timestamp,
+    },
+    Rates {
+        since: Timestamp,
+        frames: u32,
+    },
+    Sweep {
+        step: i64,
+        since: Timestamp,
+    },
+    Speed {
+        index: usize,
+        since: Timestamp,
+    },
+    Settle {
+        since: Timestamp,
+    },
+    Silent {
+        since: Timestamp,
+        last_command: Timestamp,
+        holding: Option<Timestamp>,
+        braking: Option<Timestamp>,
+    },
+    Reengage {
+        since: Timestamp,
+    },
+    Estop {
+        since: Timestamp,
+        latched: Option<Timestamp>,
+    },
+    Released {
+        since: Timestamp,
+    },
+    Reset {
+        since: Timestamp,
+    },
+    Done,
+}
+
+/// The acceptance checker.
+pub struct Checker {
+    ads: Ads<ProfileWire>,
+    config: CheckConfig,
+    state_id: u32,
+    estop: bool,
+    phase: Phase,
+    results: Vec<CheckResult>,
+    command: AdsCommand,
+    cycle: u32,
+    estop_counter: u64,
+    next_estop: Timestamp,
+    worst_steering: (f64, f64),
+    started: bool,
+    cycle_ms: u64,
+    last_poll: Timestamp,
+}
+
+impl Checker {
+    /// Checks for the vehicle `profile` describes (the E-stop check needs the reference
+    /// `EmergencyStop` message).
+    pub fn new(
+        profile: &LoadedProfile,
+        config: CheckConfig,
+    ) -> Result<Checker, crate::profile::ProfileError> {
+        let wire = ProfileWire::new(profile)?;
+        let state_id = profile
+            .profile
+            .state
+            .as_ref()
+            .and_then(|s| {
+                profile
+                    .database
+                    .messages
+                    .iter()
+                    .find(|m| m.name == s.message)
+            })
+            .map_or(0, |m| m.raw_id());
+        let estop = profile
+            .profile
+            .estop
+            .as_ref()
+            .is_some_and(|e| e.message == "EmergencyStop");
+        Ok(Checker {
+            ads: Ads::with_wire(profile.ads_config(), wire),
+            config,
+            state_id,
+            estop,
+            phase: Phase::Engage {
+                since: Timestamp::ZERO,
+            },
+            results: Vec::new(),
+            command: AdsCommand {
+                gear: Gear::Drive,
+                mode: ControlMode::Autonomous,
+                ..AdsCommand::default()
+            },
+            cycle: 0,
+            estop_counter: 0,
+            next_estop: Timestamp::ZERO,
+            worst_steering: (0.0, 0.0),
+            started: false,
+            cycle_ms: u64::try_from(profile.ads_config().cycle.as_millis())
+                .unwrap_or(20)
+                .max(1),
+            last_poll: Timestamp::ZERO,
+        })
+    }
+
+    /// The checks so far.
+    pub fn results(&self) -> &[CheckResult] {
+        &self.results
+    }
+
+    /// Every check has run (or the run stopped at a failure that leaves no point going on).
+    pub fn is_done(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
+    fn record(&mut self, name: &'static str, passed: bool, detail: String) {
+        self.results.push(CheckResult {
+            name,
+            passed,
+            detail,
+        });
+    }
+
+    fn autonomous(&self) -> bool {
+        self.ads.state().mode.value == Some(ControlMode::Autonomous)
+    }
+
+    /// Take in a frame from the vehicle.
+    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        if let Phase::Rates { since, frames } = self.phase {
+            if frame.id().is_some_and(|id| id.as_raw() == self.state_id) && now >= since {
+                self.phase = Phase::Rates {
+                    since,
+                    frames: frames + 1,
+                };
+            }
+        }
+        self.ads.on_frame(now, frame);
+        if let Phase::Silent {
+            since,
+            last_command,
+            holding,
+            braking,
+        } = self.phase
+        {
+            let level = self.ads.state().watchdog_level.value;
+            let holding = holding.or_else(|| (level >= Some(1)).then_some(now));
+            let braking = braking.or_else(|| (level == Some(3)).then_some(now));
+            self.phase = Phase::Silent {
+                since,
+                last_command,
+                holding,
+                braking,
+            };
+        }
+        if let Phase::Estop {
+            since,
+            latched: None,
+        } = self.phase
+        {
+            if self.ads.state().estop_state.value.is_some_and(|s| s != 0) {
+                self.phase = Phase::Estop {
+                    since,
+                    latched: Some(now),
+                };
+            }
+        }
+    }
+
+    fn steering(&self) -> f64 {
+        self.ads.state().steering.value.unwrap_or(f64::NAN)
+    }
+
+    fn speed(&self) -> f64 {
+        self.ads.state().velocity.value.unwrap_or(f64::NAN)
+    }
+
+    /// Advance the checks and send what is due.
+    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        self.last_poll = now;
+        if !self.started {
+            self.started = true;
+            self.phase = Phase::Engage { since: now };
+        }
+        self.cycle = self.cycle.wrapping_add(1);
+        let since_ms = |since: Timestamp| now.saturating_since(since).as_millis();
+        let mut engage = false;
+        let mut silent = false;
+        let mut operator_reset = false;
+        let mut press_estop = None;
+        match self.phase {
+            Phase::Engage { since } => {
+                engage =
+                    self.ads.feedback_alive(now) && !self.autonomous() && self.cycle % 200 < 25;
+                if self.autonomous() {
+                    self.record(
+                        "engage",
+                        true,
+                        format!("autonomous after {} ms", since_ms(since)),
+                    );
+                    self.phase = Phase::Rates {
+                        since: now.saturating_add(Duration::from_millis(100)),
+                        frames: 0,
+                    };
+                } else if since_ms(since) > 5_000 {
+                    self.record(
+                        "engage",
+                        false,
+                        "the vehicle did not report autonomous mode within 5 s".into(),
+                    );
+                    self.phase = Phase::Done;
+                }
+            }
+            Phase::Rates { since, frames } => {
+                if now >= since.saturating_add(Duration::from_secs(1)) {
+                    let expected = 1_000 / self.ads_cycle_ms();
+                    let ok = u64::from(frames).abs_diff(expected) <= expected / 10 + 1;
+                    self.record(
+                        "feedback rate",
+                        ok,
+                        format!("{frames} state frames in 1 s (expected {expected})"),
+                    );
+                    self.phase = Phase::Sweep {
+                        step: -self.steps(),
+                        since: now,
+                    };
+                }
+            }
+            Phase::Sweep { step, since } => {
+                let setpoint =
+                    f64::from(i32::try_from(step).unwrap_or(0)) * self.config.sweep_step_deg;
+                self.command.steering = setpoint;
+                // The first step travels from straight ahead to the end of the range.
+                let dwell = if step == -self.steps() {
+                    self.config.dwell.saturating_mul(8)
+                } else {
+                    self.config.dwell
+                };
+                if now.saturating_since(since) >= dwell {
+                    let error = (self.steering() - setpoint).abs();
+                    // A missing reading (NaN) fails too.
+                    if error.is_nan() || error > self.config.steering_tolerance_deg {
+                        self.record(
+                            "steering sweep",
+                            false,
+                            format!(
+                                "at {setpoint:+.1}°: actual {:+.1}°, off by {error:.1}° (> {:.1}°)",
+                                self.steering(),
+                                self.config.steering_tolerance_deg
+                            ),
+                        );
+                        self.command.steering = 0.0;
+                        self.phase = Phase::Speed {
+                            index: 0,
+                            since: now,
+                        };
+                    } else {
+                        if error > self.worst_steering.1 {
+                            self.worst_steering = (setpoint, error);
+                        }
+                        if step >= self.steps() {
+                            let (at, worst) = self.worst_steering;
+                            self.record(
+                                "steering sweep",
+                                true,
+                                format!(
+                                    "±{:.0}° in {:.0}° steps, worst error {worst:.2}° at {at:+.0}°",
+                                    self.config.sweep_deg, self.config.sweep_step_deg
+                                ),
+                            );
+                            self.command.steering = 0.0;
+                            self.phase = Phase::Speed {
+                                index: 0,
+                                since: now,
+                            };
+                        } else {
+                            self.phase = Phase::Sweep {
+                                step: step + 1,
+                                since: now,
+                            };
+                        }
+                    }
+                }
+            }
+            Phase::Speed { index, since } => {
+                let target = self.config.speeds.get(index).copied().unwrap_or(0.0);
+                self.command.velocity = target;
+                if since_ms(since) >= 6_000 {
+                    let error = (self.speed() - target).abs();
+                    let ok = error <= 0.1 * target.max(1.0);
+                    self.record(
+                        "speed step",
+                        ok,
+                        format!("{target:.1} m/s: {:.2} m/s after 6 s", self.speed()),
+                    );
+                    self.phase = if index + 1 < self.config.speeds.len() {
+                        Phase::Speed {
+                            index: index + 1,
+                            since: now,
+                        }
+                    } else {
+                        Phase::Settle { since: now }
+                    };
+                }
+            }
+            Phase::Settle { since } => {
+                self.command.velocity = 0.0;
+                if since_ms(since) >= 4_000 {
+                    self.phase = Phase::Silent {
+                        since: now,
+                        last_command: now,
+                        holding: None,
+                        braking: None,
+                    };
+                }
+            }
+            Phase::Silent {
+                since,
+                last_command,
+                holding,
+                braking,
+            } => {
+                silent = true;
+                if since_ms(since) >= 400 {
+                    let cycle = Duration::from_millis(self.ads_cycle_ms()).as_secs_f64() * 1e3;
+                    let after = |t: Option<Timestamp>| {
+                        t.map(|t| t.saturating_since(last_command).as_secs_f64() * 1e3)
+                    };
+                    let (hold_ms, brake_ms) = (after(holding), after(braking));
+                    // Holding from 1.5 cycles, full braking from 5.5, each seen in the next state frame.
+                    let ok = hold_ms.is_some_and(|t| t <= 1.5 * cycle + cycle + 2.0)
+                        && brake_ms.is_some_and(|t| t <= 5.5 * cycle + cycle + 2.0);
+                    self.record(
+                        "watchdog",
+                        ok,
+                        format!(
+                            "holding after {} ms, full braking after {} ms of silence",
+                            show(hold_ms),
+                            show(brake_ms)
+                        ),
+                    );
+                    self.phase = Phase::Reengage { since: now };
+                }
+            }
+            Phase::Reengage { since } => {
+                engage = self.ads.feedback_alive(now)
+                    && (self.cycle % 200 < 25)
+                    && (!self.autonomous() || self.ads.state().watchdog_level.value == Some(4));
+                let ready = self.autonomous() && self.ads.state().watchdog_level.value == Some(0);
+                if ready || since_ms(since) > 5_000 {
+                    if !ready {
+                        self.record("re-engage", false, "not autonomous again within 5 s".into());
+                    }
+                    self.phase = if self.estop && ready {
+                        Phase::Estop {
+                            since: now,
+                            latched: None,
+                        }
+                    } else {
+                        Phase::Done
+                    };
+                }
+            }
+            Phase::Estop { since, latched } => {
+                press_estop = Some(true);
+                if since_ms(since) >= 500 {
+                    let ms = latched.map(|t| t.saturating_since(since).as_secs_f64() * 1e3);
+                    self.record(
+                        "E-stop reaction",
+                        ms.is_some_and(|t| t <= 60.0),
+                        format!("latched {} ms after the press", show(ms)),
+                    );
+                    self.phase = Phase::Released { since: now };
+                }
+            }
+            Phase::Released { since } => {
+                press_estop = Some(false);
+                if since_ms(since) >= 1_000 {
+                    let held = self.ads.state().estop_state.value.is_some_and(|s| s != 0);
+                    self.record(
+                        "E-stop latch",
+                        held,
+                        if held {
+                            "still latched 1 s after release".into()
+                        } else {
+                            "released by itself".into()
+                        },
+                    );
+                    self.phase = Phase::Reset { since: now };
+                }
+            }
+            Phase::Reset { since } => {
+                press_estop = Some(false);
+                let state = self.ads.state().estop_state.value;
+                operator_reset = matches!(state, Some(4 | 6)) && self.cycle % 500 < 25;
+                engage = state == Some(7) && self.cycle % 200 < 25;
+                if state == Some(0) || since_ms(since) > 6_000 {
+                    self.record(
+                        "operator reset",
+                        state == Some(0),
+                        format!("latch clear after {} ms", since_ms(since)),
+                    );
+                    self.phase = Phase::Done;
+                }
+            }
+            Phase::Done => {}
+        }
+        if let Some(pressed) = press_estop {
+            if now >= self.next_estop {
+                self.next_estop = now.saturating_add(Duration::from_millis(20));
+                let mut m = EmergencyStop::default();
+                m.set_estop_request_raw(u64::from(pressed));
+                m.set_counter_raw(self.estop_counter & 0x0F);
+                self.estop_counter = self.estop_counter.wrapping_add(1);
+                out(reference_tug::sealed_frame(EmergencyStop::ID, m.0));
+            }
+        }
+        let _ = self.ads.set_command(
+            now,
+            AdsCommand {
+                engage,
+                operator_reset,
+                ..self.command
+            },
+        );
+        // Silent: the ADS side is not polled at all, so it counts no command it did not send
+        // (the vehicle's echo stays one it knows).
+        if !silent {
+            self.ads.poll(now, out);
+        }
+        if let Phase::Silent {
+            since,
+            holding,
+            braking,
+            ..
+        } = self.phase
+        {
+            // The silence starts with the first command not sent.
+            if since == now {
+                self.phase = Phase::Silent {
+                    since,
+                    last_command: now,
+                    holding,
+                    braking,
+                };
+            }
+        }
+    }
+
+    fn steps(&self) -> i64 {
+        let steps = (self.config.sweep_deg / self.config.sweep_step_deg.max(0.1)).floor();
+        // At most a thousand steps each way: the range is small.
+        (0..1_000i32)
+            .take_while(|k| f64::from(*k) < steps)
+            .last()
+            .map_or(0, |k| i64::from(k) + 1)
+    }
+
+    fn ads_cycle_ms(&self) -> u64 {
+        self.cycle_ms
+    }
+}
+
+fn show(ms: Option<f64>) -> String {
+    ms.map_or("—".to_string(), |t| format!("{t:.0}"))
+}
+
+impl bywire_core::node::Node for Checker {
+    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        Checker::on_frame(self, now, frame);
+    }
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        Checker::poll(self, now, out);
+    }
+    fn next_deadline(&self) -> Option<Timestamp> {
+        // The checks count cycles of a millisecond.
+        Some(self.last_poll.saturating_add(Duration::from_millis(1)))
+    }
+}
