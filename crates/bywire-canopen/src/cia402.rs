@@ -469,7 +469,9 @@ impl Drive {
                     && self.motor.velocity.abs() < STANDSTILL
             }
             (State::OperationEnabled, Some(_)) => {
-                let target = od.get_signed(object::TARGET_VELOCITY, 0).unwrap_or(0) as f64;
+                let target = self
+                    .params
+                    .map_or_else(|| Params::read(od).target_velocity, |p| p.target_velocity);
                 (self.motor.velocity - target).abs() < STANDSTILL
             }
             (State::QuickStopActive | State::FaultReactionActive, _) => {

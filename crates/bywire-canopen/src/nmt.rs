@@ -213,7 +213,9 @@ struct Watched {
 /// Holds at most [`HeartbeatConsumer::CAPACITY`] nodes; no allocation.
 #[derive(Debug, Clone)]
 pub struct HeartbeatConsumer {
+    /// The watched nodes in `watched[..used]` (kept together, so scans stop there).
     watched: [Option<Watched>; HeartbeatConsumer::CAPACITY],
+    used: usize,
     events: EventQueue<HeartbeatEvent, 32>,
 }
 
@@ -221,6 +223,7 @@ impl Default for HeartbeatConsumer {
     fn default() -> Self {
         HeartbeatConsumer {
             watched: [None; HeartbeatConsumer::CAPACITY],
+            used: 0,
             events: EventQueue::new(),
         }
     }
@@ -233,46 +236,57 @@ impl HeartbeatConsumer {
     /// Watch `node` with `timeout` (replacing an earlier time); a zero timeout stops
     /// watching it. `false` if the table is full.
     pub fn watch(&mut self, node: u8, timeout: Duration) -> bool {
-        if let Some(slot) = self
+        let entry = Watched {
+            node,
+            timeout,
+            liveness: Liveness::Unknown,
+        };
+        let at = self
             .watched
-            .iter_mut()
-            .find(|w| w.is_some_and(|w| w.node == node))
-        {
-            *slot = (!timeout.is_zero()).then_some(Watched {
-                node,
-                timeout,
-                liveness: Liveness::Unknown,
-            });
-            return true;
-        }
-        if timeout.is_zero() {
-            return true;
-        }
-        match self.watched.iter_mut().find(|w| w.is_none()) {
-            Some(slot) => {
-                *slot = Some(Watched {
-                    node,
-                    timeout,
-                    liveness: Liveness::Unknown,
-                });
+            .iter()
+            .take(self.used)
+            .position(|w| w.is_some_and(|w| w.node == node));
+        match (at, timeout.is_zero()) {
+            (Some(at), false) => {
+                if let Some(slot) = self.watched.get_mut(at) {
+                    *slot = Some(entry);
+                }
                 true
             }
-            None => false,
+            (Some(at), true) => {
+                // Keep the watched nodes together: the last one takes the freed place.
+                self.used -= 1;
+                self.watched.swap(at, self.used);
+                if let Some(slot) = self.watched.get_mut(self.used) {
+                    *slot = None;
+                }
+                true
+            }
+            (None, true) => true,
+            (None, false) => match self.watched.get_mut(self.used) {
+                Some(slot) => {
+                    *slot = Some(entry);
+                    self.used += 1;
+                    true
+                }
+                None => false,
+            },
         }
     }
 
     /// Stop watching every node.
     pub fn clear(&mut self) {
         self.watched = [None; HeartbeatConsumer::CAPACITY];
+        self.used = 0;
+    }
+
+    fn in_use(&self) -> impl Iterator<Item = &Watched> {
+        self.watched.iter().take(self.used).flatten()
     }
 
     /// What is known of `node` (`None` if not watched).
     pub fn liveness(&self, node: u8) -> Option<Liveness> {
-        self.watched
-            .iter()
-            .flatten()
-            .find(|w| w.node == node)
-            .map(|w| w.liveness)
+        self.in_use().find(|w| w.node == node).map(|w| w.liveness)
     }
 
     /// Take in a frame; heartbeats of watched nodes update them.
@@ -283,7 +297,13 @@ impl HeartbeatConsumer {
         if state == NmtState::BootUp {
             let _ = self.events.push(HeartbeatEvent::BootUp { node });
         }
-        let Some(watched) = self.watched.iter_mut().flatten().find(|w| w.node == node) else {
+        let Some(watched) = self
+            .watched
+            .iter_mut()
+            .take(self.used)
+            .flatten()
+            .find(|w| w.node == node)
+        else {
             return;
         };
         let event = match watched.liveness {
@@ -304,7 +324,7 @@ impl HeartbeatConsumer {
 
     /// Mark nodes silent past their consumer time as lost.
     pub fn poll(&mut self, now: Timestamp) {
-        for watched in self.watched.iter_mut().flatten() {
+        for watched in self.watched.iter_mut().take(self.used).flatten() {
             if let Liveness::Alive { state, last } = watched.liveness {
                 if now >= last.saturating_add(watched.timeout) {
                     watched.liveness = Liveness::Lost { state };
@@ -318,9 +338,7 @@ impl HeartbeatConsumer {
 
     /// The earliest time a watched node would be declared lost.
     pub fn next_deadline(&self) -> Option<Timestamp> {
-        self.watched
-            .iter()
-            .flatten()
+        self.in_use()
             .filter_map(|w| match w.liveness {
                 Liveness::Alive { last, .. } => Some(last.saturating_add(w.timeout)),
                 Liveness::Unknown | Liveness::Lost { .. } => None,
@@ -498,6 +516,38 @@ mod tests {
                 state: NmtState::Operational
             })
         );
+    }
+
+    #[test]
+    fn watching_and_unwatching_keeps_the_table_consistent() {
+        let mut consumer = HeartbeatConsumer::default();
+        for node in 1..=5 {
+            assert!(consumer.watch(node, Duration::from_millis(100)));
+        }
+        assert!(consumer.watch(2, Duration::ZERO), "stop watching 2");
+        assert!(
+            consumer.watch(3, Duration::from_millis(50)),
+            "a new time for 3"
+        );
+        assert_eq!(consumer.liveness(2), None);
+        for node in [1, 3, 4, 5] {
+            assert_eq!(consumer.liveness(node), Some(Liveness::Unknown), "{node}");
+            consumer.on_frame(
+                Timestamp::ZERO,
+                &heartbeat_frame(node, NmtState::Operational),
+            );
+        }
+        assert_eq!(
+            consumer.next_deadline(),
+            Some(Timestamp::from_millis(50)),
+            "node 3's new time"
+        );
+        consumer.clear();
+        assert_eq!(consumer.liveness(1), None);
+        for node in 1..=127 {
+            assert!(consumer.watch(node, Duration::from_millis(1)));
+        }
+        assert!(!consumer.watch(0, Duration::from_millis(1)), "full");
     }
 
     #[test]
