@@ -14,6 +14,7 @@ fn one_simulated_second(c: &mut Criterion) {
         grade: 0.0,
         route: apron_loop(),
         speed: 3.0,
+        crab_final_m: 0.0,
     });
     // Engaged and cruising before measuring.
     for _ in 0..5_000 {

@@ -5,6 +5,7 @@
 //! name = "stand-approach"
 //! route = "apron-loop"          # or: waypoints = [[0, 0], [40, 0], [40, 30]]
 //! speed = 3.0                   # m/s
+//! crab_final_m = 10.0           # the last metres in crab, heading held (a stand approach)
 //! payload = 2000                # kg, 0–4500
 //! grade = 0.02                  # rise over run
 //!
@@ -35,6 +36,8 @@ pub struct Scenario {
     pub route: Vec<Point>,
     /// Cruising speed, m/s.
     pub speed: f64,
+    /// The last this many metres of the route in crab (a stand approach; 0: none).
+    pub crab_final_m: f64,
     /// Payload, kg.
     pub payload: f64,
     /// Road grade.
@@ -74,6 +77,8 @@ struct RawScenario {
     waypoints: Option<Vec<[f64; 2]>>,
     #[serde(default = "default_speed")]
     speed: f64,
+    #[serde(default)]
+    crab_final_m: f64,
     #[serde(default)]
     payload: f64,
     #[serde(default)]
@@ -132,6 +137,7 @@ impl Scenario {
             name: name.to_string(),
             route: apron_loop(),
             speed: 3.0,
+            crab_final_m: 10.0,
             payload: 2_000.0,
             grade: 0.0,
             events,
@@ -177,6 +183,12 @@ impl Scenario {
             return Err(invalid(
                 "speed",
                 format!("{} is not a speed the tug drives (0–8 m/s)", raw.speed),
+            ));
+        }
+        if !(0.0..=1_000.0).contains(&raw.crab_final_m) {
+            return Err(invalid(
+                "crab_final_m",
+                format!("{} is not a length of route (0–1000 m)", raw.crab_final_m),
             ));
         }
         if !(0.0..=4_500.0).contains(&raw.payload) {
@@ -245,6 +257,7 @@ impl Scenario {
             name: raw.name.unwrap_or_else(|| file.to_string()),
             route,
             speed: raw.speed,
+            crab_final_m: raw.crab_final_m,
             payload: raw.payload,
             grade: raw.grade,
             events,
@@ -305,6 +318,7 @@ mod tests {
                 .contains("event[0].node: 0x30 is not a drive")
         );
         assert!(error("payload = 9000\n").contains("payload: 9000 kg"));
+        assert!(error("crab_final_m = -1\n").contains("crab_final_m: -1 is not a length"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
         assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 11));

@@ -64,6 +64,8 @@ pub struct TugParams {
     pub route: Vec<Point>,
     /// Cruising speed, m/s.
     pub speed: f64,
+    /// The last this many metres of the route in crab (a stand approach; 0: none).
+    pub crab_final_m: f64,
 }
 
 /// One corner: its two drives (CiA 402 devices with the plant as their motor) and plants.
@@ -187,6 +189,7 @@ pub struct Tug {
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
     ads_external: bool,
+    crabbing: bool,
     remaining: f64,
     delayed: Vec<(Timestamp, Frame)>,
 }
@@ -335,6 +338,7 @@ impl Tug {
             ),
             drives_lost: false,
             ads_external: false,
+            crabbing: false,
             remaining: f64::INFINITY,
             delayed: Vec::new(),
         }
@@ -711,21 +715,44 @@ impl Tug {
             self.next_ads = now.saturating_add(Duration::from_millis(20));
             let pose = self.chassis.pose();
             let speed = self.chassis.twist().vx;
+            let crab = self.remaining < self.params.crab_final_m;
             let (steering, error, remaining) = match Path::new(&self.route) {
                 Some(path) => {
                     let projection = path.project(Point {
                         x: pose.x,
                         y: pose.y,
                     });
-                    let command = self.follower.steer(pose, speed, &path);
+                    let steering = if crab {
+                        // The stand approach in crab: every wheel toward the point a lookahead
+                        // ahead on the route, the heading held.
+                        let ahead =
+                            path.at_station(projection.station + self.follower.lookahead.at(speed));
+                        let bearing = libm::atan2(ahead.y - pose.y, ahead.x - pose.x) - pose.yaw;
+                        libm::atan2(libm::sin(bearing), libm::cos(bearing))
+                            .clamp(-self.follower.max_steer, self.follower.max_steer)
+                            .to_degrees()
+                    } else {
+                        self.follower.steer(pose, speed, &path).front.to_degrees()
+                    };
                     (
-                        command.front.to_degrees(),
+                        steering,
                         projection.offset.abs(),
                         path.length() - projection.station,
                     )
                 }
                 None => (0.0, 0.0, 0.0),
             };
+            if crab != self.crabbing {
+                self.crabbing = crab;
+                self.record(
+                    "steering_mode",
+                    if crab {
+                        "Crab".to_string()
+                    } else {
+                        "Normal".to_string()
+                    },
+                );
+            }
             self.remaining = remaining;
             if self.engaged_at.is_some() {
                 self.tracking_errors.push(error);
@@ -768,7 +795,11 @@ impl Tug {
                 brake: if velocity == 0.0 { 30.0 } else { 0.0 },
                 gear: Gear::Drive,
                 mode: ControlMode::Autonomous,
-                steering_mode: SteeringMode::Normal,
+                steering_mode: if crab {
+                    SteeringMode::Crab
+                } else {
+                    SteeringMode::Normal
+                },
                 engage,
                 operator_reset,
             };

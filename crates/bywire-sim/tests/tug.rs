@@ -43,6 +43,7 @@ fn run(seed: u64) -> Tug {
         grade: 0.0,
         route: route(),
         speed: 3.0,
+        crab_final_m: 0.0,
     });
     for _ in 0..60_000 {
         tug.step();
@@ -113,6 +114,7 @@ fn cruising() -> Tug {
         grade: 0.0,
         route: apron_loop(),
         speed: 3.0,
+        crab_final_m: 0.0,
     });
     while tug.now().as_nanos() < 8_000_000_000 {
         tug.step();
@@ -235,4 +237,59 @@ fn a_silent_drive_is_lost_within_its_consumer_time_and_the_tug_brakes() {
         "braked to a stop: {}",
         tug.pose_speed()
     );
+}
+
+#[test]
+fn a_crab_approach_moves_sideways_with_the_heading_held() {
+    // 30 m along x, then 20 m on a diagonal 4 m to the left: the stand approach in crab.
+    let mut points: Vec<Point> = (0..=30)
+        .map(|x| Point {
+            x: f64::from(x),
+            y: 0.0,
+        })
+        .collect();
+    for k in 1..=20 {
+        points.push(Point {
+            x: 30.0 + f64::from(k),
+            y: 0.2 * f64::from(k),
+        });
+    }
+    let mut tug = Tug::new(TugParams {
+        seed: 3,
+        payload: 1_000.0,
+        grade: 0.0,
+        route: points,
+        speed: 2.0,
+        crab_final_m: 26.0,
+    });
+    let mut crab_angles = Vec::new();
+    for _ in 0..60_000 {
+        tug.step();
+        if tug.remaining() < 15.0 && tug.remaining() > 3.0 {
+            crab_angles.push((tug.wheel_angles(), tug.pose().yaw));
+        }
+        if tug.remaining() < 0.5 && tug.now().as_nanos() > 5_000_000_000 {
+            break;
+        }
+    }
+    let pose = tug.pose();
+    assert!(
+        (pose.y - 4.0).abs() < 0.5 && (pose.x - 50.0).abs() < 1.0,
+        "at the stand: {pose:?}"
+    );
+    assert!(
+        tug.events
+            .iter()
+            .any(|e| e.kind == "steering_mode" && e.detail == "Crab"),
+        "the ADS asked for crab"
+    );
+    assert!(!crab_angles.is_empty());
+    for (angles, yaw) in &crab_angles {
+        assert!(yaw.abs() < 3f64.to_radians(), "heading held: {yaw}");
+        // Every wheel at the same angle (degrees), to the left (the diagonal is 11.3°).
+        for angle in angles {
+            assert!((angle - angles[0]).abs() < 1.5, "crab: {angles:?}");
+        }
+        assert!(angles[0] > 5.0, "to the left: {angles:?}");
+    }
 }

@@ -51,6 +51,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             grade: 0.0,
             route: apron_loop(),
             speed: 3.0,
+            crab_final_m: 0.0,
         });
         match args.tug_fault.as_deref() {
             None => {}

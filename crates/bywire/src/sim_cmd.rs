@@ -70,6 +70,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         grade: scenario.grade,
         route: scenario.route.clone(),
         speed: scenario.speed,
+        crab_final_m: scenario.crab_final_m,
     });
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();

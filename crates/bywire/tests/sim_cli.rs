@@ -54,10 +54,18 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         .iter()
         .map(|e| e["kind"].as_str().unwrap())
         .collect();
-    // Start-up: the watchdog's recovery run, autonomous mode; then nothing until arrival.
+    // Start-up: the watchdog's recovery run, autonomous mode; then the crab stand approach and
+    // arrival.
     assert_eq!(
         kinds,
-        ["watchdog", "watchdog", "mode", "engaged", "arrived"],
+        [
+            "watchdog",
+            "watchdog",
+            "mode",
+            "engaged",
+            "steering_mode",
+            "arrived"
+        ],
         "{metrics}"
     );
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
