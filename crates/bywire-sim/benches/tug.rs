@@ -15,6 +15,8 @@ fn one_simulated_second(c: &mut Criterion) {
         route: apron_loop(),
         speed: 3.0,
         crab_final_m: 0.0,
+        tank_turn_deg: 0.0,
+        steering_steps: Vec::new(),
     });
     // Engaged and cruising before measuring.
     for _ in 0..5_000 {

@@ -6,6 +6,8 @@
 //! route = "apron-loop"          # or: waypoints = [[0, 0], [40, 0], [40, 30]]
 //! speed = 3.0                   # m/s
 //! crab_final_m = 10.0           # the last metres in crab, heading held (a stand approach)
+//! tank_turn_deg = 180           # at the end, a tank turn in place (+ left)
+//! steering_steps = [10, -10, 0] # before departure, steering steps at a standstill, 3 s each
 //! payload = 2000                # kg, 0–4500
 //! grade = 0.02                  # rise over run
 //!
@@ -38,6 +40,10 @@ pub struct Scenario {
     pub speed: f64,
     /// The last this many metres of the route in crab (a stand approach; 0: none).
     pub crab_final_m: f64,
+    /// A tank turn in place at the end of the route, degrees (+ left; 0: none).
+    pub tank_turn_deg: f64,
+    /// The steering step test before departure: angles, degrees, each held 3 s.
+    pub steering_steps: Vec<f64>,
     /// Payload, kg.
     pub payload: f64,
     /// Road grade.
@@ -79,6 +85,10 @@ struct RawScenario {
     speed: f64,
     #[serde(default)]
     crab_final_m: f64,
+    #[serde(default)]
+    tank_turn_deg: f64,
+    #[serde(default)]
+    steering_steps: Vec<f64>,
     #[serde(default)]
     payload: f64,
     #[serde(default)]
@@ -138,6 +148,12 @@ impl Scenario {
             route: apron_loop(),
             speed: 3.0,
             crab_final_m: 10.0,
+            tank_turn_deg: if name == "apron-loop" { 180.0 } else { 0.0 },
+            steering_steps: if name == "apron-loop" {
+                vec![10.0, -10.0, 0.0]
+            } else {
+                Vec::new()
+            },
             payload: 2_000.0,
             grade: 0.0,
             events,
@@ -190,6 +206,29 @@ impl Scenario {
                 "crab_final_m",
                 format!("{} is not a length of route (0–1000 m)", raw.crab_final_m),
             ));
+        }
+        if !(-720.0..=720.0).contains(&raw.tank_turn_deg) {
+            return Err(invalid(
+                "tank_turn_deg",
+                format!(
+                    "{} is not a turn of at most two rounds (±720°)",
+                    raw.tank_turn_deg
+                ),
+            ));
+        }
+        if let Some((i, angle)) = raw
+            .steering_steps
+            .iter()
+            .enumerate()
+            .find(|(_, a)| !(-40.0..=40.0).contains(*a))
+        {
+            return Err(invalid(
+                &format!("steering_steps[{i}]"),
+                format!("{angle} is not a wheel angle (−40° … 40°)"),
+            ));
+        }
+        if raw.steering_steps.len() > 100 {
+            return Err(invalid("steering_steps", "at most 100 steps".to_string()));
         }
         if !(0.0..=4_500.0).contains(&raw.payload) {
             return Err(invalid(
@@ -258,6 +297,8 @@ impl Scenario {
             route,
             speed: raw.speed,
             crab_final_m: raw.crab_final_m,
+            tank_turn_deg: raw.tank_turn_deg,
+            steering_steps: raw.steering_steps,
             payload: raw.payload,
             grade: raw.grade,
             events,
@@ -319,6 +360,9 @@ mod tests {
         );
         assert!(error("payload = 9000\n").contains("payload: 9000 kg"));
         assert!(error("crab_final_m = -1\n").contains("crab_final_m: -1 is not a length"));
+        assert!(error("tank_turn_deg = 900\n").contains("tank_turn_deg: 900 is not a turn"));
+        assert!(error("steering_steps = [5, 45]\n")
+            .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
         assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 11));

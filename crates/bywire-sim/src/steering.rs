@@ -57,9 +57,10 @@ impl Default for SteeringParams {
             load_rolling_bar: 25.0,
             cap_area: cap,
             rod_area: cap - core::f64::consts::PI * rod * rod / 4.0,
-            half_stroke: 0.100,
+            // A stroke long enough for the tank turn's ~61° (end stop at asin(0.14/0.15) = 69°).
+            half_stroke: 0.140,
             arm: 0.150,
-            sensor_range_deg: 45.0,
+            sensor_range_deg: 75.0,
             sensor_bits: 12,
             sensor_noise_deg: 0.05,
         }
@@ -234,10 +235,10 @@ mod tests {
         let mut rolling = SteeringChain::new(weak);
         run(&mut rolling, 1000, 1.0, true);
         assert!(rolling.wheel_angle_deg() > 5.0);
-        // Full command for long: the cylinder's end stop (asin(0.1/0.15) = 41.8°).
+        // Full command for long: the cylinder's end stop (asin(0.14/0.15) = 68.96°).
         run(&mut rolling, 10000, 1.0, true);
         assert!(
-            (rolling.wheel_angle_deg() - 41.81).abs() < 0.01,
+            (rolling.wheel_angle_deg() - 68.96).abs() < 0.01,
             "{}",
             rolling.wheel_angle_deg()
         );
@@ -252,10 +253,10 @@ mod tests {
         run(&mut chain, 1000, 0.5, true);
         let mut rng = Rng::new(1);
         let reading = chain.sensor_deg(&mut rng);
-        let quantum = 90.0 / 4095.0;
+        let quantum = 150.0 / 4095.0;
         assert!((reading - chain.wheel_angle_deg()).abs() <= quantum / 2.0 + 1e-9);
         assert!(
-            ((reading + 45.0) / quantum - libm::round((reading + 45.0) / quantum)).abs() < 1e-6,
+            ((reading + 75.0) / quantum - libm::round((reading + 75.0) / quantum)).abs() < 1e-6,
             "on the grid"
         );
         chain.set_fault(SensorFault::Stuck(3.0));
@@ -265,7 +266,7 @@ mod tests {
         let error = chain.sensor_deg(&mut rng) - chain.wheel_angle_deg();
         assert!((error - 3.0).abs() <= quantum, "{error}");
         chain.set_fault(SensorFault::OpenCircuit);
-        assert_eq!(chain.sensor_deg(&mut rng), 45.0);
+        assert_eq!(chain.sensor_deg(&mut rng), 75.0);
         // Noise: a thousand readings of a still wheel spread by about sigma.
         let noisy = SteeringChain::new(SteeringParams::default());
         let readings: Vec<f64> = (0..1000).map(|_| noisy.sensor_deg(&mut rng)).collect();

@@ -20,6 +20,7 @@ use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
+use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
@@ -66,6 +67,35 @@ pub struct TugParams {
     pub speed: f64,
     /// The last this many metres of the route in crab (a stand approach; 0: none).
     pub crab_final_m: f64,
+    /// At the end of the route, a tank turn in place by this many degrees (+ left; 0: none).
+    pub tank_turn_deg: f64,
+    /// Once engaged, before it drives, the ADS steps the steering to each of these angles
+    /// (degrees) in turn at a standstill, holding each for `STEP_HOLD` (the step test).
+    pub steering_steps: Vec<f64>,
+}
+
+/// How long each steering step of the step test is held.
+pub const STEP_HOLD: Duration = Duration::from_secs(3);
+
+/// One steering step at a standstill: the ADS's command from `from` to `to` degrees and the
+/// front-left wheel's angle every millisecond after it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepResponse {
+    /// The angle before, degrees.
+    pub from: f64,
+    /// The commanded angle, degrees.
+    pub to: f64,
+    /// Seconds since the command, one a millisecond.
+    pub times: Vec<f64>,
+    /// The wheel's angle at those times, degrees.
+    pub angles: Vec<f64>,
+}
+
+impl StepResponse {
+    /// Rise, settling, overshoot and steady-state error of this step.
+    pub fn metrics(&self) -> Result<StepMetrics, MetricsError> {
+        step_metrics(&self.times, &self.angles, self.from, self.to)
+    }
 }
 
 /// One corner: its two drives (CiA 402 devices with the plant as their motor) and plants.
@@ -189,7 +219,17 @@ pub struct Tug {
     last_seen: (Watchdog, EstopState, ControlMode),
     drives_lost: bool,
     ads_external: bool,
-    crabbing: bool,
+    /// The steering mode the ADS last asked for.
+    ads_steering_mode: SteeringMode,
+    /// The step test: when the current step was commanded.
+    step_started: Timestamp,
+    /// The tank turn at the end, once started: the last heading seen and the angle turned.
+    tank: Option<(f64, f64)>,
+    tank_done: bool,
+    /// The step test's responses, one a step.
+    pub step_responses: Vec<StepResponse>,
+    /// Command to heartbeat echo, as the ADS measured it on every state frame.
+    pub echo_latencies: Vec<Duration>,
     remaining: f64,
     delayed: Vec<(Timestamp, Frame)>,
 }
@@ -338,7 +378,12 @@ impl Tug {
             ),
             drives_lost: false,
             ads_external: false,
-            crabbing: false,
+            ads_steering_mode: SteeringMode::Normal,
+            step_started: Timestamp::ZERO,
+            tank: None,
+            tank_done: false,
+            step_responses: Vec::new(),
+            echo_latencies: Vec::new(),
             remaining: f64::INFINITY,
             delayed: Vec::new(),
         }
@@ -401,6 +446,85 @@ impl Tug {
 
     fn is_active(&self, fault: Fault) -> bool {
         self.active.iter().any(|(f, _)| *f == fault)
+    }
+
+    /// The route is done: engaged, at its end, stopped, and the tank turn (if any) made.
+    pub fn arrived(&self) -> bool {
+        self.engaged_at.is_some()
+            && self.remaining < 0.5
+            && self.pose_speed() < 0.01
+            && (self.params.tank_turn_deg == 0.0 || self.tank_done)
+    }
+
+    /// The step test's angle while it runs; a step is recorded as it is first commanded.
+    fn step_target(&mut self, now: Timestamp) -> Option<f64> {
+        let engaged = self.engaged_at?;
+        let index =
+            usize::try_from(now.saturating_since(engaged).as_nanos() / STEP_HOLD.as_nanos())
+                .ok()?;
+        let to = *self.params.steering_steps.get(index)?;
+        if self.step_responses.len() == index {
+            let from = index
+                .checked_sub(1)
+                .and_then(|before| self.params.steering_steps.get(before))
+                .copied()
+                .unwrap_or(0.0);
+            self.step_responses.push(StepResponse {
+                from,
+                to,
+                times: Vec::new(),
+                angles: Vec::new(),
+            });
+            self.step_started = now;
+        }
+        Some(to)
+    }
+
+    /// The step test's record: the front-left wheel every millisecond of the current step.
+    fn record_step(&mut self, now: Timestamp) {
+        if now >= self.step_started.saturating_add(STEP_HOLD) {
+            return;
+        }
+        let angle = self.corners.first().map(|c| c.chain.wheel_angle_deg());
+        if let (Some(response), Some(angle)) = (self.step_responses.last_mut(), angle) {
+            let since = now.saturating_since(self.step_started);
+            response.times.push(since.as_secs_f64());
+            response.angles.push(angle);
+        }
+    }
+
+    /// The tank turn at the end of the route: the wheel speed to command while it runs.
+    fn tank_turn(&mut self, remaining: f64, yaw: f64) -> Option<f64> {
+        let wanted = self.params.tank_turn_deg.to_radians();
+        if wanted == 0.0 || self.tank_done || self.engaged_at.is_none() || remaining >= 0.3 {
+            return None;
+        }
+        let (last_yaw, turned) = match self.tank {
+            Some(tank) => tank,
+            None if self.pose_speed() < 0.01 => (yaw, 0.0),
+            None => return None,
+        };
+        let turned = turned + libm::remainder(yaw - last_yaw, 2.0 * core::f64::consts::PI);
+        self.tank = Some((yaw, turned));
+        let left = wanted - turned;
+        if libm::fabs(left) < 0.5f64.to_radians() {
+            self.tank_done = true;
+            return None;
+        }
+        // The wheels turn to their tank angles first, then the tug rotates.
+        let aligned = self
+            .corners
+            .iter()
+            .zip(&self.wheel_targets)
+            .all(|(c, t)| libm::fabs(c.chain.wheel_angle_deg() - t.angle.to_degrees()) < 3.0);
+        if !aligned {
+            return Some(0.0);
+        }
+        let c = self.chassis.params;
+        let radius = libm::hypot(c.wheelbase / 2.0, c.track / 2.0);
+        // Slow to a stop on the heading: ω² = 2·α·θ with a gentle 0.3 rad/s².
+        let rate = libm::sqrt(2.0 * 0.3 * libm::fabs(left)).min(0.5);
+        Some(libm::copysign(rate * radius, left))
     }
 
     fn record(&mut self, kind: &str, detail: String) {
@@ -506,6 +630,7 @@ impl Tug {
         self.run_ecu(now);
         self.run_plants(now);
         self.run_reports(now);
+        self.record_step(now);
         self.note_changes();
         if now.as_nanos() % 50_000_000 == 0 {
             let steering_actual = self
@@ -676,7 +801,12 @@ impl Tug {
 
     fn deliver(&mut self) {
         while let Some(r) = self.bus1.receive(self.ads_port) {
+            let before = self.ads.state().echo_latency.at;
             self.ads.on_frame(r.timestamp, &r.frame);
+            let echo = self.ads.state().echo_latency;
+            if echo.at != before {
+                self.echo_latencies.extend(echo.value);
+            }
         }
         while let Some(r) = self.bus1.receive(self.ecu_port1) {
             self.ecu.on_frame(r.timestamp, &r.frame);
@@ -742,17 +872,6 @@ impl Tug {
                 }
                 None => (0.0, 0.0, 0.0),
             };
-            if crab != self.crabbing {
-                self.crabbing = crab;
-                self.record(
-                    "steering_mode",
-                    if crab {
-                        "Crab".to_string()
-                    } else {
-                        "Normal".to_string()
-                    },
-                );
-            }
             self.remaining = remaining;
             if self.engaged_at.is_some() {
                 self.tracking_errors.push(error);
@@ -767,6 +886,20 @@ impl Tug {
             } else {
                 target
             };
+            // The step test comes first, the tank turn last; after it the tug stands in normal
+            // mode.
+            let step = self.step_target(now);
+            let tank = self.tank_turn(remaining, pose.yaw);
+            let (steering, velocity, mode) = match (step, tank) {
+                (Some(angle), _) => (angle, 0.0, SteeringMode::Normal),
+                (None, Some(wheel_speed)) => (0.0, wheel_speed, SteeringMode::Tank),
+                (None, None) if crab && !self.tank_done => (steering, velocity, SteeringMode::Crab),
+                (None, None) => (steering, velocity, SteeringMode::Normal),
+            };
+            if mode != self.ads_steering_mode {
+                self.ads_steering_mode = mode;
+                self.record("steering_mode", format!("{mode:?}"));
+            }
             // Engage is an edge, taken once the vehicle's recovery run is complete: request it
             // every tenth cycle until the vehicle reports autonomous mode.
             self.ads_cycles = self.ads_cycles.wrapping_add(1);
@@ -795,11 +928,7 @@ impl Tug {
                 brake: if velocity == 0.0 { 30.0 } else { 0.0 },
                 gear: Gear::Drive,
                 mode: ControlMode::Autonomous,
-                steering_mode: if crab {
-                    SteeringMode::Crab
-                } else {
-                    SteeringMode::Normal
-                },
+                steering_mode: mode,
                 engage,
                 operator_reset,
             };
@@ -887,11 +1016,19 @@ impl Tug {
             },
         };
         let mut targets = self.swerve.inverse(motion.twist(), &self.wheel_targets);
-        if speed == 0.0 && a.steering_mode == SteeringMode::Normal {
-            // At a standstill the wheels still take the commanded angles (front +, rear −).
+        if speed == 0.0 {
+            // At a standstill the wheels still take the mode's angles: the commanded angle
+            // (front +, rear − in normal mode, all alike in crab), or tangent to the turn.
             let angle = a.steering.to_radians();
-            for (target, sign) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]) {
-                target.angle = angle * sign;
+            let tank = self
+                .swerve
+                .inverse(Motion::Tank { yaw_rate: 1.0 }.twist(), &self.wheel_targets);
+            for ((target, sign), tank) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]).zip(tank) {
+                target.angle = match a.steering_mode {
+                    SteeringMode::Normal => angle * sign,
+                    SteeringMode::Crab => angle,
+                    SteeringMode::Tank => tank.angle,
+                };
             }
         }
         self.wheel_targets = targets;

@@ -44,6 +44,8 @@ fn run(seed: u64) -> Tug {
         route: route(),
         speed: 3.0,
         crab_final_m: 0.0,
+        tank_turn_deg: 0.0,
+        steering_steps: Vec::new(),
     });
     for _ in 0..60_000 {
         tug.step();
@@ -115,6 +117,8 @@ fn cruising() -> Tug {
         route: apron_loop(),
         speed: 3.0,
         crab_final_m: 0.0,
+        tank_turn_deg: 0.0,
+        steering_steps: Vec::new(),
     });
     while tug.now().as_nanos() < 8_000_000_000 {
         tug.step();
@@ -261,6 +265,8 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
         route: points,
         speed: 2.0,
         crab_final_m: 26.0,
+        tank_turn_deg: 0.0,
+        steering_steps: Vec::new(),
     });
     let mut crab_angles = Vec::new();
     for _ in 0..60_000 {
@@ -292,4 +298,109 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
         }
         assert!(angles[0] > 5.0, "to the left: {angles:?}");
     }
+}
+
+fn straight(length: u32) -> Vec<Point> {
+    (0..=length)
+        .map(|x| Point {
+            x: f64::from(x),
+            y: 0.0,
+        })
+        .collect()
+}
+
+#[test]
+fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
+    let mut tug = Tug::new(TugParams {
+        seed: 4,
+        payload: 2_000.0,
+        grade: 0.0,
+        route: straight(20),
+        speed: 2.0,
+        crab_final_m: 0.0,
+        tank_turn_deg: 90.0,
+        steering_steps: Vec::new(),
+    });
+    let mut stopped_at = None;
+    for _ in 0..120_000 {
+        tug.step();
+        if tug.remaining() < 0.3 && tug.pose_speed() < 0.01 && stopped_at.is_none() {
+            stopped_at = Some(tug.pose());
+        }
+        if tug.arrived() {
+            break;
+        }
+    }
+    assert!(tug.arrived(), "turned and stopped by {:?}", tug.now());
+    let (start, end) = (stopped_at.unwrap(), tug.pose());
+    assert!(
+        (end.yaw - start.yaw - 90f64.to_radians()).abs() < 1.5f64.to_radians(),
+        "turned 90° left: {start:?} → {end:?}"
+    );
+    assert!(
+        (end.x - start.x).hypot(end.y - start.y) < 0.3,
+        "in place: {start:?} → {end:?}"
+    );
+    let modes: Vec<&str> = tug
+        .events
+        .iter()
+        .filter(|e| e.kind == "steering_mode")
+        .map(|e| e.detail.as_str())
+        .collect();
+    assert_eq!(modes, ["Tank", "Normal"]);
+}
+
+#[test]
+fn the_step_test_records_each_step_of_the_steering() {
+    let mut tug = Tug::new(TugParams {
+        seed: 5,
+        payload: 0.0,
+        grade: 0.0,
+        route: straight(10),
+        speed: 2.0,
+        crab_final_m: 0.0,
+        tank_turn_deg: 0.0,
+        steering_steps: vec![10.0, -10.0],
+    });
+    // Engaged at about 0.4 s, two steps of 3 s, then away.
+    for _ in 0..6_300 {
+        tug.step();
+    }
+    assert!(
+        tug.pose().x < 0.05,
+        "standing during the test: {:?}",
+        tug.pose()
+    );
+    for _ in 0..2_000 {
+        tug.step();
+    }
+    assert!(tug.pose().x > 0.5, "away after it: {:?}", tug.pose());
+    let steps = &tug.step_responses;
+    assert_eq!(steps.len(), 2);
+    assert_eq!((steps[0].from, steps[0].to), (0.0, 10.0));
+    assert_eq!((steps[1].from, steps[1].to), (10.0, -10.0));
+    let mut rises = Vec::new();
+    for step in steps {
+        // A sample a millisecond for the hold (the ADS commands on its 20 ms cycle).
+        assert!(
+            (2_950..=3_000).contains(&step.times.len()),
+            "{}",
+            step.times.len()
+        );
+        let m = step.metrics().unwrap();
+        // The drive's profile (20°/s of the position target, 60°/s²) and the valve's follow-up
+        // bound the response: a rise of a few tenths of a second, growing with the step, a
+        // modest overshoot, settled well inside the hold.
+        let span = (step.to - step.from).abs();
+        let rise = m.rise_time.unwrap();
+        assert!((0.2..1.2).contains(&rise), "rise {rise} s for {span}°");
+        assert!(m.overshoot_percent < 15.0, "{m:?}");
+        assert!(m.settling_time_2 < 2.5, "{m:?}");
+        assert!(m.steady_state_error.abs() < 0.5, "{m:?}");
+        rises.push(rise);
+    }
+    assert!(
+        rises[1] > rises[0],
+        "the larger step rises longer: {rises:?}"
+    );
 }

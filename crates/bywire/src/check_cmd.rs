@@ -52,6 +52,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             route: apron_loop(),
             speed: 3.0,
             crab_final_m: 0.0,
+            tank_turn_deg: 0.0,
+            steering_steps: Vec::new(),
         });
         match args.tug_fault.as_deref() {
             None => {}

@@ -71,6 +71,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         route: scenario.route.clone(),
         speed: scenario.speed,
         crab_final_m: scenario.crab_final_m,
+        tank_turn_deg: scenario.tank_turn_deg,
+        steering_steps: scenario.steering_steps.clone(),
     });
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
@@ -126,6 +128,20 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if completed {
         events.push(json!({"t_s": seconds(tug.now()), "kind": "arrived", "detail": "stopped at the end of the route"}));
     }
+    let steering_steps: Vec<_> = tug
+        .step_responses
+        .iter()
+        .map(|step| {
+            match step.metrics() {
+                Ok(m) => json!({
+                    "from_deg": step.from, "to_deg": step.to, "rise_s": m.rise_time,
+                    "settling_s": m.settling_time_2, "settling_5_s": m.settling_time_5,
+                    "overshoot_percent": m.overshoot_percent, "steady_state_error_deg": m.steady_state_error,
+                }),
+                Err(e) => json!({"from_deg": step.from, "to_deg": step.to, "error": e.to_string()}),
+            }
+        })
+        .collect();
     let metrics = json!({
         "scenario": scenario.name,
         "seed": args.seed,
@@ -133,7 +149,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "completed": completed,
         "events": events,
         "tracking_error_m": {"max": worst, "mean": mean},
-                "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3},
+                "steering_steps": steering_steps,
+        "echo_latency_ms": percentiles(&tug.echo_latencies),
+        "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3},
         "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len()},
                 "battery_soc": tug.soc(),
         "supervisor": {
@@ -152,6 +170,17 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, load3 * 100.0, args.out.display())?;
     Ok(())
+}
+
+/// Command → heartbeat-echo latencies as percentiles, ms (nearest rank).
+fn percentiles(latencies: &[Duration]) -> serde_json::Value {
+    let mut sorted: Vec<f64> = latencies.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+    sorted.sort_by(f64::total_cmp);
+    let rank = |p: f64| {
+        let index = ((p * sorted.len() as f64).ceil() as usize).saturating_sub(1);
+        sorted.get(index).copied()
+    };
+    json!({"count": sorted.len(), "p50": rank(0.5), "p95": rank(0.95), "p99": rank(0.99), "max": sorted.last()})
 }
 
 /// The run as time series: speed, the ADS's steering command and the front-left wheel's
@@ -216,7 +245,7 @@ fn run_plain(
         tug.step();
         let now = tug.now();
         scenario.apply(tug, before, now);
-        if tug.engaged_at().is_some() && tug.remaining() < 0.5 && tug.pose_speed().abs() < 0.01 {
+        if tug.arrived() {
             break true;
         }
         if now >= limit || stop.load(std::sync::atomic::Ordering::Relaxed) {

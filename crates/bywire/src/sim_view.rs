@@ -51,7 +51,7 @@ fn event_loop(
                 scenario.apply(tug, before, tug.now());
             }
         }
-        if tug.engaged_at().is_some() && tug.remaining() < 0.5 && tug.pose_speed() < 0.01 {
+        if tug.arrived() {
             return Ok(Ending::Arrived);
         }
         if Duration::from_nanos(tug.now().as_nanos()) >= limit

@@ -54,8 +54,8 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         .iter()
         .map(|e| e["kind"].as_str().unwrap())
         .collect();
-    // Start-up: the watchdog's recovery run, autonomous mode; then the crab stand approach and
-    // arrival.
+    // Start-up: the watchdog's recovery run, autonomous mode; then the crab stand approach, the
+    // tank turn at the end and arrival.
     assert_eq!(
         kinds,
         [
@@ -64,10 +64,35 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
             "mode",
             "engaged",
             "steering_mode",
+            "steering_mode",
+            "steering_mode",
             "arrived"
         ],
         "{metrics}"
     );
+    let modes: Vec<&str> = metrics["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["kind"] == "steering_mode")
+        .map(|e| e["detail"].as_str().unwrap())
+        .collect();
+    assert_eq!(modes, ["Crab", "Tank", "Normal"]);
+    // The step test before departure: 0 → 10 → −10 → 0°, each measured.
+    let steps = metrics["steering_steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 3, "{metrics}");
+    for step in steps {
+        let rise = step["rise_s"].as_f64().unwrap();
+        let overshoot = step["overshoot_percent"].as_f64().unwrap();
+        let settling = step["settling_s"].as_f64().unwrap();
+        assert!(rise > 0.1 && rise < settling && overshoot < 20.0, "{step}");
+        assert!(step["steady_state_error_deg"].as_f64().unwrap().abs() < 0.5);
+    }
+    // Command → echo latency: the state frame at 50 Hz echoes the last command.
+    let echo = &metrics["echo_latency_ms"];
+    assert!(echo["count"].as_u64().unwrap() > 1_000, "{echo}");
+    let (p50, p99) = (echo["p50"].as_f64().unwrap(), echo["p99"].as_f64().unwrap());
+    assert!(0.0 < p50 && p50 <= p99 && p99 <= 40.0, "{echo}");
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
     assert!((20.0..120.0).contains(&sim_seconds), "{sim_seconds}");
     sim(&b, "5");
