@@ -15,7 +15,8 @@
 //! at_s = 8.0
 //! fault = "ads_silence"         # ads_silence, estop, operator_reset, drive_silence,
 //! duration_s = 1.0              # sensor_fault, corrupt_commands, duplicate_commands,
-//!                               # delay_commands, driver_takeover, ecu_bus_off
+//!                               # delay_commands, driver_takeover, ecu_bus_off,
+//!                               # redundant_bus_loss
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
 //! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15
 //! ```
@@ -117,8 +118,8 @@ struct RawEvent {
 impl Scenario {
     /// A built-in scenario by name: `apron-loop` (the route, nothing happens) or `fault-tour`
     /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
-    /// a stuck steering sensor, corrupted, duplicated and delayed commands, a driver's
-    /// takeover, and the ECU's controller going bus-off).
+    /// bus 1b lost, a stuck steering sensor, corrupted, duplicated and delayed commands, a
+    /// driver's takeover, and the ECU's controller going bus-off).
     pub fn builtin(name: &str) -> Option<Scenario> {
         let s = Duration::from_secs;
         let ms = Duration::from_millis;
@@ -126,6 +127,7 @@ impl Scenario {
             "apron-loop" => Vec::new(),
             "fault-tour" => vec![
                 (s(8), Fault::AdsSilence, Some(s(1))),
+                (s(12), Fault::RedundantBusLoss, Some(s(1))),
                 (s(16), Fault::Estop, Some(s(2))),
                 (s(24), Fault::OperatorReset, None),
                 (s(32), Fault::DriveSilence(DRIVE_NODES[1]), Some(s(1))),
@@ -288,7 +290,8 @@ impl Scenario {
                 "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
                 "driver_takeover" => Fault::DriverTakeover,
                 "ecu_bus_off" => Fault::EcuBusOff,
-                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off)"))),
+                "redundant_bus_loss" => Fault::RedundantBusLoss,
+                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, redundant_bus_loss)"))),
             };
             events.push((Duration::from_secs_f64(e.at_s), fault, duration));
         }
@@ -365,6 +368,6 @@ mod tests {
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
-        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 11));
+        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 12));
     }
 }

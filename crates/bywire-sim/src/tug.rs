@@ -25,12 +25,13 @@ use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::Profile;
+use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::reference_tug::{
     self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringMode,
     VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles,
 };
-use bywire_vehicle::supervisor::Supervisor;
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
+use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
@@ -136,6 +137,8 @@ pub enum Fault {
     /// The ECU's controller on bus 1 meets a burst of bus errors (40 destroyed frames: more
     /// than enough for bus-off).
     EcuBusOff,
+    /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
+    RedundantBusLoss,
 }
 
 /// The run's state every 50 ms, for plots.
@@ -170,6 +173,13 @@ pub struct Tug {
     bus1: SimBus,
     bus2: SimBus,
     bus3: SimBus,
+    /// The redundant command bus: the ADS's frames again, voted on by the ECU.
+    bus1b: SimBus,
+    ads_port_b: NodeId,
+    ecu_port_b: NodeId,
+    log_port_b: NodeId,
+    /// Frames on bus 1b.
+    pub bus1b_log: Vec<Logged>,
     imu_port: NodeId,
     ecu_port3: NodeId,
     log_port3: NodeId,
@@ -217,6 +227,7 @@ pub struct Tug {
     /// The operator is resetting the E-stop latch (presses reset until it is released).
     resetting: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
+    last_degraded: Option<Channel>,
     drives_lost: bool,
     ads_external: bool,
     /// The steering mode the ADS last asked for.
@@ -260,10 +271,19 @@ impl Tug {
     /// A tug at the start of its route, parked, everything powered on.
     pub fn new(params: TugParams) -> Tug {
         let loaded = Profile::builtin("reference-tug");
-        let (ads_config, ecu_config) = match &loaded {
+        let (ads_config, mut ecu_config) = match &loaded {
             Ok(l) => (l.ads_config(), l.supervisor_config()),
             Err(_) => (Default::default(), Default::default()),
         };
+        // Commands come on bus 1 and bus 1b: a copy lost for three cycles leaves the other bus
+        // alone (degraded, reported); copies that disagree are a fault.
+        ecu_config.redundancy = Some(Redundancy {
+            timeout: ecu_config.cycle.saturating_mul(3),
+            skew: Duration::from_millis(5),
+        });
+        let mut bus1b = SimBus::new(500_000, None);
+        let (ads_port_b, ecu_port_b, log_port_b) =
+            (bus1b.add_node(), bus1b.add_node(), bus1b.add_node());
         let mut bus1 = SimBus::new(500_000, None);
         let mut bus2 = SimBus::new(1_000_000, None);
         let mut bus3 = SimBus::new(500_000, None);
@@ -322,6 +342,12 @@ impl Tug {
             bus1,
             bus2,
             bus3,
+            bus1b,
+            ads_port_b,
+            ecu_port_b,
+            log_port_b,
+            bus1b_log: Vec::new(),
+            last_degraded: None,
             imu_port,
             ecu_port3,
             log_port3,
@@ -396,9 +422,13 @@ impl Tug {
         self.bus1.add_node()
     }
 
-    /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]).
+    /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]), and its copy on bus 1b
+    /// (unless cut), as the built-in ADS does.
     pub fn send_bus1(&mut self, port: NodeId, frame: Frame) {
         self.bus1.submit(port, frame, self.now);
+        if !self.is_active(Fault::RedundantBusLoss) {
+            self.bus1b.submit(self.ads_port_b, frame, self.now);
+        }
     }
 
     /// The next frame bus 1 delivered to `port`.
@@ -438,6 +468,7 @@ impl Tug {
             | Fault::CorruptCommands
             | Fault::DuplicateCommands
             | Fault::DelayCommands(_)
+            | Fault::RedundantBusLoss
             | Fault::DriverTakeover => {}
         }
         self.active
@@ -589,14 +620,15 @@ impl Tug {
         self.battery.soc()
     }
 
-    /// Bus loads over the run so far: busy time over elapsed time, buses 1, 2 and 3.
+    /// Bus loads over the run so far: busy time over elapsed time, buses 1, 2, 3 and 1b.
     #[allow(clippy::cast_precision_loss)]
-    pub fn bus_loads(&self) -> [f64; 3] {
+    pub fn bus_loads(&self) -> [f64; 4] {
         let elapsed = self.now.as_nanos().max(1) as f64;
         [
             self.bus1.busy_ns(),
             self.bus2.busy_ns(),
             self.bus3.busy_ns(),
+            self.bus1b.busy_ns(),
         ]
         .map(|busy| busy as f64 / elapsed)
     }
@@ -608,6 +640,7 @@ impl Tug {
         self.bus1.advance(now);
         self.bus2.advance(now);
         self.bus3.advance(now);
+        self.bus1b.advance(now);
         let expired: Vec<Fault> = self
             .active
             .iter()
@@ -760,6 +793,7 @@ impl Tug {
             ("bus1", self.bus1.take_events()),
             ("bus2", self.bus2.take_events()),
             ("bus3", self.bus3.take_events()),
+            ("bus1b", self.bus1b.take_events()),
         ];
         for (bus, events) in events {
             for event in events {
@@ -780,6 +814,16 @@ impl Tug {
             self.record("mode", format!("{:?}", seen.2));
         }
         self.last_seen = seen;
+        let degraded = self.ecu.degraded();
+        if degraded != self.last_degraded {
+            self.last_degraded = degraded;
+            let detail = match degraded {
+                Some(Channel::A) => "bus 1 alone (bus 1b lost)",
+                Some(Channel::B) => "bus 1b alone (bus 1 lost)",
+                None => "both buses agree",
+            };
+            self.record("redundancy", detail.to_string());
+        }
         while let Some(event) = self.master.next_event() {
             match event {
                 MasterEvent::Heartbeat(HeartbeatEvent::Lost { node }) => {
@@ -814,6 +858,13 @@ impl Tug {
         while let Some(r) = self.bus1.receive(self.log_port1) {
             self.bus1_log.push((r.timestamp, r.frame));
         }
+        while let Some(r) = self.bus1b.receive(self.ecu_port_b) {
+            self.ecu.on_frame_from(r.timestamp, Channel::B, &r.frame);
+        }
+        while let Some(r) = self.bus1b.receive(self.log_port_b) {
+            self.bus1b_log.push((r.timestamp, r.frame));
+        }
+        while self.bus1b.receive(self.ads_port_b).is_some() {}
         while let Some(r) = self.bus2.receive(self.ecu_port2) {
             self.master.on_frame(r.timestamp, &r.frame);
         }
@@ -961,10 +1012,10 @@ impl Tug {
             };
             match delay {
                 Some(delay) => self.delayed.push((now.saturating_add(delay), frame)),
-                None => self.bus1.submit(self.ads_port, frame, now),
+                None => self.send_ads(frame),
             }
             if duplicate {
-                self.bus1.submit(self.ads_port, frame, now);
+                self.send_ads(frame);
             }
         }
         let due: Vec<Frame> = self
@@ -975,8 +1026,14 @@ impl Tug {
             .collect();
         self.delayed.retain(|(at, _)| *at > now);
         for frame in due {
-            self.bus1.submit(self.ads_port, frame, now);
+            self.send_ads(frame);
         }
+    }
+
+    /// The built-in ADS sends on bus 1 and on bus 1b.
+    fn send_ads(&mut self, frame: Frame) {
+        let port = self.ads_port;
+        self.send_bus1(port, frame);
     }
 
     /// The vehicle control ECU: the supervisor on bus 1, its actuator outputs turned into

@@ -94,6 +94,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         ("bus1", &tug.bus1_log),
         ("bus2", &tug.bus2_log),
         ("bus3", &tug.bus3_log),
+        ("bus1b", &tug.bus1b_log),
     ] {
         let path = args.out.join(format!("{name}.log"));
         let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
@@ -110,7 +111,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     } else {
         errors.iter().sum::<f64>() / errors.len() as f64
     };
-    let [load1, load2, load3] = tug.bus_loads();
+    let [load1, load2, load3, load1b] = tug.bus_loads();
     let seconds = |t: Timestamp| t.as_nanos() as f64 / 1e9;
     let mut events = Vec::new();
     if let Some(at) = tug.engaged_at() {
@@ -151,8 +152,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "tracking_error_m": {"max": worst, "mean": mean},
                 "steering_steps": steering_steps,
         "echo_latency_ms": percentiles(&tug.echo_latencies),
-        "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3},
-        "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len()},
+        "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3, "bus1b": load1b},
+        "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len(), "bus1b": tug.bus1b_log.len()},
                 "battery_soc": tug.soc(),
         "supervisor": {
             "accepted": tug.ecu().stats().accepted,

@@ -128,7 +128,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
     frame.render_widget(canvas, map);
     let ecu = tug.ecu();
     let [fl, fr, rl, rr] = tug.wheel_angles();
-    let [b1, b2, b3] = tug.bus_loads();
+    let [b1, b2, b3, b1b] = tug.bus_loads();
     let faults: Vec<String> = tug.active_faults().map(|f| format!("{f:?}")).collect();
     let lines = vec![
         Line::from(format!("speed      {:5.2} m/s", tug.pose_speed())),
@@ -141,10 +141,18 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
         Line::from(format!("watchdog   {:?}", ecu.watchdog())),
         Line::from(format!("E-stop     {:?}", ecu.estop())),
         Line::from(format!(
-            "bus load   {:.1} %  {:.1} %  {:.1} %",
+            "bus load   {:.1} %  {:.1} %  {:.1} %  1b {:.1} %",
             b1 * 100.0,
             b2 * 100.0,
-            b3 * 100.0
+            b3 * 100.0,
+            b1b * 100.0
+        )),
+        Line::from(format!(
+            "redundancy {}",
+            match ecu.degraded() {
+                None => "both buses",
+                Some(_) => "degraded",
+            }
         )),
         Line::from(format!("battery    {:.1} %", tug.soc() * 100.0)),
         Line::from(format!(

@@ -96,7 +96,7 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     let sim_seconds = metrics["sim_seconds"].as_f64().unwrap();
     assert!((20.0..120.0).contains(&sim_seconds), "{sim_seconds}");
     sim(&b, "5");
-    for log in ["bus1.log", "bus2.log", "bus3.log"] {
+    for log in ["bus1.log", "bus2.log", "bus3.log", "bus1b.log"] {
         let (x, y) = (
             std::fs::read(a.join(log)).unwrap(),
             std::fs::read(b.join(log)).unwrap(),
@@ -187,6 +187,22 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
     assert!((first("watchdog", "decelerating", silence) - hold - 0.040).abs() < 0.0015);
     assert!((first("watchdog", "full_braking", silence) - hold - 0.080).abs() < 0.0015);
     assert!(first("watchdog", "normal", silence) < first("fault", "Estop", 0.0));
+    // Bus 1b cut: the vote waits for the late copy (the watchdog holds, the mildest
+    // reaction), then bus 1 alone is taken, degraded, within three cycles (bus 1b's
+    // timeout); the vehicle drives on, and both buses agree again once it is back.
+    let cut_1b = first("fault", "RedundantBusLoss", 0.0);
+    let degraded = first("redundancy", "bus 1 alone", cut_1b);
+    assert!(degraded - cut_1b <= 0.081, "{degraded} after {cut_1b}");
+    assert!(first("watchdog", "normal", cut_1b) <= degraded);
+    let restored = first("redundancy", "both buses agree", degraded);
+    assert!(restored < first("fault", "Estop", 0.0));
+    assert!(first("fault_cleared", "RedundantBusLoss", cut_1b) <= restored);
+    assert!(
+        !events.iter().any(|(t, k, d)| (cut_1b..restored).contains(t)
+            && k == "watchdog"
+            && (d == "decelerating" || d == "full_braking")),
+        "no braking while one bus delivers: {events:?}"
+    );
     // E-stop: braking within a frame, stopped, and nothing but the operator's reset ends it.
     let estop = first("fault", "Estop", 0.0);
     assert!(first("estop", "BrakesApplied", estop) - estop <= 0.021);
