@@ -18,6 +18,7 @@
 pub mod battery;
 pub mod chassis;
 pub mod drive;
+pub mod plausibility;
 pub mod rng;
 pub mod scenario;
 pub mod steering;

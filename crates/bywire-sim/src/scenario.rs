@@ -134,9 +134,10 @@ impl Scenario {
                 (s(38), Fault::OperatorReset, None),
                 (
                     s(46),
-                    Fault::SensorFault(2, SensorFault::Stuck(0.0)),
+                    Fault::SensorFault(2, SensorFault::Stuck(5.0)),
                     Some(s(3)),
                 ),
+                (ms(49_500), Fault::OperatorReset, None),
                 (s(50), Fault::CorruptCommands, Some(ms(50))),
                 (s(51), Fault::DuplicateCommands, Some(ms(100))),
                 (s(52), Fault::DriverTakeover, Some(ms(500))),
@@ -368,6 +369,6 @@ mod tests {
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
-        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 12));
+        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 13));
     }
 }

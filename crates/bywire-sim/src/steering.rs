@@ -171,6 +171,18 @@ impl SteeringChain {
             SensorFault::Drift(_) => self.wheel_angle_deg() + self.drift,
             SensorFault::OpenCircuit => return p.sensor_range_deg,
         };
+        self.quantised(truth, rng)
+    }
+
+    /// What the potentiometer's second track reads (a dual-track sensor; the faults above are
+    /// of the first track, the one the drive's position loop uses).
+    pub fn second_track_deg(&self, rng: &mut Rng) -> f64 {
+        self.quantised(self.wheel_angle_deg(), rng)
+    }
+
+    /// `truth` with the track's noise, quantised to its resolution, clipped to its range.
+    fn quantised(&self, truth: f64, rng: &mut Rng) -> f64 {
+        let p = &self.params;
         let noisy = truth + rng.normal(p.sensor_noise_deg);
         let steps = f64::from(1u32 << p.sensor_bits.min(24)) - 1.0;
         let quantum = 2.0 * p.sensor_range_deg / steps;
@@ -267,6 +279,8 @@ mod tests {
         assert!((error - 3.0).abs() <= quantum, "{error}");
         chain.set_fault(SensorFault::OpenCircuit);
         assert_eq!(chain.sensor_deg(&mut rng), 75.0);
+        // The second track still reads the wheel.
+        assert!((chain.second_track_deg(&mut rng) - chain.wheel_angle_deg()).abs() <= quantum);
         // Noise: a thousand readings of a still wheel spread by about sigma.
         let noisy = SteeringChain::new(SteeringParams::default());
         let readings: Vec<f64> = (0..1000).map(|_| noisy.sensor_deg(&mut rng)).collect();

@@ -27,8 +27,8 @@ use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::Profile;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::reference_tug::{
-    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringMode,
-    VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles,
+    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringAngleSensors,
+    SteeringMode, VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles, WheelEncoders,
 };
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
 use bywire_vehicle::supervisor::{Redundancy, Supervisor};
@@ -36,6 +36,7 @@ use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
+use crate::plausibility::SteeringPlausibility;
 use crate::rng::Rng;
 use crate::steering::{SensorFault, SteeringChain, SteeringParams};
 
@@ -181,7 +182,10 @@ pub struct Tug {
     /// Frames on bus 1b.
     pub bus1b_log: Vec<Logged>,
     imu_port: NodeId,
+    io_port: NodeId,
     ecu_port3: NodeId,
+    /// The ECU's plausibility check of the steering sensors.
+    plausibility: SteeringPlausibility,
     log_port3: NodeId,
     bms_port: NodeId,
     next_report: Timestamp,
@@ -288,6 +292,7 @@ impl Tug {
         let mut bus2 = SimBus::new(1_000_000, None);
         let mut bus3 = SimBus::new(500_000, None);
         let (imu_port, ecu_port3, log_port3) = (bus3.add_node(), bus3.add_node(), bus3.add_node());
+        let io_port = bus3.add_node();
         let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
         let safety_port = bus1.add_node();
         let bms_port = bus1.add_node();
@@ -349,7 +354,9 @@ impl Tug {
             bus1b_log: Vec::new(),
             last_degraded: None,
             imu_port,
+            io_port,
             ecu_port3,
+            plausibility: SteeringPlausibility::default(),
             log_port3,
             bms_port,
             next_report: Timestamp::ZERO,
@@ -448,6 +455,16 @@ impl Tug {
             }
             Fault::OperatorReset => {
                 self.resetting = true;
+                // ... and clears a steering fault whose sensor tracks agree again.
+                if self.plausibility.faulted().is_some() {
+                    let first = self.first_tracks();
+                    let detail = if self.plausibility.reset(now, first) {
+                        "reset: the tracks agree"
+                    } else {
+                        "reset refused: the tracks still disagree"
+                    };
+                    self.record("plausibility", detail.to_string());
+                }
                 // The operator's reset also acknowledges drives the master stopped.
                 for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
                     if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
@@ -477,6 +494,27 @@ impl Tug {
 
     fn is_active(&self, fault: Fault) -> bool {
         self.active.iter().any(|(f, _)| *f == fault)
+    }
+
+    /// The steering fault the ECU's plausibility check latched, if any.
+    pub fn steering_fault(&self) -> Option<crate::plausibility::SteeringFault> {
+        self.plausibility.faulted()
+    }
+
+    /// The ECU stops the tug on its own: a drive stopped by the master, or a steering fault.
+    fn ecu_stops(&self) -> bool {
+        self.drives_lost || self.plausibility.faulted().is_some()
+    }
+
+    /// The steering sensors' first tracks, as the drives report them on bus 2, degrees.
+    fn first_tracks(&mut self) -> [f64; 4] {
+        let mut angles = [0.0; 4];
+        for (angle, steer) in angles.iter_mut().zip(STEERING_NODES) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
+                *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+            }
+        }
+        angles
     }
 
     /// The route is done: engaged, at its end, stopped, and the tank turn (if any) made.
@@ -699,6 +737,39 @@ impl Tug {
             reference_tug::sealed_frame(Imu::ID, imu.0),
             now,
         );
+        // The I/O node: the hub encoders and the steering sensors' second tracks.
+        let mut encoders = WheelEncoders::default();
+        let [fl, fr, rl, rr] = self.chassis.encoders(0.01).map(|v| v.clamp(-20.0, 20.0));
+        let _ = (
+            encoders.set_encoder_speed_fl(fl),
+            encoders.set_encoder_speed_fr(fr),
+            encoders.set_encoder_speed_rl(rl),
+            encoders.set_encoder_speed_rr(rr),
+        );
+        encoders.set_counter_raw(counter & 0x0F);
+        let mut second = SteeringAngleSensors::default();
+        let mut tracks = [0.0; 4];
+        for (track, corner) in tracks.iter_mut().zip(&self.corners) {
+            *track = corner
+                .chain
+                .second_track_deg(&mut self.rng)
+                .clamp(-200.0, 200.0);
+        }
+        let [fl, fr, rl, rr] = tracks;
+        let _ = (
+            second.set_second_angle_fl(fl),
+            second.set_second_angle_fr(fr),
+            second.set_second_angle_rl(rl),
+            second.set_second_angle_rr(rr),
+        );
+        second.set_counter_raw(counter & 0x0F);
+        for (id, payload) in [
+            (WheelEncoders::ID, encoders.0),
+            (SteeringAngleSensors::ID, second.0),
+        ] {
+            self.bus3
+                .submit(self.io_port, reference_tug::sealed_frame(id, payload), now);
+        }
         if counter % 2 == 0 {
             let (mut speeds, mut angles) = ([0.0; 4], [0.0; 4]);
             for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
@@ -744,6 +815,8 @@ impl Tug {
             );
             let mut status = VehicleStatus::default();
             status.set_drive_fault_raw(u64::from(self.drives_lost));
+            status.set_steering_fault_raw(u64::from(self.plausibility.faulted().is_some()));
+            status.set_degraded_bus_raw(u64::from(self.ecu.degraded().is_some()));
             status.set_estop_chain_open_raw(u64::from(self.is_active(Fault::Estop)));
             status.set_parking_brake_applied_raw(u64::from(
                 self.corners.iter().any(|c| c.wheel.is_parked()),
@@ -874,8 +947,26 @@ impl Tug {
         while let Some(r) = self.bus3.receive(self.log_port3) {
             self.bus3_log.push((r.timestamp, r.frame));
         }
-        // The ECU takes the IMU's frames (for its own checks; the ADS localises itself).
-        while self.bus3.receive(self.ecu_port3).is_some() {}
+        // The ECU takes the steering sensors' second tracks from bus 3 (the IMU and encoders are
+        // logged; the ADS localises itself).
+        while let Some(r) = self.bus3.receive(self.ecu_port3) {
+            let payload = reference_tug::payload(&r.frame);
+            let is_tracks = r.frame.id().map(|id| id.as_raw()) == Some(SteeringAngleSensors::ID);
+            if let (true, Some(payload)) = (is_tracks, payload) {
+                if reference_tug::is_sealed(SteeringAngleSensors::ID, &payload) {
+                    let m = SteeringAngleSensors(payload);
+                    self.plausibility.second_tracks(
+                        r.timestamp,
+                        [
+                            m.second_angle_fl(),
+                            m.second_angle_fr(),
+                            m.second_angle_rl(),
+                            m.second_angle_rr(),
+                        ],
+                    );
+                }
+            }
+        }
         for corner in &mut self.corners {
             while let Some(r) = self.bus2.receive(corner.steer_port) {
                 corner.steer.on_frame(r.timestamp, &r.frame);
@@ -1054,7 +1145,11 @@ impl Tug {
         self.drives_lost = DRIVE_NODES.iter().chain(&STEERING_NODES).any(|node| {
             matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
         });
-        let speed = if a.motors_enabled && !self.drives_lost {
+        let first_tracks = self.first_tracks();
+        if let Some(fault) = self.plausibility.check(now, first_tracks) {
+            self.record("plausibility", fault.to_string());
+        }
+        let speed = if a.motors_enabled && !self.ecu_stops() {
             a.velocity
         } else {
             0.0
@@ -1089,9 +1184,15 @@ impl Tug {
             }
         }
         self.wheel_targets = targets;
-        for (target, (steer, drive)) in targets.iter().zip(STEERING_NODES.iter().zip(DRIVE_NODES)) {
+        let faulted = self.plausibility.faulted().map(|f| f.corner());
+        for (i, (target, (steer, drive))) in targets
+            .iter()
+            .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
+            .enumerate()
+        {
             if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
-                d.set_enabled(a.steering_enabled || a.motors_enabled);
+                // A corner whose sensors disagree is not steered: its valve holds the wheel.
+                d.set_enabled((a.steering_enabled || a.motors_enabled) && faulted != Some(i));
                 d.set_setpoint(Setpoint::Position(round_i32(
                     target.angle.to_degrees() * STEERING_UNITS_PER_DEG,
                 )));
@@ -1132,7 +1233,7 @@ impl Tug {
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
         let active = &self.active;
-        let drives_lost = self.drives_lost;
+        let drives_lost = self.ecu_stops();
         for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
             let steer_silent = active
                 .iter()

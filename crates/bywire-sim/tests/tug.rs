@@ -80,12 +80,13 @@ fn the_tug_follows_its_route_over_its_buses() {
         "tracking error: worst {worst} m, mean {mean} m"
     );
     // Commands and state at 50 Hz on 500 kbit/s; eight drives' PDOs and heartbeats on 1 Mbit/s.
-    // IMU at 100 Hz on 500 kbit/s.
+    // IMU, the hub encoders and the steering sensors' second tracks at 100 Hz on 500 kbit/s;
+    // bus 1b carries the ADS's frames alone.
     let [load1, load2, load3, load1b] = tug.bus_loads();
     assert!(
         (0.01..0.1).contains(&load1)
             && (0.1..0.5).contains(&load2)
-            && (0.01..0.05).contains(&load3)
+            && (0.03..0.12).contains(&load3)
             && (0.005..load1).contains(&load1b),
         "bus loads {load1} {load2} {load3} {load1b}"
     );

@@ -148,6 +148,11 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
             b1b * 100.0
         )),
         Line::from(format!(
+            "steering   {}",
+            tug.steering_fault()
+                .map_or("sensors agree".to_string(), |f| f.to_string())
+        )),
+        Line::from(format!(
             "redundancy {}",
             match ecu.degraded() {
                 None => "both buses",

@@ -215,7 +215,19 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
     // A drive cut off: lost within its consumer time (250 ms) of its last heartbeat.
     let cut = first("fault", "DriveSilence", 0.0);
     assert!(first("heartbeat_lost", "node", cut) - cut <= 0.251);
-    assert!(first("fault", "SensorFault", 0.0) > cut);
+    // A stuck steering sensor (first track): the ECU's plausibility check against the second
+    // track on bus 3 latches within its 100 ms debounce (+ a report period), the tug stops,
+    // and only the operator's reset, once the tracks agree, clears it.
+    let stuck = first("fault", "SensorFault", 0.0);
+    assert!(stuck > cut);
+    let latched = first(
+        "plausibility",
+        "RL: the steering sensor's tracks disagree",
+        stuck,
+    );
+    assert!(latched - stuck <= 0.121, "{latched} after {stuck}");
+    let cleared = first("plausibility", "reset: the tracks agree", latched);
+    assert!(cleared >= first("fault_cleared", "SensorFault", stuck));
     // Corrupted commands fail their checksum: the watchdog holds at once; duplicates are
     // refused as repeated counters.
     let corrupt = first("fault", "CorruptCommands", 0.0);
@@ -275,8 +287,17 @@ fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
         "",
     );
     assert_eq!(code, 1);
+    // The stuck first track reads about 0° (±1 quantum of its 12 bits over ±75°), and the
+    // ECU's plausibility check then holds the tug still: the speed steps fail too.
     assert!(
-        out.contains("FAIL  steering sweep   at -40.0°: actual +0.0°"),
+        out.lines().any(
+            |l| l.starts_with("FAIL  steering sweep   at -40.0°: actual")
+                && l.contains("off by 39.")
+        ),
+        "{out}"
+    );
+    assert!(
+        out.contains("FAIL  speed step       1.0 m/s: 0.00 m/s"),
         "{out}"
     );
     assert!(err.contains("failed: steering sweep"), "{err}");
