@@ -154,6 +154,8 @@ pub struct SimBus {
     /// wrong, by frame: the wire model is exact but costly, and periodic traffic repeats the
     /// same frames (bounded: cleared when full; a pure function, so runs stay deterministic).
     timings: std::collections::HashMap<Frame, (f64, usize)>,
+    /// Arbitration's offers (node, queue index, identifier, sequence), kept between frames.
+    offers: Vec<(NodeId, usize, Id, u64)>,
     nominal: u32,
     data: Option<u32>,
     /// The bus is idle from here on (after the last intermission).
@@ -172,6 +174,7 @@ impl SimBus {
     pub fn new(nominal: u32, data: Option<u32>) -> Self {
         SimBus {
             timings: std::collections::HashMap::new(),
+            offers: Vec::new(),
             nominal: nominal.max(1),
             data,
             idle_from: Timestamp::ZERO,
@@ -321,6 +324,11 @@ impl SimBus {
         std::mem::take(&mut self.events)
     }
 
+    /// The same, keeping the buffer for the events to come (no allocation once it has grown).
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, BusEvent> {
+        self.events.drain(..)
+    }
+
     /// Simulated time so far.
     pub fn now(&self) -> Timestamp {
         self.now
@@ -418,6 +426,12 @@ impl SimBus {
     /// A frame's time on this bus (ns) and where receivers find a destroyed copy's CRC wrong
     /// (bits from its start); `None` for what has no bits on the wire.
     fn timing(&mut self, frame: &Frame) -> Option<(f64, usize)> {
+        // Classic frames are counted directly (cheaper than looking them up); FD frames are
+        // encoded once and remembered.
+        if let Some((bits, detected)) = wire::classic_length(frame) {
+            let bits = f64::from(u32::try_from(bits).unwrap_or(u32::MAX));
+            return Some((bits * (1e9 / f64::from(self.nominal.max(1))), detected + 1));
+        }
         if let Some(timing) = self.timings.get(frame) {
             return Some(*timing);
         }
@@ -460,7 +474,8 @@ impl SimBus {
 
     fn transmit_at(&mut self, start: Timestamp) {
         // Every ready node offers its highest-priority frame; the lowest identifier wins.
-        let mut offers: Vec<(NodeId, usize, Id, u64)> = Vec::new();
+        let mut offers = std::mem::take(&mut self.offers);
+        offers.clear();
         for (node, n) in self.nodes.iter().enumerate() {
             if n.confinement.state() == NodeState::BusOff || n.not_before > start {
                 continue;
@@ -480,6 +495,7 @@ impl SimBus {
             .iter()
             .min_by_key(|&&(node, _, id, seq)| (id, seq, node))
         else {
+            self.offers = offers;
             return;
         };
         for &(node, _, lost_id, _) in &offers {
@@ -491,6 +507,8 @@ impl SimBus {
                 });
             }
         }
+        // The buffer is kept for the next arbitration.
+        self.offers = offers;
         let Some(pending) = self.nodes.get(winner).and_then(|n| n.queue.get(index)) else {
             return;
         };

@@ -308,6 +308,16 @@ struct Params {
 }
 
 impl Params {
+    /// The objects the parameters come from.
+    const INDICES: [u16; 6] = [
+        object::MODES,
+        object::PROFILE_ACCELERATION,
+        object::PROFILE_DECELERATION,
+        object::QUICK_STOP_DECELERATION,
+        object::PROFILE_VELOCITY,
+        object::TARGET_VELOCITY,
+    ];
+
     fn read(od: &ObjectDictionary) -> Params {
         let read = |index: u16| real(od.get_signed(index, 0).unwrap_or(0));
         Params {
@@ -331,8 +341,11 @@ pub struct Drive {
     position_target: f64,
     fault_pending: Option<u16>,
     raised: Option<u16>,
-    /// The dictionary's drive parameters, read again after any write (`None`: stale).
+    /// The dictionary's drive parameters, read again after a write to one (`None`: not yet).
     params: Option<Params>,
+    /// What was last written to the dictionary (statusword, mode display, position and
+    /// velocity actual): unchanged values are not written again.
+    published: Option<(u16, i8, i64, i64)>,
     /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
     /// and is told the actual position and velocity.
     external: bool,
@@ -371,6 +384,7 @@ impl Drive {
             fault_pending: None,
             raised: None,
             params: None,
+            published: None,
             external: false,
             demand: 0.0,
             max_velocity: 10_000.0,
@@ -441,7 +455,7 @@ impl Drive {
         }
     }
 
-    fn publish(&self, od: &mut ObjectDictionary) {
+    fn publish(&mut self, od: &mut ObjectDictionary) {
         let mut statusword = self.state.statusword_bits();
         if self.state.is_powered()
             || matches!(self.state, State::SwitchedOn | State::ReadyToSwitchOn)
@@ -452,11 +466,21 @@ impl Drive {
         if self.target_reached(od) {
             statusword |= 0x0400;
         }
-        let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
         let display = self.mode(od).map_or(0, Mode::code);
+        let values = (
+            statusword,
+            display,
+            round(self.motor.position),
+            round(self.motor.velocity),
+        );
+        if self.published == Some(values) {
+            return;
+        }
+        self.published = Some(values);
+        let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
         let _ = od.set(object::MODES_DISPLAY, 0, &display.to_le_bytes());
-        let _ = od.set_int(object::POSITION_ACTUAL, 0, round(self.motor.position));
-        let _ = od.set_int(object::VELOCITY_ACTUAL, 0, round(self.motor.velocity));
+        let _ = od.set_int(object::POSITION_ACTUAL, 0, values.2);
+        let _ = od.set_int(object::VELOCITY_ACTUAL, 0, values.3);
     }
 
     fn target_reached(&self, od: &ObjectDictionary) -> bool {
@@ -528,8 +552,10 @@ impl Application for Drive {
     }
 
     fn on_written(&mut self, _now: Timestamp, od: &mut ObjectDictionary, index: u16, _sub: u8) {
-        if index != object::CONTROLWORD {
-            self.params = None;
+        // The cached parameters are read again when one of them changed (targets of position
+        // arrive every cycle and are not among them).
+        if Params::INDICES.contains(&index) {
+            self.params = Some(Params::read(od));
         }
         match index {
             object::CONTROLWORD => {

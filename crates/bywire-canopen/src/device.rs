@@ -749,26 +749,18 @@ impl<A: Application> Device<A> {
             out(frame);
         }
         self.sdo.poll(now, out);
-        if self.state != NmtState::Stopped {
-            self.emcy
-                .poll(now, self.comm.emcy_cob, self.comm.emcy_inhibit, out);
-        }
+        // Emergencies go out before the PDOs that show their effect.
+        self.poll_emcy(now, out);
+        // PDO deadlines are communication errors too: reacted to as they are reported (once
+        // each), whether or not the event queue has room for them.
+        let mut missed = false;
         if self.state == NmtState::Operational {
             let events = &mut self.events;
             self.pdos.poll(now, &self.od, out, &mut |event| {
+                missed |= matches!(event, PdoEvent::DeadlineMissed { .. });
                 let _ = events.push(DeviceEvent::Pdo(event));
             });
         }
-        // PDO deadlines are communication errors too.
-        let mut missed = false;
-        let mut kept: EventQueue<DeviceEvent, 64> = EventQueue::new();
-        while let Some(event) = self.events.pop() {
-            if let DeviceEvent::Pdo(PdoEvent::DeadlineMissed { .. }) = event {
-                missed = true;
-            }
-            let _ = kept.push(event);
-        }
-        self.events = kept;
         if missed {
             self.emcy.raise(
                 &mut self.od,
@@ -778,6 +770,15 @@ impl<A: Application> Device<A> {
             );
             self.app
                 .on_communication_lost(now, &mut self.od, &mut self.emcy);
+            // ... and this one in the poll that found it.
+            self.poll_emcy(now, out);
+        }
+    }
+
+    fn poll_emcy(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        if self.state != NmtState::Stopped {
+            self.emcy
+                .poll(now, self.comm.emcy_cob, self.comm.emcy_inhibit, out);
         }
     }
 
@@ -850,6 +851,35 @@ mod tests {
 
     fn ids(frames: &[Frame]) -> Vec<u16> {
         frames.iter().filter_map(cob_id).collect()
+    }
+
+    #[test]
+    fn a_missed_rpdo_deadline_raises_its_emergency_once() {
+        let mut device = Device::new(4, drive_dictionary(4), Plain);
+        polled(&mut device, 0);
+        // RPDO1's event timer to 100 ms over SDO (expedited download of 0x1400:05), then start.
+        let sdo = |data: [u8; 8]| crate::nmt::classic(0x604, &data);
+        device.on_frame(
+            Timestamp::from_millis(1),
+            &sdo([0x2B, 0x00, 0x14, 0x05, 100, 0, 0, 0]),
+        );
+        assert_eq!(device.od().get_unsigned(0x1400, 5), Some(100));
+        device.on_frame(Timestamp::from_millis(2), &NmtCommand::Start.frame(4));
+        polled(&mut device, 3);
+        let rpdo = crate::nmt::classic(0x204, &[0x06, 0x00, 0x03]);
+        device.on_frame(Timestamp::from_millis(10), &rpdo);
+        let mut emergencies = Vec::new();
+        for ms in 11..400 {
+            let frames = polled(&mut device, ms);
+            for f in frames.iter().filter(|f| cob_id(f) == Some(0x84)) {
+                emergencies.push((ms, f.data().to_vec()));
+            }
+        }
+        assert_eq!(
+            emergencies,
+            [(110, alloc::vec![0x50, 0x82, 0x11, 0, 0, 0, 0, 0])],
+            "one RPDO-timeout EMCY at 10 + 100 ms"
+        );
     }
 
     #[test]

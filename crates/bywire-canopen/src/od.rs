@@ -574,9 +574,19 @@ pub struct Slot {
 }
 
 /// The object dictionary.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default)]
 pub struct ObjectDictionary {
     objects: Vec<Object>,
+    /// Counts changes (values or objects), so readers can tell nothing changed since they
+    /// last looked without comparing values.
+    generation: u64,
+}
+
+/// Dictionaries are equal when their objects are: the change count is not content.
+impl PartialEq for ObjectDictionary {
+    fn eq(&self, other: &Self) -> bool {
+        self.objects == other.objects
+    }
 }
 
 impl ObjectDictionary {
@@ -626,6 +636,7 @@ impl ObjectDictionary {
             kind,
             entries,
         };
+        self.generation = self.generation.wrapping_add(1);
         match self.objects.binary_search_by_key(&index, |o| o.index) {
             Ok(at) => {
                 if let Some(slot) = self.objects.get_mut(at) {
@@ -708,7 +719,19 @@ impl ObjectDictionary {
 
     /// [`ObjectDictionary::set`] through a slot.
     pub fn set_at(&mut self, slot: Slot, bytes: &[u8]) -> Result<(), Abort> {
-        self.at_mut(slot).ok_or(Abort::NoObject)?.store(bytes)
+        let entry = self.at_mut(slot).ok_or(Abort::NoObject)?;
+        // The same value again changes nothing (and was checked when it was stored).
+        if entry.value() == bytes {
+            return Ok(());
+        }
+        entry.store(bytes)?;
+        self.generation = self.generation.wrapping_add(1);
+        Ok(())
+    }
+
+    /// The change count: different after any change to a value or an object.
+    pub fn generation(&self) -> u64 {
+        self.generation
     }
 
     /// An unsigned value of up to 8 bytes, or `None` if absent or not unsigned/boolean.
@@ -746,6 +769,7 @@ impl ObjectDictionary {
 
     /// Restore the defaults of every entry whose index is in `range` (NMT resets).
     pub fn restore_defaults(&mut self, range: core::ops::RangeInclusive<u16>) {
+        self.generation = self.generation.wrapping_add(1);
         for object in self.objects.iter_mut().filter(|o| range.contains(&o.index)) {
             for entry in &mut object.entries {
                 entry.restore();
@@ -783,6 +807,29 @@ mod tests {
             ],
         );
         od
+    }
+
+    #[test]
+    fn the_change_count_moves_with_every_change_and_only_then() {
+        let mut od = sample();
+        let start = od.generation();
+        od.set_int(0x6040, 0, 0x0F).unwrap();
+        let after_write = od.generation();
+        assert_ne!(after_write, start);
+        // The same value again, and refused writes, change nothing.
+        od.set_int(0x6040, 0, 0x0F).unwrap();
+        assert_eq!(
+            od.set(0x2000, 0, &2000i16.to_le_bytes()),
+            Err(Abort::ValueTooHigh)
+        );
+        assert_eq!(od.set(0x6040, 0, &[1]), Err(Abort::LengthTooLow));
+        assert_eq!(od.generation(), after_write);
+        assert_eq!(od.get_unsigned(0x6040, 0), Some(0x0F));
+        od.restore_defaults(0x6000..=0x6FFF);
+        assert_ne!(od.generation(), after_write);
+        assert_eq!(od.get_unsigned(0x6040, 0), Some(0));
+        // Equality is of content, not of history.
+        assert_eq!(od, sample());
     }
 
     #[test]

@@ -84,6 +84,9 @@ pub struct Pdo {
     pub length: usize,
     // Run-time state.
     last_payload: [u8; 8],
+    /// Event-driven TPDO: the dictionary's change count when the payload last matched
+    /// `last_payload` (unchanged since: no need to sample again).
+    sampled: Option<u64>,
     sent_once: bool,
     last_sent: Option<Timestamp>,
     syncs: u8,
@@ -110,6 +113,7 @@ impl Pdo {
             mapped: [None; MAX_MAPPED],
             length: 0,
             last_payload: [0; 8],
+            sampled: None,
             sent_once: false,
             last_sent: None,
             syncs: 0,
@@ -432,16 +436,15 @@ impl Pdos {
                         if inhibited {
                             continue;
                         }
-                        let (payload, _) = pdo.sample(od);
+                        let generation = od.generation();
+                        let changed =
+                            pdo.sampled != Some(generation) && pdo.sample(od).0 != pdo.last_payload;
+                        pdo.sampled = Some(generation);
                         let timer_due = !pdo.event_timer.is_zero()
                             && pdo
                                 .last_event
                                 .is_none_or(|armed| now >= armed.saturating_add(pdo.event_timer));
-                        if !pdo.sent_once
-                            || payload != pdo.last_payload
-                            || timer_due
-                            || pdo.requested
-                        {
+                        if !pdo.sent_once || changed || timer_due || pdo.requested {
                             pdo.requested = false;
                             transmit(pdo, now, od, out);
                         }
@@ -467,6 +470,7 @@ impl Pdos {
     pub fn restart(&mut self) {
         for pdo in &mut self.pdos {
             pdo.sent_once = false;
+            pdo.sampled = None;
             pdo.last_sent = None;
             pdo.last_event = None;
             pdo.pending = None;
@@ -519,6 +523,7 @@ fn send(
 }
 
 fn compile(od: &ObjectDictionary, pdo: &mut Pdo) {
+    pdo.sampled = None;
     let base = pdo.direction.communication_base() + (pdo.number - 1);
     let read = |index: u16, sub: u8| od.get_unsigned(index, sub);
     pdo.cob_id = read(base, 1)

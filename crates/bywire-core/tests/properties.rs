@@ -60,6 +60,16 @@ proptest! {
     }
 
     #[test]
+    fn the_fast_classic_length_agrees_with_the_encoder(f in frame()) {
+        let w = wire::encode(&f).unwrap();
+        let crc_delimiter = w.spans().iter().find(|s| s.field == Field::CrcDelimiter).unwrap().start;
+        match f {
+            Frame::Classic(_) => prop_assert_eq!(wire::classic_length(&f), Some((w.len(), crc_delimiter))),
+            _ => prop_assert_eq!(wire::classic_length(&f), None),
+        }
+    }
+
+    #[test]
     fn wire_round_trip_within_bounds(f in frame()) {
         let w = wire::encode(&f).unwrap();
         prop_assert_eq!(wire::decode(w.bits()), Ok(f));

@@ -15,6 +15,7 @@
 use core::time::Duration;
 
 use bywire_bus::sim::{NodeId, SimBus};
+use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
 use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
@@ -22,6 +23,7 @@ use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
+use bywire_core::filter::Filter;
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::Profile;
@@ -271,6 +273,26 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
     Device::new(node, od, Drive::new().with_external_motor())
 }
 
+/// A drive's port on bus 2, with the acceptance filters its controller would have: NMT,
+/// SYNC, the master's heartbeat, and what is addressed to its node ID (PDOs, SDO).
+fn drive_port(bus: &mut SimBus, node: u8) -> NodeId {
+    let port = bus.add_node();
+    let exact = |id: u32| Filter::new(id, 0x7FF);
+    bus.set_filtering(
+        port,
+        Filtering {
+            filters: vec![
+                exact(0x000),
+                exact(0x080),
+                exact(0x700 + u32::from(MASTER_NODE)),
+                Filter::new(u32::from(node), 0x07F),
+            ],
+            ..Filtering::default()
+        },
+    );
+    port
+}
+
 impl Tug {
     /// A tug at the start of its route, parked, everything powered on.
     pub fn new(params: TugParams) -> Tug {
@@ -293,9 +315,17 @@ impl Tug {
         let mut bus3 = SimBus::new(500_000, None);
         let (imu_port, ecu_port3, log_port3) = (bus3.add_node(), bus3.add_node(), bus3.add_node());
         let io_port = bus3.add_node();
+        // Nodes that only send keep nothing they hear.
+        for port in [imu_port, io_port] {
+            bus3.set_rx_capacity(port, 0);
+        }
+
         let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
         let safety_port = bus1.add_node();
         let bms_port = bus1.add_node();
+        for port in [safety_port, bms_port] {
+            bus1.set_rx_capacity(port, 0);
+        }
         let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
         let mut master = Master::new(
             MASTER_NODE,
@@ -323,8 +353,8 @@ impl Tug {
             .map(|(steer, drive)| Corner {
                 steer: drive_device(*steer, Mode::ProfilePosition),
                 drive: drive_device(drive, Mode::ProfileVelocity),
-                steer_port: bus2.add_node(),
-                drive_port: bus2.add_node(),
+                steer_port: drive_port(&mut bus2, *steer),
+                drive_port: drive_port(&mut bus2, drive),
                 chain: SteeringChain::new(SteeringParams::default()),
                 wheel: WheelDrive::new(DriveParams::default()),
                 distance: 0.0,
@@ -862,18 +892,21 @@ impl Tug {
     /// Record the supervisor's state changes, bus state changes and the master's heartbeat
     /// events.
     fn note_changes(&mut self) {
-        let events = [
-            ("bus1", self.bus1.take_events()),
-            ("bus2", self.bus2.take_events()),
-            ("bus3", self.bus3.take_events()),
-            ("bus1b", self.bus1b.take_events()),
-        ];
-        for (bus, events) in events {
-            for event in events {
+        let mut changes = Vec::new();
+        for (bus, sim) in [
+            ("bus1", &mut self.bus1),
+            ("bus2", &mut self.bus2),
+            ("bus3", &mut self.bus3),
+            ("bus1b", &mut self.bus1b),
+        ] {
+            for event in sim.drain_events() {
                 if let bywire_bus::sim::BusEvent::StateChanged { node, state, .. } = event {
-                    self.record("bus_state", format!("{bus} node {node}: {state:?}"));
+                    changes.push(format!("{bus} node {node}: {state:?}"));
                 }
             }
+        }
+        for change in changes {
+            self.record("bus_state", change);
         }
         let seen = (self.ecu.watchdog(), self.ecu.estop(), self.ecu.mode());
         let (watchdog, estop, mode) = self.last_seen;
