@@ -188,6 +188,21 @@ impl Pdo {
 /// Copy `count` bits from `from` at bit `from_bit` to `to` at bit `to_bit` (little-endian bit
 /// order, as CANopen packs PDOs). Bits outside either buffer are skipped.
 fn copy_bits(from: &[u8], from_bit: usize, to: &mut [u8], to_bit: usize, count: usize) {
+    // Whole bytes at byte boundaries (almost every mapping) go a byte at a time, with the
+    // same rules.
+    if from_bit % 8 == 0 && to_bit % 8 == 0 && count % 8 == 0 {
+        let (source, target) = (from_bit / 8, to_bit / 8);
+        for k in 0..count / 8 {
+            if let Some(byte) = to.get_mut(target + k) {
+                *byte = from.get(source + k).copied().unwrap_or(0);
+            }
+        }
+        return;
+    }
+    copy_bit_by_bit(from, from_bit, to, to_bit, count);
+}
+
+fn copy_bit_by_bit(from: &[u8], from_bit: usize, to: &mut [u8], to_bit: usize, count: usize) {
     for i in 0..count {
         let (source, target) = (from_bit + i, to_bit + i);
         let bit = from
@@ -641,6 +656,24 @@ pub fn check_write(od: &ObjectDictionary, index: u16, sub: u8, data: &[u8]) -> R
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn whole_bytes_copy_as_bit_by_bit_would() {
+        let source: [u8; 6] = [0x12, 0x34, 0x56, 0x78, 0x9A, 0xBC];
+        for from_len in 0..=6 {
+            for from_byte in 0..4 {
+                for to_byte in 0..8 {
+                    for bytes in 0..=8 {
+                        let (mut fast, mut slow) = ([0xEEu8; 8], [0xEEu8; 8]);
+                        let from = &source[..from_len];
+                        copy_bits(from, from_byte * 8, &mut fast, to_byte * 8, bytes * 8);
+                        copy_bit_by_bit(from, from_byte * 8, &mut slow, to_byte * 8, bytes * 8);
+                        assert_eq!(fast, slow, "{from_len} {from_byte} {to_byte} {bytes}");
+                    }
+                }
+            }
+        }
+    }
     use crate::od::{Access, DataType, Entry, ObjectKind};
     use alloc::vec;
     use alloc::vec::Vec;

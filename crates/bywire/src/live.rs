@@ -15,6 +15,7 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
 use bywire_core::Timestamp;
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyEventKind};
+use rustix::event::{poll, PollFd, PollFlags};
 
 use crate::busarg::{self, BusArg, Event, Readers};
 
@@ -134,10 +135,23 @@ pub fn run(view: &mut impl View, source: &Source) -> Result<()> {
             "this view needs a terminal; use `bywire dump` (or --dbc with it) to print frames"
         ));
     }
+    // Asked now, while the terminal is surely there.
+    stdin_is_terminal();
     let mut terminal = ratatui::init();
     let result = event_loop(view, source, &mut terminal);
-    ratatui::restore();
+    restore(terminal);
     result
+}
+
+/// Put the terminal back as it was. One that went away is left alone: ratatui's clean-up
+/// would report its failure on that terminal, and the report itself would panic.
+pub fn restore(terminal: ratatui::DefaultTerminal) {
+    if terminal_gone() {
+        std::mem::forget(terminal);
+    } else {
+        drop(terminal);
+        let _ = ratatui::try_restore();
+    }
 }
 
 fn event_loop(
@@ -164,13 +178,79 @@ fn event_loop(
             }
         }
         terminal.draw(|f| view.draw(f, Instant::now()))?;
-        if event::poll(frame_interval)? {
-            if let TermEvent::Key(key) = event::read()? {
-                if key.kind == KeyEventKind::Press && (is_quit(key) || view.on_key(key)) {
-                    return Ok(());
-                }
+        match next_input(frame_interval)? {
+            Input::Event(TermEvent::Key(key))
+                if key.kind == KeyEventKind::Press && (is_quit(key) || view.on_key(key)) =>
+            {
+                return Ok(());
             }
+            Input::HungUp => return Ok(()),
+            Input::Event(_) | Input::Nothing => {}
         }
+    }
+}
+
+/// What the terminal gave while a view waited.
+pub enum Input {
+    /// A key, a resize, ...
+    Event(TermEvent),
+    /// Nothing within the wait.
+    Nothing,
+    /// The terminal hung up (its window closed, its tmux session killed): the view ends.
+    HungUp,
+}
+
+/// Wait up to `timeout` for terminal input. On a terminal at standard input the wait is ours:
+/// crossterm's reader spins for ever on a terminal that hung up instead of returning.
+pub fn next_input(timeout: Duration) -> Result<Input> {
+    let read = || -> Result<Input> { Ok(Input::Event(event::read()?)) };
+    if !stdin_is_terminal() {
+        return if event::poll(timeout)? {
+            read()
+        } else {
+            Ok(Input::Nothing)
+        };
+    }
+    if terminal_gone() {
+        return Ok(Input::HungUp);
+    }
+    // Events crossterm already holds, then the terminal itself.
+    if event::poll(Duration::ZERO)? {
+        return read();
+    }
+    let ready = poll_stdin(i32::try_from(timeout.as_millis()).unwrap_or(i32::MAX));
+    if ready.intersects(gone()) {
+        Ok(Input::HungUp)
+    } else if ready.contains(PollFlags::IN) && event::poll(Duration::ZERO)? {
+        read()
+    } else {
+        Ok(Input::Nothing)
+    }
+}
+
+/// Whether standard input is a terminal, as it was when first asked (a terminal that hung up
+/// no longer says it is one).
+pub fn stdin_is_terminal() -> bool {
+    static TERMINAL: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *TERMINAL.get_or_init(|| std::io::stdin().is_terminal())
+}
+
+/// Whether the terminal at standard input hung up.
+fn terminal_gone() -> bool {
+    stdin_is_terminal() && poll_stdin(0).intersects(gone())
+}
+
+fn gone() -> PollFlags {
+    PollFlags::HUP | PollFlags::ERR | PollFlags::NVAL
+}
+
+/// What standard input is ready for within `ms` milliseconds (nothing when interrupted).
+fn poll_stdin(ms: i32) -> PollFlags {
+    let stdin = rustix::stdio::stdin();
+    let mut fds = [PollFd::new(&stdin, PollFlags::IN)];
+    match poll(&mut fds, ms) {
+        Ok(_) => fds.first().map_or(PollFlags::empty(), PollFd::revents),
+        Err(_) => PollFlags::empty(),
     }
 }
 

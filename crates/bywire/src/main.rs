@@ -140,7 +140,8 @@ fn main() -> ExitCode {
         // A closed pipe (`bywire ... | head`) is the reader's choice, not a failure.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // (Not eprintln!: it panics when standard error is gone, e.g. a closed terminal.)
+            let _ = writeln!(io::stderr(), "error: {e:#}");
             ExitCode::FAILURE
         }
     }

@@ -1,13 +1,15 @@
 //! The live view of `bywire sim` in a terminal: the route with the tug on it, speed, wheel
 //! angles, mode, watchdog and E-stop state, bus loads and the event log; keys for E-stop,
-//! the operator's reset, pause and quit.
+//! the operator's reset, pause, quit, and 1–9 to inject the scenario's faults by hand.
 
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Fault, Tug};
-use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind};
+use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
+
+use crate::live::Input;
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Style};
 use ratatui::symbols::Marker;
@@ -25,9 +27,11 @@ pub enum Ending {
 
 /// Run `tug` in real time with the dashboard until the route ends, q, or `limit`.
 pub fn run(tug: &mut Tug, scenario: &Scenario, limit: Duration) -> Result<Ending> {
+    // Asked now, while the terminal is surely there.
+    crate::live::stdin_is_terminal();
     let mut terminal = ratatui::init();
     let result = event_loop(tug, scenario, limit, &mut terminal);
-    ratatui::restore();
+    crate::live::restore(terminal);
     result
 }
 
@@ -59,26 +63,31 @@ fn event_loop(
         {
             return Ok(Ending::Stopped);
         }
-        terminal.draw(|f| draw(f, tug, paused))?;
-        if event::poll(Duration::from_millis(50))? {
-            if let Event::Key(key) = event::read()? {
-                if key.kind != KeyEventKind::Press {
-                    continue;
-                }
-                match key.code {
-                    KeyCode::Char('q') | KeyCode::Esc => return Ok(Ending::Stopped),
-                    KeyCode::Char('p') => paused = !paused,
-                    // The E-stop button: pressed for a second (the latch holds after).
-                    KeyCode::Char('e') => tug.inject(Fault::Estop, Some(Duration::from_secs(1))),
-                    KeyCode::Char('r') => tug.inject(Fault::OperatorReset, None),
-                    _ => {}
+        terminal.draw(|f| draw(f, tug, scenario, paused))?;
+        let key = match crate::live::next_input(Duration::from_millis(50))? {
+            Input::HungUp => return Ok(Ending::Stopped),
+            Input::Event(Event::Key(key)) if key.kind == KeyEventKind::Press => key,
+            Input::Event(_) | Input::Nothing => continue,
+        };
+        match key.code {
+            KeyCode::Char('q') | KeyCode::Esc => return Ok(Ending::Stopped),
+            KeyCode::Char('p') => paused = !paused,
+            // The E-stop button: pressed for a second (the latch holds after).
+            KeyCode::Char('e') => tug.inject(Fault::Estop, Some(Duration::from_secs(1))),
+            KeyCode::Char('r') => tug.inject(Fault::OperatorReset, None),
+            // The scenario's n-th fault, now, for its own duration.
+            KeyCode::Char(digit @ '1'..='9') => {
+                let index = usize::from(digit as u8 - b'1');
+                if let Some((_, fault, duration)) = scenario.events.get(index) {
+                    tug.inject(*fault, *duration);
                 }
             }
+            _ => {}
         }
     }
 }
 
-fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
+fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: bool) {
     let [top, body, log] = Layout::vertical([
         Constraint::Length(1),
         Constraint::Min(8),
@@ -86,7 +95,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
     ])
     .areas(frame.area());
     let title = format!(
-        "bywire sim   t = {:.1} s{}   keys: e E-stop  r reset  p pause  q quit",
+        "bywire sim   t = {:.1} s{}   keys: e E-stop  r reset  p pause  q quit  1-9 faults",
         tug.now().as_nanos() as f64 / 1e9,
         if paused { "  (paused)" } else { "" }
     );
@@ -130,7 +139,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
     let [fl, fr, rl, rr] = tug.wheel_angles();
     let [b1, b2, b3, b1b] = tug.bus_loads();
     let faults: Vec<String> = tug.active_faults().map(|f| format!("{f:?}")).collect();
-    let lines = vec![
+    let mut lines = vec![
         Line::from(format!("speed      {:5.2} m/s", tug.pose_speed())),
         Line::from(format!("position   x {:7.2}  y {:7.2}", pose.x, pose.y)),
         Line::from(format!("to go      {:5.1} m", tug.remaining().min(9_999.0))),
@@ -169,6 +178,15 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, paused: bool) {
             }
         )),
     ];
+    // The keys that inject the scenario's faults by hand.
+    lines.extend(
+        scenario
+            .events
+            .iter()
+            .take(9)
+            .enumerate()
+            .map(|(i, (_, fault, _))| Line::from(format!("key {}      {fault:?}", i + 1))),
+    );
     frame.render_widget(
         Paragraph::new(lines).block(Block::bordered().title("vehicle")),
         status,

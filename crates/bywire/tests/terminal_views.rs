@@ -206,3 +206,46 @@ fn sim_live_view_in_a_terminal() {
         "{metrics}"
     );
 }
+
+/// The scenario's faults by hand (key 1: the fault tour's ADS silence), and a paused view
+/// whose terminal goes away still ends and writes its files.
+#[test]
+fn sim_fault_keys_and_a_closed_terminal() {
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let dir = std::env::temp_dir().join(format!("bywire-sim-hangup-{}", std::process::id()));
+    let session = Session::start(
+        "hangup",
+        &format!(
+            "{bin} sim --scenario fault-tour --out {} --max-seconds 300",
+            dir.display()
+        ),
+    );
+    session.wait_for("key 1      AdsSilence");
+    session.wait_for("mode       Autonomous");
+    session.keys("1");
+    session.wait_for("fault            AdsSilence");
+    session.wait_for("watchdog   FullBraking");
+    session.keys("p");
+    session.wait_for("(paused)");
+    drop(session);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !dir.join("metrics.json").exists() {
+        assert!(
+            Instant::now() < deadline,
+            "the run did not end with its terminal"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Written whole: it parses, and it has the fault pressed by hand.
+    std::thread::sleep(Duration::from_millis(500));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert!(
+        metrics["events"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e["kind"] == "fault" && e["detail"] == "AdsSilence"),
+        "{metrics}"
+    );
+}

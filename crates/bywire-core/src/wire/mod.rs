@@ -531,59 +531,92 @@ pub fn classic_length(frame: &Frame) -> Option<(usize, usize)> {
     let Frame::Classic(c) = frame else {
         return None;
     };
+    // SOF through the CRC, at most 1 + 32 + 3 + 4 + 64 + 15 = 119 bits, as one number.
     let (pieces, count) = header(c.id(), c.is_remote(), None, c.dlc());
     let mut crc = CrcRegister::crc15();
-    let mut counter = StuffCounter {
-        len: 0,
-        run: 0,
-        last: true,
-    };
+    let (mut stream, mut bits) = (0u128, 0u32);
     for p in pieces.iter().take(count) {
-        for i in (0..p.width).rev() {
-            let bit = (p.value >> i) & 1 == 1;
-            crc.push_bit(bit);
-            counter.stuffed(bit);
-        }
+        let value = p.value & ((1u32 << p.width) - 1);
+        crc.push_bits(u64::from(value), p.width);
+        stream = (stream << p.width) | u128::from(value);
+        bits += u32::from(p.width);
     }
-    for byte in frame.data() {
-        for i in (0..8).rev() {
-            let bit = (byte >> i) & 1 == 1;
-            crc.push_bit(bit);
-            counter.stuffed(bit);
-        }
+    let mut crc = crc.value();
+    for &byte in frame.data() {
+        crc = crc15_byte(crc, byte);
+        stream = (stream << 8) | u128::from(byte);
+        bits += 8;
     }
-    let value = crc.value();
-    for i in (0..15).rev() {
-        counter.stuffed((value >> i) & 1 == 1);
-    }
+    stream = (stream << 15) | u128::from(crc & 0x7FFF);
+    bits += 15;
+    let stuffed = usize::try_from(bits + stuff_bits(stream, bits)).ok()?;
     // CRC delimiter, ACK slot, ACK delimiter, 7 bits of end of frame.
-    Some((counter.len + 10, counter.len))
+    Some((stuffed + 10, stuffed))
 }
 
-/// The encoder's stuffing rule, counting bits only.
-struct StuffCounter {
-    len: usize,
-    run: u8,
-    last: bool,
+/// CRC-15/CAN over one more byte, a byte at a time.
+fn crc15_byte(crc: u32, byte: u8) -> u32 {
+    let index = usize::from(u8::try_from(((crc >> 7) ^ u32::from(byte)) & 0xFF).unwrap_or(0));
+    ((crc << 8) ^ u32::from(CRC15_TABLE.get(index).copied().unwrap_or(0))) & 0x7FFF
 }
 
-impl StuffCounter {
-    fn level(&mut self, bit: bool) {
-        self.len += 1;
-        if bit == self.last && self.run > 0 {
-            self.run += 1;
+/// CRC-15/CAN (polynomial 0x4599) of each byte value. Computed at compile time, where an index
+/// out of range or a truncation would fail the build, not a run.
+#[allow(clippy::indexing_slicing, clippy::cast_possible_truncation)]
+const CRC15_TABLE: [u16; 256] = {
+    let mut table = [0u16; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut crc = (i as u16) << 7;
+        let mut k = 0;
+        while k < 8 {
+            crc = if crc & 0x4000 != 0 {
+                (crc << 1) ^ 0x4599
+            } else {
+                crc << 1
+            } & 0x7FFF;
+            k += 1;
+        }
+        table[i] = crc;
+        i += 1;
+    }
+    table
+};
+
+/// The stuff bits the first `bits` bits of `stream` (most significant first) take: a run at a
+/// time — after five equal levels a complement bit, which starts the next run.
+fn stuff_bits(stream: u128, bits: u32) -> u32 {
+    let mut rest = stream << (128 - bits.clamp(1, 128));
+    let mut left = bits.min(128);
+    // The level of the last bit sent and how many of it in a row (0: nothing sent yet).
+    let (mut last, mut run) = (true, 0u32);
+    let mut stuffed = 0;
+    // Each pass takes a whole run of equal bits: at most `bits` passes.
+    while left > 0 {
+        let level = rest >> 127 == 1;
+        let same = if level { !rest } else { rest }.leading_zeros();
+        let len = same.min(left).max(1);
+        let need = if level == last && run > 0 { 5 - run } else { 5 };
+        if len >= need {
+            stuffed += 1 + (len - need) / 5;
+            let after = (len - need) % 5;
+            (last, run) = if after == 0 {
+                (!level, 1)
+            } else {
+                (level, after)
+            };
         } else {
-            self.run = 1;
+            run = if level == last && run > 0 {
+                run + len
+            } else {
+                len
+            };
+            last = level;
         }
-        self.last = bit;
+        rest = rest.checked_shl(len).unwrap_or(0);
+        left -= len;
     }
-
-    fn stuffed(&mut self, bit: bool) {
-        self.level(bit);
-        if self.run == 5 {
-            self.level(!bit);
-        }
-    }
+    stuffed
 }
 
 #[cfg(test)]
