@@ -148,12 +148,53 @@ pub struct Fault {
     pub count: u32,
 }
 
+/// Slots of the classic-frame timing table (a power of two).
+const CLASSIC_CACHE: usize = 1 << 10;
+
+/// A classic frame's content as a table key: identifier with its extended and remote flags,
+/// DLC, and the data bytes as one word.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct ClassicKey {
+    id: u32,
+    dlc: u8,
+    data: u64,
+}
+
+impl ClassicKey {
+    fn of(frame: &Frame) -> Option<ClassicKey> {
+        let Frame::Classic(c) = frame else {
+            return None;
+        };
+        let id = match c.id() {
+            Id::Standard(id) => u32::from(id.as_raw()),
+            Id::Extended(id) => id.as_raw() | 1 << 31,
+        } | u32::from(c.is_remote()) << 30;
+        let mut data = [0u8; 8];
+        data.iter_mut().zip(frame.data()).for_each(|(d, s)| *d = *s);
+        Some(ClassicKey {
+            id,
+            dlc: c.dlc().as_raw(),
+            data: u64::from_le_bytes(data),
+        })
+    }
+
+    /// Its slot: a multiplicative hash's top bits.
+    fn slot(self) -> usize {
+        let mixed = (u64::from(self.id) | u64::from(self.dlc) << 32)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ self.data.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        usize::try_from(mixed >> (64 - CLASSIC_CACHE.trailing_zeros())).unwrap_or(0)
+    }
+}
+
 /// One simulated bus.
 pub struct SimBus {
     /// Frame time (ns) and the bits a receiver reads before it finds a destroyed frame's CRC
     /// wrong, by frame: the wire model is exact but costly, and periodic traffic repeats the
     /// same frames (bounded: cleared when full; a pure function, so runs stay deterministic).
     timings: std::collections::HashMap<Frame, (f64, usize)>,
+    /// The same for classic frames, direct-mapped by content: cheaper than hashing them.
+    classic_timings: Vec<Option<(ClassicKey, (f64, usize))>>,
     /// Arbitration's offers (node, queue index, identifier, sequence), kept between frames.
     offers: Vec<(NodeId, usize, Id, u64)>,
     nominal: u32,
@@ -174,6 +215,7 @@ impl SimBus {
     pub fn new(nominal: u32, data: Option<u32>) -> Self {
         SimBus {
             timings: std::collections::HashMap::new(),
+            classic_timings: vec![None; CLASSIC_CACHE],
             offers: Vec::new(),
             nominal: nominal.max(1),
             data,
@@ -426,11 +468,20 @@ impl SimBus {
     /// A frame's time on this bus (ns) and where receivers find a destroyed copy's CRC wrong
     /// (bits from its start); `None` for what has no bits on the wire.
     fn timing(&mut self, frame: &Frame) -> Option<(f64, usize)> {
-        // Classic frames are counted directly (cheaper than looking them up); FD frames are
-        // encoded once and remembered.
-        if let Some((bits, detected)) = wire::classic_length(frame) {
+        // Classic frames are counted (without building their bits) and remembered in a small
+        // direct-mapped table; FD frames are encoded once and remembered.
+        if let Some(key) = ClassicKey::of(frame) {
+            let slot = self.classic_timings.get_mut(key.slot())?;
+            if let Some((cached, timing)) = slot {
+                if *cached == key {
+                    return Some(*timing);
+                }
+            }
+            let (bits, detected) = wire::classic_length(frame)?;
             let bits = f64::from(u32::try_from(bits).unwrap_or(u32::MAX));
-            return Some((bits * (1e9 / f64::from(self.nominal.max(1))), detected + 1));
+            let timing = (bits * (1e9 / f64::from(self.nominal.max(1))), detected + 1);
+            *slot = Some((key, timing));
+            return Some(timing);
         }
         if let Some(timing) = self.timings.get(frame) {
             return Some(*timing);
