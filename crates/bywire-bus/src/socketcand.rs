@@ -174,12 +174,15 @@ pub struct Access {
     pub token: Option<String>,
 }
 
-/// Serve `listener`'s clients: each gets an endpoint from `open_bus` when it opens a bus name
-/// `access` allows. Runs until `stop` is set.
+/// Opens an endpoint on the bus a client named.
+pub type OpenBus = dyn Fn(&str) -> Result<Box<dyn Bus>, BusError> + Send + Sync;
+
+/// Serve `listener`'s clients: each gets an endpoint from `open_bus` (given the name) when it
+/// opens a bus name `access` allows. Runs until `stop` is set.
 pub fn serve(
     listener: TcpListener,
     access: Access,
-    open_bus: Arc<dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync>,
+    open_bus: Arc<OpenBus>,
     stop: Arc<AtomicBool>,
     stats: Arc<ServerStats>,
 ) -> std::io::Result<()> {
@@ -253,7 +256,7 @@ struct Subscriptions {
 fn session(
     stream: TcpStream,
     access: &Access,
-    open_bus: &(dyn Fn() -> Result<Box<dyn Bus>, BusError> + Send + Sync),
+    open_bus: &OpenBus,
     stop: &Arc<AtomicBool>,
     stats: &Arc<ServerStats>,
 ) -> std::io::Result<()> {
@@ -277,6 +280,8 @@ fn session(
         by_id: std::sync::Mutex::new(BTreeMap::new()),
     });
     let mut sender: Option<Box<dyn BusTx>> = None;
+    // The bus name the session opened (its cyclic jobs open their own endpoints on it).
+    let mut opened_name = String::new();
     let mut cyclic: BTreeMap<u32, Arc<std::sync::Mutex<(Duration, Frame)>>> = BTreeMap::new();
     let mut cyclic_stops: BTreeMap<u32, Arc<AtomicBool>> = BTreeMap::new();
     let mut reader = BufReader::new(stream);
@@ -347,8 +352,9 @@ fn session(
                         access.names.join(", ")
                     ));
                 } else {
-                    match open_bus() {
+                    match open_bus(&name) {
                         Ok(bus) => {
+                            opened_name = name.clone();
                             let (tx, rx) = bus.split();
                             sender = Some(tx);
                             reply("ok");
@@ -397,7 +403,7 @@ fn session(
                 }
                 let job = Arc::new(std::sync::Mutex::new((every, frame)));
                 let job_stop = Arc::new(AtomicBool::new(false));
-                match open_bus() {
+                match open_bus(&opened_name) {
                     Ok(bus) => {
                         spawn_cyclic(
                             bus,

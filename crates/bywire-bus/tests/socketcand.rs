@@ -24,7 +24,8 @@ fn server(name: &str) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let address = listener.local_addr().unwrap().to_string();
     let spec = format!("virtual:{name}");
-    let open_bus = Arc::new(move || open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
+    let open_bus =
+        Arc::new(move |_name: &str| open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
     std::thread::spawn(move || {
         socketcand::serve(
             listener,
@@ -119,8 +120,9 @@ fn four_clients_at_5000_frames_per_second_for_30_s() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let address = listener.local_addr().unwrap().to_string();
     let stats = Arc::new(ServerStats::default());
-    let open_bus =
-        Arc::new(|| open("virtual:scd-load").map_err(|e| BusError::Unsupported(e.to_string())));
+    let open_bus = Arc::new(|_name: &str| {
+        open("virtual:scd-load").map_err(|e| BusError::Unsupported(e.to_string()))
+    });
     let server_stats = Arc::clone(&stats);
     std::thread::spawn(move || {
         socketcand::serve(
@@ -191,8 +193,9 @@ fn a_token_is_asked_for_before_anything_else() {
     use std::io::{Read, Write};
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let address = listener.local_addr().unwrap();
-    let open_bus =
-        Arc::new(|| open("virtual:scd-token").map_err(|e| BusError::Unsupported(e.to_string())));
+    let open_bus = Arc::new(|_name: &str| {
+        open("virtual:scd-token").map_err(|e| BusError::Unsupported(e.to_string()))
+    });
     let access = socketcand::Access {
         names: vec!["vcan0".into()],
         token: Some("s3cret".into()),

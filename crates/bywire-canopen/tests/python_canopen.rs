@@ -38,7 +38,8 @@ fn server(name: &str) -> u16 {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
     let spec = format!("virtual:{name}");
-    let open_bus = Arc::new(move || open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
+    let open_bus =
+        Arc::new(move |_name: &str| open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
     std::thread::spawn(move || {
         socketcand::serve(
             listener,

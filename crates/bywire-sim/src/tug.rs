@@ -113,6 +113,34 @@ struct Corner {
     distance: f64,
 }
 
+/// The tug's buses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TugBus {
+    /// Vehicle control, 500 kbit/s.
+    Bus1,
+    /// CANopen drives, 1 Mbit/s.
+    Bus2,
+    /// Sensors, 500 kbit/s.
+    Bus3,
+    /// The redundant command bus, 500 kbit/s.
+    Bus1b,
+}
+
+impl TugBus {
+    /// Every bus.
+    pub const ALL: [TugBus; 4] = [TugBus::Bus1, TugBus::Bus2, TugBus::Bus3, TugBus::Bus1b];
+
+    /// Its name, as its log file and servers call it.
+    pub fn name(self) -> &'static str {
+        match self {
+            TugBus::Bus1 => "bus1",
+            TugBus::Bus2 => "bus2",
+            TugBus::Bus3 => "bus3",
+            TugBus::Bus1b => "bus1b",
+        }
+    }
+}
+
 /// A frame seen on a bus, with its end-of-frame time.
 pub type Logged = (Timestamp, Frame);
 
@@ -452,11 +480,39 @@ impl Tug {
         }
     }
 
+    fn sim_bus(&mut self, bus: TugBus) -> &mut SimBus {
+        match bus {
+            TugBus::Bus1 => &mut self.bus1,
+            TugBus::Bus2 => &mut self.bus2,
+            TugBus::Bus3 => &mut self.bus3,
+            TugBus::Bus1b => &mut self.bus1b,
+        }
+    }
+
+    /// A port on `bus` for a node outside the tug (a tool that watches and injects): it hears
+    /// every frame the others send, and what it sends goes on the bus.
+    pub fn attach(&mut self, bus: TugBus) -> NodeId {
+        self.sim_bus(bus).add_node()
+    }
+
+    /// Send `frame` on `bus` from `port` (from [`Tug::attach`]).
+    pub fn send(&mut self, bus: TugBus, port: NodeId, frame: Frame) {
+        let now = self.now;
+        self.sim_bus(bus).submit(port, frame, now);
+    }
+
+    /// The next frame `bus` delivered to `port`.
+    pub fn receive(&mut self, bus: TugBus, port: NodeId) -> Option<(Timestamp, Frame)> {
+        self.sim_bus(bus)
+            .receive(port)
+            .map(|r| (r.timestamp, r.frame))
+    }
+
     /// Replace the built-in ADS by a node outside the tug on bus 1 (acceptance checks, another
     /// ADS): the built-in one stops, and the returned port sends and receives for the outsider.
     pub fn attach_ads(&mut self) -> NodeId {
         self.ads_external = true;
-        self.bus1.add_node()
+        self.attach(TugBus::Bus1)
     }
 
     /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]), and its copy on bus 1b
@@ -470,7 +526,7 @@ impl Tug {
 
     /// The next frame bus 1 delivered to `port`.
     pub fn receive_bus1(&mut self, port: NodeId) -> Option<(Timestamp, Frame)> {
-        self.bus1.receive(port).map(|r| (r.timestamp, r.frame))
+        self.receive(TugBus::Bus1, port)
     }
 
     /// Inject `fault` now, for `duration` (`None`: for good).

@@ -92,7 +92,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     };
     let stats = Arc::new(ServerStats::default());
     let open_spec = spec.clone();
-    let open = Arc::new(move || {
+    let open = Arc::new(move |_name: &str| {
         bywire_bus::open(&open_spec).map_err(|e| bywire_bus::BusError::Unsupported(e.to_string()))
     });
     socketcand::serve(

@@ -10,11 +10,13 @@ use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Tug, TugParams};
+
+use crate::sim_serve::Served;
 use serde_json::json;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s) and bus3.log (sensors, 500 kbit/s) in candump -L form, metrics.json (sim_seconds, completed, events, route\ntracking error, bus loads, battery) and run.png (speed, steering command and actual, heading). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, command-echo latency, bus loads, battery) and run.png (speed, steering\ncommand and actual, heading). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -38,6 +40,10 @@ pub struct Args {
     /// No live view, even in a terminal.
     #[arg(long)]
     no_view: bool,
+    /// Serve the buses (bus1, bus2, bus3, bus1b) over socketcand while it runs, so other
+    /// programs watch and inject traffic (loopback only).
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:29536")]
+    serve: Option<std::net::SocketAddr>,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -74,6 +80,19 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         tank_turn_deg: scenario.tank_turn_deg,
         steering_steps: scenario.steering_steps.clone(),
     });
+    let mut served = match args.serve {
+        Some(listen) => {
+            let served = Served::start(&mut tug, listen)?;
+            writeln!(
+                out,
+                "serving bus1, bus2, bus3 and bus1b on {} (socketcand)",
+                served.address
+            )?;
+            out.flush()?;
+            Some(served)
+        }
+        None => None,
+    };
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
     // In a terminal, in real time: the live view.
@@ -83,12 +102,21 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             crate::sim_view::run(
                 &mut tug,
                 &scenario,
-                Duration::from_secs_f64(args.max_seconds)
+                Duration::from_secs_f64(args.max_seconds),
+                served.as_mut()
             )?,
             crate::sim_view::Ending::Arrived
         )
     } else {
-        run_plain(&mut tug, &scenario, args, limit, start, out)?
+        run_plain(
+            &mut tug,
+            &scenario,
+            args,
+            limit,
+            start,
+            served.as_mut(),
+            out,
+        )?
     };
     for (name, log) in [
         ("bus1", &tug.bus1_log),
@@ -237,6 +265,7 @@ fn run_plain(
     args: &Args,
     limit: Timestamp,
     start: Instant,
+    mut served: Option<&mut Served>,
     out: &mut impl Write,
 ) -> Result<bool> {
     let stop = crate::interrupt_flag();
@@ -246,6 +275,9 @@ fn run_plain(
         tug.step();
         let now = tug.now();
         scenario.apply(tug, before, now);
+        if let Some(served) = served.as_deref_mut() {
+            served.exchange(tug);
+        }
         if tug.arrived() {
             break true;
         }

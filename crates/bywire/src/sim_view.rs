@@ -10,6 +10,7 @@ use bywire_sim::tug::{Fault, Tug};
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
 use crate::live::Input;
+use crate::sim_serve::Served;
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Style};
 use ratatui::symbols::Marker;
@@ -26,11 +27,16 @@ pub enum Ending {
 }
 
 /// Run `tug` in real time with the dashboard until the route ends, q, or `limit`.
-pub fn run(tug: &mut Tug, scenario: &Scenario, limit: Duration) -> Result<Ending> {
+pub fn run(
+    tug: &mut Tug,
+    scenario: &Scenario,
+    limit: Duration,
+    served: Option<&mut Served>,
+) -> Result<Ending> {
     // Asked now, while the terminal is surely there.
     crate::live::stdin_is_terminal();
     let mut terminal = ratatui::init();
-    let result = event_loop(tug, scenario, limit, &mut terminal);
+    let result = event_loop(tug, scenario, limit, served, &mut terminal);
     crate::live::restore(terminal);
     result
 }
@@ -39,6 +45,7 @@ fn event_loop(
     tug: &mut Tug,
     scenario: &Scenario,
     limit: Duration,
+    mut served: Option<&mut Served>,
     terminal: &mut ratatui::DefaultTerminal,
 ) -> Result<Ending> {
     let mut paused = false;
@@ -53,6 +60,9 @@ fn event_loop(
                 let before = tug.now();
                 tug.step();
                 scenario.apply(tug, before, tug.now());
+                if let Some(served) = served.as_deref_mut() {
+                    served.exchange(tug);
+                }
             }
         }
         if tug.arrived() {

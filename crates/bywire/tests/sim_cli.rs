@@ -302,3 +302,83 @@ fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
     );
     assert!(err.contains("failed: steering sweep"), "{err}");
 }
+
+/// `bywire sim --serve`: python-can joins the simulated buses over socketcand while the run
+/// goes on in real time, hears the drives' heartbeats on bus 2 and the IMU on bus 3, and what
+/// it sends on bus 3 is carried on the simulated bus (it is in the run's bus 3 log).
+#[test]
+fn python_can_watches_and_injects_through_the_served_buses() {
+    use std::io::BufRead;
+    use std::process::Stdio;
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let dir = std::env::temp_dir().join(format!("bywire-sim-serve-{}", std::process::id()));
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["sim", "--no-view", "--max-seconds", "8", "--serve"])
+        .arg(format!("127.0.0.1:{port}"))
+        .arg("--out")
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut sim_out = std::io::BufReader::new(sim.stdout.take().unwrap());
+    let mut first = String::new();
+    sim_out.read_line(&mut first).unwrap();
+    assert_eq!(
+        first.trim(),
+        format!("serving bus1, bus2, bus3 and bus1b on 127.0.0.1:{port} (socketcand)")
+    );
+    let script = format!(
+        r#"
+import can, json, time
+b2 = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="bus2")
+b3 = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="bus3")
+ids, imu = set(), 0
+end = time.time() + 2
+while time.time() < end:
+    m = b2.recv(0.05)
+    if m is not None:
+        ids.add(m.arbitration_id)
+    m = b3.recv(0.0)
+    if m is not None and m.arbitration_id == 0x120:
+        imu += 1
+b3.send(can.Message(arbitration_id=0x7AB, is_extended_id=False, data=[1, 2, 3, 4]))
+time.sleep(0.5)
+print(json.dumps({{"ids": sorted(ids), "imu": imu}}))
+b2.shutdown()
+b3.shutdown()
+"#
+    );
+    let python = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(
+        python.status.success(),
+        "{}",
+        String::from_utf8_lossy(&python.stderr)
+    );
+    let heard: serde_json::Value = serde_json::from_slice(&python.stdout).unwrap();
+    let ids: Vec<u64> = heard["ids"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    for heartbeat in [0x711, 0x714, 0x721, 0x724] {
+        assert!(
+            ids.contains(&heartbeat),
+            "heartbeat {heartbeat:#x}: {ids:x?}"
+        );
+    }
+    assert!(heard["imu"].as_u64().unwrap() > 20, "{heard}");
+    assert!(sim.wait().unwrap().success());
+    let log = std::fs::read_to_string(dir.join("bus3.log")).unwrap();
+    assert!(
+        log.contains(" bus3 7AB#01020304"),
+        "the injected frame is on bus 3"
+    );
+}
