@@ -22,6 +22,8 @@ fn cruising() -> Tug {
         crab_final_m: 0.0,
         tank_turn_deg: 0.0,
         steering_steps: Vec::new(),
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     for _ in 0..5_000 {
         tug.step();

@@ -8,6 +8,8 @@
 //! crab_final_m = 10.0           # the last metres in crab, heading held (a stand approach)
 //! tank_turn_deg = 180           # at the end, a tank turn in place (+ left)
 //! steering_steps = [10, -10, 0] # before departure, steering steps at a standstill, 3 s each
+//! speeds = [[40, 1.5], [80, 3]] # from 40 m on 1.5 m/s, from 80 m on 3 m/s
+//! stops = [[60, 5]]             # stop at 60 m for 5 s
 //! payload = 2000                # kg, 0–4500
 //! grade = 0.02                  # rise over run
 //!
@@ -45,6 +47,10 @@ pub struct Scenario {
     pub tank_turn_deg: f64,
     /// The steering step test before departure: angles, degrees, each held 3 s.
     pub steering_steps: Vec<f64>,
+    /// Speeds along the route: (from this many metres on, m/s).
+    pub speeds: Vec<(f64, f64)>,
+    /// Stops along the route: (at this many metres, for this long).
+    pub stops: Vec<(f64, Duration)>,
     /// Payload, kg.
     pub payload: f64,
     /// Road grade.
@@ -90,6 +96,10 @@ struct RawScenario {
     tank_turn_deg: f64,
     #[serde(default)]
     steering_steps: Vec<f64>,
+    #[serde(default)]
+    speeds: Vec<[f64; 2]>,
+    #[serde(default)]
+    stops: Vec<[f64; 2]>,
     #[serde(default)]
     payload: f64,
     #[serde(default)]
@@ -157,6 +167,8 @@ impl Scenario {
             } else {
                 Vec::new()
             },
+            speeds: Vec::new(),
+            stops: Vec::new(),
             payload: 2_000.0,
             grade: 0.0,
             events,
@@ -233,6 +245,52 @@ impl Scenario {
         if raw.steering_steps.len() > 100 {
             return Err(invalid("steering_steps", "at most 100 steps".to_string()));
         }
+        let length: f64 = route
+            .windows(2)
+            .map(|w| match w {
+                [a, b] => (b.x - a.x).hypot(b.y - a.y),
+                _ => 0.0,
+            })
+            .sum();
+        let along = |key: &str, pairs: &[[f64; 2]], valid: &dyn Fn(f64) -> bool, what: &str| {
+            let mut last = f64::NEG_INFINITY;
+            for (i, [at, value]) in pairs.iter().enumerate() {
+                if !(0.0..=length).contains(at) || *at <= last {
+                    return Err(invalid(
+                        &format!("{key}[{i}]"),
+                        format!(
+                            "{at} m is not on the route (0–{length:.1} m) after the one before"
+                        ),
+                    ));
+                }
+                if !valid(*value) {
+                    return Err(invalid(
+                        &format!("{key}[{i}]"),
+                        format!("{value} is not {what}"),
+                    ));
+                }
+                last = *at;
+            }
+            Ok(())
+        };
+        along(
+            "speeds",
+            &raw.speeds,
+            &|v| v > 0.0 && v <= 8.0,
+            "a speed the tug drives (0–8 m/s)",
+        )?;
+        along(
+            "stops",
+            &raw.stops,
+            &|s| s > 0.0 && s <= 3_600.0,
+            "a stop's length (0–3600 s)",
+        )?;
+        let speeds = raw.speeds.iter().map(|[at, v]| (*at, *v)).collect();
+        let stops = raw
+            .stops
+            .iter()
+            .map(|[at, s]| (*at, Duration::from_secs_f64(*s)))
+            .collect();
         if !(0.0..=4_500.0).contains(&raw.payload) {
             return Err(invalid(
                 "payload",
@@ -303,6 +361,8 @@ impl Scenario {
             crab_final_m: raw.crab_final_m,
             tank_turn_deg: raw.tank_turn_deg,
             steering_steps: raw.steering_steps,
+            speeds,
+            stops,
             payload: raw.payload,
             grade: raw.grade,
             events,
@@ -365,6 +425,15 @@ mod tests {
         assert!(error("payload = 9000\n").contains("payload: 9000 kg"));
         assert!(error("crab_final_m = -1\n").contains("crab_final_m: -1 is not a length"));
         assert!(error("tank_turn_deg = 900\n").contains("tank_turn_deg: 900 is not a turn"));
+        assert!(error("stops = [[10, 5], [5, 5]]\n").contains("stops[1]: 5 m is not on the route"));
+        assert!(error("speeds = [[10, 9]]\n").contains("speeds[0]: 9 is not a speed"));
+        let timed = Scenario::parse(
+            "route = \"apron-loop\"\nspeeds = [[40, 1.5]]\nstops = [[60, 5]]\n",
+            "t.toml",
+        )
+        .unwrap();
+        assert_eq!(timed.speeds, [(40.0, 1.5)]);
+        assert_eq!(timed.stops, [(60.0, Duration::from_secs(5))]);
         assert!(error("steering_steps = [5, 45]\n")
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));

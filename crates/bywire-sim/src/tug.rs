@@ -76,6 +76,11 @@ pub struct TugParams {
     /// Once engaged, before it drives, the ADS steps the steering to each of these angles
     /// (degrees) in turn at a standstill, holding each for `STEP_HOLD` (the step test).
     pub steering_steps: Vec<f64>,
+    /// Speeds along the route: (from this many metres on, m/s), by distance; before the
+    /// first, `speed`.
+    pub speeds: Vec<(f64, f64)>,
+    /// Stops along the route: (at this many metres, for this long), by distance.
+    pub stops: Vec<(f64, Duration)>,
 }
 
 /// How long each steering step of the step test is held.
@@ -264,6 +269,9 @@ pub struct Tug {
     last_degraded: Option<Channel>,
     drives_lost: bool,
     ads_external: bool,
+    /// The next stop to make, and the end of the dwell there once stopped.
+    stop_index: usize,
+    dwell_until: Option<Timestamp>,
     /// The steering mode the ADS last asked for.
     ads_steering_mode: SteeringMode,
     /// The step test: when the current step was commanded.
@@ -469,6 +477,8 @@ impl Tug {
             ),
             drives_lost: false,
             ads_external: false,
+            stop_index: 0,
+            dwell_until: None,
             ads_steering_mode: SteeringMode::Normal,
             step_started: Timestamp::ZERO,
             tank: None,
@@ -609,6 +619,48 @@ impl Tug {
             && self.remaining < 0.5
             && self.pose_speed() < 0.01
             && (self.params.tank_turn_deg == 0.0 || self.tank_done)
+    }
+
+    /// The ADS's speed at `station` (`remaining` to go): the speed of the route there,
+    /// slowing in time for lower speeds ahead, for the next stop and for the end
+    /// (v² = v_next² + 2·a·d with a gentle 0.5 m/s²); nothing while it dwells at a stop.
+    fn speed_target(&mut self, now: Timestamp, station: f64, remaining: f64, speed: f64) -> f64 {
+        let approach = |v_next: f64, distance: f64| {
+            libm::sqrt(v_next * v_next + 2.0 * 0.5 * distance.max(0.0))
+        };
+        let speeds = &self.params.speeds;
+        let here = speeds
+            .iter()
+            .rev()
+            .find(|(from, _)| *from <= station)
+            .map_or(self.params.speed, |(_, v)| *v);
+        let target = speeds
+            .iter()
+            .filter(|(from, _)| *from > station)
+            .fold(here.min(approach(0.0, remaining)), |v, (from, next)| {
+                v.min(approach(*next, from - station))
+            });
+        let Some(&(at, dwell)) = self.params.stops.get(self.stop_index) else {
+            return target;
+        };
+        match self.dwell_until {
+            Some(until) if now < until => 0.0,
+            Some(_) => {
+                self.dwell_until = None;
+                self.stop_index += 1;
+                self.record("depart", format!("from the stop at {at:.1} m"));
+                target
+            }
+            None if at - station < 0.3 && speed.abs() < 0.05 => {
+                self.dwell_until = Some(now.saturating_add(dwell));
+                self.record(
+                    "stop",
+                    format!("at {at:.1} m for {:.1} s", dwell.as_secs_f64()),
+                );
+                0.0
+            }
+            None => target.min(approach(0.0, at - station)),
+        }
     }
 
     /// The step test's angle while it runs; a step is recorded as it is first commanded.
@@ -1077,7 +1129,7 @@ impl Tug {
             let pose = self.chassis.pose();
             let speed = self.chassis.twist().vx;
             let crab = self.remaining < self.params.crab_final_m;
-            let (steering, error, remaining) = match Path::new(&self.route) {
+            let (steering, error, remaining, station) = match Path::new(&self.route) {
                 Some(path) => {
                     let projection = path.project(Point {
                         x: pose.x,
@@ -1099,19 +1151,16 @@ impl Tug {
                         steering,
                         projection.offset.abs(),
                         path.length() - projection.station,
+                        projection.station,
                     )
                 }
-                None => (0.0, 0.0, 0.0),
+                None => (0.0, 0.0, 0.0, 0.0),
             };
             self.remaining = remaining;
             if self.engaged_at.is_some() {
                 self.tracking_errors.push(error);
             }
-            // Slow down for the end: v² = 2·a·d with a gentle 0.5 m/s².
-            let target = self
-                .params
-                .speed
-                .min(libm::sqrt(2.0 * 0.5 * remaining.max(0.0)));
+            let target = self.speed_target(now, station, remaining, speed);
             let velocity = if remaining < 0.3 || self.engaged_at.is_none() {
                 0.0
             } else {

@@ -14,12 +14,7 @@ use bywire_vehicle::reference_tug::ControlMode;
 
 fn route() -> Vec<Point> {
     // 30 m straight, a quarter circle of 15 m radius to the left, 20 m straight.
-    let mut points: Vec<Point> = (0..=30)
-        .map(|x| Point {
-            x: f64::from(x),
-            y: 0.0,
-        })
-        .collect();
+    let mut points = straight(30);
     for k in 1..=20 {
         let a = f64::from(k) / 20.0 * std::f64::consts::FRAC_PI_2;
         points.push(Point {
@@ -46,6 +41,8 @@ fn run(seed: u64) -> Tug {
         crab_final_m: 0.0,
         tank_turn_deg: 0.0,
         steering_steps: Vec::new(),
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     for _ in 0..60_000 {
         tug.step();
@@ -122,6 +119,8 @@ fn cruising() -> Tug {
         crab_final_m: 0.0,
         tank_turn_deg: 0.0,
         steering_steps: Vec::new(),
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     while tug.now().as_nanos() < 8_000_000_000 {
         tug.step();
@@ -249,12 +248,7 @@ fn a_silent_drive_is_lost_within_its_consumer_time_and_the_tug_brakes() {
 #[test]
 fn a_crab_approach_moves_sideways_with_the_heading_held() {
     // 30 m along x, then 20 m on a diagonal 4 m to the left: the stand approach in crab.
-    let mut points: Vec<Point> = (0..=30)
-        .map(|x| Point {
-            x: f64::from(x),
-            y: 0.0,
-        })
-        .collect();
+    let mut points = straight(30);
     for k in 1..=20 {
         points.push(Point {
             x: 30.0 + f64::from(k),
@@ -270,6 +264,8 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
         crab_final_m: 26.0,
         tank_turn_deg: 0.0,
         steering_steps: Vec::new(),
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     let mut crab_angles = Vec::new();
     for _ in 0..60_000 {
@@ -323,6 +319,8 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
         crab_final_m: 0.0,
         tank_turn_deg: 90.0,
         steering_steps: Vec::new(),
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     let mut stopped_at = None;
     for _ in 0..120_000 {
@@ -364,6 +362,8 @@ fn the_step_test_records_each_step_of_the_steering() {
         crab_final_m: 0.0,
         tank_turn_deg: 0.0,
         steering_steps: vec![10.0, -10.0],
+        speeds: Vec::new(),
+        stops: Vec::new(),
     });
     // Engaged at about 0.4 s, two steps of 3 s, then away.
     for _ in 0..6_300 {
@@ -405,5 +405,54 @@ fn the_step_test_records_each_step_of_the_steering() {
     assert!(
         rises[1] > rises[0],
         "the larger step rises longer: {rises:?}"
+    );
+}
+
+#[test]
+fn speeds_along_the_route_and_a_stop_are_kept() {
+    let mut tug = Tug::new(TugParams {
+        seed: 6,
+        payload: 1_000.0,
+        grade: 0.0,
+        route: straight(60),
+        speed: 3.0,
+        crab_final_m: 0.0,
+        tank_turn_deg: 0.0,
+        steering_steps: Vec::new(),
+        speeds: vec![(20.0, 1.0), (45.0, 2.0)],
+        stops: vec![(40.0, Duration::from_secs(3))],
+    });
+    let (mut fastest_slow_part, mut fastest_before) = (0.0f64, 0.0f64);
+    for _ in 0..120_000 {
+        tug.step();
+        let x = tug.pose().x;
+        if (21.0..39.0).contains(&x) {
+            fastest_slow_part = fastest_slow_part.max(tug.pose_speed());
+        }
+        if x < 12.0 {
+            fastest_before = fastest_before.max(tug.pose_speed());
+        }
+        if tug.arrived() {
+            break;
+        }
+    }
+    assert!(tug.arrived(), "at the end by {:?}", tug.now());
+    assert!(fastest_before > 2.5, "cruising before: {fastest_before}");
+    assert!(
+        fastest_slow_part < 1.15,
+        "1 m/s from 20 m on: {fastest_slow_part}"
+    );
+    let at = |kind: &str| {
+        tug.events
+            .iter()
+            .find(|e| e.kind == kind)
+            .unwrap_or_else(|| panic!("no {kind}: {:?}", tug.events))
+            .t
+    };
+    let (stopped, departed) = (at("stop"), at("depart"));
+    let dwell = departed.saturating_since(stopped);
+    assert!(
+        dwell >= Duration::from_secs(3) && dwell < Duration::from_millis(3_100),
+        "{dwell:?}"
     );
 }

@@ -54,6 +54,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             crab_final_m: 0.0,
             tank_turn_deg: 0.0,
             steering_steps: Vec::new(),
+            speeds: Vec::new(),
+            stops: Vec::new(),
         });
         match args.tug_fault.as_deref() {
             None => {}

@@ -79,6 +79,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         crab_final_m: scenario.crab_final_m,
         tank_turn_deg: scenario.tank_turn_deg,
         steering_steps: scenario.steering_steps.clone(),
+        speeds: scenario.speeds.clone(),
+        stops: scenario.stops.clone(),
     });
     let mut served = match args.serve {
         Some(listen) => {
