@@ -148,6 +148,37 @@ pub struct Fault {
     pub count: u32,
 }
 
+/// What a faulty sender does to frames of one identifier (see [`SimBus::tamper`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tamper {
+    /// The lowest bit of the first data byte flipped (checksums catch it; CAN's CRC cannot,
+    /// it is computed over the wrong data).
+    FlipBit,
+    /// Sent twice.
+    Duplicate,
+    /// Sent this much later.
+    Delay(std::time::Duration),
+}
+
+/// `frame` with the lowest bit of its first data byte flipped (as it is without data).
+fn flipped(frame: Frame) -> Frame {
+    if frame.is_remote() || frame.is_error() || frame.data().is_empty() {
+        return frame;
+    }
+    let mut data = [0u8; 64];
+    data.iter_mut().zip(frame.data()).for_each(|(d, s)| *d = *s);
+    if let Some(first) = data.first_mut() {
+        *first ^= 0x01;
+    }
+    let data = data.get(..frame.data().len()).unwrap_or(&[]);
+    let rebuilt = match frame {
+        Frame::Classic(c) => Frame::classic(c.id(), data),
+        Frame::Fd(f) => Frame::fd(f.id(), data, f.brs(), f.esi()),
+        Frame::Error(_) => Ok(frame),
+    };
+    rebuilt.unwrap_or(frame)
+}
+
 /// Slots of the classic-frame timing table (a power of two).
 const CLASSIC_CACHE: usize = 1 << 10;
 
@@ -195,6 +226,8 @@ pub struct SimBus {
     timings: std::collections::HashMap<Frame, (f64, usize)>,
     /// The same for classic frames, direct-mapped by content: cheaper than hashing them.
     classic_timings: Vec<Option<(ClassicKey, (f64, usize))>>,
+    /// Faulty senders, by identifier.
+    tampered: Vec<(Id, Tamper)>,
     /// Arbitration's offers (node, queue index, identifier, sequence), kept between frames.
     offers: Vec<(NodeId, usize, Id, u64)>,
     nominal: u32,
@@ -216,6 +249,7 @@ impl SimBus {
         SimBus {
             timings: std::collections::HashMap::new(),
             classic_timings: vec![None; CLASSIC_CACHE],
+            tampered: Vec::new(),
             offers: Vec::new(),
             nominal: nominal.max(1),
             data,
@@ -277,14 +311,37 @@ impl SimBus {
         if frame.is_error() {
             return;
         }
-        let seq = self.next_seq;
-        self.next_seq += 1;
-        if let Some(n) = self.nodes.get_mut(node) {
-            n.queue.push(Pending {
-                frame,
-                submitted: at.max(self.now),
-                seq,
-            });
+        let at = at.max(self.now);
+        let tamper = frame
+            .id()
+            .and_then(|id| self.tampered.iter().find(|(t, _)| *t == id))
+            .map(|(_, tamper)| *tamper);
+        let (frame, at, copies) = match tamper {
+            None => (frame, at, 1),
+            Some(Tamper::FlipBit) => (flipped(frame), at, 1),
+            Some(Tamper::Duplicate) => (frame, at, 2),
+            Some(Tamper::Delay(delay)) => (frame, at.saturating_add(delay), 1),
+        };
+        for _ in 0..copies {
+            let seq = self.next_seq;
+            self.next_seq += 1;
+            if let Some(n) = self.nodes.get_mut(node) {
+                n.queue.push(Pending {
+                    frame,
+                    submitted: at,
+                    seq,
+                });
+            }
+        }
+    }
+
+    /// A faulty sender for frames with identifier `id`, from whichever node (`None`: mend it):
+    /// what leaves the node is not what it meant to send — unlike [`SimBus::corrupt`], the
+    /// frames are well formed on the wire.
+    pub fn tamper(&mut self, id: Id, tamper: Option<Tamper>) {
+        self.tampered.retain(|(t, _)| *t != id);
+        if let Some(tamper) = tamper {
+            self.tampered.push((id, tamper));
         }
     }
 

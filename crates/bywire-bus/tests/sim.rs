@@ -172,3 +172,52 @@ fn repeated_corruption_leads_to_bus_off_and_recovery_at_exact_times() {
     assert_eq!(bus.confinement(sender).unwrap().tec(), 0);
     assert_eq!(bus.now(), Timestamp::from_millis(100));
 }
+
+/// A faulty sender of one identifier: its frames leave with a flipped bit (classic and FD), twice,
+/// or late — well formed on the wire, the other identifiers untouched; mended, it sends true.
+#[test]
+fn tampered_identifiers_are_flipped_duplicated_or_delayed() {
+    use bywire_bus::sim::Tamper;
+    use std::time::Duration;
+    let mut bus = SimBus::new(500_000, Some(2_000_000));
+    let (sender, listener) = (bus.add_node(), bus.add_node());
+    let id = |raw: u32| frame(&format!("{raw:03X}#00")).id().unwrap();
+    let received = |bus: &mut SimBus| -> Vec<(String, u64)> {
+        std::iter::from_fn(|| bus.receive(listener))
+            .map(|r| (r.frame.to_string(), ns(r.timestamp)))
+            .collect()
+    };
+    bus.tamper(id(0x100), Some(Tamper::FlipBit));
+    bus.tamper(id(0x101), Some(Tamper::FlipBit));
+    bus.tamper(id(0x200), Some(Tamper::Duplicate));
+    bus.submit(sender, frame("100#F0AA"), Timestamp::ZERO);
+    bus.submit(sender, frame("101##1F1020304"), Timestamp::ZERO);
+    bus.submit(sender, frame("200#55"), Timestamp::ZERO);
+    bus.submit(sender, frame("300#F0AA"), Timestamp::ZERO);
+    bus.advance(Timestamp::from_millis(10));
+    let got: Vec<String> = received(&mut bus).into_iter().map(|r| r.0).collect();
+    assert_eq!(
+        got,
+        ["100#F1AA", "101##5F0020304", "200#55", "200#55", "300#F0AA"],
+        "{got:?}"
+    );
+    // 300 ms late, and the frame behind it from the same node is not held up.
+    bus.tamper(id(0x100), Some(Tamper::Delay(Duration::from_millis(300))));
+    bus.submit(sender, frame("100#01"), Timestamp::from_millis(20));
+    bus.submit(sender, frame("300#02"), Timestamp::from_millis(20));
+    bus.advance(Timestamp::from_millis(400));
+    let got = received(&mut bus);
+    assert_eq!(got.len(), 2, "{got:?}");
+    assert_eq!(got[0].0, "300#02");
+    assert!(got[0].1 < 21_000_000, "{got:?}");
+    assert_eq!(got[1].0, "100#01");
+    assert!((320_000_000..321_000_000).contains(&got[1].1), "{got:?}");
+    // Mended.
+    bus.tamper(id(0x100), None);
+    bus.submit(sender, frame("100#F0"), Timestamp::from_millis(500));
+    bus.advance(Timestamp::from_millis(510));
+    let got = received(&mut bus);
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].0, "100#F0");
+    assert!(got[0].1 < 501_000_000, "{got:?}");
+}

@@ -18,9 +18,11 @@
 //! fault = "ads_silence"         # ads_silence, estop, operator_reset, drive_silence,
 //! duration_s = 1.0              # sensor_fault, corrupt_commands, duplicate_commands,
 //!                               # delay_commands, driver_takeover, ecu_bus_off,
-//!                               # redundant_bus_loss
+//!                               # redundant_bus_loss, corrupt_frames, duplicate_frames,
+//!                               # delay_frames
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
-//! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15
+//! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15;
+//! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms)
 //! ```
 
 use core::time::Duration;
@@ -30,7 +32,8 @@ use bywire_core::Timestamp;
 use serde::Deserialize;
 
 use crate::steering::SensorFault;
-use crate::tug::{apron_loop, Fault, Tug, DRIVE_NODES, STEERING_NODES};
+use crate::tug::{apron_loop, Fault, Tug, TugBus, DRIVE_NODES, STEERING_NODES};
+use bywire_bus::sim::Tamper;
 
 /// A scenario.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,6 +126,8 @@ struct RawEvent {
     sensor: Option<String>,
     value: Option<f64>,
     delay_ms: Option<u64>,
+    bus: Option<String>,
+    id: Option<u16>,
 }
 
 impl Scenario {
@@ -350,7 +355,21 @@ impl Scenario {
                 "driver_takeover" => Fault::DriverTakeover,
                 "ecu_bus_off" => Fault::EcuBusOff,
                 "redundant_bus_loss" => Fault::RedundantBusLoss,
-                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, redundant_bus_loss)"))),
+                kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
+                    let bus = match e.bus.as_deref() {
+                        Some(name) => TugBus::ALL.into_iter().find(|b| b.name() == name),
+                        None => None,
+                    }
+                    .ok_or_else(|| invalid(&key("bus"), format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\"")))?;
+                    let id = e.id.filter(|id| *id <= 0x7FF).ok_or_else(|| invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier")))?;
+                    let tamper = match kind {
+                        "corrupt_frames" => Tamper::FlipBit,
+                        "duplicate_frames" => Tamper::Duplicate,
+                        _ => Tamper::Delay(Duration::from_millis(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_frames needs delay_ms".to_string()))?)),
+                    };
+                    Fault::TamperFrames { bus, id, tamper }
+                }
+                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames)"))),
             };
             events.push((Duration::from_secs_f64(e.at_s), fault, duration));
         }
@@ -427,6 +446,19 @@ mod tests {
         assert!(error("tank_turn_deg = 900\n").contains("tank_turn_deg: 900 is not a turn"));
         assert!(error("stops = [[10, 5], [5, 5]]\n").contains("stops[1]: 5 m is not on the route"));
         assert!(error("speeds = [[10, 9]]\n").contains("speeds[0]: 9 is not a speed"));
+        assert!(
+            error("[[event]]\nat_s = 1\nfault = \"delay_frames\"\nbus = \"bus9\"\nid = 1\n")
+                .contains("event[0].bus: delay_frames needs bus")
+        );
+        let tamper = Scenario::parse("[[event]]\nat_s = 1\nfault = \"delay_frames\"\nbus = \"bus2\"\nid = 0x721\ndelay_ms = 300\nduration_s = 1\n", "d.toml").unwrap();
+        assert_eq!(
+            tamper.events.first().map(|e| e.1),
+            Some(Fault::TamperFrames {
+                bus: TugBus::Bus2,
+                id: 0x721,
+                tamper: Tamper::Delay(Duration::from_millis(300))
+            })
+        );
         let timed = Scenario::parse(
             "route = \"apron-loop\"\nspeeds = [[40, 1.5]]\nstops = [[60, 5]]\n",
             "t.toml",

@@ -14,7 +14,7 @@
 
 use core::time::Duration;
 
-use bywire_bus::sim::{NodeId, SimBus};
+use bywire_bus::sim::{NodeId, SimBus, Tamper};
 use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
 use bywire_canopen::device::Device;
@@ -175,6 +175,16 @@ pub enum Fault {
     EcuBusOff,
     /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
     RedundantBusLoss,
+    /// Whichever node sends frames with this identifier on this bus sends them corrupted
+    /// (a bit flipped), twice, or late.
+    TamperFrames {
+        /// The bus.
+        bus: TugBus,
+        /// The 11-bit identifier.
+        id: u16,
+        /// What happens to them.
+        tamper: Tamper,
+    },
 }
 
 /// The run's state every 50 ms, for plots.
@@ -499,6 +509,12 @@ impl Tug {
         }
     }
 
+    fn tamper(&mut self, bus: TugBus, id: u16, tamper: Option<Tamper>) {
+        if let Ok(id) = bywire_core::Id::standard(u32::from(id)) {
+            self.sim_bus(bus).tamper(id, tamper);
+        }
+    }
+
     /// A port on `bus` for a node outside the tug (a tool that watches and injects): it hears
     /// every frame the others send, and what it sends goes on the bus.
     pub fn attach(&mut self, bus: TugBus) -> NodeId {
@@ -575,6 +591,7 @@ impl Tug {
                     count: 40,
                 });
             }
+            Fault::TamperFrames { bus, id, tamper } => self.tamper(bus, id, Some(tamper)),
             Fault::AdsSilence
             | Fault::Estop
             | Fault::DriveSilence(_)
@@ -824,10 +841,14 @@ impl Tug {
             .map(|(f, _)| *f)
             .collect();
         for fault in expired {
-            if let Fault::SensorFault(corner, _) = fault {
-                if let Some(c) = self.corners.get_mut(corner) {
-                    c.chain.set_fault(SensorFault::None);
+            match fault {
+                Fault::SensorFault(corner, _) => {
+                    if let Some(c) = self.corners.get_mut(corner) {
+                        c.chain.set_fault(SensorFault::None);
+                    }
                 }
+                Fault::TamperFrames { bus, id, .. } => self.tamper(bus, id, None),
+                _ => {}
             }
             self.record("fault_cleared", format!("{fault:?}"));
         }

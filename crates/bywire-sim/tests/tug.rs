@@ -456,3 +456,53 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
         "{dwell:?}"
     );
 }
+
+#[test]
+fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
+    use bywire_bus::sim::Tamper;
+    use bywire_sim::tug::TugBus;
+    // Drive 0x21's heartbeats on bus 2 (every 100 ms), 300 ms late for a second: the gap
+    // trips the ECU's 250 ms heartbeat consumer 250 ms after the last one on time, and the
+    // heartbeat comes back.
+    let mut tug = cruising();
+    let from = tug.now().as_nanos();
+    tug.inject(
+        Fault::TamperFrames {
+            bus: TugBus::Bus2,
+            id: 0x721,
+            tamper: Tamper::Delay(Duration::from_millis(300)),
+        },
+        Some(Duration::from_secs(1)),
+    );
+    run_for(&mut tug, 2_000);
+    let events = after(&tug, from);
+    let lost = events
+        .iter()
+        .find(|(_, kind, detail)| kind == "heartbeat_lost" && detail == "node 0x21")
+        .unwrap_or_else(|| panic!("{events:?}"));
+    assert!(
+        (150..=251).contains(&lost.0),
+        "lost {} ms after the delay began",
+        lost.0
+    );
+    assert!(events.iter().any(|(t, kind, detail)| *t > lost.0
+        && kind == "heartbeat_recovered"
+        && detail == "node 0x21"));
+    // The ADS's commands (0x100 on bus 1), a bit flipped for 100 ms: every one fails its CRC.
+    let mut tug = cruising();
+    let before = tug.ecu().stats().checksum;
+    tug.inject(
+        Fault::TamperFrames {
+            bus: TugBus::Bus1,
+            id: 0x100,
+            tamper: Tamper::FlipBit,
+        },
+        Some(Duration::from_millis(100)),
+    );
+    run_for(&mut tug, 300);
+    let corrupted = tug.ecu().stats().checksum - before;
+    assert!(
+        (4..=6).contains(&corrupted),
+        "{corrupted} checksum failures"
+    );
+}

@@ -111,7 +111,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
 
 fn create_log(path: PathBuf) -> Result<BufWriter<File>> {
     let file = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
-    eprintln!("Enabling Logfile '{}'", path.display());
+    // As candump says it; a closed standard error is no reason to fail.
+    let _ = writeln!(std::io::stderr(), "Enabling Logfile '{}'", path.display());
     Ok(BufWriter::new(file))
 }
 

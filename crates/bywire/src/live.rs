@@ -143,15 +143,14 @@ pub fn run(view: &mut impl View, source: &Source) -> Result<()> {
     result
 }
 
-/// Put the terminal back as it was. One that went away is left alone: ratatui's clean-up
-/// would report its failure on that terminal, and the report itself would panic.
+/// Put the terminal back as it was: cursor shown, raw mode off, the main screen back. Every
+/// step may fail on a terminal that is going away (its window closed mid-way) and is let fail:
+/// ratatui's own clean-up, when its terminal is dropped, reports such a failure with
+/// `eprintln!`, which panics on that same terminal — so the terminal is forgotten instead.
 pub fn restore(terminal: ratatui::DefaultTerminal) {
-    if terminal_gone() {
-        std::mem::forget(terminal);
-    } else {
-        drop(terminal);
-        let _ = ratatui::try_restore();
-    }
+    std::mem::forget(terminal);
+    let _ = ratatui::crossterm::execute!(std::io::stdout(), ratatui::crossterm::cursor::Show);
+    let _ = ratatui::try_restore();
 }
 
 fn event_loop(
@@ -177,7 +176,9 @@ fn event_loop(
                 Err(_) => break,
             }
         }
-        terminal.draw(|f| view.draw(f, Instant::now()))?;
+        if !draw(terminal, |f| view.draw(f, Instant::now()))? {
+            return Ok(());
+        }
         match next_input(frame_interval)? {
             Input::Event(TermEvent::Key(key))
                 if key.kind == KeyEventKind::Press && (is_quit(key) || view.on_key(key)) =>
@@ -187,6 +188,19 @@ fn event_loop(
             Input::HungUp => return Ok(()),
             Input::Event(_) | Input::Nothing => {}
         }
+    }
+}
+
+/// Draw a view: true once drawn, false when the terminal went away (it hung up between two
+/// draws or in the middle of one); any other failure is an error.
+pub fn draw(
+    terminal: &mut ratatui::DefaultTerminal,
+    render: impl FnOnce(&mut ratatui::Frame<'_>),
+) -> Result<bool> {
+    match terminal.draw(render) {
+        Ok(_) => Ok(true),
+        Err(_) if terminal_gone() => Ok(false),
+        Err(e) => Err(e.into()),
     }
 }
 

@@ -180,11 +180,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         "completed": completed,
         "events": events,
         "tracking_error_m": {"max": worst, "mean": mean},
-                "steering_steps": steering_steps,
+        "steering_steps": steering_steps,
         "echo_latency_ms": percentiles(&tug.echo_latencies),
         "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3, "bus1b": load1b},
         "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len(), "bus1b": tug.bus1b_log.len()},
-                "battery_soc": tug.soc(),
+        "battery_soc": tug.soc(),
         "supervisor": {
             "accepted": tug.ecu().stats().accepted,
             "checksum": tug.ecu().stats().checksum,
@@ -196,8 +196,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     });
     plot(&tug, &args.out.join("run.png"))?;
     let path = args.out.join("metrics.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&metrics)? + "\n")
-        .with_context(|| format!("{}", path.display()))?;
+    // Whole or not at all: a reader never finds half a file.
+    crate::plot_cmd::write_atomically(&path, |tmp| {
+        std::fs::write(tmp, serde_json::to_string_pretty(&metrics)? + "\n")
+            .with_context(|| format!("{}", path.display()))
+    })?;
     writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, load3 * 100.0, args.out.display())?;
     Ok(())

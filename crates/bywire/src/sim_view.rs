@@ -73,7 +73,9 @@ fn event_loop(
         {
             return Ok(Ending::Stopped);
         }
-        terminal.draw(|f| draw(f, tug, scenario, paused))?;
+        if !crate::live::draw(terminal, |f| draw(f, tug, scenario, paused))? {
+            return Ok(Ending::Stopped);
+        }
         let key = match crate::live::next_input(Duration::from_millis(50))? {
             Input::HungUp => return Ok(Ending::Stopped),
             Input::Event(Event::Key(key)) if key.kind == KeyEventKind::Press => key,

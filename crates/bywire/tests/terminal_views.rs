@@ -236,8 +236,7 @@ fn sim_fault_keys_and_a_closed_terminal() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    // Written whole: it parses, and it has the fault pressed by hand.
-    std::thread::sleep(Duration::from_millis(500));
+    // Written whole (it parses at once) with the fault pressed by hand.
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     assert!(
@@ -248,4 +247,32 @@ fn sim_fault_keys_and_a_closed_terminal() {
             .any(|e| e["kind"] == "fault" && e["detail"] == "AdsSilence"),
         "{metrics}"
     );
+}
+
+/// A hang-up signal with the terminal still there (as `kill -HUP` sends it): the run ends, puts
+/// the terminal back (its summary prints on the main screen) and writes its files.
+#[test]
+fn sim_ends_cleanly_on_a_hangup_signal() {
+    let bin = env!("CARGO_BIN_EXE_bywire");
+    let dir = std::env::temp_dir().join(format!("bywire-sim-sighup-{}", std::process::id()));
+    let session = Session::start(
+        "sighup",
+        &format!(
+            "{bin} sim --out {} --max-seconds 300; echo exit=$?; sleep 60",
+            dir.display()
+        ),
+    );
+    session.wait_for("mode       Autonomous");
+    let killed = Command::new("pkill")
+        // Anchored: the shell around it has the same words later in its command line.
+        .args(["-HUP", "-f", &format!("^{bin} sim --out {}", dir.display())])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let screen = session.wait_for("exit=0");
+    assert!(screen.contains("stopped after"), "{screen}");
+    assert!(!screen.contains("mode       Autonomous"), "{screen}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["completed"], false);
 }
