@@ -51,6 +51,8 @@ pub const MASTER_NODE: u8 = 1;
 pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
 /// Wheel drives FL, FR, RL, RR.
 pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
+/// The ADS's command frame (AdsToVehicle_Control in the reference DBC).
+const ADS_COMMAND_ID: u16 = 0x100;
 
 /// Steering drives count in 0.01°; wheel drives in mm/s and mm.
 const STEERING_UNITS_PER_DEG: f64 = 100.0;
@@ -162,11 +164,11 @@ pub enum Fault {
     DriveSilence(u8),
     /// The angle sensor of a corner (0 FL … 3 RR) fails.
     SensorFault(usize, SensorFault),
-    /// The ADS's commands arrive with a flipped bit (their checksum fails).
+    /// The ADS's commands arrive with a flipped bit (their checksum fails), on bus 1 and 1b.
     CorruptCommands,
-    /// Every ADS command arrives twice.
+    /// Every ADS command arrives twice, on bus 1 and 1b.
     DuplicateCommands,
-    /// The ADS's commands arrive this many milliseconds late.
+    /// The ADS's commands arrive this many milliseconds late, on bus 1 and 1b.
     DelayCommands(u64),
     /// A driver turns the steering wheel (torque above the takeover threshold).
     DriverTakeover,
@@ -176,7 +178,7 @@ pub enum Fault {
     /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
     RedundantBusLoss,
     /// Whichever node sends frames with this identifier on this bus sends them corrupted
-    /// (a bit flipped), twice, or late.
+    /// (a bit flipped), twice, or late (one such fault an identifier: the latest holds).
     TamperFrames {
         /// The bus.
         bus: TugBus,
@@ -294,7 +296,6 @@ pub struct Tug {
     /// Command to heartbeat echo, as the ADS measured it on every state frame.
     pub echo_latencies: Vec<Duration>,
     remaining: f64,
-    delayed: Vec<(Timestamp, Frame)>,
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
@@ -496,7 +497,6 @@ impl Tug {
             step_responses: Vec::new(),
             echo_latencies: Vec::new(),
             remaining: f64::INFINITY,
-            delayed: Vec::new(),
         }
     }
 
@@ -509,9 +509,27 @@ impl Tug {
         }
     }
 
-    fn tamper(&mut self, bus: TugBus, id: u16, tamper: Option<Tamper>) {
-        if let Ok(id) = bywire_core::Id::standard(u32::from(id)) {
-            self.sim_bus(bus).tamper(id, tamper);
+    /// Set (`on`) or mend the faults that are frames tampered with on their way; others are
+    /// left alone.
+    fn set_tampering(&mut self, fault: Fault, on: bool) {
+        // The ADS's commands on both buses that carry them, as a faulty ADS would send them.
+        const COMMAND_BUSES: [TugBus; 2] = [TugBus::Bus1, TugBus::Bus1b];
+        let (buses, id, tamper): (&[TugBus], u16, Tamper) = match &fault {
+            Fault::CorruptCommands => (&COMMAND_BUSES, ADS_COMMAND_ID, Tamper::FlipBit),
+            Fault::DuplicateCommands => (&COMMAND_BUSES, ADS_COMMAND_ID, Tamper::Duplicate),
+            Fault::DelayCommands(ms) => (
+                &COMMAND_BUSES,
+                ADS_COMMAND_ID,
+                Tamper::Delay(Duration::from_millis(*ms)),
+            ),
+            Fault::TamperFrames { bus, id, tamper } => (core::slice::from_ref(bus), *id, *tamper),
+            _ => return,
+        };
+        let Ok(id) = bywire_core::Id::standard(u32::from(id)) else {
+            return;
+        };
+        for bus in buses {
+            self.sim_bus(*bus).tamper(id, on.then_some(tamper));
         }
     }
 
@@ -591,13 +609,13 @@ impl Tug {
                     count: 40,
                 });
             }
-            Fault::TamperFrames { bus, id, tamper } => self.tamper(bus, id, Some(tamper)),
+            Fault::CorruptCommands
+            | Fault::DuplicateCommands
+            | Fault::DelayCommands(_)
+            | Fault::TamperFrames { .. } => self.set_tampering(fault, true),
             Fault::AdsSilence
             | Fault::Estop
             | Fault::DriveSilence(_)
-            | Fault::CorruptCommands
-            | Fault::DuplicateCommands
-            | Fault::DelayCommands(_)
             | Fault::RedundantBusLoss
             | Fault::DriverTakeover => {}
         }
@@ -847,8 +865,7 @@ impl Tug {
                         c.chain.set_fault(SensorFault::None);
                     }
                 }
-                Fault::TamperFrames { bus, id, .. } => self.tamper(bus, id, None),
-                _ => {}
+                _ => self.set_tampering(fault, false),
             }
             self.record("fault_cleared", format!("{fault:?}"));
         }
@@ -1235,48 +1252,15 @@ impl Tug {
             };
             let _ = self.ads.set_command(now, command);
         }
-        // What the faults do to the ADS's frames on their way.
+        // A silent ADS sends nothing; corrupted, duplicated and delayed commands are the
+        // buses' doing (set_tampering).
         let silent = self.is_active(Fault::AdsSilence);
-        let corrupt = self.is_active(Fault::CorruptCommands);
-        let duplicate = self.is_active(Fault::DuplicateCommands);
-        let delay = self.active.iter().find_map(|(f, _)| match f {
-            Fault::DelayCommands(ms) => Some(Duration::from_millis(*ms)),
-            _ => None,
-        });
         let mut sent = Vec::new();
         self.ads.poll(now, &mut |f| sent.push(f));
-        for frame in sent {
-            if silent {
-                continue;
-            }
-            let frame = if corrupt && frame.id().is_some_and(|id| id.as_raw() == 0x100) {
-                let mut data = [0u8; 8];
-                data.iter_mut().zip(frame.data()).for_each(|(d, s)| *d = *s);
-                data[0] ^= 0x01;
-                frame
-                    .id()
-                    .and_then(|id| Frame::classic(id, &data).ok())
-                    .unwrap_or(frame)
-            } else {
-                frame
-            };
-            match delay {
-                Some(delay) => self.delayed.push((now.saturating_add(delay), frame)),
-                None => self.send_ads(frame),
-            }
-            if duplicate {
+        if !silent {
+            for frame in sent {
                 self.send_ads(frame);
             }
-        }
-        let due: Vec<Frame> = self
-            .delayed
-            .iter()
-            .filter(|(at, _)| *at <= now)
-            .map(|(_, f)| *f)
-            .collect();
-        self.delayed.retain(|(at, _)| *at > now);
-        for frame in due {
-            self.send_ads(frame);
         }
     }
 
