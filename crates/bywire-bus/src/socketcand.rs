@@ -557,8 +557,9 @@ fn spawn_cyclic(
     });
 }
 
-/// The discovery beacon socketcand servers send (and python-can's `detect_beacon` reads).
-pub fn beacon_xml(listen: std::net::SocketAddr, buses: &[String]) -> String {
+/// The discovery beacon socketcand servers send (and python-can's `detect_beacon` reads):
+/// where the server listens, which buses it serves, and what it is (`description`).
+pub fn beacon_xml(listen: std::net::SocketAddr, buses: &[String], description: &str) -> String {
     let escape = |text: &str| {
         text.replace('&', "&amp;")
             .replace('<', "&lt;")
@@ -566,7 +567,8 @@ pub fn beacon_xml(listen: std::net::SocketAddr, buses: &[String]) -> String {
             .replace('"', "&quot;")
     };
     let mut xml = format!(
-        "<CANBeacon name=\"bywire\" type=\"SocketCAN\" description=\"bywire serve\"><URL>can://{listen}</URL>"
+        "<CANBeacon name=\"bywire\" type=\"SocketCAN\" description=\"{}\"><URL>can://{listen}</URL>",
+        escape(description)
     );
     for bus in buses {
         xml.push_str(&format!("<Bus name=\"{}\"/>", escape(bus)));

@@ -82,7 +82,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         } else {
             args.names.clone()
         };
-        let xml = socketcand::beacon_xml(listener.local_addr()?, &buses);
+        let xml = socketcand::beacon_xml(listener.local_addr()?, &buses, "bywire serve");
         Some(
             socketcand::spawn_beacon(xml, to, Arc::clone(&stop))
                 .context("cannot send the beacon")?,

@@ -44,6 +44,10 @@ pub struct Args {
     /// programs watch and inject traffic (loopback only).
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:29536")]
     serve: Option<std::net::SocketAddr>,
+    /// With --serve: send socketcand's discovery beacon (naming the four buses) every 3 s, to
+    /// 127.0.0.1:42000 or to ADDR:PORT, so SavvyCAN and python-can find the served buses.
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:42000", requires = "serve")]
+    beacon: Option<std::net::SocketAddr>,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -84,7 +88,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     });
     let mut served = match args.serve {
         Some(listen) => {
-            let served = Served::start(&mut tug, listen)?;
+            let served = Served::start(&mut tug, listen, args.beacon)?;
             writeln!(
                 out,
                 "serving bus1, bus2, bus3 and bus1b on {} (socketcand)",

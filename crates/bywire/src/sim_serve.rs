@@ -29,13 +29,15 @@ pub struct Served {
     links: Vec<Link>,
     stop: Arc<AtomicBool>,
     server: Option<JoinHandle<std::io::Result<()>>>,
+    beacon: Option<JoinHandle<()>>,
     /// Where it listens.
     pub address: SocketAddr,
 }
 
 impl Served {
-    /// Serve `tug`'s buses on `listen` (clients open `bus1`, `bus2`, `bus3` or `bus1b`).
-    pub fn start(tug: &mut Tug, listen: SocketAddr) -> Result<Served> {
+    /// Serve `tug`'s buses on `listen` (clients open `bus1`, `bus2`, `bus3` or `bus1b`), with
+    /// socketcand's discovery beacon sent to `beacon` if given.
+    pub fn start(tug: &mut Tug, listen: SocketAddr, beacon: Option<SocketAddr>) -> Result<Served> {
         if !listen.ip().is_loopback() {
             return Err(anyhow!(
                 "--serve {listen}: not a loopback address (socketcand has no authentication; use `bywire serve` with --allow-remote and a token to reach other hosts)"
@@ -63,11 +65,20 @@ impl Served {
         let open = Arc::new(move |name: &str| -> Result<Box<dyn Bus>, BusError> {
             Ok(Box::new(VirtualBus::join(&format!("{prefix}-{name}"))))
         });
-        let access = Access {
-            names: TugBus::ALL.iter().map(|b| b.name().to_string()).collect(),
-            token: None,
-        };
+        let names: Vec<String> = TugBus::ALL.iter().map(|b| b.name().to_string()).collect();
         let stop = Arc::new(AtomicBool::new(false));
+        let beacon = match beacon {
+            Some(to) => Some(
+                socketcand::spawn_beacon(
+                    socketcand::beacon_xml(address, &names, "bywire sim"),
+                    to,
+                    Arc::clone(&stop),
+                )
+                .context("--beacon: cannot send the beacon")?,
+            ),
+            None => None,
+        };
+        let access = Access { names, token: None };
         let server_stop = Arc::clone(&stop);
         let server = std::thread::spawn(move || {
             socketcand::serve(
@@ -82,6 +93,7 @@ impl Served {
             links,
             stop,
             server: Some(server),
+            beacon,
             address,
         })
     }
@@ -106,6 +118,9 @@ impl Drop for Served {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(server) = self.server.take() {
             let _ = server.join();
+        }
+        if let Some(beacon) = self.beacon.take() {
+            let _ = beacon.join();
         }
     }
 }

@@ -303,9 +303,10 @@ fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
     assert!(err.contains("failed: steering sweep"), "{err}");
 }
 
-/// `bywire sim --serve`: python-can joins the simulated buses over socketcand while the run
-/// goes on in real time, hears the drives' heartbeats on bus 2 and the IMU on bus 3, and what
-/// it sends on bus 3 is carried on the simulated bus (it is in the run's bus 3 log).
+/// `bywire sim --serve --beacon`: python-can finds the served buses by their beacon, joins them
+/// over socketcand while the run goes on in real time, hears the drives' heartbeats on bus 2
+/// and the IMU on bus 3, and what it sends on bus 3 is carried on the simulated bus (it is in
+/// the run's bus 3 log).
 #[test]
 fn python_can_watches_and_injects_through_the_served_buses() {
     use std::io::BufRead;
@@ -315,10 +316,17 @@ fn python_can_watches_and_injects_through_the_served_buses() {
         .local_addr()
         .unwrap()
         .port();
+    let beacon_port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     let dir = std::env::temp_dir().join(format!("bywire-sim-serve-{}", std::process::id()));
     let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(["sim", "--no-view", "--max-seconds", "8", "--serve"])
+        .args(["sim", "--no-view", "--max-seconds", "12", "--serve"])
         .arg(format!("127.0.0.1:{port}"))
+        .arg("--beacon")
+        .arg(format!("127.0.0.1:{beacon_port}"))
         .arg("--out")
         .arg(&dir)
         .stdout(Stdio::piped())
@@ -334,6 +342,10 @@ fn python_can_watches_and_injects_through_the_served_buses() {
     let script = format!(
         r#"
 import can, json, time
+import can.interfaces.socketcand.socketcand as socketcand
+socketcand.DEFAULT_SOCKETCAND_DISCOVERY_PORT = {beacon_port}
+found = socketcand.detect_beacon(4000)
+channels = sorted(c["channel"] for c in found if c["port"] == {port})
 b2 = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="bus2")
 b3 = can.Bus(interface="socketcand", host="127.0.0.1", port={port}, channel="bus3")
 ids, imu = set(), 0
@@ -347,7 +359,7 @@ while time.time() < end:
         imu += 1
 b3.send(can.Message(arbitration_id=0x7AB, is_extended_id=False, data=[1, 2, 3, 4]))
 time.sleep(0.5)
-print(json.dumps({{"ids": sorted(ids), "imu": imu}}))
+print(json.dumps({{"ids": sorted(ids), "imu": imu, "channels": channels}}))
 b2.shutdown()
 b3.shutdown()
 "#
@@ -375,6 +387,11 @@ b3.shutdown()
         );
     }
     assert!(heard["imu"].as_u64().unwrap() > 20, "{heard}");
+    assert_eq!(
+        heard["channels"],
+        serde_json::json!(["bus1", "bus1b", "bus2", "bus3"]),
+        "the beacon names the served buses"
+    );
     assert!(sim.wait().unwrap().success());
     let log = std::fs::read_to_string(dir.join("bus3.log")).unwrap();
     assert!(
