@@ -237,7 +237,8 @@ pub struct SimBus {
     /// Simulated up to here.
     now: Timestamp,
     nodes: Vec<Node>,
-    faults: Vec<Fault>,
+    /// Faults, each with whether it ends when its victim is bus-off.
+    faults: Vec<(Fault, bool)>,
     events: Vec<BusEvent>,
     next_seq: u64,
     busy_ns: u64,
@@ -355,7 +356,19 @@ impl SimBus {
 
     /// Destroy the next matching transmissions.
     pub fn corrupt(&mut self, fault: Fault) {
-        self.faults.push(fault);
+        self.faults.push((fault, false));
+    }
+
+    /// Destroy every matching transmission until its sender is bus-off (a broken transceiver,
+    /// a shorted stub): however many frames of its own succeed in between, it gets there, and
+    /// after its recovery it sends again unharmed.
+    pub fn take_off_bus(&mut self, node: Option<NodeId>, id: Option<Id>) {
+        let fault = Fault {
+            node,
+            id,
+            count: u32::MAX,
+        };
+        self.faults.push((fault, true));
     }
 
     /// The next frame a node received.
@@ -624,12 +637,12 @@ impl SimBus {
         let Some((time, detected)) = self.timing(&frame) else {
             return;
         };
-        let fault = self.faults.iter_mut().find(|f| {
+        let fault = self.faults.iter_mut().find(|(f, _)| {
             f.count > 0 && f.node.is_none_or(|n| n == winner) && f.id.is_none_or(|i| i == id)
         });
         let ns = |bus: &SimBus, n: u64| std::time::Duration::from_nanos(bus.bits(n));
         let end;
-        if let Some(fault) = fault {
+        if let Some((fault, _)) = fault {
             fault.count -= 1;
             let error_end =
                 start.saturating_add(ns(self, u64::try_from(detected).unwrap_or(0) + ERROR_FRAME));
@@ -646,6 +659,19 @@ impl SimBus {
                 error_end,
             );
             self.tell_receivers(winner, Event::ReceiveError, error_end);
+            let off = self
+                .nodes
+                .get(winner)
+                .is_some_and(|n| n.confinement.state() == NodeState::BusOff);
+            // Spent faults go; so do those that were to last until this node's bus-off.
+            let ended = |f: &Fault, until: bool| {
+                f.count == 0
+                    || (until
+                        && off
+                        && f.node.is_none_or(|n| n == winner)
+                        && f.id.is_none_or(|i| i == id))
+            };
+            self.faults.retain(|(f, until)| !ended(f, *until));
         } else {
             // Frame times are whole nanoseconds at common bitrates; round the rest to nearest.
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]

@@ -221,3 +221,42 @@ fn tampered_identifiers_are_flipped_duplicated_or_delayed() {
     assert_eq!(got[0].0, "100#F0");
     assert!(got[0].1 < 501_000_000, "{got:?}");
 }
+
+/// A burst until bus-off: the sender of 0x300 goes bus-off although its 0x100 frames succeed
+/// in between (each taking 1 off its error counter), once; after its recovery the burst is
+/// over and the frame it was retrying goes through.
+#[test]
+fn a_burst_until_bus_off_gets_there_and_then_ends() {
+    let mut bus = SimBus::new(500_000, None);
+    let (sender, listener) = (bus.add_node(), bus.add_node());
+    bus.take_off_bus(None, Some(frame("300#00").id().unwrap()));
+    bus.submit(sender, frame("300#AA"), Timestamp::ZERO);
+    // A higher-priority frame of its own every 0.5 ms wins each arbitration it is in.
+    for k in 0..200 {
+        bus.submit(sender, frame("100#01"), Timestamp::from_micros(k * 500));
+    }
+    bus.advance(Timestamp::from_millis(200));
+    let events = bus.take_events();
+    let states: Vec<NodeState> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::StateChanged { node, state, .. } if *node == sender => Some(*state),
+            _ => None,
+        })
+        .collect();
+    let offs = states.iter().filter(|s| **s == NodeState::BusOff).count();
+    assert_eq!(offs, 1, "{states:?}");
+    assert_eq!(states.last(), Some(&NodeState::ErrorActive), "{states:?}");
+    let destroyed = events
+        .iter()
+        .filter(|e| matches!(e, BusEvent::Destroyed { .. }))
+        .count();
+    assert!(
+        destroyed > 32,
+        "successes in between cost more: {destroyed}"
+    );
+    let got: Vec<String> = std::iter::from_fn(|| bus.receive(listener))
+        .map(|r| r.frame.to_string())
+        .collect();
+    assert!(got.iter().any(|f| f == "300#AA"), "{got:?}");
+}

@@ -17,12 +17,13 @@
 //! at_s = 8.0
 //! fault = "ads_silence"         # ads_silence, estop, operator_reset, drive_silence,
 //! duration_s = 1.0              # sensor_fault, corrupt_commands, duplicate_commands,
-//!                               # delay_commands, driver_takeover, ecu_bus_off,
+//!                               # delay_commands, driver_takeover, ecu_bus_off, bus_off,
 //!                               # redundant_bus_loss, corrupt_frames, duplicate_frames,
 //!                               # delay_frames
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
 //! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15;
-//! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms)
+//! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms);
+//! # bus_off (of the node sending id on bus): bus = "bus2", id = 0x723
 //! ```
 
 use core::time::Duration;
@@ -158,6 +159,14 @@ impl Scenario {
                 (s(52), Fault::DriverTakeover, Some(ms(500))),
                 (s(54), Fault::DelayCommands(15), Some(s(1))),
                 (s(56), Fault::EcuBusOff, None),
+                (
+                    s(57),
+                    Fault::BusOff {
+                        bus: TugBus::Bus2,
+                        id: 0x723,
+                    },
+                    None,
+                ),
             ],
             _ => return None,
         };
@@ -327,6 +336,23 @@ impl Scenario {
                 }
                 None => None,
             };
+            // The frames a fault aims at: a bus and an identifier sent on it.
+            let bus_and_id = |kind: &str| -> Result<(TugBus, u16), ScenarioError> {
+                let bus = match e.bus.as_deref() {
+                    Some(name) => TugBus::ALL.into_iter().find(|b| b.name() == name),
+                    None => None,
+                }
+                .ok_or_else(|| {
+                    invalid(
+                        &key("bus"),
+                        format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\""),
+                    )
+                })?;
+                let id = e.id.filter(|id| *id <= 0x7FF).ok_or_else(|| {
+                    invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier"))
+                })?;
+                Ok((bus, id))
+            };
             let fault = match e.fault.as_str() {
                 "ads_silence" => Fault::AdsSilence,
                 "estop" => Fault::Estop,
@@ -354,14 +380,13 @@ impl Scenario {
                 "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
                 "driver_takeover" => Fault::DriverTakeover,
                 "ecu_bus_off" => Fault::EcuBusOff,
+                "bus_off" => {
+                    let (bus, id) = bus_and_id("bus_off")?;
+                    Fault::BusOff { bus, id }
+                }
                 "redundant_bus_loss" => Fault::RedundantBusLoss,
                 kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
-                    let bus = match e.bus.as_deref() {
-                        Some(name) => TugBus::ALL.into_iter().find(|b| b.name() == name),
-                        None => None,
-                    }
-                    .ok_or_else(|| invalid(&key("bus"), format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\"")))?;
-                    let id = e.id.filter(|id| *id <= 0x7FF).ok_or_else(|| invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier")))?;
+                    let (bus, id) = bus_and_id(kind)?;
                     let tamper = match kind {
                         "corrupt_frames" => Tamper::FlipBit,
                         "duplicate_frames" => Tamper::Duplicate,
@@ -369,7 +394,7 @@ impl Scenario {
                     };
                     Fault::TamperFrames { bus, id, tamper }
                 }
-                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames)"))),
+                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames)"))),
             };
             events.push((Duration::from_secs_f64(e.at_s), fault, duration));
         }
@@ -450,6 +475,22 @@ mod tests {
             error("[[event]]\nat_s = 1\nfault = \"delay_frames\"\nbus = \"bus9\"\nid = 1\n")
                 .contains("event[0].bus: delay_frames needs bus")
         );
+        assert!(
+            error("[[event]]\nat_s = 1\nfault = \"bus_off\"\nbus = \"bus2\"\n")
+                .contains("event[0].id: bus_off needs id")
+        );
+        let bus_off = Scenario::parse(
+            "[[event]]\nat_s = 1\nfault = \"bus_off\"\nbus = \"bus2\"\nid = 0x723\n",
+            "b.toml",
+        )
+        .unwrap();
+        assert_eq!(
+            bus_off.events.first().map(|e| e.1),
+            Some(Fault::BusOff {
+                bus: TugBus::Bus2,
+                id: 0x723
+            })
+        );
         let tamper = Scenario::parse("[[event]]\nat_s = 1\nfault = \"delay_frames\"\nbus = \"bus2\"\nid = 0x721\ndelay_ms = 300\nduration_s = 1\n", "d.toml").unwrap();
         assert_eq!(
             tamper.events.first().map(|e| e.1),
@@ -470,6 +511,6 @@ mod tests {
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
-        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 13));
+        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 14));
     }
 }

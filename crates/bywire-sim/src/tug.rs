@@ -172,9 +172,17 @@ pub enum Fault {
     DelayCommands(u64),
     /// A driver turns the steering wheel (torque above the takeover threshold).
     DriverTakeover,
-    /// The ECU's controller on bus 1 meets a burst of bus errors (40 destroyed frames: more
-    /// than enough for bus-off).
+    /// The ECU's controller on bus 1 meets a burst of bus errors until it is bus-off; it
+    /// recovers after 128 × 11 recessive bits.
     EcuBusOff,
+    /// The node that sends this identifier on this bus meets the same burst, from its next
+    /// frame of that identifier on, and recovers the same way.
+    BusOff {
+        /// The bus.
+        bus: TugBus,
+        /// An 11-bit identifier the node sends.
+        id: u16,
+    },
     /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
     RedundantBusLoss,
     /// Whichever node sends frames with this identifier on this bus sends them corrupted
@@ -602,12 +610,11 @@ impl Tug {
                     }
                 }
             }
-            Fault::EcuBusOff => {
-                self.bus1.corrupt(bywire_bus::sim::Fault {
-                    node: Some(self.ecu_port1),
-                    id: None,
-                    count: 40,
-                });
+            Fault::EcuBusOff => self.bus1.take_off_bus(Some(self.ecu_port1), None),
+            Fault::BusOff { bus, id } => {
+                if let Ok(id) = bywire_core::Id::standard(u32::from(id)) {
+                    self.sim_bus(bus).take_off_bus(None, Some(id));
+                }
             }
             Fault::CorruptCommands
             | Fault::DuplicateCommands

@@ -488,7 +488,8 @@ fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
     assert!(events.iter().any(|(t, kind, detail)| *t > lost.0
         && kind == "heartbeat_recovered"
         && detail == "node 0x21"));
-    // The ADS's commands (0x100 on bus 1), a bit flipped for 100 ms: every one fails its CRC.
+    // The ADS's commands (0x100 on bus 1), a bit flipped for 100 ms: every one fails its
+    // checksum (the CAN CRC, computed over the flipped data, passes).
     let mut tug = cruising();
     let before = tug.ecu().stats().checksum;
     tug.inject(
@@ -504,5 +505,49 @@ fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
     assert!(
         (4..=6).contains(&corrupted),
         "{corrupted} checksum failures"
+    );
+}
+
+/// Bus-off of the node sending a chosen identifier: drive 0x23 (its heartbeat 0x723 on bus 2)
+/// goes bus-off at its next heartbeat and, alone, recovers after 128 × 11 recessive bits.
+#[test]
+fn the_sender_of_a_chosen_identifier_goes_bus_off_and_recovers() {
+    use bywire_sim::tug::TugBus;
+    let mut tug = cruising();
+    let from = tug.now().as_nanos();
+    tug.inject(
+        Fault::BusOff {
+            bus: TugBus::Bus2,
+            id: 0x723,
+        },
+        None,
+    );
+    run_for(&mut tug, 500);
+    let events = after(&tug, from);
+    let states: Vec<&(u64, String, String)> = events
+        .iter()
+        .filter(|(_, kind, _)| kind == "bus_state")
+        .collect();
+    let off = states
+        .iter()
+        .find(|(_, _, detail)| detail.ends_with(": BusOff"))
+        .unwrap_or_else(|| panic!("{events:?}"));
+    // Within a heartbeat period (100 ms).
+    assert!(off.0 <= 101, "bus-off {} ms after the fault", off.0);
+    let node = off.2.trim_end_matches(": BusOff");
+    assert!(node.starts_with("bus2 node "), "{node}");
+    let back = states
+        .iter()
+        .find(|(t, _, detail)| *t >= off.0 && *detail == format!("{node}: ErrorActive"))
+        .unwrap_or_else(|| panic!("{events:?}"));
+    // 1408 bit times at 1 Mbit/s, within the step that follows.
+    assert!(back.0 - off.0 <= 2, "recovered {} ms after", back.0 - off.0);
+    assert_eq!(
+        states
+            .iter()
+            .filter(|(_, _, detail)| detail.ends_with(": BusOff"))
+            .count(),
+        1,
+        "only that node: {states:?}"
     );
 }

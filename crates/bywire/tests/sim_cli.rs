@@ -254,6 +254,27 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
         first("bus_state", "bus1 node 1: BusOff", errors)
             < first("bus_state", "bus1 node 1: ErrorActive", errors)
     );
+    // Drive 0x23 (the sender of 0x723 on bus 2): bus-off at its next heartbeat, back within
+    // its recovery's 1.4 ms, too soon for its heartbeat to be missed.
+    let drive_off = first("fault", "BusOff", 0.0);
+    let bus2_state = |state: &str, after: f64| {
+        events
+            .iter()
+            .find(|(t, k, d)| {
+                *t >= after && k == "bus_state" && d.starts_with("bus2 node") && d.ends_with(state)
+            })
+            .map(|(t, _, _)| *t)
+            .unwrap_or_else(|| panic!("no bus 2 {state} after {after}: {events:?}"))
+    };
+    let off = bus2_state("BusOff", drive_off);
+    assert!(off - drive_off <= 0.101, "{off} after {drive_off}");
+    assert!(bus2_state("ErrorActive", off) - off <= 0.002);
+    assert!(
+        !events
+            .iter()
+            .any(|(t, k, _)| *t >= drive_off && k == "heartbeat_lost"),
+        "{events:?}"
+    );
 }
 
 /// `bywire check` passes against the simulated tug and fails, naming the check, when its
