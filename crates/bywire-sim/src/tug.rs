@@ -210,6 +210,27 @@ pub struct Sample {
     pub steering_command: f64,
     /// The front-left wheel's angle, degrees.
     pub steering_actual: f64,
+    /// How long each bus (bus 1, 2, 3, 1b) has been busy since the start, ns.
+    pub busy_ns: [u64; 4],
+}
+
+/// Each bus's load (bus 1, 2, 3, 1b; 0–1) over windows of `window` consecutive samples of
+/// `trace`, stamped at each window's end: what the buses carried over the run.
+pub fn windowed_loads(trace: &[Sample], window: usize) -> [Vec<(Timestamp, f64)>; 4] {
+    let mut loads: [Vec<(Timestamp, f64)>; 4] = Default::default();
+    let ends = trace.iter().step_by(window.max(1));
+    for (from, to) in ends.clone().zip(ends.skip(1)) {
+        let span = to.t.saturating_since(from.t).as_nanos() as f64;
+        if span <= 0.0 {
+            continue;
+        }
+        for (bus, series) in loads.iter_mut().enumerate() {
+            let busy = |s: &Sample| s.busy_ns.get(bus).copied().unwrap_or(0);
+            let load = busy(to).saturating_sub(busy(from)) as f64 / span;
+            series.push((to.t, load));
+        }
+    }
+    loads
 }
 
 /// Something that happened in a run.
@@ -897,6 +918,12 @@ impl Tug {
                 speed: self.pose_speed(),
                 steering_command: self.steering_command,
                 steering_actual,
+                busy_ns: [
+                    self.bus1.busy_ns(),
+                    self.bus2.busy_ns(),
+                    self.bus3.busy_ns(),
+                    self.bus1b.busy_ns(),
+                ],
             });
         }
     }

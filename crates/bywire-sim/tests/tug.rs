@@ -551,3 +551,29 @@ fn the_sender_of_a_chosen_identifier_goes_bus_off_and_recovers() {
         "only that node: {states:?}"
     );
 }
+
+/// Bus loads over the run, in windows: each within 0–100 %, the drives' bus the busiest, and
+/// together what the buses carried on the whole.
+#[test]
+fn bus_loads_over_windows_add_up_to_the_whole() {
+    let mut tug = cruising();
+    run_for(&mut tug, 6_000);
+    let loads = bywire_sim::tug::windowed_loads(&tug.trace, 10);
+    let overall = tug.bus_loads();
+    for (bus, series) in loads.iter().enumerate() {
+        assert!(series.len() >= 10, "bus {bus}: {} windows", series.len());
+        assert!(
+            series.iter().all(|(_, l)| (0.0..=1.0).contains(l)),
+            "{series:?}"
+        );
+        // Windows are equal: their mean is the load from the first window's start on.
+        let mean = series.iter().map(|(_, l)| l).sum::<f64>() / series.len() as f64;
+        assert!(
+            (mean - overall[bus]).abs() < 0.02,
+            "bus {bus}: {mean} over windows, {} overall",
+            overall[bus]
+        );
+    }
+    let mean = |bus: usize| loads[bus].iter().map(|(_, l)| l).sum::<f64>();
+    assert!(mean(1) > mean(0) && mean(1) > mean(2) && mean(3) > 0.0);
+}

@@ -19,6 +19,7 @@ mod send_cmd;
 mod serve_cmd;
 mod signals;
 mod sim_cmd;
+mod sim_plot;
 mod sim_serve;
 mod sim_view;
 mod slcan_adapter_cmd;

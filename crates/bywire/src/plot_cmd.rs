@@ -258,7 +258,7 @@ pub(crate) fn write_atomically(
     result
 }
 
-fn plot_error(e: impl std::fmt::Display) -> anyhow::Error {
+pub(crate) fn plot_error(e: impl std::fmt::Display) -> anyhow::Error {
     anyhow!("cannot draw the plot: {e}")
 }
 
@@ -276,9 +276,7 @@ pub(crate) fn draw<DB: DrawingBackend>(
     series: &[Series],
     subplots: bool,
 ) -> Result<()> {
-    // Registering the same font again is harmless.
-    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
-        .map_err(|_| anyhow!("the embedded font is not readable"))?;
+    register_font()?;
     root.fill(&WHITE).map_err(plot_error)?;
     let panels: Vec<(DrawingArea<DB, Shift>, Vec<usize>)> = if subplots {
         let count = series.len();
@@ -291,16 +289,31 @@ pub(crate) fn draw<DB: DrawingBackend>(
         vec![(root.clone(), (0..series.len()).collect())]
     };
     for (area, members) in panels {
-        draw_panel(&area, series, &members)?;
+        draw_panel(&area, series, &members, &[])?;
     }
     root.present().map_err(plot_error)?;
     Ok(())
 }
 
-fn draw_panel<DB: DrawingBackend>(
+/// The embedded font as "sans-serif" (registering it again is harmless).
+pub(crate) fn register_font() -> Result<()> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| anyhow!("the embedded font is not readable"))
+}
+
+/// A moment marked on a time panel: a vertical line in this colour, labelled at the top.
+pub(crate) struct Marker {
+    pub(crate) t: f64,
+    pub(crate) label: String,
+    pub(crate) color: RGBColor,
+}
+
+/// One panel of `series` (those at `members`) over time, with a legend and `markers`.
+pub(crate) fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     series: &[Series],
     members: &[usize],
+    markers: &[Marker],
 ) -> Result<()> {
     let chosen: Vec<(usize, &Series)> = members
         .iter()
@@ -358,6 +371,22 @@ fn draw_panel<DB: DrawingBackend>(
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
             });
+    }
+    let (y_low, y_high) = (y_min - pad, y_max + pad);
+    for (k, marker) in markers.iter().enumerate() {
+        let line = vec![(marker.t, y_low), (marker.t, y_high)];
+        chart
+            .draw_series(LineSeries::new(line, marker.color.stroke_width(1)))
+            .map_err(plot_error)?;
+        // Staggered on three heights, so close neighbours stay readable.
+        let height = y_high - (y_high - y_low) * (0.04 + 0.07 * (k % 3) as f64);
+        chart
+            .draw_series(std::iter::once(Text::new(
+                marker.label.clone(),
+                (marker.t, height),
+                ("sans-serif", 12).into_font().color(&marker.color),
+            )))
+            .map_err(plot_error)?;
     }
     chart
         .configure_series_labels()

@@ -16,7 +16,7 @@ use serde_json::json;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, command-echo latency, bus loads, battery) and run.png (speed, steering\ncommand and actual, heading). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, command-echo latency, bus loads, battery) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -198,7 +198,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         },
         "wall_seconds": start.elapsed().as_secs_f64(),
     });
-    plot(&tug, &args.out.join("run.png"))?;
+    crate::sim_plot::write(&tug, &args.out.join("run.png"))?;
     let path = args.out.join("metrics.json");
     // Whole or not at all: a reader never finds half a file.
     crate::plot_cmd::write_atomically(&path, |tmp| {
@@ -219,51 +219,6 @@ fn percentiles(latencies: &[Duration]) -> serde_json::Value {
         sorted.get(index).copied()
     };
     json!({"count": sorted.len(), "p50": rank(0.5), "p95": rank(0.95), "p99": rank(0.99), "max": sorted.last()})
-}
-
-/// The run as time series: speed, the ADS's steering command and the front-left wheel's
-/// angle, and the heading.
-fn plot(tug: &Tug, path: &std::path::Path) -> Result<()> {
-    use crate::plot_cmd::{draw, write_atomically, Series};
-    use plotters::prelude::{BitMapBackend, IntoDrawingArea};
-    let seconds = |t: Timestamp| t.as_nanos() as f64 / 1e9;
-    let series =
-        |label: &str, unit: &str, value: &dyn Fn(&bywire_sim::tug::Sample) -> f64| Series {
-            label: label.to_string(),
-            unit: unit.to_string(),
-            points: tug.trace.iter().map(|s| (seconds(s.t), value(s))).collect(),
-        };
-    // The heading unwrapped: a loop reads as 360°, not a jump at ±180°.
-    let mut heading = Series {
-        label: "heading".to_string(),
-        unit: "deg".to_string(),
-        points: Vec::new(),
-    };
-    let mut turned = 0.0;
-    let mut previous: Option<f64> = None;
-    for sample in &tug.trace {
-        let yaw = sample.pose.yaw.to_degrees();
-        if let Some(before) = previous {
-            turned += (yaw - before + 540.0).rem_euclid(360.0) - 180.0;
-        } else {
-            turned = yaw;
-        }
-        previous = Some(yaw);
-        heading.points.push((seconds(sample.t), turned));
-    }
-    let all = [
-        series("speed", "m/s", &|s| s.speed),
-        series("steering command", "deg", &|s| s.steering_command),
-        series("front-left wheel angle", "deg", &|s| s.steering_actual),
-        heading,
-    ];
-    write_atomically(path, |tmp| {
-        draw(
-            BitMapBackend::new(tmp, (1200, 1200)).into_drawing_area(),
-            &all,
-            true,
-        )
-    })
 }
 
 /// Run without the view: progress lines every 5 simulated seconds, paced to real time unless

@@ -33,6 +33,25 @@ fn sim(out: &std::path::Path, seed: &str) -> Value {
     sim_with(out, &["--seed", seed])
 }
 
+/// A run's picture: its size and how many pixels have exactly each of `colors`.
+fn plot_pixels(png: &std::path::Path, colors: &[[u8; 3]]) -> ((u32, u32), Vec<usize>) {
+    let decoder = png::Decoder::new(std::fs::File::open(png).unwrap());
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb, "8-bit RGB");
+    let pixels: Vec<&[u8]> = buffer[..info.buffer_size()].chunks(3).collect();
+    let counts = colors
+        .iter()
+        .map(|c| pixels.iter().filter(|p| **p == c.as_slice()).count())
+        .collect();
+    ((info.width, info.height), counts)
+}
+
+/// The colours of sim_plot.rs: the path driven, and the faults.
+const PATH_BLUE: [u8; 3] = [31, 119, 180];
+const FAULT_MAGENTA: [u8; 3] = [190, 0, 110];
+
 #[test]
 fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     let dir = std::env::temp_dir().join(format!("bywire-sim-{}", std::process::id()));
@@ -43,11 +62,10 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         metrics["tracking_error_m"]["max"].as_f64().unwrap() < 0.5,
         "{metrics}"
     );
-    let png = std::fs::read(a.join("run.png")).unwrap();
-    assert!(
-        png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000,
-        "a plot of the run"
-    );
+    // The picture: the path drawn (and the speed, in the same blue), no fault marked.
+    let (size, counts) = plot_pixels(&a.join("run.png"), &[PATH_BLUE, FAULT_MAGENTA]);
+    assert_eq!(size, (1400, 1500));
+    assert!(counts[0] > 2_000 && counts[1] == 0, "{counts:?}");
     let kinds: Vec<&str> = metrics["events"]
         .as_array()
         .unwrap()
@@ -157,6 +175,9 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
 fn the_fault_tour_reacts_to_every_fault_in_time() {
     let dir = std::env::temp_dir().join(format!("bywire-sim-tour-{}", std::process::id()));
     let metrics = sim_with(&dir, &["--scenario", "fault-tour"]);
+    // Each fault marked on the map and on the four time panels (lines ~150 px high).
+    let (_, counts) = plot_pixels(&dir.join("run.png"), &[FAULT_MAGENTA]);
+    assert!(counts[0] > 14 * 4 * 100, "{counts:?}");
     assert_eq!(
         metrics["completed"], true,
         "the route is finished after every fault"
