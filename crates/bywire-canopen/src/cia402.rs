@@ -473,14 +473,24 @@ impl Drive {
             round(self.motor.position),
             round(self.motor.velocity),
         );
-        if self.published == Some(values) {
-            return;
+        // Each value only when it changed: a moving drive's position changes every step, its
+        // statusword seldom.
+        let before = self.published.replace(values);
+        let changed = |field: fn(&(u16, i8, i64, i64)) -> i64| {
+            before.as_ref().map(field) != Some(field(&values))
+        };
+        if changed(|v| i64::from(v.0)) {
+            let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
         }
-        self.published = Some(values);
-        let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
-        let _ = od.set(object::MODES_DISPLAY, 0, &display.to_le_bytes());
-        let _ = od.set_int(object::POSITION_ACTUAL, 0, values.2);
-        let _ = od.set_int(object::VELOCITY_ACTUAL, 0, values.3);
+        if changed(|v| i64::from(v.1)) {
+            let _ = od.set(object::MODES_DISPLAY, 0, &display.to_le_bytes());
+        }
+        if changed(|v| v.2) {
+            let _ = od.set_int(object::POSITION_ACTUAL, 0, values.2);
+        }
+        if changed(|v| v.3) {
+            let _ = od.set_int(object::VELOCITY_ACTUAL, 0, values.3);
+        }
     }
 
     fn target_reached(&self, od: &ObjectDictionary) -> bool {

@@ -696,13 +696,15 @@ fn write_entry(out: &mut String, index: u16, entry: &Entry, node: Option<u8>) {
         _ => None,
     };
     let default = relative.unwrap_or_else(|| match entry.data_type {
-        DataType::Integer(_) | DataType::Unsigned(_) | DataType::Boolean => {
-            match Number::decode(entry.data_type, entry.default_value()) {
-                Some(Number::Uint(v)) => format!("0x{v:X}"),
-                Some(number) => number.to_string(),
-                None => String::new(),
-            }
-        }
+        DataType::Integer(_)
+        | DataType::Unsigned(_)
+        | DataType::Boolean
+        | DataType::Real32
+        | DataType::Real64 => match Number::decode(entry.data_type, entry.default_value()) {
+            Some(Number::Uint(v)) => format!("0x{v:X}"),
+            Some(number) => number.to_string(),
+            None => String::new(),
+        },
         DataType::VisibleString | DataType::UnicodeString => {
             entry.data_type.format(entry.default_value())
         }
@@ -810,5 +812,27 @@ mod tests {
         let moved = parse(&text, Some(9)).unwrap().dictionary;
         assert_eq!(moved.get_unsigned(0x1800, 1), Some(0x189));
         assert_eq!(moved.get_unsigned(0x1014, 0), Some(0x89));
+    }
+
+    /// Reals are written as numbers (and read back the same, NaN and infinities too), not as
+    /// their bytes.
+    #[test]
+    fn reals_are_written_as_numbers() {
+        let text = "[DeviceInfo]\nProductName=x\n[2000]\nParameterName=Gain\nDataType=0x0008\nAccessType=rw\nDefaultValue=0.1\n\
+                    [2001]\nParameterName=Offset\nDataType=0x0011\nAccessType=rw\nDefaultValue=-2.5e-3\n\
+                    [2002]\nParameterName=Unset\nDataType=0x0011\nAccessType=rw\nDefaultValue=NaN\n\
+                    [2003]\nParameterName=Far\nDataType=0x0008\nAccessType=rw\nDefaultValue=-inf\n";
+        let read = parse(text, None).unwrap();
+        assert_eq!(read.diagnostics, []);
+        let written = write(&read.dictionary, &read.info, None);
+        for value in ["0.10000000149011612", "-0.0025", "NaN", "-inf"] {
+            assert!(
+                written.contains(&format!("DefaultValue={value}\n")),
+                "{written}"
+            );
+        }
+        let again = parse(&written, None).unwrap();
+        assert_eq!(again.diagnostics, []);
+        assert_eq!(again.dictionary, read.dictionary);
     }
 }

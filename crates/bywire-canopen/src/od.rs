@@ -721,7 +721,7 @@ impl ObjectDictionary {
     pub fn set_at(&mut self, slot: Slot, bytes: &[u8]) -> Result<(), Abort> {
         let entry = self.at_mut(slot).ok_or(Abort::NoObject)?;
         // The same value again changes nothing (and was checked when it was stored).
-        if entry.value() == bytes {
+        if same_value(entry.value(), bytes) {
             return Ok(());
         }
         entry.store(bytes)?;
@@ -778,9 +778,50 @@ impl ObjectDictionary {
     }
 }
 
+/// Whether two values are equal, those of up to 8 bytes (every number) compared as one word:
+/// a call to `memcmp` for a few bytes costs more than the comparison, and drives set their
+/// values every millisecond.
+fn same_value(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    if a.len() > 8 {
+        return a == b;
+    }
+    let word = |bytes: &[u8]| {
+        let mut word = [0u8; 8];
+        word.iter_mut().zip(bytes).for_each(|(w, b)| *w = *b);
+        u64::from_le_bytes(word)
+    };
+    word(a) == word(b)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Values compare as slices do: every pair of short byte strings (a trailing zero makes a
+    /// different value), and long ones.
+    #[test]
+    fn same_value_is_slice_equality() {
+        let values: Vec<Vec<u8>> = (0..=10usize)
+            .flat_map(|len| {
+                [0u8, 1, 0xFF].map(|fill| {
+                    let mut v = vec![fill; len];
+                    if let Some(last) = v.last_mut() {
+                        *last ^= 0x80;
+                    }
+                    v
+                })
+            })
+            .chain([vec![1], vec![1, 0], vec![0; 9], vec![0; 8]])
+            .collect();
+        for a in &values {
+            for b in &values {
+                assert_eq!(same_value(a, b), a == b, "{a:?} {b:?}");
+            }
+        }
+    }
 
     fn sample() -> ObjectDictionary {
         let mut od = ObjectDictionary::new();

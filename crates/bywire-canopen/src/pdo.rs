@@ -80,6 +80,8 @@ pub struct Pdo {
     /// SYNC counter value to start on (0: any).
     pub sync_start: u8,
     mapped: [Option<Mapped>; MAX_MAPPED],
+    /// How many of `mapped` the mapping's count covers (the rest are never looked at).
+    mapped_count: usize,
     /// Bytes the mapping fills.
     pub length: usize,
     // Run-time state.
@@ -111,6 +113,7 @@ impl Pdo {
             event_timer: Duration::ZERO,
             sync_start: 0,
             mapped: [None; MAX_MAPPED],
+            mapped_count: 0,
             length: 0,
             last_payload: [0; 8],
             sampled: None,
@@ -140,17 +143,23 @@ impl Pdo {
 
     /// `(index, sub, bits)` of each mapped object.
     pub fn mapping(&self) -> impl Iterator<Item = (u16, u8, u8)> + '_ {
+        self.entries().map(|m| (m.index, m.sub, m.bits))
+    }
+
+    /// The mapped objects, in order.
+    fn entries(&self) -> impl Iterator<Item = &Mapped> + '_ {
         self.mapped
+            .get(..self.mapped_count)
+            .unwrap_or(&[])
             .iter()
             .flatten()
-            .map(|m| (m.index, m.sub, m.bits))
     }
 
     /// Fill a payload from the dictionary.
     fn sample(&self, od: &ObjectDictionary) -> ([u8; 8], usize) {
         let mut payload = [0u8; 8];
         let mut bit = 0usize;
-        for mapped in self.mapped.iter().flatten() {
+        for mapped in self.entries() {
             if let Some(entry) = od.at(mapped.slot) {
                 copy_bits(
                     entry.value(),
@@ -168,7 +177,7 @@ impl Pdo {
     /// Write a received payload into the dictionary; calls `written` with each object stored.
     fn apply(&self, od: &mut ObjectDictionary, payload: &[u8], written: &mut dyn FnMut(u16, u8)) {
         let mut bit = 0usize;
-        for mapped in self.mapped.iter().flatten() {
+        for mapped in self.entries() {
             let width = usize::from(mapped.bits);
             let size = od
                 .at(mapped.slot)
@@ -556,6 +565,7 @@ fn compile(od: &ObjectDictionary, pdo: &mut Pdo) {
     pdo.length = 0;
     let mapping = base + 0x200;
     let count = read(mapping, 0).unwrap_or(0).min(MAX_MAPPED as u64);
+    pdo.mapped_count = usize::try_from(count).unwrap_or(0);
     let mut bits = 0usize;
     for sub in 1..=u8::try_from(count).unwrap_or(0) {
         let raw = read(mapping, sub)

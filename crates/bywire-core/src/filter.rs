@@ -125,18 +125,20 @@ impl FilterSet<'_> {
     /// Whether a socket with these settings receives `frame`.
     pub fn accepts(&self, frame: &Frame) -> bool {
         let can_id = frame.socketcan_id();
+        let error = self.error_mask.matches_can_id(can_id);
+        // Without join, any one match delivers it: no need to count the rest.
+        if !self.join || self.filters.len() <= 1 {
+            return error || self.filters.iter().any(|f| f.matches_can_id(can_id));
+        }
         let matches = self
             .filters
             .iter()
             .filter(|f| f.matches_can_id(can_id))
             .count()
-            + usize::from(self.error_mask.matches_can_id(can_id));
-        if matches == 0 {
-            return false;
-        }
+            + usize::from(error);
         // With join the kernel counts the matches of one frame and delivers it once the count
-        // reaches the number of filters; a single filter behaves as without join.
-        !self.join || self.filters.len() <= 1 || matches >= self.filters.len()
+        // reaches the number of filters.
+        matches >= self.filters.len()
     }
 }
 
