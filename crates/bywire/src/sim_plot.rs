@@ -11,7 +11,9 @@ use bywire_sim::tug::{windowed_loads, Sample, Tug};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::plot_cmd::{draw_panel, plot_error, register_font, write_atomically, Marker, Series};
+use crate::plot_cmd::{
+    draw_legend, draw_panel, plot_error, register_font, write_atomically, Marker, Series,
+};
 
 /// Faults: on the map and on every time panel (a colour no series uses).
 pub const FAULT_COLOR: RGBColor = RGBColor(190, 0, 110);
@@ -202,14 +204,7 @@ fn draw_map<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, tug: &Tug) -> Res
                 .map_err(plot_error)?;
         }
     }
-    chart
-        .configure_series_labels()
-        .label_font(("sans-serif", 14))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_error)?;
-    Ok(())
+    draw_legend(&mut chart)
 }
 
 #[cfg(test)]
