@@ -247,6 +247,9 @@ impl Subscription {
 }
 
 /// What the client's reader shares with the thread that feeds it frames.
+/// How long after acknowledging `< rawmode >` frames start to flow (see the command).
+const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
+
 struct Subscriptions {
     raw: AtomicBool,
     /// Identifier (SocketCAN form) → throttle interval and when it was last forwarded.
@@ -376,8 +379,12 @@ fn session(
                 reply("error open a bus first");
             }
             Command::RawMode => {
-                subscriptions.raw.store(true, Ordering::Relaxed);
+                // The acknowledgement goes out alone: clients such as python-can read the
+                // next chunk from the socket and expect exactly `< ok >`, so frames are let
+                // through only a moment after it (as if the client switched then).
                 reply("ok");
+                std::thread::sleep(RAW_MODE_GRACE);
+                subscriptions.raw.store(true, Ordering::Relaxed);
             }
             Command::BcmMode => {
                 subscriptions.raw.store(false, Ordering::Relaxed);

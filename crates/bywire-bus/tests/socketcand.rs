@@ -233,3 +233,43 @@ fn a_token_is_asked_for_before_anything_else() {
     );
     assert_eq!(exchange("< open vcan0 >"), "< ok >");
 }
+
+/// On a busy bus the acknowledgement of `< rawmode >` arrives alone — clients such as
+/// python-can read one chunk and expect exactly `< ok >` — and the frames follow.
+#[test]
+fn the_raw_mode_acknowledgement_arrives_alone_on_a_busy_bus() {
+    use std::io::{Read, Write};
+    let address = server("scd-busy");
+    let mut sender = open("virtual:scd-busy").unwrap();
+    let busy = Arc::new(AtomicBool::new(true));
+    let running = Arc::clone(&busy);
+    let traffic = std::thread::spawn(move || {
+        while running.load(std::sync::atomic::Ordering::Relaxed) {
+            sender.send(&frame("123#0102")).unwrap();
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    });
+    let mut stream = std::net::TcpStream::connect(&address).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let mut chunk = [0u8; 256];
+    let n = stream.read(&mut chunk).unwrap();
+    assert_eq!(&chunk[..n], b"< hi >");
+    stream.write_all(b"< open scd-busy >").unwrap();
+    let n = stream.read(&mut chunk).unwrap();
+    assert_eq!(&chunk[..n], b"< ok >");
+    stream.write_all(b"< rawmode >").unwrap();
+    // As a client would: a little late to read.
+    std::thread::sleep(Duration::from_millis(10));
+    let n = stream.read(&mut chunk).unwrap();
+    assert_eq!(String::from_utf8_lossy(&chunk[..n]), "< ok >");
+    let n = stream.read(&mut chunk).unwrap();
+    assert!(
+        String::from_utf8_lossy(&chunk[..n]).starts_with("< frame 123 "),
+        "{}",
+        String::from_utf8_lossy(&chunk[..n])
+    );
+    busy.store(false, std::sync::atomic::Ordering::Relaxed);
+    traffic.join().unwrap();
+}

@@ -1069,24 +1069,77 @@ impl Tug {
         );
     }
 
+    /// Who is at `port` on `bus`: an ECU, a drive by node ID, ... or a port from
+    /// [`Tug::attach`].
+    pub fn port_name(&self, bus: TugBus, port: NodeId) -> String {
+        let named = match bus {
+            TugBus::Bus1 => [
+                (self.ads_port, "ADS"),
+                (self.ecu_port1, "ECU"),
+                (self.safety_port, "safety controller"),
+                (self.bms_port, "BMS"),
+                (self.log_port1, "logger"),
+            ]
+            .into_iter()
+            .find(|(p, _)| *p == port),
+            TugBus::Bus1b => [
+                (self.ads_port_b, "ADS"),
+                (self.ecu_port_b, "ECU"),
+                (self.log_port_b, "logger"),
+            ]
+            .into_iter()
+            .find(|(p, _)| *p == port),
+            TugBus::Bus2 => [
+                (self.ecu_port2, "ECU (CANopen master)"),
+                (self.log_port2, "logger"),
+            ]
+            .into_iter()
+            .find(|(p, _)| *p == port),
+            TugBus::Bus3 => [
+                (self.imu_port, "IMU"),
+                (self.io_port, "I/O node"),
+                (self.ecu_port3, "ECU"),
+                (self.log_port3, "logger"),
+            ]
+            .into_iter()
+            .find(|(p, _)| *p == port),
+        };
+        if let Some((_, name)) = named {
+            return name.to_string();
+        }
+        let drive = self
+            .corners
+            .iter()
+            .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
+            .find_map(|(corner, (steer, drive))| {
+                if corner.steer_port == port {
+                    Some(*steer)
+                } else if corner.drive_port == port {
+                    Some(drive)
+                } else {
+                    None
+                }
+            });
+        match drive {
+            Some(node) if bus == TugBus::Bus2 => format!("drive 0x{node:02X}"),
+            _ => format!("port {port}"),
+        }
+    }
+
     /// Record the supervisor's state changes, bus state changes and the master's heartbeat
     /// events.
     fn note_changes(&mut self) {
         let mut changes = Vec::new();
-        for (bus, sim) in [
-            ("bus1", &mut self.bus1),
-            ("bus2", &mut self.bus2),
-            ("bus3", &mut self.bus3),
-            ("bus1b", &mut self.bus1b),
-        ] {
-            for event in sim.drain_events() {
+        for bus in TugBus::ALL {
+            for event in self.sim_bus(bus).drain_events() {
                 if let bywire_bus::sim::BusEvent::StateChanged { node, state, .. } = event {
-                    changes.push(format!("{bus} node {node}: {state:?}"));
+                    changes.push((bus, node, state));
                 }
             }
         }
-        for change in changes {
-            self.record("bus_state", change);
+        for (bus, node, state) in changes {
+            let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
+            self.record("bus_state", detail);
         }
         let seen = (self.ecu.watchdog(), self.ecu.estop(), self.ecu.mode());
         let (watchdog, estop, mode) = self.last_seen;

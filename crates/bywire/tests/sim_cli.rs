@@ -272,8 +272,8 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
     // The ECU's controller on bus 1: bus-off, then back to error active.
     let errors = first("fault", "EcuBusOff", 0.0);
     assert!(
-        first("bus_state", "bus1 node 1: BusOff", errors)
-            < first("bus_state", "bus1 node 1: ErrorActive", errors)
+        first("bus_state", "bus1 ECU: BusOff", errors)
+            < first("bus_state", "bus1 ECU: ErrorActive", errors)
     );
     // Drive 0x23 (the sender of 0x723 on bus 2): bus-off at its next heartbeat, back within
     // its recovery's 1.4 ms, too soon for its heartbeat to be missed.
@@ -282,7 +282,10 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
         events
             .iter()
             .find(|(t, k, d)| {
-                *t >= after && k == "bus_state" && d.starts_with("bus2 node") && d.ends_with(state)
+                *t >= after
+                    && k == "bus_state"
+                    && d.starts_with("bus2 drive 0x23:")
+                    && d.ends_with(state)
             })
             .map(|(t, _, _)| *t)
             .unwrap_or_else(|| panic!("no bus 2 {state} after {after}: {events:?}"))
