@@ -1072,38 +1072,31 @@ impl Tug {
     /// Who is at `port` on `bus`: an ECU, a drive by node ID, ... or a port from
     /// [`Tug::attach`].
     pub fn port_name(&self, bus: TugBus, port: NodeId) -> String {
-        let named = match bus {
-            TugBus::Bus1 => [
+        let named: &[(NodeId, &str)] = match bus {
+            TugBus::Bus1 => &[
                 (self.ads_port, "ADS"),
                 (self.ecu_port1, "ECU"),
                 (self.safety_port, "safety controller"),
                 (self.bms_port, "BMS"),
                 (self.log_port1, "logger"),
-            ]
-            .into_iter()
-            .find(|(p, _)| *p == port),
-            TugBus::Bus1b => [
+            ],
+            TugBus::Bus1b => &[
                 (self.ads_port_b, "ADS"),
                 (self.ecu_port_b, "ECU"),
                 (self.log_port_b, "logger"),
-            ]
-            .into_iter()
-            .find(|(p, _)| *p == port),
-            TugBus::Bus2 => [
+            ],
+            TugBus::Bus2 => &[
                 (self.ecu_port2, "ECU (CANopen master)"),
                 (self.log_port2, "logger"),
-            ]
-            .into_iter()
-            .find(|(p, _)| *p == port),
-            TugBus::Bus3 => [
+            ],
+            TugBus::Bus3 => &[
                 (self.imu_port, "IMU"),
                 (self.io_port, "I/O node"),
                 (self.ecu_port3, "ECU"),
                 (self.log_port3, "logger"),
-            ]
-            .into_iter()
-            .find(|(p, _)| *p == port),
+            ],
         };
+        let named = named.iter().find(|(p, _)| *p == port);
         if let Some((_, name)) = named {
             return name.to_string();
         }
