@@ -247,6 +247,14 @@ impl Subscription {
 }
 
 /// What the client's reader shares with the thread that feeds it frames.
+/// What a session's writer thread does next.
+enum Outgoing {
+    /// Send this text.
+    Text(String),
+    /// Send nothing for this long (see [`RAW_MODE_GRACE`]).
+    Pause(Duration),
+}
+
 /// How long after acknowledging `< rawmode >` frames start to flow (see the command).
 const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
 
@@ -264,18 +272,23 @@ fn session(
     stats: &Arc<ServerStats>,
 ) -> std::io::Result<()> {
     stream.set_nodelay(true)?;
-    let (out_tx, out_rx) = mpsc::sync_channel::<String>(CLIENT_QUEUE);
+    let (out_tx, out_rx) = mpsc::sync_channel::<Outgoing>(CLIENT_QUEUE);
     let mut writer = stream.try_clone()?;
     let writer_thread = std::thread::spawn(move || {
-        for line in out_rx {
-            if writer.write_all(line.as_bytes()).is_err() {
-                break;
+        for item in out_rx {
+            match item {
+                Outgoing::Text(line) => {
+                    if writer.write_all(line.as_bytes()).is_err() {
+                        break;
+                    }
+                }
+                Outgoing::Pause(pause) => std::thread::sleep(pause),
             }
         }
     });
     // Replies go through the same queue as frames, so they keep their order; replies are never
     // dropped (blocking send), frames are when the queue is full.
-    let reply = |text: &str| out_tx.send(format!("< {text} >")).is_ok();
+    let reply = |text: &str| out_tx.send(Outgoing::Text(format!("< {text} >"))).is_ok();
     reply("hi");
     let session_stop = Arc::new(AtomicBool::new(false));
     let subscriptions = Arc::new(Subscriptions {
@@ -380,10 +393,10 @@ fn session(
             }
             Command::RawMode => {
                 // The acknowledgement goes out alone: clients such as python-can read the
-                // next chunk from the socket and expect exactly `< ok >`, so frames are let
-                // through only a moment after it (as if the client switched then).
+                // next chunk from the socket and expect exactly `< ok >`, so the frames from
+                // now on wait in the queue a moment behind it (none is lost).
                 reply("ok");
-                std::thread::sleep(RAW_MODE_GRACE);
+                let _ = out_tx.send(Outgoing::Pause(RAW_MODE_GRACE));
                 subscriptions.raw.store(true, Ordering::Relaxed);
             }
             Command::BcmMode => {
@@ -500,7 +513,7 @@ fn id_key(id: Id) -> u32 {
 /// BCM mode. A full queue drops the frame and counts it.
 fn spawn_forwarder(
     mut rx: Box<dyn crate::BusRx>,
-    out: SyncSender<String>,
+    out: SyncSender<Outgoing>,
     subscriptions: Arc<Subscriptions>,
     stop: Arc<AtomicBool>,
     stats: Arc<ServerStats>,
@@ -525,7 +538,7 @@ fn spawn_forwarder(
             let Some(line) = format_frame(&received.frame, received.timestamp) else {
                 continue;
             };
-            match out.try_send(line) {
+            match out.try_send(Outgoing::Text(line)) {
                 Ok(()) => {}
                 Err(TrySendError::Full(_)) => {
                     stats.dropped.fetch_add(1, Ordering::Relaxed);

@@ -235,17 +235,21 @@ fn a_token_is_asked_for_before_anything_else() {
 }
 
 /// On a busy bus the acknowledgement of `< rawmode >` arrives alone — clients such as
-/// python-can read one chunk and expect exactly `< ok >` — and the frames follow.
+/// python-can read one chunk and expect exactly `< ok >` — and the frames follow, none lost:
+/// those sent while the client read the acknowledgement come first, then the rest in order.
 #[test]
 fn the_raw_mode_acknowledgement_arrives_alone_on_a_busy_bus() {
     use std::io::{Read, Write};
+    use std::sync::atomic::{AtomicU32, Ordering};
     let address = server("scd-busy");
     let mut sender = open("virtual:scd-busy").unwrap();
-    let busy = Arc::new(AtomicBool::new(true));
-    let running = Arc::clone(&busy);
+    let (busy, sent) = (Arc::new(AtomicBool::new(true)), Arc::new(AtomicU32::new(0)));
+    let (running, counter) = (Arc::clone(&busy), Arc::clone(&sent));
     let traffic = std::thread::spawn(move || {
-        while running.load(std::sync::atomic::Ordering::Relaxed) {
-            sender.send(&frame("123#0102")).unwrap();
+        while running.load(Ordering::Relaxed) {
+            let n = counter.load(Ordering::Relaxed);
+            sender.send(&frame(&format!("123#{n:08X}"))).unwrap();
+            counter.store(n + 1, Ordering::Relaxed);
             std::thread::sleep(Duration::from_micros(200));
         }
     });
@@ -264,12 +268,32 @@ fn the_raw_mode_acknowledgement_arrives_alone_on_a_busy_bus() {
     std::thread::sleep(Duration::from_millis(10));
     let n = stream.read(&mut chunk).unwrap();
     assert_eq!(String::from_utf8_lossy(&chunk[..n]), "< ok >");
-    let n = stream.read(&mut chunk).unwrap();
-    assert!(
-        String::from_utf8_lossy(&chunk[..n]).starts_with("< frame 123 "),
-        "{}",
-        String::from_utf8_lossy(&chunk[..n])
-    );
-    busy.store(false, std::sync::atomic::Ordering::Relaxed);
+    let sent_by_then = sent.load(Ordering::Relaxed);
+    // Then the frames, counting up without a gap.
+    let mut text = String::new();
+    let mut bytes = [0u8; 4096];
+    while text.matches("< frame").count() < 400 {
+        let n = stream.read(&mut bytes).unwrap();
+        text.push_str(&String::from_utf8_lossy(&bytes[..n]));
+    }
+    busy.store(false, Ordering::Relaxed);
     traffic.join().unwrap();
+    let counters: Vec<u32> = text
+        .split("< frame 123 ")
+        .skip(1)
+        .take(400)
+        .map(|f| {
+            let data = f.split_whitespace().nth(1).unwrap();
+            u32::from_str_radix(data, 16).unwrap()
+        })
+        .collect();
+    assert!(
+        counters[0] < sent_by_then,
+        "the first frame ({}) was sent while the client read the acknowledgement ({sent_by_then})",
+        counters[0]
+    );
+    assert!(
+        counters.windows(2).all(|w| w[1] == w[0] + 1),
+        "{counters:?}"
+    );
 }
