@@ -197,6 +197,20 @@ pub enum Fault {
     },
 }
 
+/// As in events and the live view: the variant's name, identifiers and node IDs in hex.
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Fault::DriveSilence(node) => write!(f, "DriveSilence(0x{node:02X})"),
+            Fault::TamperFrames { bus, id, tamper } => {
+                write!(f, "TamperFrames {{ {} 0x{id:03X} {tamper:?} }}", bus.name())
+            }
+            Fault::BusOff { bus, id } => write!(f, "BusOff {{ {} 0x{id:03X} }}", bus.name()),
+            other => write!(f, "{other:?}"),
+        }
+    }
+}
+
 /// The run's state every 50 ms, for plots.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
@@ -605,7 +619,7 @@ impl Tug {
     /// Inject `fault` now, for `duration` (`None`: for good).
     pub fn inject(&mut self, fault: Fault, duration: Option<Duration>) {
         let now = self.now;
-        self.record("fault", format!("{fault:?}"));
+        self.record("fault", fault.to_string());
         match fault {
             Fault::SensorFault(corner, sensor) => {
                 if let Some(c) = self.corners.get_mut(corner) {
@@ -895,7 +909,7 @@ impl Tug {
                 }
                 _ => self.set_tampering(fault, false),
             }
-            self.record("fault_cleared", format!("{fault:?}"));
+            self.record("fault_cleared", fault.to_string());
         }
         self.active
             .retain(|(_, end)| end.is_none_or(|end| now < end));
@@ -1365,9 +1379,17 @@ impl Tug {
         let c = self.chassis.params;
         // A drive the master had to stop (heartbeat lost, EMCY, fault) stops the vehicle: the
         // other wheels alone would drag it off its path.
-        self.drives_lost = DRIVE_NODES.iter().chain(&STEERING_NODES).any(|node| {
-            matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+        let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).find(|node| {
+            matches!(self.master.controlled(**node), Some(Controlled::Drive(d)) if d.stopped().is_some())
         });
+        if stopped.is_some() != self.drives_lost {
+            self.drives_lost = stopped.is_some();
+            let detail = match stopped {
+                Some(node) => format!("drive 0x{node:02X} stopped by the master: the tug stops"),
+                None => "every drive enabled again".to_string(),
+            };
+            self.record("drives", detail);
+        }
         let first_tracks = self.first_tracks();
         if let Some(fault) = self.plausibility.check(now, first_tracks) {
             self.record("plausibility", fault.to_string());

@@ -197,7 +197,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
             .iter()
             .take(9)
             .enumerate()
-            .map(|(i, (_, fault, _))| Line::from(format!("key {}      {fault:?}", i + 1))),
+            .map(|(i, (_, fault, _))| Line::from(format!("key {}      {fault}", i + 1))),
     );
     frame.render_widget(
         Paragraph::new(lines).block(Block::bordered().title("vehicle")),

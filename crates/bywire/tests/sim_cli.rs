@@ -444,3 +444,45 @@ b3.shutdown()
         "the injected frame is on bus 3"
     );
 }
+
+/// The example scenario in the repository runs to its end with the reactions it describes: a
+/// late heartbeat stops the drives until the operator's reset, duplicated commands are
+/// refused, the stop at the crossing, crab onto the stand and the turn to face the hold.
+#[test]
+fn the_example_stand_approach_scenario_runs_as_described() {
+    let file = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../bywire-sim/scenarios/stand-approach.toml"
+    );
+    let dir = std::env::temp_dir().join(format!("bywire-sim-stand-{}", std::process::id()));
+    let metrics = sim_with(&dir, &["--scenario", file]);
+    assert_eq!(metrics["scenario"], "stand-approach");
+    assert_eq!(metrics["completed"], true, "{metrics}");
+    let events: Vec<(f64, &str, &str)> = metrics["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["t_s"].as_f64().unwrap(),
+                e["kind"].as_str().unwrap(),
+                e["detail"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    let at = |kind: &str, detail: &str| {
+        events
+            .iter()
+            .find(|(_, k, d)| *k == kind && d.starts_with(detail))
+            .map(|(t, _, _)| *t)
+            .unwrap_or_else(|| panic!("no {kind} {detail}: {events:?}"))
+    };
+    let late = at("fault", "TamperFrames { bus2 0x721 Delay(300ms) }");
+    let stopped = at("drives", "drive 0x21 stopped by the master");
+    assert!(stopped - late <= 0.252, "{stopped} after {late}");
+    let reset = at("fault", "OperatorReset");
+    assert!(at("drives", "every drive enabled again") - reset <= 0.002);
+    assert!(metrics["supervisor"]["repeated"].as_u64().unwrap() >= 5);
+    assert!(at("stop", "at 35.0 m") > reset);
+    assert!(at("steering_mode", "Crab") < at("steering_mode", "Tank"));
+}
