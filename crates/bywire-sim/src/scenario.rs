@@ -33,7 +33,7 @@ use bywire_core::Timestamp;
 use serde::Deserialize;
 
 use crate::steering::SensorFault;
-use crate::tug::{apron_loop, Fault, Tug, TugBus, DRIVE_NODES, STEERING_NODES};
+use crate::tug::{apron_loop, Fault, Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
 use bywire_bus::sim::Tamper;
 
 /// A scenario.
@@ -411,6 +411,23 @@ impl Scenario {
             grade: raw.grade,
             events,
         })
+    }
+
+    /// What a tug driving this scenario is given: its route, speeds, stops, manoeuvres and
+    /// road, with `seed` and `payload` (kg; the scenario's own unless a run overrides it).
+    pub fn params(&self, seed: u64, payload: f64) -> TugParams {
+        TugParams {
+            seed,
+            payload,
+            grade: self.grade,
+            route: self.route.clone(),
+            speed: self.speed,
+            crab_final_m: self.crab_final_m,
+            tank_turn_deg: self.tank_turn_deg,
+            steering_steps: self.steering_steps.clone(),
+            speeds: self.speeds.clone(),
+            stops: self.stops.clone(),
+        }
     }
 
     /// Inject what is due in the step that reaches `now` (events at or before `now`, after

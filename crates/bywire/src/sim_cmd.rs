@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
 use bywire_sim::scenario::Scenario;
-use bywire_sim::tug::{Tug, TugParams};
+use bywire_sim::tug::Tug;
 
 use crate::sim_serve::Served;
 use serde_json::json;
@@ -74,18 +74,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         );
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
-    let mut tug = Tug::new(TugParams {
-        seed: args.seed,
-        payload,
-        grade: scenario.grade,
-        route: scenario.route.clone(),
-        speed: scenario.speed,
-        crab_final_m: scenario.crab_final_m,
-        tank_turn_deg: scenario.tank_turn_deg,
-        steering_steps: scenario.steering_steps.clone(),
-        speeds: scenario.speeds.clone(),
-        stops: scenario.stops.clone(),
-    });
+    let mut tug = Tug::new(scenario.params(args.seed, payload));
     let mut served = match args.serve {
         Some(listen) => {
             let served = Served::start(&mut tug, listen, args.beacon)?;
