@@ -338,11 +338,7 @@ impl Scenario {
             };
             // The frames a fault aims at: a bus and an identifier sent on it.
             let bus_and_id = |kind: &str| -> Result<(TugBus, u16), ScenarioError> {
-                let bus = match e.bus.as_deref() {
-                    Some(name) => TugBus::ALL.into_iter().find(|b| b.name() == name),
-                    None => None,
-                }
-                .ok_or_else(|| {
+                let bus = e.bus.as_deref().and_then(TugBus::named).ok_or_else(|| {
                     invalid(
                         &key("bus"),
                         format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\""),

@@ -146,6 +146,11 @@ impl TugBus {
             TugBus::Bus1b => "bus1b",
         }
     }
+
+    /// The bus of this name (`bus1`, `bus2`, `bus3`, `bus1b`).
+    pub fn named(name: &str) -> Option<TugBus> {
+        TugBus::ALL.into_iter().find(|b| b.name() == name)
+    }
 }
 
 /// A frame seen on a bus, with its end-of-frame time.
@@ -354,6 +359,9 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
     let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, acceleration);
     let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, acceleration);
     let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, acceleration * 2);
+    // The actual values (TPDO2) sampled at every SYNC, so the master sees all eight drives
+    // at one instant each cycle.
+    let _ = od.set(0x1801, 2, &[1]);
     // Each drive watches the ECU's heartbeat: silence faults it.
     let _ = od.set(
         0x1016,
@@ -421,7 +429,8 @@ impl Tug {
             MASTER_NODE,
             Duration::from_millis(100),
             Duration::from_millis(10),
-        );
+        )
+        .with_sync(Duration::from_millis(10));
         for node in STEERING_NODES {
             let mut controller =
                 DriveController::new(node, Mode::ProfilePosition, Duration::from_millis(500));

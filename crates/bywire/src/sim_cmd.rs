@@ -5,13 +5,13 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
 use bywire_sim::scenario::Scenario;
-use bywire_sim::tug::Tug;
+use bywire_sim::tug::{Tug, TugBus};
 
-use crate::sim_serve::Served;
+use crate::sim_serve::Shared;
 use serde_json::json;
 
 #[derive(clap::Args)]
@@ -48,6 +48,11 @@ pub struct Args {
     /// 127.0.0.1:42000 or to ADDR:PORT, so SavvyCAN and python-can find the served buses.
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:42000", requires = "serve")]
     beacon: Option<std::net::SocketAddr>,
+    /// Carry a simulated bus to and from another bus while it runs, e.g. bus2=vcan0 (a
+    /// SocketCAN interface, for candump or SavvyCAN) or bus3=socketcand:HOST:PORT/NAME; any
+    /// bus argument. Repeatable.
+    #[arg(long, value_name = "BUS=BUSARG")]
+    attach: Vec<String>,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -75,19 +80,25 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
     let mut tug = Tug::new(scenario.params(args.seed, payload));
-    let mut served = match args.serve {
-        Some(listen) => {
-            let served = Served::start(&mut tug, listen, args.beacon)?;
-            writeln!(
-                out,
-                "serving bus1, bus2, bus3 and bus1b on {} (socketcand)",
-                served.address
-            )?;
-            out.flush()?;
-            Some(served)
-        }
-        None => None,
-    };
+    let mut shared = Shared::default();
+    for attach in &args.attach {
+        let (name, spec) = attach
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--attach {attach}: BUS=BUSARG, e.g. bus2=vcan0"))?;
+        let bus = TugBus::named(name).ok_or_else(|| {
+            anyhow!("--attach {attach}: {name} is not a bus of the tug (bus1, bus2, bus3, bus1b)")
+        })?;
+        let endpoint = crate::busarg::open(spec).with_context(|| format!("--attach {attach}"))?;
+        shared.attach(&mut tug, bus, endpoint);
+    }
+    if let Some(listen) = args.serve {
+        let address = shared.serve(&mut tug, listen, args.beacon)?;
+        writeln!(
+            out,
+            "serving bus1, bus2, bus3 and bus1b on {address} (socketcand)"
+        )?;
+        out.flush()?;
+    }
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
     // In a terminal, in real time: the live view.
@@ -98,20 +109,12 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                 &mut tug,
                 &scenario,
                 Duration::from_secs_f64(args.max_seconds),
-                served.as_mut()
+                &mut shared
             )?,
             crate::sim_view::Ending::Arrived
         )
     } else {
-        run_plain(
-            &mut tug,
-            &scenario,
-            args,
-            limit,
-            start,
-            served.as_mut(),
-            out,
-        )?
+        run_plain(&mut tug, &scenario, args, limit, start, &mut shared, out)?
     };
     for (name, log) in [
         ("bus1", &tug.bus1_log),
@@ -218,7 +221,7 @@ fn run_plain(
     args: &Args,
     limit: Timestamp,
     start: Instant,
-    mut served: Option<&mut Served>,
+    shared: &mut Shared,
     out: &mut impl Write,
 ) -> Result<bool> {
     let stop = crate::interrupt_flag();
@@ -228,9 +231,7 @@ fn run_plain(
         tug.step();
         let now = tug.now();
         scenario.apply(tug, before, now);
-        if let Some(served) = served.as_deref_mut() {
-            served.exchange(tug);
-        }
+        shared.exchange(tug);
         if tug.arrived() {
             break true;
         }

@@ -1,7 +1,8 @@
-//! `bywire sim --serve`: each simulated bus through a socketcand server, so `bywire dump`,
-//! python-can or SavvyCAN watch and inject traffic while the simulation runs. Each bus gets a
-//! port on the simulated bus and an endpoint on an in-process virtual bus that the server's
-//! clients join; [`Served::exchange`] carries frames between the two after every step.
+//! The simulated buses shared with other programs while `bywire sim` runs: `--serve` puts each
+//! through a socketcand server (for `bywire dump`, python-can, SavvyCAN), `--attach` carries
+//! one to another bus (a SocketCAN interface such as vcan0, for candump and the like). Each
+//! share is a port on the simulated bus linked to an endpoint; [`Shared::exchange`] carries
+//! frames between the two after every step.
 
 use std::net::{SocketAddr, TcpListener};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -16,7 +17,7 @@ use bywire_bus::virtual_bus::VirtualBus;
 use bywire_bus::{Bus, BusError, BusRx, BusTx};
 use bywire_sim::tug::{Tug, TugBus};
 
-/// One bus's link: its port on the simulated bus and its endpoint on the served bus.
+/// One link: a port on a simulated bus and the endpoint its frames go to and come from.
 struct Link {
     bus: TugBus,
     port: NodeId,
@@ -24,20 +25,57 @@ struct Link {
     rx: Box<dyn BusRx>,
 }
 
-/// The server and the links; stops the server when dropped.
-pub struct Served {
-    links: Vec<Link>,
+/// The socketcand server's threads; stopped when dropped.
+struct Server {
     stop: Arc<AtomicBool>,
-    server: Option<JoinHandle<std::io::Result<()>>>,
+    thread: Option<JoinHandle<std::io::Result<()>>>,
     beacon: Option<JoinHandle<()>>,
-    /// Where it listens.
-    pub address: SocketAddr,
 }
 
-impl Served {
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+        if let Some(beacon) = self.beacon.take() {
+            let _ = beacon.join();
+        }
+    }
+}
+
+/// The links of a run and the server, if it serves.
+#[derive(Default)]
+pub struct Shared {
+    links: Vec<Link>,
+    server: Option<Server>,
+}
+
+impl Shared {
+    /// `bus` of the tug linked to `endpoint`, both ways.
+    fn link(&mut self, tug: &mut Tug, bus: TugBus, endpoint: Box<dyn Bus>) {
+        let (tx, rx) = endpoint.split();
+        self.links.push(Link {
+            bus,
+            port: tug.attach(bus),
+            tx,
+            rx,
+        });
+    }
+
+    /// Carry `bus` to and from `endpoint` while the run goes on.
+    pub fn attach(&mut self, tug: &mut Tug, bus: TugBus, endpoint: Box<dyn Bus>) {
+        self.link(tug, bus, endpoint);
+    }
+
     /// Serve `tug`'s buses on `listen` (clients open `bus1`, `bus2`, `bus3` or `bus1b`), with
-    /// socketcand's discovery beacon sent to `beacon` if given.
-    pub fn start(tug: &mut Tug, listen: SocketAddr, beacon: Option<SocketAddr>) -> Result<Served> {
+    /// socketcand's discovery beacon sent to `beacon` if given; returns where it listens.
+    pub fn serve(
+        &mut self,
+        tug: &mut Tug,
+        listen: SocketAddr,
+        beacon: Option<SocketAddr>,
+    ) -> Result<SocketAddr> {
         if !listen.ip().is_loopback() {
             return Err(anyhow!(
                 "--serve {listen}: not a loopback address (socketcand has no authentication; use `bywire serve` with --allow-remote and a token to reach other hosts)"
@@ -48,20 +86,10 @@ impl Served {
         let address = listener.local_addr()?;
         // In-process bus names of this run only.
         let prefix = format!("bywire-sim-{}", std::process::id());
-        let links = TugBus::ALL
-            .into_iter()
-            .map(|bus| {
-                let endpoint: Box<dyn Bus> =
-                    Box::new(VirtualBus::join(&format!("{prefix}-{}", bus.name())));
-                let (tx, rx) = endpoint.split();
-                Link {
-                    bus,
-                    port: tug.attach(bus),
-                    tx,
-                    rx,
-                }
-            })
-            .collect();
+        for bus in TugBus::ALL {
+            let endpoint = VirtualBus::join(&format!("{prefix}-{}", bus.name()));
+            self.link(tug, bus, Box::new(endpoint));
+        }
         let open = Arc::new(move |name: &str| -> Result<Box<dyn Bus>, BusError> {
             Ok(Box::new(VirtualBus::join(&format!("{prefix}-{name}"))))
         });
@@ -89,38 +117,25 @@ impl Served {
                 Arc::new(ServerStats::default()),
             )
         });
-        Ok(Served {
-            links,
+        self.server = Some(Server {
             stop,
-            server: Some(server),
+            thread: Some(server),
             beacon,
-            address,
-        })
+        });
+        Ok(address)
     }
 
-    /// Carry frames both ways: what the simulated buses carried out to the clients, what the
-    /// clients sent onto the simulated buses. Bounded by what arrived since the last call.
+    /// Carry frames both ways: what the simulated buses carried out to the endpoints, what the
+    /// endpoints received onto the simulated buses. Bounded by what arrived since the last call.
     pub fn exchange(&mut self, tug: &mut Tug) {
         for link in &mut self.links {
             while let Some((_, frame)) = tug.receive(link.bus, link.port) {
-                // A client that cannot keep up loses frames (its queue is bounded).
+                // An endpoint that cannot keep up loses frames (its queue is bounded).
                 let _ = link.tx.send(&frame);
             }
             while let Ok(Some(received)) = link.rx.recv(Some(Duration::ZERO)) {
                 tug.send(link.bus, link.port, received.frame);
             }
-        }
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(server) = self.server.take() {
-            let _ = server.join();
-        }
-        if let Some(beacon) = self.beacon.take() {
-            let _ = beacon.join();
         }
     }
 }

@@ -10,7 +10,7 @@ use bywire_sim::tug::{Fault, Tug};
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
 use crate::live::Input;
-use crate::sim_serve::Served;
+use crate::sim_serve::Shared;
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Style};
 use ratatui::symbols::Marker;
@@ -31,12 +31,12 @@ pub fn run(
     tug: &mut Tug,
     scenario: &Scenario,
     limit: Duration,
-    served: Option<&mut Served>,
+    shared: &mut Shared,
 ) -> Result<Ending> {
     // Asked now, while the terminal is surely there.
     crate::live::stdin_is_terminal();
     let mut terminal = ratatui::init();
-    let result = event_loop(tug, scenario, limit, served, &mut terminal);
+    let result = event_loop(tug, scenario, limit, shared, &mut terminal);
     crate::live::restore(terminal);
     result
 }
@@ -45,7 +45,7 @@ fn event_loop(
     tug: &mut Tug,
     scenario: &Scenario,
     limit: Duration,
-    mut served: Option<&mut Served>,
+    shared: &mut Shared,
     terminal: &mut ratatui::DefaultTerminal,
 ) -> Result<Ending> {
     let mut paused = false;
@@ -60,9 +60,7 @@ fn event_loop(
                 let before = tug.now();
                 tug.step();
                 scenario.apply(tug, before, tug.now());
-                if let Some(served) = served.as_deref_mut() {
-                    served.exchange(tug);
-                }
+                shared.exchange(tug);
             }
         }
         if tug.arrived() {

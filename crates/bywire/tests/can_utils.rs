@@ -261,3 +261,34 @@ echo '== end'
     assert_eq!(theirs[1] - ours[1], 8 * 10, "{out}");
     assert_eq!(ours[2], 0);
 }
+
+/// `bywire sim --attach`: the simulated drives' bus on vcan0, as candump sees it (every drive's
+/// heartbeat, SYNC), and a frame cansend puts on vcan1 lands on the simulated sensor bus.
+#[test]
+fn sim_attaches_its_buses_to_vcan_for_can_utils() {
+    let script = "\
+candump -L vcan0 > drives.log & P1=$!
+ready drives.log vcan0
+$B sim --no-view --max-seconds 4 --out /tmp/run --attach bus2=vcan0 --attach bus3=vcan1 > sim.out 2>&1 & S=$!
+sleep 2
+cansend vcan1 7AB#01020304
+wait $S; echo \"sim exit $?\"
+kill -INT $P1; sleep 0.2
+echo '== drives'; cat drives.log; echo '== bus3'; grep 7AB /tmp/run/bus3.log
+echo '== sim'; cat sim.out; echo '== end'
+";
+    let out = in_vm(script);
+    assert!(out.contains("sim exit 0"), "{out}");
+    let drives = section(&out, "drives");
+    for node in ["711", "712", "713", "714", "721", "722", "723", "724"] {
+        assert!(
+            drives.contains(&format!(" vcan0 {node}#05")),
+            "heartbeat of 0x{node} (operational): {drives}"
+        );
+    }
+    assert!(drives.contains(" vcan0 080#"), "SYNC: {drives}");
+    assert!(
+        section(&out, "bus3").contains(" bus3 7AB#01020304"),
+        "the frame from cansend on the simulated bus 3: {out}"
+    );
+}
