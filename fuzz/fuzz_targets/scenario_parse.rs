@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
             return;
         }
     };
-    let mut tug = Tug::new(scenario.params(1, scenario.payload));
+    let mut tug = Tug::new(scenario.params(1, scenario.tug.payload));
     for _ in 0..1_000 {
         let before = tug.now();
         tug.step();

@@ -9,22 +9,11 @@ use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
-use bywire_sim::tug::{apron_loop, Tug, TugParams};
+use bywire_sim::tug::{Tug, TugParams};
 
 /// A tug engaged and cruising (5 simulated seconds after power-on).
 fn cruising() -> Tug {
-    let mut tug = Tug::new(TugParams {
-        seed: 1,
-        payload: 2_000.0,
-        grade: 0.0,
-        route: apron_loop(),
-        speed: 3.0,
-        crab_final_m: 0.0,
-        tank_turn_deg: 0.0,
-        steering_steps: Vec::new(),
-        speeds: Vec::new(),
-        stops: Vec::new(),
-    });
+    let mut tug = Tug::new(TugParams::default());
     for _ in 0..5_000 {
         tug.step();
     }

@@ -41,24 +41,9 @@ use bywire_bus::sim::Tamper;
 pub struct Scenario {
     /// Its name.
     pub name: String,
-    /// The route, m.
-    pub route: Vec<Point>,
-    /// Cruising speed, m/s.
-    pub speed: f64,
-    /// The last this many metres of the route in crab (a stand approach; 0: none).
-    pub crab_final_m: f64,
-    /// A tank turn in place at the end of the route, degrees (+ left; 0: none).
-    pub tank_turn_deg: f64,
-    /// The steering step test before departure: angles, degrees, each held 3 s.
-    pub steering_steps: Vec<f64>,
-    /// Speeds along the route: (from this many metres on, m/s).
-    pub speeds: Vec<(f64, f64)>,
-    /// Stops along the route: (at this many metres, for this long).
-    pub stops: Vec<(f64, Duration)>,
-    /// Payload, kg.
-    pub payload: f64,
-    /// Road grade.
-    pub grade: f64,
+    /// What the tug is given: route, speeds, stops, manoeuvres, payload and road (the seed is
+    /// the run's: see [`Scenario::params`]).
+    pub tug: TugParams,
     /// Faults and operator actions: (at, fault, for how long).
     pub events: Vec<(Duration, Fault, Option<Duration>)>,
 }
@@ -170,21 +155,19 @@ impl Scenario {
             ],
             _ => return None,
         };
+        let apron_loop = name == "apron-loop";
         Some(Scenario {
             name: name.to_string(),
-            route: apron_loop(),
-            speed: 3.0,
-            crab_final_m: 10.0,
-            tank_turn_deg: if name == "apron-loop" { 180.0 } else { 0.0 },
-            steering_steps: if name == "apron-loop" {
-                vec![10.0, -10.0, 0.0]
-            } else {
-                Vec::new()
+            tug: TugParams {
+                crab_final_m: 10.0,
+                tank_turn_deg: if apron_loop { 180.0 } else { 0.0 },
+                steering_steps: if apron_loop {
+                    vec![10.0, -10.0, 0.0]
+                } else {
+                    Vec::new()
+                },
+                ..TugParams::default()
             },
-            speeds: Vec::new(),
-            stops: Vec::new(),
-            payload: 2_000.0,
-            grade: 0.0,
             events,
         })
     }
@@ -396,33 +379,29 @@ impl Scenario {
         }
         Ok(Scenario {
             name: raw.name.unwrap_or_else(|| file.to_string()),
-            route,
-            speed: raw.speed,
-            crab_final_m: raw.crab_final_m,
-            tank_turn_deg: raw.tank_turn_deg,
-            steering_steps: raw.steering_steps,
-            speeds,
-            stops,
-            payload: raw.payload,
-            grade: raw.grade,
+            tug: TugParams {
+                seed: TugParams::default().seed,
+                payload: raw.payload,
+                grade: raw.grade,
+                route,
+                speed: raw.speed,
+                crab_final_m: raw.crab_final_m,
+                tank_turn_deg: raw.tank_turn_deg,
+                steering_steps: raw.steering_steps,
+                speeds,
+                stops,
+            },
             events,
         })
     }
 
-    /// What a tug driving this scenario is given: its route, speeds, stops, manoeuvres and
-    /// road, with `seed` and `payload` (kg; the scenario's own unless a run overrides it).
+    /// What a tug driving this scenario is given, with `seed` and `payload` (kg; the
+    /// scenario's own unless a run overrides it).
     pub fn params(&self, seed: u64, payload: f64) -> TugParams {
         TugParams {
             seed,
             payload,
-            grade: self.grade,
-            route: self.route.clone(),
-            speed: self.speed,
-            crab_final_m: self.crab_final_m,
-            tank_turn_deg: self.tank_turn_deg,
-            steering_steps: self.steering_steps.clone(),
-            speeds: self.speeds.clone(),
-            stops: self.stops.clone(),
+            ..self.tug.clone()
         }
     }
 
@@ -447,9 +426,9 @@ mod tests {
         let text = "name = \"approach\"\nwaypoints = [[0, 0], [20, 0], [20, 10]]\nspeed = 2.0\npayload = 4000\ngrade = 0.03\n\n[[event]]\nat_s = 5\nfault = \"sensor_fault\"\ncorner = 1\nsensor = \"drift\"\nvalue = 0.5\nduration_s = 2\n\n[[event]]\nat_s = 9.5\nfault = \"drive_silence\"\nnode = 0x22\n";
         let scenario = Scenario::parse(text, "s.toml").unwrap();
         assert_eq!(scenario.name, "approach");
-        assert_eq!(scenario.route.len(), 3);
+        assert_eq!(scenario.tug.route.len(), 3);
         assert_eq!(
-            (scenario.speed, scenario.payload, scenario.grade),
+            (scenario.tug.speed, scenario.tug.payload, scenario.tug.grade),
             (2.0, 4_000.0, 0.03)
         );
         assert_eq!(
@@ -518,8 +497,8 @@ mod tests {
             "t.toml",
         )
         .unwrap();
-        assert_eq!(timed.speeds, [(40.0, 1.5)]);
-        assert_eq!(timed.stops, [(60.0, Duration::from_secs(5))]);
+        assert_eq!(timed.tug.speeds, [(40.0, 1.5)]);
+        assert_eq!(timed.tug.stops, [(60.0, Duration::from_secs(5))]);
         assert!(error("steering_steps = [5, 45]\n")
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));

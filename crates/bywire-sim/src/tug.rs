@@ -85,6 +85,24 @@ pub struct TugParams {
     pub stops: Vec<(f64, Duration)>,
 }
 
+/// The plain run: the apron loop at 3 m/s with 2 t of bags, level, nothing else asked for.
+impl Default for TugParams {
+    fn default() -> TugParams {
+        TugParams {
+            seed: 1,
+            payload: 2_000.0,
+            grade: 0.0,
+            route: apron_loop(),
+            speed: 3.0,
+            crab_final_m: 0.0,
+            tank_turn_deg: 0.0,
+            steering_steps: Vec::new(),
+            speeds: Vec::new(),
+            stops: Vec::new(),
+        }
+    }
+}
+
 /// How long each steering step of the step test is held.
 pub const STEP_HOLD: Duration = Duration::from_secs(3);
 

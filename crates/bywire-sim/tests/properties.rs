@@ -137,7 +137,7 @@ proptest! {
         let scenario = Scenario::parse(&text, "generated.toml");
         prop_assert!(scenario.is_ok(), "{:?}\n{}", scenario.err(), text);
         let scenario = scenario.unwrap();
-        let mut tug = Tug::new(scenario.params(seed, scenario.payload));
+        let mut tug = Tug::new(scenario.params(seed, scenario.tug.payload));
         for _ in 0..8_000 {
             let before = tug.now();
             tug.step();

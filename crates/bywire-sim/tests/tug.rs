@@ -34,15 +34,8 @@ fn route() -> Vec<Point> {
 fn run(seed: u64) -> Tug {
     let mut tug = Tug::new(TugParams {
         seed,
-        payload: 2_000.0,
-        grade: 0.0,
         route: route(),
-        speed: 3.0,
-        crab_final_m: 0.0,
-        tank_turn_deg: 0.0,
-        steering_steps: Vec::new(),
-        speeds: Vec::new(),
-        stops: Vec::new(),
+        ..TugParams::default()
     });
     for _ in 0..60_000 {
         tug.step();
@@ -107,20 +100,13 @@ fn the_same_seed_gives_the_same_frames() {
 
 use std::time::Duration;
 
-use bywire_sim::tug::{apron_loop, Fault, SimEvent};
+use bywire_sim::tug::{Fault, SimEvent};
 
 fn cruising() -> Tug {
     let mut tug = Tug::new(TugParams {
         seed: 2,
         payload: 0.0,
-        grade: 0.0,
-        route: apron_loop(),
-        speed: 3.0,
-        crab_final_m: 0.0,
-        tank_turn_deg: 0.0,
-        steering_steps: Vec::new(),
-        speeds: Vec::new(),
-        stops: Vec::new(),
+        ..TugParams::default()
     });
     while tug.now().as_nanos() < 8_000_000_000 {
         tug.step();
@@ -258,14 +244,10 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
     let mut tug = Tug::new(TugParams {
         seed: 3,
         payload: 1_000.0,
-        grade: 0.0,
         route: points,
         speed: 2.0,
         crab_final_m: 26.0,
-        tank_turn_deg: 0.0,
-        steering_steps: Vec::new(),
-        speeds: Vec::new(),
-        stops: Vec::new(),
+        ..TugParams::default()
     });
     let mut crab_angles = Vec::new();
     for _ in 0..60_000 {
@@ -312,15 +294,10 @@ fn straight(length: u32) -> Vec<Point> {
 fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
     let mut tug = Tug::new(TugParams {
         seed: 4,
-        payload: 2_000.0,
-        grade: 0.0,
         route: straight(20),
         speed: 2.0,
-        crab_final_m: 0.0,
         tank_turn_deg: 90.0,
-        steering_steps: Vec::new(),
-        speeds: Vec::new(),
-        stops: Vec::new(),
+        ..TugParams::default()
     });
     let mut stopped_at = None;
     for _ in 0..120_000 {
@@ -356,14 +333,10 @@ fn the_step_test_records_each_step_of_the_steering() {
     let mut tug = Tug::new(TugParams {
         seed: 5,
         payload: 0.0,
-        grade: 0.0,
         route: straight(10),
         speed: 2.0,
-        crab_final_m: 0.0,
-        tank_turn_deg: 0.0,
         steering_steps: vec![10.0, -10.0],
-        speeds: Vec::new(),
-        stops: Vec::new(),
+        ..TugParams::default()
     });
     // Engaged at about 0.4 s, two steps of 3 s, then away.
     for _ in 0..6_300 {
@@ -413,14 +386,10 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
     let mut tug = Tug::new(TugParams {
         seed: 6,
         payload: 1_000.0,
-        grade: 0.0,
         route: straight(60),
-        speed: 3.0,
-        crab_final_m: 0.0,
-        tank_turn_deg: 0.0,
-        steering_steps: Vec::new(),
         speeds: vec![(20.0, 1.0), (45.0, 2.0)],
         stops: vec![(40.0, Duration::from_secs(3))],
+        ..TugParams::default()
     });
     let (mut fastest_slow_part, mut fastest_before) = (0.0f64, 0.0f64);
     for _ in 0..120_000 {

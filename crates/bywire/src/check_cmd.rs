@@ -7,7 +7,7 @@ use std::time::Duration;
 use anyhow::{bail, Context, Result};
 use bywire_bus::runner;
 use bywire_sim::steering::SensorFault;
-use bywire_sim::tug::{apron_loop, Fault, Tug, TugParams};
+use bywire_sim::tug::{Fault, Tug, TugParams};
 use bywire_vehicle::acceptance::{CheckConfig, Checker};
 use bywire_vehicle::profile::Profile;
 
@@ -45,18 +45,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let mut checker =
         Checker::new(&loaded, config).with_context(|| format!("--profile {}", args.profile))?;
     if args.bus == "tug" {
-        let mut tug = Tug::new(TugParams {
-            seed: 1,
-            payload: 2_000.0,
-            grade: 0.0,
-            route: apron_loop(),
-            speed: 3.0,
-            crab_final_m: 0.0,
-            tank_turn_deg: 0.0,
-            steering_steps: Vec::new(),
-            speeds: Vec::new(),
-            stops: Vec::new(),
-        });
+        let mut tug = Tug::new(TugParams::default());
         match args.tug_fault.as_deref() {
             None => {}
             Some("stuck-sensor") => {

@@ -68,7 +68,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             args.scenario
         ),
     };
-    let payload = args.payload.unwrap_or(scenario.payload);
+    let payload = args.payload.unwrap_or(scenario.tug.payload);
     if !(0.0..=4_500.0).contains(&payload) {
         bail!("--payload {payload}: 0 to 4500 kg");
     }

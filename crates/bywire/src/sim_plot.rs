@@ -45,8 +45,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, tug: &Tug) -> Result<(
     root.fill(&WHITE).map_err(plot_error)?;
     let (top, bottom) = root.split_vertically(600);
     let (map, loads) = top.split_horizontally(620);
-    draw_map(&map, tug)?;
     let markers = markers(tug);
+    draw_map(&map, tug, &markers)?;
     let bus_loads: Vec<Series> = ["bus 1", "bus 2", "bus 3", "bus 1b"]
         .into_iter()
         .zip(windowed_loads(&tug.trace, LOAD_WINDOW))
@@ -132,7 +132,11 @@ fn short_name(detail: &str) -> &str {
 
 /// The route (grey), the path driven (blue) from its start (green) to its end (black), and a
 /// dot with its number where each fault struck — at one scale on both axes.
-fn draw_map<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, tug: &Tug) -> Result<()> {
+fn draw_map<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    tug: &Tug,
+    markers: &[Marker],
+) -> Result<()> {
     let route: Vec<(f64, f64)> = tug.route().iter().map(|p| (p.x, p.y)).collect();
     let path: Vec<(f64, f64)> = tug.trace.iter().map(|s| (s.pose.x, s.pose.y)).collect();
     let (mut x0, mut x1, mut y0, mut y1) = (
@@ -182,7 +186,7 @@ fn draw_map<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, tug: &Tug) -> Res
                 .map_err(plot_error)?;
         }
     }
-    for marker in markers(tug).iter().filter(|m| m.color == FAULT_COLOR) {
+    for marker in markers.iter().filter(|m| m.color == FAULT_COLOR) {
         // Where the tug was: the last sample at or before the fault.
         let at = tug
             .trace
