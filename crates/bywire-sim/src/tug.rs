@@ -904,13 +904,17 @@ impl Tug {
     #[allow(clippy::cast_precision_loss)]
     pub fn bus_loads(&self) -> [f64; 4] {
         let elapsed = self.now.as_nanos().max(1) as f64;
+        self.busy_ns().map(|busy| busy as f64 / elapsed)
+    }
+
+    /// How long each bus (1, 2, 3, 1b) has been busy since the start, ns.
+    fn busy_ns(&self) -> [u64; 4] {
         [
             self.bus1.busy_ns(),
             self.bus2.busy_ns(),
             self.bus3.busy_ns(),
             self.bus1b.busy_ns(),
         ]
-        .map(|busy| busy as f64 / elapsed)
     }
 
     /// One millisecond.
@@ -959,12 +963,7 @@ impl Tug {
                 speed: self.pose_speed(),
                 steering_command: self.steering_command,
                 steering_actual,
-                busy_ns: [
-                    self.bus1.busy_ns(),
-                    self.bus2.busy_ns(),
-                    self.bus3.busy_ns(),
-                    self.bus1b.busy_ns(),
-                ],
+                busy_ns: self.busy_ns(),
             });
         }
     }
@@ -1022,17 +1021,12 @@ impl Tug {
                 .submit(self.io_port, reference_tug::sealed_frame(id, payload), now);
         }
         if counter % 2 == 0 {
-            let (mut speeds, mut angles) = ([0.0; 4], [0.0; 4]);
-            for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
-                if let (Some(Controlled::Drive(d)), Some(slot)) =
-                    (self.master.controlled(drive), speeds.get_mut(i))
-                {
-                    *slot = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
-                }
-                if let (Some(Controlled::Drive(d)), Some(slot)) =
-                    (self.master.controlled(*steer), angles.get_mut(i))
-                {
-                    *slot = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+            // As the drives report them on bus 2.
+            let angles = self.first_tracks();
+            let mut speeds = [0.0; 4];
+            for (speed, drive) in speeds.iter_mut().zip(DRIVE_NODES) {
+                if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
+                    *speed = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
                 }
             }
             let feedback_counter = (counter / 2) & 0x0F;
@@ -1505,7 +1499,7 @@ impl Tug {
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
         let active = &self.active;
-        let drives_lost = self.ecu_stops();
+        let stopping = self.ecu_stops();
         for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
             let steer_silent = active
                 .iter()
@@ -1544,7 +1538,7 @@ impl Tug {
                 .set_parked(!a.motors_enabled && speed.abs() < 0.05);
             corner
                 .wheel
-                .step_brake(dt, if drives_lost { 1.0 } else { a.brake / 100.0 });
+                .step_brake(dt, if stopping { 1.0 } else { a.brake / 100.0 });
             power += output.power;
             corner.distance += speed * dt;
             corner.drive.app_mut().0.set_actual(
