@@ -17,9 +17,6 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut tug = Tug::new(scenario.params(1, scenario.tug.payload));
     for _ in 0..1_000 {
-        let before = tug.now();
-        tug.step();
-        let now = tug.now();
-        scenario.apply(&mut tug, before, now);
+        scenario.step(&mut tug);
     }
 });

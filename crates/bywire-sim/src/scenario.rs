@@ -405,9 +405,12 @@ impl Scenario {
         }
     }
 
-    /// Inject what is due in the step that reaches `now` (events at or before `now`, after
-    /// `before`).
-    pub fn apply(&self, tug: &mut Tug, before: Timestamp, now: Timestamp) {
+    /// One step of `tug`, with what the scenario injects in it (events after the step's
+    /// start, at or before its end).
+    pub fn step(&self, tug: &mut Tug) {
+        let before = tug.now();
+        tug.step();
+        let now = tug.now();
         for (at, fault, duration) in &self.events {
             let at = Timestamp::ZERO.saturating_add(*at);
             if at > before && at <= now {

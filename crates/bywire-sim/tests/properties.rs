@@ -139,10 +139,7 @@ proptest! {
         let scenario = scenario.unwrap();
         let mut tug = Tug::new(scenario.params(seed, scenario.tug.payload));
         for _ in 0..8_000 {
-            let before = tug.now();
-            tug.step();
-            let now = tug.now();
-            scenario.apply(&mut tug, before, now);
+            scenario.step(&mut tug);
         }
         let pose = tug.pose();
         prop_assert!(pose.x.is_finite() && pose.y.is_finite() && pose.yaw.is_finite(), "{:?}", pose);

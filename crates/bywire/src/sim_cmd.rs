@@ -227,10 +227,8 @@ fn run_plain(
     let stop = crate::interrupt_flag();
     let mut next_report = Timestamp::ZERO;
     let completed = loop {
-        let before = tug.now();
-        tug.step();
+        scenario.step(tug);
         let now = tug.now();
-        scenario.apply(tug, before, now);
         shared.exchange(tug);
         if tug.arrived() {
             break true;

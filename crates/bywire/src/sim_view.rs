@@ -57,9 +57,7 @@ fn event_loop(
         last = Instant::now();
         if !paused {
             for _ in 0..elapsed.as_millis().min(200) {
-                let before = tug.now();
-                tug.step();
-                scenario.apply(tug, before, tug.now());
+                scenario.step(tug);
                 shared.exchange(tug);
             }
         }
