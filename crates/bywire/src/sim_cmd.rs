@@ -45,12 +45,12 @@ pub struct Args {
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:29536")]
     serve: Option<std::net::SocketAddr>,
     /// With --serve: send socketcand's discovery beacon (naming the four buses) every 3 s, to
-    /// 127.0.0.1:42000 or to ADDR:PORT, so SavvyCAN and python-can find the served buses.
+    /// 127.0.0.1:42000 or to ADDR:PORT, as socketcand does (python-can's detect_beacon reads it).
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:42000", requires = "serve")]
     beacon: Option<std::net::SocketAddr>,
     /// Carry a simulated bus to and from another bus while it runs, e.g. bus2=vcan0 (a
-    /// SocketCAN interface, for candump or SavvyCAN) or bus3=socketcand:HOST:PORT/NAME; any
-    /// bus argument. Repeatable.
+    /// SocketCAN interface, for candump and the other can-utils) or
+    /// bus3=socketcand:HOST:PORT/NAME; any bus argument. Repeatable.
     #[arg(long, value_name = "BUS=BUSARG")]
     attach: Vec<String>,
 }

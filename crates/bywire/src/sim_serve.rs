@@ -1,6 +1,7 @@
 //! The simulated buses shared with other programs while `bywire sim` runs: `--serve` puts each
-//! through a socketcand server (for `bywire dump`, python-can, SavvyCAN), `--attach` carries
-//! one to another bus (a SocketCAN interface such as vcan0, for candump and the like). Each
+//! through a socketcand server (for `bywire dump`, python-can and other socketcand clients),
+//! `--attach` carries one to another bus (a SocketCAN interface such as vcan0, for candump
+//! and the like). Each
 //! share is a port on the simulated bus linked to an endpoint; [`Shared::exchange`] carries
 //! frames between the two after every step.
 
