@@ -146,7 +146,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
     let ecu = tug.ecu();
     let [fl, fr, rl, rr] = tug.wheel_angles();
     let [b1, b2, b3, b1b] = tug.bus_loads();
-    let faults: Vec<String> = tug.active_faults().map(|f| format!("{f:?}")).collect();
+    let faults: Vec<String> = tug.active_faults().map(|f| f.to_string()).collect();
     let mut lines = vec![
         Line::from(format!("speed      {:5.2} m/s", tug.pose_speed())),
         Line::from(format!("position   x {:7.2}  y {:7.2}", pose.x, pose.y)),
