@@ -16,6 +16,7 @@
 //! ```
 
 pub mod faults;
+pub mod network;
 pub mod runner;
 pub mod sim;
 pub mod sim_endpoint;

@@ -37,31 +37,8 @@ pub mod sdo;
 
 pub use abort::Abort;
 
-use bywire_core::frame::Frame;
-use bywire_core::time::Timestamp;
+pub use bywire_core::node::{Node, Port};
 
-pub use bywire_core::node::Node;
-
-impl<A: device::Application> Node for device::Device<A> {
-    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        device::Device::on_frame(self, now, frame);
-    }
-    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
-        device::Device::poll(self, now, out);
-    }
-    fn next_deadline(&self) -> Option<Timestamp> {
-        device::Device::next_deadline(self)
-    }
-}
-
-impl Node for master::Master {
-    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        master::Master::on_frame(self, now, frame);
-    }
-    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
-        master::Master::poll(self, now, out);
-    }
-    fn next_deadline(&self) -> Option<Timestamp> {
-        master::Master::next_deadline(self)
-    }
-}
+// The nodes of one bus connection: their inherent methods, on the main port.
+bywire_core::single_port_node!(device::Device<A> where A: device::Application);
+bywire_core::single_port_node!(master::Master);

@@ -14,7 +14,7 @@ use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand, NmtState};
 use bywire_canopen::roboteq::{self, Mdc1460, RoboteqCommand, RoboteqMotor};
-use bywire_canopen::Node;
+use bywire_canopen::{Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
@@ -38,7 +38,7 @@ impl Bus {
     fn step(&mut self, nodes: &mut [&mut dyn Node]) {
         let mut pending: Vec<(usize, Frame)> = Vec::new();
         for (i, node) in nodes.iter_mut().enumerate() {
-            node.poll(self.now, &mut |frame| pending.push((i, frame)));
+            node.poll(self.now, &mut |_, frame| pending.push((i, frame)));
         }
         // Bounded: each round's frames are answered by at most a block of responses.
         for _ in 0..64 {
@@ -53,12 +53,12 @@ impl Bus {
                 self.log.push((self.now, from, frame));
                 for (i, node) in nodes.iter_mut().enumerate() {
                     if i != from {
-                        node.on_frame(self.now, &frame);
+                        node.on_frame(self.now, Port::MAIN, &frame);
                     }
                 }
             }
             for (i, node) in nodes.iter_mut().enumerate() {
-                node.poll(self.now, &mut |frame| pending.push((i, frame)));
+                node.poll(self.now, &mut |_, frame| pending.push((i, frame)));
             }
         }
     }

@@ -15,7 +15,7 @@ use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master};
 use bywire_canopen::nmt::NmtCommand;
 use bywire_canopen::roboteq::{dictionary, Mdc1460, RoboteqCommand, RoboteqMotor};
-use bywire_canopen::Node;
+use bywire_canopen::{Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
@@ -29,7 +29,7 @@ fn step(
     silent: Option<usize>,
 ) {
     for (i, node) in nodes.iter_mut().enumerate() {
-        node.poll(now, &mut |frame| pending.push((i, frame)));
+        node.poll(now, &mut |_, frame| pending.push((i, frame)));
     }
     for _ in 0..8 {
         if pending.is_empty() {
@@ -43,12 +43,12 @@ fn step(
             }
             for (i, node) in nodes.iter_mut().enumerate() {
                 if i != *from {
-                    node.on_frame(now, frame);
+                    node.on_frame(now, Port::MAIN, frame);
                 }
             }
         }
         for (i, node) in nodes.iter_mut().enumerate() {
-            node.poll(now, &mut |frame| pending.push((i, frame)));
+            node.poll(now, &mut |_, frame| pending.push((i, frame)));
         }
     }
 }

@@ -29,7 +29,7 @@ use bywire_canopen::master::{Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand, NmtState};
 use bywire_canopen::od::{Access, DataType, Entry};
 use bywire_canopen::sdo::{SdoError, TransferMode};
-use bywire_canopen::{Abort, Node};
+use bywire_canopen::{Abort, Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
@@ -120,11 +120,11 @@ fn with_our_drive(name: &str, script: &str) -> (Vec<String>, Device<Drive>) {
         ..DeviceInfo::default()
     };
     std::fs::write(&eds_path, eds::write(&od, &info, Some(NODE))).unwrap();
-    let mut bus = open(&format!("virtual:{name}")).unwrap();
+    let bus = open(&format!("virtual:{name}")).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let device = Device::new(NODE, od, Drive::new());
     let runner_stop = Arc::clone(&stop);
-    let handle = std::thread::spawn(move || runner::run(&mut *bus, device, &runner_stop).unwrap());
+    let handle = std::thread::spawn(move || runner::run(bus, device, &runner_stop).unwrap());
     let lines = finish(python(
         &format!("{PREAMBLE}{script}"),
         port,
@@ -277,17 +277,17 @@ struct Scripted {
 }
 
 impl Node for Scripted {
-    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
         self.master.on_frame(now, frame);
     }
-    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         for (at, action) in &mut self.actions {
             if *at <= now {
                 action(&mut self.master);
                 *at = Timestamp::from_nanos(u64::MAX);
             }
         }
-        self.master.poll(now, out);
+        self.master.poll(now, &mut |frame| out(Port::MAIN, frame));
     }
     fn next_deadline(&self) -> Option<Timestamp> {
         let next_action = self.actions.iter().map(|(at, _)| *at).min();
@@ -388,11 +388,10 @@ network.disconnect()
             ),
         ],
     };
-    let mut bus = open(&format!("virtual:{name}")).unwrap();
+    let bus = open(&format!("virtual:{name}")).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let runner_stop = Arc::clone(&stop);
-    let handle =
-        std::thread::spawn(move || runner::run(&mut *bus, scripted, &runner_stop).unwrap());
+    let handle = std::thread::spawn(move || runner::run(bus, scripted, &runner_stop).unwrap());
     std::thread::sleep(Duration::from_millis(3_200));
     stop.store(true, Ordering::Relaxed);
     let mut master = handle.join().unwrap().master;

@@ -14,7 +14,7 @@ use bywire_canopen::cia402::{drive_dictionary, Drive, DriveController, Mode};
 use bywire_canopen::device::{Device, Plain};
 use bywire_canopen::master::{Controlled, Master};
 use bywire_canopen::roboteq::{dictionary, Mdc1460, RoboteqCommand, RoboteqMotor};
-use bywire_canopen::{eds, Abort, Node};
+use bywire_canopen::{eds, Abort, Node, Port};
 use bywire_core::frame::{Dlc, Frame, Id};
 use bywire_core::time::Timestamp;
 use proptest::prelude::*;
@@ -71,8 +71,8 @@ fn drive_responses(frames: &[(u64, Frame)]) -> Vec<Frame> {
         drive.on_frame(time, frame);
         drive.poll(time, &mut |f| from_drive.push(f));
         for node in [&mut roboteq as &mut dyn Node, &mut plain, &mut master] {
-            node.on_frame(time, frame);
-            node.poll(time, &mut |_| {});
+            node.on_frame(time, Port::MAIN, frame);
+            node.poll(time, &mut |_, _| {});
         }
     }
     from_drive

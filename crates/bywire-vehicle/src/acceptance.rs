@@ -5,6 +5,7 @@
 
 use core::time::Duration;
 
+use bywire_core::node::Port;
 use bywire_core::{Frame, Timestamp};
 
 use crate::ads::{Ads, AdsCommand};
@@ -524,11 +525,11 @@ fn show(ms: Option<f64>) -> String {
 }
 
 impl bywire_core::node::Node for Checker {
-    fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
         Checker::on_frame(self, now, frame);
     }
-    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
-        Checker::poll(self, now, out);
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        Checker::poll(self, now, &mut |frame| out(Port::MAIN, frame));
     }
     fn next_deadline(&self) -> Option<Timestamp> {
         // The checks count cycles of a millisecond.

@@ -9,6 +9,7 @@
 use core::time::Duration;
 
 use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
@@ -39,6 +40,8 @@ pub struct AdsConfig {
     pub track: f64,
     /// Steering within this of its setpoint counts as reached, degrees.
     pub steering_tolerance: f64,
+    /// As a node, send every frame on both command buses ([`Ads::PORT_A`], [`Ads::PORT_B`]).
+    pub redundant: bool,
 }
 
 impl Default for AdsConfig {
@@ -54,6 +57,7 @@ impl Default for AdsConfig {
             wheelbase: 3.2,
             track: 1.8,
             steering_tolerance: 0.5,
+            redundant: false,
         }
     }
 }
@@ -165,7 +169,13 @@ pub struct Ads<W: AdsWire = ReferenceWire> {
     steering_pending: Option<(f64, Timestamp)>,
     /// The last setpoint whose response was (or is being) measured.
     steering_reference: Option<f64>,
+    /// Feedback frames lately taken as a node, to skip the redundant bus's copies.
+    recent: [Option<(Port, Timestamp, Frame)>; RECENT],
+    recent_next: usize,
 }
+
+/// Feedback frames remembered to recognise the copy from the other bus.
+const RECENT: usize = 8;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct BrakeBurst {
@@ -204,6 +214,8 @@ impl<W: AdsWire> Ads<W> {
             last_sensors: None,
             steering_pending: None,
             steering_reference: None,
+            recent: [None; RECENT],
+            recent_next: 0,
         }
     }
 
@@ -450,5 +462,53 @@ impl<W: AdsWire> Ads<W> {
             }
         }
         self.last_sensors = Some(now);
+    }
+}
+
+impl<W: AdsWire> Ads<W> {
+    /// The port of the command bus A.
+    pub const PORT_A: Port = Port(0);
+    /// The port of the redundant command bus B.
+    pub const PORT_B: Port = Port(1);
+
+    /// Whether `frame` is the other bus's copy of feedback taken within the last cycle.
+    fn is_copy(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        let window = self.config.cycle;
+        let copy = self.recent.iter().flatten().any(|(from, at, seen)| {
+            *from != port && seen == frame && now.saturating_since(*at) <= window
+        });
+        if !copy {
+            if let Some(slot) = self.recent.get_mut(self.recent_next) {
+                *slot = Some((port, now, *frame));
+            }
+            self.recent_next = (self.recent_next + 1) % RECENT;
+        }
+        copy
+    }
+}
+
+/// The ADS side as a node: its frames go out on [`Ads::PORT_A`] (and [`Ads::PORT_B`] when
+/// [`AdsConfig::redundant`]); feedback is taken from either port, the second copy of a frame
+/// that came on both skipped.
+impl<W: AdsWire> Node for Ads<W> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        if self.config.redundant && self.is_copy(now, port, frame) {
+            return;
+        }
+        Ads::on_frame(self, now, frame);
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        let redundant = self.config.redundant;
+        Ads::poll(self, now, &mut |frame| {
+            out(Self::PORT_A, frame);
+            if redundant {
+                out(Self::PORT_B, frame);
+            }
+        });
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        Ads::next_deadline(self)
     }
 }

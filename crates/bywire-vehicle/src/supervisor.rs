@@ -22,10 +22,11 @@ use core::time::Duration;
 
 use bywire_control::stages::RateLimiter;
 use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
-use crate::reference_tug::{self, ControlMode, Gear, SteeringMode};
+use crate::reference_tug::{ControlMode, Gear, SteeringMode};
 use crate::wire::{Incoming, ReferenceWire, Rejected, StateReport, VehicleWire};
 
 /// Tuning of the supervisor.
@@ -402,7 +403,8 @@ pub struct Supervisor<W: VehicleWire = ReferenceWire> {
     config: SupervisorConfig,
     counter: CounterChecker,
     counter_b: CounterChecker,
-    voter: Option<DualVoter<[u8; 8]>>,
+    /// Votes on the decoded command and its counter, whatever the frame's format.
+    voter: Option<DualVoter<(Command, u8)>>,
     degraded: Option<Channel>,
     stats: CommandStats,
     command: Option<Command>,
@@ -557,10 +559,11 @@ impl<W: VehicleWire> Supervisor<W> {
         }
         let c = self.config;
         let command = command.ok_or(Rejection::OutOfRange)?;
-        if command.steering.abs() > c.steering_range
-            || command.velocity.abs() > c.speed_limit
-            || command.brake > 100.0
-        {
+        // Written so that a NaN (a float signal can carry one) fails every comparison.
+        let within = command.steering.abs() <= c.steering_range
+            && command.velocity.abs() <= c.speed_limit
+            && (0.0..=100.0).contains(&command.brake);
+        if !within {
             return Err(Rejection::OutOfRange);
         }
         Ok((command, counter))
@@ -574,7 +577,7 @@ impl<W: VehicleWire> Supervisor<W> {
     /// A frame from one of the two buses.
     pub fn on_frame_from(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
         match self.wire.incoming(frame) {
-            Incoming::Command(read) => self.on_command(now, channel, frame, read),
+            Incoming::Command(read) => self.on_command(now, channel, read),
             Incoming::Estop(requested) => {
                 self.estop_active = requested;
                 self.evaluate(false, false);
@@ -592,15 +595,14 @@ impl<W: VehicleWire> Supervisor<W> {
         &mut self,
         now: Timestamp,
         channel: Channel,
-        frame: &Frame,
         read: Result<(Option<Command>, u64), Rejected>,
     ) {
         let (command, counter) = match self.validate(now, channel, read) {
             Err(r) => return self.stats.count(r),
             Ok(valid) => valid,
         };
-        if let (Some(voter), Some(copy)) = (self.voter.as_mut(), reference_tug::payload(frame)) {
-            voter.receive(channel, now, copy);
+        if let Some(voter) = self.voter.as_mut() {
+            voter.receive(channel, now, (command, counter));
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
                 Vote::Degraded { healthy, .. } => self.degraded = Some(healthy),
@@ -830,5 +832,39 @@ impl<W: VehicleWire> Supervisor<W> {
         let mask = (1u64 << self.wire.state_counter_bits().clamp(1, 8)) - 1;
         self.state_counter = (self.state_counter + 1) & mask;
         frame
+    }
+}
+
+impl<W: VehicleWire> Supervisor<W> {
+    /// The port of the command bus (bus A; the only one without redundancy).
+    pub const PORT_A: Port = Port(0);
+    /// The port of the redundant command bus B.
+    pub const PORT_B: Port = Port(1);
+}
+
+/// The supervisor as a node: commands and the E-stop chain on [`Supervisor::PORT_A`] and, with
+/// redundancy, [`Supervisor::PORT_B`]; the state frame goes out on each command bus, so the ADS
+/// keeps its feedback when one bus is lost. Frames on other ports are not its buses'.
+impl<W: VehicleWire> Node for Supervisor<W> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        match port {
+            Self::PORT_A => self.on_frame_from(now, Channel::A, frame),
+            Self::PORT_B if self.voter.is_some() => self.on_frame_from(now, Channel::B, frame),
+            _ => {}
+        }
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        let redundant = self.voter.is_some();
+        Supervisor::poll(self, now, &mut |frame| {
+            out(Self::PORT_A, frame);
+            if redundant {
+                out(Self::PORT_B, frame);
+            }
+        });
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        Supervisor::next_deadline(self)
     }
 }

@@ -16,7 +16,7 @@ use bywire_canopen::nmt::{parse_heartbeat, HeartbeatEvent, NmtCommand, NmtState}
 use bywire_canopen::od::{DataType, ObjectDictionary};
 use bywire_canopen::roboteq::Mdc1460;
 use bywire_canopen::sdo::{SdoOutcome, TransferMode};
-use bywire_canopen::Node;
+use bywire_canopen::{Node, Port};
 use bywire_core::frame::{Frame, Id};
 use bywire_core::time::Timestamp;
 
@@ -333,11 +333,11 @@ fn type_for(
 
 /// Run a master until its one SDO transfer ends.
 fn transfer(bus_text: &str, master: &mut Master, timeout: Duration) -> Result<SdoOutcome> {
-    let mut bus = open_bus(bus_text)?;
+    let bus = open_bus(bus_text)?;
     let stop = crate::interrupt_flag();
     let mut outcome = None;
     runner::run_until(
-        &mut *bus,
+        bus,
         master,
         &stop,
         Some(timeout + Duration::from_secs(1)),
@@ -413,9 +413,9 @@ fn nmt(
     let mut master = Master::new(0, Duration::ZERO, Duration::from_millis(100));
     master.nmt(command, node);
     if node == 0 {
-        let mut bus = open_bus(bus_text)?;
+        let bus = open_bus(bus_text)?;
         runner::run_until(
-            &mut *bus,
+            bus,
             &mut master,
             &crate::interrupt_flag(),
             Some(Duration::from_millis(50)),
@@ -429,9 +429,9 @@ fn nmt(
     let resets = command.target() == NmtState::BootUp;
     let mut booted = false;
     let mut seen = None;
-    let mut bus = open_bus(bus_text)?;
+    let bus = open_bus(bus_text)?;
     runner::run_until(
-        &mut *bus,
+        bus,
         &mut master,
         &crate::interrupt_flag(),
         Some(wait),
@@ -488,7 +488,7 @@ struct Scanner {
 }
 
 impl Node for Scanner {
-    fn on_frame(&mut self, _now: Timestamp, frame: &Frame) {
+    fn on_frame(&mut self, _now: Timestamp, _port: Port, frame: &Frame) {
         if let Some((node, state)) = parse_heartbeat(frame) {
             self.found.insert(node, Some(state));
         } else if let Some(Id::Standard(id)) = frame.id() {
@@ -498,14 +498,14 @@ impl Node for Scanner {
             }
         }
     }
-    fn poll(&mut self, _now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    fn poll(&mut self, _now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         if !self.asked {
             self.asked = true;
             for node in 1..=127u16 {
                 let id = Id::standard(0x600 + u32::from(node))
                     .unwrap_or(Id::Standard(bywire_core::frame::StandardId::ZERO));
                 if let Ok(frame) = Frame::classic(id, &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]) {
-                    out(frame);
+                    out(Port::MAIN, frame);
                 }
             }
         }
@@ -516,16 +516,15 @@ impl Node for Scanner {
 }
 
 fn scan(bus_text: &str, wait: Duration, out: &mut impl Write) -> Result<()> {
-    let mut bus = open_bus(bus_text)?;
+    let bus = open_bus(bus_text)?;
     let mut scanner = Scanner::default();
     runner::run_until(
-        &mut *bus,
+        bus,
         &mut scanner,
         &crate::interrupt_flag(),
         Some(wait),
         |_| false,
     )?;
-    drop(bus);
     if scanner.found.is_empty() {
         writeln!(out, "no nodes answered within {} ms", wait.as_millis())?;
         return Ok(());
@@ -585,13 +584,13 @@ fn run_device<A: Application>(
     } else {
         device
     };
-    let mut bus = open_bus(options.bus)?;
+    let bus = open_bus(options.bus)?;
     let node = device.node();
     writeln!(out, "node {node} on {}", options.bus)?;
     out.flush()?;
     let mut failure = None;
     runner::run_until(
-        &mut *bus,
+        bus,
         &mut device,
         &crate::interrupt_flag(),
         options.duration,

@@ -73,10 +73,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         if args.tug_fault.is_some() {
             bail!("--tug-fault is for the simulated tug (bus `tug`)");
         }
-        let mut bus =
-            crate::busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
+        let bus = crate::busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
         runner::run_until(
-            &mut *bus,
+            bus,
             &mut checker,
             &crate::interrupt_flag(),
             Some(Duration::from_secs(600)),

@@ -1,0 +1,342 @@
+//! The simulated runner: named bit-timed buses ([`SimBus`]) with nodes wired to them by port,
+//! run in simulated time by the rule in [`bywire_core::node`].
+//!
+//! A [`Network`] holds the buses and the wiring, not the nodes: each call that runs it takes
+//! the nodes as a slice, in the order they were numbered when wired, so the caller keeps its
+//! concrete node types to look at between runs. The runner is event-driven: it wakes at the
+//! earliest of the nodes' deadlines and the buses' next changes (a delivery, a transmission's
+//! start, a bus-off recovery), delivers each frame to the ports whose filters took it at its
+//! end of frame, and polls the nodes that are due or received something.
+//!
+//! Faults are applied at the edges, never inside node code: a node's output dropped
+//! ([`Network::drop_output`]), and whatever the buses themselves inject ([`Network::bus_mut`]:
+//! tampered identifiers, destroyed frames, bus-off).
+//!
+//! It lives beside [`SimBus`] so that every crate's tests (CANopen, the vehicle interface) and
+//! the simulator run their nodes on the same runner.
+
+use std::time::Duration;
+
+use bywire_core::node::{Node, Port};
+use bywire_core::{Frame, Timestamp};
+
+use crate::sim::{NodeId, SimBus};
+use crate::Filtering;
+
+/// A node's index in the slice given to [`Network::run_until`].
+pub type NodeIndex = usize;
+
+/// A bus's index in the network.
+pub type BusIndex = usize;
+
+/// A node's deadline at or before the time it was last polled counts as this much later, so
+/// a node that keeps asking for the past cannot stall simulated time.
+const RESOLUTION: Duration = Duration::from_micros(1);
+
+/// Passes at one instant after which time is moved on by [`RESOLUTION`] (a bus that keeps
+/// reporting a change it does not make must not stall the run).
+const PASSES_PER_INSTANT: u32 = 64;
+
+struct Wire {
+    node: NodeIndex,
+    port: Port,
+    bus: BusIndex,
+    endpoint: NodeId,
+}
+
+/// Named bit-timed buses and the wiring of nodes to them.
+pub struct Network {
+    buses: Vec<(String, SimBus)>,
+    wires: Vec<Wire>,
+    /// Per node: its output is dropped (the node is cut off or powered down).
+    dropped: Vec<bool>,
+    /// Per node: when it was last polled.
+    polled: Vec<Option<Timestamp>>,
+    now: Timestamp,
+    outgoing: Vec<(Port, Frame)>,
+    received: Vec<bool>,
+}
+
+impl Default for Network {
+    fn default() -> Self {
+        Network::new()
+    }
+}
+
+impl Network {
+    /// A network with no buses, at time zero.
+    pub fn new() -> Network {
+        Network {
+            buses: Vec::new(),
+            wires: Vec::new(),
+            dropped: Vec::new(),
+            polled: Vec::new(),
+            now: Timestamp::ZERO,
+            outgoing: Vec::with_capacity(64),
+            received: Vec::new(),
+        }
+    }
+
+    /// Add a bus at `nominal` bit/s (FD data phases at `data` bit/s when given).
+    pub fn add_bus(&mut self, name: &str, nominal: u32, data: Option<u32>) -> BusIndex {
+        self.buses
+            .push((name.to_string(), SimBus::new(nominal, data)));
+        self.buses.len() - 1
+    }
+
+    /// A bus by name.
+    pub fn bus_index(&self, name: &str) -> Option<BusIndex> {
+        self.buses.iter().position(|(n, _)| n == name)
+    }
+
+    /// Wire `node`'s `port` to `bus`; the endpoint's number on that bus is returned (for the
+    /// bus's events and faults).
+    pub fn wire(&mut self, node: NodeIndex, port: Port, bus: BusIndex) -> Option<NodeId> {
+        let (_, sim) = self.buses.get_mut(bus)?;
+        let endpoint = sim.add_node();
+        self.wires.push(Wire {
+            node,
+            port,
+            bus,
+            endpoint,
+        });
+        let nodes = node.saturating_add(1).max(self.dropped.len());
+        self.dropped.resize(nodes, false);
+        self.polled.resize(nodes, None);
+        self.received.resize(nodes, false);
+        Some(endpoint)
+    }
+
+    /// A listener on `bus` that no node drives (a logger, a tap): read it with
+    /// [`Network::bus_mut`] and [`SimBus::receive`].
+    pub fn tap(&mut self, bus: BusIndex) -> Option<NodeId> {
+        self.buses.get_mut(bus).map(|(_, sim)| sim.add_node())
+    }
+
+    /// Set what a port receives.
+    pub fn set_filtering(&mut self, node: NodeIndex, port: Port, filtering: Filtering) {
+        if let Some(w) = self.wires.iter().find(|w| w.node == node && w.port == port) {
+            if let Some((_, sim)) = self.buses.get_mut(w.bus) {
+                sim.set_filtering(w.endpoint, filtering);
+            }
+        }
+    }
+
+    /// Drop (or again let through) everything `node` sends: a node cut off the bus.
+    pub fn drop_output(&mut self, node: NodeIndex, dropped: bool) {
+        if let Some(slot) = self.dropped.get_mut(node) {
+            *slot = dropped;
+        }
+    }
+
+    /// A bus, to inject faults into or read a tap.
+    pub fn bus_mut(&mut self, bus: BusIndex) -> Option<&mut SimBus> {
+        self.buses.get_mut(bus).map(|(_, sim)| sim)
+    }
+
+    /// A bus, to read its events and counts.
+    pub fn bus(&self, bus: BusIndex) -> Option<&SimBus> {
+        self.buses.get(bus).map(|(_, sim)| sim)
+    }
+
+    /// Simulated time so far.
+    pub fn now(&self) -> Timestamp {
+        self.now
+    }
+
+    /// Run the network up to `until`, driving `nodes` (indexed as wired).
+    pub fn run_until(&mut self, until: Timestamp, nodes: &mut [&mut dyn Node]) {
+        if self.polled.len() < nodes.len() {
+            self.polled.resize(nodes.len(), None);
+            self.dropped.resize(nodes.len(), false);
+            self.received.resize(nodes.len(), false);
+        }
+        // Each pass moves time forward to the next event (or ends at `until`): bounded by the
+        // events between now and `until`, and by PASSES_PER_INSTANT at any one time.
+        let mut passes_here = 0u32;
+        loop {
+            let next = self.next_event(nodes).map(|at| {
+                if at > self.now {
+                    passes_here = 0;
+                    at
+                } else if passes_here >= PASSES_PER_INSTANT {
+                    passes_here = 0;
+                    self.now.saturating_add(RESOLUTION)
+                } else {
+                    passes_here += 1;
+                    self.now
+                }
+            });
+            let Some(at) = next.filter(|at| *at <= until) else {
+                for (_, sim) in &mut self.buses {
+                    sim.advance(until);
+                }
+                self.now = self.now.max(until);
+                return;
+            };
+            self.now = at;
+            self.instant(nodes);
+        }
+    }
+
+    /// Run the network for `duration` more.
+    pub fn run_for(&mut self, duration: Duration, nodes: &mut [&mut dyn Node]) {
+        let until = self.now.saturating_add(duration);
+        self.run_until(until, nodes);
+    }
+
+    /// The earliest time something happens: a node's deadline or a bus's next change.
+    fn next_event(&self, nodes: &[&mut dyn Node]) -> Option<Timestamp> {
+        let deadlines = nodes.iter().enumerate().filter_map(|(i, node)| {
+            let deadline = node.next_deadline()?;
+            // Never polled: due now. Asking for the time already polled: a little later.
+            Some(match self.polled.get(i).copied().flatten() {
+                None => self.now,
+                Some(last) if deadline <= last => last.saturating_add(RESOLUTION),
+                Some(_) => deadline,
+            })
+        });
+        let unpolled = self
+            .polled
+            .iter()
+            .take(nodes.len())
+            .any(Option::is_none)
+            .then_some(self.now);
+        let changes = self.wires.iter().filter_map(|w| {
+            self.buses
+                .get(w.bus)
+                .and_then(|(_, s)| s.next_change(w.endpoint))
+        });
+        deadlines.chain(unpolled).chain(changes).min()
+    }
+
+    /// Everything that happens at `self.now`: buses advanced, frames delivered, the nodes that
+    /// are due or received something polled, and their frames submitted (which end later: a
+    /// frame takes time on the wire, so nothing more arrives at this instant).
+    fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
+        let now = self.now;
+        for (_, sim) in &mut self.buses {
+            sim.advance(now);
+        }
+        self.received.iter_mut().for_each(|r| *r = false);
+        for w in &self.wires {
+            let (Some((_, sim)), Some(node)) = (self.buses.get_mut(w.bus), nodes.get_mut(w.node))
+            else {
+                continue;
+            };
+            while let Some(r) = sim.receive_by(w.endpoint, now) {
+                node.on_frame(r.timestamp, w.port, &r.frame);
+                if let Some(flag) = self.received.get_mut(w.node) {
+                    *flag = true;
+                }
+            }
+        }
+        for (i, node) in nodes.iter_mut().enumerate() {
+            let due = match self.polled.get(i).copied().flatten() {
+                None => true,
+                Some(last) => {
+                    last < now && node.next_deadline().is_some_and(|d| d <= now || d <= last)
+                }
+            };
+            if !(due || self.received.get(i).copied().unwrap_or(false)) {
+                continue;
+            }
+            if let Some(slot) = self.polled.get_mut(i) {
+                *slot = Some(now);
+            }
+            self.outgoing.clear();
+            node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
+            if self.dropped.get(i).copied().unwrap_or(false) {
+                continue;
+            }
+            for (port, frame) in self.outgoing.drain(..) {
+                let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
+                if let Some((w, (_, sim))) =
+                    wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b)))
+                {
+                    sim.submit(w.endpoint, frame, now);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+    use super::*;
+    use bywire_core::Id;
+
+    /// Sends one frame every 10 ms on its main port, counts what it hears.
+    struct Ticker {
+        id: u32,
+        port: Port,
+        next: Timestamp,
+        heard: Vec<(Timestamp, Port, u32)>,
+    }
+
+    impl Node for Ticker {
+        fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+            self.heard
+                .push((now, port, frame.id().map_or(0, |id| id.as_raw())));
+        }
+        fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            if now >= self.next {
+                self.next = self.next.saturating_add(Duration::from_millis(10));
+                let frame = Frame::classic(Id::standard(self.id).unwrap(), &[0; 8]).unwrap();
+                out(self.port, frame);
+            }
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            Some(self.next)
+        }
+    }
+
+    fn ticker(id: u32) -> Ticker {
+        Ticker {
+            id,
+            port: Port::MAIN,
+            next: Timestamp::ZERO,
+            heard: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn frames_arrive_at_their_end_of_frame_on_the_wired_port() {
+        let mut net = Network::new();
+        let bus = net.add_bus("bus1", 500_000, None);
+        net.wire(0, Port::MAIN, bus).unwrap();
+        net.wire(1, Port(3), bus).unwrap();
+        let (mut a, mut b) = (ticker(0x100), ticker(0x200));
+        b.port = Port(3);
+        net.run_until(Timestamp::from_millis(35), &mut [&mut a, &mut b]);
+        // Four frames each (0, 10, 20, 30 ms); each hears the other's, on its own port.
+        assert_eq!(a.heard.len(), 4);
+        assert_eq!(b.heard.len(), 4);
+        assert!(b
+            .heard
+            .iter()
+            .all(|(_, port, id)| *port == Port(3) && *id == 0x100));
+        // Both submitted at 0: 0x100 wins arbitration, 0x200 follows it. A classic 8-byte
+        // frame at 500 kbit/s takes 222–270 µs with stuffing, 3 bits of intermission between.
+        let first_b = b.heard[0].0.as_nanos();
+        let first_a = a.heard[0].0.as_nanos();
+        assert!((200_000..300_000).contains(&first_b), "{first_b}");
+        assert!(first_a > first_b + 200_000, "{first_a} after {first_b}");
+        assert_eq!(net.now(), Timestamp::from_millis(35));
+    }
+
+    #[test]
+    fn a_node_whose_output_is_dropped_is_not_heard() {
+        let mut net = Network::new();
+        let bus = net.add_bus("bus1", 500_000, None);
+        net.wire(0, Port::MAIN, bus).unwrap();
+        net.wire(1, Port::MAIN, bus).unwrap();
+        net.drop_output(1, true);
+        let (mut a, mut b) = (ticker(0x100), ticker(0x200));
+        net.run_until(Timestamp::from_millis(50), &mut [&mut a, &mut b]);
+        assert!(a.heard.is_empty());
+        assert_eq!(b.heard.len(), 5);
+    }
+}
