@@ -144,7 +144,9 @@ impl Network {
         self.now
     }
 
-    /// Run the network up to `until`, driving `nodes` (indexed as wired).
+    /// Run everything that happens before `until`, driving `nodes` (indexed as wired). What
+    /// falls at `until` itself happens in the next run, after whatever the caller changes at
+    /// that time (a new command, a cut-off node).
     pub fn run_until(&mut self, until: Timestamp, nodes: &mut [&mut dyn Node]) {
         if self.polled.len() < nodes.len() {
             self.polled.resize(nodes.len(), None);
@@ -167,7 +169,7 @@ impl Network {
                     self.now
                 }
             });
-            let Some(at) = next.filter(|at| *at <= until) else {
+            let Some(at) = next.filter(|at| *at < until) else {
                 for (_, sim) in &mut self.buses {
                     sim.advance(until);
                 }
