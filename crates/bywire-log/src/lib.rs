@@ -6,10 +6,14 @@
 //! - [`screen`]: candump's screen form, `  can0  123   [4]  DE AD BE EF`, written as candump
 //!   prints it and read back (for tools that take either form on standard input).
 //!
+//! - [`lines`]: text lines in bounded memory (too long or not UTF-8: reported with the line's
+//!   number, and reading goes on).
+//!
 //! Readers hold one line at a time, so logs of any size stream in bounded memory, and no input
 //! can make them panic (property-tested).
 
 pub mod candump;
+pub mod lines;
 pub mod screen;
 
 pub use candump::{LogError, LogErrorKind, LogRecord, Precision, Reader, Writer};

@@ -13,7 +13,9 @@
 //! - [`rng`]: the seeded random numbers every noise source draws from;
 //! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
 //!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time;
-//! - [`scenario`]: routes, load, grade and faults, built in or from TOML files.
+//! - [`scenario`]: routes, load, grade and faults, built in or from TOML files;
+//! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
+//!   simple plant, as one node (`bywire vehicle`).
 
 pub mod battery;
 pub mod chassis;
@@ -23,3 +25,4 @@ pub mod rng;
 pub mod scenario;
 pub mod steering;
 pub mod tug;
+pub mod vehicle;

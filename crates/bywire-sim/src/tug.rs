@@ -26,6 +26,7 @@ use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::filter::Filter;
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand};
+use bywire_vehicle::command::{EstopCode, WatchdogLevel};
 use bywire_vehicle::profile::Profile;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::reference_tug::{
@@ -1339,7 +1340,7 @@ impl Tug {
             // (Watchdog level 4: the vehicle waits for a re-engage after full braking.)
             let state = self.ads.state();
             let autonomous = state.mode.value == Some(ControlMode::Autonomous);
-            let awaiting = state.watchdog_level.value == Some(4);
+            let awaiting = state.watchdog_level.value == Some(WatchdogLevel::AwaitingEngage);
             let engage = self.ads.feedback_alive(now)
                 && (!autonomous || awaiting)
                 && self.ads_cycles % 10 == 0;
@@ -1350,11 +1351,12 @@ impl Tug {
             // The operator presses reset (an edge, every half second) while the latch is
             // stopped or waiting for the confirming press, until the vehicle reports it clear.
             let estop = self.ads.state().estop_state.value;
-            if estop == Some(0) && self.resetting && autonomous {
+            if estop == Some(EstopCode::Normal) && self.resetting && autonomous {
                 self.resetting = false;
             }
-            let operator_reset =
-                self.resetting && matches!(estop, Some(4 | 6)) && self.ads_cycles % 25 == 0;
+            let operator_reset = self.resetting
+                && estop.is_some_and(EstopCode::awaits_operator_reset)
+                && self.ads_cycles % 25 == 0;
             let command = AdsCommand {
                 steering,
                 velocity,

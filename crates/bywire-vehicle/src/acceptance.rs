@@ -9,6 +9,7 @@ use bywire_core::node::Port;
 use bywire_core::{Frame, Timestamp};
 
 use crate::ads::{Ads, AdsCommand};
+use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::LoadedProfile;
 use crate::reference_tug::{self, ControlMode, EmergencyStop, Gear};
 use crate::wire::ProfileWire;
@@ -203,8 +204,13 @@ impl Checker {
         } = self.phase
         {
             let level = self.ads.state().watchdog_level.value;
-            let holding = holding.or_else(|| (level >= Some(1)).then_some(now));
-            let braking = braking.or_else(|| (level == Some(3)).then_some(now));
+            let holding = holding.or_else(|| {
+                level
+                    .is_some_and(|l| l != WatchdogLevel::Normal)
+                    .then_some(now)
+            });
+            let braking =
+                braking.or_else(|| (level == Some(WatchdogLevel::FullBraking)).then_some(now));
             self.phase = Phase::Silent {
                 since,
                 last_command,
@@ -217,7 +223,13 @@ impl Checker {
             latched: None,
         } = self.phase
         {
-            if self.ads.state().estop_state.value.is_some_and(|s| s != 0) {
+            if self
+                .ads
+                .state()
+                .estop_state
+                .value
+                .is_some_and(|s| s != EstopCode::Normal)
+            {
                 self.phase = Phase::Estop {
                     since,
                     latched: Some(now),
@@ -404,8 +416,11 @@ impl Checker {
             Phase::Reengage { since } => {
                 engage = self.ads.feedback_alive(now)
                     && (self.cycle % 200 < 25)
-                    && (!self.autonomous() || self.ads.state().watchdog_level.value == Some(4));
-                let ready = self.autonomous() && self.ads.state().watchdog_level.value == Some(0);
+                    && (!self.autonomous()
+                        || self.ads.state().watchdog_level.value
+                            == Some(WatchdogLevel::AwaitingEngage));
+                let ready = self.autonomous()
+                    && self.ads.state().watchdog_level.value == Some(WatchdogLevel::Normal);
                 if ready || since_ms(since) > 5_000 {
                     if !ready {
                         self.record("re-engage", false, "not autonomous again within 5 s".into());
@@ -435,7 +450,12 @@ impl Checker {
             Phase::Released { since } => {
                 press_estop = Some(false);
                 if since_ms(since) >= 1_000 {
-                    let held = self.ads.state().estop_state.value.is_some_and(|s| s != 0);
+                    let held = self
+                        .ads
+                        .state()
+                        .estop_state
+                        .value
+                        .is_some_and(|s| s != EstopCode::Normal);
                     self.record(
                         "E-stop latch",
                         held,
@@ -451,12 +471,14 @@ impl Checker {
             Phase::Reset { since } => {
                 press_estop = Some(false);
                 let state = self.ads.state().estop_state.value;
-                operator_reset = matches!(state, Some(4 | 6)) && self.cycle % 500 < 25;
-                engage = state == Some(7) && self.cycle % 200 < 25;
-                if state == Some(0) || since_ms(since) > 6_000 {
+                operator_reset =
+                    state.is_some_and(EstopCode::awaits_operator_reset) && self.cycle % 500 < 25;
+                engage = state == Some(EstopCode::ResetConfirmed) && self.cycle % 200 < 25;
+                let clear = state == Some(EstopCode::Normal);
+                if clear || since_ms(since) > 6_000 {
                     self.record(
                         "operator reset",
-                        state == Some(0),
+                        clear,
                         format!("latch clear after {} ms", since_ms(since)),
                     );
                     self.phase = Phase::Done;

@@ -14,7 +14,7 @@ use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
-use crate::reference_tug::ControlMode;
+use crate::command::{ControlMode, EstopCode, WatchdogLevel};
 use crate::wire::{AdsWire, Feedback, ReferenceWire, StateFeedback};
 
 /// Tuning of the ADS side.
@@ -125,10 +125,10 @@ pub struct VehicleState {
     pub velocity: Field<f64>,
     /// Control mode.
     pub mode: Field<ControlMode>,
-    /// Watchdog level (0 normal … 4 awaiting re-engage).
-    pub watchdog_level: Field<u8>,
-    /// E-stop latch state code.
-    pub estop_state: Field<u8>,
+    /// The vehicle's command watchdog.
+    pub watchdog_level: Field<WatchdogLevel>,
+    /// The vehicle's E-stop latch.
+    pub estop_state: Field<EstopCode>,
     /// The vehicle's warning flag.
     pub warning: Field<bool>,
     /// A driver has taken over.
@@ -510,5 +510,84 @@ impl<W: AdsWire> Node for Ads<W> {
 
     fn next_deadline(&self) -> Option<Timestamp> {
         Ads::next_deadline(self)
+    }
+}
+
+/// Why the vehicle is not following the ADS's commands, as its feedback tells it; the text
+/// says what to do about it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Blocker {
+    /// No valid state frame lately: the vehicle is silent, or its frames fail their checks.
+    NoFeedback,
+    /// The E-stop latch holds.
+    Estop(EstopCode),
+    /// A driver is overriding.
+    DriverOverride,
+    /// The command watchdog is not normal.
+    Watchdog(WatchdogLevel),
+    /// The vehicle is not in autonomous mode.
+    NotEngaged(ControlMode),
+}
+
+impl core::fmt::Display for Blocker {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Blocker::NoFeedback => f.write_str(
+                "no valid feedback from the vehicle: is it on this bus, and does the profile match it?",
+            ),
+            Blocker::Estop(EstopCode::Stopped) => f.write_str(
+                "E-stop latched: release the E-stop, send operator_reset, then operator_reset again to confirm, then engage",
+            ),
+            Blocker::Estop(EstopCode::EstopReset) => {
+                f.write_str("E-stop reset pending: send operator_reset again to confirm, then engage")
+            }
+            Blocker::Estop(EstopCode::ResetConfirmed) => {
+                f.write_str("E-stop reset confirmed: send engage")
+            }
+            Blocker::Estop(code) => write!(f, "E-stop: {code}"),
+            Blocker::DriverOverride => {
+                f.write_str("a driver is overriding: hands and feet off, then engage")
+            }
+            Blocker::Watchdog(WatchdogLevel::FullBraking) => f.write_str(
+                "watchdog: full braking (commands missed, invalid, or the two buses disagreed): keep sending valid commands, then engage",
+            ),
+            Blocker::Watchdog(WatchdogLevel::AwaitingEngage) => f.write_str(
+                "watchdog: recovering after full braking: keep sending valid commands and engage",
+            ),
+            Blocker::Watchdog(level) => write!(f, "watchdog: {level} (commands late)"),
+            Blocker::NotEngaged(mode) => write!(
+                f,
+                "mode {mode}: send mode autonomous with engage: true"
+            ),
+        }
+    }
+}
+
+impl<W: AdsWire> Ads<W> {
+    /// Why the vehicle is not following the commands now (`None`: it is, by its feedback).
+    /// The first reason that holds, in the order a user has to clear them.
+    pub fn blocker(&self, now: Timestamp) -> Option<Blocker> {
+        if !self.feedback_alive(now) {
+            return Some(Blocker::NoFeedback);
+        }
+        let s = &self.state;
+        if let Some(code) = s.estop_state.value.filter(|c| *c != EstopCode::Normal) {
+            return Some(Blocker::Estop(code));
+        }
+        if s.driver_override.value == Some(true) {
+            return Some(Blocker::DriverOverride);
+        }
+        let mode = s.mode.value.unwrap_or(ControlMode::Manual);
+        if mode == ControlMode::Estop {
+            return Some(Blocker::Estop(EstopCode::Requested));
+        }
+        if let Some(level) = s
+            .watchdog_level
+            .value
+            .filter(|l| *l != WatchdogLevel::Normal)
+        {
+            return Some(Blocker::Watchdog(level));
+        }
+        (mode != ControlMode::Autonomous).then_some(Blocker::NotEngaged(mode))
     }
 }

@@ -1,5 +1,8 @@
 //! # bywire-vehicle: the vehicle interface and its safety logic
 //!
+//! - [`command`]: the vocabulary both ends speak — the command, control and steering modes,
+//!   gears, and the vehicle's reported watchdog level and E-stop state — with names, text and
+//!   raw numbers converted in one place.
 //! - [`reference_tug`]: the reference tug's CAN messages (`dbc/reference-tug.dbc`), as structs
 //!   generated from the DBC at build time, plus the E2E protection (counter, CRC-8 with data ID)
 //!   every message carries.
@@ -22,6 +25,7 @@
 pub mod acceptance;
 pub mod ads;
 pub mod autoware;
+pub mod command;
 pub mod profile;
 pub mod redundancy;
 pub mod reference_tug;

@@ -12,6 +12,7 @@ use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
 use crate::ads::AdsConfig;
+use crate::command::ControlCommand;
 use crate::supervisor::{Cascade, SupervisorConfig};
 
 /// Why a profile did not load.
@@ -188,6 +189,43 @@ pub struct Limits {
     pub speed_m_s: f64,
     /// Deceleration, m/s².
     pub deceleration_m_s2: f64,
+}
+
+impl Limits {
+    /// Refuse a command beyond the vehicle's limits, naming the field: a value the vehicle
+    /// would refuse (or a tool would clamp) is never sent as something else.
+    pub fn check(&self, c: &ControlCommand) -> Result<(), String> {
+        let within = |value: f64, limit: f64| value.is_finite() && value.abs() <= limit;
+        if !within(c.steering, self.steering_deg) {
+            return Err(format!(
+                "steering {}: beyond ±{} degrees",
+                c.steering, self.steering_deg
+            ));
+        }
+        if !within(c.velocity, self.speed_m_s) {
+            return Err(format!(
+                "velocity {}: beyond ±{} m/s",
+                c.velocity, self.speed_m_s
+            ));
+        }
+        if !(c.brake.is_finite() && (0.0..=100.0).contains(&c.brake)) {
+            return Err(format!("brake {}: not within 0–100 %", c.brake));
+        }
+        Ok(())
+    }
+
+    /// Refuse an emergency-brake deceleration that is not positive or beyond the vehicle's.
+    pub fn check_deceleration(&self, deceleration: f64) -> Result<(), String> {
+        if deceleration.is_finite() && deceleration > 0.0 && deceleration <= self.deceleration_m_s2
+        {
+            Ok(())
+        } else {
+            Err(format!(
+                "emergency_brake {deceleration}: not within 0–{} m/s²",
+                self.deceleration_m_s2
+            ))
+        }
+    }
 }
 
 /// The watchdog cascade.

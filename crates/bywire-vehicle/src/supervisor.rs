@@ -25,8 +25,8 @@ use bywire_core::e2e::{CounterChecker, CounterStatus};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
+use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
-use crate::reference_tug::{ControlMode, Gear, SteeringMode};
 use crate::wire::{Incoming, ReferenceWire, Rejected, StateReport, VehicleWire};
 
 /// Tuning of the supervisor.
@@ -179,14 +179,14 @@ impl Watchdog {
         }
     }
 
-    /// The level reported in `WatchdogLevel` (0 normal … 4 awaiting re-engage).
-    pub fn level(self) -> u64 {
+    /// The level the vehicle reports.
+    pub fn level(self) -> WatchdogLevel {
         match self {
-            Watchdog::Normal => 0,
-            Watchdog::Holding { .. } => 1,
-            Watchdog::Decelerating { .. } => 2,
-            Watchdog::FullBraking => 3,
-            Watchdog::Recovering { .. } => 4,
+            Watchdog::Normal => WatchdogLevel::Normal,
+            Watchdog::Holding { .. } => WatchdogLevel::Holding,
+            Watchdog::Decelerating { .. } => WatchdogLevel::Decelerating,
+            Watchdog::FullBraking => WatchdogLevel::FullBraking,
+            Watchdog::Recovering { .. } => WatchdogLevel::AwaitingEngage,
         }
     }
 }
@@ -248,9 +248,18 @@ impl EstopState {
         }
     }
 
-    /// The value reported in `EstopState`.
-    pub fn code(self) -> u64 {
-        self as u64
+    /// The state the vehicle reports.
+    pub fn code(self) -> EstopCode {
+        match self {
+            EstopState::Normal => EstopCode::Normal,
+            EstopState::EstopRequested => EstopCode::Requested,
+            EstopState::MotorsDisabled => EstopCode::MotorsDisabled,
+            EstopState::BrakesApplied => EstopCode::BrakesApplied,
+            EstopState::Stopped => EstopCode::Stopped,
+            EstopState::OperatorReset => EstopCode::OperatorReset,
+            EstopState::EstopReset => EstopCode::EstopReset,
+            EstopState::ResetConfirmed => EstopCode::ResetConfirmed,
+        }
     }
 
     /// Whether the latch holds the vehicle.
@@ -472,6 +481,11 @@ impl<W: VehicleWire> Supervisor<W> {
             state_counter: 0,
             echo: 0,
         }
+    }
+
+    /// The wire, to send the vehicle's other messages with it.
+    pub fn wire_mut(&mut self) -> &mut W {
+        &mut self.wire
     }
 
     /// The watchdog's level.

@@ -3,13 +3,12 @@
 //! build uses), and [`ProfileWire`] speaks any vehicle a profile describes, by role, through
 //! the runtime DBC codec. The ADS node is the same for both.
 
-use std::collections::BTreeMap;
-
 use bywire_core::{Frame, Id};
 use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::{Database, Message};
 
+use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::reference_tug::{
     self, AdsToVehicleControl, ControlCommand, ControlMode, EmergencyBrake, EmergencyStop, Gear,
@@ -28,9 +27,9 @@ pub struct StateFeedback {
     /// Reported control mode.
     pub mode: ControlMode,
     /// Watchdog level, where the vehicle reports one.
-    pub watchdog_level: Option<u8>,
+    pub watchdog_level: Option<WatchdogLevel>,
     /// E-stop latch state, where reported.
-    pub estop_state: Option<u8>,
+    pub estop_state: Option<EstopCode>,
     /// Warning flag, where reported.
     pub warning: Option<bool>,
     /// Driver override, where reported.
@@ -145,9 +144,9 @@ impl AdsWire for ReferenceWire {
                     counter: m.counter_raw(),
                     steering,
                     velocity,
-                    mode: ControlMode::from_raw(m.control_mode_raw()),
-                    watchdog_level: Some(u8::try_from(m.watchdog_level_raw()).unwrap_or(u8::MAX)),
-                    estop_state: Some(u8::try_from(m.estop_state_raw()).unwrap_or(u8::MAX)),
+                    mode: ControlMode::from_raw(m.control_mode_raw()).unwrap_or_default(),
+                    watchdog_level: WatchdogLevel::from_raw(m.watchdog_level_raw()),
+                    estop_state: EstopCode::from_raw(m.estop_state_raw()),
                     warning: Some(m.warning_flag_raw() == 1),
                     driver_override: Some(m.driver_override_raw() == 1),
                     heartbeat_echo: m.heartbeat_echo_raw(),
@@ -400,80 +399,70 @@ fn index_of(message: &Message, name: &str) -> Option<usize> {
     message.signals.iter().position(|s| s.name == name)
 }
 
-/// Raw values of an enum role, by variant name (the profile's `[enums.ROLE]`, or the
-/// reference numbering where the profile has none).
+/// One vocabulary enum's raw numbers on this vehicle, resolved once from the profile's
+/// `[enums.ROLE]` table (the reference numbering where the profile has none).
 #[derive(Debug, Clone)]
-struct EnumMap(BTreeMap<String, u64>);
+struct EnumMap<T: 'static>(Vec<(T, u64)>);
 
-impl EnumMap {
-    fn new(
-        profile: &LoadedProfile,
-        role: &str,
-        names: &[(&str, u64)],
-    ) -> Result<EnumMap, ProfileError> {
-        match profile.profile.enums.get(role) {
-            None => Ok(EnumMap(
-                names.iter().map(|(n, v)| ((*n).to_string(), *v)).collect(),
-            )),
-            Some(table) => {
-                for (name, _) in names {
-                    if !table.contains_key(*name) {
-                        return Err(ProfileError::Invalid {
-                            file: profile.profile.name.clone(),
-                            key: format!("enums.{role}.{name}"),
-                            reason: "missing: every value needs its raw number".to_string(),
-                        });
-                    }
-                }
-                Ok(EnumMap(table.clone()))
-            }
+/// What [`EnumMap`] needs of a vocabulary enum.
+trait Vocabulary: Copy + PartialEq + 'static {
+    const ALL: &'static [Self];
+    fn name(self) -> &'static str;
+    fn from_name(name: &str) -> Option<Self>;
+    fn raw(self) -> u64;
+}
+
+macro_rules! vocabulary_of {
+    ($($ty:ty),*) => {$(
+        impl Vocabulary for $ty {
+            const ALL: &'static [Self] = <$ty>::ALL;
+            fn name(self) -> &'static str { <$ty>::name(self) }
+            fn from_name(name: &str) -> Option<Self> { <$ty>::from_name(name) }
+            fn raw(self) -> u64 { <$ty>::raw(self) }
         }
+    )*};
+}
+vocabulary_of!(Gear, ControlMode, SteeringMode);
+
+impl<T: Vocabulary> EnumMap<T> {
+    fn new(profile: &LoadedProfile, role: &str) -> Result<EnumMap<T>, ProfileError> {
+        let invalid = |key: String, reason: &str| ProfileError::Invalid {
+            file: profile.profile.name.clone(),
+            key,
+            reason: reason.to_string(),
+        };
+        let Some(table) = profile.profile.enums.get(role) else {
+            return Ok(EnumMap(T::ALL.iter().map(|v| (*v, v.raw())).collect()));
+        };
+        if let Some(name) = table.keys().find(|name| T::from_name(name).is_none()) {
+            let names: Vec<&str> = T::ALL.iter().map(|v| v.name()).collect();
+            return Err(invalid(
+                format!("enums.{role}.{name}"),
+                &format!("not a name of this table: {}", names.join(", ")),
+            ));
+        }
+        let mut map = Vec::with_capacity(T::ALL.len());
+        for value in T::ALL {
+            let raw = table.get(value.name()).ok_or_else(|| {
+                invalid(
+                    format!("enums.{role}.{}", value.name()),
+                    "missing: every value needs its raw number",
+                )
+            })?;
+            map.push((*value, *raw));
+        }
+        Ok(EnumMap(map))
     }
 
-    fn raw(&self, name: &str) -> u64 {
-        self.0.get(name).copied().unwrap_or(0)
-    }
-
-    fn name(&self, raw: u64) -> Option<&str> {
+    fn raw(&self, value: T) -> u64 {
         self.0
             .iter()
-            .find(|(_, v)| **v == raw)
-            .map(|(n, _)| n.as_str())
+            .find(|(v, _)| *v == value)
+            .map_or(0, |(_, raw)| *raw)
     }
-}
 
-const GEARS: [(&str, u64); 4] = [("Park", 0), ("Reverse", 1), ("Neutral", 2), ("Drive", 3)];
-const MODES: [(&str, u64); 4] = [
-    ("Manual", 0),
-    ("Autonomous", 1),
-    ("Estop", 2),
-    ("Calibration", 3),
-];
-const STEERING_MODES: [(&str, u64); 3] = [("Normal", 0), ("Crab", 1), ("Tank", 2)];
-
-fn gear_name(gear: Gear) -> &'static str {
-    match gear {
-        Gear::Park => "Park",
-        Gear::Reverse => "Reverse",
-        Gear::Neutral => "Neutral",
-        Gear::Drive => "Drive",
-    }
-}
-
-fn mode_name(mode: ControlMode) -> &'static str {
-    match mode {
-        ControlMode::Manual => "Manual",
-        ControlMode::Autonomous => "Autonomous",
-        ControlMode::Estop => "Estop",
-        ControlMode::Calibration => "Calibration",
-    }
-}
-
-fn steering_mode_name(mode: SteeringMode) -> &'static str {
-    match mode {
-        SteeringMode::Normal => "Normal",
-        SteeringMode::Crab => "Crab",
-        SteeringMode::Tank => "Tank",
+    fn value(&self, raw: u64) -> Option<T> {
+        self.0.iter().find(|(_, r)| *r == raw).map(|(v, _)| *v)
     }
 }
 
@@ -517,9 +506,9 @@ pub struct ProfileWire {
     wheel_speeds: Option<(RoleMessage, [usize; 4])>,
     brake: Option<(RoleMessage, usize, usize)>,
     estop: Option<(RoleMessage, usize)>,
-    gears: EnumMap,
-    modes: EnumMap,
-    steering_modes: EnumMap,
+    gears: EnumMap<Gear>,
+    modes: EnumMap<ControlMode>,
+    steering_modes: EnumMap<SteeringMode>,
 }
 
 impl ProfileWire {
@@ -648,9 +637,9 @@ impl ProfileWire {
             state_signals,
             wheel_speeds,
             brake,
-            gears: EnumMap::new(loaded, "gear", &GEARS)?,
-            modes: EnumMap::new(loaded, "control_mode", &MODES)?,
-            steering_modes: EnumMap::new(loaded, "steering_mode", &STEERING_MODES)?,
+            gears: EnumMap::new(loaded, "gear")?,
+            modes: EnumMap::new(loaded, "control_mode")?,
+            steering_modes: EnumMap::new(loaded, "steering_mode")?,
         })
     }
 }
@@ -675,12 +664,9 @@ impl AdsWire for ProfileWire {
     fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Option<Frame> {
         let s = self.command_signals;
         let raws = [
-            (s.gear, self.gears.raw(gear_name(c.gear))),
-            (s.control_mode, self.modes.raw(mode_name(c.mode))),
-            (
-                s.steering_mode,
-                self.steering_modes.raw(steering_mode_name(c.steering_mode)),
-            ),
+            (s.gear, self.gears.raw(c.gear)),
+            (s.control_mode, self.modes.raw(c.mode)),
+            (s.steering_mode, self.steering_modes.raw(c.steering_mode)),
             (s.engage, u64::from(c.engage)),
             (s.operator_reset, u64::from(c.operator_reset)),
         ];
@@ -708,33 +694,33 @@ impl AdsWire for ProfileWire {
             };
             let s = self.state_signals;
             let m = &self.state;
-            let mode = match m.raw(s.control_mode).and_then(|raw| self.modes.name(raw)) {
-                Some("Autonomous") => ControlMode::Autonomous,
-                Some("Estop") => ControlMode::Estop,
-                Some("Calibration") => ControlMode::Calibration,
-                // Manual, or a value the profile does not name: the ADS is not in control.
-                _ => ControlMode::Manual,
-            };
+            // A level or latch state that names nothing is out of range, not unreported.
+            let level = s.watchdog_level.and_then(|i| m.raw(i));
+            let estop = s.estop_state.and_then(|i| m.raw(i));
+            let known = level.is_none_or(|raw| WatchdogLevel::from_raw(raw).is_some())
+                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some());
+            let level = level.and_then(WatchdogLevel::from_raw);
+            let estop = estop.and_then(EstopCode::from_raw);
+            // A value the profile does not name: the ADS is not in control.
+            let mode = m
+                .raw(s.control_mode)
+                .and_then(|raw| self.modes.value(raw))
+                .unwrap_or(ControlMode::Manual);
             return Feedback::State(StateFeedback {
                 counter,
                 steering: m.physical(s.steering).unwrap_or(f64::NAN),
                 velocity: m.physical(s.velocity).unwrap_or(f64::NAN),
                 mode,
-                watchdog_level: s
-                    .watchdog_level
-                    .and_then(|i| m.raw(i))
-                    .map(|raw| u8::try_from(raw).unwrap_or(u8::MAX)),
-                estop_state: s
-                    .estop_state
-                    .and_then(|i| m.raw(i))
-                    .map(|raw| u8::try_from(raw).unwrap_or(u8::MAX)),
+                watchdog_level: level,
+                estop_state: estop,
                 warning: s.warning.and_then(|i| m.raw(i)).map(|raw| raw == 1),
                 driver_override: s.driver_override.and_then(|i| m.raw(i)).map(|raw| raw == 1),
                 heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
                 in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
                     .into_iter()
                     .flatten()
-                    .all(|i| m.in_range(i)),
+                    .all(|i| m.in_range(i))
+                    && known,
             });
         }
         if let Some((m, indices)) = self.wheel_speeds.as_mut() {
@@ -787,9 +773,9 @@ pub struct StateReport {
     /// Gear in use.
     pub gear: Gear,
     /// Watchdog level 0–4.
-    pub watchdog_level: u64,
+    pub watchdog_level: WatchdogLevel,
     /// E-stop latch state code.
-    pub estop_state: u64,
+    pub estop_state: EstopCode,
     /// Warning flag.
     pub warning: bool,
     /// A driver is overriding.
@@ -806,6 +792,9 @@ pub trait VehicleWire: Counters {
     fn incoming(&mut self, frame: &Frame) -> Incoming;
     /// The state frame with `counter` and its checksum.
     fn state_frame(&mut self, report: &StateReport, counter: u64) -> Option<Frame>;
+    /// The wheel-speed frame (FL, FR, RL, RR in m/s) with `counter` and its checksum, where
+    /// the vehicle has one.
+    fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame>;
 }
 
 impl VehicleWire for ReferenceWire {
@@ -842,8 +831,8 @@ impl VehicleWire for ReferenceWire {
         m.set_control_mode_raw(r.mode as u64);
         m.set_steering_mode_raw(r.steering_mode as u64);
         m.set_gear_raw(r.gear as u64);
-        m.set_watchdog_level_raw(r.watchdog_level);
-        m.set_estop_state_raw(r.estop_state);
+        m.set_watchdog_level_raw(r.watchdog_level.raw());
+        m.set_estop_state_raw(r.estop_state.raw());
         m.set_warning_flag_raw(u64::from(r.warning));
         m.set_driver_override_raw(u64::from(r.driver_override));
         m.set_steering_enabled_raw(u64::from(r.steering_enabled));
@@ -851,35 +840,20 @@ impl VehicleWire for ReferenceWire {
         m.set_counter_raw(counter & 0x0F);
         Some(reference_tug::sealed_frame(VehicleToAdsState::ID, m.0))
     }
-}
 
-fn gear_named(name: &str) -> Option<Gear> {
-    Some(match name {
-        "Park" => Gear::Park,
-        "Reverse" => Gear::Reverse,
-        "Neutral" => Gear::Neutral,
-        "Drive" => Gear::Drive,
-        _ => return None,
-    })
-}
-
-fn mode_named(name: &str) -> Option<ControlMode> {
-    Some(match name {
-        "Manual" => ControlMode::Manual,
-        "Autonomous" => ControlMode::Autonomous,
-        "Estop" => ControlMode::Estop,
-        "Calibration" => ControlMode::Calibration,
-        _ => return None,
-    })
-}
-
-fn steering_mode_named(name: &str) -> Option<SteeringMode> {
-    Some(match name {
-        "Normal" => SteeringMode::Normal,
-        "Crab" => SteeringMode::Crab,
-        "Tank" => SteeringMode::Tank,
-        _ => return None,
-    })
+    fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame> {
+        let mut m = VehicleToAdsSensors::default();
+        // Beyond the signals' declared range they are reported at its limit.
+        let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.48, 20.47));
+        let _ = (
+            m.set_wheel_speed_fl(fl),
+            m.set_wheel_speed_fr(fr),
+            m.set_wheel_speed_rl(rl),
+            m.set_wheel_speed_rr(rr),
+        );
+        m.set_counter_raw(counter & 0x0F);
+        Some(reference_tug::sealed_frame(VehicleToAdsSensors::ID, m.0))
+    }
 }
 
 impl ProfileWire {
@@ -887,27 +861,17 @@ impl ProfileWire {
     fn decoded_command(&self) -> Option<ControlCommand> {
         let s = self.command_signals;
         let m = &self.command;
-        // Raw value → the profile's name → the variant (no allocation).
-        fn named<T>(
-            m: &RoleMessage,
-            index: usize,
-            map: &EnumMap,
-            of: fn(&str) -> Option<T>,
-        ) -> Option<T> {
-            m.raw(index).and_then(|raw| map.name(raw)).and_then(of)
+        // Raw value → the variant (no allocation).
+        fn named<T: Vocabulary>(m: &RoleMessage, index: usize, map: &EnumMap<T>) -> Option<T> {
+            m.raw(index).and_then(|raw| map.value(raw))
         }
         Some(ControlCommand {
             steering: m.physical(s.steering)?,
             velocity: m.physical(s.velocity)?,
             brake: m.physical(s.brake)?,
-            gear: named(m, s.gear, &self.gears, gear_named)?,
-            mode: named(m, s.control_mode, &self.modes, mode_named)?,
-            steering_mode: named(
-                m,
-                s.steering_mode,
-                &self.steering_modes,
-                steering_mode_named,
-            )?,
+            gear: named(m, s.gear, &self.gears)?,
+            mode: named(m, s.control_mode, &self.modes)?,
+            steering_mode: named(m, s.steering_mode, &self.steering_modes)?,
             engage: m.raw(s.engage)? == 1,
             operator_reset: m.raw(s.operator_reset)? == 1,
         })
@@ -945,15 +909,15 @@ impl VehicleWire for ProfileWire {
     fn state_frame(&mut self, r: &StateReport, counter: u64) -> Option<Frame> {
         let s = self.state_signals;
         let raws = [
-            (Some(s.control_mode), self.modes.raw(mode_name(r.mode))),
+            (Some(s.control_mode), self.modes.raw(r.mode)),
             (
                 Some(s.steering_mode),
-                self.steering_modes.raw(steering_mode_name(r.steering_mode)),
+                self.steering_modes.raw(r.steering_mode),
             ),
-            (s.gear, self.gears.raw(gear_name(r.gear))),
+            (s.gear, self.gears.raw(r.gear)),
             (Some(s.heartbeat_echo), r.heartbeat_echo),
-            (s.watchdog_level, r.watchdog_level),
-            (s.estop_state, r.estop_state),
+            (s.watchdog_level, r.watchdog_level.raw()),
+            (s.estop_state, r.estop_state.raw()),
             (s.warning, u64::from(r.warning)),
             (s.driver_override, u64::from(r.driver_override)),
             (s.steering_enabled, u64::from(r.steering_enabled)),
@@ -965,6 +929,14 @@ impl VehicleWire for ProfileWire {
             if let Some(index) = index {
                 m.set_raw(index, raw);
             }
+        }
+        m.frame(counter)
+    }
+
+    fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame> {
+        let (m, indices) = self.wheel_speeds.as_mut()?;
+        for (index, speed) in indices.iter().zip(speeds) {
+            m.set(*index, speed);
         }
         m.frame(counter)
     }

@@ -17,6 +17,7 @@ use std::time::Duration;
 
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::command::{EstopCode, WatchdogLevel};
 use bywire_vehicle::profile::Profile;
 use bywire_vehicle::reference_tug::{
     self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
@@ -76,6 +77,15 @@ proptest! {
     }
 
     #[test]
+    fn for_the_reference_tug_both_wires_send_the_same_wheel_speeds(speeds in any::<[i16; 4]>(), counter in 0u64..16) {
+        let loaded = Profile::builtin("reference-tug").unwrap();
+        let mut by_role = ProfileWire::new(&loaded).unwrap();
+        // Both well inside and beyond the signals' ±20.48 m/s.
+        let speeds = speeds.map(|s| f64::from(s) / 1000.0);
+        prop_assert_eq!(by_role.wheel_speeds_frame(speeds, counter), ReferenceWire.wheel_speeds_frame(speeds, counter));
+    }
+
+    #[test]
     fn for_the_reference_tug_both_wires_read_feedback_alike(payload in any::<[u8; 8]>(), which in 0usize..3, seal in any::<bool>()) {
         let loaded = Profile::builtin("reference-tug").unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
@@ -107,11 +117,11 @@ proptest! {
         let report = StateReport {
             steering,
             velocity,
-            mode: ControlMode::from_raw(mode),
+            mode: ControlMode::from_raw(mode).unwrap(),
             steering_mode: [SteeringMode::Normal, SteeringMode::Crab, SteeringMode::Tank][steering_mode],
-            gear: Gear::from_raw(gear),
-            watchdog_level,
-            estop_state,
+            gear: Gear::from_raw(gear).unwrap(),
+            watchdog_level: WatchdogLevel::from_raw(watchdog_level).unwrap(),
+            estop_state: EstopCode::from_raw(estop_state).unwrap(),
             warning: flags & 1 != 0,
             driver_override: flags & 2 != 0,
             steering_enabled: flags & 4 != 0,

@@ -80,7 +80,7 @@ fn watchdog_table() {
         Recovering { valid_run: 1 },
     ]
     .iter()
-    .map(|w| w.level())
+    .map(|w| w.level().raw())
     .collect();
     assert_eq!(levels, [0, 1, 2, 3, 4]);
 }

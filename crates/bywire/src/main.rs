@@ -24,6 +24,7 @@ mod sim_serve;
 mod sim_view;
 mod slcan_adapter_cmd;
 mod sniff_cmd;
+mod vehicle_cmd;
 mod wire_cmd;
 
 use std::io::{self, Write};
@@ -110,6 +111,8 @@ enum Command {
     SlcanAdapter(slcan_adapter_cmd::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(bridge_cmd::Args),
+    /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
+    Vehicle(vehicle_cmd::Args),
 }
 
 fn main() -> ExitCode {
@@ -121,6 +124,7 @@ fn main() -> ExitCode {
         Command::Dbc { command } => dbc_cmd::run(&command, &mut out),
         Command::Decode(args) => dbc_cmd::decode(&args, &mut io::stdin().lock(), &mut out),
         Command::Bridge(args) => bridge_cmd::run(&args, &mut out),
+        Command::Vehicle(args) => vehicle_cmd::run(&args, &mut out),
         Command::Dump(args) => dump_cmd::run(&args, &mut out),
         Command::Send(args) => send_cmd::run(&args, &mut out),
         Command::Gen(args) => gen_cmd::run(&args, &mut out),

@@ -35,14 +35,20 @@ fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
         .unwrap();
     let mut stdin = child.stdin.take().unwrap();
     // Commands must keep coming (a command older than 200 ms becomes a controlled stop).
+    // (The vehicle accelerates at 1 m/s²: 1.5 m/s within two seconds of the engage.)
     let drive = r#"{"velocity": 1.5, "gear": "drive", "mode": "autonomous", "steering": 5.0}"#;
-    for k in 0..60 {
+    for k in 0..120 {
         let line = match k {
             20 => r#"{"engage": true}"#,
             30 => "not json",
+            40 => r#"{"velocity": 1000}"#,
             _ => drive,
         };
         writeln!(stdin, "{line}").unwrap();
+        if k == 50 {
+            // A line that is not UTF-8 is refused, and the bridge goes on.
+            stdin.write_all(b"{\"velocity\": \xff}\n").unwrap();
+        }
         std::thread::sleep(Duration::from_millis(25));
     }
     drop(stdin);
@@ -84,11 +90,25 @@ fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
     );
     let latency = driving.last().unwrap()["echo_latency_ms"].as_f64().unwrap();
     assert!(latency < 100.0, "{latency} ms");
-    // The bad line is reported with its number; the end of input brakes.
-    assert!(lines
+    // The bad lines are reported with their numbers; the out-of-range one on stderr too, and
+    // the vehicle never went faster than asked.
+    let refused = |number: &str| {
+        lines.iter().any(|l| {
+            l["event"] == "bad_command" && l["detail"].as_str().unwrap().starts_with(number)
+        })
+    };
+    assert!(
+        refused("line 31:") && refused("line 41: velocity 1000") && refused("line 52: not UTF-8")
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("line 41: velocity 1000: beyond ±5 m/s"),
+        "{err}"
+    );
+    assert!(states
         .iter()
-        .any(|l| l["event"] == "bad_command"
-            && l["detail"].as_str().unwrap().starts_with("line 31:")));
+        .all(|s| s["velocity"].as_f64().unwrap_or(0.0) <= 1.5));
+    // The end of input brakes.
     let end = lines
         .iter()
         .position(|l| l["event"] == "end_of_input")
@@ -151,7 +171,7 @@ fn bridge_drives_over_two_redundant_buses() {
         .unwrap();
     let mut stdin = child.stdin.take().unwrap();
     let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
-    for k in 0..50 {
+    for k in 0..100 {
         let line = if k == 20 {
             r#"{"engage": true}"#
         } else {
@@ -315,7 +335,7 @@ bus.shutdown()
     );
     assert_eq!(last["rejected"]["checksum"], 0, "{last}");
     // The simulated vehicle speaks the profile too: the shuttle's supervisor engages.
-    let input: String = (0..40)
+    let input: String = (0..80)
         .map(|k| {
             let engage = if k == 12 { r#", "engage": true"# } else { "" };
             format!(

@@ -1,0 +1,162 @@
+//! Text lines from any reader, in bounded memory: a line longer than the cap is skipped and
+//! reported with its number instead of being gathered whole (a 400 MB "line" must not cost
+//! 400 MB), and a line that is not UTF-8 is reported instead of ending the input.
+
+use std::io::{self, BufRead};
+
+/// The default cap on one line: far longer than any CAN log or command line.
+pub const DEFAULT_MAX_LINE: usize = 64 * 1024;
+
+/// One line, without its end (`\n` or `\r\n`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Line {
+    /// A line of text.
+    Text(String),
+    /// A line that is not UTF-8, with the byte offset of the first bad byte in it.
+    NotUtf8 {
+        /// Where in the line the bad bytes start.
+        at: usize,
+    },
+    /// A line longer than the cap (skipped), with its length.
+    TooLong {
+        /// Its length in bytes.
+        bytes: u64,
+    },
+}
+
+/// Lines of `reader`, numbered from 1, each at most `max` bytes held.
+pub struct CappedLines<R> {
+    reader: R,
+    max: usize,
+    number: u64,
+    buffer: Vec<u8>,
+}
+
+impl<R: BufRead> CappedLines<R> {
+    /// Lines of `reader` with the default cap.
+    pub fn new(reader: R) -> Self {
+        CappedLines::with_max(reader, DEFAULT_MAX_LINE)
+    }
+
+    /// Lines of `reader`, at most `max` bytes each.
+    pub fn with_max(reader: R, max: usize) -> Self {
+        CappedLines {
+            reader,
+            max: max.max(1),
+            number: 0,
+            buffer: Vec::new(),
+        }
+    }
+
+    /// The next line with its number; `None` at the end of the input. An I/O error ends
+    /// nothing by itself: the caller decides.
+    pub fn next_line(&mut self) -> Option<io::Result<(u64, Line)>> {
+        self.buffer.clear();
+        let mut length: u64 = 0;
+        let mut ended = false;
+        // Each pass consumes what the reader has buffered: bounded by the line's length.
+        loop {
+            let available = match self.reader.fill_buf() {
+                Ok(bytes) => bytes,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => return Some(Err(e)),
+            };
+            if available.is_empty() {
+                break;
+            }
+            let (chunk, newline) = match available.iter().position(|b| *b == b'\n') {
+                Some(i) => (available.get(..i).unwrap_or_default(), true),
+                None => (available, false),
+            };
+            let room = self.max.saturating_sub(self.buffer.len());
+            self.buffer
+                .extend_from_slice(chunk.get(..chunk.len().min(room)).unwrap_or_default());
+            length = length.saturating_add(u64::try_from(chunk.len()).unwrap_or(u64::MAX));
+            let used = chunk.len() + usize::from(newline);
+            self.reader.consume(used);
+            if newline {
+                ended = true;
+                break;
+            }
+        }
+        if !ended && length == 0 {
+            return None;
+        }
+        self.number += 1;
+        if length > u64::try_from(self.max).unwrap_or(u64::MAX) {
+            return Some(Ok((self.number, Line::TooLong { bytes: length })));
+        }
+        if self.buffer.last() == Some(&b'\r') {
+            self.buffer.pop();
+        }
+        let line = match std::str::from_utf8(&self.buffer) {
+            Ok(text) => Line::Text(text.to_string()),
+            Err(e) => Line::NotUtf8 {
+                at: e.valid_up_to(),
+            },
+        };
+        Some(Ok((self.number, line)))
+    }
+}
+
+impl<R: BufRead> Iterator for CappedLines<R> {
+    type Item = io::Result<(u64, Line)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_line()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn lines(input: &[u8], max: usize) -> Vec<(u64, Line)> {
+        CappedLines::with_max(io::BufReader::with_capacity(7, input), max)
+            .map(Result::unwrap)
+            .collect()
+    }
+
+    #[test]
+    fn lines_are_numbered_and_capped() {
+        let input = b"one\r\ntwo\n\nfar too long a line\n\xff\xfe\nlast";
+        assert_eq!(
+            lines(input, 8),
+            vec![
+                (1, Line::Text("one".into())),
+                (2, Line::Text("two".into())),
+                (3, Line::Text(String::new())),
+                (4, Line::TooLong { bytes: 19 }),
+                (5, Line::NotUtf8 { at: 0 }),
+                (6, Line::Text("last".into())),
+            ]
+        );
+        assert!(lines(b"", 8).is_empty());
+        assert_eq!(lines(b"\n", 8), vec![(1, Line::Text(String::new()))]);
+    }
+
+    #[test]
+    fn a_huge_line_is_not_held() {
+        // 10 MB without a newline, read through a small buffer: only the cap is kept.
+        let huge = vec![b'x'; 10 * 1024 * 1024];
+        let mut reader = CappedLines::with_max(io::BufReader::new(&huge[..]), 1024);
+        let (n, line) = reader.next().unwrap().unwrap();
+        assert_eq!(
+            (n, line),
+            (
+                1,
+                Line::TooLong {
+                    bytes: 10 * 1024 * 1024
+                }
+            )
+        );
+        assert!(
+            reader.buffer.capacity() <= 64 * 1024,
+            "{}",
+            reader.buffer.capacity()
+        );
+        assert!(reader.next().is_none());
+    }
+}

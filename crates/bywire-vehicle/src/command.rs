@@ -1,0 +1,249 @@
+//! The vocabulary both ends of a vehicle interface speak, whatever the vehicle: the command
+//! ([`ControlCommand`]) with its modes, gears and steering modes, and what the vehicle reports
+//! back about its safety logic ([`WatchdogLevel`], [`EstopCode`]).
+//!
+//! Names, text and raw numbers are converted here and only here. The raw numbers are the
+//! reference numbering (the reference tug's DBC uses them as they are); a profile maps each
+//! name to its own vehicle's number.
+
+use core::fmt;
+use core::str::FromStr;
+
+/// A name that is not one of an enum's.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownName {
+    /// What was looked for (`gear`, `control mode`, `steering mode`).
+    pub kind: &'static str,
+    /// The names there are.
+    pub expected: &'static [&'static str],
+}
+
+impl fmt::Display for UnknownName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "not a {}: expected {}",
+            self.kind,
+            self.expected.join(", ")
+        )
+    }
+}
+
+/// One vocabulary enum: its variants with names and reference numbers.
+macro_rules! vocabulary {
+    (
+        $(#[$doc:meta])* $name:ident, $kind:literal, default $default:ident,
+        [$($(#[$vdoc:meta])* $variant:ident = $raw:literal, $text:literal $(| $alias:literal)*;)+]
+    ) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum $name {
+            $($(#[$vdoc])* $variant = $raw,)+
+        }
+
+        impl $name {
+            /// Every variant, in reference order.
+            pub const ALL: &'static [$name] = &[$($name::$variant,)+];
+
+            /// The name used in profiles (`[enums]`) and JSON (`Drive`, `Autonomous`, …).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $($name::$variant => stringify!($variant),)+
+                }
+            }
+
+            /// The variant a profile or DBC value description names, exactly.
+            pub fn from_name(name: &str) -> Option<$name> {
+                match name {
+                    $(stringify!($variant) => Some($name::$variant),)+
+                    _ => None,
+                }
+            }
+
+            /// The reference number.
+            pub fn raw(self) -> u64 {
+                self as u64
+            }
+
+            /// From a reference number.
+            pub fn from_raw(raw: u64) -> Option<$name> {
+                match raw {
+                    $($raw => Some($name::$variant),)+
+                    _ => None,
+                }
+            }
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                $name::$default
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(match self {
+                    $($name::$variant => $text,)+
+                })
+            }
+        }
+
+        /// Text as a user types it: any case, with the usual short forms.
+        impl FromStr for $name {
+            type Err = UnknownName;
+            fn from_str(text: &str) -> Result<Self, UnknownName> {
+                let lower = text.trim().to_ascii_lowercase();
+                $(if lower == $text $(|| lower == $alias)* {
+                    return Ok($name::$variant);
+                })+
+                Err(UnknownName {
+                    kind: $kind,
+                    expected: &[$($text),+],
+                })
+            }
+        }
+    };
+}
+
+vocabulary!(
+    /// Control modes: requested by the ADS, reported by the vehicle.
+    ControlMode, "control mode", default Manual, [
+        /// A driver drives.
+        Manual = 0, "manual";
+        /// The ADS drives.
+        Autonomous = 1, "autonomous" | "auto";
+        /// Stopped by the E-stop chain.
+        Estop = 2, "estop" | "e-stop";
+        /// Service: actuators calibrated, no driving.
+        Calibration = 3, "calibration";
+    ]
+);
+
+vocabulary!(
+    /// Steering modes of a four-wheel-steered vehicle.
+    SteeringMode, "steering mode", default Normal, [
+        /// Front and rear in counter-phase.
+        Normal = 0, "normal";
+        /// All wheels parallel.
+        Crab = 1, "crab";
+        /// Rotation on the spot.
+        Tank = 2, "tank";
+    ]
+);
+
+vocabulary!(
+    /// Gears.
+    Gear, "gear", default Park, [
+        /// Park.
+        Park = 0, "park" | "p";
+        /// Reverse.
+        Reverse = 1, "reverse" | "r";
+        /// Neutral.
+        Neutral = 2, "neutral" | "n";
+        /// Drive.
+        Drive = 3, "drive" | "d";
+    ]
+);
+
+vocabulary!(
+    /// The vehicle's command watchdog, as it reports it.
+    WatchdogLevel, "watchdog level", default FullBraking, [
+        /// Commands arrive.
+        Normal = 0, "normal";
+        /// A cycle or two missed: the last command is held.
+        Holding = 1, "holding";
+        /// More missed: decelerating under control, steering held.
+        Decelerating = 2, "decelerating";
+        /// Too many missed, invalid or disagreeing commands: full braking, latched.
+        FullBraking = 3, "full braking";
+        /// Valid commands again: still braking until a run of them and a re-engage.
+        AwaitingEngage = 4, "awaiting re-engage";
+    ]
+);
+
+vocabulary!(
+    /// The vehicle's E-stop latch, as it reports it.
+    EstopCode, "E-stop state", default Normal, [
+        /// No E-stop.
+        Normal = 0, "normal";
+        /// The chain opened.
+        Requested = 1, "requested";
+        /// Drive motors disabled.
+        MotorsDisabled = 2, "motors disabled";
+        /// Brakes applied.
+        BrakesApplied = 3, "brakes applied";
+        /// At standstill, latched: an operator reset is needed.
+        Stopped = 4, "stopped";
+        /// An operator pressed reset with the chain closed.
+        OperatorReset = 5, "operator reset";
+        /// The chain was verified closed: the operator confirms with a second reset.
+        EstopReset = 6, "reset, confirm";
+        /// Confirmed: a re-engage returns to normal.
+        ResetConfirmed = 7, "reset confirmed";
+    ]
+);
+
+impl EstopCode {
+    /// Whether the latch waits for the operator's reset (pressed once when stopped, once more
+    /// to confirm).
+    pub fn awaits_operator_reset(self) -> bool {
+        matches!(self, EstopCode::Stopped | EstopCode::EstopReset)
+    }
+}
+
+/// The setpoints and requests of one command (without the wire's counter and checksum): what
+/// the ADS side sends and what the supervisor takes.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ControlCommand {
+    /// Steering angle, degrees.
+    pub steering: f64,
+    /// Speed, m/s.
+    pub velocity: f64,
+    /// Brake, %.
+    pub brake: f64,
+    /// Gear.
+    pub gear: Gear,
+    /// Control mode requested.
+    pub mode: ControlMode,
+    /// Steering mode.
+    pub steering_mode: SteeringMode,
+    /// Re-engage request.
+    pub engage: bool,
+    /// Operator reset (E-stop sequence).
+    pub operator_reset: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    #[test]
+    fn names_text_and_numbers_go_both_ways() {
+        for &gear in Gear::ALL {
+            assert_eq!(Gear::from_name(gear.name()), Some(gear));
+            assert_eq!(Gear::from_raw(gear.raw()), Some(gear));
+            assert_eq!(gear.to_string().parse::<Gear>(), Ok(gear));
+        }
+        for &code in EstopCode::ALL {
+            assert_eq!(EstopCode::from_raw(code.raw()), Some(code));
+            assert_eq!(code.to_string().parse::<EstopCode>(), Ok(code));
+        }
+        assert_eq!("D".parse::<Gear>(), Ok(Gear::Drive));
+        assert_eq!(
+            " Autonomous ".parse::<ControlMode>(),
+            Ok(ControlMode::Autonomous)
+        );
+        assert_eq!(SteeringMode::from_raw(3), None);
+        assert_eq!(
+            WatchdogLevel::from_raw(4),
+            Some(WatchdogLevel::AwaitingEngage)
+        );
+        let err = "sideways".parse::<SteeringMode>().unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "not a steering mode: expected normal, crab, tank"
+        );
+    }
+}

@@ -1,0 +1,192 @@
+//! `bywire vehicle`: a simulated vehicle for any profile on any bus — the real supervisor with
+//! the profile's wire in front of a plant (`bywire_sim::vehicle`), on the real-time runner.
+//! Status lines (JSON) go to stdout at `--rate`.
+
+use std::io::Write;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context, Result};
+use bywire_bus::runner::{Flow, Hooks, Runner};
+use bywire_bus::BusError;
+use bywire_core::node::Port;
+use bywire_core::Timestamp;
+use bywire_sim::vehicle::SimulatedVehicle;
+use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::supervisor::Supervisor;
+use bywire_vehicle::wire::ProfileWire;
+use serde_json::json;
+
+#[derive(clap::Args)]
+#[command(
+    after_help = "The vehicle fails closed: it brakes until it has seen a run of valid commands and an\n\
+engage request. An E-stop frame (the profile's [estop] message) latches it until the operator\n\
+reset sequence. With BUS2 the commands are voted on across both buses; one lost degrades.\n\n\
+Examples:\n  bywire vehicle --profile reference-tug vcan0\n  \
+bywire vehicle --profile reference-tug socketcand:127.0.0.1:29536/vcan0\n  \
+bywire vehicle --profile ./my-vehicle.toml sim:demo@500000 sim:demo-b@500000 --rate 5"
+)]
+pub struct Args {
+    /// A shipped profile (reference-tug) or a profile file.
+    #[arg(long)]
+    profile: String,
+    /// The command bus.
+    bus: String,
+    /// A redundant second command bus.
+    bus2: Option<String>,
+    /// Status lines per second on stdout (0: none).
+    #[arg(long, default_value_t = 1.0)]
+    rate: f64,
+    /// Stop after this many seconds (default: until interrupted).
+    #[arg(long)]
+    duration: Option<f64>,
+}
+
+/// A shipped profile by name, or a profile file; it must describe a vehicle to command.
+pub fn load_profile(name: &str) -> Result<LoadedProfile> {
+    let loaded = if std::path::Path::new(name).exists() {
+        Profile::load(std::path::Path::new(name))?
+    } else {
+        Profile::builtin(name)?
+    };
+    if loaded.profile.command.is_none() || loaded.profile.state.is_none() {
+        bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");
+    }
+    Ok(loaded)
+}
+
+type Vehicle = SimulatedVehicle<ProfileWire>;
+
+/// Status lines and lost buses, for the vehicle's run.
+struct Status<'a> {
+    out: Option<&'a mut dyn Write>,
+    period: Option<Duration>,
+    next: Timestamp,
+}
+
+impl Hooks<Vehicle> for Status<'_> {
+    fn after_poll(&mut self, vehicle: &mut Vehicle, now: Timestamp) -> Flow {
+        let (Some(out), Some(period)) = (self.out.as_mut(), self.period) else {
+            return Flow::Continue;
+        };
+        if now < self.next {
+            return Flow::Continue;
+        }
+        self.next = self.next.saturating_add(period).max(now);
+        let s = vehicle.supervisor();
+        let plant = vehicle.plant();
+        let stats = s.stats();
+        let line = json!({
+            "t_s": now.as_nanos() as f64 / 1e9,
+            "mode": s.mode().name().to_lowercase(),
+            "watchdog": s.watchdog().level().to_string(),
+            "estop": s.estop().code().to_string(),
+            "degraded": s.degraded().map(|c| format!("{c:?}")),
+            "speed": plant.speed,
+            "steering": plant.steering,
+            "distance": plant.distance,
+            "accepted": stats.accepted,
+            "rejected": stats.rejected(),
+        });
+        // A closed stdout ends the status lines, not the vehicle.
+        if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {
+            self.out = None;
+        }
+        Flow::Continue
+    }
+
+    fn wake_at(&self) -> Option<Timestamp> {
+        self.out.as_ref().and(self.period).map(|_| self.next)
+    }
+
+    fn bus_lost(&mut self, _: &mut Vehicle, _: Timestamp, port: Port, error: &BusError) {
+        let which = if port == Supervisor::<ProfileWire>::PORT_A {
+            "A"
+        } else {
+            "B"
+        };
+        let _ = writeln!(
+            std::io::stderr(),
+            "bywire vehicle: bus {which} lost: {error}; going on with the other"
+        );
+    }
+}
+
+fn endpoints(specs: &[(Port, String)]) -> Result<Vec<(Port, Box<dyn bywire_bus::Bus>)>> {
+    specs
+        .iter()
+        .map(|(port, spec)| {
+            Ok((
+                *port,
+                bywire_bus::open(spec).with_context(|| format!("bus {spec}"))?,
+            ))
+        })
+        .collect()
+}
+
+/// The vehicle on its own thread over in-process buses (`bridge --with-vehicle`), until `stop`.
+pub fn spawn_in_process(
+    specs: &[(Port, String)],
+    profile: &LoadedProfile,
+    wire: ProfileWire,
+    stop: &Arc<AtomicBool>,
+) -> Result<JoinHandle<()>> {
+    for (_, spec) in specs {
+        let parsed: bywire_bus::BusSpec = spec.parse()?;
+        if !matches!(
+            parsed,
+            bywire_bus::BusSpec::Virtual { .. } | bywire_bus::BusSpec::Sim { .. }
+        ) {
+            bail!("--with-vehicle needs in-process buses (virtual: or sim:), not {spec}; run `bywire vehicle` beside the bridge instead");
+        }
+    }
+    let mut vehicle = Vehicle::from_profile(profile, wire, specs.len() > 1);
+    let mut runner = Runner::new(endpoints(specs)?);
+    let stop = Arc::clone(stop);
+    Ok(std::thread::spawn(move || {
+        let mut status = Status {
+            out: None,
+            period: None,
+            next: Timestamp::ZERO,
+        };
+        let _ = runner.run(&mut vehicle, &stop, None, &mut status);
+    }))
+}
+
+/// Run the vehicle until interrupted or `--duration` has passed.
+pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
+    if !(args.rate.is_finite() && (0.0..=1000.0).contains(&args.rate)) {
+        bail!("--rate {}: between 0 and 1000 lines per second", args.rate);
+    }
+    let limit = args
+        .duration
+        .map(|s| {
+            Duration::try_from_secs_f64(s)
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| anyhow!("--duration {s}: a positive number of seconds"))
+        })
+        .transpose()?;
+    let profile = load_profile(&args.profile)?;
+    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
+    let specs: Vec<(Port, String)> = [
+        (Supervisor::<ProfileWire>::PORT_A, Some(&args.bus)),
+        (Supervisor::<ProfileWire>::PORT_B, args.bus2.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(port, spec)| spec.map(|s| (port, s.clone())))
+    .collect();
+    let mut vehicle = Vehicle::from_profile(&profile, wire, specs.len() > 1);
+    let mut runner = Runner::new(endpoints(&specs)?);
+    let mut status = Status {
+        out: Some(out),
+        period: (args.rate > 0.0).then(|| Duration::from_secs_f64(1.0 / args.rate)),
+        next: Timestamp::ZERO,
+    };
+    let stop = crate::interrupt_flag();
+    let result = runner.run(&mut vehicle, &stop, limit, &mut status);
+    result.map_err(|e| anyhow!("every bus lost (last: {e})"))?;
+    Ok(())
+}
