@@ -25,3 +25,6 @@ python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack 
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
 ../shared/tools/canvm.sh prepare
+# python-can and cantools for Debian's Python inside the VM (tests include the folder there): an
+# ADS written with them drives `bywire vehicle` over the kernel's vcan.
+python3 -m pip install -q --disable-pip-version-check --upgrade --target target/vm-python python-can==4.6.1 cantools==45.1.0

@@ -337,7 +337,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         (Ads::<ProfileWire>::PORT_B, args.bus2.as_ref()),
     ]
     .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, s.clone())))
+    .filter_map(|(port, spec)| spec.map(|s| (port, crate::busarg::full_spec(s))))
     .collect();
     // Both sides speak the profile's messages by role, through the runtime codec.
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;

@@ -176,7 +176,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         (Supervisor::<ProfileWire>::PORT_B, args.bus2.as_ref()),
     ]
     .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, s.clone())))
+    .filter_map(|(port, spec)| spec.map(|s| (port, crate::busarg::full_spec(s))))
     .collect();
     let mut vehicle = Vehicle::from_profile(&profile, wire, specs.len() > 1);
     let mut runner = Runner::new(endpoints(&specs)?);

@@ -140,9 +140,13 @@ fn bridge_refuses_bad_arguments_clearly() {
     );
     assert_eq!(code, 1);
     assert!(err.contains("can9") || err.contains("in-process"), "{err}");
+    // A plain name is a SocketCAN interface, as in every command.
     let (code, _, err) = common::bywire(&["bridge", "--profile", "reference-tug", "bus"], "");
     assert_eq!(code, 1);
-    assert!(err.contains("not a bus spec"), "{err}");
+    assert!(err.contains("socketcan:bus"), "{err}");
+    let (code, _, err) = common::bywire(&["bridge", "--profile", "reference-tug", "nope:x"], "");
+    assert_eq!(code, 1);
+    assert!(err.contains("nope:x"), "{err}");
     // Without --estop-on-eof, the end of input just ends the bridge.
     let (code, out, _) = common::bywire(
         &["bridge", "--profile", "reference-tug", "virtual:quiet"],
