@@ -17,6 +17,23 @@
 //!   master-side driver that enables, commands and safely stops a drive.
 //! - [`roboteq`]: Roboteq's objects, the MDC1460-like device, and the master-side helper.
 //! - [`config`] (feature `std`): the bus description file.
+//!
+//! A drive answering an SDO upload of its device type (0x1000), as a master would ask:
+//! ```
+//! use bywire_canopen::cia402::{self, Drive};
+//! use bywire_canopen::device::Device;
+//! use bywire_core::{Frame, Id, Timestamp};
+//!
+//! let mut drive = Device::new(2, cia402::drive_dictionary(2), Drive::new());
+//! drive.poll(Timestamp::ZERO, &mut |_boot_up| {}); // boots into pre-operational
+//! let request = Frame::classic(Id::standard(0x602).unwrap(), &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]).unwrap();
+//! drive.on_frame(Timestamp::ZERO, &request);
+//! let mut answers = Vec::new();
+//! drive.poll(Timestamp::ZERO, &mut |frame| answers.push(frame));
+//! let answer = answers.iter().find(|f| f.id() == Id::standard(0x582).ok()).unwrap();
+//! // An expedited upload of four bytes: a CiA 402 drive's device type, 0x00020192.
+//! assert_eq!(answer.data(), &[0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00]);
+//! ```
 #![cfg_attr(not(feature = "std"), no_std)]
 
 extern crate alloc;

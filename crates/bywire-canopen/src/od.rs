@@ -436,7 +436,7 @@ impl Entry {
     }
 
     /// Set its default (and present) value from bytes; for variable-length types the buffer
-    /// grows to hold at least [`VARIABLE_CAPACITY`] bytes.
+    /// grows to hold at least `VARIABLE_CAPACITY` bytes.
     pub fn with_default(mut self, bytes: &[u8]) -> Entry {
         self.default = bytes.to_vec();
         self.value = Vec::with_capacity(match self.data_type.size() {

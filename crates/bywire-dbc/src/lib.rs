@@ -8,7 +8,7 @@
 //! - [`parse`] reads a file leniently or strictly ([`Mode`]): lenient mode loads what a
 //!   reasonable engineer would accept and reports one [`Diagnostic`] per problem with
 //!   line and column; strict mode fails on the first.
-//! - [`write`] writes a [`Database`] back as DBC text (load → write → load is equal).
+//! - [`write()`] writes a [`Database`] back as DBC text (load → write → load is equal).
 //! - [`codec`] compiles each message once into a plan and decodes and encodes frames without
 //!   allocating, with Python-compatible number semantics so results match cantools bit for bit.
 //!

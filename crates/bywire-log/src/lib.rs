@@ -12,6 +12,14 @@
 //! Readers hold one line at a time, so logs of any size stream in bounded memory, and no input
 //! can make them panic (property-tested).
 
+//! ```
+//! let log = "(1700000000.000100) can0 123#DEADBEEF\n(1700000000.000200) can1 1ABCDEF0##1112233\n";
+//! let records: Vec<_> = bywire_log::Reader::new(log.as_bytes()).collect::<Result<_, _>>().unwrap();
+//! assert_eq!(records.len(), 2);
+//! assert_eq!((records[0].interface.as_str(), records[0].frame.data()), ("can0", &[0xDE, 0xAD, 0xBE, 0xEF][..]));
+//! assert!(records[1].frame.is_fd());
+//! ```
+
 pub mod candump;
 pub mod lines;
 pub mod screen;

@@ -17,6 +17,19 @@
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
 
+//!
+//! The tug's first simulated second: the ECU fails closed, then the ADS engages it.
+//! ```
+//! use bywire_sim::tug::{Tug, TugParams};
+//!
+//! let mut tug = Tug::new(TugParams::default());
+//! for _ in 0..1_000 {
+//!     tug.step(); // one simulated millisecond
+//! }
+//! assert_eq!(tug.now().as_nanos(), 1_000_000_000);
+//! assert!(tug.engaged_at().is_some());
+//! ```
+
 pub mod battery;
 pub mod chassis;
 pub mod drive;

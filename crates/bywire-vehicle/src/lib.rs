@@ -22,6 +22,22 @@
 //! - [`profile`]: TOML vehicle profiles checked against their DBC; `reference-tug` and
 //!   `autoware-can` ship.
 
+//!
+//! The supervisor fails closed: before it has seen a run of valid commands and an engage
+//! request, its watchdog is at full braking and the ADS has no say over the actuators.
+//! ```
+//! use bywire_core::Timestamp;
+//! use bywire_vehicle::command::Gear;
+//! use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
+//!
+//! let mut supervisor = Supervisor::new(SupervisorConfig::default());
+//! supervisor.poll(Timestamp::ZERO, &mut |_state_frame| {});
+//! assert_eq!(supervisor.watchdog(), Watchdog::FullBraking);
+//! let actuators = supervisor.actuators(Timestamp::ZERO);
+//! assert!(!actuators.ads_in_control && !actuators.steering_enabled && actuators.velocity == 0.0);
+//! assert_eq!("D".parse::<Gear>(), Ok(Gear::Drive));
+//! ```
+
 pub mod acceptance;
 pub mod ads;
 pub mod autoware;

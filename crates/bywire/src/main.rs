@@ -1,5 +1,7 @@
 //! `bywire`: the command line. Each subcommand parses its arguments, calls the library and
 //! prints; the work is in the library crates.
+// Doc comments here are clap's help text (`[,DATA_BITRATE]`, `INDEX[:SUB]`), not rustdoc links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 mod bittiming_cmd;
 mod bridge_cmd;

@@ -1,7 +1,7 @@
 //! `socketcan:IFACE`: a Linux SocketCAN raw socket (classic and FD) as a [`Bus`].
 //!
 //! The well-kept `socketcan` crate opens the socket, sets its options and speaks netlink for the
-//! link configuration and the controller's state. Reception is our own ([`sys`]): it needs the
+//! link configuration and the controller's state. Reception is our own (`sys.rs`): it needs the
 //! `MSG_CONFIRM` flag to tell this socket's echoed frames — the transmit confirmations, with the
 //! time the frame left — from identical frames of other nodes, plus the kernel's drop counter and
 //! hardware timestamps from the same `recvmsg`, which the crate does not return together.
