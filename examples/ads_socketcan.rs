@@ -11,17 +11,22 @@ use std::time::Duration;
 use bywire_bus::runner::{Flow, Runner};
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
+use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::command::{ControlMode, Gear};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let spec = std::env::args().nth(1).unwrap_or_else(|| "vcan0".into());
-    let spec = if spec.contains(':') { spec } else { format!("socketcan:{spec}") };
+    let spec = if spec.contains(':') {
+        spec
+    } else {
+        format!("socketcan:{spec}")
+    };
     let bus = bywire_bus::open(&spec)?;
     let mut runner = Runner::new(vec![(Port::MAIN, bus)]);
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     let mut next_print = Timestamp::ZERO;
-    let mut after_poll = |ads: &mut Ads, now: Timestamp| {
+    let mut after_poll = |ads: &mut Ads<ReferenceWire>, now: Timestamp| {
         // Engage is an edge: asked for now and then until the vehicle follows.
         let engage = ads.blocker(now).is_some() && now.as_nanos() % 500_000_000 < 20_000_000;
         ads.set_command(
@@ -48,6 +53,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Flow::Continue
     };
     let stop = AtomicBool::new(false);
-    runner.run(&mut ads, &stop, Some(Duration::from_secs(10)), &mut after_poll)?;
+    runner.run(
+        &mut ads,
+        &stop,
+        Some(Duration::from_secs(10)),
+        &mut after_poll,
+    )?;
     Ok(())
 }

@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Box::new(std::io::BufReader::new(std::fs::File::open(log)?)),
         ),
         _ => (
-            bywire_vehicle::reference_tug::DBC.to_string(),
+            bywire_tug::messages::DBC.to_string(),
             Box::new(SAMPLE.as_bytes()),
         ),
     };
@@ -32,7 +32,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut values = vec![None; 64];
     for record in bywire_log::Reader::new(log) {
         let record = record?;
-        let Some(id) = record.frame.id() else { continue };
+        let Some(id) = record.frame.id() else {
+            continue;
+        };
         let Some((message, codec)) = db
             .messages
             .iter()
@@ -46,7 +48,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("{} {}", record.timestamp.as_nanos(), message.name);
         for (signal, value) in message.signals.iter().zip(&values) {
             if let Some(value) = value {
-                println!("  {} = {} {}", signal.name, value.physical.as_f64(), signal.unit);
+                println!(
+                    "  {} = {} {}",
+                    signal.name,
+                    value.physical.as_f64(),
+                    signal.unit
+                );
             }
         }
     }

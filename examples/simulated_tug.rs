@@ -25,6 +25,11 @@ fn main() {
         tug.soc() * 100.0
     );
     for event in tug.events.iter().take(10) {
-        println!("  {:>7.3} s  {:<12} {}", event.t.as_nanos() as f64 / 1e9, event.kind, event.detail);
+        println!(
+            "  {:>7.3} s  {:<12} {}",
+            event.t.as_nanos() as f64 / 1e9,
+            event.kind,
+            event.detail
+        );
     }
 }

@@ -50,6 +50,8 @@ pub struct Network {
     wires: Vec<Wire>,
     /// Per node: its output is dropped (the node is cut off or powered down).
     dropped: Vec<bool>,
+    /// Single ports whose output is dropped (one of a node's buses cut).
+    dropped_ports: Vec<(NodeIndex, Port)>,
     /// Per node: when it was last polled.
     polled: Vec<Option<Timestamp>>,
     now: Timestamp,
@@ -70,6 +72,7 @@ impl Network {
             buses: Vec::new(),
             wires: Vec::new(),
             dropped: Vec::new(),
+            dropped_ports: Vec::new(),
             polled: Vec::new(),
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
@@ -126,6 +129,14 @@ impl Network {
     pub fn drop_output(&mut self, node: NodeIndex, dropped: bool) {
         if let Some(slot) = self.dropped.get_mut(node) {
             *slot = dropped;
+        }
+    }
+
+    /// Drop (or again let through) what `node` sends on `port` only: that one connection cut.
+    pub fn drop_port_output(&mut self, node: NodeIndex, port: Port, dropped: bool) {
+        self.dropped_ports.retain(|p| *p != (node, port));
+        if dropped {
+            self.dropped_ports.push((node, port));
         }
     }
 
@@ -252,6 +263,9 @@ impl Network {
                 continue;
             }
             for (port, frame) in self.outgoing.drain(..) {
+                if self.dropped_ports.contains(&(i, port)) {
+                    continue;
+                }
                 let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
                 if let Some((w, (_, sim))) =
                     wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b)))

@@ -222,7 +222,7 @@ pub(crate) fn parse_int(text: &str) -> Option<i128> {
 fn parse_hex_bytes(text: &str) -> Result<Vec<u8>, String> {
     let digits: String = text.chars().filter(|c| !c.is_whitespace()).collect();
     let digits = digits.strip_prefix("0x").unwrap_or(&digits);
-    if digits.len() % 2 != 0 {
+    if !digits.len().is_multiple_of(2) {
         return Err(format!("'{text}' is not a whole number of hex bytes"));
     }
     (0..digits.len() / 2)

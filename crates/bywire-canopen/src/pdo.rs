@@ -199,7 +199,7 @@ impl Pdo {
 fn copy_bits(from: &[u8], from_bit: usize, to: &mut [u8], to_bit: usize, count: usize) {
     // Whole bytes at byte boundaries (almost every mapping) go a byte at a time, with the
     // same rules.
-    if from_bit % 8 == 0 && to_bit % 8 == 0 && count % 8 == 0 {
+    if from_bit.is_multiple_of(8) && to_bit.is_multiple_of(8) && count.is_multiple_of(8) {
         let (source, target) = (from_bit / 8, to_bit / 8);
         for k in 0..count / 8 {
             if let Some(byte) = to.get_mut(target + k) {

@@ -31,7 +31,7 @@ fn positions(start: u32, length: u32, big_endian: bool) -> Vec<u32> {
     if big_endian {
         for _ in 0..length {
             msb_first.push(p);
-            p = if p % 8 == 0 { p + 15 } else { p - 1 };
+            p = if p.is_multiple_of(8) { p + 15 } else { p - 1 };
         }
         msb_first.reverse();
         msb_first

@@ -33,7 +33,6 @@
 pub mod battery;
 pub mod chassis;
 pub mod drive;
-pub mod plausibility;
 pub mod rng;
 pub mod scenario;
 pub mod steering;

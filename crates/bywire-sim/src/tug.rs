@@ -16,48 +16,39 @@ use core::time::Duration;
 
 use bywire_bus::sim::{NodeId, SimBus, Tamper};
 use bywire_bus::Filtering;
-use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
+use bywire_canopen::cia402::{self, Drive, Mode};
 use bywire_canopen::device::Device;
-use bywire_canopen::master::{Controlled, Master, MasterEvent};
-use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
-use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
+use bywire_control::kinematics::{Point, Pose};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::filter::Filter;
 use bywire_core::{Frame, Timestamp};
+use bywire_tug::messages::{
+    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringAngleSensors,
+    SteeringMode, WheelEncoders,
+};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::command::{EstopCode, WatchdogLevel};
-use bywire_vehicle::profile::Profile;
 use bywire_vehicle::redundancy::Channel;
-use bywire_vehicle::reference_tug::{
-    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringAngleSensors,
-    SteeringMode, VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles, WheelEncoders,
-};
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
 use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
-use crate::plausibility::SteeringPlausibility;
 use crate::rng::Rng;
 use crate::steering::{SensorFault, SteeringChain, SteeringParams};
+use bywire_core::node::Node;
+use bywire_tug::ecu::{self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu};
+use bywire_tug::wire::ReferenceWire;
 
 /// One simulated millisecond.
 pub const TICK: Duration = Duration::from_millis(1);
 
-/// The ECU's node ID on the drives bus.
-pub const MASTER_NODE: u8 = 1;
-/// Steering drives FL, FR, RL, RR.
-pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
-/// Wheel drives FL, FR, RL, RR.
-pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
+pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
+use bywire_tug::ecu::{DRIVE_UNITS_PER_M, STEERING_UNITS_PER_DEG};
 /// The ADS's command frame (AdsToVehicle_Control in the reference DBC).
 const ADS_COMMAND_ID: u16 = 0x100;
-
-/// Steering drives count in 0.01°; wheel drives in mm/s and mm.
-const STEERING_UNITS_PER_DEG: f64 = 100.0;
-const DRIVE_UNITS_PER_M: f64 = 1000.0;
 
 /// What a run is given.
 #[derive(Debug, Clone, PartialEq)]
@@ -298,8 +289,6 @@ pub struct Tug {
     imu_port: NodeId,
     io_port: NodeId,
     ecu_port3: NodeId,
-    /// The ECU's plausibility check of the steering sensors.
-    plausibility: SteeringPlausibility,
     log_port3: NodeId,
     bms_port: NodeId,
     next_report: Timestamp,
@@ -311,12 +300,9 @@ pub struct Tug {
     ecu_port2: NodeId,
     log_port1: NodeId,
     log_port2: NodeId,
-    ads: Ads,
-    ecu: Supervisor,
-    master: Master,
+    ads: Ads<ReferenceWire>,
+    ecu: VehicleControlEcu,
     corners: Vec<Corner>,
-    swerve: Swerve<4>,
-    wheel_targets: [WheelState; 4],
     chassis: Chassis,
     battery: Battery,
     rng: Rng,
@@ -346,7 +332,6 @@ pub struct Tug {
     resetting: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
     last_degraded: Option<Channel>,
-    drives_lost: bool,
     ads_external: bool,
     /// The next stop to make, and the end of the dwell there once stopped.
     stop_index: usize,
@@ -413,7 +398,7 @@ fn drive_port(bus: &mut SimBus, node: u8) -> NodeId {
 impl Tug {
     /// A tug at the start of its route, parked, everything powered on.
     pub fn new(params: TugParams) -> Tug {
-        let loaded = Profile::builtin("reference-tug");
+        let loaded = bywire_tug::profile();
         let (ads_config, mut ecu_config) = match &loaded {
             Ok(l) => (l.ads_config(), l.supervisor_config()),
             Err(_) => (Default::default(), Default::default()),
@@ -444,27 +429,6 @@ impl Tug {
             bus1.set_rx_capacity(port, 0);
         }
         let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
-        let mut master = Master::new(
-            MASTER_NODE,
-            Duration::from_millis(100),
-            Duration::from_millis(10),
-        )
-        .with_sync(Duration::from_millis(10));
-        for node in STEERING_NODES {
-            let mut controller =
-                DriveController::new(node, Mode::ProfilePosition, Duration::from_millis(500));
-            controller.set_enabled(true);
-            master.add(Controlled::Drive(controller));
-            master.monitor(node, Duration::from_millis(250));
-        }
-        for node in DRIVE_NODES {
-            let mut controller =
-                DriveController::new(node, Mode::ProfileVelocity, Duration::from_millis(500));
-            controller.set_enabled(true);
-            master.add(Controlled::Drive(controller));
-            master.monitor(node, Duration::from_millis(250));
-        }
-        master.nmt(NmtCommand::Start, 0);
         let corners = STEERING_NODES
             .iter()
             .zip(DRIVE_NODES)
@@ -504,7 +468,6 @@ impl Tug {
             imu_port,
             io_port,
             ecu_port3,
-            plausibility: SteeringPlausibility::default(),
             log_port3,
             bms_port,
             next_report: Timestamp::ZERO,
@@ -515,12 +478,15 @@ impl Tug {
             ecu_port2,
             log_port1,
             log_port2,
-            ads: Ads::new(ads_config),
-            ecu: Supervisor::new(ecu_config),
-            master,
+            ads: Ads::with_wire(ads_config, ReferenceWire),
+            ecu: VehicleControlEcu::new(
+                ecu_config,
+                EcuGeometry {
+                    wheelbase: chassis_params.wheelbase,
+                    track: chassis_params.track,
+                },
+            ),
             corners,
-            swerve: four_wheel(chassis_params.wheelbase, chassis_params.track),
-            wheel_targets: [WheelState::default(); 4],
             chassis: Chassis::new(chassis_params, start),
             battery: Battery::new(BatteryParams::default(), 0.8),
             rng: Rng::new(params.seed),
@@ -557,7 +523,6 @@ impl Tug {
                 EstopState::Normal,
                 ControlMode::Manual,
             ),
-            drives_lost: false,
             ads_external: false,
             stop_index: 0,
             dwell_until: None,
@@ -656,22 +621,10 @@ impl Tug {
             }
             Fault::OperatorReset => {
                 self.resetting = true;
-                // ... and clears a steering fault whose sensor tracks agree again.
-                if self.plausibility.faulted().is_some() {
-                    let first = self.first_tracks();
-                    let detail = if self.plausibility.reset(now, first) {
-                        "reset: the tracks agree"
-                    } else {
-                        "reset refused: the tracks still disagree"
-                    };
-                    self.record("plausibility", detail.to_string());
-                }
-                // The operator's reset also acknowledges drives the master stopped.
-                for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
-                    if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
-                        d.acknowledge();
-                    }
-                }
+                // ... at the ECU too: drives the master stopped acknowledged, a steering fault
+                // whose sensor tracks agree again cleared.
+                self.ecu.operator_reset(now);
+                self.take_ecu_events();
             }
             Fault::EcuBusOff => self.bus1.take_off_bus(Some(self.ecu_port1), None),
             Fault::BusOff { bus, id } => {
@@ -698,24 +651,8 @@ impl Tug {
     }
 
     /// The steering fault the ECU's plausibility check latched, if any.
-    pub fn steering_fault(&self) -> Option<crate::plausibility::SteeringFault> {
-        self.plausibility.faulted()
-    }
-
-    /// The ECU stops the tug on its own: a drive stopped by the master, or a steering fault.
-    fn ecu_stops(&self) -> bool {
-        self.drives_lost || self.plausibility.faulted().is_some()
-    }
-
-    /// The steering sensors' first tracks, as the drives report them on bus 2, degrees.
-    fn first_tracks(&mut self) -> [f64; 4] {
-        let mut angles = [0.0; 4];
-        for (angle, steer) in angles.iter_mut().zip(STEERING_NODES) {
-            if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
-                *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
-            }
-        }
-        angles
+    pub fn steering_fault(&self) -> Option<bywire_tug::plausibility::SteeringFault> {
+        self.ecu.steering_fault()
     }
 
     /// The route is done: engaged, at its end, stopped, and the tank turn (if any) made.
@@ -827,7 +764,7 @@ impl Tug {
         let aligned = self
             .corners
             .iter()
-            .zip(&self.wheel_targets)
+            .zip(&self.ecu.wheel_targets())
             .all(|(c, t)| libm::fabs(c.chain.wheel_angle_deg() - t.angle.to_degrees()) < 3.0);
         if !aligned {
             return Some(0.0);
@@ -882,8 +819,8 @@ impl Tug {
     }
 
     /// The vehicle control ECU's supervisor.
-    pub fn ecu(&self) -> &Supervisor {
-        &self.ecu
+    pub fn ecu(&self) -> &Supervisor<ReferenceWire> {
+        self.ecu.supervisor()
     }
 
     /// The route's remaining distance from the tug's projection at the last ADS cycle, m.
@@ -953,7 +890,7 @@ impl Tug {
         self.run_reports(now);
         self.record_step(now);
         self.note_changes();
-        if now.as_nanos() % 50_000_000 == 0 {
+        if now.as_nanos().is_multiple_of(50_000_000) {
             let steering_actual = self
                 .corners
                 .first()
@@ -969,8 +906,8 @@ impl Tug {
         }
     }
 
-    /// The periodic reports: the IMU on bus 3 every 10 ms; every 20 ms the ECU's wheel speeds
-    /// and angles and its status on bus 1; the BMS every 100 ms.
+    /// The periodic reports of the sensor nodes: the IMU and the I/O node on bus 3 every
+    /// 10 ms, the BMS on bus 1 every 100 ms (the ECU reports on its own).
     fn run_reports(&mut self, now: Timestamp) {
         if now < self.next_report {
             return;
@@ -983,11 +920,8 @@ impl Tug {
         let _ = imu.set_yaw_rate(yaw_rate.to_degrees().clamp(-327.0, 327.0));
         let _ = imu.set_accel_x(accel.clamp(-32.0, 32.0));
         imu.set_counter_raw(counter & 0x0F);
-        self.bus3.submit(
-            self.imu_port,
-            reference_tug::sealed_frame(Imu::ID, imu.0),
-            now,
-        );
+        self.bus3
+            .submit(self.imu_port, messages::sealed_frame(Imu::ID, imu.0), now);
         // The I/O node: the hub encoders and the steering sensors' second tracks.
         let mut encoders = WheelEncoders::default();
         let [fl, fr, rl, rr] = self.chassis.encoders(0.01).map(|v| v.clamp(-20.0, 20.0));
@@ -1019,62 +953,9 @@ impl Tug {
             (SteeringAngleSensors::ID, second.0),
         ] {
             self.bus3
-                .submit(self.io_port, reference_tug::sealed_frame(id, payload), now);
+                .submit(self.io_port, messages::sealed_frame(id, payload), now);
         }
-        if counter % 2 == 0 {
-            // As the drives report them on bus 2.
-            let angles = self.first_tracks();
-            let mut speeds = [0.0; 4];
-            for (speed, drive) in speeds.iter_mut().zip(DRIVE_NODES) {
-                if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
-                    *speed = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
-                }
-            }
-            let feedback_counter = (counter / 2) & 0x0F;
-            let mut m = VehicleToAdsSensors::default();
-            let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.0, 20.0));
-            let _ = (
-                m.set_wheel_speed_fl(fl),
-                m.set_wheel_speed_fr(fr),
-                m.set_wheel_speed_rl(rl),
-                m.set_wheel_speed_rr(rr),
-            );
-            m.set_counter_raw(feedback_counter);
-            self.bus1.submit(
-                self.ecu_port1,
-                reference_tug::sealed_frame(VehicleToAdsSensors::ID, m.0),
-                now,
-            );
-            let mut m = VehicleToAdsWheelAngles::default();
-            let [fl, fr, rl, rr] = angles.map(|a| a.clamp(-200.0, 200.0));
-            let _ = (
-                m.set_wheel_angle_fl(fl),
-                m.set_wheel_angle_fr(fr),
-                m.set_wheel_angle_rl(rl),
-                m.set_wheel_angle_rr(rr),
-            );
-            m.set_counter_raw(feedback_counter);
-            self.bus1.submit(
-                self.ecu_port1,
-                reference_tug::sealed_frame(VehicleToAdsWheelAngles::ID, m.0),
-                now,
-            );
-            let mut status = VehicleStatus::default();
-            status.set_drive_fault_raw(u64::from(self.drives_lost));
-            status.set_steering_fault_raw(u64::from(self.plausibility.faulted().is_some()));
-            status.set_degraded_bus_raw(u64::from(self.ecu.degraded().is_some()));
-            status.set_estop_chain_open_raw(u64::from(self.is_active(Fault::Estop)));
-            status.set_parking_brake_applied_raw(u64::from(
-                self.corners.iter().any(|c| c.wheel.is_parked()),
-            ));
-            status.set_counter_raw(feedback_counter);
-            self.bus1.submit(
-                self.ecu_port1,
-                reference_tug::sealed_frame(VehicleStatus::ID, status.0),
-                now,
-            );
-        }
-        if counter % 10 == 0 {
+        if counter.is_multiple_of(10) {
             let mut m = BatteryMessage::default();
             let _ = m.set_battery_voltage(self.battery.terminal_v().clamp(0.0, 120.0));
             let _ = m.set_battery_current(self.battery.current().clamp(-1000.0, 1000.0));
@@ -1082,7 +963,7 @@ impl Tug {
             m.set_counter_raw((counter / 10) & 0x0F);
             self.bus1.submit(
                 self.bms_port,
-                reference_tug::sealed_frame(BatteryMessage::ID, m.0),
+                messages::sealed_frame(BatteryMessage::ID, m.0),
                 now,
             );
         }
@@ -1100,7 +981,7 @@ impl Tug {
         self.estop_counter = self.estop_counter.wrapping_add(1);
         self.bus1.submit(
             self.safety_port,
-            reference_tug::sealed_frame(EmergencyStop::ID, m.0),
+            messages::sealed_frame(EmergencyStop::ID, m.0),
             now,
         );
     }
@@ -1170,7 +1051,8 @@ impl Tug {
             let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
             self.record("bus_state", detail);
         }
-        let seen = (self.ecu.watchdog(), self.ecu.estop(), self.ecu.mode());
+        let supervisor = self.ecu.supervisor();
+        let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
         let (watchdog, estop, mode) = self.last_seen;
         if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
             self.record("watchdog", watchdog_name(seen.0).to_string());
@@ -1182,7 +1064,7 @@ impl Tug {
             self.record("mode", format!("{:?}", seen.2));
         }
         self.last_seen = seen;
-        let degraded = self.ecu.degraded();
+        let degraded = self.ecu.supervisor().degraded();
         if degraded != self.last_degraded {
             self.last_degraded = degraded;
             let detail = match degraded {
@@ -1192,22 +1074,14 @@ impl Tug {
             };
             self.record("redundancy", detail.to_string());
         }
-        while let Some(event) = self.master.next_event() {
-            match event {
-                MasterEvent::Heartbeat(HeartbeatEvent::Lost { node }) => {
-                    self.record("heartbeat_lost", format!("node 0x{node:02X}"))
-                }
-                MasterEvent::Heartbeat(HeartbeatEvent::Recovered { node, .. }) => {
-                    self.record("heartbeat_recovered", format!("node 0x{node:02X}"))
-                }
-                MasterEvent::Emergency { node, emergency } if emergency.code != 0 => {
-                    self.record(
-                        "emcy",
-                        format!("node 0x{node:02X} code 0x{:04X}", emergency.code),
-                    );
-                }
-                _ => {}
-            }
+        self.take_ecu_events();
+    }
+
+    /// The ECU's events into the run's.
+    fn take_ecu_events(&mut self) {
+        // Bounded by the ECU's event queue.
+        while let Some((_, event)) = self.ecu.next_event() {
+            self.record(event.kind(), event.to_string());
         }
     }
 
@@ -1221,20 +1095,20 @@ impl Tug {
             }
         }
         while let Some(r) = self.bus1.receive(self.ecu_port1) {
-            self.ecu.on_frame(r.timestamp, &r.frame);
+            self.ecu.on_frame(r.timestamp, ecu::BUS1, &r.frame);
         }
         while let Some(r) = self.bus1.receive(self.log_port1) {
             self.bus1_log.push((r.timestamp, r.frame));
         }
         while let Some(r) = self.bus1b.receive(self.ecu_port_b) {
-            self.ecu.on_frame_from(r.timestamp, Channel::B, &r.frame);
+            self.ecu.on_frame(r.timestamp, ecu::BUS1B, &r.frame);
         }
         while let Some(r) = self.bus1b.receive(self.log_port_b) {
             self.bus1b_log.push((r.timestamp, r.frame));
         }
         while self.bus1b.receive(self.ads_port_b).is_some() {}
         while let Some(r) = self.bus2.receive(self.ecu_port2) {
-            self.master.on_frame(r.timestamp, &r.frame);
+            self.ecu.on_frame(r.timestamp, ecu::BUS2, &r.frame);
         }
         while let Some(r) = self.bus2.receive(self.log_port2) {
             self.bus2_log.push((r.timestamp, r.frame));
@@ -1245,22 +1119,7 @@ impl Tug {
         // The ECU takes the steering sensors' second tracks from bus 3 (the IMU and encoders are
         // logged; the ADS localises itself).
         while let Some(r) = self.bus3.receive(self.ecu_port3) {
-            let payload = reference_tug::payload(&r.frame);
-            let is_tracks = r.frame.id().map(|id| id.as_raw()) == Some(SteeringAngleSensors::ID);
-            if let (true, Some(payload)) = (is_tracks, payload) {
-                if reference_tug::is_sealed(SteeringAngleSensors::ID, &payload) {
-                    let m = SteeringAngleSensors(payload);
-                    self.plausibility.second_tracks(
-                        r.timestamp,
-                        [
-                            m.second_angle_fl(),
-                            m.second_angle_fr(),
-                            m.second_angle_rl(),
-                            m.second_angle_rr(),
-                        ],
-                    );
-                }
-            }
+            self.ecu.on_frame(r.timestamp, ecu::BUS3, &r.frame);
         }
         for corner in &mut self.corners {
             while let Some(r) = self.bus2.receive(corner.steer_port) {
@@ -1343,7 +1202,7 @@ impl Tug {
             let awaiting = state.watchdog_level.value == Some(WatchdogLevel::AwaitingEngage);
             let engage = self.ads.feedback_alive(now)
                 && (!autonomous || awaiting)
-                && self.ads_cycles % 10 == 0;
+                && self.ads_cycles.is_multiple_of(10);
             if autonomous && self.engaged_at.is_none() {
                 self.engaged_at = Some(now);
             }
@@ -1356,7 +1215,7 @@ impl Tug {
             }
             let operator_reset = self.resetting
                 && estop.is_some_and(EstopCode::awaits_operator_reset)
-                && self.ads_cycles % 25 == 0;
+                && self.ads_cycles.is_multiple_of(25);
             let command = AdsCommand {
                 steering,
                 velocity,
@@ -1387,8 +1246,8 @@ impl Tug {
         self.send_bus1(port, frame);
     }
 
-    /// The vehicle control ECU: the supervisor on bus 1, its actuator outputs turned into
-    /// wheel angles and speeds by 4WS kinematics and sent to the drives on bus 2.
+    /// The vehicle control ECU node, its inputs from the wiring set first (a driver's hand on
+    /// the wheel, the hardwired E-stop chain, the parking brakes), its frames onto its buses.
     fn run_ecu(&mut self, now: Timestamp) {
         let takeover = if self.is_active(Fault::DriverTakeover) {
             8.0
@@ -1396,99 +1255,17 @@ impl Tug {
             0.0
         };
         self.ecu.set_driver_input(takeover, 0.0);
-        let (bus, port) = (&mut self.bus1, self.ecu_port1);
-        self.ecu.poll(now, &mut |f| bus.submit(port, f, now));
-        let a = self.ecu.actuators(now);
-        let c = self.chassis.params;
-        // A drive the master had to stop (heartbeat lost, EMCY, fault) stops the vehicle: the
-        // other wheels alone would drag it off its path.
-        let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).find(|node| {
-            matches!(self.master.controlled(**node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+        self.ecu.set_status_inputs(StatusInputs {
+            estop_chain_open: self.is_active(Fault::Estop),
+            parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
         });
-        if stopped.is_some() != self.drives_lost {
-            self.drives_lost = stopped.is_some();
-            let detail = match stopped {
-                Some(node) => format!("drive 0x{node:02X} stopped by the master: the tug stops"),
-                None => "every drive enabled again".to_string(),
-            };
-            self.record("drives", detail);
-        }
-        let first_tracks = self.first_tracks();
-        if let Some(fault) = self.plausibility.check(now, first_tracks) {
-            self.record("plausibility", fault.to_string());
-        }
-        let speed = if a.motors_enabled && !self.ecu_stops() {
-            a.velocity
-        } else {
-            0.0
-        };
-        let motion = match a.steering_mode {
-            SteeringMode::Normal => Motion::Normal {
-                speed,
-                curvature: 2.0 * libm::tan(a.steering.to_radians()) / c.wheelbase,
-            },
-            SteeringMode::Crab => Motion::Crab {
-                speed,
-                angle: a.steering.to_radians(),
-            },
-            SteeringMode::Tank => Motion::Tank {
-                yaw_rate: speed / libm::hypot(c.wheelbase / 2.0, c.track / 2.0),
-            },
-        };
-        let mut targets = self.swerve.inverse(motion.twist(), &self.wheel_targets);
-        if speed == 0.0 {
-            // At a standstill the wheels still take the mode's angles: the commanded angle
-            // (front +, rear − in normal mode, all alike in crab), or tangent to the turn.
-            let angle = a.steering.to_radians();
-            let tank = self
-                .swerve
-                .inverse(Motion::Tank { yaw_rate: 1.0 }.twist(), &self.wheel_targets);
-            for ((target, sign), tank) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]).zip(tank) {
-                target.angle = match a.steering_mode {
-                    SteeringMode::Normal => angle * sign,
-                    SteeringMode::Crab => angle,
-                    SteeringMode::Tank => tank.angle,
-                };
-            }
-        }
-        self.wheel_targets = targets;
-        let faulted = self.plausibility.faulted().map(|f| f.corner());
-        for (i, (target, (steer, drive))) in targets
-            .iter()
-            .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
-            .enumerate()
-        {
-            if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
-                // A corner whose sensors disagree is not steered: its valve holds the wheel.
-                d.set_enabled((a.steering_enabled || a.motors_enabled) && faulted != Some(i));
-                d.set_setpoint(Setpoint::Position(round_i32(
-                    target.angle.to_degrees() * STEERING_UNITS_PER_DEG,
-                )));
-            }
-            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
-                d.set_enabled(true);
-                d.set_setpoint(Setpoint::Velocity(round_i32(
-                    target.speed * DRIVE_UNITS_PER_M,
-                )));
-            }
-        }
-        let (bus, port) = (&mut self.bus2, self.ecu_port2);
-        self.master.poll(now, &mut |f| bus.submit(port, f, now));
-        // Feedback for the supervisor: the wheels' mean speed and the front-left angle, as
-        // the drives report them.
-        let mut speeds = 0.0;
-        let mut angle = 0.0;
-        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
-            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
-                speeds += f64::from(d.actual().1) / DRIVE_UNITS_PER_M / 4.0;
-            }
-            if i == 0 {
-                if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
-                    angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
-                }
-            }
-        }
-        self.ecu.set_feedback(speeds, angle);
+        let (bus1, bus2) = (&mut self.bus1, &mut self.bus2);
+        let (port1, port2) = (self.ecu_port1, self.ecu_port2);
+        self.ecu.poll(now, &mut |port, frame| match port {
+            ecu::BUS1 => bus1.submit(port1, frame, now),
+            ecu::BUS2 => bus2.submit(port2, frame, now),
+            _ => {}
+        });
     }
 
     /// The drives' devices and the plants they move.
@@ -1501,7 +1278,7 @@ impl Tug {
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
         let active = &self.active;
-        let stopping = self.ecu_stops();
+        let brake = self.ecu.brake_demand(now);
         for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
             let steer_silent = active
                 .iter()
@@ -1538,9 +1315,7 @@ impl Tug {
             corner
                 .wheel
                 .set_parked(!a.motors_enabled && speed.abs() < 0.05);
-            corner
-                .wheel
-                .step_brake(dt, if stopping { 1.0 } else { a.brake / 100.0 });
+            corner.wheel.step_brake(dt, brake);
             power += output.power;
             corner.distance += speed * dt;
             corner.drive.app_mut().0.set_actual(
@@ -1556,12 +1331,6 @@ impl Tug {
         self.chassis.step(dt, &inputs, self.params.grade);
         self.battery.step(dt, power);
     }
-}
-
-/// Round to the nearest `i32` (saturating).
-#[allow(clippy::cast_possible_truncation)]
-fn round_i32(value: f64) -> i32 {
-    libm::round(value).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
 }
 
 /// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service

@@ -10,7 +10,7 @@
 
 use bywire_control::kinematics::Point;
 use bywire_sim::tug::{Tug, TugParams};
-use bywire_vehicle::reference_tug::ControlMode;
+use bywire_tug::messages::ControlMode;
 
 fn route() -> Vec<Point> {
     // 30 m straight, a quarter circle of 15 m radius to the left, 20 m straight.

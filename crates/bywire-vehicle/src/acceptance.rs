@@ -9,9 +9,8 @@ use bywire_core::node::Port;
 use bywire_core::{Frame, Timestamp};
 
 use crate::ads::{Ads, AdsCommand};
-use crate::command::{EstopCode, WatchdogLevel};
+use crate::command::{ControlMode, EstopCode, Gear, WatchdogLevel};
 use crate::profile::LoadedProfile;
-use crate::reference_tug::{self, ControlMode, EmergencyStop, Gear};
 use crate::wire::ProfileWire;
 
 /// One check's outcome.
@@ -99,7 +98,8 @@ pub struct Checker {
     ads: Ads<ProfileWire>,
     config: CheckConfig,
     state_id: u32,
-    estop: bool,
+    /// The wire the E-stop frames go out through (`None`: the vehicle has no E-stop message).
+    estop: Option<ProfileWire>,
     phase: Phase,
     results: Vec<CheckResult>,
     command: AdsCommand,
@@ -132,11 +132,8 @@ impl Checker {
                     .find(|m| m.name == s.message)
             })
             .map_or(0, |m| m.raw_id());
-        let estop = profile
-            .profile
-            .estop
-            .as_ref()
-            .is_some_and(|e| e.message == "EmergencyStop");
+        // The E-stop checks press the vehicle's own E-stop message, where it has one.
+        let estop = wire.has_estop().then(|| wire.clone());
         Ok(Checker {
             ads: Ads::with_wire(profile.ads_config(), wire),
             config,
@@ -425,7 +422,7 @@ impl Checker {
                     if !ready {
                         self.record("re-engage", false, "not autonomous again within 5 s".into());
                     }
-                    self.phase = if self.estop && ready {
+                    self.phase = if self.estop.is_some() && ready {
                         Phase::Estop {
                             since: now,
                             latched: None,
@@ -489,11 +486,15 @@ impl Checker {
         if let Some(pressed) = press_estop {
             if now >= self.next_estop {
                 self.next_estop = now.saturating_add(Duration::from_millis(20));
-                let mut m = EmergencyStop::default();
-                m.set_estop_request_raw(u64::from(pressed));
-                m.set_counter_raw(self.estop_counter & 0x0F);
+                let counter = self.estop_counter;
                 self.estop_counter = self.estop_counter.wrapping_add(1);
-                out(reference_tug::sealed_frame(EmergencyStop::ID, m.0));
+                if let Some(frame) = self
+                    .estop
+                    .as_mut()
+                    .and_then(|w| w.estop_frame(pressed, counter))
+                {
+                    out(frame);
+                }
             }
         }
         let _ = self.ads.set_command(

@@ -15,7 +15,7 @@ use bywire_core::{Frame, Timestamp};
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
 use crate::command::{ControlMode, EstopCode, WatchdogLevel};
-use crate::wire::{AdsWire, Feedback, ReferenceWire, StateFeedback};
+use crate::wire::{AdsWire, Feedback, StateFeedback};
 
 /// Tuning of the ADS side.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,7 +63,7 @@ impl Default for AdsConfig {
 }
 
 /// What the ADS wants the vehicle to do.
-pub use crate::reference_tug::ControlCommand as AdsCommand;
+pub use crate::command::ControlCommand as AdsCommand;
 
 /// A feedback value with its time and validity.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,10 +145,10 @@ pub struct VehicleState {
     pub steering_response: Field<Duration>,
 }
 
-/// The ADS-side node, speaking the reference tug's messages unless given another wire
+/// The ADS-side node, speaking a vehicle's messages through its wire
 /// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
-pub struct Ads<W: AdsWire = ReferenceWire> {
+pub struct Ads<W: AdsWire> {
     wire: W,
     config: AdsConfig,
     command: Option<(Timestamp, AdsCommand)>,
@@ -182,13 +182,6 @@ struct BrakeBurst {
     deceleration: f64,
     sent: u32,
     next: Timestamp,
-}
-
-impl Ads {
-    /// A node for the reference tug that sends nothing until it has a command.
-    pub fn new(config: AdsConfig) -> Self {
-        Ads::with_wire(config, ReferenceWire)
-    }
 }
 
 impl<W: AdsWire> Ads<W> {
@@ -254,6 +247,12 @@ impl<W: AdsWire> Ads<W> {
     /// Stop sending emergency-brake frames.
     pub fn release_brake(&mut self) {
         self.brake = None;
+    }
+
+    /// Start the odometry over at `pose` (where the vehicle is known to be).
+    pub fn reset_odometry(&mut self, pose: Pose) {
+        self.odometry = Odometry::new(pose);
+        self.state.odometry = Field::default();
     }
 
     /// The vehicle's state as validated so far.

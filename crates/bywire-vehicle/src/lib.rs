@@ -3,9 +3,6 @@
 //! - [`command`]: the vocabulary both ends speak — the command, control and steering modes,
 //!   gears, and the vehicle's reported watchdog level and E-stop state — with names, text and
 //!   raw numbers converted in one place.
-//! - [`reference_tug`]: the reference tug's CAN messages (`dbc/reference-tug.dbc`), as structs
-//!   generated from the DBC at build time, plus the E2E protection (counter, CRC-8 with data ID)
-//!   every message carries.
 //! - [`supervisor`]: the logic a vehicle control ECU runs on the other end of the wire: command
 //!   validation, the watchdog cascade, the E-stop latch, control modes with driver takeover,
 //!   and the actuator outputs. A sans-IO node: frames and time in, frames and outputs out.
@@ -17,25 +14,28 @@
 //!   and its decoder.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
 //!   timing) as a node on the command bus, for any profile's vehicle.
-//! - [`wire`]: the ADS side's messages on the wire: the reference tug through its generated
-//!   structs, or any vehicle a profile describes, by role, through the runtime codec.
-//! - [`profile`]: TOML vehicle profiles checked against their DBC; `reference-tug` and
-//!   `autoware-can` ship.
-
+//! - [`wire`]: a vehicle's messages on the wire, behind the traits the nodes speak through;
+//!   [`wire::ProfileWire`] speaks any vehicle a profile describes, by role, through the runtime
+//!   codec (a vehicle crate may add a wire over generated structs: `bywire-tug` does).
+//! - [`profile`]: TOML vehicle profiles checked against their DBC; `autoware-can` ships here,
+//!   each vehicle's own with its crate.
 //!
-//! The supervisor fails closed: before it has seen a run of valid commands and an engage
-//! request, its watchdog is at full braking and the ADS has no say over the actuators.
+//! Nothing here names a particular vehicle.
+//!
+//! The supervisor fails closed: it starts at full braking, and valid commands alone do not
+//! release it — only a run of them and then an engage request.
 //! ```
-//! use bywire_core::Timestamp;
-//! use bywire_vehicle::command::Gear;
-//! use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
+//! use bywire_vehicle::supervisor::{Cascade, Watchdog, WatchdogEvent};
 //!
-//! let mut supervisor = Supervisor::new(SupervisorConfig::default());
-//! supervisor.poll(Timestamp::ZERO, &mut |_state_frame| {});
-//! assert_eq!(supervisor.watchdog(), Watchdog::FullBraking);
-//! let actuators = supervisor.actuators(Timestamp::ZERO);
-//! assert!(!actuators.ads_in_control && !actuators.steering_enabled && actuators.velocity == 0.0);
-//! assert_eq!("D".parse::<Gear>(), Ok(Gear::Drive));
+//! let cascade = Cascade::default(); // hold 2 cycles, decelerate to 4, recover after 10
+//! let mut watchdog = Watchdog::FullBraking;
+//! for _ in 0..20 {
+//!     watchdog = watchdog.next(WatchdogEvent::Valid { engage: false }, cascade);
+//! }
+//! assert!(matches!(watchdog, Watchdog::Recovering { .. }));
+//! watchdog = watchdog.next(WatchdogEvent::Valid { engage: true }, cascade);
+//! assert_eq!(watchdog, Watchdog::Normal);
+//! assert_eq!(watchdog.next(WatchdogEvent::Missed(5), cascade), Watchdog::FullBraking);
 //! ```
 
 pub mod acceptance;
@@ -44,6 +44,5 @@ pub mod autoware;
 pub mod command;
 pub mod profile;
 pub mod redundancy;
-pub mod reference_tug;
 pub mod supervisor;
 pub mod wire;

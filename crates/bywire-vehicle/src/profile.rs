@@ -2,7 +2,7 @@
 //! which role, with the rates, timeouts, limits, enum values and watchdog cascade. Loading
 //! checks everything against the DBC and names the key at fault.
 //!
-//! Two profiles ship: `reference-tug` and `autoware-can` ([`Profile::builtin`]).
+//! `autoware-can` ships here ([`Profile::builtin`]); a vehicle's crate ships its own profile.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -326,18 +326,13 @@ pub struct LoadedProfile {
     pub database: Database,
 }
 
-const BUILTIN: [(&str, &str, &str); 2] = [
-    (
-        "reference-tug",
-        include_str!("../profiles/reference-tug.toml"),
-        crate::reference_tug::DBC,
-    ),
-    (
-        "autoware-can",
-        include_str!("../profiles/autoware-can.toml"),
-        crate::autoware::DBC,
-    ),
-];
+/// The profiles this crate ships, with their DBCs (a vehicle's crate ships its own: the
+/// reference tug's is `bywire_tug::builtin`).
+const BUILTIN: [(&str, &str, &str); 1] = [(
+    "autoware-can",
+    include_str!("../profiles/autoware-can.toml"),
+    crate::autoware::DBC,
+)];
 
 impl Profile {
     /// A shipped profile by name, with its shipped DBC.

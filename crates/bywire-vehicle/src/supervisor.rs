@@ -27,7 +27,7 @@ use bywire_core::{Frame, Timestamp};
 
 use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
-use crate::wire::{Incoming, ReferenceWire, Rejected, StateReport, VehicleWire};
+use crate::wire::{Incoming, Rejected, StateReport, VehicleWire};
 
 /// Tuning of the supervisor.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -368,7 +368,7 @@ impl CommandStats {
 }
 
 /// A validated command.
-pub use crate::reference_tug::ControlCommand as Command;
+pub use crate::command::ControlCommand as Command;
 
 /// What the actuators must do now.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -407,7 +407,7 @@ pub fn motor_rpm(velocity: f64, gear_ratio: f64, wheel_diameter: f64) -> f64 {
 /// The supervisor node, reading the reference tug's messages unless given another wire
 /// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
-pub struct Supervisor<W: VehicleWire = ReferenceWire> {
+pub struct Supervisor<W: VehicleWire> {
     wire: W,
     config: SupervisorConfig,
     counter: CounterChecker,
@@ -436,14 +436,6 @@ pub struct Supervisor<W: VehicleWire = ReferenceWire> {
     next_state_frame: Timestamp,
     state_counter: u64,
     echo: u8,
-}
-
-impl Supervisor {
-    /// A supervisor for the reference tug, failed closed: full braking until commands arrive
-    /// and it is engaged.
-    pub fn new(config: SupervisorConfig) -> Self {
-        Supervisor::with_wire(config, ReferenceWire)
-    }
 }
 
 impl<W: VehicleWire> Supervisor<W> {

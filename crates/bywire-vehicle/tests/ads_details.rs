@@ -9,11 +9,12 @@
 
 mod common;
 
-use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::reference_tug::{
+use bywire_tug::messages::{
     ControlMode, EmergencyBrake, Gear, VehicleToAdsSensors, VehicleToAdsState,
     VehicleToAdsWheelAngles,
 };
+use bywire_tug::wire::ReferenceWire;
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use common::{ms, sealed};
 
 fn drive(steering: f64) -> AdsCommand {
@@ -39,8 +40,8 @@ fn state(counter: u64, echo: u64, edit: impl FnOnce(&mut VehicleToAdsState)) -> 
 }
 
 /// An ADS that has sent commands 0..n (one per 20 ms from 0).
-fn sent(n: u64) -> Ads {
-    let mut ads = Ads::new(AdsConfig::default());
+fn sent(n: u64) -> Ads<ReferenceWire> {
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(0.0));
     for t in 0..n {
         ads.poll(ms(20 * t), &mut |_| {});
@@ -50,7 +51,7 @@ fn sent(n: u64) -> Ads {
 
 #[test]
 fn a_stale_command_drops_its_requests() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(0.0));
     let fresh = ads.effective_command(ms(0)).unwrap();
     assert!(fresh.engage && fresh.operator_reset);
@@ -60,7 +61,7 @@ fn a_stale_command_drops_its_requests() {
 
 #[test]
 fn deadlines_and_a_late_poll() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     assert_eq!(ads.next_deadline(), None);
     ads.set_command(ms(5), drive(0.0));
     assert_eq!(ads.next_deadline(), Some(ms(5)));
@@ -77,7 +78,7 @@ fn deadlines_and_a_late_poll() {
 
 #[test]
 fn the_burst_counts_and_spaces_its_frames() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.emergency_brake(ms(0), 3.0);
     let mut frames = Vec::new();
     for t in 0..1000 {
@@ -143,7 +144,7 @@ fn each_feedback_check_counts() {
 
 #[test]
 fn wheel_frames_count_and_check_their_counters() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     let angles = |c| {
         sealed(VehicleToAdsWheelAngles::ID, {
             let mut m = VehicleToAdsWheelAngles::default();
@@ -171,7 +172,7 @@ fn wheel_frames_count_and_check_their_counters() {
 
 #[test]
 fn a_change_within_the_tolerance_is_not_a_new_setpoint() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(0.0));
     ads.poll(ms(0), &mut |_| {});
     ads.on_frame(ms(10), &state(0, 0, |_| {}));

@@ -9,13 +9,14 @@
 
 mod common;
 
+use bywire_tug::wire::ReferenceWire;
 use std::time::Duration;
 
 use bywire_bus::sim::SimBus;
 use bywire_core::{Frame, Id};
+use bywire_tug::messages::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, Vote, VoteFailure};
-use bywire_vehicle::reference_tug::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
 use common::{ms, sealed};
 
@@ -24,8 +25,8 @@ struct Loop {
     bus: SimBus,
     ads_node: usize,
     vcu_node: usize,
-    ads: Ads,
-    vcu: Supervisor,
+    ads: Ads<ReferenceWire>,
+    vcu: Supervisor<ReferenceWire>,
     now: u64,
     ads_frames: Vec<(u64, Frame)>,
 }
@@ -38,8 +39,8 @@ impl Loop {
             bus,
             ads_node,
             vcu_node,
-            ads: Ads::new(AdsConfig::default()),
-            vcu: Supervisor::new(SupervisorConfig::default()),
+            ads: Ads::with_wire(AdsConfig::default(), ReferenceWire),
+            vcu: Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire),
             now: 0,
             ads_frames: Vec::new(),
         }
@@ -122,14 +123,14 @@ fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
     assert!(commands.len() >= 29);
     for (k, (_, f)) in commands.iter().enumerate() {
         let p: [u8; 8] = f.data().try_into().unwrap();
-        assert!(reference_tug::is_sealed(0x100, &p));
+        assert!(messages::is_sealed(0x100, &p));
         assert_eq!(usize::from(p[6] & 0x0F), k % 16);
     }
 }
 
 #[test]
 fn a_stale_command_becomes_a_controlled_stop() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(3.0));
     assert_eq!(ads.effective_command(ms(200)).unwrap().velocity, 3.0);
     let stop = ads.effective_command(ms(201)).unwrap();
@@ -143,7 +144,7 @@ fn a_stale_command_becomes_a_controlled_stop() {
 
 #[test]
 fn emergency_brake_burst_is_three_frames_in_10_ms_then_20_hz() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.emergency_brake(ms(100), 4.0);
     let mut sent = Vec::new();
     for t in 100..=300 {
@@ -172,13 +173,13 @@ fn state_frame(counter: u8, echo: u8, mode: ControlMode) -> Frame {
     m.set_heartbeat_echo_raw(u64::from(echo));
     m.set_counter_raw(u64::from(counter));
     let mut p = m.0;
-    reference_tug::seal(VehicleToAdsState::ID, &mut p);
+    messages::seal(VehicleToAdsState::ID, &mut p);
     Frame::classic(Id::standard(VehicleToAdsState::ID).unwrap(), &p).unwrap()
 }
 
 #[test]
 fn feedback_is_validated_and_times_out() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(1.0));
     for t in 0..=40 {
         ads.poll(ms(t), &mut |_| {});
@@ -263,8 +264,8 @@ fn two_of_three_outvotes_one_sensor() {
 /// Feed the ADS 2 s of wheel feedback at 50 Hz: every wheel at `angles` (degrees) and
 /// `speeds` (m/s); the odometry pose at the end.
 fn odometry_after(angles: [f64; 4], speeds: [f64; 4]) -> bywire_control::kinematics::Pose {
-    use bywire_vehicle::reference_tug::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
-    let mut ads = Ads::new(AdsConfig::default());
+    use bywire_tug::messages::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     for k in 0..=100u64 {
         let now = ms(20 * k);
         let mut a = VehicleToAdsWheelAngles::default();
@@ -306,7 +307,7 @@ fn odometry_follows_the_four_wheels() {
 
 #[test]
 fn steering_response_is_measured_from_setpoint_to_actual() {
-    let mut ads = Ads::new(AdsConfig::default());
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(
         ms(0),
         AdsCommand {

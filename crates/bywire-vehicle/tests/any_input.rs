@@ -9,6 +9,7 @@
 )]
 
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
 use proptest::prelude::*;
@@ -52,8 +53,8 @@ proptest! {
     fn random_traffic_is_harmless(
         frames in proptest::collection::vec((any_frame(), 0u64..50, any::<f64>(), any::<f64>()), 1..200)
     ) {
-        let mut supervisor = Supervisor::new(SupervisorConfig::default());
-        let mut ads = Ads::new(AdsConfig::default());
+        let mut supervisor = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
+        let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
         let mut t = 0u64;
         for (frame, gap, torque, speed) in frames {
             t += gap;

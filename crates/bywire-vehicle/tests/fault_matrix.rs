@@ -11,9 +11,8 @@
 
 use bywire_bus::sim::{Fault, NodeId, SimBus};
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::reference_tug::{
-    self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop,
-};
+use bywire_tug::messages::{self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop};
+use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::supervisor::{EstopState, Supervisor, SupervisorConfig, Watchdog};
 
 const CYCLE_MS: u64 = 20;
@@ -57,7 +56,7 @@ fn command_frame(c: Cmd, counter: u8) -> Frame {
     m.set_operator_reset_raw(u64::from(c.reset));
     m.set_heartbeat_counter_raw(u64::from(counter & 0x0F));
     let mut payload = m.0;
-    reference_tug::seal(AdsToVehicleControl::ID, &mut payload);
+    messages::seal(AdsToVehicleControl::ID, &mut payload);
     Frame::classic(Id::standard(AdsToVehicleControl::ID).unwrap(), &payload).unwrap()
 }
 
@@ -66,7 +65,7 @@ fn estop_frame(active: bool) -> Frame {
     m.set_estop_request_raw(u64::from(active));
     m.set_estop_source_raw(1);
     let mut payload = m.0;
-    reference_tug::seal(EmergencyStop::ID, &mut payload);
+    messages::seal(EmergencyStop::ID, &mut payload);
     Frame::classic(Id::standard(EmergencyStop::ID).unwrap(), &payload).unwrap()
 }
 
@@ -75,7 +74,7 @@ fn brake_frame() -> Frame {
     m.set_brake_request_raw(1);
     m.set_deceleration_raw(40);
     let mut payload = m.0;
-    reference_tug::seal(EmergencyBrake::ID, &mut payload);
+    messages::seal(EmergencyBrake::ID, &mut payload);
     Frame::classic(Id::standard(EmergencyBrake::ID).unwrap(), &payload).unwrap()
 }
 
@@ -85,7 +84,7 @@ struct Rig {
     ads: NodeId,
     vcu: NodeId,
     safety: NodeId,
-    supervisor: Supervisor,
+    supervisor: Supervisor<ReferenceWire>,
     now: u64,
     counter: u8,
     /// Watchdog level changes: (ms, level).
@@ -102,7 +101,7 @@ impl Rig {
             ads,
             vcu,
             safety,
-            supervisor: Supervisor::new(SupervisorConfig::default()),
+            supervisor: Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire),
             now: 0,
             counter: 0,
             watchdog_log: Vec::new(),
@@ -649,7 +648,7 @@ fn the_state_frame_echoes_the_heartbeat_and_is_sealed() {
     let mut rig = Rig::engaged();
     rig.commands(3, Cmd::default());
     let (_, last) = *rig.state_frames.last().unwrap();
-    assert!(reference_tug::is_sealed(0x101, &last));
+    assert!(messages::is_sealed(0x101, &last));
     let echo = last[6] & 0x0F;
     assert_eq!(echo, rig.counter.wrapping_sub(1) & 0x0F);
     // WatchdogLevel 0 and ControlMode autonomous.

@@ -11,7 +11,7 @@ use std::process::Command;
 
 use bywire_dbc::codec::MessageCodec;
 use bywire_dbc::e2e::Protection;
-use bywire_vehicle::reference_tug::{self, AdsToVehicleControl, VehicleToAdsState, DBC};
+use bywire_tug::messages::{self, AdsToVehicleControl, VehicleToAdsState, DBC};
 
 #[test]
 fn hand_computed_command_bytes() {
@@ -58,7 +58,7 @@ fn the_crc_agrees_with_the_dbc_declared_protection() {
         let protection = Protection::of(message).expect("every message is protected");
         for (k, mut payload) in payloads(50, u64::from(message.id)).into_iter().enumerate() {
             let id = message.id;
-            reference_tug::seal(id, &mut payload);
+            messages::seal(id, &mut payload);
             assert_eq!(
                 protection.verify(&codec, &payload),
                 Ok(Some(
@@ -72,9 +72,9 @@ fn the_crc_agrees_with_the_dbc_declared_protection() {
             // And the other way: the runtime fills, the generated check accepts.
             let mut filled = payload;
             protection.fill(&codec, 5, &mut filled).unwrap();
-            assert!(reference_tug::is_sealed(id, &filled), "{}", message.name);
+            assert!(messages::is_sealed(id, &filled), "{}", message.name);
             filled[0] ^= 0x10;
-            assert!(!reference_tug::is_sealed(id, &filled));
+            assert!(!messages::is_sealed(id, &filled));
         }
     }
 }
@@ -129,7 +129,7 @@ fn cantools_decodes_the_shipped_dbc_as_we_do() {
     for message in &db.messages {
         let codec = MessageCodec::new(message);
         for mut payload in payloads(20, u64::from(message.id) + 99) {
-            reference_tug::seal(message.id, &mut payload);
+            messages::seal(message.id, &mut payload);
             let mut out = vec![None; codec.signal_count()];
             codec.decode(&payload, &mut out).unwrap();
             lines.push_str(&format!("{} {}\n", message.id, hex(&payload)));

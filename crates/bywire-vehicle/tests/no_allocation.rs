@@ -10,18 +10,22 @@
 mod common;
 
 use bywire_core::{Frame, Timestamp};
-use bywire_vehicle::reference_tug::{AdsToVehicleControl, EmergencyStop};
+use bywire_tug::messages::{AdsToVehicleControl, EmergencyStop};
+use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
 use common::sealed;
 
 #[test]
 fn the_supervisor_never_allocates() {
-    supervisor_never_allocates(Supervisor::new(SupervisorConfig::default()));
+    supervisor_never_allocates(Supervisor::with_wire(
+        SupervisorConfig::default(),
+        ReferenceWire,
+    ));
 }
 
 #[test]
 fn the_supervisor_reading_by_profile_never_allocates() {
-    let loaded = bywire_vehicle::profile::Profile::builtin("reference-tug").unwrap();
+    let loaded = bywire_tug::profile().unwrap();
     let wire = bywire_vehicle::wire::ProfileWire::new(&loaded).unwrap();
     supervisor_never_allocates(Supervisor::with_wire(SupervisorConfig::default(), wire));
 }
@@ -76,22 +80,23 @@ fn supervisor_never_allocates<W: bywire_vehicle::wire::VehicleWire>(mut supervis
 
 #[test]
 fn the_ads_side_never_allocates() {
-    ads_never_allocates(bywire_vehicle::ads::Ads::new(
+    ads_never_allocates(bywire_vehicle::ads::Ads::with_wire(
         bywire_vehicle::ads::AdsConfig::default(),
+        ReferenceWire,
     ));
 }
 
 #[test]
 fn the_ads_side_driven_by_profile_never_allocates() {
     use bywire_vehicle::ads::{Ads, AdsConfig};
-    let loaded = bywire_vehicle::profile::Profile::builtin("reference-tug").unwrap();
+    let loaded = bywire_tug::profile().unwrap();
     let wire = bywire_vehicle::wire::ProfileWire::new(&loaded).unwrap();
     ads_never_allocates(Ads::with_wire(AdsConfig::default(), wire));
 }
 
 fn ads_never_allocates<W: bywire_vehicle::wire::AdsWire>(mut ads: bywire_vehicle::ads::Ads<W>) {
+    use bywire_tug::messages::{ControlMode, VehicleToAdsState};
     use bywire_vehicle::ads::AdsCommand;
-    use bywire_vehicle::reference_tug::{ControlMode, VehicleToAdsState};
     let states: Vec<Frame> = (0..100u64)
         .map(|k| {
             let mut m = VehicleToAdsState::default();

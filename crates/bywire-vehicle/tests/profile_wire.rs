@@ -11,21 +11,20 @@
     clippy::indexing_slicing
 )]
 
+use bywire_tug::wire::ReferenceWire;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::command::{EstopCode, WatchdogLevel};
-use bywire_vehicle::profile::Profile;
-use bywire_vehicle::reference_tug::{
+use bywire_tug::messages::{
     self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
     VehicleToAdsSensors, VehicleToAdsState,
 };
-use bywire_vehicle::wire::{
-    AdsWire, Counters, ProfileWire, ReferenceWire, StateReport, VehicleWire,
-};
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::command::{EstopCode, WatchdogLevel};
+use bywire_vehicle::profile::Profile;
+use bywire_vehicle::wire::{AdsWire, Counters, ProfileWire, StateReport, VehicleWire};
 use proptest::prelude::*;
 
 fn shuttle() -> bywire_vehicle::profile::LoadedProfile {
@@ -68,7 +67,7 @@ fn command_strategy() -> impl Strategy<Value = AdsCommand> {
 proptest! {
     #[test]
     fn for_the_reference_tug_both_wires_make_the_same_bytes(command in command_strategy(), counter in 0u64..16, decel in 0.0f64..30.0) {
-        let loaded = Profile::builtin("reference-tug").unwrap();
+        let loaded = bywire_tug::profile().unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
         let mut generated = ReferenceWire;
         prop_assert_eq!(by_role.command_frame(&command, counter), generated.command_frame(&command, counter));
@@ -78,7 +77,7 @@ proptest! {
 
     #[test]
     fn for_the_reference_tug_both_wires_send_the_same_wheel_speeds(speeds in any::<[i16; 4]>(), counter in 0u64..16) {
-        let loaded = Profile::builtin("reference-tug").unwrap();
+        let loaded = bywire_tug::profile().unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
         // Both well inside and beyond the signals' ±20.48 m/s.
         let speeds = speeds.map(|s| f64::from(s) / 1000.0);
@@ -87,11 +86,11 @@ proptest! {
 
     #[test]
     fn for_the_reference_tug_both_wires_read_feedback_alike(payload in any::<[u8; 8]>(), which in 0usize..3, seal in any::<bool>()) {
-        let loaded = Profile::builtin("reference-tug").unwrap();
+        let loaded = bywire_tug::profile().unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
         let mut generated = ReferenceWire;
         let id = [VehicleToAdsState::ID, VehicleToAdsSensors::ID, 0x123][which];
-        let frame = if seal { reference_tug::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
+        let frame = if seal { messages::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
         prop_assert_eq!(by_role.feedback(&frame), generated.feedback(&frame));
     }
 }
@@ -99,11 +98,11 @@ proptest! {
 proptest! {
     #[test]
     fn for_the_reference_tug_both_wires_read_commands_alike(payload in any::<[u8; 8]>(), which in 0usize..4, seal in any::<bool>()) {
-        let loaded = Profile::builtin("reference-tug").unwrap();
+        let loaded = bywire_tug::profile().unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
         let mut generated = ReferenceWire;
         let id = [AdsToVehicleControl::ID, EmergencyStop::ID, EmergencyBrake::ID, 0x123][which];
-        let frame = if seal { reference_tug::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
+        let frame = if seal { messages::sealed_frame(id, payload) } else { Frame::classic(Id::standard(id).unwrap(), &payload).unwrap() };
         prop_assert_eq!(by_role.incoming(&frame), generated.incoming(&frame));
     }
 
@@ -112,7 +111,7 @@ proptest! {
         steering in -60.0f64..60.0, velocity in -8.0f64..8.0, mode in 0u64..4, steering_mode in 0usize..3, gear in 0u64..4,
         watchdog_level in 0u64..5, estop_state in 0u64..8, flags in 0u8..8, echo in 0u64..16, counter in 0u64..16,
     ) {
-        let loaded = Profile::builtin("reference-tug").unwrap();
+        let loaded = bywire_tug::profile().unwrap();
         let mut by_role = ProfileWire::new(&loaded).unwrap();
         let report = StateReport {
             steering,
@@ -518,7 +517,7 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
 fn short_and_remote_command_frames_are_malformed_on_both_wires() {
     use bywire_core::frame::Dlc;
     use bywire_vehicle::wire::{Incoming, Rejected};
-    let loaded = Profile::builtin("reference-tug").unwrap();
+    let loaded = bywire_tug::profile().unwrap();
     let mut by_role = ProfileWire::new(&loaded).unwrap();
     let id = Id::standard(AdsToVehicleControl::ID).unwrap();
     for frame in [
@@ -543,7 +542,7 @@ fn state_frames_count_through_the_whole_counter() {
             }
         };
         if by_role {
-            let loaded = Profile::builtin("reference-tug").unwrap();
+            let loaded = bywire_tug::profile().unwrap();
             let mut vcu = Supervisor::with_wire(
                 SupervisorConfig::default(),
                 ProfileWire::new(&loaded).unwrap(),
@@ -552,7 +551,7 @@ fn state_frames_count_through_the_whole_counter() {
                 vcu.poll(Timestamp::from_millis(t), &mut take);
             }
         } else {
-            let mut vcu = Supervisor::new(SupervisorConfig::default());
+            let mut vcu = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
             for t in 0..400 {
                 vcu.poll(Timestamp::from_millis(t), &mut take);
             }
@@ -575,14 +574,14 @@ fn state_frames_count_through_the_whole_counter() {
 
 #[test]
 fn wheel_speed_counters_are_checked_at_their_width() {
-    let loaded = Profile::builtin("reference-tug").unwrap();
+    let loaded = bywire_tug::profile().unwrap();
     for by_role in [false, true] {
         let frames: Vec<Frame> = [0u64, 1, 4, 5]
             .iter()
             .map(|counter| {
                 let mut m = VehicleToAdsSensors::default();
                 m.set_counter_raw(*counter);
-                reference_tug::sealed_frame(VehicleToAdsSensors::ID, m.0)
+                messages::sealed_frame(VehicleToAdsSensors::ID, m.0)
             })
             .collect();
         let stats = if by_role {
@@ -592,7 +591,7 @@ fn wheel_speed_counters_are_checked_at_their_width() {
                 .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));
             ads.stats()
         } else {
-            let mut ads = Ads::new(AdsConfig::default());
+            let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
             frames
                 .iter()
                 .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));

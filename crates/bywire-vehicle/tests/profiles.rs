@@ -12,11 +12,11 @@ use std::time::Duration;
 use bywire_vehicle::profile::{Profile, ProfileError};
 use bywire_vehicle::supervisor::Cascade;
 
-const TUG: &str = include_str!("../profiles/reference-tug.toml");
+const TUG: &str = bywire_tug::PROFILE;
 
 fn with_tug_dbc(text: &str) -> Result<bywire_vehicle::profile::LoadedProfile, ProfileError> {
     Profile::parse("test.toml", text, |_| {
-        Ok(bywire_vehicle::reference_tug::DBC.to_string())
+        Ok(bywire_tug::messages::DBC.to_string())
     })
 }
 
@@ -26,7 +26,7 @@ fn error(text: &str) -> String {
 
 #[test]
 fn shipped_profiles_load_and_configure_the_nodes() {
-    let tug = Profile::builtin("reference-tug").unwrap();
+    let tug = bywire_tug::profile().unwrap();
     let s = tug.supervisor_config();
     assert_eq!(s.cycle, Duration::from_millis(20));
     assert_eq!(
@@ -58,11 +58,7 @@ fn a_profile_file_reads_its_dbc_beside_it() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("reference-tug.dbc"), "{e}");
-    std::fs::write(
-        dir.join("reference-tug.dbc"),
-        bywire_vehicle::reference_tug::DBC,
-    )
-    .unwrap();
+    std::fs::write(dir.join("reference-tug.dbc"), bywire_tug::messages::DBC).unwrap();
     assert!(Profile::load(&dir.join("tug.toml")).is_ok());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -15,18 +15,19 @@
     clippy::indexing_slicing
 )]
 
+use bywire_tug::wire::ReferenceWire;
 use std::path::Path;
 use std::time::Duration;
 
 use bywire_bus::network::Network;
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
+use bywire_tug::messages::{ControlMode, Gear};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::profile::{LoadedProfile, Profile};
 use bywire_vehicle::redundancy::Channel;
-use bywire_vehicle::reference_tug::{ControlMode, Gear};
 use bywire_vehicle::supervisor::{Redundancy, Supervisor, SupervisorConfig, Watchdog};
-use bywire_vehicle::wire::{AdsWire, ProfileWire, ReferenceWire, VehicleWire};
+use bywire_vehicle::wire::{AdsWire, ProfileWire, VehicleWire};
 
 /// The shuttle test vehicle with its command message replaced by `command_block`.
 fn shuttle_with(command_block: &str) -> LoadedProfile {
@@ -305,7 +306,7 @@ macro_rules! for_every_wire {
         mod reference_tug_profile {
             use super::*;
             fn vehicle() -> Vehicle<ProfileWire> {
-                by_profile(&Profile::builtin("reference-tug").unwrap())
+                by_profile(&bywire_tug::profile().unwrap())
             }
             $(#[test] fn $scenario() { super::$scenario(vehicle()) })*
         }

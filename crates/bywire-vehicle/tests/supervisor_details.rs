@@ -11,9 +11,10 @@
 mod common;
 
 use bywire_core::{Frame, Id};
-use bywire_vehicle::reference_tug::{
+use bywire_tug::messages::{
     AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, VehicleToAdsState,
 };
+use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::supervisor::{
     motor_rpm, next_mode, Cascade, CommandStats, EstopInputs, EstopState, ModeInputs, Supervisor,
     SupervisorConfig, Watchdog, WatchdogEvent,
@@ -21,8 +22,8 @@ use bywire_vehicle::supervisor::{
 use common::{command, ms, sealed};
 
 /// A supervisor driven to autonomous at 2 m/s; returns it, the next counter and the time.
-fn engaged() -> (Supervisor, u8, u64) {
-    let mut s = Supervisor::new(SupervisorConfig::default());
+fn engaged() -> (Supervisor<ReferenceWire>, u8, u64) {
+    let mut s = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
     let mut t = 0;
     for k in 0..12u8 {
         s.on_frame(ms(t), &command(k, |_| {}));
@@ -35,7 +36,7 @@ fn engaged() -> (Supervisor, u8, u64) {
     (s, 13, t + 20)
 }
 
-fn state_frame(s: &mut Supervisor, now: u64) -> VehicleToAdsState {
+fn state_frame(s: &mut Supervisor<ReferenceWire>, now: u64) -> VehicleToAdsState {
     let mut frames = Vec::new();
     // Force the next state frame due: poll well after the last one.
     s.poll(ms(now), &mut |f| frames.push(f));
@@ -156,7 +157,7 @@ fn stats_add_up_and_rpm_needs_a_wheel() {
 #[test]
 fn limits_hold_at_their_boundaries() {
     let (mut s, mut k, mut t) = engaged();
-    let mut send = |s: &mut Supervisor, edit: &dyn Fn(&mut AdsToVehicleControl)| {
+    let mut send = |s: &mut Supervisor<ReferenceWire>, edit: &dyn Fn(&mut AdsToVehicleControl)| {
         s.on_frame(ms(t), &command(k, edit));
         k = k.wrapping_add(1);
         t += 20;
@@ -236,7 +237,7 @@ fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
 
 #[test]
 fn deadlines_follow_the_last_command_and_the_state_frame() {
-    let mut s = Supervisor::new(SupervisorConfig::default());
+    let mut s = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
     assert_eq!(s.next_deadline(), Some(ms(0)), "the first state frame");
     s.poll(ms(0), &mut |_| {});
     assert_eq!(s.next_deadline(), Some(ms(20)));
@@ -302,7 +303,7 @@ fn actuators_in_each_situation() {
     s.on_frame(ms(t), &command(k, |m| m.set_control_mode_cmd_raw(0)));
     assert_eq!(s.mode(), ControlMode::Manual);
     assert!(!s.actuators(ms(t)).warning);
-    let fresh = Supervisor::new(SupervisorConfig::default());
+    let fresh = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
     assert!(fresh.actuators(ms(0)).warning);
     // The emergency brake holds until exactly three cycles after the frame.
     let (mut s, _, t) = engaged();

@@ -33,7 +33,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let loaded = if std::path::Path::new(&args.profile).exists() {
         Profile::load(std::path::Path::new(&args.profile))?
     } else {
-        Profile::builtin(&args.profile)?
+        bywire_tug::builtin(&args.profile)?
     };
     if !(args.sweep > 0.0 && args.sweep <= 90.0) {
         bail!("--sweep {}: more than 0, at most 90 degrees", args.sweep);

@@ -49,7 +49,7 @@ pub fn load_profile(name: &str) -> Result<LoadedProfile> {
     let loaded = if std::path::Path::new(name).exists() {
         Profile::load(std::path::Path::new(name))?
     } else {
-        Profile::builtin(name)?
+        bywire_tug::builtin(name)?
     };
     if loaded.profile.command.is_none() || loaded.profile.state.is_none() {
         bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");

@@ -40,7 +40,7 @@ fn fd_frames(count: usize) -> Vec<String> {
     let lengths = [0, 1, 5, 8, 12, 16, 20, 24, 32, 48, 64];
     (0..count)
         .map(|i| {
-            let id = if rng.next() % 2 == 0 {
+            let id = if rng.next().is_multiple_of(2) {
                 format!("{:08X}", rng.next() & 0x1FFF_FFFF)
             } else {
                 format!("{:03X}", rng.next() & 0x7FF)
@@ -49,7 +49,7 @@ fn fd_frames(count: usize) -> Vec<String> {
             let fill = [0x00, 0xFF, 0x0F, 0xF0][(rng.next() % 4) as usize];
             let data: String = (0..len)
                 .map(|_| {
-                    if rng.next() % 2 == 0 {
+                    if rng.next().is_multiple_of(2) {
                         fill
                     } else {
                         rng.next() & 0xFF
@@ -70,7 +70,7 @@ fn classic_frames(count: usize) -> Vec<String> {
         "1FFFFFFF#R".to_string(),
     ];
     while frames.len() < count {
-        let extended = rng.next() % 3 == 0;
+        let extended = rng.next().is_multiple_of(3);
         let id = if extended {
             format!("{:08X}", rng.next() & 0x1FFF_FFFF)
         } else {
@@ -90,7 +90,7 @@ fn classic_frames(count: usize) -> Vec<String> {
                 let fill = [0x00, 0xFF, 0x0F, 0xF0][(rng.next() % 4) as usize];
                 let data: String = (0..len)
                     .map(|_| {
-                        if rng.next() % 2 == 0 {
+                        if rng.next().is_multiple_of(2) {
                             fill
                         } else {
                             rng.next() & 0xFF

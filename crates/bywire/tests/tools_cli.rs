@@ -318,7 +318,7 @@ fn gen_modes() {
     }
     // From a DBC: the message at its cycle time with counters and checksums.
     let dbc = format!(
-        "{}/../bywire-vehicle/dbc/reference-tug.dbc",
+        "{}/../bywire-tug/dbc/reference-tug.dbc",
         env!("CARGO_MANIFEST_DIR")
     );
     let (code, out, err) = bywire(&["gen", "virtual:t", "--dbc", &dbc, "-n", "30", "-v"], "");
@@ -336,7 +336,7 @@ fn gen_modes() {
     for f in &frames {
         let payload: [u8; 8] = f.data().try_into().unwrap();
         assert!(
-            bywire_vehicle::reference_tug::is_sealed(f.id().unwrap().as_raw(), &payload),
+            bywire_tug::messages::is_sealed(f.id().unwrap().as_raw(), &payload),
             "{f}"
         );
     }

@@ -24,7 +24,7 @@ use serde_json::Value;
 
 fn dbc() -> String {
     format!(
-        "{}/../bywire-vehicle/dbc/reference-tug.dbc",
+        "{}/../bywire-tug/dbc/reference-tug.dbc",
         env!("CARGO_MANIFEST_DIR")
     )
 }

@@ -72,7 +72,7 @@ pub fn crc(config: &Config, data: &[u8]) -> Result<u8, E2eError> {
     let first = |byte: u8| crc8_sae_j1850_continue(0xFF, &[byte]);
     let start = match config.data_id_mode {
         DataIdMode::Both => crc8_sae_j1850_continue(first(low), &[high]),
-        DataIdMode::Alt if counter % 2 == 0 => first(low),
+        DataIdMode::Alt if counter.is_multiple_of(2) => first(low),
         DataIdMode::Alt => first(high),
         DataIdMode::Low => first(low),
         DataIdMode::Nibble => crc8_sae_j1850_continue(first(low), &[0]),

@@ -2,7 +2,7 @@
 #![allow(dead_code, clippy::unwrap_used)]
 
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::reference_tug::{self, AdsToVehicleControl, ControlMode};
+use bywire_tug::messages::{self, AdsToVehicleControl, ControlMode};
 
 pub fn ms(t: u64) -> Timestamp {
     Timestamp::from_millis(t)
@@ -10,7 +10,7 @@ pub fn ms(t: u64) -> Timestamp {
 
 /// A classic frame with `payload` and its CRC in byte 7.
 pub fn sealed(id: u32, mut payload: [u8; 8]) -> Frame {
-    reference_tug::seal(id, &mut payload);
+    messages::seal(id, &mut payload);
     Frame::classic(Id::standard(id).unwrap(), &payload).unwrap()
 }
 

@@ -12,7 +12,7 @@ mod generated {
 
 pub use generated::messages::*;
 
-pub use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode};
+pub use bywire_vehicle::command::{ControlCommand, ControlMode, Gear, SteeringMode};
 
 use bywire_core::frame::Dlc;
 use bywire_core::{Frame, Id, StandardId};
@@ -56,35 +56,33 @@ pub fn payload(frame: &Frame) -> Option<[u8; 8]> {
     }
 }
 
-impl ControlCommand {
-    /// The message with this command and `counter` (CRC not yet set). Values beyond the DBC's
-    /// ranges are clamped to them: the vehicle side refuses what its own, narrower limits do.
-    pub fn to_message(&self, counter: u8) -> AdsToVehicleControl {
-        let mut m = AdsToVehicleControl::default();
-        let _ = m.set_steering_angle_cmd(self.steering.clamp(-45.0, 45.0));
-        let _ = m.set_velocity_cmd(self.velocity.clamp(-5.0, 8.0));
-        let _ = m.set_brake_cmd(self.brake.clamp(0.0, 100.0));
-        m.set_gear_cmd_raw(self.gear.raw());
-        m.set_control_mode_cmd_raw(self.mode.raw());
-        m.set_steering_mode_cmd_raw(self.steering_mode.raw());
-        m.set_engage_request_raw(u64::from(self.engage));
-        m.set_operator_reset_raw(u64::from(self.operator_reset));
-        m.set_heartbeat_counter_raw(u64::from(counter));
-        m
-    }
+/// The message with `command` and `counter` (CRC not yet set). Values beyond the DBC's ranges
+/// are clamped to them: the vehicle side refuses what its own, narrower limits do.
+pub fn command_message(command: &ControlCommand, counter: u8) -> AdsToVehicleControl {
+    let mut m = AdsToVehicleControl::default();
+    let _ = m.set_steering_angle_cmd(command.steering.clamp(-45.0, 45.0));
+    let _ = m.set_velocity_cmd(command.velocity.clamp(-5.0, 8.0));
+    let _ = m.set_brake_cmd(command.brake.clamp(0.0, 100.0));
+    m.set_gear_cmd_raw(command.gear.raw());
+    m.set_control_mode_cmd_raw(command.mode.raw());
+    m.set_steering_mode_cmd_raw(command.steering_mode.raw());
+    m.set_engage_request_raw(u64::from(command.engage));
+    m.set_operator_reset_raw(u64::from(command.operator_reset));
+    m.set_heartbeat_counter_raw(u64::from(counter));
+    m
+}
 
-    /// The command a message carries; `None` for an undefined steering mode.
-    pub fn from_message(m: &AdsToVehicleControl) -> Option<Self> {
-        Some(ControlCommand {
-            steering: m.steering_angle_cmd(),
-            velocity: m.velocity_cmd(),
-            brake: m.brake_cmd(),
-            // Two-bit signals: every value is a gear and a mode.
-            gear: Gear::from_raw(m.gear_cmd_raw()).unwrap_or_default(),
-            mode: ControlMode::from_raw(m.control_mode_cmd_raw()).unwrap_or_default(),
-            steering_mode: SteeringMode::from_raw(m.steering_mode_cmd_raw())?,
-            engage: m.engage_request_raw() == 1,
-            operator_reset: m.operator_reset_raw() == 1,
-        })
-    }
+/// The command a message carries; `None` for an undefined steering mode.
+pub fn command_of(m: &AdsToVehicleControl) -> Option<ControlCommand> {
+    Some(ControlCommand {
+        steering: m.steering_angle_cmd(),
+        velocity: m.velocity_cmd(),
+        brake: m.brake_cmd(),
+        // Two-bit signals: every value is a gear and a mode.
+        gear: Gear::from_raw(m.gear_cmd_raw()).unwrap_or_default(),
+        mode: ControlMode::from_raw(m.control_mode_cmd_raw()).unwrap_or_default(),
+        steering_mode: SteeringMode::from_raw(m.steering_mode_cmd_raw())?,
+        engage: m.engage_request_raw() == 1,
+        operator_reset: m.operator_reset_raw() == 1,
+    })
 }

@@ -1,0 +1,515 @@
+//! The tug's vehicle control ECU as one node on four ports:
+//!
+//! - [`BUS1`] (vehicle control, 500 kbit/s): the ADS's commands and the E-stop chain into the
+//!   supervisor; out go the supervisor's state frame and the ECU's reports every 20 ms — wheel
+//!   speeds and angles (as the drives report them), and the vehicle status;
+//! - [`BUS1B`] (the redundant command bus): the commands' second copy, voted on;
+//! - [`BUS2`] (drives, CANopen, 1 Mbit/s): the ECU as NMT master of four steering drives
+//!   (profile position) and four wheel drives (profile velocity), with SYNC and heartbeats; the
+//!   supervisor's actuator outputs become eight setpoints through the 4WS kinematics;
+//! - [`BUS3`] (sensors): the steering sensors' second tracks, checked against the first tracks
+//!   the steering drives report ([`crate::plausibility`]).
+//!
+//! Inputs that are not frames come in as values ([`VehicleControlEcu::set_driver_input`],
+//! [`VehicleControlEcu::set_status_inputs`], [`VehicleControlEcu::operator_reset`]); what the
+//! ECU decides goes out as typed events ([`VehicleControlEcu::next_event`]) and as its brake
+//! demand. A drive the master had to stop, or a steering fault, stops the tug: the other wheels
+//! alone would drag it off its path.
+
+use core::time::Duration;
+use std::collections::VecDeque;
+
+use bywire_canopen::cia402::{DriveController, Mode, Setpoint};
+use bywire_canopen::master::{Controlled, Master, MasterEvent};
+use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
+use bywire_control::kinematics::{four_wheel, Motion, Swerve, WheelState};
+use bywire_core::node::{Node, Port};
+use bywire_core::{Frame, Id, Timestamp};
+use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
+
+use crate::messages::{
+    self, SteeringAngleSensors, VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles,
+};
+use crate::plausibility::{SteeringFault, SteeringPlausibility};
+use crate::wire::ReferenceWire;
+
+/// Bus 1, vehicle control.
+pub const BUS1: Port = Port(0);
+/// Bus 1b, the redundant command bus.
+pub const BUS1B: Port = Port(1);
+/// Bus 2, the drives (CANopen).
+pub const BUS2: Port = Port(2);
+/// Bus 3, the sensors.
+pub const BUS3: Port = Port(3);
+
+/// The ECU's node ID on the drives bus.
+pub const MASTER_NODE: u8 = 1;
+/// Steering drives FL, FR, RL, RR.
+pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
+/// Wheel drives FL, FR, RL, RR.
+pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
+/// Steering drives count in 0.01°.
+pub const STEERING_UNITS_PER_DEG: f64 = 100.0;
+/// Wheel drives count in mm/s and mm.
+pub const DRIVE_UNITS_PER_M: f64 = 1000.0;
+
+/// How often the ECU reports wheel speeds, angles and status on bus 1.
+const REPORT_PERIOD: Duration = Duration::from_millis(20);
+/// Events kept for the caller; more are counted and dropped.
+const EVENT_CAPACITY: usize = 64;
+
+/// The chassis the 4WS mapping needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometry {
+    /// Wheelbase, m.
+    pub wheelbase: f64,
+    /// Track, m.
+    pub track: f64,
+}
+
+/// Something the ECU decided or saw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EcuEvent {
+    /// A drive the master stopped (heartbeat lost, EMCY, fault) stops the tug; `None`: every
+    /// drive is enabled again.
+    DrivesStopped(Option<u8>),
+    /// The steering plausibility check latched a fault.
+    SteeringFault(SteeringFault),
+    /// The operator's reset of a steering fault: accepted (the tracks agree) or refused.
+    SteeringReset {
+        /// The fault cleared.
+        accepted: bool,
+    },
+    /// A drive's heartbeat was lost.
+    HeartbeatLost(u8),
+    /// A drive's heartbeat came back.
+    HeartbeatRecovered(u8),
+    /// A drive sent an emergency with a non-zero code.
+    Emergency {
+        /// The drive.
+        node: u8,
+        /// Its error code.
+        code: u16,
+    },
+}
+
+impl EcuEvent {
+    /// The event's kind, as run reports name it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            EcuEvent::DrivesStopped(_) => "drives",
+            EcuEvent::SteeringFault(_) | EcuEvent::SteeringReset { .. } => "plausibility",
+            EcuEvent::HeartbeatLost(_) => "heartbeat_lost",
+            EcuEvent::HeartbeatRecovered(_) => "heartbeat_recovered",
+            EcuEvent::Emergency { .. } => "emcy",
+        }
+    }
+}
+
+/// The event's detail, node IDs and codes in hex.
+impl core::fmt::Display for EcuEvent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            EcuEvent::DrivesStopped(Some(node)) => {
+                write!(f, "drive 0x{node:02X} stopped by the master: the tug stops")
+            }
+            EcuEvent::DrivesStopped(None) => f.write_str("every drive enabled again"),
+            EcuEvent::SteeringFault(fault) => write!(f, "{fault}"),
+            EcuEvent::SteeringReset { accepted: true } => f.write_str("reset: the tracks agree"),
+            EcuEvent::SteeringReset { accepted: false } => {
+                f.write_str("reset refused: the tracks still disagree")
+            }
+            EcuEvent::HeartbeatLost(node) | EcuEvent::HeartbeatRecovered(node) => {
+                write!(f, "node 0x{node:02X}")
+            }
+            EcuEvent::Emergency { node, code } => write!(f, "node 0x{node:02X} code 0x{code:04X}"),
+        }
+    }
+}
+
+/// Values the status report carries that come from the tug's wiring, not from frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StatusInputs {
+    /// The E-stop chain (hardwired to the ECU) is open.
+    pub estop_chain_open: bool,
+    /// The parking brakes are applied.
+    pub parking_brake_applied: bool,
+}
+
+/// The vehicle control ECU.
+pub struct VehicleControlEcu {
+    supervisor: Supervisor<ReferenceWire>,
+    master: Master,
+    plausibility: SteeringPlausibility,
+    swerve: Swerve<4>,
+    geometry: Geometry,
+    wheel_targets: [WheelState; 4],
+    drives_lost: bool,
+    status: StatusInputs,
+    next_report: Timestamp,
+    report_counter: u64,
+    events: VecDeque<(Timestamp, EcuEvent)>,
+    events_dropped: u64,
+}
+
+impl VehicleControlEcu {
+    /// An ECU with its supervisor configured by `config` (the tug's profile, with redundancy on
+    /// bus 1b), mastering the eight drives.
+    pub fn new(config: SupervisorConfig, geometry: Geometry) -> Self {
+        let mut master = Master::new(
+            MASTER_NODE,
+            Duration::from_millis(100),
+            Duration::from_millis(10),
+        )
+        .with_sync(Duration::from_millis(10));
+        for (nodes, mode) in [
+            (STEERING_NODES, Mode::ProfilePosition),
+            (DRIVE_NODES, Mode::ProfileVelocity),
+        ] {
+            for node in nodes {
+                let mut controller = DriveController::new(node, mode, Duration::from_millis(500));
+                controller.set_enabled(true);
+                master.add(Controlled::Drive(controller));
+                master.monitor(node, Duration::from_millis(250));
+            }
+        }
+        master.nmt(NmtCommand::Start, 0);
+        VehicleControlEcu {
+            supervisor: Supervisor::with_wire(config, ReferenceWire),
+            master,
+            plausibility: SteeringPlausibility::default(),
+            swerve: four_wheel(geometry.wheelbase, geometry.track),
+            geometry,
+            wheel_targets: [WheelState::default(); 4],
+            drives_lost: false,
+            status: StatusInputs::default(),
+            next_report: Timestamp::ZERO,
+            report_counter: 0,
+            events: VecDeque::with_capacity(EVENT_CAPACITY),
+            events_dropped: 0,
+        }
+    }
+
+    /// The supervisor (watchdog, latch, mode, counts, degraded bus).
+    pub fn supervisor(&self) -> &Supervisor<ReferenceWire> {
+        &self.supervisor
+    }
+
+    /// The CANopen master (its drive controllers' states).
+    pub fn master(&mut self) -> &mut Master {
+        &mut self.master
+    }
+
+    /// The driver's steering torque (N·m) and pedal (0–1): above the thresholds, a takeover.
+    pub fn set_driver_input(&mut self, torque: f64, pedal: f64) {
+        self.supervisor.set_driver_input(torque, pedal);
+    }
+
+    /// The status report's inputs from the wiring.
+    pub fn set_status_inputs(&mut self, status: StatusInputs) {
+        self.status = status;
+    }
+
+    /// The operator's reset: acknowledges drives the master stopped, and clears a steering
+    /// fault whose tracks agree again (reported as an event). The E-stop latch's reset is the
+    /// ADS's command bit, not this.
+    pub fn operator_reset(&mut self, now: Timestamp) {
+        if self.plausibility.faulted().is_some() {
+            let first = self.first_tracks();
+            let accepted = self.plausibility.reset(now, first);
+            self.push(now, EcuEvent::SteeringReset { accepted });
+        }
+        for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
+                d.acknowledge();
+            }
+        }
+    }
+
+    /// The steering fault latched, if any.
+    pub fn steering_fault(&self) -> Option<SteeringFault> {
+        self.plausibility.faulted()
+    }
+
+    /// Whether the ECU stops the tug on its own: a drive stopped by the master, or a steering
+    /// fault.
+    pub fn stops(&self) -> bool {
+        self.drives_lost || self.plausibility.faulted().is_some()
+    }
+
+    /// What the supervisor asks of the actuators now.
+    pub fn actuators(&self, now: Timestamp) -> Actuators {
+        self.supervisor.actuators(now)
+    }
+
+    /// The friction brakes' demand now, 0–1: the supervisor's, or full when the ECU stops.
+    pub fn brake_demand(&self, now: Timestamp) -> f64 {
+        if self.stops() {
+            1.0
+        } else {
+            self.supervisor.actuators(now).brake / 100.0
+        }
+    }
+
+    /// The next event, oldest first, with its time.
+    pub fn next_event(&mut self) -> Option<(Timestamp, EcuEvent)> {
+        self.events.pop_front()
+    }
+
+    /// Events dropped because the caller did not take them.
+    pub fn events_dropped(&self) -> u64 {
+        self.events_dropped
+    }
+
+    fn push(&mut self, now: Timestamp, event: EcuEvent) {
+        if self.events.len() < EVENT_CAPACITY {
+            self.events.push_back((now, event));
+        } else {
+            self.events_dropped = self.events_dropped.saturating_add(1);
+        }
+    }
+
+    /// The steering sensors' first tracks, as the steering drives report them, degrees.
+    pub fn first_tracks(&mut self) -> [f64; 4] {
+        let mut angles = [0.0; 4];
+        for (angle, steer) in angles.iter_mut().zip(STEERING_NODES) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
+                *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+            }
+        }
+        angles
+    }
+
+    /// The wheels' speeds as the wheel drives report them, m/s.
+    fn wheel_speeds(&mut self) -> [f64; 4] {
+        let mut speeds = [0.0; 4];
+        for (speed, drive) in speeds.iter_mut().zip(DRIVE_NODES) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
+                *speed = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
+            }
+        }
+        speeds
+    }
+
+    /// The second tracks from the I/O node on bus 3.
+    fn on_sensor_frame(&mut self, now: Timestamp, frame: &Frame) {
+        let is_tracks = frame.id() == Id::standard(SteeringAngleSensors::ID).ok();
+        let Some(payload) = messages::payload(frame).filter(|_| is_tracks) else {
+            return;
+        };
+        if messages::is_sealed(SteeringAngleSensors::ID, &payload) {
+            let m = SteeringAngleSensors(payload);
+            self.plausibility.second_tracks(
+                now,
+                [
+                    m.second_angle_fl(),
+                    m.second_angle_fr(),
+                    m.second_angle_rl(),
+                    m.second_angle_rr(),
+                ],
+            );
+        }
+    }
+
+    /// The drives' stop and the plausibility check, then the eight setpoints from the
+    /// actuators through the 4WS kinematics.
+    fn command_drives(&mut self, now: Timestamp, a: &Actuators) {
+        let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).copied().find(|node| {
+            matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+        });
+        if stopped.is_some() != self.drives_lost {
+            self.drives_lost = stopped.is_some();
+            self.push(now, EcuEvent::DrivesStopped(stopped));
+        }
+        let first_tracks = self.first_tracks();
+        if let Some(fault) = self.plausibility.check(now, first_tracks) {
+            self.push(now, EcuEvent::SteeringFault(fault));
+        }
+        let speed = if a.motors_enabled && !self.stops() {
+            a.velocity
+        } else {
+            0.0
+        };
+        let g = self.geometry;
+        let motion = match a.steering_mode {
+            SteeringMode::Normal => Motion::Normal {
+                speed,
+                curvature: 2.0 * libm::tan(a.steering.to_radians()) / g.wheelbase,
+            },
+            SteeringMode::Crab => Motion::Crab {
+                speed,
+                angle: a.steering.to_radians(),
+            },
+            SteeringMode::Tank => Motion::Tank {
+                yaw_rate: speed / libm::hypot(g.wheelbase / 2.0, g.track / 2.0),
+            },
+        };
+        let mut targets = self.swerve.inverse(motion.twist(), &self.wheel_targets);
+        if speed == 0.0 {
+            // At a standstill the wheels still take the mode's angles: the commanded angle
+            // (front +, rear − in normal mode, all alike in crab), or tangent to the turn.
+            let angle = a.steering.to_radians();
+            let tank = self
+                .swerve
+                .inverse(Motion::Tank { yaw_rate: 1.0 }.twist(), &self.wheel_targets);
+            for ((target, sign), tank) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]).zip(tank) {
+                target.angle = match a.steering_mode {
+                    SteeringMode::Normal => angle * sign,
+                    SteeringMode::Crab => angle,
+                    SteeringMode::Tank => tank.angle,
+                };
+            }
+        }
+        self.wheel_targets = targets;
+        let faulted = self.plausibility.faulted().map(|f| f.corner());
+        for (i, (target, (steer, drive))) in targets
+            .iter()
+            .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
+            .enumerate()
+        {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
+                // A corner whose sensors disagree is not steered: its valve holds the wheel.
+                d.set_enabled((a.steering_enabled || a.motors_enabled) && faulted != Some(i));
+                d.set_setpoint(Setpoint::Position(round_i32(
+                    target.angle.to_degrees() * STEERING_UNITS_PER_DEG,
+                )));
+            }
+            if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
+                d.set_enabled(true);
+                d.set_setpoint(Setpoint::Velocity(round_i32(
+                    target.speed * DRIVE_UNITS_PER_M,
+                )));
+            }
+        }
+    }
+
+    /// The wheel targets of the last command (for a plant's "aligned yet?").
+    pub fn wheel_targets(&self) -> [WheelState; 4] {
+        self.wheel_targets
+    }
+
+    /// Every 20 ms: wheel speeds, wheel angles and status on bus 1.
+    fn report(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        if now < self.next_report {
+            return;
+        }
+        self.next_report = now.saturating_add(REPORT_PERIOD);
+        let counter = self.report_counter & 0x0F;
+        self.report_counter = self.report_counter.wrapping_add(1);
+        let angles = self.first_tracks();
+        let speeds = self.wheel_speeds();
+        let mut m = VehicleToAdsSensors::default();
+        let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.0, 20.0));
+        let _ = (
+            m.set_wheel_speed_fl(fl),
+            m.set_wheel_speed_fr(fr),
+            m.set_wheel_speed_rl(rl),
+            m.set_wheel_speed_rr(rr),
+        );
+        m.set_counter_raw(counter);
+        out(BUS1, messages::sealed_frame(VehicleToAdsSensors::ID, m.0));
+        let mut m = VehicleToAdsWheelAngles::default();
+        let [fl, fr, rl, rr] = angles.map(|a| a.clamp(-200.0, 200.0));
+        let _ = (
+            m.set_wheel_angle_fl(fl),
+            m.set_wheel_angle_fr(fr),
+            m.set_wheel_angle_rl(rl),
+            m.set_wheel_angle_rr(rr),
+        );
+        m.set_counter_raw(counter);
+        out(
+            BUS1,
+            messages::sealed_frame(VehicleToAdsWheelAngles::ID, m.0),
+        );
+        let mut status = VehicleStatus::default();
+        status.set_drive_fault_raw(u64::from(self.drives_lost));
+        status.set_steering_fault_raw(u64::from(self.plausibility.faulted().is_some()));
+        status.set_degraded_bus_raw(u64::from(self.supervisor.degraded().is_some()));
+        status.set_estop_chain_open_raw(u64::from(self.status.estop_chain_open));
+        status.set_parking_brake_applied_raw(u64::from(self.status.parking_brake_applied));
+        status.set_counter_raw(counter);
+        out(BUS1, messages::sealed_frame(VehicleStatus::ID, status.0));
+    }
+
+    fn take_master_events(&mut self, now: Timestamp) {
+        // Bounded by the master's own event queue.
+        while let Some(event) = self.master.next_event() {
+            let event = match event {
+                MasterEvent::Heartbeat(HeartbeatEvent::Lost { node }) => {
+                    EcuEvent::HeartbeatLost(node)
+                }
+                MasterEvent::Heartbeat(HeartbeatEvent::Recovered { node, .. }) => {
+                    EcuEvent::HeartbeatRecovered(node)
+                }
+                MasterEvent::Emergency { node, emergency } if emergency.code != 0 => {
+                    EcuEvent::Emergency {
+                        node,
+                        code: emergency.code,
+                    }
+                }
+                _ => continue,
+            };
+            self.push(now, event);
+        }
+    }
+
+    /// Feedback for the supervisor: the wheels' mean speed and the front-left angle, as the
+    /// drives report them.
+    fn feed_back(&mut self) {
+        let speeds = self.wheel_speeds();
+        let mean = speeds.iter().map(|s| s / 4.0).sum::<f64>();
+        let angle = self.first_tracks().first().copied().unwrap_or(0.0);
+        self.supervisor.set_feedback(mean, angle);
+    }
+}
+
+impl Node for VehicleControlEcu {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        match port {
+            BUS1 => Node::on_frame(
+                &mut self.supervisor,
+                now,
+                Supervisor::<ReferenceWire>::PORT_A,
+                frame,
+            ),
+            BUS1B => Node::on_frame(
+                &mut self.supervisor,
+                now,
+                Supervisor::<ReferenceWire>::PORT_B,
+                frame,
+            ),
+            BUS2 => self.master.on_frame(now, frame),
+            BUS3 => self.on_sensor_frame(now, frame),
+            _ => {}
+        }
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        // The state frame goes on bus 1 only: the ADS reads it there.
+        self.supervisor.poll(now, &mut |frame| out(BUS1, frame));
+        let actuators = self.supervisor.actuators(now);
+        self.command_drives(now, &actuators);
+        self.master.poll(now, &mut |frame| out(BUS2, frame));
+        self.take_master_events(now);
+        self.feed_back();
+        self.report(now, out);
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        [
+            self.supervisor.next_deadline(),
+            self.master.next_deadline(),
+            Some(self.next_report),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+}
+
+/// Round to the nearest `i32` (saturating).
+#[allow(clippy::cast_possible_truncation)]
+fn round_i32(value: f64) -> i32 {
+    libm::round(value).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+}

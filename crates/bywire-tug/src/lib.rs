@@ -1,0 +1,51 @@
+//! # bywire-tug: the reference vehicle
+//!
+//! An electric airside baggage tug with four-wheel steering (normal, crab, tank turn) and
+//! electrohydraulic steering, as an opendbc-style "car" over the generic vehicle crate:
+//!
+//! - [`messages`]: its bus-1 DBC (`dbc/reference-tug.dbc`) as structs generated at build time,
+//!   with the E2E protection every message carries (4-bit counter, CRC-8 with data ID);
+//! - [`wire`]: [`wire::ReferenceWire`], both ends of the wire through those structs (`no_std`);
+//! - [`profile`]: its vehicle profile (`profiles/reference-tug.toml`) for the runtime codec;
+//! - [`plausibility`]: the ECU's check of each corner's two steering-sensor tracks;
+//! - [`ecu`]: the vehicle control ECU as one node on its four buses — the supervisor, the
+//!   CANopen master of the eight drives, the plausibility check, the 4WS mapping, its reports.
+//!
+//! Nothing below this crate names the tug.
+//!
+//! ```
+//! use bywire_tug::messages::{self, AdsToVehicleControl};
+//! use bywire_vehicle::command::{ControlCommand, ControlMode};
+//!
+//! let command = ControlCommand { velocity: 1.5, mode: ControlMode::Autonomous, ..Default::default() };
+//! let frame = messages::sealed_frame(AdsToVehicleControl::ID, messages::command_message(&command, 3).0);
+//! let payload = messages::payload(&frame).unwrap();
+//! assert!(messages::is_sealed(AdsToVehicleControl::ID, &payload));
+//! assert_eq!(messages::command_of(&AdsToVehicleControl(payload)), Some(command));
+//! ```
+
+pub mod ecu;
+pub mod messages;
+pub mod plausibility;
+pub mod wire;
+
+use bywire_vehicle::profile::{LoadedProfile, Profile, ProfileError};
+
+/// The tug's profile text.
+pub const PROFILE: &str = include_str!("../profiles/reference-tug.toml");
+
+/// The tug's vehicle profile, checked against its DBC (both ship with this crate; its tests
+/// load them).
+pub fn profile() -> Result<LoadedProfile, ProfileError> {
+    Profile::parse("reference-tug", PROFILE, |_| Ok(messages::DBC.to_string()))
+}
+
+/// A shipped profile by name: `reference-tug`, or one the vehicle crate ships
+/// (`autoware-can`).
+pub fn builtin(name: &str) -> Result<LoadedProfile, ProfileError> {
+    if name == "reference-tug" {
+        profile()
+    } else {
+        Profile::builtin(name)
+    }
+}
