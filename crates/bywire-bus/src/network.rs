@@ -48,12 +48,20 @@ struct Wire {
 pub struct Network {
     buses: Vec<(String, SimBus)>,
     wires: Vec<Wire>,
+    /// Per bus: the endpoints nodes are wired to (taps are read by their owner, not here).
+    bus_endpoints: Vec<Vec<NodeId>>,
+    /// Per bus: when it next changes, cached until it is advanced, given a frame or read.
+    bus_next: Vec<Option<Option<Timestamp>>>,
     /// Per node: its output is dropped (the node is cut off or powered down).
     dropped: Vec<bool>,
     /// Single ports whose output is dropped (one of a node's buses cut).
     dropped_ports: Vec<(NodeIndex, Port)>,
     /// Per node: when it was last polled.
     polled: Vec<Option<Timestamp>>,
+    /// Per node: its deadline, cached until it is polled or given a frame.
+    deadlines: Vec<Option<Timestamp>>,
+    /// Per node: changed by the caller since the last run (its deadline is asked again).
+    changed: Vec<bool>,
     now: Timestamp,
     outgoing: Vec<(Port, Frame)>,
     received: Vec<bool>,
@@ -71,9 +79,13 @@ impl Network {
         Network {
             buses: Vec::new(),
             wires: Vec::new(),
+            bus_endpoints: Vec::new(),
+            bus_next: Vec::new(),
             dropped: Vec::new(),
             dropped_ports: Vec::new(),
             polled: Vec::new(),
+            deadlines: Vec::new(),
+            changed: Vec::new(),
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
             received: Vec::new(),
@@ -84,6 +96,8 @@ impl Network {
     pub fn add_bus(&mut self, name: &str, nominal: u32, data: Option<u32>) -> BusIndex {
         self.buses
             .push((name.to_string(), SimBus::new(nominal, data)));
+        self.bus_endpoints.push(Vec::new());
+        self.bus_next.push(None);
         self.buses.len() - 1
     }
 
@@ -103,16 +117,27 @@ impl Network {
             bus,
             endpoint,
         });
-        let nodes = node.saturating_add(1).max(self.dropped.len());
-        self.dropped.resize(nodes, false);
-        self.polled.resize(nodes, None);
-        self.received.resize(nodes, false);
+        if let Some(endpoints) = self.bus_endpoints.get_mut(bus) {
+            endpoints.push(endpoint);
+        }
+        self.size_for(node.saturating_add(1));
         Some(endpoint)
     }
 
-    /// A listener on `bus` that no node drives (a logger, a tap): read it with
-    /// [`Network::bus_mut`] and [`SimBus::receive`].
+    fn size_for(&mut self, nodes: usize) {
+        if self.polled.len() < nodes {
+            self.dropped.resize(nodes, false);
+            self.polled.resize(nodes, None);
+            self.deadlines.resize(nodes, None);
+            self.changed.resize(nodes, true);
+            self.received.resize(nodes, false);
+        }
+    }
+
+    /// A listener on `bus` that no node drives (a logger, a tap, an outside tool): read it and
+    /// send from it with [`Network::bus_mut`].
     pub fn tap(&mut self, bus: BusIndex) -> Option<NodeId> {
+        self.forget_bus(bus);
         self.buses.get_mut(bus).map(|(_, sim)| sim.add_node())
     }
 
@@ -140,8 +165,9 @@ impl Network {
         }
     }
 
-    /// A bus, to inject faults into or read a tap.
+    /// A bus, to inject faults into, send from a tap or read one.
     pub fn bus_mut(&mut self, bus: BusIndex) -> Option<&mut SimBus> {
+        self.forget_bus(bus);
         self.buses.get_mut(bus).map(|(_, sim)| sim)
     }
 
@@ -155,20 +181,42 @@ impl Network {
         self.now
     }
 
+    fn forget_bus(&mut self, bus: BusIndex) {
+        if let Some(next) = self.bus_next.get_mut(bus) {
+            *next = None;
+        }
+    }
+
+    /// Say that the caller changed `node` between runs in a way that may move its deadline
+    /// (a new command, an operator's action): the next run asks it again. Nodes are otherwise
+    /// asked only after they were polled or given a frame.
+    pub fn changed(&mut self, node: NodeIndex) {
+        if let Some(flag) = self.changed.get_mut(node) {
+            *flag = true;
+        }
+    }
+
     /// Run everything that happens before `until`, driving `nodes` (indexed as wired). What
     /// falls at `until` itself happens in the next run, after whatever the caller changes at
-    /// that time (a new command, a cut-off node).
+    /// that time (a new command, a cut-off node — see [`Network::changed`]).
     pub fn run_until(&mut self, until: Timestamp, nodes: &mut [&mut dyn Node]) {
-        if self.polled.len() < nodes.len() {
-            self.polled.resize(nodes.len(), None);
-            self.dropped.resize(nodes.len(), false);
-            self.received.resize(nodes.len(), false);
+        self.size_for(nodes.len());
+        for ((slot, changed), node) in self
+            .deadlines
+            .iter_mut()
+            .zip(self.changed.iter_mut())
+            .zip(nodes.iter())
+        {
+            if *changed {
+                *slot = node.next_deadline();
+                *changed = false;
+            }
         }
         // Each pass moves time forward to the next event (or ends at `until`): bounded by the
         // events between now and `until`, and by PASSES_PER_INSTANT at any one time.
         let mut passes_here = 0u32;
         loop {
-            let next = self.next_event(nodes).map(|at| {
+            let next = self.next_event(nodes.len()).map(|at| {
                 if at > self.now {
                     passes_here = 0;
                     at
@@ -181,8 +229,11 @@ impl Network {
                 }
             });
             let Some(at) = next.filter(|at| *at < until) else {
-                for (_, sim) in &mut self.buses {
+                for (i, (_, sim)) in self.buses.iter_mut().enumerate() {
                     sim.advance(until);
+                    if let Some(next) = self.bus_next.get_mut(i) {
+                        *next = None;
+                    }
                 }
                 self.now = self.now.max(until);
                 return;
@@ -198,29 +249,42 @@ impl Network {
         self.run_until(until, nodes);
     }
 
+    /// When bus `i` next changes (cached).
+    fn bus_change(&mut self, i: BusIndex) -> Option<Timestamp> {
+        if let Some(Some(cached)) = self.bus_next.get(i) {
+            return *cached;
+        }
+        let (Some((_, sim)), Some(endpoints)) = (self.buses.get(i), self.bus_endpoints.get(i))
+        else {
+            return None;
+        };
+        let next = sim.next_change_of(endpoints);
+        if let Some(slot) = self.bus_next.get_mut(i) {
+            *slot = Some(next);
+        }
+        next
+    }
+
     /// The earliest time something happens: a node's deadline or a bus's next change.
-    fn next_event(&self, nodes: &[&mut dyn Node]) -> Option<Timestamp> {
-        let deadlines = nodes.iter().enumerate().filter_map(|(i, node)| {
-            let deadline = node.next_deadline()?;
-            // Never polled: due now. Asking for the time already polled: a little later.
-            Some(match self.polled.get(i).copied().flatten() {
-                None => self.now,
-                Some(last) if deadline <= last => last.saturating_add(RESOLUTION),
-                Some(_) => deadline,
-            })
-        });
-        let unpolled = self
-            .polled
-            .iter()
-            .take(nodes.len())
-            .any(Option::is_none)
-            .then_some(self.now);
-        let changes = self.wires.iter().filter_map(|w| {
-            self.buses
-                .get(w.bus)
-                .and_then(|(_, s)| s.next_change(w.endpoint))
-        });
-        deadlines.chain(unpolled).chain(changes).min()
+    fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
+        let mut next: Option<Timestamp> = None;
+        let mut earliest = |at: Timestamp| next = Some(next.map_or(at, |n| n.min(at)));
+        for (deadline, polled) in self.deadlines.iter().zip(&self.polled).take(nodes) {
+            match (polled, deadline) {
+                // Never polled: due now.
+                (None, _) => earliest(self.now),
+                // Asking for the time already polled: a little later.
+                (Some(last), Some(d)) if d <= last => earliest(last.saturating_add(RESOLUTION)),
+                (Some(_), Some(d)) => earliest(*d),
+                (Some(_), None) => {}
+            }
+        }
+        for i in 0..self.buses.len() {
+            if let Some(at) = self.bus_change(i) {
+                earliest(at);
+            }
+        }
+        next
     }
 
     /// Everything that happens at `self.now`: buses advanced, frames delivered, the nodes that
@@ -228,8 +292,14 @@ impl Network {
     /// frame takes time on the wire, so nothing more arrives at this instant).
     fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
         let now = self.now;
-        for (_, sim) in &mut self.buses {
-            sim.advance(now);
+        for i in 0..self.buses.len() {
+            // A bus with nothing to do before now is left where it is.
+            if self.bus_change(i).is_some_and(|at| at <= now) {
+                if let Some((_, sim)) = self.buses.get_mut(i) {
+                    sim.advance(now);
+                }
+                self.forget_bus(i);
+            }
         }
         self.received.iter_mut().for_each(|r| *r = false);
         for w in &self.wires {
@@ -237,10 +307,17 @@ impl Network {
             else {
                 continue;
             };
+            let mut got = false;
             while let Some(r) = sim.receive_by(w.endpoint, now) {
                 node.on_frame(r.timestamp, w.port, &r.frame);
+                got = true;
+            }
+            if got {
                 if let Some(flag) = self.received.get_mut(w.node) {
                     *flag = true;
+                }
+                if let Some(next) = self.bus_next.get_mut(w.bus) {
+                    *next = None;
                 }
             }
         }
@@ -248,7 +325,13 @@ impl Network {
             let due = match self.polled.get(i).copied().flatten() {
                 None => true,
                 Some(last) => {
-                    last < now && node.next_deadline().is_some_and(|d| d <= now || d <= last)
+                    last < now
+                        && self
+                            .deadlines
+                            .get(i)
+                            .copied()
+                            .flatten()
+                            .is_some_and(|d| d <= now || d <= last)
                 }
             };
             if !(due || self.received.get(i).copied().unwrap_or(false)) {
@@ -259,6 +342,9 @@ impl Network {
             }
             self.outgoing.clear();
             node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
+            if let Some(slot) = self.deadlines.get_mut(i) {
+                *slot = node.next_deadline();
+            }
             if self.dropped.get(i).copied().unwrap_or(false) {
                 continue;
             }
@@ -271,6 +357,9 @@ impl Network {
                     wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b)))
                 {
                     sim.submit(w.endpoint, frame, now);
+                    if let Some(next) = self.bus_next.get_mut(w.bus) {
+                        *next = None;
+                    }
                 }
             }
         }

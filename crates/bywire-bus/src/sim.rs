@@ -401,6 +401,21 @@ impl SimBus {
             .min()
     }
 
+    /// [`next_change`](Self::next_change) for several nodes at once: the earliest frame any
+    /// of `nodes` receives, the next transmission's start, or a bus-off recovery.
+    pub fn next_change_of(&self, nodes: &[NodeId]) -> Option<Timestamp> {
+        let delivery = nodes
+            .iter()
+            .filter_map(|node| self.nodes.get(*node).and_then(|n| n.rx.front()))
+            .map(|r| r.timestamp)
+            .min();
+        let from = self.idle_from.max(self.now);
+        [delivery, self.next_start(), self.next_recovery(from)]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
     /// The earliest start of a transmission with the frames queued now.
     fn next_start(&self) -> Option<Timestamp> {
         self.nodes

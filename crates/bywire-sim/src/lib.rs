@@ -33,6 +33,8 @@
 pub mod battery;
 pub mod chassis;
 pub mod drive;
+pub mod mission;
+pub mod nodes;
 pub mod rng;
 pub mod scenario;
 pub mod steering;

@@ -1,54 +1,61 @@
-//! The simulated tug network, stepped by the millisecond in simulated time:
-//! - bus 1 (vehicle control, 500 kbit/s, bit-timed): the ADS side following a route with pure
-//!   pursuit, and the vehicle control ECU's supervisor (the `reference-tug` profile);
-//! - bus 2 (drives, CANopen, 1 Mbit/s, bit-timed): the ECU as NMT master commanding four
-//!   steering drives (CiA 402 profile position, each turning its corner's orbital valve) and
-//!   four wheel drives (CiA 402 profile velocity), heartbeats monitored;
-//! - bus 3 (sensors, 500 kbit/s, bit-timed): the IMU, read by the ECU; the ECU reports wheel
-//!   speeds and angles, vehicle status and (from the BMS) the battery to the ADS on bus 1;
+//! The simulated tug: its nodes wired to its four bit-timed buses on the simulated runner
+//! ([`bywire_bus::network::Network`]), its plants stepped every millisecond between them.
+//!
+//! - bus 1 (vehicle control, 500 kbit/s): the built-in ADS ([`crate::mission::AdsDriver`]),
+//!   the vehicle control ECU ([`bywire_tug::ecu::VehicleControlEcu`]), the safety controller and
+//!   the BMS ([`crate::nodes`]);
+//! - bus 1b (the redundant command bus): the ADS's second copy of every command, voted on by
+//!   the ECU;
+//! - bus 2 (drives, CANopen, 1 Mbit/s): the ECU as NMT master of four steering drives and four
+//!   wheel drives (CiA 402 devices whose motors are the plants), with their controllers'
+//!   acceptance filters;
+//! - bus 3 (sensors, 500 kbit/s): the IMU and the I/O node (hub encoders, the steering
+//!   sensors' second tracks);
 //! - the plants: steering chains, wheel drives and brakes, battery, chassis.
 //!
-//! Every node is the same sans-IO node that runs on hardware; the buses are the bit-timed
-//! simulation, so frame timing and bus load are real figures. Nothing reads a clock: a run
-//! is a function of its parameters and seed.
+//! This file is wiring: nodes, plants and faults applied at the edges (a node's output
+//! dropped, a bus's frames tampered with, a plant or input value changed). Every node is the
+//! same sans-IO node that runs on hardware; the buses are the bit-timed simulation, so frame
+//! timing and bus load are real figures. Nothing reads a clock: a run is a function of its
+//! parameters and seed.
 
 use core::time::Duration;
 
-use bywire_bus::sim::{NodeId, SimBus, Tamper};
+use bywire_bus::network::{BusIndex, Network, NodeIndex};
+use bywire_bus::sim::{BusEvent, NodeId, Tamper};
 use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, Mode};
 use bywire_canopen::device::Device;
 use bywire_control::kinematics::{Point, Pose};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
-use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
+use bywire_control::path::Path;
 use bywire_core::filter::Filter;
-use bywire_core::{Frame, Timestamp};
-use bywire_tug::messages::{
-    self, Battery as BatteryMessage, ControlMode, EmergencyStop, Gear, Imu, SteeringAngleSensors,
-    SteeringMode, WheelEncoders,
+use bywire_core::node::{Node, Port};
+use bywire_core::{Frame, Id, Timestamp};
+use bywire_tug::ecu::{
+    self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu, DRIVE_UNITS_PER_M,
+    STEERING_UNITS_PER_DEG,
 };
-use bywire_vehicle::ads::{Ads, AdsCommand};
-use bywire_vehicle::command::{EstopCode, WatchdogLevel};
+pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
+use bywire_tug::messages::{
+    AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, SteeringAngleSensors,
+    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+};
+use bywire_tug::wire::ReferenceWire;
+use bywire_vehicle::ads::Ads;
 use bywire_vehicle::redundancy::Channel;
-use bywire_vehicle::supervisor::{EstopState, Watchdog};
-use bywire_vehicle::supervisor::{Redundancy, Supervisor};
+use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, Watchdog};
 
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
+use crate::mission::{AdsDriver, Mission, MissionParams};
+use crate::nodes::{self, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController};
 use crate::rng::Rng;
 use crate::steering::{SensorFault, SteeringChain, SteeringParams};
-use bywire_core::node::Node;
-use bywire_tug::ecu::{self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu};
-use bywire_tug::wire::ReferenceWire;
 
 /// One simulated millisecond.
 pub const TICK: Duration = Duration::from_millis(1);
-
-pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
-use bywire_tug::ecu::{DRIVE_UNITS_PER_M, STEERING_UNITS_PER_DEG};
-/// The ADS's command frame (AdsToVehicle_Control in the reference DBC).
-const ADS_COMMAND_ID: u16 = 0x100;
 
 /// What a run is given.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,8 +102,7 @@ impl Default for TugParams {
     }
 }
 
-/// How long each steering step of the step test is held.
-pub const STEP_HOLD: Duration = Duration::from_secs(3);
+pub use crate::mission::STEP_HOLD;
 
 /// One steering step at a standstill: the ADS's command from `from` to `to` degrees and the
 /// front-left wheel's angle every millisecond after it.
@@ -117,17 +123,6 @@ impl StepResponse {
     pub fn metrics(&self) -> Result<StepMetrics, MetricsError> {
         step_metrics(&self.times, &self.angles, self.from, self.to)
     }
-}
-
-/// One corner: its two drives (CiA 402 devices with the plant as their motor) and plants.
-struct Corner {
-    steer: Device<Drive>,
-    drive: Device<Drive>,
-    steer_port: NodeId,
-    drive_port: NodeId,
-    chain: SteeringChain,
-    wheel: WheelDrive,
-    distance: f64,
 }
 
 /// The tug's buses.
@@ -273,126 +268,106 @@ pub struct SimEvent {
     pub detail: String,
 }
 
+/// One corner's plants: the steering chain its steering drive turns, the wheel its drive turns.
+struct Corner {
+    chain: SteeringChain,
+    wheel: WheelDrive,
+    distance: f64,
+}
+
+/// The nodes' places in the network (their index in [`Tug::nodes`]' order).
+const ADS: NodeIndex = 0;
+const ECU: NodeIndex = 1;
+const SAFETY: NodeIndex = 2;
+const BMS: NodeIndex = 3;
+const IMU: NodeIndex = 4;
+const IO: NodeIndex = 5;
+/// Steering drives FL..RR at 6–9, wheel drives FL..RR at 10–13.
+const FIRST_STEER: NodeIndex = 6;
+const FIRST_DRIVE: NodeIndex = 10;
+
+/// Receive exactly these identifiers.
+fn only(ids: &[u32]) -> Filtering {
+    Filtering {
+        filters: ids.iter().map(|id| Filter::new(*id, 0x7FF)).collect(),
+        ..Filtering::default()
+    }
+}
+
+/// Receive nothing (nodes that only send).
+fn deaf() -> Filtering {
+    Filtering {
+        filters: Vec::new(),
+        ..Filtering::default()
+    }
+}
+
+/// A drive's acceptance filters, as its controller would have them: NMT, SYNC, the master's
+/// heartbeat, and what is addressed to its node ID (PDOs, SDO).
+fn drive_filtering(node: u8) -> Filtering {
+    let exact = |id: u32| Filter::new(id, 0x7FF);
+    Filtering {
+        filters: vec![
+            exact(0x000),
+            exact(0x080),
+            exact(0x700 + u32::from(MASTER_NODE)),
+            Filter::new(u32::from(node), 0x07F),
+        ],
+        ..Filtering::default()
+    }
+}
+
 /// The simulated tug.
 pub struct Tug {
     now: Timestamp,
-    bus1: SimBus,
-    bus2: SimBus,
-    bus3: SimBus,
-    /// The redundant command bus: the ADS's frames again, voted on by the ECU.
-    bus1b: SimBus,
-    ads_port_b: NodeId,
-    ecu_port_b: NodeId,
-    log_port_b: NodeId,
-    /// Frames on bus 1b.
-    pub bus1b_log: Vec<Logged>,
-    imu_port: NodeId,
-    io_port: NodeId,
-    ecu_port3: NodeId,
-    log_port3: NodeId,
-    bms_port: NodeId,
-    next_report: Timestamp,
-    report_counter: u64,
-    /// Frames on bus 3.
-    pub bus3_log: Vec<Logged>,
-    ads_port: NodeId,
-    ecu_port1: NodeId,
-    ecu_port2: NodeId,
-    log_port1: NodeId,
-    log_port2: NodeId,
-    ads: Ads<ReferenceWire>,
+    net: Network,
+    /// Bus 1, 2, 3 and 1b, in [`TugBus::ALL`]'s order.
+    buses: [BusIndex; 4],
+    /// The loggers, one a bus.
+    taps: [NodeId; 4],
+    /// Who is at each endpoint of each bus, for events.
+    names: [Vec<(NodeId, String)>; 4],
+    /// The ECU's endpoint on bus 1 and the ADS's on bus 1b.
+    ecu_bus1: NodeId,
+    ads_bus1b: NodeId,
+    ads: AdsDriver,
     ecu: VehicleControlEcu,
+    safety: SafetyController,
+    bms: Bms,
+    imu: ImuNode,
+    io: IoNode,
+    steer: Vec<Device<Drive>>,
+    drive: Vec<Device<Drive>>,
     corners: Vec<Corner>,
     chassis: Chassis,
     battery: Battery,
     rng: Rng,
     route: Vec<Point>,
-    follower: PurePursuit,
     params: TugParams,
-    next_ads: Timestamp,
-    ads_cycles: u32,
-    engaged_at: Option<Timestamp>,
     /// Frames on bus 1.
     pub bus1_log: Vec<Logged>,
     /// Frames on bus 2.
     pub bus2_log: Vec<Logged>,
-    /// Cross-track error to the route at every ADS cycle, m.
+    /// Frames on bus 3.
+    pub bus3_log: Vec<Logged>,
+    /// Frames on bus 1b.
+    pub bus1b_log: Vec<Logged>,
+    /// Cross-track error of the true pose to the route every 20 ms once engaged, m.
     pub tracking_errors: Vec<f64>,
     /// What happened, in time order.
     pub events: Vec<SimEvent>,
     /// The state every 50 ms.
     pub trace: Vec<Sample>,
-    steering_command: f64,
     /// Faults active until their end time (`None`: for good).
     active: Vec<(Fault, Option<Timestamp>)>,
-    safety_port: NodeId,
-    next_estop_frame: Timestamp,
-    estop_counter: u64,
-    /// The operator is resetting the E-stop latch (presses reset until it is released).
-    resetting: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
     last_degraded: Option<Channel>,
     ads_external: bool,
-    /// The next stop to make, and the end of the dwell there once stopped.
-    stop_index: usize,
-    dwell_until: Option<Timestamp>,
-    /// The steering mode the ADS last asked for.
-    ads_steering_mode: SteeringMode,
-    /// The step test: when the current step was commanded.
-    step_started: Timestamp,
-    /// The tank turn at the end, once started: the last heading seen and the angle turned.
-    tank: Option<(f64, f64)>,
-    tank_done: bool,
     /// The step test's responses, one a step.
     pub step_responses: Vec<StepResponse>,
     /// Command to heartbeat echo, as the ADS measured it on every state frame.
     pub echo_latencies: Vec<Duration>,
-    remaining: f64,
-}
-
-fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
-    let mut od = cia402::drive_dictionary(node);
-    let (velocity, acceleration) = match mode {
-        // Steering: 20°/s, 60°/s².
-        Mode::ProfilePosition | Mode::CyclicSynchronousPosition => (2_000, 6_000),
-        // Wheels: 8 m/s, 1.5 m/s².
-        Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => (8_000, 1_500),
-    };
-    let _ = od.set_int(cia402::object::MODES, 0, i64::from(mode.code()));
-    let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, velocity);
-    let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, acceleration);
-    let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, acceleration);
-    let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, acceleration * 2);
-    // The actual values (TPDO2) sampled at every SYNC, so the master sees all eight drives
-    // at one instant each cycle.
-    let _ = od.set(0x1801, 2, &[1]);
-    // Each drive watches the ECU's heartbeat: silence faults it.
-    let _ = od.set(
-        0x1016,
-        1,
-        &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
-    );
-    Device::new(node, od, Drive::new().with_external_motor())
-}
-
-/// A drive's port on bus 2, with the acceptance filters its controller would have: NMT,
-/// SYNC, the master's heartbeat, and what is addressed to its node ID (PDOs, SDO).
-fn drive_port(bus: &mut SimBus, node: u8) -> NodeId {
-    let port = bus.add_node();
-    let exact = |id: u32| Filter::new(id, 0x7FF);
-    bus.set_filtering(
-        port,
-        Filtering {
-            filters: vec![
-                exact(0x000),
-                exact(0x080),
-                exact(0x700 + u32::from(MASTER_NODE)),
-                Filter::new(u32::from(node), 0x07F),
-            ],
-            ..Filtering::default()
-        },
-    );
-    port
+    last_echo: Option<Timestamp>,
 }
 
 impl Tug {
@@ -409,76 +384,109 @@ impl Tug {
             timeout: ecu_config.cycle.saturating_mul(3),
             skew: Duration::from_millis(5),
         });
-        let mut bus1b = SimBus::new(500_000, None);
-        let (ads_port_b, ecu_port_b, log_port_b) =
-            (bus1b.add_node(), bus1b.add_node(), bus1b.add_node());
-        let mut bus1 = SimBus::new(500_000, None);
-        let mut bus2 = SimBus::new(1_000_000, None);
-        let mut bus3 = SimBus::new(500_000, None);
-        let (imu_port, ecu_port3, log_port3) = (bus3.add_node(), bus3.add_node(), bus3.add_node());
-        let io_port = bus3.add_node();
-        // Nodes that only send keep nothing they hear.
-        for port in [imu_port, io_port] {
-            bus3.set_rx_capacity(port, 0);
+        let chassis_params = ChassisParams {
+            payload: params.payload,
+            ..ChassisParams::default()
+        };
+        let mission = Mission::new(MissionParams {
+            route: params.route.clone(),
+            speed: params.speed,
+            speeds: params.speeds.clone(),
+            stops: params.stops.clone(),
+            crab_final_m: params.crab_final_m,
+            tank_turn_deg: params.tank_turn_deg,
+            steering_steps: params.steering_steps.clone(),
+            wheelbase: chassis_params.wheelbase,
+            track: chassis_params.track,
+        });
+        let start = mission.start_pose();
+        let mut net = Network::new();
+        let buses = [
+            net.add_bus("bus1", 500_000, None),
+            net.add_bus("bus2", 1_000_000, None),
+            net.add_bus("bus3", 500_000, None),
+            net.add_bus("bus1b", 500_000, None),
+        ];
+        let [bus1, bus2, bus3, bus1b] = buses;
+        let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
+        let mut wire = |net: &mut Network, node: NodeIndex, port: Port, bus: usize, name: &str| {
+            let index = buses.get(bus).copied().unwrap_or_default();
+            let endpoint = net.wire(node, port, index).unwrap_or_default();
+            if let Some(list) = names.get_mut(bus) {
+                list.push((endpoint, name.to_string()));
+            }
+            endpoint
+        };
+        let ads_ports = (Ads::<ReferenceWire>::PORT_A, Ads::<ReferenceWire>::PORT_B);
+        wire(&mut net, ADS, ads_ports.0, 0, "ADS");
+        let ads_bus1b = wire(&mut net, ADS, ads_ports.1, 3, "ADS");
+        let ecu_bus1 = wire(&mut net, ECU, ecu::BUS1, 0, "ECU");
+        wire(&mut net, ECU, ecu::BUS1B, 3, "ECU");
+        wire(&mut net, ECU, ecu::BUS2, 1, "ECU (CANopen master)");
+        wire(&mut net, ECU, ecu::BUS3, 2, "ECU");
+        wire(&mut net, SAFETY, Port::MAIN, 0, "safety controller");
+        wire(&mut net, BMS, Port::MAIN, 0, "BMS");
+        wire(&mut net, IMU, Port::MAIN, 2, "IMU");
+        wire(&mut net, IO, Port::MAIN, 2, "I/O node");
+        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
+            wire(
+                &mut net,
+                FIRST_STEER + i,
+                Port::MAIN,
+                1,
+                &format!("drive 0x{steer:02X}"),
+            );
+            wire(
+                &mut net,
+                FIRST_DRIVE + i,
+                Port::MAIN,
+                1,
+                &format!("drive 0x{drive:02X}"),
+            );
+            net.set_filtering(FIRST_STEER + i, Port::MAIN, drive_filtering(*steer));
+            net.set_filtering(FIRST_DRIVE + i, Port::MAIN, drive_filtering(drive));
         }
-
-        let (ads_port, ecu_port1, log_port1) = (bus1.add_node(), bus1.add_node(), bus1.add_node());
-        let safety_port = bus1.add_node();
-        let bms_port = bus1.add_node();
-        for port in [safety_port, bms_port] {
-            bus1.set_rx_capacity(port, 0);
+        // Each node hears only what it reads: delivering is where a simulator's time goes.
+        let commands = [
+            EmergencyBrake::ID,
+            EmergencyStop::ID,
+            AdsToVehicleControl::ID,
+        ];
+        net.set_filtering(ECU, ecu::BUS1, only(&commands));
+        net.set_filtering(ECU, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
+        net.set_filtering(ECU, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
+        let feedback = [
+            VehicleToAdsState::ID,
+            VehicleToAdsSensors::ID,
+            VehicleToAdsWheelAngles::ID,
+        ];
+        net.set_filtering(ADS, ads_ports.0, only(&feedback));
+        net.set_filtering(ADS, ads_ports.1, deaf());
+        for node in [SAFETY, BMS, IMU, IO] {
+            net.set_filtering(node, Port::MAIN, deaf());
         }
-        let (ecu_port2, log_port2) = (bus2.add_node(), bus2.add_node());
-        let corners = STEERING_NODES
-            .iter()
-            .zip(DRIVE_NODES)
-            .map(|(steer, drive)| Corner {
-                steer: drive_device(*steer, Mode::ProfilePosition),
-                drive: drive_device(drive, Mode::ProfileVelocity),
-                steer_port: drive_port(&mut bus2, *steer),
-                drive_port: drive_port(&mut bus2, drive),
+        let mut taps = [0; 4];
+        for (tap, (bus, list)) in taps.iter_mut().zip(buses.iter().zip(names.iter_mut())) {
+            *tap = net.tap(*bus).unwrap_or_default();
+            list.push((*tap, "logger".to_string()));
+        }
+        let _ = (bus1, bus2, bus3, bus1b);
+        let corners = (0..4)
+            .map(|_| Corner {
                 chain: SteeringChain::new(SteeringParams::default()),
                 wheel: WheelDrive::new(DriveParams::default()),
                 distance: 0.0,
             })
             .collect();
-        let chassis_params = ChassisParams {
-            payload: params.payload,
-            ..ChassisParams::default()
-        };
-        let start = match params.route.as_slice() {
-            [a, b, ..] => Pose {
-                x: a.x,
-                y: a.y,
-                yaw: libm::atan2(b.y - a.y, b.x - a.x),
-            },
-            _ => Pose::default(),
-        };
         Tug {
             now: Timestamp::ZERO,
-            bus1,
-            bus2,
-            bus3,
-            bus1b,
-            ads_port_b,
-            ecu_port_b,
-            log_port_b,
-            bus1b_log: Vec::new(),
-            last_degraded: None,
-            imu_port,
-            io_port,
-            ecu_port3,
-            log_port3,
-            bms_port,
-            next_report: Timestamp::ZERO,
-            report_counter: 0,
-            bus3_log: Vec::new(),
-            ads_port,
-            ecu_port1,
-            ecu_port2,
-            log_port1,
-            log_port2,
-            ads: Ads::with_wire(ads_config, ReferenceWire),
+            net,
+            buses,
+            taps,
+            names,
+            ecu_bus1,
+            ads_bus1b,
+            ads: AdsDriver::new(ads_config, mission),
             ecu: VehicleControlEcu::new(
                 ecu_config,
                 EcuGeometry {
@@ -486,63 +494,48 @@ impl Tug {
                     track: chassis_params.track,
                 },
             ),
+            safety: nodes::safety_controller(),
+            bms: nodes::bms(),
+            imu: nodes::imu(),
+            io: nodes::io_node(),
+            steer: STEERING_NODES
+                .iter()
+                .map(|n| drive_device(*n, Mode::ProfilePosition))
+                .collect(),
+            drive: DRIVE_NODES
+                .iter()
+                .map(|n| drive_device(*n, Mode::ProfileVelocity))
+                .collect(),
             corners,
             chassis: Chassis::new(chassis_params, start),
             battery: Battery::new(BatteryParams::default(), 0.8),
             rng: Rng::new(params.seed),
             route: params.route.clone(),
-            follower: PurePursuit {
-                lookahead: Lookahead {
-                    min: 3.0,
-                    max: 8.0,
-                    time: 1.5,
-                },
-                geometry: Geometry::CounterPhase {
-                    wheelbase: chassis_params.wheelbase,
-                    rear_ratio: 1.0,
-                },
-                max_steer: 35f64.to_radians(),
-            },
             params,
-            next_ads: Timestamp::ZERO,
-            ads_cycles: 0,
-            engaged_at: None,
             bus1_log: Vec::new(),
             bus2_log: Vec::new(),
+            bus3_log: Vec::new(),
+            bus1b_log: Vec::new(),
             tracking_errors: Vec::new(),
             events: Vec::new(),
             trace: Vec::new(),
-            steering_command: 0.0,
             active: Vec::new(),
-            safety_port,
-            next_estop_frame: Timestamp::ZERO,
-            estop_counter: 0,
-            resetting: false,
             last_seen: (
                 Watchdog::FullBraking,
                 EstopState::Normal,
                 ControlMode::Manual,
             ),
+            last_degraded: None,
             ads_external: false,
-            stop_index: 0,
-            dwell_until: None,
-            ads_steering_mode: SteeringMode::Normal,
-            step_started: Timestamp::ZERO,
-            tank: None,
-            tank_done: false,
             step_responses: Vec::new(),
             echo_latencies: Vec::new(),
-            remaining: f64::INFINITY,
+            last_echo: None,
         }
     }
 
-    fn sim_bus(&mut self, bus: TugBus) -> &mut SimBus {
-        match bus {
-            TugBus::Bus1 => &mut self.bus1,
-            TugBus::Bus2 => &mut self.bus2,
-            TugBus::Bus3 => &mut self.bus3,
-            TugBus::Bus1b => &mut self.bus1b,
-        }
+    fn bus_index(&self, bus: TugBus) -> BusIndex {
+        let i = TugBus::ALL.iter().position(|b| *b == bus).unwrap_or(0);
+        self.buses.get(i).copied().unwrap_or(0)
     }
 
     /// Set (`on`) or mend the faults that are frames tampered with on their way; others are
@@ -550,40 +543,49 @@ impl Tug {
     fn set_tampering(&mut self, fault: Fault, on: bool) {
         // The ADS's commands on both buses that carry them, as a faulty ADS would send them.
         const COMMAND_BUSES: [TugBus; 2] = [TugBus::Bus1, TugBus::Bus1b];
+        let command = u16::try_from(AdsToVehicleControl::ID).unwrap_or(0x100);
         let (buses, id, tamper): (&[TugBus], u16, Tamper) = match &fault {
-            Fault::CorruptCommands => (&COMMAND_BUSES, ADS_COMMAND_ID, Tamper::FlipBit),
-            Fault::DuplicateCommands => (&COMMAND_BUSES, ADS_COMMAND_ID, Tamper::Duplicate),
+            Fault::CorruptCommands => (&COMMAND_BUSES, command, Tamper::FlipBit),
+            Fault::DuplicateCommands => (&COMMAND_BUSES, command, Tamper::Duplicate),
             Fault::DelayCommands(ms) => (
                 &COMMAND_BUSES,
-                ADS_COMMAND_ID,
+                command,
                 Tamper::Delay(Duration::from_millis(*ms)),
             ),
             Fault::TamperFrames { bus, id, tamper } => (core::slice::from_ref(bus), *id, *tamper),
             _ => return,
         };
-        let Ok(id) = bywire_core::Id::standard(u32::from(id)) else {
+        let Ok(id) = Id::standard(u32::from(id)) else {
             return;
         };
         for bus in buses {
-            self.sim_bus(*bus).tamper(id, on.then_some(tamper));
+            let index = self.bus_index(*bus);
+            if let Some(sim) = self.net.bus_mut(index) {
+                sim.tamper(id, on.then_some(tamper));
+            }
         }
     }
 
     /// A port on `bus` for a node outside the tug (a tool that watches and injects): it hears
     /// every frame the others send, and what it sends goes on the bus.
     pub fn attach(&mut self, bus: TugBus) -> NodeId {
-        self.sim_bus(bus).add_node()
+        let index = self.bus_index(bus);
+        self.net.tap(index).unwrap_or_default()
     }
 
     /// Send `frame` on `bus` from `port` (from [`Tug::attach`]).
     pub fn send(&mut self, bus: TugBus, port: NodeId, frame: Frame) {
-        let now = self.now;
-        self.sim_bus(bus).submit(port, frame, now);
+        let (now, index) = (self.now, self.bus_index(bus));
+        if let Some(sim) = self.net.bus_mut(index) {
+            sim.submit(port, frame, now);
+        }
     }
 
     /// The next frame `bus` delivered to `port`.
     pub fn receive(&mut self, bus: TugBus, port: NodeId) -> Option<(Timestamp, Frame)> {
-        self.sim_bus(bus)
+        let index = self.bus_index(bus);
+        self.net
+            .bus_mut(index)?
             .receive(port)
             .map(|r| (r.timestamp, r.frame))
     }
@@ -592,15 +594,18 @@ impl Tug {
     /// ADS): the built-in one stops, and the returned port sends and receives for the outsider.
     pub fn attach_ads(&mut self) -> NodeId {
         self.ads_external = true;
+        self.ads.stop_planning();
+        self.net.changed(ADS);
         self.attach(TugBus::Bus1)
     }
 
     /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]), and its copy on bus 1b
     /// (unless cut), as the built-in ADS does.
     pub fn send_bus1(&mut self, port: NodeId, frame: Frame) {
-        self.bus1.submit(port, frame, self.now);
+        self.send(TugBus::Bus1, port, frame);
         if !self.is_active(Fault::RedundantBusLoss) {
-            self.bus1b.submit(self.ads_port_b, frame, self.now);
+            let b = self.ads_bus1b;
+            self.send(TugBus::Bus1b, b, frame);
         }
     }
 
@@ -620,16 +625,25 @@ impl Tug {
                 }
             }
             Fault::OperatorReset => {
-                self.resetting = true;
-                // ... at the ECU too: drives the master stopped acknowledged, a steering fault
-                // whose sensor tracks agree again cleared.
+                // The operator presses reset: at the ADS's console (the E-stop latch's reset
+                // sequence) and at the ECU (drives the master stopped acknowledged, a steering
+                // fault whose sensor tracks agree again cleared).
+                self.ads.operator_reset();
                 self.ecu.operator_reset(now);
-                self.take_ecu_events();
+                self.net.changed(ECU);
+                self.take_node_events();
             }
-            Fault::EcuBusOff => self.bus1.take_off_bus(Some(self.ecu_port1), None),
+            Fault::EcuBusOff => {
+                let (index, ecu) = (self.bus_index(TugBus::Bus1), self.ecu_bus1);
+                if let Some(sim) = self.net.bus_mut(index) {
+                    sim.take_off_bus(Some(ecu), None);
+                }
+            }
             Fault::BusOff { bus, id } => {
-                if let Ok(id) = bywire_core::Id::standard(u32::from(id)) {
-                    self.sim_bus(bus).take_off_bus(None, Some(id));
+                let index = self.bus_index(bus);
+                if let (Ok(id), Some(sim)) = (Id::standard(u32::from(id)), self.net.bus_mut(index))
+                {
+                    sim.take_off_bus(None, Some(id));
                 }
             }
             Fault::CorruptCommands
@@ -655,125 +669,13 @@ impl Tug {
         self.ecu.steering_fault()
     }
 
-    /// The route is done: engaged, at its end, stopped, and the tank turn (if any) made.
+    /// The route is done: engaged, at its end (as the ADS reckons it), stopped, and the tank
+    /// turn (if any) made.
     pub fn arrived(&self) -> bool {
-        self.engaged_at.is_some()
-            && self.remaining < 0.5
+        self.ads.engaged_at().is_some()
+            && self.ads.mission().remaining() < 0.5
             && self.pose_speed() < 0.01
-            && (self.params.tank_turn_deg == 0.0 || self.tank_done)
-    }
-
-    /// The ADS's speed at `station` (`remaining` to go): the speed of the route there,
-    /// slowing in time for lower speeds ahead, for the next stop and for the end
-    /// (v² = v_next² + 2·a·d with a gentle 0.5 m/s²); nothing while it dwells at a stop.
-    fn speed_target(&mut self, now: Timestamp, station: f64, remaining: f64, speed: f64) -> f64 {
-        let approach = |v_next: f64, distance: f64| {
-            libm::sqrt(v_next * v_next + 2.0 * 0.5 * distance.max(0.0))
-        };
-        let speeds = &self.params.speeds;
-        let here = speeds
-            .iter()
-            .rev()
-            .find(|(from, _)| *from <= station)
-            .map_or(self.params.speed, |(_, v)| *v);
-        let target = speeds
-            .iter()
-            .filter(|(from, _)| *from > station)
-            .fold(here.min(approach(0.0, remaining)), |v, (from, next)| {
-                v.min(approach(*next, from - station))
-            });
-        let Some(&(at, dwell)) = self.params.stops.get(self.stop_index) else {
-            return target;
-        };
-        match self.dwell_until {
-            Some(until) if now < until => 0.0,
-            Some(_) => {
-                self.dwell_until = None;
-                self.stop_index += 1;
-                self.record("depart", format!("from the stop at {at:.1} m"));
-                target
-            }
-            None if at - station < 0.3 && speed.abs() < 0.05 => {
-                self.dwell_until = Some(now.saturating_add(dwell));
-                self.record(
-                    "stop",
-                    format!("at {at:.1} m for {:.1} s", dwell.as_secs_f64()),
-                );
-                0.0
-            }
-            None => target.min(approach(0.0, at - station)),
-        }
-    }
-
-    /// The step test's angle while it runs; a step is recorded as it is first commanded.
-    fn step_target(&mut self, now: Timestamp) -> Option<f64> {
-        let engaged = self.engaged_at?;
-        let index =
-            usize::try_from(now.saturating_since(engaged).as_nanos() / STEP_HOLD.as_nanos())
-                .ok()?;
-        let to = *self.params.steering_steps.get(index)?;
-        if self.step_responses.len() == index {
-            let from = index
-                .checked_sub(1)
-                .and_then(|before| self.params.steering_steps.get(before))
-                .copied()
-                .unwrap_or(0.0);
-            self.step_responses.push(StepResponse {
-                from,
-                to,
-                times: Vec::new(),
-                angles: Vec::new(),
-            });
-            self.step_started = now;
-        }
-        Some(to)
-    }
-
-    /// The step test's record: the front-left wheel every millisecond of the current step.
-    fn record_step(&mut self, now: Timestamp) {
-        if now >= self.step_started.saturating_add(STEP_HOLD) {
-            return;
-        }
-        let angle = self.corners.first().map(|c| c.chain.wheel_angle_deg());
-        if let (Some(response), Some(angle)) = (self.step_responses.last_mut(), angle) {
-            let since = now.saturating_since(self.step_started);
-            response.times.push(since.as_secs_f64());
-            response.angles.push(angle);
-        }
-    }
-
-    /// The tank turn at the end of the route: the wheel speed to command while it runs.
-    fn tank_turn(&mut self, remaining: f64, yaw: f64) -> Option<f64> {
-        let wanted = self.params.tank_turn_deg.to_radians();
-        if wanted == 0.0 || self.tank_done || self.engaged_at.is_none() || remaining >= 0.3 {
-            return None;
-        }
-        let (last_yaw, turned) = match self.tank {
-            Some(tank) => tank,
-            None if self.pose_speed() < 0.01 => (yaw, 0.0),
-            None => return None,
-        };
-        let turned = turned + libm::remainder(yaw - last_yaw, 2.0 * core::f64::consts::PI);
-        self.tank = Some((yaw, turned));
-        let left = wanted - turned;
-        if libm::fabs(left) < 0.5f64.to_radians() {
-            self.tank_done = true;
-            return None;
-        }
-        // The wheels turn to their tank angles first, then the tug rotates.
-        let aligned = self
-            .corners
-            .iter()
-            .zip(&self.ecu.wheel_targets())
-            .all(|(c, t)| libm::fabs(c.chain.wheel_angle_deg() - t.angle.to_degrees()) < 3.0);
-        if !aligned {
-            return Some(0.0);
-        }
-        let c = self.chassis.params;
-        let radius = libm::hypot(c.wheelbase / 2.0, c.track / 2.0);
-        // Slow to a stop on the heading: ω² = 2·α·θ with a gentle 0.3 rad/s².
-        let rate = libm::sqrt(2.0 * 0.3 * libm::fabs(left)).min(0.5);
-        Some(libm::copysign(rate * radius, left))
+            && self.ads.mission().tank_done()
     }
 
     fn record(&mut self, kind: &str, detail: String) {
@@ -823,14 +725,19 @@ impl Tug {
         self.ecu.supervisor()
     }
 
-    /// The route's remaining distance from the tug's projection at the last ADS cycle, m.
+    /// The vehicle control ECU.
+    pub fn vehicle_control_ecu(&self) -> &VehicleControlEcu {
+        &self.ecu
+    }
+
+    /// The route's remaining distance, as the ADS reckons it from its odometry, m.
     pub fn remaining(&self) -> f64 {
-        self.remaining
+        self.ads.mission().remaining()
     }
 
     /// When the vehicle first reported autonomous mode to the ADS.
     pub fn engaged_at(&self) -> Option<Timestamp> {
-        self.engaged_at
+        self.ads.engaged_at()
     }
 
     /// The battery's state of charge.
@@ -847,22 +754,109 @@ impl Tug {
 
     /// How long each bus (1, 2, 3, 1b) has been busy since the start, ns.
     fn busy_ns(&self) -> [u64; 4] {
-        [
-            self.bus1.busy_ns(),
-            self.bus2.busy_ns(),
-            self.bus3.busy_ns(),
-            self.bus1b.busy_ns(),
-        ]
+        self.buses
+            .map(|b| self.net.bus(b).map_or(0, |sim| sim.busy_ns()))
     }
 
-    /// One millisecond.
+    /// Who is at `port` on `bus`: an ECU, a drive by node ID, ... or a port from
+    /// [`Tug::attach`].
+    pub fn port_name(&self, bus: TugBus, port: NodeId) -> String {
+        let i = TugBus::ALL.iter().position(|b| *b == bus).unwrap_or(0);
+        self.names
+            .get(i)
+            .and_then(|list| list.iter().find(|(p, _)| *p == port))
+            .map_or_else(|| format!("port {port}"), |(_, name)| name.clone())
+    }
+
+    /// The inputs the nodes read from the wiring and the plants, set before they are due:
+    /// faults at the edges (outputs dropped, a hand on the wheel, the E-stop chain), and the
+    /// sensor nodes' readings when they send within this millisecond.
+    fn set_inputs(&mut self, until: Timestamp) {
+        let silent = self.ads_external || self.is_active(Fault::AdsSilence);
+        self.net.drop_output(ADS, silent);
+        let b_lost = self.is_active(Fault::RedundantBusLoss);
+        self.net
+            .drop_port_output(ADS, Ads::<ReferenceWire>::PORT_B, b_lost);
+        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
+            let steer_silent = self.is_active(Fault::DriveSilence(*steer));
+            let drive_silent = self.is_active(Fault::DriveSilence(drive));
+            self.net.drop_output(FIRST_STEER + i, steer_silent);
+            self.net.drop_output(FIRST_DRIVE + i, drive_silent);
+        }
+        let takeover = if self.is_active(Fault::DriverTakeover) {
+            8.0
+        } else {
+            0.0
+        };
+        self.ecu.set_driver_input(takeover, 0.0);
+        let estop = self.is_active(Fault::Estop);
+        self.ecu.set_status_inputs(StatusInputs {
+            estop_chain_open: estop,
+            parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
+        });
+        self.safety.reading = estop;
+        if self.imu.schedule.due_within(until) {
+            let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
+            self.imu.reading = (yaw_rate.to_degrees(), accel);
+        }
+        if self.io.schedule.due_within(until) {
+            let encoders = self.chassis.encoders(0.01);
+            let mut second_tracks = [0.0; 4];
+            for (track, corner) in second_tracks.iter_mut().zip(&self.corners) {
+                *track = corner.chain.second_track_deg(&mut self.rng);
+            }
+            self.io.reading = IoReading {
+                encoders,
+                second_tracks,
+            };
+        }
+        if self.bms.schedule.due_within(until) {
+            self.bms.reading = BatteryReading {
+                voltage: self.battery.terminal_v(),
+                current: self.battery.current(),
+                soc: self.battery.soc(),
+            };
+        }
+    }
+
+    /// One millisecond: the inputs set, the network run over it, the plants stepped over it.
     pub fn step(&mut self) {
-        let now = self.now.saturating_add(TICK);
-        self.now = now;
-        self.bus1.advance(now);
-        self.bus2.advance(now);
-        self.bus3.advance(now);
-        self.bus1b.advance(now);
+        let now = self.now;
+        let until = now.saturating_add(TICK);
+        self.expire_faults(now);
+        self.set_inputs(until);
+        let [s0, s1, s2, s3] = self.steer.as_mut_slice() else {
+            return;
+        };
+        let [d0, d1, d2, d3] = self.drive.as_mut_slice() else {
+            return;
+        };
+        let mut nodes: [&mut dyn Node; 14] = [
+            &mut self.ads,
+            &mut self.ecu,
+            &mut self.safety,
+            &mut self.bms,
+            &mut self.imu,
+            &mut self.io,
+            s0,
+            s1,
+            s2,
+            s3,
+            d0,
+            d1,
+            d2,
+            d3,
+        ];
+        self.net.run_until(until, &mut nodes);
+        self.run_plants(now);
+        self.now = until;
+        self.take_logs();
+        self.record_step(until);
+        self.note_changes();
+        self.sample(until);
+    }
+
+    fn expire_faults(&mut self, now: Timestamp) {
         let expired: Vec<Fault> = self
             .active
             .iter()
@@ -882,14 +876,45 @@ impl Tug {
         }
         self.active
             .retain(|(_, end)| end.is_none_or(|end| now < end));
-        self.deliver();
-        self.run_safety(now);
-        self.run_ads(now);
-        self.run_ecu(now);
-        self.run_plants(now);
-        self.run_reports(now);
-        self.record_step(now);
-        self.note_changes();
+    }
+
+    /// The loggers' frames into the logs.
+    fn take_logs(&mut self) {
+        let logs = [
+            &mut self.bus1_log,
+            &mut self.bus2_log,
+            &mut self.bus3_log,
+            &mut self.bus1b_log,
+        ];
+        for ((bus, tap), log) in self.buses.iter().zip(self.taps).zip(logs) {
+            if let Some(sim) = self.net.bus_mut(*bus) {
+                while let Some(r) = sim.receive(tap) {
+                    log.push((r.timestamp, r.frame));
+                }
+            }
+        }
+        let echo = self.ads.ads().state().echo_latency;
+        if echo.at != self.last_echo {
+            self.last_echo = echo.at;
+            self.echo_latencies.extend(echo.value);
+        }
+    }
+
+    /// The trace every 50 ms, the tracking error every 20 ms once engaged.
+    fn sample(&mut self, now: Timestamp) {
+        let pose = self.chassis.pose();
+        if self.ads.engaged_at().is_some() && now.as_nanos().is_multiple_of(20_000_000) {
+            if let Some(path) = Path::new(&self.route) {
+                let error = path
+                    .project(Point {
+                        x: pose.x,
+                        y: pose.y,
+                    })
+                    .offset
+                    .abs();
+                self.tracking_errors.push(error);
+            }
+        }
         if now.as_nanos().is_multiple_of(50_000_000) {
             let steering_actual = self
                 .corners
@@ -897,153 +922,49 @@ impl Tug {
                 .map_or(0.0, |c| c.chain.wheel_angle_deg());
             self.trace.push(Sample {
                 t: now,
-                pose: self.chassis.pose(),
+                pose,
                 speed: self.pose_speed(),
-                steering_command: self.steering_command,
+                steering_command: self.ads.steering_command(),
                 steering_actual,
                 busy_ns: self.busy_ns(),
             });
         }
     }
 
-    /// The periodic reports of the sensor nodes: the IMU and the I/O node on bus 3 every
-    /// 10 ms, the BMS on bus 1 every 100 ms (the ECU reports on its own).
-    fn run_reports(&mut self, now: Timestamp) {
-        if now < self.next_report {
+    /// The step test's record: the front-left wheel every millisecond of the current step.
+    fn record_step(&mut self, now: Timestamp) {
+        let Some(step) = self.ads.mission().active_step() else {
             return;
-        }
-        self.next_report = now.saturating_add(Duration::from_millis(10));
-        let counter = self.report_counter;
-        self.report_counter = self.report_counter.wrapping_add(1);
-        let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
-        let mut imu = Imu::default();
-        let _ = imu.set_yaw_rate(yaw_rate.to_degrees().clamp(-327.0, 327.0));
-        let _ = imu.set_accel_x(accel.clamp(-32.0, 32.0));
-        imu.set_counter_raw(counter & 0x0F);
-        self.bus3
-            .submit(self.imu_port, messages::sealed_frame(Imu::ID, imu.0), now);
-        // The I/O node: the hub encoders and the steering sensors' second tracks.
-        let mut encoders = WheelEncoders::default();
-        let [fl, fr, rl, rr] = self.chassis.encoders(0.01).map(|v| v.clamp(-20.0, 20.0));
-        let _ = (
-            encoders.set_encoder_speed_fl(fl),
-            encoders.set_encoder_speed_fr(fr),
-            encoders.set_encoder_speed_rl(rl),
-            encoders.set_encoder_speed_rr(rr),
-        );
-        encoders.set_counter_raw(counter & 0x0F);
-        let mut second = SteeringAngleSensors::default();
-        let mut tracks = [0.0; 4];
-        for (track, corner) in tracks.iter_mut().zip(&self.corners) {
-            *track = corner
-                .chain
-                .second_track_deg(&mut self.rng)
-                .clamp(-200.0, 200.0);
-        }
-        let [fl, fr, rl, rr] = tracks;
-        let _ = (
-            second.set_second_angle_fl(fl),
-            second.set_second_angle_fr(fr),
-            second.set_second_angle_rl(rl),
-            second.set_second_angle_rr(rr),
-        );
-        second.set_counter_raw(counter & 0x0F);
-        for (id, payload) in [
-            (WheelEncoders::ID, encoders.0),
-            (SteeringAngleSensors::ID, second.0),
-        ] {
-            self.bus3
-                .submit(self.io_port, messages::sealed_frame(id, payload), now);
-        }
-        if counter.is_multiple_of(10) {
-            let mut m = BatteryMessage::default();
-            let _ = m.set_battery_voltage(self.battery.terminal_v().clamp(0.0, 120.0));
-            let _ = m.set_battery_current(self.battery.current().clamp(-1000.0, 1000.0));
-            let _ = m.set_state_of_charge((self.battery.soc() * 100.0).clamp(0.0, 100.0));
-            m.set_counter_raw((counter / 10) & 0x0F);
-            self.bus1.submit(
-                self.bms_port,
-                messages::sealed_frame(BatteryMessage::ID, m.0),
-                now,
-            );
-        }
-    }
-
-    /// The safety controller: the E-stop chain's state every 20 ms.
-    fn run_safety(&mut self, now: Timestamp) {
-        if now < self.next_estop_frame {
-            return;
-        }
-        self.next_estop_frame = now.saturating_add(Duration::from_millis(20));
-        let mut m = EmergencyStop::default();
-        m.set_estop_request_raw(u64::from(self.is_active(Fault::Estop)));
-        m.set_counter_raw(self.estop_counter & 0x0F);
-        self.estop_counter = self.estop_counter.wrapping_add(1);
-        self.bus1.submit(
-            self.safety_port,
-            messages::sealed_frame(EmergencyStop::ID, m.0),
-            now,
-        );
-    }
-
-    /// Who is at `port` on `bus`: an ECU, a drive by node ID, ... or a port from
-    /// [`Tug::attach`].
-    pub fn port_name(&self, bus: TugBus, port: NodeId) -> String {
-        let named: &[(NodeId, &str)] = match bus {
-            TugBus::Bus1 => &[
-                (self.ads_port, "ADS"),
-                (self.ecu_port1, "ECU"),
-                (self.safety_port, "safety controller"),
-                (self.bms_port, "BMS"),
-                (self.log_port1, "logger"),
-            ],
-            TugBus::Bus1b => &[
-                (self.ads_port_b, "ADS"),
-                (self.ecu_port_b, "ECU"),
-                (self.log_port_b, "logger"),
-            ],
-            TugBus::Bus2 => &[
-                (self.ecu_port2, "ECU (CANopen master)"),
-                (self.log_port2, "logger"),
-            ],
-            TugBus::Bus3 => &[
-                (self.imu_port, "IMU"),
-                (self.io_port, "I/O node"),
-                (self.ecu_port3, "ECU"),
-                (self.log_port3, "logger"),
-            ],
         };
-        let named = named.iter().find(|(p, _)| *p == port);
-        if let Some((_, name)) = named {
-            return name.to_string();
-        }
-        let drive = self
-            .corners
-            .iter()
-            .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
-            .find_map(|(corner, (steer, drive))| {
-                if corner.steer_port == port {
-                    Some(*steer)
-                } else if corner.drive_port == port {
-                    Some(drive)
-                } else {
-                    None
-                }
+        if self.step_responses.len() == step.index {
+            self.step_responses.push(StepResponse {
+                from: step.from,
+                to: step.to,
+                times: Vec::new(),
+                angles: Vec::new(),
             });
-        match drive {
-            Some(node) if bus == TugBus::Bus2 => format!("drive 0x{node:02X}"),
-            _ => format!("port {port}"),
+        }
+        if now >= step.started.saturating_add(STEP_HOLD) {
+            return;
+        }
+        let angle = self.corners.first().map(|c| c.chain.wheel_angle_deg());
+        if let (Some(response), Some(angle)) = (self.step_responses.get_mut(step.index), angle) {
+            let since = now.saturating_since(step.started);
+            response.times.push(since.as_secs_f64());
+            response.angles.push(angle);
         }
     }
 
-    /// Record the supervisor's state changes, bus state changes and the master's heartbeat
-    /// events.
+    /// Record the supervisor's state changes, bus state changes and the nodes' events.
     fn note_changes(&mut self) {
         let mut changes = Vec::new();
-        for bus in TugBus::ALL {
-            for event in self.sim_bus(bus).drain_events() {
-                if let bywire_bus::sim::BusEvent::StateChanged { node, state, .. } = event {
-                    changes.push((bus, node, state));
+        for (i, bus) in TugBus::ALL.into_iter().enumerate() {
+            let index = self.buses.get(i).copied().unwrap_or(0);
+            if let Some(sim) = self.net.bus_mut(index) {
+                for event in sim.drain_events() {
+                    if let BusEvent::StateChanged { node, state, .. } = event {
+                        changes.push((bus, node, state));
+                    }
                 }
             }
         }
@@ -1053,6 +974,7 @@ impl Tug {
         }
         let supervisor = self.ecu.supervisor();
         let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
+        let degraded = supervisor.degraded();
         let (watchdog, estop, mode) = self.last_seen;
         if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
             self.record("watchdog", watchdog_name(seen.0).to_string());
@@ -1064,7 +986,6 @@ impl Tug {
             self.record("mode", format!("{:?}", seen.2));
         }
         self.last_seen = seen;
-        let degraded = self.ecu.supervisor().degraded();
         if degraded != self.last_degraded {
             self.last_degraded = degraded;
             let detail = match degraded {
@@ -1074,243 +995,52 @@ impl Tug {
             };
             self.record("redundancy", detail.to_string());
         }
-        self.take_ecu_events();
+        self.take_node_events();
     }
 
-    /// The ECU's events into the run's.
-    fn take_ecu_events(&mut self) {
-        // Bounded by the ECU's event queue.
+    /// The ECU's and the ADS's events into the run's.
+    fn take_node_events(&mut self) {
+        // Bounded by the nodes' event queues.
         while let Some((_, event)) = self.ecu.next_event() {
+            self.record(event.kind(), event.to_string());
+        }
+        while let Some((_, event)) = self.ads.next_event() {
             self.record(event.kind(), event.to_string());
         }
     }
 
-    fn deliver(&mut self) {
-        while let Some(r) = self.bus1.receive(self.ads_port) {
-            let before = self.ads.state().echo_latency.at;
-            self.ads.on_frame(r.timestamp, &r.frame);
-            let echo = self.ads.state().echo_latency;
-            if echo.at != before {
-                self.echo_latencies.extend(echo.value);
-            }
-        }
-        while let Some(r) = self.bus1.receive(self.ecu_port1) {
-            self.ecu.on_frame(r.timestamp, ecu::BUS1, &r.frame);
-        }
-        while let Some(r) = self.bus1.receive(self.log_port1) {
-            self.bus1_log.push((r.timestamp, r.frame));
-        }
-        while let Some(r) = self.bus1b.receive(self.ecu_port_b) {
-            self.ecu.on_frame(r.timestamp, ecu::BUS1B, &r.frame);
-        }
-        while let Some(r) = self.bus1b.receive(self.log_port_b) {
-            self.bus1b_log.push((r.timestamp, r.frame));
-        }
-        while self.bus1b.receive(self.ads_port_b).is_some() {}
-        while let Some(r) = self.bus2.receive(self.ecu_port2) {
-            self.ecu.on_frame(r.timestamp, ecu::BUS2, &r.frame);
-        }
-        while let Some(r) = self.bus2.receive(self.log_port2) {
-            self.bus2_log.push((r.timestamp, r.frame));
-        }
-        while let Some(r) = self.bus3.receive(self.log_port3) {
-            self.bus3_log.push((r.timestamp, r.frame));
-        }
-        // The ECU takes the steering sensors' second tracks from bus 3 (the IMU and encoders are
-        // logged; the ADS localises itself).
-        while let Some(r) = self.bus3.receive(self.ecu_port3) {
-            self.ecu.on_frame(r.timestamp, ecu::BUS3, &r.frame);
-        }
-        for corner in &mut self.corners {
-            while let Some(r) = self.bus2.receive(corner.steer_port) {
-                corner.steer.on_frame(r.timestamp, &r.frame);
-            }
-            while let Some(r) = self.bus2.receive(corner.drive_port) {
-                corner.drive.on_frame(r.timestamp, &r.frame);
-            }
-        }
-    }
-
-    /// The ADS: every 20 ms, pure pursuit on the route from the tug's pose, at cruising speed
-    /// slowing to a stop at the end; engaged once the vehicle answers.
-    fn run_ads(&mut self, now: Timestamp) {
-        if self.ads_external {
-            return;
-        }
-        if now >= self.next_ads {
-            self.next_ads = now.saturating_add(Duration::from_millis(20));
-            let pose = self.chassis.pose();
-            let speed = self.chassis.twist().vx;
-            let crab = self.remaining < self.params.crab_final_m;
-            let (steering, error, remaining, station) = match Path::new(&self.route) {
-                Some(path) => {
-                    let projection = path.project(Point {
-                        x: pose.x,
-                        y: pose.y,
-                    });
-                    let steering = if crab {
-                        // The stand approach in crab: every wheel toward the point a lookahead
-                        // ahead on the route, the heading held.
-                        let ahead =
-                            path.at_station(projection.station + self.follower.lookahead.at(speed));
-                        let bearing = libm::atan2(ahead.y - pose.y, ahead.x - pose.x) - pose.yaw;
-                        libm::atan2(libm::sin(bearing), libm::cos(bearing))
-                            .clamp(-self.follower.max_steer, self.follower.max_steer)
-                            .to_degrees()
-                    } else {
-                        self.follower.steer(pose, speed, &path).front.to_degrees()
-                    };
-                    (
-                        steering,
-                        projection.offset.abs(),
-                        path.length() - projection.station,
-                        projection.station,
-                    )
-                }
-                None => (0.0, 0.0, 0.0, 0.0),
-            };
-            self.remaining = remaining;
-            if self.engaged_at.is_some() {
-                self.tracking_errors.push(error);
-            }
-            let target = self.speed_target(now, station, remaining, speed);
-            let velocity = if remaining < 0.3 || self.engaged_at.is_none() {
-                0.0
-            } else {
-                target
-            };
-            // The step test comes first, the tank turn last; after it the tug stands in normal
-            // mode.
-            let step = self.step_target(now);
-            let tank = self.tank_turn(remaining, pose.yaw);
-            let (steering, velocity, mode) = match (step, tank) {
-                (Some(angle), _) => (angle, 0.0, SteeringMode::Normal),
-                (None, Some(wheel_speed)) => (0.0, wheel_speed, SteeringMode::Tank),
-                (None, None) if crab && !self.tank_done => (steering, velocity, SteeringMode::Crab),
-                (None, None) => (steering, velocity, SteeringMode::Normal),
-            };
-            if mode != self.ads_steering_mode {
-                self.ads_steering_mode = mode;
-                self.record("steering_mode", format!("{mode:?}"));
-            }
-            // Engage is an edge, taken once the vehicle's recovery run is complete: request it
-            // every tenth cycle until the vehicle reports autonomous mode.
-            self.ads_cycles = self.ads_cycles.wrapping_add(1);
-            // (Watchdog level 4: the vehicle waits for a re-engage after full braking.)
-            let state = self.ads.state();
-            let autonomous = state.mode.value == Some(ControlMode::Autonomous);
-            let awaiting = state.watchdog_level.value == Some(WatchdogLevel::AwaitingEngage);
-            let engage = self.ads.feedback_alive(now)
-                && (!autonomous || awaiting)
-                && self.ads_cycles.is_multiple_of(10);
-            if autonomous && self.engaged_at.is_none() {
-                self.engaged_at = Some(now);
-            }
-            self.steering_command = steering;
-            // The operator presses reset (an edge, every half second) while the latch is
-            // stopped or waiting for the confirming press, until the vehicle reports it clear.
-            let estop = self.ads.state().estop_state.value;
-            if estop == Some(EstopCode::Normal) && self.resetting && autonomous {
-                self.resetting = false;
-            }
-            let operator_reset = self.resetting
-                && estop.is_some_and(EstopCode::awaits_operator_reset)
-                && self.ads_cycles.is_multiple_of(25);
-            let command = AdsCommand {
-                steering,
-                velocity,
-                brake: if velocity == 0.0 { 30.0 } else { 0.0 },
-                gear: Gear::Drive,
-                mode: ControlMode::Autonomous,
-                steering_mode: mode,
-                engage,
-                operator_reset,
-            };
-            let _ = self.ads.set_command(now, command);
-        }
-        // A silent ADS sends nothing; corrupted, duplicated and delayed commands are the
-        // buses' doing (set_tampering).
-        let silent = self.is_active(Fault::AdsSilence);
-        let mut sent = Vec::new();
-        self.ads.poll(now, &mut |f| sent.push(f));
-        if !silent {
-            for frame in sent {
-                self.send_ads(frame);
-            }
-        }
-    }
-
-    /// The built-in ADS sends on bus 1 and on bus 1b.
-    fn send_ads(&mut self, frame: Frame) {
-        let port = self.ads_port;
-        self.send_bus1(port, frame);
-    }
-
-    /// The vehicle control ECU node, its inputs from the wiring set first (a driver's hand on
-    /// the wheel, the hardwired E-stop chain, the parking brakes), its frames onto its buses.
-    fn run_ecu(&mut self, now: Timestamp) {
-        let takeover = if self.is_active(Fault::DriverTakeover) {
-            8.0
-        } else {
-            0.0
-        };
-        self.ecu.set_driver_input(takeover, 0.0);
-        self.ecu.set_status_inputs(StatusInputs {
-            estop_chain_open: self.is_active(Fault::Estop),
-            parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
-        });
-        let (bus1, bus2) = (&mut self.bus1, &mut self.bus2);
-        let (port1, port2) = (self.ecu_port1, self.ecu_port2);
-        self.ecu.poll(now, &mut |port, frame| match port {
-            ecu::BUS1 => bus1.submit(port1, frame, now),
-            ecu::BUS2 => bus2.submit(port2, frame, now),
-            _ => {}
-        });
-    }
-
-    /// The drives' devices and the plants they move.
+    /// The plants over the millisecond from `now`: each drive's demand moves its plant, whose
+    /// actual values go back to the drive.
     fn run_plants(&mut self, now: Timestamp) {
         let dt = TICK.as_secs_f64();
         let a = self.ecu.actuators(now);
+        let brake = self.ecu.brake_demand(now);
         let rolling = self.chassis.twist().vx.abs() > 0.05;
         let speeds = self.chassis.wheel_speeds();
         let soc = self.battery.soc();
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
-        let active = &self.active;
-        let brake = self.ecu.brake_demand(now);
-        for ((corner, input), speed) in self.corners.iter_mut().zip(inputs.iter_mut()).zip(speeds) {
-            let steer_silent = active
-                .iter()
-                .any(|(f, _)| *f == Fault::DriveSilence(corner.steer.node()));
-            let drive_silent = active
-                .iter()
-                .any(|(f, _)| *f == Fault::DriveSilence(corner.drive.node()));
-            let (bus, steer_port, drive_port) =
-                (&mut self.bus2, corner.steer_port, corner.drive_port);
-            corner.steer.poll(now, &mut |f| {
-                if !steer_silent {
-                    bus.submit(steer_port, f, now);
-                }
-            });
-            corner.drive.poll(now, &mut |f| {
-                if !drive_silent {
-                    bus.submit(drive_port, f, now);
-                }
-            });
+        let devices = self.steer.iter_mut().zip(self.drive.iter_mut());
+        for (((corner, (steer, drive)), input), speed) in self
+            .corners
+            .iter_mut()
+            .zip(devices)
+            .zip(inputs.iter_mut())
+            .zip(speeds)
+        {
             // Steering: the drive's velocity demand is the valve shaft's speed command.
             let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
-            let command = corner.steer.app().demand() / max_rate;
+            let command = steer.app().demand() / max_rate;
             let before = corner.chain.wheel_angle_deg();
             corner.chain.step(dt, command, rolling);
             let reading = corner.chain.sensor_deg(&mut self.rng);
             let rate = (corner.chain.wheel_angle_deg() - before) / dt;
-            corner.steer.app_mut().0.set_actual(
+            steer.app_mut().0.set_actual(
                 reading * STEERING_UNITS_PER_DEG,
                 rate * STEERING_UNITS_PER_DEG,
             );
             // Drive: the drive's velocity demand is the motor controller's setpoint.
-            let setpoint = corner.drive.app().demand() / DRIVE_UNITS_PER_M;
+            let setpoint = drive.app().demand() / DRIVE_UNITS_PER_M;
             let output = corner.wheel.motor(setpoint, speed, soc);
             corner
                 .wheel
@@ -1318,7 +1048,7 @@ impl Tug {
             corner.wheel.step_brake(dt, brake);
             power += output.power;
             corner.distance += speed * dt;
-            corner.drive.app_mut().0.set_actual(
+            drive.app_mut().0.set_actual(
                 corner.distance * DRIVE_UNITS_PER_M,
                 speed * DRIVE_UNITS_PER_M,
             );
@@ -1331,6 +1061,31 @@ impl Tug {
         self.chassis.step(dt, &inputs, self.params.grade);
         self.battery.step(dt, power);
     }
+}
+
+fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
+    let mut od = cia402::drive_dictionary(node);
+    let (velocity, acceleration) = match mode {
+        // Steering: 20°/s, 60°/s².
+        Mode::ProfilePosition | Mode::CyclicSynchronousPosition => (2_000, 6_000),
+        // Wheels: 8 m/s, 1.5 m/s².
+        Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => (8_000, 1_500),
+    };
+    let _ = od.set_int(cia402::object::MODES, 0, i64::from(mode.code()));
+    let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, velocity);
+    let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, acceleration);
+    let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, acceleration);
+    let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, acceleration * 2);
+    // The actual values (TPDO2) sampled at every SYNC, so the master sees all eight drives
+    // at one instant each cycle.
+    let _ = od.set(0x1801, 2, &[1]);
+    // Each drive watches the ECU's heartbeat: silence faults it.
+    let _ = od.set(
+        0x1016,
+        1,
+        &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
+    );
+    Device::new(node, od, Drive::new().with_external_motor())
 }
 
 /// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service

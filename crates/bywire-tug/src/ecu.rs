@@ -281,15 +281,25 @@ impl VehicleControlEcu {
         angles
     }
 
-    /// The wheels' speeds as the wheel drives report them, m/s.
+    /// The wheels' speeds as the wheel drives report them, m/s. A drive the master has
+    /// stopped (its heartbeat lost, a fault) reports nothing current: its last value would
+    /// tell the ADS's odometry the wheel still turns, so the healthy wheels' mean stands in
+    /// (the tug is stopping on all four).
     fn wheel_speeds(&mut self) -> [f64; 4] {
-        let mut speeds = [0.0; 4];
+        let mut speeds = [None; 4];
         for (speed, drive) in speeds.iter_mut().zip(DRIVE_NODES) {
             if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
-                *speed = f64::from(d.actual().1) / DRIVE_UNITS_PER_M;
+                if d.stopped().is_none() {
+                    *speed = Some(f64::from(d.actual().1) / DRIVE_UNITS_PER_M);
+                }
             }
         }
-        speeds
+        let (sum, count) = speeds
+            .iter()
+            .flatten()
+            .fold((0.0, 0.0), |(sum, count), s| (sum + s, count + 1.0));
+        let mean = if count > 0.0 { sum / count } else { 0.0 };
+        speeds.map(|s| s.unwrap_or(mean))
     }
 
     /// The second tracks from the I/O node on bus 3.

@@ -15,29 +15,29 @@
     clippy::indexing_slicing
 )]
 
-use bywire_tug::wire::ReferenceWire;
-use std::path::Path;
+mod common;
+
 use std::time::Duration;
+
+use common::vehicles::{self, by_profile, reference_wire, Vehicle};
 
 use bywire_bus::network::Network;
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_tug::messages::{ControlMode, Gear};
-use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::ads::{Ads, AdsCommand};
+use bywire_vehicle::profile::LoadedProfile;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Redundancy, Supervisor, SupervisorConfig, Watchdog};
 use bywire_vehicle::wire::{AdsWire, ProfileWire, VehicleWire};
 
 /// The shuttle test vehicle with its command message replaced by `command_block`.
 fn shuttle_with(command_block: &str) -> LoadedProfile {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let toml = std::fs::read_to_string(dir.join("shuttle.toml")).unwrap();
-    let dbc = std::fs::read_to_string(dir.join("shuttle.dbc")).unwrap();
-    let start = dbc.find("BO_ 1280 Shuttle_Cmd").unwrap();
-    let end = start + dbc[start..].find("\n\n").unwrap();
-    let dbc = format!("{}{}{}", &dbc[..start], command_block.trim(), &dbc[end..]);
-    Profile::parse("shuttle-variant", &toml, |_| Ok(dbc.clone())).unwrap()
+    vehicles::shuttle_with(|dbc| {
+        let start = dbc.find("BO_ 1280 Shuttle_Cmd").unwrap();
+        let end = start + dbc[start..].find("\n\n").unwrap();
+        format!("{}{}{}", &dbc[..start], command_block.trim(), &dbc[end..])
+    })
 }
 
 /// Six bytes: 10-bit setpoints, a 4-bit counter and an XOR checksum in the last byte.
@@ -71,28 +71,14 @@ BO_ 1280 Shuttle_Cmd: 16 ADS
  SG_ Cmd_Xor : 48|8@1+ (1,0) [0|255] "" VCU
 "#;
 
-/// One vehicle's wire and configurations.
-struct Vehicle<W> {
-    wire: W,
-    supervisor: SupervisorConfig,
-    ads: AdsConfig,
-    /// The command frame's length on the wire (to show the layout really differs).
-    command_len: usize,
-}
-
-fn by_profile(loaded: &LoadedProfile) -> Vehicle<ProfileWire> {
-    let mut wire = ProfileWire::new(loaded).unwrap();
-    let command_len = wire
+/// The command frame's length on the wire (to show a layout really differs).
+fn command_len<W: AdsWire>(vehicle: &mut Vehicle<W>) -> usize {
+    vehicle
+        .wire
         .command_frame(&AdsCommand::default(), 0)
         .unwrap()
         .data()
-        .len();
-    Vehicle {
-        wire,
-        supervisor: loaded.supervisor_config(),
-        ads: loaded.ads_config(),
-        command_len,
-    }
+        .len()
 }
 
 /// A network with bus A and bus B, an ADS computer on each, and the supervisor on both.
@@ -115,9 +101,9 @@ enum Copy {
 }
 
 impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
-    fn new(vehicle: Vehicle<W>) -> Rig<W> {
+    fn new(mut vehicle: Vehicle<W>) -> Rig<W> {
         let mut net = Network::new();
-        let fd = vehicle.command_len > 8;
+        let fd = command_len(&mut vehicle) > 8;
         let a = net.add_bus("bus A", 500_000, fd.then_some(2_000_000));
         let b = net.add_bus("bus B", 500_000, fd.then_some(2_000_000));
         net.wire(0, Port::MAIN, a).unwrap();
@@ -161,6 +147,7 @@ impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
                 ..AdsCommand::default()
             };
             assert!(self.ads[i].set_command(now, command));
+            self.net.changed(i);
             self.net.drop_output(i, copy == Copy::Silent);
         }
         let steps = u32::try_from(self.cycle.as_millis()).unwrap();
@@ -293,15 +280,7 @@ macro_rules! for_every_wire {
     ($($scenario:ident),* $(,)?) => {
         mod reference_wire {
             use super::*;
-            fn vehicle() -> Vehicle<ReferenceWire> {
-                Vehicle {
-                    wire: ReferenceWire,
-                    supervisor: SupervisorConfig::default(),
-                    ads: AdsConfig::default(),
-                    command_len: 8,
-                }
-            }
-            $(#[test] fn $scenario() { super::$scenario(vehicle()) })*
+            $(#[test] fn $scenario() { super::$scenario(reference_wire()) })*
         }
         mod reference_tug_profile {
             use super::*;
@@ -313,8 +292,8 @@ macro_rules! for_every_wire {
         mod six_byte_command {
             use super::*;
             fn vehicle() -> Vehicle<ProfileWire> {
-                let v = by_profile(&shuttle_with(SIX_BYTES));
-                assert_eq!(v.command_len, 6);
+                let mut v = by_profile(&shuttle_with(SIX_BYTES));
+                assert_eq!(command_len(&mut v), 6);
                 v
             }
             $(#[test] fn $scenario() { super::$scenario(vehicle()) })*
@@ -322,8 +301,8 @@ macro_rules! for_every_wire {
         mod fd_command {
             use super::*;
             fn vehicle() -> Vehicle<ProfileWire> {
-                let v = by_profile(&shuttle_with(FD_SIXTEEN_BYTES));
-                assert_eq!(v.command_len, 16);
+                let mut v = by_profile(&shuttle_with(FD_SIXTEEN_BYTES));
+                assert_eq!(command_len(&mut v), 16);
                 v
             }
             $(#[test] fn $scenario() { super::$scenario(vehicle()) })*

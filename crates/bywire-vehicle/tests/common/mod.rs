@@ -24,3 +24,55 @@ pub fn command(counter: u8, edit: impl FnOnce(&mut AdsToVehicleControl)) -> Fram
     edit(&mut m);
     sealed(AdsToVehicleControl::ID, m.0)
 }
+
+/// The vehicles the suites run over: a wire and the configurations its profile gives.
+pub mod vehicles {
+    use std::path::Path;
+
+    use bywire_tug::wire::ReferenceWire;
+    use bywire_vehicle::ads::AdsConfig;
+    use bywire_vehicle::profile::{LoadedProfile, Profile};
+    use bywire_vehicle::supervisor::SupervisorConfig;
+    use bywire_vehicle::wire::ProfileWire;
+
+    /// One vehicle under test.
+    pub struct Vehicle<W> {
+        pub wire: W,
+        pub supervisor: SupervisorConfig,
+        pub ads: AdsConfig,
+    }
+
+    /// The reference tug through its generated structs.
+    pub fn reference_wire() -> Vehicle<ReferenceWire> {
+        Vehicle {
+            wire: ReferenceWire,
+            supervisor: SupervisorConfig::default(),
+            ads: AdsConfig::default(),
+        }
+    }
+
+    /// Any vehicle through its profile.
+    pub fn by_profile(loaded: &LoadedProfile) -> Vehicle<ProfileWire> {
+        Vehicle {
+            wire: ProfileWire::new(loaded).unwrap(),
+            supervisor: loaded.supervisor_config(),
+            ads: loaded.ads_config(),
+        }
+    }
+
+    /// The shuttle test vehicle's profile and DBC text (tests/data).
+    pub fn shuttle_texts() -> (String, String) {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+        (
+            std::fs::read_to_string(dir.join("shuttle.toml")).unwrap(),
+            std::fs::read_to_string(dir.join("shuttle.dbc")).unwrap(),
+        )
+    }
+
+    /// The shuttle test vehicle, its DBC changed by `edit`.
+    pub fn shuttle_with(edit: impl FnOnce(String) -> String) -> LoadedProfile {
+        let (toml, dbc) = shuttle_texts();
+        let dbc = edit(dbc);
+        Profile::parse("shuttle", &toml, |_| Ok(dbc.clone())).unwrap()
+    }
+}

@@ -1,0 +1,519 @@
+//! The built-in ADS: a [`Mission`] (the route with its speeds, stops, a crab stand approach, a
+//! tank turn at the end, a steering step test first) driving the ADS side of the wire, as one
+//! node ([`AdsDriver`]). It drives from what an ADS knows — its own odometry from the
+//! vehicle's wheel speeds and angles, the speed the vehicle reports — never the plant's true
+//! pose.
+
+use std::collections::VecDeque;
+
+use core::time::Duration;
+
+use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
+use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
+use bywire_core::node::{Node, Port};
+use bywire_core::{Frame, Timestamp};
+use bywire_tug::wire::ReferenceWire;
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+
+/// How long each steering step of the step test is held.
+pub const STEP_HOLD: Duration = Duration::from_secs(3);
+/// The ADS plans every command cycle.
+const PLAN_PERIOD: Duration = Duration::from_millis(20);
+/// Events kept for the caller; more are dropped.
+const EVENT_CAPACITY: usize = 64;
+
+/// What the mission asks for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MissionParams {
+    /// The route, m (at least two points).
+    pub route: Vec<Point>,
+    /// Cruising speed, m/s.
+    pub speed: f64,
+    /// Speeds along the route: (from this many metres on, m/s), by distance.
+    pub speeds: Vec<(f64, f64)>,
+    /// Stops along the route: (at this many metres, for this long), by distance.
+    pub stops: Vec<(f64, Duration)>,
+    /// The last this many metres of the route in crab (0: none).
+    pub crab_final_m: f64,
+    /// At the end, a tank turn in place by this many degrees (+ left; 0: none).
+    pub tank_turn_deg: f64,
+    /// The step test: angles (degrees) stepped to in turn at a standstill, each held for
+    /// [`STEP_HOLD`], before it drives.
+    pub steering_steps: Vec<f64>,
+    /// The tug's wheelbase and track, m.
+    pub wheelbase: f64,
+    /// Track, m.
+    pub track: f64,
+}
+
+/// Something the mission did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MissionEvent {
+    /// The steering mode it asks for changed.
+    SteeringMode(SteeringMode),
+    /// It stopped at a stop, for a dwell.
+    Stop {
+        /// Where, m along the route.
+        at: f64,
+        /// For how long.
+        dwell: Duration,
+    },
+    /// It left a stop.
+    Depart {
+        /// Where, m along the route.
+        at: f64,
+    },
+}
+
+impl MissionEvent {
+    /// The event's kind, as run reports name it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            MissionEvent::SteeringMode(_) => "steering_mode",
+            MissionEvent::Stop { .. } => "stop",
+            MissionEvent::Depart { .. } => "depart",
+        }
+    }
+}
+
+impl core::fmt::Display for MissionEvent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            MissionEvent::SteeringMode(mode) => write!(f, "{mode:?}"),
+            MissionEvent::Stop { at, dwell } => {
+                write!(f, "at {at:.1} m for {:.1} s", dwell.as_secs_f64())
+            }
+            MissionEvent::Depart { at } => write!(f, "from the stop at {at:.1} m"),
+        }
+    }
+}
+
+/// The step of the step test being commanded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActiveStep {
+    /// Its index in the steps.
+    pub index: usize,
+    /// The angle before, degrees.
+    pub from: f64,
+    /// The commanded angle, degrees.
+    pub to: f64,
+    /// When it was first commanded.
+    pub started: Timestamp,
+}
+
+/// The route and what to do along it, planned from the ADS's own estimate.
+pub struct Mission {
+    params: MissionParams,
+    follower: PurePursuit,
+    tank_wheels: Swerve<4>,
+    stop_index: usize,
+    dwell_until: Option<Timestamp>,
+    step: Option<ActiveStep>,
+    tank: Option<(f64, f64)>,
+    tank_done: bool,
+    remaining: f64,
+    steering_mode: SteeringMode,
+}
+
+/// One plan: the command's steering, speed and steering mode.
+struct Plan {
+    steering: f64,
+    velocity: f64,
+    mode: SteeringMode,
+}
+
+impl Mission {
+    /// A mission along `params.route`.
+    pub fn new(params: MissionParams) -> Mission {
+        Mission {
+            follower: PurePursuit {
+                lookahead: Lookahead {
+                    min: 3.0,
+                    max: 8.0,
+                    time: 1.5,
+                },
+                geometry: Geometry::CounterPhase {
+                    wheelbase: params.wheelbase,
+                    rear_ratio: 1.0,
+                },
+                max_steer: 35f64.to_radians(),
+            },
+            tank_wheels: four_wheel(params.wheelbase, params.track),
+            params,
+            stop_index: 0,
+            dwell_until: None,
+            step: None,
+            tank: None,
+            tank_done: false,
+            remaining: f64::INFINITY,
+            steering_mode: SteeringMode::Normal,
+        }
+    }
+
+    /// The route's start pose: at its first point, facing its second.
+    pub fn start_pose(&self) -> Pose {
+        match self.params.route.as_slice() {
+            [a, b, ..] => Pose {
+                x: a.x,
+                y: a.y,
+                yaw: libm::atan2(b.y - a.y, b.x - a.x),
+            },
+            _ => Pose::default(),
+        }
+    }
+
+    /// What remains of the route from where the ADS thinks it is, m.
+    pub fn remaining(&self) -> f64 {
+        self.remaining
+    }
+
+    /// The tank turn asked for is made (or none was asked for).
+    pub fn tank_done(&self) -> bool {
+        self.params.tank_turn_deg == 0.0 || self.tank_done
+    }
+
+    /// The step of the step test now being commanded.
+    pub fn active_step(&self) -> Option<ActiveStep> {
+        self.step
+    }
+
+    /// The ADS's speed at `station` (`remaining` to go): the speed of the route there,
+    /// slowing in time for lower speeds ahead, for the next stop and for the end
+    /// (v² = v_next² + 2·a·d with a gentle 0.5 m/s²); nothing while it dwells at a stop.
+    fn speed_target(
+        &mut self,
+        now: Timestamp,
+        station: f64,
+        remaining: f64,
+        speed: f64,
+        events: &mut dyn FnMut(MissionEvent),
+    ) -> f64 {
+        let approach = |v_next: f64, distance: f64| {
+            libm::sqrt(v_next * v_next + 2.0 * 0.5 * distance.max(0.0))
+        };
+        let speeds = &self.params.speeds;
+        let here = speeds
+            .iter()
+            .rev()
+            .find(|(from, _)| *from <= station)
+            .map_or(self.params.speed, |(_, v)| *v);
+        let target = speeds
+            .iter()
+            .filter(|(from, _)| *from > station)
+            .fold(here.min(approach(0.0, remaining)), |v, (from, next)| {
+                v.min(approach(*next, from - station))
+            });
+        let Some(&(at, dwell)) = self.params.stops.get(self.stop_index) else {
+            return target;
+        };
+        match self.dwell_until {
+            Some(until) if now < until => 0.0,
+            Some(_) => {
+                self.dwell_until = None;
+                self.stop_index += 1;
+                events(MissionEvent::Depart { at });
+                target
+            }
+            None if at - station < 0.3 && speed.abs() < 0.05 => {
+                self.dwell_until = Some(now.saturating_add(dwell));
+                events(MissionEvent::Stop { at, dwell });
+                0.0
+            }
+            None => target.min(approach(0.0, at - station)),
+        }
+    }
+
+    /// The step test's angle while it runs.
+    fn step_target(&mut self, now: Timestamp, engaged: Timestamp) -> Option<f64> {
+        let index =
+            usize::try_from(now.saturating_since(engaged).as_nanos() / STEP_HOLD.as_nanos())
+                .ok()?;
+        let Some(&to) = self.params.steering_steps.get(index) else {
+            self.step = None;
+            return None;
+        };
+        if self.step.is_none_or(|s| s.index != index) {
+            let from = index
+                .checked_sub(1)
+                .and_then(|before| self.params.steering_steps.get(before))
+                .copied()
+                .unwrap_or(0.0);
+            self.step = Some(ActiveStep {
+                index,
+                from,
+                to,
+                started: now,
+            });
+        }
+        Some(to)
+    }
+
+    /// The tank turn at the end of the route: the wheel speed to command while it runs.
+    fn tank_turn(
+        &mut self,
+        remaining: f64,
+        yaw: f64,
+        speed: f64,
+        angles: Option<[f64; 4]>,
+    ) -> Option<f64> {
+        let wanted = self.params.tank_turn_deg.to_radians();
+        if wanted == 0.0 || self.tank_done || remaining >= 0.3 {
+            return None;
+        }
+        let (last_yaw, turned) = match self.tank {
+            Some(tank) => tank,
+            None if speed.abs() < 0.01 => (yaw, 0.0),
+            None => return None,
+        };
+        let turned = turned + libm::remainder(yaw - last_yaw, 2.0 * core::f64::consts::PI);
+        self.tank = Some((yaw, turned));
+        let left = wanted - turned;
+        if libm::fabs(left) < 0.5f64.to_radians() {
+            self.tank_done = true;
+            return None;
+        }
+        // The wheels turn to their tank angles first (as the vehicle reports them), then the
+        // tug rotates.
+        let tank = self.tank_wheels.inverse(
+            Motion::Tank { yaw_rate: 1.0 }.twist(),
+            &[WheelState::default(); 4],
+        );
+        let aligned = angles.is_some_and(|angles| {
+            angles
+                .iter()
+                .zip(&tank)
+                .all(|(a, t)| libm::fabs(a - t.angle.to_degrees()) < 3.0)
+        });
+        if !aligned {
+            return Some(0.0);
+        }
+        let radius = libm::hypot(self.params.wheelbase / 2.0, self.params.track / 2.0);
+        // Slow to a stop on the heading: ω² = 2·α·θ with a gentle 0.3 rad/s².
+        let rate = libm::sqrt(2.0 * 0.3 * libm::fabs(left)).min(0.5);
+        Some(libm::copysign(rate * radius, left))
+    }
+
+    /// The command from the ADS's pose estimate, the speed the vehicle reports and the wheel
+    /// angles it reports; `engaged` is when the vehicle first followed.
+    fn plan(
+        &mut self,
+        now: Timestamp,
+        pose: Pose,
+        speed: f64,
+        angles: Option<[f64; 4]>,
+        engaged: Option<Timestamp>,
+        events: &mut dyn FnMut(MissionEvent),
+    ) -> Plan {
+        let crab = self.remaining < self.params.crab_final_m;
+        let (steering, remaining, station) = match Path::new(&self.params.route) {
+            Some(path) => {
+                let projection = path.project(Point {
+                    x: pose.x,
+                    y: pose.y,
+                });
+                let steering = if crab {
+                    // The stand approach in crab: every wheel toward the point a lookahead
+                    // ahead on the route, the heading held.
+                    let ahead =
+                        path.at_station(projection.station + self.follower.lookahead.at(speed));
+                    let bearing = libm::atan2(ahead.y - pose.y, ahead.x - pose.x) - pose.yaw;
+                    libm::atan2(libm::sin(bearing), libm::cos(bearing))
+                        .clamp(-self.follower.max_steer, self.follower.max_steer)
+                        .to_degrees()
+                } else {
+                    self.follower.steer(pose, speed, &path).front.to_degrees()
+                };
+                (
+                    steering,
+                    path.length() - projection.station,
+                    projection.station,
+                )
+            }
+            None => (0.0, 0.0, 0.0),
+        };
+        self.remaining = remaining;
+        let target = self.speed_target(now, station, remaining, speed, events);
+        let velocity = if remaining < 0.3 || engaged.is_none() {
+            0.0
+        } else {
+            target
+        };
+        // The step test comes first, the tank turn last; after it the tug stands in normal
+        // mode.
+        let step = engaged.and_then(|at| self.step_target(now, at));
+        let tank = if engaged.is_some() {
+            self.tank_turn(remaining, pose.yaw, speed, angles)
+        } else {
+            None
+        };
+        let (steering, velocity, mode) = match (step, tank) {
+            (Some(angle), _) => (angle, 0.0, SteeringMode::Normal),
+            (None, Some(wheel_speed)) => (0.0, wheel_speed, SteeringMode::Tank),
+            (None, None) if crab && !self.tank_done => (steering, velocity, SteeringMode::Crab),
+            (None, None) => (steering, velocity, SteeringMode::Normal),
+        };
+        if mode != self.steering_mode {
+            self.steering_mode = mode;
+            events(MissionEvent::SteeringMode(mode));
+        }
+        Plan {
+            steering,
+            velocity,
+            mode,
+        }
+    }
+}
+
+/// The built-in ADS as a node: the ADS side of the wire on bus 1 and bus 1b (ports
+/// [`Ads::PORT_A`] and [`Ads::PORT_B`]), and the mission planning its commands every cycle.
+pub struct AdsDriver {
+    ads: Ads<ReferenceWire>,
+    mission: Mission,
+    next_plan: Timestamp,
+    cycles: u32,
+    engaged_at: Option<Timestamp>,
+    resetting: bool,
+    planning: bool,
+    steering_command: f64,
+    events: VecDeque<(Timestamp, MissionEvent)>,
+}
+
+impl AdsDriver {
+    /// An ADS driving `mission`, its odometry starting at the route's start.
+    pub fn new(config: AdsConfig, mission: Mission) -> AdsDriver {
+        let mut ads = Ads::with_wire(
+            AdsConfig {
+                redundant: true,
+                ..config
+            },
+            ReferenceWire,
+        );
+        ads.reset_odometry(mission.start_pose());
+        AdsDriver {
+            ads,
+            mission,
+            next_plan: Timestamp::ZERO,
+            cycles: 0,
+            engaged_at: None,
+            resetting: false,
+            planning: true,
+            steering_command: 0.0,
+            events: VecDeque::with_capacity(EVENT_CAPACITY),
+        }
+    }
+
+    /// The ADS side (its view of the vehicle, its counts).
+    pub fn ads(&self) -> &Ads<ReferenceWire> {
+        &self.ads
+    }
+
+    /// The mission.
+    pub fn mission(&self) -> &Mission {
+        &self.mission
+    }
+
+    /// When the vehicle first reported autonomous mode.
+    pub fn engaged_at(&self) -> Option<Timestamp> {
+        self.engaged_at
+    }
+
+    /// The steering angle last commanded, degrees.
+    pub fn steering_command(&self) -> f64 {
+        self.steering_command
+    }
+
+    /// The operator presses the reset (edges every half second) until the vehicle reports the
+    /// E-stop latch clear and follows again.
+    pub fn operator_reset(&mut self) {
+        self.resetting = true;
+    }
+
+    /// Stop planning (another ADS takes over the bus).
+    pub fn stop_planning(&mut self) {
+        self.planning = false;
+    }
+
+    /// The next event, oldest first.
+    pub fn next_event(&mut self) -> Option<(Timestamp, MissionEvent)> {
+        self.events.pop_front()
+    }
+
+    fn plan(&mut self, now: Timestamp) {
+        let state = *self.ads.state();
+        let pose = state
+            .odometry
+            .value
+            .unwrap_or_else(|| self.mission.start_pose());
+        let speed = state.velocity.value.unwrap_or(0.0);
+        let angles = state.wheel_angles.value;
+        let events = &mut self.events;
+        let mut record = |event| {
+            if events.len() < EVENT_CAPACITY {
+                events.push_back((now, event));
+            }
+        };
+        let plan = self
+            .mission
+            .plan(now, pose, speed, angles, self.engaged_at, &mut record);
+        // Engage is an edge, taken once the vehicle's recovery run is complete: request it
+        // every tenth cycle until the vehicle reports autonomous mode (or, awaiting re-engage
+        // after full braking, again).
+        self.cycles = self.cycles.wrapping_add(1);
+        let autonomous = state.mode.value == Some(ControlMode::Autonomous);
+        let awaiting = state.watchdog_level.value == Some(WatchdogLevel::AwaitingEngage);
+        let engage = self.ads.feedback_alive(now)
+            && (!autonomous || awaiting)
+            && self.cycles.is_multiple_of(10);
+        if autonomous && self.engaged_at.is_none() {
+            self.engaged_at = Some(now);
+        }
+        self.steering_command = plan.steering;
+        // The operator presses reset (an edge, every half second) while the latch is stopped
+        // or waiting for the confirming press, until the vehicle reports it clear.
+        let estop = state.estop_state.value;
+        if estop == Some(EstopCode::Normal) && self.resetting && autonomous {
+            self.resetting = false;
+        }
+        let operator_reset = self.resetting
+            && estop.is_some_and(EstopCode::awaits_operator_reset)
+            && self.cycles.is_multiple_of(25);
+        let command = AdsCommand {
+            steering: plan.steering,
+            velocity: plan.velocity,
+            brake: if plan.velocity == 0.0 { 30.0 } else { 0.0 },
+            gear: Gear::Drive,
+            mode: ControlMode::Autonomous,
+            steering_mode: plan.mode,
+            engage,
+            operator_reset,
+        };
+        let _ = self.ads.set_command(now, command);
+    }
+}
+
+impl Node for AdsDriver {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        Node::on_frame(&mut self.ads, now, port, frame);
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        if self.planning && now >= self.next_plan {
+            self.next_plan = now.saturating_add(PLAN_PERIOD);
+            self.plan(now);
+        }
+        if self.planning {
+            Node::poll(&mut self.ads, now, out);
+        }
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        if !self.planning {
+            return None;
+        }
+        [Node::next_deadline(&self.ads), Some(self.next_plan)]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+}
