@@ -317,6 +317,29 @@ fn drive_filtering(node: u8) -> Filtering {
     }
 }
 
+/// An ADS node that sends on one port, in the built-in ADS's place: what it sends goes on
+/// bus 1 and, copied, on bus 1b, as the built-in ADS sends.
+pub struct OnBothCommandBuses<N>(pub N);
+
+impl<N: Node> Node for OnBothCommandBuses<N> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        if port == Port::MAIN {
+            self.0.on_frame(now, port, frame);
+        }
+    }
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        self.0.poll(now, &mut |port, frame| {
+            if port == Port::MAIN {
+                out(Port::MAIN, frame);
+                out(Ads::<ReferenceWire>::PORT_B, frame);
+            }
+        });
+    }
+    fn next_deadline(&self) -> Option<Timestamp> {
+        self.0.next_deadline()
+    }
+}
+
 /// The simulated tug.
 pub struct Tug {
     now: Timestamp,
@@ -327,9 +350,8 @@ pub struct Tug {
     taps: [NodeId; 4],
     /// Who is at each endpoint of each bus, for events.
     names: [Vec<(NodeId, String)>; 4],
-    /// The ECU's endpoint on bus 1 and the ADS's on bus 1b.
+    /// The ECU's endpoint on bus 1.
     ecu_bus1: NodeId,
-    ads_bus1b: NodeId,
     ads: AdsDriver,
     ecu: VehicleControlEcu,
     safety: SafetyController,
@@ -419,7 +441,7 @@ impl Tug {
         };
         let ads_ports = (Ads::<ReferenceWire>::PORT_A, Ads::<ReferenceWire>::PORT_B);
         wire(&mut net, ADS, ads_ports.0, 0, "ADS");
-        let ads_bus1b = wire(&mut net, ADS, ads_ports.1, 3, "ADS");
+        wire(&mut net, ADS, ads_ports.1, 3, "ADS");
         let ecu_bus1 = wire(&mut net, ECU, ecu::BUS1, 0, "ECU");
         wire(&mut net, ECU, ecu::BUS1B, 3, "ECU");
         wire(&mut net, ECU, ecu::BUS2, 1, "ECU (CANopen master)");
@@ -485,7 +507,6 @@ impl Tug {
             taps,
             names,
             ecu_bus1,
-            ads_bus1b,
             ads: AdsDriver::new(ads_config, mission),
             ecu: VehicleControlEcu::new(
                 ecu_config,
@@ -588,30 +609,6 @@ impl Tug {
             .bus_mut(index)?
             .receive(port)
             .map(|r| (r.timestamp, r.frame))
-    }
-
-    /// Replace the built-in ADS by a node outside the tug on bus 1 (acceptance checks, another
-    /// ADS): the built-in one stops, and the returned port sends and receives for the outsider.
-    pub fn attach_ads(&mut self) -> NodeId {
-        self.ads_external = true;
-        self.ads.stop_planning();
-        self.net.changed(ADS);
-        self.attach(TugBus::Bus1)
-    }
-
-    /// Send `frame` on bus 1 from `port` (from [`Tug::attach_ads`]), and its copy on bus 1b
-    /// (unless cut), as the built-in ADS does.
-    pub fn send_bus1(&mut self, port: NodeId, frame: Frame) {
-        self.send(TugBus::Bus1, port, frame);
-        if !self.is_active(Fault::RedundantBusLoss) {
-            let b = self.ads_bus1b;
-            self.send(TugBus::Bus1b, b, frame);
-        }
-    }
-
-    /// The next frame bus 1 delivered to `port`.
-    pub fn receive_bus1(&mut self, port: NodeId) -> Option<(Timestamp, Frame)> {
-        self.receive(TugBus::Bus1, port)
     }
 
     /// Inject `fault` now, for `duration` (`None`: for good).
@@ -772,7 +769,7 @@ impl Tug {
     /// faults at the edges (outputs dropped, a hand on the wheel, the E-stop chain), and the
     /// sensor nodes' readings when they send within this millisecond.
     fn set_inputs(&mut self, until: Timestamp) {
-        let silent = self.ads_external || self.is_active(Fault::AdsSilence);
+        let silent = self.is_active(Fault::AdsSilence);
         self.net.drop_output(ADS, silent);
         let b_lost = self.is_active(Fault::RedundantBusLoss);
         self.net
@@ -821,6 +818,22 @@ impl Tug {
 
     /// One millisecond: the inputs set, the network run over it, the plants stepped over it.
     pub fn step(&mut self) {
+        self.step_inner(None);
+    }
+
+    /// One millisecond with `ads` — any node: acceptance checks, another ADS — in the built-in
+    /// ADS's place: its main port on bus 1, its port 1 on bus 1b (see [`OnBothCommandBuses`]).
+    pub fn step_with_ads(&mut self, ads: &mut dyn Node) {
+        if !self.ads_external {
+            self.ads_external = true;
+            self.ads.stop_planning();
+        }
+        // Another node in the slot: its deadline is its own.
+        self.net.changed(ADS);
+        self.step_inner(Some(ads));
+    }
+
+    fn step_inner(&mut self, outside_ads: Option<&mut dyn Node>) {
         let now = self.now;
         let until = now.saturating_add(TICK);
         self.expire_faults(now);
@@ -831,8 +844,12 @@ impl Tug {
         let [d0, d1, d2, d3] = self.drive.as_mut_slice() else {
             return;
         };
+        let ads: &mut dyn Node = match outside_ads {
+            Some(node) => node,
+            None => &mut self.ads,
+        };
         let mut nodes: [&mut dyn Node; 14] = [
-            &mut self.ads,
+            ads,
             &mut self.ecu,
             &mut self.safety,
             &mut self.bms,

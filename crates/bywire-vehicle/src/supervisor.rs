@@ -513,6 +513,8 @@ impl<W: VehicleWire> Supervisor<W> {
         if steering.is_finite() {
             self.steering_actual = steering;
         }
+        // Standstill moves the E-stop latch on at once, not at the next poll.
+        self.evaluate(false, false);
     }
 
     /// The driver's steering torque (N·m) and pedal travel (0–1); above the thresholds this

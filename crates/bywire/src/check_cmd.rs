@@ -7,7 +7,7 @@ use std::time::Duration;
 use anyhow::{bail, Context, Result};
 use bywire_bus::runner;
 use bywire_sim::steering::SensorFault;
-use bywire_sim::tug::{Fault, Tug, TugParams};
+use bywire_sim::tug::{Fault, OnBothCommandBuses, Tug, TugParams};
 use bywire_vehicle::acceptance::{CheckConfig, Checker};
 use bywire_vehicle::profile::Profile;
 
@@ -53,19 +53,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             }
             Some(other) => bail!("--tug-fault {other}: not a fault (stuck-sensor)"),
         }
-        let port = tug.attach_ads();
-        // Ten simulated minutes at most.
+        // The checker in the built-in ADS's place, on the simulated runner.
+        let mut ads = OnBothCommandBuses(&mut checker);
         for _ in 0..600_000 {
-            tug.step();
-            while let Some((at, frame)) = tug.receive_bus1(port) {
-                checker.on_frame(at, &frame);
-            }
-            let mut frames = Vec::new();
-            checker.poll(tug.now(), &mut |f| frames.push(f));
-            for frame in frames {
-                tug.send_bus1(port, frame);
-            }
-            if checker.is_done() {
+            tug.step_with_ads(&mut ads);
+            if ads.0.is_done() {
                 break;
             }
         }
