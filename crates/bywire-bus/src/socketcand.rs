@@ -288,7 +288,12 @@ fn session(
     });
     // Replies go through the same queue as frames, so they keep their order; replies are never
     // dropped (blocking send), frames are when the queue is full.
-    let reply = |text: &str| out_tx.send(Outgoing::Text(format!("< {text} >"))).is_ok();
+    // Angle brackets frame the protocol's messages: none may stand inside a reply (an error
+    // quoting a client's text included), or the client would read it as two.
+    let reply = |text: &str| {
+        let text = text.replace(['<', '>'], "");
+        out_tx.send(Outgoing::Text(format!("< {text} >"))).is_ok()
+    };
     reply("hi");
     let session_stop = Arc::new(AtomicBool::new(false));
     let subscriptions = Arc::new(Subscriptions {
@@ -345,7 +350,7 @@ fn session(
                 reply("ok");
             } else {
                 stats.errors.fetch_add(1, Ordering::Relaxed);
-                reply("error authenticate first: < auth TOKEN >");
+                reply("error authenticate first with: auth TOKEN");
             }
             continue;
         }

@@ -218,15 +218,22 @@ fn a_token_is_asked_for_before_anything_else() {
         String::from_utf8_lossy(&buf[..n]).into_owned()
     };
     assert_eq!(exchange(""), "< hi >");
+    // One message each: no angle bracket inside a reply.
     assert_eq!(
         exchange("< open vcan0 >"),
-        "< error authenticate first: < auth TOKEN > >"
+        "< error authenticate first with: auth TOKEN >"
     );
     assert_eq!(
         exchange("< auth wrong >"),
-        "< error authenticate first: < auth TOKEN > >"
+        "< error authenticate first with: auth TOKEN >"
     );
     assert_eq!(exchange("< auth s3cret >"), "< ok >");
+    // An error quoting the client's text keeps its framing too.
+    let r = exchange("< nonsense <x >");
+    assert!(
+        r.starts_with("< error") && r.matches('<').count() == 1 && r.matches('>').count() == 1,
+        "{r}"
+    );
     assert_eq!(
         exchange("< open other >"),
         "< error no bus 'other' (served: vcan0) >"

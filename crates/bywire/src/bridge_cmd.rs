@@ -43,7 +43,7 @@ pub struct Args {
     /// A redundant second bus: every command goes on both, feedback is taken from either.
     bus2: Option<String>,
     /// State lines per second on stdout.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::numbers::rate)]
     rate: f64,
     /// At the end of stdin, brake (emergency-brake burst and a stop command) for one second
     /// before exiting, instead of just stopping to send.
@@ -328,9 +328,6 @@ fn stdin_thread(waker: bywire_bus::runner::Waker) -> Receiver<Input> {
 
 /// Run the bridge until stdin ends (and, with `--estop-on-eof`, one second of braking).
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
-    if !(args.rate > 0.0 && args.rate <= 1000.0) {
-        bail!("--rate {}: between 0 and 1000 lines per second", args.rate);
-    }
     let profile = vehicle_cmd::load_profile(&args.profile)?;
     let specs: Vec<(Port, String)> = [
         (Ads::<ProfileWire>::PORT_A, Some(&args.bus)),

@@ -85,7 +85,7 @@ pub enum CanopenCommand {
         #[arg(long, value_name = "FILE")]
         export_eds: Option<PathBuf>,
         /// Stop after this many seconds (default: until Ctrl-C).
-        #[arg(long)]
+        #[arg(long, value_parser = crate::numbers::positive_seconds)]
         duration: Option<f64>,
     },
     /// Check an EDS or DCF file: every diagnostic with its line, and what it describes.

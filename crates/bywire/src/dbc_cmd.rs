@@ -70,6 +70,12 @@ pub struct DecodeArgs {
 }
 
 pub fn load(path: &Path, strict: bool) -> Result<Database> {
+    Ok(load_counting_errors(path, strict)?.0)
+}
+
+/// Load a DBC file, its diagnostics on stderr, with how many of them were errors (what the
+/// lenient parser had to drop or guess).
+fn load_counting_errors(path: &Path, strict: bool) -> Result<(Database, usize)> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mode = if strict { Mode::Strict } else { Mode::Lenient };
     let (db, diagnostics) = bywire_dbc::parse(&bytes, mode)
@@ -77,7 +83,11 @@ pub fn load(path: &Path, strict: bool) -> Result<Database> {
     for d in &diagnostics {
         eprintln!("{}:{d}", path.display());
     }
-    Ok(db)
+    let errors = diagnostics
+        .iter()
+        .filter(|d| d.severity == bywire_dbc::Severity::Error)
+        .count();
+    Ok((db, errors))
 }
 
 fn is_json(path: &Path) -> bool {
@@ -99,7 +109,15 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
                     anyhow::anyhow!("{}:{}:{}: {e}", input.display(), e.line(), e.column())
                 })?
             } else {
-                load(input, false)?
+                // A file the parser had to repair is not converted: the output would not say
+                // what was dropped.
+                let (db, errors) = load_counting_errors(input, false)?;
+                anyhow::ensure!(
+                    errors == 0,
+                    "{errors} error(s) in {}: not converted",
+                    input.display()
+                );
+                db
             };
             let text = if is_json(output) {
                 serde_json::to_string_pretty(&db)? + "\n"
@@ -124,7 +142,7 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             Ok(())
         }
         DbcCommand::Lint { file } => {
-            let db = load(file, false)?;
+            let (db, parse_errors) = load_counting_errors(file, false)?;
             let findings = bywire_dbc::lint::lint(&db);
             for f in &findings {
                 let severity = match f.severity {
@@ -142,10 +160,11 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
                     f.text
                 )?;
             }
-            let errors = findings
-                .iter()
-                .filter(|f| f.severity == bywire_dbc::Severity::Error)
-                .count();
+            let errors = parse_errors
+                + findings
+                    .iter()
+                    .filter(|f| f.severity == bywire_dbc::Severity::Error)
+                    .count();
             anyhow::ensure!(errors == 0, "{errors} error(s) in {}", file.display());
             Ok(())
         }

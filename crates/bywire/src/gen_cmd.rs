@@ -28,7 +28,7 @@ pub struct Args {
     /// The bus (a plain interface name means SocketCAN).
     bus: String,
     /// Gap between bursts in milliseconds.
-    #[arg(short = 'g', default_value_t = 200.0)]
+    #[arg(short = 'g', default_value_t = 200.0, value_parser = crate::numbers::milliseconds)]
     gap_ms: f64,
     /// Extended (29-bit) identifiers.
     #[arg(short = 'e')]
@@ -215,12 +215,6 @@ impl Generator {
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    if !args.gap_ms.is_finite() || args.gap_ms < 0.0 {
-        return Err(anyhow!(
-            "-g {}: the gap must be 0 or more milliseconds",
-            args.gap_ms
-        ));
-    }
     let dbc = match &args.dbc {
         Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
         None => None,

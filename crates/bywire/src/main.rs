@@ -15,6 +15,7 @@ mod gen_cmd;
 mod live;
 mod log_cmd;
 mod monitor_cmd;
+mod numbers;
 mod play_cmd;
 mod plot_cmd;
 mod send_cmd;

@@ -38,10 +38,10 @@ pub struct Args {
     #[arg(short = 't')]
     ignore_timestamps: bool,
     /// The gap in milliseconds with -t.
-    #[arg(short = 'g', default_value_t = 1.0)]
+    #[arg(short = 'g', default_value_t = 1.0, value_parser = crate::numbers::milliseconds)]
     gap_ms: f64,
     /// Skip gaps in the timestamps longer than this many seconds.
-    #[arg(short = 's', value_name = "SECONDS")]
+    #[arg(short = 's', value_name = "SECONDS", value_parser = crate::numbers::positive_seconds)]
     skip_gaps: Option<f64>,
     /// Stop after this many frames.
     #[arg(short = 'n')]
@@ -50,7 +50,7 @@ pub struct Args {
     #[arg(short = 'x')]
     no_loopback: bool,
     /// Play this many times faster than recorded (0.5 = half speed).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::numbers::factor)]
     speed: f64,
     /// Print each frame sent as a log line.
     #[arg(short = 'v')]
@@ -128,12 +128,6 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         return Err(anyhow!(
             "-l needs a file (-I): standard input cannot be read twice"
         ));
-    }
-    if !(args.speed.is_finite() && args.speed > 0.0) {
-        return Err(anyhow!("--speed {}: must be above 0", args.speed));
-    }
-    if !(args.gap_ms.is_finite() && args.gap_ms >= 0.0) {
-        return Err(anyhow!("-g {}: must be 0 or more", args.gap_ms));
     }
     let mut assigned: HashMap<String, String> = HashMap::new();
     for a in &args.assignments {

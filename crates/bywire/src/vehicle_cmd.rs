@@ -37,10 +37,10 @@ pub struct Args {
     /// A redundant second command bus.
     bus2: Option<String>,
     /// Status lines per second on stdout (0: none).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::numbers::rate_or_off)]
     rate: f64,
     /// Stop after this many seconds (default: until interrupted).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::numbers::positive_seconds)]
     duration: Option<f64>,
 }
 
@@ -157,18 +157,7 @@ pub fn spawn_in_process(
 
 /// Run the vehicle until interrupted or `--duration` has passed.
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
-    if !(args.rate.is_finite() && (0.0..=1000.0).contains(&args.rate)) {
-        bail!("--rate {}: between 0 and 1000 lines per second", args.rate);
-    }
-    let limit = args
-        .duration
-        .map(|s| {
-            Duration::try_from_secs_f64(s)
-                .ok()
-                .filter(|d| !d.is_zero())
-                .ok_or_else(|| anyhow!("--duration {s}: a positive number of seconds"))
-        })
-        .transpose()?;
+    let limit = args.duration.map(Duration::from_secs_f64);
     let profile = load_profile(&args.profile)?;
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let specs: Vec<(Port, String)> = [

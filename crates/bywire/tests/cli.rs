@@ -144,3 +144,80 @@ fn bad_input_is_a_clear_error_with_exit_1() {
     let (code, _, _) = bywire(&["wire"]);
     assert_eq!(code, 2, "usage errors exit 2");
 }
+
+/// Numeric options out of range — huge, tiny, negative, not a number — are usage errors
+/// naming the option (they used to reach `Duration::from_secs_f64` and panic).
+#[test]
+fn numeric_options_out_of_range_are_usage_errors_naming_the_option() {
+    let cases: &[(&[&str], &str)] = &[
+        (&["gen", "virtual:numbers", "-g", "1e300"], "-g"),
+        (&["play", "--speed", "1e-300", "stdout=can0"], "--speed"),
+        (&["play", "-t", "-g", "1e300", "stdout=can0"], "-g"),
+        (
+            &[
+                "canopen",
+                "node",
+                "virtual:numbers",
+                "--node",
+                "1",
+                "--duration=-1",
+            ],
+            "--duration",
+        ),
+        (
+            &[
+                "canopen",
+                "node",
+                "virtual:numbers",
+                "--node",
+                "1",
+                "--duration",
+                "NaN",
+            ],
+            "--duration",
+        ),
+        (
+            &[
+                "canopen",
+                "node",
+                "virtual:numbers",
+                "--node",
+                "1",
+                "--duration",
+                "1e300",
+            ],
+            "--duration",
+        ),
+        (
+            &[
+                "bridge",
+                "--profile",
+                "reference-tug",
+                "virtual:numbers",
+                "--rate",
+                "1e-300",
+            ],
+            "--rate",
+        ),
+        (
+            &[
+                "vehicle",
+                "--profile",
+                "reference-tug",
+                "virtual:numbers",
+                "--duration",
+                "inf",
+            ],
+            "--duration",
+        ),
+        (&["sim", "--fast", "--max-seconds", "0"], "--max-seconds"),
+    ];
+    for (args, option) in cases {
+        let (code, _, err) = common::bywire(args, "");
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(
+            err.contains(option) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+    }
+}

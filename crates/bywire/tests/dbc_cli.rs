@@ -215,3 +215,30 @@ fn gen_rust_prints_a_module() {
     );
     assert!(out.contains("pub fn set_temperature(&mut self, value: f64) -> Result<(), OutOfRange>"));
 }
+
+/// A file the parser reports errors in (a 99-bit signal, a duplicate identifier) fails lint
+/// with those errors counted, and is not converted (nothing written).
+#[test]
+fn parser_errors_fail_lint_and_convert() {
+    let dir = std::env::temp_dir().join(format!("bywire-parse-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let dbc = dir.join("broken.dbc");
+    std::fs::write(
+        &dbc,
+        "BO_ 100 A: 8 X\n SG_ Wide : 0|99@1+ (1,0) [0|0] \"\" X\nBO_ 100 B: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n",
+    )
+    .unwrap();
+    let path = dbc.to_str().unwrap();
+    let (code, _, err) = common::bywire(&["dbc", "lint", path], "");
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("error(s)") && !err.contains(" 0 error"),
+        "{err}"
+    );
+    let json = dir.join("broken.json");
+    let (code, _, err) = common::bywire(&["dbc", "convert", path, json.to_str().unwrap()], "");
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("not converted"), "{err}");
+    assert!(!json.exists() && !dir.join("broken.partial").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

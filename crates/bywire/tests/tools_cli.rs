@@ -111,10 +111,11 @@ fn bad_input_names_the_problem() {
         "",
         "above the 7FF limit",
     );
-    fails_with(
-        &["gen", "virtual:t", "-g", "inf"],
-        "",
-        "the gap must be 0 or more",
+    // A numeric option out of range is a usage error (exit 2) naming it.
+    let (code, _, err) = bywire(&["gen", "virtual:t", "-g", "inf"], "");
+    assert!(
+        code == 2 && err.contains("-g") && err.contains("not a finite number"),
+        "{err}"
     );
     fails_with(&["busload", "virtual:t"], "", "expected BUS@BITRATE");
     fails_with(&["busload", "virtual:t@0"], "", "bitrate '0'");

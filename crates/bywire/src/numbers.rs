@@ -1,0 +1,89 @@
+//! The one place numeric options are checked, as clap value parsers: a value that is not a
+//! number, not finite, out of its range or too large to be a duration is a usage error
+//! (exit 2) naming the option — never a panic deep in a command, never silently changed.
+
+/// The longest duration an option may give: a week (a longer one is a typo).
+const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+
+fn number(text: &str) -> Result<f64, String> {
+    let value: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{text}' is not a number"))?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(format!("'{text}' is not a finite number"))
+    }
+}
+
+/// Seconds, more than 0 and at most a week.
+pub fn positive_seconds(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if value > 0.0 && value <= MAX_SECONDS {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value}: more than 0 and at most {MAX_SECONDS} seconds"
+        ))
+    }
+}
+
+/// Milliseconds, 0 or more and at most a week.
+pub fn milliseconds(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if (0.0..=MAX_SECONDS * 1e3).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value}: 0 or more and at most {} ms",
+            MAX_SECONDS * 1e3
+        ))
+    }
+}
+
+/// A rate, from one in 1000 seconds to 1000 per second (its period must be a duration).
+pub fn rate(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if (0.001..=1000.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!("{value}: from 0.001 to 1000 per second"))
+    }
+}
+
+/// A rate that may be 0 (off), else as [`rate`].
+pub fn rate_or_off(text: &str) -> Result<f64, String> {
+    if number(text)? == 0.0 {
+        return Ok(0.0);
+    }
+    rate(text)
+}
+
+/// A speed factor, from 0.001 to 1000.
+pub fn factor(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if (0.001..=1000.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!("{value}: from 0.001 to 1000"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn out_of_range_numbers_are_refused_with_their_value() {
+        assert_eq!(positive_seconds("2.5"), Ok(2.5));
+        for bad in ["-1", "0", "NaN", "inf", "1e300", "x"] {
+            assert!(positive_seconds(bad).is_err(), "{bad}");
+        }
+        assert_eq!(milliseconds("0"), Ok(0.0));
+        assert!(milliseconds("1e300").is_err());
+        assert!(rate("1e-300").is_err() && rate("1001").is_err() && rate("20").is_ok());
+        assert_eq!(rate_or_off("0"), Ok(0.0));
+        assert!(factor("1e-300").is_err() && factor("2").is_ok());
+    }
+}
