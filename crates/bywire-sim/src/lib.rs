@@ -14,6 +14,7 @@
 //! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
 //!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time;
 //! - [`scenario`]: routes, load, grade and faults, built in or from TOML files;
+//! - [`report`]: a run's report (what `metrics.json` holds), with serde;
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
 
@@ -35,6 +36,7 @@ pub mod chassis;
 pub mod drive;
 pub mod mission;
 pub mod nodes;
+pub mod report;
 pub mod rng;
 pub mod scenario;
 pub mod steering;

@@ -3,32 +3,10 @@
 // Doc comments here are clap's help text (`[,DATA_BITRATE]`, `INDEX[:SUB]`), not rustdoc links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
-mod bittiming_cmd;
-mod bridge_cmd;
-mod busarg;
-mod busload_cmd;
-mod canopen_cmd;
-mod check_cmd;
-mod dbc_cmd;
-mod dump_cmd;
-mod gen_cmd;
-mod live;
-mod log_cmd;
-mod monitor_cmd;
-mod numbers;
-mod play_cmd;
-mod plot_cmd;
-mod send_cmd;
-mod serve_cmd;
-mod signals;
-mod sim_cmd;
-mod sim_plot;
-mod sim_serve;
-mod sim_view;
-mod slcan_adapter_cmd;
-mod sniff_cmd;
-mod vehicle_cmd;
-mod wire_cmd;
+mod cmd;
+mod plot;
+mod support;
+mod tui;
 
 use std::io::{self, Write};
 use std::process::ExitCode;
@@ -62,86 +40,86 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Show a frame's exact bit sequence on the bus: stuffing, CRC, length and time.
-    Wire(wire_cmd::Args),
+    Wire(cmd::wire::Args),
     /// Compute bit-timing registers for a bitrate and sample point on a controller.
-    Bittiming(bittiming_cmd::Args),
+    Bittiming(cmd::bittiming::Args),
     /// Work with DBC files: dump.
     #[command(
         after_help = "Examples:\n  bywire dbc dump vehicle.dbc\n  bywire dbc lint vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc gen-rust vehicle.dbc > src/vehicle.rs"
     )]
     Dbc {
         #[command(subcommand)]
-        command: dbc_cmd::DbcCommand,
+        command: cmd::dbc::DbcCommand,
     },
     /// Decode candump lines from standard input with a DBC file, like `cantools decode`.
-    Decode(dbc_cmd::DecodeArgs),
+    Decode(cmd::dbc::DecodeArgs),
     /// Print frames from one or more buses, like candump (same options, filters and output).
-    Dump(dump_cmd::Args),
+    Dump(cmd::dump::Args),
     /// Send one frame, like cansend, or a DBC message by name with its signals.
-    Send(send_cmd::Args),
+    Send(cmd::send::Args),
     /// Generate traffic like cangen, or every message of a DBC at its cycle time.
-    Gen(gen_cmd::Args),
+    Gen(cmd::gen::Args),
     /// Replay candump log files onto buses, like canplayer.
-    Play(play_cmd::Args),
+    Play(cmd::play::Args),
     /// Show the load of buses each second, like canbusload, per ID and against a DBC.
-    Busload(busload_cmd::Args),
+    Busload(cmd::busload::Args),
     /// Watch identifiers like cansniffer: changing bytes highlighted, rates, DBC values.
-    Sniff(sniff_cmd::Args),
+    Sniff(cmd::sniff::Args),
     /// A live table of decoded messages and signals, like cantools monitor.
-    Monitor(monitor_cmd::Args),
+    Monitor(cmd::monitor::Args),
     /// Plot signals from a candump log (or a live capture) to PNG or SVG, like cantools plot.
-    Plot(plot_cmd::Args),
+    Plot(cmd::plot::Args),
     /// Read candump logs: print them (log or screen form, filtered) or summarise them.
     #[command(
         after_help = "Examples:\n  bywire log cat --screen drive.log\n  bywire log stats drive.log"
     )]
     Log {
         #[command(subcommand)]
-        command: log_cmd::LogCommand,
+        command: cmd::log::LogCommand,
     },
     /// Vehicle acceptance checks: steering sweep, speed steps, watchdog and E-stop timing.
-    Check(check_cmd::Args),
+    Check(cmd::check::Args),
     /// The simulated tug on its buses, driven along a route (real time or --fast).
-    Sim(sim_cmd::Args),
+    Sim(cmd::sim::Args),
     /// CANopen: scan a bus, SDO read/write, NMT, run a device (EDS, CiA 402 drive, Roboteq).
     Canopen {
         #[command(subcommand)]
-        command: canopen_cmd::CanopenCommand,
+        command: cmd::canopen::CanopenCommand,
     },
     /// Serve a bus over the socketcand protocol (python-can, SavvyCAN and other clients).
-    Serve(serve_cmd::Args),
+    Serve(cmd::serve::Args),
     /// Emulate an SLCAN adapter for a bus on a pseudo terminal (for SLCAN tools).
-    SlcanAdapter(slcan_adapter_cmd::Args),
+    SlcanAdapter(cmd::slcan_adapter::Args),
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
-    Bridge(bridge_cmd::Args),
+    Bridge(cmd::bridge::Args),
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
-    Vehicle(vehicle_cmd::Args),
+    Vehicle(cmd::vehicle::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let mut out = io::stdout().lock();
     let result = match cli.command {
-        Command::Wire(args) => wire_cmd::run(&args, &mut out),
-        Command::Bittiming(args) => bittiming_cmd::run(&args, &mut out),
-        Command::Dbc { command } => dbc_cmd::run(&command, &mut out),
-        Command::Decode(args) => dbc_cmd::decode(&args, &mut io::stdin().lock(), &mut out),
-        Command::Bridge(args) => bridge_cmd::run(&args, &mut out),
-        Command::Vehicle(args) => vehicle_cmd::run(&args, &mut out),
-        Command::Dump(args) => dump_cmd::run(&args, &mut out),
-        Command::Send(args) => send_cmd::run(&args, &mut out),
-        Command::Gen(args) => gen_cmd::run(&args, &mut out),
-        Command::Play(args) => play_cmd::run(&args, &mut out),
-        Command::Sniff(args) => sniff_cmd::run(&args),
-        Command::Monitor(args) => monitor_cmd::run(&args),
-        Command::Plot(args) => plot_cmd::run(&args),
-        Command::Serve(args) => serve_cmd::run(&args, &mut out),
-        Command::Canopen { command } => canopen_cmd::run(&command, &mut out),
-        Command::Sim(args) => sim_cmd::run(&args, &mut out),
-        Command::Check(args) => check_cmd::run(&args, &mut out),
-        Command::SlcanAdapter(args) => slcan_adapter_cmd::run(&args, &mut out),
-        Command::Log { command } => log_cmd::run(&command, &mut out),
-        Command::Busload(args) => busload_cmd::run(&args, &mut out),
+        Command::Wire(args) => cmd::wire::run(&args, &mut out),
+        Command::Bittiming(args) => cmd::bittiming::run(&args, &mut out),
+        Command::Dbc { command } => cmd::dbc::run(&command, &mut out),
+        Command::Decode(args) => cmd::dbc::decode(&args, &mut io::stdin().lock(), &mut out),
+        Command::Bridge(args) => cmd::bridge::run(&args, &mut out),
+        Command::Vehicle(args) => cmd::vehicle::run(&args, &mut out),
+        Command::Dump(args) => cmd::dump::run(&args, &mut out),
+        Command::Send(args) => cmd::send::run(&args, &mut out),
+        Command::Gen(args) => cmd::gen::run(&args, &mut out),
+        Command::Play(args) => cmd::play::run(&args, &mut out),
+        Command::Sniff(args) => cmd::sniff::run(&args),
+        Command::Monitor(args) => cmd::monitor::run(&args),
+        Command::Plot(args) => cmd::plot::run(&args),
+        Command::Serve(args) => cmd::serve::run(&args, &mut out),
+        Command::Canopen { command } => cmd::canopen::run(&command, &mut out),
+        Command::Sim(args) => cmd::sim::run(&args, &mut out),
+        Command::Check(args) => cmd::check::run(&args, &mut out),
+        Command::SlcanAdapter(args) => cmd::slcan_adapter::run(&args, &mut out),
+        Command::Log { command } => cmd::log::run(&command, &mut out),
+        Command::Busload(args) => cmd::busload::run(&args, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {

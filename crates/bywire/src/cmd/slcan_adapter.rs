@@ -6,7 +6,7 @@ use std::sync::atomic::Ordering;
 
 use anyhow::{Context, Result};
 
-use crate::busarg;
+use crate::support::busarg;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:

@@ -1,9 +1,9 @@
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
-use crate::signals::{Dbc, DecodedFrame};
+use crate::support::signals::{Dbc, DecodedFrame};
 use anyhow::{Context, Result};
-use bywire_dbc::{ByteOrder, Database, Message, Mode, Multiplexing, ValueType};
+use bywire_dbc::{ByteOrder, Database, Message, Multiplexing, ValueType};
 use serde_json::json;
 
 #[derive(clap::Subcommand)]
@@ -69,27 +69,6 @@ pub struct DecodeArgs {
     strict: bool,
 }
 
-pub fn load(path: &Path, strict: bool) -> Result<Database> {
-    Ok(load_counting_errors(path, strict)?.0)
-}
-
-/// Load a DBC file, its diagnostics on stderr, with how many of them were errors (what the
-/// lenient parser had to drop or guess).
-fn load_counting_errors(path: &Path, strict: bool) -> Result<(Database, usize)> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mode = if strict { Mode::Strict } else { Mode::Lenient };
-    let (db, diagnostics) = bywire_dbc::parse(&bytes, mode)
-        .map_err(|e| anyhow::anyhow!("{}:{}", path.display(), e.0))?;
-    for d in &diagnostics {
-        eprintln!("{}:{d}", path.display());
-    }
-    let errors = diagnostics
-        .iter()
-        .filter(|d| d.severity == bywire_dbc::Severity::Error)
-        .count();
-    Ok((db, errors))
-}
-
 fn is_json(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"))
@@ -98,7 +77,7 @@ fn is_json(path: &Path) -> bool {
 pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
     match command {
         DbcCommand::Dump { file, strict } => {
-            let db = load(file, *strict)?;
+            let db = crate::support::dbc::load(file, *strict)?;
             dump(&db, out)
         }
         DbcCommand::Convert { input, output } => {
@@ -111,7 +90,7 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             } else {
                 // A file the parser had to repair is not converted: the output would not say
                 // what was dropped.
-                let (db, errors) = load_counting_errors(input, false)?;
+                let (db, errors) = crate::support::dbc::load_counting_errors(input, false)?;
                 anyhow::ensure!(
                     errors == 0,
                     "{errors} error(s) in {}: not converted",
@@ -137,12 +116,12 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             Ok(())
         }
         DbcCommand::GenRust { file } => {
-            let db = load(file, false)?;
+            let db = crate::support::dbc::load(file, false)?;
             out.write_all(bywire_dbc::codegen::generate(&db).as_bytes())?;
             Ok(())
         }
         DbcCommand::Lint { file } => {
-            let (db, parse_errors) = load_counting_errors(file, false)?;
+            let (db, parse_errors) = crate::support::dbc::load_counting_errors(file, false)?;
             let findings = bywire_dbc::lint::lint(&db);
             for f in &findings {
                 let severity = match f.severity {
@@ -296,7 +275,7 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
 }
 
 pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
-    let decoder = Dbc::new(load(&args.file, args.strict)?);
+    let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
     let choices = !args.no_decode_choices;
     let mut line = String::new();
     // One line at a time: logs of any size stream through in constant memory.

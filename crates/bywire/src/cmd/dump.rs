@@ -13,8 +13,8 @@ use bywire_core::Frame;
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::{FrameView, Precision, View};
 
-use crate::busarg::{self, BusArg, Event, Readers};
-use crate::signals::Dbc;
+use crate::support::busarg::{self, BusArg, Event, Readers};
+use crate::support::signals::Dbc;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -78,7 +78,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         .map(|b| busarg::parse(b))
         .collect::<Result<_>>()?;
     let decoder = match &args.dbc {
-        Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
+        Some(path) => Some(Dbc::new(crate::support::dbc::load(path, false)?)),
         None => None,
     };
     let opened = busarg::open_all(&buses)?;

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use anyhow::{anyhow, Context, Result};
 use bywire_core::Frame;
 
-use crate::busarg;
-use crate::signals::Dbc;
+use crate::support::busarg;
+use crate::support::signals::Dbc;
 use bywire_dbc::codec::EncodeMode;
 
 #[derive(clap::Args)]
@@ -43,7 +43,7 @@ pub struct Args {
 fn frame_of(args: &Args) -> Result<Frame> {
     match &args.dbc {
         Some(path) => {
-            let dbc = Dbc::new(crate::dbc_cmd::load(path, false)?);
+            let dbc = Dbc::new(crate::support::dbc::load(path, false)?);
             let (name, assignments) = args
                 .frame
                 .split_first()

@@ -20,7 +20,7 @@ use bywire_canopen::{Node, Port};
 use bywire_core::frame::{Frame, Id};
 use bywire_core::time::Timestamp;
 
-use crate::busarg;
+use crate::support::busarg;
 
 #[derive(clap::Subcommand)]
 pub enum CanopenCommand {
@@ -85,7 +85,7 @@ pub enum CanopenCommand {
         #[arg(long, value_name = "FILE")]
         export_eds: Option<PathBuf>,
         /// Stop after this many seconds (default: until Ctrl-C).
-        #[arg(long, value_parser = crate::numbers::positive_seconds)]
+        #[arg(long, value_parser = crate::support::numbers::positive_seconds)]
         duration: Option<f64>,
     },
     /// Check an EDS or DCF file: every diagnostic with its line, and what it describes.

@@ -11,9 +11,8 @@ use bywire_sim::tug::{windowed_loads, Sample, Tug};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::plot_cmd::{
-    draw_legend, draw_panel, plot_error, register_font, write_atomically, Marker, Series,
-};
+use crate::plot::{draw_legend, draw_panel, plot_error, register_font, Marker, Series};
+use crate::support::files::write_atomically;
 
 /// Faults: on the map and on every time panel (a colour no series uses).
 pub const FAULT_COLOR: RGBColor = RGBColor(190, 0, 110);

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::socketcand::{self, ServerStats};
 
-use crate::busarg;
+use crate::support::busarg;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:

@@ -13,8 +13,8 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::Paragraph;
 
-use crate::live::{self, View};
-use crate::signals::Dbc;
+use crate::support::signals::Dbc;
+use crate::tui::{self, View};
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -204,16 +204,16 @@ impl Sniffer {
 
 pub fn run(args: &Args) -> Result<()> {
     let dbc = match &args.dbc {
-        Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
+        Some(path) => Some(Dbc::new(crate::support::dbc::load(path, false)?)),
         None => None,
     };
-    let source = live::source(&args.buses, args.input.as_ref())?;
+    let source = tui::source(&args.buses, args.input.as_ref())?;
     let mut view = Sniffer::new(
         dbc,
         Duration::from_millis(args.hold),
         Duration::from_millis(args.timeout),
     );
-    live::run(&mut view, &source)
+    tui::run(&mut view, &source)
 }
 
 #[cfg(test)]
@@ -255,7 +255,7 @@ mod tests {
             &received("1ABCDEF0#414243", 25),
             t0 + Duration::from_millis(25),
         );
-        let (text, buffer) = live::render(&mut view, 120, 8, t0 + Duration::from_millis(30));
+        let (text, buffer) = tui::render(&mut view, 120, 8, t0 + Duration::from_millis(30));
         assert!(text.contains("2 identifiers"), "{text}");
         let row = text.lines().find(|l| l.contains(" 123 ")).unwrap();
         assert!(
@@ -275,9 +275,9 @@ mod tests {
             &received("7FF#00", 40),
             t0 + Duration::from_millis(40),
         );
-        let (text, _) = live::render(&mut view, 120, 8, t0 + Duration::from_millis(50));
+        let (text, _) = tui::render(&mut view, 120, 8, t0 + Duration::from_millis(50));
         assert!(text.contains("PAUSED") && !text.contains("7FF"), "{text}");
-        let (text, _) = live::render(&mut view, 120, 8, t0 + Duration::from_secs(6));
+        let (text, _) = tui::render(&mut view, 120, 8, t0 + Duration::from_secs(6));
         assert!(text.contains("0 identifiers"), "{text}");
         assert!(view.on_key(KeyEvent::from(KeyCode::Char('q'))));
     }

@@ -8,11 +8,11 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_core::Timestamp;
 use bywire_log::candump::Writer;
+use bywire_sim::report::RunReport;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Tug, TugBus};
 
-use crate::sim_serve::Shared;
-use serde_json::json;
+use crate::support::sim_serve::Shared;
 
 #[derive(clap::Args)]
 #[command(
@@ -35,7 +35,7 @@ pub struct Args {
     #[arg(long)]
     payload: Option<f64>,
     /// Stop after this many simulated seconds at most.
-    #[arg(long, default_value_t = 300.0, value_parser = crate::numbers::positive_seconds)]
+    #[arg(long, default_value_t = 300.0, value_parser = crate::support::numbers::positive_seconds)]
     max_seconds: f64,
     /// No live view, even in a terminal.
     #[arg(long)]
@@ -82,7 +82,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         let bus = TugBus::named(name).ok_or_else(|| {
             anyhow!("--attach {attach}: {name} is not a bus of the tug (bus1, bus2, bus3, bus1b)")
         })?;
-        let endpoint = crate::busarg::open(spec).with_context(|| format!("--attach {attach}"))?;
+        let endpoint =
+            crate::support::busarg::open(spec).with_context(|| format!("--attach {attach}"))?;
         shared.attach(&mut tug, bus, endpoint);
     }
     if let Some(listen) = args.serve {
@@ -99,13 +100,13 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let live = !args.fast && !args.no_view && std::io::IsTerminal::is_terminal(&std::io::stdout());
     let completed = if live {
         matches!(
-            crate::sim_view::run(
+            crate::tui::sim_view::run(
                 &mut tug,
                 &scenario,
                 Duration::from_secs_f64(args.max_seconds),
                 &mut shared
             )?,
-            crate::sim_view::Ending::Arrived
+            crate::tui::sim_view::Ending::Arrived
         )
     } else {
         run_plain(&mut tug, &scenario, args, limit, start, &mut shared, out)?
@@ -124,87 +125,18 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }
         writer.flush()?;
     }
-    let errors = &tug.tracking_errors;
-    let worst = errors.iter().copied().fold(0.0, f64::max);
-    let mean = if errors.is_empty() {
-        0.0
-    } else {
-        errors.iter().sum::<f64>() / errors.len() as f64
-    };
-    let [load1, load2, load3, load1b] = tug.bus_loads();
-    let seconds = |t: Timestamp| t.as_nanos() as f64 / 1e9;
-    let mut events = Vec::new();
-    if let Some(at) = tug.engaged_at() {
-        events.push(json!({"t_s": seconds(at), "kind": "engaged", "detail": "the vehicle reports autonomous mode"}));
-    }
-    for event in &tug.events {
-        events.push(json!({"t_s": seconds(event.t), "kind": event.kind, "detail": event.detail}));
-    }
-    events.sort_by(|a, b| {
-        a["t_s"]
-            .as_f64()
-            .partial_cmp(&b["t_s"].as_f64())
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
-    if completed {
-        events.push(json!({"t_s": seconds(tug.now()), "kind": "arrived", "detail": "stopped at the end of the route"}));
-    }
-    let steering_steps: Vec<_> = tug
-        .step_responses
-        .iter()
-        .map(|step| {
-            match step.metrics() {
-                Ok(m) => json!({
-                    "from_deg": step.from, "to_deg": step.to, "rise_s": m.rise_time,
-                    "settling_s": m.settling_time_2, "settling_5_s": m.settling_time_5,
-                    "overshoot_percent": m.overshoot_percent, "steady_state_error_deg": m.steady_state_error,
-                }),
-                Err(e) => json!({"from_deg": step.from, "to_deg": step.to, "error": e.to_string()}),
-            }
-        })
-        .collect();
-    let metrics = json!({
-        "scenario": scenario.name,
-        "seed": args.seed,
-        "sim_seconds": seconds(tug.now()),
-        "completed": completed,
-        "events": events,
-        "tracking_error_m": {"max": worst, "mean": mean},
-        "steering_steps": steering_steps,
-        "echo_latency_ms": percentiles(&tug.echo_latencies),
-        "bus_load": {"bus1": load1, "bus2": load2, "bus3": load3, "bus1b": load1b},
-        "frames": {"bus1": tug.bus1_log.len(), "bus2": tug.bus2_log.len(), "bus3": tug.bus3_log.len(), "bus1b": tug.bus1b_log.len()},
-        "battery_soc": tug.soc(),
-        "supervisor": {
-            "accepted": tug.ecu().stats().accepted,
-            "checksum": tug.ecu().stats().checksum,
-            "repeated": tug.ecu().stats().repeated,
-            "skipped": tug.ecu().stats().skipped,
-            "out_of_range": tug.ecu().stats().out_of_range,
-        },
-        "wall_seconds": start.elapsed().as_secs_f64(),
-    });
-    crate::sim_plot::write(&tug, &args.out.join("run.png"))?;
+    let report = RunReport::of(&tug, &scenario.name, args.seed, completed, start.elapsed());
+    crate::plot::sim::write(&tug, &args.out.join("run.png"))?;
     let path = args.out.join("metrics.json");
     // Whole or not at all: a reader never finds half a file.
-    crate::plot_cmd::write_atomically(&path, |tmp| {
-        std::fs::write(tmp, serde_json::to_string_pretty(&metrics)? + "\n")
+    crate::support::files::write_atomically(&path, |tmp| {
+        std::fs::write(tmp, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("{}", path.display()))
     })?;
-    writeln!(out, "{} after {:.1} s: tracking error max {worst:.2} m, mean {mean:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
-        if completed { "route completed" } else { "stopped" }, seconds(tug.now()), load1 * 100.0, load2 * 100.0, load3 * 100.0, args.out.display())?;
+    let (tracking, load) = (report.tracking_error_m, report.bus_load);
+    writeln!(out, "{} after {:.1} s: tracking error max {:.2} m, mean {:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
+        if completed { "route completed" } else { "stopped" }, report.sim_seconds, tracking.max, tracking.mean, load.bus1 * 100.0, load.bus2 * 100.0, load.bus3 * 100.0, args.out.display())?;
     Ok(())
-}
-
-/// Command → heartbeat-echo latencies as percentiles, ms (nearest rank).
-fn percentiles(latencies: &[Duration]) -> serde_json::Value {
-    let mut sorted: Vec<f64> = latencies.iter().map(|d| d.as_secs_f64() * 1e3).collect();
-    sorted.sort_by(f64::total_cmp);
-    let rank = |p: f64| {
-        let index = ((p * sorted.len() as f64).ceil() as usize).saturating_sub(1);
-        sorted.get(index).copied()
-    };
-    json!({"count": sorted.len(), "p50": rank(0.5), "p95": rank(0.95), "p99": rank(0.99), "max": sorted.last()})
 }
 
 /// Run without the view: progress lines every 5 simulated seconds, paced to real time unless

@@ -65,7 +65,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         if args.tug_fault.is_some() {
             bail!("--tug-fault is for the simulated tug (bus `tug`)");
         }
-        let bus = crate::busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
+        let bus = crate::support::busarg::open(&args.bus)
+            .with_context(|| format!("bus '{}'", args.bus))?;
         runner::run_until(
             bus,
             &mut checker,

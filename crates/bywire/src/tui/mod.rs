@@ -3,6 +3,8 @@
 //! keys. Views are plain state plus a draw function, so tests render them on ratatui's
 //! `TestBackend` without a terminal.
 
+pub mod sim_view;
+
 use std::fs::File;
 use std::io::{BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
@@ -17,7 +19,7 @@ use bywire_core::Timestamp;
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyEventKind};
 use rustix::event::{poll, PollFd, PollFlags};
 
-use crate::busarg::{self, BusArg, Event, Readers};
+use crate::support::busarg::{self, BusArg, Event, Readers};
 
 /// Where frames come from.
 pub struct Source {

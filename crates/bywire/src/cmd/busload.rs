@@ -15,8 +15,8 @@ use bywire_core::busload::{
 use bywire_core::Frame;
 use bywire_dbc::codec::EncodeMode;
 
-use crate::busarg::{self, BusArg, Readers};
-use crate::signals::Dbc;
+use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::signals::Dbc;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -105,7 +105,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         Stuffing::WorstCase
     };
     let dbc = match &args.dbc {
-        Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
+        Some(path) => Some(Dbc::new(crate::support::dbc::load(path, false)?)),
         None => None,
     };
     let mut meters = Vec::new();

@@ -9,8 +9,8 @@ use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Fault, Tug};
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
-use crate::live::Input;
-use crate::sim_serve::Shared;
+use crate::support::sim_serve::Shared;
+use crate::tui::Input;
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Style};
 use ratatui::symbols::Marker;
@@ -34,10 +34,10 @@ pub fn run(
     shared: &mut Shared,
 ) -> Result<Ending> {
     // Asked now, while the terminal is surely there.
-    crate::live::stdin_is_terminal();
+    crate::tui::stdin_is_terminal();
     let mut terminal = ratatui::init();
     let result = event_loop(tug, scenario, limit, shared, &mut terminal);
-    crate::live::restore(terminal);
+    crate::tui::restore(terminal);
     result
 }
 
@@ -69,10 +69,10 @@ fn event_loop(
         {
             return Ok(Ending::Stopped);
         }
-        if !crate::live::draw(terminal, |f| draw(f, tug, scenario, paused))? {
+        if !crate::tui::draw(terminal, |f| draw(f, tug, scenario, paused))? {
             return Ok(Ending::Stopped);
         }
-        let key = match crate::live::next_input(Duration::from_millis(50))? {
+        let key = match crate::tui::next_input(Duration::from_millis(50))? {
             Input::HungUp => return Ok(Ending::Stopped),
             Input::Event(Event::Key(key)) if key.kind == KeyEventKind::Press => key,
             Input::Event(_) | Input::Nothing => continue,

@@ -26,8 +26,6 @@ use bywire_vehicle::wire::ProfileWire;
 use serde::Deserialize;
 use serde_json::json;
 
-use crate::vehicle_cmd;
-
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
@@ -43,7 +41,7 @@ pub struct Args {
     /// A redundant second bus: every command goes on both, feedback is taken from either.
     bus2: Option<String>,
     /// State lines per second on stdout.
-    #[arg(long, default_value_t = 10.0, value_parser = crate::numbers::rate)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::support::numbers::rate)]
     rate: f64,
     /// At the end of stdin, brake (emergency-brake burst and a stop command) for one second
     /// before exiting, instead of just stopping to send.
@@ -328,19 +326,19 @@ fn stdin_thread(waker: bywire_bus::runner::Waker) -> Receiver<Input> {
 
 /// Run the bridge until stdin ends (and, with `--estop-on-eof`, one second of braking).
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
-    let profile = vehicle_cmd::load_profile(&args.profile)?;
+    let profile = crate::support::vehicles::load_profile(&args.profile)?;
     let specs: Vec<(Port, String)> = [
         (Ads::<ProfileWire>::PORT_A, Some(&args.bus)),
         (Ads::<ProfileWire>::PORT_B, args.bus2.as_ref()),
     ]
     .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, crate::busarg::full_spec(s))))
+    .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
     .collect();
     // Both sides speak the profile's messages by role, through the runtime codec.
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let vehicle_stop = Arc::new(AtomicBool::new(false));
     let vehicle = if args.with_vehicle {
-        Some(vehicle_cmd::spawn_in_process(
+        Some(crate::support::vehicles::spawn_in_process(
             &specs,
             &profile,
             wire.clone(),

@@ -13,8 +13,8 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::Line;
 use ratatui::widgets::Paragraph;
 
-use crate::live::{self, View};
-use crate::signals::Dbc;
+use crate::support::signals::Dbc;
+use crate::tui::{self, View};
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -187,9 +187,9 @@ impl View for Monitor {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    let dbc = Dbc::new(crate::dbc_cmd::load(&args.dbc, false)?);
-    let source = live::source(&args.buses, args.input.as_ref())?;
-    live::run(&mut Monitor::new(dbc), &source)
+    let dbc = Dbc::new(crate::support::dbc::load(&args.dbc, false)?);
+    let source = tui::source(&args.buses, args.input.as_ref())?;
+    tui::run(&mut Monitor::new(dbc), &source)
 }
 
 #[cfg(test)]
@@ -234,7 +234,7 @@ mod tests {
             &received("555#01", 13),
             t0 + Duration::from_millis(13),
         );
-        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
+        let (text, _) = tui::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("2 messages, 3 frames decoded, 1 unknown"),
             "{text}"
@@ -246,7 +246,7 @@ mod tests {
             assert!(!view.on_key(KeyEvent::from(KeyCode::Char(c))));
         }
         view.on_key(KeyEvent::from(KeyCode::Enter));
-        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
+        let (text, _) = tui::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("Position: Drive") && !text.contains("Kph"),
             "{text}"
@@ -258,7 +258,7 @@ mod tests {
             &received("124#00", 20),
             t0 + Duration::from_millis(20),
         );
-        let (text, _) = live::render(&mut view, 80, 10, Instant::now());
+        let (text, _) = tui::render(&mut view, 80, 10, Instant::now());
         assert!(
             text.contains("PAUSED") && text.contains("Position: Drive"),
             "{text}"

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context, Result};
 use bywire_core::{ClassicFrame, Dlc, FdFrame, Frame, Id};
 
-use crate::busarg;
-use crate::signals::Dbc;
+use crate::support::busarg;
+use crate::support::signals::Dbc;
 use bywire_dbc::codec::EncodeMode;
 
 #[derive(clap::Args)]
@@ -28,7 +28,7 @@ pub struct Args {
     /// The bus (a plain interface name means SocketCAN).
     bus: String,
     /// Gap between bursts in milliseconds.
-    #[arg(short = 'g', default_value_t = 200.0, value_parser = crate::numbers::milliseconds)]
+    #[arg(short = 'g', default_value_t = 200.0, value_parser = crate::support::numbers::milliseconds)]
     gap_ms: f64,
     /// Extended (29-bit) identifiers.
     #[arg(short = 'e')]
@@ -216,7 +216,7 @@ impl Generator {
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let dbc = match &args.dbc {
-        Some(path) => Some(Dbc::new(crate::dbc_cmd::load(path, false)?)),
+        Some(path) => Some(Dbc::new(crate::support::dbc::load(path, false)?)),
         None => None,
     };
     let mut generator = Generator::new(args)?;

@@ -11,7 +11,7 @@ use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::{FrameView, Precision, Reader, View};
 
-use crate::busarg;
+use crate::support::busarg;
 
 #[derive(clap::Subcommand)]
 pub enum LogCommand {

@@ -11,7 +11,7 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Bus;
 use bywire_log::{LogError, LogRecord, Reader};
 
-use crate::busarg;
+use crate::support::busarg;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -38,10 +38,10 @@ pub struct Args {
     #[arg(short = 't')]
     ignore_timestamps: bool,
     /// The gap in milliseconds with -t.
-    #[arg(short = 'g', default_value_t = 1.0, value_parser = crate::numbers::milliseconds)]
+    #[arg(short = 'g', default_value_t = 1.0, value_parser = crate::support::numbers::milliseconds)]
     gap_ms: f64,
     /// Skip gaps in the timestamps longer than this many seconds.
-    #[arg(short = 's', value_name = "SECONDS", value_parser = crate::numbers::positive_seconds)]
+    #[arg(short = 's', value_name = "SECONDS", value_parser = crate::support::numbers::positive_seconds)]
     skip_gaps: Option<f64>,
     /// Stop after this many frames.
     #[arg(short = 'n')]
@@ -50,7 +50,7 @@ pub struct Args {
     #[arg(short = 'x')]
     no_loopback: bool,
     /// Play this many times faster than recorded (0.5 = half speed).
-    #[arg(long, default_value_t = 1.0, value_parser = crate::numbers::factor)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::support::numbers::factor)]
     speed: f64,
     /// Print each frame sent as a log line.
     #[arg(short = 'v')]

@@ -3,18 +3,14 @@
 //! Status lines (JSON) go to stdout at `--rate`.
 
 use std::io::Write;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::Duration;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, Context, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::BusError;
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_sim::vehicle::SimulatedVehicle;
-use bywire_vehicle::profile::{LoadedProfile, Profile};
 use bywire_vehicle::supervisor::Supervisor;
 use bywire_vehicle::wire::ProfileWire;
 use serde_json::json;
@@ -37,24 +33,11 @@ pub struct Args {
     /// A redundant second command bus.
     bus2: Option<String>,
     /// Status lines per second on stdout (0: none).
-    #[arg(long, default_value_t = 1.0, value_parser = crate::numbers::rate_or_off)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::support::numbers::rate_or_off)]
     rate: f64,
     /// Stop after this many seconds (default: until interrupted).
-    #[arg(long, value_parser = crate::numbers::positive_seconds)]
+    #[arg(long, value_parser = crate::support::numbers::positive_seconds)]
     duration: Option<f64>,
-}
-
-/// A shipped profile by name, or a profile file; it must describe a vehicle to command.
-pub fn load_profile(name: &str) -> Result<LoadedProfile> {
-    let loaded = if std::path::Path::new(name).exists() {
-        Profile::load(std::path::Path::new(name))?
-    } else {
-        bywire_tug::builtin(name)?
-    };
-    if loaded.profile.command.is_none() || loaded.profile.state.is_none() {
-        bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");
-    }
-    Ok(loaded)
 }
 
 type Vehicle = SimulatedVehicle<ProfileWire>;
@@ -114,61 +97,20 @@ impl Hooks<Vehicle> for Status<'_> {
     }
 }
 
-fn endpoints(specs: &[(Port, String)]) -> Result<Vec<(Port, Box<dyn bywire_bus::Bus>)>> {
-    specs
-        .iter()
-        .map(|(port, spec)| {
-            Ok((
-                *port,
-                bywire_bus::open(spec).with_context(|| format!("bus {spec}"))?,
-            ))
-        })
-        .collect()
-}
-
-/// The vehicle on its own thread over in-process buses (`bridge --with-vehicle`), until `stop`.
-pub fn spawn_in_process(
-    specs: &[(Port, String)],
-    profile: &LoadedProfile,
-    wire: ProfileWire,
-    stop: &Arc<AtomicBool>,
-) -> Result<JoinHandle<()>> {
-    for (_, spec) in specs {
-        let parsed: bywire_bus::BusSpec = spec.parse()?;
-        if !matches!(
-            parsed,
-            bywire_bus::BusSpec::Virtual { .. } | bywire_bus::BusSpec::Sim { .. }
-        ) {
-            bail!("--with-vehicle needs in-process buses (virtual: or sim:), not {spec}; run `bywire vehicle` beside the bridge instead");
-        }
-    }
-    let mut vehicle = Vehicle::from_profile(profile, wire, specs.len() > 1);
-    let mut runner = Runner::new(endpoints(specs)?);
-    let stop = Arc::clone(stop);
-    Ok(std::thread::spawn(move || {
-        let mut status = Status {
-            out: None,
-            period: None,
-            next: Timestamp::ZERO,
-        };
-        let _ = runner.run(&mut vehicle, &stop, None, &mut status);
-    }))
-}
-
 /// Run the vehicle until interrupted or `--duration` has passed.
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let limit = args.duration.map(Duration::from_secs_f64);
-    let profile = load_profile(&args.profile)?;
+    let profile = crate::support::vehicles::load_profile(&args.profile)?;
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let specs: Vec<(Port, String)> = [
         (Supervisor::<ProfileWire>::PORT_A, Some(&args.bus)),
         (Supervisor::<ProfileWire>::PORT_B, args.bus2.as_ref()),
     ]
     .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, crate::busarg::full_spec(s))))
+    .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
     .collect();
     let mut vehicle = Vehicle::from_profile(&profile, wire, specs.len() > 1);
-    let mut runner = Runner::new(endpoints(&specs)?);
+    let mut runner = Runner::new(crate::support::vehicles::endpoints(&specs)?);
     let mut status = Status {
         out: Some(out),
         period: (args.rate > 0.0).then(|| Duration::from_secs_f64(1.0 / args.rate)),

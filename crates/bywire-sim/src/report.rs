@@ -1,0 +1,265 @@
+//! A run's report: what `bywire sim` writes as `metrics.json` (and what a caller of the
+//! library reads without it) — the events in time order, the tracking error, the steering
+//! steps' figures, the command-to-echo latency, the buses' loads and frame counts, the
+//! battery, the supervisor's counts.
+
+use core::time::Duration;
+
+use serde::Serialize;
+
+use crate::tug::Tug;
+
+/// One event of the run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EventRecord {
+    /// When, s.
+    pub t_s: f64,
+    /// What kind (`watchdog`, `estop`, `fault`, `engaged`, `arrived`, ...).
+    pub kind: String,
+    /// The detail.
+    pub detail: String,
+}
+
+/// The route tracking error (the true pose against the route), m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Tracking {
+    /// Largest.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+}
+
+/// One steering step's figures, or why there are none.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum StepRecord {
+    /// Measured.
+    Measured {
+        /// From, degrees.
+        from_deg: f64,
+        /// To, degrees.
+        to_deg: f64,
+        /// Rise time (10–90 %), s (`None`: it never rose that far).
+        rise_s: Option<f64>,
+        /// Settling time (2 %), s.
+        settling_s: f64,
+        /// Settling time (5 %), s.
+        settling_5_s: f64,
+        /// Overshoot, %.
+        overshoot_percent: f64,
+        /// Steady-state error, degrees.
+        steady_state_error_deg: f64,
+    },
+    /// Not measurable.
+    Failed {
+        /// From, degrees.
+        from_deg: f64,
+        /// To, degrees.
+        to_deg: f64,
+        /// Why.
+        error: String,
+    },
+}
+
+/// Latencies as nearest-rank percentiles, ms.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Percentiles {
+    /// How many.
+    pub count: usize,
+    /// Median.
+    pub p50: Option<f64>,
+    /// 95th percentile.
+    pub p95: Option<f64>,
+    /// 99th percentile.
+    pub p99: Option<f64>,
+    /// Largest.
+    pub max: Option<f64>,
+}
+
+impl Percentiles {
+    /// Of `latencies`.
+    pub fn of(latencies: &[Duration]) -> Percentiles {
+        let mut sorted: Vec<f64> = latencies.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+        sorted.sort_by(f64::total_cmp);
+        // Nearest rank: the ceil(percent/100 · n)-th value, in integers.
+        let rank = |percent: usize| {
+            let index = percent.saturating_mul(sorted.len()).div_ceil(100);
+            sorted.get(index.saturating_sub(1)).copied()
+        };
+        Percentiles {
+            count: sorted.len(),
+            p50: rank(50),
+            p95: rank(95),
+            p99: rank(99),
+            max: sorted.last().copied(),
+        }
+    }
+}
+
+/// A value for each of the tug's buses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PerBus<T> {
+    /// Bus 1.
+    pub bus1: T,
+    /// Bus 2.
+    pub bus2: T,
+    /// Bus 3.
+    pub bus3: T,
+    /// Bus 1b.
+    pub bus1b: T,
+}
+
+/// The supervisor's command counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct SupervisorCounts {
+    /// Valid commands.
+    pub accepted: u64,
+    /// Checksum failures.
+    pub checksum: u64,
+    /// Repeated counters.
+    pub repeated: u64,
+    /// Skipped counters.
+    pub skipped: u64,
+    /// Out-of-range setpoints.
+    pub out_of_range: u64,
+}
+
+/// A run's report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunReport {
+    /// The scenario's name.
+    pub scenario: String,
+    /// The seed.
+    pub seed: u64,
+    /// Simulated time, s.
+    pub sim_seconds: f64,
+    /// The route was completed.
+    pub completed: bool,
+    /// What happened, in time order.
+    pub events: Vec<EventRecord>,
+    /// The tracking error.
+    pub tracking_error_m: Tracking,
+    /// The step test's steps.
+    pub steering_steps: Vec<StepRecord>,
+    /// Command to heartbeat echo, as the ADS measured it.
+    pub echo_latency_ms: Percentiles,
+    /// Each bus's load over the run, 0–1.
+    pub bus_load: PerBus<f64>,
+    /// Frames each bus carried.
+    pub frames: PerBus<usize>,
+    /// The battery's state of charge at the end.
+    pub battery_soc: f64,
+    /// The supervisor's counts.
+    pub supervisor: SupervisorCounts,
+    /// Wall-clock time the run took, s.
+    pub wall_seconds: f64,
+}
+
+fn seconds(t: bywire_core::Timestamp) -> f64 {
+    t.as_nanos() as f64 / 1e9
+}
+
+impl RunReport {
+    /// The report of `tug`'s run so far.
+    pub fn of(tug: &Tug, scenario: &str, seed: u64, completed: bool, wall: Duration) -> Self {
+        let errors = &tug.tracking_errors;
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        let mean = if errors.is_empty() {
+            0.0
+        } else {
+            errors.iter().sum::<f64>() / errors.len() as f64
+        };
+        let mut events: Vec<EventRecord> = tug
+            .engaged_at()
+            .map(|at| EventRecord {
+                t_s: seconds(at),
+                kind: "engaged".into(),
+                detail: "the vehicle reports autonomous mode".into(),
+            })
+            .into_iter()
+            .chain(tug.events.iter().map(|e| EventRecord {
+                t_s: seconds(e.t),
+                kind: e.kind.clone(),
+                detail: e.detail.clone(),
+            }))
+            .collect();
+        // Stable: events of one instant keep their order.
+        events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        if completed {
+            events.push(EventRecord {
+                t_s: seconds(tug.now()),
+                kind: "arrived".into(),
+                detail: "stopped at the end of the route".into(),
+            });
+        }
+        let steering_steps = tug
+            .step_responses
+            .iter()
+            .map(|step| match step.metrics() {
+                Ok(m) => StepRecord::Measured {
+                    from_deg: step.from,
+                    to_deg: step.to,
+                    rise_s: m.rise_time,
+                    settling_s: m.settling_time_2,
+                    settling_5_s: m.settling_time_5,
+                    overshoot_percent: m.overshoot_percent,
+                    steady_state_error_deg: m.steady_state_error,
+                },
+                Err(e) => StepRecord::Failed {
+                    from_deg: step.from,
+                    to_deg: step.to,
+                    error: e.to_string(),
+                },
+            })
+            .collect();
+        let [bus1, bus2, bus3, bus1b] = tug.bus_loads();
+        let stats = tug.ecu().stats();
+        RunReport {
+            scenario: scenario.to_string(),
+            seed,
+            sim_seconds: seconds(tug.now()),
+            completed,
+            events,
+            tracking_error_m: Tracking { max, mean },
+            steering_steps,
+            echo_latency_ms: Percentiles::of(&tug.echo_latencies),
+            bus_load: PerBus {
+                bus1,
+                bus2,
+                bus3,
+                bus1b,
+            },
+            frames: PerBus {
+                bus1: tug.bus1_log.len(),
+                bus2: tug.bus2_log.len(),
+                bus3: tug.bus3_log.len(),
+                bus1b: tug.bus1b_log.len(),
+            },
+            battery_soc: tug.soc(),
+            supervisor: SupervisorCounts {
+                accepted: stats.accepted,
+                checksum: stats.checksum,
+                repeated: stats.repeated,
+                skipped: stats.skipped,
+                out_of_range: stats.out_of_range,
+            },
+            wall_seconds: wall.as_secs_f64(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        let latencies: Vec<Duration> = (1..=100).map(Duration::from_millis).collect();
+        let p = Percentiles::of(&latencies);
+        assert_eq!(
+            (p.count, p.p50, p.p95, p.p99, p.max),
+            (100, Some(50.0), Some(95.0), Some(99.0), Some(100.0))
+        );
+        assert_eq!(Percentiles::of(&[]).p50, None);
+    }
+}

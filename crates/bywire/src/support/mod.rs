@@ -1,0 +1,10 @@
+//! What the commands share: bus arguments, DBC and profile loading with diagnostics, numeric
+//! options, files written atomically, the simulator's servers. No command imports another.
+
+pub mod busarg;
+pub mod dbc;
+pub mod files;
+pub mod numbers;
+pub mod signals;
+pub mod sim_serve;
+pub mod vehicles;

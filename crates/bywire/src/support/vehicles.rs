@@ -1,0 +1,66 @@
+//! Vehicles as the commands find and run them: profiles by name or file, and the simulated
+//! vehicle on in-process buses beside a bridge.
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use anyhow::{bail, Context, Result};
+use bywire_bus::runner::{Flow, Runner};
+use bywire_core::node::Port;
+use bywire_sim::vehicle::SimulatedVehicle;
+use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::wire::ProfileWire;
+
+type Vehicle = SimulatedVehicle<ProfileWire>;
+
+/// A shipped profile by name, or a profile file; it must describe a vehicle to command.
+pub fn load_profile(name: &str) -> Result<LoadedProfile> {
+    let loaded = if std::path::Path::new(name).exists() {
+        Profile::load(std::path::Path::new(name))?
+    } else {
+        bywire_tug::builtin(name)?
+    };
+    if loaded.profile.command.is_none() || loaded.profile.state.is_none() {
+        bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");
+    }
+    Ok(loaded)
+}
+
+pub fn endpoints(specs: &[(Port, String)]) -> Result<Vec<(Port, Box<dyn bywire_bus::Bus>)>> {
+    specs
+        .iter()
+        .map(|(port, spec)| {
+            Ok((
+                *port,
+                bywire_bus::open(spec).with_context(|| format!("bus {spec}"))?,
+            ))
+        })
+        .collect()
+}
+
+/// The vehicle on its own thread over in-process buses (`bridge --with-vehicle`), until `stop`.
+pub fn spawn_in_process(
+    specs: &[(Port, String)],
+    profile: &LoadedProfile,
+    wire: ProfileWire,
+    stop: &Arc<AtomicBool>,
+) -> Result<JoinHandle<()>> {
+    for (_, spec) in specs {
+        let parsed: bywire_bus::BusSpec = spec.parse()?;
+        if !matches!(
+            parsed,
+            bywire_bus::BusSpec::Virtual { .. } | bywire_bus::BusSpec::Sim { .. }
+        ) {
+            bail!("--with-vehicle needs in-process buses (virtual: or sim:), not {spec}; run `bywire vehicle` beside the bridge instead");
+        }
+    }
+    let mut vehicle = Vehicle::from_profile(profile, wire, specs.len() > 1);
+    let mut runner = Runner::new(endpoints(specs)?);
+    let stop = Arc::clone(stop);
+    Ok(std::thread::spawn(move || {
+        let _ = runner.run(&mut vehicle, &stop, None, &mut |_: &mut Vehicle, _| {
+            Flow::Continue
+        });
+    }))
+}
