@@ -65,6 +65,8 @@ pub struct Network {
     now: Timestamp,
     outgoing: Vec<(Port, Frame)>,
     received: Vec<bool>,
+    /// Per bus: something happens on it at the current instant (reused).
+    active: Vec<bool>,
 }
 
 impl Default for Network {
@@ -89,6 +91,7 @@ impl Network {
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
             received: Vec::new(),
+            active: Vec::new(),
         }
     }
 
@@ -98,6 +101,7 @@ impl Network {
             .push((name.to_string(), SimBus::new(nominal, data)));
         self.bus_endpoints.push(Vec::new());
         self.bus_next.push(None);
+        self.active.push(false);
         self.buses.len() - 1
     }
 
@@ -293,16 +297,24 @@ impl Network {
     fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
         let now = self.now;
         for i in 0..self.buses.len() {
-            // A bus with nothing to do before now is left where it is.
-            if self.bus_change(i).is_some_and(|at| at <= now) {
+            // A bus with nothing to do before now is left where it is (and, having nothing
+            // due, delivers nothing now).
+            let active = self.bus_change(i).is_some_and(|at| at <= now);
+            if active {
                 if let Some((_, sim)) = self.buses.get_mut(i) {
                     sim.advance(now);
                 }
                 self.forget_bus(i);
             }
+            if let Some(slot) = self.active.get_mut(i) {
+                *slot = active;
+            }
         }
         self.received.iter_mut().for_each(|r| *r = false);
         for w in &self.wires {
+            if !self.active.get(w.bus).copied().unwrap_or(true) {
+                continue;
+            }
             let (Some((_, sim)), Some(node)) = (self.buses.get_mut(w.bus), nodes.get_mut(w.node))
             else {
                 continue;
