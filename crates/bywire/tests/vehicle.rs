@@ -201,16 +201,8 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     let out = bridge.wait_with_output().unwrap();
     stop(vehicle);
     stop(server_a);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let lines: Vec<Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    let lines = common::json_lines(out);
     let lost = lines
         .iter()
         .position(|l| l["event"] == "bus_lost")
@@ -223,7 +215,6 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
         "{}",
         lines[lost]
     );
-    let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("lost-b"), "{err}");
     // Before the loss the vehicle drove; a second after it, it still does (degraded: the
     // warning flag set), on commands from bus A alone.

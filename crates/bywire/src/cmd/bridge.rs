@@ -327,13 +327,7 @@ fn stdin_thread(waker: bywire_bus::runner::Waker) -> Receiver<Input> {
 /// Run the bridge until stdin ends (and, with `--estop-on-eof`, one second of braking).
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let profile = crate::support::vehicles::load_profile(&args.profile)?;
-    let specs: Vec<(Port, String)> = [
-        (Ads::<ProfileWire>::PORT_A, Some(&args.bus)),
-        (Ads::<ProfileWire>::PORT_B, args.bus2.as_ref()),
-    ]
-    .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
-    .collect();
+    let specs = crate::support::vehicles::command_buses(&args.bus, args.bus2.as_ref());
     // Both sides speak the profile's messages by role, through the runtime codec.
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
     let vehicle_stop = Arc::new(AtomicBool::new(false));

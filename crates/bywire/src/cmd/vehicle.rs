@@ -102,13 +102,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let limit = args.duration.map(Duration::from_secs_f64);
     let profile = crate::support::vehicles::load_profile(&args.profile)?;
     let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
-    let specs: Vec<(Port, String)> = [
-        (Supervisor::<ProfileWire>::PORT_A, Some(&args.bus)),
-        (Supervisor::<ProfileWire>::PORT_B, args.bus2.as_ref()),
-    ]
-    .into_iter()
-    .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
-    .collect();
+    let specs = crate::support::vehicles::command_buses(&args.bus, args.bus2.as_ref());
     let mut vehicle = Vehicle::from_profile(&profile, wire, specs.len() > 1);
     let mut runner = Runner::new(crate::support::vehicles::endpoints(&specs)?);
     let mut status = Status {

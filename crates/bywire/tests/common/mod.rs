@@ -61,3 +61,17 @@ pub fn in_canvm(options: &[&str], script: &str) -> String {
     );
     text
 }
+
+/// A command's stdout as JSON lines, after checking it succeeded (its stderr shown if not).
+pub fn json_lines(out: std::process::Output) -> Vec<serde_json::Value> {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
