@@ -242,3 +242,38 @@ fn parser_errors_fail_lint_and_convert() {
     assert!(!json.exists() && !dir.join("broken.partial").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Value descriptions are looked up by the raw value, as cantools does, not by the physical
+/// one: Ford's `ActChrgStrtDay_No_Actl` (offset 1) with raw 30 is 31 days, while "Invalid"
+/// belongs to raw 31 (regression: the text output printed "Invalid").
+#[test]
+fn value_descriptions_match_the_raw_value_as_cantools_does() {
+    let dbc = common::corpus("opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc");
+    let log = "(1.000000) can0 473#00000000001E0000\n(2.000000) can0 473#00000000001F0000\n";
+    let (code, ours, err) = common::bywire(&["decode", &dbc], log);
+    assert_eq!(code, 0, "{err}");
+    let mut cantools = std::process::Command::new("python3")
+        .args(["-m", "cantools", "decode", &dbc])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::io::Write::write_all(cantools.stdin.as_mut().unwrap(), log.as_bytes()).unwrap();
+    let theirs = String::from_utf8(cantools.wait_with_output().unwrap().stdout).unwrap();
+    // The same signal lines, whatever their order.
+    let lines = |text: &str| {
+        let mut v: Vec<String> = text
+            .lines()
+            .filter(|l| l.starts_with("    "))
+            .map(|l| l.trim().trim_end_matches(',').to_string())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(lines(&ours), lines(&theirs));
+    assert!(ours.contains("ActChrgStrtDay_No_Actl: 31 days"), "{ours}");
+    assert!(
+        ours.contains("ActChrgStrtDay_No_Actl: Invalid"),
+        "raw 31: {ours}"
+    );
+}

@@ -9,7 +9,7 @@ use anyhow::{anyhow, Result};
 use bywire_core::{FdFrame, Frame, Id};
 use bywire_dbc::codec::{Decoded, EncodeError, EncodeMode, MessageCodec, Value};
 use bywire_dbc::e2e::Protection;
-use bywire_dbc::{AttrValue, Database, Message, Signal};
+use bywire_dbc::{AttrValue, Database, Message, Signal, ValueType};
 use serde_json::json;
 
 /// One signal of a decoded frame.
@@ -25,12 +25,26 @@ impl SignalValue<'_> {
     /// `choices` is off), else the number with its unit.
     pub fn text(&self, choices: bool) -> String {
         let v = self.value;
+        // As cantools: the description of the raw value (sign applied), not of the physical
+        // one (they differ whenever there is an offset or a scale); a float's raw value is
+        // the number itself.
+        let key = match self.signal.value_type {
+            ValueType::Integer { signed: true } => {
+                let unused = 64u32.saturating_sub(self.signal.length.clamp(1, 64));
+                // Reinterpret the bits, then shift back arithmetically: sign extension.
+                Some(i128::from(
+                    i64::from_ne_bytes((v.raw << unused).to_ne_bytes()) >> unused,
+                ))
+            }
+            ValueType::Integer { signed: false } => Some(i128::from(v.raw)),
+            ValueType::Float32 | ValueType::Float64 => v.physical.as_i128(),
+        };
         let choice = choices
             .then(|| {
                 self.signal
                     .value_descriptions
                     .iter()
-                    .find(|(k, _)| i128::from(v.raw) == *k || v.physical.as_i128() == Some(*k))
+                    .find(|(k, _)| key == Some(*k))
             })
             .flatten();
         match choice {
