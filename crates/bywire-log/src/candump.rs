@@ -17,6 +17,8 @@ use std::io::{self, BufRead, Write};
 use bywire_core::frame::ParseFrameErrorKind;
 use bywire_core::{ClassicFrame, Dlc, Frame, Timestamp};
 
+use crate::lines::{CappedLines, Line};
+
 /// One line of a candump log.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LogRecord {
@@ -71,6 +73,12 @@ pub enum LogErrorKind {
     /// The frame text is invalid.
     #[error("frame: {0}")]
     Frame(ParseFrameErrorKind),
+    /// The line is longer than any log line (skipped; reading goes on).
+    #[error("{0} bytes: longer than a log line")]
+    TooLong(u64),
+    /// The line is not UTF-8 (from this column on).
+    #[error("not UTF-8")]
+    NotUtf8,
     /// Something after the frame other than a direction.
     #[error("unexpected '{0}' after the frame (only a direction R or T may follow)")]
     Trailing(String),
@@ -140,22 +148,31 @@ fn parse_timestamp(text: &str) -> Result<Timestamp, &'static str> {
         .ok_or("seconds out of range")
 }
 
-/// Reads a candump log one line at a time. Blank lines are skipped; every other line is a
-/// record or an error naming its line (reading goes on after an error).
+/// Reads a candump log one line at a time, in bounded memory (a line longer than
+/// [`crate::lines::DEFAULT_MAX_LINE`] is an error naming it, and skipped). Blank lines are
+/// skipped; every other line is a record or an error naming its line (reading goes on after an
+/// error).
 pub struct Reader<R> {
-    input: R,
+    lines: CappedLines<R>,
     line: u64,
-    buffer: String,
+    log_lines_only: bool,
 }
 
 impl<R: BufRead> Reader<R> {
     /// A reader over `input`.
     pub fn new(input: R) -> Self {
         Reader {
-            input,
+            lines: CappedLines::new(input),
             line: 0,
-            buffer: String::new(),
+            log_lines_only: false,
         }
+    }
+
+    /// Skip lines that do not start with `(` instead of reporting them, as canplayer does
+    /// (line numbers in errors stay the file's).
+    pub fn log_lines_only(mut self) -> Self {
+        self.log_lines_only = true;
+        self
     }
 
     /// The number of the line read last (1-based; 0 before the first).
@@ -168,28 +185,34 @@ impl<R: BufRead> Iterator for Reader<R> {
     type Item = Result<LogRecord, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
+        // Bounded by the input's lines.
         loop {
-            self.buffer.clear();
-            self.line += 1;
-            match self.input.read_line(&mut self.buffer) {
-                Ok(0) => return None,
-                Ok(_) => {}
+            let (number, line) = match self.lines.next_line()? {
+                Ok(next) => next,
                 Err(e) => {
                     return Some(Err(LogError::Io {
-                        line: self.line,
+                        line: self.line + 1,
                         message: e.to_string(),
                     }))
                 }
-            }
-            let text = self.buffer.trim_end_matches(['\n', '\r']);
-            if text.trim().is_empty() {
-                continue;
-            }
-            return Some(parse_line(text).map_err(|(column, kind)| LogError::Syntax {
-                line: self.line,
+            };
+            self.line = number;
+            let syntax = |column, kind| LogError::Syntax {
+                line: number,
                 column,
                 kind,
-            }));
+            };
+            let text = match line {
+                Line::Text(text) => text,
+                Line::TooLong { bytes } => {
+                    return Some(Err(syntax(1, LogErrorKind::TooLong(bytes))))
+                }
+                Line::NotUtf8 { at } => return Some(Err(syntax(at + 1, LogErrorKind::NotUtf8))),
+            };
+            if text.trim().is_empty() || (self.log_lines_only && !text.starts_with('(')) {
+                continue;
+            }
+            return Some(parse_line(&text).map_err(|(column, kind)| syntax(column, kind)));
         }
     }
 }
@@ -328,6 +351,32 @@ impl<W: Write> Writer<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_line_too_long_or_not_utf8_is_an_error_naming_it_and_reading_goes_on() {
+        let mut log = b"(1.000000) can0 123#01\n".to_vec();
+        log.extend(std::iter::repeat_n(b'x', 100_000));
+        log.extend(b"\n(2.000000) can0 123#\xff\n(3.000000) can0 124#02\n");
+        let results: Vec<_> = Reader::new(&log[..]).collect();
+        assert_eq!(results.len(), 4);
+        assert!(results[0].is_ok() && results[3].is_ok());
+        assert!(matches!(
+            results[1],
+            Err(LogError::Syntax {
+                line: 2,
+                kind: LogErrorKind::TooLong(100_000),
+                ..
+            })
+        ));
+        assert!(matches!(
+            results[2],
+            Err(LogError::Syntax {
+                line: 3,
+                column: 21,
+                kind: LogErrorKind::NotUtf8
+            })
+        ));
+    }
 
     #[test]
     fn reads_candump_lines() {

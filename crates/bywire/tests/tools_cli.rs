@@ -863,3 +863,34 @@ fn serve_beacon_is_found_by_python_can() {
     );
     assert!(text.contains("'channel': 'vcan7'"), "{text}");
 }
+
+/// A line longer than any log line (or not UTF-8) is reported with its number and skipped;
+/// the lines around it are read (`decode`, `log stats`).
+#[test]
+fn an_overlong_or_binary_line_is_skipped_with_its_number() {
+    let dbc = common::corpus("cantools/tests__files__dbc__motohawk.dbc");
+    let input = format!(
+        "(1.000000) can0 1F0#A5B6D90000000000\n{}\n(2.000000) can0 1F0#A5B6D90000000000\n",
+        "x".repeat(200_000)
+    );
+    let (code, out, err) = bywire(&["decode", &dbc], &input);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(out.matches("ExampleMessage(").count(), 2, "{out}");
+    assert!(err.contains("stdin:2: skipped: 200000 bytes"), "{err}");
+    let dir = std::env::temp_dir().join(format!("bywire-long-line-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("long.log");
+    let mut bytes = input.into_bytes();
+    bytes.extend(b"(3.000000) can0 1F0#\xff\n");
+    std::fs::write(&log, bytes).unwrap();
+    let (_, out, err) = bywire(&["log", "stats", log.to_str().unwrap()], "");
+    assert!(
+        err.contains("line 2") && err.contains("longer than a log line"),
+        "{out}{err}"
+    );
+    assert!(
+        err.contains("line 4") && err.contains("not UTF-8"),
+        "{out}{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

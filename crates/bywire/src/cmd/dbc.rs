@@ -274,16 +274,31 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
+/// What is wrong with a line that is not text.
+fn describe(line: &bywire_log::lines::Line) -> String {
+    match line {
+        bywire_log::lines::Line::Text(_) => "text".to_string(),
+        bywire_log::lines::Line::NotUtf8 { at } => format!("not UTF-8 at byte {at}"),
+        bywire_log::lines::Line::TooLong { bytes } => format!("{bytes} bytes, longer than a line"),
+    }
+}
+
 pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
     let choices = !args.no_decode_choices;
-    let mut line = String::new();
-    // One line at a time: logs of any size stream through in constant memory.
-    while {
-        line.clear();
-        input.read_line(&mut line)? > 0
-    } {
-        let text = line.trim_end_matches(['\n', '\r']);
+    // One line at a time, each at most a log line's size: logs of any size stream through in
+    // constant memory.
+    let mut lines = bywire_log::lines::CappedLines::new(input);
+    while let Some(next) = lines.next_line() {
+        let (number, line) = next?;
+        let line = match line {
+            bywire_log::lines::Line::Text(text) => text,
+            other => {
+                eprintln!("stdin:{number}: skipped: {}", describe(&other));
+                continue;
+            }
+        };
+        let text = line.as_str();
         let Some(frame) = bywire_log::screen::parse_line(text) else {
             if !args.json {
                 writeln!(out, "{text}")?;

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
-use bywire_log::{FrameView, Precision, Reader, View};
+use bywire_log::{FrameView, LogError, LogErrorKind, Precision, Reader, View};
 
 use crate::support::busarg;
 
@@ -98,8 +98,8 @@ fn cat(
     };
     let mut view = View::default();
     for (name, input) in inputs(files)? {
-        for record in Reader::new(input) {
-            let record = record.map_err(|e| anyhow!("{name}: {e}"))?;
+        for record in records(&name, input) {
+            let record = record?;
             if filtering.is_some_and(|f| !f.accepts(&record.frame)) {
                 continue;
             }
@@ -137,6 +137,26 @@ struct IdStats {
     last: u64,
 }
 
+/// The log's records; a line that cannot be read as text at all (longer than any log line, not
+/// UTF-8) is reported with its number and skipped, a malformed log line is an error.
+fn records<'a>(
+    name: &'a str,
+    input: Box<dyn BufRead>,
+) -> impl Iterator<Item = Result<bywire_log::LogRecord>> + 'a {
+    Reader::new(input).filter_map(move |record| match record {
+        Err(
+            e @ LogError::Syntax {
+                kind: LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8,
+                ..
+            },
+        ) => {
+            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
+            None
+        }
+        other => Some(other.map_err(|e| anyhow!("{name}: {e}"))),
+    })
+}
+
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut frames = 0u64;
     let (mut first, mut last) = (u64::MAX, 0u64);
@@ -144,8 +164,8 @@ fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut ids: BTreeMap<(String, u32), IdStats> = BTreeMap::new();
     let (mut fd, mut errors, mut remote) = (0u64, 0u64, 0u64);
     for (name, input) in inputs(files)? {
-        for record in Reader::new(input) {
-            let record = record.map_err(|e| anyhow!("{name}: {e}"))?;
+        for record in records(&name, input) {
+            let record = record?;
             let t = record.timestamp.as_nanos();
             frames += 1;
             first = first.min(t);

@@ -63,43 +63,9 @@ enum Target {
     Stdout,
 }
 
-fn lines_starting_with_paren<R: BufRead>(input: R) -> Reader<FilterParen<R>> {
-    Reader::new(FilterParen(input))
-}
-
-/// Keeps lines that start with '(' and blanks the others (canplayer ignores them), so line
-/// numbers in errors stay those of the file.
-struct FilterParen<R>(R);
-
-impl<R: BufRead> io::Read for FilterParen<R> {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        let available = self.fill_buf()?;
-        let n = available.len().min(buf.len());
-        if let (Some(dst), Some(src)) = (buf.get_mut(..n), available.get(..n)) {
-            dst.copy_from_slice(src);
-        }
-        self.consume(n);
-        Ok(n)
-    }
-}
-
-impl<R: BufRead> BufRead for FilterParen<R> {
-    fn fill_buf(&mut self) -> io::Result<&[u8]> {
-        self.0.fill_buf()
-    }
-
-    fn consume(&mut self, amount: usize) {
-        self.0.consume(amount);
-    }
-
-    fn read_line(&mut self, line: &mut String) -> io::Result<usize> {
-        let n = self.0.read_line(line)?;
-        if n > 0 && !line.starts_with('(') {
-            line.clear();
-            line.push('\n');
-        }
-        Ok(n)
-    }
+/// The log's records, lines that do not start with '(' skipped as canplayer skips them.
+fn lines_starting_with_paren<R: BufRead>(input: R) -> Reader<R> {
+    Reader::new(input).log_lines_only()
 }
 
 fn open_input(path: Option<&PathBuf>) -> Result<Box<dyn BufRead>> {
