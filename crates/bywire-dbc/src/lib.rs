@@ -9,6 +9,8 @@
 //!   reasonable engineer would accept and reports one [`Diagnostic`] per problem with
 //!   line and column; strict mode fails on the first.
 //! - [`write()`] writes a [`Database`] back as DBC text (load → write → load is equal).
+//! - [`decoder`] compiles a whole database: frames found by identifier and decoded, value
+//!   descriptions looked up by raw value.
 //! - [`codec`] compiles each message once into a plan and decodes and encodes frames without
 //!   allocating, with Python-compatible number semantics so results match cantools bit for bit.
 //!
@@ -24,6 +26,7 @@
 
 pub mod codec;
 pub mod codegen;
+pub mod decoder;
 pub mod e2e;
 mod lexer;
 pub mod lint;

@@ -1,6 +1,7 @@
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
+use crate::support::signals::FrameText;
 use crate::support::signals::{Dbc, DecodedFrame};
 use anyhow::{Context, Result};
 use bywire_dbc::{ByteOrder, Database, Message, Multiplexing, ValueType};

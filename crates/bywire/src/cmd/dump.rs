@@ -15,6 +15,7 @@ use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg::{self, BusArg, Event, Readers};
 use crate::support::signals::Dbc;
+use crate::support::signals::FrameText;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:

@@ -14,6 +14,7 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::Paragraph;
 
 use crate::support::signals::Dbc;
+use crate::support::signals::FrameText;
 use crate::tui::{self, View};
 
 #[derive(clap::Args)]

@@ -2,177 +2,64 @@
 //! `sniff` and `plot`: one place that finds a frame's message, decodes it and shows values the
 //! way cantools does (value descriptions, units, Python's float text).
 
-use std::collections::HashMap;
-use std::time::Duration;
-
 use anyhow::{anyhow, Result};
 use bywire_core::{FdFrame, Frame, Id};
-use bywire_dbc::codec::{Decoded, EncodeError, EncodeMode, MessageCodec, Value};
+use bywire_dbc::codec::{EncodeError, EncodeMode, Value};
 use bywire_dbc::e2e::Protection;
-use bywire_dbc::{AttrValue, Database, Message, Signal, ValueType};
+use bywire_dbc::{AttrValue, Database, Message, Signal};
 use serde_json::json;
 
-/// One signal of a decoded frame.
-pub struct SignalValue<'a> {
-    /// The signal.
-    pub signal: &'a Signal,
-    /// Its raw and physical value.
-    pub value: Decoded,
+pub use bywire_dbc::decoder::{DecodedFrame, Decoder, SignalValue};
+
+/// How cantools shows a decoded value.
+pub trait ValueText {
+    /// The value description if there is one (unless `choices` is off), else the number with
+    /// its unit.
+    fn text(&self, choices: bool) -> String;
 }
 
-impl SignalValue<'_> {
-    /// The value as cantools shows it: the value description if there is one (unless
-    /// `choices` is off), else the number with its unit.
-    pub fn text(&self, choices: bool) -> String {
-        let v = self.value;
-        // As cantools: the description of the raw value (sign applied), not of the physical
-        // one (they differ whenever there is an offset or a scale); a float's raw value is
-        // the number itself.
-        let key = match self.signal.value_type {
-            ValueType::Integer { signed: true } => {
-                let unused = 64u32.saturating_sub(self.signal.length.clamp(1, 64));
-                // Reinterpret the bits, then shift back arithmetically: sign extension.
-                Some(i128::from(
-                    i64::from_ne_bytes((v.raw << unused).to_ne_bytes()) >> unused,
-                ))
-            }
-            ValueType::Integer { signed: false } => Some(i128::from(v.raw)),
-            ValueType::Float32 | ValueType::Float64 => v.physical.as_i128(),
-        };
-        let choice = choices
-            .then(|| {
-                self.signal
-                    .value_descriptions
-                    .iter()
-                    .find(|(k, _)| key == Some(*k))
-            })
-            .flatten();
-        match choice {
-            Some((_, name)) => name.clone(),
-            None if self.signal.unit.is_empty() => number_text(v.physical),
-            None => format!("{} {}", number_text(v.physical), self.signal.unit),
+impl ValueText for SignalValue<'_> {
+    fn text(&self, choices: bool) -> String {
+        match self.description().filter(|_| choices) {
+            Some(name) => name.to_string(),
+            None if self.signal.unit.is_empty() => number_text(self.value.physical),
+            None => format!("{} {}", number_text(self.value.physical), self.signal.unit),
         }
     }
 }
 
-/// A frame decoded with its message.
-pub struct DecodedFrame<'a> {
-    /// The message.
-    pub message: &'a Message,
-    /// The signals present in this frame (multiplexed ones only when selected).
-    pub signals: Vec<SignalValue<'a>>,
-    /// Why decoding failed (e.g. the frame is shorter than the message).
-    pub error: Option<String>,
-}
+/// A database compiled for decoding, with what the commands add: messages found by name with
+/// an error naming the known ones, and messages encoded from `SIGNAL=VALUE` text.
+pub struct Dbc(Decoder);
 
-/// A DBC compiled for decoding.
-pub struct Dbc {
-    db: Database,
-    codecs: Vec<MessageCodec>,
-    by_id: HashMap<(u32, bool), usize>,
+impl std::ops::Deref for Dbc {
+    type Target = Decoder;
+    fn deref(&self) -> &Decoder {
+        &self.0
+    }
 }
 
 impl Dbc {
     /// Compile every message of `db`.
     pub fn new(db: Database) -> Self {
-        let codecs = db.messages.iter().map(MessageCodec::new).collect();
-        let by_id = db
-            .messages
-            .iter()
-            .enumerate()
-            .map(|(i, m)| ((m.id, m.extended), i))
-            .collect();
-        Dbc { db, codecs, by_id }
+        Dbc(Decoder::new(db))
     }
 
-    /// The database.
-    pub fn database(&self) -> &Database {
-        &self.db
-    }
-
-    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
-    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
-        let id = frame.id()?;
-        let index = *self.by_id.get(&(id.as_raw(), id.is_extended()))?;
-        let (message, codec) = (self.db.messages.get(index)?, self.codecs.get(index)?);
-        let mut values = vec![None; codec.signal_count()];
-        let data = if frame.is_remote() {
-            &[][..]
-        } else {
-            frame.data()
-        };
-        let error = codec.decode(data, &mut values).err().map(|e| e.to_string());
-        let signals = message
-            .signals
-            .iter()
-            .zip(values)
-            .filter_map(|(signal, value)| {
-                Some(SignalValue {
-                    signal,
-                    value: value?,
-                })
-            })
-            .collect();
-        Some(DecodedFrame {
-            message,
-            signals,
-            error,
-        })
-    }
-}
-
-impl Dbc {
     /// The message named `name` (or with identifier `name` in hex, `0x` optional).
     pub fn find(&self, name: &str) -> Result<&Message> {
-        let by_id = u32::from_str_radix(name.trim_start_matches("0x"), 16).ok();
-        self.db
-            .messages
-            .iter()
-            .find(|m| m.name == name || m.display_name() == name)
-            .or_else(|| by_id.and_then(|id| self.db.messages.iter().find(|m| m.id == id)))
-            .ok_or_else(|| {
-                let known: Vec<&str> = self
-                    .db
-                    .messages
-                    .iter()
-                    .take(8)
-                    .map(|m| m.name.as_str())
-                    .collect();
-                anyhow!(
-                    "no message '{name}' in the DBC (it has: {}{})",
-                    known.join(", "),
-                    if self.db.messages.len() > known.len() {
-                        ", ..."
-                    } else {
-                        ""
-                    }
-                )
-            })
-    }
-
-    fn index_of(&self, message: &Message) -> Option<usize> {
-        self.by_id.get(&(message.id, message.extended)).copied()
-    }
-
-    /// The message's cycle time (`GenMsgCycleTime`), when it has a positive one.
-    pub fn cycle_time(&self, message: &Message) -> Option<Duration> {
-        let ms: f64 = self
-            .db
-            .message_attribute_text(message, "GenMsgCycleTime")?
-            .parse()
-            .ok()?;
-        (ms > 0.0 && ms.is_finite()).then(|| Duration::from_secs_f64(ms / 1000.0))
-    }
-
-    /// Whether the message is sent as CAN FD (`VFrameFormat` says so, or it is over 8 bytes),
-    /// and with bit rate switching.
-    pub fn fd_format(&self, message: &Message) -> (bool, bool) {
-        let format = self
-            .db
-            .message_attribute_text(message, "VFrameFormat")
-            .unwrap_or_default();
-        let fd = format.contains("FD") || message.size > 8;
-        (fd, fd && !format.contains("NoBRS"))
+        self.message_named(name).ok_or_else(|| {
+            let messages = &self.database().messages;
+            let known: Vec<&str> = messages.iter().take(8).map(|m| m.name.as_str()).collect();
+            anyhow!(
+                "no message '{name}' in the DBC (it has: {}{})",
+                known.join(", "),
+                if messages.len() > known.len() {
+                    ", ..."
+                } else {
+                    ""
+                }
+            )
+        })
     }
 
     /// Encode a message from `SIGNAL=VALUE` assignments (numbers, or value-description names).
@@ -186,10 +73,9 @@ impl Dbc {
         counter: u64,
         range: EncodeMode,
     ) -> Result<Frame> {
-        let index = self
-            .index_of(message)
+        let codec = self
+            .codec(message)
             .ok_or_else(|| anyhow!("message {} is not in the DBC", message.name))?;
-        let codec = self.codecs.get(index).ok_or_else(|| anyhow!("no codec"))?;
         let mut values: Vec<Option<Value>> = message.signals.iter().map(start_value).collect();
         for assignment in assignments {
             let (name, text) = assignment
@@ -286,35 +172,43 @@ fn parse_value(signal: &Signal, text: &str) -> Option<Value> {
         .map(Value::Float)
 }
 
-impl DecodedFrame<'_> {
+/// How cantools shows a decoded frame.
+pub trait FrameText {
     /// cantools' single-line form: `Name(sig: value, ...)`.
-    pub fn single_line(&self, choices: bool) -> String {
+    fn single_line(&self, choices: bool) -> String;
+    /// cantools' multi-line form: `Name(\n    sig: value,\n ...\n)`, each line after the
+    /// first prefixed with `indent`.
+    fn multi_line(&self, choices: bool, indent: &str) -> String;
+    /// The signals as a JSON object of name to physical value.
+    fn json_signals(&self) -> serde_json::Map<String, serde_json::Value>;
+}
+
+fn items(frame: &DecodedFrame<'_>, choices: bool) -> Vec<String> {
+    frame
+        .signals
+        .iter()
+        .map(|s| format!("{}: {}", s.signal.display_name(), s.text(choices)))
+        .collect()
+}
+
+impl FrameText for DecodedFrame<'_> {
+    fn single_line(&self, choices: bool) -> String {
         format!(
             "{}({})",
             self.message.display_name(),
-            self.items(choices).join(", ")
+            items(self, choices).join(", ")
         )
     }
 
-    /// cantools' multi-line form: `Name(\n    sig: value,\n ...\n)`, each line after the
-    /// first prefixed with `indent`.
-    pub fn multi_line(&self, choices: bool, indent: &str) -> String {
+    fn multi_line(&self, choices: bool, indent: &str) -> String {
         format!(
             "{}(\n{indent}    {}\n{indent})",
             self.message.display_name(),
-            self.items(choices).join(&format!(",\n{indent}    "))
+            items(self, choices).join(&format!(",\n{indent}    "))
         )
     }
 
-    fn items(&self, choices: bool) -> Vec<String> {
-        self.signals
-            .iter()
-            .map(|s| format!("{}: {}", s.signal.display_name(), s.text(choices)))
-            .collect()
-    }
-
-    /// The signals as a JSON object of name to physical value.
-    pub fn json_signals(&self) -> serde_json::Map<String, serde_json::Value> {
+    fn json_signals(&self) -> serde_json::Map<String, serde_json::Value> {
         self.signals
             .iter()
             .map(|s| {

@@ -1,0 +1,167 @@
+//! A whole database compiled for decoding frames: each message's codec, found by identifier,
+//! and what a decoded signal's value description is (looked up by its raw value, the sign
+//! applied, as cantools does).
+//!
+//! ```
+//! use bywire_core::{Frame, Id};
+//! use bywire_dbc::decoder::Decoder;
+//!
+//! let text = "BO_ 256 Cmd: 2 ADS\n SG_ Mode : 0|2@1+ (1,1) [1|4] \"\" ECU\nVAL_ 256 Mode 1 \"Auto\" 2 \"Manual\";\n";
+//! let decoder = Decoder::new(bywire_dbc::parse_str(text, bywire_dbc::Mode::Strict).unwrap().0);
+//! let frame = Frame::classic(Id::standard(256).unwrap(), &[1, 0]).unwrap();
+//! let decoded = decoder.decode(&frame).unwrap();
+//! // Raw 1 is "Auto" (its physical value is 2, because of the offset).
+//! assert_eq!(decoded.signals[0].description(), Some("Auto"));
+//! assert_eq!(decoded.signals[0].value.physical.as_f64(), 2.0);
+//! ```
+
+use core::time::Duration;
+use std::collections::HashMap;
+
+use bywire_core::Frame;
+
+use crate::codec::{Decoded, MessageCodec};
+use crate::{Database, Message, Signal, ValueType};
+
+/// One signal of a decoded frame.
+#[derive(Debug, Clone, Copy)]
+pub struct SignalValue<'a> {
+    /// The signal.
+    pub signal: &'a Signal,
+    /// Its raw and physical value.
+    pub value: Decoded,
+}
+
+impl SignalValue<'_> {
+    /// The raw value as value descriptions number it: sign applied for signed integers; for a
+    /// float, the number itself when it is integral.
+    pub fn description_key(&self) -> Option<i128> {
+        match self.signal.value_type {
+            ValueType::Integer { signed: true } => {
+                let unused = 64u32.saturating_sub(self.signal.length.clamp(1, 64));
+                // Reinterpret the bits, then shift back arithmetically: sign extension.
+                let bits = i64::from_ne_bytes((self.value.raw << unused).to_ne_bytes());
+                Some(i128::from(bits >> unused))
+            }
+            ValueType::Integer { signed: false } => Some(i128::from(self.value.raw)),
+            ValueType::Float32 | ValueType::Float64 => self.value.physical.as_i128(),
+        }
+    }
+
+    /// The value's description (`VAL_`), if it has one.
+    pub fn description(&self) -> Option<&str> {
+        let key = self.description_key()?;
+        self.signal
+            .value_descriptions
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, name)| name.as_str())
+    }
+}
+
+/// A frame decoded with its message.
+#[derive(Debug, Clone)]
+pub struct DecodedFrame<'a> {
+    /// The message.
+    pub message: &'a Message,
+    /// The signals present in this frame (multiplexed ones only when selected).
+    pub signals: Vec<SignalValue<'a>>,
+    /// Why decoding failed (e.g. the frame is shorter than the message).
+    pub error: Option<String>,
+}
+
+/// A database compiled for decoding.
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    db: Database,
+    codecs: Vec<MessageCodec>,
+    by_id: HashMap<(u32, bool), usize>,
+}
+
+impl Decoder {
+    /// Compile every message of `db`.
+    pub fn new(db: Database) -> Self {
+        let codecs = db.messages.iter().map(MessageCodec::new).collect();
+        let by_id = db
+            .messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| ((m.id, m.extended), i))
+            .collect();
+        Decoder { db, codecs, by_id }
+    }
+
+    /// The database.
+    pub fn database(&self) -> &Database {
+        &self.db
+    }
+
+    /// The codec of `message` (a message of this database).
+    pub fn codec(&self, message: &Message) -> Option<&MessageCodec> {
+        let index = self.by_id.get(&(message.id, message.extended))?;
+        self.codecs.get(*index)
+    }
+
+    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
+    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
+        let id = frame.id()?;
+        let index = *self.by_id.get(&(id.as_raw(), id.is_extended()))?;
+        let (message, codec) = (self.db.messages.get(index)?, self.codecs.get(index)?);
+        let mut values = vec![None; codec.signal_count()];
+        let data = if frame.is_remote() {
+            &[][..]
+        } else {
+            frame.data()
+        };
+        let error = codec.decode(data, &mut values).err().map(|e| e.to_string());
+        let signals = message
+            .signals
+            .iter()
+            .zip(values)
+            .filter_map(|(signal, value)| {
+                Some(SignalValue {
+                    signal,
+                    value: value?,
+                })
+            })
+            .collect();
+        Some(DecodedFrame {
+            message,
+            signals,
+            error,
+        })
+    }
+
+    /// The message named `name` (or with identifier `name` in hex, `0x` optional).
+    pub fn message_named(&self, name: &str) -> Option<&Message> {
+        let by_id = u32::from_str_radix(name.trim_start_matches("0x"), 16).ok();
+        self.db
+            .messages
+            .iter()
+            .find(|m| m.name == name || m.display_name() == name)
+            .or_else(|| by_id.and_then(|id| self.db.messages.iter().find(|m| m.id == id)))
+    }
+
+    /// The message's cycle time (`GenMsgCycleTime`), when it has a positive one.
+    pub fn cycle_time(&self, message: &Message) -> Option<Duration> {
+        let ms: f64 = self
+            .db
+            .message_attribute_text(message, "GenMsgCycleTime")?
+            .parse()
+            .ok()?;
+        Duration::try_from_secs_f64(ms / 1000.0)
+            .ok()
+            .filter(|d| !d.is_zero())
+    }
+
+    /// Whether the message is sent as CAN FD (`VFrameFormat` says so, or it is over 8 bytes),
+    /// and with bit rate switching.
+    pub fn fd_format(&self, message: &Message) -> (bool, bool) {
+        let format = self
+            .db
+            .message_attribute_text(message, "VFrameFormat")
+            .unwrap_or_default();
+        let fd = format.contains("FD") || message.size > 8;
+        (fd, fd && !format.contains("NoBRS"))
+    }
+}
