@@ -82,12 +82,12 @@ impl Decoder {
     /// Compile every message of `db`.
     pub fn new(db: Database) -> Self {
         let codecs = db.messages.iter().map(MessageCodec::new).collect();
-        let by_id = db
-            .messages
-            .iter()
-            .enumerate()
-            .map(|(i, m)| ((m.id, m.extended), i))
-            .collect();
+        // Two messages with one identifier: the first is the one, as the parser's diagnostic
+        // says.
+        let mut by_id = HashMap::new();
+        for (i, m) in db.messages.iter().enumerate() {
+            by_id.entry((m.id, m.extended)).or_insert(i);
+        }
         Decoder { db, codecs, by_id }
     }
 
@@ -163,5 +163,23 @@ impl Decoder {
             .unwrap_or_default();
         let fd = format.contains("FD") || message.size > 8;
         (fd, fd && !format.contains("NoBRS"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+    use super::*;
+    use bywire_core::Id;
+
+    #[test]
+    fn of_two_messages_with_one_identifier_the_first_decodes() {
+        let text = "BO_ 256 First: 1 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\nBO_ 256 Second: 1 X\n SG_ B : 0|8@1+ (1,0) [0|0] \"\" X\n";
+        let (db, diagnostics) = crate::parse_str(text, crate::Mode::Lenient).unwrap();
+        assert!(diagnostics[0].resolution.contains("lookups find the first"));
+        let decoder = Decoder::new(db);
+        let frame = Frame::classic(Id::standard(256).unwrap(), &[7]).unwrap();
+        assert_eq!(decoder.decode(&frame).unwrap().message.name, "First");
     }
 }

@@ -41,7 +41,9 @@ pub fn lint(db: &Database) -> Vec<Finding> {
         })
     };
     let (mut little, mut big) = (None, None);
-    for (i, m) in db.messages.iter().enumerate() {
+    // Names seen so far: a duplicate found in constant time (a search made lint quadratic).
+    let mut names = std::collections::HashSet::new();
+    for m in &db.messages {
         if m.name == crate::INDEPENDENT_SIGNALS {
             continue;
         }
@@ -59,7 +61,7 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                 ),
             );
         }
-        if db.messages.iter().take(i).any(|o| o.name == m.name) {
+        if !names.insert(m.name.as_str()) {
             push(
                 Severity::Error,
                 "duplicate-name",
