@@ -1138,6 +1138,40 @@ impl Parser<'_> {
                 used.push((s, bits));
             }
         }
+        let mut warnings: Vec<(Position, String, &str)> = Vec::new();
+        for m in &self.db.messages {
+            // Bounded by the message's signals (at most a few hundred).
+            for (j, s) in m.signals.iter().enumerate() {
+                if m.signals.iter().take(j).any(|o| o.name == s.name) {
+                    warnings.push((
+                        s.position,
+                        format!("signal {} is defined twice in message {}", s.name, m.name),
+                        "both kept; lookups by name find the first, and decoded output shows both under one name",
+                    ));
+                }
+            }
+        }
+        if self
+            .db
+            .messages
+            .iter()
+            .all(|m| m.name == INDEPENDENT_SIGNALS)
+        {
+            warnings.push((
+                Position { line: 1, column: 1 },
+                "the file defines no messages".to_string(),
+                "loaded; there is nothing to decode",
+            ));
+        }
+        for (at, message, resolution) in warnings {
+            self.diags.push(Diagnostic {
+                line: at.line,
+                column: at.column,
+                severity: Severity::Warning,
+                message,
+                resolution: resolution.into(),
+            });
+        }
         for (at, message) in found {
             self.diags.push(Diagnostic {
                 line: at.line,

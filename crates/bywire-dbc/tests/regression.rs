@@ -43,3 +43,34 @@ fn signal_without_receivers() {
 fn string_in_bit_timing_section() {
     round_trips("string_in_bit_timing_section.dbc");
 }
+
+/// A signal name used twice in one message, and a file without messages, loaded without a
+/// word: each is now a warning with its position.
+#[test]
+fn duplicate_signal_names_and_empty_files_are_warned_about() {
+    let text =
+        "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ S : 8|8@1+ (1,0) [0|0] \"\" X\n";
+    let (_, diagnostics) = parse_str(text, Mode::Lenient).unwrap();
+    let twice: Vec<_> = diagnostics
+        .iter()
+        .filter(|d| d.message.contains("signal S is defined twice in message M"))
+        .collect();
+    assert_eq!(twice.len(), 1, "{diagnostics:?}");
+    assert_eq!(
+        (twice[0].line, twice[0].severity),
+        (3, bywire_dbc::Severity::Warning)
+    );
+    let (_, diagnostics) = parse_str("VERSION \"\"\n\nBU_: A B\n", Mode::Lenient).unwrap();
+    assert!(
+        diagnostics
+            .iter()
+            .any(|d| d.message == "the file defines no messages" && d.line == 1),
+        "{diagnostics:?}"
+    );
+    let (_, diagnostics) = parse_str(
+        "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n",
+        Mode::Lenient,
+    )
+    .unwrap();
+    assert!(diagnostics.is_empty(), "{diagnostics:?}");
+}
