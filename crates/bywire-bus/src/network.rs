@@ -336,6 +336,8 @@ impl Network {
         for (i, node) in nodes.iter_mut().enumerate() {
             let due = match self.polled.get(i).copied().flatten() {
                 None => true,
+                // Polled before this instant and its deadline reached (one at or before the
+                // last poll, too: next_event moved it on by RESOLUTION).
                 Some(last) => {
                     last < now
                         && self
@@ -343,7 +345,7 @@ impl Network {
                             .get(i)
                             .copied()
                             .flatten()
-                            .is_some_and(|d| d <= now || d <= last)
+                            .is_some_and(|d| d <= now)
                 }
             };
             if !(due || self.received.get(i).copied().unwrap_or(false)) {

@@ -24,6 +24,17 @@ pub enum Line {
     },
 }
 
+impl Line {
+    /// What keeps the line from being read as text (`None` for text).
+    pub fn problem(&self) -> Option<String> {
+        match self {
+            Line::Text(_) => None,
+            Line::NotUtf8 { at } => Some(format!("not UTF-8 at byte {at}")),
+            Line::TooLong { bytes } => Some(format!("{bytes} bytes, longer than a line")),
+        }
+    }
+}
+
 /// Lines of `reader`, numbered from 1, each at most `max` bytes held.
 pub struct CappedLines<R> {
     reader: R,

@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 
 use core::time::Duration;
 
-use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, Swerve, WheelState};
+use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, WheelState};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
@@ -106,7 +106,8 @@ pub struct ActiveStep {
 pub struct Mission {
     params: MissionParams,
     follower: PurePursuit,
-    tank_wheels: Swerve<4>,
+    /// Each wheel's angle for a tank turn (constant: the tug's geometry).
+    tank_angles: [WheelState; 4],
     stop_index: usize,
     dwell_until: Option<Timestamp>,
     step: Option<ActiveStep>,
@@ -139,7 +140,10 @@ impl Mission {
                 },
                 max_steer: 35f64.to_radians(),
             },
-            tank_wheels: four_wheel(params.wheelbase, params.track),
+            tank_angles: four_wheel(params.wheelbase, params.track).inverse(
+                Motion::Tank { yaw_rate: 1.0 }.twist(),
+                &[WheelState::default(); 4],
+            ),
             params,
             stop_index: 0,
             dwell_until: None,
@@ -275,14 +279,10 @@ impl Mission {
         }
         // The wheels turn to their tank angles first (as the vehicle reports them), then the
         // tug rotates.
-        let tank = self.tank_wheels.inverse(
-            Motion::Tank { yaw_rate: 1.0 }.twist(),
-            &[WheelState::default(); 4],
-        );
         let aligned = angles.is_some_and(|angles| {
             angles
                 .iter()
-                .zip(&tank)
+                .zip(&self.tank_angles)
                 .all(|(a, t)| libm::fabs(a - t.angle.to_degrees()) < 3.0)
         });
         if !aligned {

@@ -364,7 +364,6 @@ pub struct Tug {
     chassis: Chassis,
     battery: Battery,
     rng: Rng,
-    route: Vec<Point>,
     params: TugParams,
     /// Frames on bus 1.
     pub bus1_log: Vec<Logged>,
@@ -402,10 +401,7 @@ impl Tug {
         };
         // Commands come on bus 1 and bus 1b: a copy lost for three cycles leaves the other bus
         // alone (degraded, reported); copies that disagree are a fault.
-        ecu_config.redundancy = Some(Redundancy {
-            timeout: ecu_config.cycle.saturating_mul(3),
-            skew: Duration::from_millis(5),
-        });
+        ecu_config.redundancy = Some(Redundancy::for_cycle(ecu_config.cycle));
         let chassis_params = ChassisParams {
             payload: params.payload,
             ..ChassisParams::default()
@@ -531,7 +527,6 @@ impl Tug {
             chassis: Chassis::new(chassis_params, start),
             battery: Battery::new(BatteryParams::default(), 0.8),
             rng: Rng::new(params.seed),
-            route: params.route.clone(),
             params,
             bus1_log: Vec::new(),
             bus2_log: Vec::new(),
@@ -704,7 +699,7 @@ impl Tug {
 
     /// The route, m.
     pub fn route(&self) -> &[Point] {
-        &self.route
+        &self.params.route
     }
 
     /// Faults active now.
@@ -921,7 +916,7 @@ impl Tug {
     fn sample(&mut self, now: Timestamp) {
         let pose = self.chassis.pose();
         if self.ads.engaged_at().is_some() && now.as_nanos().is_multiple_of(20_000_000) {
-            if let Some(path) = Path::new(&self.route) {
+            if let Some(path) = Path::new(&self.params.route) {
                 let error = path
                     .project(Point {
                         x: pose.x,

@@ -222,10 +222,9 @@ impl SimulatedVehicle<bywire_vehicle::wire::ProfileWire> {
     ) -> Self {
         let mut config = profile.supervisor_config();
         if redundant {
-            config.redundancy = Some(bywire_vehicle::supervisor::Redundancy {
-                timeout: config.cycle.saturating_mul(3),
-                skew: Duration::from_millis(5),
-            });
+            config.redundancy = Some(bywire_vehicle::supervisor::Redundancy::for_cycle(
+                config.cycle,
+            ));
         }
         let params = PlantParams {
             braking: profile.profile.limits.deceleration_m_s2,

@@ -324,7 +324,7 @@ impl VehicleControlEcu {
 
     /// The drives' stop and the plausibility check, then the eight setpoints from the
     /// actuators through the 4WS kinematics.
-    fn command_drives(&mut self, now: Timestamp, a: &Actuators) {
+    fn command_drives(&mut self, now: Timestamp, a: &Actuators, first_tracks: [f64; 4]) {
         let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).copied().find(|node| {
             matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
         });
@@ -332,7 +332,6 @@ impl VehicleControlEcu {
             self.drives_lost = stopped.is_some();
             self.push(now, EcuEvent::DrivesStopped(stopped));
         }
-        let first_tracks = self.first_tracks();
         if let Some(fault) = self.plausibility.check(now, first_tracks) {
             self.push(now, EcuEvent::SteeringFault(fault));
         }
@@ -400,15 +399,19 @@ impl VehicleControlEcu {
     }
 
     /// Every 20 ms: wheel speeds, wheel angles and status on bus 1.
-    fn report(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+    fn report(
+        &mut self,
+        now: Timestamp,
+        out: &mut dyn FnMut(Port, Frame),
+        angles: [f64; 4],
+        speeds: [f64; 4],
+    ) {
         if now < self.next_report {
             return;
         }
         self.next_report = now.saturating_add(REPORT_PERIOD);
         let counter = self.report_counter & 0x0F;
         self.report_counter = self.report_counter.wrapping_add(1);
-        let angles = self.first_tracks();
-        let speeds = self.wheel_speeds();
         let mut m = VehicleToAdsSensors::default();
         let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.0, 20.0));
         let _ = (
@@ -466,10 +469,9 @@ impl VehicleControlEcu {
 
     /// Feedback for the supervisor: the wheels' mean speed and the front-left angle, as the
     /// drives report them.
-    fn feed_back(&mut self) {
-        let speeds = self.wheel_speeds();
+    fn feed_back(&mut self, first_tracks: [f64; 4], speeds: [f64; 4]) {
         let mean = speeds.iter().map(|s| s / 4.0).sum::<f64>();
-        let angle = self.first_tracks().first().copied().unwrap_or(0.0);
+        let angle = first_tracks.first().copied().unwrap_or(0.0);
         self.supervisor.set_feedback(mean, angle);
     }
 }
@@ -499,11 +501,15 @@ impl Node for VehicleControlEcu {
         // The state frame goes on bus 1 only: the ADS reads it there.
         self.supervisor.poll(now, &mut |frame| out(BUS1, frame));
         let actuators = self.supervisor.actuators(now);
-        self.command_drives(now, &actuators);
+        // The drives' actual values change only with their frames: read once a poll (the
+        // speeds after the master's poll, which may stop a drive).
+        let first_tracks = self.first_tracks();
+        self.command_drives(now, &actuators, first_tracks);
         self.master.poll(now, &mut |frame| out(BUS2, frame));
         self.take_master_events(now);
-        self.feed_back();
-        self.report(now, out);
+        let speeds = self.wheel_speeds();
+        self.feed_back(first_tracks, speeds);
+        self.report(now, out, first_tracks, speeds);
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {

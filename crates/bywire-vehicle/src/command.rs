@@ -29,6 +29,18 @@ impl fmt::Display for UnknownName {
     }
 }
 
+/// What every vocabulary enum offers, for code generic over them (a profile's number maps).
+pub trait Vocabulary: Copy + PartialEq + 'static {
+    /// Every variant, in reference order.
+    const ALL: &'static [Self];
+    /// The name used in profiles and JSON.
+    fn name(self) -> &'static str;
+    /// The variant a profile names, exactly.
+    fn from_name(name: &str) -> Option<Self>;
+    /// The reference number.
+    fn raw(self) -> u64;
+}
+
 /// One vocabulary enum: its variants with names and reference numbers.
 macro_rules! vocabulary {
     (
@@ -71,6 +83,19 @@ macro_rules! vocabulary {
                     $($raw => Some($name::$variant),)+
                     _ => None,
                 }
+            }
+        }
+
+        impl Vocabulary for $name {
+            const ALL: &'static [Self] = $name::ALL;
+            fn name(self) -> &'static str {
+                $name::name(self)
+            }
+            fn from_name(name: &str) -> Option<Self> {
+                $name::from_name(name)
+            }
+            fn raw(self) -> u64 {
+                $name::raw(self)
             }
         }
 

@@ -67,6 +67,17 @@ pub struct Redundancy {
     pub skew: Duration,
 }
 
+impl Redundancy {
+    /// For commands every `cycle`: a bus is lost after three cycles without a copy, and the
+    /// two copies of one command arrive within 5 ms of each other.
+    pub fn for_cycle(cycle: Duration) -> Redundancy {
+        Redundancy {
+            timeout: cycle.saturating_mul(3),
+            skew: Duration::from_millis(5),
+        }
+    }
+}
+
 impl Default for SupervisorConfig {
     /// The reference tug's values.
     fn default() -> Self {
@@ -404,7 +415,7 @@ pub fn motor_rpm(velocity: f64, gear_ratio: f64, wheel_diameter: f64) -> f64 {
     }
 }
 
-/// The supervisor node, reading the reference tug's messages unless given another wire
+/// The supervisor node, reading a vehicle's messages through its wire
 /// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
 pub struct Supervisor<W: VehicleWire> {

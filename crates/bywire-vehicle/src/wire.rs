@@ -10,7 +10,7 @@ use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::{Database, Message};
 
-use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode};
+use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, Vocabulary};
 use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 
@@ -304,26 +304,6 @@ fn index_of(message: &Message, name: &str) -> Option<usize> {
 /// `[enums.ROLE]` table (the reference numbering where the profile has none).
 #[derive(Debug, Clone)]
 struct EnumMap<T: 'static>(Vec<(T, u64)>);
-
-/// What [`EnumMap`] needs of a vocabulary enum.
-trait Vocabulary: Copy + PartialEq + 'static {
-    const ALL: &'static [Self];
-    fn name(self) -> &'static str;
-    fn from_name(name: &str) -> Option<Self>;
-    fn raw(self) -> u64;
-}
-
-macro_rules! vocabulary_of {
-    ($($ty:ty),*) => {$(
-        impl Vocabulary for $ty {
-            const ALL: &'static [Self] = <$ty>::ALL;
-            fn name(self) -> &'static str { <$ty>::name(self) }
-            fn from_name(name: &str) -> Option<Self> { <$ty>::from_name(name) }
-            fn raw(self) -> u64 { <$ty>::raw(self) }
-        }
-    )*};
-}
-vocabulary_of!(Gear, ControlMode, SteeringMode);
 
 impl<T: Vocabulary> EnumMap<T> {
     fn new(profile: &LoadedProfile, role: &str) -> Result<EnumMap<T>, ProfileError> {

@@ -112,10 +112,7 @@ impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
         net.wire(2, Supervisor::<W>::PORT_B, b).unwrap();
         let cycle = vehicle.supervisor.cycle;
         let config = SupervisorConfig {
-            redundancy: Some(Redundancy {
-                timeout: cycle.saturating_mul(3),
-                skew: Duration::from_millis(5),
-            }),
+            redundancy: Some(Redundancy::for_cycle(cycle)),
             ..vehicle.supervisor
         };
         let ads = || Ads::with_wire(vehicle.ads, vehicle.wire.clone());

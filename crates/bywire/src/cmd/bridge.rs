@@ -185,16 +185,7 @@ impl Bridge<'_> {
         let text = match line {
             Line::Text(text) if text.trim().is_empty() => return,
             Line::Text(text) => text,
-            Line::NotUtf8 { at } => {
-                return self.refuse(now, number, &format!("not UTF-8 at byte {at}"))
-            }
-            Line::TooLong { bytes } => {
-                return self.refuse(
-                    now,
-                    number,
-                    &format!("{bytes} bytes, longer than a command"),
-                )
-            }
+            other => return self.refuse(now, number, &other.problem().unwrap_or_default()),
         };
         let parsed = serde_json::from_str::<CommandLine>(&text)
             .map_err(anyhow::Error::from)

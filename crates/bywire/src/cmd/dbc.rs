@@ -275,15 +275,6 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-/// What is wrong with a line that is not text.
-fn describe(line: &bywire_log::lines::Line) -> String {
-    match line {
-        bywire_log::lines::Line::Text(_) => "text".to_string(),
-        bywire_log::lines::Line::NotUtf8 { at } => format!("not UTF-8 at byte {at}"),
-        bywire_log::lines::Line::TooLong { bytes } => format!("{bytes} bytes, longer than a line"),
-    }
-}
-
 pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
     let choices = !args.no_decode_choices;
@@ -295,7 +286,10 @@ pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write)
         let line = match line {
             bywire_log::lines::Line::Text(text) => text,
             other => {
-                eprintln!("stdin:{number}: skipped: {}", describe(&other));
+                eprintln!(
+                    "stdin:{number}: skipped: {}",
+                    other.problem().unwrap_or_default()
+                );
                 continue;
             }
         };
