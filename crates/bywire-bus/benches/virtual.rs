@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use bywire_bus::virtual_bus::VirtualBus;
-use bywire_bus::{Bus, BusRx, BusTx};
+use bywire_bus::{BusRx, BusTx};
 use bywire_core::Frame;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 

@@ -218,6 +218,10 @@ impl<B: Bus> BusRx for FaultyBus<B> {
         flush(&mut self.inner, &mut self.outgoing)?;
         self.inner.recv(timeout)
     }
+
+    fn stats(&self) -> Stats {
+        self.inner.stats()
+    }
 }
 
 impl<B: Bus + 'static> Bus for FaultyBus<B> {
@@ -231,10 +235,6 @@ impl<B: Bus + 'static> Bus for FaultyBus<B> {
 
     fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
         self.inner.set_loopback(on)
-    }
-
-    fn stats(&self) -> Stats {
-        self.inner.stats()
     }
 
     fn status(&self) -> Result<Option<BusStatus>, BusError> {

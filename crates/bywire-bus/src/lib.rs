@@ -183,6 +183,8 @@ pub(crate) trait SharedEndpoint: Send + Sync + 'static {
     fn send(&self, frame: &Frame) -> Result<(), BusError>;
     /// As [`BusRx::recv`].
     fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError>;
+    /// As [`BusRx::stats`].
+    fn stats(&self) -> Stats;
 }
 
 /// One half of a split endpoint.
@@ -197,6 +199,10 @@ impl<E: SharedEndpoint> BusTx for Half<E> {
 impl<E: SharedEndpoint> BusRx for Half<E> {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.0.recv(timeout)
+    }
+
+    fn stats(&self) -> Stats {
+        self.0.stats()
     }
 }
 
@@ -220,6 +226,9 @@ pub trait BusTx: Send {
 pub trait BusRx: Send {
     /// The next frame, waiting up to `timeout` (`None`: wait forever); `Ok(None)` on timeout.
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError>;
+    /// The endpoint's counts (both halves of a split endpoint share them), so a receiver can
+    /// report what its queue dropped.
+    fn stats(&self) -> Stats;
 }
 
 /// One endpoint on a bus.
@@ -231,8 +240,6 @@ pub trait Bus: BusTx + BusRx {
     /// Deliver this endpoint's frames to the other endpoints of this host (on by default, as
     /// SocketCAN's `CAN_RAW_LOOPBACK`). Backends without local endpoints ignore it.
     fn set_loopback(&mut self, on: bool) -> Result<(), BusError>;
-    /// This endpoint's counts.
-    fn stats(&self) -> Stats;
     /// The controller's state and error counters, where the backend knows them.
     fn status(&self) -> Result<Option<BusStatus>, BusError> {
         Ok(None)

@@ -423,6 +423,9 @@ mod tests {
             std::thread::sleep(Duration::from_millis(1));
             Ok(None)
         }
+        fn stats(&self) -> crate::Stats {
+            crate::Stats::default()
+        }
     }
     impl Bus for Broken {
         fn set_filtering(&mut self, _: crate::Filtering) -> Result<(), BusError> {
@@ -433,9 +436,6 @@ mod tests {
         }
         fn set_loopback(&mut self, _: bool) -> Result<(), BusError> {
             Ok(())
-        }
-        fn stats(&self) -> crate::Stats {
-            crate::Stats::default()
         }
         fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn crate::BusRx>) {
             (Box::new(Broken), Box::new(Broken))

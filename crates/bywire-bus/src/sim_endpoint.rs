@@ -167,6 +167,13 @@ impl Drop for Member {
 }
 
 impl SharedEndpoint for Member {
+    fn stats(&self) -> Stats {
+        let state = self.shared.lock();
+        let mut stats = state.stats.get(&self.node).copied().unwrap_or_default();
+        stats.rx_dropped = state.bus.rx_dropped(self.node);
+        stats
+    }
+
     fn send(&self, frame: &Frame) -> Result<(), BusError> {
         if frame.is_error() {
             return Err(BusError::Unsupported("error frames".into()));
@@ -242,6 +249,10 @@ impl BusRx for SimEndpoint {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.member.recv(timeout)
     }
+
+    fn stats(&self) -> Stats {
+        SharedEndpoint::stats(self.member.as_ref())
+    }
 }
 
 impl Bus for SimEndpoint {
@@ -257,17 +268,6 @@ impl Bus for SimEndpoint {
     /// host's controller: there is no local delivery to switch off.
     fn set_loopback(&mut self, _on: bool) -> Result<(), BusError> {
         Ok(())
-    }
-
-    fn stats(&self) -> Stats {
-        let state = self.member.shared.lock();
-        let mut stats = state
-            .stats
-            .get(&self.member.node)
-            .copied()
-            .unwrap_or_default();
-        stats.rx_dropped = state.bus.rx_dropped(self.member.node);
-        stats
     }
 
     fn status(&self) -> Result<Option<BusStatus>, BusError> {

@@ -296,6 +296,10 @@ impl Slcan {
 }
 
 impl SharedEndpoint for Shared {
+    fn stats(&self) -> Stats {
+        *lock(&self.stats)
+    }
+
     fn send(&self, frame: &Frame) -> Result<(), BusError> {
         let line = format_frame(frame)
             .ok_or_else(|| BusError::Unsupported("error frames over SLCAN".into()))?;
@@ -368,6 +372,10 @@ impl BusRx for Slcan {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.shared.recv(timeout)
     }
+
+    fn stats(&self) -> Stats {
+        SharedEndpoint::stats(self.shared.as_ref())
+    }
 }
 
 impl Bus for Slcan {
@@ -388,10 +396,6 @@ impl Bus for Slcan {
 
     fn set_loopback(&mut self, _on: bool) -> Result<(), BusError> {
         Ok(())
-    }
-
-    fn stats(&self) -> Stats {
-        *lock(&self.shared.stats)
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {

@@ -272,6 +272,10 @@ fn unix_seconds() -> f64 {
 }
 
 impl SharedEndpoint for Shared {
+    fn stats(&self) -> Stats {
+        *lock(&self.stats)
+    }
+
     fn send(&self, frame: &Frame) -> Result<(), BusError> {
         let datagram = encode(frame, unix_seconds());
         self.sender.send_to(&datagram, self.group)?;
@@ -344,6 +348,10 @@ impl crate::BusRx for UdpMulticast {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.shared.recv(timeout)
     }
+
+    fn stats(&self) -> Stats {
+        SharedEndpoint::stats(self.shared.as_ref())
+    }
 }
 
 impl Bus for UdpMulticast {
@@ -369,10 +377,6 @@ impl Bus for UdpMulticast {
             }
         }
         Ok(())
-    }
-
-    fn stats(&self) -> Stats {
-        *lock(&self.shared.stats)
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn crate::BusRx>) {

@@ -132,6 +132,15 @@ impl VirtualBus {
 }
 
 impl SharedEndpoint for Membership {
+    fn stats(&self) -> Stats {
+        self.shared
+            .lock()
+            .endpoints
+            .get(&self.id)
+            .map(|e| e.stats)
+            .unwrap_or_default()
+    }
+
     fn send(&self, frame: &Frame) -> Result<(), BusError> {
         let mut state = self.shared.lock();
         let timestamp = crate::monotonic_unix_now();
@@ -205,6 +214,10 @@ impl BusRx for VirtualBus {
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.member.recv(timeout)
     }
+
+    fn stats(&self) -> Stats {
+        SharedEndpoint::stats(self.member.as_ref())
+    }
 }
 
 impl Bus for VirtualBus {
@@ -219,16 +232,6 @@ impl Bus for VirtualBus {
     fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
         self.member.loopback.store(on, Ordering::Relaxed);
         Ok(())
-    }
-
-    fn stats(&self) -> Stats {
-        self.member
-            .shared
-            .lock()
-            .endpoints
-            .get(&self.member.id)
-            .map(|e| e.stats)
-            .unwrap_or_default()
     }
 
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>) {

@@ -17,7 +17,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, SystemTime};
 
 use bywire_bus::socketcan::{self, LinkConfig, SocketCan};
-use bywire_bus::{open, Bus, ControllerState};
+use bywire_bus::{open, Bus, BusRx, ControllerState};
 use common::*;
 
 const IN_VM: &str = "BYWIRE_IN_CANVM";

@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use bywire_bus::socketcand::{self, ServerStats};
+use bywire_bus::socketcand::{self, Server};
 use bywire_bus::{open, runner, BusError};
 use bywire_canopen::cia402::{self, Drive};
 use bywire_canopen::device::Device;
@@ -33,23 +33,13 @@ use bywire_canopen::{Abort, Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
-/// A socketcand server for `virtual:NAME`; its port.
-fn server(name: &str) -> u16 {
+/// A socketcand server for `virtual:NAME` on a free port (it stops when dropped).
+fn server(name: &str) -> Server {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let port = listener.local_addr().unwrap().port();
     let spec = format!("virtual:{name}");
     let open_bus =
         Arc::new(move |_name: &str| open(&spec).map_err(|e| BusError::Unsupported(e.to_string())));
-    std::thread::spawn(move || {
-        socketcand::serve(
-            listener,
-            socketcand::Access::default(),
-            open_bus,
-            Arc::new(AtomicBool::new(false)),
-            Arc::new(ServerStats::default()),
-        )
-    });
-    port
+    Server::start(listener, socketcand::Config::default(), open_bus).unwrap()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -109,7 +99,8 @@ fn drive_dictionary(node: u8) -> bywire_canopen::od::ObjectDictionary {
 /// Run our drive on `virtual:NAME` while python runs `script`; the drive afterwards.
 fn with_our_drive(name: &str, script: &str) -> (Vec<String>, Device<Drive>) {
     const NODE: u8 = 2;
-    let port = server(name);
+    let served = server(name);
+    let port = served.local_addr().port();
     let dir = scratch(name);
     let eds_path = dir.join("drive.eds");
     let od = drive_dictionary(NODE);
@@ -302,7 +293,8 @@ impl Node for Scripted {
 fn our_master_reads_writes_and_commands_a_python_local_node() {
     const NODE: u8 = 5;
     let name = "py-slave";
-    let port = server(name);
+    let served = server(name);
+    let port = served.local_addr().port();
     let dir = scratch(name);
     // The slave's dictionary: ours, written as EDS, read by python-canopen.
     let mut od = bywire_canopen::od::ObjectDictionary::new();

@@ -466,6 +466,66 @@ b3.shutdown()
     );
 }
 
+/// `bywire sim --serve` with descriptors for only a few clients: a crowd of connections makes
+/// `accept` fail ("too many open files"); the server waits, counts it and goes on serving (it
+/// used to end, silently, while the run went on and exited 0).
+#[test]
+fn the_served_buses_outlive_a_crowd_that_exhausts_the_descriptors() {
+    use std::io::{BufRead, Read, Write};
+    use std::process::Stdio;
+    let dir = std::env::temp_dir().join(format!("bywire-sim-crowd-{}", std::process::id()));
+    let mut sim = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -n 48 && exec \"$BYWIRE\" sim --no-view --max-seconds 6 --serve 127.0.0.1:0 --out \"$OUT\"")
+        .env("BYWIRE", env!("CARGO_BIN_EXE_bywire"))
+        .env("OUT", &dir)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut sim_out = std::io::BufReader::new(sim.stdout.take().unwrap());
+    let mut first = String::new();
+    sim_out.read_line(&mut first).unwrap();
+    let address = first
+        .trim()
+        .strip_suffix(" (socketcand)")
+        .and_then(|l| l.rsplit(' ').next())
+        .unwrap()
+        .to_string();
+    let crowd: Vec<std::net::TcpStream> = (0..60)
+        .map(|_| std::net::TcpStream::connect(&address).unwrap())
+        .collect();
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    drop(crowd);
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    let stream = std::net::TcpStream::connect(&address).unwrap();
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(5)))
+        .unwrap();
+    (&stream).write_all(b"< open bus2 >< rawmode >").unwrap();
+    let mut text = String::new();
+    let mut chunk = [0u8; 4096];
+    while text.matches("< frame").count() < 20 {
+        let n = (&stream).read(&mut chunk).unwrap();
+        assert!(n > 0, "closed: {text}");
+        text.push_str(&String::from_utf8_lossy(&chunk[..n]));
+    }
+    drop(stream);
+    let mut rest = String::new();
+    sim_out.read_to_string(&mut rest).unwrap();
+    assert!(sim.wait().unwrap().success(), "{rest}");
+    let summary = rest
+        .lines()
+        .find(|l| l.starts_with("socketcand: "))
+        .unwrap_or_else(|| panic!("{rest}"));
+    let errors: u64 = summary
+        .rsplit("accept errors ")
+        .next()
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap();
+    assert!(errors > 0, "{summary}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The example scenario in the repository runs to its end with the reactions it describes: a
 /// late heartbeat stops the drives until the operator's reset, duplicated commands are
 /// refused, the stop at the crossing, crab onto the stand and the turn to face the hold.

@@ -746,7 +746,7 @@ print("after delete", b.recv(0.3))
     assert_eq!(
         lines[5],
         "replies < echo >< error unknown or malformed command 'bogus' >< error '12G' is not a hex ID >\
-         < error length 3 with 2 data bytes (0 to 8, and equal) >< error command too long >< echo >"
+         < error length 3 with 2 data bytes (0 to 8, and equal) >< error command too long (at most 256 bytes) >< echo >"
     );
     // 20 ms cyclic frames for one second, measured by their receive times.
     let cyclic: Vec<&str> = lines[6].split_whitespace().collect();
@@ -765,6 +765,163 @@ fn serve_refuses_remote_listening_without_asking() {
         "add --allow-remote",
     );
     fails_with(&["serve", "nosuch:x"], "", "unknown bus scheme");
+}
+
+/// `bywire serve` started by `shell` (a shell command line ending in the serve command); the
+/// child and the address it listens on.
+fn start_serve(shell: &str, env: &[(&str, &str)]) -> (std::process::Child, String) {
+    let mut server = Command::new("sh")
+        .args(["-c", shell])
+        .env("BYWIRE", env!("CARGO_BIN_EXE_bywire"))
+        .envs(env.iter().copied())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.stdout.as_mut().unwrap()),
+        &mut first,
+    )
+    .unwrap();
+    let address = first
+        .trim()
+        .strip_suffix(" (socketcand)")
+        .and_then(|l| l.rsplit(' ').next())
+        .unwrap_or_else(|| panic!("{first}"))
+        .to_string();
+    (server, address)
+}
+
+/// Interrupt `server` and return its exit status and what it printed after its first line.
+fn stop_serve(mut server: std::process::Child) -> (std::process::ExitStatus, String) {
+    let _ = Command::new("kill")
+        .args(["-INT", &server.id().to_string()])
+        .status();
+    let mut rest = String::new();
+    std::io::Read::read_to_string(server.stdout.as_mut().unwrap(), &mut rest).unwrap();
+    (server.wait().unwrap(), rest)
+}
+
+/// One socketcand message from `stream` ("" once the server closed it).
+fn message(stream: &mut std::io::BufReader<std::net::TcpStream>) -> String {
+    let mut got = Vec::new();
+    let _ = std::io::BufRead::read_until(stream, b'>', &mut got);
+    String::from_utf8_lossy(&got).trim().to_string()
+}
+
+fn connect(address: &str) -> (std::io::BufReader<std::net::TcpStream>, std::net::TcpStream) {
+    let stream = std::net::TcpStream::connect(address).unwrap();
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(5)))
+        .unwrap();
+    let writer = stream.try_clone().unwrap();
+    (std::io::BufReader::new(stream), writer)
+}
+
+#[test]
+fn serve_keeps_the_token_off_the_command_line_and_other_hosts_behind_one() {
+    use std::io::Write;
+    fails_with(
+        &["serve", "virtual:x", "--token", "s3cret-token"],
+        "",
+        "--token: a token on the command line is visible to every user of this host",
+    );
+    fails_with(
+        &[
+            "serve",
+            "virtual:x",
+            "--listen",
+            "0.0.0.0:0",
+            "--allow-remote",
+        ],
+        "",
+        "--allow-remote: other hosts may reach this server only with a token",
+    );
+    let dir = std::env::temp_dir().join(format!("bywire-serve-token-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let short = dir.join("short");
+    std::fs::write(&short, "abc\n").unwrap();
+    fails_with(
+        &[
+            "serve",
+            "virtual:x",
+            "--token-file",
+            short.to_str().unwrap(),
+        ],
+        "",
+        "at least 8 characters",
+    );
+    let (code, _, err) = bywire(&["serve", "virtual:x", "--max-clients", "0"], "");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--max-clients"), "{err}");
+    let good = dir.join("token");
+    std::fs::write(&good, "correct-horse\n").unwrap();
+    for (shell, env) in [
+        (
+            format!(
+                "exec \"$BYWIRE\" serve virtual:tok --listen 127.0.0.1:0 --token-file {}",
+                good.display()
+            ),
+            vec![],
+        ),
+        (
+            "exec \"$BYWIRE\" serve virtual:tok --listen 127.0.0.1:0".to_string(),
+            vec![("BYWIRE_SERVE_TOKEN", "correct-horse")],
+        ),
+    ] {
+        let (server, address) = start_serve(&shell, &env);
+        let (mut reader, mut writer) = connect(&address);
+        assert_eq!(message(&mut reader), "< hi >");
+        writer.write_all(b"< open tok >").unwrap();
+        assert_eq!(
+            message(&mut reader),
+            "< error authenticate first with: auth TOKEN >"
+        );
+        assert_eq!(message(&mut reader), "", "closed after the refusal");
+        let (mut reader, mut writer) = connect(&address);
+        assert_eq!(message(&mut reader), "< hi >");
+        writer
+            .write_all(b"< auth correct-horse >< open tok >")
+            .unwrap();
+        assert_eq!(message(&mut reader), "< ok >");
+        assert_eq!(message(&mut reader), "< ok >");
+        let (status, rest) = stop_serve(server);
+        assert!(status.success());
+        assert!(rest.contains("failed authentications 1"), "{rest}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// With descriptors for only a few clients, a crowd of connections makes `accept` fail with
+/// "too many open files": the server waits, counts it and goes on serving.
+#[test]
+fn serve_survives_running_out_of_descriptors() {
+    use std::io::Write;
+    let (server, address) = start_serve(
+        "ulimit -n 40 && exec \"$BYWIRE\" serve virtual:fds --listen 127.0.0.1:0",
+        &[],
+    );
+    let crowd: Vec<std::net::TcpStream> = (0..60)
+        .map(|_| std::net::TcpStream::connect(&address).unwrap())
+        .collect();
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    drop(crowd);
+    std::thread::sleep(std::time::Duration::from_millis(1000));
+    let (mut reader, mut writer) = connect(&address);
+    assert_eq!(message(&mut reader), "< hi >");
+    writer.write_all(b"< open fds >< echo >").unwrap();
+    assert_eq!(message(&mut reader), "< ok >");
+    assert_eq!(message(&mut reader), "< echo >");
+    drop((reader, writer));
+    let (status, rest) = stop_serve(server);
+    assert!(status.success(), "{rest}");
+    let errors: u64 = rest
+        .rsplit("accept errors ")
+        .next()
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{rest}"));
+    assert!(errors > 0, "{rest}");
 }
 
 #[test]

@@ -226,6 +226,10 @@ impl SharedEndpoint for Shared {
     fn recv(&self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         recv(self, timeout)
     }
+
+    fn stats(&self) -> Stats {
+        *Shared::stats(self)
+    }
 }
 
 impl BusTx for SocketCan {
@@ -240,6 +244,10 @@ impl BusRx for SocketCan {
     /// driver gives one.
     fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Received>, BusError> {
         self.shared.recv(timeout)
+    }
+
+    fn stats(&self) -> Stats {
+        *Shared::stats(&self.shared)
     }
 }
 
@@ -270,10 +278,6 @@ impl Bus for SocketCan {
 
     fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
         Ok(self.shared.socket.set_loopback(on)?)
-    }
-
-    fn stats(&self) -> Stats {
-        *self.shared.stats()
     }
 
     /// From netlink; `None` for interfaces without a controller (vcan).

@@ -3,25 +3,35 @@
 
 use std::io::Write;
 use std::net::{SocketAddr, TcpListener};
+use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
-use bywire_bus::socketcand::{self, ServerStats};
+use bywire_bus::socketcand::{self, Limits, Server};
 
-use crate::support::busarg;
+use crate::support::{busarg, numbers};
+
+/// The environment variable a token may come from (a command line is visible to every user of
+/// the host; the environment and a file are not).
+const TOKEN_VARIABLE: &str = "BYWIRE_SERVE_TOKEN";
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
   bywire serve virtual:test                    (a virtual bus other programs can join)
   bywire serve can0 --listen 127.0.0.1:29536
   python3 -c \"import can; b = can.Bus(interface='socketcand', host='127.0.0.1', port=29536, channel='test')\"
+  BYWIRE_SERVE_TOKEN=... bywire serve can0 --listen 0.0.0.0:29536 --allow-remote
 
 Each client gets its own endpoint on the bus and a bounded queue: a slow client loses frames
-(counted, shown when the server stops) and never stalls the bus or the other clients. Clients
-may open any bus name unless --name restricts them. Listening beyond this host needs
---allow-remote: the protocol has no authentication. The discovery beacon is off unless
---beacon is given.")]
+(counted, shown when the server stops) and never stalls the bus or the other clients. Every
+resource a client can spend is limited (connections, time to open a bus, cyclic jobs and their
+interval, subscriptions, time a client may stop reading); what a limit refuses is counted and
+shown when the server stops. Clients may open any bus name unless --name restricts them.
+Listening beyond this host needs --allow-remote and a token (--token-file or the
+BYWIRE_SERVE_TOKEN environment variable): plain socketcand has no authentication. The
+discovery beacon is off unless --beacon is given.")]
 pub struct Args {
     /// The bus to serve (a plain interface name means SocketCAN).
     bus: String,
@@ -31,12 +41,17 @@ pub struct Args {
     /// Bus names clients may open (any when none is given).
     #[arg(long = "name", value_name = "NAME")]
     names: Vec<String>,
-    /// Allow listening on an address other hosts can reach.
+    /// Allow listening on an address other hosts can reach (needs a token).
     #[arg(long)]
     allow_remote: bool,
-    /// Require clients to send `< auth TOKEN >` first (plain socketcand clients cannot; for
-    /// bywire clients and scripts on other hosts).
-    #[arg(long, value_name = "TOKEN")]
+    /// Require clients to send `< auth TOKEN >` first, the token read from the first line of
+    /// this file (or from BYWIRE_SERVE_TOKEN). Plain socketcand clients cannot; for bywire
+    /// clients and scripts on other hosts. A wrong token closes the connection; attempts are
+    /// paced to ten a second.
+    #[arg(long, value_name = "PATH")]
+    token_file: Option<PathBuf>,
+    /// Refused: a token on the command line is visible to every user of the host.
+    #[arg(long, value_name = "TOKEN", hide = true)]
     token: Option<String>,
     /// Send socketcand's discovery beacon every 3 s (to 255.255.255.255:42000 when listening
     /// beyond this host, else to 127.0.0.1:42000).
@@ -45,14 +60,80 @@ pub struct Args {
     /// Where to send the beacon instead.
     #[arg(long, value_name = "ADDR:PORT", requires = "beacon")]
     beacon_to: Option<SocketAddr>,
+    /// Clients served at once; more are told the server is full and closed.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u16).range(1..=4096))]
+    max_clients: u16,
+    /// Cyclic (BCM `add`) jobs per client.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u16).range(0..=4096))]
+    max_jobs_per_client: u16,
+    /// Cyclic jobs over all clients.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u16).range(0..=16384))]
+    max_jobs: u16,
+    /// The shortest interval of a cyclic job, in milliseconds.
+    #[arg(long, value_name = "MS", default_value = "1", value_parser = numbers::milliseconds)]
+    min_interval: f64,
+    /// Subscriptions and content filters per client.
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u16).range(0..=16384))]
+    max_subscriptions: u16,
+    /// Seconds a connection may take to open a bus before it is closed.
+    #[arg(long, value_name = "SECONDS", default_value = "10", value_parser = numbers::positive_seconds)]
+    handshake_timeout: f64,
+    /// Seconds a client may accept no data before it is closed.
+    #[arg(long, value_name = "SECONDS", default_value = "10", value_parser = numbers::positive_seconds)]
+    write_timeout: f64,
+}
+
+impl Args {
+    fn limits(&self) -> Limits {
+        Limits {
+            max_clients: self.max_clients.into(),
+            jobs_per_client: self.max_jobs_per_client.into(),
+            jobs_total: self.max_jobs.into(),
+            min_interval: Duration::from_secs_f64(self.min_interval / 1e3),
+            subscriptions_per_client: self.max_subscriptions.into(),
+            handshake_timeout: Duration::from_secs_f64(self.handshake_timeout),
+            write_timeout: Duration::from_secs_f64(self.write_timeout),
+        }
+    }
+
+    /// The token from --token-file or the environment; `None` for an open server.
+    fn token(&self) -> Result<Option<String>> {
+        if self.token.is_some() {
+            return Err(anyhow!(
+                "--token: a token on the command line is visible to every user of this host; put it in a file (--token-file PATH) or in {TOKEN_VARIABLE}"
+            ));
+        }
+        let token = match &self.token_file {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("--token-file {}", path.display()))?;
+                Some(text.lines().next().unwrap_or("").trim().to_string())
+            }
+            None => std::env::var(TOKEN_VARIABLE).ok(),
+        };
+        match token {
+            Some(token) if token.chars().count() < 8 || token.contains(char::is_whitespace) => Err(
+                anyhow!("the token must be at least 8 characters, without spaces"),
+            ),
+            other => Ok(other),
+        }
+    }
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    if !args.listen.ip().is_loopback() && !args.allow_remote {
-        return Err(anyhow!(
-            "--listen {}: not a loopback address; socketcand has no authentication, so add --allow-remote to serve other hosts",
-            args.listen
-        ));
+    let token = args.token()?;
+    if !args.listen.ip().is_loopback() {
+        if !args.allow_remote {
+            return Err(anyhow!(
+                "--listen {}: not a loopback address; socketcand has no authentication, so add --allow-remote and a token to serve other hosts",
+                args.listen
+            ));
+        }
+        if token.is_none() {
+            return Err(anyhow!(
+                "--allow-remote: other hosts may reach this server only with a token (--token-file PATH or {TOKEN_VARIABLE})"
+            ));
+        }
     }
     let spec = busarg::full_spec(&args.bus);
     // Open once now, so a bad spec fails before anyone connects; the endpoint keeps an
@@ -60,14 +141,25 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let keep = busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
     let listener = TcpListener::bind(args.listen)
         .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let open_spec = spec.clone();
+    let open = Arc::new(move |_name: &str| {
+        bywire_bus::open(&open_spec).map_err(|e| bywire_bus::BusError::Unsupported(e.to_string()))
+    });
+    let config = socketcand::Config {
+        access: socketcand::Access {
+            names: args.names.clone(),
+            token,
+        },
+        limits: args.limits(),
+    };
+    let mut server = Server::start(listener, config, open).context("cannot start the server")?;
     writeln!(
         out,
         "serving {spec} on {} (socketcand)",
-        listener.local_addr()?
+        server.local_addr()
     )?;
     out.flush()?;
-    let stop = crate::interrupt_flag();
-    let beacon = if args.beacon {
+    if args.beacon {
         let to = args.beacon_to.unwrap_or_else(|| {
             let host = if args.listen.ip().is_loopback() {
                 "127.0.0.1:42000"
@@ -82,39 +174,37 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         } else {
             args.names.clone()
         };
-        let xml = socketcand::beacon_xml(listener.local_addr()?, &buses, "bywire serve");
-        Some(
-            socketcand::spawn_beacon(xml, to, Arc::clone(&stop))
-                .context("cannot send the beacon")?,
-        )
-    } else {
-        None
-    };
-    let stats = Arc::new(ServerStats::default());
-    let open_spec = spec.clone();
-    let open = Arc::new(move |_name: &str| {
-        bywire_bus::open(&open_spec).map_err(|e| bywire_bus::BusError::Unsupported(e.to_string()))
-    });
-    socketcand::serve(
-        listener,
-        socketcand::Access {
-            names: args.names.clone(),
-            token: args.token.clone(),
-        },
-        open,
-        Arc::clone(&stop),
-        Arc::clone(&stats),
-    )?;
-    if let Some(beacon) = beacon {
-        let _ = beacon.join();
+        let xml = socketcand::beacon_xml(server.local_addr(), &buses, "bywire serve");
+        server
+            .start_beacon(xml, to)
+            .context("cannot send the beacon")?;
     }
+    let stop = crate::interrupt_flag();
+    while !stop.load(Ordering::Relaxed) && server.is_running() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let ended = server.stop();
     drop(keep);
-    writeln!(
-        out,
-        "clients {}, frames dropped for slow clients {}, malformed commands {}",
-        stats.clients.load(Ordering::Relaxed),
-        stats.dropped.load(Ordering::Relaxed),
-        stats.errors.load(Ordering::Relaxed)
-    )?;
-    Ok(())
+    writeln!(out, "{}", server.stats().summary())?;
+    ended.context("the server stopped")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn the_options_default_to_the_servers_limits() {
+        let cli = Cli::try_parse_from(["serve", "virtual:x"]).unwrap();
+        assert_eq!(cli.args.limits(), Limits::default());
+        assert!(Cli::try_parse_from(["serve", "virtual:x", "--max-clients", "0"]).is_err());
+        assert!(Cli::try_parse_from(["serve", "virtual:x", "--min-interval", "-1"]).is_err());
+    }
 }

@@ -133,6 +133,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         std::fs::write(tmp, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("{}", path.display()))
     })?;
+    if let Some(summary) = shared.summary() {
+        writeln!(out, "socketcand: {summary}")?;
+    }
     let (tracking, load) = (report.tracking_error_m, report.bus_load);
     writeln!(out, "{} after {:.1} s: tracking error max {:.2} m, mean {:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, report.sim_seconds, tracking.max, tracking.mean, load.bus1 * 100.0, load.bus2 * 100.0, load.bus3 * 100.0, args.out.display())?;
@@ -155,7 +158,7 @@ fn run_plain(
     let completed = loop {
         scenario.step(tug);
         let now = tug.now();
-        shared.exchange(tug);
+        shared.exchange(tug)?;
         if tug.arrived() {
             break true;
         }

@@ -6,14 +6,12 @@
 //! frames between the two after every step.
 
 use std::net::{SocketAddr, TcpListener};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::sim::NodeId;
-use bywire_bus::socketcand::{self, Access, ServerStats};
+use bywire_bus::socketcand::{self, Access, Config, Server};
 use bywire_bus::virtual_bus::VirtualBus;
 use bywire_bus::{Bus, BusError, BusRx, BusTx};
 use bywire_sim::tug::{Tug, TugBus};
@@ -24,25 +22,6 @@ struct Link {
     port: NodeId,
     tx: Box<dyn BusTx>,
     rx: Box<dyn BusRx>,
-}
-
-/// The socketcand server's threads; stopped when dropped.
-struct Server {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<std::io::Result<()>>>,
-    beacon: Option<JoinHandle<()>>,
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
-        if let Some(beacon) = self.beacon.take() {
-            let _ = beacon.join();
-        }
-    }
 }
 
 /// The links of a run and the server, if it serves.
@@ -95,40 +74,37 @@ impl Shared {
             Ok(Box::new(VirtualBus::join(&format!("{prefix}-{name}"))))
         });
         let names: Vec<String> = TugBus::ALL.iter().map(|b| b.name().to_string()).collect();
-        let stop = Arc::new(AtomicBool::new(false));
-        let beacon = match beacon {
-            Some(to) => Some(
-                socketcand::spawn_beacon(
-                    socketcand::beacon_xml(address, &names, "bywire sim"),
-                    to,
-                    Arc::clone(&stop),
-                )
-                .context("--beacon: cannot send the beacon")?,
-            ),
-            None => None,
+        let config = Config {
+            access: Access {
+                names: names.clone(),
+                token: None,
+            },
+            ..Config::default()
         };
-        let access = Access { names, token: None };
-        let server_stop = Arc::clone(&stop);
-        let server = std::thread::spawn(move || {
-            socketcand::serve(
-                listener,
-                access,
-                open,
-                server_stop,
-                Arc::new(ServerStats::default()),
-            )
-        });
-        self.server = Some(Server {
-            stop,
-            thread: Some(server),
-            beacon,
-        });
+        let mut server =
+            Server::start(listener, config, open).context("--serve: cannot start the server")?;
+        if let Some(to) = beacon {
+            server
+                .start_beacon(socketcand::beacon_xml(address, &names, "bywire sim"), to)
+                .context("--beacon: cannot send the beacon")?;
+        }
+        self.server = Some(server);
         Ok(address)
     }
 
     /// Carry frames both ways: what the simulated buses carried out to the endpoints, what the
     /// endpoints received onto the simulated buses. Bounded by what arrived since the last call.
-    pub fn exchange(&mut self, tug: &mut Tug) {
+    /// An error when the server stopped serving (the run must not go on as if it served).
+    pub fn exchange(&mut self, tug: &mut Tug) -> Result<()> {
+        if let Some(server) = &mut self.server {
+            if !server.is_running() {
+                let why = server
+                    .stop()
+                    .err()
+                    .map_or("ended".into(), |e| e.to_string());
+                return Err(anyhow!("--serve: the socketcand server stopped: {why}"));
+            }
+        }
         for link in &mut self.links {
             while let Some((_, frame)) = tug.receive(link.bus, link.port) {
                 // An endpoint that cannot keep up loses frames (its queue is bounded).
@@ -138,5 +114,11 @@ impl Shared {
                 tug.send(link.bus, link.port, received.frame);
             }
         }
+        Ok(())
+    }
+
+    /// The server's counts, for the end of the run.
+    pub fn summary(&self) -> Option<String> {
+        self.server.as_ref().map(|s| s.stats().summary())
     }
 }

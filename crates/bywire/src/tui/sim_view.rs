@@ -58,7 +58,7 @@ fn event_loop(
         if !paused {
             for _ in 0..elapsed.as_millis().min(200) {
                 scenario.step(tug);
-                shared.exchange(tug);
+                shared.exchange(tug)?;
             }
         }
         if tug.arrived() {
