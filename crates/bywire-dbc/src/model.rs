@@ -456,3 +456,14 @@ impl Database {
         })
     }
 }
+
+#[cfg(test)]
+mod json_precision {
+    #[test]
+    fn floats_survive_json() {
+        let text = serde_json::to_string(&super::Num::Float(0.39215686274509803)).unwrap();
+        let back: super::Num = serde_json::from_str(&text).unwrap();
+        assert_eq!(text, "0.39215686274509803");
+        assert_eq!(back, super::Num::Float(0.39215686274509803));
+    }
+}

@@ -279,11 +279,14 @@ impl Parser<'_> {
             Tok::Number(n) => {
                 let n = n.clone();
                 self.pos += 1;
-                if n.starts_with('.') || n.starts_with("-.") || n.starts_with("+.") {
+                if let Some((sign, fraction)) = ["", "-", "+"]
+                    .iter()
+                    .find_map(|sign| Some((*sign, n.strip_prefix(sign)?.strip_prefix('.')?)))
+                {
                     self.warn(
                         &t,
                         format!("number '{n}' has no digit before the point"),
-                        "read as 0{n}",
+                        &format!("read as {}0.{fraction}", sign.trim_start_matches('+')),
                     );
                 }
                 parse_num(&n).ok_or_else(|| {
@@ -425,7 +428,14 @@ impl Parser<'_> {
             }
             "BU_" => {
                 self.eat_punct(':');
-                while self.peek().is_some_and(|t| !t.line_start) {
+                // Names on the line, and on indented lines after it (some files list one node
+                // a line); a keyword, or a word at the start of a line, begins the next statement.
+                let continues = |t: &Token| {
+                    !t.line_start
+                        || (t.col > 1
+                            && matches!(&t.tok, Tok::Ident { text, .. } if !KEYWORDS.contains(&text.as_str())))
+                };
+                while self.peek().is_some_and(continues) {
                     let name = self.name()?;
                     self.db.nodes.push(Node {
                         name,

@@ -74,3 +74,37 @@ fn duplicate_signal_names_and_empty_files_are_warned_about() {
     .unwrap();
     assert!(diagnostics.is_empty(), "{diagnostics:?}");
 }
+
+/// Found on a real file (opendbc's Tesla powertrain): `BU_:` with one node a line, indented,
+/// read as unknown statements, so the nodes were missing and the written file was one
+/// cantools rejects. A word at the start of a line still begins a statement.
+#[test]
+fn nodes_listed_one_a_line() {
+    let text = "VERSION \"\"\n\nBU_:\n\tNEO\n\tMCU GTW\nVENDOR_THING 1;\nBO_ 1 M: 8 NEO\n";
+    let (db, diagnostics) = parse_str(text, Mode::Lenient).unwrap();
+    let nodes: Vec<&str> = db.nodes.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(nodes, ["NEO", "MCU", "GTW"]);
+    assert!(
+        diagnostics
+            .iter()
+            .any(|d| d.message.contains("unknown statement 'VENDOR_THING'")),
+        "{diagnostics:?}"
+    );
+    let (again, _) = parse_str(&write(&db), Mode::Lenient).unwrap();
+    assert_eq!(again, db);
+}
+
+/// A number without a digit before its point is read and the warning says as what (it used to
+/// print the placeholder "read as 0{n}").
+#[test]
+fn a_number_without_a_leading_digit_says_what_it_was_read_as() {
+    let text = "BU_: A\nBO_ 1 M: 8 A\n SG_ S : 0|8@1+ (.25,-.5) [0|1] \"\" A\n";
+    let (db, diagnostics) = parse_str(text, Mode::Lenient).unwrap();
+    let signal = &db.messages[0].signals[0];
+    assert_eq!(
+        (signal.factor.as_f64(), signal.offset.as_f64()),
+        (0.25, -0.5)
+    );
+    let resolutions: Vec<&str> = diagnostics.iter().map(|d| d.resolution.as_str()).collect();
+    assert_eq!(resolutions, ["read as 0.25", "read as -0.5"]);
+}

@@ -176,6 +176,21 @@ fn convert_dbc_to_json_and_back() {
     let (_, from_original, _) = run(&["dbc", "dump", &corpus(MOTOHAWK)], "");
     let (_, from_converted, _) = run(&["dbc", "dump", dbc.to_str().unwrap()], "");
     assert_eq!(from_original, from_converted);
+    // Through JSON and back, a file's numbers are exactly what they were: 0.39215686274509803
+    // (1/2.55) in VW's MLB file once came back as 0.392156862745098.
+    let vw = corpus("opendbc/opendbc__dbc__vw_mlb.dbc");
+    let direct = dir.join("direct.dbc");
+    for (from, to) in [
+        (vw.as_str(), json.to_str().unwrap()),
+        (json.to_str().unwrap(), dbc.to_str().unwrap()),
+        (vw.as_str(), direct.to_str().unwrap()),
+    ] {
+        let (code, _, err) = run(&["dbc", "convert", from, to], "");
+        assert_eq!(code, 0, "{err}");
+    }
+    let through_json = std::fs::read_to_string(&dbc).unwrap();
+    assert!(through_json.contains("(0.39215686274509803,0)"));
+    assert_eq!(through_json, std::fs::read_to_string(&direct).unwrap());
     // A bad output name fails without leaving a file.
     let (code, _, err) = run(
         &[

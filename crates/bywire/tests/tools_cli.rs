@@ -486,6 +486,30 @@ fn plot_writes_png_and_svg_and_nothing_on_errors() {
             && text.contains("Motor.Current [A]")
     );
     assert!(text.contains("time [s]"));
+    // Lines that cannot be read are reported with their numbers and skipped, not silently.
+    let mut dirty = log.clone().into_bytes();
+    dirty.extend_from_slice(b"(1010.000000) can0 123#GG\n(1010.1) can0 123#\xff\xfe\n");
+    dirty.extend(std::iter::repeat_n(b'x', 70_000));
+    dirty.extend_from_slice(b"\nnot a log line\n(1011.000000) can0 123#0100E803\n");
+    let dirty_log = dir.join("dirty.log");
+    std::fs::write(&dirty_log, &dirty).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["plot", dbc, "Motor.Rpm", "-o", png.to_str().unwrap(), "-I"])
+        .arg(&dirty_log)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let name = dirty_log.display().to_string();
+    for (line, what) in [(201, "hex digit"), (202, "UTF-8"), (203, "longer")] {
+        assert!(
+            err.lines()
+                .any(|l| l.starts_with(&format!("{name}: line {line}")) && l.contains(what)),
+            "line {line} ({what}): {err}"
+        );
+    }
+    assert_eq!(err.lines().count(), 3, "{err}");
+    std::fs::remove_file(&dirty_log).unwrap();
     // Errors name the problem and leave no file, not even a temporary one.
     let bad = dir.join("bad.png");
     let b = bad.to_str().unwrap();

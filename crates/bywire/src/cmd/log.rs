@@ -2,16 +2,16 @@
 //! them — checking every line.
 
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{self, BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::Result;
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
-use bywire_log::{FrameView, LogError, LogErrorKind, Precision, Reader, View};
+use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
+use crate::support::logs::{inputs, records, Skip};
 
 #[derive(clap::Subcommand)]
 pub enum LogCommand {
@@ -43,25 +43,6 @@ Every line is checked; a malformed one is an error naming its file, line and col
         /// Log files (standard input when none).
         files: Vec<PathBuf>,
     },
-}
-
-fn inputs(files: &[PathBuf]) -> Result<Vec<(String, Box<dyn BufRead>)>> {
-    if files.is_empty() {
-        return Ok(vec![(
-            "standard input".into(),
-            Box::new(BufReader::new(io::stdin())),
-        )]);
-    }
-    files
-        .iter()
-        .map(|p| {
-            let file = File::open(p).with_context(|| format!("cannot open {}", p.display()))?;
-            Ok((
-                p.display().to_string(),
-                Box::new(BufReader::new(file)) as Box<dyn BufRead>,
-            ))
-        })
-        .collect()
 }
 
 pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
@@ -98,7 +79,7 @@ fn cat(
     };
     let mut view = View::default();
     for (name, input) in inputs(files)? {
-        for record in records(&name, input) {
+        for record in records(&name, input, Skip::Unreadable) {
             let record = record?;
             if filtering.is_some_and(|f| !f.accepts(&record.frame)) {
                 continue;
@@ -137,26 +118,6 @@ struct IdStats {
     last: u64,
 }
 
-/// The log's records; a line that cannot be read as text at all (longer than any log line, not
-/// UTF-8) is reported with its number and skipped, a malformed log line is an error.
-fn records<'a>(
-    name: &'a str,
-    input: Box<dyn BufRead>,
-) -> impl Iterator<Item = Result<bywire_log::LogRecord>> + 'a {
-    Reader::new(input).filter_map(move |record| match record {
-        Err(
-            e @ LogError::Syntax {
-                kind: LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8,
-                ..
-            },
-        ) => {
-            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
-            None
-        }
-        other => Some(other.map_err(|e| anyhow!("{name}: {e}"))),
-    })
-}
-
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut frames = 0u64;
     let (mut first, mut last) = (u64::MAX, 0u64);
@@ -164,7 +125,7 @@ fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut ids: BTreeMap<(String, u32), IdStats> = BTreeMap::new();
     let (mut fd, mut errors, mut remote) = (0u64, 0u64, 0u64);
     for (name, input) in inputs(files)? {
-        for record in records(&name, input) {
+        for record in records(&name, input, Skip::Unreadable) {
             let record = record?;
             let t = record.timestamp.as_nanos();
             frames += 1;

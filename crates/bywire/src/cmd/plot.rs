@@ -3,16 +3,15 @@
 
 use crate::plot::{draw, Series};
 use crate::support::files::write_atomically;
-use std::fs::File;
-use std::io::{self, BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use bywire_core::{Frame, Timestamp};
 use plotters::prelude::*;
 
 use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::logs;
 use crate::support::signals::Dbc;
 
 /// The font text is drawn with (DejaVu Sans, see assets/DejaVuSans-LICENSE.txt): embedded so
@@ -138,21 +137,13 @@ pub fn run(args: &Args) -> Result<()> {
     })
 }
 
-/// Timestamped frames of a candump log; lines that are not log lines are skipped.
+/// Timestamped frames of a candump log; lines that are not log lines, or not readable, are
+/// skipped, each reported with its line.
 fn read_log(path: Option<&Path>) -> Result<Vec<(Timestamp, Frame)>> {
-    let input: Box<dyn BufRead> = match path {
-        Some(p) => Box::new(BufReader::new(
-            File::open(p).with_context(|| format!("cannot open {}", p.display()))?,
-        )),
-        None => Box::new(BufReader::new(io::stdin())),
-    };
-    let mut frames = Vec::new();
-    for line in input.lines() {
-        if let Ok(record) = bywire_log::candump::parse_line(&line?) {
-            frames.push((record.timestamp, record.frame));
-        }
-    }
-    Ok(frames)
+    let (name, input) = logs::input(path)?;
+    logs::records(&name, input, logs::Skip::AnyBadLine)
+        .map(|record| record.map(|r| (r.timestamp, r.frame)))
+        .collect()
 }
 
 fn capture(buses: &[String], seconds: f64) -> Result<Vec<(Timestamp, Frame)>> {

@@ -4,6 +4,7 @@
 pub mod busarg;
 pub mod dbc;
 pub mod files;
+pub mod logs;
 pub mod numbers;
 pub mod signals;
 pub mod sim_serve;

@@ -1,0 +1,68 @@
+//! candump logs as the commands read them: files or standard input, every line checked, and
+//! what cannot be read reported on standard error with its file and line.
+
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, Context, Result};
+use bywire_log::{LogError, LogErrorKind, LogRecord, Reader};
+
+/// The files to read, each with the name its messages use (standard input when none).
+pub fn inputs(files: &[PathBuf]) -> Result<Vec<(String, Box<dyn BufRead>)>> {
+    if files.is_empty() {
+        return Ok(vec![input(None)?]);
+    }
+    files.iter().map(|p| input(Some(p))).collect()
+}
+
+/// One file (or standard input) with its name.
+pub fn input(path: Option<&Path>) -> Result<(String, Box<dyn BufRead>)> {
+    match path {
+        None => Ok((
+            "standard input".into(),
+            Box::new(BufReader::new(io::stdin())),
+        )),
+        Some(p) => {
+            let file = File::open(p).with_context(|| format!("cannot open {}", p.display()))?;
+            Ok((p.display().to_string(), Box::new(BufReader::new(file))))
+        }
+    }
+}
+
+/// Which bad lines are skipped (with a warning) rather than ending the read.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Skip {
+    /// Lines that cannot be text: too long, not UTF-8. A malformed log line is an error.
+    Unreadable,
+    /// Every bad line, and lines that are not log lines at all (a plot of what can be read).
+    AnyBadLine,
+}
+
+/// The records of `input` (called `name` in messages); skipped lines are reported.
+pub fn records<'a>(
+    name: &'a str,
+    input: Box<dyn BufRead>,
+    skip: Skip,
+) -> impl Iterator<Item = Result<LogRecord>> + 'a {
+    let reader = match skip {
+        Skip::Unreadable => Reader::new(input),
+        Skip::AnyBadLine => Reader::new(input).log_lines_only(),
+    };
+    reader.filter_map(move |record| match record {
+        Err(e @ LogError::Syntax { .. }) if skip == Skip::AnyBadLine => {
+            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
+            None
+        }
+        Err(
+            e @ LogError::Syntax {
+                kind: LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8,
+                ..
+            },
+        ) => {
+            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
+            None
+        }
+        other => Some(other.map_err(|e| anyhow!("{name}: {e}"))),
+    })
+}
