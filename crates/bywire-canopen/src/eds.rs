@@ -236,6 +236,30 @@ fn number(text: &str, node_id: Option<u8>) -> Result<i128, String> {
     Ok(if negative { -value } else { value })
 }
 
+/// Read an EDS or DCF file's bytes: UTF-8, or Windows-1252 (Latin-1) as many vendors' tools
+/// write them — said in a warning. Otherwise as [`parse`].
+pub fn parse_bytes(bytes: &[u8], node_id: Option<u8>) -> Result<Eds, EdsError> {
+    match core::str::from_utf8(bytes) {
+        Ok(text) => parse(text, node_id),
+        Err(e) => {
+            let text: String = bywire_core::text::cp1252_chars(bytes).collect();
+            let mut eds = parse(&text, node_id)?;
+            let line = bytes.get(..e.valid_up_to()).map_or(0, |before| {
+                before.iter().filter(|&&b| b == b'\n').count() + 1
+            });
+            eds.diagnostics.insert(
+                0,
+                Diagnostic {
+                    line,
+                    severity: Severity::Warning,
+                    message: "not UTF-8: read as Windows-1252 (Latin-1)".into(),
+                },
+            );
+            Ok(eds)
+        }
+    }
+}
+
 /// Read an EDS or DCF file. `node_id` resolves `$NODEID` (a DCF's own node ID is used when it
 /// is `None`). Objects that cannot be read are left out with an error diagnostic; the result
 /// is an error only when the file has no object at all.

@@ -20,6 +20,7 @@
 //! - [`confinement`]: the ISO 11898-1 error counters and bus-off as a pure state machine;
 //! - [`busload`]: bus load from timestamped frames, and predicted load of periodic messages;
 //! - [`e2e`]: rolling counters, checksums and AUTOSAR E2E profiles 1 and 2;
+//! - [`text`]: Windows-1252 text, as legacy DBC and EDS files are written;
 //! - [`time`]: [`Timestamp`], the only notion of time here, always passed in.
 //!
 //! ```
@@ -41,6 +42,7 @@ pub mod e2e;
 pub mod filter;
 pub mod frame;
 pub mod node;
+pub mod text;
 pub mod time;
 pub mod wire;
 

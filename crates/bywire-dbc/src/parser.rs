@@ -65,7 +65,7 @@ pub struct ParseError(pub Diagnostic);
 pub fn parse(bytes: &[u8], mode: Mode) -> Result<(Database, Vec<Diagnostic>), ParseError> {
     let text = match std::str::from_utf8(bytes) {
         Ok(t) => std::borrow::Cow::Borrowed(t),
-        Err(_) => std::borrow::Cow::Owned(cp1252(bytes)),
+        Err(_) => std::borrow::Cow::Owned(bywire_core::text::cp1252_chars(bytes).collect()),
     };
     parse_str(&text, mode)
 }
@@ -90,22 +90,6 @@ pub fn parse_str(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>), 
         }
     }
     Ok((p.db, p.diags))
-}
-
-/// Windows-1252 to text: Latin-1 with typographic characters in 0x80..0x9F.
-fn cp1252(bytes: &[u8]) -> String {
-    const HIGH: [char; 32] = [
-        '€', '\u{81}', '‚', 'ƒ', '„', '…', '†', '‡', 'ˆ', '‰', 'Š', '‹', 'Œ', '\u{8D}', 'Ž',
-        '\u{8F}', '\u{90}', '‘', '’', '“', '”', '•', '–', '—', '˜', '™', 'š', '›', 'œ', '\u{9D}',
-        'ž', 'Ÿ',
-    ];
-    bytes
-        .iter()
-        .map(|&b| match b {
-            0x80..=0x9F => HIGH.get(usize::from(b - 0x80)).copied().unwrap_or('?'),
-            _ => char::from(b),
-        })
-        .collect()
 }
 
 type ValueDescriptions = Vec<(i128, String)>;

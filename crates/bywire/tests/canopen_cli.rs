@@ -325,4 +325,32 @@ fn eds_check_names_lines_and_fails_on_errors() {
         "{stdout}"
     );
     assert!(stderr.contains("objects were left out"), "{stderr}");
+    // A device is not started from a file the check refuses.
+    let (success, _, stderr) = bywire(&[
+        "canopen",
+        "node",
+        "virtual:eds-refused",
+        "--node",
+        "3",
+        "--eds",
+        path.to_str().unwrap(),
+        "--duration",
+        "0.5",
+    ]);
+    assert!(!success);
+    assert!(stderr.contains("objects were left out"), "{stderr}");
+    // Vendors' tools often write Latin-1: read, and said.
+    let latin = dir.join("latin.eds");
+    std::fs::write(&latin, b"[DeviceInfo]\nVendorName=M\xfcller Antriebe\nProductName=Motor 5\xb0\n[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=ro\n").unwrap();
+    let (success, stdout, stderr) = bywire(&["canopen", "eds", latin.to_str().unwrap()]);
+    assert!(success, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("latin.eds: line 2: warning: not UTF-8: read as Windows-1252 (Latin-1)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("latin.eds: Müller Antriebe Motor 5°: 1 objects"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -292,3 +292,27 @@ fn value_descriptions_match_the_raw_value_as_cantools_does() {
         "raw 31: {ours}"
     );
 }
+
+/// A signal name used twice in one message: a warning with its position when the DBC loads,
+/// and both values in the output (text and JSON; JSON names the second `NAME#2`).
+#[test]
+fn a_signal_name_used_twice_keeps_both_values() {
+    let dir = std::env::temp_dir().join(format!("bywire-dup-signal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let dbc = dir.join("dup.dbc");
+    std::fs::write(
+        &dbc,
+        "VERSION \"\"\nBU_: A\nBO_ 291 M: 2 A\n SG_ S : 0|8@1+ (1,0) [0|255] \"\" A\n SG_ S : 8|8@1+ (1,0) [0|255] \"\" A\n",
+    )
+    .unwrap();
+    let dbc = dbc.to_str().unwrap();
+    let input = "(1.000000) can0 123#0A0B\n";
+    let (code, out, err) = run(&["decode", dbc, "--json"], input);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("dup.dbc:5:"), "{err}");
+    let value: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(value["signals"], serde_json::json!({"S": 10, "S#2": 11}));
+    let (_, out, _) = run(&["decode", dbc, "--single-line"], input);
+    assert!(out.contains("M(S: 10, S: 11)"), "{out}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

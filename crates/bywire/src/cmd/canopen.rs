@@ -213,21 +213,37 @@ fn check_node_id(id: u8) -> Result<()> {
     }
 }
 
-fn load_eds(path: &Path, node: Option<u8>, out: &mut impl Write) -> Result<ObjectDictionary> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let loaded = eds::parse(&text, node).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+/// Read an EDS (UTF-8 or Windows-1252) and print its diagnostics.
+fn read_eds(path: &Path, node: Option<u8>, out: &mut impl Write) -> Result<eds::Eds> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}", path.display()))?;
+    let loaded = eds::parse_bytes(&bytes, node).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     for diagnostic in &loaded.diagnostics {
         writeln!(out, "{}: {diagnostic}", path.display())?;
     }
+    Ok(loaded)
+}
+
+/// Refuse an EDS whose objects had to be left out: a device, an SDO client and `canopen eds`
+/// accept the same files.
+fn refuse_errors(loaded: &eds::Eds, path: &Path) -> Result<()> {
+    if loaded
+        .diagnostics
+        .iter()
+        .any(|d| d.severity == Severity::Error)
+    {
+        bail!("{}: objects were left out (errors above)", path.display());
+    }
+    Ok(())
+}
+
+fn load_eds(path: &Path, node: Option<u8>, out: &mut impl Write) -> Result<ObjectDictionary> {
+    let loaded = read_eds(path, node, out)?;
+    refuse_errors(&loaded, path)?;
     Ok(loaded.dictionary)
 }
 
 fn check_eds(path: &Path, node: Option<u8>, out: &mut impl Write) -> Result<()> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let loaded = eds::parse(&text, node).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    for diagnostic in &loaded.diagnostics {
-        writeln!(out, "{}: {diagnostic}", path.display())?;
-    }
+    let loaded = read_eds(path, node, out)?;
     let objects = loaded.dictionary.objects();
     let entries: usize = objects.iter().map(|o| o.entries().len()).sum();
     let rpdos = objects
@@ -246,14 +262,7 @@ fn check_eds(path: &Path, node: Option<u8>, out: &mut impl Write) -> Result<()> 
         loaded.info.product_name,
         objects.len()
     )?;
-    if loaded
-        .diagnostics
-        .iter()
-        .any(|d| d.severity == Severity::Error)
-    {
-        bail!("{}: objects were left out (errors above)", path.display());
-    }
-    Ok(())
+    refuse_errors(&loaded, path)
 }
 
 fn open_bus(text: &str) -> Result<Box<dyn Bus>> {

@@ -208,16 +208,22 @@ impl FrameText for DecodedFrame<'_> {
         )
     }
 
+    /// A name used twice in one message (a warning when the DBC loads) keeps both values:
+    /// the second as `NAME#2`, a third as `NAME#3`.
     fn json_signals(&self) -> serde_json::Map<String, serde_json::Value> {
-        self.signals
-            .iter()
-            .map(|s| {
-                (
-                    s.signal.display_name().to_string(),
-                    json_number(s.value.physical),
-                )
-            })
-            .collect()
+        let mut object = serde_json::Map::new();
+        for s in &self.signals {
+            let name = s.signal.display_name();
+            let key = (1..=self.signals.len())
+                .map(|n| match n {
+                    1 => name.to_string(),
+                    n => format!("{name}#{n}"),
+                })
+                .find(|key| !object.contains_key(key))
+                .unwrap_or_else(|| name.to_string());
+            object.insert(key, json_number(s.value.physical));
+        }
+        object
     }
 }
 
