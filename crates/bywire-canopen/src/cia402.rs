@@ -350,7 +350,10 @@ pub struct Drive {
     /// and is told the actual position and velocity.
     external: bool,
     demand: f64,
-    /// Maximum velocity the motor reaches (units/s).
+    /// Position units a velocity unit moves in a second (1 when velocity is position units
+    /// per second; a Roboteq's counts per RPM-second is its counts per revolution / 60).
+    position_per_velocity: f64,
+    /// Maximum velocity the motor reaches (velocity units).
     pub max_velocity: f64,
 }
 
@@ -387,6 +390,7 @@ impl Drive {
             published: None,
             external: false,
             demand: 0.0,
+            position_per_velocity: 1.0,
             max_velocity: 10_000.0,
         }
     }
@@ -396,6 +400,22 @@ impl Drive {
     pub fn with_external_motor(mut self) -> Drive {
         self.external = true;
         self
+    }
+
+    /// With an external motor whose velocity is in other units than position per second (RPM
+    /// beside encoder counts): `position_per_velocity` position units a velocity unit moves in
+    /// a second. Position modes brake in time with it.
+    pub fn with_velocity_units(mut self, position_per_velocity: f64) -> Drive {
+        self.set_velocity_units(position_per_velocity);
+        self
+    }
+
+    /// As [`Drive::with_velocity_units`], on a drive already built (a value that is not a
+    /// positive number is ignored).
+    pub fn set_velocity_units(&mut self, position_per_velocity: f64) {
+        if position_per_velocity.is_finite() && position_per_velocity > 0.0 {
+            self.position_per_velocity = position_per_velocity;
+        }
     }
 
     /// The velocity the drive asks of its motor now, units/s (zero with the power stage off).
@@ -662,7 +682,9 @@ impl Application for Drive {
                     let limit = params.profile_velocity.clamp(1.0, self.max_velocity);
                     let remaining = self.position_target - self.motor.position;
                     // Brake in time: the speed from which `deceleration` stops within `remaining`.
-                    let braking = libm::sqrt(2.0 * deceleration * remaining.abs());
+                    let braking = libm::sqrt(
+                        2.0 * deceleration * remaining.abs() / self.position_per_velocity,
+                    );
                     let speed = limit.min(braking);
                     let target = if remaining.abs() <= POSITION_WINDOW / 2.0 {
                         0.0
@@ -734,6 +756,7 @@ impl Application for Drive {
         *self = Drive {
             max_velocity: self.max_velocity,
             external: self.external,
+            position_per_velocity: self.position_per_velocity,
             ..Drive::new()
         };
         self.publish(od);
@@ -940,53 +963,11 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
     communication_objects(
         &mut od,
         node,
-        0x0002_0192,
+        DEVICE_TYPE,
         "bywire drive",
         [0x0000_0B1E, 0x0402, 1, id],
     );
-    let rw = |name: &str, data_type| Entry::new(0, name, data_type, Access::ReadWrite).mappable();
-    let ro = |name: &str, data_type| Entry::new(0, name, data_type, Access::ReadOnly).mappable();
-    od.add_var(
-        ABORT_CONNECTION,
-        rw("Abort connection option code", DataType::I16).with_int(DEFAULT_ABORT_CONNECTION),
-    );
-    od.add_var(ERROR_CODE, ro("Error code", DataType::U16));
-    od.add_var(CONTROLWORD, rw("Controlword", DataType::U16));
-    od.add_var(STATUSWORD, ro("Statusword", DataType::U16));
-    od.add_var(
-        QUICK_STOP_OPTION,
-        rw("Quick stop option code", DataType::I16).with_int(DEFAULT_QUICK_STOP_OPTION),
-    );
-    od.add_var(MODES, rw("Modes of operation", DataType::I8).with_int(3));
-    od.add_var(
-        MODES_DISPLAY,
-        ro("Modes of operation display", DataType::I8),
-    );
-    od.add_var(POSITION_ACTUAL, ro("Position actual value", DataType::I32));
-    od.add_var(VELOCITY_ACTUAL, ro("Velocity actual value", DataType::I32));
-    od.add_var(TARGET_POSITION, rw("Target position", DataType::I32));
-    od.add_var(
-        PROFILE_VELOCITY,
-        rw("Profile velocity", DataType::U32).with_int(2_000),
-    );
-    od.add_var(
-        PROFILE_ACCELERATION,
-        rw("Profile acceleration", DataType::U32).with_int(10_000),
-    );
-    od.add_var(
-        PROFILE_DECELERATION,
-        rw("Profile deceleration", DataType::U32).with_int(10_000),
-    );
-    od.add_var(
-        QUICK_STOP_DECELERATION,
-        rw("Quick stop deceleration", DataType::U32).with_int(50_000),
-    );
-    od.add_var(TARGET_VELOCITY, rw("Target velocity", DataType::I32));
-    od.add_var(
-        SUPPORTED_MODES,
-        Entry::new(0, "Supported drive modes", DataType::U32, Access::ReadOnly)
-            .with_int(i64::from(Mode::SUPPORTED)),
-    );
+    add_drive_objects(&mut od, Mode::SUPPORTED);
     add_pdo(
         &mut od,
         false,
@@ -1037,6 +1018,58 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
         },
     );
     od
+}
+
+/// The device type (0x1000) of a CiA 402 drive: profile 402, servo drive.
+pub const DEVICE_TYPE: u32 = 0x0002_0192;
+
+/// The CiA 402 objects a [`Drive`] works on (0x6007 to 0x6502), for a drive of its own or a
+/// controller with a CiA 402 face beside its own objects; `supported_modes` for 0x6502.
+pub fn add_drive_objects(od: &mut ObjectDictionary, supported_modes: u32) {
+    use object::*;
+    let rw = |name: &str, data_type| Entry::new(0, name, data_type, Access::ReadWrite).mappable();
+    let ro = |name: &str, data_type| Entry::new(0, name, data_type, Access::ReadOnly).mappable();
+    od.add_var(
+        ABORT_CONNECTION,
+        rw("Abort connection option code", DataType::I16).with_int(DEFAULT_ABORT_CONNECTION),
+    );
+    od.add_var(ERROR_CODE, ro("Error code", DataType::U16));
+    od.add_var(CONTROLWORD, rw("Controlword", DataType::U16));
+    od.add_var(STATUSWORD, ro("Statusword", DataType::U16));
+    od.add_var(
+        QUICK_STOP_OPTION,
+        rw("Quick stop option code", DataType::I16).with_int(DEFAULT_QUICK_STOP_OPTION),
+    );
+    od.add_var(MODES, rw("Modes of operation", DataType::I8).with_int(3));
+    od.add_var(
+        MODES_DISPLAY,
+        ro("Modes of operation display", DataType::I8),
+    );
+    od.add_var(POSITION_ACTUAL, ro("Position actual value", DataType::I32));
+    od.add_var(VELOCITY_ACTUAL, ro("Velocity actual value", DataType::I32));
+    od.add_var(TARGET_POSITION, rw("Target position", DataType::I32));
+    od.add_var(
+        PROFILE_VELOCITY,
+        rw("Profile velocity", DataType::U32).with_int(2_000),
+    );
+    od.add_var(
+        PROFILE_ACCELERATION,
+        rw("Profile acceleration", DataType::U32).with_int(10_000),
+    );
+    od.add_var(
+        PROFILE_DECELERATION,
+        rw("Profile deceleration", DataType::U32).with_int(10_000),
+    );
+    od.add_var(
+        QUICK_STOP_DECELERATION,
+        rw("Quick stop deceleration", DataType::U32).with_int(50_000),
+    );
+    od.add_var(TARGET_VELOCITY, rw("Target velocity", DataType::I32));
+    od.add_var(
+        SUPPORTED_MODES,
+        Entry::new(0, "Supported drive modes", DataType::U32, Access::ReadOnly)
+            .with_int(i64::from(supported_modes)),
+    );
 }
 
 /// Why a [`DriveController`] stopped its drive.

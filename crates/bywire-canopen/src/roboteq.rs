@@ -3,6 +3,13 @@
 //! Roboteq ships it, an [`Mdc1460`]-like device with a motor model and command watchdog for
 //! the simulator, and the master-side [`RoboteqMotor`] the vehicle ECU uses.
 //!
+//! Like the real controller, the device has two faces: Roboteq's own objects, and the CiA 402
+//! drive profile for channel 1 (device type 0x00020192; controlword 0x6040, statusword 0x6041,
+//! modes 0x6060/0x6061, target position 0x607A, profile velocity 0x6081, target velocity
+//! 0x60FF, position and velocity actual 0x6064/0x606C, in encoder counts and RPM). While the
+//! CiA 402 state machine has the power stage on (Operation enabled, a quick stop or a fault
+//! reaction), channel 1 follows it; otherwise Roboteq's commands drive it.
+//!
 //! Roboteq's manual: RPDO1 on `0x200 + node` carries a signed 32-bit motor command in
 //! -1000..=1000 (‰ of full power), little-endian two's complement — `0x201: BC 02 00 00` is
 //! 700 (70 %) for node 1. Remapped to 0x2002 the same four bytes are a speed in RPM
@@ -16,7 +23,8 @@ use bywire_core::time::Timestamp;
 
 use crate::abort::Abort;
 use crate::cia402::{
-    add_pdo, communication_objects, round, Motor, PdoDefault, StopLatch, StopReason,
+    self, add_drive_objects, add_pdo, communication_objects, round, Drive, Motor, PdoDefault,
+    StopLatch, StopReason,
 };
 use crate::device::{error_register, Application, EmcyProducer};
 use crate::nmt::{classic, cob_id};
@@ -83,10 +91,11 @@ pub fn dictionary(node: u8, channels: u8) -> ObjectDictionary {
     communication_objects(
         &mut od,
         node,
-        0,
+        cia402::DEVICE_TYPE,
         "MDC1460",
         [0x0000_0358, 0x1460, 2, u32::from(node)],
     );
+    add_drive_objects(&mut od, cia402::Mode::SUPPORTED);
     let per_channel = |od: &mut ObjectDictionary,
                        index: u16,
                        name: &str,
@@ -298,6 +307,8 @@ struct Channel {
 #[derive(Debug, Clone)]
 pub struct Mdc1460 {
     channels: [Channel; 2],
+    /// The CiA 402 face of channel 1 (its motor is the channel's).
+    drive: Drive,
     last_command: Option<Timestamp>,
     last_step: Option<Timestamp>,
     shutdown: bool,
@@ -315,6 +326,7 @@ impl Default for Mdc1460 {
     fn default() -> Self {
         Mdc1460 {
             channels: [Channel::default(); 2],
+            drive: Drive::new().with_external_motor(),
             last_command: None,
             last_step: None,
             shutdown: false,
@@ -341,6 +353,11 @@ impl Mdc1460 {
             .map_or(0, |c| c.command)
     }
 
+    /// The CiA 402 face of channel 1.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
     /// The controller is in emergency shutdown.
     pub fn is_shut_down(&self) -> bool {
         self.shutdown
@@ -354,14 +371,22 @@ impl Mdc1460 {
     }
 }
 
+/// Whether an object belongs to the CiA 402 face.
+fn is_drive_object(index: u16) -> bool {
+    (0x6000..=0x6FFF).contains(&index)
+}
+
 impl Application for Mdc1460 {
     fn check_write(
         &self,
-        _od: &ObjectDictionary,
+        od: &ObjectDictionary,
         index: u16,
-        _sub: u8,
-        _data: &[u8],
+        sub: u8,
+        data: &[u8],
     ) -> Result<(), Abort> {
+        if is_drive_object(index) {
+            return self.drive.check_write(od, index, sub, data);
+        }
         if self.shutdown
             && matches!(
                 index,
@@ -375,6 +400,10 @@ impl Application for Mdc1460 {
     }
 
     fn on_written(&mut self, now: Timestamp, od: &mut ObjectDictionary, index: u16, sub: u8) {
+        if is_drive_object(index) {
+            self.drive.on_written(now, od, index, sub);
+            return;
+        }
         let channel = self.channels.get_mut(usize::from(sub.saturating_sub(1)));
         match (index, channel) {
             (object::MOTOR_COMMAND, Some(channel)) if !self.shutdown => {
@@ -398,13 +427,24 @@ impl Application for Mdc1460 {
         }
     }
 
+    fn on_nmt(
+        &mut self,
+        now: Timestamp,
+        state: crate::nmt::NmtState,
+        od: &mut ObjectDictionary,
+        emcy: &mut EmcyProducer,
+    ) {
+        self.drive.on_nmt(now, state, od, emcy);
+    }
+
     fn on_communication_lost(
         &mut self,
-        _now: Timestamp,
-        _od: &mut ObjectDictionary,
-        _emcy: &mut EmcyProducer,
+        now: Timestamp,
+        od: &mut ObjectDictionary,
+        emcy: &mut EmcyProducer,
     ) {
         self.stop_all();
+        self.drive.on_communication_lost(now, od, emcy);
     }
 
     fn step(&mut self, now: Timestamp, od: &mut ObjectDictionary, emcy: &mut EmcyProducer) {
@@ -431,15 +471,30 @@ impl Application for Mdc1460 {
             self.time_constant.max(1e-3),
             self.counts_per_revolution,
         );
+        // The CiA 402 face sees channel 1 in encoder counts and RPM, and asks a speed of it.
+        self.drive.max_velocity = max_rpm;
+        self.drive.set_velocity_units(cpr / 60.0);
+        let first = self.channels.first().map(|c| c.motor).unwrap_or_default();
+        self.drive
+            .set_actual(first.position / 60.0 * cpr, first.velocity);
+        self.drive.step(now, od, emcy);
+        let drive_demand = self.drive.state().is_powered().then(|| self.drive.demand());
         for (channel, sub) in self.channels.iter_mut().zip(1u8..) {
-            let target = match channel.speed {
-                Some(rpm) => f64::from(rpm).clamp(-max_rpm, max_rpm),
-                None => f64::from(channel.command.clamp(-1000, 1000)) / 1000.0 * max_rpm,
+            let target = match (sub, drive_demand, channel.speed) {
+                (1, Some(demand), _) => demand.clamp(-max_rpm, max_rpm),
+                (_, _, Some(rpm)) => f64::from(rpm).clamp(-max_rpm, max_rpm),
+                (_, _, None) => f64::from(channel.command.clamp(-1000, 1000)) / 1000.0 * max_rpm,
             };
             let target = if self.shutdown { 0.0 } else { target };
             let before = channel.motor.velocity;
-            // First order: the speed closes 1/tau of the gap per second.
-            let rate = (target - before).abs() / tau;
+            // First order: the speed closes 1/tau of the gap per second — except under the
+            // CiA 402 face, whose profile is already a ramp the speed loop tracks.
+            let lag = if sub == 1 && drive_demand.is_some() {
+                dt.max(1e-6)
+            } else {
+                tau
+            };
+            let rate = (target - before).abs() / lag;
             channel.motor.step_velocity(target, rate, dt);
             let power = if max_rpm > 0.0 {
                 round(target / max_rpm * 1000.0)
@@ -473,8 +528,10 @@ impl Application for Mdc1460 {
         }))
     }
 
-    fn reset(&mut self, _od: &mut ObjectDictionary) {
+    fn reset(&mut self, od: &mut ObjectDictionary) {
+        self.drive.reset(od);
         *self = Mdc1460 {
+            drive: self.drive.clone(),
             watchdog: self.watchdog,
             max_rpm: self.max_rpm,
             time_constant: self.time_constant,
@@ -679,5 +736,152 @@ mod tests {
         run(&mut device, 1_899, 4_000, &[]);
         assert_eq!(device.app().command(1), 0);
         assert!(device.app().speed(1).abs() < 1.0);
+    }
+
+    /// An expedited SDO download to node 1.
+    fn sdo_write(index: u16, sub: u8, data: &[u8]) -> Frame {
+        let command = match data.len() {
+            1 => 0x2F,
+            2 => 0x2B,
+            _ => 0x23,
+        };
+        let [lo, hi] = index.to_le_bytes();
+        let mut payload = [command, lo, hi, sub, 0, 0, 0, 0];
+        for (slot, byte) in payload.iter_mut().skip(4).zip(data) {
+            *slot = *byte;
+        }
+        classic(0x601, &payload)
+    }
+
+    #[test]
+    fn the_cia402_face_drives_channel_1_and_hands_back_to_roboteqs_commands() {
+        let mut device = Device::new(1, dictionary(1, 2), Mdc1460::default()).with_autostart();
+        assert_eq!(
+            device.od().get_unsigned(0x1000, 0),
+            Some(u64::from(cia402::DEVICE_TYPE))
+        );
+        // Profile velocity, Shutdown, Switch on, Enable operation, 1200 RPM.
+        let frames = [
+            (10, sdo_write(cia402::object::MODES, 0, &[3])),
+            (
+                20,
+                sdo_write(cia402::object::CONTROLWORD, 0, &6u16.to_le_bytes()),
+            ),
+            (
+                30,
+                sdo_write(cia402::object::CONTROLWORD, 0, &7u16.to_le_bytes()),
+            ),
+            (
+                40,
+                sdo_write(cia402::object::CONTROLWORD, 0, &15u16.to_le_bytes()),
+            ),
+            (
+                50,
+                sdo_write(cia402::object::TARGET_VELOCITY, 0, &1200i32.to_le_bytes()),
+            ),
+        ];
+        run(&mut device, 0, 2_000, &frames);
+        assert_eq!(
+            device.app().drive().state(),
+            cia402::State::OperationEnabled
+        );
+        let statusword = device
+            .od()
+            .get_unsigned(cia402::object::STATUSWORD, 0)
+            .unwrap();
+        assert_eq!(
+            statusword & 0x6F,
+            0x27,
+            "operation enabled: {statusword:#06x}"
+        );
+        let rpm = device
+            .od()
+            .get_signed(cia402::object::VELOCITY_ACTUAL, 0)
+            .unwrap();
+        assert!((rpm - 1200).abs() <= 12, "{rpm} RPM");
+        assert_eq!(device.od().get_signed(object::ENCODER_SPEED, 1), Some(rpm));
+        // The power stage off (Disable voltage): Roboteq's own command drives channel 1 again.
+        let frames = [
+            (
+                2_000,
+                sdo_write(cia402::object::CONTROLWORD, 0, &0u16.to_le_bytes()),
+            ),
+            (
+                2_010,
+                sdo_write(object::MOTOR_COMMAND, 1, &(-500i32).to_le_bytes()),
+            ),
+        ];
+        run(&mut device, 2_000, 2_950, &frames);
+        assert_eq!(
+            device.app().drive().state(),
+            cia402::State::SwitchOnDisabled
+        );
+        let speed = device.app().speed(1);
+        assert!((speed + 1_500.0).abs() < 20.0, "{speed} RPM");
+    }
+
+    #[test]
+    fn the_cia402_face_moves_to_a_target_position_in_encoder_counts() {
+        let mut device = Device::new(1, dictionary(1, 1), Mdc1460::default()).with_autostart();
+        let target: i32 = 10 * 4096; // ten revolutions
+        let frames = [
+            (10, sdo_write(cia402::object::MODES, 0, &[1])),
+            (
+                15,
+                sdo_write(cia402::object::PROFILE_VELOCITY, 0, &1000u32.to_le_bytes()),
+            ),
+            (
+                20,
+                sdo_write(cia402::object::CONTROLWORD, 0, &6u16.to_le_bytes()),
+            ),
+            (
+                30,
+                sdo_write(cia402::object::CONTROLWORD, 0, &7u16.to_le_bytes()),
+            ),
+            (
+                40,
+                sdo_write(cia402::object::CONTROLWORD, 0, &15u16.to_le_bytes()),
+            ),
+            (
+                50,
+                sdo_write(cia402::object::TARGET_POSITION, 0, &target.to_le_bytes()),
+            ),
+            // New set-point (bit 4) starts the move.
+            (
+                60,
+                sdo_write(cia402::object::CONTROLWORD, 0, &0x1Fu16.to_le_bytes()),
+            ),
+        ];
+        // Ten revolutions at 1000 RPM take 0.6 s.
+        run(&mut device, 0, 400, &frames);
+        let moving = device
+            .od()
+            .get_signed(cia402::object::VELOCITY_ACTUAL, 0)
+            .unwrap();
+        assert!(
+            (700..=1_010).contains(&moving),
+            "on its way, within the profile velocity: {moving} RPM"
+        );
+        run(&mut device, 400, 3_000, &[]);
+        let position = device
+            .od()
+            .get_signed(cia402::object::POSITION_ACTUAL, 0)
+            .unwrap();
+        assert!(
+            (position - i64::from(target)).abs() <= 40,
+            "at {position}, target {target}"
+        );
+        let statusword = device
+            .od()
+            .get_unsigned(cia402::object::STATUSWORD, 0)
+            .unwrap();
+        assert!(
+            statusword & 0x0400 != 0,
+            "target reached: {statusword:#06x}"
+        );
+        assert_eq!(
+            device.od().get_signed(object::ENCODER_COUNT, 1),
+            Some(position)
+        );
     }
 }

@@ -28,6 +28,7 @@ use bywire_canopen::eds::{self, DeviceInfo};
 use bywire_canopen::master::{Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand, NmtState};
 use bywire_canopen::od::{Access, DataType, Entry};
+use bywire_canopen::roboteq;
 use bywire_canopen::sdo::{SdoError, TransferMode};
 use bywire_canopen::{Abort, Node, Port};
 use bywire_core::frame::Frame;
@@ -99,21 +100,32 @@ fn drive_dictionary(node: u8) -> bywire_canopen::od::ObjectDictionary {
 /// Run our drive on `virtual:NAME` while python runs `script`; the drive afterwards.
 fn with_our_drive(name: &str, script: &str) -> (Vec<String>, Device<Drive>) {
     const NODE: u8 = 2;
+    with_our_device(name, drive_dictionary(NODE), Drive::new(), NODE, script)
+}
+
+/// Run a device of ours (`od` and `app`, at `node`) on `virtual:NAME` while python runs
+/// `script` with the device's EDS; the device afterwards.
+fn with_our_device<A: bywire_canopen::device::Application + Send + 'static>(
+    name: &str,
+    od: bywire_canopen::od::ObjectDictionary,
+    app: A,
+    node: u8,
+    script: &str,
+) -> (Vec<String>, Device<A>) {
     let served = server(name);
     let port = served.local_addr().port();
     let dir = scratch(name);
-    let eds_path = dir.join("drive.eds");
-    let od = drive_dictionary(NODE);
+    let eds_path = dir.join("device.eds");
     let info = DeviceInfo {
         vendor_name: "bywire".into(),
-        product_name: "drive".into(),
+        product_name: name.into(),
         bitrates: vec![1000],
         ..DeviceInfo::default()
     };
-    std::fs::write(&eds_path, eds::write(&od, &info, Some(NODE))).unwrap();
+    std::fs::write(&eds_path, eds::write(&od, &info, Some(node))).unwrap();
     let bus = open(&format!("virtual:{name}")).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
-    let device = Device::new(NODE, od, Drive::new());
+    let device = Device::new(node, od, app);
     let runner_stop = Arc::clone(&stop);
     let handle = std::thread::spawn(move || runner::run(bus, device, &runner_stop).unwrap());
     let lines = finish(python(
@@ -256,6 +268,68 @@ network.disconnect()
     assert_eq!(value(&lines, "velocity"), "800");
     assert_eq!(value(&lines, "state_after"), "SWITCH ON DISABLED");
     assert_eq!(device.app().state(), cia402::State::SwitchOnDisabled);
+}
+
+/// python-canopen's `BaseNode402` drives the simulated Roboteq through its CiA 402 face, as it
+/// would the real controller: device type, the state machine to Operation enabled, a speed in
+/// RPM and a move in encoder counts; then Roboteq's own motor command drives it again.
+#[test]
+fn python_canopen_base_node_402_drives_the_roboteq_through_its_cia402_face() {
+    let script = r#"
+from canopen.profiles.p402 import BaseNode402
+node = BaseNode402(1, os.environ["EDS"])
+network.add_node(node)
+time.sleep(0.3)
+say("device_type", hex(node.sdo[0x1000].raw))
+node.nmt.state = "OPERATIONAL"
+node.nmt.wait_for_heartbeat(timeout=1)
+node.setup_402_state_machine(read_pdos=False)
+node.op_mode = "PROFILED VELOCITY"
+node.state = "OPERATION ENABLED"
+say("state", node.state)
+node.sdo[0x60FF].raw = 1200
+deadline = time.time() + 2
+while time.time() < deadline and abs(node.sdo[0x606C].raw - 1200) > 2:
+    time.sleep(0.05)
+say("velocity", node.sdo[0x606C].raw)
+node.sdo[0x60FF].raw = 0
+time.sleep(0.5)
+node.op_mode = "PROFILED POSITION"
+node.sdo[0x6081].raw = 1000
+start = node.sdo[0x6064].raw
+node.sdo[0x607A].raw = start + 8192
+node.controlword = 0x1F
+deadline = time.time() + 3
+while time.time() < deadline and not (node.statusword & 0x0400 and abs(node.sdo[0x6064].raw - start - 8192) <= 10):
+    time.sleep(0.05)
+say("moved", node.sdo[0x6064].raw - start)
+node.state = "SWITCH ON DISABLED"
+say("state_after", node.state)
+node.sdo[0x2000][1].raw = 500
+time.sleep(1.0)
+say("roboteq_speed", node.sdo[0x2103][1].raw)
+network.disconnect()
+"#;
+    let (lines, device) = with_our_device(
+        "py-roboteq-402",
+        roboteq::dictionary(1, 2),
+        roboteq::Mdc1460::default(),
+        1,
+        script,
+    );
+    assert_eq!(value(&lines, "device_type"), "0x20192");
+    assert_eq!(value(&lines, "state"), "OPERATION ENABLED");
+    let velocity: i64 = value(&lines, "velocity").parse().unwrap();
+    assert!((velocity - 1200).abs() <= 2, "{velocity}");
+    let moved: i64 = value(&lines, "moved").parse().unwrap();
+    assert!((moved - 8192).abs() <= 10, "{moved}");
+    assert_eq!(value(&lines, "state_after"), "SWITCH ON DISABLED");
+    let speed: i64 = value(&lines, "roboteq_speed").parse().unwrap();
+    assert!((speed - 1500).abs() <= 30, "50 % of 3000 RPM: {speed}");
+    assert_eq!(
+        device.app().drive().state(),
+        cia402::State::SwitchOnDisabled
+    );
 }
 
 /// Something done to the master at a time.

@@ -64,7 +64,7 @@ pub enum CanopenCommand {
     },
     /// Run a CANopen device on a bus until Ctrl-C: SDO, NMT, heartbeat, EMCY and PDOs.
     #[command(
-        after_help = "Examples:\n  bywire canopen node can0 --node 1 --profile roboteq\n  bywire canopen node virtual:bench --node 2 --profile cia402 --autostart\n  bywire canopen node can0 --node 5 --eds vendor.eds --export-eds seen.eds\n\nProfiles: roboteq (an MDC1460-like dual-channel controller with its motor model and\ncommand watchdog; RPDO1 0x200+ID is the motor command), cia402 (a CiA 402 drive with a motor\nmodel: profile position/velocity, cyclic synchronous position/velocity). With --eds any\ndevice the file describes answers SDO, NMT, heartbeat and its PDOs. NMT changes and\nheartbeat events are printed as they happen."
+        after_help = "Examples:\n  bywire canopen node can0 --node 1 --profile roboteq\n  bywire canopen node virtual:bench --node 2 --profile cia402 --autostart\n  bywire canopen node can0 --node 5 --eds vendor.eds --export-eds seen.eds\n\nProfiles: roboteq (an MDC1460-like dual-channel controller with its motor model and\ncommand watchdog; RPDO1 0x200+ID is the motor command; like the real controller it also\nhas a CiA 402 face for channel 1: 0x6040/0x6041, modes 0x6060, targets 0x607A/0x60FF), cia402 (a CiA 402 drive with a motor\nmodel: profile position/velocity, cyclic synchronous position/velocity). With --eds any\ndevice the file describes answers SDO, NMT, heartbeat and its PDOs. NMT changes and\nheartbeat events are printed as they happen."
     )]
     Node {
         /// The bus.
