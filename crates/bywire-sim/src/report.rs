@@ -7,7 +7,7 @@ use core::time::Duration;
 
 use serde::Serialize;
 
-use crate::tug::Tug;
+use crate::tug::{StepResponse, Tug};
 
 /// One event of the run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -59,6 +59,41 @@ pub enum StepRecord {
         /// Why.
         error: String,
     },
+}
+
+impl StepRecord {
+    /// The figures of one recorded step.
+    pub fn of(step: &StepResponse) -> StepRecord {
+        match step.metrics() {
+            Ok(m) => StepRecord::Measured {
+                from_deg: step.from,
+                to_deg: step.to,
+                rise_s: m.rise_time,
+                settling_s: m.settling_time_2,
+                settling_5_s: m.settling_time_5,
+                overshoot_percent: m.overshoot_percent,
+                steady_state_error_deg: m.steady_state_error,
+            },
+            Err(e) => StepRecord::Failed {
+                from_deg: step.from,
+                to_deg: step.to,
+                error: e.to_string(),
+            },
+        }
+    }
+}
+
+/// The front-left wheel through the tank turn.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TankTurnRecord {
+    /// Its step into the tank angle (settling as for the steering steps).
+    #[serde(flatten)]
+    pub step: StepRecord,
+    /// Its angle's range over the second half of the turn, degrees: the sensor's noise when it
+    /// holds, the swing when it hunts.
+    pub hold_peak_to_peak_deg: f64,
+    /// How long the turn took, s.
+    pub duration_s: f64,
 }
 
 /// Latencies as nearest-rank percentiles, ms.
@@ -141,6 +176,9 @@ pub struct RunReport {
     pub tracking_error_m: Tracking,
     /// The step test's steps.
     pub steering_steps: Vec<StepRecord>,
+    /// The tank turn's front-left wheel, from its angle before to its tank angle (`None`: the
+    /// run made no tank turn).
+    pub tank_turn: Option<TankTurnRecord>,
     /// Command to heartbeat echo, as the ADS measured it.
     pub echo_latency_ms: Percentiles,
     /// Each bus's load over the run, 0–1.
@@ -192,26 +230,15 @@ impl RunReport {
                 detail: "stopped at the end of the route".into(),
             });
         }
-        let steering_steps = tug
-            .step_responses
-            .iter()
-            .map(|step| match step.metrics() {
-                Ok(m) => StepRecord::Measured {
-                    from_deg: step.from,
-                    to_deg: step.to,
-                    rise_s: m.rise_time,
-                    settling_s: m.settling_time_2,
-                    settling_5_s: m.settling_time_5,
-                    overshoot_percent: m.overshoot_percent,
-                    steady_state_error_deg: m.steady_state_error,
-                },
-                Err(e) => StepRecord::Failed {
-                    from_deg: step.from,
-                    to_deg: step.to,
-                    error: e.to_string(),
-                },
-            })
-            .collect();
+        let steering_steps = tug.step_responses.iter().map(StepRecord::of).collect();
+        let tank_turn = tug
+            .tank_response
+            .as_ref()
+            .map(|(_, response)| TankTurnRecord {
+                step: StepRecord::of(response),
+                hold_peak_to_peak_deg: response.hold_peak_to_peak(),
+                duration_s: response.times.last().copied().unwrap_or(0.0),
+            });
         let [bus1, bus2, bus3, bus1b] = tug.bus_loads();
         let stats = tug.ecu().stats();
         RunReport {
@@ -222,6 +249,7 @@ impl RunReport {
             events,
             tracking_error_m: Tracking { max, mean },
             steering_steps,
+            tank_turn,
             echo_latency_ms: Percentiles::of(&tug.echo_latencies),
             bus_load: PerBus {
                 bus1,

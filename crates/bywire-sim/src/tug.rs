@@ -43,6 +43,7 @@ use bywire_tug::messages::{
 };
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::Ads;
+use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, Watchdog};
 
@@ -122,6 +123,23 @@ impl StepResponse {
     /// Rise, settling, overshoot and steady-state error of this step.
     pub fn metrics(&self) -> Result<StepMetrics, MetricsError> {
         step_metrics(&self.times, &self.angles, self.from, self.to)
+    }
+
+    /// The angle's range (largest − smallest) over the second half of the record, degrees: a
+    /// wheel that holds its angle has little more than the sensor's noise; one that hunts, the
+    /// width of its swing.
+    pub fn hold_peak_to_peak(&self) -> f64 {
+        let half = self.angles.get(self.angles.len() / 2..).unwrap_or_default();
+        let (low, high) = half
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
+                (lo.min(*a), hi.max(*a))
+            });
+        if half.is_empty() {
+            0.0
+        } else {
+            high - low
+        }
     }
 }
 
@@ -386,6 +404,10 @@ pub struct Tug {
     ads_external: bool,
     /// The step test's responses, one a step.
     pub step_responses: Vec<StepResponse>,
+    /// The tank turn: the front-left wheel every millisecond from the command into tank
+    /// steering until the tank turn ends, and when it began.
+    pub tank_response: Option<(Timestamp, StepResponse)>,
+    tank_over: bool,
     /// Command to heartbeat echo, as the ADS measured it on every state frame.
     pub echo_latencies: Vec<Duration>,
     last_echo: Option<Timestamp>,
@@ -544,6 +566,8 @@ impl Tug {
             last_degraded: None,
             ads_external: false,
             step_responses: Vec::new(),
+            tank_response: None,
+            tank_over: false,
             echo_latencies: Vec::new(),
             last_echo: None,
         }
@@ -943,8 +967,48 @@ impl Tug {
         }
     }
 
+    /// The tank turn's record: the front-left wheel every millisecond while the vehicle
+    /// follows a tank-steering command (the first such stretch).
+    fn record_tank_turn(&mut self, now: Timestamp) {
+        let tank = self
+            .ecu
+            .supervisor()
+            .command()
+            .is_some_and(|c| c.steering_mode == SteeringMode::Tank);
+        let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) else {
+            return;
+        };
+        match &mut self.tank_response {
+            None if tank => {
+                let to = self
+                    .ecu
+                    .wheel_targets()
+                    .first()
+                    .map_or(0.0, |w| w.angle.to_degrees());
+                self.tank_response = Some((
+                    now,
+                    StepResponse {
+                        from: angle,
+                        to,
+                        times: vec![0.0],
+                        angles: vec![angle],
+                    },
+                ));
+            }
+            Some((started, response)) if tank && !self.tank_over => {
+                response
+                    .times
+                    .push(now.saturating_since(*started).as_secs_f64());
+                response.angles.push(angle);
+            }
+            Some(_) => self.tank_over |= !tank,
+            None => {}
+        }
+    }
+
     /// The step test's record: the front-left wheel every millisecond of the current step.
     fn record_step(&mut self, now: Timestamp) {
+        self.record_tank_turn(now);
         let Some(step) = self.ads.mission().active_step() else {
             return;
         };
@@ -1040,9 +1104,15 @@ impl Tug {
             .zip(inputs.iter_mut())
             .zip(speeds)
         {
-            // Steering: the drive's velocity demand is the valve shaft's speed command.
+            // Steering: the drive's velocity demand (a wheel rate) becomes the valve shaft's
+            // speed command. The linkage turns the wheel faster per millimetre of stroke as the
+            // angle grows (angle = asin(stroke / arm)), so the drive's output stage scales by
+            // cos(angle) at the angle it measures: the loop keeps one gain from 0° to the tank
+            // turn's 60° (without it the gain doubles there, and the wheel hunts).
             let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
-            let command = steer.app().demand() / max_rate;
+            let measured = steer.app().motor().position / STEERING_UNITS_PER_DEG;
+            let linkage = libm::cos(measured.clamp(-75.0, 75.0).to_radians());
+            let command = steer.app().demand() / max_rate * linkage;
             let before = corner.chain.wheel_angle_deg();
             corner.chain.step(dt, command, rolling);
             let reading = corner.chain.sensor_deg(&mut self.rng);

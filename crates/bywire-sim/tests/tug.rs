@@ -326,6 +326,18 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
         .map(|e| e.detail.as_str())
         .collect();
     assert_eq!(modes, ["Tank", "Normal"]);
+    // The front-left wheel goes to its tank angle and holds it (it used to hunt ±2° around
+    // −60° for the whole turn: the linkage doubles the loop's gain there).
+    let (_, turn) = tug.tank_response.as_ref().expect("the turn was recorded");
+    let m = turn.metrics().unwrap();
+    assert!((turn.to + 60.6).abs() < 0.5, "{}", turn.to);
+    assert!(m.settling_time_2 < 4.0, "{m:?}");
+    assert!(m.overshoot_percent < 8.0, "{m:?}");
+    assert!(
+        turn.hold_peak_to_peak() < 0.3,
+        "holds within {:.2}°",
+        turn.hold_peak_to_peak()
+    );
 }
 
 #[test]
