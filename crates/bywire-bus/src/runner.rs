@@ -391,6 +391,58 @@ mod tests {
         assert_eq!(heard, vec![Port(0), Port(1)]);
     }
 
+    /// A waker from another thread has a node without a deadline polled at once, not at the
+    /// runner's next idle check (every 20 ms); after the run it does nothing.
+    #[test]
+    fn a_waker_polls_a_sleeping_node_at_once() {
+        use std::sync::{Arc, Mutex};
+        let bus = VirtualBus::join("runner-waker");
+        let mut runner = Runner::new(vec![(Port(0), Box::new(bus))]);
+        let waker = runner.waker();
+        let woken = Arc::new(Mutex::new(Vec::new()));
+        let times = Arc::clone(&woken);
+        let waking = std::thread::spawn(move || {
+            // Offsets that do not line up with the 20 ms idle checks.
+            for pause in [7, 13, 29, 11, 17, 23, 9, 31, 5, 19] {
+                std::thread::sleep(Duration::from_millis(pause));
+                times.lock().unwrap().push(std::time::Instant::now());
+                waker.wake();
+            }
+            waker
+        });
+        let mut node = Answer::default();
+        let stop = AtomicBool::new(false);
+        let mut polls = Vec::new();
+        let mut hooks = |_: &mut Answer, _: Timestamp| {
+            polls.push(std::time::Instant::now());
+            Flow::Continue
+        };
+        runner
+            .run(
+                &mut node,
+                &stop,
+                Some(Duration::from_millis(400)),
+                &mut hooks,
+            )
+            .unwrap();
+        let waker = waking.join().unwrap();
+        let woken = woken.lock().unwrap().clone();
+        assert_eq!(woken.len(), 10);
+        for wake in &woken {
+            let answered = polls
+                .iter()
+                .find(|p| *p >= wake)
+                .expect("a poll after the wake");
+            assert!(
+                answered.duration_since(*wake) < Duration::from_millis(10),
+                "polled {:?} after a wake",
+                answered.duration_since(*wake)
+            );
+        }
+        drop(runner);
+        waker.wake(); // the run is over: nothing to wake, nothing breaks
+    }
+
     /// Emits a frame on both ports every millisecond.
     struct Beacon {
         next: Timestamp,

@@ -26,6 +26,7 @@ use bywire_control::kinematics::{four_wheel, Motion, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 
 use crate::messages::{
@@ -34,10 +35,10 @@ use crate::messages::{
 use crate::plausibility::{SteeringFault, SteeringPlausibility};
 use crate::wire::ReferenceWire;
 
-/// Bus 1, vehicle control.
-pub const BUS1: Port = Port(0);
-/// Bus 1b, the redundant command bus.
-pub const BUS1B: Port = Port(1);
+/// Bus 1, vehicle control (the supervisor's command bus A).
+pub const BUS1: Port = Channel::A.port();
+/// Bus 1b, the redundant command bus (the supervisor's bus B).
+pub const BUS1B: Port = Channel::B.port();
 /// Bus 2, the drives (CANopen).
 pub const BUS2: Port = Port(2);
 /// Bus 3, the sensors.

@@ -466,9 +466,9 @@ impl<W: AdsWire> Ads<W> {
 
 impl<W: AdsWire> Ads<W> {
     /// The port of the command bus A.
-    pub const PORT_A: Port = Port(0);
+    pub const PORT_A: Port = crate::redundancy::Channel::A.port();
     /// The port of the redundant command bus B.
-    pub const PORT_B: Port = Port(1);
+    pub const PORT_B: Port = crate::redundancy::Channel::B.port();
 
     /// Whether `frame` is the other bus's copy of feedback taken within the last cycle.
     fn is_copy(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {

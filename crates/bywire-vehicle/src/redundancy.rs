@@ -19,6 +19,17 @@ pub enum Channel {
     B,
 }
 
+impl Channel {
+    /// The node port of this command bus, the same at both ends (the ADS side and the
+    /// supervisor): bus A on port 0, bus B on port 1.
+    pub const fn port(self) -> bywire_core::node::Port {
+        match self {
+            Channel::A => bywire_core::node::Port(0),
+            Channel::B => bywire_core::node::Port(1),
+        }
+    }
+}
+
 /// Why a vote failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum VoteFailure {

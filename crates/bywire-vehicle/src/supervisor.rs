@@ -856,9 +856,9 @@ impl<W: VehicleWire> Supervisor<W> {
 
 impl<W: VehicleWire> Supervisor<W> {
     /// The port of the command bus (bus A; the only one without redundancy).
-    pub const PORT_A: Port = Port(0);
+    pub const PORT_A: Port = crate::redundancy::Channel::A.port();
     /// The port of the redundant command bus B.
-    pub const PORT_B: Port = Port(1);
+    pub const PORT_B: Port = crate::redundancy::Channel::B.port();
 }
 
 /// The supervisor as a node: commands and the E-stop chain on [`Supervisor::PORT_A`] and, with

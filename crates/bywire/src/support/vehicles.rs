@@ -10,6 +10,7 @@ use bywire_bus::runner::{Flow, Runner};
 use bywire_core::node::Port;
 use bywire_sim::vehicle::SimulatedVehicle;
 use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::wire::ProfileWire;
 
 type Vehicle = SimulatedVehicle<ProfileWire>;
@@ -17,11 +18,14 @@ type Vehicle = SimulatedVehicle<ProfileWire>;
 /// The command buses given on the command line, each on its port (bus A on port A, the
 /// redundant bus B, if given, on port B), plain names as SocketCAN.
 pub fn command_buses(bus: &str, bus2: Option<&String>) -> Vec<(Port, String)> {
-    // Both ends give their command buses ports 0 and 1 (the ADS side and the supervisor alike).
-    [(Port(0), Some(bus)), (Port(1), bus2.map(String::as_str))]
-        .into_iter()
-        .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
-        .collect()
+    // Both ends give their command buses the same ports (the ADS side and the supervisor).
+    [
+        (Channel::A.port(), Some(bus)),
+        (Channel::B.port(), bus2.map(String::as_str)),
+    ]
+    .into_iter()
+    .filter_map(|(port, spec)| spec.map(|s| (port, crate::support::busarg::full_spec(s))))
+    .collect()
 }
 
 /// A shipped profile by name, or a profile file; it must describe a vehicle to command.
