@@ -80,6 +80,10 @@ pub struct LoadReport {
     pub frames: u32,
     /// Bits those frames occupied, interframe space included.
     pub bits: u64,
+    /// Data bits they carried (8 per data byte; none for remote frames).
+    pub payload_bits: u64,
+    /// Time the bus was busy with them, ns.
+    pub busy_ns: f64,
     /// Share of the window the bus was busy, in percent.
     pub load_percent: f64,
 }
@@ -93,6 +97,7 @@ pub struct LoadMeter {
     start: Option<Timestamp>,
     frames: u32,
     bits: u64,
+    payload_bits: u64,
     busy_ns: f64,
 }
 
@@ -106,8 +111,16 @@ impl LoadMeter {
             start: None,
             frames: 0,
             bits: 0,
+            payload_bits: 0,
             busy_ns: 0.0,
         }
+    }
+
+    /// The first window starts at `start` (instead of at the first frame): windows on a clock
+    /// of the caller's, such as whole seconds of a live measurement.
+    pub fn starting_at(mut self, start: Timestamp) -> Self {
+        self.start = Some(start);
+        self
     }
 
     /// Close the current window if `now` is past its end, returning its report. Call again
@@ -125,11 +138,14 @@ impl LoadMeter {
             start,
             frames: self.frames,
             bits: self.bits,
+            payload_bits: self.payload_bits,
+            busy_ns: self.busy_ns,
             load_percent: 100.0 * self.busy_ns / window_ns,
         };
         self.start = Some(end);
         self.frames = 0;
         self.bits = 0;
+        self.payload_bits = 0;
         self.busy_ns = 0.0;
         Some(report)
     }
@@ -151,10 +167,15 @@ impl LoadMeter {
         if self.start.is_none() {
             self.start = Some(now);
         }
-        // Exact counting encodes the frame once for both its bits and its time.
-        let (bits, ns) = match self.stuffing {
-            Stuffing::Exact => exact(frame, Some(self.rates)),
-            Stuffing::None | Stuffing::WorstCase => {
+        // Exact counting encodes the frame once for both its bits and its time; with a data
+        // bitrate the time is always the exact one (an FD data phase is not nominal bits).
+        let (bits, ns) = match (self.stuffing, self.rates.data) {
+            (Stuffing::Exact, _) => exact(frame, Some(self.rates)),
+            (_, Some(_)) => (
+                frame_bits(frame, self.stuffing),
+                frame_time_ns(frame, self.rates),
+            ),
+            (Stuffing::None | Stuffing::WorstCase, None) => {
                 let bits = frame_bits(frame, self.stuffing);
                 (
                     bits,
@@ -162,8 +183,19 @@ impl LoadMeter {
                 )
             }
         };
-        self.frames = self.frames.saturating_add(u32::from(bits > 0));
+        if bits == 0 {
+            return report; // error frames are reports, not traffic
+        }
+        let payload = if frame.is_remote() {
+            0
+        } else {
+            frame.data().len()
+        };
+        self.frames = self.frames.saturating_add(1);
         self.bits = self.bits.saturating_add(u64::from(bits));
+        self.payload_bits = self
+            .payload_bits
+            .saturating_add(8 * u64::try_from(payload).unwrap_or(0));
         self.busy_ns += ns;
         report
     }
@@ -224,13 +256,35 @@ mod tests {
             assert_eq!(m.record(Timestamp::from_micros(i * 100), &f), None);
         }
         let r = m.record(Timestamp::from_millis(25), &f).unwrap();
-        assert_eq!((r.frames, r.bits), (50, 50 * 53));
+        assert_eq!((r.frames, r.bits, r.payload_bits), (50, 50 * 53, 0));
         assert!((r.load_percent - 100.0 * 50.0 * 53.0 * 2000.0 / 1e7).abs() < 1e-9);
         // The window after the gap starts at 20 ms and holds the frame at 25 ms.
         let r = m.advance(Timestamp::from_millis(30)).unwrap();
         assert_eq!((r.start, r.frames), (Timestamp::from_millis(20), 1));
         assert_eq!(m.advance(Timestamp::from_millis(39)), None);
         assert_eq!(m.advance(Timestamp::from_millis(40)).unwrap().frames, 0);
+    }
+
+    #[test]
+    fn a_meter_on_the_callers_clock_reports_each_window_even_when_idle() {
+        let rates = Bitrates {
+            nominal: 500_000,
+            data: None,
+        };
+        let second = Duration::from_secs(1);
+        let mut m = LoadMeter::new(rates, second, Stuffing::None).starting_at(Timestamp::ZERO);
+        assert_eq!(m.advance(Timestamp::from_millis(999)), None);
+        let idle = m.advance(Timestamp::from_millis(1000)).unwrap();
+        assert_eq!(
+            (idle.start, idle.frames, idle.bits),
+            (Timestamp::ZERO, 0, 0)
+        );
+        m.record(Timestamp::from_millis(1500), &frame("123#DEADBEEF"));
+        m.record(Timestamp::from_millis(1600), &frame("123#R"));
+        m.record(Timestamp::from_millis(1700), &frame("20000004#")); // an error frame
+        let r = m.advance(Timestamp::from_millis(2000)).unwrap();
+        assert_eq!((r.frames, r.bits, r.payload_bits), (2, 79 + 47, 32));
+        assert!((r.busy_ns - 126.0 * 2000.0).abs() < 1e-6);
     }
 
     #[test]

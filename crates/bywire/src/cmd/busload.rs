@@ -10,9 +10,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Result};
 use bywire_core::busload::{
-    frame_bits, frame_time_ns, predicted_load, Bitrates, PeriodicMessage, Stuffing,
+    frame_bits, predicted_load, Bitrates, LoadMeter, LoadReport, PeriodicMessage, Stuffing,
 };
-use bywire_core::Frame;
+use bywire_core::{Frame, Timestamp};
 use bywire_dbc::codec::EncodeMode;
 
 use crate::support::busarg::{self, BusArg, Readers};
@@ -58,20 +58,13 @@ pub struct Args {
     reports: Option<u64>,
 }
 
-/// One bus's counts in the current second.
-#[derive(Default, Clone)]
-struct Counts {
-    frames: u64,
-    bits: u64,
-    payload_bits: u64,
-    busy_ns: f64,
-    per_id: BTreeMap<u32, (u64, u64)>,
-}
-
+/// One bus: the load meter (one-second windows on the clock of this run) and the frames and
+/// bits per identifier in the current second.
 struct Meter {
     arg: BusArg,
     rates: Bitrates,
-    counts: Counts,
+    load: LoadMeter,
+    per_id: BTreeMap<u32, (u64, u64)>,
     predicted: Option<f64>,
 }
 
@@ -109,13 +102,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         None => None,
     };
     let mut meters = Vec::new();
+    let second = Duration::from_secs(1);
     for text in &args.buses {
         let (arg, rates) = parse_bus(text)?;
         let predicted = dbc.as_ref().map(|d| predict(d, rates, stuffing));
         meters.push(Meter {
             arg,
             rates,
-            counts: Counts::default(),
+            load: LoadMeter::new(rates, second, stuffing).starting_at(Timestamp::ZERO),
+            per_id: BTreeMap::new(),
             predicted,
         });
     }
@@ -125,7 +120,14 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if args.redraw {
         write!(out, "\x1b[2J")?;
     }
-    let mut next = Instant::now() + Duration::from_secs(1);
+    let start = Instant::now();
+    // The meters' clock: nanoseconds since the start.
+    let since_start = |at: Instant| {
+        Timestamp::from_nanos(
+            u64::try_from(at.saturating_duration_since(start).as_nanos()).unwrap_or(u64::MAX),
+        )
+    };
+    let mut next = start + second;
     let mut reports = 0u64;
     while !stop.load(Ordering::Relaxed) && args.reports.is_none_or(|n| reports < n) {
         match readers
@@ -135,13 +137,20 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             Ok((index, event)) => {
                 let received = event.map_err(|e| anyhow!("bus {}: {e}", index))?;
                 if let Some(meter) = meters.get_mut(index) {
-                    count(meter, &received.frame, stuffing);
+                    // A frame that arrives as the second ends counts in the next one.
+                    let last_of_second =
+                        Timestamp::from_nanos(since_start(next).as_nanos().saturating_sub(1));
+                    let now = since_start(Instant::now()).min(last_of_second);
+                    meter.load.record(now, &received.frame);
+                    count_id(meter, &received.frame, stuffing);
                 }
             }
             Err(RecvTimeoutError::Timeout) => {
-                report(args, stuffing, &mut meters, out)?;
+                let end =
+                    Timestamp::from_nanos(u64::try_from((next - start).as_nanos()).unwrap_or(0));
+                report(args, stuffing, &mut meters, end, out)?;
                 reports += 1;
-                next += Duration::from_secs(1);
+                next += second;
             }
             Err(RecvTimeoutError::Disconnected) => break,
         }
@@ -149,41 +158,27 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-fn count(meter: &mut Meter, frame: &Frame, stuffing: Stuffing) {
+/// The frame's share of its identifier's line (`--per-id`).
+fn count_id(meter: &mut Meter, frame: &Frame, stuffing: Stuffing) {
     let bits = u64::from(frame_bits(frame, stuffing));
     if bits == 0 {
         return; // error frames are reports, not traffic
     }
-    let c = &mut meter.counts;
-    c.frames += 1;
-    c.bits += bits;
-    let payload = if frame.is_remote() {
-        0
-    } else {
-        frame.data().len()
-    };
-    c.payload_bits += 8 * u64::try_from(payload).unwrap_or(0);
-    c.busy_ns += if meter.rates.data.is_some() {
-        frame_time_ns(frame, meter.rates)
-    } else {
-        // Without a data phase, time is bits over the bitrate (what the percent below uses).
-        0.0
-    };
-    let entry = c.per_id.entry(frame.socketcan_id()).or_default();
+    let entry = meter.per_id.entry(frame.socketcan_id()).or_default();
     entry.0 += 1;
     entry.1 += bits;
 }
 
 /// Load in whole percent as canbusload computes it (bits in the second over the bitrate), or
 /// from the frames' time on the bus when FD frames switch to a data bitrate.
-fn percent(meter: &Meter, bits: u64, busy_ns: f64) -> u64 {
-    if meter.rates.data.is_some() {
+fn percent(rates: Bitrates, second: &LoadReport) -> u64 {
+    if rates.data.is_some() {
         // Non-negative and far below 2^64 per second.
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let p = (busy_ns / 1e7) as u64;
+        let p = (second.busy_ns / 1e7) as u64;
         p
     } else {
-        bits * 100 / u64::from(meter.rates.nominal)
+        second.bits * 100 / u64::from(rates.nominal)
     }
 }
 
@@ -191,6 +186,7 @@ fn report(
     args: &Args,
     stuffing: Stuffing,
     meters: &mut [Meter],
+    end: Timestamp,
     out: &mut impl Write,
 ) -> Result<()> {
     if args.redraw {
@@ -215,12 +211,20 @@ fn report(
         .max()
         .unwrap_or(0);
     for meter in meters.iter_mut() {
-        let c = std::mem::take(&mut meter.counts);
-        let load = percent(meter, c.bits, c.busy_ns);
+        let Some(second) = meter.load.advance(end) else {
+            continue;
+        };
+        let per_id = std::mem::take(&mut meter.per_id);
+        let load = percent(meter.rates, &second);
         write!(
             out,
             " {:>name_width$}@{:<rate_width$} {:5} {:7} {:6} {:3}%",
-            meter.arg.name, meter.rates.nominal, c.frames, c.bits, c.payload_bits, load
+            meter.arg.name,
+            meter.rates.nominal,
+            second.frames,
+            second.bits,
+            second.payload_bits,
+            load
         )?;
         if args.bargraph {
             let filled = usize::try_from(load.min(100) / 5).unwrap_or(20);
@@ -234,7 +238,7 @@ fn report(
             )?;
         }
         if args.per_id {
-            for (id, (frames, bits)) in &c.per_id {
+            for (id, (frames, bits)) in &per_id {
                 let id_text = if id & bywire_core::frame::EFF_FLAG != 0 {
                     format!("{:08X}", id & bywire_core::frame::EFF_MASK)
                 } else {
