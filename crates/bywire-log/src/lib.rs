@@ -8,6 +8,7 @@
 //!
 //! - [`lines`]: text lines in bounded memory (too long or not UTF-8: reported with the line's
 //!   number, and reading goes on).
+//! - [`pacing`]: when to replay each record (recorded pace, a speed factor, long gaps skipped).
 //!
 //! Readers hold one line at a time, so logs of any size stream in bounded memory, and no input
 //! can make them panic (property-tested).
@@ -22,6 +23,7 @@
 
 pub mod candump;
 pub mod lines;
+pub mod pacing;
 pub mod screen;
 
 pub use candump::{LogError, LogErrorKind, LogRecord, Precision, Reader, Writer};

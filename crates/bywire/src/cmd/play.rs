@@ -116,30 +116,19 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     while loops.is_none_or(|n| pass < n) {
         pass += 1;
         let reader = lines_starting_with_paren(open_input(args.input.as_ref())?);
-        let mut clock: Option<(Instant, u64)> = None;
-        let mut skipped = Duration::ZERO;
-        let mut previous_log_time: Option<u64> = None;
+        let mut pacer = bywire_log::pacing::Pacer::new(args.speed);
+        if let Some(limit) = args.skip_gaps {
+            pacer = pacer.skipping_gaps_over(Duration::from_secs_f64(limit));
+        }
+        let mut start: Option<Instant> = None;
         for record in reader {
             let record = record.map_err(|e| syntax(args.input.as_ref(), e))?;
             if stop.load(Ordering::Relaxed) || args.count.is_some_and(|n| sent >= n) {
                 return Ok(());
             }
-            let logged = record.timestamp.as_nanos();
-            if let (Some(limit), Some(previous)) = (args.skip_gaps, previous_log_time) {
-                let gap = Duration::from_nanos(logged.saturating_sub(previous));
-                if gap.as_secs_f64() > limit {
-                    skipped += gap;
-                }
-            }
-            previous_log_time = Some(logged);
-            let (start, first) = *clock.get_or_insert((Instant::now(), logged));
-            let due = if args.ignore_timestamps {
-                None
-            } else {
-                let elapsed =
-                    Duration::from_nanos(logged.saturating_sub(first)).saturating_sub(skipped);
-                Some(start + elapsed.div_f64(args.speed))
-            };
+            let start = *start.get_or_insert_with(Instant::now);
+            let offset = pacer.due(record.timestamp);
+            let due = (!args.ignore_timestamps).then(|| start + offset);
             let Some(target) = target_for(&record, &assigned, &mut targets, args.no_loopback)?
             else {
                 continue;

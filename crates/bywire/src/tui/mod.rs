@@ -15,7 +15,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
-use bywire_core::Timestamp;
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyEventKind};
 use rustix::event::{poll, PollFd, PollFlags};
 
@@ -84,20 +83,18 @@ fn replay(path: &Path, stop: Arc<AtomicBool>) -> Result<Source> {
     let thread_stop = Arc::clone(&stop);
     std::thread::spawn(move || {
         let started = Instant::now();
-        let mut first: Option<u64> = None;
+        let mut pacer = bywire_log::pacing::Pacer::new(1.0);
         for record in bywire_log::Reader::new(BufReader::new(file)) {
             if thread_stop.load(Ordering::Relaxed) {
                 break;
             }
             let event = match record {
                 Ok(r) => {
-                    let logged = r.timestamp.as_nanos();
-                    let offset = logged.saturating_sub(*first.get_or_insert(logged));
-                    let due = started + Duration::from_nanos(offset);
+                    let due = started + pacer.due(r.timestamp);
                     std::thread::sleep(due.saturating_duration_since(Instant::now()));
                     Ok(Received {
                         frame: r.frame,
-                        timestamp: Timestamp::from_nanos(logged),
+                        timestamp: r.timestamp,
                         own: false,
                         hardware: None,
                     })
