@@ -9,6 +9,8 @@
 
 use std::time::Duration;
 
+use bywire_bus::network::{BusIndex, Network};
+use bywire_bus::sim::NodeId;
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint, State, StopReason};
 use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
@@ -18,56 +20,72 @@ use bywire_canopen::{Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
 
-/// Every node polled at each step; every frame reaches every other node at once (settling
-/// within the step); a node marked silent sends nothing (powered off or cut off).
+/// The master (node 0) and one device (node 1) on a simulated 1 Mbit/s bus, run by the
+/// network runner (bit-timed frames, each node polled at its deadline); `log` is every frame
+/// on the wire with its sender, as a tap saw it.
 struct Bus {
-    now: Timestamp,
-    silent: Vec<bool>,
+    net: Network,
+    bus: BusIndex,
+    tap: NodeId,
+    /// The device's node ID (its heartbeat tells the two senders apart).
+    device: u8,
     log: Vec<(Timestamp, usize, Frame)>,
 }
 
 impl Bus {
-    fn new(nodes: usize) -> Bus {
+    fn new(device: u8) -> Bus {
+        let mut net = Network::new();
+        let bus = net.add_bus("can0", 1_000_000, None);
+        net.wire(0, Port::MAIN, bus);
+        net.wire(1, Port::MAIN, bus);
+        let tap = net.tap(bus).unwrap();
         Bus {
-            now: Timestamp::ZERO,
-            silent: vec![false; nodes],
+            net,
+            bus,
+            tap,
+            device,
             log: Vec::new(),
         }
     }
 
-    fn step(&mut self, nodes: &mut [&mut dyn Node]) {
-        let mut pending: Vec<(usize, Frame)> = Vec::new();
-        for (i, node) in nodes.iter_mut().enumerate() {
-            node.poll(self.now, &mut |_, frame| pending.push((i, frame)));
-        }
-        // Bounded: each round's frames are answered by at most a block of responses.
-        for _ in 0..64 {
-            if pending.is_empty() {
-                break;
-            }
-            let round = std::mem::take(&mut pending);
-            for (from, frame) in round {
-                if self.silent[from] {
-                    continue;
-                }
-                self.log.push((self.now, from, frame));
-                for (i, node) in nodes.iter_mut().enumerate() {
-                    if i != from {
-                        node.on_frame(self.now, Port::MAIN, &frame);
-                    }
-                }
-            }
-            for (i, node) in nodes.iter_mut().enumerate() {
-                node.poll(self.now, &mut |_, frame| pending.push((i, frame)));
-            }
-        }
+    fn now(&self) -> Timestamp {
+        self.net.now()
     }
 
-    fn run(&mut self, duration: Duration, tick: Duration, nodes: &mut [&mut dyn Node]) {
-        let end = self.now.saturating_add(duration);
-        while self.now < end {
-            self.step(nodes);
-            self.now = self.now.saturating_add(tick);
+    /// Cut a node off the bus (nothing it sends arrives), or put it back.
+    fn silence(&mut self, node: usize, silent: bool) {
+        self.net.drop_output(node, silent);
+    }
+
+    /// Who sent `frame`: CANopen's COB-IDs say it (the master sends NMT, SYNC, RPDOs, SDO
+    /// requests and its heartbeat; the device its TPDOs, SDO responses, EMCY, heartbeat).
+    fn sender(&self, frame: &Frame) -> usize {
+        let id = frame.id().map_or(0, |id| id.as_raw());
+        let device = match id {
+            0x700..=0x77F => id == 0x700 + u32::from(self.device),
+            0x081..=0x0FF | 0x180..=0x1FF | 0x280..=0x2FF | 0x380..=0x3FF | 0x480..=0x4FF => true,
+            0x580..=0x5FF => true,
+            _ => false,
+        };
+        usize::from(device)
+    }
+
+    /// Run for `duration` (the nodes may have been changed since the last run), logging.
+    fn run(&mut self, duration: Duration, nodes: &mut [&mut dyn Node]) {
+        let end = self.now().saturating_add(duration);
+        for node in 0..nodes.len() {
+            self.net.changed(node);
+        }
+        // In slices, so the tap's queue never fills.
+        while self.now() < end {
+            let until = self
+                .now()
+                .saturating_add(Duration::from_millis(10))
+                .min(end);
+            self.net.run_until(until, nodes);
+            while let Some(r) = self.net.bus_mut(self.bus).and_then(|b| b.receive(self.tap)) {
+                self.log.push((r.timestamp, self.sender(&r.frame), r.frame));
+            }
         }
     }
 }
@@ -95,18 +113,10 @@ fn running_drive(velocity: i32) -> (Bus, Master, Device<Drive>) {
     od.set(0x1016, 1, &((u32::from(MASTER) << 16) | 300).to_le_bytes())
         .unwrap();
     let mut drive = Device::new(DRIVE, od, Drive::new());
-    let mut bus = Bus::new(2);
-    bus.run(
-        Duration::from_millis(20),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    let mut bus = Bus::new(DRIVE);
+    bus.run(Duration::from_millis(20), &mut [&mut master, &mut drive]);
     master.nmt(NmtCommand::Start, DRIVE);
-    bus.run(
-        Duration::from_millis(1_500),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(1_500), &mut [&mut master, &mut drive]);
     (bus, master, drive)
 }
 
@@ -161,8 +171,8 @@ fn the_master_walks_a_drive_to_operation_enabled_and_it_follows() {
 fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_once() {
     let (mut bus, mut master, mut drive) = running_drive(1_000);
     // Cut the drive off: nothing it sends reaches the bus.
-    bus.silent[1] = true;
-    let cut_at = bus.now;
+    bus.silence(1, true);
+    let cut_at = bus.now();
     let last_heartbeat = bus
         .log
         .iter()
@@ -170,11 +180,7 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
         .find(|(_, from, f)| *from == 1 && f.id().map(|id| id.as_raw()) == Some(0x702))
         .unwrap()
         .0;
-    bus.run(
-        Duration::from_millis(400),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(400), &mut [&mut master, &mut drive]);
     let lost_at = bus
         .log
         .iter()
@@ -195,14 +201,15 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
         lost_at <= deadline.saturating_add(TICK),
         "within the consumer time and one poll ({lost_at:?})"
     );
-    // The same instant: target velocity zero on RPDO2.
+    // At once (the next frame on the wire): target velocity zero on RPDO2.
     let target = bus
         .log
         .iter()
         .find(|(t, from, f)| {
-            *t == lost_at && *from == 0 && f.id().map(|id| id.as_raw()) == Some(0x302)
+            *t >= lost_at && *from == 0 && f.id().map(|id| id.as_raw()) == Some(0x302)
         })
         .unwrap();
+    assert!(target.0.saturating_since(lost_at) <= Duration::from_micros(250));
     assert_eq!(
         i32::from_le_bytes(target.2.data()[4..8].try_into().unwrap()),
         0
@@ -224,27 +231,23 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
         drive.app().motor().velocity
     );
     // Back on the bus, the drive is held stopped until the application acknowledges.
-    bus.silent[1] = false;
-    bus.run(
-        Duration::from_millis(500),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.silence(1, false);
+    bus.run(Duration::from_millis(500), &mut [&mut master, &mut drive]);
     assert!(drive.app().motor().velocity.abs() < 1.0);
     assert_ne!(drive.app().state(), State::OperationEnabled);
     controller(&mut master).acknowledge();
-    bus.run(
-        Duration::from_millis(500),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(500), &mut [&mut master, &mut drive]);
     assert_eq!(drive.app().state(), State::OperationEnabled);
 }
 
+/// The runner polls the master at its deadline, not at the next millisecond: the quick stop
+/// is on the wire one frame after the consumer time has passed (the master received the last
+/// heartbeat at its end of frame, and the quick stop takes its own frame time).
 #[test]
-fn with_the_runner_sleeping_until_the_next_deadline_detection_is_exact() {
+fn with_the_runner_waking_at_the_deadline_detection_is_exact() {
     let (mut bus, mut master, mut drive) = running_drive(500);
-    bus.silent[1] = true;
+    bus.silence(1, true);
+    let cut_at = bus.now();
     let last_heartbeat = bus
         .log
         .iter()
@@ -252,30 +255,33 @@ fn with_the_runner_sleeping_until_the_next_deadline_detection_is_exact() {
         .find(|(_, from, f)| *from == 1 && f.id().map(|id| id.as_raw()) == Some(0x702))
         .unwrap()
         .0;
-    // An event-driven runner: poll the master exactly at its next deadline.
-    let mut lost = None;
-    for _ in 0..1_000 {
-        let next = master.next_deadline().unwrap();
-        bus.now = next.max(bus.now);
-        bus.step(&mut [&mut master, &mut drive]);
-        if controller(&mut master).stopped().is_some() {
-            lost = Some(bus.now);
-            break;
-        }
-        bus.now = bus.now.saturating_add(Duration::from_micros(1));
-    }
-    assert_eq!(lost, Some(last_heartbeat.saturating_add(CONSUMER_TIME)));
+    bus.run(Duration::from_millis(400), &mut [&mut master, &mut drive]);
+    let quick_stop = bus
+        .log
+        .iter()
+        .find(|(t, from, f)| {
+            *t >= cut_at
+                && *from == 0
+                && f.id().map(|id| id.as_raw()) == Some(0x202)
+                && f.data()[..2] == [0x02, 0x00]
+        })
+        .map(|(t, _, _)| *t)
+        .expect("a quick stop controlword");
+    let deadline = last_heartbeat.saturating_add(CONSUMER_TIME);
+    let late = quick_stop.saturating_since(deadline);
+    assert!(quick_stop >= deadline, "{quick_stop:?} before {deadline:?}");
+    // One 1 Mbit/s frame is about 0.1 ms (a frame already on the wire may delay it by one).
+    assert!(
+        late <= Duration::from_micros(250),
+        "{late:?} after the deadline"
+    );
 }
 
 #[test]
 fn a_silent_master_faults_the_drive_and_it_stops() {
     let (mut bus, mut master, mut drive) = running_drive(2_000);
-    bus.silent[0] = true;
-    bus.run(
-        Duration::from_millis(600),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.silence(0, true);
+    bus.run(Duration::from_millis(600), &mut [&mut master, &mut drive]);
     assert_eq!(
         drive.app().state(),
         State::Fault,
@@ -299,11 +305,7 @@ fn a_silent_master_faults_the_drive_and_it_stops() {
 fn an_emergency_stops_the_drive_until_acknowledged() {
     let (mut bus, mut master, mut drive) = running_drive(1_000);
     drive.app_mut().0.inject_fault(0x2310);
-    bus.run(
-        Duration::from_millis(300),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
     assert_eq!(
         controller(&mut master).stopped(),
         Some(StopReason::Emergency(0x2310))
@@ -312,20 +314,12 @@ fn an_emergency_stops_the_drive_until_acknowledged() {
     assert!(drive.app().motor().velocity.abs() < 1.0);
     // Acknowledged while the cause remains: the fault reset does nothing.
     controller(&mut master).acknowledge();
-    bus.run(
-        Duration::from_millis(300),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
     assert_eq!(drive.app().state(), State::Fault);
     // The cause gone and acknowledged again: back to Operation enabled, running.
     drive.app_mut().0.clear_fault();
     controller(&mut master).acknowledge();
-    bus.run(
-        Duration::from_millis(1_000),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(1_000), &mut [&mut master, &mut drive]);
     assert_eq!(drive.app().state(), State::OperationEnabled);
     assert!((drive.app().motor().velocity - 1_000.0).abs() < 1.0);
     let resets = bus
@@ -351,18 +345,10 @@ fn profile_position_reaches_its_target() {
     controller.set_setpoint(Setpoint::Position(5_000));
     master.add(Controlled::Drive(controller));
     let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
-    let mut bus = Bus::new(2);
-    bus.run(
-        Duration::from_millis(10),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    let mut bus = Bus::new(DRIVE);
+    bus.run(Duration::from_millis(10), &mut [&mut master, &mut drive]);
     master.nmt(NmtCommand::Start, DRIVE);
-    bus.run(
-        Duration::from_millis(5_000),
-        TICK,
-        &mut [&mut master, &mut drive],
-    );
+    bus.run(Duration::from_millis(5_000), &mut [&mut master, &mut drive]);
     assert!(
         (drive.app().motor().position - 5_000.0).abs() <= 10.0,
         "{:?}",
@@ -383,11 +369,10 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
     master.monitor(NODE, CONSUMER_TIME);
     let mut controller =
         Device::new(NODE, roboteq::dictionary(NODE, 2), Mdc1460::default()).with_autostart();
-    let mut bus = Bus::new(2);
+    let mut bus = Bus::new(NODE);
     roboteq::remap_rpdo1_to_velocity(master.sdo(), NODE, 1).unwrap();
     bus.run(
         Duration::from_millis(100),
-        TICK,
         &mut [&mut master, &mut controller],
     );
     let outcomes: Vec<_> = std::iter::from_fn(|| master.take_sdo_outcome()).collect();
@@ -399,7 +384,6 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
     }
     bus.run(
         Duration::from_millis(1_500),
-        TICK,
         &mut [&mut master, &mut controller],
     );
     assert!(
@@ -411,10 +395,9 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
         && f.id().map(|id| id.as_raw()) == Some(0x201)
         && f.data() == [0xB0, 0x04, 0x00, 0x00]));
     // The controller stops reporting: the master zeroes the command.
-    bus.silent[1] = true;
+    bus.silence(1, true);
     bus.run(
         Duration::from_millis(1_500),
-        TICK,
         &mut [&mut master, &mut controller],
     );
     let last = bus
@@ -439,18 +422,10 @@ fn cyclic_synchronous_modes_follow_the_streamed_targets() {
         cyclic.set_enabled(true);
         master.add(Controlled::Drive(cyclic));
         let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
-        let mut bus = Bus::new(2);
-        bus.run(
-            Duration::from_millis(10),
-            TICK,
-            &mut [&mut master, &mut drive],
-        );
+        let mut bus = Bus::new(DRIVE);
+        bus.run(Duration::from_millis(10), &mut [&mut master, &mut drive]);
         master.nmt(NmtCommand::Start, DRIVE);
-        bus.run(
-            Duration::from_millis(300),
-            TICK,
-            &mut [&mut master, &mut drive],
-        );
+        bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
         assert_eq!(drive.app().state(), State::OperationEnabled, "{mode:?}");
         // A ramp streamed every cycle: 0 → 1000 units in one second.
         for step in 0..=200 {
@@ -461,17 +436,9 @@ fn cyclic_synchronous_modes_follow_the_streamed_targets() {
                 Setpoint::Position(value)
             };
             controller(&mut master).set_setpoint(setpoint);
-            bus.run(
-                Duration::from_millis(5),
-                TICK,
-                &mut [&mut master, &mut drive],
-            );
+            bus.run(Duration::from_millis(5), &mut [&mut master, &mut drive]);
         }
-        bus.run(
-            Duration::from_millis(200),
-            TICK,
-            &mut [&mut master, &mut drive],
-        );
+        bus.run(Duration::from_millis(200), &mut [&mut master, &mut drive]);
         let motor = drive.app().motor();
         match mode {
             Mode::CyclicSynchronousVelocity => {
