@@ -12,7 +12,9 @@ mod common;
 use bywire_tug::wire::ReferenceWire;
 use std::time::Duration;
 
-use bywire_bus::sim::SimBus;
+use bywire_bus::network::Network;
+use bywire_bus::sim::NodeId;
+use bywire_core::node::Port;
 use bywire_core::{Frame, Id};
 use bywire_tug::messages::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
@@ -20,25 +22,31 @@ use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, V
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
 use common::{ms, sealed};
 
-/// ADS and supervisor on one 500 kbit/s bus, stepped by the millisecond.
+/// ADS and supervisor on one 500 kbit/s bus, on the network runner; between milliseconds the
+/// vehicle's speed follows the actuators (braking stops it). A tap logs the ADS's frames.
 struct Loop {
-    bus: SimBus,
-    ads_node: usize,
-    vcu_node: usize,
+    net: Network,
+    tap: NodeId,
     ads: Ads<ReferenceWire>,
     vcu: Supervisor<ReferenceWire>,
     now: u64,
     ads_frames: Vec<(u64, Frame)>,
 }
 
+/// The nodes' places in the network.
+const ADS: usize = 0;
+const VCU: usize = 1;
+
 impl Loop {
     fn new() -> Loop {
-        let mut bus = SimBus::new(500_000, None);
-        let (ads_node, vcu_node) = (bus.add_node(), bus.add_node());
+        let mut net = Network::new();
+        let bus = net.add_bus("bus1", 500_000, None);
+        net.wire(ADS, Port::MAIN, bus).unwrap();
+        net.wire(VCU, Port::MAIN, bus).unwrap();
+        let tap = net.tap(bus).unwrap();
         Loop {
-            bus,
-            ads_node,
-            vcu_node,
+            net,
+            tap,
             ads: Ads::with_wire(AdsConfig::default(), ReferenceWire),
             vcu: Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire),
             now: 0,
@@ -48,34 +56,29 @@ impl Loop {
 
     fn run_to(&mut self, until: u64) {
         while self.now < until {
+            self.net.run_for(
+                Duration::from_millis(1),
+                &mut [&mut self.ads, &mut self.vcu],
+            );
             self.now += 1;
-            let now = ms(self.now);
-            self.bus.advance(now);
-            while let Some(r) = self.bus.receive(self.vcu_node) {
-                self.vcu.on_frame(r.timestamp, &r.frame);
+            let tap = self.tap;
+            while let Some(r) = self.net.bus_mut(0).unwrap().receive(tap) {
+                // The ADS's own frames: commands (0x100) and the emergency brake.
+                if r.frame.id().is_some_and(|id| id.as_raw() < 0x101) {
+                    let at = r.timestamp.as_nanos() / 1_000_000;
+                    self.ads_frames.push((at, r.frame));
+                }
             }
-            while let Some(r) = self.bus.receive(self.ads_node) {
-                self.ads.on_frame(r.timestamp, &r.frame);
-            }
-            let mut out = Vec::new();
-            self.ads.poll(now, &mut |f| out.push(f));
-            for f in out {
-                self.ads_frames.push((self.now, f));
-                self.bus.submit(self.ads_node, f, now);
-            }
-            let mut out = Vec::new();
-            self.vcu.poll(now, &mut |f| out.push(f));
-            for f in out {
-                self.bus.submit(self.vcu_node, f, now);
-            }
-            let a = self.vcu.actuators(now);
+            let a = self.vcu.actuators(ms(self.now));
             self.vcu
                 .set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
+            self.net.changed(VCU);
         }
     }
 
     fn command(&mut self, c: AdsCommand) {
         assert!(self.ads.set_command(ms(self.now), c));
+        self.net.changed(ADS);
     }
 }
 

@@ -440,11 +440,15 @@ fn profile_wires_refuse_profiles_they_cannot_speak() {
 /// cascade brakes.
 #[test]
 fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
-    use bywire_bus::sim::SimBus;
+    use bywire_bus::network::Network;
+    use bywire_core::node::Port;
     use bywire_vehicle::supervisor::{Supervisor, Watchdog};
     let loaded = shuttle();
-    let mut bus = SimBus::new(500_000, None);
-    let (ads_node, vcu_node) = (bus.add_node(), bus.add_node());
+    let mut net = Network::new();
+    let bus = net.add_bus("bus", 500_000, None);
+    let (ads_node, vcu_node) = (0, 1);
+    net.wire(ads_node, Port::MAIN, bus).unwrap();
+    net.wire(vcu_node, Port::MAIN, bus).unwrap();
     let mut ads = Ads::with_wire(loaded.ads_config(), ProfileWire::new(&loaded).unwrap());
     let mut vcu = Supervisor::with_wire(
         loaded.supervisor_config(),
@@ -458,35 +462,21 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
         steering_mode: SteeringMode::Crab,
         ..AdsCommand::default()
     };
-    let mut silent = false;
+    // A millisecond at a time on the network runner: the ADS's command set before, the
+    // vehicle's speed following the actuators after (braking stops it).
     for t in 1..=20_000u64 {
-        let now = Timestamp::from_millis(t);
-        bus.advance(now);
-        while let Some(r) = bus.receive(vcu_node) {
-            vcu.on_frame(r.timestamp, &r.frame);
-        }
-        while let Some(r) = bus.receive(ads_node) {
-            ads.on_frame(r.timestamp, &r.frame);
-        }
+        let before = Timestamp::from_millis(t - 1);
         if t == 19_000 {
-            silent = true;
+            net.drop_output(ads_node, true); // the ADS falls silent
         }
-        if !silent {
-            let engage = (500..600).contains(&t);
-            ads.set_command(now, AdsCommand { engage, ..drive });
-            let mut out = Vec::new();
-            ads.poll(now, &mut |f| out.push(f));
-            for f in out {
-                bus.submit(ads_node, f, now);
-            }
-        }
-        let mut out = Vec::new();
-        vcu.poll(now, &mut |f| out.push(f));
-        for f in out {
-            bus.submit(vcu_node, f, now);
-        }
+        let engage = (500..600).contains(&t);
+        ads.set_command(before, AdsCommand { engage, ..drive });
+        net.changed(ads_node);
+        net.run_for(Duration::from_millis(1), &mut [&mut ads, &mut vcu]);
+        let now = Timestamp::from_millis(t);
         let a = vcu.actuators(now);
         vcu.set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
+        net.changed(vcu_node);
         if t == 18_000 {
             // 360 command cycles of 50 ms: the 8-bit counters have wrapped.
             assert_eq!(vcu.mode(), ControlMode::Autonomous);
