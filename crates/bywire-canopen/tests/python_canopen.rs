@@ -306,7 +306,8 @@ say("moved", node.sdo[0x6064].raw - start)
 node.state = "SWITCH ON DISABLED"
 say("state_after", node.state)
 node.sdo[0x2000][1].raw = 500
-time.sleep(1.0)
+# Five time constants, and well inside the controller's 1 s command watchdog.
+time.sleep(0.8)
 say("roboteq_speed", node.sdo[0x2103][1].raw)
 network.disconnect()
 "#;
