@@ -10,6 +10,10 @@
 //! same layout for tools. Output goes to sinks chosen by [`OutputMode`]; the DDS sink comes
 //! with the ROS 2 milestone, and until then [`RecordingSink`] stands in for it (and says so).
 
+use alloc::format;
+use alloc::string::String;
+use alloc::vec::Vec;
+
 use bywire_core::{Frame, Id, StandardId};
 
 /// Identifiers of the three frames.
@@ -90,14 +94,14 @@ impl core::fmt::Display for Refused {
     }
 }
 
-impl std::error::Error for Refused {}
+impl core::error::Error for Refused {}
 
 /// `value × scale` as an int32, if the value is finite, within `limit` and representable.
 fn scaled(field: &'static str, value: f64, limit: f64, scale: f64) -> Result<i32, Refused> {
     if !value.is_finite() {
         return Err(Refused::NotFinite(field));
     }
-    let raw = (value * scale).round();
+    let raw = libm::round(value * scale);
     if value.abs() > limit || raw < f64::from(i32::MIN) || raw > f64::from(i32::MAX) {
         return Err(Refused::OutOfRange(field));
     }

@@ -22,6 +22,10 @@
 //!
 //! Nothing here names a particular vehicle.
 //!
+//! The control path (the vocabulary, supervisor, ADS side, voters, the wire traits and the
+//! Autoware frames) is `no_std` with `alloc`; the `std` feature (on by default) adds profiles,
+//! [`wire::ProfileWire`] and the acceptance checks, which load files and a DBC.
+//!
 //! The supervisor fails closed: it starts at full braking, and valid commands alone do not
 //! release it — only a run of them and then an engage request.
 //! ```
@@ -38,11 +42,19 @@
 //! assert_eq!(watchdog.next(WatchdogEvent::Missed(5), cascade), Watchdog::FullBraking);
 //! ```
 
+#![cfg_attr(not(feature = "std"), no_std)]
+
+extern crate alloc;
+
+#[cfg(feature = "std")]
 pub mod acceptance;
 pub mod ads;
 pub mod autoware;
 pub mod command;
+#[cfg(feature = "std")]
 pub mod profile;
+#[cfg(feature = "std")]
+mod profile_wire;
 pub mod redundancy;
 pub mod supervisor;
 pub mod wire;

@@ -98,7 +98,7 @@ fn scan_sdo_and_nmt_against_our_devices() {
     let rows: Vec<&str> = scan.lines().skip(1).collect();
     assert_eq!(rows.len(), 2, "{scan}");
     assert!(
-        rows[0].starts_with("   1  OPERATIONAL      0x00000000   0x00000358  0x00001460"),
+        rows[0].starts_with("   1  OPERATIONAL      0x00020192   0x00000358  0x00001460"),
         "{scan}"
     );
     assert!(rows[0].ends_with("MDC1460"), "{scan}");

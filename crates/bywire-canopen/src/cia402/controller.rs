@@ -65,7 +65,7 @@ pub enum Setpoint {
     Position(i32),
 }
 
-/// The master side of one CiA 402 drive, speaking the PDO layout of [`drive_dictionary`]:
+/// The master side of one CiA 402 drive, speaking the PDO layout of [`drive_dictionary`](super::drive_dictionary):
 /// it reads the statusword from TPDO1, sends the controlword and mode on RPDO1 and the
 /// targets on RPDO2 every cycle. Fail closed: until the drive reports Operation enabled and
 /// nothing has stopped it, targets are zero; after a stop, the drive is held in Quick stop

@@ -194,7 +194,7 @@ pub fn add_pdo(od: &mut ObjectDictionary, transmit: bool, pdo: &PdoDefault<'_>) 
     );
 }
 
-/// The default PDO layout of [`drive_dictionary`], which [`DriveController`] speaks:
+/// The default PDO layout of [`drive_dictionary`], which [`DriveController`](super::DriveController) speaks:
 /// RPDO1 `0x200+id` controlword + modes of operation; RPDO2 `0x300+id` target position +
 /// target velocity; TPDO1 `0x180+id` statusword + modes display (on change and every 100 ms);
 /// TPDO2 `0x280+id` position + velocity actual (on change, at most every 10 ms, and every
@@ -266,7 +266,7 @@ pub fn drive_dictionary(node: u8) -> ObjectDictionary {
 /// The device type (0x1000) of a CiA 402 drive: profile 402, servo drive.
 pub const DEVICE_TYPE: u32 = 0x0002_0192;
 
-/// The CiA 402 objects a [`Drive`] works on (0x6007 to 0x6502), for a drive of its own or a
+/// The CiA 402 objects a [`Drive`](super::Drive) works on (0x6007 to 0x6502), for a drive of its own or a
 /// controller with a CiA 402 face beside its own objects; `supported_modes` for 0x6502.
 pub fn add_drive_objects(od: &mut ObjectDictionary, supported_modes: u32) {
     use super::object::*;

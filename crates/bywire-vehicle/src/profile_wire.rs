@@ -1,0 +1,648 @@
+//! [`ProfileWire`]: any vehicle a profile describes, spoken by role through the runtime DBC
+//! codec (needs `std`: profiles and their DBC are loaded from files).
+
+use alloc::vec::Vec;
+
+use bywire_core::{Frame, Id};
+use bywire_dbc::codec::{Decoded, MessageCodec, Value};
+use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
+use bywire_dbc::{Database, Message};
+
+use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, Vocabulary};
+use crate::command::{EstopCode, WatchdogLevel};
+use crate::profile::{LoadedProfile, ProfileError};
+use crate::wire::{
+    AdsWire, Counters, Feedback, Incoming, Rejected, StateFeedback, StateReport, VehicleWire,
+};
+
+/// One message spoken by role: its codec, protection, and the signal index of each role.
+#[derive(Debug, Clone)]
+struct RoleMessage {
+    id: u32,
+    extended: bool,
+    codec: MessageCodec,
+    protection: Protection,
+    /// Declared physical range per signal (`None` where min = max, i.e. undeclared).
+    ranges: Vec<Option<(f64, f64)>>,
+    /// Encode/decode scratch, sized at start.
+    values: Vec<Option<Value>>,
+    decoded: Vec<Option<Decoded>>,
+    counter_bits: u8,
+}
+
+impl RoleMessage {
+    fn new(
+        db: &Database,
+        name: &str,
+        counter: Option<&str>,
+        checksum: Option<&str>,
+        algorithm: ChecksumAlgorithm,
+        key: &str,
+        invalid: &dyn Fn(&str, String) -> ProfileError,
+    ) -> Result<RoleMessage, ProfileError> {
+        let message = find_message(db, name, key, invalid)?;
+        let counter = match counter {
+            None => None,
+            Some(counter) => {
+                let index = index_of(message, counter)
+                    .ok_or_else(|| invalid(key, format!("no counter signal '{counter}'")))?;
+                let bits = message.signals.get(index).map_or(0, |s| s.length);
+                if !(1..=8).contains(&bits) {
+                    return Err(invalid(
+                        key,
+                        format!("counter '{counter}' is {bits} bits; 1 to 8 are supported"),
+                    ));
+                }
+                Some((index, bits))
+            }
+        };
+        let declared = Protection::of(message);
+        let checksum = match checksum {
+            Some(name) => {
+                let index = index_of(message, name)
+                    .ok_or_else(|| invalid(key, format!("no checksum signal '{name}'")))?;
+                // An algorithm the DBC declares on the signal wins over the profile's.
+                let algorithm = declared
+                    .and_then(|p| p.checksum)
+                    .filter(|(i, _)| *i == index)
+                    .and_then(|(_, a)| a)
+                    .unwrap_or(algorithm);
+                Some((index, Some(algorithm)))
+            }
+            None => None,
+        };
+        let protection = Protection {
+            counter,
+            checksum,
+            data_id: declared.and_then(|p| p.data_id),
+        };
+        let codec = MessageCodec::new(message);
+        let ranges = message
+            .signals
+            .iter()
+            .map(|s| {
+                let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
+                (max > min).then_some((min, max))
+            })
+            .collect();
+        Ok(RoleMessage {
+            id: message.raw_id(),
+            extended: message.raw_id() > 0x7FF,
+            values: vec![None; codec.signal_count()],
+            decoded: vec![None; codec.signal_count()],
+            codec,
+            protection,
+            ranges,
+            counter_bits: counter.map_or(0, |(_, bits)| u8::try_from(bits).unwrap_or(8)),
+        })
+    }
+
+    /// The message a profile names, with the counter and checksum its DBC declares (or
+    /// opendbc's naming implies).
+    fn declared(
+        db: &Database,
+        name: &str,
+        algorithm: ChecksumAlgorithm,
+        key: &str,
+        invalid: &dyn Fn(&str, String) -> ProfileError,
+    ) -> Result<RoleMessage, ProfileError> {
+        let message = find_message(db, name, key, invalid)?;
+        let protection = Protection::of(message);
+        let name_at = |index: Option<usize>| {
+            index
+                .and_then(|i| message.signals.get(i))
+                .map(|s| s.name.clone())
+        };
+        let counter = name_at(protection.and_then(|p| p.counter).map(|(i, _)| i));
+        let checksum = name_at(protection.and_then(|p| p.checksum).map(|(i, _)| i));
+        RoleMessage::new(
+            db,
+            name,
+            counter.as_deref(),
+            checksum.as_deref(),
+            algorithm,
+            key,
+            invalid,
+        )
+    }
+
+    /// Check a frame of this message: its counter (0 without one), or why not (a remote frame
+    /// has no data, so it is short: malformed).
+    fn check(&mut self, frame: &Frame) -> Result<u64, Rejected> {
+        let counter = match self.protection.verify(&self.codec, frame.data()) {
+            Ok(counter) => counter.unwrap_or(0),
+            Err(bywire_dbc::e2e::ProtectionError::Checksum { .. }) => {
+                return Err(Rejected::Checksum)
+            }
+            Err(_) => return Err(Rejected::Malformed),
+        };
+        self.codec
+            .decode(frame.data(), &mut self.decoded)
+            .map_err(|_| Rejected::Malformed)?;
+        Ok(counter)
+    }
+
+    /// A frame on this message's identifier (a remote frame too: `check` refuses it).
+    fn is(&self, frame: &Frame) -> bool {
+        frame
+            .id()
+            .is_some_and(|id| id.as_raw() == self.id && id.is_extended() == self.extended)
+    }
+
+    /// Encode the values set in `self.values`, then counter and checksum.
+    fn frame(&mut self, counter: u64) -> Option<Frame> {
+        let mut payload = [0u8; 64];
+        let size = self.codec.encode(&self.values, &mut payload).ok()?;
+        self.protection
+            .fill(&self.codec, counter, &mut payload)
+            .ok()?;
+        let id = if self.extended {
+            Id::extended(self.id).ok()?
+        } else {
+            Id::standard(self.id).ok()?
+        };
+        let data = payload.get(..size)?;
+        if size <= 8 {
+            Frame::classic(id, data).ok()
+        } else {
+            Frame::fd(id, data, false, false).ok()
+        }
+    }
+
+    /// Set a role's value, clamped to the signal's declared range.
+    fn set(&mut self, index: usize, value: f64) {
+        let value = match self.ranges.get(index).copied().flatten() {
+            Some((min, max)) => value.clamp(min, max),
+            None => value,
+        };
+        if let Some(slot) = self.values.get_mut(index) {
+            *slot = Some(Value::Float(value));
+        }
+    }
+
+    fn set_raw(&mut self, index: usize, raw: u64) {
+        if let Some(slot) = self.values.get_mut(index) {
+            *slot = Some(Value::UInt(raw));
+        }
+    }
+
+    /// Check and decode a frame of this message: its counter, or `None` if corrupt.
+    fn read(&mut self, frame: &Frame) -> Option<u64> {
+        self.check(frame).ok()
+    }
+
+    fn physical(&self, index: usize) -> Option<f64> {
+        self.decoded
+            .get(index)
+            .copied()
+            .flatten()
+            .map(|d| d.physical.as_f64())
+    }
+
+    fn raw(&self, index: usize) -> Option<u64> {
+        self.decoded.get(index).copied().flatten().map(|d| d.raw)
+    }
+
+    fn in_range(&self, index: usize) -> bool {
+        match (
+            self.physical(index),
+            self.ranges.get(index).copied().flatten(),
+        ) {
+            (Some(value), Some((min, max))) => value >= min && value <= max,
+            (Some(value), None) => value.is_finite(),
+            (None, _) => false,
+        }
+    }
+}
+
+fn find_message<'a>(
+    db: &'a Database,
+    name: &str,
+    key: &str,
+    invalid: &dyn Fn(&str, String) -> ProfileError,
+) -> Result<&'a Message, ProfileError> {
+    db.messages
+        .iter()
+        .find(|m| m.name == name)
+        .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))
+}
+
+fn index_of(message: &Message, name: &str) -> Option<usize> {
+    message.signals.iter().position(|s| s.name == name)
+}
+
+/// One vocabulary enum's raw numbers on this vehicle, resolved once from the profile's
+/// `[enums.ROLE]` table (the reference numbering where the profile has none).
+#[derive(Debug, Clone)]
+struct EnumMap<T: 'static>(Vec<(T, u64)>);
+
+impl<T: Vocabulary> EnumMap<T> {
+    fn new(profile: &LoadedProfile, role: &str) -> Result<EnumMap<T>, ProfileError> {
+        let invalid = |key: String, reason: &str| ProfileError::Invalid {
+            file: profile.profile.name.clone(),
+            key,
+            reason: reason.to_string(),
+        };
+        let Some(table) = profile.profile.enums.get(role) else {
+            return Ok(EnumMap(T::ALL.iter().map(|v| (*v, v.raw())).collect()));
+        };
+        if let Some(name) = table.keys().find(|name| T::from_name(name).is_none()) {
+            let names: Vec<&str> = T::ALL.iter().map(|v| v.name()).collect();
+            return Err(invalid(
+                format!("enums.{role}.{name}"),
+                &format!("not a name of this table: {}", names.join(", ")),
+            ));
+        }
+        let mut map = Vec::with_capacity(T::ALL.len());
+        for value in T::ALL {
+            let raw = table.get(value.name()).ok_or_else(|| {
+                invalid(
+                    format!("enums.{role}.{}", value.name()),
+                    "missing: every value needs its raw number",
+                )
+            })?;
+            map.push((*value, *raw));
+        }
+        Ok(EnumMap(map))
+    }
+
+    fn raw(&self, value: T) -> u64 {
+        self.0
+            .iter()
+            .find(|(v, _)| *v == value)
+            .map_or(0, |(_, raw)| *raw)
+    }
+
+    fn value(&self, raw: u64) -> Option<T> {
+        self.0.iter().find(|(_, r)| *r == raw).map(|(v, _)| *v)
+    }
+}
+
+/// Signal indices of the command roles.
+#[derive(Debug, Clone, Copy)]
+struct CommandSignals {
+    steering: usize,
+    velocity: usize,
+    brake: usize,
+    gear: usize,
+    control_mode: usize,
+    steering_mode: usize,
+    engage: usize,
+    operator_reset: usize,
+}
+
+/// Signal indices of the state roles.
+#[derive(Debug, Clone, Copy)]
+struct StateSignals {
+    steering: usize,
+    velocity: usize,
+    control_mode: usize,
+    heartbeat_echo: usize,
+    steering_mode: usize,
+    watchdog_level: Option<usize>,
+    estop_state: Option<usize>,
+    warning: Option<usize>,
+    driver_override: Option<usize>,
+    gear: Option<usize>,
+    steering_enabled: Option<usize>,
+}
+
+/// Any vehicle a profile describes, by role, through the runtime codec. Buffers are sized
+/// when it is made: no allocation per frame.
+#[derive(Debug, Clone)]
+pub struct ProfileWire {
+    command: RoleMessage,
+    command_signals: CommandSignals,
+    state: RoleMessage,
+    state_signals: StateSignals,
+    wheel_speeds: Option<(RoleMessage, [usize; 4])>,
+    brake: Option<(RoleMessage, usize, usize)>,
+    estop: Option<(RoleMessage, usize)>,
+    gears: EnumMap<Gear>,
+    modes: EnumMap<ControlMode>,
+    steering_modes: EnumMap<SteeringMode>,
+}
+
+impl ProfileWire {
+    /// The wire of a loaded profile; it needs `[command]` and `[state]`.
+    pub fn new(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
+        let p = &loaded.profile;
+        let db = &loaded.database;
+        let invalid = |key: &str, reason: String| ProfileError::Invalid {
+            file: p.name.clone(),
+            key: key.to_string(),
+            reason,
+        };
+        let c = p
+            .command
+            .as_ref()
+            .ok_or_else(|| invalid("command", "a vehicle interface needs [command]".to_string()))?;
+        let s = p
+            .state
+            .as_ref()
+            .ok_or_else(|| invalid("state", "a vehicle interface needs [state]".to_string()))?;
+        let algorithm = ChecksumAlgorithm::from_name(&c.checksum_algorithm).ok_or_else(|| {
+            invalid(
+                "command.checksum_algorithm",
+                format!("'{}' is not a checksum algorithm", c.checksum_algorithm),
+            )
+        })?;
+        let command = RoleMessage::new(
+            db,
+            &c.message,
+            Some(&c.counter),
+            Some(&c.checksum),
+            algorithm,
+            "command",
+            &invalid,
+        )?;
+        let message = |name: &str| db.messages.iter().find(|m| m.name == name);
+        let signal = |message_name: &str, key: &str, name: &str| -> Result<usize, ProfileError> {
+            message(message_name)
+                .and_then(|m| index_of(m, name))
+                .ok_or_else(|| invalid(key, format!("no signal '{name}' in '{message_name}'")))
+        };
+        let command_signals = CommandSignals {
+            steering: signal(&c.message, "command.steering", &c.steering)?,
+            velocity: signal(&c.message, "command.velocity", &c.velocity)?,
+            brake: signal(&c.message, "command.brake", &c.brake)?,
+            gear: signal(&c.message, "command.gear", &c.gear)?,
+            control_mode: signal(&c.message, "command.control_mode", &c.control_mode)?,
+            steering_mode: signal(&c.message, "command.steering_mode", &c.steering_mode)?,
+            engage: signal(&c.message, "command.engage", &c.engage)?,
+            operator_reset: signal(&c.message, "command.operator_reset", &c.operator_reset)?,
+        };
+        let state = RoleMessage::new(
+            db,
+            &s.message,
+            Some(&s.counter),
+            Some(&s.checksum),
+            algorithm,
+            "state",
+            &invalid,
+        )?;
+        // Roles a state message may leave out.
+        let optional = |role: &str, name: &Option<String>| -> Result<Option<usize>, ProfileError> {
+            name.as_deref()
+                .map(|n| signal(&s.message, &format!("state.{role}"), n))
+                .transpose()
+        };
+        let state_signals = StateSignals {
+            steering: signal(&s.message, "state.steering", &s.steering)?,
+            velocity: signal(&s.message, "state.velocity", &s.velocity)?,
+            control_mode: signal(&s.message, "state.control_mode", &s.control_mode)?,
+            heartbeat_echo: signal(&s.message, "state.heartbeat_echo", &s.heartbeat_echo)?,
+            steering_mode: signal(&s.message, "state.steering_mode", &s.steering_mode)?,
+            gear: optional("gear", &s.gear)?,
+            steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
+            watchdog_level: optional("watchdog_level", &s.watchdog_level)?,
+            estop_state: optional("estop_state", &s.estop_state)?,
+            warning: optional("warning", &s.warning)?,
+            driver_override: optional("driver_override", &s.driver_override)?,
+        };
+        let wheel_speeds = match &p.wheel_speeds {
+            None => None,
+            Some(w) => {
+                let role = RoleMessage::declared(
+                    db,
+                    &w.message,
+                    algorithm,
+                    "wheel_speeds.message",
+                    &invalid,
+                )?;
+                let mut indices = [0usize; 4];
+                for (slot, (i, name)) in indices.iter_mut().zip(w.signals.iter().enumerate()) {
+                    *slot = signal(&w.message, &format!("wheel_speeds.signals[{i}]"), name)?;
+                }
+                Some((role, indices))
+            }
+        };
+        let brake = match &p.emergency_brake {
+            None => None,
+            Some(b) => {
+                let role = RoleMessage::declared(
+                    db,
+                    &b.message,
+                    algorithm,
+                    "emergency_brake.message",
+                    &invalid,
+                )?;
+                let request = signal(&b.message, "emergency_brake.request", &b.request)?;
+                let deceleration =
+                    signal(&b.message, "emergency_brake.deceleration", &b.deceleration)?;
+                Some((role, request, deceleration))
+            }
+        };
+        let estop = match &p.estop {
+            None => None,
+            Some(e) => {
+                let role =
+                    RoleMessage::declared(db, &e.message, algorithm, "estop.message", &invalid)?;
+                Some((role, signal(&e.message, "estop.request", &e.request)?))
+            }
+        };
+        Ok(ProfileWire {
+            estop,
+            command,
+            command_signals,
+            state,
+            state_signals,
+            wheel_speeds,
+            brake,
+            gears: EnumMap::new(loaded, "gear")?,
+            modes: EnumMap::new(loaded, "control_mode")?,
+            steering_modes: EnumMap::new(loaded, "steering_mode")?,
+        })
+    }
+}
+
+impl Counters for ProfileWire {
+    fn command_counter_bits(&self) -> u8 {
+        self.command.counter_bits
+    }
+
+    fn state_counter_bits(&self) -> u8 {
+        self.state.counter_bits
+    }
+}
+
+impl AdsWire for ProfileWire {
+    fn wheel_counter_bits(&self) -> u8 {
+        self.wheel_speeds
+            .as_ref()
+            .map_or(self.state.counter_bits, |(m, _)| m.counter_bits)
+    }
+
+    fn command_frame(&mut self, c: &ControlCommand, counter: u64) -> Option<Frame> {
+        let s = self.command_signals;
+        let raws = [
+            (s.gear, self.gears.raw(c.gear)),
+            (s.control_mode, self.modes.raw(c.mode)),
+            (s.steering_mode, self.steering_modes.raw(c.steering_mode)),
+            (s.engage, u64::from(c.engage)),
+            (s.operator_reset, u64::from(c.operator_reset)),
+        ];
+        let m = &mut self.command;
+        m.set(s.steering, c.steering);
+        m.set(s.velocity, c.velocity);
+        m.set(s.brake, c.brake);
+        for (index, raw) in raws {
+            m.set_raw(index, raw);
+        }
+        m.frame(counter)
+    }
+
+    fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
+        let (m, request, decel) = self.brake.as_mut()?;
+        m.set_raw(*request, 1);
+        m.set(*decel, deceleration);
+        m.frame(counter)
+    }
+
+    fn feedback(&mut self, frame: &Frame) -> Feedback {
+        if self.state.is(frame) {
+            let Some(counter) = self.state.read(frame) else {
+                return Feedback::Corrupt;
+            };
+            let s = self.state_signals;
+            let m = &self.state;
+            // A level or latch state that names nothing is out of range, not unreported.
+            let level = s.watchdog_level.and_then(|i| m.raw(i));
+            let estop = s.estop_state.and_then(|i| m.raw(i));
+            let known = level.is_none_or(|raw| WatchdogLevel::from_raw(raw).is_some())
+                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some());
+            let level = level.and_then(WatchdogLevel::from_raw);
+            let estop = estop.and_then(EstopCode::from_raw);
+            // A value the profile does not name: the ADS is not in control.
+            let mode = m
+                .raw(s.control_mode)
+                .and_then(|raw| self.modes.value(raw))
+                .unwrap_or(ControlMode::Manual);
+            return Feedback::State(StateFeedback {
+                counter,
+                steering: m.physical(s.steering).unwrap_or(f64::NAN),
+                velocity: m.physical(s.velocity).unwrap_or(f64::NAN),
+                mode,
+                watchdog_level: level,
+                estop_state: estop,
+                warning: s.warning.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                driver_override: s.driver_override.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
+                in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
+                    .into_iter()
+                    .flatten()
+                    .all(|i| m.in_range(i))
+                    && known,
+            });
+        }
+        if let Some((m, indices)) = self.wheel_speeds.as_mut() {
+            if m.is(frame) {
+                let Some(counter) = m.read(frame) else {
+                    return Feedback::Corrupt;
+                };
+                let speeds = indices.map(|i| m.physical(i).unwrap_or(f64::NAN));
+                return Feedback::WheelSpeeds { counter, speeds };
+            }
+        }
+        Feedback::Other
+    }
+}
+
+impl ProfileWire {
+    /// The E-stop frame, as the vehicle's safety controller sends it (`pressed`: the chain is
+    /// open), where the profile has an `[estop]` message.
+    pub fn estop_frame(&mut self, pressed: bool, counter: u64) -> Option<Frame> {
+        let (m, request) = self.estop.as_mut()?;
+        m.set_raw(*request, u64::from(pressed));
+        m.frame(counter)
+    }
+
+    /// Whether the profile has an `[estop]` message.
+    pub fn has_estop(&self) -> bool {
+        self.estop.is_some()
+    }
+
+    /// The command a checked command frame carries; `None` if a value names nothing.
+    fn decoded_command(&self) -> Option<ControlCommand> {
+        let s = self.command_signals;
+        let m = &self.command;
+        // Raw value → the variant (no allocation).
+        fn named<T: Vocabulary>(m: &RoleMessage, index: usize, map: &EnumMap<T>) -> Option<T> {
+            m.raw(index).and_then(|raw| map.value(raw))
+        }
+        Some(ControlCommand {
+            steering: m.physical(s.steering)?,
+            velocity: m.physical(s.velocity)?,
+            brake: m.physical(s.brake)?,
+            gear: named(m, s.gear, &self.gears)?,
+            mode: named(m, s.control_mode, &self.modes)?,
+            steering_mode: named(m, s.steering_mode, &self.steering_modes)?,
+            engage: m.raw(s.engage)? == 1,
+            operator_reset: m.raw(s.operator_reset)? == 1,
+        })
+    }
+}
+
+impl VehicleWire for ProfileWire {
+    fn incoming(&mut self, frame: &Frame) -> Incoming {
+        if self.command.is(frame) {
+            return Incoming::Command(
+                self.command
+                    .check(frame)
+                    .map(|counter| (self.decoded_command(), counter)),
+            );
+        }
+        if let Some((m, request)) = self.estop.as_mut() {
+            if m.is(frame) {
+                return match m.check(frame) {
+                    Ok(_) => Incoming::Estop(m.raw(*request) == Some(1)),
+                    Err(_) => Incoming::Other,
+                };
+            }
+        }
+        if let Some((m, request, _)) = self.brake.as_mut() {
+            if m.is(frame) {
+                return match m.check(frame) {
+                    Ok(_) => Incoming::EmergencyBrake(m.raw(*request) == Some(1)),
+                    Err(_) => Incoming::Other,
+                };
+            }
+        }
+        Incoming::Other
+    }
+
+    fn state_frame(&mut self, r: &StateReport, counter: u64) -> Option<Frame> {
+        let s = self.state_signals;
+        let raws = [
+            (Some(s.control_mode), self.modes.raw(r.mode)),
+            (
+                Some(s.steering_mode),
+                self.steering_modes.raw(r.steering_mode),
+            ),
+            (s.gear, self.gears.raw(r.gear)),
+            (Some(s.heartbeat_echo), r.heartbeat_echo),
+            (s.watchdog_level, r.watchdog_level.raw()),
+            (s.estop_state, r.estop_state.raw()),
+            (s.warning, u64::from(r.warning)),
+            (s.driver_override, u64::from(r.driver_override)),
+            (s.steering_enabled, u64::from(r.steering_enabled)),
+        ];
+        let m = &mut self.state;
+        m.set(s.steering, r.steering);
+        m.set(s.velocity, r.velocity);
+        for (index, raw) in raws {
+            if let Some(index) = index {
+                m.set_raw(index, raw);
+            }
+        }
+        m.frame(counter)
+    }
+
+    fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame> {
+        let (m, indices) = self.wheel_speeds.as_mut()?;
+        for (index, speed) in indices.iter().zip(speeds) {
+            m.set(*index, speed);
+        }
+        m.frame(counter)
+    }
+}
