@@ -696,20 +696,11 @@ fn dump_and_send_across_processes_over_udp() {
 /// TCP client for the BCM cyclic `add` (its period measured) and malformed commands.
 #[test]
 fn serve_lets_socketcand_clients_share_a_bus() {
-    let port = 29_700 + u16::try_from(std::process::id() % 200).unwrap();
-    let listen = format!("127.0.0.1:{port}");
-    let mut server = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(["serve", "virtual:served", "--listen", &listen])
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut first = String::new();
-    std::io::BufRead::read_line(
-        &mut std::io::BufReader::new(server.stdout.as_mut().unwrap()),
-        &mut first,
-    )
-    .unwrap();
-    assert!(first.starts_with("serving virtual:served on"), "{first}");
+    let (server, address) = start_serve(
+        "exec \"$BYWIRE\" serve virtual:served --listen 127.0.0.1:0",
+        &[],
+    );
+    let port = address.rsplit(':').next().unwrap();
     let script = format!(
         r#"
 import can, socket, time
@@ -750,10 +741,7 @@ print("after delete", b.recv(0.3))
         .args(["-c", &script])
         .output()
         .unwrap();
-    let _ = Command::new("kill")
-        .args(["-INT", &server.id().to_string()])
-        .status();
-    let status = server.wait().unwrap();
+    let (status, _) = stop_serve(server);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
