@@ -79,6 +79,9 @@ pub enum LogErrorKind {
     /// The line is not UTF-8 (from this column on).
     #[error("not UTF-8")]
     NotUtf8,
+    /// A line of another log format that is malformed (what, in words).
+    #[error("{0}")]
+    Format(String),
     /// Something after the frame other than a direction.
     #[error("unexpected '{0}' after the frame (only a direction R or T may follow)")]
     Trailing(String),

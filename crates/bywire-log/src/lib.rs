@@ -3,6 +3,8 @@
 //! - [`candump`]: the candump log format, `(1699999999.123456) can0 123#DEADBEEF`, read as a
 //!   stream of records with errors naming the line and column, written byte-identical to
 //!   `candump -L` (or with nanoseconds).
+//! - [`asc`]: Vector ASC logs, read and written as python-can and can-utils do.
+//! - [`format`]: the formats by extension or content, each with a reader and a writer.
 //! - [`screen`]: candump's screen form, `  can0  123   [4]  DE AD BE EF`, written as candump
 //!   prints it and read back (for tools that take either form on standard input).
 //!
@@ -21,7 +23,9 @@
 //! assert!(records[1].frame.is_fd());
 //! ```
 
+pub mod asc;
 pub mod candump;
+pub mod format;
 pub mod lines;
 pub mod pacing;
 pub mod screen;

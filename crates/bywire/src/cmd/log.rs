@@ -3,14 +3,16 @@
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
+use bywire_log::format::Format;
 use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
+use crate::support::files::write_atomically;
 use crate::support::logs::{inputs, records, Skip};
 
 #[derive(clap::Subcommand)]
@@ -35,6 +37,26 @@ Every line is checked; a malformed one is an error naming its file, line and col
         /// Keep frames matching candump-style filters (ID:MASK, ID~MASK, #ERRMASK, j).
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
+    },
+    /// Convert a log to another format (candump, Vector ASC), frame for frame.
+    #[command(after_help = "Examples:
+  bywire log convert drive.log drive.asc
+  bywire log convert vector.asc drive.log
+  candump -L can0 | bywire log convert - out.asc
+
+The input's format is sniffed from its content, the output's taken from its extension (.log
+or .candump: candump; .asc: ASC) unless --format names it. ASC channels are numbered from 1:
+can0 is channel 1 (an interface ending in N is channel N+1), and channel N reads back as
+can{N-1}; ASC dates are UTC. The output is written to a temporary file and renamed, so a failed
+conversion leaves no half-written file.")]
+    Convert {
+        /// The log to read (`-`: standard input).
+        input: PathBuf,
+        /// The file to write.
+        output: PathBuf,
+        /// The output format: candump or asc (default: from the output's extension).
+        #[arg(long, value_name = "FORMAT")]
+        format: Option<String>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
     #[command(after_help = "Examples:
@@ -62,7 +84,50 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
             cat(files, *screen, *nanoseconds, filtering.as_ref(), out)
         }
         LogCommand::Stats { files } => stats(files, out),
+        LogCommand::Convert {
+            input,
+            output,
+            format,
+        } => convert(input, output, format.as_deref(), out),
     }
+}
+
+fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Write) -> Result<()> {
+    let format = match format {
+        Some(name) => Format::named(name)
+            .ok_or_else(|| anyhow!("--format {name}: not a format (candump, asc)"))?,
+        None => Format::from_path(output).ok_or_else(|| {
+            anyhow!(
+                "{}: the output's format is not known from its name (.log, .asc); give --format",
+                output.display()
+            )
+        })?,
+    };
+    let files = if input == Path::new("-") {
+        Vec::new()
+    } else {
+        vec![input.to_path_buf()]
+    };
+    let mut frames = 0u64;
+    write_atomically(output, |tmp| {
+        let file = std::fs::File::create(tmp)
+            .with_context(|| format!("cannot write {}", output.display()))?;
+        let mut writer = format.writer(std::io::BufWriter::new(file));
+        for (name, reader) in inputs(&files)? {
+            for record in records(&name, reader, Skip::Unreadable) {
+                writer
+                    .write(&record?)
+                    .with_context(|| format!("cannot write {}", output.display()))?;
+                frames += 1;
+            }
+        }
+        writer
+            .finish()
+            .with_context(|| format!("cannot write {}", output.display()))?;
+        Ok(())
+    })?;
+    writeln!(out, "{frames} frames written to {}", output.display())?;
+    Ok(())
 }
 
 fn cat(

@@ -1,11 +1,13 @@
-//! candump logs as the commands read them: files or standard input, every line checked, and
-//! what cannot be read reported on standard error with its file and line.
+//! Logs as the commands read them (candump or ASC, sniffed from the content): files or
+//! standard input, every line checked, and what cannot be read reported on standard error with
+//! its file and line.
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context, Result};
+use bywire_log::format::Format;
 use bywire_log::{LogError, LogErrorKind, LogRecord, Reader};
 
 /// The files to read, each with the name its messages use (standard input when none).
@@ -42,12 +44,14 @@ pub enum Skip {
 /// The records of `input` (called `name` in messages); skipped lines are reported.
 pub fn records<'a>(
     name: &'a str,
-    input: Box<dyn BufRead>,
+    mut input: Box<dyn BufRead>,
     skip: Skip,
 ) -> impl Iterator<Item = Result<LogRecord>> + 'a {
-    let reader = match skip {
-        Skip::Unreadable => Reader::new(input),
-        Skip::AnyBadLine => Reader::new(input).log_lines_only(),
+    // An input that cannot even be peeked at fails on its first read, with its name.
+    let format = Format::sniff_input(&mut input).unwrap_or(Format::Candump);
+    let reader = match (format, skip) {
+        (Format::Candump, Skip::AnyBadLine) => Box::new(Reader::new(input).log_lines_only()),
+        (format, _) => format.reader(input),
     };
     reader.filter_map(move |record| match record {
         Err(e @ LogError::Syntax { .. }) if skip == Skip::AnyBadLine => {

@@ -1,0 +1,160 @@
+//! The log formats, chosen by a file's extension or sniffed from its first bytes, each with a
+//! reader of records and a writer.
+
+use std::io::{self, BufRead, Write};
+use std::path::Path;
+
+use crate::asc::{AscReader, AscWriter};
+use crate::candump::{LogError, LogRecord, Reader, Writer};
+
+/// A log format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// candump's log form, `(1699999999.123456) can0 123#DEADBEEF`.
+    Candump,
+    /// Vector ASC.
+    Asc,
+}
+
+/// The records of a log, whatever its format.
+pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a>;
+
+impl Format {
+    /// Every format, with the names `--format` takes.
+    pub const ALL: [(Format, &'static str); 2] =
+        [(Format::Candump, "candump"), (Format::Asc, "asc")];
+
+    /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
+    pub fn from_path(path: &Path) -> Option<Format> {
+        let extension = path.extension()?.to_str()?.to_ascii_lowercase();
+        match extension.as_str() {
+            "log" | "candump" => Some(Format::Candump),
+            "asc" => Some(Format::Asc),
+            _ => None,
+        }
+    }
+
+    /// The format by its name (`candump`, `asc`).
+    pub fn named(name: &str) -> Option<Format> {
+        Format::ALL
+            .iter()
+            .find(|(_, n)| n.eq_ignore_ascii_case(name))
+            .map(|(f, _)| *f)
+    }
+
+    /// The format of a log that starts with `start`: ASC's header words, else candump.
+    pub fn sniff(start: &[u8]) -> Format {
+        let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
+        let first = text
+            .lines()
+            .map(str::trim)
+            .find(|l| !l.is_empty())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        let asc = [
+            "date ",
+            "base ",
+            "begin triggerblock",
+            "// version",
+            "internal events",
+            "no internal events",
+        ];
+        if asc.iter().any(|word| first.starts_with(word)) {
+            Format::Asc
+        } else {
+            Format::Candump
+        }
+    }
+
+    /// The format of `input`, sniffed from what it has buffered (nothing is consumed).
+    pub fn sniff_input(input: &mut impl BufRead) -> io::Result<Format> {
+        Ok(Format::sniff(input.fill_buf()?))
+    }
+
+    /// A reader of this format's records over `input`.
+    pub fn reader<'a, R: BufRead + 'a>(self, input: R) -> Records<'a> {
+        match self {
+            Format::Candump => Box::new(Reader::new(input)),
+            Format::Asc => Box::new(AscReader::new(input)),
+        }
+    }
+
+    /// A writer of this format to `output`.
+    pub fn writer<W: Write>(self, output: W) -> RecordWriter<W> {
+        match self {
+            Format::Candump => RecordWriter::Candump(Writer::new(output)),
+            Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
+        }
+    }
+}
+
+/// Writes records in one of the formats.
+pub enum RecordWriter<W: Write> {
+    /// candump's log form (as `candump -L`: no direction).
+    Candump(Writer<W>),
+    /// Vector ASC.
+    Asc(AscWriter<W>),
+}
+
+impl<W: Write> RecordWriter<W> {
+    /// Write one record.
+    pub fn write(&mut self, record: &LogRecord) -> io::Result<()> {
+        match self {
+            RecordWriter::Candump(w) => w.write(record.timestamp, &record.interface, &record.frame),
+            RecordWriter::Asc(w) => w.write(record),
+        }
+    }
+
+    /// Finish the file (a format's closing lines) and flush; the output back.
+    pub fn finish(self) -> io::Result<W> {
+        match self {
+            RecordWriter::Candump(mut w) => {
+                w.flush()?;
+                Ok(w.into_inner())
+            }
+            RecordWriter::Asc(w) => w.finish(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_known_by_name_extension_and_content() {
+        assert_eq!(
+            Format::from_path(Path::new("a/drive.ASC")),
+            Some(Format::Asc)
+        );
+        assert_eq!(
+            Format::from_path(Path::new("drive.log")),
+            Some(Format::Candump)
+        );
+        assert_eq!(Format::from_path(Path::new("drive.blf")), None);
+        assert_eq!(Format::named("asc"), Some(Format::Asc));
+        assert_eq!(
+            Format::sniff(b"\n date Tue Nov 14 22:13:20 2023\n"),
+            Format::Asc
+        );
+        assert_eq!(Format::sniff(b"(1.000000) can0 123#\n"), Format::Candump);
+        assert_eq!(Format::sniff(b""), Format::Candump);
+    }
+
+    #[test]
+    fn a_log_converts_through_both_writers() {
+        let candump =
+            "(1700000000.100000) can0 123#DEADBEEF\n(1700000000.200000) can1 1ABCDEF0#R\n";
+        let mut asc = Format::Asc.writer(Vec::new());
+        for record in Format::Candump.reader(candump.as_bytes()) {
+            asc.write(&record.unwrap()).unwrap();
+        }
+        let asc = asc.finish().unwrap();
+        assert_eq!(Format::sniff(&asc), Format::Asc);
+        let mut back = Format::Candump.writer(Vec::new());
+        for record in Format::Asc.reader(asc.as_slice()) {
+            back.write(&record.unwrap()).unwrap();
+        }
+        assert_eq!(String::from_utf8(back.finish().unwrap()).unwrap(), candump);
+    }
+}

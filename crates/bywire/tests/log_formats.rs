@@ -1,0 +1,278 @@
+//! `bywire log convert` against the peers of each format: python-can 4.6.1's ASC reader and
+//! writer, can-utils' `log2asc` and `asc2log` — frame for frame (identifier, flags, data,
+//! channel, direction, time to the format's resolution), classic, extended, remote, CAN FD with
+//! BRS/ESI and error frames.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use bywire_log::LogRecord;
+
+/// One frame of every kind, on two interfaces, at sub-millisecond times.
+const FRAMES: &str = "\
+(1700000000.123456) can0 123#DEADBEEF
+(1700000000.223457) can1 1ABCDEF0#0102
+(1700000000.323458) can0 123#R
+(1700000000.333459) can0 456#R3
+(1700000000.423460) can0 20000080#0000000000000000
+(1700000000.523461) can0 123##711223344556677889900AABB
+(1700000000.623462) can0 7FF#
+(1700000000.723463) can1 1FFFFFFF##6DEADBEEF
+(1700000000.823464) can1 000#0001020304050607
+";
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bywire-logfmt-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn bywire(args: &[&str]) -> String {
+    let (code, out, err) = common::bywire(args, "");
+    assert_eq!(code, 0, "bywire {args:?}: {err}");
+    out
+}
+
+fn records(path: &Path) -> Vec<LogRecord> {
+    let file = std::fs::File::open(path).unwrap();
+    bywire_log::Reader::new(std::io::BufReader::new(file))
+        .collect::<Result<_, _>>()
+        .unwrap()
+}
+
+fn original() -> Vec<LogRecord> {
+    bywire_log::Reader::new(FRAMES.as_bytes())
+        .collect::<Result<_, _>>()
+        .unwrap()
+}
+
+fn python(script: &str, args: &[&Path]) -> String {
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        // ASC dates are local time to python-can: make its local time UTC, as ours.
+        .env("TZ", "UTC")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// python-can compares two logs message by message (its candump reader on one side).
+const COMPARE: &str = r#"
+import can, sys
+ours = list(can.ASCReader(sys.argv[1], relative_timestamp=False))
+theirs = list(can.CanutilsLogReader(sys.argv[2]))
+assert len(ours) == len(theirs), (len(ours), len(theirs))
+for a, b in zip(ours, theirs):
+    fields = ["arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd",
+              "bitrate_switch", "error_state_indicator"]
+    for f in fields:
+        assert getattr(a, f) == getattr(b, f), (f, a, b)
+    if not a.is_error_frame:
+        assert a.dlc == b.dlc and bytes(a.data) == bytes(b.data), (a, b)
+        assert a.is_rx, a
+    assert abs(a.timestamp - b.timestamp) < 1e-6, (a.timestamp, b.timestamp)
+    # (python-can's candump reader gives error frames no channel.)
+    assert b.channel is None or a.channel == int(b.channel[-1]), (a.channel, b.channel)
+print("same", len(ours))
+"#;
+
+#[test]
+fn python_can_reads_our_asc_frame_for_frame() {
+    let dir = scratch("ours");
+    let (log, asc) = (dir.join("in.log"), dir.join("out.asc"));
+    std::fs::write(&log, FRAMES).unwrap();
+    let said = bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        asc.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        said.trim(),
+        format!("9 frames written to {}", asc.display())
+    );
+    assert_eq!(python(COMPARE, &[&asc, &log]).trim(), "same 9");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn we_read_python_cans_asc_frame_for_frame() {
+    let dir = scratch("theirs");
+    let (log, asc, back) = (dir.join("in.log"), dir.join("py.asc"), dir.join("back.log"));
+    std::fs::write(&log, FRAMES).unwrap();
+    python(
+        r#"
+import can, sys
+with can.ASCWriter(sys.argv[2]) as w:
+    for m in can.CanutilsLogReader(sys.argv[1]):
+        w.on_message_received(m)
+"#,
+        &[&log, &asc],
+    );
+    bywire(&[
+        "log",
+        "convert",
+        asc.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let (got, wanted) = (records(&back), original());
+    assert_eq!(got.len(), wanted.len());
+    for (g, w) in got.iter().zip(&wanted) {
+        assert_eq!(g.frame, w.frame);
+        assert_eq!(g.interface, w.interface);
+        // python-can dates its trigger block to the millisecond and counts from the first
+        // frame's exact time: what it wrote reads back within a millisecond.
+        let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
+        assert!(drift < 1_000_000, "{drift} ns: {g:?} {w:?}");
+    }
+    // And the times between frames to the microsecond.
+    let first = (got[0].timestamp.as_nanos(), wanted[0].timestamp.as_nanos());
+    for (g, w) in got.iter().zip(&wanted) {
+        let (a, b) = (
+            g.timestamp.as_nanos() - first.0,
+            w.timestamp.as_nanos() - first.1,
+        );
+        assert!(a.abs_diff(b) < 1_000, "{a} vs {b}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// can-utils dates its files to the second (and `asc2log` cannot read the date back on this
+/// machine: it falls back to the current time), so times are compared from the first frame.
+fn same_frames_and_spacing(got: &[LogRecord], wanted: &[LogRecord]) {
+    assert_eq!(got.len(), wanted.len());
+    let first = (got[0].timestamp.as_nanos(), wanted[0].timestamp.as_nanos());
+    for (g, w) in got.iter().zip(wanted) {
+        assert_eq!(g.frame, w.frame, "{g:?} {w:?}");
+        assert_eq!(g.interface, w.interface);
+        let (a, b) = (
+            g.timestamp.as_nanos() - first.0,
+            w.timestamp.as_nanos() - first.1,
+        );
+        assert!(a.abs_diff(b) < 1_000, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn can_utils_log2asc_and_asc2log_agree_with_us() {
+    let dir = scratch("can-utils");
+    let (log, theirs, back) = (
+        dir.join("in.log"),
+        dir.join("log2asc.asc"),
+        dir.join("back.log"),
+    );
+    std::fs::write(&log, FRAMES).unwrap();
+    let out = Command::new("log2asc")
+        .args([
+            "-I",
+            log.to_str().unwrap(),
+            "-O",
+            theirs.to_str().unwrap(),
+            "can0",
+            "can1",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    bywire(&[
+        "log",
+        "convert",
+        theirs.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    same_frames_and_spacing(&records(&back), &original());
+    // The other way: asc2log reads what we write.
+    let (ours, theirs_back) = (dir.join("ours.asc"), dir.join("asc2log.log"));
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        ours.to_str().unwrap(),
+    ]);
+    let out = Command::new("asc2log")
+        .args([
+            "-I",
+            ours.to_str().unwrap(),
+            "-O",
+            theirs_back.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    same_frames_and_spacing(&records(&theirs_back), &original());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
+    let dir = scratch("cat");
+    let (log, asc) = (dir.join("in.log"), dir.join("in.asc"));
+    std::fs::write(&log, FRAMES).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        asc.to_str().unwrap(),
+    ]);
+    // `log cat` of the ASC gives the candump lines back (the format is sniffed).
+    assert_eq!(bywire(&["log", "cat", asc.to_str().unwrap()]), FRAMES);
+    let stats = bywire(&["log", "stats", asc.to_str().unwrap()]);
+    assert!(stats.contains("9"), "{stats}");
+    let broken = dir.join("broken.asc");
+    let mut text = std::fs::read_to_string(&asc).unwrap();
+    text = text.replace("d 4 DE AD BE EF", "d 4 DE AD");
+    std::fs::write(&broken, text).unwrap();
+    let out_path = dir.join("never.log");
+    let (code, _, err) = common::bywire(
+        &[
+            "log",
+            "convert",
+            broken.to_str().unwrap(),
+            out_path.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("broken.asc: line 7, column")
+            && err.contains("4 data bytes expected, 2 found"),
+        "{err}"
+    );
+    assert!(!out_path.exists(), "nothing half-written");
+    let (code, _, err) = common::bywire(
+        &[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            dir.join("x.blf").to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("give --format"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
