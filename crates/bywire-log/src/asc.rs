@@ -568,6 +568,28 @@ impl<R: BufRead> Iterator for AscReader<R> {
     }
 }
 
+/// The channel (bus) number of an interface for ASC and TRC: its trailing number plus one
+/// (`can0` is 1), else the next number not taken; remembered in `taken`.
+pub(crate) fn channel_number(taken: &mut BTreeMap<String, u32>, interface: &str) -> u32 {
+    if let Some(n) = taken.get(interface) {
+        return *n;
+    }
+    let digits = interface.len()
+        - interface
+            .bytes()
+            .rev()
+            .take_while(u8::is_ascii_digit)
+            .count();
+    let number = interface
+        .get(digits..)
+        .and_then(|d| d.parse::<u32>().ok())
+        .map(|n| n.saturating_add(1))
+        .filter(|n| !taken.values().any(|t| t == n))
+        .unwrap_or_else(|| taken.values().max().map_or(1, |m| m + 1));
+    taken.insert(interface.to_string(), number);
+    number
+}
+
 /// Writes an ASC log as python-can does: the header and trigger block dated at the first
 /// frame (to the second), each frame's time from there in microseconds, `End TriggerBlock` at
 /// [`AscWriter::finish`].
@@ -593,26 +615,8 @@ impl<W: Write> AscWriter<W> {
         }
     }
 
-    /// The channel number of an interface: its trailing number plus one (`can0` is 1), else the
-    /// next number not taken.
     fn channel(&mut self, interface: &str) -> u32 {
-        if let Some(n) = self.channels.get(interface) {
-            return *n;
-        }
-        let digits = interface.len()
-            - interface
-                .bytes()
-                .rev()
-                .take_while(u8::is_ascii_digit)
-                .count();
-        let number = interface
-            .get(digits..)
-            .and_then(|d| d.parse::<u32>().ok())
-            .map(|n| n.saturating_add(1))
-            .filter(|n| !self.channels.values().any(|taken| taken == n))
-            .unwrap_or_else(|| self.channels.values().max().map_or(1, |m| m + 1));
-        self.channels.insert(interface.to_string(), number);
-        number
+        channel_number(&mut self.channels, interface)
     }
 
     fn header(&mut self, at: u64) -> io::Result<()> {

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use crate::asc::{AscReader, AscWriter};
 use crate::candump::{LogError, LogRecord, Reader, Writer};
+use crate::trc::{TrcReader, TrcWriter};
 
 /// A log format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -14,6 +15,8 @@ pub enum Format {
     Candump,
     /// Vector ASC.
     Asc,
+    /// PEAK TRC.
+    Trc,
 }
 
 /// The records of a log, whatever its format.
@@ -21,8 +24,11 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 2] =
-        [(Format::Candump, "candump"), (Format::Asc, "asc")];
+    pub const ALL: [(Format, &'static str); 3] = [
+        (Format::Candump, "candump"),
+        (Format::Asc, "asc"),
+        (Format::Trc, "trc"),
+    ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
     pub fn from_path(path: &Path) -> Option<Format> {
@@ -30,6 +36,7 @@ impl Format {
         match extension.as_str() {
             "log" | "candump" => Some(Format::Candump),
             "asc" => Some(Format::Asc),
+            "trc" => Some(Format::Trc),
             _ => None,
         }
     }
@@ -42,7 +49,8 @@ impl Format {
             .map(|(f, _)| *f)
     }
 
-    /// The format of a log that starts with `start`: ASC's header words, else candump.
+    /// The format of a log that starts with `start`: ASC's header words, TRC's `;` header or
+    /// `N)` lines, else candump.
     pub fn sniff(start: &[u8]) -> Format {
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
@@ -59,8 +67,15 @@ impl Format {
             "internal events",
             "no internal events",
         ];
+        let trc_line = first.split_whitespace().next().is_some_and(|w| {
+            w.len() > 1
+                && w.ends_with(')')
+                && w.trim_end_matches(')').bytes().all(|b| b.is_ascii_digit())
+        });
         if asc.iter().any(|word| first.starts_with(word)) {
             Format::Asc
+        } else if first.starts_with(';') || trc_line {
+            Format::Trc
         } else {
             Format::Candump
         }
@@ -76,6 +91,7 @@ impl Format {
         match self {
             Format::Candump => Box::new(Reader::new(input)),
             Format::Asc => Box::new(AscReader::new(input)),
+            Format::Trc => Box::new(TrcReader::new(input)),
         }
     }
 
@@ -84,6 +100,7 @@ impl Format {
         match self {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
+            Format::Trc => RecordWriter::Trc(TrcWriter::new(output)),
         }
     }
 }
@@ -94,6 +111,8 @@ pub enum RecordWriter<W: Write> {
     Candump(Writer<W>),
     /// Vector ASC.
     Asc(AscWriter<W>),
+    /// PEAK TRC 2.1.
+    Trc(TrcWriter<W>),
 }
 
 impl<W: Write> RecordWriter<W> {
@@ -102,6 +121,7 @@ impl<W: Write> RecordWriter<W> {
         match self {
             RecordWriter::Candump(w) => w.write(record.timestamp, &record.interface, &record.frame),
             RecordWriter::Asc(w) => w.write(record),
+            RecordWriter::Trc(w) => w.write(record),
         }
     }
 
@@ -113,6 +133,7 @@ impl<W: Write> RecordWriter<W> {
                 Ok(w.into_inner())
             }
             RecordWriter::Asc(w) => w.finish(),
+            RecordWriter::Trc(w) => w.finish(),
         }
     }
 }
@@ -138,6 +159,9 @@ mod tests {
             Format::Asc
         );
         assert_eq!(Format::sniff(b"(1.000000) can0 123#\n"), Format::Candump);
+        assert_eq!(Format::sniff(b";$FILEVERSION=2.1\n"), Format::Trc);
+        assert_eq!(Format::sniff(b"   1)      1059 0300 8 00\n"), Format::Trc);
+        assert_eq!(Format::from_path(Path::new("pcan.trc")), Some(Format::Trc));
         assert_eq!(Format::sniff(b""), Format::Candump);
     }
 

@@ -97,6 +97,54 @@ proptest! {
     }
 
     #[test]
+    fn trc_text_of_any_shape_never_panics(
+        lines in proptest::collection::vec(
+            prop_oneof![
+                "\\PC{0,60}",
+                ";\\$(FILEVERSION|STARTTIME|COLUMNS)=[0-9A-Za-z.,]{0,20}",
+                " {0,6}[0-9]{1,4}\\)? {1,4}[0-9]{1,6}\\.?[0-9]{0,4} (DT|FD|FB|RR|ER|Rx|Tx|[0-9]) [0-9A-F]{0,9} (Rx|Tx|-) [0-9 -]{0,5}[0-9A-F ]{0,40}",
+            ],
+            0..12,
+        )
+    ) {
+        let text = lines.join("\n");
+        let _ = bywire_log::trc::TrcReader::new(text.as_bytes()).count();
+    }
+
+    #[test]
+    fn written_trc_reads_back(
+        frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4), 0..20)
+    ) {
+        let base = 1_700_000_000_000_000_000u64;
+        let mut records: Vec<bywire_log::LogRecord> = frames
+            .iter()
+            .map(|(frame, offset, channel)| bywire_log::LogRecord {
+                timestamp: Timestamp::from_nanos(base + offset),
+                interface: format!("can{channel}"),
+                frame: *frame,
+                direction: Some('R'),
+            })
+            .collect();
+        records.sort_by_key(|r| r.timestamp);
+        let mut writer = bywire_log::trc::TrcWriter::new(Vec::new());
+        for record in &records {
+            writer.write(record).unwrap();
+        }
+        let bytes = writer.finish().unwrap();
+        let read: Vec<_> = bywire_log::trc::TrcReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
+        prop_assert_eq!(read.len(), records.len());
+        for (back, record) in read.iter().zip(&records) {
+            let ts = record.timestamp.as_nanos();
+            prop_assert_eq!(back.timestamp.as_nanos(), ts - ts % 1000, "microseconds");
+            prop_assert_eq!(&back.interface, &record.interface);
+            match (&back.frame, &record.frame) {
+                (Frame::Error(_), Frame::Error(_)) => {}
+                (b, r) => prop_assert_eq!(b, r),
+            }
+        }
+    }
+
+    #[test]
     fn written_asc_reads_back(
         frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4), 0..20)
     ) {

@@ -1,5 +1,5 @@
-//! `bywire log convert` against the peers of each format: python-can 4.6.1's ASC reader and
-//! writer, can-utils' `log2asc` and `asc2log` — frame for frame (identifier, flags, data,
+//! `bywire log convert` against the peers of each format: python-can 4.6.1's ASC and TRC
+//! readers and writers, can-utils' `log2asc` and `asc2log` — frame for frame (identifier, flags, data,
 //! channel, direction, time to the format's resolution), classic, extended, remote, CAN FD with
 //! BRS/ESI and error frames.
 #![allow(
@@ -274,5 +274,79 @@ fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
     );
     assert_eq!(code, 1);
     assert!(err.contains("give --format"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn python_can_reads_our_trc_frame_for_frame() {
+    let dir = scratch("trc-ours");
+    let (log, trc) = (dir.join("in.log"), dir.join("out.trc"));
+    std::fs::write(&log, FRAMES).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        trc.to_str().unwrap(),
+    ]);
+    let compared = python(
+        r#"
+import can, sys
+ours = list(can.TRCReader(sys.argv[1]))
+# python-can reads no error frames from TRC (we write them as ER lines).
+theirs = [m for m in can.CanutilsLogReader(sys.argv[2]) if not m.is_error_frame]
+assert len(ours) == len(theirs), (len(ours), len(theirs))
+for a, b in zip(ours, theirs):
+    for f in ["arbitration_id", "is_extended_id", "is_remote_frame", "is_fd", "bitrate_switch",
+              "error_state_indicator"]:
+        assert getattr(a, f) == getattr(b, f), (f, a, b)
+    assert bytes(a.data) == bytes(b.data), (a, b)
+    # (python-can's TRC reader gives an FD frame's DLC code, not its length, as dlc.)
+    assert a.is_fd or a.dlc == b.dlc, (a, b)
+    assert a.is_rx, a
+    assert abs(a.timestamp - b.timestamp) < 1e-6, (a.timestamp, b.timestamp)
+    # (and the bus number, from 1, as its channel)
+    assert a.channel == int(b.channel[-1]) + 1, (a.channel, b.channel)
+print("same", len(ours))
+"#,
+        &[&trc, &log],
+    );
+    assert_eq!(compared.trim(), "same 8");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn we_read_python_cans_trc_frame_for_frame() {
+    let dir = scratch("trc-theirs");
+    let (log, trc, back) = (dir.join("in.log"), dir.join("py.trc"), dir.join("back.log"));
+    std::fs::write(&log, FRAMES).unwrap();
+    // python-can's TRC writer takes classic data frames only (it leaves out the others).
+    python(
+        r#"
+import can, sys
+with can.TRCWriter(sys.argv[2]) as w:
+    for m in can.CanutilsLogReader(sys.argv[1]):
+        w.on_message_received(m)
+"#,
+        &[&log, &trc],
+    );
+    bywire(&[
+        "log",
+        "convert",
+        trc.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let wanted: Vec<LogRecord> = original()
+        .into_iter()
+        .filter(|r| !r.frame.is_fd() && !r.frame.is_remote() && !r.frame.is_error())
+        .collect();
+    let got = records(&back);
+    assert_eq!(got.len(), wanted.len());
+    for (g, w) in got.iter().zip(&wanted) {
+        assert_eq!(g.frame, w.frame);
+        assert_eq!(g.interface, w.interface);
+        // Its start time is a float of days: the microsecond survives.
+        let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
+        assert!(drift <= 1_000, "{drift} ns: {g:?} {w:?}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
