@@ -45,6 +45,14 @@ pub enum LogError {
         /// What is wrong.
         kind: LogErrorKind,
     },
+    /// A binary log (pcapng, BLF) is malformed or could not be read at this byte.
+    #[error("byte {offset}: {what}")]
+    Binary {
+        /// Where the block at fault starts (or reading stopped).
+        offset: u64,
+        /// What is wrong.
+        what: String,
+    },
     /// Reading failed.
     #[error("line {line}: {message}")]
     Io {

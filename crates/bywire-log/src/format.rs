@@ -6,6 +6,7 @@ use std::path::Path;
 
 use crate::asc::{AscReader, AscWriter};
 use crate::candump::{LogError, LogRecord, Reader, Writer};
+use crate::pcapng::{PcapngReader, PcapngWriter};
 use crate::trc::{TrcReader, TrcWriter};
 
 /// A log format.
@@ -17,6 +18,8 @@ pub enum Format {
     Asc,
     /// PEAK TRC.
     Trc,
+    /// pcapng with SocketCAN frames (Wireshark).
+    Pcapng,
 }
 
 /// The records of a log, whatever its format.
@@ -24,10 +27,11 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 3] = [
+    pub const ALL: [(Format, &'static str); 4] = [
         (Format::Candump, "candump"),
         (Format::Asc, "asc"),
         (Format::Trc, "trc"),
+        (Format::Pcapng, "pcapng"),
     ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
@@ -37,6 +41,7 @@ impl Format {
             "log" | "candump" => Some(Format::Candump),
             "asc" => Some(Format::Asc),
             "trc" => Some(Format::Trc),
+            "pcapng" | "pcap" => Some(Format::Pcapng),
             _ => None,
         }
     }
@@ -52,6 +57,9 @@ impl Format {
     /// The format of a log that starts with `start`: ASC's header words, TRC's `;` header or
     /// `N)` lines, else candump.
     pub fn sniff(start: &[u8]) -> Format {
+        if start.starts_with(&[0x0A, 0x0D, 0x0D, 0x0A]) {
+            return Format::Pcapng;
+        }
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
             .lines()
@@ -92,6 +100,7 @@ impl Format {
             Format::Candump => Box::new(Reader::new(input)),
             Format::Asc => Box::new(AscReader::new(input)),
             Format::Trc => Box::new(TrcReader::new(input)),
+            Format::Pcapng => Box::new(PcapngReader::new(input)),
         }
     }
 
@@ -101,6 +110,7 @@ impl Format {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
             Format::Trc => RecordWriter::Trc(TrcWriter::new(output)),
+            Format::Pcapng => RecordWriter::Pcapng(PcapngWriter::new(output)),
         }
     }
 }
@@ -113,6 +123,8 @@ pub enum RecordWriter<W: Write> {
     Asc(AscWriter<W>),
     /// PEAK TRC 2.1.
     Trc(TrcWriter<W>),
+    /// pcapng.
+    Pcapng(PcapngWriter<W>),
 }
 
 impl<W: Write> RecordWriter<W> {
@@ -122,6 +134,7 @@ impl<W: Write> RecordWriter<W> {
             RecordWriter::Candump(w) => w.write(record.timestamp, &record.interface, &record.frame),
             RecordWriter::Asc(w) => w.write(record),
             RecordWriter::Trc(w) => w.write(record),
+            RecordWriter::Pcapng(w) => w.write(record),
         }
     }
 
@@ -134,6 +147,7 @@ impl<W: Write> RecordWriter<W> {
             }
             RecordWriter::Asc(w) => w.finish(),
             RecordWriter::Trc(w) => w.finish(),
+            RecordWriter::Pcapng(w) => w.finish(),
         }
     }
 }
@@ -162,6 +176,10 @@ mod tests {
         assert_eq!(Format::sniff(b";$FILEVERSION=2.1\n"), Format::Trc);
         assert_eq!(Format::sniff(b"   1)      1059 0300 8 00\n"), Format::Trc);
         assert_eq!(Format::from_path(Path::new("pcan.trc")), Some(Format::Trc));
+        assert_eq!(
+            Format::sniff(&[0x0A, 0x0D, 0x0D, 0x0A, 0, 0]),
+            Format::Pcapng
+        );
         assert_eq!(Format::sniff(b""), Format::Candump);
     }
 

@@ -350,3 +350,161 @@ with can.TRCWriter(sys.argv[2]) as w:
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// tshark's fields for every frame of a capture: time, interface, identifier, flags, length,
+/// BRS/ESI and data.
+fn tshark_fields(capture: &Path) -> Vec<Vec<String>> {
+    let out = Command::new("tshark")
+        .args(["--disable-protocol", "autosar-nm", "-r"])
+        .arg(capture)
+        .args(["-T", "fields", "-E", "separator=|"])
+        .args([
+            "-e",
+            "frame.time_epoch",
+            "-e",
+            "frame.interface_name",
+            "-e",
+            "can.id",
+            "-e",
+            "can.flags.xtd",
+            "-e",
+            "can.flags.rtr",
+            "-e",
+            "can.flags.err",
+            "-e",
+            "can.len",
+            "-e",
+            "canfd.flags.brs",
+            "-e",
+            "canfd.flags.esi",
+            "-e",
+            "data.data",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| l.split('|').map(str::to_string).collect())
+        .collect()
+}
+
+#[test]
+fn tshark_reads_our_pcapng_frame_for_frame() {
+    let dir = scratch("pcapng-ours");
+    let (log, capture) = (dir.join("in.log"), dir.join("out.pcapng"));
+    std::fs::write(&log, FRAMES).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        capture.to_str().unwrap(),
+    ]);
+    let rows = tshark_fields(&capture);
+    let wanted = original();
+    assert_eq!(rows.len(), wanted.len());
+    for (row, w) in rows.iter().zip(&wanted) {
+        let nanos = w.timestamp.as_nanos();
+        assert_eq!(
+            row[0],
+            format!("{}.{:09}", nanos / 1_000_000_000, nanos % 1_000_000_000)
+        );
+        assert_eq!(row[1], w.interface);
+        let flag = |on: bool| if on { "1" } else { "0" };
+        if w.frame.is_error() {
+            assert_eq!(row[5], "1", "{row:?}");
+            continue;
+        }
+        let id = w.frame.id().unwrap();
+        assert_eq!(row[2], id.as_raw().to_string(), "{row:?}");
+        assert_eq!(row[3], flag(id.is_extended()), "{row:?}");
+        // (a remote frame's length is the DLC it requests)
+        let length = if w.frame.is_remote() {
+            usize::from(w.frame.dlc().as_raw())
+        } else {
+            w.frame.data().len()
+        };
+        assert_eq!(row[6], length.to_string(), "{row:?}");
+        if let bywire_core::Frame::Fd(fd) = &w.frame {
+            assert_eq!(
+                (row[7].as_str(), row[8].as_str()),
+                (flag(fd.brs()), flag(fd.esi()))
+            );
+        } else {
+            assert_eq!(row[4], flag(w.frame.is_remote()), "{row:?}");
+        }
+        if !w.frame.is_remote() {
+            let hex: String = w.frame.data().iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(row[9], hex, "{row:?}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn we_read_a_capture_text2pcap_writes() {
+    let dir = scratch("pcapng-theirs");
+    let (hex, capture, back) = (
+        dir.join("hex.txt"),
+        dir.join("t2p.pcapng"),
+        dir.join("back.log"),
+    );
+    // SocketCAN packets as the link type defines them (identifier word big-endian), typed out
+    // independently of our writer: 123#DEADBEEF, 1ABCDEF0#0102 (EFF), 456#R3 (RTR), and an FD
+    // frame 7FF##3 with BRS and ESI and 12 bytes (canfd_frame, 72 bytes).
+    let fd_data = "11 22 33 44 55 66 77 88 99 00 aa bb";
+    let fd_pad = vec!["00"; 52].join(" ");
+    std::fs::write(
+        &hex,
+        format!(
+            "0000  00 00 01 23 04 00 00 00 de ad be ef 00 00 00 00\n\n\
+             0000  9a bc de f0 02 00 00 00 01 02 00 00 00 00 00 00\n\n\
+             0000  40 00 04 56 03 00 00 00 00 00 00 00 00 00 00 00\n\n\
+             0000  00 00 07 ff 0c 07 00 00 {fd_data} {fd_pad}\n"
+        ),
+    )
+    .unwrap();
+    let out = Command::new("text2pcap")
+        .args(["-q", "-l", "227", "-N", "vcan5"])
+        .args([&hex, &capture])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    bywire(&[
+        "log",
+        "convert",
+        capture.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let got: Vec<String> = records(&back)
+        .iter()
+        .map(|r| format!("{} {}", r.interface, r.frame))
+        .collect();
+    let fd = bywire_core::Frame::fd(
+        bywire_core::Id::standard(0x7FF).unwrap(),
+        &[
+            0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x88, 0x99, 0, 0xAA, 0xBB,
+        ],
+        true,
+        true,
+    )
+    .unwrap();
+    assert_eq!(
+        got,
+        [
+            "vcan5 123#DEADBEEF".to_string(),
+            "vcan5 1ABCDEF0#0102".to_string(),
+            "vcan5 456#R3".to_string(),
+            format!("vcan5 {fd}"),
+        ]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -38,25 +38,26 @@ Every line is checked; a malformed one is an error naming its file, line and col
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
     },
-    /// Convert a log to another format (candump, Vector ASC, PEAK TRC), frame for frame.
+    /// Convert a log to another format (candump, Vector ASC, PEAK TRC, pcapng), frame for frame.
     #[command(after_help = "Examples:
   bywire log convert drive.log drive.asc
   bywire log convert vector.asc drive.log
   bywire log convert pcan.trc drive.asc
+  bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
   candump -L can0 | bywire log convert - out.asc
 
 The input's format is sniffed from its content, the output's taken from its extension (.log
-or .candump: candump; .asc: ASC; .trc: TRC 2.1) unless --format names it. ASC channels and
+or .candump: candump; .asc: ASC; .trc: TRC 2.1; .pcapng: pcapng) unless --format names it. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
 can{N-1}; dates are UTC. TRC and ASC keep no detail of an error frame: it reads back as a bus
-error. The output is written to a temporary file and renamed, so a failed
+error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
 conversion leaves no half-written file.")]
     Convert {
         /// The log to read (`-`: standard input).
         input: PathBuf,
         /// The file to write.
         output: PathBuf,
-        /// The output format: candump, asc or trc (default: from the output's extension).
+        /// The output format: candump, asc, trc or pcapng (default: from the output's extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
     },
@@ -100,7 +101,7 @@ fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Wri
             .ok_or_else(|| anyhow!("--format {name}: not a format (candump, asc)"))?,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
-                "{}: the output's format is not known from its name (.log, .asc, .trc); give --format",
+                "{}: the output's format is not known from its name (.log, .asc, .trc, .pcapng); give --format",
                 output.display()
             )
         })?,
