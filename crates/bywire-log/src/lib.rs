@@ -6,7 +6,7 @@
 //! - [`asc`]: Vector ASC logs, read and written as python-can and can-utils do.
 //! - [`trc`]: PEAK TRC logs (1.0 to 2.1 read, 2.1 written).
 //! - [`pcapng`]: pcapng captures of SocketCAN frames (Wireshark's LINKTYPE_CAN_SOCKETCAN).
-//! - [`format`]: the formats by extension or content, each with a reader and a writer.
+//! - [`format`](mod@format): the formats by extension or content, each with a reader and a writer.
 //! - [`screen`]: candump's screen form, `  can0  123   [4]  DE AD BE EF`, written as candump
 //!   prints it and read back (for tools that take either form on standard input).
 //!

@@ -98,7 +98,10 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
 fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Write) -> Result<()> {
     let format = match format {
         Some(name) => Format::named(name)
-            .ok_or_else(|| anyhow!("--format {name}: not a format (candump, asc)"))?,
+            .ok_or_else(|| {
+                let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
+                anyhow!("--format {name}: not a format ({})", names.join(", "))
+            })?,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
                 "{}: the output's format is not known from its name (.log, .asc, .trc, .pcapng); give --format",
