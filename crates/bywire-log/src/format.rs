@@ -1,10 +1,11 @@
 //! The log formats, chosen by a file's extension or sniffed from its first bytes, each with a
 //! reader of records and a writer.
 
-use std::io::{self, BufRead, Write};
+use std::io::{self, BufRead, Seek, Write};
 use std::path::Path;
 
 use crate::asc::{AscReader, AscWriter};
+use crate::blf::{BlfReader, BlfWriter};
 use crate::candump::{LogError, LogRecord, Reader, Writer};
 use crate::pcapng::{PcapngReader, PcapngWriter};
 use crate::trc::{TrcReader, TrcWriter};
@@ -20,6 +21,8 @@ pub enum Format {
     Trc,
     /// pcapng with SocketCAN frames (Wireshark).
     Pcapng,
+    /// Vector BLF.
+    Blf,
 }
 
 /// The records of a log, whatever its format.
@@ -27,11 +30,12 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 4] = [
+    pub const ALL: [(Format, &'static str); 5] = [
         (Format::Candump, "candump"),
         (Format::Asc, "asc"),
         (Format::Trc, "trc"),
         (Format::Pcapng, "pcapng"),
+        (Format::Blf, "blf"),
     ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
@@ -42,6 +46,7 @@ impl Format {
             "asc" => Some(Format::Asc),
             "trc" => Some(Format::Trc),
             "pcapng" | "pcap" => Some(Format::Pcapng),
+            "blf" => Some(Format::Blf),
             _ => None,
         }
     }
@@ -59,6 +64,9 @@ impl Format {
     pub fn sniff(start: &[u8]) -> Format {
         if start.starts_with(&[0x0A, 0x0D, 0x0D, 0x0A]) {
             return Format::Pcapng;
+        }
+        if start.starts_with(b"LOGG") {
+            return Format::Blf;
         }
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
@@ -101,22 +109,24 @@ impl Format {
             Format::Asc => Box::new(AscReader::new(input)),
             Format::Trc => Box::new(TrcReader::new(input)),
             Format::Pcapng => Box::new(PcapngReader::new(input)),
+            Format::Blf => Box::new(BlfReader::new(input)),
         }
     }
 
-    /// A writer of this format to `output`.
-    pub fn writer<W: Write>(self, output: W) -> RecordWriter<W> {
-        match self {
+    /// A writer of this format to `output` (seekable: BLF completes its header at the end).
+    pub fn writer<W: Write + Seek>(self, output: W) -> io::Result<RecordWriter<W>> {
+        Ok(match self {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
             Format::Trc => RecordWriter::Trc(TrcWriter::new(output)),
             Format::Pcapng => RecordWriter::Pcapng(PcapngWriter::new(output)),
-        }
+            Format::Blf => RecordWriter::Blf(BlfWriter::new(output)?),
+        })
     }
 }
 
 /// Writes records in one of the formats.
-pub enum RecordWriter<W: Write> {
+pub enum RecordWriter<W: Write + Seek> {
     /// candump's log form (as `candump -L`: no direction).
     Candump(Writer<W>),
     /// Vector ASC.
@@ -125,9 +135,11 @@ pub enum RecordWriter<W: Write> {
     Trc(TrcWriter<W>),
     /// pcapng.
     Pcapng(PcapngWriter<W>),
+    /// Vector BLF.
+    Blf(BlfWriter<W>),
 }
 
-impl<W: Write> RecordWriter<W> {
+impl<W: Write + Seek> RecordWriter<W> {
     /// Write one record.
     pub fn write(&mut self, record: &LogRecord) -> io::Result<()> {
         match self {
@@ -135,6 +147,7 @@ impl<W: Write> RecordWriter<W> {
             RecordWriter::Asc(w) => w.write(record),
             RecordWriter::Trc(w) => w.write(record),
             RecordWriter::Pcapng(w) => w.write(record),
+            RecordWriter::Blf(w) => w.write(record),
         }
     }
 
@@ -148,6 +161,7 @@ impl<W: Write> RecordWriter<W> {
             RecordWriter::Asc(w) => w.finish(),
             RecordWriter::Trc(w) => w.finish(),
             RecordWriter::Pcapng(w) => w.finish(),
+            RecordWriter::Blf(w) => w.finish(),
         }
     }
 }
@@ -166,7 +180,9 @@ mod tests {
             Format::from_path(Path::new("drive.log")),
             Some(Format::Candump)
         );
-        assert_eq!(Format::from_path(Path::new("drive.blf")), None);
+        assert_eq!(Format::from_path(Path::new("drive.blf")), Some(Format::Blf));
+        assert_eq!(Format::from_path(Path::new("drive.mf4")), None);
+        assert_eq!(Format::sniff(b"LOGG\x90\0\0\0"), Format::Blf);
         assert_eq!(Format::named("asc"), Some(Format::Asc));
         assert_eq!(
             Format::sniff(b"\n date Tue Nov 14 22:13:20 2023\n"),
@@ -187,16 +203,19 @@ mod tests {
     fn a_log_converts_through_both_writers() {
         let candump =
             "(1700000000.100000) can0 123#DEADBEEF\n(1700000000.200000) can1 1ABCDEF0#R\n";
-        let mut asc = Format::Asc.writer(Vec::new());
+        let mut asc = Format::Asc.writer(io::Cursor::new(Vec::new())).unwrap();
         for record in Format::Candump.reader(candump.as_bytes()) {
             asc.write(&record.unwrap()).unwrap();
         }
-        let asc = asc.finish().unwrap();
+        let asc = asc.finish().unwrap().into_inner();
         assert_eq!(Format::sniff(&asc), Format::Asc);
-        let mut back = Format::Candump.writer(Vec::new());
+        let mut back = Format::Candump.writer(io::Cursor::new(Vec::new())).unwrap();
         for record in Format::Asc.reader(asc.as_slice()) {
             back.write(&record.unwrap()).unwrap();
         }
-        assert_eq!(String::from_utf8(back.finish().unwrap()).unwrap(), candump);
+        assert_eq!(
+            String::from_utf8(back.finish().unwrap().into_inner()).unwrap(),
+            candump
+        );
     }
 }

@@ -4,6 +4,7 @@
 //!   stream of records with errors naming the line and column, written byte-identical to
 //!   `candump -L` (or with nanoseconds).
 //! - [`asc`]: Vector ASC logs, read and written as python-can and can-utils do.
+//! - [`blf`]: Vector BLF (zlib log containers; classic, FD and error objects).
 //! - [`trc`]: PEAK TRC logs (1.0 to 2.1 read, 2.1 written).
 //! - [`pcapng`]: pcapng captures of SocketCAN frames (Wireshark's LINKTYPE_CAN_SOCKETCAN).
 //! - [`format`](mod@format): the formats by extension or content, each with a reader and a writer.
@@ -26,6 +27,7 @@
 //! ```
 
 pub mod asc;
+pub mod blf;
 pub mod candump;
 pub mod format;
 pub mod lines;

@@ -1,5 +1,6 @@
-//! `bywire log convert` against the peers of each format: python-can 4.6.1's ASC and TRC
-//! readers and writers, can-utils' `log2asc` and `asc2log` — frame for frame (identifier, flags, data,
+//! `bywire log convert` against the peers of each format: python-can 4.6.1's ASC, BLF and TRC
+//! readers and writers, can-utils' `log2asc` and `asc2log`, tshark and text2pcap — frame for
+//! frame (identifier, flags, data,
 //! channel, direction, time to the format's resolution), classic, extended, remote, CAN FD with
 //! BRS/ESI and error frames.
 #![allow(
@@ -72,15 +73,21 @@ fn python(script: &str, args: &[&Path]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// python-can compares two logs message by message (its candump reader on one side).
+/// python-can compares two logs message by message (its candump reader on one side, its ASC or
+/// BLF reader, as the third argument says, on the other).
 const COMPARE: &str = r#"
 import can, sys
-ours = list(can.ASCReader(sys.argv[1], relative_timestamp=False))
+if sys.argv[3] == "asc":
+    ours = list(can.ASCReader(sys.argv[1], relative_timestamp=False))
+else:
+    ours = list(can.BLFReader(sys.argv[1]))
 theirs = list(can.CanutilsLogReader(sys.argv[2]))
 assert len(ours) == len(theirs), (len(ours), len(theirs))
 for a, b in zip(ours, theirs):
-    fields = ["arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd",
-              "bitrate_switch", "error_state_indicator"]
+    assert a.is_error_frame == b.is_error_frame, (a, b)
+    # (An error frame's identifier and its flags mean nothing in either format.)
+    fields = [] if a.is_error_frame else ["arbitration_id", "is_extended_id", "is_remote_frame",
+              "is_fd", "bitrate_switch", "error_state_indicator"]
     for f in fields:
         assert getattr(a, f) == getattr(b, f), (f, a, b)
     if not a.is_error_frame:
@@ -107,7 +114,10 @@ fn python_can_reads_our_asc_frame_for_frame() {
         said.trim(),
         format!("9 frames written to {}", asc.display())
     );
-    assert_eq!(python(COMPARE, &[&asc, &log]).trim(), "same 9");
+    assert_eq!(
+        python(COMPARE, &[&asc, &log, Path::new("asc")]).trim(),
+        "same 9"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -268,7 +278,7 @@ fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
             "log",
             "convert",
             log.to_str().unwrap(),
-            dir.join("x.blf").to_str().unwrap(),
+            dir.join("x.mf4").to_str().unwrap(),
         ],
         "",
     );
@@ -506,5 +516,87 @@ fn we_read_a_capture_text2pcap_writes() {
             format!("vcan5 {fd}"),
         ]
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn python_can_and_tshark_read_our_blf_frame_for_frame() {
+    let dir = scratch("blf-ours");
+    let (log, blf) = (dir.join("in.log"), dir.join("out.blf"));
+    std::fs::write(&log, FRAMES).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        blf.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        python(COMPARE, &[&blf, &log, Path::new("blf")]).trim(),
+        "same 9"
+    );
+    // Wireshark reads BLF too (its 4.0 reader passes over error objects): the same frames,
+    // times to the nanosecond, channels as CAN-1 and CAN-2.
+    let rows = tshark_fields(&blf);
+    let wanted: Vec<LogRecord> = original()
+        .into_iter()
+        .filter(|r| !r.frame.is_error())
+        .collect();
+    assert_eq!(rows.len(), wanted.len(), "{rows:?}");
+    for (row, w) in rows.iter().zip(&wanted) {
+        let nanos = w.timestamp.as_nanos();
+        assert_eq!(
+            row[0],
+            format!("{}.{:09}", nanos / 1_000_000_000, nanos % 1_000_000_000)
+        );
+        let channel: u32 = w.interface.trim_start_matches("can").parse().unwrap();
+        assert_eq!(row[1], format!("CAN-{}", channel + 1));
+        if let Some(id) = w.frame.id() {
+            assert_eq!(row[2], id.as_raw().to_string(), "{row:?}");
+        }
+        if !w.frame.is_remote() && !w.frame.is_error() {
+            let hex: String = w.frame.data().iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(row[9], hex, "{row:?}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn we_read_python_cans_blf_frame_for_frame() {
+    let dir = scratch("blf-theirs");
+    let (log, blf, back) = (dir.join("in.log"), dir.join("py.blf"), dir.join("back.log"));
+    std::fs::write(&log, FRAMES).unwrap();
+    python(
+        r#"
+import can, sys
+with can.BLFWriter(sys.argv[2]) as w:
+    for m in can.CanutilsLogReader(sys.argv[1]):
+        w.on_message_received(m)
+"#,
+        &[&log, &blf],
+    );
+    bywire(&[
+        "log",
+        "convert",
+        blf.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let (got, wanted) = (records(&back), original());
+    assert_eq!(got.len(), wanted.len());
+    for (g, w) in got.iter().zip(&wanted) {
+        if w.frame.is_error() {
+            // BLF's error object keeps no SocketCAN class: a bus error.
+            assert!(g.frame.is_error(), "{g:?}");
+        } else {
+            assert_eq!(g.frame, w.frame);
+        }
+        // (python-can gives error frames no channel: channel 1.)
+        if !w.frame.is_error() {
+            assert_eq!(g.interface, w.interface);
+        }
+        // python-can counts from a start it truncated to the millisecond, in nanoseconds.
+        let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
+        assert!(drift <= 1_000, "{drift} ns: {g:?} {w:?}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -38,26 +38,30 @@ Every line is checked; a malformed one is an error naming its file, line and col
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
     },
-    /// Convert a log to another format (candump, Vector ASC, PEAK TRC, pcapng), frame for frame.
+    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng), frame for
+    /// frame.
     #[command(after_help = "Examples:
   bywire log convert drive.log drive.asc
   bywire log convert vector.asc drive.log
   bywire log convert pcan.trc drive.asc
   bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
+  bywire log convert vector.blf drive.log
   candump -L can0 | bywire log convert - out.asc
 
 The input's format is sniffed from its content, the output's taken from its extension (.log
-or .candump: candump; .asc: ASC; .trc: TRC 2.1; .pcapng: pcapng) unless --format names it. ASC channels and
+or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng) unless --format
+names it. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
-can{N-1}; dates are UTC. TRC and ASC keep no detail of an error frame: it reads back as a bus
-error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
+can{N-1}; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
+back as a bus error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
 conversion leaves no half-written file.")]
     Convert {
         /// The log to read (`-`: standard input).
         input: PathBuf,
         /// The file to write.
         output: PathBuf,
-        /// The output format: candump, asc, trc or pcapng (default: from the output's extension).
+        /// The output format: candump, asc, blf, trc or pcapng (default: from the output's
+        /// extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
     },
@@ -104,7 +108,7 @@ fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Wri
             })?,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
-                "{}: the output's format is not known from its name (.log, .asc, .trc, .pcapng); give --format",
+                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng); give --format",
                 output.display()
             )
         })?,
@@ -118,7 +122,9 @@ fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Wri
     write_atomically(output, |tmp| {
         let file = std::fs::File::create(tmp)
             .with_context(|| format!("cannot write {}", output.display()))?;
-        let mut writer = format.writer(std::io::BufWriter::new(file));
+        let mut writer = format
+            .writer(std::io::BufWriter::new(file))
+            .with_context(|| format!("cannot write {}", output.display()))?;
         for (name, reader) in inputs(&files)? {
             for record in records(&name, reader, Skip::Unreadable) {
                 writer
