@@ -1,6 +1,7 @@
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
+use crate::support::logs::Skip;
 use crate::support::signals::FrameText;
 use crate::support::signals::{Dbc, DecodedFrame};
 use anyhow::{Context, Result};
@@ -68,6 +69,10 @@ pub struct DecodeArgs {
     /// Fail on the first problem in the DBC file.
     #[arg(long)]
     strict: bool,
+    /// Read this log (candump, ASC, BLF, TRC or pcapng, by its content) instead of standard
+    /// input's lines; each frame is shown as a candump log line.
+    #[arg(short = 'I', value_name = "FILE")]
+    input: Option<PathBuf>,
 }
 
 fn is_json(path: &Path) -> bool {
@@ -277,7 +282,25 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
 
 pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
-    let choices = !args.no_decode_choices;
+    if let Some(path) = &args.input {
+        // A log file of any format: every frame, shown as its candump line.
+        for (name, reader) in crate::support::logs::inputs(std::slice::from_ref(path))? {
+            for record in crate::support::logs::records(&name, reader, Skip::Unreadable) {
+                let record = record?;
+                let text = format!(
+                    "({}) {} {}",
+                    bywire_log::candump::timestamp_text(
+                        record.timestamp,
+                        bywire_log::Precision::Micros
+                    ),
+                    record.interface,
+                    bywire_log::candump::frame_text(&record.frame, false)
+                );
+                write_decoded(args, &decoder, &text, &record.frame, out)?;
+            }
+        }
+        return Ok(());
+    }
     // One line at a time, each at most a log line's size: logs of any size stream through in
     // constant memory.
     let mut lines = bywire_log::lines::CappedLines::new(input);
@@ -294,37 +317,50 @@ pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write)
             }
         };
         let text = line.as_str();
-        let Some(frame) = bywire_log::screen::parse_line(text) else {
-            if !args.json {
-                writeln!(out, "{text}")?;
+        match bywire_log::screen::parse_line(text) {
+            Some(frame) => write_decoded(args, &decoder, text, &frame, out)?,
+            None if !args.json => writeln!(out, "{text}")?,
+            None => {}
+        }
+    }
+    Ok(())
+}
+
+/// One frame's line (`text`) and what it decodes to, as text or a JSON object.
+fn write_decoded(
+    args: &DecodeArgs,
+    decoder: &Dbc,
+    text: &str,
+    frame: &bywire_core::Frame,
+    out: &mut impl Write,
+) -> Result<()> {
+    let choices = !args.no_decode_choices;
+    let decoded = decoder.decode(frame);
+    if args.json {
+        let (id, extended) = frame
+            .id()
+            .map(|id| (id.as_raw(), id.is_extended()))
+            .unwrap_or_default();
+        let o = match &decoded {
+            None => {
+                json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})
             }
-            continue;
+            Some(d) => {
+                let mut o = json!({"id": id, "extended": extended, "name": d.message.display_name(), "signals": d.json_signals()});
+                if let Some(e) = &d.error {
+                    o["error"] = json!(e);
+                }
+                o
+            }
         };
-        let id = frame.id().map(|id| (id.as_raw(), id.is_extended()));
-        let decoded = decoder.decode(&frame);
-        if args.json {
-            let (id, extended) = id.unwrap_or_default();
-            let o = match &decoded {
-                None => {
-                    json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})
-                }
-                Some(d) => {
-                    let mut o = json!({"id": id, "extended": extended, "name": d.message.display_name(), "signals": d.json_signals()});
-                    if let Some(e) = &d.error {
-                        o["error"] = json!(e);
-                    }
-                    o
-                }
-            };
-            writeln!(out, "{o}")?;
-            continue;
-        }
-        match decoded {
-            None => writeln!(out, "{text}")?,
-            Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
-            Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,
-            Some(d) => writeln!(out, "{text} ::\n{}", d.multi_line(choices, ""))?,
-        }
+        writeln!(out, "{o}")?;
+        return Ok(());
+    }
+    match decoded {
+        None => writeln!(out, "{text}")?,
+        Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
+        Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,
+        Some(d) => writeln!(out, "{text} ::\n{}", d.multi_line(choices, ""))?,
     }
     Ok(())
 }

@@ -1,17 +1,17 @@
 //! `bywire play`: canplayer — replay candump logs onto buses, in real time or faster.
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::{self, BufRead, BufReader, Write};
+use std::io::{BufRead, Write};
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Bus;
-use bywire_log::{LogError, LogRecord, Reader};
+use bywire_log::LogRecord;
 
 use crate::support::busarg;
+use crate::support::logs::{self, Skip};
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -63,23 +63,10 @@ enum Target {
     Stdout,
 }
 
-/// The log's records, lines that do not start with '(' skipped as canplayer skips them.
-fn lines_starting_with_paren<R: BufRead>(input: R) -> Reader<R> {
-    Reader::new(input).log_lines_only()
-}
-
-fn open_input(path: Option<&PathBuf>) -> Result<Box<dyn BufRead>> {
-    Ok(match path {
-        Some(p) => Box::new(BufReader::new(
-            File::open(p).with_context(|| format!("cannot open {}", p.display()))?,
-        )),
-        None => Box::new(BufReader::new(io::stdin())),
-    })
-}
-
-fn syntax(path: Option<&PathBuf>, e: LogError) -> anyhow::Error {
-    let name = path.map_or("standard input".to_string(), |p| p.display().to_string());
-    anyhow!("{name}: {e}")
+/// The log's records, any format; in candump logs, lines that do not start with '(' are
+/// skipped as canplayer skips them.
+fn log_records(path: Option<&PathBuf>) -> Result<Vec<(String, Box<dyn BufRead>)>> {
+    logs::inputs(path.map(std::slice::from_ref).unwrap_or_default())
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -105,8 +92,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     // A file is checked whole first, so a bad line stops the replay before it starts.
     if let Some(path) = &args.input {
-        for record in lines_starting_with_paren(open_input(Some(path))?) {
-            record.map_err(|e| syntax(Some(path), e))?;
+        for (name, input) in log_records(Some(path))? {
+            for record in logs::records(&name, input, Skip::NonLogLines) {
+                record?;
+            }
         }
     }
     let mut targets: HashMap<String, Option<Target>> = HashMap::new();
@@ -115,14 +104,17 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let mut pass = 0u64;
     while loops.is_none_or(|n| pass < n) {
         pass += 1;
-        let reader = lines_starting_with_paren(open_input(args.input.as_ref())?);
+        let Some((name, input)) = log_records(args.input.as_ref())?.into_iter().next() else {
+            return Ok(());
+        };
+        let reader = logs::records(&name, input, Skip::NonLogLines);
         let mut pacer = bywire_log::pacing::Pacer::new(args.speed);
         if let Some(limit) = args.skip_gaps {
             pacer = pacer.skipping_gaps_over(Duration::from_secs_f64(limit));
         }
         let mut start: Option<Instant> = None;
         for record in reader {
-            let record = record.map_err(|e| syntax(args.input.as_ref(), e))?;
+            let record = record?;
             if stop.load(Ordering::Relaxed) || args.count.is_some_and(|n| sent >= n) {
                 return Ok(());
             }

@@ -37,6 +37,9 @@ pub fn input(path: Option<&Path>) -> Result<(String, Box<dyn BufRead>)> {
 pub enum Skip {
     /// Lines that cannot be text: too long, not UTF-8. A malformed log line is an error.
     Unreadable,
+    /// As `Unreadable`, and in candump logs lines that are not log lines at all are passed
+    /// over without a word, as canplayer does.
+    NonLogLines,
     /// Every bad line, and lines that are not log lines at all (a plot of what can be read).
     AnyBadLine,
 }
@@ -50,7 +53,9 @@ pub fn records<'a>(
     // An input that cannot even be peeked at fails on its first read, with its name.
     let format = Format::sniff_input(&mut input).unwrap_or(Format::Candump);
     let reader = match (format, skip) {
-        (Format::Candump, Skip::AnyBadLine) => Box::new(Reader::new(input).log_lines_only()),
+        (Format::Candump, Skip::AnyBadLine | Skip::NonLogLines) => {
+            Box::new(Reader::new(input).log_lines_only())
+        }
         (format, _) => format.reader(input),
     };
     reader.filter_map(move |record| match record {

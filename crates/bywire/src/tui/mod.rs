@@ -75,7 +75,8 @@ pub fn source(buses: &[String], log: Option<&PathBuf>) -> Result<Source> {
     })
 }
 
-/// A candump log as a source: each record at its time after the first, as it was recorded.
+/// A log (any format) as a source: each record at its time after the first, as it was
+/// recorded.
 fn replay(path: &Path, stop: Arc<AtomicBool>) -> Result<Source> {
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let (tx, events) = mpsc::sync_channel(4096);
@@ -84,7 +85,10 @@ fn replay(path: &Path, stop: Arc<AtomicBool>) -> Result<Source> {
     std::thread::spawn(move || {
         let started = Instant::now();
         let mut pacer = bywire_log::pacing::Pacer::new(1.0);
-        for record in bywire_log::Reader::new(BufReader::new(file)) {
+        let mut input = BufReader::new(file);
+        let format = bywire_log::format::Format::sniff_input(&mut input)
+            .unwrap_or(bywire_log::format::Format::Candump);
+        for record in format.reader(input) {
             if thread_stop.load(Ordering::Relaxed) {
                 break;
             }
