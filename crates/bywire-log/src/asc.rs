@@ -568,6 +568,35 @@ impl<R: BufRead> Iterator for AscReader<R> {
     }
 }
 
+/// Push an identifier as ASC writes it: hex, `x` after an extended one.
+fn push_id(line: &mut String, id: Id) {
+    let _ = write!(line, "{:X}", id.as_raw());
+    if id.is_extended() {
+        line.push('x');
+    }
+}
+
+/// Push what `push` writes, padded with spaces on the right to `width`.
+fn push_padded(line: &mut String, width: usize, push: impl FnOnce(&mut String)) {
+    let before = line.len();
+    push(line);
+    let written = line.len() - before;
+    line.extend(std::iter::repeat_n(' ', width.saturating_sub(written)));
+}
+
+/// Push bytes as upper-case hex with a space between (ASC and TRC data).
+pub(crate) fn push_hex(line: &mut String, data: &[u8]) {
+    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+    for (i, byte) in data.iter().enumerate() {
+        if i > 0 {
+            line.push(' ');
+        }
+        let digit = |n: u8| char::from(DIGITS.get(usize::from(n)).copied().unwrap_or(b'0'));
+        line.push(digit(byte >> 4));
+        line.push(digit(byte & 0x0F));
+    }
+}
+
 /// The channel (bus) number of an interface for ASC and TRC: its trailing number plus one
 /// (`can0` is 1), else the next number not taken; remembered in `taken`.
 pub(crate) fn channel_number(taken: &mut BTreeMap<String, u32>, interface: &str) -> u32 {
@@ -661,39 +690,22 @@ impl<W: Write> AscWriter<W> {
             micros / 1_000_000,
             micros % 1_000_000
         );
-        let id_text = |id: Id| {
-            if id.is_extended() {
-                format!("{:X}x", id.as_raw())
-            } else {
-                format!("{:X}", id.as_raw())
-            }
-        };
-        let data_text = |data: &[u8]| {
-            data.iter()
-                .map(|b| format!("{b:02X}"))
-                .collect::<Vec<_>>()
-                .join(" ")
-        };
+        // Built in the line itself: no allocation a frame.
+        let line = &mut self.line;
         match &record.frame {
             Frame::Error(_) => {
-                let _ = write!(self.line, "{channel}  ErrorFrame");
-            }
-            Frame::Classic(f) if f.is_remote() => {
-                let _ = write!(
-                    self.line,
-                    "{channel}  {:<15} {direction:<4} r {:x}",
-                    id_text(f.id()),
-                    f.dlc().as_raw()
-                );
+                let _ = write!(line, "{channel}  ErrorFrame");
             }
             Frame::Classic(f) => {
-                let _ = write!(
-                    self.line,
-                    "{channel}  {:<15} {direction:<4} d {:x} {}",
-                    id_text(f.id()),
-                    f.dlc().as_raw(),
-                    data_text(f.data())
-                );
+                let _ = write!(line, "{channel}  ");
+                push_padded(line, 15, |l| push_id(l, f.id()));
+                let _ = write!(line, " {direction:<4} ");
+                if f.is_remote() {
+                    let _ = write!(line, "r {:x}", f.dlc().as_raw());
+                } else {
+                    let _ = write!(line, "d {:x} ", f.dlc().as_raw());
+                    push_hex(line, f.data());
+                }
             }
             Frame::Fd(f) => {
                 let mut flags = 0x1000u32;
@@ -703,23 +715,25 @@ impl<W: Write> AscWriter<W> {
                 if f.esi() {
                     flags |= 0x4000;
                 }
+                let _ = write!(line, "CANFD {channel:>3} {direction:<4} ");
+                let before = line.len();
+                push_id(line, f.id());
+                let width = line.len() - before;
+                line.insert_str(before, &" ".repeat(8usize.saturating_sub(width)));
                 let _ = write!(
-                    self.line,
-                    "CANFD {channel:>3} {direction:<4} {:>8}  {:>32} {} {} {:x} {:>2} {} {:>8} {:>4} {flags:>8X} {:>8} {:>8} {:>8} {:>8} {:>8}",
-                    id_text(f.id()),
+                    line,
+                    "  {:>32} {} {} {:x} {:>2} ",
                     "",
                     u8::from(f.brs()),
                     u8::from(f.esi()),
                     f.dlc().as_raw(),
-                    f.data().len(),
-                    data_text(f.data()),
-                    0,
-                    0,
-                    0,
-                    0,
-                    0,
-                    0,
-                    0
+                    f.data().len()
+                );
+                push_hex(line, f.data());
+                let _ = write!(
+                    line,
+                    " {:>8} {:>4} {flags:>8X} {:>8} {:>8} {:>8} {:>8} {:>8}",
+                    0, 0, 0, 0, 0, 0, 0
                 );
             }
         }

@@ -559,10 +559,9 @@ impl<W: Write> TrcWriter<W> {
 }
 
 fn hex(data: &[u8]) -> String {
-    data.iter()
-        .map(|b| format!("{b:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
+    let mut text = String::with_capacity(data.len() * 3);
+    crate::asc::push_hex(&mut text, data);
+    text
 }
 
 #[cfg(test)]
