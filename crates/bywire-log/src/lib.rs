@@ -13,6 +13,7 @@
 //!
 //! - [`lines`]: text lines in bounded memory (too long or not UTF-8: reported with the line's
 //!   number, and reading goes on).
+//! - [`merge`]: several logs as one, in time order (streaming).
 //! - [`pacing`]: when to replay each record (recorded pace, a speed factor, long gaps skipped).
 //!
 //! Readers hold one line at a time, so logs of any size stream in bounded memory, and no input
@@ -31,6 +32,7 @@ pub mod blf;
 pub mod candump;
 pub mod format;
 pub mod lines;
+pub mod merge;
 pub mod pacing;
 pub mod pcapng;
 pub mod screen;

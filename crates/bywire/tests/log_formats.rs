@@ -654,3 +654,69 @@ fn decode_and_play_read_every_format() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `log convert` merges its inputs by time, keeps and renames channels, and cuts a time range.
+#[test]
+fn convert_merges_inputs_and_selects_channels_and_time() {
+    let dir = scratch("merge");
+    let (a, b, merged) = (dir.join("a.log"), dir.join("b.asc"), dir.join("merged.log"));
+    std::fs::write(
+        &a,
+        "(100.000000) can0 100#01\n(102.000000) can0 100#03\n(104.000000) can2 200#05\n",
+    )
+    .unwrap();
+    let other = dir.join("b.log");
+    std::fs::write(
+        &other,
+        "(101.000000) can1 101#02\n(103.000000) can1 101#04\n",
+    )
+    .unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        other.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]);
+    let said = bywire(&[
+        "log",
+        "convert",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        merged.to_str().unwrap(),
+        "--channel",
+        "can0",
+        "--channel",
+        "can1=vcan9",
+        "--from",
+        "1",
+        "--to",
+        "3",
+    ]);
+    assert!(
+        said.contains("3 frames written") && said.contains("2 left out"),
+        "{said}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&merged).unwrap(),
+        "(0000000101.000000) vcan9 101#02\n(0000000102.000000) can0 100#03\n(0000000103.000000) vcan9 101#04\n"
+    );
+    let (code, _, err) = common::bywire(&["log", "convert", a.to_str().unwrap(), "-", "x.log"], "");
+    assert_eq!(code, 1);
+    assert!(err.contains("can only be the one input"), "{err}");
+    let (code, _, err) = common::bywire(
+        &[
+            "log",
+            "convert",
+            a.to_str().unwrap(),
+            "x.log",
+            "--from",
+            "5",
+            "--to",
+            "1",
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("--to 1 is before --from 5"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

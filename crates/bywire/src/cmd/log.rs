@@ -4,12 +4,13 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::format::Format;
-use bywire_log::{FrameView, Precision, View};
+use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg;
 use crate::support::files::write_atomically;
@@ -47,8 +48,10 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
   bywire log convert vector.blf drive.log
   candump -L can0 | bywire log convert - out.asc
+  bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
 
-The input's format is sniffed from its content, the output's taken from its extension (.log
+Several inputs are merged by time (streaming: one frame of each held). The input's format is
+sniffed from its content, the output's taken from its extension (.log
 or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng) unless --format
 names it. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
@@ -56,14 +59,22 @@ can{N-1}; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error f
 back as a bus error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
 conversion leaves no half-written file.")]
     Convert {
-        /// The log to read (`-`: standard input).
-        input: PathBuf,
-        /// The file to write.
-        output: PathBuf,
+        /// The logs to read, merged by time (`-`: standard input), and last the file to write.
+        #[arg(required = true, num_args = 2.., value_name = "FILE")]
+        files: Vec<PathBuf>,
         /// The output format: candump, asc, blf, trc or pcapng (default: from the output's
         /// extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
+        /// Keep only these channels (interfaces), renamed where given as FROM=TO.
+        #[arg(long = "channel", value_name = "FROM[=TO]")]
+        channels: Vec<String>,
+        /// Leave out what comes before this many seconds after the first frame.
+        #[arg(long, value_name = "SECONDS", value_parser = crate::support::numbers::seconds)]
+        from: Option<f64>,
+        /// Leave out what comes after this many seconds after the first frame.
+        #[arg(long, value_name = "SECONDS", value_parser = crate::support::numbers::seconds)]
+        to: Option<f64>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
     #[command(after_help = "Examples:
@@ -92,20 +103,75 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
         }
         LogCommand::Stats { files } => stats(files, out),
         LogCommand::Convert {
-            input,
-            output,
+            files,
             format,
-        } => convert(input, output, format.as_deref(), out),
+            channels,
+            from,
+            to,
+        } => {
+            let (output, inputs) = files
+                .split_last()
+                .ok_or_else(|| anyhow!("give the logs to read and the file to write"))?;
+            let selection = Selection::new(channels, *from, *to)?;
+            convert(inputs, output, format.as_deref(), &selection, out)
+        }
     }
 }
 
-fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Write) -> Result<()> {
+/// What `log convert` keeps: channels (renamed) and a time range from the first frame.
+struct Selection {
+    /// FROM → TO; empty: every channel as it is.
+    channels: BTreeMap<String, String>,
+    from: Duration,
+    to: Option<Duration>,
+}
+
+impl Selection {
+    fn new(channels: &[String], from: Option<f64>, to: Option<f64>) -> Result<Selection> {
+        let mut map = BTreeMap::new();
+        for text in channels {
+            let (from, to) = text.split_once('=').unwrap_or((text, text));
+            if from.is_empty() || to.is_empty() {
+                return Err(anyhow!("--channel '{text}': expected FROM or FROM=TO"));
+            }
+            map.insert(from.to_string(), to.to_string());
+        }
+        if let (Some(from), Some(to)) = (from, to) {
+            if to < from {
+                return Err(anyhow!("--to {to} is before --from {from}"));
+            }
+        }
+        Ok(Selection {
+            channels: map,
+            from: Duration::from_secs_f64(from.unwrap_or(0.0)),
+            to: to.map(Duration::from_secs_f64),
+        })
+    }
+
+    /// The record as it is written (renamed), or `None` to leave it out.
+    fn keep(&self, mut record: LogRecord, since_first: Duration) -> Option<LogRecord> {
+        if since_first < self.from || self.to.is_some_and(|to| since_first > to) {
+            return None;
+        }
+        if !self.channels.is_empty() {
+            record.interface = self.channels.get(&record.interface)?.clone();
+        }
+        Some(record)
+    }
+}
+
+fn convert(
+    inputs: &[PathBuf],
+    output: &Path,
+    format: Option<&str>,
+    selection: &Selection,
+    out: &mut impl Write,
+) -> Result<()> {
     let format = match format {
-        Some(name) => Format::named(name)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
-                anyhow!("--format {name}: not a format ({})", names.join(", "))
-            })?,
+        Some(name) => Format::named(name).ok_or_else(|| {
+            let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
+            anyhow!("--format {name}: not a format ({})", names.join(", "))
+        })?,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
                 "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng); give --format",
@@ -113,33 +179,61 @@ fn convert(input: &Path, output: &Path, format: Option<&str>, out: &mut impl Wri
             )
         })?,
     };
-    let files = if input == Path::new("-") {
-        Vec::new()
-    } else {
-        vec![input.to_path_buf()]
-    };
-    let mut frames = 0u64;
+    let files: Vec<PathBuf> = inputs
+        .iter()
+        .filter(|p| p.as_path() != Path::new("-"))
+        .cloned()
+        .collect();
+    let opened = inputs_or_stdin(&files, inputs.len())?;
+    let names: Vec<String> = opened.iter().map(|(name, _)| name.clone()).collect();
+    let readers: Vec<_> = opened
+        .into_iter()
+        .zip(&names)
+        .map(|((_, reader), name)| records(name, reader, Skip::Unreadable))
+        .collect();
+    let (mut frames, mut left_out) = (0u64, 0u64);
     write_atomically(output, |tmp| {
         let file = std::fs::File::create(tmp)
             .with_context(|| format!("cannot write {}", output.display()))?;
         let mut writer = format
             .writer(std::io::BufWriter::new(file))
             .with_context(|| format!("cannot write {}", output.display()))?;
-        for (name, reader) in inputs(&files)? {
-            for record in records(&name, reader, Skip::Unreadable) {
-                writer
-                    .write(&record?)
-                    .with_context(|| format!("cannot write {}", output.display()))?;
-                frames += 1;
-            }
+        let mut first = None;
+        for record in bywire_log::merge::merge(readers) {
+            let record = record?;
+            let at = record.timestamp.as_nanos();
+            let since_first = Duration::from_nanos(at.saturating_sub(*first.get_or_insert(at)));
+            let Some(record) = selection.keep(record, since_first) else {
+                left_out += 1;
+                continue;
+            };
+            writer
+                .write(&record)
+                .with_context(|| format!("cannot write {}", output.display()))?;
+            frames += 1;
         }
         writer
             .finish()
             .with_context(|| format!("cannot write {}", output.display()))?;
         Ok(())
     })?;
-    writeln!(out, "{frames} frames written to {}", output.display())?;
+    write!(out, "{frames} frames written to {}", output.display())?;
+    if left_out > 0 {
+        write!(out, " ({left_out} left out by --channel, --from or --to)")?;
+    }
+    writeln!(out)?;
     Ok(())
+}
+
+/// The named files, or standard input when the only input is `-`.
+fn inputs_or_stdin(
+    files: &[PathBuf],
+    given: usize,
+) -> Result<Vec<(String, Box<dyn std::io::BufRead>)>> {
+    if files.len() != given && given > 1 {
+        return Err(anyhow!("'-' (standard input) can only be the one input"));
+    }
+    inputs(files)
 }
 
 fn cat(

@@ -29,6 +29,18 @@ pub fn positive_seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// Seconds, 0 or more and at most a week.
+pub fn seconds(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if (0.0..=MAX_SECONDS).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value}: 0 or more and at most {MAX_SECONDS} seconds"
+        ))
+    }
+}
+
 /// Milliseconds, 0 or more and at most a week.
 pub fn milliseconds(text: &str) -> Result<f64, String> {
     let value = number(text)?;
@@ -81,6 +93,8 @@ mod tests {
             assert!(positive_seconds(bad).is_err(), "{bad}");
         }
         assert_eq!(milliseconds("0"), Ok(0.0));
+        assert_eq!(seconds("0"), Ok(0.0));
+        assert!(seconds("-1").is_err() && seconds("1e300").is_err());
         assert!(milliseconds("1e300").is_err());
         assert!(rate("1e-300").is_err() && rate("1001").is_err() && rate("20").is_ok());
         assert_eq!(rate_or_off("0"), Ok(0.0));
