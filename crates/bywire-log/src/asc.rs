@@ -21,7 +21,7 @@ use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::candump::{LogError, LogErrorKind, LogRecord};
-use crate::lines::{CappedLines, Line};
+use crate::lines::CappedLines;
 
 const NANOS_PER_SECOND: u64 = 1_000_000_000;
 
@@ -525,32 +525,9 @@ impl<R: BufRead> Iterator for AscReader<R> {
     fn next(&mut self) -> Option<Self::Item> {
         // Bounded by the input's lines.
         loop {
-            let (number, line) = match self.lines.next_line()? {
+            let (number, text) = match crate::candump::next_text(&mut self.lines, &mut self.line)? {
                 Ok(next) => next,
-                Err(e) => {
-                    return Some(Err(LogError::Io {
-                        line: self.line + 1,
-                        message: e.to_string(),
-                    }))
-                }
-            };
-            self.line = number;
-            let text = match line {
-                Line::Text(text) => text,
-                Line::NotUtf8 { at } => {
-                    return Some(Err(LogError::Syntax {
-                        line: number,
-                        column: at + 1,
-                        kind: LogErrorKind::NotUtf8,
-                    }))
-                }
-                Line::TooLong { bytes } => {
-                    return Some(Err(LogError::Syntax {
-                        line: number,
-                        column: 1,
-                        kind: LogErrorKind::TooLong(bytes),
-                    }))
-                }
+                Err(e) => return Some(Err(e)),
             };
             let trimmed = text.trim();
             match self.header(number, trimmed) {

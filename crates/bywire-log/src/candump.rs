@@ -192,38 +192,54 @@ impl<R: BufRead> Reader<R> {
     }
 }
 
+/// The next line of text of a text log with its number (kept in `last`), or the error that
+/// line is: an I/O error, a line too long, one not UTF-8. Shared by the text formats' readers.
+pub(crate) fn next_text<R: BufRead>(
+    lines: &mut CappedLines<R>,
+    last: &mut u64,
+) -> Option<Result<(u64, String), LogError>> {
+    let (number, line) = match lines.next_line()? {
+        Ok(next) => next,
+        Err(e) => {
+            return Some(Err(LogError::Io {
+                line: *last + 1,
+                message: e.to_string(),
+            }))
+        }
+    };
+    *last = number;
+    let syntax = |column, kind| LogError::Syntax {
+        line: number,
+        column,
+        kind,
+    };
+    Some(match line {
+        Line::Text(text) => Ok((number, text)),
+        Line::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
+        Line::NotUtf8 { at } => Err(syntax(at + 1, LogErrorKind::NotUtf8)),
+    })
+}
+
 impl<R: BufRead> Iterator for Reader<R> {
     type Item = Result<LogRecord, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
         // Bounded by the input's lines.
         loop {
-            let (number, line) = match self.lines.next_line()? {
+            let (number, text) = match next_text(&mut self.lines, &mut self.line)? {
                 Ok(next) => next,
-                Err(e) => {
-                    return Some(Err(LogError::Io {
-                        line: self.line + 1,
-                        message: e.to_string(),
-                    }))
-                }
-            };
-            self.line = number;
-            let syntax = |column, kind| LogError::Syntax {
-                line: number,
-                column,
-                kind,
-            };
-            let text = match line {
-                Line::Text(text) => text,
-                Line::TooLong { bytes } => {
-                    return Some(Err(syntax(1, LogErrorKind::TooLong(bytes))))
-                }
-                Line::NotUtf8 { at } => return Some(Err(syntax(at + 1, LogErrorKind::NotUtf8))),
+                Err(e) => return Some(Err(e)),
             };
             if text.trim().is_empty() || (self.log_lines_only && !text.starts_with('(')) {
                 continue;
             }
-            return Some(parse_line(&text).map_err(|(column, kind)| syntax(column, kind)));
+            return Some(
+                parse_line(&text).map_err(|(column, kind)| LogError::Syntax {
+                    line: number,
+                    column,
+                    kind,
+                }),
+            );
         }
     }
 }

@@ -16,7 +16,7 @@ use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::candump::{LogError, LogErrorKind, LogRecord};
-use crate::lines::{CappedLines, Line};
+use crate::lines::CappedLines;
 
 /// Days from the OLE epoch (1899-12-30) to the Unix epoch.
 const OLE_TO_UNIX_DAYS: f64 = 25_569.0;
@@ -391,32 +391,9 @@ impl<R: BufRead> Iterator for TrcReader<R> {
     fn next(&mut self) -> Option<Self::Item> {
         // Bounded by the input's lines.
         loop {
-            let (number, line) = match self.lines.next_line()? {
+            let (number, text) = match crate::candump::next_text(&mut self.lines, &mut self.line)? {
                 Ok(next) => next,
-                Err(e) => {
-                    return Some(Err(LogError::Io {
-                        line: self.line + 1,
-                        message: e.to_string(),
-                    }))
-                }
-            };
-            self.line = number;
-            let text = match line {
-                Line::Text(text) => text,
-                Line::NotUtf8 { at } => {
-                    return Some(Err(LogError::Syntax {
-                        line: number,
-                        column: at + 1,
-                        kind: LogErrorKind::NotUtf8,
-                    }))
-                }
-                Line::TooLong { bytes } => {
-                    return Some(Err(LogError::Syntax {
-                        line: number,
-                        column: 1,
-                        kind: LogErrorKind::TooLong(bytes),
-                    }))
-                }
+                Err(e) => return Some(Err(e)),
             };
             let trimmed = text.trim();
             if trimmed.is_empty() {

@@ -7,6 +7,7 @@
 )]
 
 use bywire_core::{ClassicFrame, Dlc, ErrorFrame, FdFrame, Frame, Id, Timestamp};
+use bywire_log::format::Format;
 use bywire_log::screen::{self, FrameView, View};
 use bywire_log::{Precision, Reader, Writer};
 use proptest::prelude::*;
@@ -112,39 +113,6 @@ proptest! {
     }
 
     #[test]
-    fn written_trc_reads_back(
-        frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4), 0..20)
-    ) {
-        let base = 1_700_000_000_000_000_000u64;
-        let mut records: Vec<bywire_log::LogRecord> = frames
-            .iter()
-            .map(|(frame, offset, channel)| bywire_log::LogRecord {
-                timestamp: Timestamp::from_nanos(base + offset),
-                interface: format!("can{channel}"),
-                frame: *frame,
-                direction: Some('R'),
-            })
-            .collect();
-        records.sort_by_key(|r| r.timestamp);
-        let mut writer = bywire_log::trc::TrcWriter::new(Vec::new());
-        for record in &records {
-            writer.write(record).unwrap();
-        }
-        let bytes = writer.finish().unwrap();
-        let read: Vec<_> = bywire_log::trc::TrcReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
-        prop_assert_eq!(read.len(), records.len());
-        for (back, record) in read.iter().zip(&records) {
-            let ts = record.timestamp.as_nanos();
-            prop_assert_eq!(back.timestamp.as_nanos(), ts - ts % 1000, "microseconds");
-            prop_assert_eq!(&back.interface, &record.interface);
-            match (&back.frame, &record.frame) {
-                (Frame::Error(_), Frame::Error(_)) => {}
-                (b, r) => prop_assert_eq!(b, r),
-            }
-        }
-    }
-
-    #[test]
     fn pcapng_bytes_of_any_shape_never_panic(
         bytes in proptest::collection::vec(any::<u8>(), 0..400),
         flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..8)
@@ -166,28 +134,6 @@ proptest! {
             capture[index] = byte;
         }
         let _ = bywire_log::pcapng::PcapngReader::new(capture.as_slice()).count();
-    }
-
-    #[test]
-    fn written_pcapng_reads_back(
-        frames in proptest::collection::vec((any_frame(), any::<u64>(), 0u8..4, any::<bool>()), 0..20)
-    ) {
-        let records: Vec<bywire_log::LogRecord> = frames
-            .iter()
-            .map(|(frame, ts, channel, tx)| bywire_log::LogRecord {
-                timestamp: Timestamp::from_nanos(*ts),
-                interface: format!("vcan{channel}"),
-                frame: *frame,
-                direction: Some(if *tx { 'T' } else { 'R' }),
-            })
-            .collect();
-        let mut writer = bywire_log::pcapng::PcapngWriter::new(Vec::new());
-        for record in &records {
-            writer.write(record).unwrap();
-        }
-        let bytes = writer.finish().unwrap();
-        let read: Vec<_> = bywire_log::pcapng::PcapngReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
-        prop_assert_eq!(read, records, "nanoseconds, names, directions and frames, exactly");
     }
 
     #[test]
@@ -216,7 +162,7 @@ proptest! {
     }
 
     #[test]
-    fn written_blf_reads_back(
+    fn every_format_reads_back_what_it_wrote(
         frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4, any::<bool>()), 0..20)
     ) {
         let base = 1_700_000_000_000_000_000u64;
@@ -230,57 +176,32 @@ proptest! {
             })
             .collect();
         records.sort_by_key(|r| r.timestamp);
-        let mut writer = bywire_log::blf::BlfWriter::new(std::io::Cursor::new(Vec::new())).unwrap();
-        for record in &records {
-            writer.write(record).unwrap();
-        }
-        let bytes = writer.finish().unwrap().into_inner();
-        let read: Vec<_> = bywire_log::blf::BlfReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
-        prop_assert_eq!(read.len(), records.len());
-        for (back, record) in read.iter().zip(&records) {
-            prop_assert_eq!(back.timestamp, record.timestamp, "nanoseconds");
-            prop_assert_eq!(&back.interface, &record.interface);
-            match (&back.frame, &record.frame) {
-                // BLF's error object keeps no SocketCAN class: a bus error.
-                (Frame::Error(_), Frame::Error(_)) => {}
-                (b, r) => prop_assert_eq!(b, r),
+        // (format, the time resolution it keeps in ns, whether it keeps an error frame's class)
+        for (format, resolution, error_classes) in [
+            (Format::Asc, 1_000, false),
+            (Format::Trc, 1_000, false),
+            (Format::Blf, 1, false),
+            (Format::Pcapng, 1, true),
+        ] {
+            let mut writer = format.writer(std::io::Cursor::new(Vec::new())).unwrap();
+            for record in &records {
+                writer.write(record).unwrap();
             }
-            if !record.frame.is_error() {
-                prop_assert_eq!(back.direction, record.direction);
-            }
-        }
-    }
-
-    #[test]
-    fn written_asc_reads_back(
-        frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4), 0..20)
-    ) {
-        let base = 1_700_000_000_000_000_000u64;
-        let mut records: Vec<bywire_log::LogRecord> = frames
-            .iter()
-            .map(|(frame, offset, channel)| bywire_log::LogRecord {
-                timestamp: Timestamp::from_nanos(base + offset),
-                interface: format!("can{channel}"),
-                frame: *frame,
-                direction: Some('T'),
-            })
-            .collect();
-        records.sort_by_key(|r| r.timestamp);
-        let mut writer = bywire_log::asc::AscWriter::new(Vec::new());
-        for record in &records {
-            writer.write(record).unwrap();
-        }
-        let bytes = writer.finish().unwrap();
-        let read: Vec<_> = bywire_log::asc::AscReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
-        prop_assert_eq!(read.len(), records.len());
-        for (back, record) in read.iter().zip(&records) {
-            let ts = record.timestamp.as_nanos();
-            prop_assert_eq!(back.timestamp.as_nanos(), ts - ts % 1000, "microseconds");
-            prop_assert_eq!(&back.interface, &record.interface);
-            match (&back.frame, &record.frame) {
-                // ASC's ErrorFrame has no detail: it reads back as a bus error.
-                (Frame::Error(_), Frame::Error(_)) => {}
-                (b, r) => prop_assert_eq!(b, r),
+            let bytes = writer.finish().unwrap().into_inner();
+            let read: Vec<_> = format.reader(&bytes[..]).collect::<Result<_, _>>().unwrap();
+            prop_assert_eq!(read.len(), records.len(), "{:?}", format);
+            for (back, record) in read.iter().zip(&records) {
+                let ts = record.timestamp.as_nanos();
+                prop_assert_eq!(back.timestamp.as_nanos(), ts - ts % resolution, "{:?}", format);
+                prop_assert_eq!(&back.interface, &record.interface, "{:?}", format);
+                match (&back.frame, &record.frame) {
+                    // Only pcapng keeps SocketCAN's error classes: the others read a bus error.
+                    (Frame::Error(_), Frame::Error(_)) if !error_classes => {}
+                    (b, r) => prop_assert_eq!(b, r, "{:?}", format),
+                }
+                if !record.frame.is_error() {
+                    prop_assert_eq!(back.direction, record.direction, "{:?}", format);
+                }
             }
         }
     }

@@ -73,6 +73,31 @@ fn python(script: &str, args: &[&Path]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// What python-can's `writer` class (ASCWriter, BLFWriter, TRCWriter) makes of `FRAMES`, as we
+/// read it back.
+fn written_by_python_can(writer: &str, extension: &str) -> Vec<LogRecord> {
+    let dir = scratch(&format!("python-{extension}"));
+    let (log, theirs, back) = (
+        dir.join("in.log"),
+        dir.join(format!("py.{extension}")),
+        dir.join("back.log"),
+    );
+    std::fs::write(&log, FRAMES).unwrap();
+    let script = format!(
+        "import can, sys\nwith can.{writer}(sys.argv[2]) as w:\n    for m in can.CanutilsLogReader(sys.argv[1]):\n        w.on_message_received(m)\n"
+    );
+    python(&script, &[&log, &theirs]);
+    bywire(&[
+        "log",
+        "convert",
+        theirs.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let got = records(&back);
+    std::fs::remove_dir_all(&dir).unwrap();
+    got
+}
+
 /// python-can compares two logs message by message (its candump reader on one side, its ASC or
 /// BLF reader, as the third argument says, on the other).
 const COMPARE: &str = r#"
@@ -123,25 +148,7 @@ fn python_can_reads_our_asc_frame_for_frame() {
 
 #[test]
 fn we_read_python_cans_asc_frame_for_frame() {
-    let dir = scratch("theirs");
-    let (log, asc, back) = (dir.join("in.log"), dir.join("py.asc"), dir.join("back.log"));
-    std::fs::write(&log, FRAMES).unwrap();
-    python(
-        r#"
-import can, sys
-with can.ASCWriter(sys.argv[2]) as w:
-    for m in can.CanutilsLogReader(sys.argv[1]):
-        w.on_message_received(m)
-"#,
-        &[&log, &asc],
-    );
-    bywire(&[
-        "log",
-        "convert",
-        asc.to_str().unwrap(),
-        back.to_str().unwrap(),
-    ]);
-    let (got, wanted) = (records(&back), original());
+    let (got, wanted) = (written_by_python_can("ASCWriter", "asc"), original());
     assert_eq!(got.len(), wanted.len());
     for (g, w) in got.iter().zip(&wanted) {
         assert_eq!(g.frame, w.frame);
@@ -160,7 +167,6 @@ with can.ASCWriter(sys.argv[2]) as w:
         );
         assert!(a.abs_diff(b) < 1_000, "{a} vs {b}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// can-utils dates its files to the second (and `asc2log` cannot read the date back on this
@@ -326,30 +332,12 @@ print("same", len(ours))
 
 #[test]
 fn we_read_python_cans_trc_frame_for_frame() {
-    let dir = scratch("trc-theirs");
-    let (log, trc, back) = (dir.join("in.log"), dir.join("py.trc"), dir.join("back.log"));
-    std::fs::write(&log, FRAMES).unwrap();
     // python-can's TRC writer takes classic data frames only (it leaves out the others).
-    python(
-        r#"
-import can, sys
-with can.TRCWriter(sys.argv[2]) as w:
-    for m in can.CanutilsLogReader(sys.argv[1]):
-        w.on_message_received(m)
-"#,
-        &[&log, &trc],
-    );
-    bywire(&[
-        "log",
-        "convert",
-        trc.to_str().unwrap(),
-        back.to_str().unwrap(),
-    ]);
     let wanted: Vec<LogRecord> = original()
         .into_iter()
         .filter(|r| !r.frame.is_fd() && !r.frame.is_remote() && !r.frame.is_error())
         .collect();
-    let got = records(&back);
+    let got = written_by_python_can("TRCWriter", "trc");
     assert_eq!(got.len(), wanted.len());
     for (g, w) in got.iter().zip(&wanted) {
         assert_eq!(g.frame, w.frame);
@@ -358,7 +346,6 @@ with can.TRCWriter(sys.argv[2]) as w:
         let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
         assert!(drift <= 1_000, "{drift} ns: {g:?} {w:?}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// tshark's fields for every frame of a capture: time, interface, identifier, flags, length,
@@ -563,25 +550,7 @@ fn python_can_and_tshark_read_our_blf_frame_for_frame() {
 
 #[test]
 fn we_read_python_cans_blf_frame_for_frame() {
-    let dir = scratch("blf-theirs");
-    let (log, blf, back) = (dir.join("in.log"), dir.join("py.blf"), dir.join("back.log"));
-    std::fs::write(&log, FRAMES).unwrap();
-    python(
-        r#"
-import can, sys
-with can.BLFWriter(sys.argv[2]) as w:
-    for m in can.CanutilsLogReader(sys.argv[1]):
-        w.on_message_received(m)
-"#,
-        &[&log, &blf],
-    );
-    bywire(&[
-        "log",
-        "convert",
-        blf.to_str().unwrap(),
-        back.to_str().unwrap(),
-    ]);
-    let (got, wanted) = (records(&back), original());
+    let (got, wanted) = (written_by_python_can("BLFWriter", "blf"), original());
     assert_eq!(got.len(), wanted.len());
     for (g, w) in got.iter().zip(&wanted) {
         if w.frame.is_error() {
@@ -598,7 +567,6 @@ with can.BLFWriter(sys.argv[2]) as w:
         let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
         assert!(drift <= 1_000, "{drift} ns: {g:?} {w:?}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The commands that read logs take any format: `decode -I` of a BLF gives what `decode` of the
