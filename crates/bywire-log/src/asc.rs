@@ -20,7 +20,8 @@ use std::io::{self, BufRead, Write};
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
-use crate::candump::{LogError, LogErrorKind, LogRecord};
+use crate::candump::{LogError, LogRecord};
+use crate::fields::{column_of, data_bytes, dlc, fixed_point, syntax};
 use crate::lines::CappedLines;
 
 const NANOS_PER_SECOND: u64 = 1_000_000_000;
@@ -177,34 +178,9 @@ impl<R: BufRead> AscReader<R> {
     }
 }
 
-fn syntax(line: u64, column: usize, what: String) -> LogError {
-    LogError::Syntax {
-        line,
-        column,
-        kind: LogErrorKind::Format(what),
-    }
-}
-
-/// The column (1-based) of `word` within `text` (a slice of it).
-fn column_of(text: &str, word: &str) -> usize {
-    (word.as_ptr() as usize).saturating_sub(text.as_ptr() as usize) + 1
-}
-
 /// Seconds with a fraction (`0.100000`) as nanoseconds.
 fn parse_seconds(text: &str) -> Option<u64> {
-    let (whole, fraction) = text.split_once('.').unwrap_or((text, ""));
-    if whole.is_empty() || fraction.len() > 9 || !fraction.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    let seconds: u64 = whole.parse().ok()?;
-    let fraction_nanos = if fraction.is_empty() {
-        0
-    } else {
-        fraction.parse::<u64>().ok()? * 10u64.pow(9 - u32::try_from(fraction.len()).ok()?)
-    };
-    seconds
-        .checked_mul(NANOS_PER_SECOND)?
-        .checked_add(fraction_nanos)
+    fixed_point(text, 9)
 }
 
 /// What one line is.
@@ -321,42 +297,11 @@ impl<R: BufRead> AscReader<R> {
         words: &[&str],
         count: usize,
     ) -> Result<Vec<u8>, LogError> {
-        if words.len() < count {
-            let at = words
-                .last()
-                .map_or(text.len() + 1, |w| column_of(text, w) + w.len());
-            return Err(syntax(
-                number,
-                at,
-                format!("{count} data bytes expected, {} found", words.len()),
-            ));
-        }
-        words
-            .iter()
-            .take(count)
-            .map(|w| {
-                u8::from_str_radix(w, self.base.radix()).map_err(|_| {
-                    syntax(
-                        number,
-                        column_of(text, w),
-                        format!("'{w}' is not a data byte"),
-                    )
-                })
-            })
-            .collect()
+        data_bytes(number, text, words, count, self.base.radix())
     }
 
     fn dlc(&self, number: u64, text: &str, word: &str) -> Result<Dlc, LogError> {
-        u8::from_str_radix(word, self.base.radix())
-            .ok()
-            .and_then(Dlc::new)
-            .ok_or_else(|| {
-                syntax(
-                    number,
-                    column_of(text, word),
-                    format!("'{word}' is not a DLC (0-15)"),
-                )
-            })
+        dlc(number, text, word, self.base.radix())
     }
 
     /// `ID Rx|Tx d DLC DATA…`, `ID Rx|Tx r [DLC]` or `ErrorFrame` (the channel taken).

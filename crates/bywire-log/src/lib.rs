@@ -30,6 +30,7 @@
 pub mod asc;
 pub mod blf;
 pub mod candump;
+mod fields;
 pub mod format;
 pub mod lines;
 pub mod merge;

@@ -15,7 +15,8 @@ use std::io::{self, BufRead, Write};
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
-use crate::candump::{LogError, LogErrorKind, LogRecord};
+use crate::candump::{LogError, LogRecord};
+use crate::fields::{column_of, data_bytes, dlc, fixed_point, syntax};
 use crate::lines::CappedLines;
 
 /// Days from the OLE epoch (1899-12-30) to the Unix epoch.
@@ -54,31 +55,9 @@ impl<R: BufRead> TrcReader<R> {
     }
 }
 
-fn syntax(line: u64, column: usize, what: String) -> LogError {
-    LogError::Syntax {
-        line,
-        column,
-        kind: LogErrorKind::Format(what),
-    }
-}
-
-fn column_of(text: &str, word: &str) -> usize {
-    (word.as_ptr() as usize).saturating_sub(text.as_ptr() as usize) + 1
-}
-
 /// Milliseconds with a fraction (`1059.900`) as nanoseconds.
 fn parse_millis(text: &str) -> Option<u64> {
-    let (whole, fraction) = text.split_once('.').unwrap_or((text, ""));
-    if whole.is_empty() || fraction.len() > 6 || !fraction.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    let millis: u64 = whole.parse().ok()?;
-    let fraction_nanos = if fraction.is_empty() {
-        0
-    } else {
-        fraction.parse::<u64>().ok()? * 10u64.pow(6 - u32::try_from(fraction.len()).ok()?)
-    };
-    millis.checked_mul(1_000_000)?.checked_add(fraction_nanos)
+    fixed_point(text, 6)
 }
 
 /// An OLE date (days since 1899-12-30) as nanoseconds since the Unix epoch, to the
@@ -175,39 +154,11 @@ impl<R: BufRead> TrcReader<R> {
     }
 
     fn bytes(number: u64, text: &str, words: &[&str], count: usize) -> Result<Vec<u8>, LogError> {
-        if words.len() < count {
-            let at = words
-                .last()
-                .map_or(text.len() + 1, |w| column_of(text, w) + w.len());
-            return Err(syntax(
-                number,
-                at,
-                format!("{count} data bytes expected, {} found", words.len()),
-            ));
-        }
-        words
-            .iter()
-            .take(count)
-            .map(|w| {
-                u8::from_str_radix(w, 16).map_err(|_| {
-                    syntax(
-                        number,
-                        column_of(text, w),
-                        format!("'{w}' is not a data byte"),
-                    )
-                })
-            })
-            .collect()
+        data_bytes(number, text, words, count, 16)
     }
 
     fn dlc(number: u64, text: &str, word: &str) -> Result<Dlc, LogError> {
-        word.parse::<u8>().ok().and_then(Dlc::new).ok_or_else(|| {
-            syntax(
-                number,
-                column_of(text, word),
-                format!("'{word}' is not a DLC (0-15)"),
-            )
-        })
+        dlc(number, text, word, 10)
     }
 
     fn time(&self, number: u64, text: &str, word: &str) -> Result<u64, LogError> {
