@@ -23,6 +23,8 @@ pub enum Format {
     Pcapng,
     /// Vector BLF.
     Blf,
+    /// MCAP of ROS 2 `can_msgs/msg/Frame` (with the `mcap` feature).
+    Mcap,
 }
 
 /// The records of a log, whatever its format.
@@ -30,12 +32,13 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 5] = [
+    pub const ALL: [(Format, &'static str); 6] = [
         (Format::Candump, "candump"),
         (Format::Asc, "asc"),
         (Format::Trc, "trc"),
         (Format::Pcapng, "pcapng"),
         (Format::Blf, "blf"),
+        (Format::Mcap, "mcap"),
     ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
@@ -47,6 +50,7 @@ impl Format {
             "trc" => Some(Format::Trc),
             "pcapng" | "pcap" => Some(Format::Pcapng),
             "blf" => Some(Format::Blf),
+            "mcap" => Some(Format::Mcap),
             _ => None,
         }
     }
@@ -67,6 +71,9 @@ impl Format {
         }
         if start.starts_with(b"LOGG") {
             return Format::Blf;
+        }
+        if start.starts_with(b"\x89MCAP") {
+            return Format::Mcap;
         }
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
@@ -110,6 +117,13 @@ impl Format {
             Format::Trc => Box::new(TrcReader::new(input)),
             Format::Pcapng => Box::new(PcapngReader::new(input)),
             Format::Blf => Box::new(BlfReader::new(input)),
+            #[cfg(feature = "mcap")]
+            Format::Mcap => Box::new(crate::mcap::McapReader::new(input)),
+            #[cfg(not(feature = "mcap"))]
+            Format::Mcap => Box::new(std::iter::once(Err(LogError::Binary {
+                offset: 0,
+                what: "an MCAP file: this build has no MCAP support (the mcap feature)".into(),
+            }))),
         }
     }
 
@@ -121,11 +135,20 @@ impl Format {
             Format::Trc => RecordWriter::Trc(TrcWriter::new(output)),
             Format::Pcapng => RecordWriter::Pcapng(PcapngWriter::new(output)),
             Format::Blf => RecordWriter::Blf(BlfWriter::new(output)?),
+            #[cfg(feature = "mcap")]
+            Format::Mcap => RecordWriter::Mcap(crate::mcap::McapWriter::new(output)?),
+            #[cfg(not(feature = "mcap"))]
+            Format::Mcap => {
+                return Err(io::Error::other(
+                    "this build has no MCAP support (the mcap feature)",
+                ))
+            }
         })
     }
 }
 
-/// Writes records in one of the formats.
+/// Writes records in one of the formats (one writer a file: the variants' sizes do not matter).
+#[allow(clippy::large_enum_variant)]
 pub enum RecordWriter<W: Write + Seek> {
     /// candump's log form (as `candump -L`: no direction).
     Candump(Writer<W>),
@@ -137,6 +160,9 @@ pub enum RecordWriter<W: Write + Seek> {
     Pcapng(PcapngWriter<W>),
     /// Vector BLF.
     Blf(BlfWriter<W>),
+    /// MCAP.
+    #[cfg(feature = "mcap")]
+    Mcap(crate::mcap::McapWriter<W>),
 }
 
 impl<W: Write + Seek> RecordWriter<W> {
@@ -148,6 +174,17 @@ impl<W: Write + Seek> RecordWriter<W> {
             RecordWriter::Trc(w) => w.write(record),
             RecordWriter::Pcapng(w) => w.write(record),
             RecordWriter::Blf(w) => w.write(record),
+            #[cfg(feature = "mcap")]
+            RecordWriter::Mcap(w) => w.write(record),
+        }
+    }
+
+    /// Frames the format cannot hold, left out so far (CAN FD in MCAP's `can_msgs/msg/Frame`).
+    pub fn left_out(&self) -> u64 {
+        match self {
+            #[cfg(feature = "mcap")]
+            RecordWriter::Mcap(w) => w.left_out(),
+            _ => 0,
         }
     }
 
@@ -162,6 +199,8 @@ impl<W: Write + Seek> RecordWriter<W> {
             RecordWriter::Trc(w) => w.finish(),
             RecordWriter::Pcapng(w) => w.finish(),
             RecordWriter::Blf(w) => w.finish(),
+            #[cfg(feature = "mcap")]
+            RecordWriter::Mcap(w) => w.finish(),
         }
     }
 }

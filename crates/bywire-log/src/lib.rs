@@ -4,6 +4,8 @@
 //!   stream of records with errors naming the line and column, written byte-identical to
 //!   `candump -L` (or with nanoseconds).
 //! - [`asc`]: Vector ASC logs, read and written as python-can and can-utils do.
+//! - `mcap` (feature `mcap`): MCAP files of ROS 2 `can_msgs/msg/Frame`, as ros2_socketcan
+//!   records them.
 //! - [`blf`]: Vector BLF (zlib log containers; classic, FD and error objects).
 //! - [`trc`]: PEAK TRC logs (1.0 to 2.1 read, 2.1 written).
 //! - [`pcapng`]: pcapng captures of SocketCAN frames (Wireshark's LINKTYPE_CAN_SOCKETCAN).
@@ -33,6 +35,8 @@ pub mod candump;
 mod fields;
 pub mod format;
 pub mod lines;
+#[cfg(feature = "mcap")]
+pub mod mcap;
 pub mod merge;
 pub mod pacing;
 pub mod pcapng;

@@ -39,21 +39,22 @@ Every line is checked; a malformed one is an error naming its file, line and col
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
     },
-    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng), frame for
-    /// frame.
+    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng, MCAP),
+    /// frame for frame.
     #[command(after_help = "Examples:
   bywire log convert drive.log drive.asc
   bywire log convert vector.asc drive.log
   bywire log convert pcan.trc drive.asc
   bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
   bywire log convert vector.blf drive.log
+  bywire log convert drive.log drive.mcap         (ROS 2's can_msgs/msg/Frame on /from_can_bus)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
 
 Several inputs are merged by time (streaming: one frame of each held). The input's format is
 sniffed from its content, the output's taken from its extension (.log
-or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng) unless --format
-names it. ASC channels and
+or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mcap: MCAP)
+unless --format names it. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
 can{N-1}; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
 back as a bus error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
@@ -62,7 +63,7 @@ conversion leaves no half-written file.")]
         /// The logs to read, merged by time (`-`: standard input), and last the file to write.
         #[arg(required = true, num_args = 2.., value_name = "FILE")]
         files: Vec<PathBuf>,
-        /// The output format: candump, asc, blf, trc or pcapng (default: from the output's
+        /// The output format: candump, asc, blf, trc, pcapng or mcap (default: from the output's
         /// extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
@@ -174,7 +175,7 @@ fn convert(
         })?,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
-                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng); give --format",
+                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mcap); give --format",
                 output.display()
             )
         })?,
@@ -191,7 +192,7 @@ fn convert(
         .zip(&names)
         .map(|((_, reader), name)| records(name, reader, Skip::Unreadable))
         .collect();
-    let (mut frames, mut left_out) = (0u64, 0u64);
+    let (mut frames, mut left_out, mut unsupported) = (0u64, 0u64, 0u64);
     write_atomically(output, |tmp| {
         let file = std::fs::File::create(tmp)
             .with_context(|| format!("cannot write {}", output.display()))?;
@@ -212,12 +213,20 @@ fn convert(
                 .with_context(|| format!("cannot write {}", output.display()))?;
             frames += 1;
         }
+        unsupported = writer.left_out();
         writer
             .finish()
             .with_context(|| format!("cannot write {}", output.display()))?;
         Ok(())
     })?;
+    let frames = frames - unsupported;
     write!(out, "{frames} frames written to {}", output.display())?;
+    if unsupported > 0 {
+        write!(
+            out,
+            " ({unsupported} CAN FD frames left out: can_msgs/msg/Frame has no CAN FD)"
+        )?;
+    }
     if left_out > 0 {
         write!(out, " ({left_out} left out by --channel, --from or --to)")?;
     }

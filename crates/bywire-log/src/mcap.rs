@@ -1,0 +1,342 @@
+//! MCAP files as ROS 2 records them from ros2_socketcan: `can_msgs/msg/Frame` in CDR on
+//! `/from_can_bus` (what `ros2 bag record` makes of the CAN bridge), read and written with the
+//! `mcap` crate (without its compression codecs, which build C code: written chunks are
+//! uncompressed, and a compressed file read is an error that says so).
+//!
+//! A frame's header stamp is its time and its `frame_id` the interface. `can_msgs/msg/Frame`
+//! has no CAN FD: the writer leaves FD frames out and counts them ([`McapWriter::left_out`]).
+
+use std::collections::BTreeMap;
+use std::io::{Read, Seek, Write};
+
+use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame};
+use bywire_core::{Frame, Id, Timestamp};
+
+use crate::candump::{LogError, LogRecord};
+
+/// The topic ros2_socketcan publishes received frames on.
+pub const TOPIC: &str = "/from_can_bus";
+/// The message type.
+pub const SCHEMA_NAME: &str = "can_msgs/msg/Frame";
+/// Its definition, with those it uses, as `ros2 bag` stores it.
+const SCHEMA: &str = "std_msgs/Header header\nuint32 id\nbool is_rtr\nbool is_extended\nbool is_error\nuint8 dlc\nuint8[8] data\n\
+================================================================================\n\
+MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n\
+================================================================================\n\
+MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
+/// A record longer than this is not read (a CAN message is under 100 bytes).
+const RECORD_LIMIT: usize = 16 << 20;
+
+/// A frame as the CDR of `can_msgs/msg/Frame` (little-endian, with its encapsulation header).
+pub fn encode_frame(frame: &Frame, timestamp: Timestamp, frame_id: &str) -> Option<Vec<u8>> {
+    let (id, rtr, extended, error, dlc, data): (u32, bool, bool, bool, u8, &[u8]) = match frame {
+        Frame::Fd(_) => return None,
+        Frame::Error(e) => (e.class_bits(), false, false, true, 8, e.data()),
+        Frame::Classic(f) => {
+            let data: &[u8] = if f.is_remote() { &[] } else { f.data() };
+            (
+                f.id().as_raw(),
+                f.is_remote(),
+                f.id().is_extended(),
+                false,
+                f.dlc().as_raw(),
+                data,
+            )
+        }
+    };
+    let nanos = timestamp.as_nanos();
+    let mut cdr = vec![0x00, 0x01, 0x00, 0x00];
+    cdr.extend_from_slice(
+        &i32::try_from(nanos / 1_000_000_000)
+            .unwrap_or(i32::MAX)
+            .to_le_bytes(),
+    );
+    cdr.extend_from_slice(
+        &u32::try_from(nanos % 1_000_000_000)
+            .unwrap_or(0)
+            .to_le_bytes(),
+    );
+    cdr.extend_from_slice(&u32::try_from(frame_id.len() + 1).unwrap_or(1).to_le_bytes());
+    cdr.extend_from_slice(frame_id.as_bytes());
+    cdr.push(0);
+    // Alignment counts from after the encapsulation header.
+    while (cdr.len() - 4) % 4 != 0 {
+        cdr.push(0);
+    }
+    cdr.extend_from_slice(&id.to_le_bytes());
+    cdr.extend_from_slice(&[u8::from(rtr), u8::from(extended), u8::from(error), dlc]);
+    let mut bytes = [0u8; 8];
+    for (slot, byte) in bytes.iter_mut().zip(data) {
+        *slot = *byte;
+    }
+    cdr.extend_from_slice(&bytes);
+    Some(cdr)
+}
+
+/// A `can_msgs/msg/Frame` in CDR as a record (its stamp, `frame_id`, frame).
+pub fn decode_frame(cdr: &[u8]) -> Result<(Timestamp, String, Frame), String> {
+    let too_short = || format!("a can_msgs/msg/Frame of {} bytes is too short", cdr.len());
+    let body = cdr.get(4..).ok_or_else(too_short)?;
+    if cdr.get(..2) != Some(&[0x00, 0x01]) {
+        return Err("not little-endian CDR (encapsulation 00 01)".into());
+    }
+    let u32_at = |at: usize| -> Result<u32, String> {
+        Ok(u32::from_le_bytes(
+            body.get(at..at + 4)
+                .ok_or_else(too_short)?
+                .try_into()
+                .map_err(|_| too_short())?,
+        ))
+    };
+    let seconds = u64::try_from(i32::from_le_bytes(u32_at(0)?.to_le_bytes()))
+        .map_err(|_| "a stamp before 1970".to_string())?;
+    let nanos = u64::from(u32_at(4)?);
+    let length = usize::try_from(u32_at(8)?).unwrap_or(usize::MAX);
+    let name = body
+        .get(12..12usize.saturating_add(length))
+        .ok_or_else(too_short)?;
+    let frame_id = String::from_utf8_lossy(name.strip_suffix(&[0]).unwrap_or(name)).into_owned();
+    let at = (12 + length).div_ceil(4) * 4;
+    let id = u32_at(at)?;
+    let fields: [u8; 12] = body
+        .get(at + 4..at + 16)
+        .and_then(|f| f.try_into().ok())
+        .ok_or_else(too_short)?;
+    let [rtr, extended, error, dlc, data @ ..] = fields;
+    let (rtr, extended, error) = (rtr != 0, extended != 0, error != 0);
+    let frame = if error {
+        let bytes = data;
+        Frame::Error(ErrorFrame::from_array(id & 0x1FFF_FFFF, bytes))
+    } else {
+        let id = if extended {
+            Id::extended(id)
+        } else {
+            Id::standard(id)
+        }
+        .map_err(|e| e.to_string())?;
+        let dlc = Dlc::new(dlc).ok_or_else(|| format!("DLC {dlc}"))?;
+        if rtr {
+            Frame::remote(id, dlc)
+        } else {
+            let length = dlc.fd_len().min(8);
+            ClassicFrame::with_dlc(id, dlc, data.get(..length).unwrap_or_default())
+                .map(Frame::Classic)
+                .map_err(|e| e.to_string())?
+        }
+    };
+    let stamp = seconds
+        .checked_mul(1_000_000_000)
+        .and_then(|s| s.checked_add(nanos))
+        .ok_or("a stamp beyond 2554")?;
+    Ok((Timestamp::from_nanos(stamp), frame_id, frame))
+}
+
+/// Reads the CAN frames of an MCAP file: the `can_msgs/msg/Frame` messages of every channel,
+/// streaming (bounded by the record length limit); other messages are passed over.
+pub struct McapReader<R> {
+    messages: ::mcap::io::MessageReader<R>,
+    failed: bool,
+}
+
+impl<R: Read> McapReader<R> {
+    /// A reader over `input`.
+    pub fn new(input: R) -> Self {
+        let options =
+            ::mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LIMIT);
+        McapReader {
+            messages: ::mcap::io::MessageReader::new_with_options(input, options),
+            failed: false,
+        }
+    }
+}
+
+impl<R: Read> Iterator for McapReader<R> {
+    type Item = Result<LogRecord, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.failed {
+            return None;
+        }
+        // Bounded by the file's messages.
+        loop {
+            let message = match self.messages.next()? {
+                Ok(message) => message,
+                Err(e) => {
+                    self.failed = true;
+                    let what = match e {
+                        ::mcap::McapError::UnsupportedCompression(codec) => format!(
+                            "MCAP chunks compressed with {codec}: this build reads uncompressed MCAP (write bags with compression none, or recompress with `mcap convert`)"
+                        ),
+                        other => format!("MCAP: {other}"),
+                    };
+                    return Some(Err(LogError::Binary { offset: 0, what }));
+                }
+            };
+            let is_frame = message
+                .channel
+                .schema
+                .as_ref()
+                .is_some_and(|s| s.name == SCHEMA_NAME);
+            if !is_frame || message.channel.message_encoding != "cdr" {
+                continue;
+            }
+            return Some(match decode_frame(&message.data) {
+                Ok((timestamp, frame_id, frame)) => Ok(LogRecord {
+                    timestamp,
+                    interface: if frame_id.is_empty() {
+                        "can0".into()
+                    } else {
+                        frame_id
+                    },
+                    frame,
+                    direction: None,
+                }),
+                Err(what) => Err(LogError::Binary {
+                    offset: 0,
+                    what: format!(
+                        "MCAP message {} on {}: {what}",
+                        message.sequence, message.channel.topic
+                    ),
+                }),
+            });
+        }
+    }
+}
+
+/// Writes an MCAP file of `can_msgs/msg/Frame` on [`TOPIC`], one message per frame, log time
+/// the frame's time; CAN FD frames are left out and counted.
+pub struct McapWriter<W: Write + Seek> {
+    writer: ::mcap::Writer<W>,
+    channel: u16,
+    sequence: u32,
+    left_out: u64,
+}
+
+fn io_error(e: ::mcap::McapError) -> std::io::Error {
+    std::io::Error::other(e.to_string())
+}
+
+impl<W: Write + Seek> McapWriter<W> {
+    /// A writer to `output`.
+    pub fn new(output: W) -> std::io::Result<Self> {
+        let mut writer = ::mcap::WriteOptions::new()
+            .compression(None)
+            .profile("ros2")
+            .create(output)
+            .map_err(io_error)?;
+        let schema = writer
+            .add_schema(SCHEMA_NAME, "ros2msg", SCHEMA.as_bytes())
+            .map_err(io_error)?;
+        let channel = writer
+            .add_channel(schema, TOPIC, "cdr", &BTreeMap::new())
+            .map_err(io_error)?;
+        Ok(McapWriter {
+            writer,
+            channel,
+            sequence: 0,
+            left_out: 0,
+        })
+    }
+
+    /// Write one record (an FD frame is left out: see [`McapWriter::left_out`]).
+    pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
+        let Some(cdr) = encode_frame(&record.frame, record.timestamp, &record.interface) else {
+            self.left_out += 1;
+            return Ok(());
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let at = record.timestamp.as_nanos();
+        self.writer
+            .write_to_known_channel(
+                &::mcap::records::MessageHeader {
+                    channel_id: self.channel,
+                    sequence: self.sequence,
+                    log_time: at,
+                    publish_time: at,
+                },
+                &cdr,
+            )
+            .map_err(io_error)
+    }
+
+    /// CAN FD frames left out so far (`can_msgs/msg/Frame` has no FD).
+    pub fn left_out(&self) -> u64 {
+        self.left_out
+    }
+
+    /// Write the summary and end; the output back.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        self.writer.finish().map_err(io_error)?;
+        Ok(self.writer.into_inner())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_encode_as_ros2_socketcan_sends_them() {
+        let frame: Frame = "123#DEADBEEF".parse().unwrap();
+        let cdr = encode_frame(
+            &frame,
+            Timestamp::from_nanos(1_700_000_000_123_456_789),
+            "can0",
+        )
+        .unwrap();
+        let expected: Vec<u8> = [
+            &[0x00, 0x01, 0x00, 0x00][..],
+            &1_700_000_000i32.to_le_bytes(),
+            &123_456_789u32.to_le_bytes(),
+            &5u32.to_le_bytes(),
+            b"can0\0",
+            &[0, 0, 0],
+            &0x123u32.to_le_bytes(),
+            &[0, 0, 0, 4],
+            &[0xDE, 0xAD, 0xBE, 0xEF, 0, 0, 0, 0],
+        ]
+        .concat();
+        assert_eq!(cdr, expected);
+        let (at, name, back) = decode_frame(&cdr).unwrap();
+        assert_eq!(
+            (at.as_nanos(), name.as_str(), back),
+            (1_700_000_000_123_456_789, "can0", frame)
+        );
+        assert!(encode_frame(&"123##1AA".parse().unwrap(), Timestamp::ZERO, "x").is_none());
+        assert!(decode_frame(&cdr[..20]).is_err());
+    }
+
+    #[test]
+    fn written_files_read_back() {
+        let records: Vec<LogRecord> = [
+            "123#DEADBEEF",
+            "1ABCDEF0#R3",
+            "7FF##1AA",
+            "20000080#0000000000000000",
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, f)| LogRecord {
+            timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + u64::try_from(i).unwrap()),
+            interface: format!("vcan{i}"),
+            frame: f.parse().unwrap(),
+            direction: None,
+        })
+        .collect();
+        let mut writer = McapWriter::new(std::io::Cursor::new(Vec::new())).unwrap();
+        for r in &records {
+            writer.write(r).unwrap();
+        }
+        assert_eq!(writer.left_out(), 1, "the FD frame");
+        let bytes = writer.finish().unwrap().into_inner();
+        let back: Vec<LogRecord> = McapReader::new(bytes.as_slice())
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let expected: Vec<LogRecord> = records.into_iter().filter(|r| !r.frame.is_fd()).collect();
+        assert_eq!(back, expected);
+        assert!(McapReader::new(&b"not an mcap file"[..])
+            .next()
+            .unwrap()
+            .is_err());
+    }
+}
