@@ -1063,3 +1063,55 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `dump -f FILE` logs in the format the extension names and finishes the file whichever way
+/// the dump ends: after `-n` frames (BLF), or on Ctrl-C (MCAP, whose summary comes last).
+#[test]
+fn dump_logs_to_any_format_and_finishes_the_file() {
+    let (server, address) = start_serve(
+        "exec \"$BYWIRE\" serve virtual:dumplog --listen 127.0.0.1:0",
+        &[],
+    );
+    let bus = format!("socketcand:{address}/dumplog");
+    let dir = std::env::temp_dir().join(format!("bywire-dump-formats-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let frames = ["123#DEADBEEF", "1ABCDEF0#0102", "7FF#"];
+    for (file, by_count) in [("out.blf", true), ("out.mcap", false)] {
+        let path = dir.join(file);
+        let mut args = vec![
+            "dump".to_string(),
+            bus.clone(),
+            "-f".into(),
+            path.display().to_string(),
+        ];
+        if by_count {
+            args.extend(["-n".to_string(), "3".to_string()]);
+        }
+        let mut dump = Command::new(env!("CARGO_BIN_EXE_bywire"))
+            .args(&args)
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        for frame in frames {
+            let (code, _, err) = bywire(&["send", &bus, frame], "");
+            assert_eq!(code, 0, "{err}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        if !by_count {
+            let _ = Command::new("kill")
+                .args(["-INT", &dump.id().to_string()])
+                .status();
+        }
+        assert!(dump.wait().unwrap().success(), "{file}");
+        let (code, text, err) = bywire(&["log", "cat", path.to_str().unwrap()], "");
+        assert_eq!(code, 0, "{file}: {err}");
+        let got: Vec<&str> = text
+            .lines()
+            .map(|l| l.rsplit(' ').next().unwrap())
+            .collect();
+        assert_eq!(got, frames, "{file}: {text}");
+    }
+    let _ = stop_serve(server);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -11,7 +11,8 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
 use bywire_core::Frame;
 use bywire_log::candump::{frame_text, timestamp_text};
-use bywire_log::{FrameView, Precision, View};
+use bywire_log::format::{Format, RecordWriter};
+use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg::{self, BusArg, Event, Readers};
 use crate::support::signals::Dbc;
@@ -47,7 +48,8 @@ pub struct Args {
     /// Write a log file candump-YYYY-MM-DD_HHMMSS.log (and print nothing).
     #[arg(short = 'l')]
     log_file: bool,
-    /// Write the log file to this path instead (implies -l).
+    /// Write the log file to this path instead (implies -l); its extension picks the format
+    /// (.asc, .blf, .trc, .pcapng, .mcap; anything else: candump), finished properly on Ctrl-C.
     #[arg(short = 'f', value_name = "FILE")]
     log_path: Option<PathBuf>,
     /// Exit after this many frames.
@@ -104,17 +106,49 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         &mut log,
     );
     drop(readers);
-    if let Some(log) = log.as_mut() {
-        log.flush().context("cannot write the log file")?;
+    // Every way out of the loop (a count, the idle time, Ctrl-C) ends the file properly: BLF
+    // and MCAP complete their headers and summaries here.
+    if let Some(log) = log {
+        log.finish().context("cannot write the log file")?;
     }
     result
 }
 
-fn create_log(path: PathBuf) -> Result<BufWriter<File>> {
+/// Where `-l`/`-f` log: candump text (as candump writes it), or another format's writer.
+enum LogFile {
+    Candump(BufWriter<File>),
+    Other(Box<RecordWriter<BufWriter<File>>>),
+}
+
+impl LogFile {
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            LogFile::Candump(w) => w.flush(),
+            LogFile::Other(_) => Ok(()), // its containers are written as they fill
+        }
+    }
+
+    fn finish(self) -> std::io::Result<()> {
+        match self {
+            LogFile::Candump(mut w) => w.flush(),
+            LogFile::Other(w) => w.finish().map(drop),
+        }
+    }
+}
+
+fn create_log(path: PathBuf) -> Result<LogFile> {
     let file = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
     // As candump says it; a closed standard error is no reason to fail.
     let _ = writeln!(std::io::stderr(), "Enabling Logfile '{}'", path.display());
-    Ok(BufWriter::new(file))
+    let output = BufWriter::new(file);
+    Ok(match Format::from_path(&path) {
+        None | Some(Format::Candump) => LogFile::Candump(output),
+        Some(format) => LogFile::Other(Box::new(
+            format
+                .writer(output)
+                .with_context(|| format!("cannot write {}", path.display()))?,
+        )),
+    })
 }
 
 /// What the printing loop remembers between frames.
@@ -134,7 +168,7 @@ fn print_frames(
     rx: &mpsc::Receiver<Event>,
     stop: &AtomicBool,
     out: &mut impl Write,
-    log: &mut Option<BufWriter<File>>,
+    log: &mut Option<LogFile>,
 ) -> Result<()> {
     let mut printer = Printer {
         args,
@@ -178,9 +212,18 @@ fn print_frames(
         let received = received.map_err(|e| anyhow!("bus '{name}': {e}"))?;
         last_frame = Instant::now();
         count += 1;
-        if let Some(log) = log.as_mut() {
-            printer.log_line(name, &received);
-            log.write_all(printer.line.as_bytes())?;
+        match log.as_mut() {
+            Some(LogFile::Candump(file)) => {
+                printer.log_line(name, &received);
+                file.write_all(printer.line.as_bytes())?;
+            }
+            Some(LogFile::Other(writer)) => writer.write(&LogRecord {
+                timestamp: received.timestamp,
+                interface: name.to_string(),
+                frame: received.frame,
+                direction: Some(if received.own { 'T' } else { 'R' }),
+            })?,
+            None => {}
         }
         if silent {
             continue;
