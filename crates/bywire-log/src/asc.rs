@@ -20,38 +20,12 @@ use std::io::{self, BufRead, Write};
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
+use crate::calendar::{civil_from_days, days_from_civil};
 use crate::candump::{LogError, LogRecord};
-use crate::fields::{column_of, data_bytes, dlc, fixed_point, syntax};
+use crate::fields::{channel_number, column_of, data_bytes, dlc, fixed_point, syntax, WriteClock};
 use crate::lines::CappedLines;
 
 const NANOS_PER_SECOND: u64 = 1_000_000_000;
-
-/// Days from 1970-01-01 to a civil date (proleptic Gregorian), as in Howard Hinnant's
-/// `days_from_civil`.
-pub(crate) fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
-    let year = if month <= 2 { year - 1 } else { year };
-    let era = year.div_euclid(400);
-    let year_of_era = year - era * 400;
-    let month = i64::from(month);
-    let day_of_year = (153 * (month + if month > 2 { -3 } else { 9 }) + 2) / 5 + i64::from(day) - 1;
-    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
-    era * 146_097 + day_of_era - 719_468
-}
-
-/// The civil date (year, month 1–12, day 1–31) of a day counted from 1970-01-01.
-pub(crate) fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let day_of_era = z - era * 146_097;
-    let year_of_era =
-        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
-    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
-    let mp = (5 * day_of_year + 2) / 153;
-    let day = u32::try_from(day_of_year - (153 * mp + 2) / 5 + 1).unwrap_or(1);
-    let month = u32::try_from(if mp < 10 { mp + 3 } else { mp - 9 }).unwrap_or(1);
-    let year = year_of_era + era * 400 + i64::from(month <= 2);
-    (year, month, day)
-}
 
 const MONTHS: [&str; 12] = [
     "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
@@ -519,37 +493,13 @@ pub(crate) fn push_hex(line: &mut String, data: &[u8]) {
     }
 }
 
-/// The channel (bus) number of an interface for ASC and TRC: its trailing number plus one
-/// (`can0` is 1), else the next number not taken; remembered in `taken`.
-pub(crate) fn channel_number(taken: &mut BTreeMap<String, u32>, interface: &str) -> u32 {
-    if let Some(n) = taken.get(interface) {
-        return *n;
-    }
-    let digits = interface.len()
-        - interface
-            .bytes()
-            .rev()
-            .take_while(u8::is_ascii_digit)
-            .count();
-    let number = interface
-        .get(digits..)
-        .and_then(|d| d.parse::<u32>().ok())
-        .map(|n| n.saturating_add(1))
-        .filter(|n| !taken.values().any(|t| t == n))
-        .unwrap_or_else(|| taken.values().max().map_or(1, |m| m + 1));
-    taken.insert(interface.to_string(), number);
-    number
-}
-
 /// Writes an ASC log as python-can does: the header and trigger block dated at the first
 /// frame (to the second), each frame's time from there in microseconds, `End TriggerBlock` at
 /// [`AscWriter::finish`].
 pub struct AscWriter<W: Write> {
     output: W,
-    /// The trigger block's start, once the first frame set it.
-    start: Option<u64>,
-    /// The last time written (times never go backwards in the file).
-    last: u64,
+    /// The trigger block's start and the last time written.
+    clock: WriteClock,
     channels: BTreeMap<String, u32>,
     line: String,
 }
@@ -559,8 +509,7 @@ impl<W: Write> AscWriter<W> {
     pub fn new(output: W) -> Self {
         AscWriter {
             output,
-            start: None,
-            last: 0,
+            clock: WriteClock::default(),
             channels: BTreeMap::new(),
             line: String::new(),
         }
@@ -570,33 +519,26 @@ impl<W: Write> AscWriter<W> {
         channel_number(&mut self.channels, interface)
     }
 
-    fn header(&mut self, at: u64) -> io::Result<()> {
-        // The trigger block starts on the whole second (the date's resolution); the frames'
-        // times count from there in microseconds.
-        let start = at - at % NANOS_PER_SECOND;
+    /// The header and trigger block, dated at `start`.
+    fn header(&mut self, start: u64) -> io::Result<()> {
         let date = format_date(Timestamp::from_nanos(start));
         write!(
             self.output,
             "date {date}\nbase hex  timestamps absolute\ninternal events logged\n// version 9.0.0\nBegin Triggerblock {date}\n   0.000000 Start of measurement\n"
         )?;
-        self.start = Some(start);
-        self.last = start;
         Ok(())
     }
 
     /// Write one record.
     pub fn write(&mut self, record: &LogRecord) -> io::Result<()> {
-        let at = record.timestamp.as_nanos();
-        let start = match self.start {
-            Some(start) => start,
-            None => {
-                self.header(at)?;
-                self.start.unwrap_or(at)
-            }
-        };
-        let at = at.max(self.last);
-        self.last = at;
-        let offset = at - start;
+        // The trigger block starts on the whole second (the date's resolution); the frames'
+        // times count from there in microseconds.
+        let (offset, started) = self
+            .clock
+            .offset(record.timestamp.as_nanos(), |at| at - at % NANOS_PER_SECOND);
+        if let Some(start) = started {
+            self.header(start)?;
+        }
         let channel = self.channel(&record.interface);
         let direction = if record.direction == Some('T') {
             "Tx"
@@ -666,7 +608,7 @@ impl<W: Write> AscWriter<W> {
     /// End the trigger block (a file with no frames still gets a header) and flush; the output
     /// back.
     pub fn finish(mut self) -> io::Result<W> {
-        if self.start.is_none() {
+        if self.clock.unstarted() {
             self.header(0)?;
         }
         self.output.write_all(b"End TriggerBlock\n")?;

@@ -68,7 +68,7 @@ fn systemtime_to_nanos(fields: [u16; 8]) -> Option<u64> {
     {
         return None;
     }
-    let days = crate::asc::days_from_civil(i64::from(year), u32::from(month), u32::from(day));
+    let days = crate::calendar::days_from_civil(i64::from(year), u32::from(month), u32::from(day));
     let seconds = u64::try_from(days)
         .ok()?
         .checked_mul(86_400)?
@@ -81,7 +81,7 @@ fn systemtime_to_nanos(fields: [u16; 8]) -> Option<u64> {
 fn nanos_to_systemtime(nanos: u64) -> [u16; 8] {
     let seconds = nanos / 1_000_000_000;
     let days = i64::try_from(seconds / 86_400).unwrap_or(0);
-    let (year, month, day) = crate::asc::civil_from_days(days);
+    let (year, month, day) = crate::calendar::civil_from_days(days);
     let in_day = seconds % 86_400;
     let narrow = |v: u64| u16::try_from(v).unwrap_or(0);
     [
@@ -531,7 +531,7 @@ impl<W: Write + Seek> BlfWriter<W> {
         // The header's start time has milliseconds: the objects count from there.
         let start = *self.start.get_or_insert(at - at % 1_000_000);
         self.stop = self.stop.max(at);
-        let channel = u16::try_from(crate::asc::channel_number(
+        let channel = u16::try_from(crate::fields::channel_number(
             &mut self.channels,
             &record.interface,
         ))

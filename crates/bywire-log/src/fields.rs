@@ -1,6 +1,8 @@
 //! The words of a text log line as values, with errors naming the line and the column of the
 //! word at fault (ASC and TRC lines are words separated by spaces).
 
+use std::collections::BTreeMap;
+
 use bywire_core::frame::Dlc;
 
 use crate::candump::{LogError, LogErrorKind};
@@ -84,9 +86,84 @@ pub(crate) fn dlc(line: u64, text: &str, word: &str, radix: u32) -> Result<Dlc, 
         })
 }
 
+/// The channel (bus) number of an interface for ASC, TRC and BLF: its trailing number plus one
+/// (`can0` is 1), else the next number not taken; remembered in `taken`.
+pub(crate) fn channel_number(taken: &mut BTreeMap<String, u32>, interface: &str) -> u32 {
+    if let Some(n) = taken.get(interface) {
+        return *n;
+    }
+    let digits = interface.len()
+        - interface
+            .bytes()
+            .rev()
+            .take_while(u8::is_ascii_digit)
+            .count();
+    let number = interface
+        .get(digits..)
+        .and_then(|d| d.parse::<u32>().ok())
+        .map(|n| n.saturating_add(1))
+        .filter(|n| !taken.values().any(|t| t == n))
+        .unwrap_or_else(|| taken.values().max().map_or(1, |m| m + 1));
+    taken.insert(interface.to_string(), number);
+    number
+}
+
+/// The time base of a log written as offsets from a start (ASC, TRC): the first frame sets the
+/// start (rounded down by the format's rule), and times never go backwards in the file (a
+/// frame from before the last is written at the last's time, as python-can does).
+#[derive(Debug, Default)]
+pub(crate) struct WriteClock {
+    start: Option<u64>,
+    last: u64,
+}
+
+impl WriteClock {
+    /// The offset of a frame at `at` from the start, in nanoseconds, and the start when this
+    /// frame set it (`start_of` rounds the first frame's time down to it).
+    pub(crate) fn offset(
+        &mut self,
+        at: u64,
+        start_of: impl FnOnce(u64) -> u64,
+    ) -> (u64, Option<u64>) {
+        let (start, new) = match self.start {
+            Some(start) => (start, None),
+            None => {
+                let start = start_of(at).min(at);
+                self.start = Some(start);
+                self.last = start;
+                (start, Some(start))
+            }
+        };
+        self.last = at.max(self.last);
+        (self.last - start, new)
+    }
+
+    /// Whether no frame was written yet.
+    pub(crate) fn unstarted(&self) -> bool {
+        self.start.is_none()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_write_clock_starts_at_the_first_frame_and_never_goes_back() {
+        let mut clock = WriteClock::default();
+        assert!(clock.unstarted());
+        assert_eq!(
+            clock.offset(1_500, |at| at - at % 1_000),
+            (500, Some(1_000))
+        );
+        assert_eq!(clock.offset(2_200, |_| 0), (1_200, None));
+        assert_eq!(
+            clock.offset(1_700, |_| 0),
+            (1_200, None),
+            "earlier: at the last time"
+        );
+        assert!(!clock.unstarted());
+    }
 
     #[test]
     fn fixed_point_numbers() {

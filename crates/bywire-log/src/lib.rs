@@ -31,6 +31,7 @@
 
 pub mod asc;
 pub mod blf;
+mod calendar;
 pub mod candump;
 mod fields;
 pub mod format;
