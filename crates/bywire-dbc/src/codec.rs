@@ -236,6 +236,18 @@ pub struct MessageCodec {
     hot: Vec<Hot>,
 }
 
+/// The scale and offset of a signal whose values decode to exact integers (an integer signal
+/// whose scale and offset are whole numbers, `1.0` included, as Python sees them); `None` when
+/// its values are floats. What a typed column or schema of the signal's values is made from.
+pub fn whole_scaling(s: &Signal) -> Option<(i128, i128)> {
+    match (conversion(s), s.value_type) {
+        (_, ValueType::Float32 | ValueType::Float64) => None,
+        (Conversion::Identity, _) => Some((1, 0)),
+        (Conversion::Integer { scale, offset }, _) => Some((scale, offset)),
+        _ => None,
+    }
+}
+
 fn conversion(s: &Signal) -> Conversion {
     let is_float = !matches!(s.value_type, ValueType::Integer { .. });
     let whole = |n: Num| match n {

@@ -70,6 +70,24 @@ pub struct DecodedFrame<'a> {
     pub error: Option<String>,
 }
 
+/// The names a message's signals go by in tables and JSON, in signal order: each signal's
+/// display name, and a name used twice (a warning when the DBC loads) as `NAME#2`, `NAME#3`.
+pub fn field_names(message: &Message) -> Vec<String> {
+    let mut names: Vec<String> = Vec::with_capacity(message.signals.len());
+    for signal in &message.signals {
+        let name = signal.display_name();
+        let unique = (1..=message.signals.len())
+            .map(|n| match n {
+                1 => name.to_string(),
+                n => format!("{name}#{n}"),
+            })
+            .find(|candidate| !names.contains(candidate))
+            .unwrap_or_else(|| name.to_string());
+        names.push(unique);
+    }
+    names
+}
+
 /// A database compiled for decoding.
 #[derive(Debug, Clone)]
 pub struct Decoder {
@@ -102,11 +120,17 @@ impl Decoder {
         self.codecs.get(*index)
     }
 
-    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
-    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
+    /// The message `frame` is (its index in the database, the message and its codec); `None`
+    /// when no message has its identifier (or it is an error frame).
+    pub fn lookup(&self, frame: &Frame) -> Option<(usize, &Message, &MessageCodec)> {
         let id = frame.id()?;
         let index = *self.by_id.get(&(id.as_raw(), id.is_extended()))?;
-        let (message, codec) = (self.db.messages.get(index)?, self.codecs.get(index)?);
+        Some((index, self.db.messages.get(index)?, self.codecs.get(index)?))
+    }
+
+    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
+    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
+        let (_, message, codec) = self.lookup(frame)?;
         let mut values = vec![None; codec.signal_count()];
         let data = if frame.is_remote() {
             &[][..]

@@ -53,6 +53,14 @@ pub enum LogError {
         /// What is wrong.
         what: String,
     },
+    /// A table (Parquet) is malformed at this row.
+    #[error("row {row}: {what}")]
+    Table {
+        /// The 0-based row (of the whole file) where the batch at fault starts, or the row.
+        row: u64,
+        /// What is wrong.
+        what: String,
+    },
     /// Reading failed.
     #[error("line {line}: {message}")]
     Io {

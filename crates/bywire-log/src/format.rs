@@ -25,6 +25,8 @@ pub enum Format {
     Blf,
     /// MCAP of ROS 2 `can_msgs/msg/Frame` (with the `mcap` feature).
     Mcap,
+    /// Parquet, the raw frames' table (with the `parquet` feature).
+    Parquet,
 }
 
 /// The records of a log, whatever its format.
@@ -32,13 +34,14 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 6] = [
+    pub const ALL: [(Format, &'static str); 7] = [
         (Format::Candump, "candump"),
         (Format::Asc, "asc"),
         (Format::Trc, "trc"),
         (Format::Pcapng, "pcapng"),
         (Format::Blf, "blf"),
         (Format::Mcap, "mcap"),
+        (Format::Parquet, "parquet"),
     ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
@@ -51,6 +54,7 @@ impl Format {
             "pcapng" | "pcap" => Some(Format::Pcapng),
             "blf" => Some(Format::Blf),
             "mcap" => Some(Format::Mcap),
+            "parquet" | "pq" => Some(Format::Parquet),
             _ => None,
         }
     }
@@ -74,6 +78,9 @@ impl Format {
         }
         if start.starts_with(b"\x89MCAP") {
             return Format::Mcap;
+        }
+        if start.starts_with(b"PAR1") {
+            return Format::Parquet;
         }
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
@@ -124,11 +131,35 @@ impl Format {
                 offset: 0,
                 what: "an MCAP file: this build has no MCAP support (the mcap feature)".into(),
             }))),
+            Format::Parquet => Box::new(std::iter::once(Err(LogError::Binary {
+                offset: 0,
+                what: "a Parquet file can only be read from a file (its index is at its end), \
+                       not from a stream such as standard input"
+                    .into(),
+            }))),
+        }
+    }
+
+    /// A reader of this format's records in `file`: as [`Format::reader`], and Parquet too.
+    pub fn file_reader(self, file: std::fs::File) -> Records<'static> {
+        match self {
+            #[cfg(feature = "parquet")]
+            Format::Parquet => match crate::parquet::ParquetReader::open(file) {
+                Ok(reader) => Box::new(reader),
+                Err(e) => Box::new(std::iter::once(Err(e))),
+            },
+            #[cfg(not(feature = "parquet"))]
+            Format::Parquet => Box::new(std::iter::once(Err(LogError::Binary {
+                offset: 0,
+                what: "a Parquet file: this build has no Parquet support (the parquet feature)"
+                    .into(),
+            }))),
+            other => other.reader(io::BufReader::new(file)),
         }
     }
 
     /// A writer of this format to `output` (seekable: BLF completes its header at the end).
-    pub fn writer<W: Write + Seek>(self, output: W) -> io::Result<RecordWriter<W>> {
+    pub fn writer<W: Write + Seek + Send>(self, output: W) -> io::Result<RecordWriter<W>> {
         Ok(match self {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
@@ -143,13 +174,21 @@ impl Format {
                     "this build has no MCAP support (the mcap feature)",
                 ))
             }
+            #[cfg(feature = "parquet")]
+            Format::Parquet => RecordWriter::Parquet(crate::parquet::ParquetWriter::new(output)?),
+            #[cfg(not(feature = "parquet"))]
+            Format::Parquet => {
+                return Err(io::Error::other(
+                    "this build has no Parquet support (the parquet feature)",
+                ))
+            }
         })
     }
 }
 
 /// Writes records in one of the formats (one writer a file: the variants' sizes do not matter).
 #[allow(clippy::large_enum_variant)]
-pub enum RecordWriter<W: Write + Seek> {
+pub enum RecordWriter<W: Write + Seek + Send> {
     /// candump's log form (as `candump -L`: no direction).
     Candump(Writer<W>),
     /// Vector ASC.
@@ -163,9 +202,12 @@ pub enum RecordWriter<W: Write + Seek> {
     /// MCAP.
     #[cfg(feature = "mcap")]
     Mcap(crate::mcap::McapWriter<W>),
+    /// Parquet's raw frames' table.
+    #[cfg(feature = "parquet")]
+    Parquet(crate::parquet::ParquetWriter<W>),
 }
 
-impl<W: Write + Seek> RecordWriter<W> {
+impl<W: Write + Seek + Send> RecordWriter<W> {
     /// Write one record.
     pub fn write(&mut self, record: &LogRecord) -> io::Result<()> {
         match self {
@@ -176,6 +218,8 @@ impl<W: Write + Seek> RecordWriter<W> {
             RecordWriter::Blf(w) => w.write(record),
             #[cfg(feature = "mcap")]
             RecordWriter::Mcap(w) => w.write(record),
+            #[cfg(feature = "parquet")]
+            RecordWriter::Parquet(w) => w.write(record),
         }
     }
 
@@ -201,6 +245,8 @@ impl<W: Write + Seek> RecordWriter<W> {
             RecordWriter::Blf(w) => w.finish(),
             #[cfg(feature = "mcap")]
             RecordWriter::Mcap(w) => w.finish(),
+            #[cfg(feature = "parquet")]
+            RecordWriter::Parquet(w) => w.finish(),
         }
     }
 }

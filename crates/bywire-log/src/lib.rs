@@ -8,6 +8,8 @@
 //!   records them.
 //! - [`blf`]: Vector BLF (zlib log containers; classic, FD and error objects).
 //! - [`trc`]: PEAK TRC logs (1.0 to 2.1 read, 2.1 written).
+//! - `parquet` (feature `parquet`): raw frames as a Parquet table, read and written, and decoded
+//!   tables (one per message, typed signal columns) as a partitioned dataset.
 //! - [`pcapng`]: pcapng captures of SocketCAN frames (Wireshark's LINKTYPE_CAN_SOCKETCAN).
 //! - [`format`](mod@format): the formats by extension or content, each with a reader and a writer.
 //! - [`screen`]: candump's screen form, `  can0  123   [4]  DE AD BE EF`, written as candump
@@ -40,6 +42,8 @@ pub mod lines;
 pub mod mcap;
 pub mod merge;
 pub mod pacing;
+#[cfg(feature = "parquet")]
+pub mod parquet;
 pub mod pcapng;
 pub mod screen;
 pub mod trc;

@@ -6,8 +6,12 @@
 //! A frame's header stamp is its time and its `frame_id` the interface. `can_msgs/msg/Frame`
 //! has no CAN FD: the writer leaves FD frames out and counts them ([`McapWriter::left_out`]).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::{Read, Seek, Write};
+
+use bywire_dbc::codec::{whole_scaling, Decoded, Value};
+use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
+use bywire_dbc::Message;
 
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame};
 use bywire_core::{Frame, Id, Timestamp};
@@ -269,6 +273,206 @@ impl<W: Write + Seek> McapWriter<W> {
         self.writer.finish().map_err(io_error)?;
         Ok(self.writer.into_inner())
     }
+}
+
+/// The most decoded channels a file gets (message × interface); frames beyond are counted.
+pub const DECODED_CHANNELS: usize = 4096;
+
+/// Writes what [`McapWriter`] writes and, beside it, each frame decoded with a DBC as JSON on
+/// `/<interface>/<message>`, each channel with a JSON Schema of its message, so Foxglove plots
+/// signals with no plugin. A signal's value is a number (`integer` where its scale and offset
+/// are whole numbers), a non-finite float `null`; a signal with value descriptions also has
+/// `NAME_choice`, the description of its raw value; a multiplexed signal not in the frame is
+/// left out. FD frames are decoded too (only the raw channel has no FD).
+pub struct DecodedMcapWriter<'a, W: Write + Seek> {
+    raw: McapWriter<W>,
+    decoder: &'a Decoder,
+    /// Per message index: its schema's id and field names.
+    schemas: HashMap<usize, (u16, Vec<String>)>,
+    channels: HashMap<(usize, String), u16>,
+    decoded: Vec<Option<Decoded>>,
+    undecodable: u64,
+    over_limit: u64,
+}
+
+impl<'a, W: Write + Seek> DecodedMcapWriter<'a, W> {
+    /// A writer to `output`, decoding with `decoder`.
+    pub fn new(output: W, decoder: &'a Decoder) -> std::io::Result<Self> {
+        Ok(DecodedMcapWriter {
+            raw: McapWriter::new(output)?,
+            decoder,
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            decoded: Vec::new(),
+            undecodable: 0,
+            over_limit: 0,
+        })
+    }
+
+    /// Write one record: raw, and decoded when the DBC has its message.
+    pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
+        self.raw.write(record)?;
+        let Some((index, message, codec)) = self.decoder.lookup(&record.frame) else {
+            return Ok(());
+        };
+        self.decoded.clear();
+        self.decoded.resize(codec.signal_count(), None);
+        let data = if record.frame.is_remote() {
+            &[][..]
+        } else {
+            record.frame.data()
+        };
+        if codec.decode(data, &mut self.decoded).is_err() {
+            self.undecodable += 1;
+            return Ok(());
+        }
+        let Some(channel) = self.channel(index, message, &record.interface)? else {
+            self.over_limit += 1;
+            return Ok(());
+        };
+        let names = self
+            .schemas
+            .get(&index)
+            .map(|(_, n)| n.as_slice())
+            .unwrap_or(&[]);
+        let mut object = serde_json::Map::new();
+        for ((signal, name), value) in message.signals.iter().zip(names).zip(&self.decoded) {
+            let Some(value) = value else { continue };
+            object.insert(name.clone(), json_value(value.physical));
+            if !signal.value_descriptions.is_empty() {
+                let text = SignalValue {
+                    signal,
+                    value: *value,
+                }
+                .description()
+                .map_or(serde_json::Value::Null, |d| d.into());
+                object.insert(format!("{name}_choice"), text);
+            }
+        }
+        let json = serde_json::Value::Object(object).to_string();
+        let at = record.timestamp.as_nanos();
+        self.raw.sequence = self.raw.sequence.wrapping_add(1);
+        self.raw
+            .writer
+            .write_to_known_channel(
+                &::mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: self.raw.sequence,
+                    log_time: at,
+                    publish_time: at,
+                },
+                json.as_bytes(),
+            )
+            .map_err(io_error)
+    }
+
+    /// The channel of `message` on `interface`, made (with its schema) the first time.
+    fn channel(
+        &mut self,
+        index: usize,
+        message: &Message,
+        interface: &str,
+    ) -> std::io::Result<Option<u16>> {
+        if let Some(channel) = self.channels.get(&(index, interface.to_string())) {
+            return Ok(Some(*channel));
+        }
+        if self.channels.len() >= DECODED_CHANNELS {
+            return Ok(None);
+        }
+        let schema = match self.schemas.get(&index) {
+            Some((schema, _)) => *schema,
+            None => {
+                let names = field_names(message);
+                let text = json_schema(message, &names).to_string();
+                let schema = self
+                    .raw
+                    .writer
+                    .add_schema(message.display_name(), "jsonschema", text.as_bytes())
+                    .map_err(io_error)?;
+                self.schemas.insert(index, (schema, names));
+                schema
+            }
+        };
+        let topic = format!("/{interface}/{}", message.display_name());
+        let channel = self
+            .raw
+            .writer
+            .add_channel(schema, &topic, "json", &BTreeMap::new())
+            .map_err(io_error)?;
+        self.channels
+            .insert((index, interface.to_string()), channel);
+        Ok(Some(channel))
+    }
+
+    /// Frames left out of the raw channel (CAN FD).
+    pub fn left_out(&self) -> u64 {
+        self.raw.left_out()
+    }
+
+    /// Frames of a known message that could not be decoded (shorter than the message), and
+    /// frames past [`DECODED_CHANNELS`].
+    pub fn not_decoded(&self) -> (u64, u64) {
+        (self.undecodable, self.over_limit)
+    }
+
+    /// Write the summary and end; the output back.
+    pub fn finish(self) -> std::io::Result<W> {
+        self.raw.finish()
+    }
+}
+
+/// A physical value as JSON: integers exact, non-finite floats `null` (JSON has no number for
+/// them).
+fn json_value(value: Value) -> serde_json::Value {
+    match value {
+        Value::Int(i) => i.into(),
+        Value::UInt(u) => u.into(),
+        Value::Float(f) => {
+            serde_json::Number::from_f64(f).map_or(serde_json::Value::Null, Into::into)
+        }
+    }
+}
+
+/// The JSON Schema of a message's decoded object.
+fn json_schema(message: &Message, names: &[String]) -> serde_json::Value {
+    let mut properties = serde_json::Map::new();
+    for (signal, name) in message.signals.iter().zip(names) {
+        let integer = whole_scaling(signal).is_some();
+        let mut property = serde_json::Map::new();
+        let kind = if integer {
+            serde_json::json!("integer")
+        } else {
+            serde_json::json!(["number", "null"])
+        };
+        property.insert("type".into(), kind);
+        let description = match (&signal.comment, signal.unit.is_empty()) {
+            (Some(comment), _) => Some(comment.clone()),
+            (None, false) => Some(format!("[{}]", signal.unit)),
+            (None, true) => None,
+        };
+        if let Some(description) = description {
+            property.insert("description".into(), description.into());
+        }
+        properties.insert(name.clone(), property.into());
+        if !signal.value_descriptions.is_empty() {
+            let labels: Vec<&str> = signal
+                .value_descriptions
+                .iter()
+                .map(|(_, l)| l.as_str())
+                .collect();
+            properties.insert(
+                format!("{name}_choice"),
+                serde_json::json!({"type": ["string", "null"], "enum": labels.into_iter().map(serde_json::Value::from).chain([serde_json::Value::Null]).collect::<Vec<_>>()}),
+            );
+        }
+    }
+    serde_json::json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": message.display_name(),
+        "type": "object",
+        "properties": properties,
+        "additionalProperties": false,
+    })
 }
 
 #[cfg(test)]

@@ -13,8 +13,11 @@ use bywire_log::format::Format;
 use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg;
-use crate::support::files::write_atomically;
+use crate::support::files::{write_atomically, write_dir_atomically};
 use crate::support::logs::{inputs, records, Skip};
+use crate::support::progress::Progress;
+use bywire_log::mcap::DecodedMcapWriter;
+use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 
 #[derive(clap::Subcommand)]
 pub enum LogCommand {
@@ -76,6 +79,21 @@ conversion leaves no half-written file.")]
         /// Leave out what comes after this many seconds after the first frame.
         #[arg(long, value_name = "SECONDS", value_parser = crate::support::numbers::seconds)]
         to: Option<f64>,
+        /// Decode with this DBC: into a Parquet dataset (a directory: a table per message), or
+        /// into MCAP JSON channels beside the raw frames.
+        #[arg(long, value_name = "DBC")]
+        dbc: Option<PathBuf>,
+        /// With --dbc: fail on the first problem in the DBC file.
+        #[arg(long, requires = "dbc")]
+        strict: bool,
+        /// With --dbc and Parquet: partition each message's table by channel and/or UTC date.
+        #[arg(
+            long,
+            value_name = "channel|date",
+            value_delimiter = ',',
+            requires = "dbc"
+        )]
+        partition: Vec<PartitionBy>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
     #[command(after_help = "Examples:
@@ -109,14 +127,41 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
             channels,
             from,
             to,
+            dbc,
+            strict,
+            partition,
         } => {
             let (output, inputs) = files
                 .split_last()
                 .ok_or_else(|| anyhow!("give the logs to read and the file to write"))?;
             let selection = Selection::new(channels, *from, *to)?;
-            convert(inputs, output, format.as_deref(), &selection, out)
+            let decoding = Decoding {
+                dbc: dbc.as_deref(),
+                strict: *strict,
+                partitioning: Partitioning {
+                    channel: partition.contains(&PartitionBy::Channel),
+                    date: partition.contains(&PartitionBy::Date),
+                },
+            };
+            convert(
+                inputs,
+                output,
+                format.as_deref(),
+                &selection,
+                &decoding,
+                out,
+            )
         }
     }
+}
+
+/// A partition of a decoded Parquet dataset.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PartitionBy {
+    /// A directory per channel.
+    Channel,
+    /// A directory per UTC day.
+    Date,
 }
 
 /// What `log convert` keeps: channels (renamed) and a time range from the first frame.
@@ -161,11 +206,19 @@ impl Selection {
     }
 }
 
+/// What `log convert` writes besides the format: decoded tables or channels with a DBC.
+struct Decoding<'a> {
+    dbc: Option<&'a Path>,
+    strict: bool,
+    partitioning: Partitioning,
+}
+
 fn convert(
     inputs: &[PathBuf],
     output: &Path,
     format: Option<&str>,
     selection: &Selection,
+    decoding: &Decoding<'_>,
     out: &mut impl Write,
 ) -> Result<()> {
     let format = match format {
@@ -173,12 +226,26 @@ fn convert(
             let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
             anyhow!("--format {name}: not a format ({})", names.join(", "))
         })?,
+        // A name without a known extension, with a DBC: the decoded dataset's directory.
+        None if decoding.dbc.is_some() && Format::from_path(output).is_none() => Format::Parquet,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
-                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mcap); give --format",
+                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mcap, .parquet); give --format",
                 output.display()
             )
         })?,
+    };
+    let decoder = match decoding.dbc {
+        None => None,
+        Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
+            bywire_dbc::decoder::Decoder::new(crate::support::dbc::load(path, decoding.strict)?),
+        ),
+        Some(_) => {
+            return Err(anyhow!(
+                "--dbc decodes into Parquet tables or MCAP JSON channels; {} is neither",
+                output.display()
+            ))
+        }
     };
     let files: Vec<PathBuf> = inputs
         .iter()
@@ -187,58 +254,161 @@ fn convert(
         .collect();
     let opened = inputs_or_stdin(&files, inputs.len())?;
     let names: Vec<String> = opened.iter().map(|(name, _)| name.clone()).collect();
+    let progress = Progress::new(
+        opened
+            .iter()
+            .filter_map(|(_, input)| input.position_probe())
+            .collect(),
+    );
     let readers: Vec<_> = opened
         .into_iter()
         .zip(&names)
         .map(|((_, reader), name)| records(name, reader, Skip::Unreadable))
         .collect();
-    let (mut frames, mut left_out, mut unsupported) = (0u64, 0u64, 0u64);
-    write_atomically(output, |tmp| {
-        let file = std::fs::File::create(tmp)
-            .with_context(|| format!("cannot write {}", output.display()))?;
-        let mut writer = format
-            .writer(std::io::BufWriter::new(file))
-            .with_context(|| format!("cannot write {}", output.display()))?;
-        let mut first = None;
-        for record in bywire_log::merge::merge(readers) {
-            let record = record?;
-            let at = record.timestamp.as_nanos();
-            let since_first = Duration::from_nanos(at.saturating_sub(*first.get_or_insert(at)));
-            let Some(record) = selection.keep(record, since_first) else {
-                left_out += 1;
-                continue;
-            };
-            writer
-                .write(&record)
-                .with_context(|| format!("cannot write {}", output.display()))?;
-            frames += 1;
+    let mut pump = Pump {
+        selection,
+        progress,
+        first: None,
+        frames: 0,
+        left_out: 0,
+    };
+    let cannot_write = || format!("cannot write {}", output.display());
+    let mut unsupported = 0;
+    let mut notes = Vec::new();
+    match (&decoder, format) {
+        (Some(decoder), Format::Parquet) => {
+            let summary = write_dir_atomically(output, |tmp| {
+                let mut dataset = DecodedDataset::create(tmp, decoder, decoding.partitioning)
+                    .with_context(cannot_write)?;
+                pump.run(bywire_log::merge::merge(readers), |r| {
+                    dataset.write(r).with_context(cannot_write)
+                })?;
+                dataset.finish().with_context(cannot_write)
+            })?;
+            let rows: u64 = summary.rows.values().sum();
+            notes.push(format!(
+                "{rows} rows in {} tables, {} files",
+                summary.rows.len(),
+                summary.files.len()
+            ));
+            if summary.unknown > 0 {
+                notes.push(format!(
+                    "{} frames of no message in the DBC",
+                    summary.unknown
+                ));
+            }
+            for (message, (count, why)) in &summary.undecodable {
+                notes.push(format!(
+                    "{count} {message} frames not decoded (the first: {why})"
+                ));
+            }
         }
-        unsupported = writer.left_out();
-        writer
-            .finish()
-            .with_context(|| format!("cannot write {}", output.display()))?;
-        Ok(())
-    })?;
-    let frames = frames - unsupported;
+        (Some(decoder), _) => write_atomically(output, |tmp| {
+            let file = std::fs::File::create(tmp).with_context(cannot_write)?;
+            let mut writer = DecodedMcapWriter::new(std::io::BufWriter::new(file), decoder)
+                .with_context(cannot_write)?;
+            pump.run(bywire_log::merge::merge(readers), |r| {
+                writer.write(r).with_context(cannot_write)
+            })?;
+            unsupported = writer.left_out();
+            let (undecodable, over_limit) = writer.not_decoded();
+            if undecodable > 0 {
+                notes.push(format!(
+                    "{undecodable} frames of known messages not decoded"
+                ));
+            }
+            if over_limit > 0 {
+                notes.push(format!(
+                    "{over_limit} frames not decoded: more than {} decoded channels",
+                    bywire_log::mcap::DECODED_CHANNELS
+                ));
+            }
+            writer.finish().with_context(cannot_write)?;
+            Ok(())
+        })?,
+        (None, _) => write_atomically(output, |tmp| {
+            let file = std::fs::File::create(tmp).with_context(cannot_write)?;
+            let mut writer = format
+                .writer(std::io::BufWriter::new(file))
+                .with_context(cannot_write)?;
+            pump.run(bywire_log::merge::merge(readers), |r| {
+                writer.write(r).with_context(cannot_write)
+            })?;
+            unsupported = writer.left_out();
+            writer.finish().with_context(cannot_write)?;
+            Ok(())
+        })?,
+    }
+    pump.progress.finish();
+    let frames = pump.frames - unsupported;
     write!(out, "{frames} frames written to {}", output.display())?;
     if unsupported > 0 {
+        let raw = if decoder.is_some() {
+            " raw channel"
+        } else {
+            ""
+        };
         write!(
             out,
-            " ({unsupported} CAN FD frames left out: can_msgs/msg/Frame has no CAN FD)"
+            " ({unsupported} CAN FD frames left out of the{raw}: can_msgs/msg/Frame has no CAN FD)"
         )?;
     }
-    if left_out > 0 {
-        write!(out, " ({left_out} left out by --channel, --from or --to)")?;
+    if pump.left_out > 0 {
+        write!(
+            out,
+            " ({} left out by --channel, --from or --to)",
+            pump.left_out
+        )?;
+    }
+    for note in notes {
+        write!(out, "; {note}")?;
     }
     writeln!(out)?;
     Ok(())
+}
+
+/// Records from the inputs to a writer: the selection applied, progress shown, Ctrl-C obeyed
+/// (an interrupted conversion is an error, so nothing half-written is left).
+struct Pump<'a> {
+    selection: &'a Selection,
+    progress: Progress,
+    first: Option<u64>,
+    frames: u64,
+    left_out: u64,
+}
+
+impl Pump<'_> {
+    fn run(
+        &mut self,
+        records: impl Iterator<Item = Result<LogRecord>>,
+        mut write: impl FnMut(&LogRecord) -> Result<()>,
+    ) -> Result<()> {
+        let stop = crate::interrupt_flag();
+        for record in records {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(anyhow!("interrupted: nothing written"));
+            }
+            let record = record?;
+            self.progress.frame();
+            let at = record.timestamp.as_nanos();
+            let since_first =
+                Duration::from_nanos(at.saturating_sub(*self.first.get_or_insert(at)));
+            let Some(record) = self.selection.keep(record, since_first) else {
+                self.left_out += 1;
+                continue;
+            };
+            write(&record)?;
+            self.frames += 1;
+        }
+        Ok(())
+    }
 }
 
 /// The named files, or standard input when the only input is `-`.
 fn inputs_or_stdin(
     files: &[PathBuf],
     given: usize,
-) -> Result<Vec<(String, Box<dyn std::io::BufRead>)>> {
+) -> Result<Vec<(String, crate::support::logs::LogInput)>> {
     if files.len() != given && given > 1 {
         return Err(anyhow!("'-' (standard input) can only be the one input"));
     }

@@ -1,7 +1,7 @@
 //! `bywire play`: canplayer — replay candump logs onto buses, in real time or faster.
 
 use std::collections::HashMap;
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -65,7 +65,7 @@ enum Target {
 
 /// The log's records, any format; in candump logs, lines that do not start with '(' are
 /// skipped as canplayer skips them.
-fn log_records(path: Option<&PathBuf>) -> Result<Vec<(String, Box<dyn BufRead>)>> {
+fn log_records(path: Option<&PathBuf>) -> Result<Vec<(String, logs::LogInput)>> {
     logs::inputs(path.map(std::slice::from_ref).unwrap_or_default())
 }
 

@@ -25,3 +25,36 @@ pub(crate) fn write_atomically(
     }
     result
 }
+
+/// Render a directory (a dataset) into a temporary directory beside `path`, then rename it
+/// into place. `path` must not exist, or be an empty directory: a dataset is never mixed
+/// with files of another run.
+pub(crate) fn write_dir_atomically<T>(
+    path: &Path,
+    render: impl FnOnce(&Path) -> Result<T>,
+) -> Result<T> {
+    if let Ok(mut entries) = std::fs::read_dir(path) {
+        if entries.next().is_some() {
+            return Err(anyhow!(
+                "{}: the directory exists and is not empty; give a new one",
+                path.display()
+            ));
+        }
+    } else if path.exists() {
+        return Err(anyhow!("{}: exists and is not a directory", path.display()));
+    }
+    let name = path
+        .file_name()
+        .ok_or_else(|| anyhow!("{}: not a directory name", path.display()))?
+        .to_string_lossy();
+    let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+    let result = render(&tmp).and_then(|value| {
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("cannot write {}", path.display()))
+            .map(|()| value)
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    result
+}

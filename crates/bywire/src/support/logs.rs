@@ -10,8 +10,21 @@ use anyhow::{anyhow, Context, Result};
 use bywire_log::format::Format;
 use bywire_log::{LogError, LogErrorKind, LogRecord, Reader};
 
+/// A log to read: its bytes, and the file itself when it is one (Parquet is read by seeking).
+pub struct LogInput {
+    bytes: Box<dyn BufRead>,
+    file: Option<File>,
+}
+
+impl LogInput {
+    /// A handle on the file that shares its read position (for a progress bar).
+    pub fn position_probe(&self) -> Option<File> {
+        self.file.as_ref().and_then(|f| f.try_clone().ok())
+    }
+}
+
 /// The files to read, each with the name its messages use (standard input when none).
-pub fn inputs(files: &[PathBuf]) -> Result<Vec<(String, Box<dyn BufRead>)>> {
+pub fn inputs(files: &[PathBuf]) -> Result<Vec<(String, LogInput)>> {
     if files.is_empty() {
         return Ok(vec![input(None)?]);
     }
@@ -19,15 +32,27 @@ pub fn inputs(files: &[PathBuf]) -> Result<Vec<(String, Box<dyn BufRead>)>> {
 }
 
 /// One file (or standard input) with its name.
-pub fn input(path: Option<&Path>) -> Result<(String, Box<dyn BufRead>)> {
+pub fn input(path: Option<&Path>) -> Result<(String, LogInput)> {
     match path {
         None => Ok((
             "standard input".into(),
-            Box::new(BufReader::new(io::stdin())),
+            LogInput {
+                bytes: Box::new(BufReader::new(io::stdin())),
+                file: None,
+            },
         )),
         Some(p) => {
             let file = File::open(p).with_context(|| format!("cannot open {}", p.display()))?;
-            Ok((p.display().to_string(), Box::new(BufReader::new(file))))
+            let reader = file
+                .try_clone()
+                .with_context(|| format!("cannot open {}", p.display()))?;
+            Ok((
+                p.display().to_string(),
+                LogInput {
+                    bytes: Box::new(BufReader::new(reader)),
+                    file: Some(file),
+                },
+            ))
         }
     }
 }
@@ -47,16 +72,18 @@ pub enum Skip {
 /// The records of `input` (called `name` in messages); skipped lines are reported.
 pub fn records<'a>(
     name: &'a str,
-    mut input: Box<dyn BufRead>,
+    input: LogInput,
     skip: Skip,
 ) -> impl Iterator<Item = Result<LogRecord>> + 'a {
+    let LogInput { mut bytes, file } = input;
     // An input that cannot even be peeked at fails on its first read, with its name.
-    let format = Format::sniff_input(&mut input).unwrap_or(Format::Candump);
-    let reader = match (format, skip) {
-        (Format::Candump, Skip::AnyBadLine | Skip::NonLogLines) => {
-            Box::new(Reader::new(input).log_lines_only())
+    let format = Format::sniff_input(&mut bytes).unwrap_or(Format::Candump);
+    let reader = match (format, skip, file) {
+        (Format::Candump, Skip::AnyBadLine | Skip::NonLogLines, _) => {
+            Box::new(Reader::new(bytes).log_lines_only())
         }
-        (format, _) => format.reader(input),
+        (Format::Parquet, _, Some(file)) => format.file_reader(file),
+        (format, _, _) => format.reader(bytes),
     };
     reader.filter_map(move |record| match record {
         Err(e @ LogError::Syntax { .. }) if skip == Skip::AnyBadLine => {

@@ -6,6 +6,7 @@ pub mod dbc;
 pub mod files;
 pub mod logs;
 pub mod numbers;
+pub mod progress;
 pub mod signals;
 pub mod sim_serve;
 pub mod vehicles;

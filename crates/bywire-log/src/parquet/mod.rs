@@ -1,0 +1,468 @@
+//! Parquet (feature `parquet`): raw frames read and written as one table, and — with a DBC —
+//! decoded tables, one per message ([`decoded`]).
+//!
+//! The raw table has one row a frame, zstd-compressed, in row groups of [`ROW_GROUP_ROWS`]:
+//!
+//! | column | type | |
+//! |---|---|---|
+//! | `ts` | timestamp (ns, UTC) | when the frame was on the bus |
+//! | `channel` | dictionary string | the interface (`can0`) |
+//! | `id` | uint32 | the identifier (an error frame: its SocketCAN class bits) |
+//! | `extended`, `remote`, `error`, `fd`, `brs`, `esi` | bool | the frame's kind and flags |
+//! | `dir` | dictionary string, nullable | `rx`, `tx`, or null when the log did not say |
+//! | `dlc` | uint8 | the DLC (a remote frame has one and no data) |
+//! | `data` | binary | the data bytes |
+//!
+//! Parquet keeps its index at the end of the file, so a reader needs a file it can seek in
+//! ([`ParquetReader::open`]); it holds one batch of rows at a time. The writer holds one row
+//! group's encoded columns at most, and [`ParquetWriter::finish`] writes the footer (a file
+//! without one is not a Parquet file, which is why conversions write to a temporary name).
+
+pub mod decoded;
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::Write;
+use std::sync::Arc;
+
+use ::parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
+use ::parquet::arrow::ArrowWriter;
+use ::parquet::basic::{Compression, ZstdLevel};
+use ::parquet::file::metadata::KeyValue;
+use ::parquet::file::properties::WriterProperties;
+use arrow_array::builder::{
+    ArrayBuilder, BinaryBuilder, BooleanBuilder, StringDictionaryBuilder,
+    TimestampNanosecondBuilder, UInt32Builder, UInt8Builder,
+};
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Int32Type, UInt32Type, UInt8Type};
+use arrow_array::{Array, ArrayAccessor, ArrayRef, RecordBatch};
+use arrow_schema::{DataType, Field, Schema, SchemaRef, TimeUnit};
+use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
+use bywire_core::{Frame, Id, Timestamp};
+
+use crate::candump::{LogError, LogRecord};
+
+/// Rows a row group holds (about 20–40 MB of frames before compression).
+pub const ROW_GROUP_ROWS: usize = 1 << 20;
+/// Rows built up before they are handed to the encoder (and read at once).
+const BATCH_ROWS: usize = 8192;
+/// The key-value metadata key naming the table's layout, and its value.
+pub const LAYOUT_KEY: &str = "bywire.layout";
+/// The raw frames' layout, as [`LAYOUT_KEY`] names it.
+pub const RAW_LAYOUT: &str = "can-frames/1";
+
+/// The `ts` column's type: nanoseconds, UTC.
+pub(crate) fn timestamp_type() -> DataType {
+    DataType::Timestamp(TimeUnit::Nanosecond, Some("UTC".into()))
+}
+
+/// A dictionary-encoded string column's type (what pandas opens as a category).
+pub(crate) fn dictionary_type() -> DataType {
+    DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8))
+}
+
+/// The raw frames' schema.
+pub fn raw_schema() -> SchemaRef {
+    let flag = |name: &str| Field::new(name, DataType::Boolean, false);
+    Arc::new(Schema::new(vec![
+        Field::new("ts", timestamp_type(), false),
+        Field::new("channel", dictionary_type(), false),
+        Field::new("id", DataType::UInt32, false),
+        flag("extended"),
+        flag("remote"),
+        flag("error"),
+        flag("fd"),
+        flag("brs"),
+        flag("esi"),
+        Field::new("dir", dictionary_type(), true),
+        Field::new("dlc", DataType::UInt8, false),
+        Field::new("data", DataType::Binary, false),
+    ]))
+}
+
+/// Writer properties: zstd, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata.
+pub(crate) fn properties(layout: &str) -> WriterProperties {
+    WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::default()))
+        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .set_key_value_metadata(Some(vec![KeyValue::new(
+            LAYOUT_KEY.to_string(),
+            layout.to_string(),
+        )]))
+        .build()
+}
+
+/// A Parquet error as an I/O error (what the writers return).
+pub(crate) fn io_error(e: impl std::fmt::Display) -> std::io::Error {
+    std::io::Error::other(format!("Parquet: {e}"))
+}
+
+/// The timestamp as Parquet's signed nanoseconds (a time past 2262 saturates).
+pub(crate) fn nanos(timestamp: Timestamp) -> i64 {
+    i64::try_from(timestamp.as_nanos()).unwrap_or(i64::MAX)
+}
+
+/// The raw columns being built.
+struct RawColumns {
+    ts: TimestampNanosecondBuilder,
+    channel: StringDictionaryBuilder<Int32Type>,
+    id: UInt32Builder,
+    extended: BooleanBuilder,
+    remote: BooleanBuilder,
+    error: BooleanBuilder,
+    fd: BooleanBuilder,
+    brs: BooleanBuilder,
+    esi: BooleanBuilder,
+    dir: StringDictionaryBuilder<Int32Type>,
+    dlc: UInt8Builder,
+    data: BinaryBuilder,
+}
+
+impl RawColumns {
+    fn new() -> Self {
+        RawColumns {
+            ts: TimestampNanosecondBuilder::with_capacity(BATCH_ROWS).with_timezone("UTC"),
+            channel: StringDictionaryBuilder::new(),
+            id: UInt32Builder::with_capacity(BATCH_ROWS),
+            extended: BooleanBuilder::with_capacity(BATCH_ROWS),
+            remote: BooleanBuilder::with_capacity(BATCH_ROWS),
+            error: BooleanBuilder::with_capacity(BATCH_ROWS),
+            fd: BooleanBuilder::with_capacity(BATCH_ROWS),
+            brs: BooleanBuilder::with_capacity(BATCH_ROWS),
+            esi: BooleanBuilder::with_capacity(BATCH_ROWS),
+            dir: StringDictionaryBuilder::new(),
+            dlc: UInt8Builder::with_capacity(BATCH_ROWS),
+            data: BinaryBuilder::with_capacity(BATCH_ROWS, BATCH_ROWS * 8),
+        }
+    }
+
+    fn push(&mut self, record: &LogRecord) {
+        let frame = &record.frame;
+        self.ts.append_value(nanos(record.timestamp));
+        self.channel.append_value(&record.interface);
+        let (id, extended) = match frame.id() {
+            Some(id) => (id.as_raw(), id.is_extended()),
+            None => (frame.socketcan_id() & 0x1FFF_FFFF, false),
+        };
+        self.id.append_value(id);
+        self.extended.append_value(extended);
+        self.remote.append_value(frame.is_remote());
+        self.error.append_value(frame.is_error());
+        self.fd.append_value(frame.is_fd());
+        let (brs, esi) = match frame {
+            Frame::Fd(f) => (f.brs(), f.esi()),
+            _ => (false, false),
+        };
+        self.brs.append_value(brs);
+        self.esi.append_value(esi);
+        match record.direction {
+            Some('T') => self.dir.append_value("tx"),
+            Some('R') => self.dir.append_value("rx"),
+            _ => self.dir.append_null(),
+        }
+        self.dlc.append_value(frame.dlc().as_raw());
+        self.data.append_value(if frame.is_remote() {
+            &[][..]
+        } else {
+            frame.data()
+        });
+    }
+
+    fn rows(&self) -> usize {
+        self.id.len()
+    }
+
+    fn finish(&mut self, schema: &SchemaRef) -> std::io::Result<RecordBatch> {
+        let columns: Vec<ArrayRef> = vec![
+            Arc::new(self.ts.finish()),
+            Arc::new(self.channel.finish()),
+            Arc::new(self.id.finish()),
+            Arc::new(self.extended.finish()),
+            Arc::new(self.remote.finish()),
+            Arc::new(self.error.finish()),
+            Arc::new(self.fd.finish()),
+            Arc::new(self.brs.finish()),
+            Arc::new(self.esi.finish()),
+            Arc::new(self.dir.finish()),
+            Arc::new(self.dlc.finish()),
+            Arc::new(self.data.finish()),
+        ];
+        RecordBatch::try_new(schema.clone(), columns).map_err(io_error)
+    }
+}
+
+/// Writes records as the raw frames' table.
+pub struct ParquetWriter<W: Write + Send> {
+    writer: ArrowWriter<W>,
+    schema: SchemaRef,
+    columns: RawColumns,
+}
+
+impl<W: Write + Send> ParquetWriter<W> {
+    /// A writer to `output` (the file's header is written at once).
+    pub fn new(output: W) -> std::io::Result<Self> {
+        let schema = raw_schema();
+        let writer = ArrowWriter::try_new(output, schema.clone(), Some(properties(RAW_LAYOUT)))
+            .map_err(io_error)?;
+        Ok(ParquetWriter {
+            writer,
+            schema,
+            columns: RawColumns::new(),
+        })
+    }
+
+    /// Write one record.
+    pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
+        self.columns.push(record);
+        if self.columns.rows() >= BATCH_ROWS {
+            self.flush_batch()?;
+        }
+        Ok(())
+    }
+
+    fn flush_batch(&mut self) -> std::io::Result<()> {
+        if self.columns.rows() > 0 {
+            let batch = self.columns.finish(&self.schema)?;
+            self.writer.write(&batch).map_err(io_error)?;
+        }
+        Ok(())
+    }
+
+    /// Write what is left and the footer; the output back.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        self.flush_batch()?;
+        self.writer.into_inner().map_err(io_error)
+    }
+}
+
+/// Reads the raw frames' table (bywire's, or any table with its columns: `ts` may be in any
+/// unit, `channel` and `dir` plain strings, and the flags left out are false).
+pub struct ParquetReader {
+    batches: ParquetRecordBatchReader,
+    pending: VecDeque<Result<LogRecord, LogError>>,
+    row: u64,
+    failed: bool,
+}
+
+impl ParquetReader {
+    /// A reader of `file` (its footer is read at once, so a file that is not Parquet fails
+    /// here).
+    pub fn open(file: File) -> Result<Self, LogError> {
+        let batches = ParquetRecordBatchReaderBuilder::try_new(file)
+            .and_then(|b| b.with_batch_size(BATCH_ROWS).build())
+            .map_err(|e| LogError::Table {
+                row: 0,
+                what: format!("not a readable Parquet file: {e}"),
+            })?;
+        Ok(ParquetReader {
+            batches,
+            pending: VecDeque::new(),
+            row: 0,
+            failed: false,
+        })
+    }
+
+    fn read_batch(&mut self, batch: &RecordBatch) -> Result<(), LogError> {
+        let first = self.row;
+        let fail = |what: String| LogError::Table { row: first, what };
+        let column = |name: &str| {
+            batch.column_by_name(name).ok_or_else(|| {
+                fail(format!(
+                    "no '{name}' column (a raw frames table has ts, channel, id, data and flags)"
+                ))
+            })
+        };
+        let ts = timestamps(column("ts")?.as_ref()).map_err(fail)?;
+        let channel = Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?;
+        let id = column("id")?
+            .as_primitive_opt::<UInt32Type>()
+            .ok_or_else(|| fail("the 'id' column is not uint32".into()))?;
+        let data = column("data")?
+            .as_binary_opt::<i32>()
+            .ok_or_else(|| fail("the 'data' column is not binary".into()))?;
+        let flag = |name: &str| -> Result<Option<&arrow_array::BooleanArray>, LogError> {
+            match batch.column_by_name(name) {
+                None => Ok(None),
+                Some(c) => c
+                    .as_boolean_opt()
+                    .map(Some)
+                    .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
+            }
+        };
+        let (extended, remote, error) = (flag("extended")?, flag("remote")?, flag("error")?);
+        let (fd, brs, esi) = (flag("fd")?, flag("brs")?, flag("esi")?);
+        let dir = match batch.column_by_name("dir") {
+            Some(c) => Some(Strings::of(c.as_ref(), "dir").map_err(fail)?),
+            None => None,
+        };
+        let dlc = match batch.column_by_name("dlc") {
+            Some(c) => Some(
+                c.as_primitive_opt::<UInt8Type>()
+                    .ok_or_else(|| fail("the 'dlc' column is not uint8".into()))?,
+            ),
+            None => None,
+        };
+        let set = |column: Option<&arrow_array::BooleanArray>, i: usize| {
+            column.is_some_and(|c| c.is_valid(i) && c.value(i))
+        };
+        for i in 0..batch.num_rows() {
+            let row = first + i as u64;
+            let at = |what: String| LogError::Table { row, what };
+            let parts = RawRow {
+                id: id.is_valid(i).then(|| id.value(i)),
+                extended: set(extended, i),
+                remote: set(remote, i),
+                error: set(error, i),
+                fd: set(fd, i),
+                brs: set(brs, i),
+                esi: set(esi, i),
+                dlc: dlc.and_then(|d| d.is_valid(i).then(|| d.value(i))),
+                data: if data.is_valid(i) { data.value(i) } else { &[] },
+            };
+            let record = match (ts.get(i).copied().flatten(), channel.get(i)) {
+                (Some(t), Some(c)) => parts.frame().map(|frame| LogRecord {
+                    timestamp: Timestamp::from_nanos(u64::try_from(t).unwrap_or(0)),
+                    interface: c.to_string(),
+                    frame,
+                    direction: match dir.as_ref().and_then(|d| d.get(i)) {
+                        Some(d) if d.eq_ignore_ascii_case("tx") => Some('T'),
+                        Some(d) if d.eq_ignore_ascii_case("rx") => Some('R'),
+                        _ => None,
+                    },
+                }),
+                _ => Err("no timestamp or no channel".to_string()),
+            };
+            self.pending.push_back(record.map_err(at));
+        }
+        self.row += batch.num_rows() as u64;
+        Ok(())
+    }
+}
+
+impl Iterator for ParquetReader {
+    type Item = Result<LogRecord, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(record) = self.pending.pop_front() {
+                return Some(record);
+            }
+            if self.failed {
+                return None;
+            }
+            match self.batches.next()? {
+                Ok(batch) => {
+                    if let Err(e) = self.read_batch(&batch) {
+                        self.failed = true;
+                        return Some(Err(e));
+                    }
+                }
+                Err(e) => {
+                    self.failed = true;
+                    return Some(Err(LogError::Table {
+                        row: self.row,
+                        what: format!("cannot read: {e}"),
+                    }));
+                }
+            }
+        }
+    }
+}
+
+/// One row's frame fields.
+struct RawRow<'a> {
+    id: Option<u32>,
+    extended: bool,
+    remote: bool,
+    error: bool,
+    fd: bool,
+    brs: bool,
+    esi: bool,
+    dlc: Option<u8>,
+    data: &'a [u8],
+}
+
+impl RawRow<'_> {
+    fn frame(&self) -> Result<Frame, String> {
+        let raw = self.id.ok_or("no identifier")?;
+        if self.error {
+            return ErrorFrame::new(raw & 0x1FFF_FFFF, self.data)
+                .map(Frame::Error)
+                .map_err(|e| e.to_string());
+        }
+        let id = if self.extended {
+            Id::extended(raw)
+        } else {
+            Id::standard(raw)
+        }
+        .map_err(|e| e.to_string())?;
+        if self.fd {
+            return FdFrame::new(id, self.data, self.brs, self.esi)
+                .map(Frame::Fd)
+                .map_err(|e| e.to_string());
+        }
+        let length = u8::try_from(self.data.len()).unwrap_or(u8::MAX);
+        let dlc = match self.dlc {
+            Some(d) => Dlc::new(d).ok_or_else(|| format!("DLC {d} (at most 15)"))?,
+            None if self.remote => Dlc::from_nibble(0),
+            None => Dlc::from_classic_len(self.data.len())
+                .ok_or_else(|| format!("{length} data bytes in a classic frame (at most 8)"))?,
+        };
+        if self.remote {
+            return Ok(Frame::remote(id, dlc));
+        }
+        ClassicFrame::with_dlc(id, dlc, self.data)
+            .map(Frame::Classic)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// A timestamp column in nanoseconds, whatever its unit.
+fn timestamps(column: &dyn Array) -> Result<Vec<Option<i64>>, String> {
+    let scale: i64 = match column.data_type() {
+        DataType::Timestamp(TimeUnit::Nanosecond, _) => 1,
+        DataType::Timestamp(TimeUnit::Microsecond, _) => 1_000,
+        DataType::Timestamp(TimeUnit::Millisecond, _) => 1_000_000,
+        DataType::Timestamp(TimeUnit::Second, _) => 1_000_000_000,
+        other => return Err(format!("the 'ts' column is {other}, not a timestamp")),
+    };
+    // Every unit's values are i64: read them through the nanosecond type's layout.
+    let data = column.to_data();
+    let values = arrow_array::PrimitiveArray::<arrow_array::types::Int64Type>::from(
+        data.into_builder()
+            .data_type(DataType::Int64)
+            .build()
+            .map_err(|e| e.to_string())?,
+    );
+    Ok(values
+        .iter()
+        .map(|v| v.and_then(|v| v.checked_mul(scale)))
+        .collect())
+}
+
+/// A string column: plain or dictionary-encoded.
+enum Strings<'a> {
+    Plain(&'a arrow_array::StringArray),
+    Dictionary(arrow_array::TypedDictionaryArray<'a, Int32Type, arrow_array::StringArray>),
+}
+
+impl<'a> Strings<'a> {
+    fn of(column: &'a dyn Array, name: &str) -> Result<Self, String> {
+        if let Some(plain) = column.as_string_opt::<i32>() {
+            return Ok(Strings::Plain(plain));
+        }
+        column
+            .as_dictionary_opt::<Int32Type>()
+            .and_then(|d| d.downcast_dict::<arrow_array::StringArray>())
+            .map(Strings::Dictionary)
+            .ok_or_else(|| format!("the '{name}' column is not strings"))
+    }
+
+    fn get(&self, i: usize) -> Option<&'a str> {
+        match self {
+            Strings::Plain(a) => a.is_valid(i).then(|| a.value(i)),
+            Strings::Dictionary(d) => d.is_valid(i).then(|| d.value(i)),
+        }
+    }
+}
