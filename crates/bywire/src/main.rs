@@ -51,7 +51,8 @@ enum Command {
         #[command(subcommand)]
         command: cmd::dbc::DbcCommand,
     },
-    /// Decode candump lines from standard input with a DBC file, like `cantools decode`.
+    /// Decode candump lines from standard input (or a log of any format) with a DBC file, like
+    /// `cantools decode`; or into CSV or a Parquet dataset.
     Decode(cmd::dbc::DecodeArgs),
     /// Print frames from one or more buses, like candump (same options, filters and output).
     Dump(cmd::dump::Args),
@@ -103,7 +104,7 @@ fn main() -> ExitCode {
         Command::Wire(args) => cmd::wire::run(&args, &mut out),
         Command::Bittiming(args) => cmd::bittiming::run(&args, &mut out),
         Command::Dbc { command } => cmd::dbc::run(&command, &mut out),
-        Command::Decode(args) => cmd::dbc::decode(&args, &mut io::stdin().lock(), &mut out),
+        Command::Decode(args) => cmd::dbc::decode(&args, io::stdin().lock(), &mut out),
         Command::Bridge(args) => cmd::bridge::run(&args, &mut out),
         Command::Vehicle(args) => cmd::vehicle::run(&args, &mut out),
         Command::Dump(args) => cmd::dump::run(&args, &mut out),

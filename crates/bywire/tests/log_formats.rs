@@ -1035,3 +1035,124 @@ for r in t.to_pylist():
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn decoded_mcap_channels_hold_cantools_values_valid_against_their_schemas() {
+    // (Foxglove, which cannot run here, plots JSON channels with a JSON Schema: the mcap and
+    // jsonschema packages check that layout instead.)
+    for file in [
+        "opendbc/opendbc__dbc__vw_mlb.dbc",
+        "opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc",
+        "cantools/tests__files__dbc__floating_point.dbc",
+    ] {
+        let dbc = PathBuf::from(common::corpus(file));
+        let dir = scratch(&format!("mcap-decoded-{}", file.replace('/', "_")));
+        let (log, bag) = (dir.join("traffic.log"), dir.join("decoded.mcap"));
+        let traffic = python(
+            &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
+            &[&dbc, Path::new("6"), Path::new("3")],
+        );
+        std::fs::write(&log, traffic).unwrap();
+        bywire(&[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            bag.to_str().unwrap(),
+            "--dbc",
+            dbc.to_str().unwrap(),
+        ]);
+        let checked = python(
+            &std::fs::read_to_string(oracle("mcap_decoded.py")).unwrap(),
+            &[&dbc, &log, &bag],
+        );
+        assert!(
+            checked.contains("valid and equal to cantools"),
+            "{file}: {checked}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[test]
+fn decode_writes_csv_and_parquet_from_any_format_as_cantools_decodes() {
+    let dbc = PathBuf::from(common::corpus("opendbc/opendbc__dbc__vw_mlb.dbc"));
+    let dir = scratch("decode-out");
+    let (log, blf, dataset) = (
+        dir.join("traffic.log"),
+        dir.join("traffic.blf"),
+        dir.join("dataset"),
+    );
+    let traffic = python(
+        &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
+        &[&dbc, Path::new("4"), Path::new("11")],
+    );
+    std::fs::write(&log, traffic).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        blf.to_str().unwrap(),
+    ]);
+    // Parquet from a BLF: the same tables as from the candump log, checked against cantools.
+    let said = bywire(&[
+        "decode",
+        dbc.to_str().unwrap(),
+        "-I",
+        blf.to_str().unwrap(),
+        "--parquet",
+        dataset.to_str().unwrap(),
+    ]);
+    assert!(said.contains("rows in"), "{said}");
+    let agreed = python(
+        &std::fs::read_to_string(oracle("parquet_decoded.py")).unwrap(),
+        &[&dbc, &log, &dataset],
+    );
+    assert!(agreed.contains("values agree"), "{agreed}");
+    // CSV from the BLF: one row per signal, values and choices as cantools gives them.
+    let csv = dir.join("decoded.csv");
+    std::fs::write(
+        &csv,
+        bywire(&[
+            "decode",
+            dbc.to_str().unwrap(),
+            "-I",
+            blf.to_str().unwrap(),
+            "--csv",
+        ]),
+    )
+    .unwrap();
+    let compared = python(
+        r##"
+import csv, sys, cantools
+db = cantools.database.load_file(sys.argv[1], strict=False, encoding="utf-8")
+expected = []
+for line in open(sys.argv[2]):
+    stamp, channel, frame = line.split()
+    ident, data = frame.split("#", 1)
+    m = db.get_message_by_frame_id(int(ident, 16))
+    payload = bytes.fromhex(data[2:] if data.startswith("#") else data)
+    try:
+        numbers = m.decode(payload, decode_choices=False)
+        named = m.decode(payload)
+    except Exception:
+        continue
+    for s in m.signals:
+        if s.name in numbers:
+            label = named[s.name]
+            choice = "" if isinstance(label, (int, float)) else str(label)
+            expected.append((stamp.strip("()"), channel, m.name, s.name, numbers[s.name], choice, s.unit or ""))
+# (cantools orders a message's signals by start bit, bywire as the DBC lists them)
+rows = sorted(csv.DictReader(open(sys.argv[3])), key=lambda r: (r["ts"], r["signal"]))
+expected.sort(key=lambda e: (e[0], e[3]))
+assert len(rows) == len(expected), (len(rows), len(expected))
+for row, (ts, channel, message, signal, value, choice, unit) in zip(rows, expected):
+    assert row["ts"][:len(ts)] == ts and row["channel"] == channel and row["message"] == message, (row, ts)
+    assert row["signal"] == signal and row["choice"] == choice and row["unit"] == unit, (row, signal, choice)
+    assert (float(row["value"]) == float(value)) and (row["value"] == str(value)), (row, value)
+print(len(rows), "rows agree")
+"##,
+        &[&dbc, &log, &csv],
+    );
+    assert!(compared.contains("rows agree"), "{compared}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

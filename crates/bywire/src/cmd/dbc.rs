@@ -52,7 +52,7 @@ pub enum DbcCommand {
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  candump -L can0 | bywire decode vehicle.dbc\n  bywire decode vehicle.dbc --json < candump-2024-01-01_120000.log\n\nReads candump's log form `(1699999999.123456) can0 123#DEADBEEF` and its screen form\n`  can0  123   [4]  DE AD BE EF`; other lines are passed through unchanged."
+    after_help = "Examples:\n  candump -L can0 | bywire decode vehicle.dbc\n  bywire decode vehicle.dbc --json < candump-2024-01-01_120000.log\n  bywire decode vehicle.dbc -I drive.blf --csv > signals.csv\n  bywire decode vehicle.dbc -I drive.blf --parquet lake --partition date\n\nReads candump's log form `(1699999999.123456) can0 123#DEADBEEF` and its screen form\n`  can0  123   [4]  DE AD BE EF`; other lines are passed through unchanged."
 )]
 pub struct DecodeArgs {
     /// The DBC file.
@@ -69,10 +69,25 @@ pub struct DecodeArgs {
     /// Fail on the first problem in the DBC file.
     #[arg(long)]
     strict: bool,
-    /// Read this log (candump, ASC, BLF, TRC or pcapng, by its content) instead of standard
-    /// input's lines; each frame is shown as a candump log line.
+    /// Read this log (candump, ASC, BLF, TRC, pcapng, MCAP or Parquet, by its content) instead
+    /// of standard input's lines; each frame is shown as a candump log line.
     #[arg(short = 'I', value_name = "FILE")]
     input: Option<PathBuf>,
+    /// Print CSV, one row per signal: ts,channel,message,signal,value,choice,unit.
+    #[arg(long, conflicts_with_all = ["json", "single_line", "parquet"])]
+    csv: bool,
+    /// Write a Parquet dataset into this new directory: a table per message, a typed column
+    /// per signal (as `log convert --dbc`).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["json", "single_line"])]
+    parquet: Option<PathBuf>,
+    /// With --parquet: partition each message's table by channel and/or UTC date.
+    #[arg(
+        long,
+        value_name = "channel|date",
+        value_delimiter = ',',
+        requires = "parquet"
+    )]
+    partition: Vec<crate::support::logs::PartitionBy>,
 }
 
 fn is_json(path: &Path) -> bool {
@@ -280,8 +295,15 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write) -> Result<()> {
+pub fn decode(
+    args: &DecodeArgs,
+    mut input: impl BufRead + 'static,
+    out: &mut impl Write,
+) -> Result<()> {
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
+    if args.csv || args.parquet.is_some() {
+        return decode_records(args, &decoder, Box::new(input), out);
+    }
     if let Some(path) = &args.input {
         // A log file of any format: every frame, shown as its candump line.
         for (name, reader) in crate::support::logs::inputs(std::slice::from_ref(path))? {
@@ -303,7 +325,7 @@ pub fn decode(args: &DecodeArgs, input: &mut impl BufRead, out: &mut impl Write)
     }
     // One line at a time, each at most a log line's size: logs of any size stream through in
     // constant memory.
-    let mut lines = bywire_log::lines::CappedLines::new(input);
+    let mut lines = bywire_log::lines::CappedLines::new(&mut input);
     while let Some(next) = lines.next_line() {
         let (number, line) = next?;
         let line = match line {
@@ -363,4 +385,74 @@ fn write_decoded(
         Some(d) => writeln!(out, "{text} ::\n{}", d.multi_line(choices, ""))?,
     }
     Ok(())
+}
+
+/// `decode --csv` and `--parquet`: the input read as a log (a file, or standard input's log
+/// lines), every frame with its time and channel.
+fn decode_records(
+    args: &DecodeArgs,
+    decoder: &Dbc,
+    stdin: Box<dyn BufRead>,
+    out: &mut impl Write,
+) -> Result<()> {
+    use crate::support::logs::{self, LogInput, Pump, Selection};
+    let (name, input) = match &args.input {
+        Some(path) => logs::input(Some(path))?,
+        None => ("standard input".to_string(), LogInput::stream(stdin)),
+    };
+    let progress =
+        crate::support::progress::Progress::new(input.position_probe().into_iter().collect());
+    let records = logs::records(&name, input, Skip::NonLogLines);
+    let everything = Selection::everything();
+    let mut pump = Pump::new(&everything, progress);
+    if let Some(dir) = &args.parquet {
+        let partitioning = bywire_log::parquet::decoded::Partitioning {
+            channel: args.partition.contains(&logs::PartitionBy::Channel),
+            date: args.partition.contains(&logs::PartitionBy::Date),
+        };
+        let notes = logs::write_dataset(dir, decoder, partitioning, &mut pump, records)?;
+        pump.progress.finish();
+        writeln!(
+            out,
+            "{} frames decoded into {}; {}",
+            pump.frames,
+            dir.display(),
+            notes.join("; ")
+        )?;
+        return Ok(());
+    }
+    writeln!(out, "ts,channel,message,signal,value,choice,unit")?;
+    let choices = !args.no_decode_choices;
+    pump.run(records, |record| {
+        let Some(decoded) = decoder.decode(&record.frame) else {
+            return Ok(());
+        };
+        let ts =
+            bywire_log::candump::timestamp_text(record.timestamp, bywire_log::Precision::Nanos);
+        let channel = csv_field(&record.interface);
+        let message = csv_field(decoded.message.display_name());
+        for signal in &decoded.signals {
+            let choice = signal.description().filter(|_| choices).unwrap_or("");
+            writeln!(
+                out,
+                "{ts},{channel},{message},{},{},{},{}",
+                csv_field(signal.signal.display_name()),
+                crate::support::signals::number_text(signal.value.physical),
+                csv_field(choice),
+                csv_field(&signal.signal.unit)
+            )?;
+        }
+        Ok(())
+    })?;
+    pump.progress.finish();
+    Ok(())
+}
+
+/// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
+fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\"")).into()
+    } else {
+        text.into()
+    }
 }

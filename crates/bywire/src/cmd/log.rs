@@ -4,20 +4,19 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::format::Format;
-use bywire_log::{FrameView, LogRecord, Precision, View};
+use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
-use crate::support::files::{write_atomically, write_dir_atomically};
-use crate::support::logs::{inputs, records, Skip};
+use crate::support::files::write_atomically;
+use crate::support::logs::{inputs, records, write_dataset, PartitionBy, Pump, Selection, Skip};
 use crate::support::progress::Progress;
 use bywire_log::mcap::DecodedMcapWriter;
-use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
+use bywire_log::parquet::decoded::Partitioning;
 
 #[derive(clap::Subcommand)]
 pub enum LogCommand {
@@ -42,8 +41,8 @@ Every line is checked; a malformed one is an error naming its file, line and col
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
     },
-    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng, MCAP),
-    /// frame for frame.
+    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng, MCAP,
+    /// Parquet), frame for frame, or decode it with a DBC into Parquet tables or MCAP.
     #[command(after_help = "Examples:
   bywire log convert drive.log drive.asc
   bywire log convert vector.asc drive.log
@@ -51,13 +50,19 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
   bywire log convert vector.blf drive.log
   bywire log convert drive.log drive.mcap         (ROS 2's can_msgs/msg/Frame on /from_can_bus)
+  bywire log convert vector.blf frames.parquet    (one row per frame: ts, channel, id, flags, data)
+  bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
+                                                  (a Parquet table per message, typed signals)
+  bywire log convert drive.log drive.mcap --dbc vehicle.dbc   (+ JSON channels for Foxglove)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
 
 Several inputs are merged by time (streaming: one frame of each held). The input's format is
 sniffed from its content, the output's taken from its extension (.log
-or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mcap: MCAP)
-unless --format names it. ASC channels and
+or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mcap: MCAP;
+.parquet: Parquet) unless --format names it; with --dbc, an output without a known extension is
+a new directory for the decoded Parquet dataset (message=NAME/[channel=C/][date=D/]part-N.parquet).
+A progress bar shows on a terminal. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
 can{N-1}; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
 back as a bus error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
@@ -66,8 +71,8 @@ conversion leaves no half-written file.")]
         /// The logs to read, merged by time (`-`: standard input), and last the file to write.
         #[arg(required = true, num_args = 2.., value_name = "FILE")]
         files: Vec<PathBuf>,
-        /// The output format: candump, asc, blf, trc, pcapng or mcap (default: from the output's
-        /// extension).
+        /// The output format: candump, asc, blf, trc, pcapng, mcap or parquet (default: from the
+        /// output's extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
         /// Keep only these channels (interfaces), renamed where given as FROM=TO.
@@ -155,57 +160,6 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
     }
 }
 
-/// A partition of a decoded Parquet dataset.
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PartitionBy {
-    /// A directory per channel.
-    Channel,
-    /// A directory per UTC day.
-    Date,
-}
-
-/// What `log convert` keeps: channels (renamed) and a time range from the first frame.
-struct Selection {
-    /// FROM → TO; empty: every channel as it is.
-    channels: BTreeMap<String, String>,
-    from: Duration,
-    to: Option<Duration>,
-}
-
-impl Selection {
-    fn new(channels: &[String], from: Option<f64>, to: Option<f64>) -> Result<Selection> {
-        let mut map = BTreeMap::new();
-        for text in channels {
-            let (from, to) = text.split_once('=').unwrap_or((text, text));
-            if from.is_empty() || to.is_empty() {
-                return Err(anyhow!("--channel '{text}': expected FROM or FROM=TO"));
-            }
-            map.insert(from.to_string(), to.to_string());
-        }
-        if let (Some(from), Some(to)) = (from, to) {
-            if to < from {
-                return Err(anyhow!("--to {to} is before --from {from}"));
-            }
-        }
-        Ok(Selection {
-            channels: map,
-            from: Duration::from_secs_f64(from.unwrap_or(0.0)),
-            to: to.map(Duration::from_secs_f64),
-        })
-    }
-
-    /// The record as it is written (renamed), or `None` to leave it out.
-    fn keep(&self, mut record: LogRecord, since_first: Duration) -> Option<LogRecord> {
-        if since_first < self.from || self.to.is_some_and(|to| since_first > to) {
-            return None;
-        }
-        if !self.channels.is_empty() {
-            record.interface = self.channels.get(&record.interface)?.clone();
-        }
-        Some(record)
-    }
-}
-
 /// What `log convert` writes besides the format: decoded tables or channels with a DBC.
 struct Decoding<'a> {
     dbc: Option<&'a Path>,
@@ -265,43 +219,19 @@ fn convert(
         .zip(&names)
         .map(|((_, reader), name)| records(name, reader, Skip::Unreadable))
         .collect();
-    let mut pump = Pump {
-        selection,
-        progress,
-        first: None,
-        frames: 0,
-        left_out: 0,
-    };
+    let mut pump = Pump::new(selection, progress);
     let cannot_write = || format!("cannot write {}", output.display());
     let mut unsupported = 0;
     let mut notes = Vec::new();
     match (&decoder, format) {
         (Some(decoder), Format::Parquet) => {
-            let summary = write_dir_atomically(output, |tmp| {
-                let mut dataset = DecodedDataset::create(tmp, decoder, decoding.partitioning)
-                    .with_context(cannot_write)?;
-                pump.run(bywire_log::merge::merge(readers), |r| {
-                    dataset.write(r).with_context(cannot_write)
-                })?;
-                dataset.finish().with_context(cannot_write)
-            })?;
-            let rows: u64 = summary.rows.values().sum();
-            notes.push(format!(
-                "{rows} rows in {} tables, {} files",
-                summary.rows.len(),
-                summary.files.len()
-            ));
-            if summary.unknown > 0 {
-                notes.push(format!(
-                    "{} frames of no message in the DBC",
-                    summary.unknown
-                ));
-            }
-            for (message, (count, why)) in &summary.undecodable {
-                notes.push(format!(
-                    "{count} {message} frames not decoded (the first: {why})"
-                ));
-            }
+            notes = write_dataset(
+                output,
+                decoder,
+                decoding.partitioning,
+                &mut pump,
+                bywire_log::merge::merge(readers),
+            )?;
         }
         (Some(decoder), _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
@@ -365,43 +295,6 @@ fn convert(
     }
     writeln!(out)?;
     Ok(())
-}
-
-/// Records from the inputs to a writer: the selection applied, progress shown, Ctrl-C obeyed
-/// (an interrupted conversion is an error, so nothing half-written is left).
-struct Pump<'a> {
-    selection: &'a Selection,
-    progress: Progress,
-    first: Option<u64>,
-    frames: u64,
-    left_out: u64,
-}
-
-impl Pump<'_> {
-    fn run(
-        &mut self,
-        records: impl Iterator<Item = Result<LogRecord>>,
-        mut write: impl FnMut(&LogRecord) -> Result<()>,
-    ) -> Result<()> {
-        let stop = crate::interrupt_flag();
-        for record in records {
-            if stop.load(std::sync::atomic::Ordering::Relaxed) {
-                return Err(anyhow!("interrupted: nothing written"));
-            }
-            let record = record?;
-            self.progress.frame();
-            let at = record.timestamp.as_nanos();
-            let since_first =
-                Duration::from_nanos(at.saturating_sub(*self.first.get_or_insert(at)));
-            let Some(record) = self.selection.keep(record, since_first) else {
-                self.left_out += 1;
-                continue;
-            };
-            write(&record)?;
-            self.frames += 1;
-        }
-        Ok(())
-    }
 }
 
 /// The named files, or standard input when the only input is `-`.

@@ -6,7 +6,15 @@ use std::fs::File;
 use std::io::{self, BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
+use std::collections::BTreeMap;
+use std::time::Duration;
+
 use anyhow::{anyhow, Context, Result};
+use bywire_dbc::decoder::Decoder;
+use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
+
+use crate::support::files::write_dir_atomically;
+use crate::support::progress::Progress;
 use bywire_log::format::Format;
 use bywire_log::{LogError, LogErrorKind, LogRecord, Reader};
 
@@ -17,6 +25,11 @@ pub struct LogInput {
 }
 
 impl LogInput {
+    /// A stream that is not a file (standard input, already opened).
+    pub fn stream(bytes: Box<dyn BufRead>) -> LogInput {
+        LogInput { bytes, file: None }
+    }
+
     /// A handle on the file that shares its read position (for a progress bar).
     pub fn position_probe(&self) -> Option<File> {
         self.file.as_ref().and_then(|f| f.try_clone().ok())
@@ -101,4 +114,151 @@ pub fn records<'a>(
         }
         other => Some(other.map_err(|e| anyhow!("{name}: {e}"))),
     })
+}
+
+/// What a conversion keeps: channels (renamed) and a time range from the first frame.
+pub struct Selection {
+    /// FROM → TO; empty: every channel as it is.
+    channels: BTreeMap<String, String>,
+    from: Duration,
+    to: Option<Duration>,
+}
+
+impl Selection {
+    /// Every record, as it is.
+    pub fn everything() -> Selection {
+        Selection {
+            channels: BTreeMap::new(),
+            from: Duration::ZERO,
+            to: None,
+        }
+    }
+
+    pub fn new(channels: &[String], from: Option<f64>, to: Option<f64>) -> Result<Selection> {
+        let mut map = BTreeMap::new();
+        for text in channels {
+            let (from, to) = text.split_once('=').unwrap_or((text, text));
+            if from.is_empty() || to.is_empty() {
+                return Err(anyhow!("--channel '{text}': expected FROM or FROM=TO"));
+            }
+            map.insert(from.to_string(), to.to_string());
+        }
+        if let (Some(from), Some(to)) = (from, to) {
+            if to < from {
+                return Err(anyhow!("--to {to} is before --from {from}"));
+            }
+        }
+        Ok(Selection {
+            channels: map,
+            from: Duration::from_secs_f64(from.unwrap_or(0.0)),
+            to: to.map(Duration::from_secs_f64),
+        })
+    }
+
+    /// The record as it is written (renamed), or `None` to leave it out.
+    fn keep(&self, mut record: LogRecord, since_first: Duration) -> Option<LogRecord> {
+        if since_first < self.from || self.to.is_some_and(|to| since_first > to) {
+            return None;
+        }
+        if !self.channels.is_empty() {
+            record.interface = self.channels.get(&record.interface)?.clone();
+        }
+        Some(record)
+    }
+}
+
+/// Records from the inputs to a writer: the selection applied, progress shown, Ctrl-C obeyed
+/// (an interrupted conversion is an error, so nothing half-written is left).
+pub struct Pump<'a> {
+    selection: &'a Selection,
+    /// The progress bar.
+    pub progress: Progress,
+    first: Option<u64>,
+    /// Records written.
+    pub frames: u64,
+    /// Records the selection left out.
+    pub left_out: u64,
+}
+
+impl<'a> Pump<'a> {
+    /// A pump applying `selection`, showing `progress`.
+    pub fn new(selection: &'a Selection, progress: Progress) -> Self {
+        Pump {
+            selection,
+            progress,
+            first: None,
+            frames: 0,
+            left_out: 0,
+        }
+    }
+
+    pub fn run(
+        &mut self,
+        records: impl Iterator<Item = Result<LogRecord>>,
+        mut write: impl FnMut(&LogRecord) -> Result<()>,
+    ) -> Result<()> {
+        let stop = crate::interrupt_flag();
+        for record in records {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(anyhow!("interrupted: nothing written"));
+            }
+            let record = record?;
+            self.progress.frame();
+            let at = record.timestamp.as_nanos();
+            let since_first =
+                Duration::from_nanos(at.saturating_sub(*self.first.get_or_insert(at)));
+            let Some(record) = self.selection.keep(record, since_first) else {
+                self.left_out += 1;
+                continue;
+            };
+            write(&record)?;
+            self.frames += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Decode the records into a Parquet dataset at `output` (made whole or not at all); notes on
+/// what it holds and what could not be decoded.
+pub fn write_dataset(
+    output: &Path,
+    decoder: &Decoder,
+    partitioning: Partitioning,
+    pump: &mut Pump<'_>,
+    records: impl Iterator<Item = Result<LogRecord>>,
+) -> Result<Vec<String>> {
+    let cannot_write = || format!("cannot write {}", output.display());
+    let summary = write_dir_atomically(output, |tmp| {
+        let mut dataset =
+            DecodedDataset::create(tmp, decoder, partitioning).with_context(cannot_write)?;
+        pump.run(records, |r| dataset.write(r).with_context(cannot_write))?;
+        dataset.finish().with_context(cannot_write)
+    })?;
+    let rows: u64 = summary.rows.values().sum();
+    let mut notes = vec![format!(
+        "{rows} rows in {} tables, {} files",
+        summary.rows.len(),
+        summary.files.len()
+    )];
+    if summary.unknown > 0 {
+        notes.push(format!(
+            "{} frames of no message in the DBC",
+            summary.unknown
+        ));
+    }
+    for (message, (count, why)) in &summary.undecodable {
+        notes.push(format!(
+            "{count} {message} frames not decoded (the first: {why})"
+        ));
+    }
+    Ok(notes)
+}
+
+/// A partition of a decoded Parquet dataset.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PartitionBy {
+    /// A directory per channel.
+    Channel,
+    /// A directory per UTC day.
+    Date,
 }
