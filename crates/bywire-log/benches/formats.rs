@@ -55,6 +55,21 @@ fn formats(c: &mut Criterion) {
             b.iter(|| write(format, &records))
         });
         let bytes = write(format, &records);
+        if format == Format::Parquet {
+            // Parquet is read from a file (its index is at its end).
+            let path =
+                std::env::temp_dir().join(format!("bywire-bench-{}.parquet", std::process::id()));
+            std::fs::write(&path, &bytes).unwrap();
+            group.bench_function(format!("read {name}"), |b| {
+                b.iter(|| {
+                    format
+                        .file_reader(std::fs::File::open(&path).unwrap())
+                        .count()
+                })
+            });
+            std::fs::remove_file(&path).unwrap();
+            continue;
+        }
         group.bench_function(format!("read {name}"), |b| {
             b.iter(|| format.reader(bytes.as_slice()).count())
         });

@@ -1156,3 +1156,56 @@ print(len(rows), "rows agree")
     assert!(compared.contains("rows agree"), "{compared}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_readmes_pandas_walk_through_runs_as_written() {
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
+            .unwrap();
+    let start = readme
+        .find("<!-- walkthrough: parquet -->\n```python\n")
+        .unwrap();
+    let script = &readme[start..];
+    let script = &script[script.find("```python\n").unwrap() + 10
+        ..script.find("```\n<!-- end walkthrough -->").unwrap()];
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../bywire-tug/dbc/reference-tug.dbc");
+    let dir = scratch("walkthrough");
+    let traffic = python(
+        &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
+        &[&dbc, Path::new("50"), Path::new("5")],
+    );
+    std::fs::write(dir.join("drive.log"), traffic).unwrap();
+    let at = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    bywire(&["log", "convert", &at("drive.log"), &at("drive.blf")]);
+    // The README's commands, as written.
+    bywire(&[
+        "log",
+        "convert",
+        &at("drive.blf"),
+        &at("drive-lake"),
+        "--dbc",
+        dbc.to_str().unwrap(),
+        "--partition",
+        "channel,date",
+    ]);
+    bywire(&["log", "convert", &at("drive.blf"), &at("frames.parquet")]);
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let printed = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{printed}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        printed.contains("VelocityActual")
+            && printed.contains("ControlMode_choice")
+            && printed.contains("2023-11-14"),
+        "{printed}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

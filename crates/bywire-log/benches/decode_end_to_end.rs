@@ -1,0 +1,82 @@
+//! The data engineer's path end to end: a candump log of a real vehicle DBC's traffic (Ford's
+//! powertrain bus, 331 messages, random payloads) read, every signal decoded, and written as
+//! the decoded Parquet dataset (a table per message, zstd). The peer figures (`python -m
+//! cantools decode`) come from running it on the same log; see the project's notes.
+#![allow(missing_docs, clippy::unwrap_used, clippy::indexing_slicing)]
+
+use bywire_dbc::decoder::Decoder;
+use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+
+const FRAMES: u64 = 200_000;
+const DBC: &str = "../../../shared/corpus/dbc/opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc";
+
+/// The traffic as candump log text: each message in turn, payloads from a fixed generator.
+fn traffic(decoder: &Decoder) -> String {
+    let messages = &decoder.database().messages;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut text = String::new();
+    for i in 0..FRAMES {
+        let message = &messages[usize::try_from(i).unwrap() % messages.len()];
+        let nanos = 1_700_000_000_000_000_000 + i * 137_000;
+        let ident = if message.extended {
+            format!("{:08X}", message.id)
+        } else {
+            format!("{:03X}", message.id)
+        };
+        let separator = if message.size > 8 { "##1" } else { "#" };
+        let mut data = String::new();
+        for _ in 0..message.size {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            data.push_str(&format!("{:02X}", state & 0xFF));
+        }
+        text.push_str(&format!(
+            "({}.{:06}) can{} {ident}{separator}{data}\n",
+            nanos / 1_000_000_000,
+            nanos % 1_000_000_000 / 1000,
+            i % 2
+        ));
+    }
+    text
+}
+
+fn end_to_end(c: &mut Criterion) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(DBC);
+    let (db, _) =
+        bywire_dbc::parse(&std::fs::read(path).unwrap(), bywire_dbc::Mode::Lenient).unwrap();
+    let decoder = Decoder::new(db);
+    let log = traffic(&decoder);
+    let out = std::env::temp_dir().join(format!("bywire-bench-dataset-{}", std::process::id()));
+    let mut group = c.benchmark_group("decode 200,000 frames of a vehicle DBC");
+    group.throughput(Throughput::Elements(FRAMES));
+    group.sample_size(10);
+    group.bench_function("candump to decoded Parquet", |b| {
+        b.iter(|| {
+            let _ = std::fs::remove_dir_all(&out);
+            let mut dataset =
+                DecodedDataset::create(&out, &decoder, Partitioning::default()).unwrap();
+            for record in bywire_log::Reader::new(log.as_bytes()) {
+                dataset.write(&record.unwrap()).unwrap();
+            }
+            dataset.finish().unwrap()
+        })
+    });
+    group.bench_function("candump read and decoded (no output)", |b| {
+        b.iter(|| {
+            let mut signals = 0usize;
+            for record in bywire_log::Reader::new(log.as_bytes()) {
+                if let Some(decoded) = decoder.decode(&record.unwrap().frame) {
+                    signals += decoded.signals.len();
+                }
+            }
+            signals
+        })
+    });
+    group.finish();
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+criterion_group!(benches, end_to_end);
+criterion_main!(benches);
