@@ -8,7 +8,7 @@ use bywire_dbc::decoder::Decoder;
 use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-const FRAMES: u64 = 200_000;
+const FRAMES: u64 = 1_000_000;
 const DBC: &str = "../../../shared/corpus/dbc/opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc";
 
 /// The traffic as candump log text: each message in turn, payloads from a fixed generator.
@@ -49,7 +49,7 @@ fn end_to_end(c: &mut Criterion) {
     let decoder = Decoder::new(db);
     let log = traffic(&decoder);
     let out = std::env::temp_dir().join(format!("bywire-bench-dataset-{}", std::process::id()));
-    let mut group = c.benchmark_group("decode 200,000 frames of a vehicle DBC");
+    let mut group = c.benchmark_group("decode 1,000,000 frames of a vehicle DBC");
     group.throughput(Throughput::Elements(FRAMES));
     group.sample_size(10);
     group.bench_function("candump to decoded Parquet", |b| {

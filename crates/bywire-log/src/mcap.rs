@@ -137,8 +137,19 @@ pub fn decode_frame(cdr: &[u8]) -> Result<(Timestamp, String, Frame), String> {
 
 /// Reads the CAN frames of an MCAP file: the `can_msgs/msg/Frame` messages of every channel,
 /// streaming (bounded by the record length limit); other messages are passed over.
+///
+/// The `mcap` crate's `LinearReader` frames the records (and checks chunk headers), but the
+/// records are parsed here: its record parser reserves whatever a string's length prefix says
+/// before checking it against the record (4 GiB for a crafted 70-byte file, found by fuzzing),
+/// so only the three records a CAN log needs are read, each length checked against its record.
 pub struct McapReader<R> {
-    messages: ::mcap::io::MessageReader<R>,
+    input: R,
+    reader: ::mcap::sans_io::LinearReader,
+    /// Schema id → whether it is `can_msgs/msg/Frame` (ros2msg).
+    schemas: HashMap<u16, bool>,
+    /// Channel id → (topic, whether its messages are CAN frames in CDR).
+    channels: HashMap<u16, (String, bool)>,
+    offset: u64,
     failed: bool,
 }
 
@@ -148,9 +159,46 @@ impl<R: Read> McapReader<R> {
         let options =
             ::mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LIMIT);
         McapReader {
-            messages: ::mcap::io::MessageReader::new_with_options(input, options),
+            input,
+            reader: ::mcap::sans_io::LinearReader::new_with_options(options),
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            offset: 0,
             failed: false,
         }
+    }
+
+    fn fail(&mut self, what: String) -> Option<Result<LogRecord, LogError>> {
+        self.failed = true;
+        Some(Err(LogError::Binary {
+            offset: self.offset,
+            what,
+        }))
+    }
+}
+
+/// A record's fields, read in order with every length checked against what is left.
+struct Fields<'a>(&'a [u8]);
+
+impl<'a> Fields<'a> {
+    fn bytes(&mut self, n: usize) -> Option<&'a [u8]> {
+        let (head, rest) = (self.0.get(..n)?, self.0.get(n..)?);
+        self.0 = rest;
+        Some(head)
+    }
+    fn u16(&mut self) -> Option<u16> {
+        Some(u16::from_le_bytes(self.bytes(2)?.try_into().ok()?))
+    }
+    fn u32(&mut self) -> Option<u32> {
+        Some(u32::from_le_bytes(self.bytes(4)?.try_into().ok()?))
+    }
+    fn u64(&mut self) -> Option<u64> {
+        Some(u64::from_le_bytes(self.bytes(8)?.try_into().ok()?))
+    }
+    /// A length-prefixed string (lossy: names are only compared).
+    fn string(&mut self) -> Option<std::borrow::Cow<'a, str>> {
+        let length = usize::try_from(self.u32()?).ok()?;
+        Some(String::from_utf8_lossy(self.bytes(length)?))
     }
 }
 
@@ -158,52 +206,88 @@ impl<R: Read> Iterator for McapReader<R> {
     type Item = Result<LogRecord, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        if self.failed {
-            return None;
-        }
-        // Bounded by the file's messages.
-        loop {
-            let message = match self.messages.next()? {
-                Ok(message) => message,
+        // Bounded by the file's records; each read request is bounded by the record limit.
+        while !self.failed {
+            let event = match self.reader.next_event()? {
+                Ok(event) => event,
                 Err(e) => {
-                    self.failed = true;
                     let what = match e {
                         ::mcap::McapError::UnsupportedCompression(codec) => format!(
                             "MCAP chunks compressed with {codec}: this build reads uncompressed MCAP (write bags with compression none, or recompress with `mcap convert`)"
                         ),
                         other => format!("MCAP: {other}"),
                     };
-                    return Some(Err(LogError::Binary { offset: 0, what }));
+                    return self.fail(what);
                 }
             };
-            let is_frame = message
-                .channel
-                .schema
-                .as_ref()
-                .is_some_and(|s| s.name == SCHEMA_NAME);
-            if !is_frame || message.channel.message_encoding != "cdr" {
-                continue;
+            let (opcode, data) = match event {
+                ::mcap::sans_io::LinearReadEvent::ReadRequest(need) => {
+                    let read = loop {
+                        match self.input.read(self.reader.insert(need)) {
+                            Ok(n) => break n,
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                            Err(e) => return self.fail(format!("cannot read: {e}")),
+                        }
+                    };
+                    self.offset += read as u64;
+                    self.reader.notify_read(read);
+                    continue;
+                }
+                ::mcap::sans_io::LinearReadEvent::Record { opcode, data } => (opcode, data),
+            };
+            let mut fields = Fields(data);
+            match opcode {
+                ::mcap::records::op::SCHEMA => {
+                    let parsed = (|| Some((fields.u16()?, fields.string()?, fields.string()?)))();
+                    let Some((id, name, encoding)) = parsed else {
+                        return self.fail("MCAP: a schema record shorter than its fields".into());
+                    };
+                    let is_frame = name == SCHEMA_NAME && encoding == "ros2msg";
+                    self.schemas.insert(id, is_frame);
+                }
+                ::mcap::records::op::CHANNEL => {
+                    let parsed = (|| {
+                        let (id, schema) = (fields.u16()?, fields.u16()?);
+                        Some((id, schema, fields.string()?, fields.string()?))
+                    })();
+                    let Some((id, schema, topic, encoding)) = parsed else {
+                        return self.fail("MCAP: a channel record shorter than its fields".into());
+                    };
+                    let is_frame = encoding == "cdr" && self.schemas.get(&schema) == Some(&true);
+                    self.channels.insert(id, (topic.into_owned(), is_frame));
+                }
+                ::mcap::records::op::MESSAGE => {
+                    let parsed =
+                        (|| Some((fields.u16()?, fields.u32()?, fields.u64()?, fields.u64()?)))();
+                    let Some((channel, sequence, _, _)) = parsed else {
+                        return self.fail("MCAP: a message record shorter than its header".into());
+                    };
+                    let Some((topic, true)) = self.channels.get(&channel) else {
+                        continue;
+                    };
+                    return Some(match decode_frame(fields.0) {
+                        Ok((timestamp, frame_id, frame)) => Ok(LogRecord {
+                            timestamp,
+                            interface: if frame_id.is_empty() {
+                                "can0".into()
+                            } else {
+                                frame_id
+                            },
+                            frame,
+                            direction: None,
+                        }),
+                        Err(what) => Err(LogError::Binary {
+                            offset: self.offset,
+                            what: format!("MCAP message {sequence} on {topic}: {what}"),
+                        }),
+                    });
+                }
+                // The data end: the summary after it repeats schemas and channels.
+                ::mcap::records::op::DATA_END => return None,
+                _ => {}
             }
-            return Some(match decode_frame(&message.data) {
-                Ok((timestamp, frame_id, frame)) => Ok(LogRecord {
-                    timestamp,
-                    interface: if frame_id.is_empty() {
-                        "can0".into()
-                    } else {
-                        frame_id
-                    },
-                    frame,
-                    direction: None,
-                }),
-                Err(what) => Err(LogError::Binary {
-                    offset: 0,
-                    what: format!(
-                        "MCAP message {} on {}: {what}",
-                        message.sequence, message.channel.topic
-                    ),
-                }),
-            });
         }
+        None
     }
 }
 
@@ -508,6 +592,22 @@ mod tests {
         );
         assert!(encode_frame(&"123##1AA".parse().unwrap(), Timestamp::ZERO, "x").is_none());
         assert!(decode_frame(&cdr[..20]).is_err());
+    }
+
+    #[test]
+    fn a_string_longer_than_its_record_is_an_error_not_a_4_gib_reservation() {
+        // Found by fuzzing: a header record whose profile string claims 4 GiB.
+        let mut file = b"\x89MCAP0\r\n".to_vec();
+        file.extend_from_slice(&[
+            0x01, 8, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0, 0, 0,
+        ]);
+        file.extend_from_slice(&[0x03, 12, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0xFF, 0xFF, 0xFF, 0x0F]);
+        file.extend_from_slice(&[0; 8]);
+        let results: Vec<_> = McapReader::new(file.as_slice()).collect();
+        assert!(
+            matches!(results.as_slice(), [Err(LogError::Binary { .. })]),
+            "{results:?}"
+        );
     }
 
     #[test]

@@ -284,6 +284,8 @@ pub struct DecodedDataset<'a> {
     /// Files started per partition (the next file's number).
     parts: HashMap<PartitionKey, u32>,
     decoded: Vec<Option<Decoded>>,
+    /// Rows written, by message index (named in the summary at the end).
+    rows: Vec<u64>,
     summary: DatasetSummary,
     clock: u64,
 }
@@ -304,6 +306,7 @@ impl<'a> DecodedDataset<'a> {
             open: HashMap::new(),
             parts: HashMap::new(),
             decoded: Vec::new(),
+            rows: vec![0; decoder.database().messages.len()],
             summary: DatasetSummary::default(),
             clock: 0,
         })
@@ -361,11 +364,9 @@ impl<'a> DecodedDataset<'a> {
                 table.writer.flush().map_err(io_error)?;
             }
         }
-        *self
-            .summary
-            .rows
-            .entry(message.display_name().to_string())
-            .or_default() += 1;
+        if let Some(rows) = self.rows.get_mut(index) {
+            *rows += 1;
+        }
         Ok(())
     }
 
@@ -419,6 +420,16 @@ impl<'a> DecodedDataset<'a> {
         open.sort_by(|a, b| a.0.cmp(&b.0));
         for (_, table) in open {
             close(table)?;
+        }
+        let messages = &self.decoder.database().messages;
+        for (message, rows) in messages.iter().zip(&self.rows) {
+            if *rows > 0 {
+                *self
+                    .summary
+                    .rows
+                    .entry(message.display_name().to_string())
+                    .or_default() += rows;
+            }
         }
         Ok(self.summary)
     }

@@ -82,10 +82,13 @@ pub fn raw_schema() -> SchemaRef {
 }
 
 /// Writer properties: zstd, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata.
+/// Dictionary encoding is off for the decoded tables: measured, it cost a third of the
+/// throughput on signal values, and zstd already folds repeated values.
 pub(crate) fn properties(layout: &str) -> WriterProperties {
     WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::default()))
         .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .set_dictionary_enabled(layout == RAW_LAYOUT)
         .set_key_value_metadata(Some(vec![KeyValue::new(
             LAYOUT_KEY.to_string(),
             layout.to_string(),
