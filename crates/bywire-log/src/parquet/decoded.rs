@@ -31,17 +31,15 @@ use std::sync::Arc;
 
 use ::parquet::arrow::ArrowWriter;
 use arrow_array::builder::{
-    Float64Builder, Int64Builder, StringDictionaryBuilder, TimestampNanosecondBuilder,
-    UInt64Builder,
+    Float64Builder, Int64Builder, TimestampNanosecondBuilder, UInt64Builder,
 };
-use arrow_array::types::Int32Type;
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
 use bywire_dbc::codec::{whole_scaling, Decoded, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
-use super::{dictionary_type, io_error, nanos, properties, timestamp_type};
+use super::{dictionary_type, io_error, nanos, properties, timestamp_type, Labels};
 use crate::calendar;
 use crate::candump::LogRecord;
 
@@ -167,10 +165,10 @@ impl ValueColumn {
 struct MessageColumns {
     schema: SchemaRef,
     ts: TimestampNanosecondBuilder,
-    channel: Option<StringDictionaryBuilder<Int32Type>>,
+    channel: Option<Labels>,
     values: Vec<ValueColumn>,
     /// Per signal, its description column when it has value descriptions.
-    choices: Vec<Option<StringDictionaryBuilder<Int32Type>>>,
+    choices: Vec<Option<Labels>>,
     rows: usize,
 }
 
@@ -195,12 +193,15 @@ impl MessageColumns {
         MessageColumns {
             schema: Arc::new(Schema::new(fields)),
             ts: TimestampNanosecondBuilder::with_capacity(TABLE_BATCH).with_timezone("UTC"),
-            channel: with_channel.then(StringDictionaryBuilder::new),
+            channel: with_channel.then(|| Labels::new(Vec::new())),
             values: kinds.into_iter().map(ValueColumn::new).collect(),
             choices: message
                 .signals
                 .iter()
-                .map(|s| (!s.value_descriptions.is_empty()).then(StringDictionaryBuilder::new))
+                .map(|s| {
+                    let labels = s.value_descriptions.iter().map(|(_, l)| l.clone());
+                    (!s.value_descriptions.is_empty()).then(|| Labels::new(labels.collect()))
+                })
                 .collect(),
             rows: 0,
         }
@@ -209,18 +210,23 @@ impl MessageColumns {
     fn push(&mut self, message: &Message, record: &LogRecord, decoded: &[Option<Decoded>]) {
         self.ts.append_value(nanos(record.timestamp));
         if let Some(channel) = &mut self.channel {
-            channel.append_value(&record.interface);
+            channel.push_text(&record.interface);
         }
         let columns = self.values.iter_mut().zip(&mut self.choices);
         for ((signal, value), (column, choice)) in message.signals.iter().zip(decoded).zip(columns)
         {
             column.push(value.map(|v| v.physical));
             if let Some(choice) = choice {
-                let described = value.map(|value| SignalValue { signal, value });
-                match described.as_ref().and_then(SignalValue::description) {
-                    Some(text) => choice.append_value(text),
-                    None => choice.append_null(),
-                }
+                // The description's index among the signal's value descriptions.
+                let key = value
+                    .and_then(|value| SignalValue { signal, value }.description_key())
+                    .and_then(|key| {
+                        signal
+                            .value_descriptions
+                            .iter()
+                            .position(|(k, _)| *k == key)
+                    });
+                choice.push_key(key);
             }
         }
         self.rows += 1;
@@ -229,12 +235,12 @@ impl MessageColumns {
     fn finish(&mut self) -> std::io::Result<RecordBatch> {
         let mut columns: Vec<ArrayRef> = vec![Arc::new(self.ts.finish())];
         if let Some(channel) = &mut self.channel {
-            columns.push(Arc::new(channel.finish()));
+            columns.push(channel.finish()?);
         }
         for (value, choice) in self.values.iter_mut().zip(&mut self.choices) {
             columns.push(value.finish());
             if let Some(choice) = choice {
-                columns.push(Arc::new(choice.finish()));
+                columns.push(choice.finish()?);
             }
         }
         self.rows = 0;
