@@ -145,7 +145,7 @@ pub fn decode_frame(cdr: &[u8]) -> Result<(Timestamp, String, Frame), String> {
 pub struct McapReader<R> {
     input: R,
     reader: ::mcap::sans_io::LinearReader,
-    /// Schema id → whether it is `can_msgs/msg/Frame` (ros2msg).
+    /// Schema id → whether it is `can_msgs/msg/Frame`.
     schemas: HashMap<u16, bool>,
     /// Channel id → (topic, whether its messages are CAN frames in CDR).
     channels: HashMap<u16, (String, bool)>,
@@ -242,7 +242,8 @@ impl<R: Read> Iterator for McapReader<R> {
                     let Some((id, name, encoding)) = parsed else {
                         return self.fail("MCAP: a schema record shorter than its fields".into());
                     };
-                    let is_frame = name == SCHEMA_NAME && encoding == "ros2msg";
+                    // (rosbag2 stores the definition as ros2msg or ros2idl; the CDR is the same.)
+                    let is_frame = name == SCHEMA_NAME && encoding.starts_with("ros2");
                     self.schemas.insert(id, is_frame);
                 }
                 ::mcap::records::op::CHANNEL => {
