@@ -20,7 +20,7 @@ use std::collections::HashMap;
 
 use bywire_core::Frame;
 
-use crate::codec::{Decoded, MessageCodec};
+use crate::codec::{DecodeError, Decoded, MessageCodec};
 use crate::{Database, Message, Signal, ValueType};
 
 /// One signal of a decoded frame.
@@ -122,22 +122,37 @@ impl Decoder {
 
     /// The message `frame` is (its index in the database, the message and its codec); `None`
     /// when no message has its identifier (or it is an error frame).
-    pub fn lookup(&self, frame: &Frame) -> Option<(usize, &Message, &MessageCodec)> {
+    fn lookup(&self, frame: &Frame) -> Option<(usize, &Message, &MessageCodec)> {
         let id = frame.id()?;
         let index = *self.by_id.get(&(id.as_raw(), id.is_extended()))?;
         Some((index, self.db.messages.get(index)?, self.codecs.get(index)?))
     }
 
-    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
-    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
-        let (_, message, codec) = self.lookup(frame)?;
-        let mut values = vec![None; codec.signal_count()];
+    /// Decode `frame` into `values`, one slot per signal of its message (resized here, so a
+    /// caller that keeps the vector decodes without allocating; a remote frame decodes as no
+    /// data): the message's index in the database, the message, and whether it decoded.
+    /// `None` when no message has its identifier (or it is an error frame).
+    pub fn decode_into(
+        &self,
+        frame: &Frame,
+        values: &mut Vec<Option<Decoded>>,
+    ) -> Option<(usize, &Message, Result<(), DecodeError>)> {
+        let (index, message, codec) = self.lookup(frame)?;
+        values.clear();
+        values.resize(codec.signal_count(), None);
         let data = if frame.is_remote() {
             &[][..]
         } else {
             frame.data()
         };
-        let error = codec.decode(data, &mut values).err().map(|e| e.to_string());
+        Some((index, message, codec.decode(data, values)))
+    }
+
+    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
+    pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
+        let mut values = Vec::new();
+        let (_, message, decoded) = self.decode_into(frame, &mut values)?;
+        let error = decoded.err().map(|e| e.to_string());
         let signals = message
             .signals
             .iter()

@@ -56,9 +56,24 @@ fn original() -> Vec<LogRecord> {
 }
 
 fn python(script: &str, args: &[&Path]) -> String {
-    let out = Command::new("python3")
-        .arg("-c")
-        .arg(script)
+    let mut command = Command::new("python3");
+    command.arg("-c").arg(script);
+    python_output(command, args)
+}
+
+/// Run `tests/oracles/NAME` (as a file, so it imports the oracles' shared `corpus_dbc`).
+fn oracle(name: &str, args: &[&Path]) -> String {
+    let mut command = Command::new("python3");
+    command.arg(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/oracles")
+            .join(name),
+    );
+    python_output(command, args)
+}
+
+fn python_output(mut command: Command, args: &[&Path]) -> String {
+    let out = command
         .args(args)
         // ASC dates are local time to python-can: make its local time UTC, as ours.
         .env("TZ", "UTC")
@@ -802,12 +817,6 @@ with open(sys.argv[1], "wb") as f:
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-fn oracle(script: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/oracles")
-        .join(script)
-}
-
 #[test]
 fn pyarrow_and_polars_read_our_parquet_and_we_read_theirs() {
     let dir = scratch("parquet");
@@ -945,8 +954,8 @@ fn decoded_parquet_agrees_with_cantools_through_pyarrow_and_polars() {
         let dbc = PathBuf::from(common::corpus(file));
         let dir = scratch(&format!("decoded-{}", file.replace('/', "_")));
         let (log, dataset) = (dir.join("traffic.log"), dir.join("dataset"));
-        let traffic = python(
-            &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
+        let traffic = oracle(
+            "dbc_traffic.py",
             &[&dbc, Path::new(&rounds.to_string()), Path::new("7")],
         );
         std::fs::write(&log, traffic).unwrap();
@@ -959,10 +968,7 @@ fn decoded_parquet_agrees_with_cantools_through_pyarrow_and_polars() {
             dbc.to_str().unwrap(),
         ]);
         assert!(said.contains("rows in"), "{said}");
-        let agreed = python(
-            &std::fs::read_to_string(oracle("parquet_decoded.py")).unwrap(),
-            &[&dbc, &log, &dataset],
-        );
+        let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
         assert!(agreed.contains("values agree"), "{file}: {agreed}");
         // Written again into the same, now full, directory: refused, and nothing changed.
         let (code, _, err) = common::bywire(
@@ -1048,10 +1054,7 @@ fn decoded_mcap_channels_hold_cantools_values_valid_against_their_schemas() {
         let dbc = PathBuf::from(common::corpus(file));
         let dir = scratch(&format!("mcap-decoded-{}", file.replace('/', "_")));
         let (log, bag) = (dir.join("traffic.log"), dir.join("decoded.mcap"));
-        let traffic = python(
-            &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
-            &[&dbc, Path::new("6"), Path::new("3")],
-        );
+        let traffic = oracle("dbc_traffic.py", &[&dbc, Path::new("6"), Path::new("3")]);
         std::fs::write(&log, traffic).unwrap();
         bywire(&[
             "log",
@@ -1061,10 +1064,7 @@ fn decoded_mcap_channels_hold_cantools_values_valid_against_their_schemas() {
             "--dbc",
             dbc.to_str().unwrap(),
         ]);
-        let checked = python(
-            &std::fs::read_to_string(oracle("mcap_decoded.py")).unwrap(),
-            &[&dbc, &log, &bag],
-        );
+        let checked = oracle("mcap_decoded.py", &[&dbc, &log, &bag]);
         assert!(
             checked.contains("valid and equal to cantools"),
             "{file}: {checked}"
@@ -1082,10 +1082,7 @@ fn decode_writes_csv_and_parquet_from_any_format_as_cantools_decodes() {
         dir.join("traffic.blf"),
         dir.join("dataset"),
     );
-    let traffic = python(
-        &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
-        &[&dbc, Path::new("4"), Path::new("11")],
-    );
+    let traffic = oracle("dbc_traffic.py", &[&dbc, Path::new("4"), Path::new("11")]);
     std::fs::write(&log, traffic).unwrap();
     bywire(&[
         "log",
@@ -1103,10 +1100,7 @@ fn decode_writes_csv_and_parquet_from_any_format_as_cantools_decodes() {
         dataset.to_str().unwrap(),
     ]);
     assert!(said.contains("rows in"), "{said}");
-    let agreed = python(
-        &std::fs::read_to_string(oracle("parquet_decoded.py")).unwrap(),
-        &[&dbc, &log, &dataset],
-    );
+    let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
     assert!(agreed.contains("values agree"), "{agreed}");
     // CSV from the BLF: one row per signal, values and choices as cantools gives them.
     let csv = dir.join("decoded.csv");
@@ -1170,10 +1164,7 @@ fn the_readmes_pandas_walk_through_runs_as_written() {
         ..script.find("```\n<!-- end walkthrough -->").unwrap()];
     let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../bywire-tug/dbc/reference-tug.dbc");
     let dir = scratch("walkthrough");
-    let traffic = python(
-        &std::fs::read_to_string(oracle("dbc_traffic.py")).unwrap(),
-        &[&dbc, Path::new("50"), Path::new("5")],
-    );
+    let traffic = oracle("dbc_traffic.py", &[&dbc, Path::new("50"), Path::new("5")]);
     std::fs::write(dir.join("drive.log"), traffic).unwrap();
     let at = |name: &str| dir.join(name).to_str().unwrap().to_string();
     bywire(&["log", "convert", &at("drive.log"), &at("drive.blf")]);

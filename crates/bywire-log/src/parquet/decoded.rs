@@ -253,7 +253,8 @@ impl MessageColumns {
 struct PartitionKey {
     message: usize,
     channel: Option<String>,
-    date: Option<String>,
+    /// The UTC day, counted from 1970-01-01.
+    day: Option<u64>,
 }
 
 /// A file written by appending: opened for each write and closed again, so that thousands
@@ -320,18 +321,13 @@ impl<'a> DecodedDataset<'a> {
 
     /// Decode one record and add its row.
     pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
-        let Some((index, message, codec)) = self.decoder.lookup(&record.frame) else {
+        let Some((index, message, decoded)) =
+            self.decoder.decode_into(&record.frame, &mut self.decoded)
+        else {
             self.summary.unknown += 1;
             return Ok(());
         };
-        self.decoded.clear();
-        self.decoded.resize(codec.signal_count(), None);
-        let data = if record.frame.is_remote() {
-            &[][..]
-        } else {
-            record.frame.data()
-        };
-        if let Err(e) = codec.decode(data, &mut self.decoded) {
+        if let Err(e) = decoded {
             self.summary
                 .undecodable
                 .entry(message.display_name().to_string())
@@ -342,12 +338,10 @@ impl<'a> DecodedDataset<'a> {
         let key = PartitionKey {
             message: index,
             channel: self.partitioning.channel.then(|| record.interface.clone()),
-            date: self.partitioning.date.then(|| {
-                let (year, month, day) = calendar::civil_from_days(
-                    i64::try_from(record.timestamp.as_nanos() / 86_400_000_000_000).unwrap_or(0),
-                );
-                format!("{year:04}-{month:02}-{day:02}")
-            }),
+            day: self
+                .partitioning
+                .date
+                .then(|| record.timestamp.as_nanos() / 86_400_000_000_000),
         };
         self.clock += 1;
         if !self.open.contains_key(&key) {
@@ -393,8 +387,9 @@ impl<'a> DecodedDataset<'a> {
         if let Some(channel) = &key.channel {
             dir.push(format!("channel={}", path_value(channel)));
         }
-        if let Some(date) = &key.date {
-            dir.push(format!("date={date}"));
+        if let Some(day) = key.day {
+            let (year, month, day) = calendar::civil_from_days(i64::try_from(day).unwrap_or(0));
+            dir.push(format!("date={year:04}-{month:02}-{day:02}"));
         }
         std::fs::create_dir_all(&dir)?;
         let part = self.parts.entry(key.clone()).or_insert(0);
@@ -405,7 +400,7 @@ impl<'a> DecodedDataset<'a> {
         let writer = ArrowWriter::try_new(
             BufWriter::with_capacity(FILE_BUFFER, AppendFile { path: path.clone() }),
             columns.schema.clone(),
-            Some(properties(DECODED_LAYOUT)),
+            Some(properties(DECODED_LAYOUT, false)),
         )
         .map_err(io_error)?;
         self.summary.files.push(path);

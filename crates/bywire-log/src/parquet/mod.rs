@@ -20,7 +20,7 @@
 
 pub mod decoded;
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::fs::File;
 use std::io::Write;
 use std::sync::Arc;
@@ -81,14 +81,14 @@ pub fn raw_schema() -> SchemaRef {
     ]))
 }
 
-/// Writer properties: zstd, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata.
-/// Dictionary encoding is off for the decoded tables: measured, it cost a third of the
-/// throughput on signal values, and zstd already folds repeated values.
-pub(crate) fn properties(layout: &str) -> WriterProperties {
+/// Writer properties: zstd, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata,
+/// dictionary pages when asked (the decoded tables go without: measured, they cost a third of
+/// the throughput on signal values, and zstd already folds repeated values).
+pub(crate) fn properties(layout: &str, dictionary_pages: bool) -> WriterProperties {
     WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::default()))
         .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
-        .set_dictionary_enabled(layout == RAW_LAYOUT)
+        .set_dictionary_enabled(dictionary_pages)
         .set_key_value_metadata(Some(vec![KeyValue::new(
             LAYOUT_KEY.to_string(),
             layout.to_string(),
@@ -112,25 +112,34 @@ pub(crate) fn nanos(timestamp: Timestamp) -> i64 {
 pub(crate) struct Labels {
     keys: Int32Builder,
     values: Vec<String>,
+    /// The values' keys, for texts not known in advance (channels), once there are many.
+    index: HashMap<String, usize>,
 }
+
+/// Up to this many values a text is found by comparing (a log's few channels); beyond, by hash.
+const LABELS_SCANNED: usize = 16;
 
 impl Labels {
     pub(crate) fn new(values: Vec<String>) -> Self {
         Labels {
             keys: Int32Builder::with_capacity(BATCH_ROWS),
+            index: values.iter().cloned().zip(0..).collect(),
             values,
         }
     }
 
-    /// The key of `text`, added to the values if new (bounded by the channels a log names).
+    /// The key of `text`, added to the values if new.
     pub(crate) fn push_text(&mut self, text: &str) {
-        let key = match self.values.iter().rposition(|v| v == text) {
-            Some(key) => key,
-            None => {
-                self.values.push(text.to_string());
-                self.values.len() - 1
-            }
+        let found = if self.values.len() <= LABELS_SCANNED {
+            self.values.iter().position(|v| v == text)
+        } else {
+            self.index.get(text).copied()
         };
+        let key = found.unwrap_or_else(|| {
+            self.values.push(text.to_string());
+            self.index.insert(text.to_string(), self.values.len() - 1);
+            self.values.len() - 1
+        });
         self.push_key(Some(key));
     }
 
@@ -250,8 +259,9 @@ impl<W: Write + Send> ParquetWriter<W> {
     /// A writer to `output` (the file's header is written at once).
     pub fn new(output: W) -> std::io::Result<Self> {
         let schema = raw_schema();
-        let writer = ArrowWriter::try_new(output, schema.clone(), Some(properties(RAW_LAYOUT)))
-            .map_err(io_error)?;
+        let writer =
+            ArrowWriter::try_new(output, schema.clone(), Some(properties(RAW_LAYOUT, true)))
+                .map_err(io_error)?;
         Ok(ParquetWriter {
             writer,
             schema,

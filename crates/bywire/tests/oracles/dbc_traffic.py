@@ -6,15 +6,10 @@ Arguments: the DBC, the number of rounds, the seed. Prints the log on standard o
 import random
 import sys
 
-import cantools
+import corpus_dbc
 
 dbc, rounds, seed = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
-try:
-    open(dbc, encoding="utf-8").read()
-    encoding = "utf-8"
-except UnicodeDecodeError:
-    encoding = "cp1252"
-db = cantools.database.load_file(dbc, strict=False, encoding=encoding)
+db = corpus_dbc.load(dbc)
 rng = random.Random(seed)
 nanos = 1_700_000_000_000_000_000
 for round in range(rounds):

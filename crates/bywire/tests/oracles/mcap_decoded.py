@@ -10,35 +10,25 @@ import json
 import math
 import sys
 
-import cantools
+import corpus_dbc
 import jsonschema
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 dbc, log, path = sys.argv[1:4]
-try:
-    open(dbc, encoding="utf-8").read()
-    encoding = "utf-8"
-except UnicodeDecodeError:
-    encoding = "cp1252"
-db = cantools.database.load_file(dbc, strict=False, encoding=encoding)
+db = corpus_dbc.load(dbc)
 by_id = {(m.frame_id, m.is_extended_frame): m for m in reversed(db.messages)}
 
 expected = {}  # (topic, log time) -> (numbers, named)
 classic = 0
-for line in open(log):
-    stamp, channel, frame = line.split()
-    seconds, fraction = stamp.strip("()").split(".")
-    ts = int(seconds) * 1_000_000_000 + int(fraction.ljust(9, "0"))
-    ident, data = frame.split("#", 1)
-    classic += not data.startswith("#")
-    data = data[2:] if data.startswith("#") else data
-    message = by_id.get((int(ident, 16), len(ident) == 8))
+for ts, channel, ident, extended, payload, fd in corpus_dbc.frames(log):
+    classic += not fd
+    message = by_id.get((ident, extended))
     if message is None:
         continue
     try:
-        numbers = message.decode(bytes.fromhex(data), decode_choices=False)
-        named = message.decode(bytes.fromhex(data), decode_choices=True)
+        numbers = message.decode(payload, decode_choices=False)
+        named = message.decode(payload, decode_choices=True)
     except Exception:
         continue
     expected[(f"/{channel}/{message.name}", ts)] = (numbers, named)

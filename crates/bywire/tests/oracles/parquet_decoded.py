@@ -10,33 +10,21 @@ import math
 import pathlib
 import sys
 
-import cantools
+import corpus_dbc
 import polars
 import pyarrow.parquet as pq
 
 dbc, log, root = sys.argv[1], sys.argv[2], pathlib.Path(sys.argv[3])
-# bywire reads DBC text as UTF-8 (Latin-1 where it is not): load it the same way.
-try:
-    open(dbc, encoding="utf-8").read()
-    encoding = "utf-8"
-except UnicodeDecodeError:
-    encoding = "cp1252"
-db = cantools.database.load_file(dbc, strict=False, encoding=encoding)
+db = corpus_dbc.load(dbc)
 by_id = {}
 for m in db.messages:
     by_id.setdefault((m.frame_id, m.is_extended_frame), m)
 
 expected = {}  # message name -> list of (ts_ns, channel, numbers, choices)
-for line in open(log):
-    stamp, channel, frame = line.split()
-    seconds, fraction = stamp.strip("()").split(".")
-    ts = int(seconds) * 1_000_000_000 + int(fraction.ljust(9, "0"))
-    ident, data = frame.split("#", 1)
-    data = data[2:] if data.startswith("#") else data
-    message = by_id.get((int(ident, 16), len(ident) == 8))
+for ts, channel, ident, extended, payload, _ in corpus_dbc.frames(log):
+    message = by_id.get((ident, extended))
     if message is None:
         continue
-    payload = bytes.fromhex(data)
     try:
         numbers = message.decode(payload, decode_choices=False)
         named = message.decode(payload, decode_choices=True)
