@@ -27,6 +27,9 @@ python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack 
 python3 -m pip install -q --disable-pip-version-check mcap==1.6.0 mcap-ros2-support==0.6.0 jsonschema==4.26.0
 # pyarrow, polars and pandas: the Parquet peers (and the README's walk-through into pandas).
 python3 -m pip install -q --disable-pip-version-check pyarrow==26.0.1 polars==2.1.0 "pandas>=2.2,<3"
+# cyclonedds: the DDS of ROS 2's default middleware, the peer of `bywire ros2` (binary wheel with
+# the C library; its types declared under ROS 2's names).
+python3 -m pip install -q --disable-pip-version-check cyclonedds==11.0.1
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.

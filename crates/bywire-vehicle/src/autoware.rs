@@ -7,12 +7,11 @@
 //!
 //! A command with a non-finite value, or one outside the limits or the int32 range, produces
 //! no frame at all: the three go together or not at all. `dbc/autoware-can.dbc` describes the
-//! same layout for tools. Output goes to sinks chosen by [`OutputMode`]; the DDS sink comes
-//! with the ROS 2 milestone, and until then [`RecordingSink`] stands in for it (and says so).
+//! same layout for tools. Output goes to the sinks [`OutputMode`] chooses (`bywire-ros` gives the
+//! DDS one: `bywire ros2 control-output`).
 
 use alloc::format;
 use alloc::string::String;
-use alloc::vec::Vec;
 
 use bywire_core::{Frame, Id, StandardId};
 
@@ -237,22 +236,14 @@ impl core::str::FromStr for OutputMode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
-            "dds-only" => Ok(OutputMode::DdsOnly),
-            "can-only" => Ok(OutputMode::CanOnly),
+            "dds-only" | "dds" => Ok(OutputMode::DdsOnly),
+            "can-only" | "can" => Ok(OutputMode::CanOnly),
             "dds-and-can" => Ok(OutputMode::DdsAndCan),
             other => Err(format!(
-                "'{other}' is not an output mode (dds-only, can-only, dds-and-can)"
+                "'{other}' is not an output mode (dds, can, dds-and-can)"
             )),
         }
     }
-}
-
-/// Stands in for the DDS sink until the ROS 2 milestone: it records what would have been
-/// published. It is not DDS and says so in its name.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct RecordingSink {
-    /// Every command that would have been published, in order.
-    pub published: Vec<(Control, Status)>,
 }
 
 /// Sends commands to the sinks an [`OutputMode`] selects, all or nothing: a refused command
@@ -263,8 +254,6 @@ pub struct Output {
     pub mode: OutputMode,
     /// Limits checked before anything is sent.
     pub limits: Limits,
-    /// The DDS stand-in.
-    pub dds: RecordingSink,
     sequence: u16,
 }
 
@@ -274,13 +263,12 @@ impl Output {
         Output {
             mode,
             limits,
-            dds: RecordingSink::default(),
             sequence: 0,
         }
     }
 
-    /// Send one command: frames to `can` (in order 0x100, 0x101, 0x102) and/or a record to
-    /// the DDS stand-in. Returns the sequence number used.
+    /// Send one command: frames to `can` (in order 0x100, 0x101, 0x102) and/or the command to
+    /// `dds` (the ROS 2 side republishes it). Returns the sequence number used.
     pub fn send(
         &mut self,
         control: &Control,
@@ -288,6 +276,7 @@ impl Output {
         validity: u8,
         timestamp_ms: u32,
         can: &mut dyn FnMut(Frame),
+        dds: &mut dyn FnMut(&Control, &Status),
     ) -> Result<u16, Refused> {
         let status = Status {
             mode,
@@ -303,7 +292,7 @@ impl Output {
             }
         }
         if matches!(self.mode, OutputMode::DdsOnly | OutputMode::DdsAndCan) {
-            self.dds.published.push((*control, status));
+            dds(control, &status);
         }
         self.sequence = self.sequence.wrapping_add(1);
         Ok(status.sequence)

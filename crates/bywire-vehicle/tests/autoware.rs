@@ -51,6 +51,7 @@ fn frames_match_hand_computed_bytes() {
 fn non_finite_or_out_of_range_sends_nothing() {
     let mut output = Output::new(OutputMode::DdsAndCan, Limits::default());
     let mut frames = Vec::new();
+    let mut published = Vec::new();
     for (bad, why) in [
         (
             Control {
@@ -75,17 +76,21 @@ fn non_finite_or_out_of_range_sends_nothing() {
         ),
     ] {
         assert_eq!(
-            output.send(&bad, 1, 3, 0, &mut |f| frames.push(f)),
+            output.send(&bad, 1, 3, 0, &mut |f| frames.push(f), &mut |c, s| {
+                published.push((*c, *s))
+            }),
             Err(why)
         );
     }
-    assert!(frames.is_empty() && output.dds.published.is_empty());
+    assert!(frames.is_empty() && published.is_empty());
     // And the sequence did not advance for refused commands.
     assert_eq!(
-        output.send(&control(), 1, 3, 0, &mut |f| frames.push(f)),
+        output.send(&control(), 1, 3, 0, &mut |f| frames.push(f), &mut |c, s| {
+            published.push((*c, *s))
+        }),
         Ok(0)
     );
-    assert_eq!(frames.len(), 3);
+    assert_eq!((frames.len(), published.len()), (3, 1));
 }
 
 #[test]
@@ -97,18 +102,27 @@ fn output_modes_select_the_sinks() {
     ] {
         let mut output = Output::new(mode.parse().unwrap(), Limits::default());
         let mut frames = Vec::new();
+        let mut published = Vec::new();
         for _ in 0..2 {
             output
-                .send(&control(), 1, 3, 7, &mut |f| frames.push(f))
+                .send(&control(), 1, 3, 7, &mut |f| frames.push(f), &mut |c, s| {
+                    published.push((*c, *s))
+                })
                 .unwrap();
         }
         assert_eq!(
-            (frames.len(), output.dds.published.len()),
+            (frames.len(), published.len()),
             (frames_expected, dds_expected),
             "{mode}"
         );
+        // What DDS gets is the command and the status the frames carry.
+        for (i, (c, s)) in published.iter().enumerate() {
+            assert_eq!((*c, s.sequence, s.timestamp_ms), (control(), u16::try_from(i).unwrap(), 7));
+        }
     }
-    assert!("can"
+    assert_eq!("dds".parse::<OutputMode>(), Ok(OutputMode::DdsOnly));
+    assert_eq!("can".parse::<OutputMode>(), Ok(OutputMode::CanOnly));
+    assert!("both"
         .parse::<OutputMode>()
         .unwrap_err()
         .contains("dds-and-can"));

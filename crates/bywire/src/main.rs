@@ -95,6 +95,13 @@ enum Command {
     Bridge(cmd::bridge::Args),
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
     Vehicle(cmd::vehicle::Args),
+    /// ROS 2 over DDS, without a ROS installation: ros2_socketcan's CAN topics, Autoware's
+    /// controller output.
+    #[cfg(feature = "ros2")]
+    Ros2 {
+        #[command(subcommand)]
+        command: cmd::ros2::Ros2Command,
+    },
 }
 
 fn main() -> ExitCode {
@@ -121,6 +128,8 @@ fn main() -> ExitCode {
         Command::SlcanAdapter(args) => cmd::slcan_adapter::run(&args, &mut out),
         Command::Log { command } => cmd::log::run(&command, &mut out),
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
+        #[cfg(feature = "ros2")]
+        Command::Ros2 { command } => cmd::ros2::run(&command, &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {

@@ -12,6 +12,8 @@ pub mod log;
 pub mod monitor;
 pub mod play;
 pub mod plot;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod send;
 pub mod serve;
 pub mod sim;

@@ -75,3 +75,76 @@ pub fn json_lines(out: std::process::Output) -> Vec<serde_json::Value> {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect()
 }
+
+/// True inside `../shared/tools/lonet.sh` (a private network namespace where multicast and DDS
+/// cannot leave the machine); on the host, re-runs `test` of this binary in a fresh one and
+/// checks that it passed.
+pub fn inside_lonet(test: &str) -> bool {
+    const MARKER: &str = "BYWIRE_IN_LONET";
+    if std::env::var_os(MARKER).is_some() {
+        return true;
+    }
+    let lonet = format!(
+        "{}/../../../shared/tools/lonet.sh",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = Command::new(lonet)
+        .arg(std::env::current_exe().unwrap())
+        .args(["--exact", test, "--nocapture", "--test-threads", "1"])
+        .env(MARKER, "1")
+        .output()
+        .expect("lonet.sh runs (see ../shared/tools/README.md)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("test result: ok. 1 passed"),
+        "{test} in lonet: {text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    false
+}
+
+/// The test oracles' folder (Python peers and their shared modules).
+pub fn oracles() -> String {
+    format!("{}/tests/oracles", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A background `bywire` that is stopped (SIGTERM, as Ctrl-C) and collected when dropped or
+/// by [`Background::stop`].
+pub struct Background(Option<std::process::Child>);
+
+impl Background {
+    /// Start `bywire ARGS` with its output captured.
+    pub fn start(args: &[&str]) -> Background {
+        let child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("bywire starts");
+        Background(Some(child))
+    }
+
+    /// Stop it as Ctrl-C would and return (exit code, stdout, stderr).
+    pub fn stop(mut self) -> (i32, String, String) {
+        let child = self.0.take().unwrap();
+        let _ = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status();
+        let out = child.wait_with_output().unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}

@@ -1,0 +1,18 @@
+//! ROS 2 over DDS, in pure Rust and without a ROS installation.
+//!
+//! - [`msg`]: the messages (ros2_socketcan's frames, Autoware's control and vehicle messages,
+//!   `Twist`, `JointState`) as serde structs in CDR order, with their ROS 2 type names.
+//! - [`frames`]: CAN frames as ros2_socketcan's messages, both ways, checked.
+//! - `dds` (feature `dds`): a ROS 2 node on RustDDS (domain, namespace, interfaces, QoS), and
+//!   on it `can_bridge` (ros2_socketcan's topics for any bus bywire opens) and
+//!   `control_output` (Autoware's `Control` out as the `autoware-can` frames and/or DDS).
+
+pub mod frames;
+pub mod msg;
+
+#[cfg(feature = "dds")]
+pub mod can_bridge;
+#[cfg(feature = "dds")]
+pub mod control_output;
+#[cfg(feature = "dds")]
+pub mod dds;

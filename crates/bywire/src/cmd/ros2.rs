@@ -1,0 +1,282 @@
+//! `bywire ros2`: ROS 2 over DDS without a ROS installation (the `bywire-ros` crate): the CAN
+//! bridge ros2_socketcan offers, and the controller-side Autoware output.
+
+use std::io::Write;
+
+use anyhow::{anyhow, bail, Context, Result};
+use bywire_ros::can_bridge::{self, BridgeEvent, BridgedBus, CanBridgeConfig, CanTopics};
+use bywire_ros::control_output::{self, ControlOutputConfig, Outcome};
+use bywire_ros::dds::{RosNode, RosOptions};
+use bywire_vehicle::autoware::OutputMode;
+
+use crate::support::busarg;
+
+/// Refusals printed before the rest are only counted.
+const REFUSALS_SHOWN: u64 = 20;
+
+#[derive(clap::Subcommand)]
+pub enum Ros2Command {
+    /// CAN buses as ROS 2 topics, a drop-in for Autoware's ros2_socketcan: received frames on
+    /// from_can_bus (CAN FD on from_can_bus_fd), what arrives on to_can_bus (to_can_bus_fd)
+    /// is sent.
+    #[command(after_help = "Examples:
+  bywire ros2 can can0
+  bywire ros2 can can0,123:7FF --use-bus-time --namespace /sensing/can
+  bywire ros2 can vcan0 vcan1            (topics under /vcan0/... and /vcan1/..., frame_id the bus)
+  bywire ros2 can can0 --remap to_can_bus:=/vehicle/can_tx --dds-interface lo
+
+Filters follow the bus as in candump (ID:MASK, ID~MASK, #ERRMASK, j) and select what is
+published. Classic, remote and error frames go on from_can_bus as can_msgs/msg/Frame; CAN FD
+frames on from_can_bus_fd as ros2_socketcan_msgs/msg/FdFrame (with --enable-can-fd every frame
+goes there, as ros2_socketcan's enable_can_fd). A message that makes no valid frame (an id
+beyond its width, DLC above 15, an FD length CAN FD has no code for, is_error) is refused on
+stderr and nothing is sent. QoS as ros2_socketcan: reliable, volatile, depth 500.")]
+    Can(CanArgs),
+    /// Autoware's controller output on a Linux box: Control from a topic, out as the three
+    /// autoware-can frames (0x100, 0x101, 0x102), republished on DDS, or both.
+    #[command(after_help = "Examples:
+  bywire ros2 control-output can0 --mode can
+  bywire ros2 control-output can0 --mode dds-and-can --input /control/trajectory_follower/control_cmd
+
+A command with a non-finite or out-of-range value is refused whole: no frame and no sample.
+The frames follow `autoware-can.dbc` (bywire-vehicle/dbc): angle and rate x 1e6, velocity and
+acceleration x 1e3 as int32, then mode, validity flags, sequence and the stamp in ms.")]
+    ControlOutput(ControlOutputArgs),
+}
+
+/// Where the node runs (shared by every `ros2` command).
+#[derive(clap::Args)]
+pub struct NodeArgs {
+    /// The DDS domain (ROS_DOMAIN_ID).
+    #[arg(long, env = "ROS_DOMAIN_ID", default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=232))]
+    domain_id: u16,
+    /// The node's namespace.
+    #[arg(long, default_value = "/")]
+    namespace: String,
+    /// The node's name (default: the command's usual one).
+    #[arg(long)]
+    node_name: Option<String>,
+    /// Network interfaces (names or addresses) DDS uses; default: all.
+    #[arg(long = "dds-interface", value_name = "IFACE")]
+    dds_interfaces: Vec<String>,
+}
+
+impl NodeArgs {
+    fn open(&self, default_name: &str) -> Result<RosNode> {
+        let options = RosOptions {
+            domain_id: self.domain_id,
+            namespace: self.namespace.clone(),
+            node_name: self
+                .node_name
+                .clone()
+                .unwrap_or_else(|| default_name.to_string()),
+            interfaces: self.dds_interfaces.clone(),
+        };
+        RosNode::open(&options).context("cannot start the ROS 2 node")
+    }
+}
+
+#[derive(clap::Args)]
+pub struct CanArgs {
+    /// Buses, each with optional candump filters: BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
+    #[arg(required = true, num_args = 1..=16)]
+    buses: Vec<String>,
+    #[command(flatten)]
+    node: NodeArgs,
+    /// header.frame_id of published frames (default: `can` for one bus, the bus's name for
+    /// several).
+    #[arg(long)]
+    frame_id: Option<String>,
+    /// Stamp frames with their reception time on the bus, not the time they are published.
+    #[arg(long)]
+    use_bus_time: bool,
+    /// Publish the frames this bridge sends as well (on) or not (off).
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    loopback: String,
+    /// Publish every frame, classic ones too, on from_can_bus_fd.
+    #[arg(long)]
+    enable_can_fd: bool,
+    /// Send FD frames without the bit-rate switch.
+    #[arg(long)]
+    no_brs: bool,
+    /// Rename a topic: from_can_bus:=NAME (also to_can_bus, from_can_bus_fd, to_can_bus_fd).
+    #[arg(long = "remap", value_name = "FROM:=TO")]
+    remaps: Vec<String>,
+}
+
+/// Apply `FROM:=TO` remappings to the topic names.
+fn remap(remaps: &[String]) -> Result<CanTopics> {
+    let mut topics = CanTopics::default();
+    for text in remaps {
+        let (from, to) = text
+            .split_once(":=")
+            .ok_or_else(|| anyhow!("--remap {text}: expected FROM:=TO"))?;
+        let slot = match from.trim_start_matches('/') {
+            "from_can_bus" => &mut topics.from_can_bus,
+            "to_can_bus" => &mut topics.to_can_bus,
+            "from_can_bus_fd" => &mut topics.from_can_bus_fd,
+            "to_can_bus_fd" => &mut topics.to_can_bus_fd,
+            other => bail!(
+                "--remap {text}: '{other}' is not a topic of this bridge (from_can_bus, \
+                 to_can_bus, from_can_bus_fd, to_can_bus_fd)"
+            ),
+        };
+        bywire_ros::dds::name(to).with_context(|| format!("--remap {text}"))?;
+        *slot = to.to_string();
+    }
+    Ok(topics)
+}
+
+/// Stderr lines for what the bridges report (refusals capped).
+struct Reporter {
+    command: &'static str,
+    refused: u64,
+}
+
+impl Reporter {
+    fn line(&self, text: &str) {
+        let _ = writeln!(std::io::stderr(), "bywire ros2 {}: {text}", self.command);
+    }
+
+    fn refusal(&mut self, text: &str) {
+        self.refused += 1;
+        if self.refused <= REFUSALS_SHOWN {
+            self.line(&format!("refused: {text}"));
+        }
+        if self.refused == REFUSALS_SHOWN {
+            self.line("further refusals are only counted");
+        }
+    }
+}
+
+pub fn run(command: &Ros2Command, out: &mut dyn Write) -> Result<()> {
+    match command {
+        Ros2Command::Can(args) => can(args, out),
+        Ros2Command::ControlOutput(args) => control(args, out),
+    }
+}
+
+fn can(args: &CanArgs, out: &mut dyn Write) -> Result<()> {
+    let config = CanBridgeConfig {
+        topics: remap(&args.remaps)?,
+        frame_id: args.frame_id.clone(),
+        use_bus_time: args.use_bus_time,
+        loopback: args.loopback == "on",
+        fd_for_all: args.enable_can_fd,
+        brs: !args.no_brs,
+    };
+    let parsed: Vec<busarg::BusArg> = args
+        .buses
+        .iter()
+        .map(|b| busarg::parse(b))
+        .collect::<Result<_>>()?;
+    let opened = busarg::open_all(&parsed)?;
+    let buses = parsed
+        .into_iter()
+        .zip(opened)
+        .map(|(arg, bus)| BridgedBus {
+            name: arg.name,
+            bus,
+        })
+        .collect();
+    let mut node = args.node.open("socket_can_bridge")?;
+    let mut reporter = Reporter {
+        command: "can",
+        refused: 0,
+    };
+    reporter.line(&format!("node {} bridging", node.fully_qualified_name()));
+    let stats = can_bridge::run(
+        &mut node,
+        buses,
+        &config,
+        &crate::interrupt_flag(),
+        &mut |event| match event {
+            BridgeEvent::Refused { bus, why } => reporter.refusal(&format!("{bus}: {why}")),
+            BridgeEvent::BusLost { bus, error } => {
+                reporter.line(&format!("bus {bus} lost: {error}; the others go on"))
+            }
+            BridgeEvent::PublishFailed { bus, error } => reporter.line(&format!("{bus}: {error}")),
+        },
+    )?;
+    writeln!(
+        out,
+        "{} frames published, {} sent, {} refused",
+        stats.published, stats.sent, stats.refused
+    )?;
+    Ok(())
+}
+
+#[derive(clap::Args)]
+pub struct ControlOutputArgs {
+    /// The bus the frames go on.
+    bus: String,
+    #[command(flatten)]
+    node: NodeArgs,
+    /// Where commands go: can, dds or dds-and-can.
+    #[arg(long, default_value = "can")]
+    mode: OutputMode,
+    /// The Control topic read.
+    #[arg(long, default_value = control_output::INPUT_TOPIC)]
+    input: String,
+    /// The Control topic written in the dds modes.
+    #[arg(long, default_value = control_output::OUTPUT_TOPIC)]
+    output: String,
+    /// The mode byte of 0x102 (1 autonomous, 2 manual, 3 remote).
+    #[arg(long, default_value_t = 1)]
+    mode_byte: u8,
+}
+
+fn control(args: &ControlOutputArgs, out: &mut dyn Write) -> Result<()> {
+    let config = ControlOutputConfig {
+        mode: args.mode,
+        input: args.input.clone(),
+        output: args.output.clone(),
+        mode_byte: args.mode_byte,
+        ..ControlOutputConfig::default()
+    };
+    let bus = busarg::open(&args.bus).with_context(|| format!("bus {}", args.bus))?;
+    let mut node = args.node.open("control_output")?;
+    let mut reporter = Reporter {
+        command: "control-output",
+        refused: 0,
+    };
+    let mut sent = 0u64;
+    reporter.line(&format!(
+        "node {} reading {}",
+        node.fully_qualified_name(),
+        config.input
+    ));
+    control_output::run(
+        &mut node,
+        bus,
+        &config,
+        &crate::interrupt_flag(),
+        &mut |_, outcome| match outcome {
+            Outcome::Sent(_) => sent += 1,
+            Outcome::Refused(why) => reporter.refusal(&why.to_string()),
+            Outcome::BusLost(e) => reporter.line(&format!("bus lost: {e}")),
+        },
+    )?;
+    writeln!(out, "{sent} commands sent, {} refused", reporter.refused)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn remaps_name_the_topic_and_check_the_name() {
+        let t = remap(&["to_can_bus:=/vehicle/can_tx".into()]).unwrap();
+        assert_eq!(t.to_can_bus, "/vehicle/can_tx");
+        assert_eq!(t.from_can_bus, "from_can_bus");
+        assert!(remap(&["x:=y".into()])
+            .unwrap_err()
+            .to_string()
+            .contains("'x' is not a topic"));
+        assert!(remap(&["from_can_bus".into()]).is_err());
+        assert!(
+            format!("{:#}", remap(&["from_can_bus:=a b".into()]).unwrap_err()).contains("'a b'")
+        );
+    }
+}
