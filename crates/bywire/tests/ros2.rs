@@ -131,3 +131,90 @@ fn ros2_can_bridges_a_bus_to_cyclone_dds_both_ways() {
     assert!(node["writers"].as_u64().unwrap() >= 2, "{node}");
     assert!(out.contains("2 refused"), "{out}");
 }
+
+/// One run of `control-output` in `mode` against the Python peers; (what they saw, stdout,
+/// stderr).
+fn control_output_run(mode: &str, port: u16) -> (Value, String, String) {
+    let bus = format!("udp:239.74.163.2:{port}");
+    let output = Background::start(&[
+        "ros2",
+        "control-output",
+        &bus,
+        "--mode",
+        mode,
+        "--dds-interface",
+        "lo",
+    ]);
+    let dbc = format!(
+        "{}/../bywire-vehicle/dbc/autoware-can.dbc",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let seen = python_peer(
+        "ros2_control_output_peer.py",
+        &["239.74.163.2", &port.to_string(), &dbc],
+    );
+    let (code, out, err) = output.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    (seen, out, err)
+}
+
+#[test]
+fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
+    if !inside_lonet("ros2_control_output_emits_the_autoware_frames_in_each_mode") {
+        return;
+    }
+    // The three accepted commands: angle, rate, velocity, acceleration, stamp (ns).
+    let accepted = [
+        (0.25, -0.5, 2.5, -1.25, 1_700_000_000_123u64),
+        (-0.75, 0.125, -1.0, 0.5, 1_700_000_000_223),
+        (0.5, 0.0, 3.0, 0.25, 1_700_000_000_623),
+    ];
+    for (mode, port, on_can, on_dds) in [
+        ("can", 43520, true, false),
+        ("dds", 43521, false, true),
+        ("dds-and-can", 43522, true, true),
+    ] {
+        let (seen, out, err) = control_output_run(mode, port);
+        // Non-finite and out-of-range commands are refused whole, on stderr.
+        assert_eq!(err.matches("is not finite: nothing sent").count(), 2, "{mode}: {err}");
+        assert!(err.contains("steering_tire_angle is out of range"), "{mode}: {err}");
+        assert!(out.contains("3 refused"), "{mode}: {out}");
+
+        let frames = seen["frames"].as_array().unwrap();
+        if !on_can {
+            assert!(frames.is_empty(), "{mode}: {seen}");
+        } else {
+            // As cantools decodes them with autoware-can.dbc: three frames per command, in
+            // order, carrying its values; the sequence counts up by one.
+            assert_eq!(frames.len(), 9, "{mode}: {seen}");
+            let mut sequence = None;
+            for (command, set) in accepted.iter().zip(frames.chunks(3)) {
+                let (angle, rate, velocity, acceleration, stamp_ms) = *command;
+                let ids: Vec<u64> = set.iter().map(|f| f["id"].as_u64().unwrap()).collect();
+                assert_eq!(ids, [0x100, 0x101, 0x102], "{mode}");
+                let s = |i: usize, name: &str| set[i]["signals"][name].as_f64().unwrap();
+                assert!((s(0, "SteeringTireAngle") - angle).abs() < 1e-6, "{set:?}");
+                assert!((s(0, "SteeringTireRotationRate") - rate).abs() < 1e-6);
+                assert!((s(1, "Velocity") - velocity).abs() < 1e-9);
+                assert!((s(1, "Acceleration") - acceleration).abs() < 1e-9);
+                assert_eq!(set[2]["signals"]["Mode"], "Autonomous");
+                assert_eq!(s(2, "ValidityFlags"), 3.0);
+                assert_eq!(s(2, "TimestampMs") as u64, stamp_ms % (1 << 32));
+                let this = s(2, "Sequence") as u64;
+                if let Some(previous) = sequence {
+                    assert_eq!(this, previous + 1, "{mode}");
+                }
+                sequence = Some(this);
+            }
+            // Byte for byte: 0.25 rad x 1e6 = 250000, -0.5 rad/s x 1e6 = -500000 (LE int32).
+            assert_eq!(frames[0]["data"], "90d00300e05ef8ff");
+        }
+        let back = seen["republished"].as_array().unwrap();
+        if !on_dds {
+            assert!(back.is_empty(), "{mode}: {seen}");
+        } else {
+            let angles: Vec<f64> = back.iter().map(|s| s["angle"].as_f64().unwrap()).collect();
+            assert_eq!(angles, [0.25, -0.75, 0.5], "{mode}: {seen}");
+        }
+    }
+}
