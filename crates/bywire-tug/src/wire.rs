@@ -3,7 +3,9 @@
 //! [`bywire_vehicle::wire::ProfileWire`] over the tug's profile (property-tested).
 
 use bywire_core::{Frame, Id};
-use bywire_vehicle::command::{ControlCommand, ControlMode, EstopCode, WatchdogLevel};
+use bywire_vehicle::command::{
+    ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel,
+};
 use bywire_vehicle::wire::{
     AdsWire, Counters, Feedback, Incoming, Rejected, StateFeedback, StateReport, VehicleWire,
 };
@@ -75,6 +77,8 @@ impl AdsWire for ReferenceWire {
                     estop_state: EstopCode::from_raw(m.estop_state_raw()),
                     warning: Some(m.warning_flag_raw() == 1),
                     driver_override: Some(m.driver_override_raw() == 1),
+                    gear: Gear::from_raw(m.gear_raw()),
+                    steering_mode: SteeringMode::from_raw(m.steering_mode_raw()),
                     heartbeat_echo: m.heartbeat_echo_raw(),
                     in_range: steering.abs() <= 45.0
                         && (-5.0..=8.0).contains(&velocity)

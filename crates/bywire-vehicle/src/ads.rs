@@ -14,7 +14,7 @@ use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
-use crate::command::{ControlMode, EstopCode, WatchdogLevel};
+use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 use crate::wire::{AdsWire, Feedback, StateFeedback};
 
 /// Tuning of the ADS side.
@@ -133,6 +133,10 @@ pub struct VehicleState {
     pub warning: Field<bool>,
     /// A driver has taken over.
     pub driver_override: Field<bool>,
+    /// The gear engaged.
+    pub gear: Field<Gear>,
+    /// The steering mode the wheels are in.
+    pub steering_mode: Field<SteeringMode>,
     /// Wheel speeds FL, FR, RL, RR, m/s.
     pub wheel_speeds: Field<[f64; 4]>,
     /// Time from sending a command to seeing its heartbeat echoed.
@@ -411,6 +415,12 @@ impl<W: AdsWire> Ads<W> {
         }
         if let Some(driver) = m.driver_override {
             s.driver_override.set(now, driver);
+        }
+        if let Some(gear) = m.gear {
+            s.gear.set(now, gear);
+        }
+        if let Some(mode) = m.steering_mode {
+            s.steering_mode.set(now, mode);
         }
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));

@@ -527,6 +527,13 @@ impl AdsWire for ProfileWire {
                 estop_state: estop,
                 warning: s.warning.and_then(|i| m.raw(i)).map(|raw| raw == 1),
                 driver_override: s.driver_override.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                gear: s
+                    .gear
+                    .and_then(|i| m.raw(i))
+                    .and_then(|raw| self.gears.value(raw)),
+                steering_mode: m
+                    .raw(s.steering_mode)
+                    .and_then(|raw| self.steering_modes.value(raw)),
                 heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
                 in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
                     .into_iter()

@@ -31,6 +31,10 @@ pub struct StateFeedback {
     pub warning: Option<bool>,
     /// Driver override, where reported.
     pub driver_override: Option<bool>,
+    /// The gear engaged, where reported.
+    pub gear: Option<Gear>,
+    /// The steering mode the wheels are in, where reported.
+    pub steering_mode: Option<SteeringMode>,
     /// The command counter the vehicle echoes.
     pub heartbeat_echo: u64,
     /// Every value within its declared range.

@@ -10,7 +10,7 @@
 mod common;
 
 use bywire_tug::messages::{
-    ControlMode, EmergencyBrake, Gear, VehicleToAdsSensors, VehicleToAdsState,
+    ControlMode, EmergencyBrake, Gear, SteeringMode, VehicleToAdsSensors, VehicleToAdsState,
     VehicleToAdsWheelAngles,
 };
 use bywire_tug::wire::ReferenceWire;
@@ -127,12 +127,18 @@ fn each_feedback_check_counts() {
         &state(7, 5, |m| {
             m.set_warning_flag_raw(1);
             m.set_driver_override_raw(1);
+            m.set_gear_raw(1);
+            m.set_steering_mode_raw(2);
         }),
     );
     let s = ads.state();
     assert_eq!(
         (s.warning.value, s.driver_override.value),
         (Some(true), Some(true))
+    );
+    assert_eq!(
+        (s.gear.value, s.steering_mode.value),
+        (Some(Gear::Reverse), Some(SteeringMode::Tank))
     );
     ads.on_frame(ms(108), &state(8, 5, |_| {}));
     let s = ads.state();

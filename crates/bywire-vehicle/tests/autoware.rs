@@ -117,7 +117,10 @@ fn output_modes_select_the_sinks() {
         );
         // What DDS gets is the command and the status the frames carry.
         for (i, (c, s)) in published.iter().enumerate() {
-            assert_eq!((*c, s.sequence, s.timestamp_ms), (control(), u16::try_from(i).unwrap(), 7));
+            assert_eq!(
+                (*c, s.sequence, s.timestamp_ms),
+                (control(), u16::try_from(i).unwrap(), 7)
+            );
         }
     }
     assert_eq!("dds".parse::<OutputMode>(), Ok(OutputMode::DdsOnly));

@@ -176,8 +176,15 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
     ] {
         let (seen, out, err) = control_output_run(mode, port);
         // Non-finite and out-of-range commands are refused whole, on stderr.
-        assert_eq!(err.matches("is not finite: nothing sent").count(), 2, "{mode}: {err}");
-        assert!(err.contains("steering_tire_angle is out of range"), "{mode}: {err}");
+        assert_eq!(
+            err.matches("is not finite: nothing sent").count(),
+            2,
+            "{mode}: {err}"
+        );
+        assert!(
+            err.contains("steering_tire_angle is out of range"),
+            "{mode}: {err}"
+        );
         assert!(out.contains("3 refused"), "{mode}: {out}");
 
         let frames = seen["frames"].as_array().unwrap();
