@@ -21,7 +21,10 @@ use serde::Serialize;
 pub use ros2_client::{Publisher, Server, Subscription};
 pub use rustdds::mio1;
 
-use crate::msg::RosType;
+use crate::msg::{ControlModeRequest, ControlModeResponse, RosType};
+
+impl Message for ControlModeRequest {}
+impl Message for ControlModeResponse {}
 
 /// What can go wrong on the DDS side.
 #[derive(Debug, thiserror::Error)]

@@ -2,11 +2,15 @@
 //!
 //! - [`msg`]: the messages (ros2_socketcan's frames, Autoware's control and vehicle messages,
 //!   `Twist`, `JointState`) as serde structs in CDR order, with their ROS 2 type names.
+//! - [`autoware_vehicle`]: Autoware's commands into a profile's vehicle command (through the
+//!   4WS geometry), the vehicle's feedback into Autoware's reports.
 //! - [`frames`]: CAN frames as ros2_socketcan's messages, both ways, checked.
 //! - `dds` (feature `dds`): a ROS 2 node on RustDDS (domain, namespace, interfaces, QoS), and
 //!   on it `can_bridge` (ros2_socketcan's topics for any bus bywire opens) and
-//!   `control_output` (Autoware's `Control` out as the `autoware-can` frames and/or DDS).
+//!   `control_output` (Autoware's `Control` out as the `autoware-can` frames and/or DDS) and
+//!   `vehicle_interface` (the Autoware vehicle interface for any profile).
 
+pub mod autoware_vehicle;
 pub mod frames;
 pub mod msg;
 
@@ -16,3 +20,5 @@ pub mod can_bridge;
 pub mod control_output;
 #[cfg(feature = "dds")]
 pub mod dds;
+#[cfg(feature = "dds")]
+pub mod vehicle_interface;

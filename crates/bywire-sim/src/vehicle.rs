@@ -7,12 +7,14 @@
 //! rate-limited) setpoint through a first-order lag; speed follows the setpoint within an
 //! acceleration limit and brakes at the profile's deceleration scaled by the brake demand; the
 //! vehicle stops and holds when the motors are disabled. The supervisor's state frame goes out
-//! at its period, and the wheel speeds (where the profile has them) at the same period. The
+//! at its period, and the wheel speeds and angles (where the profile has them; the angles the
+//! steering mode gives the plant's one angle) at the same period. The
 //! E-stop latch and operator reset are the supervisor's own: an E-stop frame latches it, and
 //! only the command's operator-reset sequence and a re-engage release it.
 
 use core::time::Duration;
 
+use bywire_control::kinematics::{four_wheel, Swerve};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
@@ -67,6 +69,8 @@ pub struct SimulatedVehicle<W: VehicleWire> {
     next_report: Timestamp,
     wheel_counter: u64,
     redundant: bool,
+    /// Where the wheels are (for their angles in a tank turn).
+    wheels: Swerve<4>,
 }
 
 impl<W: VehicleWire> SimulatedVehicle<W> {
@@ -87,7 +91,14 @@ impl<W: VehicleWire> SimulatedVehicle<W> {
             report_period: report_period.max(Duration::from_millis(1)),
             next_report: Timestamp::ZERO,
             wheel_counter: 0,
+            wheels: four_wheel(DEFAULT_WHEELBASE, DEFAULT_TRACK),
         }
+    }
+
+    /// The vehicle's wheelbase and track (m), for its wheel angles.
+    pub fn with_geometry(mut self, wheelbase: f64, track: f64) -> Self {
+        self.wheels = four_wheel(wheelbase, track);
+        self
     }
 
     /// The supervisor (its watchdog, latch, mode, counts).
@@ -133,6 +144,11 @@ impl<W: VehicleWire> SimulatedVehicle<W> {
             .set_feedback(self.plant.speed, self.plant.steering);
     }
 }
+
+/// The geometry assumed without a profile's `[vehicle]` (the reference tug's).
+const DEFAULT_WHEELBASE: f64 = 3.2;
+/// Its track, m.
+const DEFAULT_TRACK: f64 = 1.8;
 
 /// The most plant steps taken at once.
 const MAX_CATCH_UP_STEPS: u32 = 1_000;
@@ -182,11 +198,16 @@ impl<W: VehicleWire> Node for SimulatedVehicle<W> {
         if now >= self.next_report {
             self.next_report = now.saturating_add(self.report_period);
             let speeds = [self.plant.speed; 4];
-            if let Some(frame) = self
-                .supervisor
-                .wire_mut()
-                .wheel_speeds_frame(speeds, self.wheel_counter)
-            {
+            let mode = self.supervisor.actuators(now).steering_mode;
+            let angles = mode
+                .wheel_angles(self.plant.steering.to_radians(), &self.wheels)
+                .map(f64::to_degrees);
+            let wire = self.supervisor.wire_mut();
+            let frames = [
+                wire.wheel_speeds_frame(speeds, self.wheel_counter),
+                wire.wheel_angles_frame(angles, self.wheel_counter),
+            ];
+            for frame in frames.into_iter().flatten() {
                 out(Supervisor::<W>::PORT_A, frame);
                 if self.redundant {
                     out(Supervisor::<W>::PORT_B, frame);
@@ -235,6 +256,10 @@ impl SimulatedVehicle<bywire_vehicle::wire::ProfileWire> {
             .state
             .as_ref()
             .map_or(config.cycle, |s| Duration::from_millis(s.period_ms));
-        SimulatedVehicle::new(config, wire, params, period)
+        let vehicle = SimulatedVehicle::new(config, wire, params, period);
+        match &profile.profile.vehicle {
+            Some(v) => vehicle.with_geometry(v.wheelbase_m, v.track_m),
+            None => vehicle,
+        }
     }
 }

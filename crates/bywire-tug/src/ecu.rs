@@ -28,10 +28,9 @@ use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
+use bywire_vehicle::wire::VehicleWire;
 
-use crate::messages::{
-    self, SteeringAngleSensors, VehicleStatus, VehicleToAdsSensors, VehicleToAdsWheelAngles,
-};
+use crate::messages::{self, SteeringAngleSensors, VehicleStatus};
 use crate::plausibility::{SteeringFault, SteeringPlausibility};
 use crate::wire::ReferenceWire;
 
@@ -359,16 +358,11 @@ impl VehicleControlEcu {
         if speed == 0.0 {
             // At a standstill the wheels still take the mode's angles: the commanded angle
             // (front +, rear − in normal mode, all alike in crab), or tangent to the turn.
-            let angle = a.steering.to_radians();
-            let tank = self
-                .swerve
-                .inverse(Motion::Tank { yaw_rate: 1.0 }.twist(), &self.wheel_targets);
-            for ((target, sign), tank) in targets.iter_mut().zip([1.0, 1.0, -1.0, -1.0]).zip(tank) {
-                target.angle = match a.steering_mode {
-                    SteeringMode::Normal => angle * sign,
-                    SteeringMode::Crab => angle,
-                    SteeringMode::Tank => tank.angle,
-                };
+            let angles = a
+                .steering_mode
+                .wheel_angles(a.steering.to_radians(), &self.swerve);
+            for (target, angle) in targets.iter_mut().zip(angles) {
+                target.angle = angle;
             }
         }
         self.wheel_targets = targets;
@@ -413,29 +407,14 @@ impl VehicleControlEcu {
         self.next_report = now.saturating_add(REPORT_PERIOD);
         let counter = self.report_counter & 0x0F;
         self.report_counter = self.report_counter.wrapping_add(1);
-        let mut m = VehicleToAdsSensors::default();
-        let [fl, fr, rl, rr] = speeds.map(|v| v.clamp(-20.0, 20.0));
-        let _ = (
-            m.set_wheel_speed_fl(fl),
-            m.set_wheel_speed_fr(fr),
-            m.set_wheel_speed_rl(rl),
-            m.set_wheel_speed_rr(rr),
-        );
-        m.set_counter_raw(counter);
-        out(BUS1, messages::sealed_frame(VehicleToAdsSensors::ID, m.0));
-        let mut m = VehicleToAdsWheelAngles::default();
-        let [fl, fr, rl, rr] = angles.map(|a| a.clamp(-200.0, 200.0));
-        let _ = (
-            m.set_wheel_angle_fl(fl),
-            m.set_wheel_angle_fr(fr),
-            m.set_wheel_angle_rl(rl),
-            m.set_wheel_angle_rr(rr),
-        );
-        m.set_counter_raw(counter);
-        out(
-            BUS1,
-            messages::sealed_frame(VehicleToAdsWheelAngles::ID, m.0),
-        );
+        // The frames any vehicle on this wire sends (the simulated vehicle's too).
+        let frames = [
+            ReferenceWire.wheel_speeds_frame(speeds, counter),
+            ReferenceWire.wheel_angles_frame(angles, counter),
+        ];
+        for frame in frames.into_iter().flatten() {
+            out(BUS1, frame);
+        }
         let mut status = VehicleStatus::default();
         status.set_drive_fault_raw(u64::from(self.drives_lost));
         status.set_steering_fault_raw(u64::from(self.plausibility.faulted().is_some()));

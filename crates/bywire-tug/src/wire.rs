@@ -170,4 +170,18 @@ impl VehicleWire for ReferenceWire {
         m.set_counter_raw(counter & 0x0F);
         Some(messages::sealed_frame(VehicleToAdsSensors::ID, m.0))
     }
+
+    fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame> {
+        let mut m = VehicleToAdsWheelAngles::default();
+        // Beyond the signals' declared range they are reported at its limit.
+        let [fl, fr, rl, rr] = angles.map(|a| a.clamp(-204.8, 204.7));
+        let _ = (
+            m.set_wheel_angle_fl(fl),
+            m.set_wheel_angle_fr(fr),
+            m.set_wheel_angle_rl(rl),
+            m.set_wheel_angle_rr(rr),
+        );
+        m.set_counter_raw(counter & 0x0F);
+        Some(messages::sealed_frame(VehicleToAdsWheelAngles::ID, m.0))
+    }
 }

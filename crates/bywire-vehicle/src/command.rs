@@ -156,6 +156,30 @@ vocabulary!(
     ]
 );
 
+impl SteeringMode {
+    /// The four wheels' angles (rad; FL, FR, RL, RR of `wheels`) this mode gives a commanded
+    /// angle: front + and rear − in normal mode, all alike in crab, tangent to a turn about
+    /// the centre in a tank turn (the commanded angle unused). A moving vehicle's wheels follow
+    /// its twist; these are the angles at a standstill, and a plain plant's.
+    pub fn wheel_angles(
+        self,
+        steering_rad: f64,
+        wheels: &bywire_control::kinematics::Swerve<4>,
+    ) -> [f64; 4] {
+        use bywire_control::kinematics::{Motion, WheelState};
+        match self {
+            SteeringMode::Normal => [steering_rad, steering_rad, -steering_rad, -steering_rad],
+            SteeringMode::Crab => [steering_rad; 4],
+            SteeringMode::Tank => wheels
+                .inverse(
+                    Motion::Tank { yaw_rate: 1.0 }.twist(),
+                    &[WheelState::default(); 4],
+                )
+                .map(|w| w.angle),
+        }
+    }
+}
+
 vocabulary!(
     /// Gears.
     Gear, "gear", default Park, [

@@ -129,10 +129,10 @@ pub struct StateRoles {
     pub steering_enabled: Option<String>,
 }
 
-/// Wheel speed feedback.
+/// Per-wheel feedback: wheel speeds (m/s) or wheel angles (degrees).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct WheelSpeeds {
+pub struct WheelSignals {
     /// The message.
     pub message: String,
     /// FL, FR, RL, RR.
@@ -297,7 +297,9 @@ pub struct Profile {
     /// The state message.
     pub state: Option<StateRoles>,
     /// Wheel speeds.
-    pub wheel_speeds: Option<WheelSpeeds>,
+    pub wheel_speeds: Option<WheelSignals>,
+    /// Wheel angles (four-wheel-steered vehicles).
+    pub wheel_angles: Option<WheelSignals>,
     /// E-stop.
     pub estop: Option<EstopRoles>,
     /// Emergency brake.
@@ -519,13 +521,19 @@ impl Checker<'_> {
                 ));
             }
         }
-        if let Some(w) = &p.wheel_speeds {
-            let m = self.message("wheel_speeds.message", &w.message)?;
+        for (role, wheels) in [
+            ("wheel_speeds", &p.wheel_speeds),
+            ("wheel_angles", &p.wheel_angles),
+        ] {
+            let Some(w) = wheels else { continue };
+            let m = self.message(&format!("{role}.message"), &w.message)?;
             if w.signals.len() != 4 {
-                return Err(self.invalid("wheel_speeds.signals", "four signals: FL, FR, RL, RR"));
+                return Err(
+                    self.invalid(&format!("{role}.signals"), "four signals: FL, FR, RL, RR")
+                );
             }
             for (i, name) in w.signals.iter().enumerate() {
-                self.signal(m, &format!("wheel_speeds.signals[{i}]"), name)?;
+                self.signal(m, &format!("{role}.signals[{i}]"), name)?;
             }
         }
         if let Some(e) = &p.estop {

@@ -316,6 +316,7 @@ pub struct ProfileWire {
     state: RoleMessage,
     state_signals: StateSignals,
     wheel_speeds: Option<(RoleMessage, [usize; 4])>,
+    wheel_angles: Option<(RoleMessage, [usize; 4])>,
     brake: Option<(RoleMessage, usize, usize)>,
     estop: Option<(RoleMessage, usize)>,
     gears: EnumMap<Gear>,
@@ -400,23 +401,25 @@ impl ProfileWire {
             warning: optional("warning", &s.warning)?,
             driver_override: optional("driver_override", &s.driver_override)?,
         };
-        let wheel_speeds = match &p.wheel_speeds {
-            None => None,
+        let wheels = |role: &str, w: &Option<crate::profile::WheelSignals>| match w {
+            None => Ok(None),
             Some(w) => {
-                let role = RoleMessage::declared(
+                let message = RoleMessage::declared(
                     db,
                     &w.message,
                     algorithm,
-                    "wheel_speeds.message",
+                    &format!("{role}.message"),
                     &invalid,
                 )?;
                 let mut indices = [0usize; 4];
                 for (slot, (i, name)) in indices.iter_mut().zip(w.signals.iter().enumerate()) {
-                    *slot = signal(&w.message, &format!("wheel_speeds.signals[{i}]"), name)?;
+                    *slot = signal(&w.message, &format!("{role}.signals[{i}]"), name)?;
                 }
-                Some((role, indices))
+                Ok(Some((message, indices)))
             }
         };
+        let wheel_speeds = wheels("wheel_speeds", &p.wheel_speeds)?;
+        let wheel_angles = wheels("wheel_angles", &p.wheel_angles)?;
         let brake = match &p.emergency_brake {
             None => None,
             Some(b) => {
@@ -448,6 +451,7 @@ impl ProfileWire {
             state,
             state_signals,
             wheel_speeds,
+            wheel_angles,
             brake,
             gears: EnumMap::new(loaded, "gear")?,
             modes: EnumMap::new(loaded, "control_mode")?,
@@ -551,6 +555,15 @@ impl AdsWire for ProfileWire {
                 return Feedback::WheelSpeeds { counter, speeds };
             }
         }
+        if let Some((m, indices)) = self.wheel_angles.as_mut() {
+            if m.is(frame) {
+                let Some(counter) = m.read(frame) else {
+                    return Feedback::Corrupt;
+                };
+                let angles = indices.map(|i| m.physical(i).unwrap_or(f64::NAN));
+                return Feedback::WheelAngles { counter, angles };
+            }
+        }
         Feedback::Other
     }
 }
@@ -649,6 +662,14 @@ impl VehicleWire for ProfileWire {
         let (m, indices) = self.wheel_speeds.as_mut()?;
         for (index, speed) in indices.iter().zip(speeds) {
             m.set(*index, speed);
+        }
+        m.frame(counter)
+    }
+
+    fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame> {
+        let (m, indices) = self.wheel_angles.as_mut()?;
+        for (index, angle) in indices.iter().zip(angles) {
+            m.set(*index, angle);
         }
         m.frame(counter)
     }

@@ -145,4 +145,7 @@ pub trait VehicleWire: Counters {
     /// The wheel-speed frame (FL, FR, RL, RR in m/s) with `counter` and its checksum, where
     /// the vehicle has one.
     fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame>;
+    /// The wheel-angle frame (FL, FR, RL, RR in degrees) with `counter` and its checksum,
+    /// where the vehicle has one.
+    fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame>;
 }

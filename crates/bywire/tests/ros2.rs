@@ -225,3 +225,102 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
         }
     }
 }
+
+/// `bywire ros2 vehicle` with the simulated reference tug, driven by an Autoware stand-in on
+/// Cyclone DDS: engage through the service, drive on control_cmd, the reports and their
+/// rates, a stopped publisher stopping the vehicle, disengage.
+#[test]
+fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
+    if !inside_lonet("ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds") {
+        return;
+    }
+    let vehicle = Background::start(&[
+        "ros2",
+        "vehicle",
+        "--profile",
+        "reference-tug",
+        "sim:ros2-vehicle@500000",
+        "--with-vehicle",
+        "--dds-interface",
+        "lo",
+    ]);
+    let seen = python_peer("ros2_vehicle_peer.py", &[]);
+    let (code, out, err) = vehicle.stop();
+    assert_eq!(code, 0, "{out}{err}");
+
+    // Manual until engaged; the service answers once the vehicle reports autonomous.
+    assert_eq!(seen["mode_before"], 4, "{seen}");
+    assert_eq!(seen["engaged"], true, "{seen}\n{err}");
+    assert_eq!(seen["mode_engaged"], 1, "{seen}");
+    // Every report at about 30 Hz (real time on a shared machine: a wide band).
+    for (topic, count) in seen["per_second"].as_object().unwrap() {
+        let count = count.as_u64().unwrap();
+        assert!((20..=40).contains(&count), "{topic}: {count} per second");
+    }
+    // Driving as commanded: 1.5 m/s, 0.1 rad at the (bicycle) tire, in drive.
+    let d = &seen["driving"];
+    let f = |k: &str| d[k].as_f64().unwrap();
+    assert!((f("velocity") - 1.5).abs() < 0.05, "{d}");
+    assert!((f("tire_angle") - 0.1).abs() < 0.01, "{d}");
+    assert_eq!(f("lateral"), 0.0);
+    assert!(f("heading_rate") > 0.0, "{d}");
+    assert_eq!(d["gear"], 2);
+    assert_eq!(d["frame_id"], "base_link");
+    assert_eq!(d["steering_mode"], "normal");
+    // The 4WS truth: front and rear in counter-phase at atan(tan(0.1) / 2), drive joints at
+    // speed / wheel radius (0.25 m).
+    let names: Vec<&str> = d["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "fl_steer", "fr_steer", "rl_steer", "rr_steer", "fl_drive", "fr_drive", "rl_drive",
+            "rr_drive"
+        ]
+    );
+    let position: Vec<f64> = d["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_f64().unwrap())
+        .collect();
+    let front = (0.1f64.tan() / 2.0).atan();
+    for (i, sign) in [1.0, 1.0, -1.0, -1.0].into_iter().enumerate() {
+        assert!((position[i] - sign * front).abs() < 0.005, "{position:?}");
+    }
+    let rates: Vec<f64> = d["joint_velocities"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_f64().unwrap())
+        .collect();
+    for rate in &rates[4..] {
+        assert!((rate - f("velocity") / 0.25).abs() < 0.3, "{rates:?}");
+    }
+
+    // A stopped publisher: the vehicle slows within the staleness (200 ms) and a report
+    // period, and stops.
+    let after: Vec<(f64, f64)> = seen["after_stop"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .collect();
+    let v0 = after[0].1;
+    let slowing = after
+        .iter()
+        .find(|(_, v)| *v < v0 - 0.005)
+        .unwrap_or_else(|| panic!("{after:?}"));
+    assert!(slowing.0 < 0.2 + 0.15, "slowed only after {} s", slowing.0);
+    assert!(after.last().unwrap().1 < 0.05, "{after:?}");
+
+    // Disengage; a mode this interface does not offer is refused.
+    assert_eq!(seen["disengaged"], true);
+    assert_eq!(seen["mode_after"], 4);
+    assert_eq!(seen["refused_mode"], false);
+    assert!(err.contains("mode 2: this interface engages"), "{err}");
+}

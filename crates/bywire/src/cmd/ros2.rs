@@ -7,6 +7,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use bywire_ros::can_bridge::{self, BridgeEvent, BridgedBus, CanBridgeConfig, CanTopics};
 use bywire_ros::control_output::{self, ControlOutputConfig, Outcome};
 use bywire_ros::dds::{RosNode, RosOptions};
+use bywire_ros::vehicle_interface::{self, VehicleEvent, VehicleInterfaceConfig};
 use bywire_vehicle::autoware::OutputMode;
 
 use crate::support::busarg;
@@ -42,6 +43,26 @@ A command with a non-finite or out-of-range value is refused whole: no frame and
 The frames follow `autoware-can.dbc` (bywire-vehicle/dbc): angle and rate x 1e6, velocity and
 acceleration x 1e3 as int32, then mode, validity flags, sequence and the stamp in ms.")]
     ControlOutput(ControlOutputArgs),
+    /// The Autoware vehicle interface for any profile: control_cmd, gear_cmd, cmd_vel and the
+    /// control-mode service in; steering, velocity, gear and control-mode status out, and the
+    /// 4WS truth Autoware lacks (the wheels as JointState, the steering mode).
+    #[command(after_help = "Examples:
+  bywire ros2 vehicle --profile reference-tug can0
+  bywire ros2 vehicle --profile reference-tug can0 can1          (a redundant pair)
+  bywire ros2 vehicle --profile reference-tug virtual:v --with-vehicle
+
+In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle through the
+     vehicle's geometry, velocity, a deceleration as brake), /control/command/gear_cmd,
+     /vehicle/command/steering_mode (std_msgs/String: normal, crab, tank), /cmd_vel
+     (geometry_msgs/Twist through the 4WS kinematics), and the service
+     /control/control_mode_request (autoware_vehicle_msgs/ControlModeCommand: 1 engages,
+     answered when the vehicle reports autonomous; 4 disengages).
+Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,
+     joint_states, steering_mode} at --rate, from fresh feedback only.
+Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)
+is replaced by a controlled stop. A command beyond the profile's limits is refused, never
+clamped. The E-stop's operator reset is not offered over ROS 2. Ctrl-C brakes for a second.")]
+    Vehicle(VehicleArgs),
 }
 
 /// Where the node runs (shared by every `ros2` command).
@@ -153,6 +174,7 @@ pub fn run(command: &Ros2Command, out: &mut dyn Write) -> Result<()> {
     match command {
         Ros2Command::Can(args) => can(args, out),
         Ros2Command::ControlOutput(args) => control(args, out),
+        Ros2Command::Vehicle(args) => vehicle(args, out),
     }
 }
 
@@ -258,6 +280,89 @@ fn control(args: &ControlOutputArgs, out: &mut dyn Write) -> Result<()> {
         },
     )?;
     writeln!(out, "{sent} commands sent, {} refused", reporter.refused)?;
+    Ok(())
+}
+
+#[derive(clap::Args)]
+pub struct VehicleArgs {
+    /// A shipped profile (reference-tug) or a profile file.
+    #[arg(long)]
+    profile: String,
+    /// The bus (a plain interface name means SocketCAN).
+    bus: String,
+    /// A redundant second bus: every command goes on both, feedback is taken from either.
+    bus2: Option<String>,
+    #[command(flatten)]
+    node: NodeArgs,
+    /// Reports per second.
+    #[arg(long, default_value_t = 30.0, value_parser = crate::support::numbers::rate)]
+    rate: f64,
+    /// Run a simulated vehicle (`bywire vehicle`) on the same in-process buses.
+    #[arg(long)]
+    with_vehicle: bool,
+}
+
+fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
+    use crate::support::vehicles;
+    let profile = vehicles::load_profile(&args.profile)?;
+    let specs = vehicles::command_buses(&args.bus, args.bus2.as_ref());
+    let stop_vehicle = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let simulated = if args.with_vehicle {
+        let wire = bywire_vehicle::wire::ProfileWire::new(&profile)
+            .with_context(|| format!("--profile {}", args.profile))?;
+        Some(vehicles::spawn_in_process(
+            &specs,
+            &profile,
+            wire,
+            &stop_vehicle,
+        )?)
+    } else {
+        None
+    };
+    let buses = vehicles::endpoints(&specs)?
+        .into_iter()
+        .zip(&specs)
+        .map(|((port, bus), (_, name))| (port, name.clone(), bus))
+        .collect();
+    let config = VehicleInterfaceConfig {
+        report_period: std::time::Duration::from_secs_f64(1.0 / args.rate),
+        ..VehicleInterfaceConfig::default()
+    };
+    let mut node = args.node.open("vehicle_interface")?;
+    let mut reporter = Reporter {
+        command: "vehicle",
+        refused: 0,
+    };
+    reporter.line(&format!(
+        "node {} for {}",
+        node.fully_qualified_name(),
+        profile.profile.name
+    ));
+    let result = vehicle_interface::run(
+        &mut node,
+        &profile,
+        buses,
+        &config,
+        &crate::interrupt_flag(),
+        &mut |event| match event {
+            VehicleEvent::Refused(why) => reporter.refusal(&why),
+            VehicleEvent::ModeRequest { mode, success, why } => reporter.line(&format!(
+                "control mode request {mode}: {}{}",
+                if success { "done" } else { "refused" },
+                why.map(|w| format!(" ({w})")).unwrap_or_default()
+            )),
+            VehicleEvent::BusLost(what) => {
+                reporter.line(&format!("bus {what}; commanding on the other"))
+            }
+            VehicleEvent::Stopping => reporter.line("stopping: braking for 1 s"),
+        },
+    );
+    stop_vehicle.store(true, std::sync::atomic::Ordering::Relaxed);
+    if let Some(simulated) = simulated {
+        let _ = simulated.join();
+    }
+    result?;
+    writeln!(out, "{} inputs refused", reporter.refused)?;
     Ok(())
 }
 

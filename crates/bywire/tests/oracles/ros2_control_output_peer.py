@@ -13,7 +13,7 @@ import time
 import can
 import cantools
 
-from ros2_types import Control, Lateral, Longitudinal, participant, reader, stamp, take_until, writer
+from ros2_types import Control, control, participant, reader, take_until, writer
 
 group, port, dbc = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 db = cantools.database.load_file(dbc)
@@ -21,18 +21,6 @@ dp = participant()
 commands = writer(dp, "rt/control/trajectory_follower/control_cmd", Control, depth=1)
 republished = reader(dp, "rt/control/command/control_cmd", Control, depth=100)
 bus = can.Bus(interface="udp_multicast", channel=group, port=port)
-
-
-def control(angle, rate, velocity, acceleration, nanos):
-    t = stamp(nanos)
-    return Control(
-        stamp=t, control_time=t,
-        lateral=Lateral(stamp=t, control_time=t, steering_tire_angle=angle,
-                        steering_tire_rotation_rate=rate,
-                        is_defined_steering_tire_rotation_rate=True),
-        longitudinal=Longitudinal(stamp=t, control_time=t, velocity=velocity,
-                                  acceleration=acceleration, jerk=0.0,
-                                  is_defined_acceleration=True, is_defined_jerk=False))
 
 
 def frames_until(wanted, timeout):

@@ -199,3 +199,16 @@ def take_until(reader, wanted, timeout=10.0):
 
 def stamp(nanos):
     return Time(sec=nanos // 1_000_000_000, nanosec=nanos % 1_000_000_000)
+
+
+def control(angle, rate, velocity, acceleration, nanos):
+    """An Autoware Control command with these setpoints, stamped `nanos`."""
+    t = stamp(nanos)
+    return Control(
+        stamp=t, control_time=t,
+        lateral=Lateral(stamp=t, control_time=t, steering_tire_angle=angle,
+                        steering_tire_rotation_rate=rate,
+                        is_defined_steering_tire_rotation_rate=True),
+        longitudinal=Longitudinal(stamp=t, control_time=t, velocity=velocity,
+                                  acceleration=acceleration, jerk=0.0,
+                                  is_defined_acceleration=True, is_defined_jerk=False))

@@ -1,0 +1,382 @@
+//! Autoware's vehicle interface in terms of a profile's vehicle: `Control` (and `Twist`) into
+//! the vehicle's command, the vehicle's feedback into Autoware's reports. No I/O: the DDS side
+//! is `vehicle_interface`.
+//!
+//! Autoware steers a bicycle: one tire angle δ on a wheelbase L, a path of curvature tan δ / L.
+//! A four-wheel-steered vehicle in normal mode turns front and rear in counter-phase, on
+//! curvature 2 tan δf / L; the same path wants δf = atan(tan δ / 2), and the angle reported back
+//! is the bicycle's equivalent. In crab mode the angle is the direction of travel; in a tank
+//! turn there is no steering angle (the speed is the wheels' speed about the centre). Commands
+//! beyond the profile's limits are refused, never clamped.
+
+use bywire_control::kinematics::{four_wheel, WheelState};
+use bywire_core::Timestamp;
+use bywire_vehicle::ads::{AdsCommand, VehicleState};
+use bywire_vehicle::command::{ControlMode, Gear, SteeringMode};
+use bywire_vehicle::profile::Limits;
+use core::time::Duration;
+
+use crate::msg::{self, control_mode, gear, Header, JointState, Time, Twist};
+
+/// The vehicle's geometry as the mapping needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometry {
+    /// Wheelbase, m.
+    pub wheelbase: f64,
+    /// Track, m.
+    pub track: f64,
+    /// Wheel diameter, m (for the drive joints' rad/s).
+    pub wheel_diameter: f64,
+    /// Front and rear steer in counter-phase in normal mode (a 4WS vehicle).
+    pub four_wheel_steer: bool,
+}
+
+/// The vehicle's steering command (degrees) for Autoware's tire angle (rad) in `mode`.
+pub fn steering_command(tire_angle: f64, mode: SteeringMode, g: &Geometry) -> f64 {
+    match mode {
+        SteeringMode::Normal if g.four_wheel_steer => {
+            libm::atan(libm::tan(tire_angle) / 2.0).to_degrees()
+        }
+        SteeringMode::Normal | SteeringMode::Crab => tire_angle.to_degrees(),
+        SteeringMode::Tank => 0.0,
+    }
+}
+
+/// Autoware's tire angle (rad) for the vehicle's steering (degrees) in `mode`.
+pub fn tire_angle(steering_deg: f64, mode: SteeringMode, g: &Geometry) -> f64 {
+    let angle = steering_deg.to_radians();
+    match mode {
+        SteeringMode::Normal if g.four_wheel_steer => libm::atan(2.0 * libm::tan(angle)),
+        SteeringMode::Normal | SteeringMode::Crab => angle,
+        SteeringMode::Tank => 0.0,
+    }
+}
+
+/// Brake (%) for a commanded acceleration: a deceleration as a share of the vehicle's
+/// largest; none when accelerating.
+pub fn brake_percent(acceleration: f64, max_deceleration: f64) -> f64 {
+    if acceleration >= 0.0 || max_deceleration <= 0.0 {
+        0.0
+    } else {
+        (-acceleration / max_deceleration * 100.0).min(100.0)
+    }
+}
+
+/// The command for an Autoware `Control`, from the previous one (gear, modes and requests
+/// kept), or why it is refused.
+pub fn from_control(
+    control: &msg::Control,
+    previous: AdsCommand,
+    g: &Geometry,
+    limits: &Limits,
+) -> Result<AdsCommand, String> {
+    let angle = f64::from(control.lateral.steering_tire_angle);
+    let velocity = f64::from(control.longitudinal.velocity);
+    let acceleration = f64::from(control.longitudinal.acceleration);
+    for (name, value) in [
+        ("steering_tire_angle", angle),
+        ("velocity", velocity),
+        ("acceleration", acceleration),
+    ] {
+        if !value.is_finite() {
+            return Err(format!("{name} is not finite"));
+        }
+    }
+    let command = AdsCommand {
+        steering: steering_command(angle, previous.steering_mode, g),
+        velocity,
+        brake: brake_percent(acceleration, limits.deceleration_m_s2),
+        ..previous
+    };
+    limits.check(&command)?;
+    Ok(command)
+}
+
+/// Below this a twist component counts as zero.
+const STILL: f64 = 1e-6;
+
+/// The command for a `cmd_vel` twist, through the 4WS kinematics: sideways motion without
+/// turning is crab, turning on the spot a tank turn, anything else normal steering on the
+/// twist's curvature. A vehicle without four-wheel steer takes only the normal case.
+pub fn from_twist(
+    twist: &Twist,
+    previous: AdsCommand,
+    g: &Geometry,
+    limits: &Limits,
+) -> Result<AdsCommand, String> {
+    let (vx, vy, omega) = (twist.linear.x, twist.linear.y, twist.angular.z);
+    if ![vx, vy, omega].iter().all(|v| v.is_finite()) {
+        return Err("a twist component is not finite".into());
+    }
+    let moving = vx.abs() > STILL || vy.abs() > STILL;
+    let (steering_mode, steering, velocity) = if g.four_wheel_steer && vy.abs() > STILL {
+        if omega.abs() > STILL {
+            return Err("turning while moving sideways: a 4WS vehicle crabs or turns".into());
+        }
+        // Crab: the wheels point where the body goes; backwards is reverse at the mirrored angle.
+        let (speed, angle) = if vx < 0.0 {
+            (-libm::hypot(vx, vy), libm::atan2(-vy, -vx))
+        } else {
+            (libm::hypot(vx, vy), libm::atan2(vy, vx))
+        };
+        (SteeringMode::Crab, angle.to_degrees(), speed)
+    } else if g.four_wheel_steer && !moving && omega.abs() > STILL {
+        let radius = libm::hypot(g.wheelbase / 2.0, g.track / 2.0);
+        (SteeringMode::Tank, 0.0, omega * radius)
+    } else if !moving {
+        (previous.steering_mode, previous.steering, 0.0)
+    } else {
+        if vy.abs() > STILL {
+            return Err("sideways motion needs four-wheel steer".into());
+        }
+        let curvature = omega / vx;
+        let per_axle = if g.four_wheel_steer { 2.0 } else { 1.0 };
+        let angle = libm::atan(curvature * g.wheelbase / per_axle);
+        (SteeringMode::Normal, angle.to_degrees(), vx)
+    };
+    let command = AdsCommand {
+        steering,
+        velocity,
+        brake: 0.0,
+        steering_mode,
+        ..previous
+    };
+    limits.check(&command)?;
+    Ok(command)
+}
+
+/// The gear of an Autoware gear code; `None` for `NONE` (no change).
+pub fn gear_from_code(code: u8) -> Result<Option<Gear>, String> {
+    match code {
+        gear::NONE => Ok(None),
+        gear::NEUTRAL => Ok(Some(Gear::Neutral)),
+        // Autoware's numbered drive gears are all forward.
+        gear::DRIVE..=19 => Ok(Some(Gear::Drive)),
+        gear::REVERSE | 21 => Ok(Some(Gear::Reverse)),
+        gear::PARK => Ok(Some(Gear::Park)),
+        other => Err(format!(
+            "gear code {other}: this vehicle has park, reverse, neutral and drive"
+        )),
+    }
+}
+
+/// Autoware's code for a gear.
+pub fn gear_code(g: Gear) -> u8 {
+    match g {
+        Gear::Park => gear::PARK,
+        Gear::Reverse => gear::REVERSE,
+        Gear::Neutral => gear::NEUTRAL,
+        Gear::Drive => gear::DRIVE,
+    }
+}
+
+/// Autoware's control mode for the vehicle's reported mode (`None`: no valid feedback).
+pub fn control_mode_code(mode: Option<ControlMode>) -> u8 {
+    match mode {
+        None | Some(ControlMode::Calibration) => control_mode::NOT_READY,
+        Some(ControlMode::Autonomous) => control_mode::AUTONOMOUS,
+        Some(ControlMode::Manual) => control_mode::MANUAL,
+        Some(ControlMode::Estop) => control_mode::DISENGAGED,
+    }
+}
+
+/// Longitudinal and lateral velocity (m/s) and heading rate (rad/s): from the four wheels'
+/// speeds and angles when they are fresh (the body's motion that fits them best), else from
+/// the speed and steering reported, through the steering mode's kinematics.
+pub fn body_velocity(
+    state: &VehicleState,
+    now: Timestamp,
+    fresh: Duration,
+    g: &Geometry,
+) -> Option<(f64, f64, f64)> {
+    let speeds = state.wheel_speeds.fresh(now, fresh);
+    let angles = state.wheel_angles.fresh(now, fresh);
+    if let (Some(speeds), Some(angles)) = (speeds, angles) {
+        let mut wheels = [WheelState::default(); 4];
+        for ((w, s), a) in wheels.iter_mut().zip(speeds).zip(angles) {
+            *w = WheelState {
+                speed: s,
+                angle: a.to_radians(),
+            };
+        }
+        if let Some(t) = four_wheel(g.wheelbase, g.track).forward(&wheels) {
+            return Some((t.vx, t.vy, t.omega));
+        }
+    }
+    let v = state.velocity.fresh(now, fresh)?;
+    let steering = state.steering.fresh(now, fresh).unwrap_or(0.0).to_radians();
+    let mode = state.steering_mode.fresh(now, fresh).unwrap_or_default();
+    Some(match mode {
+        SteeringMode::Normal => {
+            let per_axle = if g.four_wheel_steer { 2.0 } else { 1.0 };
+            (v, 0.0, v * per_axle * libm::tan(steering) / g.wheelbase)
+        }
+        SteeringMode::Crab => (v * libm::cos(steering), v * libm::sin(steering), 0.0),
+        SteeringMode::Tank => (0.0, 0.0, v / libm::hypot(g.wheelbase / 2.0, g.track / 2.0)),
+    })
+}
+
+/// The joints of the four wheels, in this order.
+pub const JOINTS: [&str; 8] = [
+    "fl_steer", "fr_steer", "rl_steer", "rr_steer", "fl_drive", "fr_drive", "rl_drive", "rr_drive",
+];
+
+/// The wheels as joints: steering joints at their angle (rad), drive joints at their rotation
+/// (rad, integrated by the caller) and rate (rad/s); `None` without fresh wheel feedback.
+pub fn joint_state(
+    state: &VehicleState,
+    now: Timestamp,
+    fresh: Duration,
+    g: &Geometry,
+    drive_rotation: &[f64; 4],
+    stamp: Time,
+) -> Option<JointState> {
+    let speeds = state.wheel_speeds.fresh(now, fresh)?;
+    let angles = state.wheel_angles.fresh(now, fresh)?;
+    let radius = g.wheel_diameter / 2.0;
+    let mut position: Vec<f64> = angles.iter().map(|a| a.to_radians()).collect();
+    position.extend_from_slice(drive_rotation);
+    let mut velocity = vec![0.0; 4];
+    velocity.extend(
+        speeds
+            .iter()
+            .map(|s| if radius > 0.0 { s / radius } else { 0.0 }),
+    );
+    Some(JointState {
+        header: Header {
+            stamp,
+            frame_id: "base_link".into(),
+        },
+        name: JOINTS.iter().map(|j| j.to_string()).collect(),
+        position,
+        velocity,
+        effort: Vec::new(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TUG: Geometry = Geometry {
+        wheelbase: 3.2,
+        track: 1.8,
+        wheel_diameter: 0.5,
+        four_wheel_steer: true,
+    };
+
+    fn limits() -> Limits {
+        Limits {
+            steering_deg: 40.0,
+            steering_rate_deg_s: 30.0,
+            speed_m_s: 5.0,
+            deceleration_m_s2: 4.0,
+        }
+    }
+
+    #[test]
+    fn a_bicycle_angle_becomes_the_same_path_in_counter_phase() {
+        let delta = 0.3f64;
+        let front = steering_command(delta, SteeringMode::Normal, &TUG).to_radians();
+        // The bicycle's curvature equals the 4WS curvature.
+        let bicycle = libm::tan(delta) / TUG.wheelbase;
+        let four_ws = 2.0 * libm::tan(front) / TUG.wheelbase;
+        assert!((bicycle - four_ws).abs() < 1e-12);
+        // And back.
+        let back = tire_angle(front.to_degrees(), SteeringMode::Normal, &TUG);
+        assert!((back - delta).abs() < 1e-12);
+        let front_steered = Geometry {
+            four_wheel_steer: false,
+            ..TUG
+        };
+        assert!(
+            (steering_command(delta, SteeringMode::Normal, &front_steered) - delta.to_degrees())
+                .abs()
+                < 1e-12
+        );
+        assert_eq!(steering_command(delta, SteeringMode::Tank, &TUG), 0.0);
+    }
+
+    #[test]
+    fn control_messages_are_checked_and_refused_not_clamped() {
+        let c = crate::control_output::control(0.2, 0.0, 2.0, -2.0, 0);
+        let command = from_control(&c, AdsCommand::default(), &TUG, &limits()).unwrap();
+        assert_eq!(command.velocity, 2.0);
+        assert_eq!(command.brake, 50.0);
+        let too_fast = crate::control_output::control(0.0, 0.0, 6.0, 0.0, 0);
+        assert!(from_control(&too_fast, command, &TUG, &limits())
+            .unwrap_err()
+            .contains("velocity 6"));
+        let nan = crate::control_output::control(f32::NAN, 0.0, 1.0, 0.0, 0);
+        assert_eq!(
+            from_control(&nan, command, &TUG, &limits()).unwrap_err(),
+            "steering_tire_angle is not finite"
+        );
+        // 1.0 rad at the tire is 37.9° at the front in counter-phase: within 40°; 1.1 rad is
+        // 44.5°, beyond.
+        let wide = crate::control_output::control(1.0, 0.0, 1.0, 0.0, 0);
+        assert!(from_control(&wide, command, &TUG, &limits()).is_ok());
+        let wider = crate::control_output::control(1.1, 0.0, 1.0, 0.0, 0);
+        assert!(from_control(&wider, command, &TUG, &limits()).is_err());
+    }
+
+    fn twist(vx: f64, vy: f64, wz: f64) -> Twist {
+        Twist {
+            linear: msg::Vector3 {
+                x: vx,
+                y: vy,
+                z: 0.0,
+            },
+            angular: msg::Vector3 {
+                x: 0.0,
+                y: 0.0,
+                z: wz,
+            },
+        }
+    }
+
+    #[test]
+    fn twists_choose_the_steering_mode() {
+        let p = AdsCommand::default();
+        let crab = from_twist(&twist(1.0, 0.5, 0.0), p, &TUG, &limits()).unwrap();
+        assert_eq!(crab.steering_mode, SteeringMode::Crab);
+        assert!((crab.steering - libm::atan(0.5).to_degrees()).abs() < 1e-9);
+        assert!((crab.velocity - 1.25f64.sqrt()).abs() < 1e-9);
+        assert!(from_twist(&twist(1.0, 1.0, 0.0), p, &TUG, &limits())
+            .unwrap_err()
+            .contains("steering 45"));
+        let back = from_twist(&twist(-1.0, 0.5, 0.0), p, &TUG, &limits()).unwrap();
+        assert!(back.velocity < 0.0 && back.steering < 0.0);
+        let tank = from_twist(&twist(0.0, 0.0, 0.5), p, &TUG, &limits()).unwrap();
+        assert_eq!(tank.steering_mode, SteeringMode::Tank);
+        assert!((tank.velocity - 0.5 * libm::hypot(1.6, 0.9)).abs() < 1e-9);
+        let turn = from_twist(&twist(2.0, 0.0, 0.25), p, &TUG, &limits()).unwrap();
+        assert_eq!(turn.steering_mode, SteeringMode::Normal);
+        // curvature 0.125 1/m: 2 tan(front) / L.
+        assert!((2.0 * libm::tan(turn.steering.to_radians()) / 3.2 - 0.125).abs() < 1e-12);
+        assert!(from_twist(&twist(1.0, 1.0, 0.1), p, &TUG, &limits()).is_err());
+        assert!(from_twist(&twist(f64::NAN, 0.0, 0.0), p, &TUG, &limits()).is_err());
+    }
+
+    #[test]
+    fn gear_and_mode_codes_follow_autoware() {
+        assert_eq!(gear_from_code(0), Ok(None));
+        assert_eq!(gear_from_code(2), Ok(Some(Gear::Drive)));
+        assert_eq!(gear_from_code(20), Ok(Some(Gear::Reverse)));
+        assert_eq!(gear_from_code(22), Ok(Some(Gear::Park)));
+        assert!(gear_from_code(23).unwrap_err().contains("23"));
+        for g in [Gear::Park, Gear::Reverse, Gear::Neutral, Gear::Drive] {
+            assert_eq!(gear_from_code(gear_code(g)), Ok(Some(g)));
+        }
+        assert_eq!(control_mode_code(None), control_mode::NOT_READY);
+        assert_eq!(control_mode_code(Some(ControlMode::Autonomous)), 1);
+        assert_eq!(control_mode_code(Some(ControlMode::Manual)), 4);
+    }
+
+    #[test]
+    fn brake_is_a_share_of_the_largest_deceleration() {
+        assert_eq!(brake_percent(1.0, 4.0), 0.0);
+        assert_eq!(brake_percent(-1.0, 4.0), 25.0);
+        assert_eq!(brake_percent(-9.0, 4.0), 100.0);
+    }
+}

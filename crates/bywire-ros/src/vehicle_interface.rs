@@ -1,0 +1,572 @@
+//! The Autoware vehicle interface for any profile: the ADS-side node ([`Ads`]) on the
+//! real-time runner over one or two buses, its command from Autoware's topics and its reports
+//! published back.
+//!
+//! In: `control_cmd` (`Control`), `gear_cmd`, a steering mode (`std_msgs/String`: normal,
+//! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), and the `ControlModeCommand`
+//! service (engage: answered once the vehicle reports autonomous, or `false` after
+//! [`VehicleInterfaceConfig::engage_timeout`]; disengage). The operator's E-stop reset is not
+//! offered: it stays a deliberate act at the vehicle.
+//! Out, at [`VehicleInterfaceConfig::report_period`]: steering, velocity, gear and control-mode
+//! status from fresh feedback only, the wheels as `JointState` and the steering mode.
+//!
+//! Safety is the node's: a command older than the profile's staleness (a stopped publisher) is
+//! replaced by a controlled stop; a lost bus degrades to the other; the end of the run (the
+//! stop flag) brakes for a second before returning.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, SystemTime};
+
+use bywire_bus::runner::{Flow, Hooks, Runner, Waker};
+use bywire_bus::{Bus, BusError};
+use bywire_core::node::Port;
+use bywire_core::Timestamp;
+use bywire_vehicle::ads::{Ads, AdsCommand};
+use bywire_vehicle::command::{ControlMode, SteeringMode};
+use bywire_vehicle::profile::{Limits, LoadedProfile};
+use bywire_vehicle::wire::ProfileWire;
+use ros2_client::RmwRequestId;
+
+use crate::autoware_vehicle::{self as map, Geometry};
+use crate::dds::{mio1, reliable, Publisher, RosError, RosNode, Server, Subscription, POLL_SLICE};
+use crate::msg::{
+    control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, GearCommand,
+    GearReport, Header, JointState, SteeringReport, StringMsg, Time, Twist, VelocityReport,
+};
+
+/// Messages taken from one input in one pass.
+const TAKE_BATCH: usize = 64;
+/// How long the end of a run brakes.
+const FINAL_BRAKING: Duration = Duration::from_secs(1);
+
+/// Topic and service names (Autoware's), and the rates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleInterfaceConfig {
+    /// `autoware_control_msgs/Control` in.
+    pub control_cmd: String,
+    /// `GearCommand` in.
+    pub gear_cmd: String,
+    /// The steering mode in (`std_msgs/String`).
+    pub steering_mode_cmd: String,
+    /// `geometry_msgs/Twist` in.
+    pub cmd_vel: String,
+    /// The `ControlModeCommand` service.
+    pub control_mode_request: String,
+    /// `SteeringReport` out.
+    pub steering_status: String,
+    /// `VelocityReport` out.
+    pub velocity_status: String,
+    /// `GearReport` out.
+    pub gear_status: String,
+    /// `ControlModeReport` out.
+    pub control_mode: String,
+    /// The wheels as `JointState` out.
+    pub joint_states: String,
+    /// The steering mode out (`std_msgs/String`).
+    pub steering_mode_status: String,
+    /// Time between reports.
+    pub report_period: Duration,
+    /// How long an engage request waits for the vehicle to report autonomous.
+    pub engage_timeout: Duration,
+}
+
+impl Default for VehicleInterfaceConfig {
+    fn default() -> Self {
+        VehicleInterfaceConfig {
+            control_cmd: "/control/command/control_cmd".into(),
+            gear_cmd: "/control/command/gear_cmd".into(),
+            steering_mode_cmd: "/vehicle/command/steering_mode".into(),
+            cmd_vel: "/cmd_vel".into(),
+            control_mode_request: "/control/control_mode_request".into(),
+            steering_status: "/vehicle/status/steering_status".into(),
+            velocity_status: "/vehicle/status/velocity_status".into(),
+            gear_status: "/vehicle/status/gear_status".into(),
+            control_mode: "/vehicle/status/control_mode".into(),
+            joint_states: "/vehicle/status/joint_states".into(),
+            steering_mode_status: "/vehicle/status/steering_mode".into(),
+            report_period: Duration::from_millis(33),
+            engage_timeout: Duration::from_secs(2),
+        }
+    }
+}
+
+/// What the caller hears of while the interface runs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VehicleEvent {
+    /// An input was refused (the last valid command goes on aging).
+    Refused(String),
+    /// An engage or disengage request and its answer.
+    ModeRequest {
+        /// The requested Autoware mode.
+        mode: u8,
+        /// The answer.
+        success: bool,
+        /// Why it was refused, if it was.
+        why: Option<String>,
+    },
+    /// A bus failed; the other goes on.
+    BusLost(String),
+    /// The run is ending: braking.
+    Stopping,
+}
+
+struct Inputs {
+    control: Subscription<crate::msg::Control>,
+    gear: Subscription<GearCommand>,
+    steering_mode: Subscription<StringMsg>,
+    cmd_vel: Subscription<Twist>,
+    mode_request: Server<ControlModeRequest, ControlModeResponse>,
+}
+
+struct Outputs {
+    steering: Publisher<SteeringReport>,
+    velocity: Publisher<VelocityReport>,
+    gear: Publisher<GearReport>,
+    control_mode: Publisher<ControlModeReport>,
+    joints: Publisher<JointState>,
+    steering_mode: Publisher<StringMsg>,
+}
+
+/// The interface's side of the run.
+struct Interface<'a> {
+    inputs: Inputs,
+    outputs: Outputs,
+    config: VehicleInterfaceConfig,
+    geometry: Option<Geometry>,
+    limits: Limits,
+    /// Fresh feedback is younger than this.
+    fresh: Duration,
+    command: AdsCommand,
+    /// A command has arrived (before it, nothing is sent).
+    commanding: bool,
+    engage: Option<(RmwRequestId, Timestamp)>,
+    next_report: Timestamp,
+    last_report: Option<Timestamp>,
+    drive_rotation: [f64; 4],
+    stop: &'a AtomicBool,
+    braking_until: Option<Timestamp>,
+    buses: Vec<(Port, String)>,
+    report: &'a mut dyn FnMut(VehicleEvent),
+}
+
+fn wall_stamp() -> Time {
+    Time::from_nanos(
+        SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+    )
+}
+
+impl Interface<'_> {
+    fn geometry(&self) -> Geometry {
+        self.geometry.unwrap_or(Geometry {
+            wheelbase: 1.0,
+            track: 1.0,
+            wheel_diameter: 0.0,
+            four_wheel_steer: false,
+        })
+    }
+
+    /// Take a new command (or refuse it) and hand it to the node.
+    fn command(
+        &mut self,
+        ads: &mut Ads<ProfileWire>,
+        now: Timestamp,
+        next: Result<AdsCommand, String>,
+    ) {
+        match next {
+            Ok(command) => {
+                self.command = command;
+                self.commanding = true;
+                self.send(ads, now);
+            }
+            Err(why) => (self.report)(VehicleEvent::Refused(why)),
+        }
+    }
+
+    fn send(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+        if !self.commanding || self.braking_until.is_some() {
+            return;
+        }
+        let command = AdsCommand {
+            engage: self.engage.is_some(),
+            ..self.command
+        };
+        ads.set_command(now, command);
+    }
+
+    fn take_inputs(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+        let g = self.geometry();
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((m, _))) = self.inputs.control.take() else {
+                break;
+            };
+            let next = map::from_control(&m, self.command, &g, &self.limits);
+            self.command(ads, now, next);
+        }
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((m, _))) = self.inputs.cmd_vel.take() else {
+                break;
+            };
+            let next = map::from_twist(&m, self.command, &g, &self.limits);
+            self.command(ads, now, next);
+        }
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((m, _))) = self.inputs.gear.take() else {
+                break;
+            };
+            match map::gear_from_code(m.command) {
+                // Takes effect with the next command (a gear alone starts nothing).
+                Ok(Some(gear)) => self.command.gear = gear,
+                Ok(None) => {}
+                Err(why) => (self.report)(VehicleEvent::Refused(why)),
+            }
+        }
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((m, _))) = self.inputs.steering_mode.take() else {
+                break;
+            };
+            match m.data.parse::<SteeringMode>() {
+                Ok(mode) if mode != SteeringMode::Normal && !g.four_wheel_steer => {
+                    (self.report)(VehicleEvent::Refused(format!(
+                        "steering mode {mode}: this vehicle has no four-wheel steer"
+                    )))
+                }
+                Ok(mode) => self.command.steering_mode = mode,
+                Err(e) => (self.report)(VehicleEvent::Refused(format!("'{}': {e}", m.data))),
+            }
+        }
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((id, request))) = self.inputs.mode_request.receive_request() else {
+                break;
+            };
+            self.mode_request(ads, now, id, request.mode);
+        }
+    }
+
+    fn answer(&mut self, id: RmwRequestId, mode: u8, success: bool, why: Option<String>) {
+        let _ = self
+            .inputs
+            .mode_request
+            .send_response(id, ControlModeResponse { success });
+        (self.report)(VehicleEvent::ModeRequest { mode, success, why });
+    }
+
+    fn mode_request(
+        &mut self,
+        ads: &mut Ads<ProfileWire>,
+        now: Timestamp,
+        id: RmwRequestId,
+        mode: u8,
+    ) {
+        match mode {
+            control_mode::AUTONOMOUS => {
+                self.command.mode = ControlMode::Autonomous;
+                // A newer request replaces one still waiting, which is answered now.
+                if let Some((old, _)) = self.engage.take() {
+                    self.answer(old, mode, false, Some("replaced by a newer request".into()));
+                }
+                self.engage = Some((id, now.saturating_add(self.config.engage_timeout)));
+                self.send(ads, now);
+            }
+            control_mode::MANUAL => {
+                self.command.mode = ControlMode::Manual;
+                if let Some((old, _)) = self.engage.take() {
+                    self.answer(
+                        old,
+                        control_mode::AUTONOMOUS,
+                        false,
+                        Some("disengaged".into()),
+                    );
+                }
+                self.send(ads, now);
+                self.answer(id, mode, true, None);
+            }
+            other => {
+                let why = format!("mode {other}: this interface engages (1) and disengages (4)");
+                self.answer(id, other, false, Some(why));
+            }
+        }
+    }
+
+    fn watch_engage(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
+        let Some((id, deadline)) = self.engage else {
+            return;
+        };
+        let fresh = ads.state().mode.fresh(now, self.fresh);
+        if fresh == Some(ControlMode::Autonomous) {
+            self.engage = None;
+            self.answer(id, control_mode::AUTONOMOUS, true, None);
+        } else if now >= deadline {
+            self.engage = None;
+            let why = ads.blocker(now).map(|b| b.to_string());
+            self.answer(id, control_mode::AUTONOMOUS, false, why);
+        }
+    }
+
+    fn publish_reports(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
+        let stamp = wall_stamp();
+        let state = ads.state();
+        let g = self.geometry();
+        let mode = state
+            .steering_mode
+            .fresh(now, self.fresh)
+            .unwrap_or_default();
+        // Publishing fails only when DDS is gone; the next report tries again.
+        if let Some(steering) = state.steering.fresh(now, self.fresh) {
+            let angle = map::tire_angle(steering, mode, &g);
+            let _ = self.outputs.steering.publish(SteeringReport {
+                stamp,
+                steering_tire_angle: to_f32(angle),
+            });
+        }
+        if let Some((vx, vy, omega)) = map::body_velocity(state, now, self.fresh, &g) {
+            let _ = self.outputs.velocity.publish(VelocityReport {
+                header: Header {
+                    stamp,
+                    frame_id: "base_link".into(),
+                },
+                longitudinal_velocity: to_f32(vx),
+                lateral_velocity: to_f32(vy),
+                heading_rate: to_f32(omega),
+            });
+        }
+        // A vehicle whose state message has no gear: the gear commanded is the best known.
+        let gear = state
+            .gear
+            .fresh(now, self.fresh)
+            .or_else(|| state.mode.fresh(now, self.fresh).map(|_| self.command.gear));
+        if let Some(gear) = gear {
+            let _ = self.outputs.gear.publish(GearReport {
+                stamp,
+                report: map::gear_code(gear),
+            });
+        }
+        let _ = self.outputs.control_mode.publish(ControlModeReport {
+            stamp,
+            mode: map::control_mode_code(state.mode.fresh(now, self.fresh)),
+        });
+        if let Some(speeds) = state.wheel_speeds.fresh(now, self.fresh) {
+            let dt = self
+                .last_report
+                .map_or(0.0, |t| now.saturating_since(t).as_secs_f64());
+            let radius = g.wheel_diameter / 2.0;
+            if radius > 0.0 {
+                for (rotation, speed) in self.drive_rotation.iter_mut().zip(speeds) {
+                    *rotation += speed / radius * dt;
+                }
+            }
+        }
+        if self.geometry.is_some() {
+            if let Some(joints) =
+                map::joint_state(state, now, self.fresh, &g, &self.drive_rotation, stamp)
+            {
+                let _ = self.outputs.joints.publish(joints);
+            }
+        }
+        if state.steering_mode.fresh(now, self.fresh).is_some() {
+            let _ = self.outputs.steering_mode.publish(StringMsg {
+                data: mode.name().to_ascii_lowercase(),
+            });
+        }
+        self.last_report = Some(now);
+    }
+
+    fn begin_braking(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+        (self.report)(VehicleEvent::Stopping);
+        ads.emergency_brake(now, self.limits.deceleration_m_s2);
+        ads.set_command(
+            now,
+            AdsCommand {
+                velocity: 0.0,
+                brake: 100.0,
+                engage: false,
+                operator_reset: false,
+                ..self.command
+            },
+        );
+        self.braking_until = Some(now.saturating_add(FINAL_BRAKING));
+    }
+}
+
+/// f64 → f32 for a message field (the values are physical and far inside f32's range).
+fn to_f32(value: f64) -> f32 {
+    #[allow(clippy::cast_possible_truncation)]
+    let narrowed = value as f32;
+    narrowed
+}
+
+impl Hooks<Ads<ProfileWire>> for Interface<'_> {
+    fn after_poll(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) -> Flow {
+        if let Some(until) = self.braking_until {
+            return if now >= until {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            };
+        }
+        if self.stop.load(Ordering::Relaxed) {
+            self.begin_braking(ads, now);
+            return Flow::Continue;
+        }
+        self.take_inputs(ads, now);
+        // While an engage waits, every command carries the request.
+        if self.engage.is_some() {
+            self.send(ads, now);
+        }
+        self.watch_engage(ads, now);
+        if now >= self.next_report {
+            self.publish_reports(ads, now);
+            self.next_report = self
+                .next_report
+                .saturating_add(self.config.report_period)
+                .max(now);
+        }
+        Flow::Continue
+    }
+
+    fn wake_at(&self) -> Option<Timestamp> {
+        let engage = self.engage.map(|(_, deadline)| deadline);
+        [Some(self.next_report), engage, self.braking_until]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    fn bus_lost(&mut self, _: &mut Ads<ProfileWire>, _: Timestamp, port: Port, error: &BusError) {
+        let name = self
+            .buses
+            .iter()
+            .find(|(p, _)| *p == port)
+            .map_or("?".to_string(), |(_, n)| n.clone());
+        (self.report)(VehicleEvent::BusLost(format!("{name}: {error}")));
+    }
+}
+
+/// Wakes the runner whenever an input has something (a thread waiting on every input at once).
+fn wake_on_input(
+    mut poll: mio1::Poll,
+    waker: Waker,
+    done: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let mut events = mio1::Events::with_capacity(16);
+        while !done.load(Ordering::Relaxed) {
+            match poll.poll(&mut events, Some(POLL_SLICE)) {
+                Ok(()) if !events.is_empty() => waker.wake(),
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => {
+                    // Without readiness the runner still polls the inputs at every report.
+                    return;
+                }
+            }
+        }
+    })
+}
+
+/// The geometry a profile gives (`None`: the profile has no `[vehicle]`).
+pub fn geometry(profile: &LoadedProfile) -> Option<Geometry> {
+    let v = profile.profile.vehicle.as_ref()?;
+    let four_wheel_steer = profile
+        .profile
+        .command
+        .as_ref()
+        .is_some_and(|c| !c.steering_mode.is_empty());
+    Some(Geometry {
+        wheelbase: v.wheelbase_m,
+        track: v.track_m,
+        wheel_diameter: v.wheel_diameter_m,
+        four_wheel_steer,
+    })
+}
+
+/// Run the interface for `profile` on `buses` (port A, and B for a redundant pair) until
+/// `stop`, then brake for a second. Fails when every bus is lost.
+pub fn run(
+    node: &mut RosNode,
+    profile: &LoadedProfile,
+    buses: Vec<(Port, String, Box<dyn Bus>)>,
+    config: &VehicleInterfaceConfig,
+    stop: &AtomicBool,
+    report: &mut dyn FnMut(VehicleEvent),
+) -> Result<(), RosError> {
+    let wire = ProfileWire::new(profile).map_err(|e| RosError::Create(e.to_string()))?;
+    let one = reliable(1);
+    let mut inputs = Inputs {
+        control: node.subscription(&config.control_cmd, &one)?,
+        gear: node.subscription(&config.gear_cmd, &one)?,
+        steering_mode: node.subscription(&config.steering_mode_cmd, &one)?,
+        cmd_vel: node.subscription(&config.cmd_vel, &one)?,
+        mode_request: node.server(
+            &config.control_mode_request,
+            "autoware_vehicle_msgs",
+            "ControlModeCommand",
+        )?,
+    };
+    let outputs = Outputs {
+        steering: node.publisher(&config.steering_status, &one)?,
+        velocity: node.publisher(&config.velocity_status, &one)?,
+        gear: node.publisher(&config.gear_status, &one)?,
+        control_mode: node.publisher(&config.control_mode, &one)?,
+        joints: node.publisher(&config.joint_states, &one)?,
+        steering_mode: node.publisher(&config.steering_mode_status, &one)?,
+    };
+    let io = |e: std::io::Error| RosError::Create(format!("polling the inputs: {e}"));
+    let poll = mio1::Poll::new().map_err(io)?;
+    let readable = mio1::Interest::READABLE;
+    let registry = poll.registry();
+    registry
+        .register(&mut inputs.control, mio1::Token(0), readable)
+        .map_err(io)?;
+    registry
+        .register(&mut inputs.gear, mio1::Token(1), readable)
+        .map_err(io)?;
+    registry
+        .register(&mut inputs.steering_mode, mio1::Token(2), readable)
+        .map_err(io)?;
+    registry
+        .register(&mut inputs.cmd_vel, mio1::Token(3), readable)
+        .map_err(io)?;
+    registry
+        .register(&mut inputs.mode_request, mio1::Token(4), readable)
+        .map_err(io)?;
+
+    let names: Vec<(Port, String)> = buses.iter().map(|(p, n, _)| (*p, n.clone())).collect();
+    let mut runner = Runner::new(buses.into_iter().map(|(p, _, b)| (p, b)).collect());
+    let done = Arc::new(AtomicBool::new(false));
+    let waiter = wake_on_input(poll, runner.waker(), Arc::clone(&done));
+    let mut ads_config = profile.ads_config();
+    ads_config.redundant = names.len() > 1;
+    let fresh = ads_config
+        .cycle
+        .saturating_mul(ads_config.feedback_timeout_cycles);
+    let mut ads = Ads::with_wire(ads_config, wire);
+    let mut interface = Interface {
+        inputs,
+        outputs,
+        config: config.clone(),
+        geometry: geometry(profile),
+        limits: profile.profile.limits,
+        fresh,
+        command: AdsCommand::default(),
+        commanding: false,
+        engage: None,
+        next_report: Timestamp::ZERO,
+        last_report: None,
+        drive_rotation: [0.0; 4],
+        stop,
+        braking_until: None,
+        buses: names,
+        report,
+    };
+    // The runner's own stop flag stays clear: the interface's stop brakes first.
+    let never = AtomicBool::new(false);
+    let result = runner.run(&mut ads, &never, None, &mut interface);
+    done.store(true, Ordering::Relaxed);
+    let _ = waiter.join();
+    result
+        .map(|_| ())
+        .map_err(|e| RosError::Create(format!("every bus is lost (last: {e})")))
+}
