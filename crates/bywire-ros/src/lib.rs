@@ -9,6 +9,7 @@
 //!   on it `can_bridge` (ros2_socketcan's topics for any bus bywire opens) and
 //!   `control_output` (Autoware's `Control` out as the `autoware-can` frames and/or DDS) and
 //!   `vehicle_interface` (the Autoware vehicle interface for any profile).
+//! - `simulation` (feature `sim`): the simulated tug driven over ROS 2.
 
 pub mod autoware_vehicle;
 pub mod frames;
@@ -20,5 +21,7 @@ pub mod can_bridge;
 pub mod control_output;
 #[cfg(feature = "dds")]
 pub mod dds;
+#[cfg(feature = "sim")]
+pub mod simulation;
 #[cfg(feature = "dds")]
 pub mod vehicle_interface;

@@ -374,6 +374,100 @@ pub struct JointState {
 }
 ros_type!(JointState, "sensor_msgs", "JointState");
 
+/// `geometry_msgs/msg/Point`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Point {
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// z, m.
+    pub z: f64,
+}
+ros_type!(Point, "geometry_msgs", "Point");
+
+/// `geometry_msgs/msg/Quaternion`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Quaternion {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+    /// w.
+    pub w: f64,
+}
+ros_type!(Quaternion, "geometry_msgs", "Quaternion");
+
+impl Quaternion {
+    /// A rotation of `yaw` rad about z.
+    pub fn from_yaw(yaw: f64) -> Quaternion {
+        Quaternion {
+            x: 0.0,
+            y: 0.0,
+            z: libm::sin(yaw / 2.0),
+            w: libm::cos(yaw / 2.0),
+        }
+    }
+}
+
+/// `geometry_msgs/msg/Pose`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Pose {
+    /// Position.
+    pub position: Point,
+    /// Orientation.
+    pub orientation: Quaternion,
+}
+ros_type!(Pose, "geometry_msgs", "Pose");
+
+/// A 6×6 covariance (`float64[36]`, row-major). Serde derives arrays of up to 32: the 36
+/// values are two arrays back to back, which CDR writes exactly as one (no padding between
+/// `f64`s).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Covariance {
+    /// Values 0–31.
+    pub head: [f64; 32],
+    /// Values 32–35.
+    pub tail: [f64; 4],
+}
+
+/// `geometry_msgs/msg/PoseWithCovariance`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct PoseWithCovariance {
+    /// The pose.
+    pub pose: Pose,
+    /// Its covariance.
+    pub covariance: Covariance,
+}
+ros_type!(PoseWithCovariance, "geometry_msgs", "PoseWithCovariance");
+
+/// `geometry_msgs/msg/TwistWithCovariance`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct TwistWithCovariance {
+    /// The twist.
+    pub twist: Twist,
+    /// Its covariance.
+    pub covariance: Covariance,
+}
+ros_type!(TwistWithCovariance, "geometry_msgs", "TwistWithCovariance");
+
+/// `nav_msgs/msg/Odometry`: the simulated vehicle's true pose (Autoware's
+/// `/localization/kinematic_state`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Odometry {
+    /// Stamp and the world frame (`map`).
+    pub header: Header,
+    /// The body frame (`base_link`).
+    pub child_frame_id: String,
+    /// Where the body is.
+    pub pose: PoseWithCovariance,
+    /// How it moves, in the body frame.
+    pub twist: TwistWithCovariance,
+}
+ros_type!(Odometry, "nav_msgs", "Odometry");
+
 /// `std_msgs/msg/String` (the steering-mode topic of ours: `normal`, `crab`, `tank`).
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct StringMsg {

@@ -128,8 +128,9 @@ struct Outputs {
     steering_mode: Publisher<StringMsg>,
 }
 
-/// The interface's side of the run.
-struct Interface<'a> {
+/// The interface's side of a run: the hooks of the real-time runner (`run`), or stepped by a
+/// simulation that drives the node itself (`after_poll` after each of its steps).
+pub struct VehicleInterface<'a> {
     inputs: Inputs,
     outputs: Outputs,
     config: VehicleInterfaceConfig,
@@ -140,7 +141,10 @@ struct Interface<'a> {
     command: AdsCommand,
     /// A command has arrived (before it, nothing is sent).
     commanding: bool,
-    engage: Option<(RmwRequestId, Timestamp)>,
+    /// An engage request waiting: its id, since when, until when.
+    engage: Option<(RmwRequestId, Timestamp, Timestamp)>,
+    /// The command period (engage pulses last one).
+    cycle: Duration,
     next_report: Timestamp,
     last_report: Option<Timestamp>,
     drive_rotation: [f64; 4],
@@ -150,7 +154,8 @@ struct Interface<'a> {
     report: &'a mut dyn FnMut(VehicleEvent),
 }
 
-fn wall_stamp() -> Time {
+/// Now on the wall clock, as ROS 2 stamps messages.
+pub fn wall_stamp() -> Time {
     Time::from_nanos(
         SystemTime::now()
             .duration_since(SystemTime::UNIX_EPOCH)
@@ -158,7 +163,7 @@ fn wall_stamp() -> Time {
     )
 }
 
-impl Interface<'_> {
+impl VehicleInterface<'_> {
     fn geometry(&self) -> Geometry {
         self.geometry.unwrap_or(Geometry {
             wheelbase: 1.0,
@@ -189,8 +194,15 @@ impl Interface<'_> {
         if !self.commanding || self.braking_until.is_some() {
             return;
         }
+        // The vehicle takes an engage on a rising edge, and one edge serves one transition
+        // (a watchdog's recovery, then the mode): while a request waits, the bit pulses, high
+        // for one command period and low for the next.
+        let cycles = now
+            .saturating_since(self.engage.map_or(now, |(_, since, _)| since))
+            .as_nanos()
+            / self.cycle.as_nanos().max(1);
         let command = AdsCommand {
-            engage: self.engage.is_some(),
+            engage: self.engage.is_some() && cycles.is_multiple_of(2),
             ..self.command
         };
         ads.set_command(now, command);
@@ -264,15 +276,15 @@ impl Interface<'_> {
             control_mode::AUTONOMOUS => {
                 self.command.mode = ControlMode::Autonomous;
                 // A newer request replaces one still waiting, which is answered now.
-                if let Some((old, _)) = self.engage.take() {
+                if let Some((old, _, _)) = self.engage.take() {
                     self.answer(old, mode, false, Some("replaced by a newer request".into()));
                 }
-                self.engage = Some((id, now.saturating_add(self.config.engage_timeout)));
+                self.engage = Some((id, now, now.saturating_add(self.config.engage_timeout)));
                 self.send(ads, now);
             }
             control_mode::MANUAL => {
                 self.command.mode = ControlMode::Manual;
-                if let Some((old, _)) = self.engage.take() {
+                if let Some((old, _, _)) = self.engage.take() {
                     self.answer(
                         old,
                         control_mode::AUTONOMOUS,
@@ -291,7 +303,7 @@ impl Interface<'_> {
     }
 
     fn watch_engage(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
-        let Some((id, deadline)) = self.engage else {
+        let Some((id, _, deadline)) = self.engage else {
             return;
         };
         let fresh = ads.state().mode.fresh(now, self.fresh);
@@ -397,7 +409,7 @@ fn to_f32(value: f64) -> f32 {
     narrowed
 }
 
-impl Hooks<Ads<ProfileWire>> for Interface<'_> {
+impl Hooks<Ads<ProfileWire>> for VehicleInterface<'_> {
     fn after_poll(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) -> Flow {
         if let Some(until) = self.braking_until {
             return if now >= until {
@@ -427,7 +439,7 @@ impl Hooks<Ads<ProfileWire>> for Interface<'_> {
     }
 
     fn wake_at(&self) -> Option<Timestamp> {
-        let engage = self.engage.map(|(_, deadline)| deadline);
+        let engage = self.engage.map(|(_, _, deadline)| deadline);
         [Some(self.next_report), engage, self.braking_until]
             .into_iter()
             .flatten()
@@ -482,6 +494,91 @@ pub fn geometry(profile: &LoadedProfile) -> Option<Geometry> {
     })
 }
 
+impl<'a> VehicleInterface<'a> {
+    /// The interface for `profile` on `node`, and the ADS-side node it commands (`redundant`:
+    /// it sends on ports A and B). `stop` begins the final braking; `report` hears events.
+    pub fn new(
+        node: &mut RosNode,
+        profile: &LoadedProfile,
+        redundant: bool,
+        config: &VehicleInterfaceConfig,
+        stop: &'a AtomicBool,
+        report: &'a mut dyn FnMut(VehicleEvent),
+    ) -> Result<(VehicleInterface<'a>, Ads<ProfileWire>), RosError> {
+        let wire = ProfileWire::new(profile).map_err(|e| RosError::Create(e.to_string()))?;
+        let one = reliable(1);
+        let inputs = Inputs {
+            control: node.subscription(&config.control_cmd, &one)?,
+            gear: node.subscription(&config.gear_cmd, &one)?,
+            steering_mode: node.subscription(&config.steering_mode_cmd, &one)?,
+            cmd_vel: node.subscription(&config.cmd_vel, &one)?,
+            mode_request: node.server(
+                &config.control_mode_request,
+                "autoware_vehicle_msgs",
+                "ControlModeCommand",
+            )?,
+        };
+        let outputs = Outputs {
+            steering: node.publisher(&config.steering_status, &one)?,
+            velocity: node.publisher(&config.velocity_status, &one)?,
+            gear: node.publisher(&config.gear_status, &one)?,
+            control_mode: node.publisher(&config.control_mode, &one)?,
+            joints: node.publisher(&config.joint_states, &one)?,
+            steering_mode: node.publisher(&config.steering_mode_status, &one)?,
+        };
+        let mut ads_config = profile.ads_config();
+        ads_config.redundant = redundant;
+        let fresh = ads_config
+            .cycle
+            .saturating_mul(ads_config.feedback_timeout_cycles);
+        let interface = VehicleInterface {
+            inputs,
+            outputs,
+            config: config.clone(),
+            geometry: geometry(profile),
+            limits: profile.profile.limits,
+            fresh,
+            cycle: ads_config.cycle,
+            command: AdsCommand::default(),
+            commanding: false,
+            engage: None,
+            next_report: Timestamp::ZERO,
+            last_report: None,
+            drive_rotation: [0.0; 4],
+            stop,
+            braking_until: None,
+            buses: Vec::new(),
+            report,
+        };
+        Ok((interface, Ads::with_wire(ads_config, wire)))
+    }
+
+    /// A poll on which every input becomes readable when it has something.
+    pub fn readiness(&mut self) -> Result<mio1::Poll, RosError> {
+        let io = |e: std::io::Error| RosError::Create(format!("polling the inputs: {e}"));
+        let poll = mio1::Poll::new().map_err(io)?;
+        let readable = mio1::Interest::READABLE;
+        let registry = poll.registry();
+        let i = &mut self.inputs;
+        registry
+            .register(&mut i.control, mio1::Token(0), readable)
+            .map_err(io)?;
+        registry
+            .register(&mut i.gear, mio1::Token(1), readable)
+            .map_err(io)?;
+        registry
+            .register(&mut i.steering_mode, mio1::Token(2), readable)
+            .map_err(io)?;
+        registry
+            .register(&mut i.cmd_vel, mio1::Token(3), readable)
+            .map_err(io)?;
+        registry
+            .register(&mut i.mode_request, mio1::Token(4), readable)
+            .map_err(io)?;
+        Ok(poll)
+    }
+}
+
 /// Run the interface for `profile` on `buses` (port A, and B for a redundant pair) until
 /// `stop`, then brake for a second. Fails when every bus is lost.
 pub fn run(
@@ -492,75 +589,14 @@ pub fn run(
     stop: &AtomicBool,
     report: &mut dyn FnMut(VehicleEvent),
 ) -> Result<(), RosError> {
-    let wire = ProfileWire::new(profile).map_err(|e| RosError::Create(e.to_string()))?;
-    let one = reliable(1);
-    let mut inputs = Inputs {
-        control: node.subscription(&config.control_cmd, &one)?,
-        gear: node.subscription(&config.gear_cmd, &one)?,
-        steering_mode: node.subscription(&config.steering_mode_cmd, &one)?,
-        cmd_vel: node.subscription(&config.cmd_vel, &one)?,
-        mode_request: node.server(
-            &config.control_mode_request,
-            "autoware_vehicle_msgs",
-            "ControlModeCommand",
-        )?,
-    };
-    let outputs = Outputs {
-        steering: node.publisher(&config.steering_status, &one)?,
-        velocity: node.publisher(&config.velocity_status, &one)?,
-        gear: node.publisher(&config.gear_status, &one)?,
-        control_mode: node.publisher(&config.control_mode, &one)?,
-        joints: node.publisher(&config.joint_states, &one)?,
-        steering_mode: node.publisher(&config.steering_mode_status, &one)?,
-    };
-    let io = |e: std::io::Error| RosError::Create(format!("polling the inputs: {e}"));
-    let poll = mio1::Poll::new().map_err(io)?;
-    let readable = mio1::Interest::READABLE;
-    let registry = poll.registry();
-    registry
-        .register(&mut inputs.control, mio1::Token(0), readable)
-        .map_err(io)?;
-    registry
-        .register(&mut inputs.gear, mio1::Token(1), readable)
-        .map_err(io)?;
-    registry
-        .register(&mut inputs.steering_mode, mio1::Token(2), readable)
-        .map_err(io)?;
-    registry
-        .register(&mut inputs.cmd_vel, mio1::Token(3), readable)
-        .map_err(io)?;
-    registry
-        .register(&mut inputs.mode_request, mio1::Token(4), readable)
-        .map_err(io)?;
-
-    let names: Vec<(Port, String)> = buses.iter().map(|(p, n, _)| (*p, n.clone())).collect();
+    let redundant = buses.len() > 1;
+    let (mut interface, mut ads) =
+        VehicleInterface::new(node, profile, redundant, config, stop, report)?;
+    let poll = interface.readiness()?;
+    interface.buses = buses.iter().map(|(p, n, _)| (*p, n.clone())).collect();
     let mut runner = Runner::new(buses.into_iter().map(|(p, _, b)| (p, b)).collect());
     let done = Arc::new(AtomicBool::new(false));
     let waiter = wake_on_input(poll, runner.waker(), Arc::clone(&done));
-    let mut ads_config = profile.ads_config();
-    ads_config.redundant = names.len() > 1;
-    let fresh = ads_config
-        .cycle
-        .saturating_mul(ads_config.feedback_timeout_cycles);
-    let mut ads = Ads::with_wire(ads_config, wire);
-    let mut interface = Interface {
-        inputs,
-        outputs,
-        config: config.clone(),
-        geometry: geometry(profile),
-        limits: profile.profile.limits,
-        fresh,
-        command: AdsCommand::default(),
-        commanding: false,
-        engage: None,
-        next_report: Timestamp::ZERO,
-        last_report: None,
-        drive_rotation: [0.0; 4],
-        stop,
-        braking_until: None,
-        buses: names,
-        report,
-    };
     // The runner's own stop flag stays clear: the interface's stop brakes first.
     let never = AtomicBool::new(false);
     let result = runner.run(&mut ads, &never, None, &mut interface);

@@ -410,6 +410,19 @@ impl Scenario {
     pub fn step(&self, tug: &mut Tug) {
         let before = tug.now();
         tug.step();
+        self.inject_due(tug, before);
+    }
+
+    /// One millisecond with `ads` in the built-in ADS's place ([`Tug::step_with_ads`]), the
+    /// scenario's faults injected on time as in [`Scenario::step`].
+    pub fn step_with_ads(&self, tug: &mut Tug, ads: &mut dyn bywire_core::node::Node) {
+        let before = tug.now();
+        tug.step_with_ads(ads);
+        self.inject_due(tug, before);
+    }
+
+    /// Inject the events due after `before` up to the tug's time.
+    fn inject_due(&self, tug: &mut Tug, before: Timestamp) {
         let now = tug.now();
         for (at, fault, duration) in &self.events {
             let at = Timestamp::ZERO.saturating_add(*at);

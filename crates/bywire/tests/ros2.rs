@@ -324,3 +324,59 @@ fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
     assert_eq!(seen["refused_mode"], false);
     assert!(err.contains("mode 2: this interface engages"), "{err}");
 }
+
+/// The README's walk-through as written: `bywire sim --ros2` and `examples/ros2_drive_tug.py`
+/// (Cyclone DDS in Python) engaging the simulated tug, driving it along a left curve and
+/// stopping it.
+#[test]
+fn the_readme_python_script_drives_the_simulated_tug() {
+    if !inside_lonet("the_readme_python_script_drives_the_simulated_tug") {
+        return;
+    }
+    let out_dir = std::env::temp_dir().join(format!("bywire-sim-ros2-{}", std::process::id()));
+    let sim = Background::start(&[
+        "sim",
+        "--ros2",
+        "--max-seconds",
+        "120",
+        "--no-view",
+        "--dds-interface",
+        "lo",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let script = format!(
+        "{}/../../examples/ros2_drive_tug.py",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let run = Command::new("python3").arg(&script).output().unwrap();
+    let (code, out, err) = sim.stop();
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(code, 0, "{out}{err}");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.first(), Some(&"engaged: True"), "{text}\n{err}");
+    assert_eq!(lines.last(), Some(&"disengaged: True"), "{text}");
+    // "speed 1.46 m/s; at x=6.2 y=0.9 yaw=0.29": at speed, moved forward and turned left as a
+    // bicycle on 0.15 rad would (curvature tan(0.15) / 3.2 m).
+    let numbers: Vec<f64> = lines[1]
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    let [speed, x, y, yaw] = numbers[..] else {
+        panic!("{text}");
+    };
+    assert!((1.35..=1.55).contains(&speed), "{text}");
+    assert!(x > 3.0 && y > 0.0, "{text}");
+    let distance = x.hypot(y);
+    let expected_yaw = distance * 0.15f64.tan() / 3.2;
+    assert!((yaw - expected_yaw).abs() < 0.1, "{text}: {expected_yaw}");
+    // The run's logs and metrics are written as by any other run.
+    assert!(out_dir.join("metrics.json").is_file(), "{out}");
+    assert!(out.contains("stopped after"), "{out}");
+    let _ = std::fs::remove_dir_all(&out_dir);
+}

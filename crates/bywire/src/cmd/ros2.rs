@@ -83,7 +83,7 @@ pub struct NodeArgs {
 }
 
 impl NodeArgs {
-    fn open(&self, default_name: &str) -> Result<RosNode> {
+    pub fn open(&self, default_name: &str) -> Result<RosNode> {
         let options = RosOptions {
             domain_id: self.domain_id,
             namespace: self.namespace.clone(),

@@ -53,6 +53,16 @@ pub struct Args {
     /// bus3=socketcand:HOST:PORT/NAME; any bus argument. Repeatable.
     #[arg(long, value_name = "BUS=BUSARG")]
     attach: Vec<String>,
+    /// Drive the tug over ROS 2 instead of the built-in mission: the Autoware vehicle
+    /// interface takes the ADS's place on bus 1 and 1b (as `bywire ros2 vehicle`; see its
+    /// --help for the topics), and the true pose goes to /localization/kinematic_state
+    /// (nav_msgs/Odometry). Real time.
+    #[cfg(feature = "ros2")]
+    #[arg(long, conflicts_with = "fast")]
+    ros2: bool,
+    #[cfg(feature = "ros2")]
+    #[command(flatten)]
+    node: crate::cmd::ros2::NodeArgs,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
@@ -98,7 +108,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let start = Instant::now();
     // In a terminal, in real time: the live view.
     let live = !args.fast && !args.no_view && std::io::IsTerminal::is_terminal(&std::io::stdout());
-    let completed = if live {
+    #[cfg(feature = "ros2")]
+    let over_ros2 = args.ros2;
+    #[cfg(not(feature = "ros2"))]
+    let over_ros2 = false;
+    let completed = if over_ros2 {
+        #[cfg(feature = "ros2")]
+        run_over_ros2(&mut tug, &scenario, args, &mut shared, out)?;
+        false
+    } else if live {
         matches!(
             crate::tui::sim_view::run(
                 &mut tug,
@@ -139,6 +157,73 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let (tracking, load) = (report.tracking_error_m, report.bus_load);
     writeln!(out, "{} after {:.1} s: tracking error max {:.2} m, mean {:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, report.sim_seconds, tracking.max, tracking.mean, load.bus1 * 100.0, load.bus2 * 100.0, load.bus3 * 100.0, args.out.display())?;
+    Ok(())
+}
+
+/// Run driven over ROS 2 until Ctrl-C (then a second of braking) or --max-seconds, with
+/// progress lines every 5 simulated seconds.
+#[cfg(feature = "ros2")]
+fn run_over_ros2(
+    tug: &mut Tug,
+    scenario: &Scenario,
+    args: &Args,
+    shared: &mut Shared,
+    out: &mut impl Write,
+) -> Result<()> {
+    use bywire_ros::simulation::{self, SimulationConfig};
+    use bywire_ros::vehicle_interface::VehicleEvent;
+    let mut node = args.node.open("simulated_tug")?;
+    writeln!(
+        out,
+        "node {} driving the simulated tug (publish /control/command/control_cmd)",
+        node.fully_qualified_name()
+    )?;
+    out.flush()?;
+    let config = SimulationConfig {
+        limit: Duration::from_secs_f64(args.max_seconds),
+        ..SimulationConfig::default()
+    };
+    let mut next_line = Timestamp::ZERO;
+    simulation::run(
+        &mut node,
+        tug,
+        scenario,
+        &config,
+        &crate::interrupt_flag(),
+        &mut |event| {
+            let text = match event {
+                VehicleEvent::Refused(why) => format!("refused: {why}"),
+                VehicleEvent::ModeRequest { mode, success, why } => format!(
+                    "control mode request {mode}: {}{}",
+                    if success { "done" } else { "refused" },
+                    why.map(|w| format!(" ({w})")).unwrap_or_default()
+                ),
+                VehicleEvent::BusLost(what) => format!("bus {what}"),
+                VehicleEvent::Stopping => "stopping: braking for 1 s".into(),
+            };
+            let _ = writeln!(std::io::stderr(), "bywire sim: {text}");
+        },
+        &mut |tug| {
+            shared.exchange(tug).map_err(|e| e.to_string())?;
+            let now = tug.now();
+            if now >= next_line {
+                next_line = now.saturating_add(Duration::from_secs(5));
+                let pose = tug.pose();
+                writeln!(
+                    out,
+                    "t={:6.1}s  x={:7.2} y={:7.2}  {:4.2} m/s",
+                    now.as_nanos() as f64 / 1e9,
+                    pose.x,
+                    pose.y,
+                    tug.pose_speed()
+                )
+                .and_then(|()| out.flush())
+                .map_err(|e| e.to_string())?;
+            }
+            Ok(())
+        },
+    )
+    .map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
