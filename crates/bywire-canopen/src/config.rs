@@ -56,52 +56,52 @@ pub enum ConfigError {
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawMaster {
-    node_id: u8,
-    bitrate: u32,
+pub(crate) struct RawMaster {
+    pub(crate) node_id: u8,
+    pub(crate) bitrate: u32,
     #[serde(default = "default_heartbeat")]
-    heartbeat_ms: u64,
+    pub(crate) heartbeat_ms: u64,
     #[serde(default = "default_cycle")]
-    cycle_ms: u64,
+    pub(crate) cycle_ms: u64,
     #[serde(default)]
-    sync_us: u64,
+    pub(crate) sync_us: u64,
 }
 
-fn default_heartbeat() -> u64 {
+pub(crate) fn default_heartbeat() -> u64 {
     100
 }
 
-fn default_cycle() -> u64 {
+pub(crate) fn default_cycle() -> u64 {
     10
 }
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawNode {
-    id: u8,
-    eds: Option<String>,
-    profile: Option<String>,
+pub(crate) struct RawNode {
+    pub(crate) id: u8,
+    pub(crate) eds: Option<String>,
+    pub(crate) profile: Option<String>,
     #[serde(default = "default_driver")]
-    driver: String,
-    mode: Option<String>,
+    pub(crate) driver: String,
+    pub(crate) mode: Option<String>,
     #[serde(default = "default_timeout")]
-    heartbeat_timeout_ms: u64,
+    pub(crate) heartbeat_timeout_ms: u64,
 }
 
 fn default_driver() -> String {
     "none".to_string()
 }
 
-fn default_timeout() -> u64 {
+pub(crate) fn default_timeout() -> u64 {
     300
 }
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawBus {
-    master: RawMaster,
+pub(crate) struct RawBus {
+    pub(crate) master: RawMaster,
     #[serde(default)]
-    node: BTreeMap<String, RawNode>,
+    pub(crate) node: BTreeMap<String, RawNode>,
 }
 
 /// The driver the master runs for a node.
@@ -175,6 +175,11 @@ impl BusConfig {
             file: file.to_string(),
             message: e.to_string().trim_end().to_string(),
         })?;
+        BusConfig::from_raw(raw, file, base)
+    }
+
+    /// Check a description read from any format and load its dictionaries.
+    pub(crate) fn from_raw(raw: RawBus, file: &str, base: &Path) -> Result<BusConfig, ConfigError> {
         let invalid = |key: &str, reason: String| ConfigError::Invalid {
             file: file.to_string(),
             key: key.to_string(),

@@ -16,7 +16,8 @@
 //! - [`cia402`]: the CiA 402 drive state machine, a drive with a motor model, and the
 //!   master-side driver that enables, commands and safely stops a drive.
 //! - [`roboteq`]: Roboteq's objects, the MDC1460-like device, and the master-side helper.
-//! - [`config`] (feature `std`): the bus description file.
+//! - [`config`] (feature `std`): the bus description file (TOML; ros2_canopen's `bus.yml` with
+//!   the feature `yaml`).
 //!
 //! A drive answering an SDO upload of its device type (0x1000), as a master would ask:
 //! ```
@@ -42,6 +43,8 @@ pub mod abort;
 pub mod cia402;
 #[cfg(feature = "std")]
 pub mod config;
+#[cfg(feature = "yaml")]
+mod config_yaml;
 pub mod device;
 pub mod eds;
 pub mod master;

@@ -10,6 +10,7 @@
 //!   `control_output` (Autoware's `Control` out as the `autoware-can` frames and/or DDS) and
 //!   `vehicle_interface` (the Autoware vehicle interface for any profile).
 //! - `simulation` (feature `sim`): the simulated tug driven over ROS 2.
+//! - `canopen_bridge` (feature `canopen`): CiA 402 drives on ROS 2, as ros2_canopen offers them.
 
 pub mod autoware_vehicle;
 pub mod frames;
@@ -17,6 +18,8 @@ pub mod msg;
 
 #[cfg(feature = "dds")]
 pub mod can_bridge;
+#[cfg(feature = "canopen")]
+pub mod canopen_bridge;
 #[cfg(feature = "dds")]
 pub mod control_output;
 #[cfg(feature = "dds")]

@@ -468,6 +468,14 @@ pub struct Odometry {
 }
 ros_type!(Odometry, "nav_msgs", "Odometry");
 
+/// `std_msgs/msg/Float64` (a drive's target topic).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Float64 {
+    /// The value.
+    pub data: f64,
+}
+ros_type!(Float64, "std_msgs", "Float64");
+
 /// `std_msgs/msg/String` (the steering-mode topic of ours: `normal`, `crab`, `tank`).
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct StringMsg {

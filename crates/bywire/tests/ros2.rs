@@ -380,3 +380,109 @@ fn the_readme_python_script_drives_the_simulated_tug() {
     assert!(out.contains("stopped after"), "{out}");
     let _ = std::fs::remove_dir_all(&out_dir);
 }
+
+/// `bywire ros2 canopen` with bywire's CiA 402 drive on a shared `udp:` bus, called from
+/// Cyclone DDS as a ros2_canopen user would: init, velocity mode, targets by topic and
+/// service, halt and recover; then the drive is killed and its heartbeat loss shows.
+#[test]
+fn ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does() {
+    use std::io::{BufRead, BufReader, Write};
+    if !inside_lonet("ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does") {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("bywire-ros2-canopen-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("bus.toml");
+    std::fs::write(
+        &config,
+        "[master]\nnode_id = 1\nbitrate = 1_000_000\n\n[node.wheel]\nid = 2\nprofile = \"cia402\"\ndriver = \"cia402\"\nmode = \"profile_position\"\nheartbeat_timeout_ms = 300\n",
+    )
+    .unwrap();
+    let bus = "udp:239.74.163.2:43540";
+    let drive = Background::start(&["canopen", "node", bus, "--node", "2", "--profile", "cia402"]);
+    let bridge = Background::start(&[
+        "ros2",
+        "canopen",
+        bus,
+        "--config",
+        config.to_str().unwrap(),
+        "--dds-interface",
+        "lo",
+    ]);
+    let mut peer = Command::new("python3")
+        .arg(format!("{}/ros2_canopen_peer.py", oracles()))
+        .arg("wheel")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(peer.stdout.take().unwrap()).lines();
+    let first: Value = serde_json::from_str(&lines.next().unwrap().unwrap()).unwrap();
+    drop(drive);
+    writeln!(peer.stdin.as_mut().unwrap(), "lost").unwrap();
+    let second: Value = serde_json::from_str(&lines.next().unwrap().unwrap()).unwrap();
+    assert!(peer.wait().unwrap().success());
+    let (code, out, err) = bridge.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // init answers once the drive is in Operation enabled, NMT operational.
+    assert_eq!(first["init"]["success"], true, "{first}\n{err}");
+    assert_eq!(first["init"]["message"], "operation enabled");
+    assert_eq!(first["velocity_mode"]["success"], true, "{first}");
+    assert_eq!(first["nmt"], "operational");
+    assert_eq!(first["state"], "operation enabled");
+    // The drive's motor model follows the targets (drive units per second).
+    let v = |k: &str| first[k].as_f64().unwrap_or_else(|| panic!("{k}: {first}"));
+    assert!((v("velocity_topic") - 1000.0).abs() < 50.0, "{first}");
+    assert_eq!(first["target_service"], true);
+    assert!((v("velocity_service") + 500.0).abs() < 50.0, "{first}");
+    // Halt holds a quick stop with zero velocity until recover.
+    assert_eq!(first["halt"]["success"], true);
+    assert!(
+        first["halted_state"]
+            .as_str()
+            .unwrap()
+            .contains("stopped: halted"),
+        "{first}"
+    );
+    assert!(v("velocity_halted").abs() < 50.0, "{first}");
+    assert_eq!(first["recover"]["success"], true, "{first}");
+    // The drive gone: its heartbeat is lost and the controller holds it stopped.
+    assert_eq!(second["nmt"], "lost", "{second}");
+    assert!(
+        second["state"].as_str().unwrap().contains("heartbeat lost"),
+        "{second}"
+    );
+    assert!(err.contains("wheel stopped: heartbeat lost"), "{err}");
+    assert!(out.contains("service calls"), "{out}");
+}
+
+/// A ros2_canopen bus.yml is read (its mistakes named by key) before anything starts.
+#[test]
+fn ros2_canopen_reads_a_ros2_canopen_bus_yml_and_names_its_mistakes() {
+    let dir = std::env::temp_dir().join(format!("bywire-ros2-yml-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let yml = dir.join("bus.yml");
+    std::fs::write(
+        &yml,
+        "master:\n  node_id: 1\ndefaults:\n  driver: \"ros2_canopen::Cia402Driver\"\nnodes:\n  wheel:\n    node_id: 200\n",
+    )
+    .unwrap();
+    let (code, _, err) = bywire(
+        &[
+            "ros2",
+            "canopen",
+            "virtual:yml",
+            "--config",
+            yml.to_str().unwrap(),
+        ],
+        "",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("bus.yml: nodes.wheel.node_id: 200 is not a node ID"),
+        "{err}"
+    );
+}

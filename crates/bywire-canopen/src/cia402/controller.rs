@@ -65,6 +65,14 @@ pub enum Setpoint {
     Position(i32),
 }
 
+/// A target of zero of the kind `mode` follows.
+fn zero_setpoint(mode: Mode) -> Setpoint {
+    match mode {
+        Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => Setpoint::Velocity(0),
+        Mode::ProfilePosition | Mode::CyclicSynchronousPosition => Setpoint::Position(0),
+    }
+}
+
 /// The master side of one CiA 402 drive, speaking the PDO layout of [`drive_dictionary`](super::drive_dictionary):
 /// it reads the statusword from TPDO1, sends the controlword and mode on RPDO1 and the
 /// targets on RPDO2 every cycle. Fail closed: until the drive reports Operation enabled and
@@ -93,10 +101,7 @@ impl DriveController {
         DriveController {
             node,
             mode,
-            setpoint: match mode {
-                Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => Setpoint::Velocity(0),
-                Mode::ProfilePosition | Mode::CyclicSynchronousPosition => Setpoint::Position(0),
-            },
+            setpoint: zero_setpoint(mode),
             enable: false,
             stopped: StopLatch::default(),
             statusword: None,
@@ -112,6 +117,20 @@ impl DriveController {
     /// The drive's node.
     pub fn node(&self) -> u8 {
         self.node
+    }
+
+    /// Switch the mode of operation (sent with the controlword from the next cycle); the
+    /// target becomes zero of the new mode's kind until the next set-point.
+    pub fn set_mode(&mut self, mode: Mode) {
+        if mode != self.mode {
+            self.mode = mode;
+            self.setpoint = zero_setpoint(mode);
+        }
+    }
+
+    /// The mode of operation commanded.
+    pub fn mode(&self) -> Mode {
+        self.mode
     }
 
     /// Ask for Operation enabled (or, `false`, for the power stage off).

@@ -63,6 +63,21 @@ Keep publishing control_cmd: one older than the profile's staleness (200 ms for 
 is replaced by a controlled stop. A command beyond the profile's limits is refused, never
 clamped. The E-stop's operator reset is not offered over ROS 2. Ctrl-C brakes for a second.")]
     Vehicle(VehicleArgs),
+    /// CANopen drives on ROS 2, as ros2_canopen's CiA 402 driver offers them: the master of a
+    /// bus description (bywire's bus.toml or ros2_canopen's bus.yml) with services, targets
+    /// and states per drive.
+    #[command(after_help = "Examples:
+  bywire ros2 canopen can0 --config bus.toml
+  bywire ros2 canopen can0 --config bus.yml --namespace /drives
+
+Per CiA 402 drive NAME: services NAME/{init, enable, disable, halt, recover, position_mode,
+velocity_mode, cyclic_position_mode, cyclic_velocity_mode} (std_srvs/Trigger; init and
+recover answer once the drive reports Operation enabled), NAME/target (the set-point in drive
+units: canopen_interfaces/COTargetDouble service and std_msgs/Float64 topic), and
+NAME/joint_states (sensor_msgs/JointState), NAME/nmt_state and NAME/drive_state
+(std_msgs/String) at --rate. Heartbeat loss, an emergency or a fault stop the drive until
+recover. Ctrl-C quick-stops every drive before exiting.")]
+    Canopen(CanopenArgs),
 }
 
 /// Where the node runs (shared by every `ros2` command).
@@ -175,6 +190,7 @@ pub fn run(command: &Ros2Command, out: &mut dyn Write) -> Result<()> {
         Ros2Command::Can(args) => can(args, out),
         Ros2Command::ControlOutput(args) => control(args, out),
         Ros2Command::Vehicle(args) => vehicle(args, out),
+        Ros2Command::Canopen(args) => canopen(args, out),
     }
 }
 
@@ -363,6 +379,82 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
     }
     result?;
     writeln!(out, "{} inputs refused", reporter.refused)?;
+    Ok(())
+}
+
+#[derive(clap::Args)]
+pub struct CanopenArgs {
+    /// The bus.
+    bus: String,
+    /// The bus description: bus.toml (bywire's) or bus.yml (ros2_canopen's).
+    #[arg(long)]
+    config: std::path::PathBuf,
+    #[command(flatten)]
+    node: NodeArgs,
+    /// Joint and state reports per second.
+    #[arg(long, default_value_t = 50.0, value_parser = crate::support::numbers::rate)]
+    rate: f64,
+}
+
+fn canopen(args: &CanopenArgs, out: &mut dyn Write) -> Result<()> {
+    use bywire_canopen::config::BusConfig;
+    use bywire_ros::canopen_bridge::{self, CanopenEvent};
+    let path = &args.config;
+    let yaml = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("yml") || e.eq_ignore_ascii_case("yaml"));
+    let config = if yaml {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("--config {}", path.display()))?;
+        let base = path.parent().unwrap_or(std::path::Path::new("."));
+        BusConfig::parse_ros2_canopen(&text, &path.display().to_string(), base)?
+    } else {
+        BusConfig::load(path)?
+    };
+    let reporter = Reporter {
+        command: "canopen",
+        refused: 0,
+    };
+    for node in &config.nodes {
+        for warning in &node.warnings {
+            reporter.line(&format!("{} (node {}): {warning}", node.name, node.id));
+        }
+    }
+    let bus = busarg::open(&args.bus).with_context(|| format!("bus {}", args.bus))?;
+    let mut node = args.node.open("canopen_master")?;
+    reporter.line(&format!(
+        "node {} for {}",
+        node.fully_qualified_name(),
+        path.display()
+    ));
+    let mut calls = 0u64;
+    canopen_bridge::run(
+        &mut node,
+        &config,
+        bus,
+        std::time::Duration::from_secs_f64(1.0 / args.rate),
+        &crate::interrupt_flag(),
+        &mut |event| match event {
+            CanopenEvent::Called {
+                drive,
+                service,
+                success,
+                message,
+            } => {
+                calls += 1;
+                reporter.line(&format!(
+                    "{drive}/{service}: {} ({message})",
+                    if success { "done" } else { "refused" }
+                ));
+            }
+            CanopenEvent::Stopped { drive, why } => {
+                reporter.line(&format!("{drive} stopped: {why}"))
+            }
+            CanopenEvent::NotExposed(what) => reporter.line(&format!("not exposed: {what}")),
+            CanopenEvent::BusLost(e) => reporter.line(&format!("bus lost: {e}")),
+        },
+    )?;
+    writeln!(out, "{calls} service calls")?;
     Ok(())
 }
 

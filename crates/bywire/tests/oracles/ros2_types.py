@@ -212,3 +212,62 @@ def control(angle, rate, velocity, acceleration, nanos):
         longitudinal=Longitudinal(stamp=t, control_time=t, velocity=velocity,
                                   acceleration=acceleration, jerk=0.0,
                                   is_defined_acceleration=True, is_defined_jerk=False))
+
+
+@dataclass
+class Float64(IdlStruct, typename="std_msgs::msg::dds_::Float64_"):
+    data: float64
+
+
+@dataclass
+class TriggerRequest(IdlStruct, typename="std_srvs::srv::dds_::Trigger_Request_"):
+    client_guid: uint64
+    sequence_number: int64
+    structure_needs_at_least_one_member: uint8
+
+
+@dataclass
+class TriggerResponse(IdlStruct, typename="std_srvs::srv::dds_::Trigger_Response_"):
+    client_guid: uint64
+    sequence_number: int64
+    success: bool
+    message: str
+
+
+@dataclass
+class TargetRequest(IdlStruct, typename="canopen_interfaces::srv::dds_::COTargetDouble_Request_"):
+    client_guid: uint64
+    sequence_number: int64
+    target: float64
+
+
+@dataclass
+class TargetResponse(IdlStruct, typename="canopen_interfaces::srv::dds_::COTargetDouble_Response_"):
+    client_guid: uint64
+    sequence_number: int64
+    success: bool
+
+
+class ServiceClient:
+    """A ROS 2 service client as rmw_cyclonedds frames its calls (request header first)."""
+
+    def __init__(self, dp, name, request, response):
+        self.requests = writer(dp, f"rq{name}Request", request)
+        self.replies = reader(dp, f"rr{name}Reply", response)
+        self.request = request
+        self.sequence = 0
+
+    def call(self, timeout=5.0, **fields):
+        """The reply, retrying until the service is matched; None if none came."""
+        self.sequence += 1
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.requests.write(self.request(client_guid=77, sequence_number=self.sequence,
+                                             **fields))
+            until = min(end, time.monotonic() + 0.5)
+            while time.monotonic() < until:
+                for reply in self.replies.take(N=10):
+                    if reply.sequence_number == self.sequence:
+                        return reply
+                time.sleep(0.01)
+        return None
