@@ -3,7 +3,12 @@
 //! gives the mean and spread; the p50 and p99 of every sample measured are printed at the end.
 //!
 //! DDS discovery is multicast: the bench re-runs itself inside `../shared/tools/lonet.sh`.
-#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+#![allow(
+    missing_docs,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing
+)]
 
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};

@@ -45,13 +45,15 @@ fn ros2_can_bridges_a_bus_to_cyclone_dds_both_ways() {
     if !inside_lonet("ros2_can_bridges_a_bus_to_cyclone_dds_both_ways") {
         return;
     }
-    let bus = "udp:239.74.163.2:43510";
+    // With a candump filter: every frame but 0x7FE.
+    let bus = "udp:239.74.163.2:43510,7FE~7FF";
     let bridge = Background::start(&["ros2", "can", bus, "--dds-interface", "lo"]);
     let seen = python_peer("ros2_can_peer.py", &["239.74.163.2", "43510"]);
     let (code, out, err) = bridge.stop();
     assert_eq!(code, 0, "{out}{err}");
 
-    // The bus to DDS: classic, extended and remote frames on from_can_bus as can_msgs/Frame.
+    // The bus to DDS: classic, extended and remote frames on from_can_bus as can_msgs/Frame
+    // (0x7FE filtered out).
     let classic = seen["classic"].as_array().unwrap();
     assert_eq!(ids(&seen["classic"]), [0x123, 0x1ABC_DEF0, 0x321], "{seen}");
     let f = &classic[0];

@@ -83,6 +83,8 @@ sent = [
                 is_extended_id=False),
     can.Message(arbitration_id=0x18DAF110, data=bytes(range(64)), is_fd=True,
                 is_extended_id=True),
+    # The bridge's filter (7FE~7FF: all but 0x7FE) keeps this one off DDS.
+    can.Message(arbitration_id=0x7FE, data=b"\xfe", is_extended_id=False),
 ]
 for m in sent:
     bus.send(m)
@@ -104,6 +106,8 @@ to_bus_fd.write(fd_msg(0x458, bytes(range(9))))
 to_bus.write(frame_msg(0x333, b"\x33"))
 to_bus_fd.write(fd_msg(0x459, b"\x59"))
 received = bus_frames(lambda g: {0x333, 0x459} <= {m.arbitration_id for m in g})
+# With loopback on, what the bridge sent is published too (as a second socket sees it).
+looped = take_until(from_bus, lambda g: any(s.id == 0x333 for s in g))
 
 nodes = []
 for info in take_until(graph, lambda g: any(n.node_name == "socket_can_bridge"
@@ -119,6 +123,7 @@ print(json.dumps({
     "fd": [{"id": s.id, "ext": s.is_extended, "len": s.len, "data": bytes(s.data).hex()}
            for s in fd],
     "bus": [as_dict(m) for m in received],
+    "looped": [s.id for s in looped],
     "nodes": nodes,
     "wall": time.time(),
 }))
