@@ -6,11 +6,11 @@ use std::io::Write;
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_ros::can_bridge::{self, BridgeEvent, BridgedBus, CanBridgeConfig, CanTopics};
 use bywire_ros::control_output::{self, ControlOutputConfig, Outcome};
-use bywire_ros::dds::{RosNode, RosOptions};
 use bywire_ros::vehicle_interface::{self, VehicleEvent, VehicleInterfaceConfig};
 use bywire_vehicle::autoware::OutputMode;
 
 use crate::support::busarg;
+use crate::support::ros2::NodeArgs;
 
 /// Refusals printed before the rest are only counted.
 const REFUSALS_SHOWN: u64 = 20;
@@ -78,38 +78,6 @@ NAME/joint_states (sensor_msgs/JointState), NAME/nmt_state and NAME/drive_state
 (std_msgs/String) at --rate. Heartbeat loss, an emergency or a fault stop the drive until
 recover. Ctrl-C quick-stops every drive before exiting.")]
     Canopen(CanopenArgs),
-}
-
-/// Where the node runs (shared by every `ros2` command).
-#[derive(clap::Args)]
-pub struct NodeArgs {
-    /// The DDS domain (ROS_DOMAIN_ID).
-    #[arg(long, env = "ROS_DOMAIN_ID", default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=232))]
-    domain_id: u16,
-    /// The node's namespace.
-    #[arg(long, default_value = "/")]
-    namespace: String,
-    /// The node's name (default: the command's usual one).
-    #[arg(long)]
-    node_name: Option<String>,
-    /// Network interfaces (names or addresses) DDS uses; default: all.
-    #[arg(long = "dds-interface", value_name = "IFACE")]
-    dds_interfaces: Vec<String>,
-}
-
-impl NodeArgs {
-    pub fn open(&self, default_name: &str) -> Result<RosNode> {
-        let options = RosOptions {
-            domain_id: self.domain_id,
-            namespace: self.namespace.clone(),
-            node_name: self
-                .node_name
-                .clone()
-                .unwrap_or_else(|| default_name.to_string()),
-            interfaces: self.dds_interfaces.clone(),
-        };
-        RosNode::open(&options).context("cannot start the ROS 2 node")
-    }
 }
 
 #[derive(clap::Args)]

@@ -62,7 +62,7 @@ pub struct Args {
     ros2: bool,
     #[cfg(feature = "ros2")]
     #[command(flatten)]
-    node: crate::cmd::ros2::NodeArgs,
+    node: crate::support::ros2::NodeArgs,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {

@@ -1,5 +1,5 @@
 //! What the commands share: bus arguments, DBC and profile loading with diagnostics, numeric
-//! options, files written atomically, the simulator's servers. No command imports another.
+//! options, files written atomically, the simulator's servers, ROS 2 nodes. No command imports another.
 
 pub mod busarg;
 pub mod dbc;
@@ -7,6 +7,8 @@ pub mod files;
 pub mod logs;
 pub mod numbers;
 pub mod progress;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod signals;
 pub mod sim_serve;
 pub mod vehicles;
