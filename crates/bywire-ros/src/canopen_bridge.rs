@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use bywire_bus::runner::{Flow, Hooks, Runner, Waker};
+use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::{Bus, BusError};
 use bywire_canopen::cia402::{DriveController, Mode, Setpoint, State, StopReason};
 use bywire_canopen::config::{BusConfig, Driver};
@@ -28,7 +28,9 @@ use bywire_core::Timestamp;
 use ros2_client::{Message, RmwRequestId};
 use serde::{Deserialize, Serialize};
 
-use crate::dds::{mio1, reliable, Publisher, RosError, RosNode, Server, Subscription, POLL_SLICE};
+use crate::dds::{
+    mio1, reliable, wake_on_readiness, Publisher, RosError, RosNode, Server, Subscription,
+};
 use crate::msg::{Float64, Header, JointState, StringMsg};
 use crate::vehicle_interface::wall_stamp;
 
@@ -452,25 +454,6 @@ impl Hooks<Master> for Bridge<'_> {
     }
 }
 
-fn wake_on_input(
-    mut poll: mio1::Poll,
-    waker: Waker,
-    done: Arc<AtomicBool>,
-) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
-        let mut events = mio1::Events::with_capacity(64);
-        while !done.load(Ordering::Relaxed) {
-            match poll.poll(&mut events, Some(POLL_SLICE)) {
-                Ok(()) if !events.is_empty() => waker.wake(),
-                Ok(()) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                // Without readiness the bridge still serves calls at every report.
-                Err(_) => return,
-            }
-        }
-    })
-}
-
 /// Run the master of `config` on `bus` with its CiA 402 drives on ROS 2 until `stop` (then
 /// every drive is quick-stopped before it returns).
 pub fn run(
@@ -545,7 +528,7 @@ pub fn run(
     let mut master = config.master();
     let mut runner = Runner::new(vec![(Port::MAIN, bus)]);
     let done = Arc::new(AtomicBool::new(false));
-    let waiter = wake_on_input(poll, runner.waker(), Arc::clone(&done));
+    let waiter = wake_on_readiness(poll, runner.waker(), Arc::clone(&done));
     let mut bridge = Bridge {
         drives,
         report_period,

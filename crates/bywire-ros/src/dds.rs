@@ -233,6 +233,27 @@ impl RosNode {
 /// How long a DDS loop waits for its sockets before looking at its stop flag.
 pub const POLL_SLICE: Duration = Duration::from_millis(50);
 
+/// A thread that wakes a real-time runner whenever an input registered with `poll` has
+/// something, until `done`: the runner's hooks take the inputs after its next poll.
+pub fn wake_on_readiness(
+    mut poll: mio1::Poll,
+    waker: bywire_bus::runner::Waker,
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let mut events = mio1::Events::with_capacity(64);
+        while !done.load(std::sync::atomic::Ordering::Relaxed) {
+            match poll.poll(&mut events, Some(POLL_SLICE)) {
+                Ok(()) if !events.is_empty() => waker.wake(),
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                // Without readiness the hooks still take the inputs at every report.
+                Err(_) => return,
+            }
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use bywire_bus::runner::{Flow, Hooks, Runner, Waker};
+use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::{Bus, BusError};
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
@@ -29,7 +29,9 @@ use bywire_vehicle::wire::ProfileWire;
 use ros2_client::RmwRequestId;
 
 use crate::autoware_vehicle::{self as map, Geometry};
-use crate::dds::{mio1, reliable, Publisher, RosError, RosNode, Server, Subscription, POLL_SLICE};
+use crate::dds::{
+    mio1, reliable, wake_on_readiness, Publisher, RosError, RosNode, Server, Subscription,
+};
 use crate::msg::{
     control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, GearCommand,
     GearReport, Header, JointState, SteeringReport, StringMsg, Time, Twist, VelocityReport,
@@ -387,17 +389,7 @@ impl VehicleInterface<'_> {
 
     fn begin_braking(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
         (self.report)(VehicleEvent::Stopping);
-        ads.emergency_brake(now, self.limits.deceleration_m_s2);
-        ads.set_command(
-            now,
-            AdsCommand {
-                velocity: 0.0,
-                brake: 100.0,
-                engage: false,
-                operator_reset: false,
-                ..self.command
-            },
-        );
+        ads.safe_stop(now, self.limits.deceleration_m_s2);
         self.braking_until = Some(now.saturating_add(FINAL_BRAKING));
     }
 }
@@ -454,28 +446,6 @@ impl Hooks<Ads<ProfileWire>> for VehicleInterface<'_> {
             .map_or("?".to_string(), |(_, n)| n.clone());
         (self.report)(VehicleEvent::BusLost(format!("{name}: {error}")));
     }
-}
-
-/// Wakes the runner whenever an input has something (a thread waiting on every input at once).
-fn wake_on_input(
-    mut poll: mio1::Poll,
-    waker: Waker,
-    done: Arc<AtomicBool>,
-) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
-        let mut events = mio1::Events::with_capacity(16);
-        while !done.load(Ordering::Relaxed) {
-            match poll.poll(&mut events, Some(POLL_SLICE)) {
-                Ok(()) if !events.is_empty() => waker.wake(),
-                Ok(()) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(_) => {
-                    // Without readiness the runner still polls the inputs at every report.
-                    return;
-                }
-            }
-        }
-    })
 }
 
 /// The geometry a profile gives (`None`: the profile has no `[vehicle]`).
@@ -596,7 +566,7 @@ pub fn run(
     interface.buses = buses.iter().map(|(p, n, _)| (*p, n.clone())).collect();
     let mut runner = Runner::new(buses.into_iter().map(|(p, _, b)| (p, b)).collect());
     let done = Arc::new(AtomicBool::new(false));
-    let waiter = wake_on_input(poll, runner.waker(), Arc::clone(&done));
+    let waiter = wake_on_readiness(poll, runner.waker(), Arc::clone(&done));
     // The runner's own stop flag stays clear: the interface's stop brakes first.
     let never = AtomicBool::new(false);
     let result = runner.run(&mut ads, &never, None, &mut interface);

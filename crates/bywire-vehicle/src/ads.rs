@@ -248,6 +248,23 @@ impl<W: AdsWire> Ads<W> {
         });
     }
 
+    /// The safe stop at an end of input: the emergency-brake burst at `deceleration` and a
+    /// command of zero speed at full brake (steering, gear and modes held, no requests).
+    pub fn safe_stop(&mut self, now: Timestamp, deceleration: f64) {
+        self.emergency_brake(now, deceleration);
+        let held = self.command.map(|(_, c)| c).unwrap_or_default();
+        self.set_command(
+            now,
+            AdsCommand {
+                velocity: 0.0,
+                brake: 100.0,
+                engage: false,
+                operator_reset: false,
+                ..held
+            },
+        );
+    }
+
     /// Stop sending emergency-brake frames.
     pub fn release_brake(&mut self) {
         self.brake = None;

@@ -198,3 +198,30 @@ fn a_change_within_the_tolerance_is_not_a_new_setpoint() {
         Some(std::time::Duration::from_millis(5))
     );
 }
+
+#[test]
+fn the_safe_stop_brakes_at_once_and_holds_the_steering() {
+    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
+    ads.set_command(
+        ms(0),
+        AdsCommand {
+            engage: true,
+            ..drive(5.0)
+        },
+    );
+    ads.safe_stop(ms(10), 3.0);
+    let c = ads.effective_command(ms(10)).unwrap();
+    assert_eq!(
+        (c.velocity, c.brake, c.steering, c.engage),
+        (0.0, 100.0, 5.0, false)
+    );
+    let mut frames = Vec::new();
+    ads.poll(ms(10), &mut |f| frames.push(f));
+    // The emergency-brake frame goes first, then the stop command.
+    let ids: Vec<u32> = frames
+        .iter()
+        .filter_map(|f| f.id())
+        .map(|i| i.as_raw())
+        .collect();
+    assert_eq!(ids.first(), Some(&EmergencyBrake::ID), "{ids:x?}");
+}

@@ -215,18 +215,7 @@ impl Bridge<'_> {
         if !self.estop_on_eof {
             return Flow::Stop;
         }
-        let deceleration = self.limits.deceleration_m_s2;
-        ads.emergency_brake(now, deceleration);
-        ads.set_command(
-            now,
-            AdsCommand {
-                velocity: 0.0,
-                brake: 100.0,
-                engage: false,
-                operator_reset: false,
-                ..self.command
-            },
-        );
+        ads.safe_stop(now, self.limits.deceleration_m_s2);
         self.event(now, "end_of_input", &format!("{why}: braking for 1 s"));
         self.braking_until = Some(now.saturating_add(Duration::from_secs(1)));
         Flow::Continue

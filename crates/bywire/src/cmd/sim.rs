@@ -208,23 +208,27 @@ fn run_over_ros2(
             let now = tug.now();
             if now >= next_line {
                 next_line = now.saturating_add(Duration::from_secs(5));
-                let pose = tug.pose();
-                writeln!(
-                    out,
-                    "t={:6.1}s  x={:7.2} y={:7.2}  {:4.2} m/s",
-                    now.as_nanos() as f64 / 1e9,
-                    pose.x,
-                    pose.y,
-                    tug.pose_speed()
-                )
-                .and_then(|()| out.flush())
-                .map_err(|e| e.to_string())?;
+                let speed = format!("{:4.2} m/s", tug.pose_speed());
+                writeln!(out, "{}", progress_line(tug, &speed))
+                    .and_then(|()| out.flush())
+                    .map_err(|e| e.to_string())?;
             }
             Ok(())
         },
     )
     .map_err(|e| anyhow!("{e}"))?;
     Ok(())
+}
+
+/// A progress line: the time, where the tug is, then `what`.
+fn progress_line(tug: &Tug, what: &str) -> String {
+    let pose = tug.pose();
+    format!(
+        "t={:6.1}s  x={:7.2} y={:7.2}  {what}",
+        tug.now().as_nanos() as f64 / 1e9,
+        pose.x,
+        pose.y
+    )
 }
 
 /// Run without the view: progress lines every 5 simulated seconds, paced to real time unless
@@ -252,15 +256,8 @@ fn run_plain(
         }
         if now >= next_report {
             next_report = now.saturating_add(Duration::from_secs(5));
-            let pose = tug.pose();
-            writeln!(
-                out,
-                "t={:6.1}s  x={:7.2} y={:7.2}  {:5.1} m to go",
-                now.as_nanos() as f64 / 1e9,
-                pose.x,
-                pose.y,
-                tug.remaining()
-            )?;
+            let to_go = format!("{:5.1} m to go", tug.remaining());
+            writeln!(out, "{}", progress_line(tug, &to_go))?;
             out.flush()?;
         }
         if !args.fast {
