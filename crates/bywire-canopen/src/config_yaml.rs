@@ -2,7 +2,8 @@
 //! same way: `master` (`node_id`, `baudrate` in kbit/s, `sync_period` in µs,
 //! `heartbeat_producer` in ms), `defaults` merged under every node, and per node `node_id`,
 //! `dcf` (found under `options.dcf_path`, whose `@BUS_CONFIG_PATH@` is the file's folder),
-//! `driver` (ros2_canopen's CiA 402 drivers become `cia402`, any other `none`), `period`
+//! `driver` (ros2_canopen's CiA 402 drivers become `cia402`, any other `none`),
+//! `velocity_mode` / `position_mode` (the mode a drive starts in), `period`
 //! (the command cycle), `heartbeat_timeout_ms`.
 //!
 //! The `sdo`, `tpdo` and `rpdo` lists are not applied (the master commands drives with the
@@ -158,6 +159,23 @@ impl BusConfig {
                 {
                     ignored.push(name.clone());
                 }
+                // The mode a drive starts in: ros2_canopen's velocity mode (3 profile, 9 cyclic)
+                // if given, else its position mode (1 profile, 8 cyclic); services switch it.
+                let velocity: Option<i64> = number(&node, "velocity_mode", &path, &invalid)?;
+                let position: Option<i64> = number(&node, "position_mode", &path, &invalid)?;
+                let mode = match (velocity, position) {
+                    (Some(3), _) => Some("profile_velocity"),
+                    (Some(9), _) => Some("cyclic_velocity"),
+                    (None, Some(1)) => Some("profile_position"),
+                    (None, Some(8)) => Some("cyclic_position"),
+                    (None, None) => None,
+                    (Some(code), _) | (None, Some(code)) => {
+                        return Err(invalid(
+                            &format!("{path}.{}", if velocity.is_some() { "velocity_mode" } else { "position_mode" }),
+                            format!("{code} is not a mode this master drives (velocity 3 or 9, position 1 or 8)"),
+                        ))
+                    }
+                };
                 nodes.insert(
                     name,
                     RawNode {
@@ -165,7 +183,7 @@ impl BusConfig {
                         eds,
                         profile,
                         driver: driver.to_string(),
-                        mode: None,
+                        mode: mode.map(str::to_string),
                         heartbeat_timeout_ms: number(
                             &node,
                             "heartbeat_timeout_ms",
@@ -204,7 +222,7 @@ impl BusConfig {
 mod tests {
     use super::*;
 
-    const BUS: &str = "options:\n  dcf_path: \"@BUS_CONFIG_PATH@\"\nmaster:\n  node_id: 1\n  driver: \"ros2_canopen::MasterDriver\"\n  package: \"canopen_master_driver\"\n  sync_period: 10000\ndefaults:\n  driver: \"ros2_canopen::Cia402Driver\"\n  package: \"canopen_402_driver\"\n  period: 10\n  sdo:\n    - {index: 0x6081, sub_index: 0, value: 1000}\nnodes:\n  drive_left:\n    node_id: 2\n  drive_right:\n    node_id: 3\n    heartbeat_timeout_ms: 250\n";
+    const BUS: &str = "options:\n  dcf_path: \"@BUS_CONFIG_PATH@\"\nmaster:\n  node_id: 1\n  driver: \"ros2_canopen::MasterDriver\"\n  package: \"canopen_master_driver\"\n  sync_period: 10000\ndefaults:\n  driver: \"ros2_canopen::Cia402Driver\"\n  package: \"canopen_402_driver\"\n  period: 10\n  sdo:\n    - {index: 0x6081, sub_index: 0, value: 1000}\nnodes:\n  drive_left:\n    node_id: 2\n  drive_right:\n    node_id: 3\n    heartbeat_timeout_ms: 250\n    position_mode: 8\n";
 
     const PROXY: &str = "  io:\n    node_id: 4\n    driver: \"ros2_canopen::ProxyDriver\"\n    package: \"canopen_proxy_driver\"\n";
 
@@ -217,7 +235,26 @@ mod tests {
         let ids: Vec<(String, u8)> = bus.nodes.iter().map(|n| (n.name.clone(), n.id)).collect();
         assert_eq!(ids, [("drive_left".into(), 2), ("drive_right".into(), 3)]);
         let right = bus.nodes.iter().find(|n| n.name == "drive_right").unwrap();
-        assert!(matches!(right.driver, crate::config::Driver::Cia402(_)));
+        assert_eq!(
+            right.driver,
+            crate::config::Driver::Cia402(crate::cia402::Mode::CyclicSynchronousPosition)
+        );
+        let left = bus.nodes.iter().find(|n| n.name == "drive_left").unwrap();
+        assert_eq!(
+            left.driver,
+            crate::config::Driver::Cia402(crate::cia402::Mode::ProfileVelocity)
+        );
+        let e = BusConfig::parse_ros2_canopen(
+            &BUS.replace("position_mode: 8", "velocity_mode: 4"),
+            "bus.yml",
+            Path::new("."),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("bus.yml: nodes.drive_right.velocity_mode: 4 is not a mode"),
+            "{e}"
+        );
         assert_eq!(
             right.heartbeat_timeout,
             core::time::Duration::from_millis(250)

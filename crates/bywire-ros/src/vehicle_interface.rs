@@ -141,6 +141,8 @@ pub struct VehicleInterface<'a> {
     /// Fresh feedback is younger than this.
     fresh: Duration,
     command: AdsCommand,
+    /// The steering mode chosen on the steering-mode topic (control_cmd steers in it).
+    steering_mode: SteeringMode,
     /// A command has arrived (before it, nothing is sent).
     commanding: bool,
     /// An engage request waiting: its id, since when, until when.
@@ -216,7 +218,13 @@ impl VehicleInterface<'_> {
             let Ok(Some((m, _))) = self.inputs.control.take() else {
                 break;
             };
-            let next = map::from_control(&m, self.command, &g, &self.limits);
+            // A control_cmd steers in the mode chosen on the steering-mode topic (a cmd_vel
+            // before it may have chosen another).
+            let base = AdsCommand {
+                steering_mode: self.steering_mode,
+                ..self.command
+            };
+            let next = map::from_control(&m, base, &g, &self.limits);
             self.command(ads, now, next);
         }
         for _ in 0..TAKE_BATCH {
@@ -247,7 +255,10 @@ impl VehicleInterface<'_> {
                         "steering mode {mode}: this vehicle has no four-wheel steer"
                     )))
                 }
-                Ok(mode) => self.command.steering_mode = mode,
+                Ok(mode) => {
+                    self.steering_mode = mode;
+                    self.command.steering_mode = mode;
+                }
                 Err(e) => (self.report)(VehicleEvent::Refused(format!("'{}': {e}", m.data))),
             }
         }
@@ -510,6 +521,7 @@ impl<'a> VehicleInterface<'a> {
             fresh,
             cycle: ads_config.cycle,
             command: AdsCommand::default(),
+            steering_mode: SteeringMode::Normal,
             commanding: false,
             engage: None,
             next_report: Timestamp::ZERO,

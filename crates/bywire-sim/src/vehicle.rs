@@ -14,7 +14,7 @@
 
 use core::time::Duration;
 
-use bywire_control::kinematics::{four_wheel, Swerve};
+use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
@@ -69,8 +69,10 @@ pub struct SimulatedVehicle<W: VehicleWire> {
     next_report: Timestamp,
     wheel_counter: u64,
     redundant: bool,
-    /// Where the wheels are (for their angles in a tank turn).
+    /// Where the wheels are.
     wheels: Swerve<4>,
+    /// The wheels' last angles and speeds.
+    wheel_states: [WheelState; 4],
 }
 
 impl<W: VehicleWire> SimulatedVehicle<W> {
@@ -92,6 +94,7 @@ impl<W: VehicleWire> SimulatedVehicle<W> {
             next_report: Timestamp::ZERO,
             wheel_counter: 0,
             wheels: four_wheel(DEFAULT_WHEELBASE, DEFAULT_TRACK),
+            wheel_states: [WheelState::default(); 4],
         }
     }
 
@@ -197,11 +200,16 @@ impl<W: VehicleWire> Node for SimulatedVehicle<W> {
         Node::poll(&mut self.supervisor, now, out);
         if now >= self.next_report {
             self.next_report = now.saturating_add(self.report_period);
-            let speeds = [self.plant.speed; 4];
+            // Each wheel as the steering mode moves it at the plant's speed and angle.
             let mode = self.supervisor.actuators(now).steering_mode;
-            let angles = mode
-                .wheel_angles(self.plant.steering.to_radians(), &self.wheels)
-                .map(f64::to_degrees);
+            self.wheel_states = mode.wheel_states(
+                self.plant.speed,
+                self.plant.steering.to_radians(),
+                &self.wheels,
+                &self.wheel_states,
+            );
+            let speeds = self.wheel_states.map(|w| w.speed);
+            let angles = self.wheel_states.map(|w| w.angle.to_degrees());
             let wire = self.supervisor.wire_mut();
             let frames = [
                 wire.wheel_speeds_frame(speeds, self.wheel_counter),

@@ -22,10 +22,9 @@ use std::collections::VecDeque;
 use bywire_canopen::cia402::{DriveController, Mode, Setpoint};
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
-use bywire_control::kinematics::{four_wheel, Motion, Swerve, WheelState};
+use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
@@ -143,7 +142,6 @@ pub struct VehicleControlEcu {
     master: Master,
     plausibility: SteeringPlausibility,
     swerve: Swerve<4>,
-    geometry: Geometry,
     wheel_targets: [WheelState; 4],
     drives_lost: bool,
     status: StatusInputs,
@@ -180,7 +178,6 @@ impl VehicleControlEcu {
             master,
             plausibility: SteeringPlausibility::default(),
             swerve: four_wheel(geometry.wheelbase, geometry.track),
-            geometry,
             wheel_targets: [WheelState::default(); 4],
             drives_lost: false,
             status: StatusInputs::default(),
@@ -340,31 +337,12 @@ impl VehicleControlEcu {
         } else {
             0.0
         };
-        let g = self.geometry;
-        let motion = match a.steering_mode {
-            SteeringMode::Normal => Motion::Normal {
-                speed,
-                curvature: 2.0 * libm::tan(a.steering.to_radians()) / g.wheelbase,
-            },
-            SteeringMode::Crab => Motion::Crab {
-                speed,
-                angle: a.steering.to_radians(),
-            },
-            SteeringMode::Tank => Motion::Tank {
-                yaw_rate: speed / libm::hypot(g.wheelbase / 2.0, g.track / 2.0),
-            },
-        };
-        let mut targets = self.swerve.inverse(motion.twist(), &self.wheel_targets);
-        if speed == 0.0 {
-            // At a standstill the wheels still take the mode's angles: the commanded angle
-            // (front +, rear − in normal mode, all alike in crab), or tangent to the turn.
-            let angles = a
-                .steering_mode
-                .wheel_angles(a.steering.to_radians(), &self.swerve);
-            for (target, angle) in targets.iter_mut().zip(angles) {
-                target.angle = angle;
-            }
-        }
+        let targets = a.steering_mode.wheel_states(
+            speed,
+            a.steering.to_radians(),
+            &self.swerve,
+            &self.wheel_targets,
+        );
         self.wheel_targets = targets;
         let faulted = self.plausibility.faulted().map(|f| f.corner());
         for (i, (target, (steer, drive))) in targets

@@ -158,9 +158,8 @@ vocabulary!(
 
 impl SteeringMode {
     /// The four wheels' angles (rad; FL, FR, RL, RR of `wheels`) this mode gives a commanded
-    /// angle: front + and rear − in normal mode, all alike in crab, tangent to a turn about
-    /// the centre in a tank turn (the commanded angle unused). A moving vehicle's wheels follow
-    /// its twist; these are the angles at a standstill, and a plain plant's.
+    /// angle at a standstill: front + and rear − in normal mode, all alike in crab, tangent to a
+    /// turn about the centre in a tank turn (the commanded angle unused).
     pub fn wheel_angles(
         self,
         steering_rad: f64,
@@ -177,6 +176,46 @@ impl SteeringMode {
                 )
                 .map(|w| w.angle),
         }
+    }
+
+    /// The four wheels' states (angle, speed) this mode gives `speed` (m/s) and a commanded
+    /// angle on a rectangular 4WS vehicle (`wheels` FL, FR, RL, RR about its centre): normal
+    /// steering on the path of curvature 2 tan δ / wheelbase (front and rear in counter-phase),
+    /// crab at δ, a tank turn whose wheels roll at `speed`; at a standstill the angles
+    /// [`SteeringMode::wheel_angles`] gives. `current` keeps each wheel from flipping round.
+    pub fn wheel_states(
+        self,
+        speed: f64,
+        steering_rad: f64,
+        wheels: &bywire_control::kinematics::Swerve<4>,
+        current: &[bywire_control::kinematics::WheelState; 4],
+    ) -> [bywire_control::kinematics::WheelState; 4] {
+        use bywire_control::kinematics::Motion;
+        let front_left = wheels.wheels[0];
+        let (wheelbase, radius) = (2.0 * front_left.x, libm::hypot(front_left.x, front_left.y));
+        let motion = match self {
+            SteeringMode::Normal => Motion::Normal {
+                speed,
+                curvature: 2.0 * libm::tan(steering_rad) / wheelbase,
+            },
+            SteeringMode::Crab => Motion::Crab {
+                speed,
+                angle: steering_rad,
+            },
+            SteeringMode::Tank => Motion::Tank {
+                yaw_rate: speed / radius,
+            },
+        };
+        let mut states = wheels.inverse(motion.twist(), current);
+        if speed == 0.0 {
+            for (state, angle) in states
+                .iter_mut()
+                .zip(self.wheel_angles(steering_rad, wheels))
+            {
+                state.angle = angle;
+            }
+        }
+        states
     }
 }
 

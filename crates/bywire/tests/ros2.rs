@@ -264,7 +264,7 @@ fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
     let f = |k: &str| d[k].as_f64().unwrap();
     assert!((f("velocity") - 1.5).abs() < 0.05, "{d}");
     assert!((f("tire_angle") - 0.1).abs() < 0.01, "{d}");
-    assert_eq!(f("lateral"), 0.0);
+    assert!(f("lateral").abs() < 1e-6, "{d}");
     assert!(f("heading_rate") > 0.0, "{d}");
     assert_eq!(d["gear"], 2);
     assert_eq!(d["frame_id"], "base_link");
@@ -303,6 +303,34 @@ fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
     for rate in &rates[4..] {
         assert!((rate - f("velocity") / 0.25).abs() < 0.3, "{rates:?}");
     }
+
+    // Crab chosen on the steering-mode topic: the same command also moves the tug sideways
+    // (the tire angle is now the direction of travel), without turning; back to normal.
+    let crab = &seen["crab"];
+    assert_eq!(crab["steering_mode"], "crab", "{seen}");
+    let lateral = crab["lateral"].as_f64().unwrap();
+    assert!((lateral - 1.5 * 0.1f64.sin()).abs() < 0.03, "{crab}");
+    assert!(
+        crab["heading_rate"].as_f64().unwrap().abs() < 0.01,
+        "{crab}"
+    );
+    assert!(
+        (crab["tire_angle"].as_f64().unwrap() - 0.1).abs() < 0.01,
+        "{crab}"
+    );
+    assert_eq!(seen["normal"]["steering_mode"], "normal");
+    assert!(seen["normal"]["lateral"].as_f64().unwrap().abs() < 0.01);
+    // cmd_vel turning on the spot at 0.3 rad/s: a tank turn at that yaw rate.
+    let tank = &seen["tank"];
+    assert_eq!(tank["steering_mode"], "tank", "{seen}");
+    assert!(
+        (tank["heading_rate"].as_f64().unwrap() - 0.3).abs() < 0.05,
+        "{tank}"
+    );
+    assert!(
+        tank["longitudinal"].as_f64().unwrap().abs() < 0.05,
+        "{tank}"
+    );
 
     // A stopped publisher: the vehicle slows within the staleness (200 ms) and a report
     // period, and stops.

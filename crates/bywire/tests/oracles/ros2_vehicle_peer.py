@@ -12,11 +12,14 @@ import time
 
 from ros2_types import (Control, ControlModeCommandRequest, ControlModeCommandResponse,
                         ControlModeReport, GearCommand, GearReport, JointState, SteeringReport,
-                        StringMsg, VelocityReport, control, participant, reader, stamp, writer)
+                        StringMsg, Twist, Vector3, VelocityReport, control, participant, reader,
+                        stamp, writer)
 
 dp = participant()
 control_cmd = writer(dp, "rt/control/command/control_cmd", Control, depth=1)
 gear_cmd = writer(dp, "rt/control/command/gear_cmd", GearCommand, depth=1)
+steering_mode_cmd = writer(dp, "rt/vehicle/command/steering_mode", StringMsg, depth=1)
+cmd_vel = writer(dp, "rt/cmd_vel", Twist, depth=1)
 requests = writer(dp, "rq/control/control_mode_requestRequest", ControlModeCommandRequest)
 replies = reader(dp, "rr/control/control_mode_requestReply", ControlModeCommandResponse)
 topics = {
@@ -120,6 +123,32 @@ try:
                          "tire_angle": s.steering_tire_angle, "gear": g.report,
                          "joints": list(j.name), "positions": list(j.position),
                          "joint_velocities": list(j.velocity), "steering_mode": sm.data}
+    # Crab on our steering-mode topic: the same control_cmd now moves the tug sideways too.
+    def steering_mode_is(mode):
+        return latest("steering_mode") is not None and latest("steering_mode").data == mode
+
+    for mode in ["crab", "normal"]:
+        for _ in range(5):
+            steering_mode_cmd.write(StringMsg(data=mode))
+            time.sleep(0.05)
+        wait_for(lambda: steering_mode_is(mode), 5)
+        time.sleep(1.0)
+        v = latest("velocity")
+        result[mode] = {"steering_mode": latest("steering_mode").data,
+                        "lateral": v.lateral_velocity, "heading_rate": v.heading_rate,
+                        "tire_angle": latest("steering").steering_tire_angle}
+    # cmd_vel instead of control_cmd: a turn on the spot becomes a tank turn.
+    publishing.clear()
+    end = time.monotonic() + 3.0
+    while time.monotonic() < end:
+        cmd_vel.write(Twist(linear=Vector3(0.0, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.3)))
+        time.sleep(0.025)
+    v = latest("velocity")
+    result["tank"] = {"steering_mode": latest("steering_mode").data,
+                      "heading_rate": v.heading_rate, "longitudinal": v.longitudinal_velocity}
+    publishing.set()
+    wait_for(lambda: steering_mode_is("normal")
+             and latest("velocity").longitudinal_velocity > 1.45, 10)
     # A stopped publisher: the vehicle slows within the staleness and stops.
     publishing.clear()
     stopped_at = last_command[0]
