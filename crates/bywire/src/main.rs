@@ -91,6 +91,11 @@ enum Command {
     Serve(cmd::serve::Args),
     /// Emulate an SLCAN adapter for a bus on a pseudo terminal (for SLCAN tools).
     SlcanAdapter(cmd::slcan_adapter::Args),
+    /// ISO-TP on any bus, like can-utils' isotpsend and isotprecv (same options).
+    Isotp {
+        #[command(subcommand)]
+        command: cmd::isotp::IsotpCommand,
+    },
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(cmd::bridge::Args),
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
@@ -128,6 +133,7 @@ fn main() -> ExitCode {
         Command::SlcanAdapter(args) => cmd::slcan_adapter::run(&args, &mut out),
         Command::Log { command } => cmd::log::run(&command, &mut out),
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
+        Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),
         #[cfg(feature = "ros2")]
         Command::Ros2 { command } => cmd::ros2::run(&command, &mut out),
     };

@@ -8,6 +8,7 @@ pub mod check;
 pub mod dbc;
 pub mod dump;
 pub mod gen;
+pub mod isotp;
 pub mod log;
 pub mod monitor;
 pub mod play;
