@@ -422,3 +422,66 @@ proptest! {
         prop_assert_eq!(events(&mut a), vec![IsoTpEvent::Sent]);
     }
 }
+
+/// Throughput on a bit-timed 1 Mbit/s bus with BS 0 and STmin 0: the transfer takes no more
+/// than 5 % over the time its frames occupy the wire (each frame's exact stuffed length and
+/// interframe space), classic and padded, and CAN FD at 1/4 Mbit/s.
+#[test]
+fn throughput_is_within_5_percent_of_the_wire() {
+    use bywire_bus::network::Network;
+    use bywire_core::busload::{frame_time_ns, Bitrates};
+    use bywire_core::node::{Node, Port};
+    for (fd, data) in [(false, None), (true, Some(4_000_000))] {
+        let mut net = Network::new();
+        let bus = net.add_bus("can0", 1_000_000, data);
+        net.wire(0, Port::MAIN, bus);
+        net.wire(1, Port::MAIN, bus);
+        let tap = net.tap(bus).unwrap();
+        let (mut a, mut b) = pair(|c| {
+            c.padding = Some(0xCC);
+            c.fd = fd;
+            c.brs = fd;
+            c.tx_dl = 64;
+        });
+        a.send(&message(4095)).unwrap();
+        let mut frames = Vec::new();
+        let mut received_at = None;
+        for _ in 0..20_000 {
+            net.changed(0);
+            let until = net.now().saturating_add(Duration::from_micros(200));
+            net.run_until(until, &mut [&mut a as &mut dyn Node, &mut b]);
+            while let Some(r) = net.bus_mut(bus).and_then(|s| s.receive(tap)) {
+                frames.push(r);
+            }
+            if let Some(IsoTpEvent::Received(m)) = b.next_event() {
+                assert_eq!(m, message(4095));
+                received_at = frames.last().map(|r| r.timestamp);
+                break;
+            }
+        }
+        let end = received_at.expect("the message arrived");
+        let rates = Bitrates {
+            nominal: 1_000_000,
+            data,
+        };
+        let wire_ns: f64 = frames.iter().map(|r| frame_time_ns(&r.frame, rates)).sum();
+        // From the start of the first frame (its end less its own time) to the end of the last.
+        let first = &frames[0];
+        let start_ns = first.timestamp.as_nanos() as f64 - frame_time_ns(&first.frame, rates);
+        let took_ns = end.as_nanos() as f64 - start_ns;
+        let ratio = wire_ns / took_ns;
+        println!(
+            "ISO-TP 4095 bytes, {}: {} frames, {:.3} ms on the wire, {:.3} ms taken ({:.1} %)",
+            if fd {
+                "CAN FD 1/4 Mbit/s"
+            } else {
+                "classic 1 Mbit/s"
+            },
+            frames.len(),
+            wire_ns / 1e6,
+            took_ns / 1e6,
+            ratio * 100.0
+        );
+        assert!(ratio >= 0.95, "{ratio}");
+    }
+}
