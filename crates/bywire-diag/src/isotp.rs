@@ -756,3 +756,97 @@ impl bywire_core::node::Node for IsoTp {
         IsoTp::next_deadline(self)
     }
 }
+
+/// One frame read as ISO-TP (for dumps): what its PCI says, the data after it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pdu<'a> {
+    /// A single frame of `length` bytes.
+    Single {
+        /// SF_DL.
+        length: usize,
+        /// The data after the PCI.
+        data: &'a [u8],
+    },
+    /// A first frame announcing `length` bytes.
+    First {
+        /// FF_DL.
+        length: usize,
+        /// The data after the PCI.
+        data: &'a [u8],
+    },
+    /// A consecutive frame.
+    Consecutive {
+        /// Its sequence number.
+        sequence: u8,
+        /// The data after the PCI.
+        data: &'a [u8],
+    },
+    /// A flow-control frame.
+    Flow {
+        /// Flow status (0 CTS, 1 WAIT, 2 OVFLW, others invalid).
+        status: u8,
+        /// Block size.
+        block_size: u8,
+        /// STmin byte.
+        st_min: u8,
+    },
+    /// A PCI type ISO-TP does not define, or a frame too short for its PCI.
+    Unknown,
+}
+
+impl Pdu<'_> {
+    /// Read `data` (after any addressing byte).
+    pub fn parse(data: &[u8]) -> Pdu<'_> {
+        let Some(&pci) = data.first() else {
+            return Pdu::Unknown;
+        };
+        let byte = |i: usize| data.get(i).copied();
+        let rest = |i: usize| data.get(i..).unwrap_or(&[]);
+        match pci >> 4 {
+            0 if pci & 0x0F != 0 => Pdu::Single {
+                length: usize::from(pci & 0x0F),
+                data: rest(1),
+            },
+            0 => match byte(1) {
+                Some(length) => Pdu::Single {
+                    length: usize::from(length),
+                    data: rest(2),
+                },
+                None => Pdu::Unknown,
+            },
+            1 => {
+                let Some(low) = byte(1) else {
+                    return Pdu::Unknown;
+                };
+                let short = (usize::from(pci & 0x0F) << 8) | usize::from(low);
+                if short != 0 {
+                    return Pdu::First {
+                        length: short,
+                        data: rest(2),
+                    };
+                }
+                match data.get(2..6) {
+                    Some(&[a, b, c, d]) => Pdu::First {
+                        length: usize::try_from(u32::from_be_bytes([a, b, c, d]))
+                            .unwrap_or(usize::MAX),
+                        data: rest(6),
+                    },
+                    _ => Pdu::Unknown,
+                }
+            }
+            2 => Pdu::Consecutive {
+                sequence: pci & 0x0F,
+                data: rest(1),
+            },
+            3 => match (byte(1), byte(2)) {
+                (Some(block_size), Some(st_min)) => Pdu::Flow {
+                    status: pci & 0x0F,
+                    block_size,
+                    st_min,
+                },
+                _ => Pdu::Unknown,
+            },
+            _ => Pdu::Unknown,
+        }
+    }
+}

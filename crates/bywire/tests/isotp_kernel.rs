@@ -133,6 +133,24 @@ echo "== long from the kernel"
 $B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv6.txt &
 run sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4800.txt"
 cat recv6.txt
+echo "== dumps"
+isotpdump -s 7E0 -d 7E8 -a vcan0 > theirs.txt & P1=$!
+$B isotp dump vcan0 -s 7E0 -d 7E8 -a > ours.txt & P2=$!
+sleep 0.5
+isotprecv -s 7E8 -d 7E0 -b 2 -m F3 vcan0 > /dev/null & R=$!
+sleep 0.3
+head -c 300 {d}/m4095.txt | $B isotp send vcan0 -s 7E0 -d 7E8
+wait $R
+isotprecv -s 7E8 -d 7E0 -m 7F -L 72:64:1 vcan0 > /dev/null & R=$!
+sleep 0.3
+head -c 600 {d}/m4095.txt | isotpsend -s 7E0 -d 7E8 -L 72:64:1 vcan0
+wait $R
+echo 3E 00 | isotpsend -s 7E0 -d 7E8 vcan0
+sleep 0.5; kill $P1 $P2; wait $P1 $P2
+echo "== theirs"
+cat theirs.txt
+echo "== ours"
+cat ours.txt
 echo "== end"
 "#
     );
@@ -173,6 +191,12 @@ echo "== end"
     let long_want = hex(&long).trim().to_string();
     let to = received("long to the kernel");
     let from = received("long from the kernel");
+    // The dump reads every frame as isotpdump does, line for line (SF, FF, CF, FC in both
+    // directions, classic and FD, with the ASCII column).
+    let theirs = section(&out, "theirs");
+    let ours = section(&out, "ours");
+    assert!(theirs.lines().count() > 20, "{theirs}");
+    assert_eq!(ours, theirs);
     let bytes = |t: &str| t.split_whitespace().count();
     assert!(
         from == long_want,

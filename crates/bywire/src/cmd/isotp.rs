@@ -55,6 +55,40 @@ MTU 72 is CAN FD, TX_DL its frame length, FLAGS 1 the bit-rate switch.")]
         #[arg(short = 'l')]
         keep: bool,
     },
+    /// Show the ISO-TP frames of a conversation, like isotpdump, live or from a log.
+    #[command(after_help = "Examples:
+  bywire isotp dump can0 -s 7E0 -d 7E8
+  bywire isotp dump vcan0 -s 7E0 -d 7E8 -a -t z
+  bywire isotp dump --log drive.blf -s 7E0 -d 7E8      (any log format)
+
+Each frame of either identifier as isotpdump prints it: [SF]/[FF] with the length,
+[CF] with its sequence number, [FC] with flow status, block size and STmin.")]
+    Dump {
+        /// The bus (a plain interface name means SocketCAN); none with --log.
+        #[arg(required_unless_present = "log")]
+        bus: Option<String>,
+        /// Read the frames from this log (any format) instead of a bus.
+        #[arg(long, value_name = "FILE", conflicts_with = "bus")]
+        log: Option<std::path::PathBuf>,
+        /// One identifier of the conversation (hex).
+        #[arg(short = 's', value_name = "CAN_ID")]
+        source: String,
+        /// The other (hex).
+        #[arg(short = 'd', value_name = "CAN_ID")]
+        destination: String,
+        /// Extended addressing: the source's address byte, or `any`.
+        #[arg(short = 'x', value_name = "ADDR")]
+        extended: Option<String>,
+        /// Extended addressing: the destination's address byte, or `any`.
+        #[arg(short = 'X', value_name = "ADDR")]
+        rx_extended: Option<String>,
+        /// Print the data as ASCII too.
+        #[arg(short = 'a')]
+        ascii: bool,
+        /// Timestamps: a (absolute), d (delta), z (from the first frame).
+        #[arg(short = 't', value_parser = ["a", "d", "z"])]
+        timestamp: Option<String>,
+    },
 }
 
 /// What both take: the channel's identifiers and frame format.
@@ -233,7 +267,230 @@ pub fn run(command: &IsotpCommand, input: &mut dyn Read, out: &mut dyn Write) ->
             }
             outcome.unwrap_or(Ok(()))
         }
+        IsotpCommand::Dump {
+            bus,
+            log,
+            source,
+            destination,
+            extended,
+            rx_extended,
+            ascii,
+            timestamp,
+        } => dump(
+            bus.as_ref(),
+            log.as_deref(),
+            (can_id(source, "-s")?, can_id(destination, "-d")?),
+            (
+                address_filter(extended.as_ref(), "-x")?,
+                address_filter(rx_extended.as_ref(), "-X")?,
+            ),
+            *ascii,
+            timestamp.as_deref(),
+            out,
+        ),
     }
+}
+
+/// Which address byte a side's frames must carry: none (normal addressing), any, or one.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum AddressFilter {
+    None,
+    Any,
+    Byte(u8),
+}
+
+fn address_filter(text: Option<&String>, option: &str) -> Result<AddressFilter> {
+    match text.map(String::as_str) {
+        None => Ok(AddressFilter::None),
+        Some("any") => Ok(AddressFilter::Any),
+        Some(t) => Ok(AddressFilter::Byte(
+            hex_u8(t).map_err(|e| anyhow!("{option} {t}: {e}"))?,
+        )),
+    }
+}
+
+/// One frame as isotpdump prints it (after its timestamp), or `None` when it is not part of
+/// the conversation.
+fn dump_line(
+    interface: &str,
+    frame: &bywire_core::Frame,
+    ids: (Id, Id),
+    filters: (AddressFilter, AddressFilter),
+    ascii: bool,
+) -> Option<String> {
+    use bywire_diag::isotp::Pdu;
+    let id = frame.id()?;
+    let filter = if id == ids.0 {
+        filters.0
+    } else if id == ids.1 {
+        filters.1
+    } else {
+        return None;
+    };
+    let data = frame.data();
+    let ext = match filter {
+        AddressFilter::None => 0,
+        AddressFilter::Any => 1,
+        AddressFilter::Byte(b) => {
+            if data.first() != Some(&b) {
+                return None;
+            }
+            1
+        }
+    };
+    let mut line = if id.is_extended() {
+        format!(" {interface}  {:8X}", id.as_raw())
+    } else {
+        format!(" {interface}  {:3X}", id.as_raw())
+    };
+    if ext == 1 {
+        line += &format!("{{{:02X}}}", data.first().copied().unwrap_or(0));
+    }
+    line += &if frame.is_fd() {
+        format!(" [{:02}]  ", data.len())
+    } else {
+        format!("  [{}]  ", data.len())
+    };
+    let after = data.get(ext..).unwrap_or(&[]);
+    let payload: &[u8] = match Pdu::parse(after) {
+        Pdu::Single { length, data } => {
+            line += &format!("[SF] ln: {length:<4} data:");
+            data
+        }
+        Pdu::First { length, data } => {
+            line += &format!("[FF] ln: {length:<4} data:");
+            data
+        }
+        Pdu::Consecutive { sequence, data } => {
+            line += &format!("[CF] sn: {sequence:X}    data:");
+            data
+        }
+        Pdu::Flow {
+            status,
+            block_size,
+            st_min,
+        } => {
+            let name = ["CTS", "WT", "OVFLW"]
+                .get(usize::from(status))
+                .copied()
+                .unwrap_or("reserved");
+            let off = if block_size == 0 { "= off " } else { "" };
+            let time = match st_min {
+                0x00..=0x7F => format!("{st_min} ms"),
+                0xF1..=0xF9 => format!("{} us", u16::from(st_min & 0x0F) * 100),
+                _ => "reserved".to_string(),
+            };
+            line += &format!(
+                "[FC] FC: {status} = {name} # BS: {block_size} {off}# STmin: 0x{st_min:02X} = {time}"
+            );
+            &[]
+        }
+        Pdu::Unknown => {
+            line += "[??]";
+            &[]
+        }
+    };
+    if !payload.is_empty() {
+        line.push(' ');
+        for b in payload {
+            line += &format!("{b:02X} ");
+        }
+        if ascii {
+            // Aligned as isotpdump aligns it: to the column after a full classic frame's data;
+            // a longer (FD) payload pushes the marker left-aligned into a field as wide as
+            // the overshoot.
+            let pad = (7 - ext as i64 - payload.len() as i64) * 3 + 5;
+            let width = pad.unsigned_abs() as usize;
+            line += &if pad >= 0 {
+                format!("{:>width$}", "-  '")
+            } else {
+                format!("{:<width$}", "-  '")
+            };
+            line.extend(payload.iter().map(|&b| {
+                if (0x20..0x7F).contains(&b) {
+                    b as char
+                } else {
+                    '.'
+                }
+            }));
+            line.push('\'');
+        }
+    }
+    Some(line)
+}
+
+/// `isotp dump`: frames of the conversation from a bus or a log, with timestamps as asked.
+#[allow(clippy::too_many_arguments)]
+fn dump(
+    bus: Option<&String>,
+    log: Option<&std::path::Path>,
+    ids: (Id, Id),
+    filters: (AddressFilter, AddressFilter),
+    ascii: bool,
+    timestamp: Option<&str>,
+    out: &mut dyn Write,
+) -> Result<()> {
+    let mut first: Option<Timestamp> = None;
+    let mut last: Option<Timestamp> = None;
+    let mut print = |out: &mut dyn Write,
+                     at: Timestamp,
+                     interface: &str,
+                     frame: &bywire_core::Frame|
+     -> Result<()> {
+        let Some(line) = dump_line(interface, frame, ids, filters, ascii) else {
+            return Ok(());
+        };
+        let stamp = match timestamp {
+            Some("a") => Some(at),
+            Some("z") => Some(Timestamp::from_nanos(
+                at.as_nanos()
+                    .saturating_sub(first.get_or_insert(at).as_nanos()),
+            )),
+            Some("d") => {
+                let since = last.map_or(0, |l| at.as_nanos().saturating_sub(l.as_nanos()));
+                last = Some(at);
+                Some(Timestamp::from_nanos(since))
+            }
+            _ => None,
+        };
+        if let Some(t) = stamp {
+            let ns = t.as_nanos();
+            write!(
+                out,
+                "({}.{:06}) ",
+                ns / 1_000_000_000,
+                ns % 1_000_000_000 / 1000
+            )?;
+        }
+        writeln!(out, "{line}")?;
+        Ok(())
+    };
+    if let Some(path) = log {
+        let (name, input) = crate::support::logs::input(Some(path))?;
+        for record in
+            crate::support::logs::records(&name, input, crate::support::logs::Skip::Unreadable)
+        {
+            let record = record?;
+            print(out, record.timestamp, &record.interface, &record.frame)?;
+        }
+        return Ok(());
+    }
+    let arg = busarg::parse(bus.map(String::as_str).unwrap_or_default())?;
+    let opened = busarg::open_all(std::slice::from_ref(&arg))?;
+    let readers = busarg::Readers::start(opened);
+    let stop = crate::interrupt_flag();
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        match readers.events.recv_timeout(Duration::from_millis(100)) {
+            Ok((_, Ok(received))) => {
+                print(out, received.timestamp, &arg.name, &received.frame)?;
+                out.flush()?;
+            }
+            Ok((_, Err(e))) => bail!("bus {}: {e}", arg.spec),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    Ok(())
 }
 
 /// Run `node` on `bus` until `done` has an outcome (or Ctrl-C: `None`).
