@@ -30,6 +30,8 @@ python3 -m pip install -q --disable-pip-version-check pyarrow==26.0.1 polars==2.
 # cyclonedds: the DDS of ROS 2's default middleware, the peer of `bywire ros2` (binary wheel with
 # the C library; its types declared under ROS 2's names).
 python3 -m pip install -q --disable-pip-version-check cyclonedds==11.0.1
+# can-isotp + udsoncan: the UDS tester of `bywire uds serve` (pure Python, on python-can).
+python3 -m pip install -q --disable-pip-version-check can-isotp==2.0.7 udsoncan==1.26.1
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.

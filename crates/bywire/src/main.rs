@@ -96,6 +96,11 @@ enum Command {
         #[command(subcommand)]
         command: cmd::isotp::IsotpCommand,
     },
+    /// UDS diagnostics: a server (an ECU for testers) on any bus.
+    Uds {
+        #[command(subcommand)]
+        command: cmd::uds::UdsCommand,
+    },
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(cmd::bridge::Args),
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
@@ -133,6 +138,7 @@ fn main() -> ExitCode {
         Command::SlcanAdapter(args) => cmd::slcan_adapter::run(&args, &mut out),
         Command::Log { command } => cmd::log::run(&command, &mut out),
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
+        Command::Uds { command } => cmd::uds::run(&command, &mut out),
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),
         #[cfg(feature = "ros2")]
         Command::Ros2 { command } => cmd::ros2::run(&command, &mut out),

@@ -11,6 +11,7 @@ use bywire_core::{Id, Timestamp};
 use bywire_diag::isotp::{Addressing, IsoTp, IsoTpConfig, IsoTpEvent, StMin};
 
 use crate::support::busarg;
+use crate::support::numbers::can_id;
 
 /// The most hex input `send` reads (an ISO-TP message of up to 4 GiB is not typed by hand).
 const MAX_INPUT: u64 = 64 << 20;
@@ -121,17 +122,6 @@ pub struct ChannelArgs {
 
 fn hex_u8(text: &str) -> Result<u8, String> {
     u8::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex byte"))
-}
-
-/// A CAN identifier as can-utils reads one: hex, 8 digits or above 0x7FF for extended.
-fn can_id(text: &str, what: &str) -> Result<Id> {
-    let raw = u32::from_str_radix(text, 16).map_err(|_| anyhow!("{what} {text}: not hex"))?;
-    let id = if text.len() == 8 || raw > 0x7FF {
-        Id::extended(raw)
-    } else {
-        Id::standard(raw)
-    };
-    id.map_err(|e| anyhow!("{what} {text}: {e}"))
 }
 
 impl ChannelArgs {

@@ -20,5 +20,6 @@ pub mod serve;
 pub mod sim;
 pub mod slcan_adapter;
 pub mod sniff;
+pub mod uds;
 pub mod vehicle;
 pub mod wire;

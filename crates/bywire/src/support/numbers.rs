@@ -82,6 +82,19 @@ pub fn factor(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A CAN identifier as can-utils' ISO-TP tools read one: hex, extended when written with 8
+/// digits or above 0x7FF; `option` names it in the error.
+pub fn can_id(text: &str, option: &str) -> anyhow::Result<bywire_core::Id> {
+    let raw = u32::from_str_radix(text, 16)
+        .map_err(|_| anyhow::anyhow!("{option} {text}: not a hex identifier"))?;
+    let id = if text.len() == 8 || raw > 0x7FF {
+        bywire_core::Id::extended(raw)
+    } else {
+        bywire_core::Id::standard(raw)
+    };
+    id.map_err(|e| anyhow::anyhow!("{option} {text}: {e}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

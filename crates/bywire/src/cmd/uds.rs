@@ -1,0 +1,140 @@
+//! `bywire uds serve`: a UDS server (`bywire-diag`) on any bus, with the DIDs and DTCs given on
+//! the command line — an ECU for testers (udsoncan, vendor tools) to talk to.
+
+use std::io::Write;
+
+use anyhow::{anyhow, Context, Result};
+use bywire_bus::runner::{Flow, Runner};
+use bywire_core::node::Port;
+use bywire_core::Timestamp;
+use bywire_diag::isotp::IsoTpConfig;
+use bywire_diag::uds::{Did, Session, UdsEvent, UdsServer, UdsTiming};
+
+use crate::support::busarg;
+use crate::support::numbers::can_id;
+
+#[derive(clap::Subcommand)]
+pub enum UdsCommand {
+    /// Answer UDS requests on a bus until Ctrl-C, printing what the tester did.
+    #[command(after_help = "Examples:
+  bywire uds serve can0 --did F190=WBYWIRE0TUG000042 --did F195=1.4.0
+  bywire uds serve vcan0 --tx 7E8 --rx 7E0 --did 0101=hex:0000:rw --dtc C10100 --dtc 512300:passed
+
+A DID's value is text, or hex:BYTES; :rw makes it writable in the extended session. A DTC
+(hex, 24 bits) is reported failed (testFailed, pending, confirmed, ...) or, with :passed,
+failed once and passed since.")]
+    Serve {
+        /// The bus (a plain interface name means SocketCAN).
+        bus: String,
+        /// The identifier answers go out with (hex).
+        #[arg(long, default_value = "7E8")]
+        tx: String,
+        /// The identifier requests come on (hex).
+        #[arg(long, default_value = "7E0")]
+        rx: String,
+        /// A data identifier: ID=VALUE (text or hex:BYTES), :rw for writable.
+        #[arg(long = "did", value_name = "ID=VALUE[:rw]")]
+        dids: Vec<String>,
+        /// A DTC: CODE[:passed].
+        #[arg(long = "dtc", value_name = "CODE[:passed]")]
+        dtcs: Vec<String>,
+    },
+}
+
+fn parse_did(text: &str) -> Result<(u16, Did)> {
+    let (id, rest) = text
+        .split_once('=')
+        .ok_or_else(|| anyhow!("--did {text}: expected ID=VALUE"))?;
+    let id = u16::from_str_radix(id, 16)
+        .map_err(|_| anyhow!("--did {text}: '{id}' is not a hex DID"))?;
+    let (value, writable) = match rest.strip_suffix(":rw") {
+        Some(v) => (v, true),
+        None => (rest, false),
+    };
+    let value = match value.strip_prefix("hex:") {
+        Some(hex) => {
+            if hex.len() % 2 != 0 {
+                return Err(anyhow!("--did {text}: an odd number of hex digits"));
+            }
+            (0..hex.len())
+                .step_by(2)
+                .map(|i| {
+                    hex.get(i..i + 2)
+                        .and_then(|b| u8::from_str_radix(b, 16).ok())
+                        .ok_or_else(|| anyhow!("--did {text}: '{hex}' is not hex"))
+                })
+                .collect::<Result<Vec<u8>>>()?
+        }
+        None => value.as_bytes().to_vec(),
+    };
+    let writable_in = if writable {
+        vec![Session::Extended]
+    } else {
+        Vec::new()
+    };
+    Ok((id, Did { value, writable_in }))
+}
+
+fn parse_dtc(text: &str) -> Result<(u32, bool)> {
+    let (code, passed) = match text.strip_suffix(":passed") {
+        Some(c) => (c, true),
+        None => (text, false),
+    };
+    let dtc = u32::from_str_radix(code, 16)
+        .ok()
+        .filter(|d| *d <= 0xFF_FFFF)
+        .ok_or_else(|| anyhow!("--dtc {text}: not a 24-bit hex DTC"))?;
+    Ok((dtc, passed))
+}
+
+pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
+    let UdsCommand::Serve {
+        bus,
+        tx,
+        rx,
+        dids,
+        dtcs,
+    } = command;
+    let mut server = UdsServer::new(
+        IsoTpConfig::new(can_id(tx, "--tx")?, can_id(rx, "--rx")?),
+        UdsTiming::default(),
+    );
+    for text in dids {
+        let (id, did) = parse_did(text)?;
+        server.set_did(id, did);
+    }
+    for text in dtcs {
+        let (dtc, passed) = parse_dtc(text)?;
+        server.report(dtc, true);
+        if passed {
+            server.report(dtc, false);
+        }
+    }
+    let endpoint = busarg::open(bus).with_context(|| format!("bus {bus}"))?;
+    let mut runner = Runner::new(vec![(Port::MAIN, endpoint)]);
+    let mut write_error = None;
+    let mut hooks = |server: &mut UdsServer, now: Timestamp| {
+        for event in server.take_events() {
+            let line = match event {
+                UdsEvent::Session(s) => format!("session {s:?}"),
+                UdsEvent::Reset(kind) => format!("reset {kind}"),
+                UdsEvent::Written(id) => format!("written {id:04X}"),
+                UdsEvent::Cleared(group) => format!("cleared {group:06X}"),
+                UdsEvent::Transport(e) => format!("transport: {e}"),
+            };
+            let t = now.as_nanos() as f64 / 1e9;
+            if let Err(e) = writeln!(out, "{t:.3} {line}").and_then(|()| out.flush()) {
+                write_error = Some(e);
+                return Flow::Stop;
+            }
+        }
+        Flow::Continue
+    };
+    runner
+        .run(&mut server, &crate::interrupt_flag(), None, &mut hooks)
+        .map_err(|e| anyhow!("bus {bus}: {e}"))?;
+    match write_error {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
