@@ -6,8 +6,11 @@
 //! ReadDataByIdentifier (0x22, several identifiers per request), WriteDataByIdentifier
 //! (0x2E, in the sessions a DID allows), ReadDTCInformation (0x19: 0x01 count, 0x02 by
 //! status mask, 0x0A supported), ClearDiagnosticInformation (0x14), ControlDTCSetting
-//! (0x85), CommunicationControl (0x28). The suppress-positive-response bit is honoured;
-//! every refusal is a negative response with the standard's code.
+//! (0x85), CommunicationControl (0x28), SecurityAccess (0x27: seed and key with a pluggable
+//! key function, three attempts, then a delay), RoutineControl (0x31: start, stop, results; a
+//! routine that takes time is answered with response pending, 0x78, then its result). The
+//! suppress-positive-response bit is honoured; every refusal is a negative response with the
+//! standard's code.
 
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
@@ -32,6 +35,16 @@ pub mod nrc {
     pub const REQUEST_OUT_OF_RANGE: u8 = 0x31;
     /// Security access needed.
     pub const SECURITY_ACCESS_DENIED: u8 = 0x33;
+    /// A request out of its sequence (a key without a seed, results before a start).
+    pub const REQUEST_SEQUENCE_ERROR: u8 = 0x24;
+    /// The key is wrong.
+    pub const INVALID_KEY: u8 = 0x35;
+    /// Too many wrong keys: a delay starts.
+    pub const EXCEEDED_NUMBER_OF_ATTEMPTS: u8 = 0x36;
+    /// The delay after too many wrong keys has not passed.
+    pub const REQUIRED_TIME_DELAY_NOT_EXPIRED: u8 = 0x37;
+    /// The answer comes later (within P2*).
+    pub const RESPONSE_PENDING: u8 = 0x78;
     /// The service is not offered in the active session.
     pub const SERVICE_NOT_SUPPORTED_IN_ACTIVE_SESSION: u8 = 0x7F;
     /// The sub-function is not offered in the active session.
@@ -94,6 +107,48 @@ pub struct Did {
     pub value: Vec<u8>,
     /// The sessions it may be written in (none: read-only).
     pub writable_in: Vec<Session>,
+    /// Writing needs security access.
+    pub secured: bool,
+}
+
+/// A routine RoutineControl can run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Routine {
+    /// How long it runs once started (zero: at once).
+    pub runs_for: Duration,
+    /// What its results request answers once it has run.
+    pub result: Vec<u8>,
+    /// Starting it needs security access.
+    pub secured: bool,
+}
+
+/// The key for a seed at a security level (a vehicle's own algorithm plugs in here).
+pub type KeyFunction = fn(level: u8, seed: &[u8]) -> Vec<u8>;
+
+/// The demonstration key: each seed byte XOR 0x5A, plus the level. Not a secret: a real ECU
+/// gives its own [`KeyFunction`].
+pub fn demo_key(level: u8, seed: &[u8]) -> Vec<u8> {
+    seed.iter()
+        .map(|b| (b ^ 0x5A).wrapping_add(level))
+        .collect()
+}
+
+/// Wrong keys accepted before the delay.
+const MAX_ATTEMPTS: u8 = 3;
+/// The delay after too many wrong keys.
+const ATTEMPT_DELAY: Duration = Duration::from_secs(10);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Security {
+    Locked,
+    /// A seed was given for this level.
+    Seeded {
+        level: u8,
+        seed: [u8; 4],
+    },
+    Unlocked {
+        level: u8,
+    },
 }
 
 /// What the application hears of.
@@ -108,6 +163,10 @@ pub enum UdsEvent {
     Written(u16),
     /// DTCs were cleared (the group).
     Cleared(u32),
+    /// Security access was granted at this level.
+    Unlocked(u8),
+    /// A routine was started.
+    RoutineStarted(u16),
     /// The transport failed (the message is lost; the tester will repeat).
     Transport(crate::isotp::IsoTpError),
 }
@@ -147,6 +206,16 @@ pub struct UdsServer {
     events: Vec<UdsEvent>,
     /// Responses waiting for the channel to be free.
     outbox: Vec<Vec<u8>>,
+    key: KeyFunction,
+    security: Security,
+    failed_attempts: u8,
+    locked_until: Option<Timestamp>,
+    seeds_given: u32,
+    routines: BTreeMap<u16, Routine>,
+    /// Routines started: until when they run.
+    running: BTreeMap<u16, Timestamp>,
+    /// A started routine whose positive answer is pending: (routine, when it is due).
+    pending: Option<(u16, Timestamp)>,
 }
 
 impl UdsServer {
@@ -162,7 +231,30 @@ impl UdsServer {
             dtc_setting_on: true,
             events: Vec::new(),
             outbox: Vec::new(),
+            key: demo_key,
+            security: Security::Locked,
+            failed_attempts: 0,
+            locked_until: None,
+            seeds_given: 0,
+            routines: BTreeMap::new(),
+            running: BTreeMap::new(),
+            pending: None,
         }
+    }
+
+    /// Use `key` for SecurityAccess.
+    pub fn with_key_function(mut self, key: KeyFunction) -> Self {
+        self.key = key;
+        self
+    }
+
+    /// Offer a routine for RoutineControl.
+    pub fn set_routine(&mut self, id: u16, routine: Routine) {
+        self.routines.insert(id, routine);
+    }
+
+    fn unlocked(&self) -> bool {
+        matches!(self.security, Security::Unlocked { .. })
     }
 
     /// Set a DID (its value and where it may be written).
@@ -215,8 +307,10 @@ impl UdsServer {
         let negative = |code: u8| Some(alloc::vec![0x7F, service, code]);
         // Services with a sub-function: its bit 7 suppresses the positive answer.
         let sub = body.first().copied();
-        let suppress = matches!(service, 0x10 | 0x11 | 0x3E | 0x19 | 0x28 | 0x85)
-            && sub.is_some_and(|s| s & 0x80 != 0);
+        let suppress = matches!(
+            service,
+            0x10 | 0x11 | 0x3E | 0x19 | 0x28 | 0x85 | 0x27 | 0x31
+        ) && sub.is_some_and(|s| s & 0x80 != 0);
         let sub = sub.map(|s| s & 0x7F);
         let positive = |mut answer: Vec<u8>| {
             if suppress {
@@ -235,6 +329,7 @@ impl UdsServer {
                     return negative(nrc::SUB_FUNCTION_NOT_SUPPORTED);
                 };
                 self.session = session;
+                self.security = Security::Locked;
                 self.events.push(UdsEvent::Session(session));
                 let p2 = u16::try_from(self.timing.p2.as_millis()).unwrap_or(u16::MAX);
                 let p2x =
@@ -293,7 +388,120 @@ impl UdsServer {
                 (Some(_), 2) => negative(nrc::SUB_FUNCTION_NOT_SUPPORTED),
                 _ => negative(nrc::INCORRECT_MESSAGE_LENGTH),
             },
+            0x27 => self
+                .security_access(now, sub, body)
+                .map_or_else(negative, positive),
+            0x31 => match self.routine_control(now, sub, body) {
+                Ok(Some(answer)) => positive(answer),
+                // Answered later: response pending now.
+                Ok(None) => negative(nrc::RESPONSE_PENDING),
+                Err(code) => negative(code),
+            },
             _ => negative(nrc::SERVICE_NOT_SUPPORTED),
+        }
+    }
+
+    fn security_access(
+        &mut self,
+        now: Timestamp,
+        sub: Option<u8>,
+        body: &[u8],
+    ) -> Result<Vec<u8>, u8> {
+        let sub = sub.ok_or(nrc::INCORRECT_MESSAGE_LENGTH)?;
+        if sub == 0 || sub > 0x41 {
+            return Err(nrc::SUB_FUNCTION_NOT_SUPPORTED);
+        }
+        if self.session == Session::Default {
+            return Err(nrc::SERVICE_NOT_SUPPORTED_IN_ACTIVE_SESSION);
+        }
+        if self.locked_until.is_some_and(|until| now < until) {
+            return Err(nrc::REQUIRED_TIME_DELAY_NOT_EXPIRED);
+        }
+        if sub % 2 == 1 {
+            if body.len() != 1 {
+                return Err(nrc::INCORRECT_MESSAGE_LENGTH);
+            }
+            // Already unlocked at this level: a seed of zeros says so.
+            if self.security == (Security::Unlocked { level: sub }) {
+                return Ok(alloc::vec![sub, 0, 0, 0, 0]);
+            }
+            self.seeds_given = self.seeds_given.wrapping_add(1);
+            let seed = seed(now, self.seeds_given);
+            self.security = Security::Seeded { level: sub, seed };
+            let mut answer = alloc::vec![sub];
+            answer.extend_from_slice(&seed);
+            return Ok(answer);
+        }
+        let Security::Seeded { level, seed } = self.security else {
+            return Err(nrc::REQUEST_SEQUENCE_ERROR);
+        };
+        if level + 1 != sub {
+            return Err(nrc::REQUEST_SEQUENCE_ERROR);
+        }
+        let key = body.get(1..).unwrap_or(&[]);
+        if key == (self.key)(level, &seed).as_slice() {
+            self.security = Security::Unlocked { level };
+            self.failed_attempts = 0;
+            self.events.push(UdsEvent::Unlocked(level));
+            return Ok(alloc::vec![sub]);
+        }
+        self.security = Security::Locked;
+        self.failed_attempts = self.failed_attempts.saturating_add(1);
+        if self.failed_attempts >= MAX_ATTEMPTS {
+            self.failed_attempts = 0;
+            self.locked_until = Some(now.saturating_add(ATTEMPT_DELAY));
+            return Err(nrc::EXCEEDED_NUMBER_OF_ATTEMPTS);
+        }
+        Err(nrc::INVALID_KEY)
+    }
+
+    /// `Ok(None)`: the answer is pending.
+    fn routine_control(
+        &mut self,
+        now: Timestamp,
+        sub: Option<u8>,
+        body: &[u8],
+    ) -> Result<Option<Vec<u8>>, u8> {
+        let sub = sub.ok_or(nrc::INCORRECT_MESSAGE_LENGTH)?;
+        let [_, hi, lo, ..] = body else {
+            return Err(nrc::INCORRECT_MESSAGE_LENGTH);
+        };
+        let id = u16::from_be_bytes([*hi, *lo]);
+        let routine = self.routines.get(&id).ok_or(nrc::REQUEST_OUT_OF_RANGE)?;
+        let answer = |extra: &[u8]| {
+            let mut a = alloc::vec![sub, *hi, *lo];
+            a.extend_from_slice(extra);
+            a
+        };
+        match sub {
+            1 => {
+                if self.session == Session::Default {
+                    return Err(nrc::SERVICE_NOT_SUPPORTED_IN_ACTIVE_SESSION);
+                }
+                if routine.secured && !self.unlocked() {
+                    return Err(nrc::SECURITY_ACCESS_DENIED);
+                }
+                let done = now.saturating_add(routine.runs_for);
+                self.running.insert(id, done);
+                self.events.push(UdsEvent::RoutineStarted(id));
+                if routine.runs_for.is_zero() {
+                    return Ok(Some(answer(&[0x00])));
+                }
+                self.pending = Some((id, done));
+                Ok(None)
+            }
+            2 => {
+                self.running
+                    .remove(&id)
+                    .ok_or(nrc::REQUEST_SEQUENCE_ERROR)?;
+                Ok(Some(answer(&[0x00])))
+            }
+            3 => match self.running.get(&id) {
+                Some(done) if now >= *done => Ok(Some(answer(&routine.result))),
+                Some(_) => Err(nrc::CONDITIONS_NOT_CORRECT),
+                None => Err(nrc::REQUEST_SEQUENCE_ERROR),
+            },
+            _ => Err(nrc::SUB_FUNCTION_NOT_SUPPORTED),
         }
     }
 
@@ -319,13 +527,16 @@ impl UdsServer {
             return Err(nrc::INCORRECT_MESSAGE_LENGTH);
         };
         let id = u16::from_be_bytes([*hi, *lo]);
-        let session = self.session;
+        let (session, unlocked) = (self.session, self.unlocked());
         let did = self.dids.get_mut(&id).ok_or(nrc::REQUEST_OUT_OF_RANGE)?;
         if did.writable_in.is_empty() {
             return Err(nrc::REQUEST_OUT_OF_RANGE);
         }
         if !did.writable_in.contains(&session) {
             return Err(nrc::CONDITIONS_NOT_CORRECT);
+        }
+        if did.secured && !unlocked {
+            return Err(nrc::SECURITY_ACCESS_DENIED);
         }
         if value.len() != did.value.len() {
             return Err(nrc::INCORRECT_MESSAGE_LENGTH);
@@ -391,6 +602,13 @@ impl UdsServer {
             self.session = Session::Default;
             self.events.push(UdsEvent::Session(Session::Default));
         }
+        if let Some((id, due)) = self.pending {
+            if now >= due {
+                self.pending = None;
+                let [hi, lo] = id.to_be_bytes();
+                self.outbox.push(alloc::vec![0x71, 0x01, hi, lo, 0x00]);
+            }
+        }
         if !self.channel.sending() && !self.outbox.is_empty() {
             let answer = self.outbox.remove(0);
             // A channel that cannot take it (empty) has nothing to send.
@@ -409,10 +627,26 @@ impl UdsServer {
         let s3 = (self.session != Session::Default)
             .then(|| self.last_request.saturating_add(self.timing.s3));
         let out = (!self.outbox.is_empty()).then_some(Timestamp::ZERO);
-        [self.channel.next_deadline(), s3, out]
+        let pending = self.pending.map(|(_, due)| due);
+        [self.channel.next_deadline(), s3, out, pending]
             .into_iter()
             .flatten()
             .min()
+    }
+}
+
+/// A 4-byte seed from the time and a count (never all zeros: that means "already unlocked").
+fn seed(now: Timestamp, count: u32) -> [u8; 4] {
+    // SplitMix64's finaliser: well mixed, deterministic for a simulated run.
+    let mut z = now.as_nanos() ^ (u64::from(count) << 32) ^ 0x9E37_79B9_7F4A_7C15;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    let [a, b, c, d, ..] = z.to_le_bytes();
+    if [a, b, c, d] == [0; 4] {
+        [0, 0, 0, 1]
+    } else {
+        [a, b, c, d]
     }
 }
 

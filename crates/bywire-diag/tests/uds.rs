@@ -12,7 +12,7 @@ use core::time::Duration;
 
 use bywire_core::{Id, Timestamp};
 use bywire_diag::isotp::{IsoTp, IsoTpConfig, IsoTpEvent};
-use bywire_diag::uds::{status, Did, Session, UdsEvent, UdsServer, UdsTiming};
+use bywire_diag::uds::{demo_key, status, Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 
 const VIN: &[u8] = b"WBYWIRE0TUG000042";
 
@@ -32,6 +32,7 @@ impl Bench {
             Did {
                 value: VIN.to_vec(),
                 writable_in: Vec::new(),
+                secured: false,
             },
         );
         server.set_did(
@@ -39,6 +40,7 @@ impl Bench {
             Did {
                 value: b"1.4.0".to_vec(),
                 writable_in: Vec::new(),
+                secured: false,
             },
         );
         server.set_did(
@@ -46,6 +48,7 @@ impl Bench {
             Did {
                 value: vec![0, 0],
                 writable_in: vec![Session::Extended],
+                secured: false,
             },
         );
         Bench {
@@ -248,4 +251,105 @@ fn reset_answers_then_tells_the_application() {
     assert_eq!(b.ask(&[0x11, 0x09]), Some(vec![0x7F, 0x11, 0x12]));
     assert_eq!(b.ask(&[0x99, 0x00]), Some(vec![0x7F, 0x99, 0x11]));
     assert_eq!(b.ask(&[0x28, 0x00, 0x01]), Some(vec![0x7F, 0x28, 0x7F]));
+}
+
+#[test]
+fn security_access_gives_a_seed_takes_the_key_and_delays_after_three_wrong_ones() {
+    let mut b = Bench::new();
+    b.server.set_did(
+        0x0202,
+        Did {
+            value: vec![7],
+            writable_in: vec![Session::Extended],
+            secured: true,
+        },
+    );
+    assert_eq!(
+        b.ask(&[0x27, 0x01]),
+        Some(vec![0x7F, 0x27, 0x7F]),
+        "not in the default session"
+    );
+    b.ask(&[0x10, 0x03]);
+    assert_eq!(
+        b.ask(&[0x2E, 0x02, 0x02, 0x09]),
+        Some(vec![0x7F, 0x2E, 0x33])
+    );
+    assert_eq!(
+        b.ask(&[0x27, 0x02, 0, 0, 0, 0]),
+        Some(vec![0x7F, 0x27, 0x24]),
+        "a key before a seed"
+    );
+    let answer = b.ask(&[0x27, 0x01]).unwrap();
+    assert_eq!((answer[0], answer[1], answer.len()), (0x67, 0x01, 6));
+    let mut request = vec![0x27, 0x02];
+    request.extend(demo_key(1, &answer[2..]));
+    assert_eq!(b.ask(&request), Some(vec![0x67, 0x02]));
+    assert!(b.server.take_events().contains(&UdsEvent::Unlocked(1)));
+    assert_eq!(
+        b.ask(&[0x2E, 0x02, 0x02, 0x09]),
+        Some(vec![0x6E, 0x02, 0x02])
+    );
+    // Unlocked: the seed is zeros.
+    assert_eq!(b.ask(&[0x27, 0x01]), Some(vec![0x67, 0x01, 0, 0, 0, 0]));
+    // A new session locks again; three wrong keys start the delay.
+    b.ask(&[0x10, 0x03]);
+    for expected in [0x35, 0x35, 0x36] {
+        b.ask(&[0x27, 0x01]).unwrap();
+        assert_eq!(
+            b.ask(&[0x27, 0x02, 1, 2, 3, 4]),
+            Some(vec![0x7F, 0x27, expected])
+        );
+    }
+    assert_eq!(b.ask(&[0x27, 0x01]), Some(vec![0x7F, 0x27, 0x37]));
+    b.ask(&[0x3E, 0x80]);
+    b.run(Duration::from_secs(4));
+    b.ask(&[0x3E, 0x80]);
+    b.run(Duration::from_secs(4));
+    b.ask(&[0x3E, 0x80]);
+    b.run(Duration::from_secs(3));
+    assert_eq!(
+        b.ask(&[0x27, 0x01]).unwrap()[0],
+        0x67,
+        "after the 10 s delay"
+    );
+}
+
+#[test]
+fn a_routine_that_takes_time_answers_pending_then_its_result() {
+    let mut b = Bench::new();
+    b.server.set_routine(
+        0x0203,
+        Routine {
+            runs_for: Duration::from_millis(300),
+            result: vec![0x00, 0x2A],
+            secured: false,
+        },
+    );
+    assert_eq!(
+        b.ask(&[0x31, 0x01, 0x02, 0x03]),
+        Some(vec![0x7F, 0x31, 0x7F])
+    );
+    b.ask(&[0x10, 0x03]);
+    b.tester.send(&[0x31, 0x01, 0x02, 0x03]).unwrap();
+    let answers = b.run(Duration::from_millis(500));
+    assert_eq!(
+        answers,
+        [vec![0x7F, 0x31, 0x78], vec![0x71, 0x01, 0x02, 0x03, 0x00]]
+    );
+    assert_eq!(
+        b.ask(&[0x31, 0x03, 0x02, 0x03]),
+        Some(vec![0x71, 0x03, 0x02, 0x03, 0x00, 0x2A])
+    );
+    assert_eq!(
+        b.ask(&[0x31, 0x02, 0x02, 0x03]),
+        Some(vec![0x71, 0x02, 0x02, 0x03, 0x00])
+    );
+    assert_eq!(
+        b.ask(&[0x31, 0x03, 0x02, 0x03]),
+        Some(vec![0x7F, 0x31, 0x24])
+    );
+    assert_eq!(
+        b.ask(&[0x31, 0x01, 0x99, 0x99]),
+        Some(vec![0x7F, 0x31, 0x31])
+    );
 }

@@ -36,6 +36,10 @@ fn udsoncan_diagnoses_bywire_uds_serve() {
         "C10100",
         "--dtc",
         "512300:passed",
+        "--did",
+        "0202=hex:07:rws",
+        "--routine",
+        "0203=300:hex:002A",
     ]);
     std::thread::sleep(std::time::Duration::from_millis(300));
     let run = Command::new("python3")
@@ -64,6 +68,11 @@ fn udsoncan_diagnoses_bywire_uds_serve() {
     assert_eq!(seen["failing"], json!(["C10100"]));
     assert_eq!(seen["after_clear"], 0);
     assert_eq!(seen["reset"], 1);
+    // Writing a secured DID is refused until SecurityAccess, then done.
+    assert_eq!(seen["locked_write"], 0x33, "securityAccessDenied");
+    assert_eq!(seen["secured"], json!([9]));
+    // The routine's result, after udsoncan waited through response pending.
+    assert_eq!(seen["routine"], json!([0x00, 0x2A]));
     // What the tester did, as the server printed it.
     for line in [
         "session Extended",

@@ -24,7 +24,10 @@ config["data_identifiers"] = {
     0xF195: udsoncan.AsciiCodec(5),
     0x0101: ">H",
     0x1234: ">H",
+    0x0202: ">B",
 }
+# bywire's demonstration key: each seed byte XOR 0x5A, plus the level.
+config["security_algo"] = lambda level, seed, params: bytes(((b ^ 0x5A) + level) & 0xFF for b in seed)
 out = {}
 with Client(PythonIsoTpConnection(stack), request_timeout=3, config=config) as client:
     r = client.change_session(3)
@@ -44,6 +47,17 @@ with Client(PythonIsoTpConnection(stack), request_timeout=3, config=config) as c
     out["failing"] = [f"{d.id:06X}" for d in client.get_dtc_by_status_mask(0x01).service_data.dtcs]
     client.clear_dtc(0xFFFFFF)
     out["after_clear"] = len(client.get_dtc_by_status_mask(0xFF).service_data.dtcs)
+    try:
+        client.write_data_by_identifier(0x0202, 9)
+        out["locked_write"] = None
+    except NegativeResponseException as e:
+        out["locked_write"] = e.response.code
+    client.unlock_security_access(1)
+    client.write_data_by_identifier(0x0202, 9)
+    out["secured"] = client.read_data_by_identifier(0x0202).service_data.values[0x0202]
+    # A routine that runs 300 ms: udsoncan waits through the response-pending answer.
+    client.start_routine(0x0203)
+    out["routine"] = list(client.get_routine_result(0x0203).service_data.routine_status_record)
     client.tester_present()
     out["reset"] = client.ecu_reset(1).service_data.reset_type_echo
 print(json.dumps(out))
