@@ -11,6 +11,8 @@
 
 mod common;
 
+use common::section;
+
 /// Run `script` in the VM with two vcan interfaces, can-utils and our binary as `$B`.
 fn in_vm(script: &str) -> String {
     in_vm_with(script, &[])
@@ -28,15 +30,6 @@ fn in_vm_with(script: &str, files: &[&str]) -> String {
         options.extend(["--include", f]);
     }
     common::in_canvm(&options, &script)
-}
-
-/// The text between `== name` and the next `==` line.
-fn section<'a>(text: &'a str, name: &str) -> &'a str {
-    let start = text
-        .find(&format!("== {name}\n"))
-        .unwrap_or_else(|| panic!("no section {name} in:\n{text}"));
-    let rest = &text[start + name.len() + 4..];
-    &rest[..rest.find("\n== ").map_or(rest.len(), |e| e + 1)]
 }
 
 /// The lines after the one with the 7FD marker frame.

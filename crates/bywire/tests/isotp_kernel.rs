@@ -11,21 +11,14 @@
 
 mod common;
 
+use common::section;
+
 fn pattern(len: usize) -> Vec<u8> {
     (0..len).map(|i| (i * 31 % 251) as u8).collect()
 }
 
 fn hex(data: &[u8]) -> String {
     data.iter().map(|b| format!("{b:02X} ")).collect()
-}
-
-/// The text between `== name` and the next `==` line.
-fn section<'a>(text: &'a str, name: &str) -> &'a str {
-    let start = text
-        .find(&format!("== {name}\n"))
-        .unwrap_or_else(|| panic!("no section {name} in:\n{text}"));
-    let rest = &text[start + name.len() + 4..];
-    &rest[..rest.find("\n== ").map_or(rest.len(), |e| e + 1)]
 }
 
 /// candump -ta lines: (time s, id, data bytes).

@@ -148,3 +148,12 @@ impl Drop for Background {
         }
     }
 }
+
+/// The text between `== name` and the next `==` line of a script's output.
+pub fn section<'a>(text: &'a str, name: &str) -> &'a str {
+    let start = text
+        .find(&format!("== {name}\n"))
+        .unwrap_or_else(|| panic!("no section {name} in:\n{text}"));
+    let rest = &text[start + name.len() + 4..];
+    &rest[..rest.find("\n== ").map_or(rest.len(), |e| e + 1)]
+}
