@@ -196,6 +196,8 @@ impl Default for UdsTiming {
 #[derive(Debug, Clone)]
 pub struct UdsServer {
     channel: IsoTp,
+    /// Functional requests (one frame each), answered on `channel`.
+    functional: Option<IsoTp>,
     timing: UdsTiming,
     session: Session,
     last_request: Timestamp,
@@ -223,6 +225,7 @@ impl UdsServer {
     pub fn new(channel: IsoTpConfig, timing: UdsTiming) -> Self {
         UdsServer {
             channel: IsoTp::new(channel),
+            functional: None,
             timing,
             session: Session::Default,
             last_request: Timestamp::ZERO,
@@ -240,6 +243,15 @@ impl UdsServer {
             running: BTreeMap::new(),
             pending: None,
         }
+    }
+
+    /// Also take functional requests on `rx` (e.g. 0x7DF), answered physically. As the
+    /// standard asks, their "not supported" and "out of range" refusals are not sent.
+    pub fn with_functional(mut self, rx: bywire_core::Id) -> Self {
+        let mut config = *self.channel.config();
+        config.rx_id = rx;
+        self.functional = Some(IsoTp::new(config));
+        self
     }
 
     /// Use `key` for SecurityAccess.
@@ -580,6 +592,22 @@ impl UdsServer {
 
     /// Take a frame from the bus.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        if let Some(functional) = self.functional.as_mut() {
+            functional.on_frame(now, frame);
+            let mut requests = Vec::new();
+            while let Some(event) = functional.next_event() {
+                if let IsoTpEvent::Received(request) = event {
+                    requests.push(request);
+                }
+            }
+            for request in requests {
+                match self.handle(now, &request) {
+                    Some(answer) if is_suppressed_for_functional(&answer) => {}
+                    Some(answer) => self.outbox.push(answer),
+                    None => {}
+                }
+            }
+        }
         self.channel.on_frame(now, frame);
         while let Some(event) = self.channel.next_event() {
             match event {
@@ -633,6 +661,21 @@ impl UdsServer {
             .flatten()
             .min()
     }
+}
+
+/// Negative answers a server keeps to itself for functional requests (ISO 14229-1 7.5).
+fn is_suppressed_for_functional(answer: &[u8]) -> bool {
+    matches!(
+        answer,
+        [0x7F, _, code] if matches!(
+            *code,
+            nrc::SERVICE_NOT_SUPPORTED
+                | nrc::SUB_FUNCTION_NOT_SUPPORTED
+                | nrc::REQUEST_OUT_OF_RANGE
+                | nrc::SUB_FUNCTION_NOT_SUPPORTED_IN_ACTIVE_SESSION
+                | nrc::SERVICE_NOT_SUPPORTED_IN_ACTIVE_SESSION
+        )
+    )
 }
 
 /// A 4-byte seed from the time and a count (never all zeros: that means "already unlocked").

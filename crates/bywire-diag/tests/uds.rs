@@ -353,3 +353,26 @@ fn a_routine_that_takes_time_answers_pending_then_its_result() {
         Some(vec![0x7F, 0x31, 0x31])
     );
 }
+
+#[test]
+fn functional_requests_are_answered_physically_and_quietly_refused() {
+    let id = |raw| Id::standard(raw).unwrap();
+    let mut b = Bench::new();
+    b.server = b.server.clone().with_functional(id(0x7DF));
+    let mut functional = IsoTp::new(IsoTpConfig::new(id(0x7DF), id(0x7E8)));
+    let mut ask = |b: &mut Bench, request: &[u8]| {
+        functional.send(request).unwrap();
+        let mut frames = Vec::new();
+        functional.poll(b.now, &mut |_, f| frames.push(f));
+        for f in &frames {
+            b.server.on_frame(b.now, f);
+        }
+        b.run(Duration::from_millis(100))
+    };
+    assert_eq!(ask(&mut b, &[0x3E, 0x00]), [vec![0x7E, 0x00]]);
+    assert_eq!(ask(&mut b, &[0x10, 0x03]).len(), 1);
+    assert_eq!(b.server.session(), Session::Extended);
+    // Out of range and not supported: nothing comes back to a functional request.
+    assert!(ask(&mut b, &[0x22, 0x12, 0x34]).is_empty());
+    assert!(ask(&mut b, &[0x99]).is_empty());
+}

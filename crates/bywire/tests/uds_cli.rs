@@ -40,6 +40,8 @@ fn udsoncan_diagnoses_bywire_uds_serve() {
         "0202=hex:07:rws",
         "--routine",
         "0203=300:hex:002A",
+        "--functional",
+        "7DF",
     ]);
     std::thread::sleep(std::time::Duration::from_millis(300));
     let run = Command::new("python3")
@@ -73,6 +75,8 @@ fn udsoncan_diagnoses_bywire_uds_serve() {
     assert_eq!(seen["secured"], json!([9]));
     // The routine's result, after udsoncan waited through response pending.
     assert_eq!(seen["routine"], json!([0x00, 0x2A]));
+    // A functional request (0x7DF) answered on the physical identifier.
+    assert_eq!(seen["functional"], "027e00");
     // What the tester did, as the server printed it.
     for line in [
         "session Extended",

@@ -33,6 +33,9 @@ the demonstration key (each seed byte XOR 0x5A, plus the level): not a secret.")
         /// The identifier requests come on (hex).
         #[arg(long, default_value = "7E0")]
         rx: String,
+        /// Also take functional requests on this identifier (hex, e.g. 7DF).
+        #[arg(long)]
+        functional: Option<String>,
         /// A data identifier: ID=VALUE (text or hex:BYTES), :rw for writable.
         #[arg(long = "did", value_name = "ID=VALUE[:rw]")]
         dids: Vec<String>,
@@ -133,6 +136,7 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         bus,
         tx,
         rx,
+        functional,
         dids,
         dtcs,
         routines,
@@ -141,6 +145,9 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         IsoTpConfig::new(can_id(tx, "--tx")?, can_id(rx, "--rx")?),
         UdsTiming::default(),
     );
+    if let Some(f) = functional {
+        server = server.with_functional(can_id(f, "--functional")?);
+    }
     for text in dids {
         let (id, did) = parse_did(text)?;
         server.set_did(id, did);

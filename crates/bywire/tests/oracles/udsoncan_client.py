@@ -60,4 +60,15 @@ with Client(PythonIsoTpConnection(stack), request_timeout=3, config=config) as c
     out["routine"] = list(client.get_routine_result(0x0203).service_data.routine_status_record)
     client.tester_present()
     out["reset"] = client.ecu_reset(1).service_data.reset_type_echo
+# A functional TesterPresent (one frame on 0x7DF), answered physically on 0x7E8.
+while bus.recv(0.05) is not None:
+    pass
+bus.send(can.Message(arbitration_id=0x7DF, data=[0x02, 0x3E, 0x00], is_extended_id=False))
+answer = None
+for _ in range(40):
+    m = bus.recv(0.05)
+    if m is not None and m.arbitration_id == 0x7E8:
+        answer = m.data.hex()
+        break
+out["functional"] = answer
 print(json.dumps(out))
