@@ -5,7 +5,7 @@
 //! timeout back to the default session), ECUReset (0x11), TesterPresent (0x3E),
 //! ReadDataByIdentifier (0x22, several identifiers per request), WriteDataByIdentifier
 //! (0x2E, in the sessions a DID allows), ReadDTCInformation (0x19: 0x01 count, 0x02 by
-//! status mask, 0x0A supported), ClearDiagnosticInformation (0x14), ControlDTCSetting
+//! status mask, 0x04 snapshots, 0x06 extended data, 0x0A supported), ClearDiagnosticInformation (0x14), ControlDTCSetting
 //! (0x85), CommunicationControl (0x28), SecurityAccess (0x27: seed and key with a pluggable
 //! key function, three attempts, then a delay), RoutineControl (0x31: start, stop, results; a
 //! routine that takes time is answered with response pending, 0x78, then its result). The
@@ -133,6 +133,18 @@ pub fn demo_key(level: u8, seed: &[u8]) -> Vec<u8> {
         .collect()
 }
 
+/// A snapshot: data identifiers and their values when a fault was found.
+pub type Snapshot = Vec<(u16, Vec<u8>)>;
+
+/// What a DTC keeps beside its status: snapshot record 0x01 (its first occurrence) and 0x02
+/// (the latest), and extended data record 0x01 (how often it occurred).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+struct DtcRecords {
+    first: Option<Snapshot>,
+    latest: Option<Snapshot>,
+    occurrences: u8,
+}
+
 /// Wrong keys accepted before the delay.
 const MAX_ATTEMPTS: u8 = 3;
 /// The delay after too many wrong keys.
@@ -204,6 +216,8 @@ pub struct UdsServer {
     dids: BTreeMap<u16, Did>,
     /// DTC (24 bits) → status byte.
     dtcs: BTreeMap<u32, u8>,
+    /// DTC → its snapshots and occurrence count.
+    records: BTreeMap<u32, DtcRecords>,
     dtc_setting_on: bool,
     events: Vec<UdsEvent>,
     /// Responses waiting for the channel to be free.
@@ -231,6 +245,7 @@ impl UdsServer {
             last_request: Timestamp::ZERO,
             dids: BTreeMap::new(),
             dtcs: BTreeMap::new(),
+            records: BTreeMap::new(),
             dtc_setting_on: true,
             events: Vec::new(),
             outbox: Vec::new(),
@@ -294,6 +309,28 @@ impl UdsServer {
                 | status::FAILED_SINCE_CLEAR;
         } else {
             *entry &= !status::TEST_FAILED;
+        }
+    }
+
+    /// Report a failure with a snapshot of the conditions (record 0x01 keeps the first, 0x02
+    /// the latest), counting occurrences (extended data record 0x01).
+    pub fn report_with_snapshot(&mut self, dtc: u32, snapshot: Snapshot) {
+        if !self.dtc_setting_on {
+            return;
+        }
+        let dtc = dtc & 0x00FF_FFFF;
+        let already_failing = self
+            .dtcs
+            .get(&dtc)
+            .is_some_and(|s| s & status::TEST_FAILED != 0);
+        self.report(dtc, true);
+        let records = self.records.entry(dtc).or_default();
+        if records.first.is_none() {
+            records.first = Some(snapshot.clone());
+        }
+        records.latest = Some(snapshot);
+        if !already_failing {
+            records.occurrences = records.occurrences.saturating_add(1);
         }
     }
 
@@ -377,8 +414,11 @@ impl UdsServer {
                 let group = u32::from_be_bytes([0, *a, *b, *c]);
                 if group == 0x00FF_FFFF {
                     self.dtcs.clear();
+                    self.records.clear();
                 } else if self.dtcs.remove(&group).is_none() {
                     return negative(nrc::REQUEST_OUT_OF_RANGE);
+                } else {
+                    self.records.remove(&group);
                 }
                 self.events.push(UdsEvent::Cleared(group));
                 positive(Vec::new())
@@ -585,7 +625,38 @@ impl UdsServer {
                 }
                 Ok(answer)
             }
-            (0x01 | 0x02 | 0x0A, _) => Err(nrc::INCORRECT_MESSAGE_LENGTH),
+            (0x04 | 0x06, [_, a, b, c, record]) => {
+                let dtc = u32::from_be_bytes([0, *a, *b, *c]);
+                let status = *self.dtcs.get(&dtc).ok_or(nrc::REQUEST_OUT_OF_RANGE)?;
+                let records = self.records.get(&dtc).cloned().unwrap_or_default();
+                let mut answer = alloc::vec![sub, *a, *b, *c, status & AVAILABILITY_MASK];
+                if sub == 0x04 {
+                    let wanted: &[(u8, &Option<Snapshot>)] =
+                        &[(1, &records.first), (2, &records.latest)];
+                    if !matches!(record, 1 | 2 | 0xFF) {
+                        return Err(nrc::REQUEST_OUT_OF_RANGE);
+                    }
+                    for (number, snapshot) in wanted {
+                        let Some(snapshot) = snapshot else { continue };
+                        if *record != 0xFF && record != number {
+                            continue;
+                        }
+                        answer.push(*number);
+                        answer.push(u8::try_from(snapshot.len()).unwrap_or(u8::MAX));
+                        for (id, value) in snapshot {
+                            answer.extend_from_slice(&id.to_be_bytes());
+                            answer.extend_from_slice(value);
+                        }
+                    }
+                } else {
+                    if !matches!(record, 1 | 0xFF) {
+                        return Err(nrc::REQUEST_OUT_OF_RANGE);
+                    }
+                    answer.extend_from_slice(&[0x01, records.occurrences]);
+                }
+                Ok(answer)
+            }
+            (0x01 | 0x02 | 0x04 | 0x06 | 0x0A, _) => Err(nrc::INCORRECT_MESSAGE_LENGTH),
             _ => Err(nrc::SUB_FUNCTION_NOT_SUPPORTED),
         }
     }
