@@ -156,8 +156,6 @@ echo "== end"
             bin,
             "--include",
             &dir_text,
-            "--mem",
-            "2048",
         ],
         &script,
     );

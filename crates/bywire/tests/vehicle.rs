@@ -137,10 +137,6 @@ fn a_python_can_ads_sweeps_the_vehicles_steering_on_socketcan() {
         &dbc,
         "--include",
         &script,
-        // The guest's root lives in its memory: the debug binary (about 300 MB with DDS) and
-        // Python's library do not fit the default 1 GiB together.
-        "--mem",
-        "2048",
     ];
     let text = common::in_canvm(&options, &shell);
     let line = text

@@ -47,8 +47,12 @@ pub fn in_canvm(options: &[&str], script: &str) -> String {
         "{}/../../../shared/tools/canvm.sh",
         env!("CARGO_MANIFEST_DIR")
     );
+    // The guest's files live in its memory: the debug binary (about 300 MB with DDS), what a
+    // test includes and what it writes need more than the default 1 GiB (a test's own
+    // `--mem` comes later and wins).
     let out = Command::new(canvm)
         .arg("run")
+        .args(["--mem", "2048"])
         .args(options)
         .args(["--timeout", "300", "--", "/bin/sh", "-c", script])
         .output()
