@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::{Duration, SystemTime};
+use std::time::Duration;
 
 use bywire_bus::{Bus, BusError, BusTx};
 use bywire_core::Frame;
@@ -398,7 +398,7 @@ impl Reader {
             let stamp = if self.use_bus_time {
                 Time::from_nanos(received.timestamp.as_nanos())
             } else {
-                Time::from_nanos(now_nanos())
+                Time::now()
             };
             let published = match frames::to_ros(&received.frame, stamp, &self.frame_id) {
                 Published::Classic(m) if self.fd_for_all => self.fd.publish(as_fd(m)).is_ok(),
@@ -436,12 +436,6 @@ fn as_fd(m: CanFrame) -> FdFrame {
         len: u8::try_from(len).unwrap_or(8),
         data: m.data.get(..len).unwrap_or(&m.data).to_vec(),
     }
-}
-
-fn now_nanos() -> u64 {
-    SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 #[cfg(test)]

@@ -31,8 +31,7 @@ use serde::{Deserialize, Serialize};
 use crate::dds::{
     mio1, reliable, wake_on_readiness, Publisher, RosError, RosNode, Server, Subscription,
 };
-use crate::msg::{Float64, Header, JointState, StringMsg};
-use crate::vehicle_interface::wall_stamp;
+use crate::msg::{Float64, Header, JointState, StringMsg, Time};
 
 /// How long `init` and `recover` wait for Operation enabled.
 const SWITCH_ON_TIMEOUT: Duration = Duration::from_secs(3);
@@ -382,7 +381,7 @@ impl Bridge<'_> {
     }
 
     fn publish(&mut self, master: &mut Master) {
-        let stamp = wall_stamp();
+        let stamp = Time::now();
         for d in &self.drives {
             let nmt = nmt_name(master.liveness(d.node));
             let _ = d.nmt_state.publish(StringMsg { data: nmt.into() });

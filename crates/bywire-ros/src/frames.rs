@@ -185,7 +185,7 @@ mod tests {
         };
         assert_eq!((m.len, m.data.len(), m.id), (12, 12, 0x123));
         assert_eq!(from_ros_fd(&m, true).unwrap(), f);
-        assert!(!from_ros_fd(&m, false).unwrap().is_fd() || from_ros_fd(&m, false).unwrap() != f);
+        assert_ne!(from_ros_fd(&m, false).unwrap(), f);
     }
 
     #[test]

@@ -43,6 +43,14 @@ impl Time {
         }
     }
 
+    /// Now on the wall clock, as ROS 2 stamps messages.
+    pub fn now() -> Time {
+        let since_epoch = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        Time::from_nanos(u64::try_from(since_epoch.as_nanos()).unwrap_or(u64::MAX))
+    }
+
     /// Nanoseconds; a negative time is zero.
     pub fn as_nanos(self) -> u64 {
         match u64::try_from(self.sec) {

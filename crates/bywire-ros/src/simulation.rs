@@ -125,11 +125,7 @@ pub fn run(
                 }
             });
             last_yaw = Some((now, yaw));
-            let _ = odometry_out.publish(odometry(
-                tug,
-                yaw_rate,
-                crate::vehicle_interface::wall_stamp(),
-            ));
+            let _ = odometry_out.publish(odometry(tug, yaw_rate, Time::now()));
         }
         tick(tug).map_err(RosError::Create)?;
         // Real time: the simulation never runs ahead of the clock.

@@ -16,7 +16,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, SystemTime};
+use std::time::Duration;
 
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::{Bus, BusError};
@@ -156,15 +156,6 @@ pub struct VehicleInterface<'a> {
     braking_until: Option<Timestamp>,
     buses: Vec<(Port, String)>,
     report: &'a mut dyn FnMut(VehicleEvent),
-}
-
-/// Now on the wall clock, as ROS 2 stamps messages.
-pub fn wall_stamp() -> Time {
-    Time::from_nanos(
-        SystemTime::now()
-            .duration_since(SystemTime::UNIX_EPOCH)
-            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
-    )
 }
 
 impl VehicleInterface<'_> {
@@ -331,7 +322,7 @@ impl VehicleInterface<'_> {
     }
 
     fn publish_reports(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
-        let stamp = wall_stamp();
+        let stamp = Time::now();
         let state = ads.state();
         let g = self.geometry();
         let mode = state

@@ -5,8 +5,6 @@ use std::io::{Read, Write};
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
-use bywire_bus::runner::{Flow, Runner};
-use bywire_core::node::Port;
 use bywire_core::{Id, Timestamp};
 use bywire_diag::isotp::{Addressing, IsoTp, IsoTpConfig, IsoTpEvent, StMin};
 
@@ -207,7 +205,7 @@ pub fn run(command: &IsotpCommand, input: &mut dyn Read, out: &mut dyn Write) ->
             };
             let mut node = IsoTp::new(config);
             node.send(&data).map_err(|e| anyhow!("{e}"))?;
-            let outcome = drive(&channel.bus, &mut node, |node, _| match node.next_event() {
+            let outcome = drive(&channel.bus, &mut node, |node| match node.next_event() {
                 Some(IsoTpEvent::Sent) => Some(Ok(())),
                 Some(IsoTpEvent::Failed {
                     sending: true,
@@ -230,7 +228,7 @@ pub fn run(command: &IsotpCommand, input: &mut dyn Read, out: &mut dyn Write) ->
             config.max_wait_frames = *max_wait;
             let mut node = IsoTp::new(config);
             let mut write_error = None;
-            let outcome = drive(&channel.bus, &mut node, |node, _| {
+            let outcome = drive(&channel.bus, &mut node, |node| {
                 while let Some(event) = node.next_event() {
                     match event {
                         IsoTpEvent::Received(message) => {
@@ -487,20 +485,14 @@ fn dump(
 fn drive(
     bus: &str,
     node: &mut IsoTp,
-    mut done: impl FnMut(&mut IsoTp, Timestamp) -> Option<Result<()>>,
+    mut done: impl FnMut(&mut IsoTp) -> Option<Result<()>>,
 ) -> Result<Option<Result<()>>> {
     let bus_handle = busarg::open(bus).with_context(|| format!("bus {bus}"))?;
-    let mut runner = Runner::new(vec![(Port::MAIN, bus_handle)]);
     let mut outcome = None;
-    let mut hooks = |node: &mut IsoTp, now: Timestamp| match done(node, now) {
-        Some(result) => {
-            outcome = Some(result);
-            Flow::Stop
-        }
-        None => Flow::Continue,
-    };
-    runner
-        .run(node, &crate::interrupt_flag(), None, &mut hooks)
-        .map_err(|e| anyhow!("bus {bus}: {e}"))?;
+    bywire_bus::runner::run_until(bus_handle, node, &crate::interrupt_flag(), None, |node| {
+        outcome = done(node);
+        outcome.is_some()
+    })
+    .map_err(|e| anyhow!("bus {bus}: {e}"))?;
     Ok(outcome)
 }
