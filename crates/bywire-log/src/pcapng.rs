@@ -164,10 +164,12 @@ impl<R: Read> PcapngReader<R> {
     /// Read the rest of a block of `length` bytes (of which 8 + `already` are read) into
     /// `self.block`, without the trailing length (checked).
     fn read_body(&mut self, start: u64, length: u32, already: u32) -> Result<(), LogError> {
-        if length < 12 || !length.is_multiple_of(4) || length > MAX_BLOCK {
+        // The header, what the caller read beyond it, and the trailing length.
+        let least = 12 + already;
+        if length < least || !length.is_multiple_of(4) || length > MAX_BLOCK {
             return Err(self.malformed(
                 start,
-                format!("block length {length} (a multiple of 4, 12 to {MAX_BLOCK})"),
+                format!("block length {length} (a multiple of 4, {least} to {MAX_BLOCK})"),
             ));
         }
         let rest = usize::try_from(length - 8 - already).unwrap_or(0);
@@ -670,6 +672,14 @@ mod tests {
                     b
                 },
                 "block length",
+            ),
+            (
+                {
+                    let mut b = bytes.clone();
+                    b[4..8].copy_from_slice(&12u32.to_le_bytes()); // a section header too short for its magic
+                    b
+                },
+                "block length 12 (a multiple of 4, 16 to",
             ),
             (
                 {
