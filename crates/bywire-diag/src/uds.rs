@@ -179,6 +179,8 @@ pub enum UdsEvent {
     Unlocked(u8),
     /// A routine was started.
     RoutineStarted(u16),
+    /// A running routine was stopped by the tester.
+    RoutineStopped(u16),
     /// The transport failed (the message is lost; the tester will repeat).
     Transport(crate::isotp::IsoTpError),
 }
@@ -230,8 +232,11 @@ pub struct UdsServer {
     routines: BTreeMap<u16, Routine>,
     /// Routines started: until when they run.
     running: BTreeMap<u16, Timestamp>,
-    /// A started routine whose positive answer is pending: (routine, when it is due).
-    pending: Option<(u16, Timestamp)>,
+    /// A started routine whose positive answer is pending: (routine, when it is due, when
+    /// the next response pending is due if it is not done by then).
+    pending: Option<(u16, Timestamp, Timestamp)>,
+    /// Routines whose start the application refuses now (conditions not correct).
+    refused: alloc::collections::BTreeSet<u16>,
 }
 
 impl UdsServer {
@@ -257,6 +262,7 @@ impl UdsServer {
             routines: BTreeMap::new(),
             running: BTreeMap::new(),
             pending: None,
+            refused: alloc::collections::BTreeSet::new(),
         }
     }
 
@@ -278,6 +284,44 @@ impl UdsServer {
     /// Offer a routine for RoutineControl.
     pub fn set_routine(&mut self, id: u16, routine: Routine) {
         self.routines.insert(id, routine);
+    }
+
+    /// Whether the routine may start now (the vehicle's conditions: at standstill, ...);
+    /// a refused start is answered with conditionsNotCorrect.
+    pub fn set_routine_allowed(&mut self, id: u16, allowed: bool) {
+        if allowed {
+            self.refused.remove(&id);
+        } else {
+            self.refused.insert(id);
+        }
+    }
+
+    /// What the routine's results request answers from now on (the application measured it).
+    pub fn set_routine_result(&mut self, id: u16, result: Vec<u8>) {
+        if let Some(routine) = self.routines.get_mut(&id) {
+            routine.result = result;
+        }
+    }
+
+    /// Whether the routine was started, has not been stopped, and has not run its time.
+    pub fn routine_running(&self, id: u16, now: Timestamp) -> bool {
+        self.running.get(&id).is_some_and(|done| now < *done)
+    }
+
+    /// Forget the session, security and running routines, as a reset does; the DIDs and the
+    /// DTC memory (non-volatile) stay.
+    pub fn restart(&mut self) {
+        self.session = Session::Default;
+        self.security = Security::Locked;
+        self.running.clear();
+        self.pending = None;
+        self.outbox.clear();
+        self.dtc_setting_on = true;
+        let config = *self.channel.config();
+        self.channel = IsoTp::new(config);
+        if let Some(functional) = self.functional.as_mut() {
+            *functional = IsoTp::new(*functional.config());
+        }
     }
 
     fn unlocked(&self) -> bool {
@@ -533,19 +577,27 @@ impl UdsServer {
                 if routine.secured && !self.unlocked() {
                     return Err(nrc::SECURITY_ACCESS_DENIED);
                 }
+                if self.refused.contains(&id) {
+                    return Err(nrc::CONDITIONS_NOT_CORRECT);
+                }
                 let done = now.saturating_add(routine.runs_for);
                 self.running.insert(id, done);
                 self.events.push(UdsEvent::RoutineStarted(id));
                 if routine.runs_for.is_zero() {
                     return Ok(Some(answer(&[0x00])));
                 }
-                self.pending = Some((id, done));
+                let reminder = now.saturating_add(self.pending_reminder());
+                self.pending = Some((id, done, reminder));
                 Ok(None)
             }
             2 => {
                 self.running
                     .remove(&id)
                     .ok_or(nrc::REQUEST_SEQUENCE_ERROR)?;
+                if self.pending.is_some_and(|(p, ..)| p == id) {
+                    self.pending = None;
+                }
+                self.events.push(UdsEvent::RoutineStopped(id));
                 Ok(Some(answer(&[0x00])))
             }
             3 => match self.running.get(&id) {
@@ -695,17 +747,26 @@ impl UdsServer {
 
     /// Send what is due.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        // S3 runs only while no request is being worked on.
+        if self.pending.is_some() {
+            self.last_request = now;
+        }
         if self.session != Session::Default
             && now.saturating_since(self.last_request) >= self.timing.s3
         {
             self.session = Session::Default;
             self.events.push(UdsEvent::Session(Session::Default));
         }
-        if let Some((id, due)) = self.pending {
+        if let Some((id, due, reminder)) = self.pending {
             if now >= due {
                 self.pending = None;
                 let [hi, lo] = id.to_be_bytes();
                 self.outbox.push(alloc::vec![0x71, 0x01, hi, lo, 0x00]);
+            } else if now >= reminder {
+                // Still running: another response pending before the tester's P2* ends.
+                self.pending = Some((id, due, now.saturating_add(self.pending_reminder())));
+                self.outbox
+                    .push(alloc::vec![0x7F, 0x31, nrc::RESPONSE_PENDING]);
             }
         }
         if !self.channel.sending() && !self.outbox.is_empty() {
@@ -721,12 +782,18 @@ impl UdsServer {
         }
     }
 
+    /// How long after a response pending the next one goes out if the answer is not ready:
+    /// well inside P2*.
+    fn pending_reminder(&self) -> Duration {
+        self.timing.p2_extended * 4 / 5
+    }
+
     /// When the server next has something to do.
     pub fn next_deadline(&self) -> Option<Timestamp> {
         let s3 = (self.session != Session::Default)
             .then(|| self.last_request.saturating_add(self.timing.s3));
         let out = (!self.outbox.is_empty()).then_some(Timestamp::ZERO);
-        let pending = self.pending.map(|(_, due)| due);
+        let pending = self.pending.map(|(_, due, reminder)| due.min(reminder));
         [self.channel.next_deadline(), s3, out, pending]
             .into_iter()
             .flatten()

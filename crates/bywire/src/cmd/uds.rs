@@ -176,6 +176,7 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
                 UdsEvent::Transport(e) => format!("transport: {e}"),
                 UdsEvent::Unlocked(level) => format!("unlocked {level}"),
                 UdsEvent::RoutineStarted(id) => format!("routine {id:04X} started"),
+                UdsEvent::RoutineStopped(id) => format!("routine {id:04X} stopped"),
             };
             let t = now.as_nanos() as f64 / 1e9;
             if let Err(e) = writeln!(out, "{t:.3} {line}").and_then(|()| out.flush()) {
