@@ -70,6 +70,9 @@ impl Emergency {
     }
 }
 
+/// EMCY error code (CiA 301): the controller recovered from bus-off.
+pub const RECOVERED_FROM_BUS_OFF: u16 = 0x8140;
+
 /// Error register (0x1001) bits.
 pub mod error_register {
     /// Generic error (set whenever any other is).
@@ -577,9 +580,23 @@ impl<A: Application> Device<A> {
         self.boot(now);
     }
 
-    /// Take in a frame.
+    /// Take in a frame. An error frame saying the controller restarted after bus-off (the
+    /// device's own controller, on SocketCAN or a simulated bus) is the event CiA 301 reports
+    /// as EMCY 0x8140, followed by the error reset.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
         if !self.booted {
+            return;
+        }
+        if let Frame::Error(error) = frame {
+            if error.has(bywire_core::frame::ErrorClass::Restarted) {
+                self.emcy.raise(
+                    &mut self.od,
+                    RECOVERED_FROM_BUS_OFF,
+                    error_register::COMMUNICATION,
+                    [0; 5],
+                );
+                self.emcy.clear(&mut self.od, RECOVERED_FROM_BUS_OFF);
+            }
             return;
         }
         if let Some((command, node)) = NmtCommand::parse(frame) {

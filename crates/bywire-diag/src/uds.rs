@@ -378,6 +378,11 @@ impl UdsServer {
         }
     }
 
+    /// Every DTC in memory with its status, in DTC order.
+    pub fn dtcs(&self) -> impl Iterator<Item = (u32, u8)> + '_ {
+        self.dtcs.iter().map(|(dtc, status)| (*dtc, *status))
+    }
+
     /// A DTC's status.
     pub fn dtc_status(&self, dtc: u32) -> Option<u8> {
         self.dtcs.get(&dtc).copied()

@@ -138,31 +138,57 @@ pub fn decode_frame(cdr: &[u8]) -> Result<(Timestamp, String, Frame), String> {
 /// Reads the CAN frames of an MCAP file: the `can_msgs/msg/Frame` messages of every channel,
 /// streaming (bounded by the record length limit); other messages are passed over.
 ///
-/// The `mcap` crate's `LinearReader` frames the records (and checks chunk headers), but the
-/// records are parsed here: its record parser reserves whatever a string's length prefix says
-/// before checking it against the record (4 GiB for a crafted 70-byte file, found by fuzzing),
-/// so only the three records a CAN log needs are read, each length checked against its record.
+/// The `mcap` crate's `LinearReader` frames the top-level records, but the records are parsed
+/// here, chunks included: its record parser reserves whatever a string's length prefix says
+/// before checking it against the record (4 GiB for a crafted 70-byte file), and its walk
+/// through a chunk subtracts a record's length from what the chunk has left without checking
+/// it (an overflow panic in a debug build) — both found by fuzzing. So chunks come whole
+/// (`emit_chunks`) and only the records a CAN log needs are read, each length checked
+/// against what holds it.
 pub struct McapReader<R> {
     input: R,
     reader: ::mcap::sans_io::LinearReader,
+    catalog: Catalog,
+    /// The records of the chunk being read, and where the next one starts.
+    chunk: Vec<u8>,
+    chunk_at: usize,
+    offset: u64,
+    failed: bool,
+}
+
+/// What the file has declared so far.
+#[derive(Default)]
+struct Catalog {
     /// Schema id → whether it is `can_msgs/msg/Frame`.
     schemas: HashMap<u16, bool>,
     /// Channel id → (topic, whether its messages are CAN frames in CDR).
     channels: HashMap<u16, (String, bool)>,
-    offset: u64,
-    failed: bool,
+}
+
+/// What one record gives.
+enum Handled {
+    /// Nothing for the caller (a schema, a channel, another topic's message).
+    Nothing,
+    /// A frame, or why the record is not one.
+    Record(Result<LogRecord, LogError>),
+    /// The records of an uncompressed chunk, to be read next.
+    Chunk(Vec<u8>),
+    /// The data section ended.
+    End,
 }
 
 impl<R: Read> McapReader<R> {
     /// A reader over `input`.
     pub fn new(input: R) -> Self {
-        let options =
-            ::mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LIMIT);
+        let options = ::mcap::sans_io::LinearReaderOptions::default()
+            .with_record_length_limit(RECORD_LIMIT)
+            .with_emit_chunks(true);
         McapReader {
             input,
             reader: ::mcap::sans_io::LinearReader::new_with_options(options),
-            schemas: HashMap::new(),
-            channels: HashMap::new(),
+            catalog: Catalog::default(),
+            chunk: Vec::new(),
+            chunk_at: 0,
             offset: 0,
             failed: false,
         }
@@ -174,6 +200,105 @@ impl<R: Read> McapReader<R> {
             offset: self.offset,
             what,
         }))
+    }
+
+    /// Where the next record of the current chunk is: (opcode, its data's range), or why it
+    /// does not fit.
+    fn next_in_chunk(&mut self) -> Option<Result<(u8, core::ops::Range<usize>), String>> {
+        let rest = self.chunk.get(self.chunk_at..).filter(|r| !r.is_empty())?;
+        let mut fields = Fields(rest);
+        let parsed = (|| {
+            let opcode = fields.bytes(1)?.first().copied()?;
+            let length = usize::try_from(fields.u64()?).ok()?;
+            fields.bytes(length)?;
+            Some((opcode, length))
+        })();
+        match parsed {
+            Some((opcode, length)) => {
+                let start = self.chunk_at + 9;
+                self.chunk_at = start + length;
+                Some(Ok((opcode, start..start + length)))
+            }
+            None => {
+                self.chunk.clear();
+                Some(Err(
+                    "MCAP: a record in a chunk runs past the chunk's end".to_string()
+                ))
+            }
+        }
+    }
+}
+
+impl Catalog {
+    /// One record's meaning (`offset`: where the reader is, for errors).
+    fn handle(&mut self, offset: u64, opcode: u8, data: &[u8]) -> Result<Handled, String> {
+        let mut fields = Fields(data);
+        match opcode {
+            ::mcap::records::op::SCHEMA => {
+                let parsed = (|| Some((fields.u16()?, fields.string()?, fields.string()?)))();
+                let (id, name, encoding) =
+                    parsed.ok_or("MCAP: a schema record shorter than its fields")?;
+                // (rosbag2 stores the definition as ros2msg or ros2idl; the CDR is the same.)
+                let is_frame = name == SCHEMA_NAME && encoding.starts_with("ros2");
+                self.schemas.insert(id, is_frame);
+            }
+            ::mcap::records::op::CHANNEL => {
+                let parsed = (|| {
+                    let (id, schema) = (fields.u16()?, fields.u16()?);
+                    Some((id, schema, fields.string()?, fields.string()?))
+                })();
+                let (id, schema, topic, encoding) =
+                    parsed.ok_or("MCAP: a channel record shorter than its fields")?;
+                let is_frame = encoding == "cdr" && self.schemas.get(&schema) == Some(&true);
+                self.channels.insert(id, (topic.into_owned(), is_frame));
+            }
+            ::mcap::records::op::MESSAGE => {
+                let parsed =
+                    (|| Some((fields.u16()?, fields.u32()?, fields.u64()?, fields.u64()?)))();
+                let (channel, sequence, _, _) =
+                    parsed.ok_or("MCAP: a message record shorter than its header")?;
+                let Some((topic, true)) = self.channels.get(&channel) else {
+                    return Ok(Handled::Nothing);
+                };
+                return Ok(Handled::Record(match decode_frame(fields.0) {
+                    Ok((timestamp, frame_id, frame)) => Ok(LogRecord {
+                        timestamp,
+                        interface: if frame_id.is_empty() {
+                            "can0".into()
+                        } else {
+                            frame_id
+                        },
+                        frame,
+                        direction: None,
+                    }),
+                    Err(what) => Err(LogError::Binary {
+                        offset,
+                        what: format!("MCAP message {sequence} on {topic}: {what}"),
+                    }),
+                }));
+            }
+            ::mcap::records::op::CHUNK => {
+                let parsed = (|| {
+                    let _times_and_size = (fields.u64()?, fields.u64()?, fields.u64()?);
+                    let _crc = fields.u32()?;
+                    let compression = fields.string()?.into_owned();
+                    let length = usize::try_from(fields.u64()?).ok()?;
+                    Some((compression, fields.bytes(length)?))
+                })();
+                let (compression, records) =
+                    parsed.ok_or("MCAP: a chunk record shorter than its fields")?;
+                if !compression.is_empty() {
+                    return Err(format!(
+                        "MCAP chunks compressed with {compression}: this build reads uncompressed MCAP (write bags with compression none, or recompress with `mcap convert`)"
+                    ));
+                }
+                return Ok(Handled::Chunk(records.to_vec()));
+            }
+            // The data end: the summary after it repeats schemas and channels.
+            ::mcap::records::op::DATA_END => return Ok(Handled::End),
+            _ => {}
+        }
+        Ok(Handled::Nothing)
     }
 }
 
@@ -206,86 +331,48 @@ impl<R: Read> Iterator for McapReader<R> {
     type Item = Result<LogRecord, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        // Bounded by the file's records; each read request is bounded by the record limit.
+        // Bounded by the file's records; each read request is bounded by the record limit,
+        // and a chunk's records by the chunk.
         while !self.failed {
-            let event = match self.reader.next_event()? {
-                Ok(event) => event,
-                Err(e) => {
-                    let what = match e {
-                        ::mcap::McapError::UnsupportedCompression(codec) => format!(
-                            "MCAP chunks compressed with {codec}: this build reads uncompressed MCAP (write bags with compression none, or recompress with `mcap convert`)"
-                        ),
-                        other => format!("MCAP: {other}"),
-                    };
-                    return self.fail(what);
+            let handled = match self.next_in_chunk() {
+                Some(Ok((opcode, range))) => {
+                    let data = self.chunk.get(range).unwrap_or(&[]);
+                    self.catalog.handle(self.offset, opcode, data)
                 }
-            };
-            let (opcode, data) = match event {
-                ::mcap::sans_io::LinearReadEvent::ReadRequest(need) => {
-                    let read = loop {
-                        match self.input.read(self.reader.insert(need)) {
-                            Ok(n) => break n,
-                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                            Err(e) => return self.fail(format!("cannot read: {e}")),
+                Some(Err(what)) => return self.fail(what),
+                None => {
+                    let event = match self.reader.next_event()? {
+                        Ok(event) => event,
+                        Err(e) => return self.fail(format!("MCAP: {e}")),
+                    };
+                    match event {
+                        ::mcap::sans_io::LinearReadEvent::ReadRequest(need) => {
+                            let read = loop {
+                                match self.input.read(self.reader.insert(need)) {
+                                    Ok(n) => break n,
+                                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                                    Err(e) => return self.fail(format!("cannot read: {e}")),
+                                }
+                            };
+                            self.offset += read as u64;
+                            self.reader.notify_read(read);
+                            continue;
                         }
-                    };
-                    self.offset += read as u64;
-                    self.reader.notify_read(read);
-                    continue;
+                        ::mcap::sans_io::LinearReadEvent::Record { opcode, data } => {
+                            self.catalog.handle(self.offset, opcode, data)
+                        }
+                    }
                 }
-                ::mcap::sans_io::LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
-            let mut fields = Fields(data);
-            match opcode {
-                ::mcap::records::op::SCHEMA => {
-                    let parsed = (|| Some((fields.u16()?, fields.string()?, fields.string()?)))();
-                    let Some((id, name, encoding)) = parsed else {
-                        return self.fail("MCAP: a schema record shorter than its fields".into());
-                    };
-                    // (rosbag2 stores the definition as ros2msg or ros2idl; the CDR is the same.)
-                    let is_frame = name == SCHEMA_NAME && encoding.starts_with("ros2");
-                    self.schemas.insert(id, is_frame);
+            match handled {
+                Ok(Handled::Nothing) => {}
+                Ok(Handled::Record(record)) => return Some(record),
+                Ok(Handled::Chunk(records)) => {
+                    self.chunk = records;
+                    self.chunk_at = 0;
                 }
-                ::mcap::records::op::CHANNEL => {
-                    let parsed = (|| {
-                        let (id, schema) = (fields.u16()?, fields.u16()?);
-                        Some((id, schema, fields.string()?, fields.string()?))
-                    })();
-                    let Some((id, schema, topic, encoding)) = parsed else {
-                        return self.fail("MCAP: a channel record shorter than its fields".into());
-                    };
-                    let is_frame = encoding == "cdr" && self.schemas.get(&schema) == Some(&true);
-                    self.channels.insert(id, (topic.into_owned(), is_frame));
-                }
-                ::mcap::records::op::MESSAGE => {
-                    let parsed =
-                        (|| Some((fields.u16()?, fields.u32()?, fields.u64()?, fields.u64()?)))();
-                    let Some((channel, sequence, _, _)) = parsed else {
-                        return self.fail("MCAP: a message record shorter than its header".into());
-                    };
-                    let Some((topic, true)) = self.channels.get(&channel) else {
-                        continue;
-                    };
-                    return Some(match decode_frame(fields.0) {
-                        Ok((timestamp, frame_id, frame)) => Ok(LogRecord {
-                            timestamp,
-                            interface: if frame_id.is_empty() {
-                                "can0".into()
-                            } else {
-                                frame_id
-                            },
-                            frame,
-                            direction: None,
-                        }),
-                        Err(what) => Err(LogError::Binary {
-                            offset: self.offset,
-                            what: format!("MCAP message {sequence} on {topic}: {what}"),
-                        }),
-                    });
-                }
-                // The data end: the summary after it repeats schemas and channels.
-                ::mcap::records::op::DATA_END => return None,
-                _ => {}
+                Ok(Handled::End) => return None,
+                Err(what) => return self.fail(what),
             }
         }
         None
@@ -639,5 +726,31 @@ mod tests {
             .next()
             .unwrap()
             .is_err());
+    }
+
+    /// A chunk whose record claims more than the chunk holds (found by fuzzing: the `mcap`
+    /// crate's own walk through the chunk overflowed on it).
+    #[test]
+    fn a_record_running_past_its_chunk_is_an_error() {
+        let mut file = b"\x89MCAP0\r\n".to_vec();
+        let mut chunk = Vec::new();
+        for field in [0u64, 0, 9] {
+            chunk.extend_from_slice(&field.to_le_bytes());
+        }
+        chunk.extend_from_slice(&0u32.to_le_bytes()); // CRC
+        chunk.extend_from_slice(&0u32.to_le_bytes()); // no compression
+                                                      // 4 bytes of records holding the start of a record that claims 100 bytes.
+        chunk.extend_from_slice(&4u64.to_le_bytes());
+        chunk.extend_from_slice(&[::mcap::records::op::MESSAGE, 100, 0, 0]);
+        file.push(::mcap::records::op::CHUNK);
+        file.extend_from_slice(&u64::try_from(chunk.len()).unwrap().to_le_bytes());
+        file.extend_from_slice(&chunk);
+        let error = McapReader::new(file.as_slice())
+            .find_map(Result::err)
+            .expect("an error");
+        assert!(
+            error.to_string().contains("past the chunk's end"),
+            "{error}"
+        );
     }
 }

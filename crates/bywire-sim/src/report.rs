@@ -189,8 +189,45 @@ pub struct RunReport {
     pub battery_soc: f64,
     /// The supervisor's counts.
     pub supervisor: SupervisorCounts,
+    /// The DTCs the vehicle control ECU holds at the end, as a tester reads them.
+    pub dtcs: Vec<DtcRecord>,
     /// Wall-clock time the run took, s.
     pub wall_seconds: f64,
+}
+
+/// One DTC of the ECU's memory.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct DtcRecord {
+    /// The DTC, 24 bits in hex (as UDS carries it).
+    pub dtc: String,
+    /// Its SAE J2012 form.
+    pub code: String,
+    /// Its name.
+    pub name: String,
+    /// Its status byte.
+    pub status: u8,
+    /// The status bits set, by their ISO 14229-1 names.
+    pub status_bits: Vec<&'static str>,
+}
+
+impl DtcRecord {
+    /// The ECU's DTC memory.
+    pub fn all(tug: &Tug) -> Vec<DtcRecord> {
+        let names: std::collections::BTreeMap<u32, String> =
+            bywire_tug::diagnostics::dtc_names().into_iter().collect();
+        tug.vehicle_control_ecu()
+            .diagnostics()
+            .server()
+            .dtcs()
+            .map(|(dtc, status)| DtcRecord {
+                dtc: format!("{dtc:06X}"),
+                code: bywire_diag::describe::dtc_code(dtc),
+                name: names.get(&dtc).cloned().unwrap_or_default(),
+                status,
+                status_bits: bywire_diag::describe::status_bits(status),
+            })
+            .collect()
+    }
 }
 
 fn seconds(t: bywire_core::Timestamp) -> f64 {
@@ -271,6 +308,7 @@ impl RunReport {
                 skipped: stats.skipped,
                 out_of_range: stats.out_of_range,
             },
+            dtcs: DtcRecord::all(tug),
             wall_seconds: wall.as_secs_f64(),
         }
     }

@@ -29,17 +29,19 @@ use bywire_canopen::device::Device;
 use bywire_control::kinematics::{Point, Pose};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_control::path::Path;
-use bywire_core::filter::Filter;
+use bywire_core::filter::{ErrorMask, Filter};
+use bywire_core::frame::ErrorClass;
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_tug::diagnostics;
 use bywire_tug::ecu::{
     self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu, DRIVE_UNITS_PER_M,
     STEERING_UNITS_PER_DEG,
 };
 pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
 use bywire_tug::messages::{
-    AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, SteeringAngleSensors,
-    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+    AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
+    SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::Ads;
@@ -331,6 +333,8 @@ fn drive_filtering(node: u8) -> Filtering {
             exact(0x700 + u32::from(MASTER_NODE)),
             Filter::new(u32::from(node), 0x07F),
         ],
+        // Its controller's restart after bus-off, which it reports as an EMCY.
+        error_mask: ErrorMask(ErrorClass::Restarted.bit()),
         ..Filtering::default()
     }
 }
@@ -492,7 +496,21 @@ impl Tug {
             EmergencyStop::ID,
             AdsToVehicleControl::ID,
         ];
-        net.set_filtering(ECU, ecu::BUS1, only(&commands));
+        // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state.
+        let mut ecu_hears = commands.to_vec();
+        ecu_hears.extend([
+            diagnostics::REQUEST_ID,
+            diagnostics::FUNCTIONAL_ID,
+            BatteryMessage::ID,
+        ]);
+        net.set_filtering(
+            ECU,
+            ecu::BUS1,
+            Filtering {
+                error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
+                ..only(&ecu_hears)
+            },
+        );
         net.set_filtering(ECU, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
         net.set_filtering(ECU, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
         let feedback = [

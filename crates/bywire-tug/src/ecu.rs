@@ -10,6 +10,11 @@
 //! - [`BUS3`] (sensors): the steering sensors' second tracks, checked against the first tracks
 //!   the steering drives report ([`crate::plausibility`]).
 //!
+//! On bus 1 it also answers UDS ([`crate::diagnostics`]): its faults as DTCs, its DIDs, the
+//! steering calibration sweep, and ECUReset — after which it is silent for [`BOOT_TIME`]
+//! (spring brakes applied, the drives losing their master) and starts afresh, its DTC memory
+//! kept.
+//!
 //! Inputs that are not frames come in as values ([`VehicleControlEcu::set_driver_input`],
 //! [`VehicleControlEcu::set_status_inputs`], [`VehicleControlEcu::operator_reset`]); what the
 //! ECU decides goes out as typed events ([`VehicleControlEcu::next_event`]) and as its brake
@@ -29,7 +34,10 @@ use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
 
-use crate::messages::{self, SteeringAngleSensors, VehicleStatus};
+use bywire_core::frame::ErrorClass;
+
+use crate::diagnostics::{self, DiagnosticRequest, Diagnostics, Observation};
+use crate::messages::{self, Battery as BatteryMessage, SteeringAngleSensors, VehicleStatus};
 use crate::plausibility::{SteeringFault, SteeringPlausibility};
 use crate::wire::ReferenceWire;
 
@@ -57,6 +65,10 @@ pub const DRIVE_UNITS_PER_M: f64 = 1000.0;
 const REPORT_PERIOD: Duration = Duration::from_millis(20);
 /// Events kept for the caller; more are counted and dropped.
 const EVENT_CAPACITY: usize = 64;
+/// How long the ECU is silent after an ECUReset.
+pub const BOOT_TIME: Duration = Duration::from_millis(500);
+/// Below this speed (m/s) the tug is at standstill for the calibration sweep.
+const CALIBRATION_STANDSTILL: f64 = 0.05;
 
 /// The chassis the 4WS mapping needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -149,6 +161,19 @@ pub struct VehicleControlEcu {
     report_counter: u64,
     events: VecDeque<(Timestamp, EcuEvent)>,
     events_dropped: u64,
+    config: SupervisorConfig,
+    geometry: Geometry,
+    diagnostics: Diagnostics,
+    /// Each corner's steering trim from the calibration DID, degrees.
+    offsets: [f64; 4],
+    /// The BMS's last reading: state of charge (%), voltage (V), current (A).
+    battery: Option<(f64, f64, f64)>,
+    /// The sensors' second tracks, as the I/O node last sent them.
+    second_tracks: [f64; 4],
+    /// A calibration sweep: when it began, each corner's summed track difference, samples.
+    calibration: Option<(Timestamp, [f64; 4], u32)>,
+    /// After an ECUReset: silent until then.
+    booting_until: Option<Timestamp>,
 }
 
 impl VehicleControlEcu {
@@ -185,7 +210,42 @@ impl VehicleControlEcu {
             report_counter: 0,
             events: VecDeque::with_capacity(EVENT_CAPACITY),
             events_dropped: 0,
+            config,
+            geometry,
+            diagnostics: Diagnostics::new("reference-tug"),
+            offsets: [0.0; 4],
+            battery: None,
+            second_tracks: [0.0; 4],
+            calibration: None,
+            booting_until: None,
         }
+    }
+
+    /// The diagnostics: the UDS server with the DTC memory.
+    pub fn diagnostics(&self) -> &Diagnostics {
+        &self.diagnostics
+    }
+
+    /// Whether the ECU is rebooting after an ECUReset.
+    pub fn booting(&self, now: Timestamp) -> bool {
+        self.booting_until.is_some_and(|until| now < until)
+    }
+
+    /// Start afresh, as after power-on: a new supervisor (failed closed), a new master, no
+    /// latched faults; the diagnostics' DTC memory, the odometer and the wiring's inputs
+    /// stay. Silent for [`BOOT_TIME`].
+    fn restart(&mut self, now: Timestamp) {
+        let mut fresh = VehicleControlEcu::new(self.config, self.geometry);
+        core::mem::swap(&mut fresh.diagnostics, &mut self.diagnostics);
+        fresh.diagnostics.restart();
+        fresh.offsets = fresh.diagnostics.steering_offsets();
+        fresh.status = self.status;
+        fresh.battery = self.battery;
+        fresh.events = core::mem::take(&mut self.events);
+        fresh.events_dropped = self.events_dropped;
+        fresh.booting_until = Some(now.saturating_add(BOOT_TIME));
+        fresh.next_report = now.saturating_add(BOOT_TIME);
+        *self = fresh;
     }
 
     /// The supervisor (watchdog, latch, mode, counts, degraded bus).
@@ -229,10 +289,10 @@ impl VehicleControlEcu {
         self.plausibility.faulted()
     }
 
-    /// Whether the ECU stops the tug on its own: a drive stopped by the master, or a steering
-    /// fault.
+    /// Whether the ECU stops the tug on its own: a drive stopped by the master, a steering
+    /// fault, or a reboot (its outputs off: the spring brakes apply).
     pub fn stops(&self) -> bool {
-        self.drives_lost || self.plausibility.faulted().is_some()
+        self.drives_lost || self.plausibility.faulted().is_some() || self.booting_until.is_some()
     }
 
     /// What the supervisor asks of the actuators now.
@@ -260,6 +320,18 @@ impl VehicleControlEcu {
     }
 
     fn push(&mut self, now: Timestamp, event: EcuEvent) {
+        match event {
+            EcuEvent::HeartbeatLost(node) => self.diagnostics.heartbeat(now, node, true),
+            EcuEvent::HeartbeatRecovered(node) => self.diagnostics.heartbeat(now, node, false),
+            EcuEvent::Emergency { node, code } => self.diagnostics.emergency(now, node, code),
+            EcuEvent::SteeringFault(fault) => {
+                self.diagnostics.steering_sensors(now, Some(fault.corner()));
+            }
+            EcuEvent::SteeringReset { accepted: true } => {
+                self.diagnostics.steering_sensors(now, None);
+            }
+            EcuEvent::SteeringReset { accepted: false } | EcuEvent::DrivesStopped(_) => {}
+        }
         if self.events.len() < EVENT_CAPACITY {
             self.events.push_back((now, event));
         } else {
@@ -307,15 +379,13 @@ impl VehicleControlEcu {
         };
         if messages::is_sealed(SteeringAngleSensors::ID, &payload) {
             let m = SteeringAngleSensors(payload);
-            self.plausibility.second_tracks(
-                now,
-                [
-                    m.second_angle_fl(),
-                    m.second_angle_fr(),
-                    m.second_angle_rl(),
-                    m.second_angle_rr(),
-                ],
-            );
+            self.second_tracks = [
+                m.second_angle_fl(),
+                m.second_angle_fr(),
+                m.second_angle_rl(),
+                m.second_angle_rr(),
+            ];
+            self.plausibility.second_tracks(now, self.second_tracks);
         }
     }
 
@@ -337,24 +407,36 @@ impl VehicleControlEcu {
         } else {
             0.0
         };
-        let targets = a.steering_mode.wheel_states(
-            speed,
-            a.steering.to_radians(),
-            &self.swerve,
-            &self.wheel_targets,
-        );
+        let sweep = self.sweep_angle(now);
+        let targets = match sweep {
+            // The calibration sweep: every wheel to the same angle, none turning.
+            Some(angle) => {
+                [WheelState {
+                    angle: angle.to_radians(),
+                    speed: 0.0,
+                }; 4]
+            }
+            None => a.steering_mode.wheel_states(
+                speed,
+                a.steering.to_radians(),
+                &self.swerve,
+                &self.wheel_targets,
+            ),
+        };
         self.wheel_targets = targets;
+        let steering_on = a.steering_enabled || a.motors_enabled || sweep.is_some();
         let faulted = self.plausibility.faulted().map(|f| f.corner());
         for (i, (target, (steer, drive))) in targets
             .iter()
             .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
             .enumerate()
         {
+            let offset = self.offsets.get(i).copied().unwrap_or(0.0);
             if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
                 // A corner whose sensors disagree is not steered: its valve holds the wheel.
-                d.set_enabled((a.steering_enabled || a.motors_enabled) && faulted != Some(i));
+                d.set_enabled(steering_on && faulted != Some(i));
                 d.set_setpoint(Setpoint::Position(round_i32(
-                    target.angle.to_degrees() * STEERING_UNITS_PER_DEG,
+                    (target.angle.to_degrees() + offset) * STEERING_UNITS_PER_DEG,
                 )));
             }
             if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
@@ -362,6 +444,62 @@ impl VehicleControlEcu {
                 d.set_setpoint(Setpoint::Velocity(round_i32(
                     target.speed * DRIVE_UNITS_PER_M,
                 )));
+            }
+        }
+    }
+
+    /// The calibration sweep's angle now (one sine period over the sweep), if it runs.
+    fn sweep_angle(&self, now: Timestamp) -> Option<f64> {
+        let (started, ..) = self.calibration?;
+        let phase =
+            now.saturating_since(started).as_secs_f64() / diagnostics::SWEEP_TIME.as_secs_f64();
+        Some(diagnostics::SWEEP_DEG * libm::sin(2.0 * core::f64::consts::PI * phase.min(1.0)))
+    }
+
+    /// Every report cycle of the sweep: each corner's track difference summed; at its end,
+    /// the means become the routine's results.
+    fn calibrate(&mut self, now: Timestamp, first_tracks: [f64; 4]) {
+        let Some((started, mut sums, mut samples)) = self.calibration else {
+            return;
+        };
+        if !self.diagnostics.calibrating(now) {
+            return;
+        }
+        for (sum, (second, first)) in sums
+            .iter_mut()
+            .zip(self.second_tracks.iter().zip(first_tracks))
+        {
+            *sum += second - first;
+        }
+        samples = samples.saturating_add(1);
+        self.calibration = Some((started, sums, samples));
+    }
+
+    /// What the tester asked of the ECU.
+    fn serve_diagnostics(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        // The sweep's end: its results before the server answers anything more.
+        if let Some((_, sums, samples)) = self.calibration {
+            if !self.diagnostics.calibrating(now) {
+                self.calibration = None;
+                let n = f64::from(samples.max(1));
+                self.diagnostics.calibration_result(sums.map(|s| s / n));
+            }
+        }
+        self.diagnostics.poll(now, &mut |frame| out(BUS1, frame));
+        // Bounded by the diagnostics' request queue.
+        while let Some(request) = self.diagnostics.next_request() {
+            match request {
+                DiagnosticRequest::Reset => {
+                    self.restart(now);
+                    return;
+                }
+                DiagnosticRequest::OffsetsWritten => {
+                    self.offsets = self.diagnostics.steering_offsets();
+                }
+                DiagnosticRequest::CalibrationStarted => {
+                    self.calibration = Some((now, [0.0; 4], 0));
+                }
+                DiagnosticRequest::CalibrationStopped => self.calibration = None,
             }
         }
     }
@@ -383,6 +521,7 @@ impl VehicleControlEcu {
             return;
         }
         self.next_report = now.saturating_add(REPORT_PERIOD);
+        self.diagnose(now, angles, speeds);
         let counter = self.report_counter & 0x0F;
         self.report_counter = self.report_counter.wrapping_add(1);
         // The frames any vehicle on this wire sends (the simulated vehicle's too).
@@ -403,6 +542,69 @@ impl VehicleControlEcu {
         out(BUS1, messages::sealed_frame(VehicleStatus::ID, status.0));
     }
 
+    /// The monitors, every report cycle.
+    fn diagnose(&mut self, now: Timestamp, angles: [f64; 4], speeds: [f64; 4]) {
+        let speed = speeds.iter().sum::<f64>() / 4.0;
+        let steering = angles.first().copied().unwrap_or(0.0);
+        self.calibrate(now, angles);
+        self.diagnostics.observe(
+            now,
+            &Observation {
+                watchdog: self.supervisor.watchdog(),
+                estop: self.supervisor.estop(),
+                degraded: self.supervisor.degraded(),
+                stats: self.supervisor.stats(),
+                driver_input: self.supervisor.driver_input(),
+                speed,
+                steering,
+            },
+        );
+        self.diagnostics.refresh_values(now, self.battery);
+        // The sweep needs the tug at standstill and the ADS not driving it (manual, or its
+        // commands braked away by the watchdog or the E-stop).
+        let standstill = speed.abs() < CALIBRATION_STANDSTILL;
+        let a = self.supervisor.actuators(now);
+        let ads_driving = a.ads_in_control && a.motors_enabled;
+        self.diagnostics
+            .allow_calibration(standstill && !ads_driving);
+    }
+
+    /// A bus-1 frame that is not a command: diagnostics, the BMS's reading, the
+    /// controller's state.
+    fn on_bus1_frame(&mut self, now: Timestamp, frame: &Frame) {
+        if let Frame::Error(error) = frame {
+            if error.has(ErrorClass::BusOff) {
+                self.diagnostics.bus_off(now, true);
+            } else if error.has(ErrorClass::Restarted) {
+                self.diagnostics.bus_off(now, false);
+            }
+            return;
+        }
+        // Every bus-1 identifier is an 11-bit one.
+        let raw = frame.id().filter(|id| !id.is_extended()).map(Id::as_raw);
+        if raw == Some(diagnostics::REQUEST_ID) || raw == Some(diagnostics::FUNCTIONAL_ID) {
+            self.diagnostics.on_frame(now, frame);
+        } else if raw == Some(BatteryMessage::ID) {
+            if let Some(payload) =
+                messages::payload(frame).filter(|p| messages::is_sealed(BatteryMessage::ID, p))
+            {
+                let m = BatteryMessage(payload);
+                self.battery = Some((
+                    m.state_of_charge(),
+                    m.battery_voltage(),
+                    m.battery_current(),
+                ));
+            }
+        } else {
+            Node::on_frame(
+                &mut self.supervisor,
+                now,
+                Supervisor::<ReferenceWire>::PORT_A,
+                frame,
+            );
+        }
+    }
+
     fn take_master_events(&mut self, now: Timestamp) {
         // Bounded by the master's own event queue.
         while let Some(event) = self.master.next_event() {
@@ -418,6 +620,11 @@ impl VehicleControlEcu {
                         node,
                         code: emergency.code,
                     }
+                }
+                // Error reset: the drive's emergency monitor passes.
+                MasterEvent::Emergency { node, .. } => {
+                    self.diagnostics.emergency(now, node, 0);
+                    continue;
                 }
                 _ => continue,
             };
@@ -436,13 +643,11 @@ impl VehicleControlEcu {
 
 impl Node for VehicleControlEcu {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        if self.booting(now) {
+            return;
+        }
         match port {
-            BUS1 => Node::on_frame(
-                &mut self.supervisor,
-                now,
-                Supervisor::<ReferenceWire>::PORT_A,
-                frame,
-            ),
+            BUS1 => self.on_bus1_frame(now, frame),
             BUS1B => Node::on_frame(
                 &mut self.supervisor,
                 now,
@@ -456,6 +661,11 @@ impl Node for VehicleControlEcu {
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        match self.booting_until {
+            Some(until) if now < until => return,
+            Some(_) => self.booting_until = None,
+            None => {}
+        }
         // The state frame goes on bus 1 only: the ADS reads it there.
         self.supervisor.poll(now, &mut |frame| out(BUS1, frame));
         let actuators = self.supervisor.actuators(now);
@@ -468,13 +678,18 @@ impl Node for VehicleControlEcu {
         let speeds = self.wheel_speeds();
         self.feed_back(first_tracks, speeds);
         self.report(now, out, first_tracks, speeds);
+        self.serve_diagnostics(now, out);
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
+        if let Some(until) = self.booting_until {
+            return Some(until);
+        }
         [
             self.supervisor.next_deadline(),
             self.master.next_deadline(),
             Some(self.next_report),
+            self.diagnostics.next_deadline(),
         ]
         .into_iter()
         .flatten()

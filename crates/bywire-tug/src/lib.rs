@@ -9,7 +9,9 @@
 //! - [`profile`]: its vehicle profile (`profiles/reference-tug.toml`) for the runtime codec;
 //! - [`plausibility`]: the ECU's check of each corner's two steering-sensor tracks;
 //! - [`ecu`]: the vehicle control ECU as one node on its four buses — the supervisor, the
-//!   CANopen master of the eight drives, the plausibility check, the 4WS mapping, its reports.
+//!   CANopen master of the eight drives, the plausibility check, the 4WS mapping, its reports;
+//! - [`diagnostics`]: the ECU's UDS server — its faults as DTCs with snapshots, its DIDs, the
+//!   steering calibration sweep.
 //!
 //! Nothing below this crate names the tug.
 //!
@@ -24,6 +26,7 @@
 //! assert_eq!(messages::command_of(&AdsToVehicleControl(payload)), Some(command));
 //! ```
 
+pub mod diagnostics;
 pub mod ecu;
 pub mod messages;
 pub mod plausibility;

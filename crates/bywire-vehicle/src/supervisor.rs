@@ -537,6 +537,11 @@ impl<W: VehicleWire> Supervisor<W> {
         self.evaluate(false, false);
     }
 
+    /// Whether a driver's input is above the takeover thresholds.
+    pub fn driver_input(&self) -> bool {
+        self.driver_input
+    }
+
     fn standstill(&self) -> bool {
         self.speed.abs() < self.config.standstill
     }
