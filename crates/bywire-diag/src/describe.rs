@@ -61,6 +61,43 @@ pub struct Description {
 }
 
 impl Description {
+    /// The identifiers ISO 14229-1 (annex C) defines as text: part numbers, serial number,
+    /// VIN (17 characters), versions, names.
+    pub fn iso14229() -> Self {
+        let mut d = Description::default();
+        let names: [(u16, &str); 14] = [
+            (0xF187, "spare part number"),
+            (0xF188, "ECU software number"),
+            (0xF189, "ECU software version number"),
+            (0xF18A, "system supplier identifier"),
+            (0xF18B, "ECU manufacturing date"),
+            (0xF18C, "ECU serial number"),
+            (0xF190, "VIN"),
+            (0xF191, "ECU hardware number"),
+            (0xF192, "supplier ECU hardware number"),
+            (0xF193, "supplier ECU hardware version number"),
+            (0xF194, "supplier ECU software number"),
+            (0xF195, "supplier ECU software version number"),
+            (0xF197, "system name or engine type"),
+            (0xF19E, "ODX file identifier"),
+        ];
+        for (id, name) in names {
+            d.dids.insert(
+                id,
+                DidInfo {
+                    name: name.into(),
+                    length: (id == 0xF190).then_some(17),
+                    kind: if id == 0xF18B {
+                        ValueKind::Bytes
+                    } else {
+                        ValueKind::Ascii
+                    },
+                },
+            );
+        }
+        d
+    }
+
     /// A DID's length, if known.
     pub fn did_length(&self, id: u16) -> Option<usize> {
         self.dids.get(&id).and_then(|d| d.length)

@@ -1,20 +1,194 @@
-//! `bywire uds serve`: a UDS server (`bywire-diag`) on any bus, with the DIDs and DTCs given on
-//! the command line — an ECU for testers (udsoncan, vendor tools) to talk to.
+//! `bywire uds`: a UDS tester on any bus (`session`, `read-did`, `write-did`, `read-dtc`,
+//! `clear-dtc`, `routine`, `reset`, `security`, `tester-present`, `dtc-setting`,
+//! `comm-control`, `raw`), with udsoncan's habits, and `uds serve`, a server with the DIDs and
+//! DTCs given on the command line — an ECU for testers to talk to. Both are `bywire-diag`'s
+//! nodes on the real-time runner.
 
 use std::io::Write;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use bywire_bus::runner::{Flow, Runner};
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
-use bywire_diag::isotp::IsoTpConfig;
+use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
+use bywire_diag::describe::{self, Description};
+use bywire_diag::isotp::{Addressing, IsoTpConfig};
 use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
+use serde_json::{json, Value};
 
 use crate::support::busarg;
 use crate::support::numbers::can_id;
 
+/// How the tester reaches the ECU, and what it does first.
+#[derive(clap::Args)]
+pub struct Tester {
+    /// The bus (a plain interface name means SocketCAN).
+    bus: String,
+    /// The identifier requests go out with (hex; 8 digits: extended).
+    #[arg(long, default_value = "7E0")]
+    tx: String,
+    /// The identifier answers come on (hex).
+    #[arg(long, default_value = "7E8")]
+    rx: String,
+    /// Extended addressing: the ECU's address byte [and the tester's].
+    #[arg(short = 'x', value_name = "ADDR[:RXADDR]")]
+    extended: Option<String>,
+    /// Pad every frame with this byte (hex).
+    #[arg(long, value_name = "BYTE")]
+    padding: Option<String>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+    /// The ECU's DIDs and DTCs: a TOML description file, or `tug` (the reference tug).
+    #[arg(long, value_name = "FILE|tug")]
+    describe: Option<String>,
+    /// Change to this session first (1 default, 2 programming, 3 extended).
+    #[arg(long, value_name = "N")]
+    session: Option<u8>,
+    /// Then unlock this security level (odd) with --key-fn.
+    #[arg(long, value_name = "LEVEL")]
+    security: Option<u8>,
+    /// The key function: demo (the demonstration key), xor:HEX (the seed XOR these bytes,
+    /// repeated), or exec:PROGRAM (run as PROGRAM LEVEL SEED_HEX, printing the key in hex).
+    #[arg(long, value_name = "FN", default_value = "demo")]
+    key_fn: String,
+    /// P2: how long the first answer may take, ms (the server's, once a session is set).
+    #[arg(long, default_value_t = 1000)]
+    p2_ms: u64,
+    /// P2*: how long an answer may take after response pending, ms.
+    #[arg(long, default_value_t = 5000)]
+    p2_star_ms: u64,
+}
+
 #[derive(clap::Subcommand)]
 pub enum UdsCommand {
+    /// DiagnosticSessionControl: change the session.
+    #[command(after_help = "Examples:
+  bywire uds session can0 3
+  bywire uds session vcan0 --tx 18DA10F1 --rx 18DAF110 2")]
+    Session {
+        #[command(flatten)]
+        tester: Tester,
+        /// 1 default, 2 programming, 3 extended (or a name, or any sub-function as 0xNN).
+        #[arg(value_name = "SESSION")]
+        code: String,
+    },
+    /// ReadDataByIdentifier: one or more DIDs (hex) in one request.
+    #[command(after_help = "Examples:
+  bywire uds read-did can0 F190 F195
+  bywire uds read-did can0 F190 0301 --describe tug --json
+
+With several DIDs, each but the last needs its length from --describe.")]
+    ReadDid {
+        #[command(flatten)]
+        tester: Tester,
+        /// The DIDs (hex).
+        #[arg(required = true)]
+        dids: Vec<String>,
+    },
+    /// WriteDataByIdentifier: a DID and its value (text, or hex:BYTES).
+    #[command(after_help = "Examples:
+  bywire uds write-did can0 --session 3 --security 1 0200 hex:0000001400000000")]
+    WriteDid {
+        #[command(flatten)]
+        tester: Tester,
+        /// The DID (hex).
+        did: String,
+        /// The value: text, or hex:BYTES.
+        value: String,
+    },
+    /// ReadDTCInformation: the DTCs matching a status mask, with their status bits (and
+    /// snapshots and occurrence counts with --snapshots).
+    #[command(after_help = "Examples:
+  bywire uds read-dtc can0
+  bywire uds read-dtc can0 --status 01 --describe tug      (failing now)
+  bywire uds read-dtc can0 --snapshots --describe tug --json")]
+    ReadDtc {
+        #[command(flatten)]
+        tester: Tester,
+        /// The status mask (hex).
+        #[arg(long, default_value = "FF")]
+        status: String,
+        /// Also read each DTC's snapshot records (0x04) and extended data (0x06).
+        #[arg(long)]
+        snapshots: bool,
+        /// Only count them (0x01).
+        #[arg(long, conflicts_with = "snapshots")]
+        count: bool,
+    },
+    /// ClearDiagnosticInformation: a DTC group (hex; FFFFFF: all).
+    ClearDtc {
+        #[command(flatten)]
+        tester: Tester,
+        /// The group.
+        #[arg(default_value = "FFFFFF")]
+        group: String,
+    },
+    /// RoutineControl: start, stop or results of a routine (hex), with optional data.
+    #[command(after_help = "Examples:
+  bywire uds routine can0 --session 3 --security 1 start 0203
+  bywire uds routine can0 --session 3 results 0203")]
+    Routine {
+        #[command(flatten)]
+        tester: Tester,
+        /// start, stop or results.
+        #[arg(value_parser = ["start", "stop", "results"])]
+        action: String,
+        /// The routine (hex).
+        routine: String,
+        /// Its option record (hex bytes).
+        data: Option<String>,
+    },
+    /// ECUReset: hard, keyoffon, soft, or a sub-function (hex).
+    Reset {
+        #[command(flatten)]
+        tester: Tester,
+        /// The kind.
+        #[arg(default_value = "hard")]
+        kind: String,
+    },
+    /// SecurityAccess: ask a seed at LEVEL (odd) and send the key --key-fn computes.
+    #[command(after_help = "Examples:
+  bywire uds security can0 --session 3 1
+  bywire uds security can0 --session 3 3 --key-fn exec:./seed2key")]
+    Security {
+        #[command(flatten)]
+        tester: Tester,
+        /// The level (odd).
+        level: u8,
+    },
+    /// TesterPresent.
+    TesterPresent {
+        #[command(flatten)]
+        tester: Tester,
+    },
+    /// ControlDTCSetting: on or off (needs a non-default session).
+    DtcSetting {
+        #[command(flatten)]
+        tester: Tester,
+        /// on or off.
+        #[arg(value_parser = ["on", "off"])]
+        setting: String,
+    },
+    /// CommunicationControl: the control type (0 enable rx/tx … 3 disable both) and the
+    /// communication type (1 normal, 2 network management, 3 both).
+    CommControl {
+        #[command(flatten)]
+        tester: Tester,
+        /// The control type.
+        control: u8,
+        /// The communication type.
+        #[arg(default_value_t = 1)]
+        communication: u8,
+    },
+    /// Any request, as hex bytes; prints the positive answer in hex.
+    Raw {
+        #[command(flatten)]
+        tester: Tester,
+        /// The request (hex bytes, e.g. 22F190 or "22 F1 90").
+        #[arg(required = true)]
+        request: Vec<String>,
+    },
     /// Answer UDS requests on a bus until Ctrl-C, printing what the tester did.
     #[command(after_help = "Examples:
   bywire uds serve can0 --did F190=WBYWIRE0TUG000042 --did F195=1.4.0
@@ -140,7 +314,10 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         dids,
         dtcs,
         routines,
-    } = command;
+    } = command
+    else {
+        return run_tester(command, out);
+    };
     let mut server = UdsServer::new(
         IsoTpConfig::new(can_id(tx, "--tx")?, can_id(rx, "--rx")?),
         UdsTiming::default(),
@@ -193,4 +370,578 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         Some(e) => Err(e.into()),
         None => Ok(()),
     }
+}
+
+impl UdsCommand {
+    /// The tester's options of a tester command.
+    fn tester(&self) -> Option<&Tester> {
+        match self {
+            UdsCommand::Serve { .. } => None,
+            UdsCommand::Session { tester, .. }
+            | UdsCommand::ReadDid { tester, .. }
+            | UdsCommand::WriteDid { tester, .. }
+            | UdsCommand::ReadDtc { tester, .. }
+            | UdsCommand::ClearDtc { tester, .. }
+            | UdsCommand::Routine { tester, .. }
+            | UdsCommand::Reset { tester, .. }
+            | UdsCommand::Security { tester, .. }
+            | UdsCommand::TesterPresent { tester }
+            | UdsCommand::DtcSetting { tester, .. }
+            | UdsCommand::CommControl { tester, .. }
+            | UdsCommand::Raw { tester, .. } => Some(tester),
+        }
+    }
+}
+
+impl Tester {
+    fn channel(&self) -> Result<IsoTpConfig> {
+        let mut config = IsoTpConfig::new(can_id(&self.tx, "--tx")?, can_id(&self.rx, "--rx")?);
+        let byte = |t: &str, option: &str| {
+            u8::from_str_radix(t, 16).map_err(|_| anyhow!("{option} {t}: not a hex byte"))
+        };
+        if let Some(x) = &self.extended {
+            let (target, source) = x.split_once(':').unwrap_or((x, x));
+            config.addressing = Addressing::Extended {
+                target: byte(target, "-x")?,
+                source: byte(if source.is_empty() { target } else { source }, "-x")?,
+            };
+        }
+        if let Some(p) = &self.padding {
+            config.padding = Some(byte(p, "--padding")?);
+        }
+        Ok(config)
+    }
+
+    fn timing(&self) -> ClientTiming {
+        ClientTiming {
+            p2: std::time::Duration::from_millis(self.p2_ms),
+            p2_extended: std::time::Duration::from_millis(self.p2_star_ms),
+            ..ClientTiming::default()
+        }
+    }
+
+    /// The key for `seed` at `level`.
+    fn key(&self, level: u8, seed: &[u8]) -> Result<Vec<u8>> {
+        let spec = &self.key_fn;
+        if spec == "demo" {
+            return Ok(bywire_diag::uds::demo_key(level, seed));
+        }
+        if let Some(hex) = spec.strip_prefix("xor:") {
+            let mask = hex_bytes(hex).map_err(|e| anyhow!("--key-fn {spec}: {e}"))?;
+            if mask.is_empty() {
+                bail!("--key-fn {spec}: no bytes to XOR with");
+            }
+            return Ok(seed
+                .iter()
+                .zip(mask.iter().cycle())
+                .map(|(s, m)| s ^ m)
+                .collect());
+        }
+        if let Some(program) = spec.strip_prefix("exec:") {
+            let output = std::process::Command::new(program)
+                .arg(level.to_string())
+                .arg(describe::hex(seed))
+                .output()
+                .with_context(|| format!("--key-fn {spec}"))?;
+            if !output.status.success() {
+                bail!("--key-fn {spec}: the program failed ({})", output.status);
+            }
+            let text = String::from_utf8_lossy(&output.stdout);
+            let digits: String = text.split_whitespace().collect();
+            return hex_bytes(&digits).map_err(|e| anyhow!("--key-fn {spec}: its key: {e}"));
+        }
+        bail!("--key-fn {spec}: demo, xor:HEX or exec:PROGRAM")
+    }
+}
+
+/// A 16-bit hex number named by `what`.
+fn hex_u16(text: &str, what: &str) -> Result<u16> {
+    u16::from_str_radix(text.trim_start_matches("0x"), 16)
+        .map_err(|_| anyhow!("{what} {text}: not a 16-bit hex number"))
+}
+
+fn hex_u8(text: &str, what: &str) -> Result<u8> {
+    u8::from_str_radix(text.trim_start_matches("0x"), 16)
+        .map_err(|_| anyhow!("{what} {text}: not a hex byte"))
+}
+
+/// What the tester does: its requests, each chosen once the answer to the one before is in.
+struct Script<'a> {
+    tester: &'a Tester,
+    command: &'a UdsCommand,
+    description: Description,
+    /// Steps done so far (session, security, then the command's own).
+    step: Step,
+    /// The command's answers, for the report.
+    answers: Vec<Vec<u8>>,
+    /// DTCs to read snapshots of (with --snapshots), and which is next.
+    dtcs: Vec<(u32, u8)>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    Start,
+    Session,
+    Seed,
+    Key,
+    Main,
+    /// With --snapshots: snapshot (false) or extended data (true) of the i-th DTC.
+    Detail(usize, bool),
+}
+
+impl Script<'_> {
+    /// The next request after `answer` (to the last one), or `None`: done.
+    fn next(&mut self, answer: Option<Vec<u8>>) -> Result<Option<Vec<u8>>> {
+        let t = self.tester;
+        // Where the last request leaves us.
+        let mut step = self.step;
+        if let Some(answer) = answer {
+            match step {
+                Step::Seed => {
+                    let seed = answer.get(2..).unwrap_or(&[]);
+                    // A zero seed: already unlocked.
+                    if !seed.iter().all(|b| *b == 0) {
+                        let level = t.security.unwrap_or(1);
+                        let mut request = vec![0x27, level.wrapping_add(1)];
+                        request.extend(t.key(level, seed)?);
+                        self.step = Step::Key;
+                        return Ok(Some(request));
+                    }
+                }
+                Step::Main => {
+                    if let (
+                        UdsCommand::ReadDtc {
+                            snapshots: true, ..
+                        },
+                        Ok((_, dtcs)),
+                    ) = (self.command, client::dtc_list(&answer))
+                    {
+                        self.dtcs = dtcs;
+                    }
+                    self.answers.push(answer);
+                }
+                Step::Detail(..) => self.answers.push(answer),
+                Step::Start | Step::Session | Step::Key => {}
+            }
+        }
+        // The next step with something to ask.
+        loop {
+            step = match step {
+                Step::Start => Step::Session,
+                Step::Session => Step::Seed,
+                Step::Seed | Step::Key => Step::Main,
+                Step::Main => Step::Detail(0, false),
+                Step::Detail(i, false) => Step::Detail(i, true),
+                Step::Detail(i, true) => Step::Detail(i + 1, false),
+            };
+            self.step = step;
+            let request = match step {
+                Step::Start => None,
+                Step::Session => t.session.map(|s| vec![0x10, s]),
+                Step::Seed => match t.security {
+                    Some(level) if level % 2 == 1 => Some(vec![0x27, level]),
+                    Some(level) => {
+                        bail!("--security {level}: a level is odd (its key is level + 1)")
+                    }
+                    None => None,
+                },
+                Step::Key => None,
+                Step::Main => Some(self.main_request()?),
+                Step::Detail(i, extended) => {
+                    let Some((dtc, _)) = self.dtcs.get(i) else {
+                        return Ok(None);
+                    };
+                    let [_, a, b, c] = dtc.to_be_bytes();
+                    Some(vec![
+                        0x19,
+                        if extended { 0x06 } else { 0x04 },
+                        a,
+                        b,
+                        c,
+                        0xFF,
+                    ])
+                }
+            };
+            if request.is_some() {
+                return Ok(request);
+            }
+        }
+    }
+
+    fn main_request(&self) -> Result<Vec<u8>> {
+        Ok(match self.command {
+            UdsCommand::Serve { .. } => bail!("not a tester command"),
+            UdsCommand::Session { code, .. } => {
+                let code = match code.as_str() {
+                    "default" => 1,
+                    "programming" => 2,
+                    "extended" => 3,
+                    other => other
+                        .strip_prefix("0x")
+                        .map_or_else(|| other.parse().ok(), |h| u8::from_str_radix(h, 16).ok())
+                        .ok_or_else(|| anyhow!("session {other}: 1, 2, 3, a name or 0xNN"))?,
+                };
+                vec![0x10, code]
+            }
+            UdsCommand::ReadDid { dids, .. } => {
+                let mut request = vec![0x22];
+                for did in dids {
+                    request.extend(hex_u16(did, "DID")?.to_be_bytes());
+                }
+                request
+            }
+            UdsCommand::WriteDid { did, value, .. } => {
+                let mut request = vec![0x2E];
+                request.extend(hex_u16(did, "DID")?.to_be_bytes());
+                match value.strip_prefix("hex:") {
+                    Some(hex) => {
+                        request.extend(hex_bytes(hex).map_err(|e| anyhow!("{value}: {e}"))?)
+                    }
+                    None => request.extend(value.as_bytes()),
+                }
+                request
+            }
+            UdsCommand::ReadDtc { status, count, .. } => {
+                vec![
+                    0x19,
+                    if *count { 0x01 } else { 0x02 },
+                    hex_u8(status, "--status")?,
+                ]
+            }
+            UdsCommand::ClearDtc { group, .. } => {
+                let group = u32::from_str_radix(group, 16)
+                    .ok()
+                    .filter(|g| *g <= 0xFF_FFFF)
+                    .ok_or_else(|| anyhow!("group {group}: not a 24-bit hex DTC group"))?;
+                let [_, a, b, c] = group.to_be_bytes();
+                vec![0x14, a, b, c]
+            }
+            UdsCommand::Routine {
+                action,
+                routine,
+                data,
+                ..
+            } => {
+                let sub = match action.as_str() {
+                    "start" => 1,
+                    "stop" => 2,
+                    _ => 3,
+                };
+                let mut request = vec![0x31, sub];
+                request.extend(hex_u16(routine, "routine")?.to_be_bytes());
+                if let Some(data) = data {
+                    request.extend(hex_bytes(data).map_err(|e| anyhow!("{data}: {e}"))?);
+                }
+                request
+            }
+            UdsCommand::Reset { kind, .. } => {
+                let sub = match kind.as_str() {
+                    "hard" => 1,
+                    "keyoffon" => 2,
+                    "soft" => 3,
+                    other => hex_u8(other, "reset")?,
+                };
+                vec![0x11, sub]
+            }
+            UdsCommand::Security { level, .. } => {
+                if level % 2 == 0 {
+                    bail!("security {level}: a level is odd (its key is level + 1)");
+                }
+                vec![0x27, *level]
+            }
+            UdsCommand::TesterPresent { .. } => vec![0x3E, 0x00],
+            UdsCommand::DtcSetting { setting, .. } => {
+                vec![0x85, if setting == "on" { 0x01 } else { 0x02 }]
+            }
+            UdsCommand::CommControl {
+                control,
+                communication,
+                ..
+            } => vec![0x28, *control, *communication],
+            UdsCommand::Raw { request, .. } => {
+                let digits: String = request.concat().split_whitespace().collect();
+                let bytes = hex_bytes(&digits).map_err(|e| anyhow!("raw: {e}"))?;
+                if bytes.is_empty() {
+                    bail!("raw: no request");
+                }
+                bytes
+            }
+        })
+    }
+
+    /// A security command's main answer is the seed: the key follows.
+    fn security_key(&mut self, answer: &[u8]) -> Result<Option<Vec<u8>>> {
+        let UdsCommand::Security { level, .. } = self.command else {
+            return Ok(None);
+        };
+        let seed = answer.get(2..).unwrap_or(&[]);
+        if answer.get(1) != Some(level) || seed.iter().all(|b| *b == 0) {
+            return Ok(None);
+        }
+        let mut request = vec![0x27, level.wrapping_add(1)];
+        request.extend(self.tester.key(*level, seed)?);
+        Ok(Some(request))
+    }
+}
+
+fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
+    let tester = command
+        .tester()
+        .ok_or_else(|| anyhow!("not a tester command"))?;
+    let description = match &tester.describe {
+        Some(spec) => crate::support::uds_describe::load(spec)?,
+        None => Description::iso14229(),
+    };
+    let mut script = Script {
+        tester,
+        command,
+        description,
+        step: Step::Start,
+        answers: Vec::new(),
+        dtcs: Vec::new(),
+    };
+    let mut client = UdsClient::new(tester.channel()?, tester.timing());
+    let endpoint = busarg::open(&tester.bus).with_context(|| format!("bus {}", tester.bus))?;
+    let mut runner = Runner::new(vec![(Port::MAIN, endpoint)]);
+    let mut failure: Option<anyhow::Error> = None;
+    let mut queued: Option<Vec<u8>> = None;
+    let mut started = false;
+    let mut last_request = Vec::new();
+    let mut key_sent = false;
+    let mut hooks = |client: &mut UdsClient, now: Timestamp| {
+        if !started {
+            started = true;
+            match script.next(None) {
+                Ok(next) => queued = next,
+                Err(e) => {
+                    failure = Some(e);
+                    return Flow::Stop;
+                }
+            }
+        } else if let Some(outcome) = client.take_outcome() {
+            let answer = match outcome {
+                Ok(answer) => answer,
+                Err(e) => {
+                    failure = Some(request_error(&last_request, &e));
+                    return Flow::Stop;
+                }
+            };
+            // `security`'s own seed: the key goes next, and its answer is the result.
+            let next = if script.step == Step::Main && !key_sent {
+                match script.security_key(&answer) {
+                    Ok(Some(key)) => {
+                        key_sent = true;
+                        Ok(Some(key))
+                    }
+                    Ok(None) => script.next(Some(answer)),
+                    Err(e) => Err(e),
+                }
+            } else {
+                script.next(Some(answer))
+            };
+            match next {
+                Ok(next) => queued = next,
+                Err(e) => {
+                    failure = Some(e);
+                    return Flow::Stop;
+                }
+            }
+        } else if queued.is_none() {
+            // Waiting for an answer.
+            return Flow::Continue;
+        }
+        let Some(request) = queued.take() else {
+            return Flow::Stop;
+        };
+        // A TesterPresent of the client's own may be on its way: try again next time.
+        match client.request(now, &request) {
+            Ok(()) => last_request = request,
+            Err(ClientError::Busy) => queued = Some(request),
+            Err(e) => {
+                failure = Some(request_error(&request, &e));
+                return Flow::Stop;
+            }
+        }
+        Flow::Continue
+    };
+    let ended = runner
+        .run(&mut client, &crate::interrupt_flag(), None, &mut hooks)
+        .map_err(|e| anyhow!("bus {}: {e}", tester.bus))?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if ended != bywire_bus::runner::Ended::ByHooks {
+        bail!("interrupted");
+    }
+    report(&script, out)
+}
+
+fn request_error(request: &[u8], error: &ClientError) -> anyhow::Error {
+    anyhow!("request {}: {error}", describe::hex(request))
+}
+
+/// The command's answers, as text or JSON.
+fn report(script: &Script, out: &mut dyn Write) -> Result<()> {
+    let d = &script.description;
+    let answer = script.answers.first().cloned().unwrap_or_default();
+    let (text, value): (String, Value) = match script.command {
+        UdsCommand::Session { .. } => match answer.as_slice() {
+            [0x50, session, a, b, c, e] => {
+                let p2 = u16::from_be_bytes([*a, *b]);
+                let p2x = u32::from(u16::from_be_bytes([*c, *e])) * 10;
+                (
+                    format!("session {session}: P2 {p2} ms, P2* {p2x} ms"),
+                    json!({"session": session, "p2_ms": p2, "p2_star_ms": p2x}),
+                )
+            }
+            other => (
+                format!("session: {}", describe::hex(other)),
+                json!({"answer": describe::hex(other)}),
+            ),
+        },
+        UdsCommand::ReadDid { dids, .. } => {
+            let ids: Vec<u16> = dids
+                .iter()
+                .map(|did| hex_u16(did, "DID"))
+                .collect::<Result<_>>()?;
+            let values = client::did_values(&answer, &ids, &|id| d.did_length(id))
+                .map_err(|e| anyhow!("{e} (give the DIDs' lengths with --describe)"))?;
+            let mut lines = Vec::new();
+            let mut object = serde_json::Map::new();
+            for (id, value) in values {
+                let name = d.dids.get(&id).map(|i| i.name.clone());
+                let shown = d.show(id, &value);
+                lines.push(match &name {
+                    Some(name) => format!("{id:04X} {name}: {shown}"),
+                    None => format!("{id:04X}: {shown}"),
+                });
+                object.insert(
+                    format!("{id:04X}"),
+                    json!({"name": name, "value": shown, "hex": describe::hex(&value)}),
+                );
+            }
+            (lines.join("\n"), Value::Object(object))
+        }
+        UdsCommand::ReadDtc { count: true, .. } => {
+            let count = client::dtc_count(&answer).map_err(|e| anyhow!("{e}"))?;
+            (format!("{count} DTCs"), json!({"count": count}))
+        }
+        UdsCommand::ReadDtc { .. } => dtc_report(script, &answer)?,
+        UdsCommand::Routine {
+            action, routine, ..
+        } => {
+            let record = answer.get(4..).unwrap_or(&[]);
+            (
+                format!("routine {routine} {action}: {}", describe::hex(record)),
+                json!({"routine": routine, "action": action, "record": describe::hex(record)}),
+            )
+        }
+        UdsCommand::Reset { .. } => {
+            let kind = answer.get(1).copied().unwrap_or(0);
+            (format!("reset {kind}: done"), json!({"reset": kind}))
+        }
+        UdsCommand::Security { level, .. } => (
+            format!("security level {level}: unlocked"),
+            json!({"unlocked": level}),
+        ),
+        UdsCommand::ClearDtc { group, .. } => {
+            (format!("cleared {group}"), json!({"cleared": group}))
+        }
+        UdsCommand::WriteDid { did, .. } => (format!("{did} written"), json!({"written": did})),
+        UdsCommand::TesterPresent { .. } => {
+            ("tester present: answered".into(), json!({"present": true}))
+        }
+        UdsCommand::DtcSetting { setting, .. } => (
+            format!("DTC setting {setting}"),
+            json!({"dtc_setting": setting}),
+        ),
+        UdsCommand::CommControl { control, .. } => (
+            format!("communication control {control}: done"),
+            json!({"comm_control": control}),
+        ),
+        UdsCommand::Raw { .. } | UdsCommand::Serve { .. } => (
+            describe::hex(&answer),
+            json!({"answer": describe::hex(&answer)}),
+        ),
+    };
+    if script.tester.json {
+        writeln!(out, "{value}")?;
+    } else if !text.is_empty() {
+        writeln!(out, "{text}")?;
+    }
+    Ok(())
+}
+
+/// DTCs with their names and status bits; with --snapshots their records.
+fn dtc_report(script: &Script, answer: &[u8]) -> Result<(String, Value)> {
+    let d = &script.description;
+    let (_, dtcs) = client::dtc_list(answer).map_err(|e| anyhow!("{e}"))?;
+    let mut lines = Vec::new();
+    let mut list = Vec::new();
+    for (i, (dtc, status)) in dtcs.iter().enumerate() {
+        let name = d.dtcs.get(dtc).cloned();
+        let bits = describe::status_bits(*status);
+        lines.push(format!(
+            "{} {dtc:06X} {}status {status:02X}: {}",
+            describe::dtc_code(*dtc),
+            name.as_ref().map(|n| format!("{n}, ")).unwrap_or_default(),
+            bits.join(" ")
+        ));
+        let mut entry = json!({
+            "dtc": format!("{dtc:06X}"),
+            "code": describe::dtc_code(*dtc),
+            "name": name,
+            "status": status,
+            "status_bits": bits,
+        });
+        // The details follow the list: snapshot then extended data for each DTC.
+        if let (Some(snapshot), Some(extended)) =
+            (script.answers.get(1 + 2 * i), script.answers.get(2 + 2 * i))
+        {
+            let (_, _, records) =
+                client::snapshots(snapshot, &|id| d.did_length(id)).map_err(|e| {
+                    anyhow!("{dtc:06X}: {e} (give the snapshot DIDs' lengths with --describe)")
+                })?;
+            let mut shown = Vec::new();
+            for record in &records {
+                let values: Vec<String> = record
+                    .values
+                    .iter()
+                    .map(|(id, v)| {
+                        let name = d
+                            .dids
+                            .get(id)
+                            .map_or_else(|| format!("{id:04X}"), |i| i.name.clone());
+                        format!("{name} {}", d.show(*id, v))
+                    })
+                    .collect();
+                lines.push(format!(
+                    "  snapshot {}: {}",
+                    record.number,
+                    values.join(", ")
+                ));
+                shown.push(json!({
+                    "record": record.number,
+                    "values": record.values.iter().map(|(id, v)| json!({
+                        "did": format!("{id:04X}"), "value": d.show(*id, v), "hex": describe::hex(v)
+                    })).collect::<Vec<_>>(),
+                }));
+            }
+            // Extended data record 0x01: the occurrence count.
+            let occurrences = match extended.as_slice() {
+                [.., 0x01, count] => Some(*count),
+                _ => None,
+            };
+            if let Some(count) = occurrences {
+                lines.push(format!("  occurrences: {count}"));
+            }
+            entry["snapshots"] = json!(shown);
+            entry["occurrences"] = json!(occurrences);
+        }
+        list.push(entry);
+    }
+    if lines.is_empty() {
+        lines.push("no DTCs".into());
+    }
+    Ok((lines.join("\n"), Value::Array(list)))
 }
