@@ -82,7 +82,10 @@ pub fn parse_date(text: &str) -> Option<u64> {
         digits * 10u64.pow(9 - u32::try_from(fraction.len()).ok()?)
     };
     let days = u64::try_from(days_from_civil(year, month, day)).ok()?;
-    let seconds = days * 86_400 + hour * 3_600 + minute * 60 + second;
+    // A year far from now must not overflow.
+    let seconds = days
+        .checked_mul(86_400)?
+        .checked_add(hour * 3_600 + minute * 60 + second)?;
     seconds.checked_mul(NANOS_PER_SECOND)?.checked_add(nanos)
 }
 
@@ -655,6 +658,8 @@ mod tests {
             "Nov 32 22:13:20 2023",
             "Nov 14 25:00:00 2023",
             "Nov 14 22:13 2023",
+            // Far beyond what nanoseconds since 1970 hold (found by fuzzing).
+            "Nov 14 22:13:20 9999999999999",
         ] {
             assert_eq!(parse_date(bad), None, "{bad}");
         }

@@ -87,3 +87,134 @@ fn udsoncan_diagnoses_bywire_uds_serve() {
         assert!(out.contains(line), "{line}: {out}");
     }
 }
+
+/// `bywire uds` as the tester of a server built on udsoncan's request parser and response
+/// encoder: every service's answer decoded, the server's P2/P2* adopted, response pending
+/// waited through, the security key computed, negative responses named.
+#[test]
+fn bywire_uds_diagnoses_a_udsoncan_server() {
+    if !inside_lonet("bywire_uds_diagnoses_a_udsoncan_server") {
+        return;
+    }
+    let bus = "udp:239.74.163.4:43562";
+    let mut server = KillOnDrop(
+        Command::new("python3")
+            .arg(format!("{}/udsoncan_server.py", oracles()))
+            .args(["239.74.163.4", "43562"])
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let mut lines =
+        std::io::BufRead::lines(std::io::BufReader::new(server.0.stdout.take().unwrap()));
+    assert_eq!(lines.next().unwrap().unwrap(), "ready");
+    let uds = |args: &[&str]| {
+        let mut all = vec!["uds"];
+        all.extend_from_slice(args);
+        let (code, out, err) = bywire(&all, "");
+        (code, format!("{out}{err}"))
+    };
+    let ok = |args: &[&str]| {
+        let (code, text) = uds(args);
+        assert_eq!(code, 0, "{args:?}: {text}");
+        text
+    };
+    let json = |args: &[&str]| -> Value {
+        let mut all = args.to_vec();
+        all.push("--json");
+        serde_json::from_str(ok(&all).trim()).unwrap()
+    };
+    assert_eq!(
+        json(&["session", bus, "3"]),
+        json!({"session": 3, "p2_ms": 50, "p2_star_ms": 2000})
+    );
+    assert_eq!(
+        ok(&["read-did", bus, "F190"]).trim(),
+        "F190 VIN: UDSONCAN000000042"
+    );
+    // Two DIDs in one request, split by the VIN's known length.
+    let read = json(&["read-did", bus, "F190", "0101"]);
+    assert_eq!(read["0101"]["hex"], "1234", "{read}");
+    // Writing needs the session and security: refused, then done with --session/--security.
+    let (code, text) = uds(&["write-did", bus, "--session", "1", "0101", "hex:BEEF"]);
+    assert_ne!(code, 0);
+    assert!(text.contains("0x22 (conditionsNotCorrect)"), "{text}");
+    let (code, text) = uds(&["write-did", bus, "--session", "3", "0101", "hex:BEEF"]);
+    assert_ne!(code, 0);
+    assert!(text.contains("0x33 (securityAccessDenied)"), "{text}");
+    ok(&[
+        "write-did",
+        bus,
+        "--session",
+        "3",
+        "--security",
+        "1",
+        "0101",
+        "hex:BEEF",
+    ]);
+    assert_eq!(json(&["read-did", bus, "0101"])["0101"]["hex"], "beef");
+    // DTCs with their names from a description file, snapshots and occurrence counts.
+    let file = std::env::temp_dir().join("bywire-uds-describe.toml");
+    std::fs::write(
+        &file,
+        "[did.DD01]\nname = \"speed\"\nlength = 2\nkind = \"signed\"\nscale = 0.01\nunit = \"m/s\"\n\
+         [dtc]\nC07300 = \"bus-off\"\n",
+    )
+    .unwrap();
+    let describe = file.to_str().unwrap();
+    let dtcs = json(&["read-dtc", bus, "--snapshots", "--describe", describe]);
+    assert_eq!(dtcs[0]["dtc"], "512300", "{dtcs}");
+    assert_eq!(dtcs[1]["code"], "U0073-00");
+    assert_eq!(dtcs[1]["name"], "bus-off");
+    assert_eq!(dtcs[1]["status"], 0x2F);
+    assert_eq!(dtcs[1]["snapshots"][0]["values"][0]["value"], "3 m/s");
+    assert_eq!(dtcs[1]["occurrences"], 3);
+    let text = ok(&["read-dtc", bus, "--status", "01", "--describe", describe]);
+    assert_eq!(
+        text.trim(),
+        "U0073-00 C07300 bus-off, status 2F: testFailed testFailedThisOperationCycle pendingDTC confirmedDTC testFailedSinceLastClear"
+    );
+    assert_eq!(json(&["read-dtc", bus, "--count"]), json!({"count": 2}));
+    ok(&["clear-dtc", bus]);
+    assert_eq!(ok(&["read-dtc", bus]).trim(), "no DTCs");
+    // A routine answered after response pending, then its results.
+    assert_eq!(
+        ok(&["routine", bus, "start", "0203"]).trim(),
+        "routine 0203 start: 00"
+    );
+    assert_eq!(json(&["routine", bus, "results", "0203"])["record"], "2a");
+    assert_eq!(
+        json(&["security", bus, "--session", "3", "1"]),
+        json!({"unlocked": 1})
+    );
+    let (code, text) = uds(&["security", bus, "--session", "3", "1", "--key-fn", "xor:FF"]);
+    assert_ne!(code, 0);
+    assert!(text.contains("0x35 (invalidKey)"), "{text}");
+    assert_eq!(json(&["reset", bus, "soft"]), json!({"reset": 3}));
+    ok(&["tester-present", bus]);
+    ok(&["dtc-setting", bus, "--session", "3", "off"]);
+    ok(&["comm-control", bus, "--session", "3", "3", "1"]);
+    let (code, text) = uds(&["raw", bus, "BA 01"]);
+    assert_ne!(code, 0);
+    assert!(text.contains("0x11 (serviceNotSupported)"), "{text}");
+    drop(server);
+    // What the server saw: every request bywire sent, in udsoncan's parse.
+    let seen: Vec<String> = lines.map_while(Result::ok).collect();
+    assert!(seen.contains(&"request 1003".to_string()), "{seen:?}");
+    assert!(seen.contains(&"request 2e0101beef".to_string()), "{seen:?}");
+    assert!(seen.contains(&"request 190201".to_string()), "{seen:?}");
+    assert!(
+        seen.contains(&"request 1904c07300ff".to_string()),
+        "{seen:?}"
+    );
+}
+
+/// A peer process, killed when the test ends (also when it fails).
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
