@@ -301,6 +301,28 @@ fn a_silent_master_faults_the_drive_and_it_stops() {
     );
 }
 
+/// A drive whose controller restarted after bus-off says so (EMCY 0x8140, then the error
+/// reset), and the master keeps it running: the heartbeat consumer watches the link itself.
+#[test]
+fn recovery_from_bus_off_is_reported_and_does_not_stop_the_drive() {
+    let (mut bus, mut master, mut drive) = running_drive(1_000);
+    let restarted = bywire_core::frame::ErrorFrame::from_array(
+        bywire_core::frame::ErrorClass::Restarted.bit(),
+        [0; 8],
+    );
+    drive.on_frame(Timestamp::ZERO, &Frame::Error(restarted));
+    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
+    let emcys: Vec<[u8; 2]> = bus
+        .log
+        .iter()
+        .filter(|(_, from, f)| *from == 1 && f.id().map(|id| id.as_raw()) == Some(0x82))
+        .map(|(_, _, f)| [f.data()[0], f.data()[1]])
+        .collect();
+    assert_eq!(emcys, vec![[0x40, 0x81], [0, 0]]);
+    assert_eq!(controller(&mut master).stopped(), None);
+    assert_eq!(drive.app().state(), State::OperationEnabled);
+}
+
 #[test]
 fn an_emergency_stops_the_drive_until_acknowledged() {
     let (mut bus, mut master, mut drive) = running_drive(1_000);

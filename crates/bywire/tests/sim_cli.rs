@@ -12,7 +12,7 @@ mod common;
 
 use std::process::Command;
 
-use serde_json::Value;
+use serde_json::{json, Value};
 
 /// `bywire sim --fast` with `args`, into `out`; its metrics.
 fn sim_with(out: &std::path::Path, args: &[&str]) -> Value {
@@ -319,6 +319,118 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
             .any(|(t, k, _)| *t >= drive_off && k == "heartbeat_lost"),
         "{events:?}"
     );
+    // Every fault is a DTC of the vehicle control ECU, confirmed and over by the end.
+    let dtcs: Vec<(String, u64)> = metrics["dtcs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| {
+            (
+                d["dtc"].as_str().unwrap().to_string(),
+                d["status"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    for code in FAULT_TOUR_DTCS {
+        assert!(
+            dtcs.iter()
+                .any(|(d, status)| d == code && status & 0x2C == 0x2C),
+            "{code}: {dtcs:?}"
+        );
+    }
+    let bus_off = metrics["dtcs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|d| d["dtc"] == "C07300")
+        .unwrap();
+    assert_eq!(bus_off["code"], "U0073-00");
+    assert_eq!(bus_off["name"], "bus 1 controller bus-off");
+}
+
+/// The DTCs the fault tour leaves in the ECU: the ADS silence's cascade, bus 1b lost, the
+/// E-stop, drive 0x22 silent, corner RL's stuck sensor, corrupted and duplicated commands,
+/// the takeover, the ECU's bus-off, drive 0x23's bus-off (its EMCY 0x8140).
+const FAULT_TOUR_DTCS: [&str; 12] = [
+    "D00101", "D00102", "D00103", "D00200", "500000", "D10022", "530003", "D00301", "D00302",
+    "540000", "C07300", "520023",
+];
+
+/// udsoncan, over `bywire sim --serve`'s socketcand, reads the fault tour's DTCs from the
+/// simulated ECU while the run lingers: every injected fault with its status bits, the
+/// E-stop's snapshot, an occurrence count, the VIN and odometer; ClearDTC clears them, and the
+/// run's metrics then list none.
+#[test]
+fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
+    use std::io::BufRead;
+    use std::process::Stdio;
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let dir = std::env::temp_dir().join(format!("bywire-sim-uds-{}", std::process::id()));
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "sim",
+            "--fast",
+            "--scenario",
+            "fault-tour",
+            "--max-seconds",
+            "62",
+        ])
+        .args(["--linger", "60", "--serve"])
+        .arg(format!("127.0.0.1:{port}"))
+        .arg("--out")
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let sim_out = std::io::BufReader::new(sim.stdout.take().unwrap());
+    let mut lines = sim_out.lines();
+    // Bounded by the run's 62 simulated seconds of progress lines.
+    let lingering = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .any(|l| l.starts_with("lingering for 60 s"));
+    assert!(lingering);
+    let python = Command::new("python3")
+        .arg(format!("{}/udsoncan_sim.py", common::oracles()))
+        .args(["127.0.0.1", &port.to_string()])
+        .output()
+        .unwrap();
+    let _ = Command::new("kill")
+        .args(["-TERM", &sim.id().to_string()])
+        .status();
+    assert!(sim.wait().unwrap().success());
+    assert!(
+        python.status.success(),
+        "{}",
+        String::from_utf8_lossy(&python.stderr)
+    );
+    let seen: Value = serde_json::from_slice(&python.stdout).unwrap();
+    for code in FAULT_TOUR_DTCS {
+        let status = seen["dtcs"][code]
+            .as_u64()
+            .unwrap_or_else(|| panic!("{code}: {seen}"));
+        // pendingDTC, confirmedDTC, testFailedSinceLastClear; testFailed no longer.
+        assert_eq!(status & 0x2D, 0x2C, "{code}: {status:#x}");
+    }
+    assert_eq!(seen["failing"], json!([]));
+    // The E-stop at 16 s, at speed.
+    let time_ms = seen["estop_snapshot"]["DD00"][0].as_u64().unwrap();
+    assert!((16_000..16_100).contains(&time_ms), "{seen}");
+    assert!(
+        seen["estop_snapshot"]["DD01"][0].as_i64().unwrap() > 100,
+        "{seen}"
+    );
+    assert_eq!(seen["full_braking_occurrences"], json!([1]));
+    assert_eq!(seen["vin"], "BYWIRETUG00000042");
+    assert!(seen["odometer_m"][0].as_u64().unwrap() > 50, "{seen}");
+    assert_eq!(seen["after_clear"], json!({}));
+    let metrics: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["dtcs"], json!([]), "cleared by the tester");
 }
 
 /// `bywire check` passes against the simulated tug and fails, naming the check, when its

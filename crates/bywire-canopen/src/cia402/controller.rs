@@ -46,10 +46,14 @@ impl StopLatch {
         self.0 = None;
     }
 
-    /// Stop on an emergency (other than an error reset) from `node`.
+    /// Stop on an emergency from `node`, other than an error reset and the CAN
+    /// communication warnings (0x81xx: overrun, error passive, recovered from bus-off): the
+    /// communication they report is watched by the heartbeat consumer, which stops the drive
+    /// if it is really lost, and a drive that lost its master faults on its own.
     pub fn on_emergency(&mut self, node: u8, frame: &Frame) {
         if let Some((from, emergency)) = crate::device::Emergency::parse(frame) {
-            if from == node && emergency.code != 0 {
+            let communication_warning = emergency.code & 0xFF00 == 0x8100;
+            if from == node && emergency.code != 0 && !communication_warning {
                 self.stop(StopReason::Emergency(emergency.code));
             }
         }

@@ -48,6 +48,11 @@ pub struct Args {
     /// 127.0.0.1:42000 or to ADDR:PORT, as socketcand does (python-can's detect_beacon reads it).
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:42000", requires = "serve")]
     beacon: Option<std::net::SocketAddr>,
+    /// After the run (the route done, or --max-seconds), keep the tug running in real time
+    /// for this many seconds, parked with its buses served or attached, so testers can
+    /// diagnose it (e.g. read the fault tour's DTCs with udsoncan); Ctrl-C ends it sooner.
+    #[arg(long, value_name = "SECONDS", value_parser = crate::support::numbers::positive_seconds)]
+    linger: Option<f64>,
     /// Carry a simulated bus to and from another bus while it runs, e.g. bus2=vcan0 (a
     /// SocketCAN interface, for candump and the other can-utils) or
     /// bus3=socketcand:HOST:PORT/NAME; any bus argument. Repeatable.
@@ -58,7 +63,7 @@ pub struct Args {
     /// --help for the topics), and the true pose goes to /localization/kinematic_state
     /// (nav_msgs/Odometry). Real time.
     #[cfg(feature = "ros2")]
-    #[arg(long, conflicts_with = "fast")]
+    #[arg(long, conflicts_with_all = ["fast", "linger"])]
     ros2: bool,
     #[cfg(feature = "ros2")]
     #[command(flatten)]
@@ -107,7 +112,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
     // In a terminal, in real time: the live view.
-    let live = !args.fast && !args.no_view && std::io::IsTerminal::is_terminal(&std::io::stdout());
+    let live = !args.fast
+        && !args.no_view
+        && args.linger.is_none()
+        && std::io::IsTerminal::is_terminal(&std::io::stdout());
     #[cfg(feature = "ros2")]
     let over_ros2 = args.ros2;
     #[cfg(not(feature = "ros2"))]
@@ -267,5 +275,25 @@ fn run_plain(
             }
         }
     };
+    if let Some(seconds) = args.linger {
+        writeln!(
+            out,
+            "lingering for {seconds} s in real time, the buses still served (Ctrl-C ends it)"
+        )?;
+        out.flush()?;
+        let (sim_from, wall_from) = (tug.now(), Instant::now());
+        let linger = Duration::from_secs_f64(seconds);
+        while wall_from.elapsed() < linger && !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            scenario.step(tug);
+            shared.exchange(tug)?;
+            let ahead = tug
+                .now()
+                .saturating_since(sim_from)
+                .saturating_sub(wall_from.elapsed());
+            if !ahead.is_zero() {
+                std::thread::sleep(ahead);
+            }
+        }
+    }
     Ok(completed)
 }
