@@ -72,7 +72,14 @@ pub fn parse_date(text: &str) -> Option<u64> {
         Some("AM" | "PM") | None => {}
         Some(_) => return None,
     }
-    if !(1..=31).contains(&day) || hour > 23 || minute > 59 || second > 60 || fraction.len() > 9 {
+    // Years a timestamp in nanoseconds since 1970 can hold (and the calendar's arithmetic).
+    if !(1970..=2554).contains(&year)
+        || !(1..=31).contains(&day)
+        || hour > 23
+        || minute > 59
+        || second > 60
+        || fraction.len() > 9
+    {
         return None;
     }
     let nanos = if fraction.is_empty() {
@@ -660,6 +667,7 @@ mod tests {
             "Nov 14 22:13 2023",
             // Far beyond what nanoseconds since 1970 hold (found by fuzzing).
             "Nov 14 22:13:20 9999999999999",
+            "Nov 14 22:13:20 -999999999999999999",
         ] {
             assert_eq!(parse_date(bad), None, "{bad}");
         }
