@@ -1,7 +1,8 @@
 //! `bywire isotp` against the Linux kernel's ISO-TP (`can-isotp`) and can-utils' isotpsend and
 //! isotprecv, on vcan inside `../shared/tools/canvm.sh`: 4095-byte messages both ways with
 //! block sizes and STmin (one side's flow control obeyed by the other, read off candump's
-//! timestamps), classic and CAN FD, and an escape-length message beyond 4095 bytes.
+//! timestamps), classic and CAN FD, an escape-length message beyond 4095 bytes, and extended
+//! addressing on 29-bit identifiers both ways.
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -126,6 +127,19 @@ echo "== long from the kernel"
 $B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv6.txt &
 run sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4800.txt"
 cat recv6.txt
+echo "== extended to the kernel"
+isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 -b 2 -m 01 vcan0 > recv7.txt &
+run sh -c "head -c 900 {d}/m4095.txt | $B isotp send vcan0 -s 18DA10F1 -d 18DAF110 -x 10:F1"
+cat recv7.txt
+echo "== extended from the kernel"
+$B isotp recv vcan0 -s 18DAF110 -d 18DA10F1 -x F1:10 -b 3 > recv8.txt &
+run sh -c "head -c 900 {d}/m4095.txt | isotpsend -s 18DA10F1 -d 18DAF110 -x 10:F1 vcan0"
+cat recv8.txt
+echo "== extended dump"
+candump -ta vcan0 > dump9.txt & D=$!
+isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 vcan0 > /dev/null &
+run sh -c "head -c 60 {d}/m4095.txt | $B isotp send vcan0 -s 18DA10F1 -d 18DAF110 -x 10:F1"
+cat dump9.txt
 echo "== dumps"
 isotpdump -s 7E0 -d 7E8 -a vcan0 > theirs.txt & P1=$!
 $B isotp dump vcan0 -s 7E0 -d 7E8 -a > ours.txt & P2=$!
@@ -182,6 +196,32 @@ echo "== end"
     let long_want = hex(&long).trim().to_string();
     let to = received("long to the kernel");
     let from = received("long from the kernel");
+    // Extended addressing on 29-bit identifiers (the address byte first in every frame),
+    // both ways; the first 300 bytes of the message (900 hex characters with spaces).
+    let short = hex(&message[..300]).trim().to_string();
+    assert_eq!(
+        received("extended to the kernel"),
+        short,
+        "bywire → kernel, -x"
+    );
+    assert_eq!(
+        received("extended from the kernel"),
+        short,
+        "kernel → bywire, -x"
+    );
+    let extended = frames(section(&out, "extended dump"));
+    // 20 bytes: a first frame (5 of them behind the address byte), its flow control, three
+    // consecutive frames.
+    assert_eq!(extended.len(), 5, "{extended:?}");
+    for (_, id, data) in &extended {
+        let (address, expected_id) = if id == "18DA10F1" {
+            (0x10, true)
+        } else {
+            (0xF1, id == "18DAF110")
+        };
+        assert!(expected_id, "{id}");
+        assert_eq!(data[0], address, "{id} {data:02X?}");
+    }
     // The dump reads every frame as isotpdump does, line for line (SF, FF, CF, FC in both
     // directions, classic and FD, with the ASCII column).
     let theirs = section(&out, "theirs");
