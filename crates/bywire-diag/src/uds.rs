@@ -333,6 +333,25 @@ impl UdsServer {
         self.dids.insert(id, did);
     }
 
+    /// Change a DID's value in place (no allocation when its length stays); a DID not yet
+    /// set becomes a read-only one.
+    pub fn set_did_value(&mut self, id: u16, value: &[u8]) {
+        match self.dids.get_mut(&id) {
+            Some(did) if did.value.len() == value.len() => did.value.copy_from_slice(value),
+            Some(did) => did.value = value.to_vec(),
+            None => {
+                self.dids.insert(
+                    id,
+                    Did {
+                        value: value.to_vec(),
+                        writable_in: Vec::new(),
+                        secured: false,
+                    },
+                );
+            }
+        }
+    }
+
     /// A DID's value.
     pub fn did(&self, id: u16) -> Option<&[u8]> {
         self.dids.get(&id).map(|d| d.value.as_slice())

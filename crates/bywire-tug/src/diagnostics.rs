@@ -564,39 +564,36 @@ impl Diagnostics {
     /// The values DIDs show now: battery (from the BMS's frame, if one came) and odometer,
     /// and the drives' emergency history.
     pub fn refresh_values(&mut self, now: Timestamp, battery: Option<(f64, f64, f64)>) {
-        let read_only = |value: Vec<u8>| Did {
-            value,
-            writable_in: Vec::new(),
-            secured: false,
-        };
+        // Every report cycle: the values change in place, nothing is allocated.
+        let mut value = [0u8; 5];
         if let Some((soc, voltage, current)) = battery {
-            let mut value = vec![round_u8(soc)];
-            value.extend_from_slice(&round_u16(voltage * 10.0).to_be_bytes());
-            value.extend_from_slice(&centi(current / 10.0).to_be_bytes());
-            self.server.set_did(did::BATTERY, read_only(value));
-        } else if self.server.did(did::BATTERY).is_none() {
-            self.server.set_did(did::BATTERY, read_only(vec![0; 5]));
+            let [v0, v1] = round_u16(voltage * 10.0).to_be_bytes();
+            let [c0, c1] = centi(current / 10.0).to_be_bytes();
+            value = [round_u8(soc), v0, v1, c0, c1];
+        }
+        if battery.is_some() || self.server.did(did::BATTERY).is_none() {
+            self.server.set_did_value(did::BATTERY, &value);
         }
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         let metres = self.odometer_m.clamp(0.0, f64::from(u32::MAX)) as u32;
         self.server
-            .set_did(did::ODOMETER, read_only(metres.to_be_bytes().to_vec()));
-        let mut history = Vec::with_capacity(32);
-        for (node, (count, code)) in STEERING_NODES
-            .iter()
-            .chain(&DRIVE_NODES)
+            .set_did_value(did::ODOMETER, &metres.to_be_bytes());
+        let mut history = [0u8; 32];
+        for ((entry, node), (count, code)) in history
+            .chunks_exact_mut(4)
+            .zip(STEERING_NODES.iter().chain(&DRIVE_NODES))
             .zip(self.emergencies)
         {
-            history.push(*node);
-            history.push(count);
-            history.extend_from_slice(&code.to_be_bytes());
+            let [hi, lo] = code.to_be_bytes();
+            entry.copy_from_slice(&[*node, count, hi, lo]);
         }
+        self.server.set_did_value(did::DRIVE_EMERGENCIES, &history);
         self.server
-            .set_did(did::DRIVE_EMERGENCIES, read_only(history));
-        let now_values = self.snapshot(now);
-        for (id, value) in now_values {
-            self.server.set_did(id, read_only(value));
-        }
+            .set_did_value(did::TIME, &millis(now).to_be_bytes());
+        self.server
+            .set_did_value(did::SPEED, &centi(self.speed).to_be_bytes());
+        self.server
+            .set_did_value(did::STEERING_ANGLE, &centi(self.steering).to_be_bytes());
     }
 }
 
