@@ -235,8 +235,10 @@ impl UdsClient {
     /// The transition function: every (state, input) pair, and what it leaves behind.
     fn step(&mut self, now: Timestamp, input: Input) {
         let (next, outcome) = match (self.state, input) {
-            (State::Idle, Input::Received(_) | Input::Sent | Input::Tick) => (State::Idle, None),
-            (State::Idle, Input::Failed(_)) => (State::Idle, None),
+            // Nothing asked: a stray answer, a late failure or time change nothing.
+            (State::Idle, Input::Received(_) | Input::Sent | Input::Tick | Input::Failed(_)) => {
+                (State::Idle, None)
+            }
             (State::Sending { service, .. }, Input::Sent) => (
                 State::Awaiting {
                     service,

@@ -245,7 +245,8 @@ fn the_steering_calibration_sweep_runs_at_standstill_only_and_reports_offsets() 
     let step = |t: &mut Tug| t.step();
     tester.unlock(&mut tug, &step);
     // Moving under the ADS: refused.
-    let start = [0x31, 0x01, 0x02, 0x03];
+    let [hi, lo] = CALIBRATION_ROUTINE.to_be_bytes();
+    let start = [0x31, 0x01, hi, lo];
     assert_eq!(
         tester.ask(&mut tug, &step, &start),
         Err(ClientError::Negative {
@@ -253,7 +254,6 @@ fn the_steering_calibration_sweep_runs_at_standstill_only_and_reports_offsets() 
             code: nrc::CONDITIONS_NOT_CORRECT
         })
     );
-    assert_eq!(CALIBRATION_ROUTINE, 0x0203);
     // A silent ADS: the tug brakes to standstill and falls back to manual.
     let widest = std::cell::Cell::new(0.0f64);
     let quiet = |t: &mut Tug| {
@@ -274,7 +274,7 @@ fn the_steering_calibration_sweep_runs_at_standstill_only_and_reports_offsets() 
     tester.unlock(&mut tug, &quiet);
     let started = tug.now();
     let answer = tester.ask(&mut tug, &quiet, &start).unwrap();
-    assert_eq!(answer, vec![0x71, 0x01, 0x02, 0x03, 0x00]);
+    assert_eq!(answer, vec![0x71, 0x01, hi, lo, 0x00]);
     // Answered once the sweep is done (through response pending), the wheels swept.
     assert!(tug.now().saturating_since(started) >= SWEEP_TIME);
     assert!(
@@ -282,9 +282,7 @@ fn the_steering_calibration_sweep_runs_at_standstill_only_and_reports_offsets() 
         "the sweep reached {} degrees",
         widest.get()
     );
-    let results = tester
-        .ask(&mut tug, &quiet, &[0x31, 0x03, 0x02, 0x03])
-        .unwrap();
+    let results = tester.ask(&mut tug, &quiet, &[0x31, 0x03, hi, lo]).unwrap();
     assert_eq!(results.len(), 4 + 8, "{results:02X?}");
     // Healthy sensors: each corner's offset is well under a degree.
     for pair in results[4..].chunks_exact(2) {

@@ -436,15 +436,24 @@ impl Diagnostics {
         self.requests.clear();
     }
 
-    fn snapshot(&self, now: Timestamp) -> Vec<(u16, Vec<u8>)> {
-        vec![
-            (did::TIME, millis(now).to_be_bytes().to_vec()),
-            (did::SPEED, centi(self.speed).to_be_bytes().to_vec()),
-            (
-                did::STEERING_ANGLE,
-                centi(self.steering).to_be_bytes().to_vec(),
-            ),
+    /// The snapshot's DIDs and their values now (the time's 4 bytes, the others' first 2).
+    fn snapshot_values(&self, now: Timestamp) -> [(u16, [u8; 4], usize); 3] {
+        let two = |v: i16| {
+            let [a, b] = v.to_be_bytes();
+            [a, b, 0, 0]
+        };
+        [
+            (did::TIME, millis(now).to_be_bytes(), 4),
+            (did::SPEED, two(centi(self.speed)), 2),
+            (did::STEERING_ANGLE, two(centi(self.steering)), 2),
         ]
+    }
+
+    fn snapshot(&self, now: Timestamp) -> Vec<(u16, Vec<u8>)> {
+        self.snapshot_values(now)
+            .iter()
+            .map(|(id, bytes, len)| (*id, bytes.get(..*len).unwrap_or(&[]).to_vec()))
+            .collect()
     }
 
     /// One monitor's result: failed on the condition's rising edge (with a snapshot),
@@ -588,12 +597,10 @@ impl Diagnostics {
             entry.copy_from_slice(&[*node, count, hi, lo]);
         }
         self.server.set_did_value(did::DRIVE_EMERGENCIES, &history);
-        self.server
-            .set_did_value(did::TIME, &millis(now).to_be_bytes());
-        self.server
-            .set_did_value(did::SPEED, &centi(self.speed).to_be_bytes());
-        self.server
-            .set_did_value(did::STEERING_ANGLE, &centi(self.steering).to_be_bytes());
+        for (id, bytes, len) in self.snapshot_values(now) {
+            self.server
+                .set_did_value(id, bytes.get(..len).unwrap_or(&[]));
+        }
     }
 }
 

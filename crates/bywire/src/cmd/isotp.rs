@@ -6,10 +6,10 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_core::{Id, Timestamp};
-use bywire_diag::isotp::{Addressing, IsoTp, IsoTpConfig, IsoTpEvent, StMin};
+use bywire_diag::isotp::{IsoTp, IsoTpConfig, IsoTpEvent, StMin};
 
 use crate::support::busarg;
-use crate::support::numbers::can_id;
+use crate::support::numbers::{can_id, extended_addressing, hex_u8};
 
 /// The most hex input `send` reads (an ISO-TP message of up to 4 GiB is not typed by hand).
 const MAX_INPUT: u64 = 64 << 20;
@@ -118,10 +118,6 @@ pub struct ChannelArgs {
     max_message: usize,
 }
 
-fn hex_u8(text: &str) -> Result<u8, String> {
-    u8::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex byte"))
-}
-
 impl ChannelArgs {
     fn config(&self) -> Result<IsoTpConfig> {
         let mut c = IsoTpConfig::new(
@@ -129,12 +125,7 @@ impl ChannelArgs {
             can_id(&self.destination, "-d")?,
         );
         if let Some(x) = &self.extended {
-            let (tx, rx) = x.split_once(':').unwrap_or((x, x));
-            let byte = |t: &str| hex_u8(t).map_err(|e| anyhow!("-x {x}: {e}"));
-            c.addressing = Addressing::Extended {
-                target: byte(tx)?,
-                source: byte(if rx.is_empty() { tx } else { rx })?,
-            };
+            c.addressing = extended_addressing(x)?;
         }
         if let Some(p) = &self.padding {
             let tx = p.split(':').next().unwrap_or_default();

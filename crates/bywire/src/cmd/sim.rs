@@ -269,10 +269,7 @@ fn run_plain(
             out.flush()?;
         }
         if !args.fast {
-            let behind = Duration::from_nanos(now.as_nanos()).saturating_sub(start.elapsed());
-            if !behind.is_zero() {
-                std::thread::sleep(behind);
-            }
+            keep_pace(Duration::from_nanos(now.as_nanos()), start);
         }
     };
     if let Some(seconds) = args.linger {
@@ -286,14 +283,16 @@ fn run_plain(
         while wall_from.elapsed() < linger && !stop.load(std::sync::atomic::Ordering::Relaxed) {
             scenario.step(tug);
             shared.exchange(tug)?;
-            let ahead = tug
-                .now()
-                .saturating_since(sim_from)
-                .saturating_sub(wall_from.elapsed());
-            if !ahead.is_zero() {
-                std::thread::sleep(ahead);
-            }
+            keep_pace(tug.now().saturating_since(sim_from), wall_from);
         }
     }
     Ok(completed)
+}
+
+/// Real time: wait while `simulated` (since `wall_start`) is ahead of the wall clock.
+fn keep_pace(simulated: Duration, wall_start: Instant) {
+    let ahead = simulated.saturating_sub(wall_start.elapsed());
+    if !ahead.is_zero() {
+        std::thread::sleep(ahead);
+    }
 }

@@ -12,12 +12,12 @@ use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
 use bywire_diag::describe::{self, Description};
-use bywire_diag::isotp::{Addressing, IsoTpConfig};
+use bywire_diag::isotp::IsoTpConfig;
 use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 use serde_json::{json, Value};
 
 use crate::support::busarg;
-use crate::support::numbers::can_id;
+use crate::support::numbers::{can_id, extended_addressing, hex_u8};
 
 /// How the tester reaches the ECU, and what it does first.
 #[derive(clap::Args)]
@@ -396,18 +396,11 @@ impl UdsCommand {
 impl Tester {
     fn channel(&self) -> Result<IsoTpConfig> {
         let mut config = IsoTpConfig::new(can_id(&self.tx, "--tx")?, can_id(&self.rx, "--rx")?);
-        let byte = |t: &str, option: &str| {
-            u8::from_str_radix(t, 16).map_err(|_| anyhow!("{option} {t}: not a hex byte"))
-        };
         if let Some(x) = &self.extended {
-            let (target, source) = x.split_once(':').unwrap_or((x, x));
-            config.addressing = Addressing::Extended {
-                target: byte(target, "-x")?,
-                source: byte(if source.is_empty() { target } else { source }, "-x")?,
-            };
+            config.addressing = extended_addressing(x)?;
         }
         if let Some(p) = &self.padding {
-            config.padding = Some(byte(p, "--padding")?);
+            config.padding = Some(hex_byte(p, "--padding")?);
         }
         Ok(config)
     }
@@ -418,6 +411,18 @@ impl Tester {
             p2_extended: std::time::Duration::from_millis(self.p2_star_ms),
             ..ClientTiming::default()
         }
+    }
+
+    /// The key request for a seed answer at `level`; `None` when the seed is zero (already
+    /// unlocked).
+    fn key_request(&self, level: u8, answer: &[u8]) -> Result<Option<Vec<u8>>> {
+        let seed = answer.get(2..).unwrap_or(&[]);
+        if seed.iter().all(|b| *b == 0) {
+            return Ok(None);
+        }
+        let mut request = vec![0x27, level.wrapping_add(1)];
+        request.extend(self.key(level, seed)?);
+        Ok(Some(request))
     }
 
     /// The key for `seed` at `level`.
@@ -460,9 +465,9 @@ fn hex_u16(text: &str, what: &str) -> Result<u16> {
         .map_err(|_| anyhow!("{what} {text}: not a 16-bit hex number"))
 }
 
-fn hex_u8(text: &str, what: &str) -> Result<u8> {
-    u8::from_str_radix(text.trim_start_matches("0x"), 16)
-        .map_err(|_| anyhow!("{what} {text}: not a hex byte"))
+/// A hex byte (0x allowed) named by `what`.
+fn hex_byte(text: &str, what: &str) -> Result<u8> {
+    hex_u8(text.trim_start_matches("0x")).map_err(|e| anyhow!("{what} {text}: {e}"))
 }
 
 /// What the tester does: its requests, each chosen once the answer to the one before is in.
@@ -485,6 +490,8 @@ enum Step {
     Seed,
     Key,
     Main,
+    /// `security`'s own key, after its seed.
+    MainKey,
     /// With --snapshots: snapshot (false) or extended data (true) of the i-th DTC.
     Detail(usize, bool),
 }
@@ -498,17 +505,18 @@ impl Script<'_> {
         if let Some(answer) = answer {
             match step {
                 Step::Seed => {
-                    let seed = answer.get(2..).unwrap_or(&[]);
-                    // A zero seed: already unlocked.
-                    if !seed.iter().all(|b| *b == 0) {
-                        let level = t.security.unwrap_or(1);
-                        let mut request = vec![0x27, level.wrapping_add(1)];
-                        request.extend(t.key(level, seed)?);
+                    if let Some(request) = t.key_request(t.security.unwrap_or(1), &answer)? {
                         self.step = Step::Key;
                         return Ok(Some(request));
                     }
                 }
                 Step::Main => {
+                    if let UdsCommand::Security { level, .. } = self.command {
+                        if let Some(request) = t.key_request(*level, &answer)? {
+                            self.step = Step::MainKey;
+                            return Ok(Some(request));
+                        }
+                    }
                     if let (
                         UdsCommand::ReadDtc {
                             snapshots: true, ..
@@ -520,7 +528,7 @@ impl Script<'_> {
                     }
                     self.answers.push(answer);
                 }
-                Step::Detail(..) => self.answers.push(answer),
+                Step::MainKey | Step::Detail(..) => self.answers.push(answer),
                 Step::Start | Step::Session | Step::Key => {}
             }
         }
@@ -530,7 +538,7 @@ impl Script<'_> {
                 Step::Start => Step::Session,
                 Step::Session => Step::Seed,
                 Step::Seed | Step::Key => Step::Main,
-                Step::Main => Step::Detail(0, false),
+                Step::Main | Step::MainKey => Step::Detail(0, false),
                 Step::Detail(i, false) => Step::Detail(i, true),
                 Step::Detail(i, true) => Step::Detail(i + 1, false),
             };
@@ -545,7 +553,7 @@ impl Script<'_> {
                     }
                     None => None,
                 },
-                Step::Key => None,
+                Step::Key | Step::MainKey => None,
                 Step::Main => Some(self.main_request()?),
                 Step::Detail(i, extended) => {
                     let Some((dtc, _)) = self.dtcs.get(i) else {
@@ -605,7 +613,7 @@ impl Script<'_> {
                 vec![
                     0x19,
                     if *count { 0x01 } else { 0x02 },
-                    hex_u8(status, "--status")?,
+                    hex_byte(status, "--status")?,
                 ]
             }
             UdsCommand::ClearDtc { group, .. } => {
@@ -639,7 +647,7 @@ impl Script<'_> {
                     "hard" => 1,
                     "keyoffon" => 2,
                     "soft" => 3,
-                    other => hex_u8(other, "reset")?,
+                    other => hex_byte(other, "reset")?,
                 };
                 vec![0x11, sub]
             }
@@ -668,20 +676,6 @@ impl Script<'_> {
             }
         })
     }
-
-    /// A security command's main answer is the seed: the key follows.
-    fn security_key(&mut self, answer: &[u8]) -> Result<Option<Vec<u8>>> {
-        let UdsCommand::Security { level, .. } = self.command else {
-            return Ok(None);
-        };
-        let seed = answer.get(2..).unwrap_or(&[]);
-        if answer.get(1) != Some(level) || seed.iter().all(|b| *b == 0) {
-            return Ok(None);
-        }
-        let mut request = vec![0x27, level.wrapping_add(1)];
-        request.extend(self.tester.key(*level, seed)?);
-        Ok(Some(request))
-    }
 }
 
 fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
@@ -707,7 +701,6 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
     let mut queued: Option<Vec<u8>> = None;
     let mut started = false;
     let mut last_request = Vec::new();
-    let mut key_sent = false;
     let mut hooks = |client: &mut UdsClient, now: Timestamp| {
         if !started {
             started = true;
@@ -726,20 +719,7 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
                     return Flow::Stop;
                 }
             };
-            // `security`'s own seed: the key goes next, and its answer is the result.
-            let next = if script.step == Step::Main && !key_sent {
-                match script.security_key(&answer) {
-                    Ok(Some(key)) => {
-                        key_sent = true;
-                        Ok(Some(key))
-                    }
-                    Ok(None) => script.next(Some(answer)),
-                    Err(e) => Err(e),
-                }
-            } else {
-                script.next(Some(answer))
-            };
-            match next {
+            match script.next(Some(answer)) {
                 Ok(next) => queued = next,
                 Err(e) => {
                     failure = Some(e);

@@ -95,6 +95,22 @@ pub fn can_id(text: &str, option: &str) -> anyhow::Result<bywire_core::Id> {
     id.map_err(|e| anyhow::anyhow!("{option} {text}: {e}"))
 }
 
+/// A hex byte, as can-utils reads one (a clap value parser too).
+pub fn hex_u8(text: &str) -> Result<u8, String> {
+    u8::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex byte"))
+}
+
+/// can-utils' `-x ADDR[:RXADDR]`: extended addressing with the address byte sent and, if
+/// given, the one received (else the same).
+pub fn extended_addressing(text: &str) -> anyhow::Result<bywire_diag::isotp::Addressing> {
+    let (tx, rx) = text.split_once(':').unwrap_or((text, text));
+    let byte = |t: &str| hex_u8(t).map_err(|e| anyhow::anyhow!("-x {text}: {e}"));
+    Ok(bywire_diag::isotp::Addressing::Extended {
+        target: byte(tx)?,
+        source: byte(if rx.is_empty() { tx } else { rx })?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
