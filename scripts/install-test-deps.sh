@@ -34,6 +34,8 @@ python3 -m pip install -q --disable-pip-version-check cyclonedds==11.0.1
 python3 -m pip install -q --disable-pip-version-check can-isotp==2.0.7 udsoncan==1.26.1
 # crccheck: CRC-15/CAN oracle; autosar-e2e: AUTOSAR E2E profile oracle; cantools: DBC decode.
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
+# cryptography: the CMAC-AES-128 under cantools' SecOC framing, the peer of bywire-secoc.
+python3 -m pip install -q --disable-pip-version-check cryptography==48.0.0
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
 ../shared/tools/canvm.sh prepare
 # python-can and cantools for Debian's Python inside the VM (tests include the folder there): an

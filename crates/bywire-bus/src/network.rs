@@ -115,6 +115,8 @@ impl Network {
     pub fn wire(&mut self, node: NodeIndex, port: Port, bus: BusIndex) -> Option<NodeId> {
         let (_, sim) = self.buses.get_mut(bus)?;
         let endpoint = sim.add_node();
+        // A node's own frames come back as its transmit confirmations.
+        sim.set_receive_own(endpoint, true);
         self.wires.push(Wire {
             node,
             port,
@@ -320,9 +322,22 @@ impl Network {
                 continue;
             };
             let mut got = false;
+            let mut confirmed = false;
             while let Some(r) = sim.receive_by(w.endpoint, now) {
-                node.on_frame(r.timestamp, w.port, &r.frame);
-                got = true;
+                if r.own {
+                    node.on_sent(r.timestamp, w.port, &r.frame);
+                    confirmed = true;
+                } else {
+                    node.on_frame(r.timestamp, w.port, &r.frame);
+                    got = true;
+                }
+            }
+            // A confirmation moves the node's deadline (its next frame may be due now); it
+            // is polled when that comes, not for the confirmation itself.
+            if confirmed {
+                if let Some(slot) = self.deadlines.get_mut(w.node) {
+                    *slot = node.next_deadline();
+                }
             }
             if got {
                 if let Some(flag) = self.received.get_mut(w.node) {

@@ -4,6 +4,10 @@
 //! Each endpoint is split; a receive thread per endpoint hands frames to the runner through
 //! one bounded queue (when the runner falls behind, the queue fills and the backend's own
 //! queue counts the drops), and the runner's thread polls the node and sends what it emits.
+//! Each bus is asked to echo what it sends: the echo is the node's transmit confirmation
+//! ([`Node::on_sent`]); a backend that cannot echo (socketcand, SLCAN) confirms a frame when
+//! it accepts it. An echo must pass the endpoint's own filters (SocketCAN applies them to
+//! it), so a filtered bus should let the node's own identifiers through.
 //! A bus that fails is reported to the caller ([`Hooks::bus_lost`]) and left out from then
 //! on: the node goes on running on the others, so losing a redundant bus degrades instead of
 //! silencing the healthy one. The run ends with an error only when every bus is lost.
@@ -86,6 +90,8 @@ pub struct RunStats {
 
 enum Arrival {
     Frame(Port, Frame),
+    /// The backend's echo of a frame this runner sent (its transmit confirmation).
+    Sent(Port, Frame),
     Lost(Port, BusError),
     Wake,
 }
@@ -105,6 +111,8 @@ impl Waker {
 struct Attached {
     port: Port,
     tx: Option<Box<dyn BusTx>>,
+    /// The backend echoes what it sent; otherwise a frame is confirmed once accepted.
+    echoes: bool,
 }
 
 /// A node's endpoints, ready to run.
@@ -125,16 +133,22 @@ impl Runner {
         let ended = Arc::new(AtomicBool::new(false));
         let mut attached = Vec::with_capacity(endpoints.len());
         let mut receivers = Vec::with_capacity(endpoints.len());
-        for (port, bus) in endpoints {
+        for (port, mut bus) in endpoints {
+            // Own frames come back as transmit confirmations where the backend can echo.
+            let echoes = bus.set_receive_own(true).is_ok();
             let (tx, mut rx) = bus.split();
-            attached.push(Attached { port, tx: Some(tx) });
+            attached.push(Attached {
+                port,
+                tx: Some(tx),
+                echoes,
+            });
             let queue = sender.clone();
             let ended = Arc::clone(&ended);
             receivers.push(std::thread::spawn(move || {
                 while !ended.load(Ordering::Relaxed) {
                     let arrival = match rx.recv(Some(RECEIVE_SLICE)) {
                         Ok(None) => continue,
-                        Ok(Some(r)) if r.own => continue,
+                        Ok(Some(r)) if r.own => Arrival::Sent(port, r.frame),
                         Ok(Some(r)) => Arrival::Frame(port, r.frame),
                         Err(e) => {
                             let _ = queue.send(Arrival::Lost(port, e));
@@ -229,6 +243,7 @@ impl Runner {
                         self.stats.received = self.stats.received.saturating_add(1);
                         node.on_frame(now, port, &frame);
                     }
+                    Arrival::Sent(port, frame) => node.on_sent(now, port, &frame),
                     Arrival::Lost(port, error) => self.lose(node, hooks, now, port, &error),
                     Arrival::Wake => {}
                 }
@@ -236,7 +251,7 @@ impl Runner {
         }
     }
 
-    fn send<N>(
+    fn send<N: Node>(
         &mut self,
         node: &mut N,
         hooks: &mut impl Hooks<N>,
@@ -253,7 +268,12 @@ impl Runner {
             return;
         };
         match tx.send(frame) {
-            Ok(()) => self.stats.sent = self.stats.sent.saturating_add(1),
+            Ok(()) => {
+                self.stats.sent = self.stats.sent.saturating_add(1);
+                if !attached.echoes {
+                    node.on_sent(now, port, frame);
+                }
+            }
             // A frame this bus cannot carry is refused, not a lost bus.
             Err(BusError::Unsupported(_)) => {
                 self.stats.unattached = self.stats.unattached.saturating_add(1)
@@ -389,6 +409,112 @@ mod tests {
         let mut heard = node.heard.clone();
         heard.sort();
         assert_eq!(heard, vec![Port(0), Port(1)]);
+    }
+
+    /// Sends frame 0x30 on each port once, and records the confirmations it is given.
+    #[derive(Default)]
+    struct Confirmed {
+        sent: bool,
+        confirmed: Vec<(Port, Frame)>,
+        heard: usize,
+    }
+
+    impl Node for Confirmed {
+        fn on_frame(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {
+            self.heard += 1;
+        }
+        fn on_sent(&mut self, _now: Timestamp, port: Port, frame: &Frame) {
+            self.confirmed.push((port, *frame));
+        }
+        fn poll(&mut self, _now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            if !std::mem::replace(&mut self.sent, true) {
+                for port in 0..3 {
+                    out(Port(port), frame(0x30));
+                }
+            }
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            None
+        }
+    }
+
+    /// A virtual bus that cannot echo, as socketcand and SLCAN cannot.
+    struct NoEcho(VirtualBus);
+
+    impl BusTx for NoEcho {
+        fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
+            self.0.send(frame)
+        }
+    }
+    impl crate::BusRx for NoEcho {
+        fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<crate::Received>, BusError> {
+            self.0.recv(timeout)
+        }
+        fn stats(&self) -> crate::Stats {
+            self.0.stats()
+        }
+    }
+
+    impl Bus for NoEcho {
+        fn set_filtering(&mut self, filtering: crate::Filtering) -> Result<(), BusError> {
+            self.0.set_filtering(filtering)
+        }
+        fn set_receive_own(&mut self, _: bool) -> Result<(), BusError> {
+            Err(BusError::Unsupported("receive-own".into()))
+        }
+        fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
+            self.0.set_loopback(on)
+        }
+        fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn crate::BusRx>) {
+            Box::new(self.0).split()
+        }
+    }
+
+    /// Each frame sent is confirmed once, on its port, as a confirmation and not as a frame:
+    /// from the echo of a bus that echoes; when accepted by one that cannot echo; from a
+    /// silenced bus (its frames dropped) never.
+    #[test]
+    fn frames_sent_are_confirmed_by_their_echo_and_only_when_they_went_out() {
+        use crate::faults::{Action, FaultyBus, Match, Rule, When};
+        let echoing = VirtualBus::join("runner-confirm-a");
+        let silenced = FaultyBus::new(
+            VirtualBus::join("runner-confirm-b"),
+            vec![Rule {
+                matching: Match::All,
+                when: When::Always,
+                action: Action::Drop,
+            }],
+            1,
+        );
+        let mut peer = VirtualBus::join("runner-confirm-a");
+        let mut runner = Runner::new(vec![
+            (Port(0), Box::new(echoing)),
+            (Port(1), Box::new(silenced)),
+            (
+                Port(2),
+                Box::new(NoEcho(VirtualBus::join("runner-confirm-c"))),
+            ),
+        ]);
+        let mut node = Confirmed::default();
+        let stop = AtomicBool::new(false);
+        let ended = runner
+            .run(
+                &mut node,
+                &stop,
+                Some(Duration::from_millis(300)),
+                &mut |_: &mut Confirmed, _| Flow::Continue,
+            )
+            .unwrap();
+        assert_eq!(ended, Ended::TimeLimit);
+        node.confirmed.sort_by_key(|(port, _)| *port);
+        assert_eq!(
+            node.confirmed,
+            vec![(Port(0), frame(0x30)), (Port(2), frame(0x30))]
+        );
+        assert_eq!(node.heard, 0, "an echo is not a frame heard");
+        assert_eq!(runner.stats().received, 0);
+        let got = peer.recv(Some(Duration::from_secs(1))).unwrap().unwrap();
+        assert_eq!(got.frame, frame(0x30));
     }
 
     /// A waker from another thread has a node without a deadline polled at once, not at the

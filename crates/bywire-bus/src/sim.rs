@@ -705,9 +705,10 @@ impl SimBus {
             });
             for (node, n) in self.nodes.iter_mut().enumerate() {
                 let own = node == winner;
+                // The sender's own copy is its transmit confirmation, past its filters.
                 if n.confinement.state() == NodeState::BusOff
                     || (own && !n.receive_own)
-                    || !n.filtering.accepts(&frame)
+                    || (!own && !n.filtering.accepts(&frame))
                 {
                     continue;
                 }

@@ -13,12 +13,17 @@
 //! 1. Time never goes backwards: each call's `now` is at or after the previous call's.
 //! 2. `on_frame(now, port, frame)` is called with the time the frame became available to the
 //!    node: its end of frame on a simulated bus, the moment the runner took it from the
-//!    backend in real time. A node's own frames are not given back to it.
-//! 3. `poll(now, out)` is called after every batch of frames delivered at one time, and
+//!    backend in real time. A node's own frames are not given back to it as frames.
+//! 3. `on_sent(now, port, frame)` confirms that a frame the node gave to `out` went onto the
+//!    bus (ISO-TP's N_As/N_Ar are timed from it): at its end of frame in simulation; in real
+//!    time when the backend echoes it (SocketCAN's own-message loopback), or, on a backend
+//!    that cannot echo, when the backend accepted it. A frame that never made it (a silenced
+//!    node, a bus without acknowledgement) is never confirmed.
+//! 4. `poll(now, out)` is called after every batch of frames delivered at one time, and
 //!    otherwise no later than [`Node::next_deadline`] (as soon as a runner can: at that time in
 //!    simulation, within the scheduler's wake-up delay in real time). A node must tolerate
 //!    being polled early or more often than it asked; it must not rely on being polled late.
-//! 4. Frames given to `out` are sent in the order given, on the port named.
+//! 5. Frames given to `out` are sent in the order given, on the port named.
 //!
 //! # Example
 //! ```
@@ -81,6 +86,9 @@ impl fmt::Display for Port {
 pub trait Node {
     /// Take in a frame seen on `port` (a node's own frames are not given back to it).
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame);
+    /// A frame this node sent on `port` is on the bus (its transmit confirmation). Nodes that
+    /// do not time their own transmissions ignore it; its next deadline is asked again after.
+    fn on_sent(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {}
     /// Do what is due at `now`; frames to send go to `out` with the port to send them on.
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame));
     /// The latest time `poll` should next be called (`None`: only when a frame arrives).
@@ -90,6 +98,9 @@ pub trait Node {
 impl<N: Node + ?Sized> Node for &mut N {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         (**self).on_frame(now, port, frame);
+    }
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        (**self).on_sent(now, port, frame);
     }
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         (**self).poll(now, out);

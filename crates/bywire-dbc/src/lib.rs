@@ -32,6 +32,8 @@ mod lexer;
 pub mod lint;
 pub mod model;
 mod parser;
+#[cfg(feature = "secoc")]
+pub mod secoc;
 mod writer;
 
 pub use model::*;

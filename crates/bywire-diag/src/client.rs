@@ -332,6 +332,13 @@ impl UdsClient {
         self.take_channel_events(now);
     }
 
+    /// A frame the client sent is on the bus (its transmit confirmation: P2 starts at the
+    /// request's).
+    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
+        self.channel.on_sent(now, frame);
+        self.take_channel_events(now);
+    }
+
     fn take_channel_events(&mut self, now: Timestamp) {
         // Bounded by the channel's event queue.
         while let Some(event) = self.channel.next_event() {
@@ -399,6 +406,10 @@ impl UdsClient {
 impl Node for UdsClient {
     fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
         UdsClient::on_frame(self, now, frame);
+    }
+
+    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+        UdsClient::on_sent(self, now, frame);
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

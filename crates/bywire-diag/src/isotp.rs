@@ -6,9 +6,14 @@
 //! - Flow control both ways: the receiver's block size and STmin (milliseconds, and the
 //!   100–900 µs codes) are honoured when sending and offered when receiving; WAIT frames up to
 //!   `max_wait_frames`; OVERFLOW when a message is larger than the receive buffer.
-//! - Timers, from the time each call is given: N_Bs (waiting for flow control) and N_Cr
-//!   (waiting for a consecutive frame). N_As/N_Ar (a frame's own transmission) belong to the
-//!   controller: a node hands its frames to the runner and has no confirmation to time.
+//! - Timers, from the time each call is given: N_Bs (waiting for flow control), N_Cr (waiting
+//!   for a consecutive frame) and, when set, N_As/N_Ar (waiting for a frame's own transmit
+//!   confirmation, [`Node::on_sent`](bywire_core::node::Node::on_sent)). With confirmations
+//!   the channel works as the standard's timing diagram does and as Linux's ISO-TP does: one
+//!   frame on its way at a time, N_Bs and N_Cr counted from the confirmation of the frame
+//!   before, STmin from the end of the previous consecutive frame, and [`IsoTpEvent::Sent`]
+//!   only once the last frame is confirmed. Without (the default, for a caller that drives
+//!   the channel by hand) a frame counts as sent when it is handed out.
 //! - Addressing: normal (the identifiers alone; normal fixed 0x18DA/0x18DB for 29 bits is a
 //!   choice of identifiers, [`Addressing::normal_fixed`]), extended (a target address byte
 //!   first) and mixed (an address extension byte first); padding to full frames, or none.
@@ -23,6 +28,9 @@ use core::time::Duration;
 
 use bywire_core::node::Port;
 use bywire_core::{Frame, Id, Timestamp};
+
+/// The standard's default for its timeouts (N_As, N_Ar, N_Bs, N_Cr).
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(1000);
 
 /// The largest message the 32-bit first frame can announce that this node takes (a buffer of
 /// this size is never made: `max_message` bounds what is accepted).
@@ -147,15 +155,40 @@ pub struct IsoTpConfig {
     pub n_bs: Duration,
     /// Longest wait for a consecutive frame (N_Cr).
     pub n_cr: Duration,
+    /// Longest wait for the transmit confirmation of a data frame (N_As); `None`: frames are
+    /// not confirmed (the runner gives no [`Node::on_sent`](bywire_core::node::Node::on_sent)).
+    pub n_as: Option<Duration>,
+    /// Longest wait for the transmit confirmation of a flow-control frame (N_Ar).
+    pub n_ar: Option<Duration>,
     /// The largest message received (a longer one is refused with OVERFLOW).
     pub max_message: usize,
     /// Separation time used regardless of what the receiver asks (`None`: the receiver's).
     pub st_min_override: Option<Duration>,
+    /// Added to the separation before each consecutive frame (Linux's `frame_txtime`,
+    /// isotpsend's `-t`).
+    pub frame_gap: Duration,
+    /// The padding byte received frames must carry (with `rx_padding_check.content`).
+    pub rx_padding: Option<u8>,
+    /// What is checked of a received frame's padding (isotprecv's `-P`).
+    pub rx_padding_check: PaddingCheck,
+}
+
+/// Checks of received frames' padding, as Linux's ISO-TP makes them: with an expected
+/// padding byte, the frame's length must be a padded one (8, or the CAN FD length covering
+/// it) and the bytes after the data that byte; without one, the length must be the shortest.
+/// A frame that fails is dropped and the transfer it belongs to fails with
+/// [`IsoTpError::Padding`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PaddingCheck {
+    /// The frame's length.
+    pub length: bool,
+    /// The padding bytes' value.
+    pub content: bool,
 }
 
 impl IsoTpConfig {
     /// Classic frames between `tx_id` and `rx_id`, normal addressing, no padding, BS 0,
-    /// STmin 0, N_Bs and N_Cr 1 s, messages up to 4095 bytes.
+    /// STmin 0, N_Bs and N_Cr 1 s, no transmit confirmations, messages up to 4095 bytes.
     pub fn new(tx_id: Id, rx_id: Id) -> Self {
         IsoTpConfig {
             tx_id,
@@ -168,11 +201,27 @@ impl IsoTpConfig {
             block_size: 0,
             st_min: StMin::Millis(0),
             max_wait_frames: 10,
-            n_bs: Duration::from_millis(1000),
-            n_cr: Duration::from_millis(1000),
+            n_bs: DEFAULT_TIMEOUT,
+            n_cr: DEFAULT_TIMEOUT,
+            n_as: None,
+            n_ar: None,
             max_message: 4095,
             st_min_override: None,
+            frame_gap: Duration::ZERO,
+            rx_padding: None,
+            rx_padding_check: PaddingCheck {
+                length: false,
+                content: false,
+            },
         }
+    }
+
+    /// With N_As and N_Ar of `timeout` (the standard's 1000 ms is usual): for a runner that
+    /// confirms what it sends, as both of bywire's do.
+    pub fn confirmed(mut self, timeout: Duration) -> Self {
+        self.n_as = Some(timeout);
+        self.n_ar = Some(timeout);
+        self
     }
 
     /// The frame length used: 8 for classic frames, `tx_dl` (a valid FD length) for FD.
@@ -193,6 +242,9 @@ impl IsoTpConfig {
 /// What went wrong, by the standard's names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum IsoTpError {
+    /// N_TIMEOUT_A: a frame was not confirmed on the bus in time (N_As sending, N_Ar for a
+    /// flow-control frame while receiving).
+    TimeoutA,
     /// N_TIMEOUT_Bs: no flow control in time.
     TimeoutBs,
     /// N_TIMEOUT_Cr: no consecutive frame in time.
@@ -216,11 +268,16 @@ pub enum IsoTpError {
     BufferOverflow,
     /// A frame whose PCI is malformed (a length that does not fit the frame, a reserved type).
     Malformed,
+    /// A received frame whose padding is not as [`PaddingCheck`] requires (Linux's EBADMSG).
+    Padding,
 }
 
 impl fmt::Display for IsoTpError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
+            IsoTpError::TimeoutA => {
+                f.write_str("N_TIMEOUT_A: a frame was not confirmed sent in time (N_As/N_Ar)")
+            }
             IsoTpError::TimeoutBs => f.write_str("N_TIMEOUT_Bs: no flow control frame in time"),
             IsoTpError::TimeoutCr => f.write_str("N_TIMEOUT_Cr: no consecutive frame in time"),
             IsoTpError::WrongSequenceNumber { expected, received } => write!(
@@ -241,6 +298,7 @@ impl fmt::Display for IsoTpError {
                 f.write_str("N_BUFFER_OVFLW: the message is larger than the receiver takes")
             }
             IsoTpError::Malformed => f.write_str("a malformed ISO-TP frame"),
+            IsoTpError::Padding => f.write_str("a received frame is not padded as required"),
         }
     }
 }
@@ -312,6 +370,15 @@ enum Rx {
     },
 }
 
+/// A frame handed out and not yet confirmed on the bus.
+#[derive(Debug, Clone, PartialEq)]
+struct Unconfirmed {
+    frame: Frame,
+    deadline: Timestamp,
+    /// The message's last frame: its confirmation is the message's.
+    last: bool,
+}
+
 /// Flow statuses.
 const CTS: u8 = 0;
 const WAIT: u8 = 1;
@@ -329,6 +396,10 @@ pub struct IsoTp {
     rx_data: Vec<u8>,
     /// Flow control frames due (flow status).
     flow_due: VecDeque<u8>,
+    /// With N_As: the data frame on its way.
+    unconfirmed_data: Option<Unconfirmed>,
+    /// With N_Ar: the flow-control frame on its way.
+    unconfirmed_flow: Option<Unconfirmed>,
     events: VecDeque<IsoTpEvent>,
 }
 
@@ -344,6 +415,8 @@ impl IsoTp {
             rx: Rx::Idle,
             rx_data: Vec::new(),
             flow_due: VecDeque::new(),
+            unconfirmed_data: None,
+            unconfirmed_flow: None,
             events: VecDeque::new(),
         }
     }
@@ -353,9 +426,9 @@ impl IsoTp {
         &self.config
     }
 
-    /// Whether a message is being sent.
+    /// Whether a message is being sent (its last frame not yet confirmed, with N_As).
     pub fn sending(&self) -> bool {
-        self.tx != Tx::Idle
+        self.tx != Tx::Idle || self.unconfirmed_data.is_some()
     }
 
     /// Send `data` (from the next poll).
@@ -381,6 +454,7 @@ impl IsoTp {
     fn fail(&mut self, sending: bool, error: IsoTpError) {
         if sending {
             self.tx = Tx::Idle;
+            self.unconfirmed_data = None;
         } else {
             self.rx = Rx::Idle;
             self.rx_data.clear();
@@ -431,6 +505,13 @@ impl IsoTp {
             return;
         }
         let Some(&pci) = data.first() else { return };
+        if let Some(used) = self.pdu_length(data, frame.is_fd()) {
+            let used = used + self.config.prefix_len();
+            if !self.padding_ok(frame.data(), used) {
+                // Which transfer the frame belonged to: a flow control is the sender's.
+                return self.fail(pci >> 4 == 3, IsoTpError::Padding);
+            }
+        }
         match pci >> 4 {
             0 => self.on_single(data, frame.is_fd()),
             1 => self.on_first(now, data),
@@ -438,6 +519,52 @@ impl IsoTp {
             3 => self.on_flow(now, data),
             // Reserved PCI types are ignored, as the standard asks.
             _ => {}
+        }
+    }
+
+    /// The bytes of a received frame (after its addressing byte) that its PDU uses, when it may
+    /// be padded: a single frame, flow control, the last consecutive frame of a transfer.
+    fn pdu_length(&self, data: &[u8], fd: bool) -> Option<usize> {
+        let pci = *data.first()?;
+        let used = match pci >> 4 {
+            0 if pci & 0x0F == 0 && fd => 2 + usize::from(*data.get(1)?),
+            0 => 1 + usize::from(pci & 0x0F),
+            2 => match self.rx {
+                Rx::Receiving { length, .. } => 1 + length.saturating_sub(self.rx_data.len()),
+                Rx::Idle => return None,
+            },
+            3 => 3,
+            _ => return None,
+        };
+        (used <= data.len()).then_some(used)
+    }
+
+    /// Whether a received frame of `used` bytes (addressing byte included) is padded as
+    /// required.
+    fn padding_ok(&self, frame: &[u8], used: usize) -> bool {
+        let check = self.config.rx_padding_check;
+        let padded_length = |n: usize| {
+            if n <= 8 {
+                8
+            } else {
+                bywire_core::frame::Dlc::fd_covering(n).map_or(64, bywire_core::frame::Dlc::fd_len)
+            }
+        };
+        match self.config.rx_padding {
+            // No padding expected: the shortest frame (the CAN FD length covering it).
+            None => {
+                !check.length
+                    || if used <= 8 {
+                        frame.len() == used
+                    } else {
+                        frame.len() == padded_length(used)
+                    }
+            }
+            Some(byte) => {
+                (!check.length || frame.len() == padded_length(frame.len()))
+                    && (!check.content
+                        || frame.get(used..).unwrap_or(&[]).iter().all(|b| *b == byte))
+            }
         }
     }
 
@@ -573,7 +700,8 @@ impl IsoTp {
                 let separation = self
                     .config
                     .st_min_override
-                    .unwrap_or_else(|| StMin::from_byte(st_min).duration());
+                    .unwrap_or_else(|| StMin::from_byte(st_min).duration())
+                    .saturating_add(self.config.frame_gap);
                 self.tx = Tx::Consecutive {
                     next_at: now,
                     sequence,
@@ -604,10 +732,37 @@ impl IsoTp {
 
     /// Send what is due at `now`.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
-        // Flow control first: it keeps the peer's transfer going.
-        while let Some(status) = self.flow_due.pop_front() {
+        if self
+            .unconfirmed_flow
+            .as_ref()
+            .is_some_and(|u| now >= u.deadline)
+        {
+            self.unconfirmed_flow = None;
+            self.flow_due.clear();
+            self.fail(false, IsoTpError::TimeoutA);
+        }
+        if self
+            .unconfirmed_data
+            .as_ref()
+            .is_some_and(|u| now >= u.deadline)
+        {
+            self.fail(true, IsoTpError::TimeoutA);
+        }
+        // Flow control first: it keeps the peer's transfer going (one at a time when each
+        // waits for its confirmation).
+        while self.unconfirmed_flow.is_none() {
+            let Some(status) = self.flow_due.pop_front() else {
+                break;
+            };
             let (bs, st) = (self.config.block_size, self.config.st_min.to_byte());
             if let Some(frame) = self.frame(&[0x30 | status, bs, st]) {
+                if let Some(n_ar) = self.config.n_ar {
+                    self.unconfirmed_flow = Some(Unconfirmed {
+                        frame,
+                        deadline: now.saturating_add(n_ar),
+                        last: false,
+                    });
+                }
                 out(self.port, frame);
             }
         }
@@ -615,6 +770,9 @@ impl IsoTp {
             if now >= deadline {
                 self.fail(false, IsoTpError::TimeoutCr);
             }
+        }
+        if self.unconfirmed_data.is_some() {
+            return;
         }
         match self.tx.clone() {
             Tx::Idle => {}
@@ -641,11 +799,8 @@ impl IsoTp {
         }
         if classic_single || fd_single {
             payload.extend_from_slice(&self.tx_data);
-            if let Some(frame) = self.frame(&payload) {
-                out(self.port, frame);
-            }
             self.tx = Tx::Idle;
-            self.events.push_back(IsoTpEvent::Sent);
+            self.emit(now, &payload, true, out);
             return;
         }
         if len > 4095 {
@@ -658,9 +813,7 @@ impl IsoTp {
         }
         let take = self.first_frame_payload().min(len);
         payload.extend_from_slice(self.tx_data.get(..take).unwrap_or(&[]));
-        if let Some(frame) = self.frame(&payload) {
-            out(self.port, frame);
-        }
+        self.emit(now, &payload, false, out);
         self.tx_offset = take;
         self.tx = Tx::AwaitFlow {
             deadline: now.saturating_add(self.config.n_bs),
@@ -696,13 +849,11 @@ impl IsoTp {
                     .get(self.tx_offset..self.tx_offset + take)
                     .unwrap_or(&[]),
             );
-            if let Some(frame) = self.frame(&payload) {
-                out(self.port, frame);
-            }
             self.tx_offset += take;
-            if self.tx_offset >= self.tx_data.len() {
+            let last = self.tx_offset >= self.tx_data.len();
+            self.emit(now, &payload, last, out);
+            if last {
                 self.tx = Tx::Idle;
-                self.events.push_back(IsoTpEvent::Sent);
                 return;
             }
             self.tx = match block_left {
@@ -718,8 +869,70 @@ impl IsoTp {
                     separation,
                 },
             };
-            if !separation.is_zero() {
+            if !separation.is_zero() || self.unconfirmed_data.is_some() {
                 return;
+            }
+        }
+    }
+
+    /// Hand out a data frame with `payload`; with N_As it waits for its confirmation, and the
+    /// message's `last` frame is its [`IsoTpEvent::Sent`] once confirmed (at once without).
+    fn emit(
+        &mut self,
+        now: Timestamp,
+        payload: &[u8],
+        last: bool,
+        out: &mut dyn FnMut(Port, Frame),
+    ) {
+        let Some(frame) = self.frame(payload) else {
+            if last {
+                self.events.push_back(IsoTpEvent::Sent);
+            }
+            return;
+        };
+        match self.config.n_as {
+            Some(n_as) => {
+                self.unconfirmed_data = Some(Unconfirmed {
+                    frame,
+                    deadline: now.saturating_add(n_as),
+                    last,
+                })
+            }
+            None if last => self.events.push_back(IsoTpEvent::Sent),
+            None => {}
+        }
+        out(self.port, frame);
+    }
+
+    /// A frame this channel sent is on the bus: the timers that start at a confirmation start.
+    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
+        if self
+            .unconfirmed_data
+            .as_ref()
+            .is_some_and(|u| u.frame == *frame)
+        {
+            if self.unconfirmed_data.take().is_some_and(|u| u.last) {
+                self.events.push_back(IsoTpEvent::Sent);
+            }
+            match &mut self.tx {
+                Tx::AwaitFlow { deadline, .. } => {
+                    *deadline = now.saturating_add(self.config.n_bs);
+                }
+                Tx::Consecutive {
+                    next_at,
+                    separation,
+                    ..
+                } => *next_at = now.saturating_add(*separation),
+                Tx::Idle | Tx::Start => {}
+            }
+        } else if self
+            .unconfirmed_flow
+            .as_ref()
+            .is_some_and(|u| u.frame == *frame)
+        {
+            self.unconfirmed_flow = None;
+            if let Rx::Receiving { deadline, .. } = &mut self.rx {
+                *deadline = now.saturating_add(self.config.n_cr);
             }
         }
     }
@@ -727,6 +940,9 @@ impl IsoTp {
     /// When the channel next has something to do.
     pub fn next_deadline(&self) -> Option<Timestamp> {
         let tx = match self.tx {
+            _ if self.unconfirmed_data.is_some() => {
+                self.unconfirmed_data.as_ref().map(|u| u.deadline)
+            }
             Tx::Idle => None,
             Tx::Start => Some(Timestamp::ZERO),
             Tx::AwaitFlow { deadline, .. } => Some(deadline),
@@ -736,7 +952,10 @@ impl IsoTp {
             Rx::Idle => None,
             Rx::Receiving { deadline, .. } => Some(deadline),
         };
-        let flow = (!self.flow_due.is_empty()).then_some(Timestamp::ZERO);
+        let flow = match &self.unconfirmed_flow {
+            Some(u) => Some(u.deadline),
+            None => (!self.flow_due.is_empty()).then_some(Timestamp::ZERO),
+        };
         [tx, rx, flow].into_iter().flatten().min()
     }
 }
@@ -745,6 +964,12 @@ impl bywire_core::node::Node for IsoTp {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         if port == self.port {
             IsoTp::on_frame(self, now, frame);
+        }
+    }
+
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        if port == self.port {
+            IsoTp::on_sent(self, now, frame);
         }
     }
 

@@ -769,6 +769,11 @@ impl UdsServer {
         }
     }
 
+    /// A frame the server sent is on the bus (its transmit confirmation).
+    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
+        self.channel.on_sent(now, frame);
+    }
+
     /// Send what is due.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         // S3 runs only while no request is being worked on.
@@ -816,7 +821,8 @@ impl UdsServer {
     pub fn next_deadline(&self) -> Option<Timestamp> {
         let s3 = (self.session != Session::Default)
             .then(|| self.last_request.saturating_add(self.timing.s3));
-        let out = (!self.outbox.is_empty()).then_some(Timestamp::ZERO);
+        // An answer waits for the one before it to be sent (the channel says when).
+        let out = (!self.outbox.is_empty() && !self.channel.sending()).then_some(Timestamp::ZERO);
         let pending = self.pending.map(|(_, due, reminder)| due.min(reminder));
         [self.channel.next_deadline(), s3, out, pending]
             .into_iter()
@@ -858,6 +864,10 @@ fn seed(now: Timestamp, count: u32) -> [u8; 4] {
 impl Node for UdsServer {
     fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
         UdsServer::on_frame(self, now, frame);
+    }
+
+    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+        UdsServer::on_sent(self, now, frame);
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

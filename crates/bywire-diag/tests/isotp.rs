@@ -354,6 +354,99 @@ fn padding_fills_every_frame() {
     assert_eq!(events(&mut b), [IsoTpEvent::Received(vec![0x3E, 0x00])]);
 }
 
+/// Received frames' padding checked as Linux's ISO-TP checks it (isotprecv's -P): a frame
+/// that fails is dropped and its transfer fails with the padding error.
+#[test]
+fn received_padding_is_checked_for_length_and_content() {
+    use bywire_diag::isotp::PaddingCheck;
+    let all = PaddingCheck {
+        length: true,
+        content: true,
+    };
+    let length = PaddingCheck {
+        length: true,
+        content: false,
+    };
+    // (sender's padding, receiver's expected byte, check, accepted)
+    for (tx, rx, check, accepted) in [
+        (Some(0xAA), Some(0xAA), all, true),
+        (Some(0xCC), Some(0xAA), all, false),
+        (Some(0xCC), Some(0xAA), length, true),
+        (None, Some(0xAA), length, false),
+        (None, None, length, true),
+        (Some(0xAA), None, length, false),
+        (None, Some(0xAA), PaddingCheck::default(), true),
+    ] {
+        // A single frame, and a transfer whose last consecutive frame is padded.
+        for len in [3, 19] {
+            let mut a = IsoTpConfig::new(id(0x7E0), id(0x7E8));
+            let mut b = IsoTpConfig::new(id(0x7E8), id(0x7E0));
+            a.padding = tx;
+            b.padding = Some(0xAA);
+            b.rx_padding = rx;
+            b.rx_padding_check = check;
+            a.rx_padding = Some(0xAA);
+            a.rx_padding_check = all;
+            let (mut a, mut b) = (IsoTp::new(a), IsoTp::new(b));
+            a.send(&message(len)).unwrap();
+            pump(&mut a, &mut b, Timestamp::ZERO, Duration::from_secs(2));
+            let got = events(&mut b);
+            let case = format!("{tx:?} {rx:?} {check:?}, {len} bytes");
+            if accepted {
+                assert_eq!(got, [IsoTpEvent::Received(message(len))], "{case}");
+            } else {
+                assert!(
+                    got.contains(&IsoTpEvent::Failed {
+                        sending: false,
+                        error: IsoTpError::Padding
+                    }),
+                    "{case}: {got:?}"
+                );
+                assert!(
+                    !got.iter().any(|e| matches!(e, IsoTpEvent::Received(_))),
+                    "{case}"
+                );
+            }
+        }
+    }
+    // A sender checking the flow control's padding gives up on a bad one.
+    let (a, mut b) = pair(|c| c.padding = Some(0xCC));
+    let mut strict = *a.config();
+    strict.rx_padding = Some(0xAA);
+    strict.rx_padding_check = all;
+    let mut a = IsoTp::new(strict);
+    a.send(&message(20)).unwrap();
+    pump(&mut a, &mut b, Timestamp::ZERO, Duration::from_secs(2));
+    assert!(events(&mut a).contains(&IsoTpEvent::Failed {
+        sending: true,
+        error: IsoTpError::Padding
+    }));
+}
+
+/// isotpsend's -t: the frame time is added to the separation the receiver asks for.
+#[test]
+fn the_frame_gap_adds_to_st_min() {
+    let (a, mut b) = pair(|c| c.st_min = StMin::Millis(1));
+    let mut config = *a.config();
+    config.frame_gap = Duration::from_micros(250);
+    let mut a = IsoTp::new(config);
+    a.send(&message(40)).unwrap();
+    let (trace, _) = pump(&mut a, &mut b, Timestamp::ZERO, Duration::from_secs(1));
+    assert_eq!(events(&mut b), [IsoTpEvent::Received(message(40))]);
+    let cfs: Vec<Timestamp> = trace
+        .iter()
+        .filter(|t| t.2.data()[0] >> 4 == 2)
+        .map(|t| t.0)
+        .collect();
+    assert_eq!(cfs.len(), 5);
+    for pair in cfs.windows(2) {
+        assert_eq!(
+            pair[1].saturating_since(pair[0]),
+            Duration::from_micros(1250)
+        );
+    }
+}
+
 #[test]
 fn normal_fixed_addressing_names_29_bit_identifiers() {
     let (tx, rx) = Addressing::normal_fixed(0x10, 0xF1, false);
@@ -425,13 +518,20 @@ proptest! {
 
 /// Throughput on a bit-timed 1 Mbit/s bus with BS 0 and STmin 0: the transfer takes no more
 /// than 5 % over the time its frames occupy the wire (each frame's exact stuffed length and
-/// interframe space), classic and padded, and CAN FD at 1/4 Mbit/s.
+/// interframe space), classic and padded, and CAN FD at 1/4 Mbit/s; with each frame waiting
+/// for its confirmation too (the next is handed over at the end of the one before, in time
+/// for the bus to start it after the interframe space).
 #[test]
 fn throughput_is_within_5_percent_of_the_wire() {
     use bywire_bus::network::Network;
     use bywire_core::busload::{frame_time_ns, Bitrates};
     use bywire_core::node::{Node, Port};
-    for (fd, data) in [(false, None), (true, Some(4_000_000))] {
+    for (fd, data, confirmed) in [
+        (false, None, false),
+        (true, Some(4_000_000), false),
+        (false, None, true),
+        (true, Some(4_000_000), true),
+    ] {
         let mut net = Network::new();
         let bus = net.add_bus("can0", 1_000_000, data);
         net.wire(0, Port::MAIN, bus);
@@ -442,6 +542,9 @@ fn throughput_is_within_5_percent_of_the_wire() {
             c.fd = fd;
             c.brs = fd;
             c.tx_dl = 64;
+            if confirmed {
+                *c = c.confirmed(Duration::from_millis(100));
+            }
         });
         a.send(&message(4095)).unwrap();
         let mut frames = Vec::new();
@@ -471,17 +574,180 @@ fn throughput_is_within_5_percent_of_the_wire() {
         let took_ns = end.as_nanos() as f64 - start_ns;
         let ratio = wire_ns / took_ns;
         println!(
-            "ISO-TP 4095 bytes, {}: {} frames, {:.3} ms on the wire, {:.3} ms taken ({:.1} %)",
+            "ISO-TP 4095 bytes, {}{}: {} frames, {:.3} ms on the wire, {:.3} ms taken ({:.1} %)",
             if fd {
                 "CAN FD 1/4 Mbit/s"
             } else {
                 "classic 1 Mbit/s"
             },
+            if confirmed { ", confirmed" } else { "" },
             frames.len(),
             wire_ns / 1e6,
             took_ns / 1e6,
             ratio * 100.0
         );
         assert!(ratio >= 0.95, "{ratio}");
+    }
+}
+
+/// Two channels on a bit-timed 500 kbit/s bus, confirmed by the simulated runner.
+mod confirmed {
+    use super::*;
+    use bywire_bus::network::Network;
+    use bywire_core::busload::{frame_time_ns, Bitrates};
+    use bywire_core::node::{Node, Port};
+
+    const N_A: Duration = Duration::from_millis(50);
+
+    struct Bench {
+        net: Network,
+        tap: bywire_bus::sim::NodeId,
+        bus: usize,
+        a: IsoTp,
+        b: IsoTp,
+        /// Every frame on the wire, with its end of frame.
+        wire: Vec<(Timestamp, Frame)>,
+        /// Each end's events with the time they were seen (within 100 µs).
+        events: [Vec<(Timestamp, IsoTpEvent)>; 2],
+    }
+
+    impl Bench {
+        fn new(edit: impl Fn(&mut IsoTpConfig)) -> Bench {
+            let mut net = Network::new();
+            let bus = net.add_bus("can0", 500_000, None);
+            net.wire(0, Port::MAIN, bus);
+            net.wire(1, Port::MAIN, bus);
+            let tap = net.tap(bus).unwrap();
+            let (a, b) = pair(|c| {
+                *c = c.confirmed(N_A);
+                edit(c);
+            });
+            Bench {
+                net,
+                tap,
+                bus,
+                a,
+                b,
+                wire: Vec::new(),
+                events: [Vec::new(), Vec::new()],
+            }
+        }
+
+        fn run_for(&mut self, duration: Duration) {
+            let end = self.net.now().saturating_add(duration);
+            while self.net.now() < end {
+                self.net.changed(0);
+                self.net.changed(1);
+                let until = self.net.now().saturating_add(Duration::from_micros(100));
+                self.net
+                    .run_until(until, &mut [&mut self.a as &mut dyn Node, &mut self.b]);
+                let now = self.net.now();
+                while let Some(r) = self.net.bus_mut(self.bus).and_then(|s| s.receive(self.tap)) {
+                    self.wire.push((r.timestamp, r.frame));
+                }
+                for (end, channel) in [&mut self.a, &mut self.b].into_iter().enumerate() {
+                    while let Some(event) = channel.next_event() {
+                        self.events[end].push((now, event));
+                    }
+                }
+            }
+        }
+
+        fn failure(&self, end: usize) -> Option<(Timestamp, bool, IsoTpError)> {
+            self.events[end].iter().find_map(|(at, e)| match e {
+                IsoTpEvent::Failed { sending, error } => Some((*at, *sending, *error)),
+                _ => None,
+            })
+        }
+    }
+
+    /// A sender whose frames never reach the bus (its controller silenced) gives up after N_As
+    /// with N_TIMEOUT_A, not after N_Bs: nothing it sent was ever on the wire.
+    #[test]
+    fn a_frame_never_confirmed_is_n_timeout_a_after_n_as() {
+        let mut bench = Bench::new(|c| c.n_bs = Duration::from_millis(500));
+        bench.net.drop_output(0, true);
+        bench.a.send(&message(100)).unwrap();
+        bench.run_for(Duration::from_millis(45));
+        assert_eq!(bench.failure(0), None, "not before N_As");
+        assert!(bench.a.sending());
+        bench.run_for(Duration::from_millis(15));
+        let (at, sending, error) = bench.failure(0).expect("N_As ran out");
+        assert_eq!((sending, error), (true, IsoTpError::TimeoutA));
+        assert!(at >= Timestamp::ZERO.saturating_add(N_A), "{at:?}");
+        assert!(!bench.a.sending());
+        assert!(bench.wire.is_empty());
+        assert!(bench.events[1].is_empty(), "{:?}", bench.events[1]);
+    }
+
+    /// A receiver whose flow control is never confirmed gives up after N_Ar (N_TIMEOUT_A, on
+    /// its receiving side); the sender, which never got the flow control, after N_Bs.
+    #[test]
+    fn a_flow_control_never_confirmed_is_n_timeout_a_after_n_ar() {
+        let mut bench = Bench::new(|c| c.n_bs = Duration::from_millis(200));
+        bench.net.drop_port_output(1, Port::MAIN, true);
+        bench.a.send(&message(100)).unwrap();
+        bench.run_for(Duration::from_millis(250));
+        let first_frame_end = bench.wire.first().map(|(at, _)| *at).unwrap();
+        assert_eq!(bench.wire.len(), 1, "only the first frame is on the wire");
+        let (at, sending, error) = bench.failure(1).expect("N_Ar ran out");
+        assert_eq!((sending, error), (false, IsoTpError::TimeoutA));
+        let waited = at.saturating_since(first_frame_end);
+        assert!(
+            waited >= N_A && waited < N_A + Duration::from_millis(1),
+            "{waited:?}"
+        );
+        let (at, sending, error) = bench.failure(0).expect("N_Bs ran out");
+        assert_eq!((sending, error), (true, IsoTpError::TimeoutBs));
+        // N_Bs counts from the first frame's confirmation, its end of frame.
+        let waited = at.saturating_since(first_frame_end);
+        assert!(
+            waited >= Duration::from_millis(200) && waited < Duration::from_millis(201),
+            "{waited:?}"
+        );
+    }
+
+    /// With confirmations a message is sent when its last frame is on the wire, each
+    /// consecutive frame waits STmin after the end of the one before (ISO 15765-2's timing
+    /// diagram), and the message arrives whole.
+    #[test]
+    fn sent_comes_with_the_last_frame_and_st_min_runs_from_the_end_of_frame() {
+        let mut bench = Bench::new(|c| c.st_min = StMin::Micros(300));
+        bench.a.send(&message(300)).unwrap();
+        bench.run_for(Duration::from_millis(50));
+        let received = bench.events[1].iter().find_map(|(_, e)| match e {
+            IsoTpEvent::Received(m) => Some(m.clone()),
+            _ => None,
+        });
+        assert_eq!(received, Some(message(300)));
+        let data: Vec<_> = bench
+            .wire
+            .iter()
+            .filter(|(_, f)| f.id() == Some(id(0x7E0)))
+            .collect();
+        assert_eq!(data.len(), 1 + 300_usize.saturating_sub(6).div_ceil(7));
+        let rates = Bitrates {
+            nominal: 500_000,
+            data: None,
+        };
+        // Consecutive frames only (the first after the flow control).
+        for pair in data[1..].windows(2) {
+            let (end_before, _) = pair[0];
+            let (end, frame) = pair[1];
+            // The frame's time counts its interframe space (3 bits, 6 µs) after it.
+            let start = end.as_nanos() as f64 - frame_time_ns(frame, rates) + 6_000.0;
+            let gap = start - end_before.as_nanos() as f64;
+            assert!(
+                (300_000.0..310_000.0).contains(&gap),
+                "{gap} ns between consecutive frames"
+            );
+        }
+        let last_end = data.last().unwrap().0;
+        let sent_at = bench.events[0]
+            .iter()
+            .find_map(|(at, e)| (*e == IsoTpEvent::Sent).then_some(*at))
+            .expect("sent");
+        assert!(sent_at >= last_end, "{sent_at:?} before {last_end:?}");
+        assert!(bench.failure(0).is_none() && bench.failure(1).is_none());
     }
 }

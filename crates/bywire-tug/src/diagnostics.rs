@@ -283,6 +283,9 @@ pub struct Diagnostics {
     requests: std::collections::VecDeque<DiagnosticRequest>,
 }
 
+/// The ECU's N_As and N_Ar.
+const N_A: core::time::Duration = core::time::Duration::from_millis(25);
+
 /// Requests kept for the ECU (it takes them every poll).
 const REQUEST_CAPACITY: usize = 8;
 
@@ -290,7 +293,8 @@ impl Diagnostics {
     /// The ECU's diagnostics for `profile` (the active profile's name).
     pub fn new(profile: &str) -> Self {
         let id = |raw| Id::standard(raw).unwrap_or(Id::Standard(bywire_core::StandardId::ZERO));
-        let mut channel = IsoTpConfig::new(id(RESPONSE_ID), id(REQUEST_ID));
+        // Frames are confirmed by the runner; OBD's ISO 15765-4 bounds N_As/N_Ar to 25 ms.
+        let mut channel = IsoTpConfig::new(id(RESPONSE_ID), id(REQUEST_ID)).confirmed(N_A);
         // OBD-style ECUs pad every frame.
         channel.padding = Some(0xAA);
         let mut server =
@@ -372,6 +376,11 @@ impl Diagnostics {
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
         self.server.on_frame(now, frame);
         self.take_events();
+    }
+
+    /// One of the server's answers is on the bus.
+    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
+        self.server.on_sent(now, frame);
     }
 
     /// The server's answers, and what the tester asked of the ECU.

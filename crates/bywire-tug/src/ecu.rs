@@ -660,6 +660,13 @@ impl Node for VehicleControlEcu {
         }
     }
 
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        let raw = frame.id().filter(|id| !id.is_extended()).map(Id::as_raw);
+        if port == BUS1 && raw == Some(diagnostics::RESPONSE_ID) {
+            self.diagnostics.on_sent(now, frame);
+        }
+    }
+
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         match self.booting_until {
             Some(until) if now < until => return,

@@ -101,6 +101,11 @@ enum Command {
         #[command(subcommand)]
         command: cmd::uds::UdsCommand,
     },
+    /// SecOC (AUTOSAR authenticated messages): sign a frame, verify one or a whole capture.
+    Secoc {
+        #[command(subcommand)]
+        command: cmd::secoc::SecocCommand,
+    },
     /// Run the ADS side of a vehicle interface on a bus: JSON commands in, vehicle state out.
     Bridge(cmd::bridge::Args),
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
@@ -139,6 +144,7 @@ fn main() -> ExitCode {
         Command::Log { command } => cmd::log::run(&command, &mut out),
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
         Command::Uds { command } => cmd::uds::run(&command, &mut out),
+        Command::Secoc { command } => cmd::secoc::run(&command, &mut out),
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),
         #[cfg(feature = "ros2")]
         Command::Ros2 { command } => cmd::ros2::run(&command, &mut out),

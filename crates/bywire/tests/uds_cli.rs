@@ -190,6 +190,45 @@ fn bywire_uds_diagnoses_a_udsoncan_server() {
     let (code, text) = uds(&["security", bus, "--session", "3", "1", "--key-fn", "xor:FF"]);
     assert_ne!(code, 0);
     assert!(text.contains("0x35 (invalidKey)"), "{text}");
+    // A key program of the user's (here the server's algorithm, written again in Python): run
+    // with the level and the seed, its key printed in hex; one that fails, or prints no key,
+    // is named.
+    let key_program = |name: &str, body: &str| {
+        use std::os::unix::fs::PermissionsExt;
+        let path = std::env::temp_dir().join(name);
+        std::fs::write(
+            &path,
+            format!("#!/usr/bin/env python3\nimport sys\n{body}\n"),
+        )
+        .unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+        format!("exec:{}", path.display())
+    };
+    let seed2key = key_program(
+        "bywire-seed2key.py",
+        "level, seed = int(sys.argv[1]), bytes.fromhex(sys.argv[2])\n\
+         print(bytes(((b ^ 0x5A) + level) & 0xFF for b in seed).hex())",
+    );
+    assert_eq!(
+        json(&[
+            "security",
+            bus,
+            "--session",
+            "3",
+            "1",
+            "--key-fn",
+            &seed2key
+        ]),
+        json!({"unlocked": 1})
+    );
+    let failing = key_program("bywire-seed2key-fails.py", "sys.exit(3)");
+    let (code, text) = uds(&["security", bus, "--session", "3", "1", "--key-fn", &failing]);
+    assert_ne!(code, 0);
+    assert!(text.contains("the program failed"), "{text}");
+    let garbage = key_program("bywire-seed2key-garbage.py", "print('no key here')");
+    let (code, text) = uds(&["security", bus, "--session", "3", "1", "--key-fn", &garbage]);
+    assert_ne!(code, 0);
+    assert!(text.contains("its key"), "{text}");
     assert_eq!(json(&["reset", bus, "soft"]), json!({"reset": 3}));
     ok(&["tester-present", bus]);
     ok(&["dtc-setting", bus, "--session", "3", "off"]);

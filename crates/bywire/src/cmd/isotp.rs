@@ -30,6 +30,10 @@ MTU 72 is CAN FD, TX_DL its frame length, FLAGS 1 the bit-rate switch.")]
         /// Ignore the receiver's STmin and wait this many nanoseconds between frames.
         #[arg(short = 'f', value_name = "NS")]
         force_st_min: Option<u64>,
+        /// Frame transmit time in nanoseconds, added to the separation between consecutive
+        /// frames (ZERO or 0: none, the default).
+        #[arg(short = 't', value_name = "NS", value_parser = frame_time)]
+        frame_time: Option<u64>,
         /// Send a fixed message of this many bytes (0x00, 0x01, ...) instead of stdin's.
         #[arg(short = 'D', value_name = "LEN")]
         fixed: Option<usize>,
@@ -104,13 +108,19 @@ pub struct ChannelArgs {
     /// Extended addressing: the address byte sent [and the one received].
     #[arg(short = 'x', value_name = "ADDR[:RXADDR]")]
     extended: Option<String>,
-    /// Padding: the byte frames sent are padded with [:the byte expected, not checked].
+    /// Padding: the byte frames sent are padded with [:the byte received frames carry, checked
+    /// with -P].
     #[arg(short = 'p', value_name = "[TX]:[RX]")]
     padding: Option<String>,
+    /// Check received frames' padding: l (length), c (content: needs -p :RX), a (both); a
+    /// frame that fails is dropped and its transfer fails.
+    #[arg(short = 'P', value_name = "MODE", value_parser = ["l", "c", "a"])]
+    padding_check: Option<String>,
     /// CAN FD link layer: MTU (72 for FD), TX_DL, flags (1: bit-rate switch).
     #[arg(short = 'L', value_name = "MTU:TX_DL:FLAGS")]
     link: Option<String>,
-    /// Give up waiting for the peer after this many milliseconds (N_Bs, N_Cr).
+    /// Give up waiting for the peer, or for a frame to be confirmed sent, after this many
+    /// milliseconds (N_As, N_Ar, N_Bs, N_Cr).
     #[arg(long, default_value_t = 1000)]
     timeout_ms: u64,
     /// The largest message received.
@@ -128,9 +138,21 @@ impl ChannelArgs {
             c.addressing = extended_addressing(x)?;
         }
         if let Some(p) = &self.padding {
-            let tx = p.split(':').next().unwrap_or_default();
-            if !tx.is_empty() {
-                c.padding = Some(hex_u8(tx).map_err(|e| anyhow!("-p {p}: {e}"))?);
+            let mut parts = p.split(':');
+            let byte = |text: &str| -> Result<Option<u8>> {
+                if text.is_empty() {
+                    return Ok(None);
+                }
+                Ok(Some(hex_u8(text).map_err(|e| anyhow!("-p {p}: {e}"))?))
+            };
+            c.padding = byte(parts.next().unwrap_or_default())?;
+            c.rx_padding = byte(parts.next().unwrap_or_default())?;
+        }
+        if let Some(mode) = &self.padding_check {
+            c.rx_padding_check.length = mode != "c";
+            c.rx_padding_check.content = mode != "l";
+            if c.rx_padding_check.content && c.rx_padding.is_none() {
+                bail!("-P {mode}: checking the padding's content needs the byte: -p [TX]:RX");
             }
         }
         if let Some(link) = &self.link {
@@ -156,11 +178,23 @@ impl ChannelArgs {
                 bail!("-L {link}: MTU {mtu} is 16 (classic CAN) or 72 (CAN FD)");
             }
         }
-        c.n_bs = Duration::from_millis(self.timeout_ms);
-        c.n_cr = Duration::from_millis(self.timeout_ms);
+        let timeout = Duration::from_millis(self.timeout_ms);
+        // The runner confirms every frame sent.
+        c = c.confirmed(timeout);
+        c.n_bs = timeout;
+        c.n_cr = timeout;
         c.max_message = self.max_message;
         Ok(c)
     }
+}
+
+/// isotpsend's `-t`: nanoseconds, or ZERO.
+fn frame_time(text: &str) -> std::result::Result<u64, String> {
+    if text == "ZERO" {
+        return Ok(0);
+    }
+    text.parse()
+        .map_err(|_| format!("{text}: nanoseconds (a whole number) or ZERO"))
 }
 
 /// Hex bytes separated by white space.
@@ -179,10 +213,12 @@ pub fn run(command: &IsotpCommand, input: &mut dyn Read, out: &mut dyn Write) ->
         IsotpCommand::Send {
             channel,
             force_st_min,
+            frame_time,
             fixed,
         } => {
             let mut config = channel.config()?;
             config.st_min_override = force_st_min.map(Duration::from_nanos);
+            config.frame_gap = Duration::from_nanos(frame_time.unwrap_or(0));
             let data = match fixed {
                 Some(len) => (0..*len).map(|i| (i % 256) as u8).collect(),
                 None => {

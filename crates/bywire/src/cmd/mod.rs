@@ -15,6 +15,7 @@ pub mod play;
 pub mod plot;
 #[cfg(feature = "ros2")]
 pub mod ros2;
+pub mod secoc;
 pub mod send;
 pub mod serve;
 pub mod sim;

@@ -12,7 +12,7 @@ use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
 use bywire_diag::describe::{self, Description};
-use bywire_diag::isotp::IsoTpConfig;
+use bywire_diag::isotp::{IsoTpConfig, DEFAULT_TIMEOUT};
 use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 use serde_json::{json, Value};
 
@@ -319,7 +319,8 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         return run_tester(command, out);
     };
     let mut server = UdsServer::new(
-        IsoTpConfig::new(can_id(tx, "--tx")?, can_id(rx, "--rx")?),
+        // The runner confirms every frame sent.
+        IsoTpConfig::new(can_id(tx, "--tx")?, can_id(rx, "--rx")?).confirmed(DEFAULT_TIMEOUT),
         UdsTiming::default(),
     );
     if let Some(f) = functional {
@@ -395,7 +396,8 @@ impl UdsCommand {
 
 impl Tester {
     fn channel(&self) -> Result<IsoTpConfig> {
-        let mut config = IsoTpConfig::new(can_id(&self.tx, "--tx")?, can_id(&self.rx, "--rx")?);
+        let mut config = IsoTpConfig::new(can_id(&self.tx, "--tx")?, can_id(&self.rx, "--rx")?)
+            .confirmed(DEFAULT_TIMEOUT);
         if let Some(x) = &self.extended {
             config.addressing = extended_addressing(x)?;
         }

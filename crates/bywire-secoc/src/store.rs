@@ -1,0 +1,192 @@
+//! A sender's freshness kept across restarts, so that a restart is not a rewind.
+//!
+//! The file holds one decimal number: a freshness value no message has been signed with, at
+//! or above every value used. Values are reserved ahead, `step` at a time (one write per
+//! `step` messages, not one per message), and each reservation is written before any value in
+//! it is used: to a temporary file, synced, renamed over the old one, the directory synced. A
+//! kill or power loss leaves the old reservation or the new one, never a torn file; at worst a
+//! restart skips the unused rest of a reservation, and it never reuses a value.
+//!
+//! A file that is there but does not hold a number is an error, not a fresh start: starting
+//! again from 1 would be exactly the rewind the file exists to prevent.
+
+use std::fmt;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Why the freshness file cannot be used.
+#[derive(Debug)]
+pub enum StoreError {
+    /// Reading or writing failed.
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file holds no freshness value.
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+    },
+    /// Every value has been used (a new key is needed).
+    Exhausted {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+impl fmt::Display for StoreError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StoreError::Io { path, source } => write!(f, "{}: {source}", path.display()),
+            StoreError::Corrupt { path } => write!(
+                f,
+                "{}: not a freshness value (refusing to start over: that would be a rewind)",
+                path.display()
+            ),
+            StoreError::Exhausted { path } => write!(
+                f,
+                "{}: every freshness value has been used (a new key is needed)",
+                path.display()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for StoreError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            StoreError::Io { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+/// A sender's persisted freshness.
+#[derive(Debug)]
+pub struct FreshnessStore {
+    path: PathBuf,
+    /// Values below this may be used without another write.
+    reserved: u64,
+    step: u64,
+}
+
+impl FreshnessStore {
+    /// Open (or create) the store at `path`, reserving `step` values (at least 1) at a time;
+    /// the first freshness value to use (1 for a new file).
+    pub fn open(path: &Path, step: u64) -> Result<(FreshnessStore, u64), StoreError> {
+        let start = match std::fs::read_to_string(path) {
+            Ok(text) => text
+                .trim()
+                .parse::<u64>()
+                .map_err(|_| StoreError::Corrupt {
+                    path: path.to_path_buf(),
+                })?,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => 1,
+            Err(source) => {
+                return Err(StoreError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })
+            }
+        };
+        let mut store = FreshnessStore {
+            path: path.to_path_buf(),
+            reserved: start,
+            step: step.max(1),
+        };
+        store.reserve_from(start)?;
+        Ok((store, start))
+    }
+
+    /// Call before signing with `freshness`: writes the next reservation when it is due.
+    pub fn before_signing(&mut self, freshness: u64) -> Result<(), StoreError> {
+        if freshness < self.reserved {
+            return Ok(());
+        }
+        self.reserve_from(freshness)
+    }
+
+    /// Values from `from` up to `from + step` may be used once this returns.
+    fn reserve_from(&mut self, from: u64) -> Result<(), StoreError> {
+        let until = from.checked_add(self.step).ok_or(StoreError::Exhausted {
+            path: self.path.clone(),
+        })?;
+        write_atomically(&self.path, format!("{until}\n").as_bytes()).map_err(|source| {
+            StoreError::Io {
+                path: self.path.clone(),
+                source,
+            }
+        })?;
+        self.reserved = until;
+        Ok(())
+    }
+}
+
+/// Write `bytes` to `path` so that it holds either its old content or all of the new.
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(".tmp");
+    let temporary = PathBuf::from(temporary);
+    {
+        let mut file = std::fs::File::create(&temporary)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+    }
+    std::fs::rename(&temporary, path)?;
+    if let Some(directory) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::File::open(directory)?.sync_all()?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn temp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("bywire-secoc-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join("freshness")
+    }
+
+    #[test]
+    fn a_restart_goes_on_past_every_value_used() {
+        let path = temp("restart");
+        let (mut store, start) = FreshnessStore::open(&path, 100).unwrap();
+        assert_eq!(start, 1);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "101\n");
+        for fv in start..=250 {
+            store.before_signing(fv).unwrap();
+        }
+        // 250 used: the reservation covers it.
+        let reserved: u64 = std::fs::read_to_string(&path)
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        assert!(reserved > 250, "{reserved}");
+        drop(store);
+        let (_, start) = FreshnessStore::open(&path, 100).unwrap();
+        assert_eq!(start, reserved);
+        assert!(!path.with_extension("tmp").exists());
+    }
+
+    #[test]
+    fn a_damaged_file_is_refused_not_started_over() {
+        let path = temp("damaged");
+        std::fs::write(&path, "12x\n").unwrap();
+        let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
+        assert!(error.contains("refusing to start over"), "{error}");
+        std::fs::write(&path, format!("{}\n", u64::MAX - 5)).unwrap();
+        let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
+        assert!(
+            error.contains("every freshness value has been used"),
+            "{error}"
+        );
+    }
+}
