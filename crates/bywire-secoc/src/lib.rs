@@ -206,8 +206,10 @@ impl Layout {
 
     /// The bytes the secured message needs: the payload, then the freshness and MAC bits.
     pub fn secured_length(&self) -> usize {
-        let bits = self.fv_tx_length + self.mac_tx_length;
-        self.payload_length + usize::try_from(bits.div_ceil(8)).unwrap_or(usize::MAX)
+        // Saturating: the fields are public, and a hand-made layout must not overflow here.
+        let bits = self.fv_tx_length.saturating_add(self.mac_tx_length);
+        self.payload_length
+            .saturating_add(usize::try_from(bits.div_ceil(8)).unwrap_or(usize::MAX))
     }
 
     /// The largest freshness value.
