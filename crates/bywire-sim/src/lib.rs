@@ -14,6 +14,8 @@
 //! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
 //!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time;
 //! - [`scenario`]: routes, load, grade and faults, built in or from TOML files;
+//! - [`attacker`]: a node on bus 1 without the key: forged and replayed commands, a forged
+//!   speed toward the ADS, a flood of identifier 0x000;
 //! - [`report`]: a run's report (what `metrics.json` holds), with serde;
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
@@ -31,6 +33,7 @@
 //! assert!(tug.engaged_at().is_some());
 //! ```
 
+pub mod attacker;
 pub mod battery;
 pub mod chassis;
 pub mod drive;

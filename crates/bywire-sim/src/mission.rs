@@ -12,7 +12,7 @@ use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, WheelState};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
-use bywire_tug::wire::ReferenceWire;
+use bywire_tug::secured::TugWire;
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 
@@ -368,7 +368,7 @@ impl Mission {
 /// The built-in ADS as a node: the ADS side of the wire on bus 1 and bus 1b (ports
 /// [`Ads::PORT_A`] and [`Ads::PORT_B`]), and the mission planning its commands every cycle.
 pub struct AdsDriver {
-    ads: Ads<ReferenceWire>,
+    ads: Ads<TugWire>,
     mission: Mission,
     next_plan: Timestamp,
     cycles: u32,
@@ -380,14 +380,14 @@ pub struct AdsDriver {
 }
 
 impl AdsDriver {
-    /// An ADS driving `mission`, its odometry starting at the route's start.
-    pub fn new(config: AdsConfig, mission: Mission) -> AdsDriver {
+    /// An ADS driving `mission` through `wire`, its odometry starting at the route's start.
+    pub fn new(config: AdsConfig, mission: Mission, wire: TugWire) -> AdsDriver {
         let mut ads = Ads::with_wire(
             AdsConfig {
                 redundant: true,
                 ..config
             },
-            ReferenceWire,
+            wire,
         );
         ads.reset_odometry(mission.start_pose());
         AdsDriver {
@@ -404,7 +404,7 @@ impl AdsDriver {
     }
 
     /// The ADS side (its view of the vehicle, its counts).
-    pub fn ads(&self) -> &Ads<ReferenceWire> {
+    pub fn ads(&self) -> &Ads<TugWire> {
         &self.ads
     }
 

@@ -157,6 +157,37 @@ pub struct SupervisorCounts {
     pub skipped: u64,
     /// Out-of-range setpoints.
     pub out_of_range: u64,
+    /// Redundant copies that disagreed.
+    pub disagreements: u64,
+    /// Secured commands that failed verification.
+    pub authentication: u64,
+    /// Other secured frames (E-stop, emergency brake) that failed verification.
+    pub unauthenticated: u64,
+}
+
+/// What the attacks achieved, and what the secured variant refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct SecurityCounts {
+    /// The secured variant ran.
+    pub secoc: bool,
+    /// Frames the attacker sent.
+    pub attacker_frames: u64,
+    /// Commands the ECU took that the ADS never sent.
+    pub foreign_commands: u64,
+    /// State frames the ADS took whose speed the tug never had.
+    pub false_speeds: u64,
+    /// Feedback frames the ADS refused as unauthenticated.
+    pub ads_authentication: u64,
+    /// The ECU's verifications: accepted, and refused by reason.
+    pub ecu_accepted: u64,
+    /// Refused: the MAC is wrong (forged).
+    pub ecu_mac: u64,
+    /// Refused: authentic but not fresh (replayed).
+    pub ecu_stale: u64,
+    /// Refused: not a secured frame's shape.
+    pub ecu_malformed: u64,
+    /// Refused: beyond the freshness window.
+    pub ecu_window: u64,
 }
 
 /// A run's report.
@@ -189,6 +220,8 @@ pub struct RunReport {
     pub battery_soc: f64,
     /// The supervisor's counts.
     pub supervisor: SupervisorCounts,
+    /// The attacks' outcome and the verifications.
+    pub security: SecurityCounts,
     /// The DTCs the vehicle control ECU holds at the end, as a tester reads them.
     pub dtcs: Vec<DtcRecord>,
     /// Wall-clock time the run took, s.
@@ -227,6 +260,30 @@ impl DtcRecord {
                 status_bits: bywire_diag::describe::status_bits(status),
             })
             .collect()
+    }
+}
+
+impl SecurityCounts {
+    /// The run's counts so far.
+    pub fn of(tug: &Tug) -> SecurityCounts {
+        let verified = tug
+            .ecu()
+            .wire()
+            .table()
+            .map(|t| t.stats().frames)
+            .unwrap_or_default();
+        SecurityCounts {
+            secoc: tug.ecu().wire().table().is_some(),
+            attacker_frames: tug.attacker().sent(),
+            foreign_commands: tug.security.foreign_commands,
+            false_speeds: tug.security.false_speeds,
+            ads_authentication: tug.ads().ads().stats().authentication,
+            ecu_accepted: verified.accepted,
+            ecu_mac: verified.mac,
+            ecu_stale: verified.stale,
+            ecu_malformed: verified.malformed,
+            ecu_window: verified.window,
+        }
     }
 }
 
@@ -307,7 +364,11 @@ impl RunReport {
                 repeated: stats.repeated,
                 skipped: stats.skipped,
                 out_of_range: stats.out_of_range,
+                disagreements: stats.disagreements,
+                authentication: stats.authentication,
+                unauthenticated: stats.unauthenticated,
             },
+            security: SecurityCounts::of(tug),
             dtcs: DtcRecord::all(tug),
             wall_seconds: wall.as_secs_f64(),
         }

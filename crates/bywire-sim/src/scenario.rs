@@ -12,6 +12,7 @@
 //! stops = [[60, 5]]             # stop at 60 m for 5 s
 //! payload = 2000                # kg, 0–4500
 //! grade = 0.02                  # rise over run
+//! secoc = true                  # the secured variant: commands authenticated, CAN FD
 //!
 //! [[event]]
 //! at_s = 8.0
@@ -19,7 +20,8 @@
 //! duration_s = 1.0              # sensor_fault, corrupt_commands, duplicate_commands,
 //!                               # delay_commands, driver_takeover, ecu_bus_off, bus_off,
 //!                               # redundant_bus_loss, corrupt_frames, duplicate_frames,
-//!                               # delay_frames
+//!                               # delay_frames, forge_commands, replay_commands,
+//!                               # forge_state, flood (an attacker on bus 1)
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
 //! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15;
 //! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms);
@@ -32,6 +34,7 @@ use bywire_control::kinematics::Point;
 use bywire_core::Timestamp;
 use serde::Deserialize;
 
+use crate::attacker::Attack;
 use crate::steering::SensorFault;
 use crate::tug::{apron_loop, Fault, Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
 use bywire_bus::sim::Tamper;
@@ -94,6 +97,8 @@ struct RawScenario {
     #[serde(default)]
     grade: f64,
     #[serde(default)]
+    secoc: bool,
+    #[serde(default)]
     event: Vec<RawEvent>,
 }
 
@@ -120,7 +125,8 @@ impl Scenario {
     /// A built-in scenario by name: `apron-loop` (the route, nothing happens) or `fault-tour`
     /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
     /// bus 1b lost, a stuck steering sensor, corrupted, duplicated and delayed commands, a
-    /// driver's takeover, and the ECU's controller going bus-off).
+    /// driver's takeover, the ECU's controller going bus-off, and an attacker on bus 1:
+    /// forged commands, replayed commands, a forged speed, a flood of 0x000).
     pub fn builtin(name: &str) -> Option<Scenario> {
         let s = Duration::from_secs;
         let ms = Duration::from_millis;
@@ -152,6 +158,11 @@ impl Scenario {
                     },
                     None,
                 ),
+                (s(58), Fault::Attack(Attack::ForgeCommands), Some(s(1))),
+                (s(60), Fault::Attack(Attack::ReplayCommands), Some(s(1))),
+                (s(62), Fault::Attack(Attack::ForgeState), Some(s(1))),
+                (s(64), Fault::Attack(Attack::Flood), Some(ms(500))),
+                (s(66), Fault::OperatorReset, None),
             ],
             _ => return None,
         };
@@ -364,6 +375,10 @@ impl Scenario {
                     Fault::BusOff { bus, id }
                 }
                 "redundant_bus_loss" => Fault::RedundantBusLoss,
+                "forge_commands" => Fault::Attack(Attack::ForgeCommands),
+                "replay_commands" => Fault::Attack(Attack::ReplayCommands),
+                "forge_state" => Fault::Attack(Attack::ForgeState),
+                "flood" => Fault::Attack(Attack::Flood),
                 kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
                     let (bus, id) = bus_and_id(kind)?;
                     let tamper = match kind {
@@ -373,7 +388,7 @@ impl Scenario {
                     };
                     Fault::TamperFrames { bus, id, tamper }
                 }
-                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames)"))),
+                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood)"))),
             };
             events.push((Duration::from_secs_f64(e.at_s), fault, duration));
         }
@@ -390,6 +405,7 @@ impl Scenario {
                 steering_steps: raw.steering_steps,
                 speeds,
                 stops,
+                secoc: raw.secoc,
             },
             events,
         })
@@ -519,6 +535,6 @@ mod tests {
             .contains("steering_steps[1]: 45 is not a wheel angle"));
         assert!(error("waypoints = [[0, 0]]\n").contains("waypoints: at least two points"));
         assert!(error("speeed = 2\n").contains("unknown field `speeed`"));
-        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 14));
+        assert!(Scenario::builtin("fault-tour").is_some_and(|s| s.events.len() == 19));
     }
 }

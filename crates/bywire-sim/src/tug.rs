@@ -43,12 +43,14 @@ use bywire_tug::messages::{
     AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
     SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
-use bywire_tug::wire::ReferenceWire;
+use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::Ads;
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
+use bywire_vehicle::secured::Signing;
 use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, Watchdog};
 
+use crate::attacker::{Attack, Attacker};
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
@@ -85,6 +87,9 @@ pub struct TugParams {
     pub speeds: Vec<(f64, f64)>,
     /// Stops along the route: (at this many metres, for this long), by distance.
     pub stops: Vec<(f64, Duration)>,
+    /// The secured variant: the command path authenticated, CAN FD on bus 1 and 1b
+    /// ([`bywire_tug::secured`]).
+    pub secoc: bool,
 }
 
 /// The plain run: the apron loop at 3 m/s with 2 t of bags, level, nothing else asked for.
@@ -101,6 +106,7 @@ impl Default for TugParams {
             steering_steps: Vec::new(),
             speeds: Vec::new(),
             stops: Vec::new(),
+            secoc: false,
         }
     }
 }
@@ -215,6 +221,8 @@ pub enum Fault {
     },
     /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
     RedundantBusLoss,
+    /// A node on bus 1 without the key attacks ([`crate::attacker`]).
+    Attack(Attack),
     /// Whichever node sends frames with this identifier on this bus sends them corrupted
     /// (a bit flipped), twice, or late (one such fault an identifier: the latest holds).
     TamperFrames {
@@ -305,6 +313,10 @@ const IO: NodeIndex = 5;
 /// Steering drives FL..RR at 6–9, wheel drives FL..RR at 10–13.
 const FIRST_STEER: NodeIndex = 6;
 const FIRST_DRIVE: NodeIndex = 10;
+const ATTACKER: NodeIndex = 14;
+/// The simulated vehicle's SecOC key (a simulation's, not a secret): every node of the
+/// secured variant has it, the attacker does not.
+const SIM_KEY: [u8; 16] = *b"bywire-sim-key!!";
 
 /// Receive exactly these identifiers.
 fn only(ids: &[u32]) -> Filtering {
@@ -358,7 +370,7 @@ impl<N: Node> Node for OnBothCommandBuses<N> {
         self.0.poll(now, &mut |port, frame| {
             if port == Port::MAIN {
                 out(Port::MAIN, frame);
-                out(Ads::<ReferenceWire>::PORT_B, frame);
+                out(Ads::<TugWire>::PORT_B, frame);
             }
         });
     }
@@ -381,7 +393,8 @@ pub struct Tug {
     ecu_bus1: NodeId,
     ads: AdsDriver,
     ecu: VehicleControlEcu,
-    safety: SafetyController,
+    safety: Signing<SafetyController>,
+    attacker: Attacker,
     bms: Bms,
     imu: ImuNode,
     io: IoNode,
@@ -420,6 +433,20 @@ pub struct Tug {
     /// Command to heartbeat echo, as the ADS measured it on every state frame.
     pub echo_latencies: Vec<Duration>,
     last_echo: Option<Timestamp>,
+    /// What the attacks achieved.
+    pub security: SecurityWatch,
+}
+
+/// What the run saw of the attacks: commands the vehicle took that the ADS never sent, and
+/// speeds the ADS took that the tug never had.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SecurityWatch {
+    /// Commands the ECU accepted that differ from the ADS's own (by > 5° or > 1 m/s).
+    pub foreign_commands: u64,
+    /// State frames the ADS accepted whose speed is > 1.5 m/s off the tug's.
+    pub false_speeds: u64,
+    accepted: u64,
+    speed_at: Option<Timestamp>,
 }
 
 impl Tug {
@@ -450,11 +477,13 @@ impl Tug {
         });
         let start = mission.start_pose();
         let mut net = Network::new();
+        // The secured variant's frames are CAN FD with a faster data phase on the command buses.
+        let command_data = params.secoc.then_some(secured::DATA_BITRATE);
         let buses = [
-            net.add_bus("bus1", 500_000, None),
+            net.add_bus("bus1", 500_000, command_data),
             net.add_bus("bus2", 1_000_000, None),
             net.add_bus("bus3", 500_000, None),
-            net.add_bus("bus1b", 500_000, None),
+            net.add_bus("bus1b", 500_000, command_data),
         ];
         let [bus1, bus2, bus3, bus1b] = buses;
         let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
@@ -466,7 +495,7 @@ impl Tug {
             }
             endpoint
         };
-        let ads_ports = (Ads::<ReferenceWire>::PORT_A, Ads::<ReferenceWire>::PORT_B);
+        let ads_ports = (Ads::<TugWire>::PORT_A, Ads::<TugWire>::PORT_B);
         wire(&mut net, ADS, ads_ports.0, 0, "ADS");
         wire(&mut net, ADS, ads_ports.1, 3, "ADS");
         let ecu_bus1 = wire(&mut net, ECU, ecu::BUS1, 0, "ECU");
@@ -475,6 +504,7 @@ impl Tug {
         wire(&mut net, ECU, ecu::BUS3, 2, "ECU");
         wire(&mut net, SAFETY, Port::MAIN, 0, "safety controller");
         wire(&mut net, BMS, Port::MAIN, 0, "BMS");
+        wire(&mut net, ATTACKER, Port::MAIN, 0, "attacker");
         wire(&mut net, IMU, Port::MAIN, 2, "IMU");
         wire(&mut net, IO, Port::MAIN, 2, "I/O node");
         for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
@@ -504,6 +534,7 @@ impl Tug {
         // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state.
         let mut ecu_hears = commands.to_vec();
         ecu_hears.extend([
+            secured::SYNC_ID,
             diagnostics::REQUEST_ID,
             diagnostics::FUNCTIONAL_ID,
             BatteryMessage::ID,
@@ -522,12 +553,28 @@ impl Tug {
             VehicleToAdsState::ID,
             VehicleToAdsSensors::ID,
             VehicleToAdsWheelAngles::ID,
+            secured::SYNC_ID,
         ];
         net.set_filtering(ADS, ads_ports.0, only(&feedback));
         net.set_filtering(ADS, ads_ports.1, deaf());
         for node in [SAFETY, BMS, IMU, IO] {
             net.set_filtering(node, Port::MAIN, deaf());
         }
+        net.set_filtering(
+            ATTACKER,
+            Port::MAIN,
+            only(&[AdsToVehicleControl::ID, VehicleToAdsState::ID]),
+        );
+        // Every node of the secured variant starts its freshness at 1: a new key.
+        let key = bywire_secoc::Key::new(SIM_KEY);
+        let wire = || {
+            if params.secoc {
+                secured::secured(&key, 1).unwrap_or_else(|_| secured::plain())
+            } else {
+                secured::plain()
+            }
+        };
+        let safety_table = params.secoc.then(|| secured::table(&key, 1).ok()).flatten();
         let mut taps = [0; 4];
         for (tap, (bus, list)) in taps.iter_mut().zip(buses.iter().zip(names.iter_mut())) {
             *tap = net.tap(*bus).unwrap_or_default();
@@ -548,15 +595,17 @@ impl Tug {
             taps,
             names,
             ecu_bus1,
-            ads: AdsDriver::new(ads_config, mission),
-            ecu: VehicleControlEcu::new(
+            ads: AdsDriver::new(ads_config, mission, wire()),
+            ecu: VehicleControlEcu::with_wire(
                 ecu_config,
                 EcuGeometry {
                     wheelbase: chassis_params.wheelbase,
                     track: chassis_params.track,
                 },
+                wire(),
             ),
-            safety: nodes::safety_controller(),
+            safety: Signing::new(nodes::safety_controller(), safety_table),
+            attacker: Attacker::new(),
             bms: nodes::bms(),
             imu: nodes::imu(),
             io: nodes::io_node(),
@@ -593,6 +642,7 @@ impl Tug {
             tank_over: false,
             echo_latencies: Vec::new(),
             last_echo: None,
+            security: SecurityWatch::default(),
         }
     }
 
@@ -693,7 +743,8 @@ impl Tug {
             | Fault::Estop
             | Fault::DriveSilence(_)
             | Fault::RedundantBusLoss
-            | Fault::DriverTakeover => {}
+            | Fault::DriverTakeover
+            | Fault::Attack(_) => {}
         }
         self.active
             .push((fault, duration.map(|d| now.saturating_add(d))));
@@ -760,7 +811,7 @@ impl Tug {
     }
 
     /// The vehicle control ECU's supervisor.
-    pub fn ecu(&self) -> &Supervisor<ReferenceWire> {
+    pub fn ecu(&self) -> &Supervisor<TugWire> {
         self.ecu.supervisor()
     }
 
@@ -815,7 +866,7 @@ impl Tug {
         self.net.drop_output(ADS, silent);
         let b_lost = self.is_active(Fault::RedundantBusLoss);
         self.net
-            .drop_port_output(ADS, Ads::<ReferenceWire>::PORT_B, b_lost);
+            .drop_port_output(ADS, Ads::<TugWire>::PORT_B, b_lost);
         for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
             let steer_silent = self.is_active(Fault::DriveSilence(*steer));
             let drive_silent = self.is_active(Fault::DriveSilence(drive));
@@ -833,7 +884,15 @@ impl Tug {
             estop_chain_open: estop,
             parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
         });
-        self.safety.reading = estop;
+        self.safety.node.reading = estop;
+        let attack = self.active.iter().find_map(|(f, _)| match f {
+            Fault::Attack(a) => Some(*a),
+            _ => None,
+        });
+        if attack != self.attacker.attack() {
+            self.attacker.set_attack(attack);
+            self.net.changed(ATTACKER);
+        }
         if self.imu.schedule.due_within(until) {
             let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
             self.imu.reading = (yaw_rate.to_degrees(), accel);
@@ -890,7 +949,7 @@ impl Tug {
             Some(node) => node,
             None => &mut self.ads,
         };
-        let mut nodes: [&mut dyn Node; 14] = [
+        let mut nodes: [&mut dyn Node; 15] = [
             ads,
             &mut self.ecu,
             &mut self.safety,
@@ -905,11 +964,13 @@ impl Tug {
             d1,
             d2,
             d3,
+            &mut self.attacker,
         ];
         self.net.run_until(until, &mut nodes);
         self.run_plants(now);
         self.now = until;
         self.take_logs();
+        self.watch_attacks();
         self.record_step(until);
         self.note_changes();
         self.sample(until);
@@ -957,6 +1018,44 @@ impl Tug {
             self.last_echo = echo.at;
             self.echo_latencies.extend(echo.value);
         }
+    }
+
+    /// What the attacks achieve: each command the ECU took this step compared with the ADS's
+    /// own, each speed the ADS took with the tug's.
+    fn watch_attacks(&mut self) {
+        let accepted = self.ecu.supervisor().stats().accepted;
+        if accepted != self.security.accepted && !self.ads_external {
+            self.security.accepted = accepted;
+            let own = self.ads.ads().effective_command(self.now);
+            let taken = self.ecu.supervisor().command();
+            if let (Some(own), Some(taken)) = (own, taken) {
+                if (own.steering - taken.steering).abs() > 5.0
+                    || (own.velocity - taken.velocity).abs() > 1.0
+                {
+                    self.security.foreign_commands += 1;
+                }
+            }
+        }
+        let speed = self.ads.ads().state().velocity;
+        if speed.at != self.security.speed_at {
+            self.security.speed_at = speed.at;
+            if speed
+                .value
+                .is_some_and(|v| (v - self.pose_speed()).abs() > 1.5)
+            {
+                self.security.false_speeds += 1;
+            }
+        }
+    }
+
+    /// The attacker (its frames sent).
+    pub fn attacker(&self) -> &Attacker {
+        &self.attacker
+    }
+
+    /// The built-in ADS (its view of the vehicle, its counts).
+    pub fn ads(&self) -> &AdsDriver {
+        &self.ads
     }
 
     /// The trace every 50 ms, the tracking error every 20 ms once engaged.

@@ -39,7 +39,7 @@ use bywire_core::frame::ErrorClass;
 use crate::diagnostics::{self, DiagnosticRequest, Diagnostics, Observation};
 use crate::messages::{self, Battery as BatteryMessage, SteeringAngleSensors, VehicleStatus};
 use crate::plausibility::{SteeringFault, SteeringPlausibility};
-use crate::wire::ReferenceWire;
+use crate::secured::{self, TugWire};
 
 /// Bus 1, vehicle control (the supervisor's command bus A).
 pub const BUS1: Port = Channel::A.port();
@@ -150,7 +150,7 @@ pub struct StatusInputs {
 
 /// The vehicle control ECU.
 pub struct VehicleControlEcu {
-    supervisor: Supervisor<ReferenceWire>,
+    supervisor: Supervisor<TugWire>,
     master: Master,
     plausibility: SteeringPlausibility,
     swerve: Swerve<4>,
@@ -180,6 +180,11 @@ impl VehicleControlEcu {
     /// An ECU with its supervisor configured by `config` (the tug's profile, with redundancy on
     /// bus 1b), mastering the eight drives.
     pub fn new(config: SupervisorConfig, geometry: Geometry) -> Self {
+        Self::with_wire(config, geometry, secured::plain())
+    }
+
+    /// The same ECU speaking `wire` (the secured variant: [`secured::secured`]).
+    pub fn with_wire(config: SupervisorConfig, geometry: Geometry, wire: TugWire) -> Self {
         let mut master = Master::new(
             MASTER_NODE,
             Duration::from_millis(100),
@@ -199,7 +204,7 @@ impl VehicleControlEcu {
         }
         master.nmt(NmtCommand::Start, 0);
         VehicleControlEcu {
-            supervisor: Supervisor::with_wire(config, ReferenceWire),
+            supervisor: Supervisor::with_wire(config, wire),
             master,
             plausibility: SteeringPlausibility::default(),
             swerve: four_wheel(geometry.wheelbase, geometry.track),
@@ -233,9 +238,12 @@ impl VehicleControlEcu {
 
     /// Start afresh, as after power-on: a new supervisor (failed closed), a new master, no
     /// latched faults; the diagnostics' DTC memory, the odometer and the wiring's inputs
-    /// stay. Silent for [`BOOT_TIME`].
+    /// stay, and so does the wire's freshness. Silent for [`BOOT_TIME`].
     fn restart(&mut self, now: Timestamp) {
-        let mut fresh = VehicleControlEcu::new(self.config, self.geometry);
+        // The wire's freshness values are kept, as in non-volatile memory: a restart is not a
+        // rewind.
+        let wire = self.supervisor.wire_mut().clone();
+        let mut fresh = VehicleControlEcu::with_wire(self.config, self.geometry, wire);
         core::mem::swap(&mut fresh.diagnostics, &mut self.diagnostics);
         fresh.diagnostics.restart();
         fresh.offsets = fresh.diagnostics.steering_offsets();
@@ -249,7 +257,7 @@ impl VehicleControlEcu {
     }
 
     /// The supervisor (watchdog, latch, mode, counts, degraded bus).
-    pub fn supervisor(&self) -> &Supervisor<ReferenceWire> {
+    pub fn supervisor(&self) -> &Supervisor<TugWire> {
         &self.supervisor
     }
 
@@ -525,9 +533,10 @@ impl VehicleControlEcu {
         let counter = self.report_counter & 0x0F;
         self.report_counter = self.report_counter.wrapping_add(1);
         // The frames any vehicle on this wire sends (the simulated vehicle's too).
+        let wire = self.supervisor.wire_mut();
         let frames = [
-            ReferenceWire.wheel_speeds_frame(speeds, counter),
-            ReferenceWire.wheel_angles_frame(angles, counter),
+            wire.wheel_speeds_frame(speeds, counter),
+            wire.wheel_angles_frame(angles, counter),
         ];
         for frame in frames.into_iter().flatten() {
             out(BUS1, frame);
@@ -599,7 +608,7 @@ impl VehicleControlEcu {
             Node::on_frame(
                 &mut self.supervisor,
                 now,
-                Supervisor::<ReferenceWire>::PORT_A,
+                Supervisor::<TugWire>::PORT_A,
                 frame,
             );
         }
@@ -651,7 +660,7 @@ impl Node for VehicleControlEcu {
             BUS1B => Node::on_frame(
                 &mut self.supervisor,
                 now,
-                Supervisor::<ReferenceWire>::PORT_B,
+                Supervisor::<TugWire>::PORT_B,
                 frame,
             ),
             BUS2 => self.master.on_frame(now, frame),

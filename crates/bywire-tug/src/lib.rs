@@ -7,6 +7,8 @@
 //!   with the E2E protection every message carries (4-bit counter, CRC-8 with data ID);
 //! - [`wire`]: [`wire::ReferenceWire`], both ends of the wire through those structs (`no_std`);
 //! - [`profile`]: its vehicle profile (`profiles/reference-tug.toml`) for the runtime codec;
+//! - [`secured`]: its secured variant — the command path authenticated (SecOC profile 1) in
+//!   CAN FD frames, with the figures that chose FD over a companion frame;
 //! - [`plausibility`]: the ECU's check of each corner's two steering-sensor tracks;
 //! - [`ecu`]: the vehicle control ECU as one node on its four buses — the supervisor, the
 //!   CANopen master of the eight drives, the plausibility check, the 4WS mapping, its reports;
@@ -30,6 +32,7 @@ pub mod diagnostics;
 pub mod ecu;
 pub mod messages;
 pub mod plausibility;
+pub mod secured;
 pub mod wire;
 
 use bywire_vehicle::profile::{LoadedProfile, Profile, ProfileError};

@@ -114,6 +114,8 @@ pub struct FeedbackStats {
     pub range: u64,
     /// State frames whose heartbeat echo matched none of the recent commands.
     pub echo: u64,
+    /// Secured frames that failed verification (forged, replayed, another key's).
+    pub authentication: u64,
 }
 
 /// The vehicle as the ADS sees it.
@@ -214,6 +216,11 @@ impl<W: AdsWire> Ads<W> {
             recent: [None; RECENT],
             recent_next: 0,
         }
+    }
+
+    /// The wire it speaks through.
+    pub fn wire(&self) -> &W {
+        &self.wire
     }
 
     /// The latest command (latest wins); non-finite values are refused and the previous
@@ -371,6 +378,9 @@ impl<W: AdsWire> Ads<W> {
                 self.next_command = Some(next);
             }
         }
+        if let Some(frame) = self.wire.pending_frame(now) {
+            out(frame);
+        }
     }
 
     /// A frame from the vehicle.
@@ -378,6 +388,7 @@ impl<W: AdsWire> Ads<W> {
         match self.wire.feedback(frame) {
             Feedback::Other => {}
             Feedback::Corrupt => self.stats.checksum += 1,
+            Feedback::Unauthenticated => self.stats.authentication += 1,
             Feedback::State(state) => self.on_state(now, state),
             Feedback::WheelAngles { counter, angles } => self.on_angles(now, counter, angles),
             Feedback::WheelSpeeds { counter, speeds } => self.on_sensors(now, counter, speeds),

@@ -14,6 +14,8 @@
 //!   and its decoder.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
 //!   timing) as a node on the command bus, for any profile's vehicle.
+//! - `secured` (feature `secoc`): any wire with its messages authenticated (AUTOSAR SecOC:
+//!   CMAC, freshness, replay and forgery rejected and counted, freshness sync).
 //! - [`wire`]: a vehicle's messages on the wire, behind the traits the nodes speak through;
 //!   [`wire::ProfileWire`] speaks any vehicle a profile describes, by role, through the runtime
 //!   codec (a vehicle crate may add a wire over generated structs: `bywire-tug` does).
@@ -56,5 +58,7 @@ pub mod profile;
 #[cfg(feature = "std")]
 mod profile_wire;
 pub mod redundancy;
+#[cfg(feature = "secoc")]
+pub mod secured;
 pub mod supervisor;
 pub mod wire;

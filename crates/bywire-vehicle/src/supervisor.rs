@@ -29,6 +29,9 @@ use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::wire::{Incoming, Rejected, StateReport, VehicleWire};
 
+/// Command cycles without an E-stop frame, once one has come, after which the chain is open.
+pub const ESTOP_TIMEOUT_CYCLES: u32 = 3;
+
 /// Tuning of the supervisor.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SupervisorConfig {
@@ -333,6 +336,8 @@ pub enum Rejection {
     OutOfRange,
     /// The copies from the two buses differ.
     Disagreement,
+    /// A secured command that failed verification: forged, replayed, or another key's.
+    Authentication,
 }
 
 /// Counts of accepted and rejected commands.
@@ -352,6 +357,11 @@ pub struct CommandStats {
     pub out_of_range: u64,
     /// Redundant copies that disagreed.
     pub disagreements: u64,
+    /// Secured commands that failed verification.
+    pub authentication: u64,
+    /// Other secured frames (E-stop, emergency brake) that failed verification and were not
+    /// read; not command rejections.
+    pub unauthenticated: u64,
 }
 
 impl CommandStats {
@@ -363,6 +373,7 @@ impl CommandStats {
             Rejection::SkippedCounter => &mut self.skipped,
             Rejection::OutOfRange => &mut self.out_of_range,
             Rejection::Disagreement => &mut self.disagreements,
+            Rejection::Authentication => &mut self.authentication,
         };
         *slot = slot.saturating_add(1);
     }
@@ -375,6 +386,7 @@ impl CommandStats {
             + self.skipped
             + self.out_of_range
             + self.disagreements
+            + self.authentication
     }
 }
 
@@ -437,6 +449,8 @@ pub struct Supervisor<W: VehicleWire> {
     decelerating_since: Option<(Timestamp, f64)>,
     estop: EstopState,
     estop_active: bool,
+    /// When the last E-stop frame came (`None`: the vehicle has sent none yet).
+    estop_heard: Option<Timestamp>,
     emergency_brake_until: Option<Timestamp>,
     mode: ControlMode,
     driver_input: bool,
@@ -473,6 +487,7 @@ impl<W: VehicleWire> Supervisor<W> {
             decelerating_since: None,
             estop: EstopState::Normal,
             estop_active: false,
+            estop_heard: None,
             emergency_brake_until: None,
             mode: ControlMode::Manual,
             driver_input: false,
@@ -484,6 +499,11 @@ impl<W: VehicleWire> Supervisor<W> {
             state_counter: 0,
             echo: 0,
         }
+    }
+
+    /// The wire it reads.
+    pub fn wire(&self) -> &W {
+        &self.wire
     }
 
     /// The wire, to send the vehicle's other messages with it.
@@ -561,6 +581,7 @@ impl<W: VehicleWire> Supervisor<W> {
         let (command, counter) = read.map_err(|rejected| match rejected {
             Rejected::Malformed => Rejection::Malformed,
             Rejected::Checksum => Rejection::Checksum,
+            Rejected::Authentication => Rejection::Authentication,
         })?;
         let counter = u8::try_from(counter).unwrap_or(0);
         let last = self.command.map(|_| self.echo);
@@ -600,9 +621,10 @@ impl<W: VehicleWire> Supervisor<W> {
 
     /// A frame from one of the two buses.
     pub fn on_frame_from(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
-        match self.wire.incoming(frame) {
+        match self.wire.incoming_from(channel, frame) {
             Incoming::Command(read) => self.on_command(now, channel, read),
             Incoming::Estop(requested) => {
+                self.estop_heard = Some(now);
                 self.estop_active = requested;
                 self.evaluate(false, false);
             }
@@ -610,6 +632,9 @@ impl<W: VehicleWire> Supervisor<W> {
                 // Each brake frame holds full braking for 3 cycles (the burst, then 20 Hz).
                 self.emergency_brake_until =
                     requested.then(|| now.saturating_add(self.config.cycle.saturating_mul(3)));
+            }
+            Incoming::Unauthenticated => {
+                self.stats.unauthenticated = self.stats.unauthenticated.saturating_add(1);
             }
             Incoming::Other => {}
         }
@@ -709,7 +734,15 @@ impl<W: VehicleWire> Supervisor<W> {
             t.saturating_add(self.config.cycle.saturating_mul(k))
                 .saturating_add(self.config.cycle / 2)
         });
-        Some(tick.map_or(self.next_state_frame, |t| t.min(self.next_state_frame)))
+        let due = tick.map_or(self.next_state_frame, |t| t.min(self.next_state_frame));
+        Some(self.estop_deadline().map_or(due, |t| t.min(due)))
+    }
+
+    /// When a chain heard before counts as open for want of its frames: three command cycles
+    /// after the last (a bus that cannot carry the E-stop chain is an E-stop).
+    fn estop_deadline(&self) -> Option<Timestamp> {
+        let heard = self.estop_heard.filter(|_| !self.estop_active)?;
+        Some(heard.saturating_add(self.config.cycle.saturating_mul(ESTOP_TIMEOUT_CYCLES)))
     }
 
     /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due.
@@ -734,6 +767,9 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }
         }
+        if self.estop_deadline().is_some_and(|t| now >= t) {
+            self.estop_active = true;
+        }
         if self.emergency_brake_until.is_some_and(|until| now >= until) {
             self.emergency_brake_until = None;
         }
@@ -749,6 +785,9 @@ impl<W: VehicleWire> Supervisor<W> {
             if let Some(frame) = self.state_frame() {
                 out(frame);
             }
+        }
+        if let Some(frame) = self.wire.pending_frame(now) {
+            out(frame);
         }
     }
 

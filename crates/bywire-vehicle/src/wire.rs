@@ -5,9 +5,10 @@
 //! (`no_std`, what an ECU build uses) — the reference tug's crate does. The nodes are the same
 //! for every wire.
 
-use bywire_core::Frame;
+use bywire_core::{Frame, Timestamp};
 
 use crate::command::{ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+use crate::redundancy::Channel;
 
 #[cfg(feature = "std")]
 pub use crate::profile_wire::ProfileWire;
@@ -48,6 +49,9 @@ pub enum Feedback {
     Other,
     /// A feedback message whose checksum or shape is wrong.
     Corrupt,
+    /// A secured feedback message that failed verification (forged, replayed, or another
+    /// key's): not read at all.
+    Unauthenticated,
     /// The state message.
     State(StateFeedback),
     /// Wheel angles FL, FR, RL, RR, degrees, with the counter.
@@ -84,6 +88,11 @@ pub trait AdsWire: Counters {
     fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame>;
     /// Read a received frame.
     fn feedback(&mut self, frame: &Frame) -> Feedback;
+    /// A frame the wire itself has to send at `now` (a freshness sync), polled with the
+    /// node's own.
+    fn pending_frame(&mut self, _now: Timestamp) -> Option<Frame> {
+        None
+    }
 }
 
 /// What a received frame is to the vehicle side.
@@ -98,6 +107,8 @@ pub enum Incoming {
     Estop(bool),
     /// The emergency-brake message (checked): whether braking is requested.
     EmergencyBrake(bool),
+    /// A secured message other than the command that failed verification: not read at all.
+    Unauthenticated,
 }
 
 /// Why a command frame was not read.
@@ -107,6 +118,8 @@ pub enum Rejected {
     Malformed,
     /// The checksum does not match.
     Checksum,
+    /// A secured command that failed verification (forged, replayed, or another key's).
+    Authentication,
 }
 
 /// What the vehicle side reports in its state message.
@@ -140,6 +153,16 @@ pub struct StateReport {
 pub trait VehicleWire: Counters {
     /// Read a received frame.
     fn incoming(&mut self, frame: &Frame) -> Incoming;
+    /// Read a frame received on `channel`'s bus (a wire that keeps state per bus, as
+    /// [`crate::secured::Secured`] does, tells them apart).
+    fn incoming_from(&mut self, _channel: Channel, frame: &Frame) -> Incoming {
+        self.incoming(frame)
+    }
+    /// A frame the wire itself has to send at `now` (a freshness sync), polled with the
+    /// node's own.
+    fn pending_frame(&mut self, _now: Timestamp) -> Option<Frame> {
+        None
+    }
     /// The state frame with `counter` and its checksum.
     fn state_frame(&mut self, report: &StateReport, counter: u64) -> Option<Frame>;
     /// The wheel-speed frame (FL, FR, RL, RR in m/s) with `counter` and its checksum, where

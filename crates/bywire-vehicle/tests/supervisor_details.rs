@@ -148,8 +148,11 @@ fn stats_add_up_and_rpm_needs_a_wheel() {
         skipped: 8,
         out_of_range: 16,
         disagreements: 32,
+        authentication: 64,
+        // Not a command rejection.
+        unauthenticated: 128,
     };
-    assert_eq!(stats.rejected(), 63);
+    assert_eq!(stats.rejected(), 127);
     assert_eq!(motor_rpm(1.0, 20.0, 0.0), 0.0);
     assert!((motor_rpm(1.0, 20.0, 0.5) - 2400.0 / std::f64::consts::PI).abs() < 1e-9);
 }

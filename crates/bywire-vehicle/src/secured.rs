@@ -1,0 +1,534 @@
+//! Authenticated messages on the command path ([`Secured`]): any wire, with the messages it
+//! lists signed on the way out and verified on the way in (AUTOSAR SecOC through
+//! [`bywire_secoc`]). A secured message travels as a CAN FD frame: the message's own payload
+//! (counter and CRC included, unchanged), then the freshness value's low bits and the truncated
+//! MAC.
+//!
+//! - The ADS side signs its commands and emergency-brake frames and verifies the vehicle's
+//!   state and wheel frames; the vehicle side the reverse. A frame of a listed message that
+//!   fails verification is never read: a command becomes a rejected command
+//!   ([`Rejected::Authentication`], the watchdog cascade follows), anything else an
+//!   [`Incoming::Unauthenticated`] or [`Feedback::Unauthenticated`], counted apart.
+//! - Each command bus has its own receivers: the redundant bus carries the same frames, with
+//!   the same freshness, and neither copy is a replay of the other.
+//! - Freshness sync: when an authentic frame is stale (its sender restarted without its
+//!   persisted freshness), the receiving side answers with a signed sync message carrying the
+//!   last value it accepted, at most every [`SYNC_INTERVAL`]; the sender goes on after it.
+//!   A sync only ever moves a sender forward, so a replayed one does nothing.
+//! - Signing that cannot be done (the freshness exhausted, a frame not of its declared length)
+//!   sends nothing: the receiving side's watchdog then stops the vehicle. Nothing is ever sent
+//!   unauthenticated in a secured message's place.
+//!
+//! `no_std`, no allocation: the table holds at most [`MAX_SECURED`] messages.
+
+use core::time::Duration;
+
+use bywire_core::frame::FdFrame;
+use bywire_core::node::{Node, Port};
+use bywire_core::{Frame, Id, Timestamp};
+use bywire_secoc::{Authenticator, Counts, Key, Layout, Receiver, Rejection, Sender};
+
+use crate::command::ControlCommand;
+use crate::redundancy::Channel;
+use crate::wire::{AdsWire, Counters, Feedback, Incoming, Rejected, StateReport, VehicleWire};
+
+/// The most messages one table secures.
+pub const MAX_SECURED: usize = 8;
+/// The shortest time between two freshness-sync frames.
+pub const SYNC_INTERVAL: Duration = Duration::from_millis(100);
+
+/// A sync frame's payload: the secured message's data ID (2 bytes) and the last freshness
+/// value accepted (8 bytes), both big-endian; the MAC covers it with that value as freshness.
+const SYNC_PAYLOAD: usize = 10;
+/// The sync frame's MAC bits.
+const SYNC_MAC_BITS: u32 = 24;
+
+/// The freshness-sync message: its identifier and the data ID its MAC covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncMessage {
+    /// The identifier it is sent with.
+    pub id: Id,
+    /// Its data ID.
+    pub data_id: u16,
+}
+
+/// Why a table refused a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TableError {
+    /// More than [`MAX_SECURED`] messages.
+    Full,
+    /// The identifier is already in the table.
+    Duplicate(Id),
+    /// The data ID is already in the table (a MAC must name one message).
+    DuplicateDataId(u16),
+}
+
+impl core::fmt::Display for TableError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TableError::Full => write!(f, "at most {MAX_SECURED} secured messages"),
+            TableError::Duplicate(id) => {
+                write!(f, "identifier 0x{:X} is secured twice", id.as_raw())
+            }
+            TableError::DuplicateDataId(d) => write!(f, "data ID {d} is used twice"),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Entry {
+    id: Id,
+    layout: Layout,
+    sender: Sender,
+    /// One receiver per command bus.
+    receivers: [Receiver; 2],
+}
+
+/// What a received frame is to the table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Checked {
+    /// Not a secured message: read it as it is.
+    Unsecured,
+    /// Authentic and fresh: the message as its own wire reads it (the payload alone).
+    Authentic(Frame),
+    /// A secured message that failed verification, and why.
+    Rejected(Rejection),
+    /// A freshness sync, taken (or, failing verification, counted and dropped).
+    Sync,
+}
+
+/// Counts of everything the table verified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SecuredStats {
+    /// The receivers' counts, summed.
+    pub frames: Counts,
+    /// Sync frames taken.
+    pub syncs_taken: u64,
+    /// Sync frames refused (their MAC is wrong).
+    pub syncs_refused: u64,
+    /// Sync frames sent.
+    pub syncs_sent: u64,
+    /// Frames not sent because they could not be signed.
+    pub unsigned: u64,
+}
+
+/// The secured messages of one node, with its key, freshness and counts.
+#[derive(Debug, Clone)]
+pub struct SecuredTable {
+    auth: Authenticator,
+    window: u64,
+    entries: [Option<Entry>; MAX_SECURED],
+    sync: Option<SyncMessage>,
+    /// A stale frame of this entry was seen: a sync is due.
+    sync_due: Option<usize>,
+    last_sync: Option<Timestamp>,
+    stats: SecuredStats,
+}
+
+impl SecuredTable {
+    /// A table signing and verifying with `key`, accepting freshness values up to `window`
+    /// ahead of the last accepted one (at least the freshness a sender's store reserves ahead,
+    /// so that its restart is accepted).
+    pub fn new(key: &Key, window: u64) -> SecuredTable {
+        SecuredTable {
+            auth: Authenticator::new(key),
+            window,
+            entries: Default::default(),
+            sync: None,
+            sync_due: None,
+            last_sync: None,
+            stats: SecuredStats::default(),
+        }
+    }
+
+    /// Secure message `id` with `layout`, the first frame sent with freshness `next` (1 for a
+    /// new key, the persisted value after a restart).
+    pub fn secure(&mut self, id: Id, layout: Layout, next: u64) -> Result<(), TableError> {
+        let taken = self.entries.iter().flatten();
+        if let Some(e) = taken.clone().find(|e| e.id == id) {
+            return Err(TableError::Duplicate(e.id));
+        }
+        if taken.clone().any(|e| e.layout.data_id == layout.data_id)
+            || self.sync.is_some_and(|s| s.data_id == layout.data_id)
+        {
+            return Err(TableError::DuplicateDataId(layout.data_id));
+        }
+        let slot = self
+            .entries
+            .iter_mut()
+            .find(|e| e.is_none())
+            .ok_or(TableError::Full)?;
+        let receiver = Receiver::new(0, self.window);
+        *slot = Some(Entry {
+            id,
+            layout,
+            sender: Sender::new(next),
+            receivers: [receiver; 2],
+        });
+        Ok(())
+    }
+
+    /// Answer stale frames with (and take) freshness syncs on `sync`.
+    pub fn with_sync(mut self, sync: SyncMessage) -> Result<SecuredTable, TableError> {
+        if self
+            .entries
+            .iter()
+            .flatten()
+            .any(|e| e.layout.data_id == sync.data_id)
+        {
+            return Err(TableError::DuplicateDataId(sync.data_id));
+        }
+        self.sync = Some(sync);
+        Ok(self)
+    }
+
+    /// The counts so far.
+    pub fn stats(&self) -> SecuredStats {
+        self.stats
+    }
+
+    /// The freshness the next frame of `id` is signed with (what a sender persists).
+    pub fn next_freshness(&self, id: Id) -> Option<u64> {
+        self.entry(id).map(|e| e.sender.next())
+    }
+
+    /// The layout of message `id`, if secured.
+    pub fn layout(&self, id: Id) -> Option<Layout> {
+        self.entry(id).map(|e| e.layout)
+    }
+
+    fn entry(&self, id: Id) -> Option<&Entry> {
+        self.entries.iter().flatten().find(|e| e.id == id)
+    }
+
+    fn position(&self, id: Id) -> Option<usize> {
+        self.entries
+            .iter()
+            .position(|e| e.as_ref().is_some_and(|e| e.id == id))
+    }
+
+    /// `frame` as it goes on the wire: a secured message signed with its next freshness value
+    /// (an FD frame with bit-rate switching); any other frame as it is. `None`: it could not be
+    /// signed (the freshness is exhausted, or the frame is not the declared length), and
+    /// nothing may be sent in its place.
+    pub fn protect(&mut self, frame: Frame) -> Option<Frame> {
+        let Some(index) = frame.id().and_then(|id| self.position(id)) else {
+            return Some(frame);
+        };
+        let signed = self
+            .entries
+            .get_mut(index)
+            .and_then(Option::as_mut)
+            .and_then(|e| {
+                let payload = frame.data();
+                if payload.len() != e.layout.payload_length || frame.is_remote() {
+                    return None;
+                }
+                let mut data = [0u8; bywire_secoc::MAX_PAYLOAD];
+                let secured = data.get_mut(..e.layout.secured_length())?;
+                secured.get_mut(..payload.len())?.copy_from_slice(payload);
+                e.sender.sign(&self.auth, &e.layout, secured).ok()?;
+                FdFrame::padded(e.id, secured, true, false)
+                    .ok()
+                    .map(Frame::Fd)
+            });
+        if signed.is_none() {
+            self.stats.unsigned = self.stats.unsigned.saturating_add(1);
+        }
+        signed
+    }
+
+    /// Verify a frame received on `channel`'s bus.
+    pub fn check(&mut self, channel: Channel, frame: &Frame) -> Checked {
+        let Some(id) = frame.id() else {
+            return Checked::Unsecured;
+        };
+        if self.sync.is_some_and(|s| s.id == id) {
+            self.take_sync(frame);
+            return Checked::Sync;
+        }
+        let Some(index) = self.position(id) else {
+            return Checked::Unsecured;
+        };
+        let auth = &self.auth;
+        let Some(entry) = self.entries.get_mut(index).and_then(Option::as_mut) else {
+            return Checked::Unsecured;
+        };
+        let receiver = match channel {
+            Channel::A => &mut entry.receivers[0],
+            Channel::B => &mut entry.receivers[1],
+        };
+        let outcome = if frame.is_remote() {
+            Err(Rejection::Malformed)
+        } else {
+            receiver.accept(auth, &entry.layout, frame.data())
+        };
+        count(&mut self.stats.frames, outcome);
+        match outcome {
+            Ok(_) => frame
+                .data()
+                .get(..entry.layout.payload_length)
+                .and_then(|payload| payload_frame(id, payload))
+                .map_or(Checked::Rejected(Rejection::Malformed), Checked::Authentic),
+            Err(rejection) => {
+                if rejection == Rejection::Stale {
+                    self.sync_due = Some(index);
+                }
+                Checked::Rejected(rejection)
+            }
+        }
+    }
+
+    /// The freshness-sync frame due at `now`, if any: the last value accepted of the message
+    /// whose frame was stale, at most one every [`SYNC_INTERVAL`].
+    pub fn sync_frame(&mut self, now: Timestamp) -> Option<Frame> {
+        let sync = self.sync?;
+        let index = self.sync_due?;
+        if self
+            .last_sync
+            .is_some_and(|t| now.saturating_since(t) < SYNC_INTERVAL)
+        {
+            return None;
+        }
+        let entry = self.entries.get(index).and_then(Option::as_ref)?;
+        let last = entry
+            .receivers
+            .iter()
+            .map(Receiver::last)
+            .max()
+            .unwrap_or(0);
+        let layout = sync_layout(sync.data_id)?;
+        let mut data = [0u8; 16];
+        let secured = data.get_mut(..layout.secured_length())?;
+        let (head, _) = secured.split_at_mut(SYNC_PAYLOAD);
+        let (data_id, value) = head.split_at_mut(2);
+        data_id.copy_from_slice(&entry.layout.data_id.to_be_bytes());
+        value.copy_from_slice(&last.to_be_bytes());
+        self.auth.sign(&layout, last, secured).ok()?;
+        let frame = FdFrame::padded(sync.id, secured, true, false).ok()?;
+        self.sync_due = None;
+        self.last_sync = Some(now);
+        self.stats.syncs_sent = self.stats.syncs_sent.saturating_add(1);
+        Some(Frame::Fd(frame))
+    }
+
+    /// Take a sync frame: the sender of the message it names goes on after its value.
+    fn take_sync(&mut self, frame: &Frame) {
+        let taken = self.sync.and_then(|sync| {
+            let layout = sync_layout(sync.data_id)?;
+            let data = frame.data();
+            let data_id = u16::from_be_bytes(data.get(..2)?.try_into().ok()?);
+            let value = u64::from_be_bytes(data.get(2..SYNC_PAYLOAD)?.try_into().ok()?);
+            if frame.is_remote() || !self.auth.verify(&layout, value, data) {
+                return None;
+            }
+            let entry = self
+                .entries
+                .iter_mut()
+                .flatten()
+                .find(|e| e.layout.data_id == data_id)?;
+            entry.sender.resync(value);
+            Some(())
+        });
+        let slot = match taken {
+            Some(()) => &mut self.stats.syncs_taken,
+            None => &mut self.stats.syncs_refused,
+        };
+        *slot = slot.saturating_add(1);
+    }
+}
+
+fn sync_layout(data_id: u16) -> Option<Layout> {
+    Layout::new(data_id, SYNC_PAYLOAD, 64, 0, SYNC_MAC_BITS).ok()
+}
+
+fn count(counts: &mut Counts, outcome: Result<u64, Rejection>) {
+    let slot = match outcome {
+        Ok(_) => &mut counts.accepted,
+        Err(Rejection::Malformed) => &mut counts.malformed,
+        Err(Rejection::Mac) => &mut counts.mac,
+        Err(Rejection::Stale) => &mut counts.stale,
+        Err(Rejection::Window) => &mut counts.window,
+    };
+    *slot = slot.saturating_add(1);
+}
+
+/// The message as its own wire reads it: a classic frame up to 8 bytes, FD beyond.
+fn payload_frame(id: Id, payload: &[u8]) -> Option<Frame> {
+    if payload.len() <= 8 {
+        Frame::classic(id, payload).ok()
+    } else {
+        FdFrame::padded(id, payload, false, false)
+            .ok()
+            .map(Frame::Fd)
+    }
+}
+
+/// A wire with some of its messages secured; with no table, the wire as it is.
+#[derive(Debug, Clone)]
+pub struct Secured<W> {
+    inner: W,
+    table: Option<SecuredTable>,
+}
+
+impl<W> Secured<W> {
+    /// `inner` with the messages of `table` secured.
+    pub fn new(inner: W, table: SecuredTable) -> Secured<W> {
+        Secured {
+            inner,
+            table: Some(table),
+        }
+    }
+
+    /// `inner` as it is: nothing secured.
+    pub fn plain(inner: W) -> Secured<W> {
+        Secured { inner, table: None }
+    }
+
+    /// The table, when secured.
+    pub fn table(&self) -> Option<&SecuredTable> {
+        self.table.as_ref()
+    }
+
+    /// The wire underneath.
+    pub fn inner_mut(&mut self) -> &mut W {
+        &mut self.inner
+    }
+
+    fn protect(&mut self, frame: Option<Frame>) -> Option<Frame> {
+        match self.table.as_mut() {
+            Some(table) => frame.and_then(|f| table.protect(f)),
+            None => frame,
+        }
+    }
+
+    fn check(&mut self, channel: Channel, frame: &Frame) -> Checked {
+        self.table
+            .as_mut()
+            .map_or(Checked::Unsecured, |t| t.check(channel, frame))
+    }
+}
+
+impl<W: Counters> Counters for Secured<W> {
+    fn command_counter_bits(&self) -> u8 {
+        self.inner.command_counter_bits()
+    }
+
+    fn state_counter_bits(&self) -> u8 {
+        self.inner.state_counter_bits()
+    }
+}
+
+impl<W: AdsWire> AdsWire for Secured<W> {
+    fn wheel_counter_bits(&self) -> u8 {
+        self.inner.wheel_counter_bits()
+    }
+
+    fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Option<Frame> {
+        let frame = self.inner.command_frame(command, counter);
+        self.protect(frame)
+    }
+
+    fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
+        let frame = self.inner.emergency_brake_frame(deceleration, counter);
+        self.protect(frame)
+    }
+
+    fn feedback(&mut self, frame: &Frame) -> Feedback {
+        // The vehicle's feedback comes on bus 1 (a copy on the other bus is skipped before).
+        match self.check(Channel::A, frame) {
+            Checked::Unsecured => self.inner.feedback(frame),
+            Checked::Authentic(payload) => self.inner.feedback(&payload),
+            Checked::Rejected(_) => Feedback::Unauthenticated,
+            Checked::Sync => Feedback::Other,
+        }
+    }
+
+    fn pending_frame(&mut self, now: Timestamp) -> Option<Frame> {
+        self.table.as_mut().and_then(|t| t.sync_frame(now))
+    }
+}
+
+impl<W: VehicleWire> VehicleWire for Secured<W> {
+    fn incoming(&mut self, frame: &Frame) -> Incoming {
+        self.incoming_from(Channel::A, frame)
+    }
+
+    fn incoming_from(&mut self, channel: Channel, frame: &Frame) -> Incoming {
+        match self.check(channel, frame) {
+            Checked::Unsecured => self.inner.incoming(frame),
+            Checked::Authentic(payload) => self.inner.incoming(&payload),
+            Checked::Rejected(_) => {
+                // What the message is, from its identifier alone (its bytes are not to be
+                // read): a command is a rejected command, anything else unauthenticated.
+                let shape = frame
+                    .id()
+                    .and_then(|id| Frame::classic(id, &[0; 8]).ok())
+                    .map(|f| self.inner.incoming(&f));
+                match shape {
+                    Some(Incoming::Command(_)) => Incoming::Command(Err(Rejected::Authentication)),
+                    _ => Incoming::Unauthenticated,
+                }
+            }
+            Checked::Sync => Incoming::Other,
+        }
+    }
+
+    fn state_frame(&mut self, report: &StateReport, counter: u64) -> Option<Frame> {
+        let frame = self.inner.state_frame(report, counter);
+        self.protect(frame)
+    }
+
+    fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame> {
+        let frame = self.inner.wheel_speeds_frame(speeds, counter);
+        self.protect(frame)
+    }
+
+    fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame> {
+        let frame = self.inner.wheel_angles_frame(angles, counter);
+        self.protect(frame)
+    }
+
+    fn pending_frame(&mut self, now: Timestamp) -> Option<Frame> {
+        self.table.as_mut().and_then(|t| t.sync_frame(now))
+    }
+}
+
+/// Any node with its secured messages signed on their way out (a node that only sends them,
+/// as a safety controller sends its E-stop frames); with no table, the node as it is.
+#[derive(Debug, Clone)]
+pub struct Signing<N> {
+    /// The node.
+    pub node: N,
+    table: Option<SecuredTable>,
+}
+
+impl<N> Signing<N> {
+    /// `node`, signing the messages of `table` (or none).
+    pub fn new(node: N, table: Option<SecuredTable>) -> Signing<N> {
+        Signing { node, table }
+    }
+}
+
+impl<N: Node> Node for Signing<N> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        self.node.on_frame(now, port, frame);
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        let table = &mut self.table;
+        self.node.poll(now, &mut |port, frame| {
+            let signed = match table.as_mut() {
+                Some(t) => t.protect(frame),
+                None => Some(frame),
+            };
+            if let Some(frame) = signed {
+                out(port, frame);
+            }
+        });
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        self.node.next_deadline()
+    }
+}
