@@ -282,6 +282,53 @@ pub struct AutowareRoles {
     pub output: String,
 }
 
+/// Authenticated messages (AUTOSAR SecOC, see [`crate::secured`] with the `secoc` feature):
+/// the messages as the DBC describes them (8 bytes, counter and CRC) become the authentic
+/// payload of a CAN FD frame followed by the freshness and MAC bits.
+///
+/// ```toml
+/// [secoc]
+/// messages = ["AdsToVehicle_Control", "EmergencyBrake", "EmergencyStop", "VehicleToAds_State"]
+/// profile = "24Bit-CMAC-8Bit-FV"   # or fv_length, fv_tx_length, mac_tx_length (bits)
+/// key_id = 1                        # the key's id in the key file given at run time
+/// window = 1024                     # freshness values accepted ahead of the last
+/// sync_id = 0x0F0                   # the freshness-sync message (optional)
+/// ```
+///
+/// Each message's data ID is its identifier's low 16 bits. A build without the `secoc`
+/// feature refuses such a profile, and a key file without the key refuses to start: nothing
+/// declared secured is ever sent or read unauthenticated.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SecOcRoles {
+    /// The messages secured, by name.
+    pub messages: Vec<String>,
+    /// An AUTOSAR profile by name, or the three lengths.
+    #[serde(default)]
+    pub profile: Option<String>,
+    /// SecOCFreshnessValueLength, bits.
+    #[serde(default)]
+    pub fv_length: Option<u32>,
+    /// SecOCFreshnessValueTxLength, bits.
+    #[serde(default)]
+    pub fv_tx_length: Option<u32>,
+    /// SecOCAuthInfoTxLength, bits.
+    #[serde(default)]
+    pub mac_tx_length: Option<u32>,
+    /// The key's id in the key file.
+    pub key_id: u32,
+    /// How far ahead of the last accepted freshness value a new one may be.
+    #[serde(default = "default_window")]
+    pub window: u64,
+    /// The freshness-sync message's 11-bit identifier.
+    #[serde(default)]
+    pub sync_id: Option<u32>,
+}
+
+fn default_window() -> u64 {
+    1024
+}
+
 /// A vehicle profile.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -317,6 +364,9 @@ pub struct Profile {
     pub vehicle: Option<Geometry>,
     /// Autoware output.
     pub autoware: Option<AutowareRoles>,
+    /// Authenticated messages.
+    #[serde(default)]
+    pub secoc: Option<SecOcRoles>,
 }
 
 /// A profile checked against its DBC.
@@ -580,11 +630,153 @@ impl Checker<'_> {
                 .parse::<crate::autoware::OutputMode>()
                 .map_err(|e| self.invalid("autoware.output", e))?;
         }
+        if let Some(secoc) = &p.secoc {
+            self.secured_layouts(secoc)?;
+        }
         Ok(())
+    }
+
+    /// Each secured message's identifier and layout.
+    #[cfg(feature = "secoc")]
+    fn secured_layouts(
+        &self,
+        s: &SecOcRoles,
+    ) -> Result<Vec<(bywire_core::Id, bywire_secoc::Layout)>, ProfileError> {
+        let lengths = match (&s.profile, s.fv_length, s.fv_tx_length, s.mac_tx_length) {
+            (Some(name), None, None, None) => {
+                let p = bywire_secoc::profile(name).ok_or_else(|| {
+                    let known: Vec<&str> = bywire_secoc::PROFILES.iter().map(|p| p.name).collect();
+                    self.invalid(
+                        "secoc.profile",
+                        format!("'{name}' is not a SecOC profile ({})", known.join(", ")),
+                    )
+                })?;
+                (p.fv_length, p.fv_tx_length, p.mac_tx_length)
+            }
+            (None, Some(fv), Some(tx), Some(mac)) => (fv, tx, mac),
+            _ => {
+                return Err(self.invalid(
+                    "secoc",
+                    "give profile, or fv_length, fv_tx_length and mac_tx_length",
+                ))
+            }
+        };
+        if s.messages.is_empty() || s.messages.len() > crate::secured::MAX_SECURED {
+            return Err(self.invalid(
+                "secoc.messages",
+                format!("1 to {} messages", crate::secured::MAX_SECURED),
+            ));
+        }
+        if s.window == 0 {
+            return Err(self.invalid("secoc.window", "must be at least 1"));
+        }
+        let mut layouts = Vec::new();
+        for (i, name) in s.messages.iter().enumerate() {
+            let key = format!("secoc.messages[{i}]");
+            let m = self.message(&key, name)?;
+            let id = if m.extended {
+                bywire_core::Id::extended(m.raw_id())
+            } else {
+                bywire_core::Id::standard(m.raw_id())
+            }
+            .map_err(|e| self.invalid(&key, e.to_string()))?;
+            let data_id = u16::try_from(m.raw_id() & 0xFFFF).unwrap_or(0);
+            let length = usize::try_from(m.size).unwrap_or(usize::MAX);
+            let layout =
+                bywire_secoc::Layout::new(data_id, length, lengths.0, lengths.1, lengths.2)
+                    .map_err(|e| self.invalid(&key, format!("{name}: {e}")))?;
+            if layouts.iter().any(|(other, _)| *other == id) {
+                return Err(self.invalid(&key, format!("'{name}' is listed twice")));
+            }
+            layouts.push((id, layout));
+        }
+        if let Some(sync) = s.sync_id {
+            let taken = self
+                .db
+                .messages
+                .iter()
+                .any(|m| m.raw_id() == sync && !m.extended);
+            if sync > 0x7FF || taken {
+                return Err(self.invalid(
+                    "secoc.sync_id",
+                    format!("0x{sync:X} is not a free 11-bit identifier of the DBC"),
+                ));
+            }
+        }
+        Ok(layouts)
+    }
+
+    #[cfg(not(feature = "secoc"))]
+    fn secured_layouts(&self, _: &SecOcRoles) -> Result<(), ProfileError> {
+        Err(self.invalid(
+            "secoc",
+            "this build has no SecOC (the `secoc` feature): refusing to run unauthenticated",
+        ))
     }
 }
 
 impl LoadedProfile {
+    /// The profile's wire with its `[secoc]` messages secured by its key from `keys` (see
+    /// [`LoadedProfile::secured_table`]); the plain wire when it secures nothing.
+    #[cfg(feature = "secoc")]
+    pub fn secured_wire(
+        &self,
+        keys: &bywire_secoc::keys::KeyFile,
+        next: u64,
+    ) -> Result<crate::secured::Secured<crate::wire::ProfileWire>, ProfileError> {
+        let wire = crate::wire::ProfileWire::unsecured(self)?;
+        Ok(match self.secured_table(keys, next)? {
+            Some(table) => crate::secured::Secured::new(wire, table),
+            None => crate::secured::Secured::plain(wire),
+        })
+    }
+
+    /// The table securing the profile's `[secoc]` messages with its key from `keys`, this
+    /// node's frames signed from freshness `next` on (1 for a new key, the persisted value
+    /// after a restart); `None` when the profile secures nothing. A missing key is an error:
+    /// the caller must not start.
+    #[cfg(feature = "secoc")]
+    pub fn secured_table(
+        &self,
+        keys: &bywire_secoc::keys::KeyFile,
+        next: u64,
+    ) -> Result<Option<crate::secured::SecuredTable>, ProfileError> {
+        let Some(s) = &self.profile.secoc else {
+            return Ok(None);
+        };
+        let checker = Checker {
+            file: &self.profile.name,
+            db: &self.database,
+        };
+        let key = keys.key(s.key_id).ok_or_else(|| {
+            checker.invalid(
+                "secoc.key_id",
+                format!(
+                    "key {} is not in the key file: refusing to start unauthenticated",
+                    s.key_id
+                ),
+            )
+        })?;
+        let mut table = crate::secured::SecuredTable::new(key, s.window);
+        for (id, layout) in checker.secured_layouts(s)? {
+            table
+                .secure(id, layout, next)
+                .map_err(|e| checker.invalid("secoc.messages", e.to_string()))?;
+        }
+        if let Some(sync) = s.sync_id {
+            let id = bywire_core::Id::standard(sync)
+                .map_err(|e| checker.invalid("secoc.sync_id", e.to_string()))?;
+            let sync = crate::secured::SyncMessage {
+                id,
+                data_id: u16::try_from(sync).unwrap_or(0),
+            };
+            table = table
+                .with_sync(sync)
+                .map_err(|e| checker.invalid("secoc.sync_id", e.to_string()))?;
+        }
+        Ok(Some(table))
+    }
+
     /// The supervisor's configuration from this profile (defaults where it is silent).
     pub fn supervisor_config(&self) -> SupervisorConfig {
         let p = &self.profile;

@@ -325,8 +325,22 @@ pub struct ProfileWire {
 }
 
 impl ProfileWire {
-    /// The wire of a loaded profile; it needs `[command]` and `[state]`.
+    /// The wire of a loaded profile; it needs `[command]` and `[state]`. A profile that
+    /// declares `[secoc]` is refused: its wire needs its key
+    /// (`LoadedProfile::secured_wire`, feature `secoc`), never the messages unauthenticated.
     pub fn new(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
+        if loaded.profile.secoc.is_some() {
+            return Err(ProfileError::Invalid {
+                file: loaded.profile.name.clone(),
+                key: "secoc".to_string(),
+                reason: "the profile secures its messages: give it its key file".to_string(),
+            });
+        }
+        Self::unsecured(loaded)
+    }
+
+    /// The wire without the profile's SecOC, for [`crate::secured::Secured`] to wrap.
+    pub(crate) fn unsecured(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
         let p = &loaded.profile;
         let db = &loaded.database;
         let invalid = |key: &str, reason: String| ProfileError::Invalid {

@@ -346,6 +346,50 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
         .unwrap();
     assert_eq!(bus_off["code"], "U0073-00");
     assert_eq!(bus_off["name"], "bus 1 controller bus-off");
+    // The attacker on bus 1 (the tour is not secured): the forged speed is taken by the ADS,
+    // the forged commands pass CRC and counter and meet bus 1b's disagreeing copy.
+    let security = &metrics["security"];
+    assert_eq!(security["secoc"], false);
+    assert!(
+        security["false_speeds"].as_u64().unwrap() >= 45,
+        "{security}"
+    );
+    assert!(
+        metrics["supervisor"]["disagreements"].as_u64().unwrap() >= 80,
+        "{}",
+        metrics["supervisor"]
+    );
+}
+
+/// `secoc = true` in a scenario file: the same forged commands are refused and counted.
+#[test]
+fn a_secured_scenario_refuses_the_attackers_commands() {
+    let dir = std::env::temp_dir().join(format!("bywire-sim-secoc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("attack.toml");
+    std::fs::write(
+        &file,
+        "name = \"attack\"\nsecoc = true\n\n[[event]]\nat_s = 8\nfault = \"forge_commands\"\nduration_s = 1\n",
+    )
+    .unwrap();
+    let metrics = sim_with(
+        &dir,
+        &["--scenario", file.to_str().unwrap(), "--max-seconds", "10"],
+    );
+    let security = &metrics["security"];
+    assert_eq!(security["secoc"], true);
+    assert!(security["ecu_mac"].as_u64().unwrap() >= 45, "{security}");
+    assert_eq!(security["foreign_commands"], 0);
+    assert!(
+        metrics["supervisor"]["authentication"].as_u64().unwrap() >= 45,
+        "{}",
+        metrics["supervisor"]
+    );
+    let braked = metrics["events"].as_array().unwrap().iter().any(|e| {
+        e["t_s"].as_f64().unwrap() >= 8.0 && e["kind"] == "watchdog" && e["detail"] != "normal"
+    });
+    assert!(!braked, "{}", metrics["events"]);
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The DTCs the fault tour leaves in the ECU: the ADS silence's cascade, bus 1b lost, the

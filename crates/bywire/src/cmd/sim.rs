@@ -16,7 +16,7 @@ use crate::support::sim_serve::Shared;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -34,6 +34,10 @@ pub struct Args {
     /// Payload, kg (instead of the scenario's).
     #[arg(long)]
     payload: Option<f64>,
+    /// The secured variant, whatever the scenario says (its `secoc = true`): commands, E-stop,
+    /// emergency brake and the vehicle's reports authenticated (SecOC), CAN FD on bus 1 and 1b.
+    #[arg(long)]
+    secoc: bool,
     /// Stop after this many simulated seconds at most.
     #[arg(long, default_value_t = 300.0, value_parser = crate::support::numbers::positive_seconds)]
     max_seconds: f64,
@@ -88,7 +92,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         bail!("--payload {payload}: 0 to 4500 kg");
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
-    let mut tug = Tug::new(scenario.params(args.seed, payload));
+    let mut params = scenario.params(args.seed, payload);
+    params.secoc |= args.secoc;
+    let mut tug = Tug::new(params);
     let mut shared = Shared::default();
     for attach in &args.attach {
         let (name, spec) = attach
