@@ -400,3 +400,25 @@ fn a_secured_profile_is_refused_without_its_key_or_with_bad_lengths_and_never_ru
         "{error}"
     );
 }
+
+#[test]
+fn forged_commands_alone_are_no_commands_the_watchdog_cascade_follows() {
+    let mut bench = Bench::new(wire(1), wire(1));
+    bench.quiet(200);
+    let last = *bench.commands.last().unwrap();
+    // The ADS falls silent; the attacker's commands keep coming, every cycle.
+    let mut forged = forged_after(&last);
+    for t in 200..400u64 {
+        if t % 20 == 0 {
+            bench.supervisor.on_frame(ms(t), &forged);
+            forged = forged_after(&forged);
+        }
+        bench.supervisor.poll(ms(t), &mut |_| {});
+    }
+    let stats = bench.supervisor.stats();
+    assert_eq!(stats.authentication, 10, "{stats:?}");
+    assert_eq!(
+        bench.supervisor.watchdog(),
+        bywire_vehicle::supervisor::Watchdog::FullBraking
+    );
+}
