@@ -524,7 +524,8 @@ impl Counts {
             .saturating_add(self.window)
     }
 
-    fn count(&mut self, outcome: Result<u64, Rejection>) {
+    /// Count one outcome (a receiver's, or a sum over several).
+    pub fn record(&mut self, outcome: Result<u64, Rejection>) {
         let slot = match outcome {
             Ok(_) => &mut self.accepted,
             Err(Rejection::Malformed) => &mut self.malformed,
@@ -578,7 +579,7 @@ impl Receiver {
         if let Ok(freshness) = outcome {
             self.last = freshness;
         }
-        self.counts.count(outcome);
+        self.counts.record(outcome);
         outcome
     }
 

@@ -263,7 +263,7 @@ impl SecuredTable {
         } else {
             receiver.accept(auth, &entry.layout, frame.data())
         };
-        count(&mut self.stats.frames, outcome);
+        self.stats.frames.record(outcome);
         match outcome {
             Ok(_) => frame
                 .data()
@@ -340,17 +340,6 @@ impl SecuredTable {
 
 fn sync_layout(data_id: u16) -> Option<Layout> {
     Layout::new(data_id, SYNC_PAYLOAD, 64, 0, SYNC_MAC_BITS).ok()
-}
-
-fn count(counts: &mut Counts, outcome: Result<u64, Rejection>) {
-    let slot = match outcome {
-        Ok(_) => &mut counts.accepted,
-        Err(Rejection::Malformed) => &mut counts.malformed,
-        Err(Rejection::Mac) => &mut counts.mac,
-        Err(Rejection::Stale) => &mut counts.stale,
-        Err(Rejection::Window) => &mut counts.window,
-    };
-    *slot = slot.saturating_add(1);
 }
 
 /// The message as its own wire reads it: a classic frame up to 8 bytes, FD beyond.
