@@ -92,8 +92,18 @@ pub fn run(
     let profile =
         bywire_tug::builtin("reference-tug").map_err(|e| RosError::Create(e.to_string()))?;
     let odometry_out = node.publisher::<Odometry>(&config.odometry, &reliable(1))?;
-    let (mut interface, mut ads) =
-        VehicleInterface::new(node, &profile, true, &config.interface, stop, report)?;
+    // The tug's plain variant (the secured one's key is the simulation's own).
+    let wire = bywire_vehicle::wire::ProfileWire::new(&profile)
+        .map_err(|e| RosError::Create(e.to_string()))?;
+    let (mut interface, mut ads) = VehicleInterface::new(
+        node,
+        &profile,
+        bywire_vehicle::secured::Secured::plain(wire),
+        true,
+        &config.interface,
+        stop,
+        report,
+    )?;
     let limit = Timestamp::ZERO.saturating_add(config.limit);
     let start = Instant::now();
     let mut next_pass = Timestamp::ZERO;

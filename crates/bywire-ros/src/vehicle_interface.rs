@@ -22,9 +22,11 @@ use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::{Bus, BusError};
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
+use bywire_secoc::store::FreshnessStore;
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::command::{ControlMode, SteeringMode};
 use bywire_vehicle::profile::{Limits, LoadedProfile};
+use bywire_vehicle::secured::Secured;
 use bywire_vehicle::wire::ProfileWire;
 use ros2_client::RmwRequestId;
 
@@ -36,6 +38,9 @@ use crate::msg::{
     control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, GearCommand,
     GearReport, Header, JointState, SteeringReport, StringMsg, Time, Twist, VelocityReport,
 };
+
+/// The ADS side over a profile's wire, secured when the profile declares `[secoc]`.
+pub type AdsSide = Ads<Secured<ProfileWire>>;
 
 /// Messages taken from one input in one pass.
 const TAKE_BATCH: usize = 64;
@@ -111,6 +116,8 @@ pub enum VehicleEvent {
     BusLost(String),
     /// The run is ending: braking.
     Stopping,
+    /// The freshness store cannot keep what is signed next: braking, then the end.
+    Freshness(String),
 }
 
 struct Inputs {
@@ -156,6 +163,8 @@ pub struct VehicleInterface<'a> {
     braking_until: Option<Timestamp>,
     buses: Vec<(Port, String)>,
     report: &'a mut dyn FnMut(VehicleEvent),
+    /// Where the secured wire's freshness is kept across restarts.
+    freshness: Option<FreshnessStore>,
 }
 
 impl VehicleInterface<'_> {
@@ -169,12 +178,7 @@ impl VehicleInterface<'_> {
     }
 
     /// Take a new command (or refuse it) and hand it to the node.
-    fn command(
-        &mut self,
-        ads: &mut Ads<ProfileWire>,
-        now: Timestamp,
-        next: Result<AdsCommand, String>,
-    ) {
+    fn command(&mut self, ads: &mut AdsSide, now: Timestamp, next: Result<AdsCommand, String>) {
         match next {
             Ok(command) => {
                 self.command = command;
@@ -185,7 +189,7 @@ impl VehicleInterface<'_> {
         }
     }
 
-    fn send(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+    fn send(&mut self, ads: &mut AdsSide, now: Timestamp) {
         if !self.commanding || self.braking_until.is_some() {
             return;
         }
@@ -203,7 +207,7 @@ impl VehicleInterface<'_> {
         ads.set_command(now, command);
     }
 
-    fn take_inputs(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+    fn take_inputs(&mut self, ads: &mut AdsSide, now: Timestamp) {
         let g = self.geometry();
         for _ in 0..TAKE_BATCH {
             let Ok(Some((m, _))) = self.inputs.control.take() else {
@@ -269,13 +273,7 @@ impl VehicleInterface<'_> {
         (self.report)(VehicleEvent::ModeRequest { mode, success, why });
     }
 
-    fn mode_request(
-        &mut self,
-        ads: &mut Ads<ProfileWire>,
-        now: Timestamp,
-        id: RmwRequestId,
-        mode: u8,
-    ) {
+    fn mode_request(&mut self, ads: &mut AdsSide, now: Timestamp, id: RmwRequestId, mode: u8) {
         match mode {
             control_mode::AUTONOMOUS => {
                 self.command.mode = ControlMode::Autonomous;
@@ -306,7 +304,7 @@ impl VehicleInterface<'_> {
         }
     }
 
-    fn watch_engage(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
+    fn watch_engage(&mut self, ads: &AdsSide, now: Timestamp) {
         let Some((id, _, deadline)) = self.engage else {
             return;
         };
@@ -321,7 +319,7 @@ impl VehicleInterface<'_> {
         }
     }
 
-    fn publish_reports(&mut self, ads: &Ads<ProfileWire>, now: Timestamp) {
+    fn publish_reports(&mut self, ads: &AdsSide, now: Timestamp) {
         let stamp = Time::now();
         let state = ads.state();
         let g = self.geometry();
@@ -389,7 +387,7 @@ impl VehicleInterface<'_> {
         self.last_report = Some(now);
     }
 
-    fn begin_braking(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) {
+    fn begin_braking(&mut self, ads: &mut AdsSide, now: Timestamp) {
         (self.report)(VehicleEvent::Stopping);
         ads.safe_stop(now, self.limits.deceleration_m_s2);
         self.braking_until = Some(now.saturating_add(FINAL_BRAKING));
@@ -403,8 +401,8 @@ fn to_f32(value: f64) -> f32 {
     narrowed
 }
 
-impl Hooks<Ads<ProfileWire>> for VehicleInterface<'_> {
-    fn after_poll(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) -> Flow {
+impl Hooks<AdsSide> for VehicleInterface<'_> {
+    fn after_poll(&mut self, ads: &mut AdsSide, now: Timestamp) -> Flow {
         if let Some(until) = self.braking_until {
             return if now >= until {
                 Flow::Stop
@@ -415,6 +413,14 @@ impl Hooks<Ads<ProfileWire>> for VehicleInterface<'_> {
         if self.stop.load(Ordering::Relaxed) {
             self.begin_braking(ads, now);
             return Flow::Continue;
+        }
+        if let (Some(store), Some(table)) = (self.freshness.as_mut(), ads.wire().table()) {
+            if let Err(e) = table.reserve_in(store) {
+                // What is signed next could not be kept (a restart would reuse it): brake.
+                (self.report)(VehicleEvent::Freshness(e.to_string()));
+                self.begin_braking(ads, now);
+                return Flow::Continue;
+            }
         }
         self.take_inputs(ads, now);
         // While an engage waits, every command carries the request.
@@ -440,7 +446,7 @@ impl Hooks<Ads<ProfileWire>> for VehicleInterface<'_> {
             .min()
     }
 
-    fn bus_lost(&mut self, _: &mut Ads<ProfileWire>, _: Timestamp, port: Port, error: &BusError) {
+    fn bus_lost(&mut self, _: &mut AdsSide, _: Timestamp, port: Port, error: &BusError) {
         let name = self
             .buses
             .iter()
@@ -467,17 +473,18 @@ pub fn geometry(profile: &LoadedProfile) -> Option<Geometry> {
 }
 
 impl<'a> VehicleInterface<'a> {
-    /// The interface for `profile` on `node`, and the ADS-side node it commands (`redundant`:
-    /// it sends on ports A and B). `stop` begins the final braking; `report` hears events.
+    /// The interface for `profile` on `node`, and the ADS-side node it commands through `wire`
+    /// (`redundant`: it sends on ports A and B). `stop` begins the final braking; `report`
+    /// hears events.
     pub fn new(
         node: &mut RosNode,
         profile: &LoadedProfile,
+        wire: Secured<ProfileWire>,
         redundant: bool,
         config: &VehicleInterfaceConfig,
         stop: &'a AtomicBool,
         report: &'a mut dyn FnMut(VehicleEvent),
-    ) -> Result<(VehicleInterface<'a>, Ads<ProfileWire>), RosError> {
-        let wire = ProfileWire::new(profile).map_err(|e| RosError::Create(e.to_string()))?;
+    ) -> Result<(VehicleInterface<'a>, AdsSide), RosError> {
         let one = reliable(1);
         let inputs = Inputs {
             control: node.subscription(&config.control_cmd, &one)?,
@@ -522,6 +529,7 @@ impl<'a> VehicleInterface<'a> {
             braking_until: None,
             buses: Vec::new(),
             report,
+            freshness: None,
         };
         Ok((interface, Ads::with_wire(ads_config, wire)))
     }
@@ -552,11 +560,13 @@ impl<'a> VehicleInterface<'a> {
     }
 }
 
-/// Run the interface for `profile` on `buses` (port A, and B for a redundant pair) until
-/// `stop`, then brake for a second. Fails when every bus is lost.
+/// Run the interface for `profile` through its wire (secured when the profile declares
+/// `[secoc]`, its freshness kept in the store when one is given) on `buses` (port A, and B for
+/// a redundant pair) until `stop`, then brake for a second. Fails when every bus is lost.
 pub fn run(
     node: &mut RosNode,
     profile: &LoadedProfile,
+    (wire, freshness): (Secured<ProfileWire>, Option<FreshnessStore>),
     buses: Vec<(Port, String, Box<dyn Bus>)>,
     config: &VehicleInterfaceConfig,
     stop: &AtomicBool,
@@ -564,7 +574,8 @@ pub fn run(
 ) -> Result<(), RosError> {
     let redundant = buses.len() > 1;
     let (mut interface, mut ads) =
-        VehicleInterface::new(node, profile, redundant, config, stop, report)?;
+        VehicleInterface::new(node, profile, wire, redundant, config, stop, report)?;
+    interface.freshness = freshness;
     let poll = interface.readiness()?;
     interface.buses = buses.iter().map(|(p, n, _)| (*p, n.clone())).collect();
     let mut runner = Runner::new(buses.into_iter().map(|(p, _, b)| (p, b)).collect());

@@ -240,13 +240,13 @@ impl<W: VehicleWire> Node for SimulatedVehicle<W> {
     }
 }
 
-impl SimulatedVehicle<bywire_vehicle::wire::ProfileWire> {
+impl SimulatedVehicle<bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>> {
     /// The vehicle a profile describes, on one bus or (`redundant`) two: its supervisor
     /// configured by the profile (voting on the two buses' copies, a bus lost after three
     /// command cycles), braking at the profile's deceleration, reporting at its state period.
     pub fn from_profile(
         profile: &bywire_vehicle::profile::LoadedProfile,
-        wire: bywire_vehicle::wire::ProfileWire,
+        wire: bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>,
         redundant: bool,
     ) -> Self {
         let mut config = profile.supervisor_config();

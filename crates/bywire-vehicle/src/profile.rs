@@ -716,6 +716,34 @@ impl Checker<'_> {
 }
 
 impl LoadedProfile {
+    /// The profile's wire as a node speaks it: secured by its key from `keys` when the profile
+    /// declares `[secoc]` (the keys then required), as it is otherwise (keys then refused: they
+    /// would secure nothing the user meant).
+    #[cfg(feature = "secoc")]
+    pub fn wire_with_keys(
+        &self,
+        keys: Option<&bywire_secoc::keys::KeyFile>,
+        next: u64,
+    ) -> Result<crate::secured::Secured<crate::wire::ProfileWire>, ProfileError> {
+        let invalid = |reason: &str| ProfileError::Invalid {
+            file: self.profile.name.clone(),
+            key: "secoc".to_string(),
+            reason: reason.to_string(),
+        };
+        match (keys, &self.profile.secoc) {
+            (Some(keys), Some(_)) => self.secured_wire(keys, next),
+            (None, Some(_)) => Err(invalid(
+                "the profile secures its messages: give its key file (--key-file)",
+            )),
+            (Some(_), None) => Err(invalid(
+                "a key file was given but the profile declares no [secoc]",
+            )),
+            (None, None) => Ok(crate::secured::Secured::plain(
+                crate::wire::ProfileWire::new(self)?,
+            )),
+        }
+    }
+
     /// The profile's wire with its `[secoc]` messages secured by its key from `keys` (see
     /// [`LoadedProfile::secured_table`]); the plain wire when it secures nothing.
     #[cfg(feature = "secoc")]

@@ -43,6 +43,10 @@ const SYNC_PAYLOAD: usize = 10;
 /// The sync frame's MAC bits.
 const SYNC_MAC_BITS: u32 = 24;
 
+/// How far beyond the next freshness value a node reserves in its store before it polls again:
+/// more than one poll ever signs.
+pub const RESERVE_MARGIN: u64 = 64;
+
 /// The freshness-sync message: its identifier and the data ID its MAC covers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SyncMessage {
@@ -192,6 +196,17 @@ impl SecuredTable {
         self.entry(id).map(|e| e.sender.next())
     }
 
+    /// The freshness the next frame of any message is signed with, at the most: what a node
+    /// must have reserved in its store before it sends again.
+    pub fn next_freshness_max(&self) -> u64 {
+        self.entries
+            .iter()
+            .flatten()
+            .map(|e| e.sender.next())
+            .max()
+            .unwrap_or(0)
+    }
+
     /// The layout of message `id`, if secured.
     pub fn layout(&self, id: Id) -> Option<Layout> {
         self.entry(id).map(|e| e.layout)
@@ -335,6 +350,18 @@ impl SecuredTable {
             None => &mut self.stats.syncs_refused,
         };
         *slot = slot.saturating_add(1);
+    }
+}
+
+#[cfg(feature = "std")]
+impl SecuredTable {
+    /// Reserve in `store` every value the next poll may sign (call after each poll): a
+    /// restart then goes on after them, never back. An error means the store cannot keep them.
+    pub fn reserve_in(
+        &self,
+        store: &mut bywire_secoc::store::FreshnessStore,
+    ) -> Result<(), bywire_secoc::store::StoreError> {
+        store.before_signing(self.next_freshness_max().saturating_add(RESERVE_MARGIN))
     }
 }
 

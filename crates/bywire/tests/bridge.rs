@@ -15,6 +15,33 @@ use std::time::Duration;
 
 use serde_json::Value;
 
+/// Run the bridge with `args`, `drive` every 25 ms for 2.5 s with an engage at 0.5 s; the
+/// state lines it wrote.
+fn drive_and_engage(args: &[&str], drive: &str) -> Vec<Value> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    for k in 0..100 {
+        let line = if k == 20 {
+            r#"{"engage": true}"#
+        } else {
+            drive
+        };
+        writeln!(stdin, "{line}").unwrap();
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    drop(stdin);
+    common::json_lines(child.wait_with_output().unwrap())
+        .into_iter()
+        .filter(|v| v.get("mode").is_some())
+        .collect()
+}
+
 #[test]
 fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
     let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
@@ -158,8 +185,8 @@ fn bridge_refuses_bad_arguments_clearly() {
 
 #[test]
 fn bridge_drives_over_two_redundant_buses() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
+    let states = drive_and_engage(
+        &[
             "bridge",
             "--profile",
             "reference-tug",
@@ -168,31 +195,9 @@ fn bridge_drives_over_two_redundant_buses() {
             "--with-vehicle",
             "--rate",
             "20",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
-    for k in 0..100 {
-        let line = if k == 20 {
-            r#"{"engage": true}"#
-        } else {
-            drive
-        };
-        writeln!(stdin, "{line}").unwrap();
-        std::thread::sleep(Duration::from_millis(25));
-    }
-    drop(stdin);
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success());
-    let states: Vec<Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .filter(|v: &Value| v.get("mode").is_some())
-        .collect();
+        ],
+        r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#,
+    );
     // Both copies agree: the vehicle drives, not degraded (no warning), and the feedback
     // that arrives twice is taken once (no counter rejections).
     let driving: Vec<&Value> = states
@@ -381,4 +386,93 @@ bus.shutdown()
             .any(|s| s["mode"] == "autonomous" && s["velocity"] == 1.5),
         "{states:?}"
     );
+}
+
+/// A profile that secures the tug's command path (`[secoc]`), beside its DBC, and its key file
+/// (readable by its owner only), in `dir`.
+fn secured_profile(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    use std::os::unix::fs::PermissionsExt;
+    let tug = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../bywire-tug");
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::copy(
+        tug.join("dbc/reference-tug.dbc"),
+        dir.join("reference-tug.dbc"),
+    )
+    .unwrap();
+    let profile = std::fs::read_to_string(tug.join("profiles/reference-tug.toml")).unwrap()
+        + "\n[secoc]\nmessages = [\"AdsToVehicle_Control\", \"EmergencyBrake\", \"VehicleToAds_State\", \"VehicleToAds_Sensors\", \"VehicleToAds_WheelAngles\"]\nfv_length = 64\nfv_tx_length = 8\nmac_tx_length = 24\nkey_id = 1\nsync_id = 0x0F0\n";
+    let profile_path = dir.join("secured.toml");
+    std::fs::write(&profile_path, profile).unwrap();
+    let key_path = dir.join("keys");
+    std::fs::write(&key_path, "1 2b7e151628aed2a6abf7158809cf4f3c\n").unwrap();
+    std::fs::set_permissions(&key_path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    (profile_path, key_path)
+}
+
+#[test]
+fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_without() {
+    let dir = std::env::temp_dir().join(format!("bywire-bridge-secoc-{}", std::process::id()));
+    let (profile, keys) = secured_profile(&dir);
+    let freshness = dir.join("ads.freshness");
+    let (profile, keys) = (profile.to_str().unwrap(), keys.to_str().unwrap());
+    // Without its key every command that speaks it refuses to start.
+    let mut refusing = vec![vec!["bridge", "--profile", profile, "virtual:x"]];
+    refusing.push(vec!["vehicle", "--profile", profile, "virtual:x"]);
+    #[cfg(feature = "ros2")]
+    refusing.push(vec!["ros2", "vehicle", "--profile", profile, "virtual:x"]);
+    for args in refusing {
+        let (code, _, err) = common::bywire(&args, "");
+        assert_eq!(code, 1, "{args:?}");
+        assert!(
+            err.contains("secoc: the profile secures its messages"),
+            "{args:?}: {err}"
+        );
+    }
+    // A key file for a profile that secures nothing is refused too.
+    let (code, _, err) = common::bywire(
+        &[
+            "bridge",
+            "--profile",
+            "reference-tug",
+            "virtual:x",
+            "--key-file",
+            keys,
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("the profile declares no [secoc]"), "{err}");
+    let fresh = freshness.to_str().unwrap();
+    let states = drive_and_engage(
+        &[
+            "bridge",
+            "--profile",
+            profile,
+            "sim:bridge-secoc@500000/2000000",
+            "--with-vehicle",
+            "--rate",
+            "20",
+            "--key-file",
+            keys,
+            "--freshness-file",
+            fresh,
+        ],
+        r#"{"velocity": 1.5, "gear": "drive", "mode": "autonomous"}"#,
+    );
+    // Every command authenticated by the vehicle (else it never engages), every state frame by
+    // the ADS side (else no feedback).
+    assert!(
+        states
+            .iter()
+            .any(|s| s["mode"] == "autonomous" && s["velocity"] == 1.5),
+        "never drove: {states:?}"
+    );
+    // 2.5 s of commands at 50 Hz, reserved ahead in the store.
+    let kept: u64 = std::fs::read_to_string(&freshness)
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    assert!(kept > 100, "{kept}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -468,7 +468,9 @@ fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
         seen["estop_snapshot"]["DD01"][0].as_i64().unwrap() > 100,
         "{seen}"
     );
-    assert_eq!(seen["full_braking_occurrences"], json!([1]));
+    // Full braking three times: the ADS's silence, and the voter's answer to the attacker's
+    // forged and replayed commands (the tour is not secured).
+    assert_eq!(seen["full_braking_occurrences"], json!([3]));
     assert_eq!(seen["vin"], "BYWIRETUG00000042");
     assert!(seen["odometer_m"][0].as_u64().unwrap() > 50, "{seen}");
     assert_eq!(seen["after_clear"], json!({}));

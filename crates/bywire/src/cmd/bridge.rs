@@ -13,6 +13,7 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::support::vehicles::{keep_freshness, SecOcArgs, Wire};
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::BusError;
@@ -22,7 +23,6 @@ use bywire_log::lines::{CappedLines, Line};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::command::{ControlMode, Gear, SteeringMode};
 use bywire_vehicle::profile::Limits;
-use bywire_vehicle::wire::ProfileWire;
 use serde::Deserialize;
 use serde_json::json;
 
@@ -51,6 +51,8 @@ pub struct Args {
     /// buses, for trying the bridge without a vehicle; only for in-process buses.
     #[arg(long)]
     with_vehicle: bool,
+    #[command(flatten)]
+    secoc: SecOcArgs,
 }
 
 /// A command line from stdin.
@@ -106,7 +108,7 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ad
     Ok(command)
 }
 
-fn state_json(ads: &Ads<ProfileWire>, now: Timestamp) -> serde_json::Value {
+fn state_json(ads: &Ads<Wire>, now: Timestamp) -> serde_json::Value {
     let s = ads.state();
     let age_ms = |at: Option<Duration>| at.map(|d| d.as_secs_f64() * 1e3);
     json!({
@@ -154,6 +156,8 @@ struct Bridge<'a> {
     buses: Vec<(Port, String)>,
     /// Stdout failed: nothing more is written (and the input counts as ended).
     output_lost: bool,
+    /// Where the secured wire's freshness is kept.
+    freshness: Option<bywire_secoc::store::FreshnessStore>,
 }
 
 impl Bridge<'_> {
@@ -181,7 +185,7 @@ impl Bridge<'_> {
         self.event(now, "bad_command", &format!("line {number}: {why}"));
     }
 
-    fn take_line(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp, number: u64, line: Line) {
+    fn take_line(&mut self, ads: &mut Ads<Wire>, now: Timestamp, number: u64, line: Line) {
         let text = match line {
             Line::Text(text) if text.trim().is_empty() => return,
             Line::Text(text) => text,
@@ -208,7 +212,7 @@ impl Bridge<'_> {
     }
 
     /// The end of input: brake for a second (with `--estop-on-eof`) or end now.
-    fn end_of_input(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp, why: &str) -> Flow {
+    fn end_of_input(&mut self, ads: &mut Ads<Wire>, now: Timestamp, why: &str) -> Flow {
         if self.braking_until.is_some() {
             return Flow::Continue;
         }
@@ -222,8 +226,8 @@ impl Bridge<'_> {
     }
 }
 
-impl Hooks<Ads<ProfileWire>> for Bridge<'_> {
-    fn after_poll(&mut self, ads: &mut Ads<ProfileWire>, now: Timestamp) -> Flow {
+impl Hooks<Ads<Wire>> for Bridge<'_> {
+    fn after_poll(&mut self, ads: &mut Ads<Wire>, now: Timestamp) -> Flow {
         // Bounded per pass; the rest waits for the next (the runner is woken per line).
         for _ in 0..256 {
             match self.inputs.try_recv() {
@@ -245,6 +249,14 @@ impl Hooks<Ads<ProfileWire>> for Bridge<'_> {
         if self.output_lost && self.end_of_input(ads, now, "stdout closed") == Flow::Stop {
             return Flow::Stop;
         }
+        if let Err(why) = keep_freshness(&mut self.freshness, ads.wire()) {
+            // What is signed next could not be kept: a restart would reuse it. Brake and end.
+            if self.braking_until.is_none() {
+                ads.safe_stop(now, self.limits.deceleration_m_s2);
+                self.event(now, "freshness", &format!("{why}: braking for 1 s"));
+                self.braking_until = Some(now.saturating_add(Duration::from_secs(1)));
+            }
+        }
         if now >= self.next_report {
             self.write(state_json(ads, now));
             self.next_report = self.next_report.saturating_add(self.report).max(now);
@@ -262,7 +274,7 @@ impl Hooks<Ads<ProfileWire>> for Bridge<'_> {
         )
     }
 
-    fn bus_lost(&mut self, _: &mut Ads<ProfileWire>, now: Timestamp, port: Port, error: &BusError) {
+    fn bus_lost(&mut self, _: &mut Ads<Wire>, now: Timestamp, port: Port, error: &BusError) {
         let lost = self
             .buses
             .iter()
@@ -308,8 +320,9 @@ fn stdin_thread(waker: bywire_bus::runner::Waker) -> Receiver<Input> {
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let profile = crate::support::vehicles::load_profile(&args.profile)?;
     let specs = crate::support::vehicles::command_buses(&args.bus, args.bus2.as_ref());
-    // Both sides speak the profile's messages by role, through the runtime codec.
-    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
+    // Both sides speak the profile's messages by role, through the runtime codec (its
+    // [secoc] messages authenticated with --key-file).
+    let (wire, freshness) = args.secoc.wire(&profile)?;
     let vehicle_stop = Arc::new(AtomicBool::new(false));
     let vehicle = if args.with_vehicle {
         Some(crate::support::vehicles::spawn_in_process(
@@ -343,6 +356,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         braking_until: None,
         buses: specs.clone(),
         output_lost: false,
+        freshness,
     };
     let result = runner.run(&mut ads, &crate::interrupt_flag(), None, &mut bridge);
     vehicle_stop.store(true, Ordering::Relaxed);

@@ -284,6 +284,8 @@ pub struct VehicleArgs {
     /// Run a simulated vehicle (`bywire vehicle`) on the same in-process buses.
     #[arg(long)]
     with_vehicle: bool,
+    #[command(flatten)]
+    secoc: crate::support::vehicles::SecOcArgs,
 }
 
 fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
@@ -291,13 +293,12 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
     let profile = vehicles::load_profile(&args.profile)?;
     let specs = vehicles::command_buses(&args.bus, args.bus2.as_ref());
     let stop_vehicle = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (wire, freshness) = args.secoc.wire(&profile)?;
     let simulated = if args.with_vehicle {
-        let wire = bywire_vehicle::wire::ProfileWire::new(&profile)
-            .with_context(|| format!("--profile {}", args.profile))?;
         Some(vehicles::spawn_in_process(
             &specs,
             &profile,
-            wire,
+            wire.clone(),
             &stop_vehicle,
         )?)
     } else {
@@ -325,6 +326,7 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
     let result = vehicle_interface::run(
         &mut node,
         &profile,
+        (wire, freshness),
         buses,
         &config,
         &crate::interrupt_flag(),
@@ -339,6 +341,9 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
                 reporter.line(&format!("bus {what}; commanding on the other"))
             }
             VehicleEvent::Stopping => reporter.line("stopping: braking for 1 s"),
+            VehicleEvent::Freshness(why) => {
+                reporter.line(&format!("freshness store: {why}; braking for 1 s"))
+            }
         },
     );
     stop_vehicle.store(true, std::sync::atomic::Ordering::Relaxed);

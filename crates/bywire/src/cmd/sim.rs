@@ -67,7 +67,7 @@ pub struct Args {
     /// --help for the topics), and the true pose goes to /localization/kinematic_state
     /// (nav_msgs/Odometry). Real time.
     #[cfg(feature = "ros2")]
-    #[arg(long, conflicts_with_all = ["fast", "linger"])]
+    #[arg(long, conflicts_with_all = ["fast", "linger", "secoc"])]
     ros2: bool,
     #[cfg(feature = "ros2")]
     #[command(flatten)]
@@ -213,6 +213,7 @@ fn run_over_ros2(
                     why.map(|w| format!(" ({w})")).unwrap_or_default()
                 ),
                 VehicleEvent::BusLost(what) => format!("bus {what}"),
+                VehicleEvent::Freshness(why) => format!("freshness store: {why}"),
                 VehicleEvent::Stopping => "stopping: braking for 1 s".into(),
             };
             let _ = writeln!(std::io::stderr(), "bywire sim: {text}");

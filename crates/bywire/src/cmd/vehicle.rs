@@ -5,14 +5,14 @@
 use std::io::Write;
 use std::time::Duration;
 
-use anyhow::{anyhow, Context, Result};
+use crate::support::vehicles::{keep_freshness, SecOcArgs, Wire};
+use anyhow::{anyhow, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::BusError;
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_sim::vehicle::SimulatedVehicle;
 use bywire_vehicle::supervisor::Supervisor;
-use bywire_vehicle::wire::ProfileWire;
 use serde_json::json;
 
 #[derive(clap::Args)]
@@ -38,19 +38,28 @@ pub struct Args {
     /// Stop after this many seconds (default: until interrupted).
     #[arg(long, value_parser = crate::support::numbers::positive_seconds)]
     duration: Option<f64>,
+    #[command(flatten)]
+    secoc: SecOcArgs,
 }
 
-type Vehicle = SimulatedVehicle<ProfileWire>;
+type Vehicle = SimulatedVehicle<Wire>;
 
 /// Status lines and lost buses, for the vehicle's run.
 struct Status<'a> {
     out: Option<&'a mut dyn Write>,
     period: Option<Duration>,
     next: Timestamp,
+    /// Where the secured wire's freshness is kept.
+    freshness: Option<bywire_secoc::store::FreshnessStore>,
 }
 
 impl Hooks<Vehicle> for Status<'_> {
     fn after_poll(&mut self, vehicle: &mut Vehicle, now: Timestamp) -> Flow {
+        if let Err(why) = keep_freshness(&mut self.freshness, vehicle.supervisor().wire()) {
+            // Its next frames could not be kept: stop sending (the ADS sees the vehicle go).
+            let _ = writeln!(std::io::stderr(), "bywire vehicle: {why}; stopping");
+            return Flow::Stop;
+        }
         let (Some(out), Some(period)) = (self.out.as_mut(), self.period) else {
             return Flow::Continue;
         };
@@ -85,7 +94,7 @@ impl Hooks<Vehicle> for Status<'_> {
     }
 
     fn bus_lost(&mut self, _: &mut Vehicle, _: Timestamp, port: Port, error: &BusError) {
-        let which = if port == Supervisor::<ProfileWire>::PORT_A {
+        let which = if port == Supervisor::<Wire>::PORT_A {
             "A"
         } else {
             "B"
@@ -101,7 +110,7 @@ impl Hooks<Vehicle> for Status<'_> {
 pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
     let limit = args.duration.map(Duration::from_secs_f64);
     let profile = crate::support::vehicles::load_profile(&args.profile)?;
-    let wire = ProfileWire::new(&profile).with_context(|| format!("--profile {}", args.profile))?;
+    let (wire, freshness) = args.secoc.wire(&profile)?;
     let specs = crate::support::vehicles::command_buses(&args.bus, args.bus2.as_ref());
     let mut vehicle = Vehicle::from_profile(&profile, wire, specs.len() > 1);
     let mut runner = Runner::new(crate::support::vehicles::endpoints(&specs)?);
@@ -109,6 +118,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         out: Some(out),
         period: (args.rate > 0.0).then(|| Duration::from_secs_f64(1.0 / args.rate)),
         next: Timestamp::ZERO,
+        freshness,
     };
     let stop = crate::interrupt_flag();
     let result = runner.run(&mut vehicle, &stop, limit, &mut status);

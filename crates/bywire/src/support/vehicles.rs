@@ -8,12 +8,64 @@ use std::thread::JoinHandle;
 use anyhow::{bail, Context, Result};
 use bywire_bus::runner::{Flow, Runner};
 use bywire_core::node::Port;
+use bywire_secoc::keys::KeyFile;
+use bywire_secoc::store::FreshnessStore;
 use bywire_sim::vehicle::SimulatedVehicle;
 use bywire_vehicle::profile::{LoadedProfile, Profile};
 use bywire_vehicle::redundancy::Channel;
+use bywire_vehicle::secured::Secured;
 use bywire_vehicle::wire::ProfileWire;
 
-type Vehicle = SimulatedVehicle<ProfileWire>;
+/// A profile's wire, secured when it declares `[secoc]`.
+pub type Wire = Secured<ProfileWire>;
+type Vehicle = SimulatedVehicle<Wire>;
+
+/// Freshness values a store reserves at a time (one write per this many frames); within the
+/// window a profile's receivers accept by default.
+const FRESHNESS_STEP: u64 = 256;
+
+/// SecOC for a profile that declares `[secoc]`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct SecOcArgs {
+    /// The key file of a profile that declares [secoc]: 32 hex digits per key id, readable by
+    /// its owner only. Without it such a profile is refused (never run unauthenticated).
+    #[arg(long, value_name = "KEYFILE")]
+    pub key_file: Option<std::path::PathBuf>,
+    /// Where this side keeps its freshness across restarts, so that a restart is no rewind
+    /// (without it the other side refuses the first frames as stale, then resynchronises it).
+    #[arg(long, value_name = "FILE", requires = "key_file")]
+    pub freshness_file: Option<std::path::PathBuf>,
+}
+
+impl SecOcArgs {
+    /// The profile's wire with these keys, and the freshness store if one was given.
+    pub fn wire(&self, profile: &LoadedProfile) -> Result<(Wire, Option<FreshnessStore>)> {
+        let keys = match &self.key_file {
+            Some(path) => Some(KeyFile::load(path).context("--key-file")?),
+            None => None,
+        };
+        let (store, next) = match &self.freshness_file {
+            Some(path) => {
+                let (store, next) =
+                    FreshnessStore::open(path, FRESHNESS_STEP).context("--freshness-file")?;
+                (Some(store), next)
+            }
+            None => (None, 1),
+        };
+        let wire = profile
+            .wire_with_keys(keys.as_ref(), next)
+            .with_context(|| format!("--profile {}", profile.profile.name))?;
+        Ok((wire, store))
+    }
+}
+
+/// Reserve in `store` what `wire` signs next; `Err` with why the store cannot keep it.
+pub fn keep_freshness(store: &mut Option<FreshnessStore>, wire: &Wire) -> Result<(), String> {
+    match (store.as_mut(), wire.table()) {
+        (Some(store), Some(table)) => table.reserve_in(store).map_err(|e| e.to_string()),
+        _ => Ok(()),
+    }
+}
 
 /// The command buses given on the command line, each on its port (bus A on port A, the
 /// redundant bus B, if given, on port B), plain names as SocketCAN.
@@ -57,7 +109,7 @@ pub fn endpoints(specs: &[(Port, String)]) -> Result<Vec<(Port, Box<dyn bywire_b
 pub fn spawn_in_process(
     specs: &[(Port, String)],
     profile: &LoadedProfile,
-    wire: ProfileWire,
+    wire: Wire,
     stop: &Arc<AtomicBool>,
 ) -> Result<JoinHandle<()>> {
     for (_, spec) in specs {
