@@ -98,6 +98,9 @@ struct Rig {
     watchdog_log: Vec<(u64, Watchdog)>,
     /// The supervisor's state frames: (ms at their end of frame, payload).
     state_frames: Vec<(u64, [u8; 8])>,
+    /// The E-stop chain's frame, once the safety controller has sent one: it repeats it every
+    /// command cycle, as the tug's does (a chain that falls silent counts as open).
+    chain: Option<Frame>,
 }
 
 impl Rig {
@@ -120,6 +123,7 @@ impl Rig {
             counter: 0,
             watchdog_log: Vec::new(),
             state_frames: Vec::new(),
+            chain: None,
         }
     }
 
@@ -131,6 +135,7 @@ impl Rig {
 
     /// The safety controller sends `frame` now.
     fn safety_sends(&mut self, frame: Frame) {
+        self.chain = Some(frame);
         let (safety, now) = (self.safety, ms(self.now));
         self.bus().submit(safety, frame, now);
     }
@@ -173,6 +178,10 @@ impl Rig {
         self.counter = self.counter.wrapping_add(1);
         let (ads, now) = (self.ads, ms(self.now));
         self.bus().submit(ads, f, now);
+        if let Some(chain) = self.chain {
+            let safety = self.safety;
+            self.bus().submit(safety, chain, now);
+        }
     }
 
     /// The ADS sends `n` commands, one per cycle, starting now.
