@@ -6,7 +6,7 @@ use bywire_canopen::cia402::{drive_dictionary, Drive, DriveController, Mode};
 use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master};
 use bywire_canopen::roboteq::{dictionary, Mdc1460};
-use bywire_canopen::Node;
+use bywire_core::node::{Node, Port};
 use bywire_core::frame::{Frame, Id};
 use bywire_core::time::Timestamp;
 use libfuzzer_sys::fuzz_target;
@@ -28,8 +28,8 @@ fuzz_target!(|data: &[u8]| {
         };
         let time = Timestamp::from_millis(now);
         for node in [&mut drive as &mut dyn Node, &mut roboteq, &mut master] {
-            node.on_frame(time, &frame);
-            node.poll(time, &mut |out| {
+            node.on_frame(time, Port::MAIN, &frame);
+            node.poll(time, &mut |_, out| {
                 if out.id() == Id::standard(0x582).ok() {
                     let command = out.data()[0];
                     assert!(out.data().len() == 8 && matches!(command >> 5, 0..=6), "{out:?}");
