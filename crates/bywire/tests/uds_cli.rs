@@ -115,7 +115,13 @@ fn bywire_uds_diagnoses_a_udsoncan_server() {
         (code, format!("{out}{err}"))
     };
     let ok = |args: &[&str]| {
-        let (code, text) = uds(args);
+        let (mut code, mut text) = uds(args);
+        // UDP multicast is best effort: a read whose request or answer was lost is asked once
+        // more, as a tester would (P2 and its timeouts are tested exactly in simulated time).
+        let read = matches!(args.first(), Some(&("read-dtc" | "read-did" | "session")));
+        if read && code != 0 && text.contains("no answer within P2") {
+            (code, text) = uds(args);
+        }
         assert_eq!(code, 0, "{args:?}: {text}");
         text
     };
