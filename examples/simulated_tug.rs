@@ -6,8 +6,8 @@
 
 use bywire_sim::tug::{Tug, TugParams};
 
-fn main() {
-    let mut tug = Tug::new(TugParams::default());
+fn main() -> Result<(), bywire_sim::tug::TugError> {
+    let mut tug = Tug::new(TugParams::default())?;
     // One step is a simulated millisecond; at most three minutes.
     for _ in 0..180_000 {
         tug.step();
@@ -32,4 +32,5 @@ fn main() {
             event.detail
         );
     }
+    Ok(())
 }

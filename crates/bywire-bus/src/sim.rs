@@ -461,7 +461,8 @@ impl SimBus {
         self.now
     }
 
-    /// Time the bus spent carrying frames and error frames, in nanoseconds.
+    /// Time the bus spent carrying frames and error frames, each with the intermission after
+    /// it, in nanoseconds.
     pub fn busy_ns(&self) -> u64 {
         self.busy_ns
     }
@@ -722,10 +723,11 @@ impl SimBus {
             self.set_state(winner, Event::TransmitSuccess, eof);
             self.tell_receivers(winner, Event::ReceiveSuccess, eof);
         }
-        self.busy_ns = self
-            .busy_ns
-            .saturating_add(u64::try_from(end.saturating_since(start).as_nanos()).unwrap_or(0));
         self.idle_from = end.saturating_add(ns(self, INTERMISSION));
+        // The intermission counts as busy: bus load as canbusload and `bywire busload` count it.
+        self.busy_ns = self.busy_ns.saturating_add(
+            u64::try_from(self.idle_from.saturating_since(start).as_nanos()).unwrap_or(0),
+        );
         self.now = self.idle_from;
         let passive = self
             .nodes

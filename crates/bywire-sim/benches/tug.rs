@@ -3,7 +3,7 @@
 //! and I/O nodes; the plants) per iteration, while the tug cruises the apron loop — a fresh tug
 //! is started, untimed, whenever one nears the end of its route. Simulated seconds per wall
 //! second is 1 / the time per iteration.
-#![allow(missing_docs)]
+#![allow(missing_docs, clippy::unwrap_used)]
 
 use std::time::{Duration, Instant};
 
@@ -13,7 +13,7 @@ use bywire_sim::tug::{Tug, TugParams};
 
 /// A tug engaged and cruising (5 simulated seconds after power-on).
 fn cruising() -> Tug {
-    let mut tug = Tug::new(TugParams::default());
+    let mut tug = Tug::new(TugParams::default()).unwrap();
     for _ in 0..5_000 {
         tug.step();
     }

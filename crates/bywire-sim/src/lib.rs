@@ -25,12 +25,13 @@
 //! ```
 //! use bywire_sim::tug::{Tug, TugParams};
 //!
-//! let mut tug = Tug::new(TugParams::default());
+//! let mut tug = Tug::new(TugParams::default())?;
 //! for _ in 0..1_000 {
 //!     tug.step(); // one simulated millisecond
 //! }
 //! assert_eq!(tug.now().as_nanos(), 1_000_000_000);
 //! assert!(tug.engaged_at().is_some());
+//! # Ok::<(), bywire_sim::tug::TugError>(())
 //! ```
 
 pub mod attacker;

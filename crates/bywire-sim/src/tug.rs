@@ -449,14 +449,24 @@ pub struct SecurityWatch {
     speed_at: Option<Timestamp>,
 }
 
+/// Why a tug could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum TugError {
+    /// The tug's shipped profile did not load.
+    #[error("the reference tug's profile: {0}")]
+    Profile(String),
+    /// The secured variant's table did not build.
+    #[error(transparent)]
+    SecOc(#[from] secured::SecuredError),
+}
+
 impl Tug {
-    /// A tug at the start of its route, parked, everything powered on.
-    pub fn new(params: TugParams) -> Tug {
-        let loaded = bywire_tug::profile();
-        let (ads_config, mut ecu_config) = match &loaded {
-            Ok(l) => (l.ads_config(), l.supervisor_config()),
-            Err(_) => (Default::default(), Default::default()),
-        };
+    /// A tug at the start of its route, parked, everything powered on. Refused only if the
+    /// tug's own profile or secured table does not build: a run never falls back to other
+    /// settings than the ones asked for.
+    pub fn new(params: TugParams) -> Result<Tug, TugError> {
+        let loaded = bywire_tug::profile().map_err(|e| TugError::Profile(e.to_string()))?;
+        let (ads_config, mut ecu_config) = (loaded.ads_config(), loaded.supervisor_config());
         // Commands come on bus 1 and bus 1b: a copy lost for three cycles leaves the other bus
         // alone (degraded, reported); copies that disagree are a fault.
         ecu_config.redundancy = Some(Redundancy::for_cycle(ecu_config.cycle));
@@ -567,14 +577,17 @@ impl Tug {
         );
         // Every node of the secured variant starts its freshness at 1: a new key.
         let key = bywire_secoc::Key::new(SIM_KEY);
-        let wire = || {
-            if params.secoc {
-                secured::secured(&key, 1).unwrap_or_else(|_| secured::plain())
+        let wire = || -> Result<_, TugError> {
+            Ok(if params.secoc {
+                secured::secured(&key, 1)?
             } else {
                 secured::plain()
-            }
+            })
         };
-        let safety_table = params.secoc.then(|| secured::table(&key, 1).ok()).flatten();
+        let safety_table = match params.secoc {
+            true => Some(secured::table(&key, 1)?),
+            false => None,
+        };
         let mut taps = [0; 4];
         for (tap, (bus, list)) in taps.iter_mut().zip(buses.iter().zip(names.iter_mut())) {
             *tap = net.tap(*bus).unwrap_or_default();
@@ -588,21 +601,21 @@ impl Tug {
                 distance: 0.0,
             })
             .collect();
-        Tug {
+        Ok(Tug {
             now: Timestamp::ZERO,
             net,
             buses,
             taps,
             names,
             ecu_bus1,
-            ads: AdsDriver::new(ads_config, mission, wire()),
+            ads: AdsDriver::new(ads_config, mission, wire()?),
             ecu: VehicleControlEcu::with_wire(
                 ecu_config,
                 EcuGeometry {
                     wheelbase: chassis_params.wheelbase,
                     track: chassis_params.track,
                 },
-                wire(),
+                wire()?,
             ),
             safety: Signing::new(nodes::safety_controller(), safety_table),
             attacker: Attacker::new(),
@@ -643,7 +656,7 @@ impl Tug {
             echo_latencies: Vec::new(),
             last_echo: None,
             security: SecurityWatch::default(),
-        }
+        })
     }
 
     fn bus_index(&self, bus: TugBus) -> BusIndex {

@@ -76,7 +76,7 @@ impl Tester {
 
 fn fault_tour() -> (Tug, Scenario) {
     let scenario = Scenario::builtin("fault-tour").unwrap();
-    let mut tug = Tug::new(scenario.params(1, scenario.tug.payload));
+    let mut tug = Tug::new(scenario.params(1, scenario.tug.payload)).unwrap();
     while tug.now() < Timestamp::from_millis(62_000) {
         scenario.step(&mut tug);
     }
@@ -193,7 +193,8 @@ fn cruising() -> Tug {
         seed: 2,
         payload: 0.0,
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     while tug.now() < Timestamp::from_millis(8_000) {
         tug.step();
     }

@@ -137,7 +137,7 @@ proptest! {
         let scenario = Scenario::parse(&text, "generated.toml");
         prop_assert!(scenario.is_ok(), "{:?}\n{}", scenario.err(), text);
         let scenario = scenario.unwrap();
-        let mut tug = Tug::new(scenario.params(seed, scenario.tug.payload));
+        let mut tug = Tug::new(scenario.params(seed, scenario.tug.payload)).unwrap();
         for _ in 0..8_000 {
             scenario.step(&mut tug);
         }

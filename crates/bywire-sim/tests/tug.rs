@@ -36,7 +36,8 @@ fn run(seed: u64) -> Tug {
         seed,
         route: route(),
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     for _ in 0..60_000 {
         tug.step();
         if tug.remaining() < 0.5 && tug.now().as_nanos() > 5_000_000_000 {
@@ -107,7 +108,8 @@ fn cruising() -> Tug {
         seed: 2,
         payload: 0.0,
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     while tug.now().as_nanos() < 8_000_000_000 {
         tug.step();
     }
@@ -248,7 +250,8 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
         speed: 2.0,
         crab_final_m: 26.0,
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     let mut crab_angles = Vec::new();
     for _ in 0..60_000 {
         tug.step();
@@ -298,7 +301,8 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
         speed: 2.0,
         tank_turn_deg: 90.0,
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     let mut stopped_at = None;
     for _ in 0..120_000 {
         tug.step();
@@ -349,7 +353,8 @@ fn the_step_test_records_each_step_of_the_steering() {
         speed: 2.0,
         steering_steps: vec![10.0, -10.0],
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     // Engaged at about 0.4 s, two steps of 3 s, then away.
     for _ in 0..6_300 {
         tug.step();
@@ -402,7 +407,8 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
         speeds: vec![(20.0, 1.0), (45.0, 2.0)],
         stops: vec![(40.0, Duration::from_secs(3))],
         ..TugParams::default()
-    });
+    })
+    .unwrap();
     let (mut fastest_slow_part, mut fastest_before) = (0.0f64, 0.0f64);
     for _ in 0..120_000 {
         tug.step();

@@ -22,7 +22,7 @@
 
 use bywire_core::busload::{frame_time_ns, Bitrates};
 use bywire_core::{Frame, Id, StandardId};
-use bywire_secoc::{Key, Layout};
+use bywire_secoc::{Key, Layout, LayoutError};
 use bywire_vehicle::command::ControlCommand;
 use bywire_vehicle::secured::{Secured, SecuredTable, SyncMessage, TableError};
 use bywire_vehicle::wire::AdsWire;
@@ -63,26 +63,50 @@ fn standard(id: u32) -> Id {
     Id::Standard(StandardId::new(u16::try_from(id).unwrap_or(0)).unwrap_or(StandardId::ZERO))
 }
 
+/// Why the secured table could not be built (the lengths above are wrong: a build that
+/// asked for the secured variant must not fall back to the plain one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SecuredError {
+    /// A message's lengths do not fit a frame.
+    Layout(LayoutError),
+    /// The table refused a message.
+    Table(TableError),
+}
+
+impl core::fmt::Display for SecuredError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SecuredError::Layout(e) => write!(f, "the secured layout: {e}"),
+            SecuredError::Table(e) => write!(f, "the secured table: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for SecuredError {}
+
 /// The secured messages' table for one node with `key`, its frames signed from freshness
 /// `next` on (1 for a new key, a persisted value after a restart).
-pub fn table(key: &Key, next: u64) -> Result<SecuredTable, TableError> {
+pub fn table(key: &Key, next: u64) -> Result<SecuredTable, SecuredError> {
     let mut table = SecuredTable::new(key, WINDOW);
     for id in SECURED {
         let data_id = u16::try_from(id).unwrap_or(u16::MAX);
-        // Valid lengths: 8 + 4 bytes fit an FD frame.
-        if let Ok(layout) = Layout::new(data_id, 8, FRESHNESS_BITS, FRESHNESS_TX_BITS, MAC_TX_BITS)
-        {
-            table.secure(standard(id), layout, next)?;
-        }
+        // 8 bytes of command, 1 of freshness sent, 3 of MAC: a 12-byte FD frame.
+        let layout = Layout::new(data_id, 8, FRESHNESS_BITS, FRESHNESS_TX_BITS, MAC_TX_BITS)
+            .map_err(SecuredError::Layout)?;
+        table
+            .secure(standard(id), layout, next)
+            .map_err(SecuredError::Table)?;
     }
-    table.with_sync(SyncMessage {
-        id: standard(SYNC_ID),
-        data_id: u16::try_from(SYNC_ID).unwrap_or(u16::MAX),
-    })
+    table
+        .with_sync(SyncMessage {
+            id: standard(SYNC_ID),
+            data_id: u16::try_from(SYNC_ID).unwrap_or(u16::MAX),
+        })
+        .map_err(SecuredError::Table)
 }
 
 /// The tug's wire secured with `key`, from freshness `next` on.
-pub fn secured(key: &Key, next: u64) -> Result<TugWire, TableError> {
+pub fn secured(key: &Key, next: u64) -> Result<TugWire, SecuredError> {
     Ok(Secured::new(ReferenceWire, table(key, next)?))
 }
 

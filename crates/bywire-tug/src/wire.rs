@@ -114,6 +114,10 @@ impl AdsWire for ReferenceWire {
 }
 
 impl VehicleWire for ReferenceWire {
+    fn is_command(&self, id: Id) -> bool {
+        !id.is_extended() && id.as_raw() == AdsToVehicleControl::ID
+    }
+
     fn incoming(&mut self, frame: &Frame) -> Incoming {
         let Some(Id::Standard(id)) = frame.id() else {
             return Incoming::Other;

@@ -144,9 +144,11 @@ impl RoleMessage {
 
     /// A frame on this message's identifier (a remote frame too: `check` refuses it).
     fn is(&self, frame: &Frame) -> bool {
-        frame
-            .id()
-            .is_some_and(|id| id.as_raw() == self.id && id.is_extended() == self.extended)
+        frame.id().is_some_and(|id| self.has_id(id))
+    }
+
+    fn has_id(&self, id: Id) -> bool {
+        id.as_raw() == self.id && id.is_extended() == self.extended
     }
 
     /// Encode the values set in `self.values`, then counter and checksum.
@@ -618,6 +620,10 @@ impl ProfileWire {
 }
 
 impl VehicleWire for ProfileWire {
+    fn is_command(&self, id: Id) -> bool {
+        self.command.has_id(id)
+    }
+
     fn incoming(&mut self, frame: &Frame) -> Incoming {
         if self.command.is(frame) {
             return Incoming::Command(

@@ -273,19 +273,23 @@ impl SecuredTable {
             Channel::A => &mut entry.receivers[0],
             Channel::B => &mut entry.receivers[1],
         };
-        let outcome = if frame.is_remote() {
-            Err(Rejection::Malformed)
-        } else {
-            receiver.accept(auth, &entry.layout, frame.data())
-        };
-        self.stats.frames.record(outcome);
-        match outcome {
-            Ok(_) => frame
+        // The payload's frame first: a frame counted accepted is always handed on.
+        let payload = match frame.is_remote() {
+            true => None,
+            false => frame
                 .data()
                 .get(..entry.layout.payload_length)
-                .and_then(|payload| payload_frame(id, payload))
-                .map_or(Checked::Rejected(Rejection::Malformed), Checked::Authentic),
-            Err(rejection) => {
+                .and_then(|payload| payload_frame(id, payload)),
+        };
+        let outcome = match payload {
+            Some(_) => receiver.accept(auth, &entry.layout, frame.data()),
+            None => Err(Rejection::Malformed),
+        };
+        self.stats.frames.record(outcome);
+        match (outcome, payload) {
+            (Ok(_), Some(payload)) => Checked::Authentic(payload),
+            (Ok(_), None) => Checked::Rejected(Rejection::Malformed),
+            (Err(rejection), _) => {
                 if rejection == Rejection::Stale {
                     self.sync_due = Some(index);
                 }
@@ -466,6 +470,10 @@ impl<W: AdsWire> AdsWire for Secured<W> {
 }
 
 impl<W: VehicleWire> VehicleWire for Secured<W> {
+    fn is_command(&self, id: Id) -> bool {
+        self.inner.is_command(id)
+    }
+
     fn incoming(&mut self, frame: &Frame) -> Incoming {
         self.incoming_from(Channel::A, frame)
     }
@@ -474,18 +482,14 @@ impl<W: VehicleWire> VehicleWire for Secured<W> {
         match self.check(channel, frame) {
             Checked::Unsecured => self.inner.incoming(frame),
             Checked::Authentic(payload) => self.inner.incoming(&payload),
-            Checked::Rejected(_) => {
-                // What the message is, from its identifier alone (its bytes are not to be
-                // read): a command is a rejected command, anything else unauthenticated.
-                let shape = frame
-                    .id()
-                    .and_then(|id| Frame::classic(id, &[0; 8]).ok())
-                    .map(|f| self.inner.incoming(&f));
-                match shape {
-                    Some(Incoming::Command(_)) => Incoming::Command(Err(Rejected::Authentication)),
-                    _ => Incoming::Unauthenticated,
+            // Known by its identifier alone (its bytes are not to be read): a command is a
+            // rejected command, anything else unauthenticated.
+            Checked::Rejected(_) => match frame.id() {
+                Some(id) if self.inner.is_command(id) => {
+                    Incoming::Command(Err(Rejected::Authentication))
                 }
-            }
+                _ => Incoming::Unauthenticated,
+            },
             Checked::Sync => Incoming::Other,
         }
     }

@@ -5,7 +5,7 @@
 //! (`no_std`, what an ECU build uses) — the reference tug's crate does. The nodes are the same
 //! for every wire.
 
-use bywire_core::{Frame, Timestamp};
+use bywire_core::{Frame, Id, Timestamp};
 
 use crate::command::{ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
 use crate::redundancy::Channel;
@@ -153,6 +153,9 @@ pub struct StateReport {
 pub trait VehicleWire: Counters {
     /// Read a received frame.
     fn incoming(&mut self, frame: &Frame) -> Incoming;
+    /// Whether `id` is the command's identifier (a frame whose bytes are not to be read, as
+    /// one that failed authentication, is still known by it).
+    fn is_command(&self, id: Id) -> bool;
     /// Read a frame received on `channel`'s bus (a wire that keeps state per bus, as
     /// [`crate::secured::Secured`] does, tells them apart).
     fn incoming_from(&mut self, _channel: Channel, frame: &Frame) -> Incoming {

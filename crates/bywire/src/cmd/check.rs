@@ -45,7 +45,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let mut checker =
         Checker::new(&loaded, config).with_context(|| format!("--profile {}", args.profile))?;
     if args.bus == "tug" {
-        let mut tug = Tug::new(TugParams::default());
+        let mut tug = Tug::new(TugParams::default())?;
         match args.tug_fault.as_deref() {
             None => {}
             Some("stuck-sensor") => {

@@ -94,7 +94,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
     let mut params = scenario.params(args.seed, payload);
     params.secoc |= args.secoc;
-    let mut tug = Tug::new(params);
+    let mut tug = Tug::new(params)?;
     let mut shared = Shared::default();
     for attach in &args.attach {
         let (name, spec) = attach
