@@ -25,6 +25,9 @@ fi
 python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack pyserial canopen==2.4.1
 # mcap + mcap-ros2-support: the MCAP peer (ROS 2 can_msgs/msg/Frame in CDR).
 python3 -m pip install -q --disable-pip-version-check mcap==1.6.0 mcap-ros2-support==0.6.0 jsonschema==4.26.0
+# asammdf: the MF4 peer (python-can's MF4 reader and writer are asammdf's; its bus logging
+# extraction decodes our files with a DBC).
+python3 -m pip install -q --disable-pip-version-check asammdf==8.6.10
 # pyarrow, polars and pandas: the Parquet peers (and the README's walk-through into pandas).
 python3 -m pip install -q --disable-pip-version-check pyarrow==26.0.1 polars==2.1.0 "pandas>=2.2,<3"
 # cyclonedds: the DDS of ROS 2's default middleware, the peer of `bywire ros2` (binary wheel with

@@ -55,10 +55,10 @@ fn formats(c: &mut Criterion) {
             b.iter(|| write(format, &records))
         });
         let bytes = write(format, &records);
-        if format == Format::Parquet {
-            // Parquet is read from a file (its index is at its end).
+        if matches!(format, Format::Parquet | Format::Mf4) {
+            // Parquet and MF4 are read from a file (their indexes link by offset).
             let path =
-                std::env::temp_dir().join(format!("bywire-bench-{}.parquet", std::process::id()));
+                std::env::temp_dir().join(format!("bywire-bench-{}.{name}", std::process::id()));
             std::fs::write(&path, &bytes).unwrap();
             group.bench_function(format!("read {name}"), |b| {
                 b.iter(|| {

@@ -7,6 +7,7 @@ use std::path::Path;
 use crate::asc::{AscReader, AscWriter};
 use crate::blf::{BlfReader, BlfWriter};
 use crate::candump::{LogError, LogRecord, Reader, Writer};
+use crate::mf4::{Mf4Reader, Mf4Writer};
 use crate::pcapng::{PcapngReader, PcapngWriter};
 use crate::trc::{TrcReader, TrcWriter};
 
@@ -27,6 +28,8 @@ pub enum Format {
     Mcap,
     /// Parquet, the raw frames' table (with the `parquet` feature).
     Parquet,
+    /// ASAM MDF 4 bus logging.
+    Mf4,
 }
 
 /// The records of a log, whatever its format.
@@ -34,7 +37,7 @@ pub type Records<'a> = Box<dyn Iterator<Item = Result<LogRecord, LogError>> + 'a
 
 impl Format {
     /// Every format, with the names `--format` takes.
-    pub const ALL: [(Format, &'static str); 7] = [
+    pub const ALL: [(Format, &'static str); 8] = [
         (Format::Candump, "candump"),
         (Format::Asc, "asc"),
         (Format::Trc, "trc"),
@@ -42,6 +45,7 @@ impl Format {
         (Format::Blf, "blf"),
         (Format::Mcap, "mcap"),
         (Format::Parquet, "parquet"),
+        (Format::Mf4, "mf4"),
     ];
 
     /// The format a file name says (`.log`, `.candump`: candump; `.asc`: ASC).
@@ -55,6 +59,7 @@ impl Format {
             "blf" => Some(Format::Blf),
             "mcap" => Some(Format::Mcap),
             "parquet" | "pq" => Some(Format::Parquet),
+            "mf4" => Some(Format::Mf4),
             _ => None,
         }
     }
@@ -81,6 +86,9 @@ impl Format {
         }
         if start.starts_with(b"PAR1") {
             return Format::Parquet;
+        }
+        if start.starts_with(b"MDF     ") || start.starts_with(b"UnFinMF ") {
+            return Format::Mf4;
         }
         let text = String::from_utf8_lossy(start.get(..start.len().min(4096)).unwrap_or(&[]));
         let first = text
@@ -137,12 +145,23 @@ impl Format {
                        not from a stream such as standard input"
                     .into(),
             }))),
+            Format::Mf4 => Box::new(std::iter::once(Err(LogError::Binary {
+                offset: 0,
+                what: "an MF4 file can only be read from a file (its blocks link by offset), \
+                       not from a stream such as standard input"
+                    .into(),
+            }))),
         }
     }
 
-    /// A reader of this format's records in `file`: as [`Format::reader`], and Parquet too.
+    /// A reader of this format's records in `file`: as [`Format::reader`], and Parquet and
+    /// MF4 too.
     pub fn file_reader(self, file: std::fs::File) -> Records<'static> {
         match self {
+            Format::Mf4 => match Mf4Reader::open(io::BufReader::new(file)) {
+                Ok(reader) => Box::new(reader),
+                Err(e) => Box::new(std::iter::once(Err(e))),
+            },
             #[cfg(feature = "parquet")]
             Format::Parquet => match crate::parquet::ParquetReader::open(file) {
                 Ok(reader) => Box::new(reader),
@@ -166,6 +185,7 @@ impl Format {
             Format::Trc => RecordWriter::Trc(TrcWriter::new(output)),
             Format::Pcapng => RecordWriter::Pcapng(PcapngWriter::new(output)),
             Format::Blf => RecordWriter::Blf(BlfWriter::new(output)?),
+            Format::Mf4 => RecordWriter::Mf4(Mf4Writer::new(output)?),
             #[cfg(feature = "mcap")]
             Format::Mcap => RecordWriter::Mcap(crate::mcap::McapWriter::new(output)?),
             #[cfg(not(feature = "mcap"))]
@@ -199,6 +219,8 @@ pub enum RecordWriter<W: Write + Seek + Send> {
     Pcapng(PcapngWriter<W>),
     /// Vector BLF.
     Blf(BlfWriter<W>),
+    /// ASAM MDF 4.
+    Mf4(Mf4Writer<W>),
     /// MCAP.
     #[cfg(feature = "mcap")]
     Mcap(crate::mcap::McapWriter<W>),
@@ -216,6 +238,7 @@ impl<W: Write + Seek + Send> RecordWriter<W> {
             RecordWriter::Trc(w) => w.write(record),
             RecordWriter::Pcapng(w) => w.write(record),
             RecordWriter::Blf(w) => w.write(record),
+            RecordWriter::Mf4(w) => w.write(record),
             #[cfg(feature = "mcap")]
             RecordWriter::Mcap(w) => w.write(record),
             #[cfg(feature = "parquet")]
@@ -243,6 +266,7 @@ impl<W: Write + Seek + Send> RecordWriter<W> {
             RecordWriter::Trc(w) => w.finish(),
             RecordWriter::Pcapng(w) => w.finish(),
             RecordWriter::Blf(w) => w.finish(),
+            RecordWriter::Mf4(w) => w.finish(),
             #[cfg(feature = "mcap")]
             RecordWriter::Mcap(w) => w.finish(),
             #[cfg(feature = "parquet")]
@@ -266,7 +290,10 @@ mod tests {
             Some(Format::Candump)
         );
         assert_eq!(Format::from_path(Path::new("drive.blf")), Some(Format::Blf));
-        assert_eq!(Format::from_path(Path::new("drive.mf4")), None);
+        assert_eq!(Format::from_path(Path::new("drive.mf4")), Some(Format::Mf4));
+        assert_eq!(Format::from_path(Path::new("drive.mdf")), None);
+        assert_eq!(Format::sniff(b"MDF     4.10    "), Format::Mf4);
+        assert_eq!(Format::sniff(b"UnFinMF 4.10    "), Format::Mf4);
         assert_eq!(Format::sniff(b"LOGG\x90\0\0\0"), Format::Blf);
         assert_eq!(Format::named("asc"), Some(Format::Asc));
         assert_eq!(

@@ -7,6 +7,8 @@
 //! - `mcap` (feature `mcap`): MCAP files of ROS 2 `can_msgs/msg/Frame`, as ros2_socketcan
 //!   records them.
 //! - [`blf`]: Vector BLF (zlib log containers; classic, FD and error objects).
+//! - [`mf4`]: ASAM MDF 4 bus logging (`CAN_DataFrame` groups), as python-can and asammdf
+//!   write it.
 //! - [`trc`]: PEAK TRC logs (1.0 to 2.1 read, 2.1 written).
 //! - `parquet` (feature `parquet`): raw frames as a Parquet table, read and written, and decoded
 //!   tables (one per message, typed signal columns) as a partitioned dataset.
@@ -41,6 +43,7 @@ pub mod lines;
 #[cfg(feature = "mcap")]
 pub mod mcap;
 pub mod merge;
+pub mod mf4;
 pub mod pacing;
 #[cfg(feature = "parquet")]
 pub mod parquet;

@@ -113,12 +113,14 @@ fn written_by_python_can(writer: &str, extension: &str) -> Vec<LogRecord> {
     got
 }
 
-/// python-can compares two logs message by message (its candump reader on one side, its ASC or
-/// BLF reader, as the third argument says, on the other).
+/// python-can compares two logs message by message (its candump reader on one side, its ASC,
+/// MF4 or BLF reader, as the third argument says, on the other).
 const COMPARE: &str = r#"
 import can, sys
 if sys.argv[3] == "asc":
     ours = list(can.ASCReader(sys.argv[1], relative_timestamp=False))
+elif sys.argv[3] == "mf4":
+    ours = list(can.MF4Reader(sys.argv[1]))
 else:
     ours = list(can.BLFReader(sys.argv[1]))
 theirs = list(can.CanutilsLogReader(sys.argv[2]))
@@ -299,7 +301,7 @@ fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
             "log",
             "convert",
             log.to_str().unwrap(),
-            dir.join("x.mf4").to_str().unwrap(),
+            dir.join("x.mdf").to_str().unwrap(),
         ],
         "",
     );
@@ -584,6 +586,102 @@ fn we_read_python_cans_blf_frame_for_frame() {
     }
 }
 
+#[test]
+fn python_can_reads_our_mf4_frame_for_frame() {
+    let dir = scratch("mf4-ours");
+    let (log, mf4) = (dir.join("in.log"), dir.join("out.mf4"));
+    std::fs::write(&log, FRAMES).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        mf4.to_str().unwrap(),
+    ]);
+    // (python-can's MF4 reader is asammdf's: both read it.)
+    assert_eq!(
+        python(COMPARE, &[&mf4, &log, Path::new("mf4")]).trim(),
+        "same 9"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn we_read_python_cans_mf4_frame_for_frame() {
+    // python-can's default: data blocks zipped and transposed (asammdf writes them).
+    let (got, wanted) = (written_by_python_can("MF4Writer", "mf4"), original());
+    assert_eq!(got.len(), wanted.len());
+    for (g, w) in got.iter().zip(&wanted) {
+        assert_eq!(g.frame, w.frame);
+        assert_eq!(g.interface, w.interface);
+        // python-can counts in seconds (a double) from the time it opened the file.
+        let drift = g.timestamp.as_nanos().abs_diff(w.timestamp.as_nanos());
+        assert!(drift <= 2_000, "{drift} ns: {g:?} {w:?}");
+    }
+}
+
+/// asammdf's bus logging extraction decodes the frames of our MF4 with a DBC as `bywire decode`
+/// decodes them, signal for signal.
+#[test]
+fn asammdf_decodes_our_mf4_as_bywire_decode_does() {
+    let dir = scratch("mf4-asammdf");
+    let dbc = common::corpus("cantools/tests__files__dbc__motohawk.dbc");
+    let (log, mf4) = (dir.join("in.log"), dir.join("out.mf4"));
+    // Bytes from a small generator: every signal takes many values.
+    let mut state = 12345u32;
+    let text: String = (0..300u32)
+        .map(|i| {
+            let data: String = (0..8)
+                .map(|_| {
+                    state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                    format!("{:02X}", state >> 24)
+                })
+                .collect();
+            format!("(1700000000.{:06}) can0 1F0#{data}\n", i * 1000)
+        })
+        .collect();
+    std::fs::write(&log, &text).unwrap();
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        mf4.to_str().unwrap(),
+    ]);
+    let ours = bywire(&["decode", &dbc, "--json", "-I", mf4.to_str().unwrap()]);
+    let ours_path = dir.join("ours.jsonl");
+    std::fs::write(&ours_path, ours).unwrap();
+    let compared = python(
+        r#"
+import json, sys
+from asammdf import MDF
+mdf = MDF(sys.argv[1])
+decoded = mdf.extract_bus_logging({"CAN": [(sys.argv[2], 0)]})
+df = decoded.to_dataframe(raw=True)
+ours = [json.loads(line) for line in open(sys.argv[3])]
+assert len(df) == len(ours) == 300, (len(df), len(ours))
+names = sorted(ours[0]["signals"])
+assert sorted(df.columns) == names, (df.columns, names)
+for row, mine in zip(df.itertuples(index=False), ours):
+    for name in names:
+        theirs, value = getattr(row, name), mine["signals"][name]
+        if isinstance(value, float) and name != "Enable":
+            # asammdf gives raw values here: scale them as the DBC says.
+            continue
+        assert theirs == value, (name, theirs, value)
+scaled = decoded.to_dataframe()
+for row, mine in zip(scaled.itertuples(index=False), ours):
+    for name in names:
+        theirs, value = getattr(row, name), mine["signals"][name]
+        if isinstance(theirs, bytes):
+            continue
+        assert abs(theirs - value) < 1e-9, (name, theirs, value)
+print("same", len(ours))
+"#,
+        &[&mf4, Path::new(&dbc), &ours_path],
+    );
+    assert_eq!(compared.trim(), "same 300");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The commands that read logs take any format: `decode -I` of a BLF gives what `decode` of the
 /// candump text gives, and `play -I` of an ASC replays the same lines.
 #[test]
@@ -604,7 +702,7 @@ fn decode_and_play_read_every_format() {
     std::fs::write(&log, &text).unwrap();
     let (code, from_text, err) = common::bywire(&["decode", &dbc, "--single-line"], &text);
     assert_eq!(code, 0, "{err}");
-    for extension in ["blf", "asc", "trc", "pcapng"] {
+    for extension in ["blf", "asc", "trc", "pcapng", "mf4"] {
         let converted = dir.join(format!("in.{extension}"));
         bywire(&[
             "log",

@@ -41,14 +41,15 @@ Every line is checked; a malformed one is an error naming its file, line and col
         #[arg(long, value_name = "FILTER")]
         filter: Vec<String>,
     },
-    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng, MCAP,
-    /// Parquet), frame for frame, or decode it with a DBC into Parquet tables or MCAP.
+    /// Convert a log to another format (candump, Vector ASC and BLF, PEAK TRC, pcapng, ASAM
+    /// MF4, MCAP, Parquet), frame for frame, or decode it with a DBC into Parquet tables or MCAP.
     #[command(after_help = "Examples:
   bywire log convert drive.log drive.asc
   bywire log convert vector.asc drive.log
   bywire log convert pcan.trc drive.asc
   bywire log convert drive.log drive.pcapng       (then: wireshark drive.pcapng)
   bywire log convert vector.blf drive.log
+  bywire log convert vector.blf drive.mf4         (ASAM MDF 4 bus logging: asammdf, CANape)
   bywire log convert drive.log drive.mcap         (ROS 2's can_msgs/msg/Frame on /from_can_bus)
   bywire log convert vector.blf frames.parquet    (one row per frame: ts, channel, id, flags, data)
   bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
@@ -59,20 +60,21 @@ Every line is checked; a malformed one is an error naming its file, line and col
 
 Several inputs are merged by time (streaming: one frame of each held). The input's format is
 sniffed from its content, the output's taken from its extension (.log
-or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mcap: MCAP;
-.parquet: Parquet) unless --format names it; with --dbc, an output without a known extension is
+or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mf4: MF4;
+.mcap: MCAP; .parquet: Parquet) unless --format names it; with --dbc, an output without a known extension is
 a new directory for the decoded Parquet dataset (message=NAME/[channel=C/][date=D/]part-N.parquet).
 A progress bar shows on a terminal. ASC channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
 can{N-1}; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
-back as a bus error. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
+back as a bus error. MF4 numbers buses as python-can does (can0 is BusChannel 0) and keeps
+error classes. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
 conversion leaves no half-written file.")]
     Convert {
         /// The logs to read, merged by time (`-`: standard input), and last the file to write.
         #[arg(required = true, num_args = 2.., value_name = "FILE")]
         files: Vec<PathBuf>,
-        /// The output format: candump, asc, blf, trc, pcapng, mcap or parquet (default: from the
-        /// output's extension).
+        /// The output format: candump, asc, blf, trc, pcapng, mf4, mcap or parquet (default:
+        /// from the output's extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
         /// Keep only these channels (interfaces), renamed where given as FROM=TO.
@@ -184,7 +186,7 @@ fn convert(
         None if decoding.dbc.is_some() && Format::from_path(output).is_none() => Format::Parquet,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
-                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mcap, .parquet); give --format",
+                "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mf4, .mcap, .parquet); give --format",
                 output.display()
             )
         })?,

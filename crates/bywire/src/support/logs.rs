@@ -95,7 +95,7 @@ pub fn records<'a>(
         (Format::Candump, Skip::AnyBadLine | Skip::NonLogLines, _) => {
             Box::new(Reader::new(bytes).log_lines_only())
         }
-        (Format::Parquet, _, Some(file)) => format.file_reader(file),
+        (Format::Parquet | Format::Mf4, _, Some(file)) => format.file_reader(file),
         (format, _, _) => format.reader(bytes),
     };
     reader.filter_map(move |record| match record {
