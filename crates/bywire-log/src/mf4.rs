@@ -1520,6 +1520,90 @@ mod tests {
         assert!(got.iter().map(strip).eq(wanted.iter().map(strip)));
     }
 
+    /// An unsorted file, as loggers write them: one data group, record IDs, data frames (ID 1)
+    /// between records of another group (ID 2), the frames' time an integer in µs.
+    fn unsorted_file() -> Vec<u8> {
+        fn push(out: &mut Vec<u8>, bytes: &[u8]) -> u64 {
+            let at = out.len() as u64;
+            out.extend_from_slice(bytes);
+            out.resize(out.len().div_ceil(8) * 8, 0);
+            at
+        }
+        fn text(out: &mut Vec<u8>, text: &str) -> u64 {
+            push(out, &block(b"##TX", &[], format!("{text}\0").as_bytes()))
+        }
+        let mut out = identification(true).to_vec();
+        out.resize(usize::try_from(HEADER_AT + HEADER_LEN).unwrap(), 0);
+        // Components of a 14-byte frame record after an 8-byte time: ID with bit 31 for
+        // extended, BusChannel, DLC, 8 data bytes; no DataLength, IDE or Dir.
+        let mut next = 0;
+        for (name, offset, bytes, data_type) in [
+            ("CAN_DataFrame.DataBytes", 14u32, 8u32, DT_BYTES),
+            ("CAN_DataFrame.DLC", 13, 1, DT_UNSIGNED_LE),
+            ("CAN_DataFrame.BusChannel", 12, 1, DT_UNSIGNED_LE),
+            ("CAN_DataFrame.ID", 8, 4, DT_UNSIGNED_LE),
+        ] {
+            let name = text(&mut out, name);
+            next = push(&mut out, &channel([next, 0, name, 0], (0, 0), data_type, offset, bytes * 8));
+        }
+        let name = text(&mut out, "CAN_DataFrame");
+        let structure = push(&mut out, &channel([0, next, name, 0], (0, 0), DT_BYTES, 8, 14 * 8));
+        let mut linear = vec![1u8, 0, 0, 0, 0, 0, 2, 0];
+        linear.extend_from_slice(&[0; 16]);
+        linear.extend_from_slice(&0.5f64.to_le_bytes()); // offset: half a second
+        linear.extend_from_slice(&1e-6f64.to_le_bytes());
+        let conversion = push(&mut out, &block(b"##CC", &[0, 0, 0, 0], &linear));
+        let name = text(&mut out, "Timestamp");
+        let mut time = channel([structure, 0, name, 0], (CN_MASTER, SYNC_TIME), DT_UNSIGNED_LE, 0, 64);
+        // The conversion link: the fifth.
+        time[24 + 4 * 8..24 + 5 * 8].copy_from_slice(&conversion.to_le_bytes());
+        let time = push(&mut out, &time);
+        let group = |id: u64, first: u64, bytes: u32, next: u64| {
+            let mut cg = Vec::new();
+            cg.extend_from_slice(&id.to_le_bytes());
+            cg.extend_from_slice(&2u64.to_le_bytes());
+            cg.extend_from_slice(&CG_BUS_EVENT.to_le_bytes());
+            cg.extend_from_slice(&[b'.', 0, 0, 0, 0, 0]);
+            cg.extend_from_slice(&bytes.to_le_bytes());
+            cg.extend_from_slice(&0u32.to_le_bytes());
+            block(b"##CG", &[next, first, 0, 0, 0, 0], &cg)
+        };
+        let other = push(&mut out, &group(2, 0, 4, 0));
+        let frames = push(&mut out, &group(1, time, 22, other));
+        let mut records = Vec::new();
+        for (micros, id, data) in [(10u64, 0x123u32, [1u8; 8]), (20, 0x8000_0456, [2; 8])] {
+            records.push(1);
+            records.extend_from_slice(&micros.to_le_bytes());
+            records.extend_from_slice(&id.to_le_bytes());
+            records.extend_from_slice(&[1, 8]);
+            records.extend_from_slice(&data);
+            records.extend_from_slice(&[2, 9, 9, 9, 9]);
+        }
+        let mut dt = b"##DT\0\0\0\0".to_vec();
+        dt.extend_from_slice(&(24 + records.len() as u64).to_le_bytes());
+        dt.extend_from_slice(&0u64.to_le_bytes());
+        dt.extend_from_slice(&records);
+        let data = push(&mut out, &dt);
+        let dg = push(&mut out, &block(b"##DG", &[0, frames, data, 0], &[1, 0, 0, 0, 0, 0, 0, 0]));
+        let header = header([dg, 0, 0, 0, 0, 0], 1_700_000_000_000_000_000);
+        out[64..64 + header.len()].copy_from_slice(&header);
+        out
+    }
+
+    #[test]
+    fn unsorted_files_with_integer_times_are_read() {
+        let got = read(&unsorted_file()).unwrap();
+        let start = 1_700_000_000_500_000_000;
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[0].timestamp, Timestamp::from_nanos(start + 10_000));
+        assert_eq!(got[1].timestamp, Timestamp::from_nanos(start + 20_000));
+        assert_eq!(got[0].interface, "can1");
+        assert_eq!(got[0].frame.to_string(), "123#0101010101010101");
+        // Extended by the ID's top bit.
+        assert_eq!(got[1].frame.to_string(), "00000456#0202020202020202");
+        assert_eq!(got[1].direction, None);
+    }
+
     #[test]
     fn bad_files_are_errors_naming_the_offset() {
         let wanted: Vec<LogRecord> = Reader::new(FRAMES.as_bytes())
