@@ -23,6 +23,7 @@ use flate2::write::ZlibEncoder;
 use flate2::Compression;
 
 use crate::candump::{LogError, LogRecord};
+use crate::fields::{u16_at, u32_at, u64_at};
 
 const FILE_HEADER_SIZE: usize = 144;
 const OBJECT_HEADER_BASE: usize = 16;
@@ -41,18 +42,6 @@ const MAX_OBJECT: usize = 16 << 20;
 const MAX_CONTAINER: usize = 16 << 20;
 /// What the writer puts in one container before compressing it.
 const CONTAINER_SIZE: usize = 128 * 1024;
-
-fn u16_at(bytes: &[u8], at: usize) -> Option<u16> {
-    Some(u16::from_le_bytes(bytes.get(at..at + 2)?.try_into().ok()?))
-}
-
-fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
-    Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?))
-}
-
-fn u64_at(bytes: &[u8], at: usize) -> Option<u64> {
-    Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?))
-}
 
 /// A Windows `SYSTEMTIME` (year, month, weekday, day, hour, minute, second, millisecond) as
 /// nanoseconds since the Unix epoch, UTC; `None` for an empty or impossible one.

@@ -33,6 +33,7 @@ use bywire_core::{Frame, Id, Timestamp};
 use flate2::read::ZlibDecoder;
 
 use crate::candump::{LogError, LogRecord};
+use crate::fields::{u16_at, u32_at, u64_at};
 
 /// The records a writer's data block holds, in bytes.
 pub const BLOCK_SIZE: usize = 512 * 1024;
@@ -68,18 +69,6 @@ const SOURCE_BUS: u8 = 2;
 const BUS_CAN: u8 = 2;
 /// The SocketCAN class a bus error is read as when a file gives no class.
 const BUS_ERROR: u32 = 0x80;
-
-fn u16_at(bytes: &[u8], at: usize) -> Option<u16> {
-    Some(u16::from_le_bytes(bytes.get(at..at + 2)?.try_into().ok()?))
-}
-
-fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
-    Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?))
-}
-
-fn u64_at(bytes: &[u8], at: usize) -> Option<u64> {
-    Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?))
-}
 
 fn f64_at(bytes: &[u8], at: usize) -> Option<f64> {
     u64_at(bytes, at).map(f64::from_bits)
@@ -236,61 +225,28 @@ impl<W: Write + Seek> Mf4Writer<W> {
         let channel =
             crate::fields::channel_number(&mut self.channels, &record.interface).saturating_sub(1);
         let dir = u8::from(record.direction == Some('T'));
-        let (kind, id, extended, dlc, data, edl, brs, esi) = match &record.frame {
+        // (kind, identifier, DLC, data, FD's BRS and ESI)
+        let (kind, id, dlc, data, fd) = match &record.frame {
             Frame::Classic(f) if f.is_remote() => {
-                let id = f.id();
-                (
-                    Kind::Remote,
-                    id.as_raw(),
-                    id.is_extended(),
-                    f.dlc().as_raw(),
-                    &[][..],
-                    false,
-                    false,
-                    false,
-                )
+                (Kind::Remote, Some(f.id()), f.dlc(), &[][..], None)
             }
-            Frame::Classic(f) => {
-                let id = f.id();
-                (
-                    Kind::Data,
-                    id.as_raw(),
-                    id.is_extended(),
-                    f.dlc().as_raw(),
-                    f.data(),
-                    false,
-                    false,
-                    false,
-                )
-            }
-            Frame::Fd(f) => {
-                let id = f.id();
-                (
-                    Kind::Data,
-                    id.as_raw(),
-                    id.is_extended(),
-                    f.dlc().as_raw(),
-                    f.data(),
-                    true,
-                    f.brs(),
-                    f.esi(),
-                )
-            }
-            Frame::Error(f) => {
-                let data = f.data();
-                let dlc = u8::try_from(data.len()).unwrap_or(8);
-                (
-                    Kind::Error,
-                    f.class_bits(),
-                    false,
-                    dlc,
-                    data,
-                    false,
-                    false,
-                    false,
-                )
-            }
+            Frame::Classic(f) => (Kind::Data, Some(f.id()), f.dlc(), f.data(), None),
+            Frame::Fd(f) => (
+                Kind::Data,
+                Some(f.id()),
+                f.dlc(),
+                f.data(),
+                Some((f.brs(), f.esi())),
+            ),
+            // The SocketCAN class in the identifier's place.
+            Frame::Error(f) => (Kind::Error, None, Dlc::from_nibble(8), f.data(), None),
         };
+        let (id, extended) = match (id, &record.frame) {
+            (Some(id), _) => (id.as_raw(), id.is_extended()),
+            (None, Frame::Error(f)) => (f.class_bits(), false),
+            (None, _) => (0, false),
+        };
+        let (edl, brs, esi) = fd.map_or((false, false, false), |(brs, esi)| (true, brs, esi));
         #[allow(clippy::cast_precision_loss)]
         let seconds = (i128::from(at) - i128::from(start)) as f64 / 1e9;
         let group = self.group(kind);
@@ -299,7 +255,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
         row[8] = u8::try_from(channel).unwrap_or(u8::MAX);
         row[9..13].copy_from_slice(&id.to_le_bytes());
         row[13] = u8::from(extended);
-        row[14] = dlc;
+        row[14] = dlc.as_raw();
         row[15] = u8::try_from(data.len()).unwrap_or(64);
         match kind {
             Kind::Remote => row[16] = dir,
@@ -1544,17 +1500,29 @@ mod tests {
             ("CAN_DataFrame.ID", 8, 4, DT_UNSIGNED_LE),
         ] {
             let name = text(&mut out, name);
-            next = push(&mut out, &channel([next, 0, name, 0], (0, 0), data_type, offset, bytes * 8));
+            next = push(
+                &mut out,
+                &channel([next, 0, name, 0], (0, 0), data_type, offset, bytes * 8),
+            );
         }
         let name = text(&mut out, "CAN_DataFrame");
-        let structure = push(&mut out, &channel([0, next, name, 0], (0, 0), DT_BYTES, 8, 14 * 8));
+        let structure = push(
+            &mut out,
+            &channel([0, next, name, 0], (0, 0), DT_BYTES, 8, 14 * 8),
+        );
         let mut linear = vec![1u8, 0, 0, 0, 0, 0, 2, 0];
         linear.extend_from_slice(&[0; 16]);
         linear.extend_from_slice(&0.5f64.to_le_bytes()); // offset: half a second
         linear.extend_from_slice(&1e-6f64.to_le_bytes());
         let conversion = push(&mut out, &block(b"##CC", &[0, 0, 0, 0], &linear));
         let name = text(&mut out, "Timestamp");
-        let mut time = channel([structure, 0, name, 0], (CN_MASTER, SYNC_TIME), DT_UNSIGNED_LE, 0, 64);
+        let mut time = channel(
+            [structure, 0, name, 0],
+            (CN_MASTER, SYNC_TIME),
+            DT_UNSIGNED_LE,
+            0,
+            64,
+        );
         // The conversion link: the fifth.
         time[24 + 4 * 8..24 + 5 * 8].copy_from_slice(&conversion.to_le_bytes());
         let time = push(&mut out, &time);
@@ -1584,7 +1552,10 @@ mod tests {
         dt.extend_from_slice(&0u64.to_le_bytes());
         dt.extend_from_slice(&records);
         let data = push(&mut out, &dt);
-        let dg = push(&mut out, &block(b"##DG", &[0, frames, data, 0], &[1, 0, 0, 0, 0, 0, 0, 0]));
+        let dg = push(
+            &mut out,
+            &block(b"##DG", &[0, frames, data, 0], &[1, 0, 0, 0, 0, 0, 0, 0]),
+        );
         let header = header([dg, 0, 0, 0, 0, 0], 1_700_000_000_000_000_000);
         out[64..64 + header.len()].copy_from_slice(&header);
         out

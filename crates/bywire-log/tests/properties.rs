@@ -43,6 +43,20 @@ fn any_frame() -> impl Strategy<Value = Frame> {
     )
 }
 
+/// Records of (frame, ns after a base time, interface number, sent).
+fn records_of(frames: &[(Frame, u64, u8, bool)]) -> Vec<bywire_log::LogRecord> {
+    let base = 1_700_000_000_000_000_000u64;
+    frames
+        .iter()
+        .map(|(frame, offset, channel, tx)| bywire_log::LogRecord {
+            timestamp: Timestamp::from_nanos(base + offset),
+            interface: format!("can{channel}"),
+            frame: *frame,
+            direction: Some(if *tx { 'T' } else { 'R' }),
+        })
+        .collect()
+}
+
 proptest! {
     #[test]
     fn any_text_is_a_record_or_an_error(text in "\\PC{0,80}") {
@@ -165,16 +179,7 @@ proptest! {
     fn every_format_reads_back_what_it_wrote(
         frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4, any::<bool>()), 0..20)
     ) {
-        let base = 1_700_000_000_000_000_000u64;
-        let mut records: Vec<bywire_log::LogRecord> = frames
-            .iter()
-            .map(|(frame, offset, channel, tx)| bywire_log::LogRecord {
-                timestamp: Timestamp::from_nanos(base + offset),
-                interface: format!("can{channel}"),
-                frame: *frame,
-                direction: Some(if *tx { 'T' } else { 'R' }),
-            })
-            .collect();
+        let mut records = records_of(&frames);
         records.sort_by_key(|r| r.timestamp);
         // (format, the time resolution it keeps in ns, whether it keeps an error frame's class)
         for (format, resolution, error_classes) in [
@@ -210,16 +215,7 @@ proptest! {
     fn mf4_reads_back_every_frame_exactly(
         frames in proptest::collection::vec((any_frame(), 0u64..1_000_000_000_000, 0u8..4, any::<bool>()), 0..40)
     ) {
-        let base = 1_700_000_000_000_000_000u64;
-        let mut records: Vec<bywire_log::LogRecord> = frames
-            .iter()
-            .map(|(frame, offset, channel, tx)| bywire_log::LogRecord {
-                timestamp: Timestamp::from_nanos(base + offset),
-                interface: format!("can{channel}"),
-                frame: *frame,
-                direction: Some(if *tx { 'T' } else { 'R' }),
-            })
-            .collect();
+        let mut records = records_of(&frames);
         // Frames of one kind keep their order; kinds are merged by time (ties: any order).
         records.sort_by_key(|r| r.timestamp);
         records.dedup_by_key(|r| r.timestamp);
