@@ -1165,17 +1165,26 @@ impl<R: Read + Seek> Mf4Reader<R> {
     /// The next frame of group `index`.
     fn next_of(&mut self, index: usize) -> Result<Option<LogRecord>, LogError> {
         let start = self.start;
-        let Some(group) = self.groups.get_mut(index) else {
+        let Some(GroupReader {
+            stream,
+            id_size,
+            groups,
+            left,
+            at,
+            read,
+        }) = self.groups.get_mut(index)
+        else {
             return Ok(None);
         };
+        let file = &mut self.file;
         loop {
-            if group.left == Some(0) {
+            if *left == Some(0) {
                 return Ok(None);
             }
-            let record_id = if group.id_size == 0 {
+            let record_id = if *id_size == 0 {
                 0
             } else {
-                let Some(bytes) = group.stream.take(&mut self.file, group.id_size)? else {
+                let Some(bytes) = stream.take(file, *id_size)? else {
                     return Ok(None);
                 };
                 let mut raw = [0u8; 8];
@@ -1184,50 +1193,42 @@ impl<R: Read + Seek> Mf4Reader<R> {
                 }
                 u64::from_le_bytes(raw)
             };
-            let Some(records) = group.groups.get(&record_id) else {
+            let Some(records) = groups.get(&record_id) else {
                 return Err(malformed(
-                    group.stream.offset,
-                    format!(
-                        "record ID {record_id} of no channel group (data group at {})",
-                        group.at
-                    ),
+                    stream.offset,
+                    format!("record ID {record_id} of no channel group (data group at {at})"),
                 ));
             };
-            let len = match records {
-                Records::Frames(_, len) | Records::Other(len) => *len,
+            let (layout, len) = match records {
+                Records::Frames(layout, len) => (Some(layout), *len),
+                Records::Other(len) => (None, *len),
                 Records::Variable => {
-                    let Some(bytes) = group.stream.take(&mut self.file, 4)? else {
+                    let Some(bytes) = stream.take(file, 4)? else {
                         return Ok(None);
                     };
                     let len = u32_at(bytes, 0).unwrap_or(0);
                     if u64::from(len) > MAX_RECORD {
                         return Err(malformed(
-                            group.stream.offset,
+                            stream.offset,
                             format!("variable-length data of {len} bytes"),
                         ));
                     }
-                    usize::try_from(len).unwrap_or(0)
+                    (None, usize::try_from(len).unwrap_or(0))
                 }
             };
-            let layout = match records {
-                Records::Frames(layout, _) => Some(layout.clone()),
-                _ => None,
-            };
-            let Some(record) = group.stream.take(&mut self.file, len)? else {
-                return Err(malformed(
-                    group.stream.offset,
-                    "the data ends before its records",
-                ));
+            let offset = stream.offset;
+            let Some(record) = stream.take(file, len)? else {
+                return Err(malformed(offset, "the data ends before its records"));
             };
             let Some(layout) = layout else {
                 continue;
             };
-            group.left = group.left.map(|n| n - 1);
-            group.read += 1;
-            let n = group.read;
-            return decode(&layout, record, start)
+            *left = left.map(|n| n - 1);
+            *read += 1;
+            let n = *read;
+            return decode(layout, record, start)
                 .map(Some)
-                .map_err(|what| malformed(group.at, format!("frame {n}: {what}")));
+                .map_err(|what| malformed(*at, format!("frame {n}: {what}")));
         }
     }
 }
