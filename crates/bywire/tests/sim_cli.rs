@@ -392,18 +392,19 @@ fn a_secured_scenario_refuses_the_attackers_commands() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// The DTCs the fault tour leaves in the ECU: the ADS silence's cascade, bus 1b lost, the
-/// E-stop, drive 0x22 silent, corner RL's stuck sensor, corrupted and duplicated commands,
-/// the takeover, the ECU's bus-off, drive 0x23's bus-off (its EMCY 0x8140).
-const FAULT_TOUR_DTCS: [&str; 12] = [
+/// The DTCs the whole fault tour leaves in the ECU: the ADS silence's cascade, bus 1b lost,
+/// the E-stop, drive 0x22 silent, corner RL's stuck sensor, corrupted and duplicated commands,
+/// the takeover, the ECU's bus-off, drive 0x23's bus-off (its EMCY 0x8140), and the attacks:
+/// forged copies that disagree, replayed and skipped counters, bus 1 lost to the flood.
+const FAULT_TOUR_DTCS: [&str; 15] = [
     "D00101", "D00102", "D00103", "D00200", "500000", "D10022", "530003", "D00301", "D00302",
-    "540000", "C07300", "520023",
+    "540000", "C07300", "520023", "D00306", "D00303", "D00201",
 ];
 
-/// udsoncan, over `bywire sim --serve`'s socketcand, reads the fault tour's DTCs from the
-/// simulated ECU while the run lingers: every injected fault with its status bits, the
-/// E-stop's snapshot, an occurrence count, the VIN and odometer; ClearDTC clears them, and the
-/// run's metrics then list none.
+/// udsoncan, over `bywire sim --serve`'s socketcand, reads the whole fault tour's DTCs from
+/// the simulated ECU while the run lingers (the tour over, so nothing new fails after the
+/// clear): every injected fault with its status bits, the E-stop's snapshot, an occurrence
+/// count, the VIN and odometer; ClearDTC clears them, and the run's metrics then list none.
 #[test]
 fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
     use std::io::BufRead;
@@ -421,7 +422,7 @@ fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
             "--scenario",
             "fault-tour",
             "--max-seconds",
-            "62",
+            "90",
         ])
         .args(["--linger", "60", "--serve"])
         .arg(format!("127.0.0.1:{port}"))
