@@ -12,11 +12,13 @@
 use bywire_control::kinematics::{four_wheel, WheelState};
 use bywire_core::Timestamp;
 use bywire_vehicle::ads::{AdsCommand, VehicleState};
-use bywire_vehicle::command::{ControlMode, Gear, SteeringMode};
+use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators};
 use bywire_vehicle::profile::Limits;
 use core::time::Duration;
 
-use crate::msg::{self, control_mode, gear, Header, JointState, Time, Twist};
+use crate::msg::{
+    self, control_mode, gear, hazard_lights, turn_indicators, Header, JointState, Time, Twist,
+};
 
 /// The vehicle's geometry as the mapping needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -167,6 +169,50 @@ pub fn gear_code(g: Gear) -> u8 {
         Gear::Reverse => gear::REVERSE,
         Gear::Neutral => gear::NEUTRAL,
         Gear::Drive => gear::DRIVE,
+    }
+}
+
+/// The turn indicators an Autoware `TurnIndicatorsCommand` code asks for (`None`: no command).
+pub fn turn_indicators_from_code(code: u8) -> Result<Option<TurnIndicators>, String> {
+    match code {
+        turn_indicators::NO_COMMAND => Ok(None),
+        turn_indicators::DISABLE => Ok(Some(TurnIndicators::Off)),
+        turn_indicators::ENABLE_LEFT => Ok(Some(TurnIndicators::Left)),
+        turn_indicators::ENABLE_RIGHT => Ok(Some(TurnIndicators::Right)),
+        other => Err(format!(
+            "turn indicators code {other}: expected 0 (no command), 1 (off), 2 (left), 3 (right)"
+        )),
+    }
+}
+
+/// Autoware's `TurnIndicatorsReport` code for the turn indicators.
+pub fn turn_indicators_code(lights: TurnIndicators) -> u8 {
+    match lights {
+        TurnIndicators::Off => turn_indicators::DISABLE,
+        TurnIndicators::Left => turn_indicators::ENABLE_LEFT,
+        TurnIndicators::Right => turn_indicators::ENABLE_RIGHT,
+    }
+}
+
+/// Whether an Autoware `HazardLightsCommand` code asks for the hazard lights on (`None`: no
+/// command).
+pub fn hazard_lights_from_code(code: u8) -> Result<Option<bool>, String> {
+    match code {
+        hazard_lights::NO_COMMAND => Ok(None),
+        hazard_lights::DISABLE => Ok(Some(false)),
+        hazard_lights::ENABLE => Ok(Some(true)),
+        other => Err(format!(
+            "hazard lights code {other}: expected 0 (no command), 1 (off), 2 (on)"
+        )),
+    }
+}
+
+/// Autoware's `HazardLightsReport` code for the hazard lights.
+pub fn hazard_lights_code(on: bool) -> u8 {
+    if on {
+        hazard_lights::ENABLE
+    } else {
+        hazard_lights::DISABLE
     }
 }
 
@@ -371,6 +417,25 @@ mod tests {
         assert_eq!(control_mode_code(None), control_mode::NOT_READY);
         assert_eq!(control_mode_code(Some(ControlMode::Autonomous)), 1);
         assert_eq!(control_mode_code(Some(ControlMode::Manual)), 4);
+    }
+
+    #[test]
+    fn light_codes_follow_autoware() {
+        assert_eq!(turn_indicators_from_code(0), Ok(None));
+        assert_eq!(turn_indicators_from_code(2), Ok(Some(TurnIndicators::Left)));
+        assert!(turn_indicators_from_code(4).unwrap_err().contains("code 4"));
+        for lights in TurnIndicators::ALL {
+            let code = turn_indicators_code(*lights);
+            assert_eq!(turn_indicators_from_code(code), Ok(Some(*lights)));
+        }
+        assert_eq!(hazard_lights_from_code(0), Ok(None));
+        assert!(hazard_lights_from_code(3).unwrap_err().contains("code 3"));
+        for on in [false, true] {
+            assert_eq!(
+                hazard_lights_from_code(hazard_lights_code(on)),
+                Ok(Some(on))
+            );
+        }
     }
 
     #[test]

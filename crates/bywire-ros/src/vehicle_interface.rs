@@ -3,12 +3,14 @@
 //! published back.
 //!
 //! In: `control_cmd` (`Control`), `gear_cmd`, a steering mode (`std_msgs/String`: normal,
-//! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), and the `ControlModeCommand`
+//! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), `turn_indicators_cmd` and
+//! `hazard_lights_cmd` where the profile's command has them, and the `ControlModeCommand`
 //! service (engage: answered once the vehicle reports autonomous, or `false` after
 //! [`VehicleInterfaceConfig::engage_timeout`]; disengage). The operator's E-stop reset is not
 //! offered: it stays a deliberate act at the vehicle.
 //! Out, at [`VehicleInterfaceConfig::report_period`]: steering, velocity, gear and control-mode
-//! status from fresh feedback only, the wheels as `JointState` and the steering mode.
+//! status from fresh feedback only, the wheels as `JointState` and the steering mode, and the
+//! turn-indicator and hazard-light status where the profile's state message has them.
 //!
 //! Safety is the node's: a command older than the profile's staleness (a stopped publisher) is
 //! replaced by a controlled stop; a lost bus degrades to the other; the end of the run (the
@@ -36,7 +38,8 @@ use crate::dds::{
 };
 use crate::msg::{
     control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, GearCommand,
-    GearReport, Header, JointState, SteeringReport, StringMsg, Time, Twist, VelocityReport,
+    GearReport, HazardLightsCommand, HazardLightsReport, Header, JointState, SteeringReport,
+    StringMsg, Time, TurnIndicatorsCommand, TurnIndicatorsReport, Twist, VelocityReport,
 };
 
 /// The ADS side over a profile's wire, secured when the profile declares `[secoc]`.
@@ -58,6 +61,10 @@ pub struct VehicleInterfaceConfig {
     pub steering_mode_cmd: String,
     /// `geometry_msgs/Twist` in.
     pub cmd_vel: String,
+    /// `TurnIndicatorsCommand` in.
+    pub turn_indicators_cmd: String,
+    /// `HazardLightsCommand` in.
+    pub hazard_lights_cmd: String,
     /// The `ControlModeCommand` service.
     pub control_mode_request: String,
     /// `SteeringReport` out.
@@ -72,6 +79,10 @@ pub struct VehicleInterfaceConfig {
     pub joint_states: String,
     /// The steering mode out (`std_msgs/String`).
     pub steering_mode_status: String,
+    /// `TurnIndicatorsReport` out.
+    pub turn_indicators_status: String,
+    /// `HazardLightsReport` out.
+    pub hazard_lights_status: String,
     /// Time between reports.
     pub report_period: Duration,
     /// How long an engage request waits for the vehicle to report autonomous.
@@ -85,6 +96,8 @@ impl Default for VehicleInterfaceConfig {
             gear_cmd: "/control/command/gear_cmd".into(),
             steering_mode_cmd: "/vehicle/command/steering_mode".into(),
             cmd_vel: "/cmd_vel".into(),
+            turn_indicators_cmd: "/control/command/turn_indicators_cmd".into(),
+            hazard_lights_cmd: "/control/command/hazard_lights_cmd".into(),
             control_mode_request: "/control/control_mode_request".into(),
             steering_status: "/vehicle/status/steering_status".into(),
             velocity_status: "/vehicle/status/velocity_status".into(),
@@ -92,6 +105,8 @@ impl Default for VehicleInterfaceConfig {
             control_mode: "/vehicle/status/control_mode".into(),
             joint_states: "/vehicle/status/joint_states".into(),
             steering_mode_status: "/vehicle/status/steering_mode".into(),
+            turn_indicators_status: "/vehicle/status/turn_indicators_status".into(),
+            hazard_lights_status: "/vehicle/status/hazard_lights_status".into(),
             report_period: Duration::from_millis(33),
             engage_timeout: Duration::from_secs(2),
         }
@@ -126,6 +141,10 @@ struct Inputs {
     steering_mode: Subscription<StringMsg>,
     cmd_vel: Subscription<Twist>,
     mode_request: Server<ControlModeRequest, ControlModeResponse>,
+    /// Where the profile's command has turn indicators.
+    turn_indicators: Option<Subscription<TurnIndicatorsCommand>>,
+    /// Where the profile's command has hazard lights.
+    hazard_lights: Option<Subscription<HazardLightsCommand>>,
 }
 
 struct Outputs {
@@ -135,6 +154,10 @@ struct Outputs {
     control_mode: Publisher<ControlModeReport>,
     joints: Publisher<JointState>,
     steering_mode: Publisher<StringMsg>,
+    /// Where the profile's state message has turn indicators.
+    turn_indicators: Option<Publisher<TurnIndicatorsReport>>,
+    /// Where the profile's state message has hazard lights.
+    hazard_lights: Option<Publisher<HazardLightsReport>>,
 }
 
 /// The interface's side of a run: the hooks of the real-time runner (`run`), or stepped by a
@@ -257,11 +280,38 @@ impl VehicleInterface<'_> {
                 Err(e) => (self.report)(VehicleEvent::Refused(format!("'{}': {e}", m.data))),
             }
         }
+        self.take_lights();
         for _ in 0..TAKE_BATCH {
             let Ok(Some((id, request))) = self.inputs.mode_request.receive_request() else {
                 break;
             };
             self.mode_request(ads, now, id, request.mode);
+        }
+    }
+
+    /// Lights requested take effect with the next command, as a gear does.
+    fn take_lights(&mut self) {
+        for _ in 0..TAKE_BATCH {
+            let Some(Ok(Some((m, _)))) = self.inputs.turn_indicators.as_mut().map(|s| s.take())
+            else {
+                break;
+            };
+            match map::turn_indicators_from_code(m.command) {
+                Ok(Some(lights)) => self.command.turn_indicators = lights,
+                Ok(None) => {}
+                Err(why) => (self.report)(VehicleEvent::Refused(why)),
+            }
+        }
+        for _ in 0..TAKE_BATCH {
+            let Some(Ok(Some((m, _)))) = self.inputs.hazard_lights.as_mut().map(|s| s.take())
+            else {
+                break;
+            };
+            match map::hazard_lights_from_code(m.command) {
+                Ok(Some(on)) => self.command.hazard_lights = on,
+                Ok(None) => {}
+                Err(why) => (self.report)(VehicleEvent::Refused(why)),
+            }
         }
     }
 
@@ -384,6 +434,24 @@ impl VehicleInterface<'_> {
                 data: mode.name().to_ascii_lowercase(),
             });
         }
+        if let (Some(out), Some(lights)) = (
+            &self.outputs.turn_indicators,
+            state.turn_indicators.fresh(now, self.fresh),
+        ) {
+            let _ = out.publish(TurnIndicatorsReport {
+                stamp,
+                report: map::turn_indicators_code(lights),
+            });
+        }
+        if let (Some(out), Some(on)) = (
+            &self.outputs.hazard_lights,
+            state.hazard_lights.fresh(now, self.fresh),
+        ) {
+            let _ = out.publish(HazardLightsReport {
+                stamp,
+                report: map::hazard_lights_code(on),
+            });
+        }
         self.last_report = Some(now);
     }
 
@@ -486,6 +554,8 @@ impl<'a> VehicleInterface<'a> {
         report: &'a mut dyn FnMut(VehicleEvent),
     ) -> Result<(VehicleInterface<'a>, AdsSide), RosError> {
         let one = reliable(1);
+        let command_roles = profile.profile.command.as_ref();
+        let state_roles = profile.profile.state.as_ref();
         let inputs = Inputs {
             control: node.subscription(&config.control_cmd, &one)?,
             gear: node.subscription(&config.gear_cmd, &one)?,
@@ -496,6 +566,14 @@ impl<'a> VehicleInterface<'a> {
                 "autoware_vehicle_msgs",
                 "ControlModeCommand",
             )?,
+            turn_indicators: match command_roles.and_then(|c| c.turn_indicators.as_ref()) {
+                Some(_) => Some(node.subscription(&config.turn_indicators_cmd, &one)?),
+                None => None,
+            },
+            hazard_lights: match command_roles.and_then(|c| c.hazard_lights.as_ref()) {
+                Some(_) => Some(node.subscription(&config.hazard_lights_cmd, &one)?),
+                None => None,
+            },
         };
         let outputs = Outputs {
             steering: node.publisher(&config.steering_status, &one)?,
@@ -504,6 +582,14 @@ impl<'a> VehicleInterface<'a> {
             control_mode: node.publisher(&config.control_mode, &one)?,
             joints: node.publisher(&config.joint_states, &one)?,
             steering_mode: node.publisher(&config.steering_mode_status, &one)?,
+            turn_indicators: match state_roles.and_then(|s| s.turn_indicators.as_ref()) {
+                Some(_) => Some(node.publisher(&config.turn_indicators_status, &one)?),
+                None => None,
+            },
+            hazard_lights: match state_roles.and_then(|s| s.hazard_lights.as_ref()) {
+                Some(_) => Some(node.publisher(&config.hazard_lights_status, &one)?),
+                None => None,
+            },
         };
         let mut ads_config = profile.ads_config();
         ads_config.redundant = redundant;
@@ -556,6 +642,16 @@ impl<'a> VehicleInterface<'a> {
         registry
             .register(&mut i.mode_request, mio1::Token(4), readable)
             .map_err(io)?;
+        if let Some(lights) = i.turn_indicators.as_mut() {
+            registry
+                .register(lights, mio1::Token(5), readable)
+                .map_err(io)?;
+        }
+        if let Some(lights) = i.hazard_lights.as_mut() {
+            registry
+                .register(lights, mio1::Token(6), readable)
+                .map_err(io)?;
+        }
         Ok(poll)
     }
 }

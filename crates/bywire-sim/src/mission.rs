@@ -487,6 +487,7 @@ impl AdsDriver {
             steering_mode: plan.mode,
             engage,
             operator_reset,
+            ..AdsCommand::default()
         };
         let _ = self.ads.set_command(now, command);
     }

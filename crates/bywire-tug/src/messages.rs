@@ -16,6 +16,7 @@ pub use bywire_vehicle::command::{ControlCommand, ControlMode, Gear, SteeringMod
 
 use bywire_core::frame::Dlc;
 use bywire_core::{Frame, Id, StandardId};
+use bywire_vehicle::command::TurnIndicators;
 
 /// The DBC the structs were generated from, for tools that decode by name.
 pub const DBC: &str = include_str!("../dbc/reference-tug.dbc");
@@ -84,5 +85,8 @@ pub fn command_of(m: &AdsToVehicleControl) -> Option<ControlCommand> {
         steering_mode: SteeringMode::from_raw(m.steering_mode_cmd_raw())?,
         engage: m.engage_request_raw() == 1,
         operator_reset: m.operator_reset_raw() == 1,
+        // The tug's command message has no lights.
+        turn_indicators: TurnIndicators::Off,
+        hazard_lights: false,
     })
 }

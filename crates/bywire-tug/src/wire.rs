@@ -79,6 +79,9 @@ impl AdsWire for ReferenceWire {
                     driver_override: Some(m.driver_override_raw() == 1),
                     gear: Gear::from_raw(m.gear_raw()),
                     steering_mode: SteeringMode::from_raw(m.steering_mode_raw()),
+                    // The tug's state message has no lights.
+                    turn_indicators: None,
+                    hazard_lights: None,
                     heartbeat_echo: m.heartbeat_echo_raw(),
                     in_range: steering.abs() <= 45.0
                         && (-5.0..=8.0).contains(&velocity)

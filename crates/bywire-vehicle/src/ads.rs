@@ -14,7 +14,7 @@ use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
-use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
 use crate::wire::{AdsWire, Feedback, StateFeedback};
 
 /// Tuning of the ADS side.
@@ -139,6 +139,10 @@ pub struct VehicleState {
     pub gear: Field<Gear>,
     /// The steering mode the wheels are in.
     pub steering_mode: Field<SteeringMode>,
+    /// The turn indicators.
+    pub turn_indicators: Field<TurnIndicators>,
+    /// The hazard lights are on.
+    pub hazard_lights: Field<bool>,
     /// Wheel speeds FL, FR, RL, RR, m/s.
     pub wheel_speeds: Field<[f64; 4]>,
     /// Time from sending a command to seeing its heartbeat echoed.
@@ -449,6 +453,12 @@ impl<W: AdsWire> Ads<W> {
         }
         if let Some(mode) = m.steering_mode {
             s.steering_mode.set(now, mode);
+        }
+        if let Some(lights) = m.turn_indicators {
+            s.turn_indicators.set(now, lights);
+        }
+        if let Some(on) = m.hazard_lights {
+            s.hazard_lights.set(now, on);
         }
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));

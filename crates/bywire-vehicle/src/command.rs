@@ -1,6 +1,6 @@
 //! The vocabulary both ends of a vehicle interface speak, whatever the vehicle: the command
-//! ([`ControlCommand`]) with its modes, gears and steering modes, and what the vehicle reports
-//! back about its safety logic ([`WatchdogLevel`], [`EstopCode`]).
+//! ([`ControlCommand`]) with its modes, gears, steering modes and lights, and what the vehicle
+//! reports back about its safety logic ([`WatchdogLevel`], [`EstopCode`]).
 //!
 //! Names, text and raw numbers are converted here and only here. The raw numbers are the
 //! reference numbering (the reference tug's DBC uses them as they are); a profile maps each
@@ -271,6 +271,18 @@ vocabulary!(
     ]
 );
 
+vocabulary!(
+    /// The turn indicators.
+    TurnIndicators, "turn indicator state", default Off, [
+        /// Off.
+        Off = 0, "off";
+        /// Flashing left.
+        Left = 1, "left" | "l";
+        /// Flashing right.
+        Right = 2, "right" | "r";
+    ]
+);
+
 impl EstopCode {
     /// Whether the latch waits for the operator's reset (pressed once when stopped, once more
     /// to confirm).
@@ -299,6 +311,10 @@ pub struct ControlCommand {
     pub engage: bool,
     /// Operator reset (E-stop sequence).
     pub operator_reset: bool,
+    /// Turn indicators (sent where the vehicle's command message has them).
+    pub turn_indicators: TurnIndicators,
+    /// Hazard lights on (sent where the vehicle's command message has them).
+    pub hazard_lights: bool,
 }
 
 #[cfg(test)]

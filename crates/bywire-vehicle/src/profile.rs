@@ -81,6 +81,12 @@ pub struct CommandRoles {
     pub checksum: String,
     /// Checksum algorithm (`crc8_sae_j1850`, `crc8_h2f`, `xor8`, `sum8`).
     pub checksum_algorithm: String,
+    /// Turn-indicator request signal (optional).
+    #[serde(default)]
+    pub turn_indicators: Option<String>,
+    /// Hazard-lights request signal (optional).
+    #[serde(default)]
+    pub hazard_lights: Option<String>,
 }
 
 /// The state (feedback) message's roles.
@@ -127,6 +133,12 @@ pub struct StateRoles {
     /// Steering actuator enabled (optional).
     #[serde(default)]
     pub steering_enabled: Option<String>,
+    /// Turn indicators as they are (optional).
+    #[serde(default)]
+    pub turn_indicators: Option<String>,
+    /// Hazard lights as they are (optional).
+    #[serde(default)]
+    pub hazard_lights: Option<String>,
 }
 
 /// Per-wheel feedback: wheel speeds (m/s) or wheel angles (degrees).
@@ -512,6 +524,13 @@ impl Checker<'_> {
                 let width = self.signal(m, &format!("command.{key}"), name)?;
                 widths.insert(key, width);
             }
+            if let Some(name) = &c.turn_indicators {
+                let width = self.signal(m, "command.turn_indicators", name)?;
+                widths.insert("turn_indicators", width);
+            }
+            if let Some(name) = &c.hazard_lights {
+                self.signal(m, "command.hazard_lights", name)?;
+            }
             if bywire_dbc::e2e::ChecksumAlgorithm::from_name(&c.checksum_algorithm).is_none() {
                 return Err(self.invalid(
                     "command.checksum_algorithm",
@@ -526,7 +545,7 @@ impl Checker<'_> {
                 let Some(width) = widths.get(role.as_str()) else {
                     return Err(self.invalid(
                         &format!("enums.{role}"),
-                        "not a command role (gear, control_mode, steering_mode)",
+                        "not a command role (gear, control_mode, steering_mode, turn_indicators)",
                     ));
                 };
                 for (name, value) in values {
@@ -559,6 +578,8 @@ impl Checker<'_> {
                 ("driver_override", &s.driver_override),
                 ("gear", &s.gear),
                 ("steering_enabled", &s.steering_enabled),
+                ("turn_indicators", &s.turn_indicators),
+                ("hazard_lights", &s.hazard_lights),
             ] {
                 if let Some(name) = name {
                     self.signal(m, &format!("state.{key}"), name)?;

@@ -8,7 +8,7 @@ use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::{Database, Message};
 
-use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, Vocabulary};
+use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
 use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::wire::{
@@ -291,6 +291,8 @@ struct CommandSignals {
     steering_mode: usize,
     engage: usize,
     operator_reset: usize,
+    turn_indicators: Option<usize>,
+    hazard_lights: Option<usize>,
 }
 
 /// Signal indices of the state roles.
@@ -307,6 +309,8 @@ struct StateSignals {
     driver_override: Option<usize>,
     gear: Option<usize>,
     steering_enabled: Option<usize>,
+    turn_indicators: Option<usize>,
+    hazard_lights: Option<usize>,
 }
 
 /// Any vehicle a profile describes, by role, through the runtime codec. Buffers are sized
@@ -324,6 +328,7 @@ pub struct ProfileWire {
     gears: EnumMap<Gear>,
     modes: EnumMap<ControlMode>,
     steering_modes: EnumMap<SteeringMode>,
+    turn_indicators: EnumMap<TurnIndicators>,
 }
 
 impl ProfileWire {
@@ -379,6 +384,12 @@ impl ProfileWire {
                 .and_then(|m| index_of(m, name))
                 .ok_or_else(|| invalid(key, format!("no signal '{name}' in '{message_name}'")))
         };
+        let optional_command =
+            |role: &str, name: &Option<String>| -> Result<Option<usize>, ProfileError> {
+                name.as_deref()
+                    .map(|n| signal(&c.message, &format!("command.{role}"), n))
+                    .transpose()
+            };
         let command_signals = CommandSignals {
             steering: signal(&c.message, "command.steering", &c.steering)?,
             velocity: signal(&c.message, "command.velocity", &c.velocity)?,
@@ -388,6 +399,8 @@ impl ProfileWire {
             steering_mode: signal(&c.message, "command.steering_mode", &c.steering_mode)?,
             engage: signal(&c.message, "command.engage", &c.engage)?,
             operator_reset: signal(&c.message, "command.operator_reset", &c.operator_reset)?,
+            turn_indicators: optional_command("turn_indicators", &c.turn_indicators)?,
+            hazard_lights: optional_command("hazard_lights", &c.hazard_lights)?,
         };
         let state = RoleMessage::new(
             db,
@@ -416,6 +429,8 @@ impl ProfileWire {
             estop_state: optional("estop_state", &s.estop_state)?,
             warning: optional("warning", &s.warning)?,
             driver_override: optional("driver_override", &s.driver_override)?,
+            turn_indicators: optional("turn_indicators", &s.turn_indicators)?,
+            hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
         };
         let wheels = |role: &str, w: &Option<crate::profile::WheelSignals>| match w {
             None => Ok(None),
@@ -472,6 +487,7 @@ impl ProfileWire {
             gears: EnumMap::new(loaded, "gear")?,
             modes: EnumMap::new(loaded, "control_mode")?,
             steering_modes: EnumMap::new(loaded, "steering_mode")?,
+            turn_indicators: EnumMap::new(loaded, "turn_indicators")?,
         })
     }
 }
@@ -508,6 +524,18 @@ impl AdsWire for ProfileWire {
         m.set(s.brake, c.brake);
         for (index, raw) in raws {
             m.set_raw(index, raw);
+        }
+        let lights = [
+            (
+                s.turn_indicators,
+                self.turn_indicators.raw(c.turn_indicators),
+            ),
+            (s.hazard_lights, u64::from(c.hazard_lights)),
+        ];
+        for (index, raw) in lights {
+            if let Some(index) = index {
+                m.set_raw(index, raw);
+            }
         }
         m.frame(counter)
     }
@@ -554,6 +582,11 @@ impl AdsWire for ProfileWire {
                 steering_mode: m
                     .raw(s.steering_mode)
                     .and_then(|raw| self.steering_modes.value(raw)),
+                turn_indicators: s
+                    .turn_indicators
+                    .and_then(|i| m.raw(i))
+                    .and_then(|raw| self.turn_indicators.value(raw)),
+                hazard_lights: s.hazard_lights.and_then(|i| m.raw(i)).map(|raw| raw == 1),
                 heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
                 in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
                     .into_iter()
@@ -606,6 +639,15 @@ impl ProfileWire {
         fn named<T: Vocabulary>(m: &RoleMessage, index: usize, map: &EnumMap<T>) -> Option<T> {
             m.raw(index).and_then(|raw| map.value(raw))
         }
+        // Lights a command message does not carry stay off.
+        let turn_indicators = match s.turn_indicators {
+            Some(index) => named(m, index, &self.turn_indicators)?,
+            None => TurnIndicators::Off,
+        };
+        let hazard_lights = match s.hazard_lights {
+            Some(index) => m.raw(index)? == 1,
+            None => false,
+        };
         Some(ControlCommand {
             steering: m.physical(s.steering)?,
             velocity: m.physical(s.velocity)?,
@@ -615,6 +657,8 @@ impl ProfileWire {
             steering_mode: named(m, s.steering_mode, &self.steering_modes)?,
             engage: m.raw(s.engage)? == 1,
             operator_reset: m.raw(s.operator_reset)? == 1,
+            turn_indicators,
+            hazard_lights,
         })
     }
 }
@@ -666,6 +710,11 @@ impl VehicleWire for ProfileWire {
             (s.warning, u64::from(r.warning)),
             (s.driver_override, u64::from(r.driver_override)),
             (s.steering_enabled, u64::from(r.steering_enabled)),
+            (
+                s.turn_indicators,
+                self.turn_indicators.raw(r.turn_indicators),
+            ),
+            (s.hazard_lights, u64::from(r.hazard_lights)),
         ];
         let m = &mut self.state;
         m.set(s.steering, r.steering);

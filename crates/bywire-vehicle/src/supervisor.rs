@@ -25,7 +25,7 @@ use bywire_core::e2e::{CounterChecker, CounterStatus};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
-use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::wire::{Incoming, Rejected, StateReport, VehicleWire};
 
@@ -889,6 +889,13 @@ impl<W: VehicleWire> Supervisor<W> {
             warning: self.watchdog != Watchdog::Normal || self.degraded.is_some(),
             driver_override: self.driver_input,
             steering_enabled,
+            turn_indicators: self
+                .command
+                .map_or(TurnIndicators::Off, |c| c.turn_indicators),
+            // The hazard lights also warn while the vehicle stops on its own.
+            hazard_lights: self.command.is_some_and(|c| c.hazard_lights)
+                || self.watchdog == Watchdog::FullBraking
+                || self.estop.is_latched(),
             heartbeat_echo: u64::from(self.echo),
         };
         let frame = self.wire.state_frame(&report, self.state_counter);

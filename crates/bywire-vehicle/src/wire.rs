@@ -7,7 +7,9 @@
 
 use bywire_core::{Frame, Id, Timestamp};
 
-use crate::command::{ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+use crate::command::{
+    ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel,
+};
 use crate::redundancy::Channel;
 
 #[cfg(feature = "std")]
@@ -36,6 +38,10 @@ pub struct StateFeedback {
     pub gear: Option<Gear>,
     /// The steering mode the wheels are in, where reported.
     pub steering_mode: Option<SteeringMode>,
+    /// The turn indicators, where reported.
+    pub turn_indicators: Option<TurnIndicators>,
+    /// The hazard lights, where reported.
+    pub hazard_lights: Option<bool>,
     /// The command counter the vehicle echoes.
     pub heartbeat_echo: u64,
     /// Every value within its declared range.
@@ -145,6 +151,10 @@ pub struct StateReport {
     pub driver_override: bool,
     /// The steering actuator is enabled.
     pub steering_enabled: bool,
+    /// The turn indicators.
+    pub turn_indicators: TurnIndicators,
+    /// The hazard lights are on.
+    pub hazard_lights: bool,
     /// The last accepted command counter, echoed.
     pub heartbeat_echo: u64,
 }

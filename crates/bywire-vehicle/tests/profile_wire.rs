@@ -22,9 +22,11 @@ use bywire_tug::messages::{
     VehicleToAdsSensors, VehicleToAdsState,
 };
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::command::{EstopCode, WatchdogLevel};
+use bywire_vehicle::command::{EstopCode, TurnIndicators, WatchdogLevel};
 use bywire_vehicle::profile::Profile;
-use bywire_vehicle::wire::{AdsWire, Counters, ProfileWire, StateReport, VehicleWire};
+use bywire_vehicle::wire::{
+    AdsWire, Counters, Feedback, Incoming, ProfileWire, StateReport, VehicleWire,
+};
 use proptest::prelude::*;
 
 fn shuttle() -> bywire_vehicle::profile::LoadedProfile {
@@ -59,6 +61,7 @@ fn command_strategy() -> impl Strategy<Value = AdsCommand> {
                         [steering_mode],
                     engage,
                     operator_reset,
+                    ..AdsCommand::default()
                 }
             },
         )
@@ -124,16 +127,21 @@ proptest! {
             warning: flags & 1 != 0,
             driver_override: flags & 2 != 0,
             steering_enabled: flags & 4 != 0,
+            // The tug's state message has no lights: both wires leave them out.
+            turn_indicators: TurnIndicators::Left,
+            hazard_lights: true,
             heartbeat_echo: echo,
         };
         prop_assert_eq!(VehicleWire::state_frame(&mut by_role, &report, counter), VehicleWire::state_frame(&mut ReferenceWire, &report, counter));
     }
 }
 
-/// cantools, given the shuttle DBC, decodes `lines` ("ID HEX") into JSON objects, or encodes
-/// `{"id": .., "signals": {..}}` lines into "ID HEX".
-fn cantools(script: &str, input: &str) -> Vec<String> {
-    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.dbc");
+/// cantools, given `dbc` (in tests/data), decodes `lines` ("ID HEX") into JSON objects, or
+/// encodes `{"id": .., "signals": {..}}` lines into "ID HEX".
+fn cantools(dbc: &str, script: &str, input: &str) -> Vec<String> {
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(dbc);
     let mut child = Command::new("python3")
         .args(["-c", script])
         .arg(&dbc)
@@ -207,6 +215,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
             steering_mode: SteeringMode::Crab,
             engage: true,
             operator_reset: false,
+            ..AdsCommand::default()
         },
         AdsCommand {
             steering: -29.5,
@@ -217,6 +226,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
             steering_mode: SteeringMode::Tank,
             engage: false,
             operator_reset: true,
+            ..AdsCommand::default()
         },
         // Beyond the DBC's ranges: clamped to them (the vehicle refuses more with its own limits).
         AdsCommand {
@@ -228,6 +238,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
             steering_mode: SteeringMode::Normal,
             engage: false,
             operator_reset: false,
+            ..AdsCommand::default()
         },
     ];
     let mut lines = String::new();
@@ -250,7 +261,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
         });
     }
     assert_eq!(sent.len(), 300);
-    let decoded = cantools(DECODE, &lines);
+    let decoded = cantools("shuttle.dbc", DECODE, &lines);
     let gear = |g: Gear| match g {
         Gear::Park => 4.0,
         Gear::Reverse => 2.0,
@@ -315,7 +326,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
             );
         }
     });
-    let line = &cantools(DECODE, &brake)[0];
+    let line = &cantools("shuttle.dbc", DECODE, &brake)[0];
     assert_eq!(
         (
             field(line, "EB_Request"),
@@ -370,7 +381,7 @@ fn the_shuttles_feedback_from_cantools_is_validated_by_role() {
         r#"{"id": 1281, "signals": {"St_Steer": 1.0, "St_Speed": 1.0, "St_Mode": 2, "St_SteerMode": 0, "St_Echo": 2, "St_Alive": 201, "St_Xor": 0}}"#,
         r#"{"id": 1281, "signals": {"St_Steer": 1.0, "St_Speed": 1.0, "St_Mode": 2, "St_SteerMode": 0, "St_Echo": 200, "St_Alive": 202, "St_Xor": 0}}"#,
     ];
-    let frames: Vec<Frame> = cantools(ENCODE, &(requests.join("\n") + "\n"))
+    let frames: Vec<Frame> = cantools("shuttle.dbc", ENCODE, &(requests.join("\n") + "\n"))
         .iter()
         .map(|line| {
             let (id, hex) = line.split_once(' ').unwrap();
@@ -595,4 +606,162 @@ fn wheel_speed_counters_are_checked_at_their_width() {
             "by role: {by_role}: {stats:?}"
         );
     }
+}
+
+/// "ID HEX", as the cantools scripts read a frame.
+fn id_and_hex(frame: &Frame) -> String {
+    let hex: String = frame.data().iter().map(|b| format!("{b:02x}")).collect();
+    format!("{} {hex}\n", frame.id().unwrap().as_raw())
+}
+
+/// A vehicle driving on in autonomous mode with `turn` and `hazard` lights.
+fn lit_report(turn: TurnIndicators, hazard: bool, echo: u64) -> StateReport {
+    StateReport {
+        steering: 0.0,
+        velocity: 1.0,
+        mode: ControlMode::Autonomous,
+        steering_mode: SteeringMode::Normal,
+        gear: Gear::Drive,
+        watchdog_level: WatchdogLevel::Normal,
+        estop_state: EstopCode::Normal,
+        warning: false,
+        driver_override: false,
+        steering_enabled: true,
+        turn_indicators: turn,
+        hazard_lights: hazard,
+        heartbeat_echo: echo,
+    }
+}
+
+/// A profile with lights (tests/data/tug-with-lights): its command carries the turn
+/// indicators in the profile's own numbering (right 1, left 2) and the hazard lights as
+/// cantools reads them, its state reports them, and both read back by role.
+#[test]
+fn lights_go_out_in_the_profiles_numbering_and_read_back() {
+    let loaded = Profile::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/tug-with-lights.toml"),
+    )
+    .unwrap();
+    let mut wire = ProfileWire::new(&loaded).unwrap();
+    let numbered = |t: TurnIndicators| match t {
+        TurnIndicators::Off => 0.0,
+        TurnIndicators::Right => 1.0,
+        TurnIndicators::Left => 2.0,
+    };
+    let cases = [
+        (TurnIndicators::Off, false),
+        (TurnIndicators::Left, false),
+        (TurnIndicators::Right, true),
+        (TurnIndicators::Off, true),
+    ];
+    let mut lines = String::new();
+    for (counter, (turn, hazard)) in (0u64..).zip(cases) {
+        let command = AdsCommand {
+            velocity: 1.0,
+            gear: Gear::Drive,
+            mode: ControlMode::Autonomous,
+            turn_indicators: turn,
+            hazard_lights: hazard,
+            ..AdsCommand::default()
+        };
+        let frame = AdsWire::command_frame(&mut wire, &command, counter).unwrap();
+        let Incoming::Command(Ok((Some(read), _))) = VehicleWire::incoming(&mut wire, &frame)
+        else {
+            panic!("{frame:?}");
+        };
+        assert_eq!((read.turn_indicators, read.hazard_lights), (turn, hazard));
+        let report = lit_report(turn, hazard, counter);
+        let state = VehicleWire::state_frame(&mut wire, &report, counter).unwrap();
+        let Feedback::State(feedback) = AdsWire::feedback(&mut wire, &state) else {
+            panic!("{state:?}");
+        };
+        assert_eq!(
+            (feedback.turn_indicators, feedback.hazard_lights),
+            (Some(turn), Some(hazard))
+        );
+        lines.push_str(&id_and_hex(&frame));
+        lines.push_str(&id_and_hex(&state));
+    }
+    let decoded = cantools("tug-with-lights.dbc", DECODE, &lines);
+    assert_eq!(decoded.len(), 2 * cases.len());
+    for (pair, (turn, hazard)) in decoded.chunks(2).zip(cases) {
+        let on = f64::from(u8::from(hazard));
+        assert_eq!(
+            field(&pair[0], "TurnIndicatorsCmd"),
+            numbered(turn),
+            "{pair:?}"
+        );
+        assert_eq!(field(&pair[0], "HazardLightsCmd"), on, "{pair:?}");
+        assert_eq!(
+            field(&pair[1], "TurnIndicators"),
+            numbered(turn),
+            "{pair:?}"
+        );
+        assert_eq!(field(&pair[1], "HazardLights"), on, "{pair:?}");
+    }
+    // The reference tug has no lights: its feedback reports none.
+    let mut tug = ProfileWire::new(&bywire_tug::profile().unwrap()).unwrap();
+    let report = lit_report(TurnIndicators::Left, true, 0);
+    let state = VehicleWire::state_frame(&mut tug, &report, 0).unwrap();
+    let Feedback::State(feedback) = AdsWire::feedback(&mut tug, &state) else {
+        panic!("{state:?}");
+    };
+    assert_eq!(
+        (feedback.turn_indicators, feedback.hazard_lights),
+        (None, None)
+    );
+}
+
+/// The vehicle side of a profile with lights: never commanded (full braking), its hazard
+/// lights are on; commanded, its lights are as commanded.
+#[test]
+fn the_vehicle_shows_its_hazard_lights_while_it_stops_on_its_own() {
+    use bywire_core::node::Node;
+    use bywire_vehicle::supervisor::Supervisor;
+    let loaded = Profile::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/tug-with-lights.toml"),
+    )
+    .unwrap();
+    let mut vehicle = Supervisor::with_wire(
+        loaded.supervisor_config(),
+        ProfileWire::new(&loaded).unwrap(),
+    );
+    let mut ads = ProfileWire::new(&loaded).unwrap();
+    let command = AdsCommand {
+        velocity: 1.0,
+        gear: Gear::Drive,
+        mode: ControlMode::Autonomous,
+        turn_indicators: TurnIndicators::Left,
+        ..AdsCommand::default()
+    };
+    let mut shown = Vec::new();
+    for k in 0..40u64 {
+        let now = Timestamp::from_millis(20 * k);
+        // Commands from 200 ms on.
+        if k >= 10 {
+            let frame = ads.command_frame(&command, k % 16).unwrap();
+            Node::on_frame(&mut vehicle, now, Supervisor::<ProfileWire>::PORT_A, &frame);
+        }
+        let mut sent = Vec::new();
+        Node::poll(&mut vehicle, now, &mut |_, frame| sent.push(frame));
+        for frame in sent {
+            if let Feedback::State(s) = ads.feedback(&frame) {
+                shown.push((k, s.hazard_lights, s.turn_indicators));
+            }
+        }
+    }
+    let before: Vec<_> = shown.iter().filter(|(k, ..)| *k < 10).collect();
+    assert!(!before.is_empty(), "{shown:?}");
+    assert!(
+        before
+            .iter()
+            .all(|(_, hazard, turn)| *hazard == Some(true) && *turn == Some(TurnIndicators::Off)),
+        "{shown:?}"
+    );
+    let last = shown.last().unwrap();
+    assert_eq!(
+        (last.1, last.2),
+        (Some(false), Some(TurnIndicators::Left)),
+        "{shown:?}"
+    );
 }

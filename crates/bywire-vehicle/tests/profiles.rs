@@ -97,6 +97,21 @@ fn broken_profiles_name_the_key() {
             "watchdog.decelerate_cycles: the cascade needs",
         ),
         (
+            "checksum_algorithm = \"crc8_sae_j1850\"",
+            "checksum_algorithm = \"crc8_sae_j1850\"\nturn_indicators = \"Blinker\"",
+            "command.turn_indicators: no signal 'Blinker' in message 'AdsToVehicle_Control'",
+        ),
+        (
+            "heartbeat_echo = \"HeartbeatEcho\"",
+            "heartbeat_echo = \"HeartbeatEcho\"\nhazard_lights = \"Beacon\"",
+            "state.hazard_lights: no signal 'Beacon' in message 'VehicleToAds_State'",
+        ),
+        (
+            "[enums.steering_mode]",
+            "[enums.turn_indicators]\nLeft = 1\n\n[enums.steering_mode]",
+            "enums.turn_indicators: not a command role",
+        ),
+        (
             "bitrate = 500000",
             "bitrate = 0",
             "bitrate: 0 is not a CAN bitrate",

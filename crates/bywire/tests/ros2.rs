@@ -14,7 +14,7 @@ mod common;
 use std::process::Command;
 
 use common::*;
-use serde_json::Value;
+use serde_json::{json, Value};
 
 /// Run a Python peer from the oracles folder; its one JSON line.
 fn python_peer(script: &str, args: &[&str]) -> Value {
@@ -236,17 +236,44 @@ fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
     if !inside_lonet("ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds") {
         return;
     }
+    drive_over_cyclone_dds("reference-tug", &[]);
+}
+
+/// The same drive with a profile whose command and state have lights (bywire-vehicle's
+/// tests/data/tug-with-lights): Autoware's turn-indicator and hazard-light commands reach the
+/// vehicle and its status comes back; a code Autoware does not have is refused.
+#[test]
+fn ros2_vehicle_commands_and_reports_the_lights() {
+    if !inside_lonet("ros2_vehicle_commands_and_reports_the_lights") {
+        return;
+    }
+    let profile = format!(
+        "{}/../bywire-vehicle/tests/data/tug-with-lights.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let (seen, err) = drive_over_cyclone_dds(&profile, &["lights"]);
+    // Left, then right with the hazard lights, then off: each as commanded.
+    assert_eq!(seen["lights"], json!([[2, 1], [3, 2], [1, 1]]), "{seen}");
+    assert_eq!(seen["after_bad_code"], 1, "{seen}");
+    assert!(err.contains("turn indicators code 7"), "{err}");
+    let per_second = &seen["per_second"];
+    assert!(per_second["turn"].as_u64() >= Some(20), "{per_second}");
+}
+
+/// `bywire ros2 vehicle --profile PROFILE` with its simulated vehicle, driven by
+/// `ros2_vehicle_peer.py PEER_ARGS`, checked as above; what the peer saw and stderr.
+fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) {
     let vehicle = Background::start(&[
         "ros2",
         "vehicle",
         "--profile",
-        "reference-tug",
+        profile,
         "sim:ros2-vehicle@500000",
         "--with-vehicle",
         "--dds-interface",
         "lo",
     ]);
-    let seen = python_peer("ros2_vehicle_peer.py", &[]);
+    let seen = python_peer("ros2_vehicle_peer.py", peer_args);
     let (code, out, err) = vehicle.stop();
     assert_eq!(code, 0, "{out}{err}");
 
@@ -353,6 +380,7 @@ fn ros2_vehicle_is_driven_by_control_cmd_over_cyclone_dds() {
     assert_eq!(seen["mode_after"], 4);
     assert_eq!(seen["refused_mode"], false);
     assert!(err.contains("mode 2: this interface engages"), "{err}");
+    (seen, err)
 }
 
 /// The README's walk-through as written: `bywire sim --ros2` and `examples/ros2_drive_tug.py`

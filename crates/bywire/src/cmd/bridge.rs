@@ -21,7 +21,7 @@ use bywire_core::node::Port;
 use bywire_core::Timestamp;
 use bywire_log::lines::{CappedLines, Line};
 use bywire_vehicle::ads::{Ads, AdsCommand};
-use bywire_vehicle::command::{ControlMode, Gear, SteeringMode};
+use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators};
 use bywire_vehicle::profile::Limits;
 use serde::Deserialize;
 use serde_json::json;
@@ -29,7 +29,7 @@ use serde_json::json;
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
-command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A command beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging.\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
+command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"turn_indicators\": \"left\", \"hazard_lights\": true}   (where the profile has lights)\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A command beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging.\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
 --with-vehicle simulates that vehicle)."
 )]
 pub struct Args {
@@ -67,6 +67,8 @@ struct CommandLine {
     steering_mode: Option<String>,
     engage: Option<bool>,
     operator_reset: Option<bool>,
+    turn_indicators: Option<String>,
+    hazard_lights: Option<bool>,
     emergency_brake: Option<f64>,
     release_brake: Option<bool>,
 }
@@ -95,6 +97,11 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ad
         // Edges: a request lasts for the line that asks for it.
         engage: line.engage.unwrap_or(false),
         operator_reset: line.operator_reset.unwrap_or(false),
+        turn_indicators: parsed::<TurnIndicators>(
+            line.turn_indicators.as_deref(),
+            previous.turn_indicators,
+        )?,
+        hazard_lights: line.hazard_lights.unwrap_or(previous.hazard_lights),
     };
     if command.mode == ControlMode::Estop {
         bail!("mode 'estop' is the vehicle's to report, not to request (send emergency_brake)");

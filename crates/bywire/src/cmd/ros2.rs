@@ -54,11 +54,14 @@ acceleration x 1e3 as int32, then mode, validity flags, sequence and the stamp i
 In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle through the
      vehicle's geometry, velocity, a deceleration as brake), /control/command/gear_cmd,
      /vehicle/command/steering_mode (std_msgs/String: normal, crab, tank), /cmd_vel
-     (geometry_msgs/Twist through the 4WS kinematics), and the service
-     /control/control_mode_request (autoware_vehicle_msgs/ControlModeCommand: 1 engages,
-     answered when the vehicle reports autonomous; 4 disengages).
+     (geometry_msgs/Twist through the 4WS kinematics), /control/command/
+     {turn_indicators_cmd, hazard_lights_cmd} where the profile's [command] has
+     turn_indicators and hazard_lights, and the service /control/control_mode_request
+     (autoware_vehicle_msgs/ControlModeCommand: 1 engages, answered when the vehicle reports
+     autonomous; 4 disengages).
 Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,
-     joint_states, steering_mode} at --rate, from fresh feedback only.
+     joint_states, steering_mode} at --rate, from fresh feedback only, and
+     {turn_indicators_status, hazard_lights_status} where the profile's [state] has them.
 Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)
 is replaced by a controlled stop. A command beyond the profile's limits is refused, never
 clamped. The E-stop's operator reset is not offered over ROS 2. Ctrl-C brakes for a second.")]

@@ -108,6 +108,34 @@ class GearReport(IdlStruct, typename="autoware_vehicle_msgs::msg::dds_::GearRepo
 
 
 @dataclass
+class TurnIndicatorsCommand(IdlStruct,
+                            typename="autoware_vehicle_msgs::msg::dds_::TurnIndicatorsCommand_"):
+    stamp: Time
+    command: uint8
+
+
+@dataclass
+class TurnIndicatorsReport(IdlStruct,
+                           typename="autoware_vehicle_msgs::msg::dds_::TurnIndicatorsReport_"):
+    stamp: Time
+    report: uint8
+
+
+@dataclass
+class HazardLightsCommand(IdlStruct,
+                          typename="autoware_vehicle_msgs::msg::dds_::HazardLightsCommand_"):
+    stamp: Time
+    command: uint8
+
+
+@dataclass
+class HazardLightsReport(IdlStruct,
+                         typename="autoware_vehicle_msgs::msg::dds_::HazardLightsReport_"):
+    stamp: Time
+    report: uint8
+
+
+@dataclass
 class ControlModeReport(IdlStruct, typename="autoware_vehicle_msgs::msg::dds_::ControlModeReport_"):
     stamp: Time
     mode: uint8

@@ -1,9 +1,10 @@
 """An Autoware stand-in for `bywire ros2 vehicle`, on Cyclone DDS: publishes control_cmd at
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
 the vehicle's reports, stops publishing (the vehicle must stop), then disengages. Prints one
-JSON object of what it saw.
+JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
+lights and reads their status (a profile that has them).
 
-usage: ros2_vehicle_peer.py"""
+usage: ros2_vehicle_peer.py [lights]"""
 
 import json
 import sys
@@ -11,9 +12,12 @@ import threading
 import time
 
 from ros2_types import (Control, ControlModeCommandRequest, ControlModeCommandResponse,
-                        ControlModeReport, GearCommand, GearReport, JointState, SteeringReport,
-                        StringMsg, Twist, Vector3, VelocityReport, control, participant, reader,
-                        stamp, writer)
+                        ControlModeReport, GearCommand, GearReport, HazardLightsCommand,
+                        HazardLightsReport, JointState, SteeringReport, StringMsg,
+                        TurnIndicatorsCommand, TurnIndicatorsReport, Twist, Vector3,
+                        VelocityReport, control, participant, reader, stamp, writer)
+
+lights = sys.argv[1:] == ["lights"]
 
 dp = participant()
 control_cmd = writer(dp, "rt/control/command/control_cmd", Control, depth=1)
@@ -30,6 +34,13 @@ topics = {
     "joints": ("rt/vehicle/status/joint_states", JointState),
     "steering_mode": ("rt/vehicle/status/steering_mode", StringMsg),
 }
+if lights:
+    turn_cmd = writer(dp, "rt/control/command/turn_indicators_cmd", TurnIndicatorsCommand,
+                      depth=1)
+    hazard_cmd = writer(dp, "rt/control/command/hazard_lights_cmd", HazardLightsCommand,
+                        depth=1)
+    topics["turn"] = ("rt/vehicle/status/turn_indicators_status", TurnIndicatorsReport)
+    topics["hazard"] = ("rt/vehicle/status/hazard_lights_status", HazardLightsReport)
 readers = {k: reader(dp, name, kind, depth=100) for k, (name, kind) in topics.items()}
 seen = {k: [] for k in topics}  # (time, sample)
 lock = threading.Lock()
@@ -116,6 +127,24 @@ try:
     time.sleep(1.0)
     with lock:
         result["per_second"] = {k: len(v) - counts_before[k] for k, v in seen.items()}
+    if lights:
+        # Autoware's codes: turn 1 off, 2 left, 3 right; hazard 1 off, 2 on. Each pair is
+        # sent at 10 Hz, as Autoware does, until the status shows it (or 3 s).
+        result["lights"] = []
+        for turn, hazard in [(2, 1), (3, 2), (1, 1)]:
+            def shown():
+                t, h = latest("turn"), latest("hazard")
+                return t is not None and h is not None and (t.report, h.report) == (turn, hazard)
+            end = time.monotonic() + 3.0
+            while time.monotonic() < end and not shown():
+                turn_cmd.write(TurnIndicatorsCommand(stamp=stamp(0), command=turn))
+                hazard_cmd.write(HazardLightsCommand(stamp=stamp(0), command=hazard))
+                time.sleep(0.1)
+            result["lights"].append([latest("turn").report, latest("hazard").report])
+        # A code Autoware does not have is refused; the lights stay as they are.
+        turn_cmd.write(TurnIndicatorsCommand(stamp=stamp(0), command=7))
+        time.sleep(0.3)
+        result["after_bad_code"] = latest("turn").report
     v, s, g = latest("velocity"), latest("steering"), latest("gear")
     j, sm = latest("joints"), latest("steering_mode")
     result["driving"] = {"velocity": v.longitudinal_velocity, "lateral": v.lateral_velocity,
