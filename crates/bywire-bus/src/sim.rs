@@ -179,6 +179,21 @@ fn flipped(frame: Frame) -> Frame {
     rebuilt.unwrap_or(frame)
 }
 
+/// Whether `event` leaves a node's counters and state as they are: a success counts a
+/// counter down, so one already at zero (or a node off the bus) has nothing to change. Most
+/// frames on a healthy bus are such events for every node, and the simulator skips them.
+fn unchanged_by(confinement: &Confinement, event: Event) -> bool {
+    let off = confinement.state() == NodeState::BusOff;
+    match event {
+        Event::TransmitSuccess => off || confinement.tec() == 0,
+        Event::ReceiveSuccess => off || confinement.rec() == 0,
+        _ => off,
+    }
+}
+
+/// Slots of the acceptance table (a power of two).
+const ACCEPTANCE_CACHE: usize = 1 << 8;
+
 /// Slots of the classic-frame timing table (a power of two).
 const CLASSIC_CACHE: usize = 1 << 10;
 
@@ -226,6 +241,11 @@ pub struct SimBus {
     timings: std::collections::HashMap<Frame, (f64, usize)>,
     /// The same for classic frames, direct-mapped by content: cheaper than hashing them.
     classic_timings: Vec<Option<(ClassicKey, (f64, usize))>>,
+    /// Which nodes' filters take a frame, by its SocketCAN identifier (all that acceptance
+    /// depends on): a direct-mapped table of node bit sets, emptied whenever a node or a
+    /// filter changes. Delivering is where a bus's time goes; most buses carry a few dozen
+    /// identifiers to a dozen nodes.
+    acceptance: Vec<Option<(u32, u64)>>,
     /// Faulty senders, by identifier.
     tampered: Vec<(Id, Tamper)>,
     /// Arbitration's offers (node, queue index, identifier, sequence), kept between frames.
@@ -234,6 +254,10 @@ pub struct SimBus {
     data: Option<u32>,
     /// The bus is idle from here on (after the last intermission).
     idle_from: Timestamp,
+    /// The earliest a queued frame may start, bus idle or not (`None` inside: no frame
+    /// queued), remembered until a queue, a suspension or a node's state changes: runners ask
+    /// for the next change far more often than frames are queued.
+    ready: std::cell::Cell<Option<Option<Timestamp>>>,
     /// Simulated up to here.
     now: Timestamp,
     nodes: Vec<Node>,
@@ -250,11 +274,13 @@ impl SimBus {
         SimBus {
             timings: std::collections::HashMap::new(),
             classic_timings: vec![None; CLASSIC_CACHE],
+            acceptance: vec![None; ACCEPTANCE_CACHE],
             tampered: Vec::new(),
             offers: Vec::new(),
             nominal: nominal.max(1),
             data,
             idle_from: Timestamp::ZERO,
+            ready: std::cell::Cell::new(None),
             now: Timestamp::ZERO,
             nodes: Vec::new(),
             faults: Vec::new(),
@@ -277,6 +303,8 @@ impl SimBus {
             not_before: Timestamp::ZERO,
             recessive_run: 0,
         });
+        self.forget_acceptance();
+        self.ready.set(None);
         self.nodes.len() - 1
     }
 
@@ -285,6 +313,7 @@ impl SimBus {
         if let Some(n) = self.nodes.get_mut(node) {
             n.filtering = filtering;
         }
+        self.forget_acceptance();
     }
 
     /// How many received frames a node holds before new ones are dropped and counted.
@@ -334,6 +363,7 @@ impl SimBus {
                 });
             }
         }
+        self.ready.set(None);
     }
 
     /// A faulty sender for frames with identifier `id`, from whichever node (`None`: mend it):
@@ -352,6 +382,7 @@ impl SimBus {
             n.queue.clear();
             n.rx.clear();
         }
+        self.ready.set(None);
     }
 
     /// Destroy the next matching transmissions.
@@ -418,17 +449,25 @@ impl SimBus {
 
     /// The earliest start of a transmission with the frames queued now.
     fn next_start(&self) -> Option<Timestamp> {
-        self.nodes
-            .iter()
-            .filter(|n| n.confinement.state() != NodeState::BusOff)
-            .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
-            .min()
-            .map(|ready| ready.max(self.idle_from))
+        let ready = self.ready.get().unwrap_or_else(|| {
+            let ready = self
+                .nodes
+                .iter()
+                .filter(|n| n.confinement.state() != NodeState::BusOff)
+                .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
+                .min();
+            self.ready.set(Some(ready));
+            ready
+        });
+        ready.map(|ready| ready.max(self.idle_from))
     }
 
     /// The earliest moment a bus-off node completes its 128th recovery sequence, counting idle
     /// bits from `from`.
     fn next_recovery(&self, from: Timestamp) -> Option<Timestamp> {
+        if !self.any_bus_off() {
+            return None;
+        }
         let bit = self.bits(1).max(1);
         self.nodes
             .iter()
@@ -439,6 +478,41 @@ impl SimBus {
                 from.saturating_add(std::time::Duration::from_nanos(bits.saturating_mul(bit)))
             })
             .min()
+    }
+
+    fn forget_acceptance(&mut self) {
+        self.acceptance.iter_mut().for_each(|slot| *slot = None);
+    }
+
+    /// The nodes whose filters take `frame`, one bit each (`None` past 64 nodes: ask each).
+    fn accepting(&mut self, frame: &Frame) -> Option<u64> {
+        if self.nodes.len() > 64 {
+            return None;
+        }
+        let can_id = frame.socketcan_id();
+        let mixed = u64::from(can_id).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let slot = usize::try_from(mixed >> (64 - ACCEPTANCE_CACHE.trailing_zeros())).ok()?;
+        if let Some(Some((cached, nodes))) = self.acceptance.get(slot) {
+            if *cached == can_id {
+                return Some(*nodes);
+            }
+        }
+        let nodes = self
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| n.filtering.accepts(frame))
+            .fold(0u64, |set, (i, _)| set | 1 << i);
+        if let Some(entry) = self.acceptance.get_mut(slot) {
+            *entry = Some((can_id, nodes));
+        }
+        Some(nodes)
+    }
+
+    fn any_bus_off(&self) -> bool {
+        self.nodes
+            .iter()
+            .any(|n| n.confinement.state() == NodeState::BusOff)
     }
 
     /// A node's fault-confinement state and counters.
@@ -474,6 +548,7 @@ impl SimBus {
     }
 
     fn set_state(&mut self, node: NodeId, event: Event, at: Timestamp) {
+        self.ready.set(None);
         let Some(n) = self.nodes.get_mut(node) else {
             return;
         };
@@ -501,11 +576,11 @@ impl SimBus {
     /// Apply `event` to every node on the bus except the sender.
     fn tell_receivers(&mut self, sender: NodeId, event: Event, at: Timestamp) {
         for node in 0..self.nodes.len() {
-            let on_bus = self
+            let affected = self
                 .nodes
                 .get(node)
-                .is_some_and(|n| n.confinement.state() != NodeState::BusOff);
-            if node != sender && on_bus {
+                .is_some_and(|n| !unchanged_by(&n.confinement, event));
+            if node != sender && affected {
                 self.set_state(node, event, at);
             }
         }
@@ -514,6 +589,9 @@ impl SimBus {
     /// Count idle recessive bits from `from` towards bus-off recovery, up to `to` or to the first
     /// recovery, whichever comes first; returns the time of that recovery.
     fn idle(&mut self, from: Timestamp, to: Timestamp) -> Option<Timestamp> {
+        if !self.any_bus_off() {
+            return None;
+        }
         let bit = self.bits(1).max(1);
         let at_bits = |bits: u64| {
             from.saturating_add(std::time::Duration::from_nanos(bits.saturating_mul(bit)))
@@ -545,6 +623,7 @@ impl SimBus {
                 if n.confinement.state() != NodeState::BusOff {
                     n.not_before = r;
                     n.recessive_run = 0;
+                    self.ready.set(None);
                 }
             }
         }
@@ -704,12 +783,15 @@ impl SimBus {
                 latency_ns: u64::try_from(eof.saturating_since(submitted).as_nanos())
                     .unwrap_or(u64::MAX),
             });
+            let accepting = self.accepting(&frame);
             for (node, n) in self.nodes.iter_mut().enumerate() {
                 let own = node == winner;
+                let accepts = accepting
+                    .map_or_else(|| n.filtering.accepts(&frame), |set| set >> node & 1 == 1);
                 // The sender's own copy is its transmit confirmation, past its filters.
                 if n.confinement.state() == NodeState::BusOff
                     || (own && !n.receive_own)
-                    || (!own && !n.filtering.accepts(&frame))
+                    || (!own && !accepts)
                 {
                     continue;
                 }
@@ -720,7 +802,13 @@ impl SimBus {
                     hardware: None,
                 });
             }
-            self.set_state(winner, Event::TransmitSuccess, eof);
+            if self
+                .nodes
+                .get(winner)
+                .is_some_and(|n| !unchanged_by(&n.confinement, Event::TransmitSuccess))
+            {
+                self.set_state(winner, Event::TransmitSuccess, eof);
+            }
             self.tell_receivers(winner, Event::ReceiveSuccess, eof);
         }
         self.idle_from = end.saturating_add(ns(self, INTERMISSION));
@@ -734,6 +822,7 @@ impl SimBus {
             .get(winner)
             .is_some_and(|n| n.confinement.state() == NodeState::ErrorPassive);
         let suspend_until = self.idle_from.saturating_add(ns(self, SUSPEND));
+        self.ready.set(None);
         if let Some(n) = self.nodes.get_mut(winner) {
             n.not_before = if passive {
                 suspend_until

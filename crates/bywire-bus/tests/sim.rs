@@ -260,3 +260,49 @@ fn a_burst_until_bus_off_gets_there_and_then_ends() {
         .collect();
     assert!(got.iter().any(|f| f == "300#AA"), "{got:?}");
 }
+
+/// The bus remembers which nodes take an identifier and when the next frame may start; a
+/// filter changed, a node added or a frame queued between transmissions must still count at
+/// once (regression guard for those caches).
+#[test]
+fn filters_nodes_and_queued_frames_changed_between_frames_count_at_once() {
+    use bywire_bus::Filtering;
+    use bywire_core::Filter;
+    let mut bus = SimBus::new(500_000, None);
+    let (sender, listener) = (bus.add_node(), bus.add_node());
+    let heard = |bus: &mut SimBus, node| {
+        let mut ids = Vec::new();
+        while let Some(r) = bus.receive(node) {
+            ids.push(r.frame.id().unwrap().as_raw());
+        }
+        ids
+    };
+    bus.submit(sender, frame("123#01"), Timestamp::ZERO);
+    bus.advance(Timestamp::from_millis(1));
+    assert_eq!(heard(&mut bus, listener), [0x123]);
+    // Asked when the next change is (nothing queued), then a frame queued: it is seen.
+    assert_eq!(bus.next_change(listener), None);
+    bus.submit(sender, frame("123#02"), Timestamp::from_millis(1));
+    assert_eq!(
+        bus.next_change(listener),
+        Some(Timestamp::from_millis(1)),
+        "a frame queued after the question"
+    );
+    // The listener now takes 0x200 only: 0x123 no longer reaches it, 0x200 does.
+    bus.set_filtering(
+        listener,
+        Filtering {
+            filters: vec![Filter::new(0x200, 0x7FF)],
+            ..Filtering::default()
+        },
+    );
+    bus.submit(sender, frame("200#03"), Timestamp::from_millis(1));
+    bus.advance(Timestamp::from_millis(3));
+    assert_eq!(heard(&mut bus, listener), [0x200]);
+    // A node added later hears 0x123 (the default filter) though the bus knew 0x123 before.
+    let late = bus.add_node();
+    bus.submit(sender, frame("123#04"), Timestamp::from_millis(3));
+    bus.advance(Timestamp::from_millis(5));
+    assert_eq!(heard(&mut bus, late), [0x123]);
+    assert!(heard(&mut bus, listener).is_empty());
+}

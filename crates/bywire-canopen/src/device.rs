@@ -7,7 +7,7 @@
 use core::time::Duration;
 
 use bywire_core::frame::Frame;
-use bywire_core::time::Timestamp;
+use bywire_core::time::{earliest, Timestamp};
 
 use crate::abort::Abort;
 use crate::nmt::{
@@ -837,7 +837,7 @@ impl<A: Application> Device<A> {
             .last_guard
             .filter(|_| !self.life_guard_lost && !self.life_time().is_zero())
             .map(|last| last.saturating_add(self.life_time()));
-        [
+        earliest([
             heartbeat,
             life,
             self.sdo.next_deadline(),
@@ -847,10 +847,7 @@ impl<A: Application> Device<A> {
                 .then(|| self.pdos.next_deadline())
                 .flatten(),
             self.next_sync,
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        ])
     }
 }
 

@@ -7,7 +7,7 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use bywire_core::frame::Frame;
-use bywire_core::time::Timestamp;
+use bywire_core::time::{earliest, Timestamp};
 
 use crate::cia402::{DriveController, StopReason};
 use crate::device::Emergency;
@@ -222,15 +222,12 @@ impl Master {
         let sync = (!self.sync_period.is_zero()).then(|| self.next_sync.unwrap_or(Timestamp::ZERO));
         let cycle =
             (!self.controlled.is_empty()).then(|| self.next_cycle.unwrap_or(Timestamp::ZERO));
-        [
+        earliest([
             heartbeat,
             sync,
             cycle,
             self.consumer.next_deadline(),
             self.sdo.next_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        ])
     }
 }

@@ -54,9 +54,32 @@ impl Timestamp {
     }
 }
 
+/// The earliest of several optional deadlines (`None`: that timer is not running), as a node
+/// with several timers answers `next_deadline`. A plain loop: runners ask this at every event,
+/// and `into_iter().flatten().min()` over an array compiles to far more work than the compares.
+pub fn earliest<const N: usize>(deadlines: [Option<Timestamp>; N]) -> Option<Timestamp> {
+    let mut first: Option<Timestamp> = None;
+    for deadline in deadlines {
+        first = match (first, deadline) {
+            (Some(f), Some(d)) => Some(f.min(d)),
+            (f, d) => f.or(d),
+        };
+    }
+    first
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn earliest_skips_stopped_timers() {
+        let t = Timestamp::from_millis;
+        assert_eq!(earliest([None, Some(t(5)), None, Some(t(3))]), Some(t(3)));
+        assert_eq!(earliest([Some(t(3)), Some(t(3))]), Some(t(3)));
+        assert_eq!(earliest::<2>([None, None]), None);
+        assert_eq!(earliest::<0>([]), None);
+    }
 
     #[test]
     fn out_of_order_difference_is_none_not_wrapped() {

@@ -29,6 +29,7 @@ use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
@@ -701,15 +702,12 @@ impl Node for VehicleControlEcu {
         if let Some(until) = self.booting_until {
             return Some(until);
         }
-        [
+        earliest([
             self.supervisor.next_deadline(),
             self.master.next_deadline(),
             Some(self.next_report),
             self.diagnostics.next_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        ])
     }
 }
 
