@@ -18,6 +18,7 @@
 use std::time::Duration;
 
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
 use crate::sim::{NodeId, SimBus};
@@ -44,29 +45,72 @@ struct Wire {
     endpoint: NodeId,
 }
 
+/// What the runner keeps for one node between its events.
+#[derive(Clone, Copy)]
+struct Slot {
+    /// Its deadline, cached until it is polled or given a frame.
+    deadline: Option<Timestamp>,
+    /// When it was last polled.
+    polled: Option<Timestamp>,
+    /// Changed by the caller since the last run (its deadline is asked again).
+    changed: bool,
+    /// It received something at the current instant.
+    received: bool,
+    /// Its output is dropped (the node is cut off or powered down).
+    dropped: bool,
+}
+
+impl Slot {
+    const NEW: Slot = Slot {
+        deadline: None,
+        polled: None,
+        changed: true,
+        received: false,
+        dropped: false,
+    };
+
+    /// When it must next run: now if never polled; a deadline at or before its last poll
+    /// counts RESOLUTION after that poll, so a node asking for the past cannot stall time.
+    fn wake(&self, now: Timestamp) -> Option<Timestamp> {
+        match (self.polled, self.deadline) {
+            (None, _) => Some(now),
+            (Some(last), Some(d)) if d <= last => Some(last.saturating_add(RESOLUTION)),
+            (Some(_), deadline) => deadline,
+        }
+    }
+
+    /// Whether it is due at `now`: never polled, or polled before `now` with its deadline
+    /// reached (one at or before the last poll, too: `wake` moved it on by RESOLUTION).
+    fn due(&self, now: Timestamp) -> bool {
+        match self.polled {
+            None => true,
+            Some(last) => last < now && self.deadline.is_some_and(|d| d <= now),
+        }
+    }
+}
+
+/// One simulated bus and what the runner knows of it.
+struct NetBus {
+    name: String,
+    sim: SimBus,
+    /// The wires to it (indices into the network's wires), in the order they were made.
+    wires: Vec<usize>,
+    /// The endpoints nodes are wired to (taps are read by their owner, not here).
+    endpoints: Vec<NodeId>,
+    /// When it next changes, cached until it is advanced, given a frame or read.
+    next: Option<Option<Timestamp>>,
+}
+
 /// Named bit-timed buses and the wiring of nodes to them.
 pub struct Network {
-    buses: Vec<(String, SimBus)>,
+    buses: Vec<NetBus>,
     wires: Vec<Wire>,
-    /// Per bus: the endpoints nodes are wired to (taps are read by their owner, not here).
-    bus_endpoints: Vec<Vec<NodeId>>,
-    /// Per bus: when it next changes, cached until it is advanced, given a frame or read.
-    bus_next: Vec<Option<Option<Timestamp>>>,
-    /// Per node: its output is dropped (the node is cut off or powered down).
-    dropped: Vec<bool>,
     /// Single ports whose output is dropped (one of a node's buses cut).
     dropped_ports: Vec<(NodeIndex, Port)>,
-    /// Per node: when it was last polled.
-    polled: Vec<Option<Timestamp>>,
-    /// Per node: its deadline, cached until it is polled or given a frame.
-    deadlines: Vec<Option<Timestamp>>,
-    /// Per node: changed by the caller since the last run (its deadline is asked again).
-    changed: Vec<bool>,
+    /// Per node.
+    slots: Vec<Slot>,
     now: Timestamp,
     outgoing: Vec<(Port, Frame)>,
-    received: Vec<bool>,
-    /// Per bus: something happens on it at the current instant (reused).
-    active: Vec<bool>,
 }
 
 impl Default for Network {
@@ -81,62 +125,52 @@ impl Network {
         Network {
             buses: Vec::new(),
             wires: Vec::new(),
-            bus_endpoints: Vec::new(),
-            bus_next: Vec::new(),
-            dropped: Vec::new(),
             dropped_ports: Vec::new(),
-            polled: Vec::new(),
-            deadlines: Vec::new(),
-            changed: Vec::new(),
+            slots: Vec::new(),
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
-            received: Vec::new(),
-            active: Vec::new(),
         }
     }
 
     /// Add a bus at `nominal` bit/s (FD data phases at `data` bit/s when given).
     pub fn add_bus(&mut self, name: &str, nominal: u32, data: Option<u32>) -> BusIndex {
-        self.buses
-            .push((name.to_string(), SimBus::new(nominal, data)));
-        self.bus_endpoints.push(Vec::new());
-        self.bus_next.push(None);
-        self.active.push(false);
+        self.buses.push(NetBus {
+            name: name.to_string(),
+            sim: SimBus::new(nominal, data),
+            wires: Vec::new(),
+            endpoints: Vec::new(),
+            next: None,
+        });
         self.buses.len() - 1
     }
 
     /// A bus by name.
     pub fn bus_index(&self, name: &str) -> Option<BusIndex> {
-        self.buses.iter().position(|(n, _)| n == name)
+        self.buses.iter().position(|b| b.name == name)
     }
 
     /// Wire `node`'s `port` to `bus`; the endpoint's number on that bus is returned (for the
     /// bus's events and faults).
     pub fn wire(&mut self, node: NodeIndex, port: Port, bus: BusIndex) -> Option<NodeId> {
-        let (_, sim) = self.buses.get_mut(bus)?;
-        let endpoint = sim.add_node();
+        let net_bus = self.buses.get_mut(bus)?;
+        let endpoint = net_bus.sim.add_node();
         // A node's own frames come back as its transmit confirmations.
-        sim.set_receive_own(endpoint, true);
+        net_bus.sim.set_receive_own(endpoint, true);
+        net_bus.wires.push(self.wires.len());
+        net_bus.endpoints.push(endpoint);
         self.wires.push(Wire {
             node,
             port,
             bus,
             endpoint,
         });
-        if let Some(endpoints) = self.bus_endpoints.get_mut(bus) {
-            endpoints.push(endpoint);
-        }
         self.size_for(node.saturating_add(1));
         Some(endpoint)
     }
 
     fn size_for(&mut self, nodes: usize) {
-        if self.polled.len() < nodes {
-            self.dropped.resize(nodes, false);
-            self.polled.resize(nodes, None);
-            self.deadlines.resize(nodes, None);
-            self.changed.resize(nodes, true);
-            self.received.resize(nodes, false);
+        if self.slots.len() < nodes {
+            self.slots.resize(nodes, Slot::NEW);
         }
     }
 
@@ -144,22 +178,23 @@ impl Network {
     /// send from it with [`Network::bus_mut`].
     pub fn tap(&mut self, bus: BusIndex) -> Option<NodeId> {
         self.forget_bus(bus);
-        self.buses.get_mut(bus).map(|(_, sim)| sim.add_node())
+        self.buses.get_mut(bus).map(|b| b.sim.add_node())
     }
 
     /// Set what a port receives.
     pub fn set_filtering(&mut self, node: NodeIndex, port: Port, filtering: Filtering) {
         if let Some(w) = self.wires.iter().find(|w| w.node == node && w.port == port) {
-            if let Some((_, sim)) = self.buses.get_mut(w.bus) {
-                sim.set_filtering(w.endpoint, filtering);
+            if let Some(b) = self.buses.get_mut(w.bus) {
+                b.sim.set_filtering(w.endpoint, filtering);
             }
         }
     }
 
     /// Drop (or again let through) everything `node` sends: a node cut off the bus.
     pub fn drop_output(&mut self, node: NodeIndex, dropped: bool) {
-        if let Some(slot) = self.dropped.get_mut(node) {
-            *slot = dropped;
+        self.size_for(node.saturating_add(1));
+        if let Some(slot) = self.slots.get_mut(node) {
+            slot.dropped = dropped;
         }
     }
 
@@ -174,12 +209,12 @@ impl Network {
     /// A bus, to inject faults into, send from a tap or read one.
     pub fn bus_mut(&mut self, bus: BusIndex) -> Option<&mut SimBus> {
         self.forget_bus(bus);
-        self.buses.get_mut(bus).map(|(_, sim)| sim)
+        self.buses.get_mut(bus).map(|b| &mut b.sim)
     }
 
     /// A bus, to read its events and counts.
     pub fn bus(&self, bus: BusIndex) -> Option<&SimBus> {
-        self.buses.get(bus).map(|(_, sim)| sim)
+        self.buses.get(bus).map(|b| &b.sim)
     }
 
     /// Simulated time so far.
@@ -188,8 +223,8 @@ impl Network {
     }
 
     fn forget_bus(&mut self, bus: BusIndex) {
-        if let Some(next) = self.bus_next.get_mut(bus) {
-            *next = None;
+        if let Some(b) = self.buses.get_mut(bus) {
+            b.next = None;
         }
     }
 
@@ -197,8 +232,8 @@ impl Network {
     /// (a new command, an operator's action): the next run asks it again. Nodes are otherwise
     /// asked only after they were polled or given a frame.
     pub fn changed(&mut self, node: NodeIndex) {
-        if let Some(flag) = self.changed.get_mut(node) {
-            *flag = true;
+        if let Some(slot) = self.slots.get_mut(node) {
+            slot.changed = true;
         }
     }
 
@@ -207,15 +242,10 @@ impl Network {
     /// that time (a new command, a cut-off node — see [`Network::changed`]).
     pub fn run_until(&mut self, until: Timestamp, nodes: &mut [&mut dyn Node]) {
         self.size_for(nodes.len());
-        for ((slot, changed), node) in self
-            .deadlines
-            .iter_mut()
-            .zip(self.changed.iter_mut())
-            .zip(nodes.iter())
-        {
-            if *changed {
-                *slot = node.next_deadline();
-                *changed = false;
+        for (slot, node) in self.slots.iter_mut().zip(nodes.iter()) {
+            if slot.changed {
+                slot.deadline = node.next_deadline();
+                slot.changed = false;
             }
         }
         // Each pass moves time forward to the next event (or ends at `until`): bounded by the
@@ -235,11 +265,9 @@ impl Network {
                 }
             });
             let Some(at) = next.filter(|at| *at < until) else {
-                for (i, (_, sim)) in self.buses.iter_mut().enumerate() {
-                    sim.advance(until);
-                    if let Some(next) = self.bus_next.get_mut(i) {
-                        *next = None;
-                    }
+                for b in &mut self.buses {
+                    b.sim.advance(until);
+                    b.next = None;
                 }
                 self.now = self.now.max(until);
                 return;
@@ -255,126 +283,69 @@ impl Network {
         self.run_until(until, nodes);
     }
 
-    /// When bus `i` next changes (cached).
-    fn bus_change(&mut self, i: BusIndex) -> Option<Timestamp> {
-        if let Some(Some(cached)) = self.bus_next.get(i) {
-            return *cached;
-        }
-        let (Some((_, sim)), Some(endpoints)) = (self.buses.get(i), self.bus_endpoints.get(i))
-        else {
-            return None;
-        };
-        let next = sim.next_change_of(endpoints);
-        if let Some(slot) = self.bus_next.get_mut(i) {
-            *slot = Some(next);
-        }
-        next
-    }
-
     /// The earliest time something happens: a node's deadline or a bus's next change.
     fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
         let mut next: Option<Timestamp> = None;
-        let mut earliest = |at: Timestamp| next = Some(next.map_or(at, |n| n.min(at)));
-        for (deadline, polled) in self.deadlines.iter().zip(&self.polled).take(nodes) {
-            match (polled, deadline) {
-                // Never polled: due now.
-                (None, _) => earliest(self.now),
-                // Asking for the time already polled: a little later.
-                (Some(last), Some(d)) if d <= last => earliest(last.saturating_add(RESOLUTION)),
-                (Some(_), Some(d)) => earliest(*d),
-                (Some(_), None) => {}
-            }
+        for slot in self.slots.iter().take(nodes) {
+            next = earliest([next, slot.wake(self.now)]);
         }
-        for i in 0..self.buses.len() {
-            if let Some(at) = self.bus_change(i) {
-                earliest(at);
-            }
+        for b in &mut self.buses {
+            next = earliest([next, b.next_change()]);
         }
         next
     }
 
-    /// Everything that happens at `self.now`: buses advanced, frames delivered, the nodes that
-    /// are due or received something polled, and their frames submitted (which end later: a
-    /// frame takes time on the wire, so nothing more arrives at this instant).
+    /// Everything that happens at `self.now`: buses advanced, frames delivered (bus by bus, in
+    /// the order the buses were added, each to its wires in the order they were made), the
+    /// nodes that are due or received something polled, and their frames submitted (which end
+    /// later: a frame takes time on the wire, so nothing more arrives at this instant).
     fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
         let now = self.now;
-        for i in 0..self.buses.len() {
+        self.slots.iter_mut().for_each(|s| s.received = false);
+        for b in &mut self.buses {
             // A bus with nothing to do before now is left where it is (and, having nothing
             // due, delivers nothing now).
-            let active = self.bus_change(i).is_some_and(|at| at <= now);
-            if active {
-                if let Some((_, sim)) = self.buses.get_mut(i) {
-                    sim.advance(now);
-                }
-                self.forget_bus(i);
-            }
-            if let Some(slot) = self.active.get_mut(i) {
-                *slot = active;
-            }
-        }
-        self.received.iter_mut().for_each(|r| *r = false);
-        for w in &self.wires {
-            if !self.active.get(w.bus).copied().unwrap_or(true) {
+            if !b.next_change().is_some_and(|at| at <= now) {
                 continue;
             }
-            let (Some((_, sim)), Some(node)) = (self.buses.get_mut(w.bus), nodes.get_mut(w.node))
-            else {
-                continue;
-            };
-            let mut got = false;
-            let mut confirmed = false;
-            while let Some(r) = sim.receive_by(w.endpoint, now) {
-                if r.own {
-                    node.on_sent(r.timestamp, w.port, &r.frame);
-                    confirmed = true;
-                } else {
-                    node.on_frame(r.timestamp, w.port, &r.frame);
-                    got = true;
+            b.sim.advance(now);
+            b.next = None;
+            for w in b.wires.iter().filter_map(|&i| self.wires.get(i)) {
+                let (Some(node), Some(slot)) = (nodes.get_mut(w.node), self.slots.get_mut(w.node))
+                else {
+                    continue;
+                };
+                let mut got = false;
+                let mut confirmed = false;
+                while let Some(r) = b.sim.receive_by(w.endpoint, now) {
+                    if r.own {
+                        node.on_sent(r.timestamp, w.port, &r.frame);
+                        confirmed = true;
+                    } else {
+                        node.on_frame(r.timestamp, w.port, &r.frame);
+                        got = true;
+                    }
                 }
-            }
-            // A confirmation moves the node's deadline (its next frame may be due now); it
-            // is polled when that comes, not for the confirmation itself.
-            if confirmed {
-                if let Some(slot) = self.deadlines.get_mut(w.node) {
-                    *slot = node.next_deadline();
+                // A confirmation moves the node's deadline (its next frame may be due now);
+                // it is polled when that comes, not for the confirmation itself.
+                if confirmed {
+                    slot.deadline = node.next_deadline();
                 }
-            }
-            if got {
-                if let Some(flag) = self.received.get_mut(w.node) {
-                    *flag = true;
-                }
-                if let Some(next) = self.bus_next.get_mut(w.bus) {
-                    *next = None;
+                if got {
+                    slot.received = true;
+                    b.next = None;
                 }
             }
         }
-        for (i, node) in nodes.iter_mut().enumerate() {
-            let due = match self.polled.get(i).copied().flatten() {
-                None => true,
-                // Polled before this instant and its deadline reached (one at or before the
-                // last poll, too: next_event moved it on by RESOLUTION).
-                Some(last) => {
-                    last < now
-                        && self
-                            .deadlines
-                            .get(i)
-                            .copied()
-                            .flatten()
-                            .is_some_and(|d| d <= now)
-                }
-            };
-            if !(due || self.received.get(i).copied().unwrap_or(false)) {
+        for (i, (node, slot)) in nodes.iter_mut().zip(self.slots.iter_mut()).enumerate() {
+            if !(slot.due(now) || slot.received) {
                 continue;
             }
-            if let Some(slot) = self.polled.get_mut(i) {
-                *slot = Some(now);
-            }
+            slot.polled = Some(now);
             self.outgoing.clear();
             node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
-            if let Some(slot) = self.deadlines.get_mut(i) {
-                *slot = node.next_deadline();
-            }
-            if self.dropped.get(i).copied().unwrap_or(false) {
+            slot.deadline = node.next_deadline();
+            if slot.dropped {
                 continue;
             }
             for (port, frame) in self.outgoing.drain(..) {
@@ -382,16 +353,24 @@ impl Network {
                     continue;
                 }
                 let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
-                if let Some((w, (_, sim))) =
-                    wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b)))
-                {
-                    sim.submit(w.endpoint, frame, now);
-                    if let Some(next) = self.bus_next.get_mut(w.bus) {
-                        *next = None;
-                    }
+                if let Some((w, b)) = wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b))) {
+                    b.sim.submit(w.endpoint, frame, now);
+                    b.next = None;
                 }
             }
         }
+    }
+}
+
+impl NetBus {
+    /// When it next changes (cached).
+    fn next_change(&mut self) -> Option<Timestamp> {
+        if let Some(cached) = self.next {
+            return cached;
+        }
+        let next = self.sim.next_change_of(&self.endpoints);
+        self.next = Some(next);
+        next
     }
 }
 
