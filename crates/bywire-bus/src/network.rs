@@ -305,7 +305,7 @@ impl Network {
         for b in &mut self.buses {
             // A bus with nothing to do before now is left where it is (and, having nothing
             // due, delivers nothing now).
-            if !b.next_change().is_some_and(|at| at <= now) {
+            if b.next_change().is_none_or(|at| at > now) {
                 continue;
             }
             b.sim.advance(now);
