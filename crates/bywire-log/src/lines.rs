@@ -24,6 +24,34 @@ pub enum Line {
     },
 }
 
+/// One line as [`CappedLines::next_str`] lends it: the text borrowed until the next read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineRef<'a> {
+    /// A line of text.
+    Text(&'a str),
+    /// A line that is not UTF-8, with the byte offset of the first bad byte in it.
+    NotUtf8 {
+        /// Where in the line the bad bytes start.
+        at: usize,
+    },
+    /// A line longer than the cap (skipped), with its length.
+    TooLong {
+        /// Its length in bytes.
+        bytes: u64,
+    },
+}
+
+impl LineRef<'_> {
+    /// The line, owned.
+    pub fn to_owned_line(self) -> Line {
+        match self {
+            LineRef::Text(text) => Line::Text(text.to_string()),
+            LineRef::NotUtf8 { at } => Line::NotUtf8 { at },
+            LineRef::TooLong { bytes } => Line::TooLong { bytes },
+        }
+    }
+}
+
 impl Line {
     /// What keeps the line from being read as text (`None` for text).
     pub fn problem(&self) -> Option<String> {
@@ -62,6 +90,13 @@ impl<R: BufRead> CappedLines<R> {
     /// The next line with its number; `None` at the end of the input. An I/O error ends
     /// nothing by itself: the caller decides.
     pub fn next_line(&mut self) -> Option<io::Result<(u64, Line)>> {
+        self.next_str()
+            .map(|next| next.map(|(number, line)| (number, line.to_owned_line())))
+    }
+
+    /// As [`CappedLines::next_line`], the text lent rather than copied into a new `String`
+    /// (the readers of text logs parse it in place).
+    pub fn next_str(&mut self) -> Option<io::Result<(u64, LineRef<'_>)>> {
         self.buffer.clear();
         let mut length: u64 = 0;
         let mut ended = false;
@@ -75,7 +110,7 @@ impl<R: BufRead> CappedLines<R> {
             if available.is_empty() {
                 break;
             }
-            let (chunk, newline) = match available.iter().position(|b| *b == b'\n') {
+            let (chunk, newline) = match memchr::memchr(b'\n', available) {
                 Some(i) => (available.get(..i).unwrap_or_default(), true),
                 None => (available, false),
             };
@@ -95,14 +130,14 @@ impl<R: BufRead> CappedLines<R> {
         }
         self.number += 1;
         if length > u64::try_from(self.max).unwrap_or(u64::MAX) {
-            return Some(Ok((self.number, Line::TooLong { bytes: length })));
+            return Some(Ok((self.number, LineRef::TooLong { bytes: length })));
         }
         if self.buffer.last() == Some(&b'\r') {
             self.buffer.pop();
         }
         let line = match std::str::from_utf8(&self.buffer) {
-            Ok(text) => Line::Text(text.to_string()),
-            Err(e) => Line::NotUtf8 {
+            Ok(text) => LineRef::Text(text),
+            Err(e) => LineRef::NotUtf8 {
                 at: e.valid_up_to(),
             },
         };

@@ -344,7 +344,7 @@ impl<R: BufRead> Iterator for TrcReader<R> {
         // Bounded by the input's lines.
         loop {
             let (number, text) = match crate::candump::next_text(&mut self.lines, &mut self.line)? {
-                Ok(next) => next,
+                Ok((number, text)) => (number, text.to_string()),
                 Err(e) => return Some(Err(e)),
             };
             let trimmed = text.trim();

@@ -305,22 +305,30 @@ pub fn decode(
         return decode_records(args, &decoder, Box::new(input), out);
     }
     if let Some(path) = &args.input {
-        // A log file of any format: every frame, shown as its candump line.
+        // A log file of any format: every frame, shown as its candump line. Written in blocks,
+        // not a line at a time as standard output is (the input is a file, not a live bus).
+        let mut out = std::io::BufWriter::with_capacity(1 << 16, out);
         for (name, reader) in crate::support::logs::inputs(std::slice::from_ref(path))? {
             for record in crate::support::logs::records(&name, reader, Skip::Unreadable) {
                 let record = record?;
-                let text = format!(
-                    "({}) {} {}",
-                    bywire_log::candump::timestamp_text(
-                        record.timestamp,
-                        bywire_log::Precision::Micros
-                    ),
-                    record.interface,
-                    bywire_log::candump::frame_text(&record.frame, false)
-                );
-                write_decoded(args, &decoder, &text, &record.frame, out)?;
+                // JSON has no use for the frame's line.
+                let text = if args.json {
+                    String::new()
+                } else {
+                    format!(
+                        "({}) {} {}",
+                        bywire_log::candump::timestamp_text(
+                            record.timestamp,
+                            bywire_log::Precision::Micros
+                        ),
+                        record.interface,
+                        bywire_log::candump::frame_text(&record.frame, false)
+                    )
+                };
+                write_decoded(args, &decoder, &text, &record.frame, &mut out)?;
             }
         }
+        out.flush()?;
         return Ok(());
     }
     // One line at a time, each at most a log line's size: logs of any size stream through in
@@ -363,6 +371,9 @@ fn write_decoded(
             .id()
             .map(|id| (id.as_raw(), id.is_extended()))
             .unwrap_or_default();
+        if crate::support::signals::write_json_line(out, (id, extended), decoded.as_ref())? {
+            return Ok(());
+        }
         let o = match &decoded {
             None => {
                 json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})

@@ -366,8 +366,8 @@ struct IdStats {
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut frames = 0u64;
     let (mut first, mut last) = (u64::MAX, 0u64);
-    let mut interfaces: BTreeMap<String, u64> = BTreeMap::new();
-    let mut ids: BTreeMap<(String, u32), IdStats> = BTreeMap::new();
+    // Per interface: its frames and its identifiers (looked up by name without a copy).
+    let mut interfaces: BTreeMap<String, (u64, BTreeMap<u32, IdStats>)> = BTreeMap::new();
     let (mut fd, mut errors, mut remote) = (0u64, 0u64, 0u64);
     for (name, input) in inputs(files)? {
         for record in records(&name, input, Skip::Unreadable) {
@@ -379,14 +379,16 @@ fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
             fd += u64::from(record.frame.is_fd());
             errors += u64::from(record.frame.is_error());
             remote += u64::from(record.frame.is_remote());
-            *interfaces.entry(record.interface.clone()).or_default() += 1;
-            let entry = ids
-                .entry((record.interface, record.frame.socketcan_id()))
-                .or_insert(IdStats {
-                    frames: 0,
-                    first: t,
-                    last: t,
-                });
+            let (count, ids) = match interfaces.get_mut(&record.interface) {
+                Some(known) => known,
+                None => interfaces.entry(record.interface).or_default(),
+            };
+            *count += 1;
+            let entry = ids.entry(record.frame.socketcan_id()).or_insert(IdStats {
+                frames: 0,
+                first: t,
+                last: t,
+            });
             entry.frames += 1;
             entry.first = entry.first.min(t);
             entry.last = entry.last.max(t);
@@ -403,11 +405,14 @@ fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
         span / 1_000_000_000,
         span % 1_000_000_000 / 1000
     )?;
-    for (interface, count) in &interfaces {
+    for (interface, (count, _)) in &interfaces {
         writeln!(out, "  {interface}: {count} frames")?;
     }
     writeln!(out, "interface  id        frames  mean cycle ms")?;
-    for ((interface, id), s) in &ids {
+    let ids = interfaces
+        .iter()
+        .flat_map(|(interface, (_, ids))| ids.iter().map(move |(id, s)| (interface, id, s)));
+    for (interface, id, s) in ids {
         let id_text = if id & bywire_core::frame::ERR_FLAG != 0 {
             format!("{id:08X}")
         } else if id & bywire_core::frame::EFF_FLAG != 0 {

@@ -227,6 +227,51 @@ impl FrameText for DecodedFrame<'_> {
     }
 }
 
+/// One frame's `decode --json` line, written straight out: the bytes `serde_json` makes of
+/// the same object (keys in its sorted order, its number and string forms) without a map and
+/// a value allocated per signal. `Ok(false)`, and nothing written, where two signals share a
+/// name: [`FrameText::json_signals`] numbers those.
+pub fn write_json_line(
+    out: &mut impl std::io::Write,
+    (id, extended): (u32, bool),
+    decoded: Option<&DecodedFrame<'_>>,
+) -> std::io::Result<bool> {
+    let Some(d) = decoded else {
+        writeln!(
+            out,
+            r#"{{"error":"unknown message","extended":{extended},"id":{id},"name":null,"signals":{{}}}}"#
+        )?;
+        return Ok(true);
+    };
+    let mut order: Vec<&SignalValue<'_>> = d.signals.iter().collect();
+    order.sort_unstable_by(|a, b| a.signal.display_name().cmp(b.signal.display_name()));
+    let shared_name = order
+        .windows(2)
+        .any(|pair| matches!(pair, [a, b] if a.signal.display_name() == b.signal.display_name()));
+    if shared_name {
+        return Ok(false);
+    }
+    out.write_all(b"{")?;
+    if let Some(error) = &d.error {
+        out.write_all(br#""error":"#)?;
+        serde_json::to_writer(&mut *out, error)?;
+        out.write_all(b",")?;
+    }
+    write!(out, r#""extended":{extended},"id":{id},"name":"#)?;
+    serde_json::to_writer(&mut *out, d.message.display_name())?;
+    out.write_all(br#","signals":{"#)?;
+    for (i, s) in order.iter().enumerate() {
+        if i > 0 {
+            out.write_all(b",")?;
+        }
+        serde_json::to_writer(&mut *out, s.signal.display_name())?;
+        out.write_all(b":")?;
+        serde_json::to_writer(&mut *out, &json_number(s.value.physical))?;
+    }
+    out.write_all(b"}}\n")?;
+    Ok(true)
+}
+
 /// A value as JSON (non-finite floats as strings, which JSON has no number for).
 pub fn json_number(v: Value) -> serde_json::Value {
     match v {
@@ -292,5 +337,70 @@ mod tests {
         ] {
             assert_eq!(super::python_float(f), text);
         }
+    }
+
+    /// The direct JSON line is byte for byte the `serde_json` object it stands in for: every
+    /// message of a corpus DBC with random payloads, a short frame (an error), and an unknown
+    /// identifier; a message whose signals share a name is left to the object's numbering.
+    #[test]
+    fn json_lines_are_the_objects_serde_json_writes() {
+        use super::{write_json_line, Dbc, FrameText};
+        use bywire_core::{Frame, Id};
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../../shared/corpus/dbc/opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc"
+        );
+        let (db, _) =
+            bywire_dbc::parse(&std::fs::read(path).unwrap(), bywire_dbc::Mode::Lenient).unwrap();
+        let dbc = Dbc::new(db);
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut frames = Vec::new();
+        for message in &dbc.database().messages {
+            let id = if message.extended {
+                Id::extended(message.id).unwrap()
+            } else {
+                Id::standard(message.id).unwrap()
+            };
+            let payload: Vec<u8> = (0..message.size)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    state.to_le_bytes()[0]
+                })
+                .collect();
+            let len = payload.len().min(8);
+            frames.push(Frame::classic(id, &payload[..len]).unwrap());
+            frames.push(Frame::classic(id, &payload[..len / 2]).unwrap());
+        }
+        frames.push(Frame::classic(Id::standard(0x7FF).unwrap(), &[1, 2]).unwrap());
+        for frame in &frames {
+            let id = frame.id().unwrap();
+            let decoded = dbc.decode(frame);
+            let mut line = Vec::new();
+            let written =
+                write_json_line(&mut line, (id.as_raw(), id.is_extended()), decoded.as_ref())
+                    .unwrap();
+            assert!(written, "{frame}");
+            let mut object = match &decoded {
+                None => serde_json::json!({"id": id.as_raw(), "extended": id.is_extended(),
+                    "name": null, "signals": {}, "error": "unknown message"}),
+                Some(d) => serde_json::json!({"id": id.as_raw(), "extended": id.is_extended(),
+                    "name": d.message.display_name(), "signals": d.json_signals()}),
+            };
+            if let Some(error) = decoded.as_ref().and_then(|d| d.error.as_ref()) {
+                object["error"] = serde_json::json!(error);
+            }
+            assert_eq!(String::from_utf8(line).unwrap(), format!("{object}\n"));
+        }
+        // Two signals of one name: nothing written, the object's numbering applies.
+        let text = "VERSION \"\"\nBU_: A\nBO_ 256 M: 2 A\n SG_ S : 0|8@1+ (1,0) [0|255] \"\" A\n SG_ S : 8|8@1+ (1,0) [0|255] \"\" A\n";
+        let (db, _) = bywire_dbc::parse(text.as_bytes(), bywire_dbc::Mode::Lenient).unwrap();
+        let dbc = Dbc::new(db);
+        let frame = Frame::classic(Id::standard(0x100).unwrap(), &[1, 2]).unwrap();
+        let mut line = Vec::new();
+        let decoded = dbc.decode(&frame);
+        assert!(!write_json_line(&mut line, (0x100, false), decoded.as_ref()).unwrap());
+        assert!(line.is_empty());
     }
 }
