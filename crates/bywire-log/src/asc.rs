@@ -476,10 +476,43 @@ impl<R: BufRead> Iterator for AscReader<R> {
 
 /// Push an identifier as ASC writes it: hex, `x` after an extended one.
 fn push_id(line: &mut String, id: Id) {
-    let _ = write!(line, "{:X}", id.as_raw());
+    push_number(line, u64::from(id.as_raw()), 16, 1);
     if id.is_extended() {
         line.push('x');
     }
+}
+
+/// Push `value` in `radix` (10 or 16, upper case), zero-padded to `digits` at least: what
+/// `write!` with `{:0N}` or `{:X}` writes, for the hot lines without the formatter's cost.
+/// Widths beyond 4 are not padded by the caller above (`push_padded_left`).
+fn push_number(line: &mut String, mut value: u64, radix: u64, digits: usize) {
+    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+    let mut text = [b'0'; 20];
+    let mut start = text.len();
+    // At most 20 digits for a u64 in base 10 (16 in base 16).
+    while value > 0 || start > text.len().saturating_sub(digits.max(1)) {
+        start -= 1;
+        if let (Some(slot), Some(digit)) = (
+            text.get_mut(start),
+            DIGITS.get(usize::try_from(value % radix).unwrap_or(0)),
+        ) {
+            *slot = *digit;
+        }
+        value /= radix;
+        if start == 0 {
+            break;
+        }
+    }
+    line.push_str(std::str::from_utf8(text.get(start..).unwrap_or(&[])).unwrap_or(""));
+}
+
+/// Push what `push` writes, padded with spaces on the left to `width` (right-aligned).
+fn push_padded_left(line: &mut String, width: usize, push: impl FnOnce(&mut String)) {
+    let before = line.len();
+    push(line);
+    let written = line.len() - before;
+    let padding = width.saturating_sub(written).min(4);
+    line.insert_str(before, "    ".get(..padding).unwrap_or(""));
 }
 
 /// Push what `push` writes, padded with spaces on the right to `width`.
@@ -557,27 +590,31 @@ impl<W: Write> AscWriter<W> {
         };
         self.line.clear();
         let micros = offset / 1_000;
-        // Writing to a String cannot fail.
-        let _ = write!(
-            self.line,
-            "{:>4}.{:06} ",
-            micros / 1_000_000,
-            micros % 1_000_000
-        );
-        // Built in the line itself: no allocation a frame.
+        // Built in the line itself: no allocation a frame. Writing to a String cannot fail.
         let line = &mut self.line;
+        // `{:>4}.{:06} `: the seconds right-aligned in four columns.
+        push_padded_left(line, 4, |l| push_number(l, micros / 1_000_000, 10, 1));
+        line.push('.');
+        push_number(line, micros % 1_000_000, 10, 6);
+        line.push(' ');
         match &record.frame {
             Frame::Error(_) => {
                 let _ = write!(line, "{channel}  ErrorFrame");
             }
             Frame::Classic(f) => {
-                let _ = write!(line, "{channel}  ");
+                push_number(line, u64::from(channel), 10, 1);
+                line.push_str("  ");
                 push_padded(line, 15, |l| push_id(l, f.id()));
-                let _ = write!(line, " {direction:<4} ");
-                if f.is_remote() {
-                    let _ = write!(line, "r {:x}", f.dlc().as_raw());
-                } else {
-                    let _ = write!(line, "d {:x} ", f.dlc().as_raw());
+                line.push(' ');
+                line.push_str(direction);
+                line.push_str("   ");
+                // The DLC as one lower-case hex digit (`{:x}`: 0-f).
+                let dlc = char::from_digit(u32::from(f.dlc().as_raw()), 16).unwrap_or('0');
+                line.push(if f.is_remote() { 'r' } else { 'd' });
+                line.push(' ');
+                line.push(dlc);
+                if !f.is_remote() {
+                    line.push(' ');
                     push_hex(line, f.data());
                 }
             }
