@@ -20,10 +20,22 @@ pub trait ValueText {
 
 impl ValueText for SignalValue<'_> {
     fn text(&self, choices: bool) -> String {
-        match self.description().filter(|_| choices) {
-            Some(name) => name.to_string(),
-            None if self.signal.unit.is_empty() => number_text(self.value.physical),
-            None => format!("{} {}", number_text(self.value.physical), self.signal.unit),
+        let mut text = String::new();
+        push_value_text(&mut text, self, choices);
+        text
+    }
+}
+
+/// Push what [`ValueText::text`] gives.
+fn push_value_text(line: &mut String, value: &SignalValue<'_>, choices: bool) {
+    match value.description().filter(|_| choices) {
+        Some(name) => line.push_str(name),
+        None => {
+            push_number_text(line, value.value.physical);
+            if !value.signal.unit.is_empty() {
+                line.push(' ');
+                line.push_str(&value.signal.unit);
+            }
         }
     }
 }
@@ -183,29 +195,40 @@ pub trait FrameText {
     fn json_signals(&self) -> serde_json::Map<String, serde_json::Value>;
 }
 
-fn items(frame: &DecodedFrame<'_>, choices: bool) -> Vec<String> {
-    frame
-        .signals
-        .iter()
-        .map(|s| format!("{}: {}", s.signal.display_name(), s.text(choices)))
-        .collect()
+/// Push the frame's `signal: value` items, `separator` between them: into one string, not a
+/// string per item (decoding a log spends its time here).
+fn push_items(line: &mut String, frame: &DecodedFrame<'_>, choices: bool, separator: &str) {
+    for (i, s) in frame.signals.iter().enumerate() {
+        if i > 0 {
+            line.push_str(separator);
+        }
+        line.push_str(s.signal.display_name());
+        line.push_str(": ");
+        push_value_text(line, s, choices);
+    }
 }
 
 impl FrameText for DecodedFrame<'_> {
     fn single_line(&self, choices: bool) -> String {
-        format!(
-            "{}({})",
-            self.message.display_name(),
-            items(self, choices).join(", ")
-        )
+        let mut line = String::with_capacity(64 + 32 * self.signals.len());
+        line.push_str(self.message.display_name());
+        line.push('(');
+        push_items(&mut line, self, choices, ", ");
+        line.push(')');
+        line
     }
 
     fn multi_line(&self, choices: bool, indent: &str) -> String {
-        format!(
-            "{}(\n{indent}    {}\n{indent})",
-            self.message.display_name(),
-            items(self, choices).join(&format!(",\n{indent}    "))
-        )
+        let mut text = String::with_capacity(64 + 40 * self.signals.len());
+        text.push_str(self.message.display_name());
+        text.push_str("(\n");
+        text.push_str(indent);
+        text.push_str("    ");
+        push_items(&mut text, self, choices, &format!(",\n{indent}    "));
+        text.push('\n');
+        text.push_str(indent);
+        text.push(')');
+        text
     }
 
     /// A name used twice in one message (a warning when the DBC loads) keeps both values:
@@ -285,11 +308,23 @@ pub fn json_number(v: Value) -> serde_json::Value {
 
 /// A value as Python prints it (what cantools shows): integers plainly, floats as `repr`.
 pub fn number_text(v: Value) -> String {
-    match v {
-        Value::Int(i) => i.to_string(),
-        Value::UInt(u) => u.to_string(),
-        Value::Float(f) => python_float(f),
-    }
+    let mut text = String::new();
+    push_number_text(&mut text, v);
+    text
+}
+
+/// Push what [`number_text`] gives.
+fn push_number_text(line: &mut String, v: Value) {
+    use std::fmt::Write as _;
+    // Writing to a String cannot fail.
+    let _ = match v {
+        Value::Int(i) => write!(line, "{i}"),
+        Value::UInt(u) => write!(line, "{u}"),
+        Value::Float(f) => {
+            line.push_str(&python_float(f));
+            Ok(())
+        }
+    };
 }
 
 /// Python's `repr` of a float: the shortest digits that read back the same (Rust finds the
