@@ -26,8 +26,11 @@ fn drive_and_engage(args: &[&str], drive: &str) -> Vec<Value> {
         .spawn()
         .unwrap();
     let mut stdin = child.stdin.take().unwrap();
+    // Engage at 0.5 s, and again at 1 s and 1.5 s as an operator would if the vehicle was
+    // still recovering from its start (a loaded machine can stretch that past 0.5 s, and a
+    // refused engage is not retried by the bridge).
     for k in 0..100 {
-        let line = if k == 20 {
+        let line = if matches!(k, 20 | 40 | 60) {
             r#"{"engage": true}"#
         } else {
             drive
