@@ -486,25 +486,25 @@ fn push_id(line: &mut String, id: Id) {
 /// `write!` with `{:0N}` or `{:X}` writes, for the hot lines without the formatter's cost.
 /// Widths beyond 4 are not padded by the caller above (`push_padded_left`).
 fn push_number(line: &mut String, mut value: u64, radix: u64, digits: usize) {
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+    // A u64 has at most 20 digits in base 10; the buffer starts as the zero padding.
     let mut text = [b'0'; 20];
     let mut start = text.len();
-    // At most 20 digits for a u64 in base 10 (16 in base 16).
-    while value > 0 || start > text.len().saturating_sub(digits.max(1)) {
+    while value > 0 && start > 0 {
         start -= 1;
         if let (Some(slot), Some(digit)) = (
             text.get_mut(start),
-            DIGITS.get(usize::try_from(value % radix).unwrap_or(0)),
+            HEX_DIGITS.get(usize::try_from(value % radix).unwrap_or(0)),
         ) {
             *slot = *digit;
         }
         value /= radix;
-        if start == 0 {
-            break;
-        }
     }
+    let start = start.min(text.len().saturating_sub(digits.max(1)));
     line.push_str(std::str::from_utf8(text.get(start..).unwrap_or(&[])).unwrap_or(""));
 }
+
+/// Upper-case hex digits by value (identifiers and data bytes).
+const HEX_DIGITS: &[u8; 16] = b"0123456789ABCDEF";
 
 /// Push what `push` writes, padded with spaces on the left to `width` (right-aligned).
 fn push_padded_left(line: &mut String, width: usize, push: impl FnOnce(&mut String)) {
@@ -525,12 +525,11 @@ fn push_padded(line: &mut String, width: usize, push: impl FnOnce(&mut String)) 
 
 /// Push bytes as upper-case hex with a space between (ASC and TRC data).
 pub(crate) fn push_hex(line: &mut String, data: &[u8]) {
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
     for (i, byte) in data.iter().enumerate() {
         if i > 0 {
             line.push(' ');
         }
-        let digit = |n: u8| char::from(DIGITS.get(usize::from(n)).copied().unwrap_or(b'0'));
+        let digit = |n: u8| char::from(HEX_DIGITS.get(usize::from(n)).copied().unwrap_or(b'0'));
         line.push(digit(byte >> 4));
         line.push(digit(byte & 0x0F));
     }
