@@ -177,6 +177,19 @@ impl Format {
         }
     }
 
+    /// The records of the log file at `path`, its format sniffed from its first bytes (the
+    /// extension is not trusted: a `.log` may be ASC).
+    pub fn open_file(path: &Path) -> io::Result<(Format, Records<'static>)> {
+        let file = std::fs::File::open(path)?;
+        let mut bytes = io::BufReader::new(file.try_clone()?);
+        let format = Format::sniff_input(&mut bytes)?;
+        let records = match format {
+            Format::Parquet | Format::Mf4 => format.file_reader(file),
+            other => other.reader(bytes),
+        };
+        Ok((format, records))
+    }
+
     /// A writer of this format to `output` (seekable: BLF completes its header at the end).
     pub fn writer<W: Write + Seek + Send>(self, output: W) -> io::Result<RecordWriter<W>> {
         Ok(match self {

@@ -772,6 +772,16 @@ impl Tug {
         self.ecu.steering_fault()
     }
 
+    /// Each bus's frames under the name its log file takes (`bus1`, `bus2`, `bus3`, `bus1b`).
+    pub fn bus_logs(&self) -> [(&'static str, &[Logged]); 4] {
+        [
+            ("bus1", &self.bus1_log),
+            ("bus2", &self.bus2_log),
+            ("bus3", &self.bus3_log),
+            ("bus1b", &self.bus1b_log),
+        ]
+    }
+
     /// The route is done: engaged, at its end (as the ADS reckons it), stopped, and the tank
     /// turn (if any) made.
     pub fn arrived(&self) -> bool {

@@ -321,20 +321,11 @@ impl<'a> DecodedDataset<'a> {
 
     /// Decode one record and add its row.
     pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
-        let Some((index, message, decoded)) =
-            self.decoder.decode_into(&record.frame, &mut self.decoded)
+        let Some((index, message)) =
+            decode_counted(self.decoder, record, &mut self.decoded, &mut self.summary)
         else {
-            self.summary.unknown += 1;
             return Ok(());
         };
-        if let Err(e) = decoded {
-            self.summary
-                .undecodable
-                .entry(message.display_name().to_string())
-                .or_insert_with(|| (0, e.to_string()))
-                .0 += 1;
-            return Ok(());
-        }
         let key = PartitionKey {
             message: index,
             channel: self.partitioning.channel.then(|| record.interface.clone()),
@@ -433,6 +424,83 @@ impl<'a> DecodedDataset<'a> {
             }
         }
         Ok(self.summary)
+    }
+}
+
+/// Decode `record` into `values`: its message's index and the message, or `None` when it is of
+/// no message or does not decode (counted in `summary`).
+fn decode_counted<'d>(
+    decoder: &'d Decoder,
+    record: &LogRecord,
+    values: &mut Vec<Option<Decoded>>,
+    summary: &mut DatasetSummary,
+) -> Option<(usize, &'d Message)> {
+    let Some((index, message, decoded)) = decoder.decode_into(&record.frame, values) else {
+        summary.unknown += 1;
+        return None;
+    };
+    if let Err(e) = decoded {
+        summary
+            .undecodable
+            .entry(message.display_name().to_string())
+            .or_insert_with(|| (0, e.to_string()))
+            .0 += 1;
+        return None;
+    }
+    Some((index, message))
+}
+
+/// Decoded frames as Arrow batches in memory, one per message with the columns a dataset's
+/// table has (`channel` always): for callers that take Arrow (the Python package), not files.
+/// It holds every row pushed until [`DecodedBatches::finish`], so the caller bounds the rows.
+pub struct DecodedBatches<'a> {
+    decoder: &'a Decoder,
+    tables: BTreeMap<usize, MessageColumns>,
+    decoded: Vec<Option<Decoded>>,
+    summary: DatasetSummary,
+}
+
+impl<'a> DecodedBatches<'a> {
+    /// Nothing decoded yet.
+    pub fn new(decoder: &'a Decoder) -> Self {
+        DecodedBatches {
+            decoder,
+            tables: BTreeMap::new(),
+            decoded: Vec::new(),
+            summary: DatasetSummary::default(),
+        }
+    }
+
+    /// Decode one record and add its row to its message's batch.
+    pub fn push(&mut self, record: &LogRecord) {
+        let Some((index, message)) =
+            decode_counted(self.decoder, record, &mut self.decoded, &mut self.summary)
+        else {
+            return;
+        };
+        let table = self
+            .tables
+            .entry(index)
+            .or_insert_with(|| MessageColumns::new(message, true));
+        table.push(message, record, &self.decoded);
+        *self
+            .summary
+            .rows
+            .entry(message.display_name().to_string())
+            .or_default() += 1;
+    }
+
+    /// One batch per message that had rows (by display name, in the database's order), and
+    /// the counts ([`DatasetSummary::files`] is empty).
+    pub fn finish(mut self) -> std::io::Result<(Vec<(String, RecordBatch)>, DatasetSummary)> {
+        let messages = &self.decoder.database().messages;
+        let mut batches = Vec::with_capacity(self.tables.len());
+        for (index, table) in &mut self.tables {
+            if let Some(message) = messages.get(*index) {
+                batches.push((message.display_name().to_string(), table.finish()?));
+            }
+        }
+        Ok((batches, self.summary))
     }
 }
 

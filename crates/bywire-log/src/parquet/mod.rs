@@ -159,8 +159,9 @@ impl Labels {
     }
 }
 
-/// The raw columns being built.
-struct RawColumns {
+/// Raw frames' columns being built: records in, [`raw_schema`] batches out (the writer's
+/// buffer, and how other Arrow users get a log's frames without a file).
+pub struct FrameColumns {
     ts: TimestampNanosecondBuilder,
     channel: Labels,
     id: UInt32Builder,
@@ -175,9 +176,16 @@ struct RawColumns {
     data: BinaryBuilder,
 }
 
-impl RawColumns {
-    fn new() -> Self {
-        RawColumns {
+impl Default for FrameColumns {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl FrameColumns {
+    /// No rows yet.
+    pub fn new() -> Self {
+        FrameColumns {
             ts: TimestampNanosecondBuilder::with_capacity(BATCH_ROWS).with_timezone("UTC"),
             channel: Labels::new(Vec::new()),
             id: UInt32Builder::with_capacity(BATCH_ROWS),
@@ -193,7 +201,8 @@ impl RawColumns {
         }
     }
 
-    fn push(&mut self, record: &LogRecord) {
+    /// Add one record's row.
+    pub fn push(&mut self, record: &LogRecord) {
         let frame = &record.frame;
         self.ts.append_value(nanos(record.timestamp));
         self.channel.push_text(&record.interface);
@@ -225,11 +234,14 @@ impl RawColumns {
         });
     }
 
-    fn rows(&self) -> usize {
+    /// Rows added since the last batch.
+    pub fn rows(&self) -> usize {
         self.id.len()
     }
 
-    fn finish(&mut self, schema: &SchemaRef) -> std::io::Result<RecordBatch> {
+    /// The rows added so far as one batch of `schema` ([`raw_schema`]); the columns start
+    /// empty again.
+    pub fn finish(&mut self, schema: &SchemaRef) -> std::io::Result<RecordBatch> {
         let columns: Vec<ArrayRef> = vec![
             Arc::new(self.ts.finish()),
             self.channel.finish()?,
@@ -252,7 +264,7 @@ impl RawColumns {
 pub struct ParquetWriter<W: Write + Send> {
     writer: ArrowWriter<W>,
     schema: SchemaRef,
-    columns: RawColumns,
+    columns: FrameColumns,
 }
 
 impl<W: Write + Send> ParquetWriter<W> {
@@ -265,7 +277,7 @@ impl<W: Write + Send> ParquetWriter<W> {
         Ok(ParquetWriter {
             writer,
             schema,
-            columns: RawColumns::new(),
+            columns: FrameColumns::new(),
         })
     }
 
@@ -321,80 +333,93 @@ impl ParquetReader {
     }
 
     fn read_batch(&mut self, batch: &RecordBatch) -> Result<(), LogError> {
-        let first = self.row;
-        let fail = |what: String| LogError::Table { row: first, what };
-        let column = |name: &str| {
-            batch.column_by_name(name).ok_or_else(|| {
-                fail(format!(
-                    "no '{name}' column (a raw frames table has ts, channel, id, data and flags)"
-                ))
-            })
-        };
-        let ts = timestamps(column("ts")?.as_ref()).map_err(fail)?;
-        let channel = Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?;
-        let id = column("id")?
-            .as_primitive_opt::<UInt32Type>()
-            .ok_or_else(|| fail("the 'id' column is not uint32".into()))?;
-        let data = column("data")?
-            .as_binary_opt::<i32>()
-            .ok_or_else(|| fail("the 'data' column is not binary".into()))?;
-        let flag = |name: &str| -> Result<Option<&arrow_array::BooleanArray>, LogError> {
-            match batch.column_by_name(name) {
-                None => Ok(None),
-                Some(c) => c
-                    .as_boolean_opt()
-                    .map(Some)
-                    .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
-            }
-        };
-        let (extended, remote, error) = (flag("extended")?, flag("remote")?, flag("error")?);
-        let (fd, brs, esi) = (flag("fd")?, flag("brs")?, flag("esi")?);
-        let dir = match batch.column_by_name("dir") {
-            Some(c) => Some(Strings::of(c.as_ref(), "dir").map_err(fail)?),
-            None => None,
-        };
-        let dlc = match batch.column_by_name("dlc") {
-            Some(c) => Some(
-                c.as_primitive_opt::<UInt8Type>()
-                    .ok_or_else(|| fail("the 'dlc' column is not uint8".into()))?,
-            ),
-            None => None,
-        };
-        let set = |column: Option<&arrow_array::BooleanArray>, i: usize| {
-            column.is_some_and(|c| c.is_valid(i) && c.value(i))
-        };
-        for i in 0..batch.num_rows() {
-            let row = first + i as u64;
-            let at = |what: String| LogError::Table { row, what };
-            let parts = RawRow {
-                id: id.is_valid(i).then(|| id.value(i)),
-                extended: set(extended, i),
-                remote: set(remote, i),
-                error: set(error, i),
-                fd: set(fd, i),
-                brs: set(brs, i),
-                esi: set(esi, i),
-                dlc: dlc.and_then(|d| d.is_valid(i).then(|| d.value(i))),
-                data: if data.is_valid(i) { data.value(i) } else { &[] },
-            };
-            let record = match (ts.get(i).copied().flatten(), channel.get(i)) {
-                (Some(t), Some(c)) => parts.frame().map(|frame| LogRecord {
-                    timestamp: Timestamp::from_nanos(u64::try_from(t).unwrap_or(0)),
-                    interface: c.to_string(),
-                    frame,
-                    direction: match dir.as_ref().and_then(|d| d.get(i)) {
-                        Some(d) if d.eq_ignore_ascii_case("tx") => Some('T'),
-                        Some(d) if d.eq_ignore_ascii_case("rx") => Some('R'),
-                        _ => None,
-                    },
-                }),
-                _ => Err("no timestamp or no channel".to_string()),
-            };
-            self.pending.push_back(record.map_err(at));
-        }
+        self.pending.extend(records_of_batch(batch, self.row)?);
         self.row += batch.num_rows() as u64;
         Ok(())
     }
+}
+
+/// The records of a raw frames batch (bywire's [`raw_schema`], or any batch with its columns:
+/// `ts` in any unit, `channel` and `dir` plain strings, the flags left out false), its rows
+/// numbered from `first_row` in errors. A batch without the columns is an error; a row that is
+/// no frame is an error in its place.
+pub fn records_of_batch(
+    batch: &RecordBatch,
+    first_row: u64,
+) -> Result<Vec<Result<LogRecord, LogError>>, LogError> {
+    let first = first_row;
+    let fail = |what: String| LogError::Table { row: first, what };
+    let column = |name: &str| {
+        batch.column_by_name(name).ok_or_else(|| {
+            fail(format!(
+                "no '{name}' column (a raw frames table has ts, channel, id, data and flags)"
+            ))
+        })
+    };
+    let ts = timestamps(column("ts")?.as_ref()).map_err(fail)?;
+    let channel = Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?;
+    let id = column("id")?
+        .as_primitive_opt::<UInt32Type>()
+        .ok_or_else(|| fail("the 'id' column is not uint32".into()))?;
+    let data = column("data")?
+        .as_binary_opt::<i32>()
+        .ok_or_else(|| fail("the 'data' column is not binary".into()))?;
+    let flag = |name: &str| -> Result<Option<&arrow_array::BooleanArray>, LogError> {
+        match batch.column_by_name(name) {
+            None => Ok(None),
+            Some(c) => c
+                .as_boolean_opt()
+                .map(Some)
+                .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
+        }
+    };
+    let (extended, remote, error) = (flag("extended")?, flag("remote")?, flag("error")?);
+    let (fd, brs, esi) = (flag("fd")?, flag("brs")?, flag("esi")?);
+    let dir = match batch.column_by_name("dir") {
+        Some(c) => Some(Strings::of(c.as_ref(), "dir").map_err(fail)?),
+        None => None,
+    };
+    let dlc = match batch.column_by_name("dlc") {
+        Some(c) => Some(
+            c.as_primitive_opt::<UInt8Type>()
+                .ok_or_else(|| fail("the 'dlc' column is not uint8".into()))?,
+        ),
+        None => None,
+    };
+    let set = |column: Option<&arrow_array::BooleanArray>, i: usize| {
+        column.is_some_and(|c| c.is_valid(i) && c.value(i))
+    };
+    let mut records = Vec::with_capacity(batch.num_rows());
+    for i in 0..batch.num_rows() {
+        let row = first + i as u64;
+        let at = |what: String| LogError::Table { row, what };
+        let parts = RawRow {
+            id: id.is_valid(i).then(|| id.value(i)),
+            extended: set(extended, i),
+            remote: set(remote, i),
+            error: set(error, i),
+            fd: set(fd, i),
+            brs: set(brs, i),
+            esi: set(esi, i),
+            dlc: dlc.and_then(|d| d.is_valid(i).then(|| d.value(i))),
+            data: if data.is_valid(i) { data.value(i) } else { &[] },
+        };
+        let record = match (ts.get(i).copied().flatten(), channel.get(i)) {
+            (Some(t), Some(c)) => parts.frame().map(|frame| LogRecord {
+                timestamp: Timestamp::from_nanos(u64::try_from(t).unwrap_or(0)),
+                interface: c.to_string(),
+                frame,
+                direction: match dir.as_ref().and_then(|d| d.get(i)) {
+                    Some(d) if d.eq_ignore_ascii_case("tx") => Some('T'),
+                    Some(d) if d.eq_ignore_ascii_case("rx") => Some('R'),
+                    _ => None,
+                },
+            }),
+            _ => Err("no timestamp or no channel".to_string()),
+        };
+        records.push(record.map_err(at));
+    }
+    Ok(records)
 }
 
 impl Iterator for ParquetReader {

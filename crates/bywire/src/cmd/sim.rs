@@ -143,12 +143,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     } else {
         run_plain(&mut tug, &scenario, args, limit, start, &mut shared, out)?
     };
-    for (name, log) in [
-        ("bus1", &tug.bus1_log),
-        ("bus2", &tug.bus2_log),
-        ("bus3", &tug.bus3_log),
-        ("bus1b", &tug.bus1b_log),
-    ] {
+    for (name, log) in tug.bus_logs() {
         let path = args.out.join(format!("{name}.log"));
         let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
         let mut writer = Writer::new(std::io::BufWriter::new(file));

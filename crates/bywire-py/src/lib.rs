@@ -1,0 +1,966 @@
+//! `bywire._native`: the Python package's native module. The package (`python/bywire`) wraps
+//! it; this crate only converts between Python and the libraries:
+//!
+//! - [`Database`]: a DBC loaded by bywire-dbc, decoding and encoding with cantools' call
+//!   signatures, values and errors (`decode_message`, `encode_message`), and whole Arrow
+//!   batches of frames decoded into one batch per message (`decode_arrow`);
+//! - [`LogBatches`]: a log of any format bywire-log reads, as Arrow record batches of its
+//!   frames (the raw frames' table layout);
+//! - [`run_sim`]: a simulator run as fast as possible, its bus logs and report written.
+//!
+//! Arrow crosses to pyarrow through the Arrow C data interface (`arrow-pyarrow`): no copy.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow_array::RecordBatch;
+use arrow_pyarrow::PyArrowType;
+use bywire_core::Timestamp;
+use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
+use bywire_dbc::decoder::{Decoder, SignalValue};
+use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Num, Signal, ValueType};
+use bywire_log::format::{Format, Records};
+use bywire_log::parquet::decoded::DecodedBatches;
+use bywire_log::parquet::{raw_schema, records_of_batch, FrameColumns};
+use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyByteArray, PyBytes, PyDict, PyString, PyType};
+
+pyo3::create_exception!(_native, Error, PyException, "Every bywire error.");
+pyo3::create_exception!(
+    _native,
+    ParseError,
+    Error,
+    "A DBC file that cannot be loaded."
+);
+pyo3::create_exception!(_native, DecodeError, Error, "Data that does not decode.");
+pyo3::create_exception!(_native, EncodeError, Error, "Values that do not encode.");
+pyo3::create_exception!(_native, LogError, Error, "A log that cannot be read.");
+pyo3::create_exception!(
+    _native,
+    ScenarioError,
+    Error,
+    "A simulation that cannot run."
+);
+
+/// cantools' `NamedSignalValue` equivalent, defined in Python (`bywire._values`).
+static NAMED_VALUE: PyOnceLock<Py<PyType>> = PyOnceLock::new();
+
+/// Rows a batch from [`LogBatches`] holds unless asked otherwise.
+const DEFAULT_BATCH_ROWS: usize = 65_536;
+/// The most rows a batch may be asked to hold (a batch is built in memory).
+const MAX_BATCH_ROWS: usize = 1 << 24;
+
+/// The bytes of a `bytes`, `bytearray` or any object `bytes()` takes.
+fn bytes_of(data: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
+    if let Ok(b) = data.cast::<PyBytes>() {
+        return Ok(b.as_bytes().to_vec());
+    }
+    if let Ok(b) = data.cast::<PyByteArray>() {
+        return Ok(b.to_vec());
+    }
+    let builtins = data.py().import("builtins")?;
+    let converted = builtins.getattr("bytes")?.call1((data,))?;
+    Ok(converted.cast::<PyBytes>()?.as_bytes().to_vec())
+}
+
+/// cantools' `format_or`: `1, 2 or 3`.
+fn format_or(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [rest @ .., last] => format!("{} or {last}", rest.join(", ")),
+    }
+}
+
+/// A number as Python has it: `int` for exact integers, `float` otherwise.
+fn number<'py>(py: Python<'py>, value: Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        Value::Int(i) => i.into_pyobject(py)?.into_any(),
+        Value::UInt(u) => u.into_pyobject(py)?.into_any(),
+        Value::Float(f) => f.into_pyobject(py)?.into_any(),
+    })
+}
+
+/// A decoded signal's raw value as cantools gives it unscaled: the float of a float signal,
+/// the sign-extended integer of a signed one.
+fn raw_number(signal: &Signal, raw: u64) -> Value {
+    match signal.value_type {
+        ValueType::Float32 => Value::Float(f64::from(f32::from_bits(
+            u32::try_from(raw & u64::from(u32::MAX)).unwrap_or(0),
+        ))),
+        ValueType::Float64 => Value::Float(f64::from_bits(raw)),
+        ValueType::Integer { signed: true } => {
+            let unused = 64u32.saturating_sub(signal.length.clamp(1, 64));
+            let bits = i64::from_ne_bytes((raw << unused).to_ne_bytes());
+            Value::Int(bits >> unused)
+        }
+        ValueType::Integer { signed: false } => Value::integer(i128::from(raw)),
+    }
+}
+
+/// Whether the signal's bits end past `bytes` bytes (cantools' rule for truncated data:
+/// a big-endian signal counted from its most significant bit in network order).
+fn past_available(signal: &Signal, bytes: usize) -> bool {
+    let start = u64::from(signal.start_bit);
+    let sequential_start = match signal.byte_order {
+        ByteOrder::LittleEndian => start,
+        ByteOrder::BigEndian => 8 * (start / 8) + (7 - start % 8),
+    };
+    sequential_start + u64::from(signal.length) > (bytes as u64).saturating_mul(8)
+}
+
+fn num_f64(n: Num) -> f64 {
+    n.as_f64()
+}
+
+/// The multiplexor signal `signal` depends on, if any (its index).
+fn switch_of(message: &Message, signal: &Signal) -> Option<usize> {
+    if let Some(condition) = &signal.mux_condition {
+        return message
+            .signals
+            .iter()
+            .position(|s| s.name == condition.switch);
+    }
+    match signal.multiplexing {
+        Multiplexing::Multiplexed(_) | Multiplexing::MultiplexedMultiplexor(_) => {
+            message.signals.iter().position(|s| {
+                matches!(
+                    s.multiplexing,
+                    Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
+                ) && s.name != signal.name
+            })
+        }
+        _ => None,
+    }
+}
+
+/// The multiplexor values that select a signal of `switch` (sorted, as cantools lists them).
+fn selector_values(message: &Message, switch: usize) -> Vec<i128> {
+    let mut values: Vec<i128> = Vec::new();
+    for signal in &message.signals {
+        if switch_of(message, signal) != Some(switch) {
+            continue;
+        }
+        if let Some(condition) = &signal.mux_condition {
+            for (low, high) in &condition.ranges {
+                if high.saturating_sub(*low) < 256 {
+                    values.extend((*low..=*high).map(i128::from));
+                }
+            }
+        } else if let Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) =
+            signal.multiplexing
+        {
+            values.push(i128::from(v));
+        }
+    }
+    values.sort_unstable();
+    values.dedup();
+    values
+}
+
+/// Whether `signal` is selected when its multiplexor's raw value is `value`.
+fn selected_by(signal: &Signal, value: i128) -> bool {
+    if let Some(condition) = &signal.mux_condition {
+        return condition
+            .ranges
+            .iter()
+            .any(|(low, high)| i128::from(*low) <= value && value <= i128::from(*high));
+    }
+    match signal.multiplexing {
+        Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) => {
+            i128::from(v) == value
+        }
+        _ => true,
+    }
+}
+
+/// A DBC database: cantools' `Database` for the common calls, and Arrow decoding.
+#[pyclass(frozen, module = "bywire._native")]
+struct Database {
+    decoder: Arc<Decoder>,
+    codecs: Vec<MessageCodec>,
+    /// Frame identifier → message, as cantools looks it up (the last message with it).
+    by_frame_id: HashMap<u32, usize>,
+    /// Name → message (the last with it, as in cantools).
+    by_name: HashMap<String, usize>,
+    diagnostics: Vec<String>,
+}
+
+impl Database {
+    fn new(bytes: &[u8], strict: bool, origin: &str) -> PyResult<Self> {
+        let mode = if strict { Mode::Strict } else { Mode::Lenient };
+        let (db, diagnostics) = bywire_dbc::parse(bytes, mode).map_err(|e| {
+            ParseError::new_err(format!(
+                "{origin}:{}:{}: {}",
+                e.0.line, e.0.column, e.0.message
+            ))
+        })?;
+        let codecs = db.messages.iter().map(MessageCodec::new).collect();
+        let by_frame_id = db.messages.iter().enumerate().map(|(i, m)| (m.id, i));
+        let by_name = db
+            .messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.display_name().to_string(), i));
+        Ok(Database {
+            by_frame_id: by_frame_id.collect(),
+            by_name: by_name.collect(),
+            codecs,
+            diagnostics: diagnostics
+                .iter()
+                .map(|d| format!("{origin}:{}:{}: {}", d.line, d.column, d.message))
+                .collect(),
+            decoder: Arc::new(Decoder::new(db)),
+        })
+    }
+
+    fn messages(&self) -> &[Message] {
+        &self.decoder.database().messages
+    }
+
+    /// The message a frame identifier or name stands for; `KeyError` as cantools raises.
+    fn lookup(&self, frame_id_or_name: &Bound<'_, PyAny>) -> PyResult<(&Message, &MessageCodec)> {
+        let index = if let Ok(name) = frame_id_or_name.cast::<PyString>() {
+            self.by_name.get(name.to_str()?).copied()
+        } else {
+            let id: u64 = frame_id_or_name.extract().map_err(|_| {
+                PyTypeError::new_err("a frame identifier (int) or a message name (str)")
+            })?;
+            u32::try_from(id)
+                .ok()
+                .and_then(|id| self.by_frame_id.get(&id).copied())
+        };
+        index
+            .and_then(|i| Some((self.messages().get(i)?, self.codecs.get(i)?)))
+            .ok_or_else(|| PyKeyError::new_err(frame_id_or_name.clone().unbind()))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn decode_with<'py>(
+        &self,
+        py: Python<'py>,
+        message: &Message,
+        codec: &MessageCodec,
+        data: &[u8],
+        decode_choices: bool,
+        scaling: bool,
+        allow_truncated: bool,
+        allow_excess: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let size = codec.size();
+        let mut payload = data.to_vec();
+        if payload.len() != size {
+            if allow_truncated && payload.len() < size {
+                payload.resize(size, 0xFF);
+            }
+            if allow_excess {
+                payload.truncate(size);
+            }
+            if payload.len() != size {
+                return Err(DecodeError::new_err(format!(
+                    "Wrong data size: {} instead of {size} bytes",
+                    data.len()
+                )));
+            }
+        }
+        let mut out = vec![None; codec.signal_count()];
+        match codec.decode(&payload, &mut out) {
+            Ok(()) => {}
+            Err(CodecError::UnknownMultiplexerValue { signal, value }) => {
+                let switch = message.signals.get(signal);
+                let got = match (switch, out.get(signal).copied().flatten()) {
+                    (Some(_), Some(decoded)) if scaling => {
+                        number(py, decoded.physical)?.str()?.to_string()
+                    }
+                    (Some(s), _) => number(py, raw_number(s, value))?.str()?.to_string(),
+                    (None, _) => value.to_string(),
+                };
+                let expected: Vec<String> = selector_values(message, signal)
+                    .iter()
+                    .map(i128::to_string)
+                    .collect();
+                return Err(DecodeError::new_err(format!(
+                    "expected multiplexer id {}, but got {got}",
+                    format_or(&expected)
+                )));
+            }
+            Err(e) => return Err(DecodeError::new_err(e.to_string())),
+        }
+        if data.len() < size && allow_truncated {
+            // Signals past the data are left out, and so is what their multiplexor selects.
+            for (i, signal) in message.signals.iter().enumerate() {
+                if past_available(signal, data.len()) {
+                    if let Some(slot) = out.get_mut(i) {
+                        *slot = None;
+                    }
+                }
+            }
+            for (i, signal) in message.signals.iter().enumerate() {
+                let switch_gone = switch_of(message, signal)
+                    .is_some_and(|s| out.get(s).copied().flatten().is_none());
+                if switch_gone {
+                    if let Some(slot) = out.get_mut(i) {
+                        *slot = None;
+                    }
+                }
+            }
+        }
+        let named = NAMED_VALUE.import(py, "bywire._values", "NamedSignalValue")?;
+        let dict = PyDict::new(py);
+        for (signal, decoded) in message.signals.iter().zip(&out) {
+            let Some(decoded) = decoded else { continue };
+            let choice = decode_choices
+                .then(|| {
+                    SignalValue {
+                        signal,
+                        value: *decoded,
+                    }
+                    .description_key()
+                })
+                .flatten()
+                .and_then(|key| signal.value_descriptions.iter().find(|(k, _)| *k == key));
+            let value = match choice {
+                Some((key, name)) => named.call1((*key, name))?,
+                None if scaling => number(py, decoded.physical)?,
+                None => number(py, raw_number(signal, decoded.raw))?,
+            };
+            dict.set_item(signal.display_name(), value)?;
+        }
+        Ok(dict)
+    }
+
+    fn encode_with(
+        &self,
+        message: &Message,
+        codec: &MessageCodec,
+        data: &Bound<'_, PyDict>,
+        scaling: bool,
+        padding: bool,
+        strict: bool,
+    ) -> PyResult<Vec<u8>> {
+        let named = NAMED_VALUE.import(data.py(), "bywire._values", "NamedSignalValue")?;
+        // The signals the encoding needs: every signal not multiplexed, and those the given
+        // multiplexor values select (cantools' gather_signals).
+        let given = |signal: &Signal| data.get_item(signal.display_name()).ok().flatten();
+        let mut needed = vec![false; message.signals.len()];
+        for (i, signal) in message.signals.iter().enumerate() {
+            let Some(switch) = switch_of(message, signal) else {
+                if let Some(slot) = needed.get_mut(i) {
+                    *slot = true;
+                }
+                continue;
+            };
+            let Some(switch_signal) = message.signals.get(switch) else {
+                continue;
+            };
+            let Some(selector) = given(switch_signal) else {
+                continue;
+            };
+            let selector = self.raw_choice_or_number(switch_signal, &selector, &named)?;
+            if let Some(Value::Int(v)) = selector.map(|(raw, _)| raw) {
+                if let Some(slot) = needed.get_mut(i) {
+                    *slot = selected_by(signal, i128::from(v));
+                }
+            }
+        }
+        // A needed multiplexor whose value selects nothing.
+        for (i, signal) in message.signals.iter().enumerate() {
+            let is_switch = matches!(
+                signal.multiplexing,
+                Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
+            );
+            if !is_switch || !needed.get(i).copied().unwrap_or(false) {
+                continue;
+            }
+            let choices = selector_values(message, i);
+            if choices.is_empty() {
+                continue;
+            }
+            let value = given(signal);
+            let selector = match &value {
+                Some(v) => self.raw_choice_or_number(signal, v, &named)?,
+                None => None,
+            };
+            let selects =
+                matches!(selector, Some((Value::Int(v), _)) if choices.contains(&i128::from(v)));
+            if let (Some(value), false) = (value, selects) {
+                let listed: Vec<String> = choices.iter().map(i128::to_string).collect();
+                return Err(EncodeError::new_err(format!(
+                    "A valid value for the multiplexer selector signal \"{}\" is required: Expected one of {{{}}}, but got {}",
+                    signal.display_name(),
+                    format_or(&listed),
+                    value.str()?
+                )));
+            }
+        }
+        for (signal, needed) in message.signals.iter().zip(&needed) {
+            if *needed && given(signal).is_none() {
+                return Err(EncodeError::new_err(format!(
+                    "The signal \"{}\" is required for encoding.",
+                    signal.display_name()
+                )));
+            }
+        }
+        if strict {
+            let mut unknown: Vec<String> = Vec::new();
+            for key in data.keys() {
+                let name: String = key.extract()?;
+                let used = message
+                    .signals
+                    .iter()
+                    .zip(&needed)
+                    .any(|(s, n)| *n && s.display_name() == name);
+                if !used {
+                    unknown.push(format!("'{name}'"));
+                }
+            }
+            if !unknown.is_empty() {
+                return Err(EncodeError::new_err(format!(
+                    "The following signals were specified but are not required to encode the message:{{{}}}",
+                    unknown.join(", ")
+                )));
+            }
+        }
+        // Physical values for the codec; choices and unscaled values written raw after it.
+        let mut physical: Vec<Option<Value>> = vec![None; message.signals.len()];
+        let mut raw: Vec<Option<u64>> = vec![None; message.signals.len()];
+        for (i, (signal, needed)) in message.signals.iter().zip(&needed).enumerate() {
+            let Some(value) = given(signal).filter(|_| *needed) else {
+                continue;
+            };
+            let Some((number, is_choice)) = self.raw_choice_or_number(signal, &value, &named)?
+            else {
+                return Err(EncodeError::new_err(format!(
+                    "Invalid value specified for signal \"{}\": \"{}\"",
+                    signal.display_name(),
+                    value.str()?
+                )));
+            };
+            if is_choice || !scaling {
+                let bits = match (signal.value_type, number) {
+                    (ValueType::Float32, v) => u64::from((v.as_f64() as f32).to_bits()),
+                    (ValueType::Float64, v) => v.as_f64().to_bits(),
+                    (_, Value::Int(v)) => u64::from_ne_bytes(v.to_ne_bytes()),
+                    (_, Value::UInt(v)) => v,
+                    (_, Value::Float(f)) => {
+                        let rounded = round_half_even(f);
+                        if !rounded.is_finite() {
+                            return Err(EncodeError::new_err(format!(
+                                "signal \"{}\": {f} is not a number that encodes",
+                                signal.display_name()
+                            )));
+                        }
+                        u64::from_ne_bytes((rounded as i64).to_ne_bytes())
+                    }
+                };
+                if let Some(slot) = raw.get_mut(i) {
+                    *slot = Some(bits);
+                }
+                if strict && !is_choice {
+                    let scaled = number.as_f64() * num_f64(signal.factor) + num_f64(signal.offset);
+                    let shown = value.str()?.to_string();
+                    check_range(message, signal, scaled, number.as_i128(), &shown)?;
+                }
+            } else {
+                if strict {
+                    // The raw value the physical one encodes to, for the choices.
+                    let raw_key =
+                        (number.as_f64() - num_f64(signal.offset)) / num_f64(signal.factor);
+                    let raw_key = round_half_even(raw_key);
+                    let raw_key =
+                        (raw_key.is_finite() && raw_key.abs() < 1e18).then_some(raw_key as i128);
+                    let shown = value.str()?.to_string();
+                    check_range(message, signal, number.as_f64(), raw_key, &shown)?;
+                }
+                if let Some(slot) = physical.get_mut(i) {
+                    *slot = Some(number);
+                }
+            }
+        }
+        let mut payload = vec![0u8; codec.size()];
+        codec
+            .encode(&physical, &mut payload)
+            .map_err(|e| EncodeError::new_err(e.to_string()))?;
+        for (i, bits) in raw.iter().enumerate() {
+            if let Some(bits) = bits {
+                codec.write_raw(i, *bits, &mut payload);
+            }
+        }
+        if padding {
+            // Bits no encoded signal covers are ones.
+            let mut covered = vec![0u8; codec.size()];
+            for (i, needed) in needed.iter().enumerate() {
+                if *needed {
+                    codec.write_raw(i, u64::MAX, &mut covered);
+                }
+            }
+            for (byte, cover) in payload.iter_mut().zip(&covered) {
+                *byte |= !cover;
+            }
+        }
+        Ok(payload)
+    }
+
+    /// A value as a number, and whether it was a choice (a name, or a `NamedSignalValue`,
+    /// given as the raw value it names). `None`: a name the signal does not have.
+    fn raw_choice_or_number(
+        &self,
+        signal: &Signal,
+        value: &Bound<'_, PyAny>,
+        named: &Bound<'_, PyType>,
+    ) -> PyResult<Option<(Value, bool)>> {
+        let name = if value.is_instance(named)? {
+            Some(value.getattr("name")?.extract::<String>()?)
+        } else if let Ok(text) = value.cast::<PyString>() {
+            Some(text.to_str()?.to_string())
+        } else {
+            None
+        };
+        if let Some(name) = name {
+            let key = signal
+                .value_descriptions
+                .iter()
+                .find(|(_, n)| *n == name)
+                .and_then(|(k, _)| i64::try_from(*k).ok());
+            return Ok(key.map(|k| (Value::Int(k), true)));
+        }
+        if let Ok(i) = value.extract::<i64>() {
+            return Ok(Some((Value::Int(i), false)));
+        }
+        if let Ok(u) = value.extract::<u64>() {
+            return Ok(Some((Value::UInt(u), false)));
+        }
+        let f: f64 = value.extract().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "Unable to encode signal '{}' with type '{}'.",
+                signal.display_name(),
+                value
+                    .get_type()
+                    .name()
+                    .map(|n| n.to_string())
+                    .unwrap_or_default()
+            ))
+        })?;
+        Ok(Some((Value::Float(f), false)))
+    }
+}
+
+/// Python's `round`: half to even.
+fn round_half_even(f: f64) -> f64 {
+    let rounded = f.round();
+    if (f - f.trunc()).abs() == 0.5 {
+        2.0 * (f / 2.0).round()
+    } else {
+        rounded
+    }
+}
+
+/// cantools' range check: `scaled` against the signal's declared range (none when the DBC
+/// says `[0|0]`), with a millionth of the scale's tolerance; a raw value the signal's choices
+/// name passes. `shown` is the value as the caller gave it (for the message).
+fn check_range(
+    message: &Message,
+    signal: &Signal,
+    scaled: f64,
+    raw_key: Option<i128>,
+    shown: &str,
+) -> PyResult<()> {
+    if raw_key.is_some_and(|k| signal.value_descriptions.iter().any(|(key, _)| *key == k)) {
+        return Ok(());
+    }
+    let (min, max) = (signal.minimum, signal.maximum);
+    if num_f64(min) == 0.0 && num_f64(max) == 0.0 {
+        return Ok(());
+    }
+    let tolerance = num_f64(signal.factor).abs() * 1e-6;
+    let (side, bound) = if scaled < num_f64(min) - tolerance {
+        ("greater than", min)
+    } else if scaled > num_f64(max) + tolerance {
+        ("smaller than", max)
+    } else {
+        return Ok(());
+    };
+    Err(EncodeError::new_err(format!(
+        "Expected signal \"{}\" value {side} or equal to {bound} in message \"{}\", but got {shown}.",
+        signal.display_name(),
+        message.display_name(),
+    )))
+}
+
+#[pymethods]
+impl Database {
+    /// Load a DBC file (`strict`: the first problem is an error; otherwise what a reasonable
+    /// engineer accepts loads, each problem in `diagnostics`).
+    #[staticmethod]
+    #[pyo3(signature = (path, strict = false))]
+    fn load(path: PathBuf, strict: bool) -> PyResult<Self> {
+        let bytes = std::fs::read(&path)
+            .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?;
+        Database::new(&bytes, strict, &path.display().to_string())
+    }
+
+    /// Load DBC text.
+    #[staticmethod]
+    #[pyo3(signature = (text, strict = false))]
+    fn load_string(text: &str, strict: bool) -> PyResult<Self> {
+        Database::new(text.as_bytes(), strict, "<string>")
+    }
+
+    /// The problems found while loading, `FILE:LINE:COLUMN: what`.
+    #[getter]
+    fn diagnostics(&self) -> Vec<String> {
+        self.diagnostics.clone()
+    }
+
+    /// The messages' names, in the file's order.
+    #[getter]
+    fn message_names(&self) -> Vec<String> {
+        self.messages()
+            .iter()
+            .map(|m| m.display_name().to_string())
+            .collect()
+    }
+
+    /// One message's description: name, frame_id, is_extended_frame, length, cycle_time (ms
+    /// or None), senders, and its signals (name, start, length, byte_order, is_signed,
+    /// is_float, scale, offset, minimum, maximum, unit, is_multiplexer, multiplexer_ids,
+    /// choices).
+    fn message_info<'py>(
+        &self,
+        py: Python<'py>,
+        frame_id_or_name: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (message, _) = self.lookup(frame_id_or_name)?;
+        let info = PyDict::new(py);
+        info.set_item("name", message.display_name())?;
+        info.set_item("frame_id", message.id)?;
+        info.set_item("is_extended_frame", message.extended)?;
+        info.set_item("length", message.size)?;
+        info.set_item(
+            "cycle_time",
+            self.decoder
+                .cycle_time(message)
+                .map(|d| d.as_secs_f64() * 1000.0),
+        )?;
+        info.set_item("senders", message.senders.clone())?;
+        let mut signals = Vec::with_capacity(message.signals.len());
+        for s in &message.signals {
+            let d = PyDict::new(py);
+            d.set_item("name", s.display_name())?;
+            d.set_item("start", s.start_bit)?;
+            d.set_item("length", s.length)?;
+            d.set_item(
+                "byte_order",
+                match s.byte_order {
+                    ByteOrder::LittleEndian => "little_endian",
+                    ByteOrder::BigEndian => "big_endian",
+                },
+            )?;
+            d.set_item(
+                "is_signed",
+                matches!(s.value_type, ValueType::Integer { signed: true }),
+            )?;
+            d.set_item(
+                "is_float",
+                matches!(s.value_type, ValueType::Float32 | ValueType::Float64),
+            )?;
+            d.set_item("scale", num_f64(s.factor))?;
+            d.set_item("offset", num_f64(s.offset))?;
+            d.set_item("minimum", num_f64(s.minimum))?;
+            d.set_item("maximum", num_f64(s.maximum))?;
+            d.set_item("unit", &s.unit)?;
+            d.set_item(
+                "is_multiplexer",
+                matches!(
+                    s.multiplexing,
+                    Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
+                ),
+            )?;
+            let ids: Option<Vec<i128>> = switch_of(message, s).map(|_| match s.multiplexing {
+                Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) => {
+                    vec![i128::from(v)]
+                }
+                _ => s.mux_condition.as_ref().map_or_else(Vec::new, |c| {
+                    c.ranges
+                        .iter()
+                        .filter(|(l, h)| h.saturating_sub(*l) < 256)
+                        .flat_map(|(l, h)| (*l..=*h).map(i128::from))
+                        .collect()
+                }),
+            });
+            d.set_item("multiplexer_ids", ids)?;
+            let choices = PyDict::new(py);
+            for (k, name) in &s.value_descriptions {
+                choices.set_item(*k, name)?;
+            }
+            d.set_item("choices", choices)?;
+            signals.push(d);
+        }
+        info.set_item("signals", signals)?;
+        Ok(info)
+    }
+
+    /// Decode `data` as the message with this frame identifier or name: a dict of signal
+    /// values, as cantools' `Database.decode_message` gives it.
+    #[pyo3(signature = (frame_id_or_name, data, decode_choices = true, scaling = true, decode_containers = false, allow_truncated = false, allow_excess = true))]
+    #[allow(clippy::too_many_arguments)]
+    fn decode_message<'py>(
+        &self,
+        py: Python<'py>,
+        frame_id_or_name: &Bound<'py, PyAny>,
+        data: &Bound<'py, PyAny>,
+        decode_choices: bool,
+        scaling: bool,
+        decode_containers: bool,
+        allow_truncated: bool,
+        allow_excess: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        // DBC files have no container messages: the flag changes nothing.
+        let _ = decode_containers;
+        let (message, codec) = self.lookup(frame_id_or_name)?;
+        let bytes = bytes_of(data)?;
+        self.decode_with(
+            py,
+            message,
+            codec,
+            &bytes,
+            decode_choices,
+            scaling,
+            allow_truncated,
+            allow_excess,
+        )
+    }
+
+    /// Encode signal values as the message with this frame identifier or name, as cantools'
+    /// `Database.encode_message` does.
+    #[pyo3(signature = (frame_id_or_name, data, scaling = true, padding = false, strict = true))]
+    fn encode_message<'py>(
+        &self,
+        py: Python<'py>,
+        frame_id_or_name: &Bound<'py, PyAny>,
+        data: &Bound<'py, PyAny>,
+        scaling: bool,
+        padding: bool,
+        strict: bool,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let (message, codec) = self.lookup(frame_id_or_name)?;
+        let Ok(values) = data.cast::<PyDict>() else {
+            return Err(EncodeError::new_err(
+                "The payload for encoding non-container messages must be a signal name to signal value dictionary",
+            ));
+        };
+        let payload = self.encode_with(message, codec, values, scaling, padding, strict)?;
+        Ok(PyBytes::new(py, &payload))
+    }
+
+    /// Decode a batch of raw frames (the layout `read_log` gives) into one batch per message:
+    /// `(batches, unknown, undecodable)` with `batches` a list of `(message, RecordBatch)`,
+    /// `unknown` the frames of no message, `undecodable` `{message: (count, why)}`.
+    #[allow(clippy::type_complexity)]
+    fn decode_arrow(
+        &self,
+        py: Python<'_>,
+        batch: PyArrowType<RecordBatch>,
+    ) -> PyResult<(
+        Vec<(String, PyArrowType<RecordBatch>)>,
+        u64,
+        HashMap<String, (u64, String)>,
+    )> {
+        let decoder = Arc::clone(&self.decoder);
+        let batch = batch.0;
+        let result = py.detach(move || -> Result<_, String> {
+            let records = records_of_batch(&batch, 0).map_err(|e| e.to_string())?;
+            let mut decoded = DecodedBatches::new(&decoder);
+            for record in records {
+                decoded.push(&record.map_err(|e| e.to_string())?);
+            }
+            decoded.finish().map_err(|e| e.to_string())
+        });
+        let (batches, summary) = result.map_err(PyValueError::new_err)?;
+        Ok((
+            batches
+                .into_iter()
+                .map(|(name, batch)| (name, PyArrowType(batch)))
+                .collect(),
+            summary.unknown,
+            summary.undecodable.into_iter().collect(),
+        ))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<bywire.Database: {} messages>", self.messages().len())
+    }
+}
+
+/// A log's frames as Arrow record batches (the raw frames' table layout); an iterator.
+#[pyclass(unsendable, module = "bywire._native")]
+struct LogBatches {
+    path: String,
+    format: &'static str,
+    records: Records<'static>,
+    columns: FrameColumns,
+    batch_rows: usize,
+    done: bool,
+}
+
+#[pymethods]
+impl LogBatches {
+    /// Open the log at `path` (its format sniffed from its content).
+    #[new]
+    #[pyo3(signature = (path, batch_rows = DEFAULT_BATCH_ROWS))]
+    fn new(path: PathBuf, batch_rows: usize) -> PyResult<Self> {
+        if !(1..=MAX_BATCH_ROWS).contains(&batch_rows) {
+            return Err(PyValueError::new_err(format!(
+                "batch_rows {batch_rows}: 1 to {MAX_BATCH_ROWS}"
+            )));
+        }
+        let (format, records) = Format::open_file(&path)
+            .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?;
+        let name = Format::ALL
+            .iter()
+            .find(|(f, _)| *f == format)
+            .map_or("candump", |(_, n)| *n);
+        Ok(LogBatches {
+            path: path.display().to_string(),
+            format: name,
+            records,
+            columns: FrameColumns::new(),
+            batch_rows,
+            done: false,
+        })
+    }
+
+    /// The batches' schema.
+    #[staticmethod]
+    fn schema() -> PyArrowType<arrow_schema::Schema> {
+        PyArrowType(raw_schema().as_ref().clone())
+    }
+
+    /// The format the log was read as (`candump`, `blf`, ...).
+    #[getter]
+    fn format(&self) -> &'static str {
+        self.format
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__(&mut self) -> PyResult<Option<PyArrowType<RecordBatch>>> {
+        while !self.done && self.columns.rows() < self.batch_rows {
+            match self.records.next() {
+                Some(Ok(record)) => self.columns.push(&record),
+                Some(Err(e)) => {
+                    self.done = true;
+                    return Err(LogError::new_err(format!("{}: {e}", self.path)));
+                }
+                None => self.done = true,
+            }
+        }
+        if self.columns.rows() == 0 {
+            return Ok(None);
+        }
+        let batch = self
+            .columns
+            .finish(&raw_schema())
+            .map_err(|e| LogError::new_err(format!("{}: {e}", self.path)))?;
+        Ok(Some(PyArrowType(batch)))
+    }
+}
+
+/// Run a scenario as fast as possible: `(report_json, files)`, the bus logs (candump) and
+/// `metrics.json` written into `out`.
+#[pyfunction]
+#[pyo3(signature = (scenario, seed, out, payload = None, secoc = false, max_seconds = 300.0))]
+fn run_sim(
+    scenario: &str,
+    seed: u64,
+    out: PathBuf,
+    payload: Option<f64>,
+    secoc: bool,
+    max_seconds: f64,
+) -> PyResult<(String, Vec<String>)> {
+    use bywire_sim::scenario::Scenario;
+    let scenario = match Scenario::builtin(scenario) {
+        Some(s) => s,
+        None if Path::new(scenario).is_file() => {
+            let text = std::fs::read_to_string(scenario)
+                .map_err(|e| PyOSError::new_err(format!("{scenario}: {e}")))?;
+            Scenario::parse(&text, scenario).map_err(|e| ScenarioError::new_err(e.to_string()))?
+        }
+        None => {
+            return Err(ScenarioError::new_err(format!(
+                "{scenario}: not a built-in scenario (apron-loop, fault-tour) nor a file"
+            )))
+        }
+    };
+    let payload = payload.unwrap_or(scenario.tug.payload);
+    if !(0.0..=4_500.0).contains(&payload) {
+        return Err(ScenarioError::new_err(format!(
+            "payload {payload}: 0 to 4500 kg"
+        )));
+    }
+    if !(max_seconds.is_finite() && max_seconds > 0.0 && max_seconds <= 86_400.0) {
+        return Err(ScenarioError::new_err(format!(
+            "max_seconds {max_seconds}: more than 0, at most 86400"
+        )));
+    }
+    let mut params = scenario.params(seed, payload);
+    params.secoc |= secoc;
+    let mut tug =
+        bywire_sim::tug::Tug::new(params).map_err(|e| ScenarioError::new_err(e.to_string()))?;
+    let limit = Timestamp::from_nanos((max_seconds * 1e9) as u64);
+    let wall = std::time::Instant::now();
+    let completed = loop {
+        scenario.step(&mut tug);
+        if tug.arrived() {
+            break true;
+        }
+        if tug.now() >= limit {
+            break false;
+        }
+    };
+    let report =
+        bywire_sim::report::RunReport::of(&tug, &scenario.name, seed, completed, wall.elapsed());
+    let io =
+        |path: &Path, e: std::io::Error| PyOSError::new_err(format!("{}: {e}", path.display()));
+    std::fs::create_dir_all(&out).map_err(|e| io(&out, e))?;
+    let mut files = Vec::new();
+    for (name, log) in tug.bus_logs() {
+        let path = out.join(format!("{name}.log"));
+        let file = std::fs::File::create(&path).map_err(|e| io(&path, e))?;
+        let mut writer = bywire_log::Writer::new(std::io::BufWriter::new(file));
+        for (timestamp, frame) in log {
+            writer
+                .write(*timestamp, name, frame)
+                .map_err(|e| io(&path, e))?;
+        }
+        writer.flush().map_err(|e| io(&path, e))?;
+        files.push(path.display().to_string());
+    }
+    let json =
+        serde_json::to_string_pretty(&report).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let path = out.join("metrics.json");
+    std::fs::write(&path, format!("{json}\n")).map_err(|e| io(&path, e))?;
+    files.push(path.display().to_string());
+    Ok((json, files))
+}
+
+/// The native module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add_class::<Database>()?;
+    m.add_class::<LogBatches>()?;
+    m.add_function(wrap_pyfunction!(run_sim, m)?)?;
+    m.add("Error", py.get_type::<Error>())?;
+    m.add("ParseError", py.get_type::<ParseError>())?;
+    m.add("DecodeError", py.get_type::<DecodeError>())?;
+    m.add("EncodeError", py.get_type::<EncodeError>())?;
+    m.add("LogError", py.get_type::<LogError>())?;
+    m.add("ScenarioError", py.get_type::<ScenarioError>())?;
+    Ok(())
+}
