@@ -137,9 +137,14 @@ fn switch_of(message: &Message, signal: &Signal) -> Option<usize> {
     }
 }
 
-/// The multiplexor values that select a signal of `switch` (sorted, as cantools lists them).
+/// The multiplexor values cantools accepts for `switch` (sorted, as it lists them): those that
+/// select a signal, and those its value descriptions name (a branch with no signals).
 fn selector_values(message: &Message, switch: usize) -> Vec<i128> {
-    let mut values: Vec<i128> = Vec::new();
+    let mut values: Vec<i128> = message
+        .signals
+        .get(switch)
+        .map(|s| s.value_descriptions.iter().map(|(k, _)| *k).collect())
+        .unwrap_or_default();
     for signal in &message.signals {
         if switch_of(message, signal) != Some(switch) {
             continue;
@@ -159,6 +164,33 @@ fn selector_values(message: &Message, switch: usize) -> Vec<i128> {
     values.sort_unstable();
     values.dedup();
     values
+}
+
+/// The multiplexor cantools reports when a frame's multiplexing does not decode: the first in
+/// its order (by start bit) that is in effect and whose value selects nothing — its index, its
+/// value and the values it accepts.
+fn failing_multiplexor(
+    message: &Message,
+    codec: &MessageCodec,
+    payload: &[u8],
+) -> Option<(usize, i128, Vec<i128>)> {
+    let value_of = |i: usize| -> Option<i128> {
+        let raw = codec.read_raw(i, payload)?;
+        raw_number(message.signals.get(i)?, raw).as_i128()
+    };
+    let mut by_start: Vec<usize> = (0..message.signals.len()).collect();
+    by_start.sort_by_key(|i| message.signals.get(*i).map(|s| s.start_bit));
+    by_start.into_iter().find_map(|i| {
+        let switch = message.signals.get(i)?;
+        let in_effect = match switch_of(message, switch) {
+            None => true,
+            Some(parent) => value_of(parent).is_some_and(|v| selected_by(switch, v)),
+        };
+        let number = value_of(i)?;
+        let accepted = selector_values(message, i);
+        (in_effect && !accepted.is_empty() && !accepted.contains(&number))
+            .then_some((i, number, accepted))
+    })
 }
 
 /// Whether `signal` is selected when its multiplexor's raw value is `value`.
@@ -267,29 +299,44 @@ impl Database {
             }
         }
         let mut out = vec![None; codec.signal_count()];
-        match codec.decode(&payload, &mut out) {
-            Ok(()) => {}
-            Err(CodecError::UnknownMultiplexerValue { signal, value }) => {
-                let switch = message.signals.get(signal);
-                let got = match (switch, out.get(signal).copied().flatten()) {
-                    (Some(_), Some(decoded)) if scaling => {
-                        number(py, decoded.physical)?.str()?.to_string()
-                    }
-                    (Some(s), _) => number(py, raw_number(s, value))?.str()?.to_string(),
-                    (None, _) => value.to_string(),
-                };
-                let expected: Vec<String> = selector_values(message, signal)
-                    .iter()
-                    .map(i128::to_string)
-                    .collect();
-                return Err(DecodeError::new_err(format!(
-                    "expected multiplexer id {}, but got {got}",
-                    format_or(&expected)
-                )));
+        let truncated = data.len() < size && allow_truncated;
+        // A multiplexor past truncated data is skipped, as cantools does: its bits are set to a
+        // value it accepts and it is left out below (once per multiplexor at most).
+        for _ in 0..=message.signals.len() {
+            let Err(error) = codec.decode(&payload, &mut out) else {
+                break;
+            };
+            let CodecError::UnknownMultiplexerValue { signal, value } = error else {
+                return Err(DecodeError::new_err(error.to_string()));
+            };
+            let (index, got, accepted) = failing_multiplexor(message, codec, &payload)
+                .unwrap_or_else(|| {
+                    let number = message
+                        .signals
+                        .get(signal)
+                        .and_then(|s| raw_number(s, value).as_i128())
+                        .unwrap_or(i128::from(value));
+                    (signal, number, selector_values(message, signal))
+                });
+            let past = message
+                .signals
+                .get(index)
+                .is_some_and(|s| past_available(s, data.len()));
+            match accepted.first() {
+                Some(valid) if truncated && past => {
+                    let bits = u64::from_ne_bytes(i64::try_from(*valid).unwrap_or(0).to_ne_bytes());
+                    codec.write_raw(index, bits, &mut payload);
+                }
+                _ => {
+                    let expected: Vec<String> = accepted.iter().map(i128::to_string).collect();
+                    return Err(DecodeError::new_err(format!(
+                        "expected multiplexer id {}, but got {got}",
+                        format_or(&expected)
+                    )));
+                }
             }
-            Err(e) => return Err(DecodeError::new_err(e.to_string())),
         }
-        if data.len() < size && allow_truncated {
+        if truncated {
             // Signals past the data are left out, and so is what their multiplexor selects.
             for (i, signal) in message.signals.iter().enumerate() {
                 if past_available(signal, data.len()) {
@@ -433,11 +480,8 @@ impl Database {
             };
             let Some((number, is_choice)) = self.raw_choice_or_number(signal, &value, &named)?
             else {
-                return Err(EncodeError::new_err(format!(
-                    "Invalid value specified for signal \"{}\": \"{}\"",
-                    signal.display_name(),
-                    value.str()?
-                )));
+                // A name the signal's choices do not have: cantools' KeyError.
+                return Err(PyKeyError::new_err(value.str()?.unbind()));
             };
             if is_choice || !scaling {
                 let bits = match (signal.value_type, number) {
