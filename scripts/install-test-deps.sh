@@ -39,6 +39,13 @@ python3 -m pip install -q --disable-pip-version-check can-isotp==2.0.7 udsoncan=
 python3 -m pip install -q --disable-pip-version-check crccheck==1.3.1 autosar-e2e==1.0.0 cantools==45.1.0
 # cryptography: the CMAC-AES-128 under cantools' SecOC framing, the peer of bywire-secoc.
 python3 -m pip install -q --disable-pip-version-check cryptography==48.0.0
+# The Python package's tests: pytest; pyspark (local mode) runs on Java 17; pandas below 3, which
+# pyspark 4.3 does not fully support. `pip install .` fetches maturin itself.
+python3 -m pip install -q --disable-pip-version-check pytest==9.2.0 pyspark==4.3.0
+if ! command -v java >/dev/null; then
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends default-jre-headless >/dev/null
+fi
 # Real Linux SocketCAN (and SJA1000 controllers) in a VM: this machine's kernel has no CAN.
 ../shared/tools/canvm.sh prepare
 # python-can and cantools for Debian's Python inside the VM (tests include the folder there): an

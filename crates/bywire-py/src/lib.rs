@@ -1,12 +1,12 @@
 //! `bywire._native`: the Python package's native module. The package (`python/bywire`) wraps
 //! it; this crate only converts between Python and the libraries:
 //!
-//! - [`Database`]: a DBC loaded by bywire-dbc, decoding and encoding with cantools' call
+//! - `Database`: a DBC loaded by bywire-dbc, decoding and encoding with cantools' call
 //!   signatures, values and errors (`decode_message`, `encode_message`), and whole Arrow
 //!   batches of frames decoded into one batch per message (`decode_arrow`);
-//! - [`LogBatches`]: a log of any format bywire-log reads, as Arrow record batches of its
+//! - `LogBatches`: a log of any format bywire-log reads, as Arrow record batches of its
 //!   frames (the raw frames' table layout);
-//! - [`run_sim`]: a simulator run as fast as possible, its bus logs and report written.
+//! - `run_sim`: a simulator run as fast as possible, its bus logs and report written.
 //!
 //! Arrow crosses to pyarrow through the Arrow C data interface (`arrow-pyarrow`): no copy.
 
@@ -406,7 +406,7 @@ impl Database {
             let Some(selector) = given(switch_signal) else {
                 continue;
             };
-            let selector = self.raw_choice_or_number(switch_signal, &selector, &named)?;
+            let selector = self.raw_choice_or_number(switch_signal, &selector, named)?;
             if let Some(Value::Int(v)) = selector.map(|(raw, _)| raw) {
                 if let Some(slot) = needed.get_mut(i) {
                     *slot = selected_by(signal, i128::from(v));
@@ -428,7 +428,7 @@ impl Database {
             }
             let value = given(signal);
             let selector = match &value {
-                Some(v) => self.raw_choice_or_number(signal, v, &named)?,
+                Some(v) => self.raw_choice_or_number(signal, v, named)?,
                 None => None,
             };
             let selects =
@@ -478,12 +478,15 @@ impl Database {
             let Some(value) = given(signal).filter(|_| *needed) else {
                 continue;
             };
-            let Some((number, is_choice)) = self.raw_choice_or_number(signal, &value, &named)?
+            let Some((number, is_choice)) = self.raw_choice_or_number(signal, &value, named)?
             else {
                 // A name the signal's choices do not have: cantools' KeyError.
                 return Err(PyKeyError::new_err(value.str()?.unbind()));
             };
             if is_choice || !scaling {
+                // A float32 signal holds the value rounded to single precision, as Python's
+                // struct packs it; an integer past i64 saturates before it is masked to width.
+                #[allow(clippy::cast_possible_truncation)]
                 let bits = match (signal.value_type, number) {
                     (ValueType::Float32, v) => u64::from((v.as_f64() as f32).to_bits()),
                     (ValueType::Float64, v) => v.as_f64().to_bits(),
@@ -514,6 +517,8 @@ impl Database {
                     let raw_key =
                         (number.as_f64() - num_f64(signal.offset)) / num_f64(signal.factor);
                     let raw_key = round_half_even(raw_key);
+                    // Whole and within ±1e18 (checked), so the conversion is exact.
+                    #[allow(clippy::cast_possible_truncation)]
                     let raw_key =
                         (raw_key.is_finite() && raw_key.abs() < 1e18).then_some(raw_key as i128);
                     let shown = value.str()?.to_string();
@@ -956,7 +961,8 @@ fn run_sim(
     params.secoc |= secoc;
     let mut tug =
         bywire_sim::tug::Tug::new(params).map_err(|e| ScenarioError::new_err(e.to_string()))?;
-    let limit = Timestamp::from_nanos((max_seconds * 1e9) as u64);
+    let limit = std::time::Duration::from_secs_f64(max_seconds).as_nanos();
+    let limit = Timestamp::from_nanos(u64::try_from(limit).unwrap_or(u64::MAX));
     let wall = std::time::Instant::now();
     let completed = loop {
         scenario.step(&mut tug);

@@ -1,0 +1,38 @@
+"""Inputs for the Python benchmarks: simulator runs' logs of the reference tug (its DBC's real
+traffic), as a fleet of vehicles in candump and BLF."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import subprocess
+
+import bywire.sim
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+TUG_DBC = ROOT / "crates" / "bywire-tug" / "dbc" / "reference-tug.dbc"
+
+
+def cli() -> str:
+    for profile in ("release", "debug"):
+        path = ROOT / "target" / profile / "bywire"
+        if path.exists():
+            return str(path)
+    subprocess.run(["cargo", "build", "--release", "-q", "-p", "bywire"], cwd=ROOT, check=True)
+    return str(ROOT / "target" / "release" / "bywire")
+
+
+def fleet(folder: pathlib.Path, vehicles: int = 4, seconds: float = 120.0) -> pathlib.Path:
+    """vehicle=tugN/date=2026-12-0N/{bus1.log, bus3.blf}: command and sensor buses of one run
+    per vehicle (made once, kept in `folder`)."""
+    done = folder / "done"
+    if done.exists():
+        return folder
+    for n in range(1, vehicles + 1):
+        run = bywire.sim.run("apron-loop", seed=n, out=folder / f"run{n}", max_seconds=seconds)
+        target = folder / f"vehicle=tug{n}" / f"date=2026-12-0{n}"
+        target.mkdir(parents=True, exist_ok=True)
+        os.replace(run.bus_logs["bus1"], target / "bus1.log")
+        subprocess.run([cli(), "log", "convert", run.bus_logs["bus3"], str(target / "bus3.blf")], check=True, capture_output=True)
+    done.write_text("")
+    return folder
