@@ -21,8 +21,8 @@ use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Num, Signal, ValueType};
 use bywire_log::format::{Format, Records};
-use bywire_log::parquet::decoded::DecodedBatches;
-use bywire_log::parquet::{raw_schema, records_of_batch, FrameColumns};
+use bywire_log::parquet::decoded::decode_frames_batch;
+use bywire_log::parquet::{raw_schema, FrameColumns};
 use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
@@ -820,14 +820,8 @@ impl Database {
     )> {
         let decoder = Arc::clone(&self.decoder);
         let batch = batch.0;
-        let result = py.detach(move || -> Result<_, String> {
-            let records = records_of_batch(&batch, 0).map_err(|e| e.to_string())?;
-            let mut decoded = DecodedBatches::new(&decoder);
-            for record in records {
-                decoded.push(&record.map_err(|e| e.to_string())?);
-            }
-            decoded.finish().map_err(|e| e.to_string())
-        });
+        let result =
+            py.detach(move || decode_frames_batch(&decoder, &batch).map_err(|e| e.to_string()));
         let (batches, summary) = result.map_err(PyValueError::new_err)?;
         Ok((
             batches

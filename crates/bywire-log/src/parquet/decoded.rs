@@ -39,9 +39,11 @@ use bywire_dbc::codec::{whole_scaling, Decoded, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
-use super::{dictionary_type, io_error, nanos, properties, timestamp_type, Labels};
+use super::{
+    dictionary_type, io_error, nanos, properties, timestamp_type, FrameColumnsRef, Labels,
+};
 use crate::calendar;
-use crate::candump::LogRecord;
+use crate::candump::{LogError, LogRecord};
 
 /// Rows a table builds up before they are encoded (fewer when many tables are open).
 pub const TABLE_BATCH: usize = 4096;
@@ -208,9 +210,19 @@ impl MessageColumns {
     }
 
     fn push(&mut self, message: &Message, record: &LogRecord, decoded: &[Option<Decoded>]) {
-        self.ts.append_value(nanos(record.timestamp));
-        if let Some(channel) = &mut self.channel {
-            channel.push_text(&record.interface);
+        self.push_values(message, nanos(record.timestamp), &record.interface, decoded);
+    }
+
+    fn push_values(
+        &mut self,
+        message: &Message,
+        ts: i64,
+        channel: &str,
+        decoded: &[Option<Decoded>],
+    ) {
+        self.ts.append_value(ts);
+        if let Some(labels) = &mut self.channel {
+            labels.push_text(channel);
         }
         let columns = self.values.iter_mut().zip(&mut self.choices);
         for ((signal, value), (column, choice)) in message.signals.iter().zip(decoded).zip(columns)
@@ -450,58 +462,61 @@ fn decode_counted<'d>(
     Some((index, message))
 }
 
-/// Decoded frames as Arrow batches in memory, one per message with the columns a dataset's
-/// table has (`channel` always): for callers that take Arrow (the Python package), not files.
-/// It holds every row pushed until [`DecodedBatches::finish`], so the caller bounds the rows.
-pub struct DecodedBatches<'a> {
-    decoder: &'a Decoder,
-    tables: BTreeMap<usize, MessageColumns>,
-    decoded: Vec<Option<Decoded>>,
-    summary: DatasetSummary,
-}
-
-impl<'a> DecodedBatches<'a> {
-    /// Nothing decoded yet.
-    pub fn new(decoder: &'a Decoder) -> Self {
-        DecodedBatches {
-            decoder,
-            tables: BTreeMap::new(),
-            decoded: Vec::new(),
-            summary: DatasetSummary::default(),
-        }
-    }
-
-    /// Decode one record and add its row to its message's batch.
-    pub fn push(&mut self, record: &LogRecord) {
-        let Some((index, message)) =
-            decode_counted(self.decoder, record, &mut self.decoded, &mut self.summary)
-        else {
-            return;
+/// A batch of raw frames (the layout [`super::raw_schema`] gives, or any batch
+/// [`super::records_of_batch`] reads) decoded column by column into one batch per message with
+/// the columns a dataset's table has (`channel` always), in the database's order, and the counts
+/// ([`DatasetSummary::files`] empty). For callers that take Arrow in memory (the Python package):
+/// no record is built per frame.
+pub fn decode_frames_batch(
+    decoder: &Decoder,
+    batch: &RecordBatch,
+) -> Result<(Vec<(String, RecordBatch)>, DatasetSummary), LogError> {
+    let frames = FrameColumnsRef::of(batch)?;
+    let messages = &decoder.database().messages;
+    let mut tables: Vec<Option<MessageColumns>> = Vec::new();
+    tables.resize_with(messages.len(), || None);
+    let mut summary = DatasetSummary::default();
+    let mut values: Vec<Option<Decoded>> = Vec::new();
+    for row in 0..batch.num_rows() {
+        let Some((ts, channel, id, extended, data)) = frames.row(row) else {
+            summary.unknown += 1;
+            continue;
         };
-        let table = self
-            .tables
-            .entry(index)
-            .or_insert_with(|| MessageColumns::new(message, true));
-        table.push(message, record, &self.decoded);
-        *self
-            .summary
-            .rows
-            .entry(message.display_name().to_string())
-            .or_default() += 1;
-    }
-
-    /// One batch per message that had rows (by display name, in the database's order), and
-    /// the counts ([`DatasetSummary::files`] is empty).
-    pub fn finish(mut self) -> std::io::Result<(Vec<(String, RecordBatch)>, DatasetSummary)> {
-        let messages = &self.decoder.database().messages;
-        let mut batches = Vec::with_capacity(self.tables.len());
-        for (index, table) in &mut self.tables {
-            if let Some(message) = messages.get(*index) {
-                batches.push((message.display_name().to_string(), table.finish()?));
-            }
+        let Some((index, message, codec)) = decoder.message_with_id(id, extended) else {
+            summary.unknown += 1;
+            continue;
+        };
+        values.clear();
+        values.resize(codec.signal_count(), None);
+        if let Err(e) = codec.decode(data, &mut values) {
+            summary
+                .undecodable
+                .entry(message.display_name().to_string())
+                .or_insert_with(|| (0, e.to_string()))
+                .0 += 1;
+            continue;
         }
-        Ok((batches, self.summary))
+        let Some(slot) = tables.get_mut(index) else {
+            continue;
+        };
+        slot.get_or_insert_with(|| MessageColumns::new(message, true))
+            .push_values(message, ts, channel, &values);
     }
+    let mut batches = Vec::new();
+    for (message, table) in messages.iter().zip(&mut tables) {
+        if let Some(table) = table {
+            *summary
+                .rows
+                .entry(message.display_name().to_string())
+                .or_default() += table.rows as u64;
+            let batch = table.finish().map_err(|e| LogError::Table {
+                row: 0,
+                what: e.to_string(),
+            })?;
+            batches.push((message.display_name().to_string(), batch));
+        }
+    }
+    Ok((batches, summary))
 }
 
 fn close(mut table: OpenTable) -> std::io::Result<()> {

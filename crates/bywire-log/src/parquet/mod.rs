@@ -114,6 +114,8 @@ pub(crate) struct Labels {
     values: Vec<String>,
     /// The values' keys, for texts not known in advance (channels), once there are many.
     index: HashMap<String, usize>,
+    /// The last text's key: rows of one channel follow each other, found with one comparison.
+    last: Option<usize>,
 }
 
 /// Up to this many values a text is found by comparing (a log's few channels); beyond, by hash.
@@ -125,11 +127,17 @@ impl Labels {
             keys: Int32Builder::with_capacity(BATCH_ROWS),
             index: values.iter().cloned().zip(0..).collect(),
             values,
+            last: None,
         }
     }
 
     /// The key of `text`, added to the values if new.
     pub(crate) fn push_text(&mut self, text: &str) {
+        if let Some(key) = self.last {
+            if self.values.get(key).is_some_and(|v| v == text) {
+                return self.push_key(Some(key));
+            }
+        }
         let found = if self.values.len() <= LABELS_SCANNED {
             self.values.iter().position(|v| v == text)
         } else {
@@ -140,6 +148,7 @@ impl Labels {
             self.index.insert(text.to_string(), self.values.len() - 1);
             self.values.len() - 1
         });
+        self.last = Some(key);
         self.push_key(Some(key));
     }
 
@@ -347,69 +356,17 @@ pub fn records_of_batch(
     batch: &RecordBatch,
     first_row: u64,
 ) -> Result<Vec<Result<LogRecord, LogError>>, LogError> {
-    let first = first_row;
-    let fail = |what: String| LogError::Table { row: first, what };
-    let column = |name: &str| {
-        batch.column_by_name(name).ok_or_else(|| {
-            fail(format!(
-                "no '{name}' column (a raw frames table has ts, channel, id, data and flags)"
-            ))
-        })
-    };
-    let ts = timestamps(column("ts")?.as_ref()).map_err(fail)?;
-    let channel = Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?;
-    let id = column("id")?
-        .as_primitive_opt::<UInt32Type>()
-        .ok_or_else(|| fail("the 'id' column is not uint32".into()))?;
-    let data = column("data")?
-        .as_binary_opt::<i32>()
-        .ok_or_else(|| fail("the 'data' column is not binary".into()))?;
-    let flag = |name: &str| -> Result<Option<&arrow_array::BooleanArray>, LogError> {
-        match batch.column_by_name(name) {
-            None => Ok(None),
-            Some(c) => c
-                .as_boolean_opt()
-                .map(Some)
-                .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
-        }
-    };
-    let (extended, remote, error) = (flag("extended")?, flag("remote")?, flag("error")?);
-    let (fd, brs, esi) = (flag("fd")?, flag("brs")?, flag("esi")?);
-    let dir = match batch.column_by_name("dir") {
-        Some(c) => Some(Strings::of(c.as_ref(), "dir").map_err(fail)?),
-        None => None,
-    };
-    let dlc = match batch.column_by_name("dlc") {
-        Some(c) => Some(
-            c.as_primitive_opt::<UInt8Type>()
-                .ok_or_else(|| fail("the 'dlc' column is not uint8".into()))?,
-        ),
-        None => None,
-    };
-    let set = |column: Option<&arrow_array::BooleanArray>, i: usize| {
-        column.is_some_and(|c| c.is_valid(i) && c.value(i))
-    };
+    let columns = FrameColumnsRef::with_rows_from(batch, first_row)?;
     let mut records = Vec::with_capacity(batch.num_rows());
     for i in 0..batch.num_rows() {
-        let row = first + i as u64;
+        let row = first_row + i as u64;
         let at = |what: String| LogError::Table { row, what };
-        let parts = RawRow {
-            id: id.is_valid(i).then(|| id.value(i)),
-            extended: set(extended, i),
-            remote: set(remote, i),
-            error: set(error, i),
-            fd: set(fd, i),
-            brs: set(brs, i),
-            esi: set(esi, i),
-            dlc: dlc.and_then(|d| d.is_valid(i).then(|| d.value(i))),
-            data: if data.is_valid(i) { data.value(i) } else { &[] },
-        };
-        let record = match (ts.get(i).copied().flatten(), channel.get(i)) {
-            (Some(t), Some(c)) => parts.frame().map(|frame| LogRecord {
+        let record = match (columns.ts.get(i).copied().flatten(), columns.channel.get(i)) {
+            (Some(t), Some(c)) => columns.raw_row(i).frame().map(|frame| LogRecord {
                 timestamp: Timestamp::from_nanos(u64::try_from(t).unwrap_or(0)),
                 interface: c.to_string(),
                 frame,
-                direction: match dir.as_ref().and_then(|d| d.get(i)) {
+                direction: match columns.dir.as_ref().and_then(|d| d.get(i)) {
                     Some(d) if d.eq_ignore_ascii_case("tx") => Some('T'),
                     Some(d) if d.eq_ignore_ascii_case("rx") => Some('R'),
                     _ => None,
@@ -420,6 +377,123 @@ pub fn records_of_batch(
         records.push(record.map_err(at));
     }
     Ok(records)
+}
+
+/// A raw frames batch's columns, found and type-checked once: what [`records_of_batch`] and
+/// the columnar decoder ([`decoded::decode_frames_batch`]) read.
+pub(crate) struct FrameColumnsRef<'a> {
+    ts: Vec<Option<i64>>,
+    channel: Strings<'a>,
+    id: &'a arrow_array::PrimitiveArray<UInt32Type>,
+    data: &'a arrow_array::BinaryArray,
+    extended: Option<&'a arrow_array::BooleanArray>,
+    remote: Option<&'a arrow_array::BooleanArray>,
+    error: Option<&'a arrow_array::BooleanArray>,
+    fd: Option<&'a arrow_array::BooleanArray>,
+    brs: Option<&'a arrow_array::BooleanArray>,
+    esi: Option<&'a arrow_array::BooleanArray>,
+    dir: Option<Strings<'a>>,
+    dlc: Option<&'a arrow_array::PrimitiveArray<UInt8Type>>,
+}
+
+impl<'a> FrameColumnsRef<'a> {
+    /// The columns of `batch` (a missing or mistyped column is an error at its first row).
+    pub(crate) fn of(batch: &'a RecordBatch) -> Result<Self, LogError> {
+        Self::with_rows_from(batch, 0)
+    }
+
+    /// As [`FrameColumnsRef::of`], the batch's rows numbered from `first` in errors.
+    fn with_rows_from(batch: &'a RecordBatch, first: u64) -> Result<Self, LogError> {
+        let fail = |what: String| LogError::Table { row: first, what };
+        let column = |name: &str| {
+            batch.column_by_name(name).ok_or_else(|| {
+                fail(format!(
+                    "no '{name}' column (a raw frames table has ts, channel, id, data and flags)"
+                ))
+            })
+        };
+        let flag = |name: &str| -> Result<Option<&'a arrow_array::BooleanArray>, LogError> {
+            match batch.column_by_name(name) {
+                None => Ok(None),
+                Some(c) => c
+                    .as_boolean_opt()
+                    .map(Some)
+                    .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
+            }
+        };
+        Ok(FrameColumnsRef {
+            ts: timestamps(column("ts")?.as_ref()).map_err(fail)?,
+            channel: Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?,
+            id: column("id")?
+                .as_primitive_opt::<UInt32Type>()
+                .ok_or_else(|| fail("the 'id' column is not uint32".into()))?,
+            data: column("data")?
+                .as_binary_opt::<i32>()
+                .ok_or_else(|| fail("the 'data' column is not binary".into()))?,
+            extended: flag("extended")?,
+            remote: flag("remote")?,
+            error: flag("error")?,
+            fd: flag("fd")?,
+            brs: flag("brs")?,
+            esi: flag("esi")?,
+            dir: match batch.column_by_name("dir") {
+                Some(c) => Some(Strings::of(c.as_ref(), "dir").map_err(fail)?),
+                None => None,
+            },
+            dlc: match batch.column_by_name("dlc") {
+                Some(c) => Some(
+                    c.as_primitive_opt::<UInt8Type>()
+                        .ok_or_else(|| fail("the 'dlc' column is not uint8".into()))?,
+                ),
+                None => None,
+            },
+        })
+    }
+
+    fn set(column: Option<&arrow_array::BooleanArray>, i: usize) -> bool {
+        column.is_some_and(|c| c.is_valid(i) && c.value(i))
+    }
+
+    fn raw_row(&self, i: usize) -> RawRow<'a> {
+        let id = self.id;
+        RawRow {
+            id: id.is_valid(i).then(|| id.value(i)),
+            extended: Self::set(self.extended, i),
+            remote: Self::set(self.remote, i),
+            error: Self::set(self.error, i),
+            fd: Self::set(self.fd, i),
+            brs: Self::set(self.brs, i),
+            esi: Self::set(self.esi, i),
+            dlc: self.dlc.and_then(|d| d.is_valid(i).then(|| d.value(i))),
+            data: if self.data.is_valid(i) {
+                self.data.value(i)
+            } else {
+                &[]
+            },
+        }
+    }
+
+    /// What decoding needs of row `i`: time (ns), channel, identifier, whether extended, and
+    /// the data (none for a remote frame). `None` for an error frame or a row without them.
+    pub(crate) fn row(&self, i: usize) -> Option<(i64, &'a str, u32, bool, &'a [u8])> {
+        if Self::set(self.error, i) || !self.id.is_valid(i) {
+            return None;
+        }
+        let ts = self.ts.get(i).copied().flatten()?;
+        let channel = self.channel.get(i)?;
+        let data = if Self::set(self.remote, i) || !self.data.is_valid(i) {
+            &[][..]
+        } else {
+            self.data.value(i)
+        };
+        Some((
+            ts,
+            channel,
+            self.id.value(i),
+            Self::set(self.extended, i),
+            data,
+        ))
+    }
 }
 
 impl Iterator for ParquetReader {
