@@ -48,11 +48,18 @@ def frames_schema() -> pa.Schema:
     return _native.LogBatches.schema()
 
 
-def read_log(path: str | os.PathLike[str], batch_rows: int = BATCH_ROWS) -> pa.RecordBatchReader:
+def read_log(
+    path: str | os.PathLike[str],
+    batch_rows: int = BATCH_ROWS,
+    byte_range: tuple[int, int] | None = None,
+) -> pa.RecordBatchReader:
     """The frames of the log at ``path`` as a stream of Arrow record batches (the format is
     sniffed from the content). A log that turns out bad part way raises :class:`LogError`
-    naming the file and the line or byte offset, after the batches read before it."""
-    batches = _native.LogBatches(os.fspath(path), batch_rows)
+    naming the file and the line or byte offset, after the batches read before it.
+
+    ``byte_range=(start, end)`` reads only the lines that start in those bytes of a candump
+    log: the ranges of a split read every frame exactly once (how Spark splits big logs)."""
+    batches = _native.LogBatches(os.fspath(path), batch_rows, byte_range)
     return pa.RecordBatchReader.from_batches(frames_schema(), batches)
 
 

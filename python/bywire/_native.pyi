@@ -45,7 +45,12 @@ class Database:
     ) -> tuple[list[tuple[str, pa.RecordBatch]], int, dict[str, tuple[int, str]]]: ...
 
 class LogBatches:
-    def __init__(self, path: str | PathLike[str], batch_rows: int = 65536) -> None: ...
+    def __init__(
+        self,
+        path: str | PathLike[str],
+        batch_rows: int = 65536,
+        byte_range: tuple[int, int] | None = None,
+    ) -> None: ...
     @staticmethod
     def schema() -> pa.Schema: ...
     @property

@@ -24,6 +24,8 @@ Options:
   ``{vehicle}/{date}/*.blf``; without it, Hive-style segments ``vehicle=...`` and
   ``date=...`` are used. A row without a date from the path gets its frame's UTC day.
 - ``batch_rows``: rows read at a time (65536).
+- ``split_mb``: candump logs bigger than this (256 MB) are read in ranges of this size, one
+  partition each (other formats: one partition a file).
 
 :func:`decode` decodes a frames DataFrame with ``mapInArrow``.
 """
@@ -198,6 +200,7 @@ class _Settings:
     message: str | None
     pattern: str | None
     batch_rows: int
+    split_bytes: int
 
     @classmethod
     def of(cls, options) -> _Settings:
@@ -211,7 +214,11 @@ class _Settings:
         if output == "wide" and not message:
             raise ValueError("option output=wide needs option message (the message's name)")
         batch_rows = int(options.get("batch_rows", bywire.BATCH_ROWS))
-        return cls(output, dbc, message, options.get("path_pattern"), batch_rows)
+        split_mb = float(options.get("split_mb", 256))
+        if not split_mb > 0:
+            raise ValueError(f"option split_mb={split_mb}: more than 0")
+        split_bytes = max(1, int(split_mb * 1e6))
+        return cls(output, dbc, message, options.get("path_pattern"), batch_rows, split_bytes)
 
 
 try:
@@ -221,10 +228,23 @@ except ImportError:  # pragma: no cover - pyspark is optional
 
 
 class FilePartition(InputPartition):  # type: ignore[misc]
-    """One log file."""
+    """One log file, or the lines starting in a byte range of a big candump log."""
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, byte_range: tuple[int, int] | None = None) -> None:
         self.path = path
+        self.byte_range = byte_range
+
+
+def split(path: str, split_bytes: int) -> list[FilePartition]:
+    """A file's partitions: candump logs bigger than ``split_bytes`` in ranges of that size
+    (each line read by exactly one), any other file whole."""
+    size = os.path.getsize(path)
+    if size <= split_bytes or bywire._native.LogBatches(path, 1).format != "candump":
+        return [FilePartition(path)]
+    return [
+        FilePartition(path, (start, min(start + split_bytes, size)))
+        for start in range(0, size, split_bytes)
+    ]
 
 
 class BywireDataSource(DataSource):  # type: ignore[misc]
@@ -261,12 +281,12 @@ class BywireReader(DataSourceReader):  # type: ignore[misc]
         files = files_of(path)
         if not files:
             raise FileNotFoundError(f"{path}: no files")
-        return [FilePartition(f) for f in files]
+        return [part for f in files for part in split(f, self.settings.split_bytes)]
 
     def read(self, partition: FilePartition) -> Iterator[pa.RecordBatch]:
         settings = self.settings
         vehicle, date = path_labels(partition.path, settings.pattern)
-        frames = bywire.read_log(partition.path, settings.batch_rows)
+        frames = bywire.read_log(partition.path, settings.batch_rows, partition.byte_range)
         if settings.output == "frames":
             for batch in frames:
                 yield frames_for_spark(batch, vehicle, date)

@@ -170,3 +170,19 @@ def test_batches_stream_with_the_rows_asked_for(tmp_path):
     sizes = [b.num_rows for b in bywire.read_log(path, batch_rows=16)]
     assert sizes == [16, 16, 16, 12]
     assert isinstance(bywire.read_log(path), pa.RecordBatchReader)
+
+
+def test_byte_ranges_of_a_candump_log_read_every_frame_once(tmp_path):
+    path = tmp_path / "frames.log"
+    write(path, messages())
+    whole = bywire.read_log(path).read_all()
+    size = path.stat().st_size
+    for parts in (1, 2, 3, 7, 50):
+        bounds = [size * i // parts for i in range(parts + 1)]
+        pieces = [bywire.read_log(path, byte_range=(a, b)).read_all() for a, b in zip(bounds, bounds[1:])]
+        # The same rows (each piece's channel dictionary is its own).
+        assert [row for piece in pieces for row in piece.to_pylist()] == whole.to_pylist()
+    blf = tmp_path / "frames.blf"
+    write(blf, messages())
+    with pytest.raises(ValueError, match="byte ranges"):
+        bywire.read_log(blf, byte_range=(0, 100))

@@ -91,6 +91,16 @@ def test_frames_and_decode_through_map_in_arrow(spark, fleet):
     assert Counter(r.Gear for r in wide.collect()) == Counter(r[5] for r in states)
 
 
+def test_a_big_candump_log_is_split_into_partitions(spark, fleet):
+    candump = next(fleet.rglob("*.log"))
+    whole = spark.read.format("bywire").load(str(candump))
+    split = spark.read.format("bywire").option("split_mb", "0.05").load(str(candump))
+    assert whole.rdd.getNumPartitions() == 1
+    assert split.rdd.getNumPartitions() == -(-candump.stat().st_size // 50_000)
+    key = lambda r: (r.ts, r.id, r.data)  # noqa: E731
+    assert Counter(map(key, split.collect())) == Counter(map(key, whole.collect()))
+
+
 def test_bad_options_are_named(spark, fleet):
     with pytest.raises(Exception, match="output=signals needs option dbc"):
         spark.read.format("bywire").option("output", "signals").load(str(fleet)).count()

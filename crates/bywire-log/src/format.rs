@@ -190,6 +190,24 @@ impl Format {
         Ok((format, records))
     }
 
+    /// The records of the lines that start in the byte range `start..end` of the candump log
+    /// at `path`: one worker's share of a big log split among several (see
+    /// [`crate::lines::LineRange`]; line numbers in errors count from the range's first line).
+    /// Other formats cannot be split by bytes and are an error.
+    pub fn open_file_range(path: &Path, start: u64, end: u64) -> io::Result<Records<'static>> {
+        let file = std::fs::File::open(path)?;
+        let mut bytes = io::BufReader::new(file);
+        let format = Format::sniff_input(&mut bytes)?;
+        if format != Format::Candump {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("a {format:?} log cannot be read in byte ranges (candump logs can)"),
+            ));
+        }
+        let range = crate::lines::LineRange::new(bytes, start, end)?;
+        Ok(Format::Candump.reader(io::BufReader::new(range)))
+    }
+
     /// A writer of this format to `output` (seekable: BLF completes its header at the end).
     pub fn writer<W: Write + Seek + Send>(self, output: W) -> io::Result<RecordWriter<W>> {
         Ok(match self {

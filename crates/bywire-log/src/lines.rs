@@ -153,11 +153,125 @@ impl<R: BufRead> Iterator for CappedLines<R> {
     }
 }
 
+/// The lines of a text log that start in the byte range `start..end` of a file: what one worker
+/// reads when a big log is split among several (each line is read by exactly one range, so the
+/// ranges of a split together read every line once). A [`std::io::Read`] over the range's bytes,
+/// from the first line starting at or after `start` through the end of the line holding byte
+/// `end - 1`.
+pub struct LineRange<R> {
+    inner: R,
+    /// Offset of the next byte `inner` gives.
+    position: u64,
+    end: u64,
+    done: bool,
+}
+
+impl<R: BufRead + io::Seek> LineRange<R> {
+    /// The range `start..end` of `inner` (a seekable reader at any position).
+    pub fn new(mut inner: R, start: u64, end: u64) -> io::Result<Self> {
+        let mut position = start.saturating_sub(1);
+        inner.seek(io::SeekFrom::Start(position))?;
+        // The byte before `start` is a newline when a line starts at `start`; otherwise the
+        // line it is part of belongs to the range before. Skipped without keeping it (each
+        // pass consumes bytes, so this ends at the file's end at the latest).
+        if start > 0 {
+            loop {
+                let buffer = inner.fill_buf()?;
+                if buffer.is_empty() {
+                    break;
+                }
+                let (taken, found) = match memchr::memchr(b'\n', buffer) {
+                    Some(at) => (at + 1, true),
+                    None => (buffer.len(), false),
+                };
+                inner.consume(taken);
+                position += taken as u64;
+                if found {
+                    break;
+                }
+            }
+        }
+        Ok(LineRange {
+            inner,
+            position,
+            end,
+            done: position >= end,
+        })
+    }
+}
+
+impl<R: BufRead> io::Read for LineRange<R> {
+    fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
+        if self.done {
+            return Ok(0);
+        }
+        let buffer = self.inner.fill_buf()?;
+        let mut n = buffer.len().min(out.len());
+        // The last line is the one holding byte `end - 1`: stop after the first newline at
+        // or past it.
+        let last = self.end.saturating_sub(1).saturating_sub(self.position);
+        if let Ok(last) = usize::try_from(last) {
+            if last < n {
+                let newline = buffer
+                    .get(last..n)
+                    .and_then(|rest| memchr::memchr(b'\n', rest));
+                if let Some(at) = newline {
+                    n = last + at + 1;
+                    self.done = true;
+                }
+            }
+        }
+        if let (Some(to), Some(from)) = (out.get_mut(..n), buffer.get(..n)) {
+            to.copy_from_slice(from);
+        }
+        self.inner.consume(n);
+        self.position += n as u64;
+        Ok(n)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+
+    fn range(text: &[u8], start: u64, end: u64) -> Vec<u8> {
+        let reader = io::BufReader::with_capacity(5, io::Cursor::new(text.to_vec()));
+        let mut out = Vec::new();
+        io::Read::read_to_end(&mut LineRange::new(reader, start, end).unwrap(), &mut out).unwrap();
+        out
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn ranges_of_a_split_read_every_line_once(
+            lines in proptest::collection::vec("[a-z ]{0,12}", 0..20),
+            last_newline: bool,
+            cuts in proptest::collection::vec(0u64..400, 0..6),
+        ) {
+            let mut text = lines.join("\n");
+            if last_newline {
+                text.push('\n');
+            }
+            let len = text.len() as u64;
+            let mut bounds: Vec<u64> = cuts.into_iter().map(|c| c % (len + 1)).collect();
+            bounds.push(0);
+            bounds.push(len);
+            bounds.sort_unstable();
+            let mut joined = Vec::new();
+            for pair in bounds.windows(2) {
+                let part = range(text.as_bytes(), pair[0], pair[1]);
+                // Each range is whole lines: it starts a line, and ends one (or the text).
+                if let Some(first) = part.first() {
+                    let at = joined.len();
+                    proptest::prop_assert!(at == 0 || text.as_bytes()[at - 1] == b'\n', "{first}");
+                }
+                joined.extend(part);
+            }
+            proptest::prop_assert_eq!(joined, text.into_bytes());
+        }
+    }
 
     fn lines(input: &[u8], max: usize) -> Vec<(u64, Line)> {
         CappedLines::with_max(io::BufReader::with_capacity(7, input), max)

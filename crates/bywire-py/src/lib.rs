@@ -851,17 +851,28 @@ struct LogBatches {
 
 #[pymethods]
 impl LogBatches {
-    /// Open the log at `path` (its format sniffed from its content).
+    /// Open the log at `path` (its format sniffed from its content); with `byte_range`
+    /// `(start, end)`, only the lines starting in it (candump logs: a share of a split).
     #[new]
-    #[pyo3(signature = (path, batch_rows = DEFAULT_BATCH_ROWS))]
-    fn new(path: PathBuf, batch_rows: usize) -> PyResult<Self> {
+    #[pyo3(signature = (path, batch_rows = DEFAULT_BATCH_ROWS, byte_range = None))]
+    fn new(path: PathBuf, batch_rows: usize, byte_range: Option<(u64, u64)>) -> PyResult<Self> {
         if !(1..=MAX_BATCH_ROWS).contains(&batch_rows) {
             return Err(PyValueError::new_err(format!(
                 "batch_rows {batch_rows}: 1 to {MAX_BATCH_ROWS}"
             )));
         }
-        let (format, records) = Format::open_file(&path)
-            .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?;
+        let opened = match byte_range {
+            None => Format::open_file(&path),
+            Some((start, end)) => {
+                Format::open_file_range(&path, start, end).map(|records| (Format::Candump, records))
+            }
+        };
+        let (format, records) = opened.map_err(|e| match e.kind() {
+            std::io::ErrorKind::InvalidInput => {
+                PyValueError::new_err(format!("{}: {e}", path.display()))
+            }
+            _ => PyOSError::new_err(format!("{}: {e}", path.display())),
+        })?;
         let name = Format::ALL
             .iter()
             .find(|(f, _)| *f == format)
