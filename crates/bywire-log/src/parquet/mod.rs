@@ -19,6 +19,7 @@
 //! without one is not a Parquet file, which is why conversions write to a temporary name).
 
 pub mod decoded;
+mod footer;
 
 use std::collections::{HashMap, VecDeque};
 use std::fs::File;
@@ -326,7 +327,9 @@ pub struct ParquetReader {
 impl ParquetReader {
     /// A reader of `file` (its footer is read at once, so a file that is not Parquet fails
     /// here).
-    pub fn open(file: File) -> Result<Self, LogError> {
+    pub fn open(mut file: File) -> Result<Self, LogError> {
+        // The crate reserves what a footer declares: checked against its bytes first.
+        footer::check(&mut file)?;
         let batches = ParquetRecordBatchReaderBuilder::try_new(file)
             .and_then(|b| b.with_batch_size(BATCH_ROWS).build())
             .map_err(|e| LogError::Table {
