@@ -331,7 +331,9 @@ mod parquet_files {
 fn a_parquet_footer_declaring_more_than_it_holds_is_refused_with_its_offset() {
     let mut footer = vec![0x15, 0x02, 0x19, 0x1C, 0x48, 0x06];
     footer.extend(b"schema");
-    footer.extend([0x15, 0x80, 0xD0, 0xAC, 0xF3, 0x0E, 0x00, 0x16, 0x00, 0x19, 0x0C, 0x00]);
+    footer.extend([
+        0x15, 0x80, 0xD0, 0xAC, 0xF3, 0x0E, 0x00, 0x16, 0x00, 0x19, 0x0C, 0x00,
+    ]);
     let mut bytes = b"PAR1".to_vec();
     bytes.extend(&footer);
     bytes.extend(u32::try_from(footer.len()).unwrap().to_le_bytes());
@@ -344,5 +346,8 @@ fn a_parquet_footer_declaring_more_than_it_holds_is_refused_with_its_offset() {
     std::fs::remove_file(&path).unwrap();
     let error = first.unwrap().unwrap_err().to_string();
     assert!(error.contains("declares 2000000000 children"), "{error}");
-    assert!(error.contains("offset 22") || error.contains("byte 22"), "{error}");
+    assert!(
+        error.contains("offset 22") || error.contains("byte 22"),
+        "{error}"
+    );
 }

@@ -53,6 +53,11 @@ pub const BUILT_ROWS: usize = 1 << 19;
 pub const MEMORY_BUDGET: usize = 256 << 20;
 /// Tables open at once.
 pub const OPEN_TABLES: usize = 4096;
+/// Column chunks the open tables' finished row groups may hold: a writer keeps each one's
+/// metadata (about 1.5 KB: statistics, page indexes) until its file's footer, so a file that
+/// grew without end would grow the memory with it. Past this, the table holding the most is
+/// finished and its next rows start the partition's next `part-NNNNN` file.
+pub const HELD_CHUNKS: usize = 32_768;
 /// Bytes a table buffers before appending them to its file.
 const FILE_BUFFER: usize = 64 << 10;
 /// The decoded tables' layout, as the metadata names it.
@@ -294,6 +299,13 @@ struct OpenTable {
     last_used: u64,
 }
 
+impl OpenTable {
+    /// Column chunks of the row groups written so far (their metadata is held until the end).
+    fn held_chunks(&self) -> usize {
+        self.writer.flushed_row_groups().len() * self.columns.schema.fields().len()
+    }
+}
+
 /// Writes decoded records into a dataset directory.
 pub struct DecodedDataset<'a> {
     decoder: &'a Decoder,
@@ -307,6 +319,10 @@ pub struct DecodedDataset<'a> {
     rows: Vec<u64>,
     summary: DatasetSummary,
     clock: u64,
+    /// Column chunks the open tables hold, at most [`HELD_CHUNKS`] (a field for the tests).
+    held_budget: usize,
+    /// [`MEMORY_BUDGET`] (a field for the tests).
+    memory_budget: usize,
 }
 
 impl<'a> DecodedDataset<'a> {
@@ -328,6 +344,8 @@ impl<'a> DecodedDataset<'a> {
             rows: vec![0; decoder.database().messages.len()],
             summary: DatasetSummary::default(),
             clock: 0,
+            held_budget: HELD_CHUNKS,
+            memory_budget: MEMORY_BUDGET,
         })
     }
 
@@ -352,7 +370,7 @@ impl<'a> DecodedDataset<'a> {
         }
         let open = self.open.len().max(1);
         let (budget, batch) = (
-            MEMORY_BUDGET / open,
+            self.memory_budget / open,
             (BUILT_ROWS / open).clamp(16, TABLE_BATCH),
         );
         let Some(table) = self.open.get_mut(&key) else {
@@ -360,15 +378,43 @@ impl<'a> DecodedDataset<'a> {
         };
         table.last_used = self.clock;
         table.columns.push(message, record, &self.decoded);
+        let mut wrote = false;
         if table.columns.rows >= batch {
             let batch = table.columns.finish()?;
             table.writer.write(&batch).map_err(io_error)?;
             if table.writer.in_progress_size() > budget {
                 table.writer.flush().map_err(io_error)?;
             }
+            wrote = true;
         }
         if let Some(rows) = self.rows.get_mut(index) {
             *rows += 1;
+        }
+        if wrote {
+            self.bound_held_chunks()?;
+        }
+        Ok(())
+    }
+
+    /// Finish the tables holding the most row groups' metadata until the open tables hold at
+    /// most the budget (bounded: each pass closes a table).
+    fn bound_held_chunks(&mut self) -> std::io::Result<()> {
+        while self
+            .open
+            .values()
+            .map(OpenTable::held_chunks)
+            .sum::<usize>()
+            > self.held_budget
+        {
+            let fullest = self
+                .open
+                .iter()
+                .max_by_key(|(_, t)| t.held_chunks())
+                .map(|(k, _)| k.clone());
+            match fullest.and_then(|k| self.open.remove(&k)) {
+                Some(table) => close(table)?,
+                None => break,
+            }
         }
         Ok(())
     }
@@ -560,6 +606,62 @@ mod tests {
         assert_eq!(path_value("../etc"), "%2E.%2Fetc");
         assert_eq!(path_value("a/b c"), "a%2Fb%20c");
         assert_eq!(path_value(""), "__HIVE_DEFAULT_PARTITION__");
+    }
+
+    #[test]
+    fn a_table_past_the_held_metadata_budget_continues_in_its_next_file() {
+        let text = "BO_ 1 M: 2 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ B : 8|8@1+ (1,0) [0|0] \"\" X\n";
+        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let root = std::env::temp_dir().join(format!("bywire-held-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let mut dataset = DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
+        // Every batch (4096 rows) a row group of 4 column chunks (ts, channel, A, B); a table
+        // holding more than 8 is finished after its third.
+        dataset.memory_budget = 1;
+        dataset.held_budget = 8;
+        let id = bywire_core::Id::standard(1).unwrap();
+        for i in 0..60_000u32 {
+            let byte = u8::try_from(i % 251).unwrap();
+            dataset
+                .write(&LogRecord {
+                    timestamp: bywire_core::Timestamp::from_nanos(u64::from(i)),
+                    interface: "can0".into(),
+                    frame: bywire_core::Frame::classic(id, &[byte, 7]).unwrap(),
+                    direction: None,
+                })
+                .unwrap();
+        }
+        let summary = dataset.finish().unwrap();
+        assert!(summary.files.len() > 3, "{:?}", summary.files);
+        let mut ts = Vec::new();
+        for path in &summary.files {
+            let file = File::open(path).unwrap();
+            let reader =
+                ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 1 << 16)
+                    .unwrap();
+            for batch in reader {
+                let batch = batch.unwrap();
+                let column = batch.column(0).to_data();
+                let values = arrow_array::Int64Array::from(
+                    column
+                        .into_builder()
+                        .data_type(DataType::Int64)
+                        .build()
+                        .unwrap(),
+                );
+                ts.extend(values.values().iter().copied());
+            }
+            // Each file holds at most three row groups.
+            let file = File::open(path).unwrap();
+            let metadata = ::parquet::file::reader::FileReader::metadata(
+                &::parquet::file::reader::SerializedFileReader::new(file).unwrap(),
+            )
+            .num_row_groups();
+            assert!(metadata <= 3, "{metadata} row groups in {}", path.display());
+        }
+        assert_eq!(ts, (0..60_000i64).collect::<Vec<_>>());
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]
