@@ -305,6 +305,16 @@ impl Signal {
     pub fn display_name(&self) -> &str {
         long_symbol(&self.attributes, "SystemSignalLongSymbol").unwrap_or(&self.name)
     }
+
+    /// The start bit counted in network order (a big-endian signal's most significant bit
+    /// renumbered byte by byte from the top): the key cantools orders a message's signals by,
+    /// and where its bits begin in the payload read as one bit string.
+    pub fn network_start_bit(&self) -> u32 {
+        match self.byte_order {
+            ByteOrder::LittleEndian => self.start_bit,
+            ByteOrder::BigEndian => 8 * (self.start_bit / 8) + (7 - self.start_bit % 8),
+        }
+    }
 }
 
 /// A node (ECU).

@@ -101,15 +101,11 @@ fn raw_number(signal: &Signal, raw: u64) -> Value {
     }
 }
 
-/// Whether the signal's bits end past `bytes` bytes (cantools' rule for truncated data:
-/// a big-endian signal counted from its most significant bit in network order).
+/// Whether the signal's bits end past `bytes` bytes (cantools' rule for truncated data: the
+/// signal counted from its start bit in network order).
 fn past_available(signal: &Signal, bytes: usize) -> bool {
-    let start = u64::from(signal.start_bit);
-    let sequential_start = match signal.byte_order {
-        ByteOrder::LittleEndian => start,
-        ByteOrder::BigEndian => 8 * (start / 8) + (7 - start % 8),
-    };
-    sequential_start + u64::from(signal.length) > (bytes as u64).saturating_mul(8)
+    u64::from(signal.network_start_bit()) + u64::from(signal.length)
+        > (bytes as u64).saturating_mul(8)
 }
 
 fn num_f64(n: Num) -> f64 {
@@ -167,7 +163,7 @@ fn selector_values(message: &Message, switch: usize) -> Vec<i128> {
 }
 
 /// The multiplexor cantools reports when a frame's multiplexing does not decode: the first in
-/// its order (by start bit) that is in effect and whose value selects nothing — its index, its
+/// its order (by start bit in network order) that is in effect and whose value selects nothing — its index, its
 /// value and the values it accepts.
 fn failing_multiplexor(
     message: &Message,
@@ -179,7 +175,7 @@ fn failing_multiplexor(
         raw_number(message.signals.get(i)?, raw).as_i128()
     };
     let mut by_start: Vec<usize> = (0..message.signals.len()).collect();
-    by_start.sort_by_key(|i| message.signals.get(*i).map(|s| s.start_bit));
+    by_start.sort_by_key(|i| message.signals.get(*i).map(Signal::network_start_bit));
     by_start.into_iter().find_map(|i| {
         let switch = message.signals.get(i)?;
         let in_effect = match switch_of(message, switch) {
