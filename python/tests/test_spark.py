@@ -12,11 +12,11 @@ from collections import Counter
 import can
 import cantools
 import pyarrow.dataset as ds
+import pyspark  # noqa: F401  (installed by scripts/install-test-deps.sh; missing, the tests fail)
 import pytest
 
 from conftest import ROOT, TUG_DBC, bywire_cli, env_for_spark
 
-pyspark = pytest.importorskip("pyspark")
 
 
 @pytest.fixture(scope="module")
