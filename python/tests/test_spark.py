@@ -18,7 +18,6 @@ import pytest
 from conftest import ROOT, TUG_DBC, bywire_cli, env_for_spark
 
 
-
 @pytest.fixture(scope="module")
 def fleet(sim_run, tmp_path_factory):
     """Logs of two vehicles on two days: candump and BLF."""
