@@ -105,10 +105,11 @@ fn dump_prints_what_candump_prints() {
             assert_eq!(ours, theirs, "dump {form}");
         }
     }
-    // With --dbc the signals follow their frame, as cantools shows them.
+    // With --dbc the signals follow their frame, as cantools shows them (in its order: by
+    // start bit in network order).
     let decoded = after_marker(section(&out, "decoded"));
     assert!(
-        decoded.contains("  vcan0  1F0   [8]  A5 B6 D9 00 00 00 00 00\n      ExampleMessage(\n          Temperature: 244.14 degK,\n          AverageRadius: 1.8 m,\n          Enable: Enabled\n      )\n"),
+        decoded.contains("  vcan0  1F0   [8]  A5 B6 D9 00 00 00 00 00\n      ExampleMessage(\n          Enable: Enabled,\n          AverageRadius: 1.8 m,\n          Temperature: 244.14 degK\n      )\n"),
         "{decoded}"
     );
     // The words for error frames are there (-e).
