@@ -509,10 +509,10 @@ fn decode_counted<'d>(
 }
 
 /// A batch of raw frames (the layout [`super::raw_schema`] gives, or any batch
-/// [`super::records_of_batch`] reads) decoded column by column into one batch per message with
-/// the columns a dataset's table has (`channel` always), in the database's order, and the counts
-/// ([`DatasetSummary::files`] empty). For callers that take Arrow in memory (the Python package):
-/// no record is built per frame.
+/// [`super::records_of_batch`] reads) decoded straight from its columns into one batch per
+/// message with the columns a dataset's table has (`channel` always), in the database's order,
+/// and the counts ([`DatasetSummary::files`] empty). For callers that take Arrow in memory (the
+/// Python package): no record is built per frame.
 pub fn decode_frames_batch(
     decoder: &Decoder,
     batch: &RecordBatch,
