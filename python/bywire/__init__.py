@@ -151,25 +151,13 @@ class Database:
         message: ``ts``, ``channel``, one typed column per signal (int64 where the signal's
         values are whole numbers, else float64; null where a multiplexed signal is absent) and
         ``NAME_choice`` beside each signal with value descriptions."""
-        out = DecodedLog()
-        out.unknown, out.undecodable = 0, {}
-        parts: dict[str, list[pa.RecordBatch]] = {}
-        self._decode_into(frames, parts, out)
-        for name, batches in parts.items():
-            out[name] = pa.Table.from_batches(batches)
-        return out
+        batches = frames.to_batches() if isinstance(frames, pa.Table) else [frames]
+        return self._decode_all(batches)
 
     def decode_log(self, path: str | os.PathLike[str], batch_rows: int = BATCH_ROWS) -> DecodedLog:
         """Decode every frame of the log at ``path``: one table per message, as
         :meth:`decode_arrow` gives them."""
-        out = DecodedLog()
-        out.unknown, out.undecodable = 0, {}
-        parts: dict[str, list[pa.RecordBatch]] = {}
-        for batch in read_log(path, batch_rows):
-            self._decode_into(batch, parts, out)
-        for name, batches in parts.items():
-            out[name] = pa.Table.from_batches(batches)
-        return out
+        return self._decode_all(read_log(path, batch_rows))
 
     def iter_decoded(
         self, frames: Iterable[pa.RecordBatch]
@@ -180,14 +168,11 @@ class Database:
             decoded, _, _ = self._db.decode_arrow(_native_frames(batch))
             yield from decoded
 
-    def _decode_into(
-        self,
-        frames: pa.RecordBatch | pa.Table,
-        parts: dict[str, list[pa.RecordBatch]],
-        out: DecodedLog,
-    ) -> None:
-        batches = frames.to_batches() if isinstance(frames, pa.Table) else [frames]
-        for batch in batches:
+    def _decode_all(self, frames: Iterable[pa.RecordBatch]) -> DecodedLog:
+        out = DecodedLog()
+        out.unknown, out.undecodable = 0, {}
+        parts: dict[str, list[pa.RecordBatch]] = {}
+        for batch in frames:
             decoded, unknown, undecodable = self._db.decode_arrow(_native_frames(batch))
             out.unknown += unknown
             for name, (count, why) in undecodable.items():
@@ -195,6 +180,9 @@ class Database:
                 out.undecodable[name] = (before[0] + count, before[1])
             for name, part in decoded:
                 parts.setdefault(name, []).append(part)
+        for name, batches in parts.items():
+            out[name] = pa.Table.from_batches(batches)
+        return out
 
     def __repr__(self) -> str:
         return repr(self._db)

@@ -146,6 +146,7 @@ def signals_long(
             continue
         values = table.column(name)
         present = pc.is_valid(values)
+        rows = len(values) - values.null_count
         parts.append(
             pa.table(
                 {
@@ -153,8 +154,8 @@ def signals_long(
                     "vehicle": pc.filter(vehicles, present),
                     "date": pc.filter(dates, present),
                     "channel": pc.filter(channel, present),
-                    "message": pa.array([message] * int(pc.sum(present).as_py() or 0), pa.string()),
-                    "signal": pa.array([name] * int(pc.sum(present).as_py() or 0), pa.string()),
+                    "message": pa.array([message] * rows, pa.string()),
+                    "signal": pa.array([name] * rows, pa.string()),
                     "value": pc.filter(values, present).cast(pa.float64()),
                 }
             )

@@ -433,6 +433,15 @@ impl MessageCodec {
         }
     }
 
+    /// The multiplexor that selects signal `index` (its index), if the signal is multiplexed:
+    /// the switch decoding uses, from `mN`/`mNM` or `SG_MUL_VAL_`.
+    pub fn switch_of(&self, index: usize) -> Option<usize> {
+        match &self.plans.get(index)?.presence {
+            Presence::Always => None,
+            Presence::Selected { switch, .. } | Presence::Ranges { switch, .. } => Some(*switch),
+        }
+    }
+
     /// Number of signals (the length `decode` needs).
     pub fn signal_count(&self) -> usize {
         self.plans.len()

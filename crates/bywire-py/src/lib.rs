@@ -19,7 +19,7 @@ use arrow_pyarrow::PyArrowType;
 use bywire_core::Timestamp;
 use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
-use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Num, Signal, ValueType};
+use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
 use bywire_log::format::{Format, Records};
 use bywire_log::parquet::decoded::decode_frames_batch;
 use bywire_log::parquet::{raw_schema, FrameColumns};
@@ -108,41 +108,16 @@ fn past_available(signal: &Signal, bytes: usize) -> bool {
         > (bytes as u64).saturating_mul(8)
 }
 
-fn num_f64(n: Num) -> f64 {
-    n.as_f64()
-}
-
-/// The multiplexor signal `signal` depends on, if any (its index).
-fn switch_of(message: &Message, signal: &Signal) -> Option<usize> {
-    if let Some(condition) = &signal.mux_condition {
-        return message
-            .signals
-            .iter()
-            .position(|s| s.name == condition.switch);
-    }
-    match signal.multiplexing {
-        Multiplexing::Multiplexed(_) | Multiplexing::MultiplexedMultiplexor(_) => {
-            message.signals.iter().position(|s| {
-                matches!(
-                    s.multiplexing,
-                    Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
-                ) && s.name != signal.name
-            })
-        }
-        _ => None,
-    }
-}
-
 /// The multiplexor values cantools accepts for `switch` (sorted, as it lists them): those that
 /// select a signal, and those its value descriptions name (a branch with no signals).
-fn selector_values(message: &Message, switch: usize) -> Vec<i128> {
+fn selector_values(message: &Message, codec: &MessageCodec, switch: usize) -> Vec<i128> {
     let mut values: Vec<i128> = message
         .signals
         .get(switch)
         .map(|s| s.value_descriptions.iter().map(|(k, _)| *k).collect())
         .unwrap_or_default();
-    for signal in &message.signals {
-        if switch_of(message, signal) != Some(switch) {
+    for (i, signal) in message.signals.iter().enumerate() {
+        if codec.switch_of(i) != Some(switch) {
             continue;
         }
         if let Some(condition) = &signal.mux_condition {
@@ -178,12 +153,12 @@ fn failing_multiplexor(
     by_start.sort_by_key(|i| message.signals.get(*i).map(Signal::network_start_bit));
     by_start.into_iter().find_map(|i| {
         let switch = message.signals.get(i)?;
-        let in_effect = match switch_of(message, switch) {
+        let in_effect = match codec.switch_of(i) {
             None => true,
             Some(parent) => value_of(parent).is_some_and(|v| selected_by(switch, v)),
         };
         let number = value_of(i)?;
-        let accepted = selector_values(message, i);
+        let accepted = selector_values(message, codec, i);
         (in_effect && !accepted.is_empty() && !accepted.contains(&number))
             .then_some((i, number, accepted))
     })
@@ -312,7 +287,7 @@ impl Database {
                         .get(signal)
                         .and_then(|s| raw_number(s, value).as_i128())
                         .unwrap_or(i128::from(value));
-                    (signal, number, selector_values(message, signal))
+                    (signal, number, selector_values(message, codec, signal))
                 });
             let past = message
                 .signals
@@ -341,8 +316,9 @@ impl Database {
                     }
                 }
             }
-            for (i, signal) in message.signals.iter().enumerate() {
-                let switch_gone = switch_of(message, signal)
+            for i in 0..message.signals.len() {
+                let switch_gone = codec
+                    .switch_of(i)
                     .is_some_and(|s| out.get(s).copied().flatten().is_none());
                 if switch_gone {
                     if let Some(slot) = out.get_mut(i) {
@@ -390,7 +366,7 @@ impl Database {
         let given = |signal: &Signal| data.get_item(signal.display_name()).ok().flatten();
         let mut needed = vec![false; message.signals.len()];
         for (i, signal) in message.signals.iter().enumerate() {
-            let Some(switch) = switch_of(message, signal) else {
+            let Some(switch) = codec.switch_of(i) else {
                 if let Some(slot) = needed.get_mut(i) {
                     *slot = true;
                 }
@@ -418,7 +394,7 @@ impl Database {
             if !is_switch || !needed.get(i).copied().unwrap_or(false) {
                 continue;
             }
-            let choices = selector_values(message, i);
+            let choices = selector_values(message, codec, i);
             if choices.is_empty() {
                 continue;
             }
@@ -503,7 +479,7 @@ impl Database {
                     *slot = Some(bits);
                 }
                 if strict && !is_choice {
-                    let scaled = number.as_f64() * num_f64(signal.factor) + num_f64(signal.offset);
+                    let scaled = number.as_f64() * signal.factor.as_f64() + signal.offset.as_f64();
                     let shown = value.str()?.to_string();
                     check_range(message, signal, scaled, number.as_i128(), &shown)?;
                 }
@@ -511,7 +487,7 @@ impl Database {
                 if strict {
                     // The raw value the physical one encodes to, for the choices.
                     let raw_key =
-                        (number.as_f64() - num_f64(signal.offset)) / num_f64(signal.factor);
+                        (number.as_f64() - signal.offset.as_f64()) / signal.factor.as_f64();
                     let raw_key = round_half_even(raw_key);
                     // Whole and within ±1e18 (checked), so the conversion is exact.
                     #[allow(clippy::cast_possible_truncation)]
@@ -617,13 +593,13 @@ fn check_range(
         return Ok(());
     }
     let (min, max) = (signal.minimum, signal.maximum);
-    if num_f64(min) == 0.0 && num_f64(max) == 0.0 {
+    if min.as_f64() == 0.0 && max.as_f64() == 0.0 {
         return Ok(());
     }
-    let tolerance = num_f64(signal.factor).abs() * 1e-6;
-    let (side, bound) = if scaled < num_f64(min) - tolerance {
+    let tolerance = signal.factor.as_f64().abs() * 1e-6;
+    let (side, bound) = if scaled < min.as_f64() - tolerance {
         ("greater than", min)
-    } else if scaled > num_f64(max) + tolerance {
+    } else if scaled > max.as_f64() + tolerance {
         ("smaller than", max)
     } else {
         return Ok(());
@@ -678,7 +654,7 @@ impl Database {
         py: Python<'py>,
         frame_id_or_name: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (message, _) = self.lookup(frame_id_or_name)?;
+        let (message, codec) = self.lookup(frame_id_or_name)?;
         let info = PyDict::new(py);
         info.set_item("name", message.display_name())?;
         info.set_item("frame_id", message.id)?;
@@ -692,7 +668,7 @@ impl Database {
         )?;
         info.set_item("senders", message.senders.clone())?;
         let mut signals = Vec::with_capacity(message.signals.len());
-        for s in &message.signals {
+        for (i, s) in message.signals.iter().enumerate() {
             let d = PyDict::new(py);
             d.set_item("name", s.display_name())?;
             d.set_item("start", s.start_bit)?;
@@ -712,10 +688,10 @@ impl Database {
                 "is_float",
                 matches!(s.value_type, ValueType::Float32 | ValueType::Float64),
             )?;
-            d.set_item("scale", num_f64(s.factor))?;
-            d.set_item("offset", num_f64(s.offset))?;
-            d.set_item("minimum", num_f64(s.minimum))?;
-            d.set_item("maximum", num_f64(s.maximum))?;
+            d.set_item("scale", s.factor.as_f64())?;
+            d.set_item("offset", s.offset.as_f64())?;
+            d.set_item("minimum", s.minimum.as_f64())?;
+            d.set_item("maximum", s.maximum.as_f64())?;
             d.set_item("unit", &s.unit)?;
             d.set_item(
                 "is_multiplexer",
@@ -724,7 +700,7 @@ impl Database {
                     Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
                 ),
             )?;
-            let ids: Option<Vec<i128>> = switch_of(message, s).map(|_| match s.multiplexing {
+            let ids: Option<Vec<i128>> = codec.switch_of(i).map(|_| match s.multiplexing {
                 Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) => {
                     vec![i128::from(v)]
                 }

@@ -86,6 +86,16 @@ pub struct DatasetSummary {
     pub files: Vec<PathBuf>,
 }
 
+impl DatasetSummary {
+    /// Count a frame of `message` that did not decode (the first one's reason kept).
+    fn count_undecodable(&mut self, message: &Message, error: &impl std::fmt::Display) {
+        self.undecodable
+            .entry(message.display_name().to_string())
+            .or_insert_with(|| (0, error.to_string()))
+            .0 += 1;
+    }
+}
+
 /// A column's type, from the signal's definition (so every file of a message agrees).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Kind {
@@ -378,19 +388,21 @@ impl<'a> DecodedDataset<'a> {
         };
         table.last_used = self.clock;
         table.columns.push(message, record, &self.decoded);
-        let mut wrote = false;
+        let mut finished_row_group = false;
         if table.columns.rows >= batch {
+            let row_groups = table.writer.flushed_row_groups().len();
             let batch = table.columns.finish()?;
             table.writer.write(&batch).map_err(io_error)?;
             if table.writer.in_progress_size() > budget {
                 table.writer.flush().map_err(io_error)?;
             }
-            wrote = true;
+            finished_row_group = table.writer.flushed_row_groups().len() > row_groups;
         }
         if let Some(rows) = self.rows.get_mut(index) {
             *rows += 1;
         }
-        if wrote {
+        // What the open tables hold only grows when a row group is finished.
+        if finished_row_group {
             self.bound_held_chunks()?;
         }
         Ok(())
@@ -498,11 +510,7 @@ fn decode_counted<'d>(
         return None;
     };
     if let Err(e) = decoded {
-        summary
-            .undecodable
-            .entry(message.display_name().to_string())
-            .or_insert_with(|| (0, e.to_string()))
-            .0 += 1;
+        summary.count_undecodable(message, &e);
         return None;
     }
     Some((index, message))
@@ -535,11 +543,7 @@ pub fn decode_frames_batch(
         values.clear();
         values.resize(codec.signal_count(), None);
         if let Err(e) = codec.decode(data, &mut values) {
-            summary
-                .undecodable
-                .entry(message.display_name().to_string())
-                .or_insert_with(|| (0, e.to_string()))
-                .0 += 1;
+            summary.count_undecodable(message, &e);
             continue;
         }
         let Some(slot) = tables.get_mut(index) else {
