@@ -228,25 +228,13 @@ impl Decoder {
 
     /// The message's cycle time (`GenMsgCycleTime`), when it has a positive one.
     pub fn cycle_time(&self, message: &Message) -> Option<Duration> {
-        let ms: f64 = self
-            .db
-            .message_attribute_text(message, "GenMsgCycleTime")?
-            .parse()
-            .ok()?;
-        Duration::try_from_secs_f64(ms / 1000.0)
-            .ok()
-            .filter(|d| !d.is_zero())
+        self.db.cycle_time(message)
     }
 
-    /// Whether the message is sent as CAN FD (`VFrameFormat` says so, or it is over 8 bytes),
-    /// and with bit rate switching.
+    /// Whether the message is sent as CAN FD, and with bit rate switching
+    /// ([`Database::fd_format`]).
     pub fn fd_format(&self, message: &Message) -> (bool, bool) {
-        let format = self
-            .db
-            .message_attribute_text(message, "VFrameFormat")
-            .unwrap_or_default();
-        let fd = format.contains("FD") || message.size > 8;
-        (fd, fd && !format.contains("NoBRS"))
+        self.db.fd_format(message)
     }
 }
 

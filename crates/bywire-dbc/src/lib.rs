@@ -32,6 +32,7 @@ mod lexer;
 pub mod lint;
 pub mod model;
 mod parser;
+pub mod schedule;
 #[cfg(feature = "secoc")]
 pub mod secoc;
 mod writer;

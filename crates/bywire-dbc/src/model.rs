@@ -1,6 +1,7 @@
 //! Everything a DBC file carries. Every type is serde-serializable (`bywire dbc convert` writes
 //! and reads JSON with it); positions are not serialized.
 
+use core::time::Duration;
 use std::fmt;
 
 use serde::{Deserialize, Serialize};
@@ -464,6 +465,30 @@ impl Database {
             (AttrValue::Number(n), _) => n.to_string(),
             (AttrValue::Str(s), _) => s.clone(),
         })
+    }
+
+    /// A message attribute in milliseconds (`GenMsgCycleTime`, `GenMsgDelayTime`, …), when it
+    /// is a positive number.
+    pub fn message_attribute_ms(&self, message: &Message, name: &str) -> Option<Duration> {
+        let ms: f64 = self.message_attribute_text(message, name)?.parse().ok()?;
+        Duration::try_from_secs_f64(ms / 1000.0)
+            .ok()
+            .filter(|d| !d.is_zero())
+    }
+
+    /// The message's cycle time (`GenMsgCycleTime`), when it has a positive one.
+    pub fn cycle_time(&self, message: &Message) -> Option<Duration> {
+        self.message_attribute_ms(message, "GenMsgCycleTime")
+    }
+
+    /// Whether the message is sent as CAN FD (`VFrameFormat` says so, or it is over 8 bytes),
+    /// and with bit rate switching.
+    pub fn fd_format(&self, message: &Message) -> (bool, bool) {
+        let format = self
+            .message_attribute_text(message, "VFrameFormat")
+            .unwrap_or_default();
+        let fd = format.contains("FD") || message.size > 8;
+        (fd, fd && !format.contains("NoBRS"))
     }
 }
 
