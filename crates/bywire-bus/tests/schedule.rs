@@ -1,7 +1,7 @@
 //! The response-time analysis (`bywire_core::schedule`) against the bit-timed bus: random
 //! message sets, each message queued with random jitter and random payloads from its own
-//! controller, never take longer on the simulated bus than the analysis allows; and a set the
-//! analysis says misses a deadline does miss it on the bus.
+//! controller, never take longer on the simulated bus than the analysis allows. (A DBC the
+//! analysis says misses its deadlines is tested against the bus in bywire-sim.)
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
 use bywire_bus::sim::{BusEvent, SimBus};
@@ -72,7 +72,7 @@ fn simulate(messages: &[Message], run_us: u64, seed: u64) -> Vec<u64> {
             } else {
                 rng.next() % (m.jitter_us * 1_000 + 1)
             };
-            let data: Vec<u8> = (0..m.len).map(|_| rng.next() as u8).collect();
+            let data: Vec<u8> = (0..m.len).map(|_| rng.next().to_le_bytes()[0]).collect();
             let frame = ClassicFrame::new(Id::Standard(StandardId::new(m.id).unwrap()), &data);
             bus.submit(
                 nodes[i],
@@ -131,79 +131,5 @@ proptest! {
                 );
             }
         }
-    }
-}
-
-/// Nine messages of 8 bytes every 2.5 ms with a 1.95 ms deadline, and a lower-priority frame
-/// that starts just before all nine are queued (the critical instant): the analysis says which
-/// miss their deadline, and on the bus exactly those do, with payloads of zeros (a few stuff
-/// bits short of the most a frame can have).
-#[test]
-fn predicted_misses_happen_on_the_bus() {
-    const DEADLINE_NS: u64 = 1_950_000;
-    let messages: Vec<Message> = (0..9)
-        .map(|i| Message {
-            id: 0x100 + i,
-            len: 8,
-            period_us: 2_500,
-            jitter_us: 0,
-        })
-        .collect();
-    // The blocker: once a second.
-    let blocker_message = Message {
-        id: 0x7FF,
-        len: 8,
-        period_us: 1_000_000,
-        jitter_us: 0,
-    };
-    let streams = streams(&[messages.clone(), vec![blocker_message]].concat());
-    let predicted: Vec<u64> = (0..messages.len())
-        .map(|i| {
-            response_time(&streams, i, bit_ns(BITRATE))
-                .unwrap()
-                .worst_ns
-        })
-        .collect();
-    let misses: Vec<bool> = predicted.iter().map(|&r| r > DEADLINE_NS).collect();
-    assert!(misses.iter().any(|&m| m), "{predicted:?}");
-    assert!(!misses[0], "{predicted:?}");
-
-    let mut bus = SimBus::new(BITRATE, None);
-    let blocker = bus.add_node();
-    let long = ClassicFrame::new(Id::Standard(StandardId::new(0x7FF).unwrap()), &[0; 8]);
-    bus.submit(blocker, Frame::Classic(long.unwrap()), Timestamp::ZERO);
-    let nodes: Vec<_> = messages.iter().map(|_| bus.add_node()).collect();
-    let mut releases = vec![Vec::new(); messages.len()];
-    for (i, m) in messages.iter().enumerate() {
-        let id = Id::Standard(StandardId::new(m.id).unwrap());
-        let frame = Frame::Classic(ClassicFrame::new(id, &[0; 8]).unwrap());
-        for k in 0..20 {
-            let at = 1 + k * m.period_us * 1_000;
-            bus.submit(nodes[i], frame, Timestamp::from_nanos(at));
-            releases[i].push(at);
-        }
-    }
-    bus.advance(Timestamp::from_millis(100));
-    let mut sent = vec![0usize; messages.len()];
-    let mut measured = vec![0u64; messages.len()];
-    for event in bus.take_events() {
-        if let BusEvent::Transmitted { node, end, .. } = event {
-            let Some(i) = nodes.iter().position(|&n| n == node) else {
-                continue;
-            };
-            measured[i] = measured[i].max(end.as_nanos() - releases[i][sent[i]]);
-            sent[i] += 1;
-        }
-    }
-    for i in 0..messages.len() {
-        assert!(
-            measured[i] <= predicted[i],
-            "{i}: {measured:?} vs {predicted:?}"
-        );
-        assert_eq!(
-            measured[i] > DEADLINE_NS,
-            misses[i],
-            "{i}: {measured:?} vs {predicted:?}"
-        );
     }
 }

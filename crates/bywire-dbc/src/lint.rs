@@ -189,9 +189,9 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                 .any(|s| contains_any(&s.name, CHECKSUM_NAMES));
             if !counter || !checksum {
                 let missing = match (counter, checksum) {
-                    (false, false) => "a rolling counter and a checksum",
-                    (false, true) => "a rolling counter",
-                    _ => "a checksum",
+                    (false, false) => "rolling counter and no checksum",
+                    (false, true) => "rolling counter",
+                    _ => "checksum",
                 };
                 push(Severity::Warning, "unprotected-command", m.position, format!("command message {} has no {missing}: a stale or corrupted command cannot be detected", m.name));
             }

@@ -81,6 +81,43 @@ fn check_json(path: &Path) -> Result<(), Failed> {
     Ok(())
 }
 
+/// The schedule analysis takes every file: each message analysed or left out with a reason,
+/// in priority order, every bound at least the message's jitter and frame.
+fn check_schedule(path: &Path) -> Result<(), Failed> {
+    use bywire_dbc::schedule::{analyse, Options};
+    let db = load(path);
+    for nominal in [125_000, 500_000] {
+        let options = Options {
+            rates: bywire_core::busload::Bitrates {
+                nominal,
+                data: Some(2_000_000),
+            },
+            jitter: std::time::Duration::from_micros(100),
+        };
+        let schedule = analyse(&db, |_| true, options);
+        if schedule.messages.len() + schedule.skipped.len() != db.messages.len() {
+            return Err("a message was neither analysed nor left out".into());
+        }
+        if !schedule.messages.windows(2).all(|w| w[0].id <= w[1].id) {
+            return Err("not in priority order".into());
+        }
+        if !(schedule.utilisation.is_finite() && schedule.utilisation >= 0.0) {
+            return Err(format!("utilisation {}", schedule.utilisation).into());
+        }
+        for m in &schedule.messages {
+            if let Ok(r) = m.outcome {
+                if r.worst_ns < m.frame_ns + m.jitter_ns || r.instances == 0 {
+                    return Err(format!("{}: {r:?}", m.name).into());
+                }
+            }
+        }
+        if schedule.skipped.iter().any(|s| s.reason.is_empty()) {
+            return Err("left out without a reason".into());
+        }
+    }
+    Ok(())
+}
+
 fn check_roundtrip(path: &Path) -> Result<(), Failed> {
     let db = load(path);
     let written = write(&db);
@@ -296,6 +333,10 @@ fn main() {
             }));
             let p = path.clone();
             trials.push(Trial::test(format!("json/{rel}"), move || check_json(&p)));
+            let p = path.clone();
+            trials.push(Trial::test(format!("schedule/{rel}"), move || {
+                check_schedule(&p)
+            }));
             if summary["files"][&rel]["nonstrict_ok"] == Json::Bool(false) {
                 let p = path.clone();
                 trials.push(Trial::test(format!("strict/{rel}"), move || {

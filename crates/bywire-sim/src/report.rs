@@ -216,6 +216,9 @@ pub struct RunReport {
     pub bus_load: PerBus<f64>,
     /// Frames each bus carried.
     pub frames: PerBus<usize>,
+    /// Each bus's response times by identifier: from queued at the controller to the end of
+    /// the frame (`bywire latency --predict` bounds them from a DBC).
+    pub response_times_us: PerBus<Vec<ResponseRecord>>,
     /// The battery's state of charge at the end.
     pub battery_soc: f64,
     /// The supervisor's counts.
@@ -226,6 +229,36 @@ pub struct RunReport {
     pub dtcs: Vec<DtcRecord>,
     /// Wall-clock time the run took, s.
     pub wall_seconds: f64,
+}
+
+/// One identifier's response times on a bus.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ResponseRecord {
+    /// The identifier in hex, as candump writes it.
+    pub id: String,
+    /// Frames sent.
+    pub frames: u64,
+    /// Mean response time, µs.
+    pub mean: f64,
+    /// Longest response time, µs.
+    pub max: f64,
+}
+
+impl ResponseRecord {
+    fn all(times: &[crate::tug::ResponseTimes]) -> Vec<ResponseRecord> {
+        times
+            .iter()
+            .map(|t| ResponseRecord {
+                id: match t.id {
+                    bywire_core::Id::Standard(_) => format!("{:03X}", t.id.as_raw()),
+                    bywire_core::Id::Extended(_) => format!("{:08X}", t.id.as_raw()),
+                },
+                frames: t.count,
+                mean: t.total_ns as f64 / t.count.max(1) as f64 / 1e3,
+                max: t.max_ns as f64 / 1e3,
+            })
+            .collect()
+    }
 }
 
 /// One DTC of the ECU's memory.
@@ -356,6 +389,16 @@ impl RunReport {
                 bus2: tug.bus2_log.len(),
                 bus3: tug.bus3_log.len(),
                 bus1b: tug.bus1b_log.len(),
+            },
+            response_times_us: {
+                let [bus1, bus2, bus3, bus1b] =
+                    tug.response_times().map(|(_, t)| ResponseRecord::all(t));
+                PerBus {
+                    bus1,
+                    bus2,
+                    bus3,
+                    bus1b,
+                }
             },
             battery_soc: tug.soc(),
             supervisor: SupervisorCounts {

@@ -435,6 +435,22 @@ pub struct Tug {
     last_echo: Option<Timestamp>,
     /// What the attacks achieved.
     pub security: SecurityWatch,
+    /// Each bus's response times by identifier, in [`TugBus::ALL`]'s order.
+    response_times: [Vec<ResponseTimes>; 4],
+}
+
+/// How long one identifier's frames took on a bus: from being queued at the controller to the
+/// end of the frame (arbitration, waiting, retransmissions and the frame itself).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ResponseTimes {
+    /// The identifier.
+    pub id: Id,
+    /// Frames sent.
+    pub count: u64,
+    /// Their summed response times, ns.
+    pub total_ns: u64,
+    /// The longest, ns.
+    pub max_ns: u64,
 }
 
 /// What the run saw of the attacks: commands the vehicle took that the ADS never sent, and
@@ -656,6 +672,7 @@ impl Tug {
             echo_latencies: Vec::new(),
             last_echo: None,
             security: SecurityWatch::default(),
+            response_times: Default::default(),
         })
     }
 
@@ -770,6 +787,12 @@ impl Tug {
     /// The steering fault the ECU's plausibility check latched, if any.
     pub fn steering_fault(&self) -> Option<bywire_tug::plausibility::SteeringFault> {
         self.ecu.steering_fault()
+    }
+
+    /// Each bus's response times by identifier (lowest identifier first), under the bus's name.
+    pub fn response_times(&self) -> [(&'static str, &[ResponseTimes]); 4] {
+        let [a, b, c, d] = &self.response_times;
+        [("bus1", a), ("bus2", b), ("bus3", c), ("bus1b", d)]
     }
 
     /// Each bus's frames under the name its log file takes (`bus1`, `bus2`, `bus3`, `bus1b`).
@@ -1181,11 +1204,20 @@ impl Tug {
         let mut changes = Vec::new();
         for (i, bus) in TugBus::ALL.into_iter().enumerate() {
             let index = self.buses.get(i).copied().unwrap_or(0);
-            if let Some(sim) = self.net.bus_mut(index) {
-                for event in sim.drain_events() {
-                    if let BusEvent::StateChanged { node, state, .. } = event {
+            let (Some(sim), Some(times)) =
+                (self.net.bus_mut(index), self.response_times.get_mut(i))
+            else {
+                continue;
+            };
+            for event in sim.drain_events() {
+                match event {
+                    BusEvent::StateChanged { node, state, .. } => {
                         changes.push((bus, node, state));
                     }
+                    BusEvent::Transmitted { id, latency_ns, .. } => {
+                        note_response(times, id, latency_ns);
+                    }
+                    _ => {}
                 }
             }
         }
@@ -1306,6 +1338,11 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
     // The actual values (TPDO2) sampled at every SYNC, so the master sees all eight drives
     // at one instant each cycle.
     let _ = od.set(0x1801, 2, &[1]);
+    // The statusword (TPDO1) at most every 2 ms, emergencies at most every 10 ms (inhibit
+    // times, in 100 µs): what bounds the drives bus's worst-case response times
+    // (`dbc/reference-tug-drives.dbc` in bywire-tug declares them).
+    let _ = od.set(0x1800, 3, &20u16.to_le_bytes());
+    let _ = od.set(0x1015, 0, &100u16.to_le_bytes());
     // Each drive watches the ECU's heartbeat: silence faults it.
     let _ = od.set(
         0x1016,
@@ -1313,6 +1350,30 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
         &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
     );
     Device::new(node, od, Drive::new().with_external_motor())
+}
+
+/// One more frame of `id` that took `latency_ns`; identifiers kept in order.
+fn note_response(times: &mut Vec<ResponseTimes>, id: Id, latency_ns: u64) {
+    let index = match times.binary_search_by_key(&id, |t| t.id) {
+        Ok(index) => index,
+        Err(index) => {
+            times.insert(
+                index,
+                ResponseTimes {
+                    id,
+                    count: 0,
+                    total_ns: 0,
+                    max_ns: 0,
+                },
+            );
+            index
+        }
+    };
+    if let Some(t) = times.get_mut(index) {
+        t.count += 1;
+        t.total_ns = t.total_ns.saturating_add(latency_ns);
+        t.max_ns = t.max_ns.max(latency_ns);
+    }
 }
 
 /// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service

@@ -37,6 +37,11 @@ pub mod wire;
 
 use bywire_vehicle::profile::{LoadedProfile, Profile, ProfileError};
 
+/// The DBC of bus 2 (the drives' CANopen bus): SYNC, PDOs, emergencies and heartbeats with
+/// their cycle times, minimum intervals and jitter, for decoding and for
+/// `bywire latency --predict`.
+pub const DRIVES_DBC: &str = include_str!("../dbc/reference-tug-drives.dbc");
+
 /// The tug's profile text.
 pub const PROFILE: &str = include_str!("../profiles/reference-tug.toml");
 

@@ -9,6 +9,7 @@ pub mod dbc;
 pub mod dump;
 pub mod gen;
 pub mod isotp;
+pub mod latency;
 pub mod log;
 pub mod monitor;
 pub mod play;
