@@ -1,8 +1,8 @@
-//! `bywire latency`: latency of a bus's messages — `--predict`: the worst case from a DBC
-//! alone (`bywire_dbc::schedule`).
+//! `bywire latency`: latency of a drive-by-wire chain — from logs (`bywire_vehicle::latency`),
+//! or, with `--predict`, the worst case from a DBC alone (`bywire_dbc::schedule`).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{ensure, Result};
@@ -14,8 +14,14 @@ use serde::Serialize;
 
 use crate::support::{dbc, numbers};
 
+mod logs;
+
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
+  bywire latency bus1.log --profile reference-tug
+  bywire latency bus1.log bus1b.log --profile reference-tug --transfer bus1b=bus1 --json
+  bywire latency drive.blf --dbc vehicle.dbc --echo Cmd.Counter=State.Echo \\
+      --response Cmd.SteerAngle=State.SteerAngle
   bywire latency --predict vehicle.dbc --bitrate 500000
   bywire latency --predict vehicle.dbc --bitrate 500000 --dbitrate 2000000 --jitter 0.5 --json
   bywire latency --predict tug.dbc --bitrate 500000 --senders IMU,IO   (one bus of a shared DBC)
@@ -27,14 +33,50 @@ message's own earlier frames in the busy period, each frame at its longest stuff
 Periods from GenMsgCycleTime; spontaneous messages (GenMsgSendType) use GenMsgDelayTime as their
 minimum interval; deadlines from GenMsgDeadline, else the cycle time; GenMsgJitter overrides
 --jitter (all in ms). Bus errors are not counted. Exit status 1 when a message can miss its
-deadline or could not be analysed, with --strict.")]
+deadline or could not be analysed, with --strict.
+
+From logs (any format, several merged in time order): the command's heartbeat counter to its
+echo in the feedback; each setpoint step to the actual value's 10/50/90 % crossings (the
+10 % one is the dead time), rise, settling and overshoot; every message's cycle time, jitter
+and late gaps against the DBC's GenMsgCycleTime; and, with --transfer, how long a frame takes
+from one channel to another (the same identifier and data). A profile names the echo and the
+steering and speed pairs by role.")]
 pub struct Args {
-    /// Predict from this DBC's messages (no bus, no log).
-    #[arg(long, value_name = "DBC", required = true)]
-    predict: PathBuf,
-    /// Nominal bitrate in bit/s.
+    /// Logs to analyse (candump, ASC, BLF, TRC, pcapng, MCAP, MF4, Parquet).
+    #[arg(conflicts_with = "predict")]
+    logs: Vec<PathBuf>,
+    /// A vehicle profile (built in, e.g. reference-tug, or a TOML file): its DBC, the
+    /// command's counter and echo, and the steering and speed setpoint/actual pairs.
+    #[arg(long, conflicts_with = "dbc")]
+    profile: Option<String>,
+    /// The DBC of the logs (without a profile).
     #[arg(long)]
-    bitrate: u32,
+    dbc: Option<PathBuf>,
+    /// COMMAND.COUNTER=FEEDBACK.ECHO: the counter and its echo.
+    #[arg(long, value_name = "CMD.SIGNAL=FB.SIGNAL")]
+    echo: Option<String>,
+    /// SETPOINT=ACTUAL (MESSAGE.SIGNAL each): measure the actual's response to each setpoint
+    /// step. Repeatable; replaces the profile's pairs.
+    #[arg(long, value_name = "MSG.SIGNAL=MSG.SIGNAL")]
+    response: Vec<String>,
+    /// The smallest setpoint change that is a step (in the setpoint's unit).
+    #[arg(long, default_value_t = 0.5)]
+    step_min: f64,
+    /// Longest a step's response is followed, s (it ends sooner at the next step).
+    #[arg(long, default_value = "5", value_parser = numbers::positive_seconds)]
+    step_window: f64,
+    /// FROM=TO: channels between which identical frames are matched. Repeatable.
+    #[arg(long, value_name = "FROM=TO")]
+    transfer: Vec<String>,
+    /// Longest an echo or a transfer may take to count, ms.
+    #[arg(long, default_value = "1000", value_parser = numbers::milliseconds)]
+    window: f64,
+    /// Predict from this DBC's messages (no bus, no log).
+    #[arg(long, value_name = "DBC", requires = "bitrate")]
+    predict: Option<PathBuf>,
+    /// Nominal bitrate in bit/s (with --predict).
+    #[arg(long)]
+    bitrate: Option<u32>,
     /// Data-phase bitrate in bit/s, for FD messages with bit rate switching.
     #[arg(long)]
     dbitrate: Option<u32>,
@@ -93,16 +135,23 @@ struct ScheduleJson<'a> {
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    ensure!(args.bitrate > 0, "--bitrate must be above 0");
+    match (&args.predict, args.bitrate) {
+        (Some(predict), Some(bitrate)) => run_predict(args, predict, bitrate, out),
+        _ => logs::run(args, out),
+    }
+}
+
+fn run_predict(args: &Args, predict: &Path, bitrate: u32, out: &mut impl Write) -> Result<()> {
+    ensure!(bitrate > 0, "--bitrate must be above 0");
     ensure!(args.dbitrate != Some(0), "--dbitrate must be above 0");
-    let db = dbc::load(&args.predict, false)?;
+    let db = dbc::load(predict, false)?;
     for name in &args.senders {
         ensure!(
             db.messages
                 .iter()
                 .any(|m| m.transmitter == *name || m.senders.contains(name)),
             "--senders: no message of {} is sent by '{name}'",
-            args.predict.display()
+            predict.display()
         );
     }
     let wanted_ids: Vec<Option<u32>> = args
@@ -116,7 +165,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                 .iter()
                 .any(|m| m.name == *name || Some(m.id) == *id),
             "--messages: {} has no message '{name}'",
-            args.predict.display()
+            predict.display()
         );
     }
     let selected = |m: &bywire_dbc::Message| {
@@ -135,17 +184,17 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     };
     let options = schedule::Options {
         rates: Bitrates {
-            nominal: args.bitrate,
+            nominal: bitrate,
             data: args.dbitrate,
         },
         jitter: Duration::from_secs_f64(args.jitter / 1e3),
     };
     let result = schedule::analyse(&db, selected, options);
     if args.json {
-        serde_json::to_writer_pretty(&mut *out, &to_json(args, &result))?;
+        serde_json::to_writer_pretty(&mut *out, &to_json(args, bitrate, &result))?;
         writeln!(out)?;
     } else {
-        print_table(args, &result, out)?;
+        print_table(args, predict, bitrate, &result, out)?;
     }
     let misses = result.misses().count();
     if args.strict {
@@ -182,7 +231,7 @@ fn no_bound_text(why: Unbounded) -> &'static str {
     }
 }
 
-fn to_json<'a>(args: &Args, result: &'a Schedule) -> ScheduleJson<'a> {
+fn to_json<'a>(args: &Args, bitrate: u32, result: &'a Schedule) -> ScheduleJson<'a> {
     let message = |m: &'a MessageSchedule| {
         let ok = m.outcome.ok();
         MessageJson {
@@ -204,7 +253,7 @@ fn to_json<'a>(args: &Args, result: &'a Schedule) -> ScheduleJson<'a> {
         }
     };
     ScheduleJson {
-        bitrate: args.bitrate,
+        bitrate,
         data_bitrate: args.dbitrate,
         jitter_ms: args.jitter,
         utilisation_percent: result.utilisation,
@@ -222,7 +271,13 @@ fn to_json<'a>(args: &Args, result: &'a Schedule) -> ScheduleJson<'a> {
     }
 }
 
-fn print_table(args: &Args, result: &Schedule, out: &mut impl Write) -> Result<()> {
+fn print_table(
+    args: &Args,
+    predict: &Path,
+    bitrate: u32,
+    result: &Schedule,
+    out: &mut impl Write,
+) -> Result<()> {
     let data = args
         .dbitrate
         .map(|d| format!(", data phase {d} bit/s"))
@@ -230,15 +285,15 @@ fn print_table(args: &Args, result: &Schedule, out: &mut impl Write) -> Result<(
     writeln!(
         out,
         "{} at {} bit/s{data}: {} messages, worst-case utilisation {:.1} %, {} can miss their deadline",
-        args.predict.display(),
-        args.bitrate,
+        predict.display(),
+        bitrate,
         result.messages.len(),
         result.utilisation,
         result.misses().count()
     )?;
     writeln!(
         out,
-        "{:<10} {:<32} {:>9} {:>10} {:>9} {:>11} {:>10} {:>10}  verdict",
+        "{:<10} {:<32} {:>9} {:>10} {:>9} {:>11} {:>11} {:>10}  verdict",
         "id",
         "message",
         "frame µs",
@@ -278,7 +333,7 @@ fn print_table(args: &Args, result: &Schedule, out: &mut impl Write) -> Result<(
         };
         writeln!(
             out,
-            "{:<10} {:<32} {:>9.1} {:>10} {:>9.3} {:>11.3} {:>10} {:>10}  {verdict}",
+            "{:<10} {:<32} {:>9.1} {:>10} {:>9.3} {:>11.3} {:>11} {:>10}  {verdict}",
             id_text(m.id),
             m.name,
             us(m.frame_ns),
