@@ -167,8 +167,9 @@ impl Histogram {
         self.max_ns = self.max_ns.max(ns);
     }
 
-    fn percentile(&self, p: f64) -> f64 {
-        let rank = ((p * self.count as f64).ceil() as u64).max(1);
+    /// The `per_mille`th per-mille: the smallest bin holding that share of the samples.
+    fn percentile(&self, per_mille: u64) -> f64 {
+        let rank = (self.count.saturating_mul(per_mille)).div_ceil(1000).max(1);
         let mut seen = 0u64;
         for (i, &n) in self.bins.iter().enumerate() {
             seen += u64::from(n);
@@ -187,9 +188,9 @@ impl Histogram {
             min_ms: self.min_ns as f64 / 1e6,
             mean_ms: self.sum_ns as f64 / self.count as f64 / 1e6,
             max_ms: self.max_ns as f64 / 1e6,
-            p50_ms: self.percentile(0.5),
-            p90_ms: self.percentile(0.9),
-            p99_ms: self.percentile(0.99),
+            p50_ms: self.percentile(500),
+            p90_ms: self.percentile(900),
+            p99_ms: self.percentile(990),
             histogram: self
                 .bins
                 .iter()
@@ -762,7 +763,7 @@ BA_ \"GenMsgCycleTime\" BO_ 256 20;
             if k != 6 {
                 analyzer.push(ms(t + 3), "a", &frame(0x100, k, angle));
             }
-            let actual = ((t + 7).saturating_sub(140) as i16).min(100);
+            let actual = i16::try_from((t + 7).saturating_sub(140).min(100)).unwrap();
             let echo = if k == 9 { 15 } else { k };
             analyzer.push(ms(t + 7), "a", &frame(0x101, echo, actual));
         }

@@ -100,3 +100,127 @@ fn predict_refuses_what_it_cannot_do() {
         assert!(err.contains(expected), "{args:?}: {err}");
     }
 }
+
+/// Run the simulated tug (`bywire sim --fast`) for `seconds` with `scenario` into a new folder.
+fn sim_run(name: &str, scenario: &str, seconds: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("bywire-latency-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenario_path = dir.join("scenario.toml");
+    std::fs::write(&scenario_path, scenario).unwrap();
+    let out = dir.join("run");
+    let (code, _, err) = common::bywire(
+        &[
+            "sim",
+            "--fast",
+            "--no-view",
+            "--scenario",
+            scenario_path.to_str().unwrap(),
+            "--max-seconds",
+            seconds,
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    out
+}
+
+/// The ADS's commands delayed 15 ms on bus 1 only (a scenario's `delay_frames`): the copy on
+/// bus 1b is on time, so the transfer from bus 1b to bus 1 is the injected delay, within a
+/// frame time (an 8-byte frame at 500 kbit/s: ≤ 0.27 ms).
+#[test]
+fn logs_show_an_injected_delay_between_the_redundant_buses() {
+    let run = sim_run(
+        "delay",
+        "name = \"delayed\"\nroute = \"apron-loop\"\n[[event]]\nat_s = 1.0\nfault = \"delay_frames\"\nbus = \"bus1\"\nid = 0x100\ndelay_ms = 15\n",
+        "6",
+    );
+    let bus1 = run.join("bus1.log");
+    let bus1b = run.join("bus1b.log");
+    let (code, out, err) = common::bywire(
+        &[
+            "latency",
+            bus1.to_str().unwrap(),
+            bus1b.to_str().unwrap(),
+            "--profile",
+            "reference-tug",
+            "--transfer",
+            "bus1b=bus1",
+            "--json",
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let latency = &json["transfers"][0]["latency"];
+    let (p50, max) = (
+        latency["p50_ms"].as_f64().unwrap(),
+        latency["max_ms"].as_f64().unwrap(),
+    );
+    assert!((15.0..=15.27).contains(&p50), "{latency}");
+    assert!(max <= 15.27, "{latency}");
+    // Before the fault (the first second) the copies were a frame apart.
+    assert!(latency["min_ms"].as_f64().unwrap() < 0.3, "{latency}");
+    assert_eq!(json["transfers"][0]["unmatched"], 0);
+    std::fs::remove_dir_all(run.parent().unwrap()).unwrap();
+}
+
+/// The steering steps at a standstill, measured from bus 1's log (the command's setpoint
+/// against the reported front-left wheel angle, 50 Hz, 0.1° steps, from the angle sensor)
+/// agree with the simulator's own step metrics (the plant's true angle every millisecond):
+/// rise within 30 ms and 5 % settling within 150 ms (the log samples every 20 ms and ends a
+/// step at its next one), overshoot within 4 points (sensor noise on the peak).
+#[test]
+fn logged_steering_steps_agree_with_the_simulators_metrics() {
+    let run = sim_run(
+        "steps",
+        "name = \"steps\"\nroute = \"apron-loop\"\nsteering_steps = [10, -10, 0]\n",
+        "10",
+    );
+    let bus1 = run.join("bus1.log");
+    let (code, out, err) = common::bywire(
+        &[
+            "latency",
+            bus1.to_str().unwrap(),
+            "--profile",
+            "reference-tug",
+            "--response",
+            "AdsToVehicle_Control.SteeringAngleCmd=VehicleToAds_WheelAngles.WheelAngleFL",
+            "--step-min",
+            "5",
+            "--step-window",
+            "3",
+            "--json",
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let ours: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
+    let theirs = metrics["steering_steps"].as_array().unwrap();
+    let steps = ours["responses"][0]["steps"].as_array().unwrap();
+    assert_eq!(theirs.len(), 3);
+    assert!(steps.len() >= 3, "{steps:?}");
+    for (ours, theirs) in steps.iter().zip(theirs) {
+        let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+        assert_eq!(f(ours, "from"), f(theirs, "from_deg"));
+        assert_eq!(f(ours, "to"), f(theirs, "to_deg"));
+        assert!(
+            (f(ours, "rise_s") - f(theirs, "rise_s")).abs() < 0.03,
+            "{ours} {theirs}"
+        );
+        assert!(
+            (f(ours, "settling_5_s") - f(theirs, "settling_5_s")).abs() < 0.15,
+            "{ours} {theirs}"
+        );
+        assert!(
+            (f(ours, "overshoot_percent") - f(theirs, "overshoot_percent")).abs() < 4.0,
+            "{ours} {theirs}"
+        );
+        assert!(f(ours, "dead_time_s") > 0.0 && f(ours, "dead_time_s") < f(ours, "t90_s"));
+    }
+    std::fs::remove_dir_all(run.parent().unwrap()).unwrap();
+}
