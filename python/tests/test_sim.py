@@ -27,6 +27,17 @@ def test_a_run_writes_the_same_logs_as_the_command_line(tmp_path):
         assert ours.report[key] == cli[key], key
     assert ours.report["sim_seconds"] == pytest.approx(8.0)
     assert sorted(ours.bus_logs) == ["bus1", "bus1b", "bus2", "bus3"]
+    # The ground truth too, and it opens in pandas and polars alike.
+    truth = tmp_path / "py" / "truth.csv"
+    assert str(truth) in ours.files
+    assert (tmp_path / "cli" / "truth.csv").read_bytes() == truth.read_bytes()
+    import pandas
+    import polars
+
+    frame = pandas.read_csv(truth)
+    assert len(frame) == 800 and frame["t_s"].iloc[-1] == pytest.approx(8.0)
+    assert set(frame["steering_mode"].dropna()) <= {"normal", "crab", "tank"}
+    assert polars.read_csv(truth).columns == list(frame.columns)
 
 
 def test_seeds_and_payloads_change_the_run(tmp_path):

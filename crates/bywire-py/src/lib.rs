@@ -968,6 +968,13 @@ fn run_sim(
         writer.flush().map_err(|e| io(&path, e))?;
         files.push(path.display().to_string());
     }
+    let path = out.join("truth.csv");
+    let mut truth =
+        std::io::BufWriter::new(std::fs::File::create(&path).map_err(|e| io(&path, e))?);
+    bywire_sim::truth::write_csv(&tug.truth, &mut truth)
+        .and_then(|()| std::io::Write::flush(&mut truth))
+        .map_err(|e| io(&path, e))?;
+    files.push(path.display().to_string());
     let json =
         serde_json::to_string_pretty(&report).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let path = out.join("metrics.json");

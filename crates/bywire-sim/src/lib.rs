@@ -17,6 +17,7 @@
 //! - [`attacker`]: a node on bus 1 without the key: forged and replayed commands, a forged
 //!   speed toward the ADS, a flood of identifier 0x000;
 //! - [`report`]: a run's report (what `metrics.json` holds), with serde;
+//! - [`truth`]: the plant's true state every 10 ms as CSV (`truth.csv`);
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
 
@@ -44,5 +45,6 @@ pub mod report;
 pub mod rng;
 pub mod scenario;
 pub mod steering;
+pub mod truth;
 pub mod tug;
 pub mod vehicle;

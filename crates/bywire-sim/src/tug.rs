@@ -26,7 +26,7 @@ use bywire_bus::sim::{BusEvent, NodeId, Tamper};
 use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, Mode};
 use bywire_canopen::device::Device;
-use bywire_control::kinematics::{Point, Pose};
+use bywire_control::kinematics::{Point, Pose, Twist};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_control::path::Path;
 use bywire_core::filter::{ErrorMask, Filter};
@@ -266,6 +266,24 @@ pub struct Sample {
     pub busy_ns: [u64; 4],
 }
 
+/// The plant's true state, every 10 ms: what a dataset's ground truth holds beside what the
+/// buses show.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthSample {
+    /// When.
+    pub t: Timestamp,
+    /// The true pose.
+    pub pose: Pose,
+    /// The body's motion: forward and leftward speed (m/s), yaw rate (rad/s).
+    pub twist: Twist,
+    /// Each wheel's angle (FL, FR, RL, RR), degrees.
+    pub wheel_angles_deg: [f64; 4],
+    /// Each wheel's rolling speed (FL, FR, RL, RR), m/s.
+    pub wheel_speeds: [f64; 4],
+    /// The steering mode of the command the ECU follows (`None`: no command yet).
+    pub steering_mode: Option<SteeringMode>,
+}
+
 /// Each bus's load (bus 1, 2, 3, 1b; 0–1) over windows of `window` consecutive samples of
 /// `trace`, stamped at each window's end: what the buses carried over the run.
 pub fn windowed_loads(trace: &[Sample], window: usize) -> [Vec<(Timestamp, f64)>; 4] {
@@ -419,6 +437,8 @@ pub struct Tug {
     pub events: Vec<SimEvent>,
     /// The state every 50 ms.
     pub trace: Vec<Sample>,
+    /// The plant's true state every 10 ms.
+    pub truth: Vec<TruthSample>,
     /// Faults active until their end time (`None`: for good).
     active: Vec<(Fault, Option<Timestamp>)>,
     last_seen: (Watchdog, EstopState, ControlMode),
@@ -658,6 +678,7 @@ impl Tug {
             tracking_errors: Vec::new(),
             events: Vec::new(),
             trace: Vec::new(),
+            truth: Vec::new(),
             active: Vec::new(),
             last_seen: (
                 Watchdog::FullBraking,
@@ -1118,6 +1139,20 @@ impl Tug {
                     .abs();
                 self.tracking_errors.push(error);
             }
+        }
+        if now.as_nanos().is_multiple_of(10_000_000) {
+            self.truth.push(TruthSample {
+                t: now,
+                pose,
+                twist: self.chassis.twist(),
+                wheel_angles_deg: core::array::from_fn(|i| {
+                    self.corners
+                        .get(i)
+                        .map_or(0.0, |c| c.chain.wheel_angle_deg())
+                }),
+                wheel_speeds: self.chassis.wheel_speeds(),
+                steering_mode: self.ecu.supervisor().command().map(|c| c.steering_mode),
+            });
         }
         if now.as_nanos().is_multiple_of(50_000_000) {
             let steering_actual = self

@@ -139,6 +139,7 @@ fn logs_show_an_injected_delay_between_the_redundant_buses() {
     );
     let bus1 = run.join("bus1.log");
     let bus1b = run.join("bus1b.log");
+    let plot = run.join("latency.png");
     let (code, out, err) = common::bywire(
         &[
             "latency",
@@ -149,10 +150,18 @@ fn logs_show_an_injected_delay_between_the_redundant_buses() {
             "--transfer",
             "bus1b=bus1",
             "--json",
+            "--plot",
+            plot.to_str().unwrap(),
         ],
         "",
     );
     assert_eq!(code, 0, "{err}");
+    let png = std::fs::read(&plot).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 10_000,
+        "{}",
+        png.len()
+    );
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
     let latency = &json["transfers"][0]["latency"];
     let (p50, max) = (
@@ -223,4 +232,40 @@ fn logged_steering_steps_agree_with_the_simulators_metrics() {
         assert!(f(ours, "dead_time_s") > 0.0 && f(ours, "dead_time_s") < f(ours, "t90_s"));
     }
     std::fs::remove_dir_all(run.parent().unwrap()).unwrap();
+}
+
+#[test]
+fn logs_mode_refuses_bad_options_with_their_names() {
+    let log = std::env::temp_dir().join(format!("bywire-latency-bad-{}.log", std::process::id()));
+    std::fs::write(&log, "(1.000000) can0 100#00\n").unwrap();
+    let log = log.to_str().unwrap();
+    for (args, expected) in [
+        (vec![log], "give --profile or --dbc"),
+        (
+            vec![log, "--profile", "reference-tug", "--echo", "Nope"],
+            "--echo 'Nope': expected MESSAGE.SIGNAL=MESSAGE.SIGNAL",
+        ),
+        (
+            vec![log, "--profile", "reference-tug", "--response", "A.B=C.D"],
+            "A.B: the DBC has no message 'A'",
+        ),
+        (
+            vec![log, "--profile", "reference-tug", "--transfer", "can0"],
+            "--transfer 'can0': expected FROM=TO",
+        ),
+        (
+            vec![log, "--profile", "reference-tug", "--plot", "x.gif"],
+            "the image must end in .png or .svg",
+        ),
+        (
+            vec![log, "--profile", "reference-tug", "--plot", "x.png"],
+            "nothing to plot",
+        ),
+    ] {
+        let all = [&["latency"][..], &args[..]].concat();
+        let (code, _, err) = common::bywire(&all, "");
+        assert_ne!(code, 0, "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+    std::fs::remove_file(log).unwrap();
 }

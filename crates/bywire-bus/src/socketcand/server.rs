@@ -26,7 +26,9 @@ use crate::{Bus, BusError, BusRx, BusTx};
 pub const CLIENT_QUEUE: usize = 8192;
 
 /// How long after acknowledging `< rawmode >` frames start to flow (see [`Effect::HoldFrames`]).
-const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
+// Long enough for a client on a loaded machine to read the reply first (a reader 50 ms late
+// saw the first frames in the same chunk); frames are held, never dropped.
+const RAW_MODE_GRACE: Duration = Duration::from_millis(250);
 /// How often blocked reads wake to see whether the server stops or a session timed out.
 const POLL: Duration = Duration::from_millis(200);
 /// The kernel's send buffer for each client (a second of a full 1 Mbit/s bus as text).

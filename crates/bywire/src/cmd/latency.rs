@@ -71,6 +71,9 @@ pub struct Args {
     /// Longest an echo or a transfer may take to count, ms.
     #[arg(long, default_value = "1000", value_parser = numbers::milliseconds)]
     window: f64,
+    /// Draw the latency histograms (echo, transfers) to this .png or .svg.
+    #[arg(long, value_name = "FILE")]
+    plot: Option<PathBuf>,
     /// Predict from this DBC's messages (no bus, no log).
     #[arg(long, value_name = "DBC", requires = "bitrate")]
     predict: Option<PathBuf>,

@@ -16,7 +16,9 @@ use crate::support::sim_serve::Shared;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused, response times per identifier),
+truth.csv (the plant's true pose, motion, wheel angles and speeds and steering mode every
+10 ms, on the logs' clock) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -152,6 +154,12 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }
         writer.flush()?;
     }
+    let truth = args.out.join("truth.csv");
+    crate::support::files::write_atomically(&truth, |tmp| {
+        let mut file = std::io::BufWriter::new(std::fs::File::create(tmp)?);
+        bywire_sim::truth::write_csv(&tug.truth, &mut file)?;
+        file.flush().with_context(|| format!("{}", truth.display()))
+    })?;
     let report = RunReport::of(&tug, &scenario.name, args.seed, completed, start.elapsed());
     crate::plot::sim::write(&tug, &args.out.join("run.png"))?;
     let path = args.out.join("metrics.json");

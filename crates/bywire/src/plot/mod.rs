@@ -6,6 +6,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+pub mod latency;
 pub mod sim;
 
 const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");

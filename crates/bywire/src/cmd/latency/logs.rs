@@ -57,6 +57,17 @@ fn config(args: &Args) -> Result<(Decoder, Config)> {
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    if let Some(plot) = &args.plot {
+        let extension = plot
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        anyhow::ensure!(
+            matches!(extension.as_deref(), Some("png" | "svg")),
+            "--plot {}: the image must end in .png or .svg",
+            plot.display()
+        );
+    }
     let (decoder, config) = config(args)?;
     let mut analyzer = Analyzer::new(&decoder, config)?;
     let (names, inputs): (Vec<String>, Vec<_>) = logs::inputs(&args.logs)?.into_iter().unzip();
@@ -74,6 +85,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         analyzer.push(record.timestamp, &record.interface, &record.frame);
     }
     let report = analyzer.finish();
+    if let Some(plot) = &args.plot {
+        crate::plot::latency::write(&report, plot)?;
+    }
     if args.json {
         serde_json::to_writer_pretty(&mut *out, &to_json(&report)).context("writing JSON")?;
         writeln!(out)?;
