@@ -941,45 +941,16 @@ fn run_sim(
     let limit = std::time::Duration::from_secs_f64(max_seconds).as_nanos();
     let limit = Timestamp::from_nanos(u64::try_from(limit).unwrap_or(u64::MAX));
     let wall = std::time::Instant::now();
-    let completed = loop {
-        scenario.step(&mut tug);
-        if tug.arrived() {
-            break true;
-        }
-        if tug.now() >= limit {
-            break false;
-        }
-    };
+    let completed = scenario.run_fast(&mut tug, limit);
     let report =
         bywire_sim::report::RunReport::of(&tug, &scenario.name, seed, completed, wall.elapsed());
-    let io =
-        |path: &Path, e: std::io::Error| PyOSError::new_err(format!("{}: {e}", path.display()));
-    std::fs::create_dir_all(&out).map_err(|e| io(&out, e))?;
-    let mut files = Vec::new();
-    for (name, log) in tug.bus_logs() {
-        let path = out.join(format!("{name}.log"));
-        let file = std::fs::File::create(&path).map_err(|e| io(&path, e))?;
-        let mut writer = bywire_log::Writer::new(std::io::BufWriter::new(file));
-        for (timestamp, frame) in log {
-            writer
-                .write(*timestamp, name, frame)
-                .map_err(|e| io(&path, e))?;
-        }
-        writer.flush().map_err(|e| io(&path, e))?;
-        files.push(path.display().to_string());
-    }
-    let path = out.join("truth.csv");
-    let mut truth =
-        std::io::BufWriter::new(std::fs::File::create(&path).map_err(|e| io(&path, e))?);
-    bywire_sim::truth::write_csv(&tug.truth, &mut truth)
-        .and_then(|()| std::io::Write::flush(&mut truth))
-        .map_err(|e| io(&path, e))?;
-    files.push(path.display().to_string());
+    let files = bywire_sim::output::write_run(&tug, &report, &out)
+        .map_err(|e| PyOSError::new_err(e.to_string()))?
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
     let json =
         serde_json::to_string_pretty(&report).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    let path = out.join("metrics.json");
-    std::fs::write(&path, format!("{json}\n")).map_err(|e| io(&path, e))?;
-    files.push(path.display().to_string());
     Ok((json, files))
 }
 

@@ -18,6 +18,7 @@
 //!   speed toward the ADS, a flood of identifier 0x000;
 //! - [`report`]: a run's report (what `metrics.json` holds), with serde;
 //! - [`truth`]: the plant's true state every 10 ms as CSV (`truth.csv`);
+//! - [`output`]: a run's files (bus logs, truth, metrics); [`sweep`]: many runs on all cores;
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
 
@@ -41,10 +42,12 @@ pub mod chassis;
 pub mod drive;
 pub mod mission;
 pub mod nodes;
+pub mod output;
 pub mod report;
 pub mod rng;
 pub mod scenario;
 pub mod steering;
+pub mod sweep;
 pub mod truth;
 pub mod tug;
 pub mod vehicle;

@@ -421,6 +421,20 @@ impl Scenario {
         }
     }
 
+    /// Drive `tug` through the scenario as fast as possible until the route is done (`true`)
+    /// or the simulated time reaches `limit` (`false`).
+    pub fn run_fast(&self, tug: &mut Tug, limit: Timestamp) -> bool {
+        loop {
+            self.step(tug);
+            if tug.arrived() {
+                return true;
+            }
+            if tug.now() >= limit {
+                return false;
+            }
+        }
+    }
+
     /// One step of `tug`, with what the scenario injects in it (events after the step's
     /// start, at or before its end).
     pub fn step(&self, tug: &mut Tug) {

@@ -729,3 +729,94 @@ fn the_example_stand_approach_scenario_runs_as_described() {
     assert!(at("stop", "at 35.0 m") > reset);
     assert!(at("steering_mode", "Crab") < at("steering_mode", "Tank"));
 }
+
+/// `sim --sweep`: every combination in its own folder, the same files a single run writes
+/// (runs are deterministic whatever the threads), and a summary row per run.
+#[test]
+fn a_sweep_runs_every_combination_as_single_runs_do() {
+    let dir = std::env::temp_dir().join(format!("bywire-sweep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let sweep = dir.join("sweep");
+    let (code, out, err) = common::bywire(
+        &[
+            "sim",
+            "--sweep",
+            "apron-loop,fault-tour",
+            "--seeds",
+            "3..4",
+            "--payloads",
+            "0,2000",
+            "--max-seconds",
+            "4",
+            "--jobs",
+            "2",
+            "--out",
+            sweep.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("8 runs on 2 threads"), "{out}");
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with('[')).count(),
+        8,
+        "{err}"
+    );
+    let summary = std::fs::read_to_string(sweep.join("sweep.csv")).unwrap();
+    let rows: Vec<&str> = summary.lines().skip(1).collect();
+    assert_eq!(rows.len(), 8);
+    assert!(rows[0].starts_with("apron-loop_seed3_payload0_grade0,apron-loop,3,0,0,false,4,"));
+    assert!(rows.iter().all(|r| r.ends_with(',')), "{summary}");
+    // One of them against a single run with the same seed and payload.
+    let single = dir.join("single");
+    let (code, _, err) = common::bywire(
+        &[
+            "sim",
+            "--fast",
+            "--no-view",
+            "--scenario",
+            "fault-tour",
+            "--seed",
+            "4",
+            "--payload",
+            "2000",
+            "--max-seconds",
+            "4",
+            "--out",
+            single.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let swept = sweep.join("fault-tour_seed4_payload2000_grade0");
+    for file in ["bus1.log", "bus2.log", "bus3.log", "bus1b.log", "truth.csv"] {
+        assert_eq!(
+            std::fs::read(swept.join(file)).unwrap(),
+            std::fs::read(single.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+    for (args, expected) in [
+        (vec!["--seeds", "5..2"], "2 is below 5"),
+        (vec!["--seeds", "x"], "expected A..B"),
+        (vec!["--grades", "0.5"], "−0.2 to 0.2"),
+        (vec!["--payloads", "9000"], "0 to 4500 kg"),
+        (vec!["--jobs", "0"], "--jobs 0"),
+    ] {
+        let all = [
+            &[
+                "sim",
+                "--sweep",
+                "apron-loop",
+                "--out",
+                sweep.to_str().unwrap(),
+            ][..],
+            &args[..],
+        ]
+        .concat();
+        let (code, _, err) = common::bywire(&all, "");
+        assert_ne!(code, 0, "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -7,7 +7,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_core::Timestamp;
-use bywire_log::candump::Writer;
 use bywire_sim::report::RunReport;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Tug, TugBus};
@@ -64,6 +63,28 @@ pub struct Args {
     /// bus3=socketcand:HOST:PORT/NAME; any bus argument. Repeatable.
     #[arg(long, value_name = "BUS=BUSARG")]
     attach: Vec<String>,
+    /// Sweep: run these scenarios (comma-separated; built in or files) × --seeds × --payloads
+    /// × --grades as fast as possible on --jobs threads, each into its own folder under --out,
+    /// with sweep.csv summarising the runs.
+    #[arg(long, value_name = "SCENARIOS", value_delimiter = ',', conflicts_with_all = ["serve", "attach", "linger"])]
+    sweep: Vec<String>,
+    /// The sweep's seeds: A..B (inclusive) or one seed.
+    #[arg(long, value_name = "A..B", requires = "sweep")]
+    seeds: Option<String>,
+    /// The sweep's payloads, kg (comma-separated; default: each scenario's).
+    #[arg(long, value_delimiter = ',', requires = "sweep")]
+    payloads: Vec<f64>,
+    /// The sweep's grades, rise over run (comma-separated; default: each scenario's).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        requires = "sweep",
+        allow_hyphen_values = true
+    )]
+    grades: Vec<f64>,
+    /// Runs at once (default: the machine's cores).
+    #[arg(long, requires = "sweep")]
+    jobs: Option<usize>,
     /// Drive the tug over ROS 2 instead of the built-in mission: the Autoware vehicle
     /// interface takes the ADS's place on bus 1 and 1b (as `bywire ros2 vehicle`; see its
     /// --help for the topics), and the true pose goes to /localization/kinematic_state
@@ -76,19 +97,25 @@ pub struct Args {
     node: crate::support::ros2::NodeArgs,
 }
 
-pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let scenario = match Scenario::builtin(&args.scenario) {
-        Some(scenario) => scenario,
-        None if std::path::Path::new(&args.scenario).is_file() => {
-            let text = std::fs::read_to_string(&args.scenario)
-                .with_context(|| format!("--scenario {}", args.scenario))?;
-            Scenario::parse(&text, &args.scenario)?
+/// A built-in scenario or one from a file.
+fn load_scenario(name: &str, option: &str) -> Result<Scenario> {
+    match Scenario::builtin(name) {
+        Some(scenario) => Ok(scenario),
+        None if std::path::Path::new(name).is_file() => {
+            let text = std::fs::read_to_string(name).with_context(|| format!("{option} {name}"))?;
+            Ok(Scenario::parse(&text, name)?)
         }
-        None => bail!(
-            "--scenario {}: not a built-in scenario (apron-loop, fault-tour) nor a file",
-            args.scenario
-        ),
-    };
+        None => {
+            bail!("{option} {name}: not a built-in scenario (apron-loop, fault-tour) nor a file")
+        }
+    }
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    if !args.sweep.is_empty() {
+        return sweep(args, out);
+    }
+    let scenario = load_scenario(&args.scenario, "--scenario")?;
     let payload = args.payload.unwrap_or(scenario.tug.payload);
     if !(0.0..=4_500.0).contains(&payload) {
         bail!("--payload {payload}: 0 to 4500 kg");
@@ -145,35 +172,102 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     } else {
         run_plain(&mut tug, &scenario, args, limit, start, &mut shared, out)?
     };
-    for (name, log) in tug.bus_logs() {
-        let path = args.out.join(format!("{name}.log"));
-        let file = std::fs::File::create(&path).with_context(|| format!("{}", path.display()))?;
-        let mut writer = Writer::new(std::io::BufWriter::new(file));
-        for (timestamp, frame) in log {
-            writer.write(*timestamp, name, frame)?;
-        }
-        writer.flush()?;
-    }
-    let truth = args.out.join("truth.csv");
-    crate::support::files::write_atomically(&truth, |tmp| {
-        let mut file = std::io::BufWriter::new(std::fs::File::create(tmp)?);
-        bywire_sim::truth::write_csv(&tug.truth, &mut file)?;
-        file.flush().with_context(|| format!("{}", truth.display()))
-    })?;
     let report = RunReport::of(&tug, &scenario.name, args.seed, completed, start.elapsed());
     crate::plot::sim::write(&tug, &args.out.join("run.png"))?;
-    let path = args.out.join("metrics.json");
-    // Whole or not at all: a reader never finds half a file.
-    crate::support::files::write_atomically(&path, |tmp| {
-        std::fs::write(tmp, serde_json::to_string_pretty(&report)? + "\n")
-            .with_context(|| format!("{}", path.display()))
-    })?;
+    bywire_sim::output::write_run(&tug, &report, &args.out)?;
     if let Some(summary) = shared.summary() {
         writeln!(out, "socketcand: {summary}")?;
     }
     let (tracking, load) = (report.tracking_error_m, report.bus_load);
     writeln!(out, "{} after {:.1} s: tracking error max {:.2} m, mean {:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
         if completed { "route completed" } else { "stopped" }, report.sim_seconds, tracking.max, tracking.mean, load.bus1 * 100.0, load.bus2 * 100.0, load.bus3 * 100.0, args.out.display())?;
+    Ok(())
+}
+
+/// `--sweep`: every combination on `--jobs` threads, a line per finished run, sweep.csv.
+fn sweep(args: &Args, out: &mut impl Write) -> Result<()> {
+    let scenarios: Vec<Scenario> = args
+        .sweep
+        .iter()
+        .map(|name| load_scenario(name, "--sweep"))
+        .collect::<Result<_>>()?;
+    let seeds = match args.seeds.as_deref() {
+        None => args.seed..=args.seed,
+        Some(text) => {
+            let (a, b) = text.split_once("..").unwrap_or((text, text));
+            let parse = |s: &str| {
+                s.trim()
+                    .parse::<u64>()
+                    .map_err(|_| anyhow!("--seeds {text}: expected A..B or one seed"))
+            };
+            let (a, b) = (parse(a)?, parse(b)?);
+            if b < a {
+                bail!("--seeds {text}: {b} is below {a}");
+            }
+            a..=b
+        }
+    };
+    for &payload in &args.payloads {
+        if !(0.0..=4_500.0).contains(&payload) {
+            bail!("--payloads {payload}: 0 to 4500 kg");
+        }
+    }
+    for &grade in &args.grades {
+        if !(-0.2..=0.2).contains(&grade) {
+            bail!("--grades {grade}: −0.2 to 0.2 (rise over run)");
+        }
+    }
+    let jobs = bywire_sim::sweep::jobs(&scenarios, seeds, &args.payloads, &args.grades);
+    if jobs.len() > 100_000 {
+        bail!("the sweep has {} runs; at most 100000", jobs.len());
+    }
+    let threads = args.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    if threads == 0 || threads > 256 {
+        bail!("--jobs {threads}: 1 to 256");
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
+    let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
+    let start = Instant::now();
+    let total = jobs.len();
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let report_line = |index: usize, outcome: &bywire_sim::sweep::Outcome| {
+        let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        let name = jobs.get(index).map(|j| j.folder()).unwrap_or_default();
+        let what = match outcome {
+            Ok((_, r)) => format!(
+                "{} after {:.1} s",
+                if r.completed { "completed" } else { "stopped" },
+                r.sim_seconds
+            ),
+            Err(e) => format!("failed: {e}"),
+        };
+        // Progress goes to standard error; the summary is the file.
+        let _ = writeln!(std::io::stderr(), "[{n}/{total}] {name}: {what}");
+    };
+    let outcomes = bywire_sim::sweep::run(&jobs, threads, limit, &args.out, &report_line);
+    let wall = start.elapsed().as_secs_f64();
+    let mut csv = String::from(bywire_sim::sweep::SUMMARY_COLUMNS);
+    csv.push('\n');
+    for (job, outcome) in jobs.iter().zip(&outcomes) {
+        csv.push_str(&bywire_sim::sweep::summary_row(job, outcome));
+        csv.push('\n');
+    }
+    let path = args.out.join("sweep.csv");
+    crate::support::files::write_atomically(&path, |tmp| {
+        std::fs::write(tmp, &csv).with_context(|| format!("{}", path.display()))
+    })?;
+    let failed = outcomes.iter().filter(|o| o.is_err()).count();
+    writeln!(
+        out,
+        "{total} runs on {threads} threads in {wall:.1} s ({:.1} runs per minute); {failed} failed; summary in {}",
+        total as f64 / wall.max(1e-9) * 60.0,
+        path.display()
+    )?;
+    if failed > 0 {
+        bail!("{failed} of {total} runs failed (see {})", path.display());
+    }
     Ok(())
 }
 

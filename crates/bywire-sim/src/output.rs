@@ -1,0 +1,46 @@
+//! A run's files in its folder: each bus's log (`bus1.log` … in candump `-L` form), the
+//! ground truth (`truth.csv`, [`crate::truth`]) and the report (`metrics.json`) — the same
+//! files whichever front end ran it (`bywire sim`, a sweep, Python).
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use crate::report::RunReport;
+use crate::tug::Tug;
+
+/// Write `tug`'s logs, truth and `report` into `dir` (created if needed); the paths written.
+/// `metrics.json` comes last, written whole or not at all: a reader that finds it finds the
+/// rest complete.
+pub fn write_run(tug: &Tug, report: &RunReport, dir: &Path) -> io::Result<Vec<PathBuf>> {
+    let named =
+        |path: &Path, e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", path.display()));
+    std::fs::create_dir_all(dir).map_err(|e| named(dir, e))?;
+    let mut written = Vec::new();
+    for (name, log) in tug.bus_logs() {
+        let path = dir.join(format!("{name}.log"));
+        let file = File::create(&path).map_err(|e| named(&path, e))?;
+        let mut writer = bywire_log::Writer::new(BufWriter::new(file));
+        for (timestamp, frame) in log {
+            writer
+                .write(*timestamp, name, frame)
+                .map_err(|e| named(&path, e))?;
+        }
+        writer.flush().map_err(|e| named(&path, e))?;
+        written.push(path);
+    }
+    let path = dir.join("truth.csv");
+    let mut truth = BufWriter::new(File::create(&path).map_err(|e| named(&path, e))?);
+    crate::truth::write_csv(&tug.truth, &mut truth)
+        .and_then(|()| truth.flush())
+        .map_err(|e| named(&path, e))?;
+    written.push(path);
+    let path = dir.join("metrics.json");
+    let json = serde_json::to_string_pretty(report).map_err(io::Error::other)?;
+    let tmp = dir.join(".metrics.json.tmp");
+    std::fs::write(&tmp, json + "\n")
+        .and_then(|()| std::fs::rename(&tmp, &path))
+        .map_err(|e| named(&path, e))?;
+    written.push(path);
+    Ok(written)
+}
