@@ -64,8 +64,12 @@ enum Command {
     Play(cmd::play::Args),
     /// Show the load of buses each second, like canbusload, per ID and against a DBC.
     Busload(cmd::busload::Args),
-    /// Latency of a bus's messages: worst-case response times predicted from a DBC.
+    /// Latency of a drive-by-wire chain from logs (echo, steps, cycle times, transfers), or
+    /// worst-case response times predicted from a DBC.
     Latency(cmd::latency::Args),
+    /// A training dataset from logs: actions and observations on a time grid, ages, episodes,
+    /// a split, the simulator's ground truth, and a dataset card.
+    Dataset(cmd::dataset::Args),
     /// Watch identifiers like cansniffer: changing bytes highlighted, rates, DBC values.
     Sniff(cmd::sniff::Args),
     /// A live table of decoded messages and signals, like cantools monitor.
@@ -146,6 +150,7 @@ fn main() -> ExitCode {
         Command::Log { command } => cmd::log::run(&command, &mut out),
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
         Command::Latency(args) => cmd::latency::run(&args, &mut out),
+        Command::Dataset(args) => cmd::dataset::run(&args, &mut out),
         Command::Uds { command } => cmd::uds::run(&command, &mut out),
         Command::Secoc { command } => cmd::secoc::run(&command, &mut out),
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),

@@ -820,3 +820,86 @@ fn a_sweep_runs_every_combination_as_single_runs_do() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `bywire dataset` refuses what it cannot do, naming the option.
+#[test]
+fn dataset_refuses_bad_input_with_its_name() {
+    let dir = std::env::temp_dir().join(format!("bywire-dataset-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("full")).unwrap();
+    std::fs::write(dir.join("full").join("x"), "x").unwrap();
+    std::fs::create_dir_all(dir.join("empty-sweep")).unwrap();
+    let log = dir.join("a.log");
+    std::fs::write(&log, "(1.000000) bus1 100#0000000000000000\n").unwrap();
+    let truth = dir.join("truth.csv");
+    std::fs::write(&truth, "t_s,x_m\n0.01,abc\n").unwrap();
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let out = path(&dir.join("out"));
+    for (args, expected) in [
+        (
+            vec![path(&log), "--out".into(), path(&dir.join("full"))],
+            "not empty",
+        ),
+        (
+            vec![
+                "--runs".into(),
+                path(&dir.join("empty-sweep")),
+                "--out".into(),
+                out.clone(),
+            ],
+            "no run folders",
+        ),
+        (
+            vec![
+                path(&log),
+                "--signal".into(),
+                "nope".into(),
+                "--out".into(),
+                out.clone(),
+            ],
+            "--signal 'nope': expected NAME=MESSAGE.SIGNAL",
+        ),
+        (
+            vec![
+                path(&log),
+                "--signal".into(),
+                "a=Imu.Nope".into(),
+                "--out".into(),
+                out.clone(),
+            ],
+            "Imu has no signal 'Nope'",
+        ),
+        (
+            vec![
+                path(&log),
+                "--truth".into(),
+                path(&truth),
+                "--out".into(),
+                out.clone(),
+            ],
+            "line 2: column 2 is not a number",
+        ),
+        (
+            vec![
+                path(&log),
+                "--validation".into(),
+                "2".into(),
+                "--out".into(),
+                out.clone(),
+            ],
+            "--validation 2",
+        ),
+    ] {
+        let all: Vec<String> = ["dataset", "--profile", "reference-tug"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(args.clone())
+            .collect();
+        let all: Vec<&str> = all.iter().map(String::as_str).collect();
+        let (code, _, err) = common::bywire(&all, "");
+        assert_ne!(code, 0, "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert!(!dir.join("out").join("dataset.parquet").exists());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -20,6 +20,7 @@
 
 pub mod decoded;
 mod footer;
+pub mod table;
 
 use std::collections::{HashMap, VecDeque};
 use std::fs::File;

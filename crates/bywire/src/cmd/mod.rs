@@ -5,6 +5,7 @@ pub mod bridge;
 pub mod busload;
 pub mod canopen;
 pub mod check;
+pub mod dataset;
 pub mod dbc;
 pub mod dump;
 pub mod gen;

@@ -1,0 +1,560 @@
+//! A training dataset from logs: on a fixed time grid, the actions (command signals by role)
+//! and observations (feedback by role), each observation with its age — the time since a frame
+//! last carried it, so a model can mask a value the bus stopped refreshing — cut into episodes
+//! at every change of control mode, steering mode or E-stop state and at gaps in the commands,
+//! and split into training and validation by episode.
+//!
+//! [`Builder`] takes records in time order and hands out rows as the grid passes them; it keeps
+//! one value and one timestamp per column, so memory does not grow with the log.
+
+use std::time::Duration;
+
+use bywire_core::{Frame, Timestamp};
+use bywire_dbc::codec::Decoded;
+use bywire_dbc::decoder::Decoder;
+
+use crate::latency::SignalRef;
+use crate::profile::Profile;
+
+/// Whether a column is something the driver did or something the vehicle showed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// A command signal.
+    Action,
+    /// A feedback signal (with its age).
+    Observation,
+}
+
+/// One column of the dataset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// Its name in the table (`action_steering`, `obs_velocity`, …).
+    pub name: String,
+    /// What it is.
+    pub role: Role,
+    /// Where it comes from.
+    pub source: SignalRef,
+    /// Its unit (from the DBC).
+    pub unit: String,
+    /// Whether a change of it starts a new episode (control mode, steering mode, E-stop).
+    pub cuts_episodes: bool,
+}
+
+/// What to build.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// The columns.
+    pub columns: Vec<Column>,
+    /// The grid's step.
+    pub step: Duration,
+    /// A command gap longer than this ends an episode (the next command starts one).
+    pub gap: Duration,
+    /// The command message whose gaps cut episodes.
+    pub command: Option<String>,
+    /// Share of episodes for validation, 0–1.
+    pub validation: f64,
+    /// Seed of the split.
+    pub seed: u64,
+}
+
+impl Config {
+    /// The actions and observations a vehicle profile names, on a grid of `rate` Hz.
+    pub fn from_profile(profile: &Profile, rate: f64) -> Config {
+        let mut columns = Vec::new();
+        let mut add = |name: &str, role: Role, message: &str, signal: &str, cuts: bool| {
+            if !signal.is_empty() {
+                columns.push(Column {
+                    name: name.to_string(),
+                    role,
+                    source: SignalRef {
+                        message: message.to_string(),
+                        signal: signal.to_string(),
+                    },
+                    unit: String::new(),
+                    cuts_episodes: cuts,
+                });
+            }
+        };
+        if let Some(c) = &profile.command {
+            for (name, signal) in [
+                ("action_steering", &c.steering),
+                ("action_velocity", &c.velocity),
+                ("action_brake", &c.brake),
+                ("action_gear", &c.gear),
+                ("action_steering_mode", &c.steering_mode),
+                ("action_control_mode", &c.control_mode),
+            ] {
+                add(name, Role::Action, &c.message, signal, false);
+            }
+        }
+        if let Some(s) = &profile.state {
+            let optional = |o: &Option<String>| o.clone().unwrap_or_default();
+            for (name, signal, cuts) in [
+                ("obs_steering", s.steering.clone(), false),
+                ("obs_velocity", s.velocity.clone(), false),
+                ("obs_gear", optional(&s.gear), false),
+                ("obs_control_mode", s.control_mode.clone(), true),
+                ("obs_steering_mode", s.steering_mode.clone(), true),
+                ("obs_estop_state", optional(&s.estop_state), true),
+                ("obs_watchdog_level", optional(&s.watchdog_level), false),
+                ("obs_driver_override", optional(&s.driver_override), false),
+            ] {
+                add(name, Role::Observation, &s.message, &signal, cuts);
+            }
+        }
+        for (prefix, wheels) in [
+            ("obs_wheel_speed", &profile.wheel_speeds),
+            ("obs_wheel_angle", &profile.wheel_angles),
+        ] {
+            if let Some(w) = wheels {
+                for (corner, signal) in ["fl", "fr", "rl", "rr"].iter().zip(&w.signals) {
+                    add(
+                        &format!("{prefix}_{corner}"),
+                        Role::Observation,
+                        &w.message,
+                        signal,
+                        false,
+                    );
+                }
+            }
+        }
+        let period = profile.command.as_ref().map_or(20, |c| c.period_ms.max(1));
+        Config {
+            columns,
+            step: Duration::from_secs_f64(1.0 / rate),
+            gap: Duration::from_millis(period.saturating_mul(5)),
+            command: profile.command.as_ref().map(|c| c.message.clone()),
+            validation: 0.2,
+            seed: 0,
+        }
+    }
+}
+
+/// Why a configuration does not fit a DBC.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ConfigError(String);
+
+/// One grid point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    /// Time since the first record, s.
+    pub t_s: f64,
+    /// The episode (from 0), `None` outside every episode (before the first command, in a gap).
+    pub episode: Option<u32>,
+    /// Whether its episode is in the validation share.
+    pub validation: bool,
+    /// Each column's last value (`NaN` before the first).
+    pub values: Vec<f64>,
+    /// Each column's age, s: since a frame last carried it (`NaN` before the first).
+    pub ages: Vec<f64>,
+}
+
+/// One episode as the rows show it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Episode {
+    /// Its number.
+    pub index: u32,
+    /// Its first and last rows' times, s.
+    pub start_s: f64,
+    /// Its last row's time, s.
+    pub end_s: f64,
+    /// Its rows.
+    pub rows: u64,
+    /// Whether it is in the validation share.
+    pub validation: bool,
+}
+
+/// What a build saw.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Summary {
+    /// Records read.
+    pub records: u64,
+    /// Rows written.
+    pub rows: u64,
+    /// Rows outside every episode.
+    pub rows_outside: u64,
+    /// The episodes with at least one row, in order.
+    pub episodes: Vec<Episode>,
+}
+
+/// Where a column's signal is.
+struct Located {
+    raw: u32,
+    extended: bool,
+    index: usize,
+}
+
+/// The streaming builder.
+pub struct Builder<'a> {
+    decoder: &'a Decoder,
+    config: Config,
+    located: Vec<Located>,
+    command: Option<(u32, bool)>,
+    values: Vec<f64>,
+    seen: Vec<Option<u64>>,
+    decoded: Vec<Option<Decoded>>,
+    first: Option<u64>,
+    last: Option<u64>,
+    next_row: u64,
+    step_ns: u64,
+    last_command: Option<u64>,
+    episode: Option<u32>,
+    episodes: u32,
+    summary: Summary,
+}
+
+impl<'a> Builder<'a> {
+    /// A builder of `config`'s columns from `decoder`'s messages; an error names a signal the
+    /// DBC lacks. Units come from the DBC.
+    pub fn new(decoder: &'a Decoder, mut config: Config) -> Result<Builder<'a>, ConfigError> {
+        let db = decoder.database();
+        let mut located = Vec::new();
+        for column in &mut config.columns {
+            let s = &column.source;
+            let message = db.message_by_name(&s.message).ok_or_else(|| {
+                ConfigError(format!("{s}: the DBC has no message '{}'", s.message))
+            })?;
+            let index = message
+                .signals
+                .iter()
+                .position(|sig| sig.name == s.signal)
+                .ok_or_else(|| {
+                    ConfigError(format!("{s}: {} has no signal '{}'", s.message, s.signal))
+                })?;
+            if let Some(signal) = message.signals.get(index) {
+                column.unit = signal.unit.clone();
+            }
+            located.push(Located {
+                raw: message.id,
+                extended: message.extended,
+                index,
+            });
+        }
+        let command = match &config.command {
+            Some(name) => Some(
+                db.message_by_name(name)
+                    .map(|m| (m.id, m.extended))
+                    .ok_or_else(|| {
+                        ConfigError(format!("the DBC has no command message '{name}'"))
+                    })?,
+            ),
+            None => None,
+        };
+        let step_ns = u64::try_from(config.step.as_nanos())
+            .unwrap_or(u64::MAX)
+            .max(1_000);
+        let n = config.columns.len();
+        let most = db
+            .messages
+            .iter()
+            .map(|m| m.signals.len())
+            .max()
+            .unwrap_or(0);
+        Ok(Builder {
+            decoder,
+            config,
+            located,
+            command,
+            values: vec![f64::NAN; n],
+            seen: vec![None; n],
+            decoded: vec![None; most],
+            first: None,
+            last: None,
+            next_row: 0,
+            step_ns,
+            last_command: None,
+            episode: None,
+            episodes: 0,
+            summary: Summary::default(),
+        })
+    }
+
+    /// Number this builder's episodes from `first` (several runs in one table).
+    pub fn offset_episodes(&mut self, first: u32) {
+        self.episodes = first;
+    }
+
+    /// The columns (with their units).
+    pub fn columns(&self) -> &[Column] {
+        &self.config.columns
+    }
+
+    /// The next record (in time order); `row` is given each grid point it passes.
+    pub fn push(&mut self, at: Timestamp, frame: &Frame, row: &mut dyn FnMut(Row)) {
+        let Some(id) = frame.id() else { return };
+        let now = at.as_nanos();
+        let first = *self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.summary.records += 1;
+        // Grid points before this record see the state before it.
+        while first.saturating_add(self.next_row.saturating_mul(self.step_ns)) < now {
+            self.emit(first, row);
+        }
+        let (raw, extended) = (id.as_raw(), id.is_extended());
+        if self.command == Some((raw, extended)) {
+            let gap = u64::try_from(self.config.gap.as_nanos()).unwrap_or(u64::MAX);
+            if self.last_command.is_none_or(|last| now - last > gap) {
+                self.start_episode();
+            }
+            self.last_command = Some(now);
+        }
+        if !self
+            .located
+            .iter()
+            .any(|l| l.raw == raw && l.extended == extended)
+        {
+            return;
+        }
+        let Some((_, _, codec)) = self.decoder.message_with_id(raw, extended) else {
+            return;
+        };
+        self.decoded.iter_mut().for_each(|d| *d = None);
+        if codec.decode(frame.data(), &mut self.decoded).is_err() {
+            return;
+        }
+        let mut cut = false;
+        for (i, l) in self.located.iter().enumerate() {
+            if l.raw != raw || l.extended != extended {
+                continue;
+            }
+            let Some(value) = self.decoded.get(l.index).copied().flatten() else {
+                continue;
+            };
+            let value = value.physical.as_f64();
+            if let (Some(old), Some(column)) = (self.values.get_mut(i), self.config.columns.get(i))
+            {
+                cut |= column.cuts_episodes && !old.is_nan() && *old != value;
+                *old = value;
+            }
+            if let Some(seen) = self.seen.get_mut(i) {
+                *seen = Some(now);
+            }
+        }
+        if cut && self.episode.is_some() {
+            self.start_episode();
+        }
+    }
+
+    fn start_episode(&mut self) {
+        self.episode = Some(self.episodes);
+        self.episodes = self.episodes.saturating_add(1);
+    }
+
+    /// Whether episode `e` is for validation: a hash of it and the seed against the share.
+    fn validation(&self, episode: u32) -> bool {
+        let mut x = (u64::from(episode) ^ self.config.seed.rotate_left(17))
+            .wrapping_add(0x9E37_79B9_7F4A_7C15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        x ^= x >> 31;
+        let share = (x >> 11) as f64 / (1u64 << 53) as f64;
+        share < self.config.validation
+    }
+
+    fn emit(&mut self, first: u64, row: &mut dyn FnMut(Row)) {
+        let t = first.saturating_add(self.next_row.saturating_mul(self.step_ns));
+        self.next_row += 1;
+        let gap = u64::try_from(self.config.gap.as_nanos()).unwrap_or(u64::MAX);
+        // In a command gap the episode has ended.
+        if self.command.is_some() && self.last_command.is_none_or(|last| t - last.min(t) > gap) {
+            self.episode = None;
+        }
+        let episode = self.episode;
+        let validation = episode.is_some_and(|e| self.validation(e));
+        let ages = self
+            .seen
+            .iter()
+            .map(|s| s.map_or(f64::NAN, |s| t.saturating_sub(s) as f64 / 1e9))
+            .collect();
+        let t_s = (t - first) as f64 / 1e9;
+        match (episode, self.summary.episodes.last_mut()) {
+            (Some(e), Some(last)) if last.index == e => {
+                last.end_s = t_s;
+                last.rows += 1;
+            }
+            (Some(e), _) => self.summary.episodes.push(Episode {
+                index: e,
+                start_s: t_s,
+                end_s: t_s,
+                rows: 1,
+                validation,
+            }),
+            (None, _) => self.summary.rows_outside += 1,
+        }
+        self.summary.rows += 1;
+        row(Row {
+            t_s,
+            episode,
+            validation,
+            values: self.values.clone(),
+            ages,
+        });
+    }
+
+    /// The grid points up to the last record, and the summary.
+    pub fn finish(mut self, row: &mut dyn FnMut(Row)) -> Summary {
+        if let (Some(first), Some(last)) = (self.first, self.last) {
+            while first.saturating_add(self.next_row.saturating_mul(self.step_ns)) <= last {
+                self.emit(first, row);
+            }
+        }
+        self.summary
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+    use super::*;
+    use bywire_core::frame::{ClassicFrame, StandardId};
+    use bywire_core::Id;
+
+    const DBC: &str = "BO_ 256 Cmd: 8 ADS
+ SG_ Steer : 0|16@1- (0.1,0) [-90|90] \"deg\" ECU
+BO_ 257 State: 8 ECU
+ SG_ Speed : 0|16@1- (0.01,0) [-50|50] \"m/s\" ADS
+ SG_ Mode : 16|8@1+ (1,0) [0|3] \"\" ADS
+";
+
+    fn frame(id: u16, a: i16, b: u8) -> Frame {
+        let a = a.to_le_bytes();
+        let data = [a[0], a[1], b, 0, 0, 0, 0, 0];
+        Frame::Classic(
+            ClassicFrame::new(Id::Standard(StandardId::new(id).unwrap()), &data).unwrap(),
+        )
+    }
+
+    fn column(name: &str, role: Role, source: &str, cuts: bool) -> Column {
+        Column {
+            name: name.into(),
+            role,
+            source: SignalRef::parse(source).unwrap(),
+            unit: String::new(),
+            cuts_episodes: cuts,
+        }
+    }
+
+    fn ms(t: u64) -> Timestamp {
+        Timestamp::from_nanos(1_000_000_000 + t * 1_000_000)
+    }
+
+    /// A hand-made log: commands every 20 ms from 0 to 400 ms, then a 200 ms gap, then again
+    /// to 800 ms (the steering angle in 0.1° is the time in ms); the state every 50 ms from
+    /// 5 ms until 305 ms, then silent (a stale value), its mode 0 → 1 at 155 ms.
+    fn build(config: Config) -> (Vec<Row>, Summary, Vec<Column>) {
+        let (db, _) = bywire_dbc::parse(DBC.as_bytes(), bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let mut builder = Builder::new(&decoder, config).unwrap();
+        let columns = builder.columns().to_vec();
+        let mut records: Vec<(u64, Frame)> = Vec::new();
+        for t in (0..=800).step_by(20) {
+            if !(401..600).contains(&t) {
+                records.push((t, frame(0x100, i16::try_from(t).unwrap(), 0)));
+            }
+        }
+        for t in (0..=300).step_by(50) {
+            records.push((t + 5, frame(0x101, 150, u8::from(t >= 150))));
+        }
+        records.sort_by_key(|(t, _)| *t);
+        let mut rows = Vec::new();
+        for (t, f) in &records {
+            builder.push(ms(*t), f, &mut |r| rows.push(r));
+        }
+        let summary = builder.finish(&mut |r| rows.push(r));
+        (rows, summary, columns)
+    }
+
+    fn config() -> Config {
+        Config {
+            columns: vec![
+                column("action_steer", Role::Action, "Cmd.Steer", false),
+                column("obs_speed", Role::Observation, "State.Speed", false),
+                column("obs_mode", Role::Observation, "State.Mode", true),
+            ],
+            step: Duration::from_millis(100),
+            gap: Duration::from_millis(50),
+            command: Some("Cmd".into()),
+            validation: 0.5,
+            seed: 3,
+        }
+    }
+
+    #[test]
+    fn the_grid_the_ages_and_the_episodes_of_a_hand_made_log() {
+        let (rows, summary, columns) = build(config());
+        assert_eq!(columns[0].unit, "deg");
+        assert_eq!(columns[1].unit, "m/s");
+        // The grid: every 100 ms from the first record to the last, values as of just before.
+        let times: Vec<f64> = rows.iter().map(|r| r.t_s).collect();
+        assert_eq!(times.len(), 9);
+        for (k, t) in times.iter().enumerate() {
+            assert!((t - k as f64 * 0.1).abs() < 1e-9, "{times:?}");
+        }
+        // A grid point sees the records at or before it: at 0 the first command only (the
+        // state not yet: NaN, no age); at 100 ms the command of 100 ms (10.0°, age 0) and the
+        // state of 55 ms (45 ms old).
+        assert_eq!(rows[0].values[0], 0.0);
+        assert!(rows[0].values[1].is_nan() && rows[0].ages[1].is_nan());
+        assert_eq!(rows[1].values[0], 10.0);
+        assert_eq!(rows[1].ages[0], 0.0);
+        assert!((rows[1].values[1] - 1.5).abs() < 1e-12);
+        assert!((rows[1].ages[1] - 0.045).abs() < 1e-9, "{:?}", rows[1].ages);
+        // The state stopped at 305 ms: at 800 ms its value is held, 0.495 s old.
+        assert!((rows[8].values[1] - 1.5).abs() < 1e-12);
+        assert!((rows[8].ages[1] - 0.495).abs() < 1e-9, "{:?}", rows[8].ages);
+        // Episodes: the first from the first command, a new one at the mode change (155 ms),
+        // none in the command gap (500 ms: 100 ms since the last command, over 50), a third
+        // from the command at 600 ms.
+        let episodes: Vec<Option<u32>> = rows.iter().map(|r| r.episode).collect();
+        assert_eq!(
+            episodes,
+            [
+                Some(0),
+                Some(0),
+                Some(1),
+                Some(1),
+                Some(1),
+                None,
+                Some(2),
+                Some(2),
+                Some(2)
+            ]
+        );
+        assert_eq!(summary.episodes.len(), 3);
+        assert_eq!(summary.rows, 9);
+        assert_eq!(summary.rows_outside, 1);
+        assert_eq!((summary.episodes[0].rows, summary.episodes[1].rows), (2, 3));
+        assert!((summary.episodes[1].start_s - 0.2).abs() < 1e-9);
+        // The split is per episode: every row of an episode has its episode's split.
+        for r in &rows {
+            if let Some(e) = r.episode {
+                assert_eq!(
+                    r.validation,
+                    summary
+                        .episodes
+                        .iter()
+                        .find(|x| x.index == e)
+                        .unwrap()
+                        .validation
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_split_follows_the_share_and_the_seed() {
+        let mut all = config();
+        all.validation = 1.0;
+        let (rows, _, _) = build(all);
+        assert!(rows
+            .iter()
+            .filter(|r| r.episode.is_some())
+            .all(|r| r.validation));
+        let mut none = config();
+        none.validation = 0.0;
+        let (rows, _, _) = build(none);
+        assert!(rows.iter().all(|r| !r.validation));
+    }
+}
