@@ -26,10 +26,7 @@ use crate::{Bus, BusError, BusRx, BusTx};
 pub const CLIENT_QUEUE: usize = 8192;
 
 /// How long after acknowledging `< rawmode >` frames start to flow (see [`Effect::HoldFrames`]).
-// Long enough for a client on a loaded machine to read the reply first (a reader 50 ms late
-// saw the first frames in the same chunk), short enough for a client's first requests (an SDO
-// answered within 300 ms); frames are held, never dropped.
-const RAW_MODE_GRACE: Duration = Duration::from_millis(100);
+const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
 /// How often blocked reads wake to see whether the server stops or a session timed out.
 const POLL: Duration = Duration::from_millis(200);
 /// The kernel's send buffer for each client (a second of a full 1 Mbit/s bus as text).
