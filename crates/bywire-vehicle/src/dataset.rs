@@ -13,7 +13,8 @@ use bywire_core::{Frame, Timestamp};
 use bywire_dbc::codec::Decoded;
 use bywire_dbc::decoder::Decoder;
 
-use crate::latency::SignalRef;
+pub use crate::latency::ConfigError;
+use crate::latency::{locate, Located, SignalRef};
 use crate::profile::Profile;
 
 /// Whether a column is something the driver did or something the vehicle showed.
@@ -130,11 +131,6 @@ impl Config {
     }
 }
 
-/// Why a configuration does not fit a DBC.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0}")]
-pub struct ConfigError(String);
-
 /// One grid point.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Row {
@@ -174,16 +170,14 @@ pub struct Summary {
     pub rows: u64,
     /// Rows outside every episode.
     pub rows_outside: u64,
+    /// Grid points not written: silences over a minute (or clock jumps) in the logs.
+    pub rows_skipped: u64,
     /// The episodes with at least one row, in order.
     pub episodes: Vec<Episode>,
 }
 
-/// Where a column's signal is.
-struct Located {
-    raw: u32,
-    extended: bool,
-    index: usize,
-}
+/// A silence in the logs longer than this is skipped by the grid (one minute).
+const MAX_SILENCE_NS: u64 = 60_000_000_000;
 
 /// The streaming builder.
 pub struct Builder<'a> {
@@ -211,25 +205,9 @@ impl<'a> Builder<'a> {
         let db = decoder.database();
         let mut located = Vec::new();
         for column in &mut config.columns {
-            let s = &column.source;
-            let message = db.message_by_name(&s.message).ok_or_else(|| {
-                ConfigError(format!("{s}: the DBC has no message '{}'", s.message))
-            })?;
-            let index = message
-                .signals
-                .iter()
-                .position(|sig| sig.name == s.signal)
-                .ok_or_else(|| {
-                    ConfigError(format!("{s}: {} has no signal '{}'", s.message, s.signal))
-                })?;
-            if let Some(signal) = message.signals.get(index) {
-                column.unit = signal.unit.clone();
-            }
-            located.push(Located {
-                raw: message.id,
-                extended: message.extended,
-                index,
-            });
+            let (place, unit) = locate(decoder, &column.source)?;
+            column.unit = unit;
+            located.push(place);
         }
         let command = match &config.command {
             Some(name) => Some(
@@ -287,6 +265,15 @@ impl<'a> Builder<'a> {
         let first = *self.first.get_or_insert(now);
         self.last = Some(now);
         self.summary.records += 1;
+        // A silence longer than MAX_SILENCE (or a clock that jumps) is skipped, not filled
+        // a row at a time.
+        let next = first.saturating_add(self.next_row.saturating_mul(self.step_ns));
+        if now.saturating_sub(next) > MAX_SILENCE_NS {
+            let target = (now - first) / self.step_ns;
+            self.summary.rows_skipped += target.saturating_sub(self.next_row);
+            self.next_row = self.next_row.max(target);
+            self.episode = None;
+        }
         // Grid points before this record see the state before it.
         while first.saturating_add(self.next_row.saturating_mul(self.step_ns)) < now {
             self.emit(first, row);
@@ -294,7 +281,10 @@ impl<'a> Builder<'a> {
         let (raw, extended) = (id.as_raw(), id.is_extended());
         if self.command == Some((raw, extended)) {
             let gap = u64::try_from(self.config.gap.as_nanos()).unwrap_or(u64::MAX);
-            if self.last_command.is_none_or(|last| now - last > gap) {
+            if self
+                .last_command
+                .is_none_or(|last| now.saturating_sub(last) > gap)
+            {
                 self.start_episode();
             }
             self.last_command = Some(now);
@@ -541,6 +531,27 @@ BO_ 257 State: 8 ECU
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_long_silence_is_skipped_not_filled() {
+        let (db, _) = bywire_dbc::parse(DBC.as_bytes(), bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let mut builder = Builder::new(&decoder, config()).unwrap();
+        let mut rows = Vec::new();
+        // A record, then one a year later: the row at the second, not 315 million.
+        builder.push(ms(0), &frame(0x100, 1, 0), &mut |r| rows.push(r));
+        let year = 365 * 24 * 3600 * 1000;
+        builder.push(ms(year), &frame(0x100, 2, 0), &mut |r| rows.push(r));
+        let summary = builder.finish(&mut |r| rows.push(r));
+        assert_eq!(rows.len(), 1);
+        assert_eq!(summary.rows_skipped, year / 100);
+        // Backwards time ends in rows too, never a panic.
+        let mut builder = Builder::new(&decoder, config()).unwrap();
+        for t in [500, 100, 300, 0, 900] {
+            builder.push(ms(t), &frame(0x100, 1, 0), &mut |r| rows.push(r));
+        }
+        builder.finish(&mut |r| rows.push(r));
     }
 
     #[test]

@@ -110,7 +110,7 @@ impl Config {
 /// Why a configuration does not fit a DBC.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{0}")]
-pub struct ConfigError(String);
+pub struct ConfigError(pub(crate) String);
 
 /// Latency figures of one kind.
 #[derive(Debug, Clone, PartialEq)]
@@ -301,10 +301,30 @@ pub struct Report {
 
 /// A signal found in the DBC: its message's identifier and the signal's index.
 #[derive(Clone, Copy)]
-struct Located {
-    raw: u32,
-    extended: bool,
-    index: usize,
+pub(crate) struct Located {
+    pub(crate) raw: u32,
+    pub(crate) extended: bool,
+    pub(crate) index: usize,
+}
+
+/// Where `s` is in `decoder`'s DBC, with the signal's unit; an error names what is missing.
+pub(crate) fn locate(decoder: &Decoder, s: &SignalRef) -> Result<(Located, String), ConfigError> {
+    let message = decoder
+        .database()
+        .message_by_name(&s.message)
+        .ok_or_else(|| ConfigError(format!("{s}: the DBC has no message '{}'", s.message)))?;
+    let (index, signal) = message
+        .signals
+        .iter()
+        .enumerate()
+        .find(|(_, sig)| sig.name == s.signal)
+        .ok_or_else(|| ConfigError(format!("{s}: {} has no signal '{}'", s.message, s.signal)))?;
+    let located = Located {
+        raw: message.id,
+        extended: message.extended,
+        index,
+    };
+    Ok((located, signal.unit.clone()))
 }
 
 struct Response {
@@ -366,26 +386,7 @@ impl<'a> Analyzer<'a> {
     /// An analysis of `config` with the messages of `decoder`; an error names a message or
     /// signal the DBC does not have.
     pub fn new(decoder: &'a Decoder, config: Config) -> Result<Analyzer<'a>, ConfigError> {
-        let locate = |s: &SignalRef| -> Result<Located, ConfigError> {
-            let message = decoder
-                .database()
-                .message_by_name(&s.message)
-                .ok_or_else(|| {
-                    ConfigError(format!("{s}: the DBC has no message '{}'", s.message))
-                })?;
-            let index = message
-                .signals
-                .iter()
-                .position(|sig| sig.name == s.signal)
-                .ok_or_else(|| {
-                    ConfigError(format!("{s}: {} has no signal '{}'", s.message, s.signal))
-                })?;
-            Ok(Located {
-                raw: message.id,
-                extended: message.extended,
-                index,
-            })
-        };
+        let locate = |s: &SignalRef| locate(decoder, s).map(|(l, _)| l);
         let echo = match &config.echo {
             Some((command, feedback)) => Some((locate(command)?, locate(feedback)?)),
             None => None,
@@ -461,10 +462,9 @@ impl<'a> Analyzer<'a> {
             let window = u64::try_from(self.config.window.as_nanos()).unwrap_or(u64::MAX);
             if let Some(counter) = value(&self.values, command) {
                 let data = head(frame);
-                let copy = self
-                    .commands
-                    .get(&counter.to_bits())
-                    .is_some_and(|p| !p.echoed && p.data == data && now - p.sent <= window);
+                let copy = self.commands.get(&counter.to_bits()).is_some_and(|p| {
+                    !p.echoed && p.data == data && now.saturating_sub(p.sent) <= window
+                });
                 if !copy {
                     let pending = Pending {
                         sent: now,
@@ -480,9 +480,9 @@ impl<'a> Analyzer<'a> {
             }
             if let Some(echoed) = value(&self.values, feedback) {
                 if let Some(p) = self.commands.get_mut(&echoed.to_bits()) {
-                    if !p.echoed && now - p.sent <= window {
+                    if !p.echoed && now.saturating_sub(p.sent) <= window {
                         p.echoed = true;
-                        self.echo_latency.add(now - p.sent);
+                        self.echo_latency.add(now.saturating_sub(p.sent));
                     }
                 }
             }
@@ -508,10 +508,10 @@ impl<'a> Analyzer<'a> {
                 response.last_actual = actual;
             }
             if let (Some(actual), Some((start, _, _))) = (actual, response.step) {
-                let within = now - start <= step_window;
+                let within = now.saturating_sub(start) <= step_window;
                 if within && response.times.len() < MAX_STEP_SAMPLES {
                     response.initial.get_or_insert(actual);
-                    response.times.push((now - start) as f64 / 1e9);
+                    response.times.push(now.saturating_sub(start) as f64 / 1e9);
                     response.values.push(actual);
                 }
             }
@@ -570,7 +570,7 @@ impl<'a> Analyzer<'a> {
             while transfer
                 .pending
                 .front()
-                .is_some_and(|(at, _)| now - at > window)
+                .is_some_and(|(at, _)| now.saturating_sub(*at) > window)
             {
                 transfer.pending.pop_front();
                 transfer.unmatched += 1;
@@ -578,7 +578,7 @@ impl<'a> Analyzer<'a> {
             if channel == transfer.to {
                 if let Some(i) = transfer.pending.iter().position(|(_, f)| f == frame) {
                     if let Some((at, _)) = transfer.pending.remove(i) {
-                        transfer.latency.add(now - at);
+                        transfer.latency.add(now.saturating_sub(at));
                     }
                     continue;
                 }
@@ -798,6 +798,38 @@ BA_ \"GenMsgCycleTime\" BO_ 256 20;
         assert!((step.t10_s.unwrap() - 0.01).abs() < 1e-9, "{step:?}");
         assert!((step.t50_s.unwrap() - 0.05).abs() < 1e-9, "{step:?}");
         assert!(step.metrics.is_some());
+    }
+
+    proptest::proptest! {
+        /// Any records — unknown identifiers, short or garbage data, time going backwards —
+        /// end in a report, never a panic.
+        #[test]
+        fn any_records_end_in_a_report(
+            records in proptest::collection::vec(
+                (0u64..5_000, 0x0FEu16..0x103, proptest::collection::vec(proptest::num::u8::ANY, 0..=8), 0u8..3),
+                0..300,
+            )
+        ) {
+            let (db, _) = bywire_dbc::parse(DBC.as_bytes(), bywire_dbc::Mode::Lenient).unwrap();
+            let decoder = Decoder::new(db);
+            let config = Config {
+                echo: Some((signal("Cmd.Counter"), signal("State.Echo"))),
+                responses: vec![(signal("Cmd.Angle"), signal("State.Angle"))],
+                step_min: 0.5,
+                transfers: vec![("c0".into(), "c1".into())],
+                window: Duration::from_millis(100),
+                step_window: Duration::from_secs(1),
+            };
+            let mut analyzer = Analyzer::new(&decoder, config).unwrap();
+            for (t, id, data, channel) in &records {
+                let frame = Frame::Classic(
+                    ClassicFrame::new(Id::Standard(StandardId::new(*id).unwrap()), data).unwrap(),
+                );
+                analyzer.push(ms(*t), &format!("c{channel}"), &frame);
+            }
+            let report = analyzer.finish();
+            proptest::prop_assert_eq!(report.records, records.len() as u64);
+        }
     }
 
     #[test]

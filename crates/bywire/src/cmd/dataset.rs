@@ -12,7 +12,7 @@ use bywire_vehicle::dataset::{Builder, Column, Config, Role, Row, Summary};
 use bywire_vehicle::latency::SignalRef;
 use serde_json::json;
 
-use crate::support::logs::{self, Skip};
+use crate::support::logs;
 use crate::support::vehicles;
 
 #[derive(clap::Args)]
@@ -293,6 +293,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         total.records += summary.records;
         total.rows += summary.rows;
         total.rows_outside += summary.rows_outside;
+        total.rows_skipped += summary.rows_skipped;
         total.episodes.extend(summary.episodes);
     }
     let rows = table.finish()?;
@@ -369,23 +370,12 @@ fn build(
             failure = Some(e);
         }
     };
-    let (names, inputs): (Vec<String>, Vec<_>) = logs::inputs(&source.logs)?.into_iter().unzip();
-    let readers: Vec<_> = names
-        .iter()
-        .zip(inputs)
-        .map(|(name, input)| logs::records(name, input, Skip::Unreadable))
-        .collect();
-    let stop = crate::interrupt_flag();
-    for record in bywire_log::merge::merge(readers) {
-        if stop.load(std::sync::atomic::Ordering::Relaxed) {
-            bail!("interrupted: no dataset written");
-        }
-        let record = record?;
+    logs::for_each_merged(&source.logs, |record| {
         let first = *first_timestamp.get_or_insert(record.timestamp.as_nanos() as f64 / 1e9);
         builder.push(record.timestamp, &record.frame, &mut |row| {
             write_row(row, first)
         });
-    }
+    })?;
     let first = first_timestamp.unwrap_or(0.0);
     let summary = builder.finish(&mut |row| write_row(row, first));
     if let Some(e) = failure {
@@ -426,6 +416,7 @@ fn card(
         "rows": summary.rows,
         "records_read": summary.records,
         "rows_outside_episodes": summary.rows_outside,
+        "grid_points_skipped_in_silences": summary.rows_skipped,
         "profile": profile,
         "validation_share": args.validation,
         "split_seed": args.seed,

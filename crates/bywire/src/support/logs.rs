@@ -116,6 +116,25 @@ pub fn records<'a>(
     })
 }
 
+/// Every record of `files` (standard input when none), merged in time order, handed to
+/// `each`; Ctrl-C ends it with an error (an interrupted analysis keeps nothing).
+pub fn for_each_merged(files: &[PathBuf], mut each: impl FnMut(LogRecord)) -> Result<()> {
+    let (names, inputs): (Vec<String>, Vec<LogInput>) = inputs(files)?.into_iter().unzip();
+    let readers: Vec<_> = names
+        .iter()
+        .zip(inputs)
+        .map(|(name, input)| records(name, input, Skip::Unreadable))
+        .collect();
+    let stop = crate::interrupt_flag();
+    for record in bywire_log::merge::merge(readers) {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(anyhow!("interrupted"));
+        }
+        each(record?);
+    }
+    Ok(())
+}
+
 /// What a conversion keeps: channels (renamed) and a time range from the first frame.
 pub struct Selection {
     /// FROM → TO; empty: every channel as it is.

@@ -9,7 +9,7 @@ use bywire_vehicle::latency::{Analyzer, Config, Distribution, Report, SignalRef}
 use serde_json::{json, Value};
 
 use super::Args;
-use crate::support::logs::{self, Skip};
+use crate::support::logs;
 use crate::support::{dbc, vehicles};
 
 fn pair(text: &str, option: &str) -> Result<(SignalRef, SignalRef)> {
@@ -70,20 +70,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     let (decoder, config) = config(args)?;
     let mut analyzer = Analyzer::new(&decoder, config)?;
-    let (names, inputs): (Vec<String>, Vec<_>) = logs::inputs(&args.logs)?.into_iter().unzip();
-    let readers: Vec<_> = names
-        .iter()
-        .zip(inputs)
-        .map(|(name, input)| logs::records(name, input, Skip::Unreadable))
-        .collect();
-    let stop = crate::interrupt_flag();
-    for record in bywire_log::merge::merge(readers) {
-        if stop.load(std::sync::atomic::Ordering::Relaxed) {
-            bail!("interrupted");
-        }
-        let record = record?;
+    logs::for_each_merged(&args.logs, |record| {
         analyzer.push(record.timestamp, &record.interface, &record.frame);
-    }
+    })?;
     let report = analyzer.finish();
     if let Some(plot) = &args.plot {
         crate::plot::latency::write(&report, plot)?;
