@@ -375,7 +375,8 @@ pub struct Analyzer<'a> {
     echo_latency: Histogram,
     echo_missing: u64,
     responses: Vec<Response>,
-    cycles: BTreeMap<(String, u32), Cycle>,
+    /// Channel → identifier (bit 31 for extended) → timing; a channel's name is kept once.
+    cycles: BTreeMap<String, BTreeMap<u32, Cycle>>,
     transfers: Vec<Transfer>,
     first: Option<u64>,
     records: u64,
@@ -538,9 +539,14 @@ impl<'a> Analyzer<'a> {
 
     fn note_cycle(&mut self, channel: &str, raw: u32, extended: bool, now: u64) {
         let key_id = raw | if extended { 0x8000_0000 } else { 0 };
-        let key = (channel.to_string(), key_id);
+        if !self.cycles.contains_key(channel) {
+            self.cycles.insert(channel.to_string(), BTreeMap::new());
+        }
+        let Some(by_id) = self.cycles.get_mut(channel) else {
+            return;
+        };
         let decoder = self.decoder;
-        let cycle = self.cycles.entry(key).or_insert_with(|| Cycle {
+        let cycle = by_id.entry(key_id).or_insert_with(|| Cycle {
             min: f64::INFINITY,
             nominal_ns: decoder
                 .message_with_id(raw, extended)
@@ -556,7 +562,10 @@ impl<'a> Analyzer<'a> {
             cycle.sum_sq += gap * gap;
             cycle.min = cycle.min.min(gap);
             cycle.max = cycle.max.max(gap);
-            if cycle.nominal_ns.is_some_and(|n| 2 * gap_ns > 3 * n) {
+            if cycle
+                .nominal_ns
+                .is_some_and(|n| gap_ns.saturating_mul(2) > n.saturating_mul(3))
+            {
                 cycle.late += 1;
             }
         }
@@ -603,7 +612,12 @@ impl<'a> Analyzer<'a> {
         let cycles = self
             .cycles
             .into_iter()
-            .map(|((channel, raw_id), c)| {
+            .flat_map(|(channel, by_id)| {
+                by_id
+                    .into_iter()
+                    .map(move |(id, c)| (channel.clone(), id, c))
+            })
+            .map(|(channel, raw_id, c)| {
                 let gaps = c.frames.saturating_sub(1) as f64;
                 let mean = if gaps > 0.0 { c.sum / gaps } else { 0.0 };
                 let variance = if gaps > 0.0 {

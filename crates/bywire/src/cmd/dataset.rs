@@ -59,6 +59,9 @@ pub struct Args {
     out: PathBuf,
 }
 
+/// A truth.csv's lines after its header.
+type TruthLines = std::io::Lines<std::io::BufReader<std::fs::File>>;
+
 /// A simulator run's truth table, read whole (a run's truth is small: 100 rows a second).
 struct Truth {
     columns: Vec<String>,
@@ -67,7 +70,9 @@ struct Truth {
 }
 
 impl Truth {
-    fn read(path: &Path) -> Result<Truth> {
+    /// The header: the file's lines after it, the truth_* column names, and which CSV
+    /// columns they are (the numeric ones; the steering mode is text).
+    fn header(path: &Path) -> Result<(TruthLines, Vec<String>, Vec<usize>)> {
         let file =
             std::fs::File::open(path).with_context(|| format!("--truth {}", path.display()))?;
         let mut lines = std::io::BufReader::new(file).lines();
@@ -81,7 +86,6 @@ impl Truth {
             "--truth {}: not a truth.csv (its first column is not t_s)",
             path.display()
         );
-        // Numeric columns only (the steering mode is text).
         let numeric: Vec<usize> = (1..names.len())
             .filter(|&i| names[i] != "steering_mode")
             .collect();
@@ -89,6 +93,11 @@ impl Truth {
             .iter()
             .map(|&i| format!("truth_{}", names[i]))
             .collect();
+        Ok((lines, columns, numeric))
+    }
+
+    fn read(path: &Path) -> Result<Truth> {
+        let (lines, columns, numeric) = Truth::header(path)?;
         let mut rows = Vec::new();
         for (n, line) in lines.enumerate() {
             let line = line?;
@@ -235,8 +244,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let decoder = Decoder::new(loaded.database);
     // The columns (with the DBC's units) and the truth's, from the first run's truth.csv.
     let columns = Builder::new(&decoder, config.clone())?.columns().to_vec();
+    // The first run's truth header names the truth columns (each run's rows are read in turn).
     let truth_columns = match sources.iter().find_map(|s| s.truth.as_deref()) {
-        Some(path) => Truth::read(path)?.columns,
+        Some(path) => Truth::header(path)?.1,
         None => Vec::new(),
     };
     let mut table_columns: Vec<TableColumn> = columns
