@@ -496,19 +496,12 @@ fn run_session(stream: TcpStream, context: &Arc<Context>) -> std::io::Result<()>
                 },
             },
         };
-        let step = step(context, &session, event);
-        if let Some(text) = &step.reply {
-            // Fails when the writer ended: the client is gone or stalled.
-            alive = out_tx
-                .send(Outgoing::Text(protocol::format_reply(text)))
-                .is_ok();
-        }
+        let (step, queued) = step(context, &session, event, &out_tx);
+        // Fails when the writer ended: the client is gone or stalled.
+        alive = queued;
         match step.effect {
-            Effect::None => {}
+            Effect::None | Effect::HoldFrames => {}
             Effect::Close => break,
-            Effect::HoldFrames => {
-                alive &= out_tx.send(Outgoing::Pause(RAW_MODE_GRACE)).is_ok();
-            }
             Effect::Send(frame) => {
                 let sent = opened.as_ref().map_or(Ok(()), |o| lock(&o.tx).send(&frame));
                 follow_up = sent.err().map(|e| match e {
@@ -535,8 +528,16 @@ fn run_session(stream: TcpStream, context: &Arc<Context>) -> std::io::Result<()>
     Ok(())
 }
 
-/// One event through the state machine (a token attempt waits for its turn first).
-fn step(context: &Context, session: &Mutex<Session>, event: Event) -> Step {
+/// One event through the state machine (a token attempt waits for its turn first), its reply
+/// queued to the client before the session lock is let go: the forwarder checks the session
+/// under that lock before it queues a frame, so no frame of a new mode can overtake the reply
+/// that starts it (raw mode's `< ok >`). Returns the step and whether the writer took the reply.
+fn step(
+    context: &Context,
+    session: &Mutex<Session>,
+    event: Event,
+    out: &SyncSender<Outgoing>,
+) -> (Step, bool) {
     let is_auth = matches!(
         (lock(session).phase(), &event),
         (
@@ -546,11 +547,24 @@ fn step(context: &Context, session: &Mutex<Session>, event: Event) -> Step {
     );
     if is_auth {
         context.wait_for_auth_turn();
-        if let Some(step) = lock(session).on_auth(&event) {
-            return step;
-        }
     }
-    lock(session).on_event(event, Instant::now())
+    let mut guard = lock(session);
+    let step = match is_auth.then(|| guard.on_auth(&event)).flatten() {
+        Some(step) => step,
+        None => guard.on_event(event, Instant::now()),
+    };
+    let mut queued = true;
+    if let Some(text) = &step.reply {
+        // The writer never takes the session lock, so waiting on it here cannot deadlock.
+        queued = out
+            .send(Outgoing::Text(protocol::format_reply(text)))
+            .is_ok();
+    }
+    if matches!(step.effect, Effect::HoldFrames) {
+        queued &= out.send(Outgoing::Pause(RAW_MODE_GRACE)).is_ok();
+    }
+    drop(guard);
+    (step, queued)
 }
 
 /// Open the bus `name` for a session and start forwarding its frames.
