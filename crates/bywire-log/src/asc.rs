@@ -651,6 +651,11 @@ impl<W: Write> AscWriter<W> {
         self.output.write_all(self.line.as_bytes())
     }
 
+    /// Write out what is buffered: a file cut short after this reads up to here.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.output.flush()
+    }
+
     /// End the trigger block (a file with no frames still gets a header) and flush; the output
     /// back.
     pub fn finish(mut self) -> io::Result<W> {

@@ -500,9 +500,8 @@ fn object_header(kind: u32, body_len: usize, flags: u32, timestamp: u64) -> Vec<
 
 impl<W: Write + Seek> BlfWriter<W> {
     /// A writer to `output` (its header is written now and completed at the end).
-    pub fn new(mut output: W) -> io::Result<Self> {
-        output.write_all(&[0u8; FILE_HEADER_SIZE])?;
-        Ok(BlfWriter {
+    pub fn new(output: W) -> io::Result<Self> {
+        let mut writer = BlfWriter {
             output,
             buffer: Vec::new(),
             start: None,
@@ -511,7 +510,11 @@ impl<W: Write + Seek> BlfWriter<W> {
             uncompressed: u64::try_from(FILE_HEADER_SIZE).unwrap_or(0),
             written: u64::try_from(FILE_HEADER_SIZE).unwrap_or(0),
             channels: BTreeMap::new(),
-        })
+        };
+        // A valid header from the start (counts zero): readers take a file cut short.
+        let header = writer.file_header();
+        writer.output.write_all(&header)?;
+        Ok(writer)
     }
 
     /// Write one record.
@@ -614,9 +617,8 @@ impl<W: Write + Seek> BlfWriter<W> {
         Ok(())
     }
 
-    /// Write the last container and the header; the output back.
-    pub fn finish(mut self) -> io::Result<W> {
-        self.flush_container()?;
+    /// The file header as things stand: sizes, object count, first and last times.
+    fn file_header(&self) -> Vec<u8> {
         let mut header = Vec::with_capacity(FILE_HEADER_SIZE);
         header.extend_from_slice(b"LOGG");
         header.extend_from_slice(&u32::try_from(FILE_HEADER_SIZE).unwrap_or(144).to_le_bytes());
@@ -634,10 +636,24 @@ impl<W: Write + Seek> BlfWriter<W> {
             header.extend_from_slice(&field.to_le_bytes());
         }
         header.resize(FILE_HEADER_SIZE, 0);
+        header
+    }
+
+    /// Make the file complete as it stands and go on after: the objects so far go out in a
+    /// (possibly short) container and the header is brought up to date. A file cut short after
+    /// this reads up to here.
+    pub fn checkpoint(&mut self) -> io::Result<()> {
+        self.flush_container()?;
+        let header = self.file_header();
         self.output.seek(SeekFrom::Start(0))?;
         self.output.write_all(&header)?;
         self.output.seek(SeekFrom::End(0))?;
-        self.output.flush()?;
+        self.output.flush()
+    }
+
+    /// Write the last container and the header; the output back.
+    pub fn finish(mut self) -> io::Result<W> {
+        self.checkpoint()?;
         Ok(self.output)
     }
 }

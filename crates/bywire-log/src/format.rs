@@ -208,6 +208,12 @@ impl Format {
         Ok(Format::Candump.reader(io::BufReader::new(range)))
     }
 
+    /// Whether a file of this format cut short after [`RecordWriter::checkpoint`] still reads
+    /// up to it: every format but Parquet, whose footer is written last.
+    pub fn survives_a_cut(self) -> bool {
+        self != Format::Parquet
+    }
+
     /// A writer of this format to `output` (seekable: BLF completes its header at the end).
     pub fn writer<W: Write + Seek + Send>(self, output: W) -> io::Result<RecordWriter<W>> {
         Ok(match self {
@@ -286,6 +292,26 @@ impl<W: Write + Seek + Send> RecordWriter<W> {
         }
     }
 
+    /// Make what was written so far survive the writer's end: everything buffered goes out,
+    /// and a format with closing structures (BLF's header, MF4's groups) is made complete as
+    /// it stands, so a file cut short after this (a kill, a power loss, once the caller has
+    /// synced it) reads up to here. Parquet cannot be: its footer comes only at
+    /// [`RecordWriter::finish`] (see [`Format::survives_a_cut`]); its rows so far are written.
+    pub fn checkpoint(&mut self) -> io::Result<()> {
+        match self {
+            RecordWriter::Candump(w) => w.flush(),
+            RecordWriter::Asc(w) => w.flush(),
+            RecordWriter::Trc(w) => w.flush(),
+            RecordWriter::Pcapng(w) => w.flush(),
+            RecordWriter::Blf(w) => w.checkpoint(),
+            RecordWriter::Mf4(w) => w.checkpoint(),
+            #[cfg(feature = "mcap")]
+            RecordWriter::Mcap(w) => w.flush(),
+            #[cfg(feature = "parquet")]
+            RecordWriter::Parquet(w) => w.flush(),
+        }
+    }
+
     /// Finish the file (a format's closing lines) and flush; the output back.
     pub fn finish(self) -> io::Result<W> {
         match self {
@@ -340,6 +366,97 @@ mod tests {
             Format::Pcapng
         );
         assert_eq!(Format::sniff(b""), Format::Candump);
+    }
+
+    fn numbered(i: u64) -> LogRecord {
+        use bywire_core::frame::ClassicFrame;
+        use bywire_core::{Id, Timestamp};
+        LogRecord {
+            timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + i * 1_000_000),
+            interface: format!("can{}", i % 2),
+            frame: bywire_core::Frame::Classic(
+                ClassicFrame::new(Id::standard(0x100).unwrap(), &i.to_le_bytes()).unwrap(),
+            ),
+            direction: Some('R'),
+        }
+    }
+
+    /// The records a (possibly cut) file reads until its first error.
+    fn readable(format: Format, bytes: Vec<u8>) -> Vec<LogRecord> {
+        let dir = std::env::temp_dir().join(format!(
+            "bywire-cut-{}-{format:?}-{}",
+            std::process::id(),
+            bytes.len()
+        ));
+        std::fs::write(&dir, &bytes).unwrap();
+        let (_, records) = Format::open_file(&dir).unwrap();
+        let read = records.map_while(Result::ok).collect();
+        std::fs::remove_file(&dir).unwrap();
+        read
+    }
+
+    /// A file in memory both the writer and the test see.
+    #[derive(Clone, Default)]
+    struct Shared(std::sync::Arc<std::sync::Mutex<io::Cursor<Vec<u8>>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            self.0.lock().unwrap().write(buf)
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Seek for Shared {
+        fn seek(&mut self, to: io::SeekFrom) -> io::Result<u64> {
+            self.0.lock().unwrap().seek(to)
+        }
+    }
+
+    impl Shared {
+        fn bytes(&self) -> Vec<u8> {
+            self.0.lock().unwrap().get_ref().clone()
+        }
+    }
+
+    #[test]
+    fn a_file_cut_anywhere_after_a_checkpoint_reads_up_to_it() {
+        for (format, _) in Format::ALL {
+            if !format.survives_a_cut() || (format == Format::Mcap && !cfg!(feature = "mcap")) {
+                continue;
+            }
+            let file = Shared::default();
+            let mut writer = format.writer(file.clone()).unwrap();
+            for i in 0..300 {
+                writer.write(&numbered(i)).unwrap();
+            }
+            writer.checkpoint().unwrap();
+            let checkpointed = file.bytes().len();
+            // Enough more to fill BLF's containers and MF4's data blocks, never checkpointed.
+            for i in 300..12_000 {
+                writer.write(&numbered(i)).unwrap();
+            }
+            let written = file.bytes();
+            assert!(written.len() > checkpointed, "{format:?}");
+            let middle = (checkpointed + written.len()) / 2;
+            for cut in [checkpointed, checkpointed + 1, middle, written.len()] {
+                let read = readable(format, written[..cut].to_vec());
+                assert!(
+                    read.len() >= 300,
+                    "{format:?} cut at {cut} of {}: {} records",
+                    written.len(),
+                    read.len()
+                );
+                for (i, record) in read.iter().enumerate() {
+                    assert_eq!(
+                        record.frame,
+                        numbered(i as u64).frame,
+                        "{format:?} record {i}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -440,6 +440,12 @@ impl<W: Write + Seek> McapWriter<W> {
         self.left_out
     }
 
+    /// End the current chunk and write it out: a file cut short after this streams up to here
+    /// (readers fall back to reading the chunks in order when the summary is missing).
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        self.writer.flush().map_err(io_error)
+    }
+
     /// Write the summary and end; the output back.
     pub fn finish(mut self) -> std::io::Result<W> {
         self.writer.finish().map_err(io_error)?;

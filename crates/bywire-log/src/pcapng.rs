@@ -504,6 +504,15 @@ impl<W: Write> PcapngWriter<W> {
         self.emit(ENHANCED_PACKET)
     }
 
+    /// Write out what is buffered (the section header too, if no frame came yet): a file cut
+    /// short after this reads up to here.
+    pub fn flush(&mut self) -> io::Result<()> {
+        if !self.started {
+            self.start()?;
+        }
+        self.output.flush()
+    }
+
     /// Flush (a file with no frames still gets its section header); the output back.
     pub fn finish(mut self) -> io::Result<W> {
         if !self.started {

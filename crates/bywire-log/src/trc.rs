@@ -470,6 +470,11 @@ impl<W: Write> TrcWriter<W> {
         self.output.write_all(self.line.as_bytes())
     }
 
+    /// Write out what is buffered: a file cut short after this reads up to here.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.output.flush()
+    }
+
     /// Flush (a file with no frames still gets a header); the output back.
     pub fn finish(mut self) -> io::Result<W> {
         if self.clock.unstarted() {

@@ -309,6 +309,12 @@ impl<W: Write + Send> ParquetWriter<W> {
         Ok(())
     }
 
+    /// Write the rows so far as a row group (the file still needs its footer to be read).
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        self.flush_batch()?;
+        self.writer.flush().map_err(io_error)
+    }
+
     /// Write what is left and the footer; the output back.
     pub fn finish(mut self) -> std::io::Result<W> {
         self.flush_batch()?;
