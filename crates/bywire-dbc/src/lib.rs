@@ -26,6 +26,7 @@
 
 pub mod codec;
 pub mod codegen;
+pub mod condition;
 pub mod decoder;
 pub mod e2e;
 mod lexer;

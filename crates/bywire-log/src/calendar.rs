@@ -27,3 +27,18 @@ pub(crate) fn civil_from_days(days: i64) -> (i64, u32, u32) {
     let year = year_of_era + era * 400 + i64::from(month <= 2);
     (year, month, day)
 }
+
+/// `2026-12-03T22:17:00.123456Z` for a time in nanoseconds since the Unix epoch.
+pub(crate) fn utc_text(nanos: u64) -> String {
+    let seconds = nanos / 1_000_000_000;
+    let days = i64::try_from(seconds / 86_400).unwrap_or(i64::MAX);
+    let (year, month, day) = civil_from_days(days);
+    let of_day = seconds % 86_400;
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:06}Z",
+        of_day / 3600,
+        of_day / 60 % 60,
+        of_day % 60,
+        nanos % 1_000_000_000 / 1000
+    )
+}

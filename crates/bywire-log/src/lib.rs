@@ -48,6 +48,7 @@ pub mod pacing;
 #[cfg(feature = "parquet")]
 pub mod parquet;
 pub mod pcapng;
+pub mod recorder;
 pub mod screen;
 pub mod trc;
 
