@@ -228,6 +228,68 @@ impl fmt::Display for BusSpec {
     }
 }
 
+/// How quiet a bus opened for listening is (see [`open_listening`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Listening {
+    /// The controller was put in listen-only mode by this open (a SocketCAN interface: undo
+    /// with [`crate::socketcan::clear_listen_only`] when done).
+    SwitchedToListenOnly,
+    /// The controller is listen-only (already, or opened so: an SLCAN adapter's `L`).
+    ListenOnly,
+    /// It could not be made listen-only: why, in words. Its controller still acknowledges
+    /// frames (the program itself sends nothing).
+    NotListenOnly(String),
+    /// There is no controller of ours to set: why, in words (a virtual bus; a bus served over
+    /// the network, whose server's controller decides).
+    NoController(String),
+}
+
+/// Open the bus a spec names for listening only: a SocketCAN interface's controller is put in
+/// listen-only mode where the interface allows, an SLCAN adapter is opened listen-only; what
+/// came of it is said. The bus is opened either way (a logger records what it can).
+pub fn open_listening(spec: &str) -> Result<(Box<dyn Bus>, Listening), OpenError> {
+    let parsed = spec.parse::<BusSpec>()?;
+    let listening = match &parsed {
+        BusSpec::Virtual { .. } | BusSpec::Sim { .. } => {
+            Listening::NoController("an in-process bus".into())
+        }
+        BusSpec::Socketcand { .. } => {
+            Listening::NoController("served over TCP: the server's controller decides".into())
+        }
+        BusSpec::Udp { .. } => Listening::NoController("UDP multicast has no controller".into()),
+        BusSpec::Slcan { port, bitrate } => {
+            let bus = crate::slcan::Slcan::open(port, *bitrate, true).map_err(|e| {
+                OpenError::Refused {
+                    spec: spec.to_string(),
+                    reason: e.to_string(),
+                }
+            })?;
+            return Ok((Box::new(bus), Listening::ListenOnly));
+        }
+        #[cfg(target_os = "linux")]
+        BusSpec::SocketCan { interface } => {
+            use crate::socketcan::ListenOnly;
+            match crate::socketcan::set_listen_only(interface) {
+                Ok(ListenOnly::Set) => Listening::SwitchedToListenOnly,
+                Ok(ListenOnly::AlreadyOn) => Listening::ListenOnly,
+                Ok(ListenOnly::NoController) => Listening::NoController(
+                    "a virtual interface (vcan/vxcan) has no controller".into(),
+                ),
+                Ok(ListenOnly::Unsupported) => {
+                    Listening::NotListenOnly("its driver has no listen-only mode".into())
+                }
+                Ok(ListenOnly::Refused(why)) => Listening::NotListenOnly(format!(
+                    "the kernel refused ({why}; it needs CAP_NET_ADMIN)"
+                )),
+                Err(e) => Listening::NotListenOnly(e.to_string()),
+            }
+        }
+        #[cfg(not(target_os = "linux"))]
+        BusSpec::SocketCan { .. } => Listening::NotListenOnly("not on Linux".into()),
+    };
+    Ok((open(spec)?, listening))
+}
+
 /// Open the bus a spec names.
 pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
     let refused = |reason: String| OpenError::Refused {

@@ -30,6 +30,9 @@ use crate::calendar::utc_text;
 use crate::candump::LogRecord;
 use crate::format::{Format, RecordWriter};
 
+/// The most triggers a file's metadata lists (more are counted).
+pub const MAX_TRIGGERS_LISTED: usize = 10_000;
+
 /// Where the buses' frames go.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Layout {
@@ -145,6 +148,7 @@ struct Facts {
     last_ns: u64,
     frames: BTreeMap<String, u64>,
     triggers: Vec<(u64, String)>,
+    triggers_not_listed: u64,
 }
 
 impl Facts {
@@ -154,8 +158,13 @@ impl Facts {
 
     fn note_trigger(&mut self, at: u64, reason: &str) {
         // The same reason again within a file is the same event going on.
-        if self.triggers.last().is_none_or(|(_, last)| last != reason) {
+        if self.triggers.last().is_some_and(|(_, last)| last == reason) {
+            return;
+        }
+        if self.triggers.len() < MAX_TRIGGERS_LISTED {
             self.triggers.push((at, reason.to_string()));
+        } else {
+            self.triggers_not_listed += 1;
         }
     }
 }
@@ -331,12 +340,22 @@ impl Recorder {
         }
         if self.open.is_empty() && self.config.window.is_some() {
             // A capture with nothing held: its files open with its first frame.
-            self.pending_triggers.push((at, reason.to_string()));
+            if self.pending_triggers.len() < MAX_TRIGGERS_LISTED {
+                self.pending_triggers.push((at, reason.to_string()));
+            }
         }
         for file in self.open.values_mut() {
             file.facts.note_trigger(at, reason);
         }
         Ok(())
+    }
+
+    /// Keep a capture under way going to `at` + the window's after-time, without noting a new
+    /// trigger (a condition that goes on holding); nothing without a capture.
+    pub fn extend(&mut self, at: u64) {
+        if let (Some(window), Some(capture)) = (self.config.window, &mut self.capture) {
+            capture.until_ns = capture.until_ns.max(at.saturating_add(window.after_ns));
+        }
     }
 
     /// Let time pass (`now`, the caller's clock in nanoseconds since the Unix epoch, the base
@@ -483,6 +502,7 @@ impl Recorder {
                 last_ns: 0,
                 frames: BTreeMap::new(),
                 triggers: std::mem::take(&mut self.pending_triggers),
+                triggers_not_listed: 0,
             },
             dirty: true,
         };
@@ -555,6 +575,7 @@ fn write_metadata(
         "first_frame_ns": facts.first_ns,
         "last_frame_ns": last,
         "triggers": triggers,
+        "triggers_not_listed": facts.triggers_not_listed,
         "checkpoint_interval_s": config.checkpoint_ns as f64 / 1e9,
         "survives_a_cut": config.format.survives_a_cut(),
     });

@@ -56,6 +56,9 @@ enum Command {
     Decode(cmd::dbc::DecodeArgs),
     /// Print frames from one or more buses, like candump (same options, filters and output).
     Dump(cmd::dump::Args),
+    /// Record buses in the field: listen-only, into any log format, a file per bus or merged,
+    /// rotated, checkpointed against kills, around triggers, with metadata and a status line.
+    Record(cmd::record::Args),
     /// Send one frame, like cansend, or a DBC message by name with its signals.
     Send(cmd::send::Args),
     /// Generate traffic like cangen, or every message of a DBC at its cycle time.
@@ -136,6 +139,7 @@ fn main() -> ExitCode {
         Command::Bridge(args) => cmd::bridge::run(&args, &mut out),
         Command::Vehicle(args) => cmd::vehicle::run(&args, &mut out),
         Command::Dump(args) => cmd::dump::run(&args, &mut out),
+        Command::Record(args) => cmd::record::run(&args, &mut out),
         Command::Send(args) => cmd::send::run(&args, &mut out),
         Command::Gen(args) => cmd::gen::run(&args, &mut out),
         Command::Play(args) => cmd::play::run(&args, &mut out),

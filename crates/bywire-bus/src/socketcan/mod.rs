@@ -357,6 +357,68 @@ pub fn configure(interface: &str, config: &LinkConfig) -> Result<(), BusError> {
     link.bring_up().map_err(|e| fail("up", e))
 }
 
+/// What asking an interface's controller for listen-only mode came to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ListenOnly {
+    /// The controller was switched to listen-only (the link went down and up for it).
+    Set,
+    /// It was listen-only already.
+    AlreadyOn,
+    /// The interface has no controller (vcan, vxcan): nothing to set.
+    NoController,
+    /// The controller's driver has no listen-only mode.
+    Unsupported,
+    /// The kernel refused (usually: no `CAP_NET_ADMIN`); the link is as it was.
+    Refused(String),
+}
+
+/// Put `interface`'s controller in listen-only mode (it then neither acknowledges frames nor
+/// sends error frames: a logger that cannot disturb the bus). The kernel changes control modes
+/// only on a link that is down, so a link that was up is taken down for it and brought up
+/// again; its bit timing is kept.
+pub fn set_listen_only(interface: &str) -> Result<ListenOnly, BusError> {
+    switch_listen_only(interface, true)
+}
+
+/// Take `interface`'s controller out of listen-only mode (as [`set_listen_only`] in reverse).
+pub fn clear_listen_only(interface: &str) -> Result<ListenOnly, BusError> {
+    switch_listen_only(interface, false)
+}
+
+fn switch_listen_only(interface: &str, on: bool) -> Result<ListenOnly, BusError> {
+    use socketcan::CanCtrlMode;
+    let link = CanInterface::open(interface).map_err(|e| io_error(interface, e))?;
+    let params = link.can_params().map_err(|e| io_error(interface, e))?;
+    let Some(modes) = params.ctrl_mode else {
+        return Ok(ListenOnly::NoController);
+    };
+    if modes.has_mode(CanCtrlMode::ListenOnly) == on {
+        return Ok(ListenOnly::AlreadyOn);
+    }
+    let supported = params
+        .ctrl_mode_supported
+        .is_some_and(|mask| mask & CanCtrlMode::ListenOnly.mask() != 0);
+    if !supported {
+        return Ok(ListenOnly::Unsupported);
+    }
+    let was_up = link.details().map_err(|e| io_error(interface, e))?.is_up;
+    if was_up {
+        if let Err(e) = link.bring_down() {
+            return Ok(ListenOnly::Refused(format!("{interface}: down: {e}")));
+        }
+    }
+    let switched = link.set_ctrlmode(CanCtrlMode::ListenOnly, on);
+    // Up again whatever came of it: the link is left running as it was found.
+    let up = if was_up { link.bring_up() } else { Ok(()) };
+    match (switched, up) {
+        (Ok(()), Ok(())) => Ok(ListenOnly::Set),
+        (Err(e), _) => Ok(ListenOnly::Refused(format!(
+            "{interface}: listen-only: {e}"
+        ))),
+        (Ok(()), Err(e)) => Err(io_error(&format!("{interface}: up"), e)),
+    }
+}
+
 /// Restart a controller that is bus-off (when automatic restart is off).
 pub fn restart(interface: &str) -> Result<(), BusError> {
     let link = CanInterface::open(interface).map_err(|e| io_error(interface, e))?;

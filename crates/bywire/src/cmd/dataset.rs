@@ -152,26 +152,6 @@ impl Truth {
     }
 }
 
-fn sha256(path: &Path) -> Result<String> {
-    use sha2::Digest;
-    let mut hasher = sha2::Sha256::new();
-    let mut file = std::fs::File::open(path).with_context(|| format!("{}", path.display()))?;
-    let mut buffer = vec![0u8; 1 << 16];
-    loop {
-        let n = std::io::Read::read(&mut file, &mut buffer)
-            .with_context(|| format!("{}", path.display()))?;
-        if n == 0 {
-            break;
-        }
-        hasher.update(buffer.get(..n).unwrap_or_default());
-    }
-    Ok(hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
-}
-
 /// One run's inputs: its logs, its truth, its name in the `run` column.
 struct Source {
     logs: Vec<PathBuf>,
@@ -419,7 +399,7 @@ fn card(
     let sources = sources
         .iter()
         .flat_map(|s| s.logs.iter().chain(s.truth.iter()))
-        .map(|p| Ok(json!({"file": p.display().to_string(), "sha256": sha256(p)?})))
+        .map(|p| Ok(json!({"file": p.display().to_string(), "sha256": crate::support::files::sha256(p)?})))
         .collect::<Result<Vec<_>>>()?;
     Ok(json!({
         "rate_hz": args.rate,

@@ -15,6 +15,7 @@ pub mod log;
 pub mod monitor;
 pub mod play;
 pub mod plot;
+pub mod record;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod secoc;

@@ -2,7 +2,7 @@
 //! `virtual:test`, `sim:a@500000`, or a plain interface name such as `can0` for SocketCAN),
 //! optionally followed by candump's filters (`can0,123:7FF,1F0~7F0,#FFFFFFFF,j`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -71,9 +71,29 @@ pub fn parse(text: &str) -> Result<BusArg> {
 impl BusArg {
     /// Open the bus and apply the filters.
     pub fn open(&self) -> Result<Box<dyn Bus>> {
-        let mut bus = bywire_bus::open(&self.spec)?;
-        if let Some(filtering) = &self.filtering {
-            bus.set_filtering(filtering.clone())
+        self.open_filtered(None)
+    }
+
+    /// Open the bus and apply the filters, or `otherwise` when none were given.
+    pub fn open_filtered(&self, otherwise: Option<Filtering>) -> Result<Box<dyn Bus>> {
+        let bus = bywire_bus::open(&self.spec)?;
+        self.filter(bus, self.filtering.clone().or(otherwise))
+    }
+
+    /// Open the bus for listening only (see [`bywire_bus::open_listening`]) and apply the
+    /// filters, or `otherwise` when none were given.
+    pub fn open_listening(
+        &self,
+        otherwise: Option<Filtering>,
+    ) -> Result<(Box<dyn Bus>, bywire_bus::Listening)> {
+        let (bus, listening) = bywire_bus::open_listening(&self.spec)?;
+        let bus = self.filter(bus, self.filtering.clone().or(otherwise))?;
+        Ok((bus, listening))
+    }
+
+    fn filter(&self, mut bus: Box<dyn Bus>, filtering: Option<Filtering>) -> Result<Box<dyn Bus>> {
+        if let Some(filtering) = filtering {
+            bus.set_filtering(filtering)
                 .with_context(|| format!("{}: cannot set the filters", self.spec))?;
         }
         Ok(bus)
@@ -88,6 +108,9 @@ pub type Event = (usize, Result<Received, String>);
 pub struct Readers {
     /// Frames from every bus.
     pub events: Receiver<Event>,
+    /// Each bus's receive drops so far (its endpoint's count: the kernel's for SocketCAN),
+    /// brought up to date as its reader goes.
+    pub dropped: Vec<Arc<AtomicU64>>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -99,18 +122,29 @@ impl Readers {
         // Bounded: a stalled printer holds the readers back instead of growing without end
         // (the buses' own receive queues count what is lost then).
         let (tx, events) = mpsc::sync_channel::<Event>(4096);
+        let dropped: Vec<Arc<AtomicU64>> = buses.iter().map(|_| Arc::default()).collect();
         let threads = buses
             .into_iter()
+            .zip(&dropped)
             .enumerate()
-            .map(|(index, mut bus)| {
-                let (tx, stop) = (tx.clone(), Arc::clone(&stop));
+            .map(|(index, (mut bus, dropped))| {
+                let (tx, stop, dropped) = (tx.clone(), Arc::clone(&stop), Arc::clone(dropped));
                 std::thread::spawn(move || {
+                    let mut since_count = 0u32;
                     while !stop.load(Ordering::Relaxed) {
                         let event = match bus.recv(Some(Duration::from_millis(100))) {
-                            Ok(None) => continue,
+                            Ok(None) => {
+                                dropped.store(bus.stats().rx_dropped, Ordering::Relaxed);
+                                continue;
+                            }
                             Ok(Some(received)) => Ok(received),
                             Err(e) => Err(e.to_string()),
                         };
+                        since_count += 1;
+                        if since_count >= 256 {
+                            since_count = 0;
+                            dropped.store(bus.stats().rx_dropped, Ordering::Relaxed);
+                        }
                         let failed = event.is_err();
                         if tx.send((index, event)).is_err() || failed {
                             break;
@@ -121,6 +155,7 @@ impl Readers {
             .collect();
         Readers {
             events,
+            dropped,
             stop,
             threads,
         }

@@ -41,6 +41,49 @@ pub fn seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A duration with a unit (`500ms`, `30s`, `10m`, `2h`; a plain number is seconds), more than
+/// 0 and at most a week: its seconds.
+pub fn duration(text: &str) -> Result<f64, String> {
+    let trimmed = text.trim();
+    let split = trimmed
+        .find(|c: char| c.is_ascii_alphabetic())
+        .unwrap_or(trimmed.len());
+    let (value, unit) = trimmed.split_at(split);
+    let scale = match unit {
+        "" | "s" => 1.0,
+        "ms" => 1e-3,
+        "m" | "min" => 60.0,
+        "h" => 3600.0,
+        _ => return Err(format!("'{text}': the unit is one of ms, s, m, h")),
+    };
+    positive_seconds(&(number(value)? * scale).to_string())
+}
+
+/// A size with a unit (`512k`, `100M`, `2G`: powers of 1024; a plain number is bytes), at least
+/// 4 KiB and at most 1 TiB: its bytes.
+pub fn size(text: &str) -> Result<u64, String> {
+    let trimmed = text.trim();
+    let split = trimmed
+        .find(|c: char| c.is_ascii_alphabetic())
+        .unwrap_or(trimmed.len());
+    let (value, unit) = trimmed.split_at(split);
+    let scale = match unit.to_ascii_uppercase().trim_end_matches(['B', 'I']) {
+        "" => 1.0,
+        "K" => 1024.0,
+        "M" => 1024.0 * 1024.0,
+        "G" => 1024.0 * 1024.0 * 1024.0,
+        _ => return Err(format!("'{text}': the unit is one of k, M, G")),
+    };
+    let bytes = number(value)? * scale;
+    if (4096.0..=1024f64.powi(4)).contains(&bytes) {
+        // In range, so the conversion is exact enough and cannot wrap.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        Ok(bytes as u64)
+    } else {
+        Err(format!("'{text}': at least 4 KiB and at most 1 TiB"))
+    }
+}
+
 /// Milliseconds, 0 or more and at most a week.
 pub fn milliseconds(text: &str) -> Result<f64, String> {
     let value = number(text)?;
@@ -128,5 +171,23 @@ mod tests {
         assert!(rate("1e-300").is_err() && rate("1001").is_err() && rate("20").is_ok());
         assert_eq!(rate_or_off("0"), Ok(0.0));
         assert!(factor("1e-300").is_err() && factor("2").is_ok());
+    }
+
+    #[test]
+    fn durations_and_sizes_take_units_and_refuse_the_rest() {
+        assert_eq!(duration("10m"), Ok(600.0));
+        assert_eq!(duration("500ms"), Ok(0.5));
+        assert_eq!(duration("2h"), Ok(7200.0));
+        assert_eq!(duration("45"), Ok(45.0));
+        for bad in ["0s", "-1m", "10 days", "1e9h", "m", "NaNs"] {
+            assert!(duration(bad).is_err(), "{bad}");
+        }
+        assert_eq!(size("100M"), Ok(100 << 20));
+        assert_eq!(size("512k"), Ok(512 << 10));
+        assert_eq!(size("2GiB"), Ok(2 << 30));
+        assert_eq!(size("8192"), Ok(8192));
+        for bad in ["10", "2T", "-5M", "5X", "NaNM", "1e30"] {
+            assert!(size(bad).is_err(), "{bad}");
+        }
     }
 }
