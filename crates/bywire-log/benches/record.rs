@@ -19,7 +19,6 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use bywire_bus::Bus;
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_log::format::Format;
 use bywire_log::recorder::{Config, Layout, Recorder, Rotation};
