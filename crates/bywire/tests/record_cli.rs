@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use common::{bywire, in_canvm};
+use common::{bywire, in_canvm, inside_lonet, Background};
 
 fn folder(test: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("bywire-record-{}-{test}", std::process::id()));
@@ -295,6 +295,82 @@ fn a_key_press_captures_the_window_and_stops_cleanly_on_ctrl_c() {
         files[0].to_str().unwrap()
     ));
     assert_eq!(read, meta["frames"]);
+}
+
+/// python-can sends frames and then an error frame with the bus-off class over
+/// `udp_multicast` (inside lonet): the error-frame and bus-off triggers both capture it.
+#[test]
+fn error_frames_and_bus_off_from_python_can_trigger_a_capture() {
+    if !inside_lonet("error_frames_and_bus_off_from_python_can_trigger_a_capture") {
+        return;
+    }
+    let dir = folder("errors");
+    let out = dir.join("logs");
+    let recorder = Background::start(&[
+        "record",
+        "udp:239.74.163.2:43580",
+        "--out",
+        out.to_str().unwrap(),
+        "--format",
+        "candump",
+        "--merged",
+        "--pre",
+        "300ms",
+        "--post",
+        "300ms",
+        "--trigger",
+        "error-frame",
+        "--trigger",
+        "bus-off",
+        "--quiet",
+    ]);
+    std::thread::sleep(Duration::from_millis(500));
+    let sent = python(
+        r#"
+import can, json, time
+bus = can.Bus(interface="udp_multicast", channel="239.74.163.2", port=43580)
+for i in range(150):
+    bus.send(can.Message(arbitration_id=0x123, data=[i % 256], is_extended_id=False))
+    time.sleep(0.01)
+bus.send(can.Message(arbitration_id=0x40, is_error_frame=True, dlc=8, data=[0] * 8, is_extended_id=False))
+for i in range(150):
+    bus.send(can.Message(arbitration_id=0x124, data=[i % 256], is_extended_id=False))
+    time.sleep(0.01)
+bus.shutdown()
+print(json.dumps("sent"))
+"#,
+    );
+    assert_eq!(sent, "sent");
+    let (code, _, stderr) = recorder.stop();
+    assert_eq!(code, 0, "{stderr}");
+    let files = files_with(&out, "log");
+    assert_eq!(files.len(), 1, "{files:?} {stderr}");
+    let meta = metadata(&files[0]);
+    let reasons: Vec<&str> = meta["triggers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["reason"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        reasons,
+        [
+            "error frame on udp:239.74.163.2:43580",
+            "bus-off on udp:239.74.163.2:43580"
+        ]
+    );
+    let log = std::fs::read_to_string(&files[0]).unwrap();
+    let lines: Vec<&str> = log.lines().collect();
+    // About 300 ms of frames each side of the error frame (10 ms apart), and nothing else.
+    let before = lines
+        .iter()
+        .take_while(|l| !l.contains("#R") && l.contains(" 123#"))
+        .count();
+    let after = lines.iter().filter(|l| l.contains(" 124#")).count();
+    assert!((20..=32).contains(&before), "{before}: {log}");
+    assert!((20..=32).contains(&after), "{after}: {log}");
+    assert!(log.contains("20000040#"), "the error frame itself: {log}");
+    assert_eq!(lines.len(), before + after + 1, "{log}");
 }
 
 #[test]
