@@ -109,3 +109,32 @@ def test_the_card_describes_the_table(dataset):
     assert len(card["sources"]) == 4 * 3  # bus1.log, bus3.log and truth.csv of each run
     assert all(len(s["sha256"]) == 64 for s in card["sources"])
     assert "# Dataset card" in (out / "card.md").read_text()
+
+
+def test_the_odometry_pose_follows_the_plants_truth_in_every_steering_mode(dataset):
+    """The 4WS odometry from the bus's wheel speeds and angles, from each episode's start,
+    against the plant's true pose carried into the same frame."""
+    import numpy
+
+    _, out = dataset
+    frame = pandas.read_parquet(out / "dataset.parquet")
+    modes = set()
+    for (_, _), episode in frame.dropna(subset=["episode", "odom_x"]).groupby(["run", "episode"]):
+        if len(episode) < 50:
+            continue
+        x0, y0, yaw0 = episode.iloc[0][["truth_x_m", "truth_y_m", "truth_yaw_rad"]]
+        dx, dy = episode["truth_x_m"] - x0, episode["truth_y_m"] - y0
+        c, s = numpy.cos(yaw0), numpy.sin(yaw0)
+        true_x, true_y = c * dx + s * dy, -s * dx + c * dy
+        travelled = numpy.hypot(true_x.diff(), true_y.diff()).sum()
+        error = numpy.hypot(true_x - episode["odom_x"], true_y - episode["odom_y"])
+        assert error.max() <= 0.02 * travelled + 0.1, (travelled, error.max())
+        turned = episode["truth_yaw_rad"] - yaw0 - episode["odom_yaw"]
+        assert abs(turned.iloc[-1]) < 0.03
+        modes.add(episode["obs_steering_mode"].iloc[0])
+    assert modes == {0.0, 1.0, 2.0}  # normal, crab and tank
+    schema = pyarrow.parquet.read_schema(out / "dataset.parquet")
+    assert schema.field("odom_x").metadata == {b"unit": b"m"}
+    assert schema.field("obs_imu_yaw_rate").metadata == {b"unit": b"deg/s"}
+    assert schema.field("obs_battery_voltage").metadata == {b"unit": b"V"}
+    assert frame["obs_battery_soc"].notna().sum() > 0.9 * len(frame)

@@ -4,6 +4,11 @@
 //! at every change of control mode, steering mode or E-stop state and at gaps in the commands,
 //! and split into training and validation by episode.
 //!
+//! With the vehicle's geometry and its four wheel speeds and angles, the rows also carry the
+//! pose of the 4WS odometry (`bywire_control::kinematics`: the body twist from the four wheels
+//! by least squares, integrated as arcs), from the origin at each episode's start: exact
+//! kinematics in normal, crab and tank steering alike.
+//!
 //! [`Builder`] takes records in time order and hands out rows as the grid passes them; it keeps
 //! one value and one timestamp per column, so memory does not grow with the log.
 
@@ -16,6 +21,7 @@ use bywire_dbc::decoder::Decoder;
 pub use crate::latency::ConfigError;
 use crate::latency::{locate, Located, SignalRef};
 use crate::profile::Profile;
+use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
 /// Whether a column is something the driver did or something the vehicle showed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,7 +30,35 @@ pub enum Role {
     Action,
     /// A feedback signal (with its age).
     Observation,
+    /// Computed from observations (the odometry's pose; its age is its oldest input's).
+    Derived,
 }
+
+impl Role {
+    /// Whether its columns have an age beside them.
+    pub fn has_age(self) -> bool {
+        self != Role::Action
+    }
+}
+
+/// The odometry's geometry: wheel positions at (±wheelbase/2, ±track/2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseConfig {
+    /// Front to rear axle, m.
+    pub wheelbase_m: f64,
+    /// Left to right wheel, m.
+    pub track_m: f64,
+}
+
+/// The pose columns, in order: position (m), heading (rad), body velocity (m/s) and yaw rate.
+pub const POSE_COLUMNS: [(&str, &str); 6] = [
+    ("odom_x", "m"),
+    ("odom_y", "m"),
+    ("odom_yaw", "rad"),
+    ("odom_vx", "m/s"),
+    ("odom_vy", "m/s"),
+    ("odom_yaw_rate", "rad/s"),
+];
 
 /// One column of the dataset.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,6 +84,9 @@ pub struct Config {
     pub step: Duration,
     /// A command gap longer than this ends an episode (the next command starts one).
     pub gap: Duration,
+    /// The 4WS odometry's pose columns (needs the `obs_wheel_speed_*` and `obs_wheel_angle_*`
+    /// columns).
+    pub pose: Option<PoseConfig>,
     /// The command message whose gaps cut episodes.
     pub command: Option<String>,
     /// Share of episodes for validation, 0–1.
@@ -119,11 +156,45 @@ impl Config {
                 }
             }
         }
+        if let Some(imu) = &profile.imu {
+            for (name, signal) in [
+                ("obs_imu_yaw_rate", Some(&imu.yaw_rate)),
+                ("obs_imu_accel_x", imu.accel_x.as_ref()),
+                ("obs_imu_accel_y", imu.accel_y.as_ref()),
+            ] {
+                if let Some(signal) = signal {
+                    add(name, Role::Observation, &imu.message, signal, false);
+                }
+            }
+        }
+        if let Some(b) = &profile.battery {
+            for (name, signal) in [
+                ("obs_battery_voltage", Some(&b.voltage)),
+                ("obs_battery_current", b.current.as_ref()),
+                ("obs_battery_soc", b.soc.as_ref()),
+            ] {
+                if let Some(signal) = signal {
+                    add(name, Role::Observation, &b.message, signal, false);
+                }
+            }
+        }
         let period = profile.command.as_ref().map_or(20, |c| c.period_ms.max(1));
+        let pose = match (
+            &profile.vehicle,
+            &profile.wheel_speeds,
+            &profile.wheel_angles,
+        ) {
+            (Some(v), Some(_), Some(_)) => Some(PoseConfig {
+                wheelbase_m: v.wheelbase_m,
+                track_m: v.track_m,
+            }),
+            _ => None,
+        };
         Config {
             columns,
             step: Duration::from_secs_f64(1.0 / rate),
             gap: Duration::from_millis(period.saturating_mul(5)),
+            pose,
             command: profile.command.as_ref().map(|c| c.message.clone()),
             validation: 0.2,
             seed: 0,
@@ -179,10 +250,129 @@ pub struct Summary {
 /// A silence in the logs longer than this is skipped by the grid (one minute).
 const MAX_SILENCE_NS: u64 = 60_000_000_000;
 
+/// The 4WS odometry as the grid goes.
+struct PoseState {
+    swerve: Swerve<4>,
+    odometry: Odometry,
+    /// The wheel speed and angle columns, FL FR RL RR.
+    speeds: [usize; 4],
+    angles: [usize; 4],
+    /// Their units to m/s and rad.
+    speed_scale: f64,
+    angle_scale: f64,
+    /// The stretch (episode, or none) the pose counts from.
+    stretch: Option<Option<u32>>,
+}
+
+impl PoseState {
+    fn new(pose: PoseConfig, columns: &[Column]) -> Result<PoseState, ConfigError> {
+        let find = |name: String| -> Result<(usize, &Column), ConfigError> {
+            columns
+                .iter()
+                .enumerate()
+                .find(|(_, c)| c.name == name)
+                .ok_or_else(|| ConfigError(format!("the odometry needs the column {name}")))
+        };
+        let mut speeds = [0; 4];
+        let mut angles = [0; 4];
+        let (mut speed_unit, mut angle_unit) = (String::new(), String::new());
+        for ((corner, speed), angle) in ["fl", "fr", "rl", "rr"]
+            .iter()
+            .zip(speeds.iter_mut())
+            .zip(angles.iter_mut())
+        {
+            let (i, c) = find(format!("obs_wheel_speed_{corner}"))?;
+            (*speed, speed_unit) = (i, c.unit.clone());
+            let (i, c) = find(format!("obs_wheel_angle_{corner}"))?;
+            (*angle, angle_unit) = (i, c.unit.clone());
+        }
+        let speed_scale = match speed_unit.as_str() {
+            "m/s" => 1.0,
+            "km/h" | "kph" => 1.0 / 3.6,
+            other => {
+                return Err(ConfigError(format!(
+                    "the odometry needs wheel speeds in m/s or km/h, not '{other}'"
+                )))
+            }
+        };
+        let angle_scale = match angle_unit.as_str() {
+            "deg" | "°" | "degree" | "degrees" => std::f64::consts::PI / 180.0,
+            "rad" => 1.0,
+            other => {
+                return Err(ConfigError(format!(
+                    "the odometry needs wheel angles in deg or rad, not '{other}'"
+                )))
+            }
+        };
+        Ok(PoseState {
+            swerve: four_wheel(pose.wheelbase_m, pose.track_m),
+            odometry: Odometry::new(Pose::default()),
+            speeds,
+            angles,
+            speed_scale,
+            angle_scale,
+            stretch: None,
+        })
+    }
+
+    /// The pose columns at a grid point `dt` after the last, from the wheels' values there
+    /// (the twist held over the step); the pose counts from the origin at each stretch's start.
+    fn step(
+        &mut self,
+        dt: f64,
+        episode: Option<u32>,
+        values: &[f64],
+        ages: &[f64],
+    ) -> ([f64; 6], f64) {
+        // A new stretch starts at the origin (this point is its first: nothing to integrate).
+        let starts = self.stretch != Some(episode);
+        if starts {
+            self.stretch = Some(episode);
+            self.odometry = Odometry::new(Pose::default());
+        }
+        let mut wheels = [WheelState::default(); 4];
+        let mut oldest = 0.0f64;
+        for (wheel, (&s, &a)) in wheels.iter_mut().zip(self.speeds.iter().zip(&self.angles)) {
+            let (speed, angle) = (values.get(s).copied(), values.get(a).copied());
+            let (Some(speed), Some(angle)) = (speed, angle) else {
+                return ([f64::NAN; 6], f64::NAN);
+            };
+            *wheel = WheelState {
+                speed: speed * self.speed_scale,
+                angle: angle * self.angle_scale,
+            };
+            for age in [ages.get(s), ages.get(a)] {
+                oldest = oldest.max(age.copied().unwrap_or(f64::NAN));
+            }
+        }
+        let finite = wheels
+            .iter()
+            .all(|w| w.speed.is_finite() && w.angle.is_finite());
+        let twist = self.swerve.forward(&wheels).filter(|_| finite);
+        let Some(twist) = twist else {
+            // Counted again from the next point with every wheel known.
+            self.stretch = None;
+            return ([f64::NAN; 6], f64::NAN);
+        };
+        let pose = if starts {
+            self.odometry.pose
+        } else {
+            self.odometry.update(dt, twist)
+        };
+        (
+            [pose.x, pose.y, pose.yaw, twist.vx, twist.vy, twist.omega],
+            oldest,
+        )
+    }
+}
+
 /// The streaming builder.
 pub struct Builder<'a> {
     decoder: &'a Decoder,
     config: Config,
+    /// The columns as the rows carry them: the signals', then the derived.
+    all_columns: Vec<Column>,
+    pose: Option<PoseState>,
     located: Vec<Located>,
     command: Option<(u32, bool)>,
     values: Vec<f64>,
@@ -222,6 +412,23 @@ impl<'a> Builder<'a> {
         let step_ns = u64::try_from(config.step.as_nanos())
             .unwrap_or(u64::MAX)
             .max(1_000);
+        let pose = config
+            .pose
+            .map(|p| PoseState::new(p, &config.columns))
+            .transpose()?;
+        let mut all_columns = config.columns.clone();
+        if pose.is_some() {
+            all_columns.extend(POSE_COLUMNS.iter().map(|(name, unit)| Column {
+                name: (*name).to_string(),
+                role: Role::Derived,
+                source: SignalRef {
+                    message: String::new(),
+                    signal: String::new(),
+                },
+                unit: (*unit).to_string(),
+                cuts_episodes: false,
+            }));
+        }
         let n = config.columns.len();
         let most = db
             .messages
@@ -232,6 +439,8 @@ impl<'a> Builder<'a> {
         Ok(Builder {
             decoder,
             config,
+            all_columns,
+            pose,
             located,
             command,
             values: vec![f64::NAN; n],
@@ -253,9 +462,9 @@ impl<'a> Builder<'a> {
         self.episodes = first;
     }
 
-    /// The columns (with their units).
+    /// The columns as the rows carry them (with their units): the signals', then the derived.
     pub fn columns(&self) -> &[Column] {
-        &self.config.columns
+        &self.all_columns
     }
 
     /// The next record (in time order); `row` is given each grid point it passes.
@@ -352,11 +561,18 @@ impl<'a> Builder<'a> {
         }
         let episode = self.episode;
         let validation = episode.is_some_and(|e| self.validation(e));
-        let ages = self
+        let mut ages: Vec<f64> = self
             .seen
             .iter()
             .map(|s| s.map_or(f64::NAN, |s| t.saturating_sub(s) as f64 / 1e9))
             .collect();
+        let mut values = self.values.clone();
+        if let Some(pose) = &mut self.pose {
+            let dt = self.step_ns as f64 / 1e9;
+            let (derived, age) = pose.step(dt, episode, &values, &ages);
+            values.extend(derived);
+            ages.extend([age; 6]);
+        }
         let t_s = (t - first) as f64 / 1e9;
         match (episode, self.summary.episodes.last_mut()) {
             (Some(e), Some(last)) if last.index == e => {
@@ -377,7 +593,7 @@ impl<'a> Builder<'a> {
             t_s,
             episode,
             validation,
-            values: self.values.clone(),
+            values,
             ages,
         });
     }
@@ -468,7 +684,112 @@ BO_ 257 State: 8 ECU
             command: Some("Cmd".into()),
             validation: 0.5,
             seed: 3,
+            pose: None,
         }
+    }
+
+    const WHEELS_DBC: &str = "BU_: VCU\nBO_ 512 Speeds: 8 VCU
+ SG_ FL : 0|16@1- (0.001,0) [-30|30] \"m/s\" ADS
+ SG_ FR : 16|16@1- (0.001,0) [-30|30] \"m/s\" ADS
+ SG_ RL : 32|16@1- (0.001,0) [-30|30] \"m/s\" ADS
+ SG_ RR : 48|16@1- (0.001,0) [-30|30] \"m/s\" ADS
+BO_ 513 Angles: 8 VCU
+ SG_ FL : 0|16@1- (0.01,0) [-180|180] \"deg\" ADS
+ SG_ FR : 16|16@1- (0.01,0) [-180|180] \"deg\" ADS
+ SG_ RL : 32|16@1- (0.01,0) [-180|180] \"deg\" ADS
+ SG_ RR : 48|16@1- (0.01,0) [-180|180] \"deg\" ADS
+";
+
+    /// The pose at the end of 2 s of the wheels `states` (sent every 10 ms), on a 50 Hz grid.
+    fn pose_after(states: [bywire_control::kinematics::WheelState; 4]) -> Vec<f64> {
+        let (db, _) = bywire_dbc::parse(WHEELS_DBC.as_bytes(), bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let mut columns = Vec::new();
+        for (kind, message) in [("speed", "Speeds"), ("angle", "Angles")] {
+            for corner in ["fl", "fr", "rl", "rr"] {
+                let source = format!("{message}.{}", corner.to_uppercase());
+                let name = format!("obs_wheel_{kind}_{corner}");
+                columns.push(column(&name, Role::Observation, &source, false));
+            }
+        }
+        let config = Config {
+            columns,
+            step: Duration::from_millis(20),
+            gap: Duration::from_secs(1),
+            command: None,
+            validation: 0.0,
+            seed: 0,
+            pose: Some(PoseConfig {
+                wheelbase_m: 3.2,
+                track_m: 1.8,
+            }),
+        };
+        let mut builder = Builder::new(&decoder, config).unwrap();
+        assert_eq!(builder.columns().last().unwrap().name, "odom_yaw_rate");
+        #[allow(clippy::cast_possible_truncation)]
+        let raw = |v: f64, scale: f64| ((v / scale).round() as i16).to_le_bytes();
+        let pack = |f: &dyn Fn(&bywire_control::kinematics::WheelState) -> [u8; 2]| {
+            let mut data = [0u8; 8];
+            for (k, s) in states.iter().enumerate() {
+                data[2 * k..2 * k + 2].copy_from_slice(&f(s));
+            }
+            data
+        };
+        let speeds = pack(&|s| raw(s.speed, 0.001));
+        let angles = pack(&|s| raw(s.angle.to_degrees(), 0.01));
+        let mut last = None;
+        for t in (0..=2000).step_by(10) {
+            for (id, data) in [(0x200, speeds), (0x201, angles)] {
+                let frame = Frame::Classic(
+                    ClassicFrame::new(Id::Standard(StandardId::new(id).unwrap()), &data).unwrap(),
+                );
+                builder.push(ms(t), &frame, &mut |r| last = Some(r));
+            }
+        }
+        builder.finish(&mut |r| last = Some(r));
+        let row = last.unwrap();
+        row.values[8..].to_vec()
+    }
+
+    #[test]
+    fn the_odometry_pose_follows_crab_and_tank_steering() {
+        use bywire_control::kinematics::{four_wheel, Twist, WheelState};
+        let swerve = four_wheel(3.2, 1.8);
+        // Crab: 1 m/s at 30° to the left, for 2 s (the pose counts from the first grid point,
+        // at 0 s, with every wheel seen).
+        let crab = swerve.inverse(
+            Twist {
+                vx: 30f64.to_radians().cos(),
+                vy: 30f64.to_radians().sin(),
+                omega: 0.0,
+            },
+            &[WheelState::default(); 4],
+        );
+        let pose = pose_after(crab);
+        let travelled = 2.0;
+        assert!(
+            (pose[0] - travelled * 30f64.to_radians().cos()).abs() < 0.01,
+            "{pose:?}"
+        );
+        assert!(
+            (pose[1] - travelled * 30f64.to_radians().sin()).abs() < 0.01,
+            "{pose:?}"
+        );
+        assert!(pose[2].abs() < 1e-3, "{pose:?}");
+        assert!((pose[4] - 0.5).abs() < 0.002, "{pose:?}");
+        // Tank: turning on the spot at 0.3 rad/s.
+        let tank = swerve.inverse(
+            Twist {
+                vx: 0.0,
+                vy: 0.0,
+                omega: 0.3,
+            },
+            &[WheelState::default(); 4],
+        );
+        let pose = pose_after(tank);
+        assert!(pose[0].abs() < 0.01 && pose[1].abs() < 0.01, "{pose:?}");
+        assert!((pose[2] - 0.3 * travelled).abs() < 0.005, "{pose:?}");
+        assert!((pose[5] - 0.3).abs() < 0.001, "{pose:?}");
     }
 
     #[test]

@@ -151,6 +151,38 @@ pub struct WheelSignals {
     pub signals: Vec<String>,
 }
 
+/// The IMU's message (observations for datasets and logs).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuRoles {
+    /// The message.
+    pub message: String,
+    /// Yaw rate (deg/s or rad/s, as the DBC's unit says).
+    pub yaw_rate: String,
+    /// Longitudinal acceleration.
+    #[serde(default)]
+    pub accel_x: Option<String>,
+    /// Lateral acceleration.
+    #[serde(default)]
+    pub accel_y: Option<String>,
+}
+
+/// The battery's message (observations for datasets and logs).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BatteryRoles {
+    /// The message.
+    pub message: String,
+    /// Pack voltage.
+    pub voltage: String,
+    /// Pack current.
+    #[serde(default)]
+    pub current: Option<String>,
+    /// State of charge.
+    #[serde(default)]
+    pub soc: Option<String>,
+}
+
 /// The E-stop message.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -359,6 +391,12 @@ pub struct Profile {
     pub wheel_speeds: Option<WheelSignals>,
     /// Wheel angles (four-wheel-steered vehicles).
     pub wheel_angles: Option<WheelSignals>,
+    /// The IMU.
+    #[serde(default)]
+    pub imu: Option<ImuRoles>,
+    /// The battery.
+    #[serde(default)]
+    pub battery: Option<BatteryRoles>,
     /// E-stop.
     pub estop: Option<EstopRoles>,
     /// Emergency brake.
@@ -605,6 +643,24 @@ impl Checker<'_> {
             }
             for (i, name) in w.signals.iter().enumerate() {
                 self.signal(m, &format!("{role}.signals[{i}]"), name)?;
+            }
+        }
+        if let Some(imu) = &p.imu {
+            let m = self.message("imu.message", &imu.message)?;
+            self.signal(m, "imu.yaw_rate", &imu.yaw_rate)?;
+            for (key, name) in [("accel_x", &imu.accel_x), ("accel_y", &imu.accel_y)] {
+                if let Some(name) = name {
+                    self.signal(m, &format!("imu.{key}"), name)?;
+                }
+            }
+        }
+        if let Some(b) = &p.battery {
+            let m = self.message("battery.message", &b.message)?;
+            self.signal(m, "battery.voltage", &b.voltage)?;
+            for (key, name) in [("current", &b.current), ("soc", &b.soc)] {
+                if let Some(name) = name {
+                    self.signal(m, &format!("battery.{key}"), name)?;
+                }
             }
         }
         if let Some(e) = &p.estop {

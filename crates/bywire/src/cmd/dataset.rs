@@ -19,13 +19,15 @@ use crate::support::vehicles;
 #[command(after_help = "Examples:
   bywire dataset drive1.log drive2.blf --profile reference-tug --rate 50 --out ds
   bywire dataset run/bus1.log --profile reference-tug --truth run/truth.csv --out ds
-  bywire dataset bus1.log bus3.log --profile reference-tug --signal imu_yaw_rate=Imu.YawRate --out ds
+  bywire dataset bus1.log bus3.log --profile reference-tug --signal bms_state=Battery.BmsState --out ds
   bywire sim --sweep apron-loop --seeds 1..8 --out sweep && bywire dataset --runs sweep --profile reference-tug --out ds
 
 Writes into --out (a new or empty folder): dataset.parquet (one row per grid step: t_s,
-timestamp_s, run, episode, split, then each action and observation, each observation's age_s —
-the time since a frame last carried it —, and truth_* columns with --truth; units in the
-fields' metadata) and card.json / card.md (columns, units, rate, episodes, statistics, the
+timestamp_s, run, episode, split, then each action and observation by the profile's roles
+(command, state, wheel speeds and angles, IMU, battery), the 4WS odometry's pose from each
+episode's start (odom_x, odom_y, odom_yaw, odom_vx, odom_vy, odom_yaw_rate; with the profile's
+geometry), each observation's age_s — the time since a frame last carried it; the pose's is its
+oldest input's —, and truth_* columns with --truth; units in the fields' metadata) and card.json / card.md (columns, units, rate, episodes, statistics, the
 source files' SHA-256, the profile and DBC). Episodes end at a change of control mode, steering
 mode or E-stop state and at a command gap (5 command periods); the split is by episode.")]
 pub struct Args {
@@ -236,7 +238,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             unit: c.unit.clone(),
         })
         .collect();
-    for c in columns.iter().filter(|c| c.role == Role::Observation) {
+    for c in columns.iter().filter(|c| c.role.has_age()) {
         table_columns.push(TableColumn {
             name: format!("{}_age_s", c.name),
             unit: "s".into(),
@@ -324,7 +326,7 @@ fn build(
     stats: &mut Stats,
 ) -> Result<Summary> {
     let observations: Vec<usize> = (0..columns.len())
-        .filter(|&i| columns.get(i).is_some_and(|c| c.role == Role::Observation))
+        .filter(|&i| columns.get(i).is_some_and(|c| c.role.has_age()))
         .collect();
     let mut first_timestamp: Option<f64> = None;
     let mut failure: Option<std::io::Error> = None;
