@@ -156,26 +156,29 @@ impl Config {
                 }
             }
         }
+        // Sensors by role: (column, message, signal) where the profile names them.
+        let mut sensors: Vec<(&str, &str, Option<&String>)> = Vec::new();
         if let Some(imu) = &profile.imu {
-            for (name, signal) in [
-                ("obs_imu_yaw_rate", Some(&imu.yaw_rate)),
-                ("obs_imu_accel_x", imu.accel_x.as_ref()),
-                ("obs_imu_accel_y", imu.accel_y.as_ref()),
-            ] {
-                if let Some(signal) = signal {
-                    add(name, Role::Observation, &imu.message, signal, false);
-                }
-            }
+            sensors.extend([
+                (
+                    "obs_imu_yaw_rate",
+                    imu.message.as_str(),
+                    Some(&imu.yaw_rate),
+                ),
+                ("obs_imu_accel_x", &imu.message, imu.accel_x.as_ref()),
+                ("obs_imu_accel_y", &imu.message, imu.accel_y.as_ref()),
+            ]);
         }
         if let Some(b) = &profile.battery {
-            for (name, signal) in [
-                ("obs_battery_voltage", Some(&b.voltage)),
-                ("obs_battery_current", b.current.as_ref()),
-                ("obs_battery_soc", b.soc.as_ref()),
-            ] {
-                if let Some(signal) = signal {
-                    add(name, Role::Observation, &b.message, signal, false);
-                }
+            sensors.extend([
+                ("obs_battery_voltage", b.message.as_str(), Some(&b.voltage)),
+                ("obs_battery_current", &b.message, b.current.as_ref()),
+                ("obs_battery_soc", &b.message, b.soc.as_ref()),
+            ]);
+        }
+        for (name, message, signal) in sensors {
+            if let Some(signal) = signal {
+                add(name, Role::Observation, message, signal, false);
             }
         }
         let period = profile.command.as_ref().map_or(20, |c| c.period_ms.max(1));

@@ -41,14 +41,19 @@ pub fn seconds(text: &str) -> Result<f64, String> {
     }
 }
 
-/// A duration with a unit (`500ms`, `30s`, `10m`, `2h`; a plain number is seconds), more than
-/// 0 and at most a week: its seconds.
-pub fn duration(text: &str) -> Result<f64, String> {
+/// `10m` as (`10`, `m`): the number, then the letters from the first one.
+fn number_and_unit(text: &str) -> (&str, &str) {
     let trimmed = text.trim();
     let split = trimmed
         .find(|c: char| c.is_ascii_alphabetic())
         .unwrap_or(trimmed.len());
-    let (value, unit) = trimmed.split_at(split);
+    trimmed.split_at(split)
+}
+
+/// A duration with a unit (`500ms`, `30s`, `10m`, `2h`; a plain number is seconds), more than
+/// 0 and at most a week: its seconds.
+pub fn duration(text: &str) -> Result<f64, String> {
+    let (value, unit) = number_and_unit(text);
     let scale = match unit {
         "" | "s" => 1.0,
         "ms" => 1e-3,
@@ -62,11 +67,7 @@ pub fn duration(text: &str) -> Result<f64, String> {
 /// A size with a unit (`512k`, `100M`, `2G`: powers of 1024; a plain number is bytes), at least
 /// 4 KiB and at most 1 TiB: its bytes.
 pub fn size(text: &str) -> Result<u64, String> {
-    let trimmed = text.trim();
-    let split = trimmed
-        .find(|c: char| c.is_ascii_alphabetic())
-        .unwrap_or(trimmed.len());
-    let (value, unit) = trimmed.split_at(split);
+    let (value, unit) = number_and_unit(text);
     let scale = match unit.to_ascii_uppercase().trim_end_matches(['B', 'I']) {
         "" => 1.0,
         "K" => 1024.0,
