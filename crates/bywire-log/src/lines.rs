@@ -69,6 +69,8 @@ pub struct CappedLines<R> {
     max: usize,
     number: u64,
     buffer: Vec<u8>,
+    /// Bytes of the reader's buffer lent out as the last line, consumed at the next call.
+    lent: usize,
 }
 
 impl<R: BufRead> CappedLines<R> {
@@ -84,6 +86,7 @@ impl<R: BufRead> CappedLines<R> {
             max: max.max(1),
             number: 0,
             buffer: Vec::new(),
+            lent: 0,
         }
     }
 
@@ -97,7 +100,22 @@ impl<R: BufRead> CappedLines<R> {
     /// As [`CappedLines::next_line`], the text lent rather than copied into a new `String`
     /// (the readers of text logs parse it in place).
     pub fn next_str(&mut self) -> Option<io::Result<(u64, LineRef<'_>)>> {
+        self.reader.consume(std::mem::take(&mut self.lent));
         self.buffer.clear();
+        // Most lines lie whole in the reader's buffer: lent from there, not copied.
+        let whole = match self.reader.fill_buf() {
+            Ok(available) => memchr::memchr(b'\n', available).filter(|&end| end <= self.max),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => None,
+            Err(e) => return Some(Err(e)),
+        };
+        if let Some(end) = whole {
+            self.lent = end + 1;
+            self.number += 1;
+            // The buffer is as it was: a second fill_buf does not read.
+            let available = self.reader.fill_buf().unwrap_or_default();
+            let line = available.get(..end).unwrap_or_default();
+            return Some(Ok((self.number, line_ref(line))));
+        }
         let mut length: u64 = 0;
         let mut ended = false;
         // Each pass consumes what the reader has buffered: bounded by the line's length.
@@ -132,16 +150,29 @@ impl<R: BufRead> CappedLines<R> {
         if length > u64::try_from(self.max).unwrap_or(u64::MAX) {
             return Some(Ok((self.number, LineRef::TooLong { bytes: length })));
         }
-        if self.buffer.last() == Some(&b'\r') {
-            self.buffer.pop();
-        }
-        let line = match std::str::from_utf8(&self.buffer) {
-            Ok(text) => LineRef::Text(text),
-            Err(e) => LineRef::NotUtf8 {
-                at: e.valid_up_to(),
-            },
-        };
-        Some(Ok((self.number, line)))
+        Some(Ok((self.number, line_ref(&self.buffer))))
+    }
+}
+
+impl<T: io::Read> CappedLines<io::BufReader<T>> {
+    /// Whether a whole line is already read and waiting (the next line comes without waiting
+    /// for the input).
+    pub fn line_waiting(&self) -> bool {
+        self.reader
+            .buffer()
+            .get(self.lent..)
+            .is_some_and(|rest| rest.contains(&b'\n'))
+    }
+}
+
+/// A line's bytes (its newline gone) as text, a `\r` before the newline dropped.
+fn line_ref(line: &[u8]) -> LineRef<'_> {
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    match std::str::from_utf8(line) {
+        Ok(text) => LineRef::Text(text),
+        Err(e) => LineRef::NotUtf8 {
+            at: e.valid_up_to(),
+        },
     }
 }
 

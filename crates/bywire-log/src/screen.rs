@@ -96,10 +96,45 @@ impl fmt::Display for FrameView<'_> {
     }
 }
 
+/// The frame's text of a line in the log form as candump writes it, `(ts) can0 123#DEADBEEF`
+/// (one space between the fields), found without splitting the line into words; `None` for
+/// anything else, which the word-by-word path reads (to the same frame where both apply).
+fn log_form_frame(line: &str) -> Option<&str> {
+    let bytes = line.as_bytes();
+    if bytes.first() != Some(&b'(') {
+        return None;
+    }
+    // A word of printable ASCII (no whitespace of any kind) up to a space or the end.
+    let word_end = |from: usize| {
+        let rest = bytes.get(from..)?;
+        let len = rest
+            .iter()
+            .position(|b| !b.is_ascii_graphic())
+            .unwrap_or(rest.len());
+        (len > 0 && rest.get(len).is_none_or(|&b| b == b' ')).then_some(from + len)
+    };
+    let stamp_end = word_end(0)?;
+    if bytes.get(stamp_end - 1) != Some(&b')') {
+        return None;
+    }
+    let interface_end = word_end(stamp_end + 1)?;
+    let frame_end = word_end(interface_end + 1)?;
+    let frame = line.get(interface_end + 1..frame_end)?;
+    frame.contains('#').then_some(frame)
+}
+
 /// A frame from a candump line in either form: the log form `(ts) can0 123#DEADBEEF` or the
 /// screen form `can0  123   [4]  DE AD BE EF` (with or without a leading `(timestamp)`).
 /// `None` for anything else. Error frames' detail lines and the ASCII column are ignored.
 pub fn parse_line(line: &str) -> Option<Frame> {
+    match log_form_frame(line) {
+        Some(frame_text) => frame_text.parse().ok(),
+        None => parse_words(line),
+    }
+}
+
+/// [`parse_line`] word by word, for every form.
+fn parse_words(line: &str) -> Option<Frame> {
     let mut words = line.split_whitespace().peekable();
     if words.peek().is_some_and(|w| w.starts_with('(')) {
         // `-tA` timestamps have a space inside: skip to the word that closes them.
@@ -236,6 +271,42 @@ mod tests {
             "  can0  12G  [1]  00",
         ] {
             assert_eq!(parse_line(junk), None, "{junk}");
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+
+        /// The log form's shortcut reads every line it takes as the word-by-word path does:
+        /// lines of candump's log form with other spacing (tabs, vertical tabs, no-break spaces,
+        /// doubled spaces), timestamps with spaces, and stray brackets and hashes.
+        #[test]
+        fn the_log_form_shortcut_agrees_with_the_words(
+            stamp in "[(]?[0-9.]{0,4}( [0-9:]{1,3})?[)]?",
+            first in "[ ]|[ ]{2}|\t|\u{b}|\u{a0}|",
+            interface in "can0|vcan1|c[)]|[#]|",
+            second in "[ ]|[ ]{2}|\t|\u{b}|\u{a0}|",
+            frame in "[0-9A-Fa-f]{0,9}#{0,2}[0-9A-Fa-fR_.]{0,6}",
+            rest in "( R| T|[ ]{2}R|\u{a0}T| x#1)?",
+        ) {
+            let line = format!("{stamp}{first}{interface}{second}{frame}{rest}");
+            if let Some(text) = log_form_frame(&line) {
+                proptest::prop_assert_eq!(text.parse::<Frame>().ok(), parse_words(&line), "{:?}", line);
+            }
+        }
+
+        #[test]
+        fn log_lines_take_the_shortcut(
+            seconds in 0u64..2_000_000_000,
+            id in 0u32..0x800,
+            data in proptest::collection::vec(proptest::num::u8::ANY, 0..=8),
+            direction in "( R| T)?",
+        ) {
+            let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
+            let line = format!("({seconds}.000001) can0 {id:03X}#{hex}{direction}");
+            proptest::prop_assert!(log_form_frame(&line).is_some());
+            proptest::prop_assert_eq!(parse_line(&line), parse_words(&line));
+            proptest::prop_assert!(parse_line(&line).is_some());
         }
     }
 }

@@ -135,7 +135,7 @@ fn main() -> ExitCode {
         Command::Wire(args) => cmd::wire::run(&args, &mut out),
         Command::Bittiming(args) => cmd::bittiming::run(&args, &mut out),
         Command::Dbc { command } => cmd::dbc::run(&command, &mut out),
-        Command::Decode(args) => cmd::dbc::decode(&args, io::stdin().lock(), &mut out),
+        Command::Decode(args) => cmd::dbc::decode(&args, io::stdin(), &mut out),
         Command::Bridge(args) => cmd::bridge::run(&args, &mut out),
         Command::Vehicle(args) => cmd::vehicle::run(&args, &mut out),
         Command::Dump(args) => cmd::dump::run(&args, &mut out),

@@ -88,6 +88,77 @@ fn decode_json_objects_and_errors() {
     assert_eq!(objects[2]["error"], "unknown message");
 }
 
+/// Output is written in blocks but never held while the input waits: a frame piped in from a
+/// live bus is decoded before the next one comes (stdin stays open throughout).
+#[test]
+fn decode_answers_each_line_of_a_live_pipe() {
+    use std::io::{BufRead, Write};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["decode", &corpus(MOTOHAWK), "--json"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let (lines, answers) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout).lines() {
+            if lines.send(line.unwrap()).is_err() {
+                break;
+            }
+        }
+    });
+    for data in ["A5B6D90000000000", "0000000000000000", "FFFFFFFFFFFFFFFF"] {
+        writeln!(stdin, "(1600000000.000000) vcan0 1F0#{data}").unwrap();
+        stdin.flush().unwrap();
+        let answer = answers
+            .recv_timeout(std::time::Duration::from_secs(20))
+            .expect("no answer while the input stays open");
+        let object: serde_json::Value = serde_json::from_str(&answer).unwrap();
+        assert_eq!(object["name"], "ExampleMessage", "{answer}");
+    }
+    drop(stdin);
+    assert!(child.wait().unwrap().success());
+}
+
+/// Many lines through standard input (blocks of output, lines lent from the input's buffer)
+/// give what the same log gives read as a file with `-I`.
+#[test]
+fn decode_of_standard_input_equals_decode_of_the_file() {
+    let mut log = String::new();
+    for n in 0..20_000u32 {
+        let data = format!("{:016X}", u64::from(n).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let id = if n % 3 == 0 { "123" } else { "1F0" };
+        log.push_str(&format!(
+            "({}.{:06}) vcan{} {id}#{data}\n",
+            1_600_000_000 + n / 1000,
+            n % 1000,
+            n % 2
+        ));
+    }
+    let dir = std::env::temp_dir().join(format!("bywire-decode-stdin-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("in.log");
+    std::fs::write(&file, &log).unwrap();
+    let (code, piped, err) = run(&["decode", &corpus(MOTOHAWK), "--json"], &log);
+    assert_eq!(code, 0, "{err}");
+    let (code, read, err) = run(
+        &[
+            "decode",
+            &corpus(MOTOHAWK),
+            "--json",
+            "-I",
+            file.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(piped.lines().count(), 20_000);
+    assert_eq!(piped, read);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn dump_is_lenient_by_default_and_strict_on_request() {
     // cantools refuses this file (a signal comment without a signal name).

@@ -71,6 +71,22 @@ fn err(column: usize, kind: ParseFrameErrorKind) -> ParseFrameError {
     ParseFrameError { column, kind }
 }
 
+/// Each byte's value as a hex digit, or 0xFF.
+const HEX_VALUE: [u8; 256] = hex_values();
+
+// Indices are a byte's value, below 256; a digit's value is below 16.
+#[allow(clippy::indexing_slicing, clippy::cast_possible_truncation)]
+const fn hex_values() -> [u8; 256] {
+    let mut table = [0xFF; 256];
+    let mut digit = 0;
+    while digit < 16 {
+        table[b"0123456789abcdef"[digit] as usize] = digit as u8;
+        table[b"0123456789ABCDEF"[digit] as usize] = digit as u8;
+        digit += 1;
+    }
+    table
+}
+
 /// A cursor over the ASCII bytes of the text, with 0-based position `pos`.
 struct Cursor<'a> {
     bytes: &'a [u8],
@@ -110,6 +126,19 @@ impl Cursor<'_> {
         let mut len = 0;
         // Each byte consumes at least two characters, so the text length bounds the loop.
         while let Some(c) = self.peek() {
+            // Two hex digits, the usual case, by table; anything else below, with its error.
+            let pair = self.bytes.get(self.pos + 1).map(|&low| {
+                let value = |b: u8| HEX_VALUE.get(usize::from(b)).copied().unwrap_or(0xFF);
+                (value(c), value(low))
+            });
+            if let (Some((high, low)), Some(slot)) = (pair, out.get_mut(len)) {
+                if high < 16 && low < 16 && len < max {
+                    *slot = (high << 4) | low;
+                    len += 1;
+                    self.pos += 2;
+                    continue;
+                }
+            }
             if c == b'.' {
                 self.pos += 1;
                 continue;

@@ -1,9 +1,9 @@
-use std::io::{BufRead, Write};
+use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 
 use crate::support::logs::Skip;
 use crate::support::signals::FrameText;
-use crate::support::signals::{Dbc, DecodedFrame};
+use crate::support::signals::{Dbc, DecodedFrame, JsonLines};
 use anyhow::{Context, Result};
 use bywire_dbc::{ByteOrder, Database, Message, Multiplexing, ValueType};
 use serde_json::json;
@@ -295,12 +295,10 @@ fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
-pub fn decode(
-    args: &DecodeArgs,
-    mut input: impl BufRead + 'static,
-    out: &mut impl Write,
-) -> Result<()> {
+pub fn decode(args: &DecodeArgs, input: impl Read + 'static, out: &mut impl Write) -> Result<()> {
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
+    let input = std::io::BufReader::with_capacity(1 << 16, input);
+    let mut json = args.json.then(|| JsonLines::new(&decoder));
     if args.csv || args.parquet.is_some() {
         return decode_records(args, &decoder, Box::new(input), out);
     }
@@ -325,55 +323,70 @@ pub fn decode(
                         bywire_log::candump::frame_text(&record.frame, false)
                     )
                 };
-                write_decoded(args, &decoder, &text, &record.frame, &mut out)?;
+                write_decoded(
+                    args,
+                    &decoder,
+                    json.as_mut(),
+                    &text,
+                    &record.frame,
+                    &mut out,
+                )?;
             }
         }
         out.flush()?;
         return Ok(());
     }
     // One line at a time, each at most a log line's size: logs of any size stream through in
-    // constant memory.
-    let mut lines = bywire_log::lines::CappedLines::new(&mut input);
-    while let Some(next) = lines.next_line() {
+    // constant memory. The output is written in blocks, but flushed whenever no whole line is
+    // waiting in the input, so a live bus piped in (`candump -L can0 | bywire decode`) shows
+    // each frame as it comes.
+    let mut out = std::io::BufWriter::with_capacity(1 << 16, out);
+    let mut lines = bywire_log::lines::CappedLines::new(input);
+    loop {
+        if !lines.line_waiting() {
+            out.flush()?;
+        }
+        let Some(next) = lines.next_str() else { break };
         let (number, line) = next?;
-        let line = match line {
-            bywire_log::lines::Line::Text(text) => text,
+        let text = match line {
+            bywire_log::lines::LineRef::Text(text) => text,
             other => {
                 eprintln!(
                     "stdin:{number}: skipped: {}",
-                    other.problem().unwrap_or_default()
+                    other.to_owned_line().problem().unwrap_or_default()
                 );
                 continue;
             }
         };
-        let text = line.as_str();
         match bywire_log::screen::parse_line(text) {
-            Some(frame) => write_decoded(args, &decoder, text, &frame, out)?,
+            Some(frame) => write_decoded(args, &decoder, json.as_mut(), text, &frame, &mut out)?,
             None if !args.json => writeln!(out, "{text}")?,
             None => {}
         }
     }
+    out.flush()?;
     Ok(())
 }
 
-/// One frame's line (`text`) and what it decodes to, as text or a JSON object.
+/// One frame's line (`text`) and what it decodes to, as text or (with `json`) a JSON object.
 fn write_decoded(
     args: &DecodeArgs,
     decoder: &Dbc,
+    json: Option<&mut JsonLines<'_>>,
     text: &str,
     frame: &bywire_core::Frame,
     out: &mut impl Write,
 ) -> Result<()> {
-    let choices = !args.no_decode_choices;
-    let decoded = decoder.decode(frame);
-    if args.json {
+    if let Some(lines) = json {
+        if lines.write(out, frame)? {
+            return Ok(());
+        }
+        // Two signals of one name: the object numbers them.
         let (id, extended) = frame
             .id()
             .map(|id| (id.as_raw(), id.is_extended()))
             .unwrap_or_default();
-        if crate::support::signals::write_json_line(out, (id, extended), decoded.as_ref())? {
-            return Ok(());
-        }
+        let decoded = decoder.decode(frame);
         let o = match &decoded {
             None => {
                 json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})
@@ -389,7 +402,8 @@ fn write_decoded(
         writeln!(out, "{o}")?;
         return Ok(());
     }
-    match decoded {
+    let choices = !args.no_decode_choices;
+    match decoder.decode(frame) {
         None => writeln!(out, "{text}")?,
         Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
         Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,

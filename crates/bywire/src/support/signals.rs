@@ -253,49 +253,109 @@ impl FrameText for DecodedFrame<'_> {
     }
 }
 
-/// One frame's `decode --json` line, written straight out: the bytes `serde_json` makes of
-/// the same object (keys in its sorted order, its number and string forms) without a map and
-/// a value allocated per signal. `Ok(false)`, and nothing written, where two signals share a
-/// name: [`FrameText::json_signals`] numbers those.
-pub fn write_json_line(
-    out: &mut impl std::io::Write,
-    (id, extended): (u32, bool),
-    decoded: Option<&DecodedFrame<'_>>,
-) -> std::io::Result<bool> {
-    let Some(d) = decoded else {
-        writeln!(
-            out,
-            r#"{{"error":"unknown message","extended":{extended},"id":{id},"name":null,"signals":{{}}}}"#
-        )?;
-        return Ok(true);
-    };
-    let mut order: Vec<&SignalValue<'_>> = d.signals.iter().collect();
-    order.sort_unstable_by(|a, b| a.signal.display_name().cmp(b.signal.display_name()));
-    let shared_name = order
-        .windows(2)
-        .any(|pair| matches!(pair, [a, b] if a.signal.display_name() == b.signal.display_name()));
-    if shared_name {
-        return Ok(false);
+/// `decode --json` lines written straight out: the bytes `serde_json` makes of the same object
+/// (keys in its sorted order, its number and string forms) without a map, a value or a sort per
+/// frame. Each message's signals are put in name order, their names quoted, once.
+pub struct JsonLines<'a> {
+    dbc: &'a Dbc,
+    /// By message index; `None` where two signals share a name ([`FrameText::json_signals`]
+    /// numbers those).
+    messages: Vec<Option<MessageJson>>,
+    values: Vec<Option<bywire_dbc::codec::Decoded>>,
+}
+
+/// A message's quoted name and its signals' indices with their quoted names, in name order.
+struct MessageJson {
+    name: String,
+    signals: Vec<(usize, String)>,
+}
+
+impl<'a> JsonLines<'a> {
+    /// Lines of frames decoded with `dbc`.
+    pub fn new(dbc: &'a Dbc) -> Self {
+        let quoted = |text: &str| serde_json::to_string(text).unwrap_or_default();
+        let messages = dbc
+            .database()
+            .messages
+            .iter()
+            .map(|message| {
+                let mut signals: Vec<(usize, &str)> = message
+                    .signals
+                    .iter()
+                    .map(Signal::display_name)
+                    .enumerate()
+                    .collect();
+                signals.sort_unstable_by(|a, b| a.1.cmp(b.1));
+                let shared_name = signals.windows(2).any(|pair| pair[0].1 == pair[1].1);
+                (!shared_name).then(|| MessageJson {
+                    name: quoted(message.display_name()),
+                    signals: signals
+                        .into_iter()
+                        .map(|(index, name)| (index, quoted(name)))
+                        .collect(),
+                })
+            })
+            .collect();
+        JsonLines {
+            dbc,
+            messages,
+            values: Vec::new(),
+        }
     }
-    out.write_all(b"{")?;
-    if let Some(error) = &d.error {
-        out.write_all(br#""error":"#)?;
-        serde_json::to_writer(&mut *out, error)?;
-        out.write_all(b",")?;
-    }
-    write!(out, r#""extended":{extended},"id":{id},"name":"#)?;
-    serde_json::to_writer(&mut *out, d.message.display_name())?;
-    out.write_all(br#","signals":{"#)?;
-    for (i, s) in order.iter().enumerate() {
-        if i > 0 {
+
+    /// Write `frame`'s line; `Ok(false)`, and nothing written, where two of its message's
+    /// signals share a name.
+    pub fn write(&mut self, out: &mut impl std::io::Write, frame: &Frame) -> std::io::Result<bool> {
+        let (id, extended) = frame
+            .id()
+            .map(|id| (id.as_raw(), id.is_extended()))
+            .unwrap_or_default();
+        let Some((index, _, decoded)) = self.dbc.decode_into(frame, &mut self.values) else {
+            writeln!(
+                out,
+                r#"{{"error":"unknown message","extended":{extended},"id":{id},"name":null,"signals":{{}}}}"#
+            )?;
+            return Ok(true);
+        };
+        let Some(Some(message)) = self.messages.get(index) else {
+            return Ok(false);
+        };
+        out.write_all(b"{")?;
+        if let Err(error) = decoded {
+            out.write_all(br#""error":"#)?;
+            serde_json::to_writer(&mut *out, &error.to_string())?;
             out.write_all(b",")?;
         }
-        serde_json::to_writer(&mut *out, s.signal.display_name())?;
-        out.write_all(b":")?;
-        serde_json::to_writer(&mut *out, &json_number(s.value.physical))?;
+        out.write_all(if extended {
+            br#""extended":true,"id":"#
+        } else {
+            br#""extended":false,"id":"#
+        })?;
+        serde_json::to_writer(&mut *out, &id)?;
+        out.write_all(br#","name":"#)?;
+        out.write_all(message.name.as_bytes())?;
+        out.write_all(br#","signals":{"#)?;
+        let mut first = true;
+        for (signal, name) in &message.signals {
+            let Some(Some(value)) = self.values.get(*signal) else {
+                continue;
+            };
+            if !first {
+                out.write_all(b",")?;
+            }
+            first = false;
+            out.write_all(name.as_bytes())?;
+            out.write_all(b":")?;
+            match value.physical {
+                Value::Int(i) => serde_json::to_writer(&mut *out, &i)?,
+                Value::UInt(u) => serde_json::to_writer(&mut *out, &u)?,
+                Value::Float(f) if f.is_finite() => serde_json::to_writer(&mut *out, &f)?,
+                other => serde_json::to_writer(&mut *out, &json_number(other))?,
+            }
+        }
+        out.write_all(b"}}\n")?;
+        Ok(true)
     }
-    out.write_all(b"}}\n")?;
-    Ok(true)
 }
 
 /// A value as JSON (non-finite floats as strings, which JSON has no number for).
@@ -382,7 +442,7 @@ mod tests {
     /// identifier; a message whose signals share a name is left to the object's numbering.
     #[test]
     fn json_lines_are_the_objects_serde_json_writes() {
-        use super::{write_json_line, Dbc, FrameText};
+        use super::{Dbc, FrameText, JsonLines};
         use bywire_core::{Frame, Id};
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
@@ -412,13 +472,12 @@ mod tests {
             frames.push(Frame::classic(id, &payload[..len / 2]).unwrap());
         }
         frames.push(Frame::classic(Id::standard(0x7FF).unwrap(), &[1, 2]).unwrap());
+        let mut lines = JsonLines::new(&dbc);
         for frame in &frames {
             let id = frame.id().unwrap();
             let decoded = dbc.decode(frame);
             let mut line = Vec::new();
-            let written =
-                write_json_line(&mut line, (id.as_raw(), id.is_extended()), decoded.as_ref())
-                    .unwrap();
+            let written = lines.write(&mut line, frame).unwrap();
             assert!(written, "{frame}");
             let mut object = match &decoded {
                 None => serde_json::json!({"id": id.as_raw(), "extended": id.is_extended(),
@@ -437,8 +496,7 @@ mod tests {
         let dbc = Dbc::new(db);
         let frame = Frame::classic(Id::standard(0x100).unwrap(), &[1, 2]).unwrap();
         let mut line = Vec::new();
-        let decoded = dbc.decode(&frame);
-        assert!(!write_json_line(&mut line, (0x100, false), decoded.as_ref()).unwrap());
+        assert!(!JsonLines::new(&dbc).write(&mut line, &frame).unwrap());
         assert!(line.is_empty());
     }
 }

@@ -13,13 +13,17 @@ pub fn run_with_input(command: &mut Command, input: &str) -> (i32, String, Strin
         .stderr(Stdio::piped())
         .spawn()
         .expect("the program starts");
-    // A program that refuses its arguments may exit before reading its input: a broken
-    // pipe here is its choice, not a failure of the test.
-    let written = child.stdin.take().unwrap().write_all(input.as_bytes());
-    if let Err(e) = written {
+    // Written from a thread while the output is read: a program that answers as it reads
+    // would otherwise fill its output pipe and wait for us as we wait for it. A program that
+    // refuses its arguments may exit before reading its input: a broken pipe here is its
+    // choice, not a failure of the test.
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()));
+    let out = child.wait_with_output().unwrap();
+    if let Err(e) = writer.join().unwrap() {
         assert_eq!(e.kind(), std::io::ErrorKind::BrokenPipe, "{e}");
     }
-    let out = child.wait_with_output().unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8(out.stdout).unwrap(),
