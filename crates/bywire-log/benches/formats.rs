@@ -8,6 +8,7 @@ use std::io::Cursor;
 
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_log::format::Format;
+use bywire_log::stats::LogStats;
 use bywire_log::LogRecord;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
@@ -77,5 +78,36 @@ fn formats(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, formats);
+/// Reading candump text, in bytes per second: records lent by the reader (no copy of a
+/// line), and counted as `bywire log stats` counts them.
+fn candump_reading(c: &mut Criterion) {
+    let text = write(Format::Candump, &records());
+    let mut group = c.benchmark_group("candump text");
+    group.throughput(Throughput::Bytes(u64::try_from(text.len()).unwrap()));
+    group.sample_size(20);
+    group.bench_function("read, records lent", |b| {
+        b.iter(|| {
+            let mut frames = 0u64;
+            let end: Option<()> = bywire_log::Reader::new(text.as_slice()).for_each_ref(|r| {
+                frames += u64::from(!r.unwrap().frame.data().is_empty());
+                std::ops::ControlFlow::Continue(())
+            });
+            assert!(end.is_none());
+            frames
+        })
+    });
+    group.bench_function("read and counted (log stats)", |b| {
+        b.iter(|| {
+            let mut stats = LogStats::new();
+            let _: Option<()> = bywire_log::Reader::new(text.as_slice()).for_each_ref(|r| {
+                stats.add(&r.unwrap());
+                std::ops::ControlFlow::Continue(())
+            });
+            stats.frames
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, formats, candump_reading);
 criterion_main!(benches);

@@ -13,11 +13,12 @@
 
 use std::fmt::{self, Write as _};
 use std::io::{self, BufRead, Write};
+use std::ops::ControlFlow;
 
 use bywire_core::frame::ParseFrameErrorKind;
 use bywire_core::{ClassicFrame, Dlc, Frame, Timestamp};
 
-use crate::lines::{CappedLines, LineRef};
+use crate::lines::{line_ref, CappedLines, LineBytes, LineRef};
 
 /// One line of a candump log.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -30,6 +31,44 @@ pub struct LogRecord {
     pub frame: Frame,
     /// `Some('R')` or `Some('T')` when the line carries a direction.
     pub direction: Option<char>,
+}
+
+/// A record lent by a reader, its interface name still in the line it was read from: for
+/// callers that need no copy of it (counting, filtering), see [`Reader::for_each_ref`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LogRecordRef<'a> {
+    /// When the frame was on the bus, in nanoseconds since the Unix epoch.
+    pub timestamp: Timestamp,
+    /// The interface it was on.
+    pub interface: &'a str,
+    /// The frame.
+    pub frame: Frame,
+    /// `Some('R')` or `Some('T')` when the line carries a direction.
+    pub direction: Option<char>,
+}
+
+impl LogRecordRef<'_> {
+    /// The record with its own copy of the interface name.
+    pub fn to_record(&self) -> LogRecord {
+        LogRecord {
+            timestamp: self.timestamp,
+            interface: self.interface.to_string(),
+            frame: self.frame,
+            direction: self.direction,
+        }
+    }
+}
+
+impl LogRecord {
+    /// The record lent as a [`LogRecordRef`].
+    pub fn as_record_ref(&self) -> LogRecordRef<'_> {
+        LogRecordRef {
+            timestamp: self.timestamp,
+            interface: &self.interface,
+            frame: self.frame,
+            direction: self.direction,
+        }
+    }
 }
 
 /// A line that is not a candump log line, with where the problem is.
@@ -105,11 +144,16 @@ pub enum LogErrorKind {
 
 /// Parse one log line. Columns in errors are 1-based.
 pub fn parse_line(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
-    parse_plain_line(text).map_or_else(|| parse_line_in_full(text), Ok)
+    parse_line_ref(text).map(|record| record.to_record())
+}
+
+/// [`parse_line`], the interface name lent from `text`.
+pub fn parse_line_ref(text: &str) -> Result<LogRecordRef<'_>, (usize, LogErrorKind)> {
+    parse_plain_line(text.as_bytes()).map_or_else(|| parse_line_in_full(text), Ok)
 }
 
 /// [`parse_line`] for any line, each problem named with its column.
-fn parse_line_in_full(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
+fn parse_line_in_full(text: &str) -> Result<LogRecordRef<'_>, (usize, LogErrorKind)> {
     let rest = text
         .strip_prefix('(')
         .ok_or((1, LogErrorKind::NoTimestamp))?;
@@ -146,9 +190,9 @@ fn parse_line_in_full(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
     if let Some(extra) = fields.next() {
         return Err((column + 2, LogErrorKind::Trailing(extra.to_string())));
     }
-    Ok(LogRecord {
+    Ok(LogRecordRef {
         timestamp,
-        interface: interface.to_string(),
+        interface,
         frame,
         direction,
     })
@@ -158,8 +202,9 @@ fn parse_line_in_full(text: &str) -> Result<LogRecord, (usize, LogErrorKind)> {
 /// spaces — read in one pass without the column bookkeeping an error needs; `None` for
 /// anything else, which [`parse_line`]'s full path then reads or names. Most of a log's time
 /// goes here; a property test holds the two paths to the same records.
-fn parse_plain_line(text: &str) -> Option<LogRecord> {
-    let bytes = text.as_bytes();
+/// The line's bytes are taken as they come: what it reads is ASCII but for the interface's
+/// name, checked on its own, so a line read here needs no UTF-8 check of its whole.
+fn parse_plain_line(bytes: &[u8]) -> Option<LogRecordRef<'_>> {
     if bytes.first() != Some(&b'(') {
         return None;
     }
@@ -192,26 +237,61 @@ fn parse_plain_line(text: &str) -> Option<LogRecord> {
     if interface_end == interface_start || frame_end <= frame_start {
         return None;
     }
-    let frame = text.get(frame_start..frame_end)?.parse::<Frame>().ok()?;
-    Some(LogRecord {
+    let frame = Frame::from_ascii(bytes.get(frame_start..frame_end)?).ok()?;
+    Some(LogRecordRef {
         timestamp,
-        interface: text.get(interface_start..interface_end)?.to_string(),
+        interface: std::str::from_utf8(bytes.get(interface_start..interface_end)?).ok()?,
         frame,
         direction,
     })
 }
 
-/// The decimal number from `start` up to the first non-digit, and where that is; `None` past
-/// `u64` (the full path names it).
+/// The decimal number from `start` up to the first non-digit, and where that is; `None` for
+/// more than 19 digits (the full path reads or names those).
 fn plain_digits(bytes: &[u8], start: usize) -> Option<(u64, usize)> {
+    let rest = bytes.get(start..)?;
     let mut value = 0u64;
-    let mut at = start;
-    // Bounded by the line's length.
-    while let Some(&b) = bytes.get(at).filter(|b| b.is_ascii_digit()) {
-        value = value.checked_mul(10)?.checked_add(u64::from(b - b'0'))?;
-        at += 1;
+    let mut count = 0;
+    // Eight digits at a time while they last (a timestamp's seconds), then one at a time.
+    while let Some(eight) = rest
+        .get(count..count + 8)
+        .filter(|_| count + 8 <= 19)
+        .and_then(|chunk| <[u8; 8]>::try_from(chunk).ok())
+        .and_then(eight_digits)
+    {
+        value = value * 100_000_000 + eight;
+        count += 8;
     }
-    Some((value, at))
+    for &b in rest.get(count..)? {
+        let digit = b.wrapping_sub(b'0');
+        if digit > 9 {
+            break;
+        }
+        if count == 19 {
+            return None;
+        }
+        // Nineteen digits or fewer fit a u64.
+        value = value * 10 + u64::from(digit);
+        count += 1;
+    }
+    Some((value, start + count))
+}
+
+/// Eight ASCII digits as their number, all at once in a u64 (`None` when one is not a digit).
+fn eight_digits(chunk: [u8; 8]) -> Option<u64> {
+    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
+    const ZEROS: u64 = 0x3030_3030_3030_3030;
+    let text = u64::from_le_bytes(chunk);
+    // A digit is 0x30-0x39: its high half is 3, and adding 6 to it leaves that so.
+    if text & HIGH != ZEROS || (text + 0x0606_0606_0606_0606) & HIGH != ZEROS {
+        return None;
+    }
+    // The first digit is the lowest byte: pairs, then fours, then all eight, each step
+    // joining neighbours (what spills into the lanes above is masked off).
+    let digits = text - ZEROS;
+    let pairs = (digits.wrapping_mul(10) + (digits >> 8)) & 0x00FF_00FF_00FF_00FF;
+    let fours = (pairs.wrapping_mul(100) + (pairs >> 16)) & 0x0000_FFFF_0000_FFFF;
+    Some((fours.wrapping_mul(10_000) + (fours >> 32)) & 0xFFFF_FFFF)
 }
 
 fn parse_timestamp(text: &str) -> Result<Timestamp, &'static str> {
@@ -293,25 +373,70 @@ pub(crate) fn next_text<'a, R: BufRead>(
     })
 }
 
+impl<R: BufRead> Reader<R> {
+    /// Hand each record to `each`, lent rather than copied (no allocation per line), until
+    /// the input ends (`None`) or `each` breaks (what it broke with). Errors are handed on
+    /// as the iterator gives them; reading goes on after one unless `each` breaks.
+    pub fn for_each_ref<B>(
+        &mut self,
+        mut each: impl FnMut(Result<LogRecordRef<'_>, LogError>) -> ControlFlow<B>,
+    ) -> Option<B> {
+        // Bounded by the input's lines.
+        loop {
+            let (number, line) = match self.lines.next_bytes()? {
+                Ok(next) => next,
+                Err(e) => {
+                    let line = self.line + 1;
+                    let message = e.to_string();
+                    match each(Err(LogError::Io { line, message })) {
+                        ControlFlow::Break(b) => return Some(b),
+                        ControlFlow::Continue(()) => continue,
+                    }
+                }
+            };
+            self.line = number;
+            let syntax = |column, kind| LogError::Syntax {
+                line: number,
+                column,
+                kind,
+            };
+            let record = match line {
+                LineBytes::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
+                // Most lines are read here, without a UTF-8 check of the whole line.
+                LineBytes::Bytes(bytes) => match parse_plain_line(strip_cr(bytes)) {
+                    Some(record) => Ok(record),
+                    None => match line_ref(bytes) {
+                        LineRef::Text(text)
+                            if !text.starts_with('(')
+                                && (self.log_lines_only || text.trim().is_empty()) =>
+                        {
+                            continue
+                        }
+                        LineRef::Text(text) => {
+                            parse_line_in_full(text).map_err(|(column, kind)| syntax(column, kind))
+                        }
+                        LineRef::NotUtf8 { at } => Err(syntax(at + 1, LogErrorKind::NotUtf8)),
+                        LineRef::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
+                    },
+                },
+            };
+            if let ControlFlow::Break(b) = each(record) {
+                return Some(b);
+            }
+        }
+    }
+}
+
+/// A line's bytes without a `\r` at its end.
+fn strip_cr(line: &[u8]) -> &[u8] {
+    line.strip_suffix(b"\r").unwrap_or(line)
+}
+
 impl<R: BufRead> Iterator for Reader<R> {
     type Item = Result<LogRecord, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        // Bounded by the input's lines.
-        loop {
-            let (number, text) = match next_text(&mut self.lines, &mut self.line)? {
-                Ok(next) => next,
-                Err(e) => return Some(Err(e)),
-            };
-            if text.trim().is_empty() || (self.log_lines_only && !text.starts_with('(')) {
-                continue;
-            }
-            return Some(parse_line(text).map_err(|(column, kind)| LogError::Syntax {
-                line: number,
-                column,
-                kind,
-            }));
-        }
+        self.for_each_ref(|record| ControlFlow::Break(record.map(|r| r.to_record())))
     }
 }
 
@@ -468,12 +593,75 @@ mod tests {
         prop_oneof![well_formed, mangled]
     }
 
+    /// A log of such lines, some with a `\r`, blank or with bytes that are not UTF-8.
+    fn near_logs() -> impl Strategy<Value = Vec<u8>> {
+        let line = prop_oneof![
+            8 => near_log_lines().prop_map(String::into_bytes),
+            1 => Just(Vec::new()),
+            1 => near_log_lines().prop_map(|l| format!("{l}\r").into_bytes()),
+            1 => (near_log_lines(), any::<usize>(), 0x80u8..).prop_map(|(l, at, bad)| {
+                let mut bytes = l.into_bytes();
+                let at = at % (bytes.len() + 1);
+                bytes.insert(at, bad);
+                bytes
+            }),
+            1 => (near_log_lines(), "[ a-zé]{1,6}").prop_map(|(l, iface)| {
+                l.replacen("can", &iface, 1).into_bytes()
+            }),
+        ];
+        proptest::collection::vec(line, 0..12).prop_map(|lines| lines.join(&b'\n'))
+    }
+
     proptest! {
+        /// The reader parses most lines before checking them to be UTF-8: what it reads is
+        /// what checking each line first, then parsing it, reads.
+        #[test]
+        fn the_reader_reads_what_checked_lines_parse_to(log in near_logs(), only_log_lines in any::<bool>()) {
+            let mut reader = Reader::new(&log[..]);
+            if only_log_lines {
+                reader = reader.log_lines_only();
+            }
+            let got: Vec<_> = reader.collect();
+            let mut expected = Vec::new();
+            let mut lines = CappedLines::new(&log[..]);
+            let mut last = 0;
+            while let Some(next) = next_text(&mut lines, &mut last) {
+                let (number, text) = match next {
+                    Ok(next) => next,
+                    Err(e) => {
+                        expected.push(Err(e));
+                        continue;
+                    }
+                };
+                if text.trim().is_empty() || (only_log_lines && !text.starts_with('(')) {
+                    continue;
+                }
+                expected.push(parse_line(text).map_err(|(column, kind)| LogError::Syntax {
+                    line: number,
+                    column,
+                    kind,
+                }));
+            }
+            prop_assert_eq!(got, expected);
+        }
+
         #[test]
         fn the_plain_path_reads_lines_as_the_full_path_does(line in near_log_lines()) {
-            if let Some(record) = parse_plain_line(&line) {
+            if let Some(record) = parse_plain_line(line.as_bytes()) {
                 prop_assert_eq!(parse_line_in_full(&line), Ok(record), "{}", line);
             }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn eight_digits_at_once_read_as_one_at_a_time(chunk in any::<[u8; 8]>(), digits in "[0-9]{8}") {
+            let one_at_a_time = |chunk: [u8; 8]| {
+                chunk.iter().try_fold(0u64, |v, b| b.is_ascii_digit().then(|| v * 10 + u64::from(b - b'0')))
+            };
+            prop_assert_eq!(eight_digits(chunk), one_at_a_time(chunk));
+            let chunk = <[u8; 8]>::try_from(digits.as_bytes()).unwrap();
+            prop_assert_eq!(eight_digits(chunk), Some(digits.parse::<u64>().unwrap()));
         }
     }
 
@@ -485,8 +673,8 @@ mod tests {
             "(1.000000000) can0 123##1DEADBEEF R",
             "(5.5) can0 7FF#R8 T",
         ] {
-            assert!(parse_plain_line(line).is_some(), "{line}");
-            assert_eq!(parse_line(line), parse_line_in_full(line), "{line}");
+            assert!(parse_plain_line(line.as_bytes()).is_some(), "{line}");
+            assert_eq!(parse_line_ref(line), parse_line_in_full(line), "{line}");
         }
         for line in [
             "(1.000000) can0  123#00",
@@ -496,7 +684,7 @@ mod tests {
             "(1.5) can0 123#00 R X",
             "(1.5) can0 123#00 ",
         ] {
-            assert!(parse_plain_line(line).is_none(), "{line}");
+            assert!(parse_plain_line(line.as_bytes()).is_none(), "{line}");
             assert!(parse_line(line).is_err(), "{line}");
         }
     }

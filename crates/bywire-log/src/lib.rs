@@ -50,7 +50,8 @@ pub mod parquet;
 pub mod pcapng;
 pub mod recorder;
 pub mod screen;
+pub mod stats;
 pub mod trc;
 
-pub use candump::{LogError, LogErrorKind, LogRecord, Precision, Reader, Writer};
+pub use candump::{LogError, LogErrorKind, LogRecord, LogRecordRef, Precision, Reader, Writer};
 pub use screen::{FrameView, View};

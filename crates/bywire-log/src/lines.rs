@@ -41,6 +41,18 @@ pub enum LineRef<'a> {
     },
 }
 
+/// One line as [`CappedLines::next_bytes`] lends it: its bytes, not yet checked to be UTF-8.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineBytes<'a> {
+    /// The line's bytes, without its newline (a `\r` before it kept).
+    Bytes(&'a [u8]),
+    /// A line longer than the cap (skipped), with its length.
+    TooLong {
+        /// Its length in bytes.
+        bytes: u64,
+    },
+}
+
 impl LineRef<'_> {
     /// The line, owned.
     pub fn to_owned_line(self) -> Line {
@@ -100,6 +112,18 @@ impl<R: BufRead> CappedLines<R> {
     /// As [`CappedLines::next_line`], the text lent rather than copied into a new `String`
     /// (the readers of text logs parse it in place).
     pub fn next_str(&mut self) -> Option<io::Result<(u64, LineRef<'_>)>> {
+        self.next_bytes().map(|next| {
+            next.map(|(number, line)| match line {
+                LineBytes::Bytes(bytes) => (number, line_ref(bytes)),
+                LineBytes::TooLong { bytes } => (number, LineRef::TooLong { bytes }),
+            })
+        })
+    }
+
+    /// As [`CappedLines::next_str`], the line's bytes not yet checked to be UTF-8 (a reader
+    /// that checks them as it parses need not go over them twice); a `\r` before the newline
+    /// is kept.
+    pub fn next_bytes(&mut self) -> Option<io::Result<(u64, LineBytes<'_>)>> {
         self.reader.consume(std::mem::take(&mut self.lent));
         self.buffer.clear();
         // Most lines lie whole in the reader's buffer: lent from there, not copied.
@@ -114,7 +138,7 @@ impl<R: BufRead> CappedLines<R> {
             // The buffer is as it was: a second fill_buf does not read.
             let available = self.reader.fill_buf().unwrap_or_default();
             let line = available.get(..end).unwrap_or_default();
-            return Some(Ok((self.number, line_ref(line))));
+            return Some(Ok((self.number, LineBytes::Bytes(line))));
         }
         let mut length: u64 = 0;
         let mut ended = false;
@@ -148,9 +172,9 @@ impl<R: BufRead> CappedLines<R> {
         }
         self.number += 1;
         if length > u64::try_from(self.max).unwrap_or(u64::MAX) {
-            return Some(Ok((self.number, LineRef::TooLong { bytes: length })));
+            return Some(Ok((self.number, LineBytes::TooLong { bytes: length })));
         }
-        Some(Ok((self.number, line_ref(&self.buffer))))
+        Some(Ok((self.number, LineBytes::Bytes(&self.buffer))))
     }
 }
 
@@ -166,7 +190,7 @@ impl<T: io::Read> CappedLines<io::BufReader<T>> {
 }
 
 /// A line's bytes (its newline gone) as text, a `\r` before the newline dropped.
-fn line_ref(line: &[u8]) -> LineRef<'_> {
+pub fn line_ref(line: &[u8]) -> LineRef<'_> {
     let line = line.strip_suffix(b"\r").unwrap_or(line);
     match std::str::from_utf8(line) {
         Ok(text) => LineRef::Text(text),

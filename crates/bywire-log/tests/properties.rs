@@ -327,6 +327,7 @@ mod parquet_files {
 /// A Parquet footer declaring two billion schema children in a few bytes (what fuzzing found
 /// makes the parquet crate reserve gigabytes) is refused before the crate reads it, with the
 /// byte offset.
+#[cfg(feature = "parquet")]
 #[test]
 fn a_parquet_footer_declaring_more_than_it_holds_is_refused_with_its_offset() {
     let mut footer = vec![0x15, 0x02, 0x19, 0x1C, 0x48, 0x06];

@@ -123,22 +123,23 @@ impl Cursor<'_> {
 
     /// Data bytes with optional '.' separators, up to `max`, into `out`; returns the count.
     fn data(&mut self, out: &mut [u8; 64], max: usize) -> Result<usize, ParseFrameError> {
+        // The usual case first: pairs of hex digits, by table, up to the first other byte.
+        let value = |b: u8| HEX_VALUE.get(usize::from(b)).copied().unwrap_or(0xFF);
+        let rest = self.bytes.get(self.pos..).unwrap_or_default();
         let mut len = 0;
-        // Each byte consumes at least two characters, so the text length bounds the loop.
-        while let Some(c) = self.peek() {
-            // Two hex digits, the usual case, by table; anything else below, with its error.
-            let pair = self.bytes.get(self.pos + 1).map(|&low| {
-                let value = |b: u8| HEX_VALUE.get(usize::from(b)).copied().unwrap_or(0xFF);
-                (value(c), value(low))
-            });
-            if let (Some((high, low)), Some(slot)) = (pair, out.get_mut(len)) {
-                if high < 16 && low < 16 && len < max {
-                    *slot = (high << 4) | low;
-                    len += 1;
-                    self.pos += 2;
-                    continue;
-                }
+        for (slot, pair) in out.iter_mut().zip(rest.chunks_exact(2)).take(max) {
+            let &[high, low] = pair else { break };
+            let (high, low) = (value(high), value(low));
+            if (high | low) > 15 {
+                break;
             }
+            *slot = (high << 4) | low;
+            len += 1;
+        }
+        self.pos += 2 * len;
+        // Separators, odd digits and errors, with their columns. Each byte consumes at least
+        // two characters, so the text length bounds the loop.
+        while let Some(c) = self.peek() {
             if c == b'.' {
                 self.pos += 1;
                 continue;
@@ -189,7 +190,14 @@ impl FromStr for Frame {
     type Err = ParseFrameError;
 
     fn from_str(text: &str) -> Result<Frame, ParseFrameError> {
-        let bytes = text.as_bytes();
+        Frame::from_ascii(text.as_bytes())
+    }
+}
+
+impl Frame {
+    /// [`Frame::from_str`] over bytes not known to be UTF-8 (the form is ASCII, so any other
+    /// byte is an error at its column): for readers that parse a line before checking it.
+    pub fn from_ascii(bytes: &[u8]) -> Result<Frame, ParseFrameError> {
         let digits = match (bytes.get(3), bytes.get(8)) {
             (Some(b'#'), _) => 3,
             (_, Some(b'#')) => 8,

@@ -1,7 +1,6 @@
 //! `bywire log`: read candump logs — print them (log or screen form, filtered) or summarise
 //! them — checking every line.
 
-use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -9,11 +8,14 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::format::Format;
+use bywire_log::stats::LogStats;
 use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
 use crate::support::files::write_atomically;
-use crate::support::logs::{inputs, records, write_dataset, PartitionBy, Pump, Selection, Skip};
+use crate::support::logs::{
+    for_each_lent, inputs, records, write_dataset, PartitionBy, Pump, Selection, Skip,
+};
 use crate::support::progress::Progress;
 use bywire_log::mcap::DecodedMcapWriter;
 use bywire_log::parquet::decoded::Partitioning;
@@ -355,89 +357,11 @@ fn cat(
     Ok(())
 }
 
-/// Per identifier: frames, first and last time.
-#[derive(Default)]
-struct IdStats {
-    frames: u64,
-    first: u64,
-    last: u64,
-}
-
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
-    let mut frames = 0u64;
-    let (mut first, mut last) = (u64::MAX, 0u64);
-    // Per interface: its frames and its identifiers (looked up by name without a copy).
-    let mut interfaces: BTreeMap<String, (u64, BTreeMap<u32, IdStats>)> = BTreeMap::new();
-    let (mut fd, mut errors, mut remote) = (0u64, 0u64, 0u64);
+    let mut stats = LogStats::new();
     for (name, input) in inputs(files)? {
-        for record in records(&name, input, Skip::Unreadable) {
-            let record = record?;
-            let t = record.timestamp.as_nanos();
-            frames += 1;
-            first = first.min(t);
-            last = last.max(t);
-            fd += u64::from(record.frame.is_fd());
-            errors += u64::from(record.frame.is_error());
-            remote += u64::from(record.frame.is_remote());
-            let (count, ids) = match interfaces.get_mut(&record.interface) {
-                Some(known) => known,
-                None => interfaces.entry(record.interface).or_default(),
-            };
-            *count += 1;
-            let entry = ids.entry(record.frame.socketcan_id()).or_insert(IdStats {
-                frames: 0,
-                first: t,
-                last: t,
-            });
-            entry.frames += 1;
-            entry.first = entry.first.min(t);
-            entry.last = entry.last.max(t);
-        }
+        for_each_lent(&name, input, |record| stats.add(record))?;
     }
-    if frames == 0 {
-        writeln!(out, "no frames")?;
-        return Ok(());
-    }
-    let span = last.saturating_sub(first);
-    writeln!(
-        out,
-        "{frames} frames ({fd} FD, {remote} remote, {errors} error) over {}.{:06} s",
-        span / 1_000_000_000,
-        span % 1_000_000_000 / 1000
-    )?;
-    for (interface, (count, _)) in &interfaces {
-        writeln!(out, "  {interface}: {count} frames")?;
-    }
-    writeln!(out, "interface  id        frames  mean cycle ms")?;
-    let ids = interfaces
-        .iter()
-        .flat_map(|(interface, (_, ids))| ids.iter().map(move |(id, s)| (interface, id, s)));
-    for (interface, id, s) in ids {
-        let id_text = if id & bywire_core::frame::ERR_FLAG != 0 {
-            format!("{id:08X}")
-        } else if id & bywire_core::frame::EFF_FLAG != 0 {
-            format!("{:08X}", id & bywire_core::frame::EFF_MASK)
-        } else {
-            format!("{:03X}", id & bywire_core::frame::SFF_MASK)
-        };
-        let id_text = if id & bywire_core::frame::RTR_FLAG != 0 {
-            id_text + " R"
-        } else {
-            id_text
-        };
-        let cycle = if s.frames > 1 {
-            // Nanosecond spans between frames: well within f64's exact range for logs.
-            #[allow(clippy::cast_precision_loss)]
-            let ms = (s.last - s.first) as f64 / (s.frames - 1) as f64 / 1e6;
-            format!("{ms:.3}")
-        } else {
-            "-".into()
-        };
-        writeln!(
-            out,
-            "{interface:<10} {id_text:<9} {:>6}  {cycle:>13}",
-            s.frames
-        )?;
-    }
+    stats.write_report(out)?;
     Ok(())
 }

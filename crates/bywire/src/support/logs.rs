@@ -4,6 +4,7 @@
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Write};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
@@ -16,7 +17,11 @@ use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 use crate::support::files::write_dir_atomically;
 use crate::support::progress::Progress;
 use bywire_log::format::Format;
-use bywire_log::{LogError, LogErrorKind, LogRecord, Reader};
+use bywire_log::{LogError, LogErrorKind, LogRecord, LogRecordRef, Reader};
+
+/// Bytes read from a log at a time: large reads cost fewer system calls than the default
+/// 8 KiB (a tenth of `log stats`'s time on a big candump log), and stay small beside the heap.
+const READ_BUFFER: usize = 64 << 10;
 
 /// A log to read: its bytes, and the file itself when it is one (Parquet is read by seeking).
 pub struct LogInput {
@@ -50,7 +55,7 @@ pub fn input(path: Option<&Path>) -> Result<(String, LogInput)> {
         None => Ok((
             "standard input".into(),
             LogInput {
-                bytes: Box::new(BufReader::new(io::stdin())),
+                bytes: Box::new(BufReader::with_capacity(READ_BUFFER, io::stdin())),
                 file: None,
             },
         )),
@@ -62,7 +67,7 @@ pub fn input(path: Option<&Path>) -> Result<(String, LogInput)> {
             Ok((
                 p.display().to_string(),
                 LogInput {
-                    bytes: Box::new(BufReader::new(reader)),
+                    bytes: Box::new(BufReader::with_capacity(READ_BUFFER, reader)),
                     file: Some(file),
                 },
             ))
@@ -99,21 +104,49 @@ pub fn records<'a>(
         (format, _, _) => format.reader(bytes),
     };
     reader.filter_map(move |record| match record {
-        Err(e @ LogError::Syntax { .. }) if skip == Skip::AnyBadLine => {
-            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
-            None
-        }
-        Err(
-            e @ LogError::Syntax {
-                kind: LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8,
-                ..
-            },
-        ) => {
-            let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
-            None
-        }
+        Err(e) if skipped(name, &e, skip) => None,
         other => Some(other.map_err(|e| anyhow!("{name}: {e}"))),
     })
+}
+
+/// Whether `skip` passes over this error: if so, it is reported on standard error.
+fn skipped(name: &str, e: &LogError, skip: Skip) -> bool {
+    let skipped = match e {
+        LogError::Syntax { .. } if skip == Skip::AnyBadLine => true,
+        LogError::Syntax { kind, .. } => {
+            matches!(kind, LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8)
+        }
+        _ => false,
+    };
+    if skipped {
+        let _ = writeln!(io::stderr(), "{name}: {e} (skipped)");
+    }
+    skipped
+}
+
+/// Each record of `input` handed to `each`, lent: a candump log is read without a copy of any
+/// line. Unreadable lines are skipped as [`records`] skips them; any other error ends it.
+pub fn for_each_lent(
+    name: &str,
+    input: LogInput,
+    mut each: impl FnMut(&LogRecordRef<'_>),
+) -> Result<()> {
+    let LogInput { mut bytes, file } = input;
+    if Format::sniff_input(&mut bytes).unwrap_or(Format::Candump) != Format::Candump {
+        for record in records(name, LogInput { bytes, file }, Skip::Unreadable) {
+            each(&record?.as_record_ref());
+        }
+        return Ok(());
+    }
+    let failed = Reader::new(bytes).for_each_ref(|record| match record {
+        Ok(record) => {
+            each(&record);
+            ControlFlow::Continue(())
+        }
+        Err(e) if skipped(name, &e, Skip::Unreadable) => ControlFlow::Continue(()),
+        Err(e) => ControlFlow::Break(anyhow!("{name}: {e}")),
+    });
+    failed.map_or(Ok(()), Err)
 }
 
 /// Every record of `files` (standard input when none), merged in time order, handed to
