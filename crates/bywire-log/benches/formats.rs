@@ -100,7 +100,7 @@ fn candump_reading(c: &mut Criterion) {
         b.iter(|| {
             let mut stats = LogStats::new();
             let _: Option<()> = bywire_log::Reader::new(text.as_slice()).for_each_ref(|r| {
-                stats.add(&r.unwrap());
+                stats.add(r.unwrap());
                 std::ops::ControlFlow::Continue(())
             });
             stats.frames

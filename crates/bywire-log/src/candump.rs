@@ -379,7 +379,7 @@ impl<R: BufRead> Reader<R> {
     /// as the iterator gives them; reading goes on after one unless `each` breaks.
     pub fn for_each_ref<B>(
         &mut self,
-        mut each: impl FnMut(Result<LogRecordRef<'_>, LogError>) -> ControlFlow<B>,
+        mut each: impl FnMut(Result<&LogRecordRef<'_>, LogError>) -> ControlFlow<B>,
     ) -> Option<B> {
         // Bounded by the input's lines.
         loop {
@@ -420,7 +420,12 @@ impl<R: BufRead> Reader<R> {
                     },
                 },
             };
-            if let ControlFlow::Break(b) = each(record) {
+            // Lent by reference: a record is not copied on its way to `each`.
+            let flow = match record {
+                Ok(ref record) => each(Ok(record)),
+                Err(e) => each(Err(e)),
+            };
+            if let ControlFlow::Break(b) = flow {
                 return Some(b);
             }
         }

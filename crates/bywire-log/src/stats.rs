@@ -252,7 +252,7 @@ mod tests {
         let mut stats = LogStats::new();
         let mut reader = Reader::new(LOG.as_bytes());
         let stopped: Option<()> = reader.for_each_ref(|record| {
-            stats.add(&record.unwrap());
+            stats.add(record.unwrap());
             ControlFlow::Continue(())
         });
         assert_eq!(stopped, None);

@@ -591,6 +591,42 @@ fn log_cat_and_stats() {
     );
 }
 
+/// `log stats` reads a file again from its start after sniffing its format, and a pipe given
+/// as a path (which cannot seek) on from what was peeked at: the counts are the same.
+#[test]
+fn log_stats_of_a_file_a_pipe_and_standard_input_agree() {
+    let mut input = String::new();
+    for i in 0..20_000u32 {
+        let id = [0x123, 0x1F0, 0x7FF][usize::try_from(i % 3).unwrap()];
+        input.push_str(&format!(
+            "({}.{:06}) can{} {id:03X}#{:016X}\n",
+            1_700_000_000 + i / 1000,
+            (i % 1000) * 1000,
+            i % 2,
+            u64::from(i) * 0x9E37_79B9
+        ));
+    }
+    let dir = std::env::temp_dir().join(format!("bywire-stats-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("in.log");
+    std::fs::write(&log, &input).unwrap();
+    let (code, from_file, err) = bywire(&["log", "stats", log.to_str().unwrap()], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        from_file.starts_with("20000 frames (0 FD, 0 remote, 0 error) over 19.999000 s"),
+        "{from_file}"
+    );
+    assert!(
+        from_file.contains("  can0: 10000 frames\n  can1: 10000 frames\n"),
+        "{from_file}"
+    );
+    let (_, from_stdin, _) = bywire(&["log", "stats"], &input);
+    let (_, from_pipe_path, err) = bywire(&["log", "stats", "/dev/stdin"], &input);
+    assert_eq!(from_stdin, from_file);
+    assert_eq!(from_pipe_path, from_file, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn every_help_ends_with_examples_and_a_closed_pipe_is_success() {
     for command in [

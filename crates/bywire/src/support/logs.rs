@@ -3,7 +3,7 @@
 //! its file and line.
 
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, Write};
+use std::io::{self, BufRead, BufReader, Seek, SeekFrom, Write};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
@@ -138,9 +138,23 @@ pub fn for_each_lent(
         }
         return Ok(());
     }
+    // A file is read again from its start through a reader of its own type, so that each
+    // line's reads are inlined rather than called through `dyn`; a pipe that cannot seek is
+    // read on from what was peeked at.
+    match file.filter(|mut f| f.seek(SeekFrom::Start(0)).is_ok()) {
+        Some(file) => lent_candump(name, BufReader::with_capacity(READ_BUFFER, file), each),
+        None => lent_candump(name, bytes, each),
+    }
+}
+
+fn lent_candump(
+    name: &str,
+    bytes: impl BufRead,
+    mut each: impl FnMut(&LogRecordRef<'_>),
+) -> Result<()> {
     let failed = Reader::new(bytes).for_each_ref(|record| match record {
         Ok(record) => {
-            each(&record);
+            each(record);
             ControlFlow::Continue(())
         }
         Err(e) if skipped(name, &e, Skip::Unreadable) => ControlFlow::Continue(()),
