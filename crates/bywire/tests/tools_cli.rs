@@ -627,6 +627,40 @@ fn log_stats_of_a_file_a_pipe_and_standard_input_agree() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `log cat` writes files in blocks and standard input line by line: the same lines either
+/// way, and a bad line ends it with what came before it written.
+#[test]
+fn log_cat_of_a_file_writes_what_standard_input_does() {
+    let mut input: String = (0..5_000u32)
+        .map(|i| {
+            format!(
+                "({}.{:06}) can0 {:03X}#{:08X}\n",
+                1 + i / 1000,
+                i % 1000,
+                i % 0x800,
+                i
+            )
+        })
+        .collect();
+    input.push_str("(9.000000) can0 12#00\n(9.100000) can0 123#00\n");
+    let dir = std::env::temp_dir().join(format!("bywire-cat-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("in.log");
+    std::fs::write(&log, &input).unwrap();
+    let (code, from_file, err) = bywire(&["log", "cat", log.to_str().unwrap()], "");
+    assert_ne!(code, 0);
+    assert!(err.contains("line 5001, column 17"), "{err}");
+    let (_, from_stdin, _) = bywire(&["log", "cat"], &input);
+    assert_eq!(from_file.lines().count(), 5_000);
+    assert_eq!(from_file, from_stdin);
+    assert!(
+        from_file.ends_with("(0000000005.000999) can0 387#00001387\n"),
+        "{}",
+        &from_file[from_file.len() - 80..]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn every_help_ends_with_examples_and_a_closed_pipe_is_success() {
     for command in [
