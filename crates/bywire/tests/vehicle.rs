@@ -185,7 +185,9 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
     let mut server_b = Some(server_b);
     for k in 0..200 {
-        let line = if k == 20 {
+        // Engage, and again (as an ADS would) should the vehicle still have been recovering
+        // from its start-up braking: a loaded machine starts the processes more slowly.
+        let line = if matches!(k, 20 | 40 | 60) {
             r#"{"engage": true}"#
         } else {
             drive
