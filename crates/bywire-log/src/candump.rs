@@ -353,24 +353,32 @@ pub(crate) fn next_text<'a, R: BufRead>(
 ) -> Option<Result<(u64, &'a str), LogError>> {
     let (number, line) = match lines.next_str()? {
         Ok(next) => next,
-        Err(e) => {
-            return Some(Err(LogError::Io {
-                line: *last + 1,
-                message: e.to_string(),
-            }))
-        }
+        Err(e) => return Some(Err(read_error(*last, &e))),
     };
     *last = number;
+    Some(text_of(number, line).map(|text| (number, text)))
+}
+
+/// The error a read that failed after line `last` is.
+fn read_error(last: u64, e: &io::Error) -> LogError {
+    LogError::Io {
+        line: last + 1,
+        message: e.to_string(),
+    }
+}
+
+/// Line `number` as text, or the error naming why it cannot be read (too long, not UTF-8).
+fn text_of(number: u64, line: LineRef<'_>) -> Result<&str, LogError> {
     let syntax = |column, kind| LogError::Syntax {
         line: number,
         column,
         kind,
     };
-    Some(match line {
-        LineRef::Text(text) => Ok((number, text)),
+    match line {
+        LineRef::Text(text) => Ok(text),
         LineRef::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
         LineRef::NotUtf8 { at } => Err(syntax(at + 1, LogErrorKind::NotUtf8)),
-    })
+    }
 }
 
 impl<R: BufRead> Reader<R> {
@@ -385,40 +393,36 @@ impl<R: BufRead> Reader<R> {
         loop {
             let (number, line) = match self.lines.next_bytes()? {
                 Ok(next) => next,
-                Err(e) => {
-                    let line = self.line + 1;
-                    let message = e.to_string();
-                    match each(Err(LogError::Io { line, message })) {
-                        ControlFlow::Break(b) => return Some(b),
-                        ControlFlow::Continue(()) => continue,
-                    }
-                }
+                Err(e) => match each(Err(read_error(self.line, &e))) {
+                    ControlFlow::Break(b) => return Some(b),
+                    ControlFlow::Continue(()) => continue,
+                },
             };
             self.line = number;
-            let syntax = |column, kind| LogError::Syntax {
-                line: number,
-                column,
-                kind,
-            };
-            let record = match line {
-                LineBytes::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
+            let unplain = match line {
                 // Most lines are read here, without a UTF-8 check of the whole line.
                 LineBytes::Bytes(bytes) => match parse_plain_line(strip_cr(bytes)) {
-                    Some(record) => Ok(record),
-                    None => match line_ref(bytes) {
-                        LineRef::Text(text)
-                            if !text.starts_with('(')
-                                && (self.log_lines_only || text.trim().is_empty()) =>
-                        {
-                            continue
-                        }
-                        LineRef::Text(text) => {
-                            parse_line_in_full(text).map_err(|(column, kind)| syntax(column, kind))
-                        }
-                        LineRef::NotUtf8 { at } => Err(syntax(at + 1, LogErrorKind::NotUtf8)),
-                        LineRef::TooLong { bytes } => Err(syntax(1, LogErrorKind::TooLong(bytes))),
+                    Some(record) => match each(Ok(&record)) {
+                        ControlFlow::Break(b) => return Some(b),
+                        ControlFlow::Continue(()) => continue,
                     },
+                    None => line_ref(bytes),
                 },
+                LineBytes::TooLong { bytes } => LineRef::TooLong { bytes },
+            };
+            let record = match text_of(number, unplain) {
+                Ok(text)
+                    if !text.starts_with('(')
+                        && (self.log_lines_only || text.trim().is_empty()) =>
+                {
+                    continue
+                }
+                Ok(text) => parse_line_in_full(text).map_err(|(column, kind)| LogError::Syntax {
+                    line: number,
+                    column,
+                    kind,
+                }),
+                Err(e) => Err(e),
             };
             // Lent by reference: a record is not copied on its way to `each`.
             let flow = match record {
