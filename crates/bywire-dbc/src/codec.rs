@@ -221,6 +221,55 @@ struct Hot {
     past_end: bool,
 }
 
+impl Hot {
+    /// The signal's raw bits in a payload read as words.
+    #[inline(always)]
+    fn raw_of(&self, words: PayloadWords) -> u64 {
+        let word = if self.big_endian { words.1 } else { words.0 };
+        (word >> self.word_shift) & self.mask
+    }
+}
+
+/// One signal of many payloads by `kernel` (known in each caller's arm, so the loop computes
+/// only its kernel's value), read from the big-endian word when `BIG`.
+#[inline(always)]
+fn column<const BIG: bool, T>(
+    kernel: Kernel,
+    h: &Hot,
+    p: &Plan,
+    payloads: &[PayloadWords],
+    out: &mut Vec<T>,
+    convert: &mut impl FnMut(Decoded) -> T,
+) {
+    let (shift, mask) = (h.word_shift, h.mask);
+    out.extend(payloads.iter().map(|words| {
+        let word = if BIG { words.1 } else { words.0 };
+        let raw = (word >> shift) & mask;
+        convert(Decoded {
+            raw,
+            physical: value_of(kernel, p, raw),
+        })
+    }));
+}
+
+/// A payload of at most 8 bytes, zero-padded, read as one little-endian and one big-endian
+/// word: each signal of it is then one shift and one mask.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PayloadWords(u64, u64);
+
+#[inline(always)]
+fn payload_words(payload: &[u8]) -> PayloadWords {
+    // Eight bytes (the common case) convert without a copy loop or a library call.
+    let bytes: [u8; 8] = payload.try_into().unwrap_or_else(|_| {
+        let mut padded = [0u8; 8];
+        for (dst, src) in padded.iter_mut().zip(payload) {
+            *dst = *src;
+        }
+        padded
+    });
+    PayloadWords(u64::from_le_bytes(bytes), u64::from_be_bytes(bytes))
+}
+
 /// A message compiled for decoding and encoding.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MessageCodec {
@@ -465,25 +514,11 @@ impl MessageCodec {
             needed: self.size,
             got: data.len(),
         })?;
-        let mut buf = [0u8; BUFFER];
-        if let Some(dst) = buf.get_mut(..payload.len()) {
-            dst.copy_from_slice(payload);
-        }
-        if self.plain && self.size <= 8 {
-            // The whole payload as one word in each byte order: one shift and mask per signal.
-            // Eight bytes (the common case) convert without a copy loop or a library call.
-            let bytes: [u8; 8] = payload.try_into().unwrap_or_else(|_| {
-                let mut padded = [0u8; 8];
-                for (dst, src) in padded.iter_mut().zip(payload) {
-                    *dst = *src;
-                }
-                padded
-            });
-            let words = [u64::from_le_bytes(bytes), u64::from_be_bytes(bytes)];
+        if self.decodes_by_word() {
+            let words = payload_words(payload);
             for ((h, p), slot) in self.hot.iter().zip(&self.plans).zip(out.iter_mut()) {
                 *slot = (!h.past_end).then(|| {
-                    let word = if h.big_endian { words[1] } else { words[0] };
-                    let raw = (word >> h.word_shift) & h.mask;
+                    let raw = h.raw_of(words);
                     Decoded {
                         raw,
                         physical: value_of(h.kernel, p, raw),
@@ -491,6 +526,10 @@ impl MessageCodec {
                 });
             }
             return Ok(());
+        }
+        let mut buf = [0u8; BUFFER];
+        if let Some(dst) = buf.get_mut(..payload.len()) {
+            dst.copy_from_slice(payload);
         }
         if self.plain {
             for (p, slot) in self.plans.iter().zip(out.iter_mut()) {
@@ -533,6 +572,67 @@ impl MessageCodec {
             }
         }
         Ok(())
+    }
+
+    /// Whether every signal is read from the payload as one word (no multiplexing, at most 8
+    /// bytes): the fast path of [`MessageCodec::decode`], and the messages
+    /// [`MessageCodec::decode_column`] decodes.
+    pub fn decodes_by_word(&self) -> bool {
+        self.plain && self.size <= 8
+    }
+
+    /// The message's payload in `data` as the words [`MessageCodec::decode_column`] reads
+    /// (little- and big-endian); an error when `data` is shorter than the message.
+    pub fn words_of(&self, data: &[u8]) -> Result<PayloadWords, DecodeError> {
+        match data.get(..self.size) {
+            Some(payload) => Ok(payload_words(payload)),
+            None => Err(DecodeError::TooShort {
+                needed: self.size,
+                got: data.len(),
+            }),
+        }
+    }
+
+    /// Signal `index` of many payloads of a message that [decodes by
+    /// word](MessageCodec::decodes_by_word), appended to `out` in order: each payload's value,
+    /// as [`MessageCodec::decode`] gives it, through `convert`. Column-at-a-time decoding for
+    /// tables: the signal's plan is looked up once, not once per frame, and `out` grows once.
+    /// False (and nothing appended) when the message does not decode by word or the signal
+    /// is never present (past the message's end, or no such signal).
+    pub fn decode_column<T>(
+        &self,
+        index: usize,
+        payloads: &[PayloadWords],
+        out: &mut Vec<T>,
+        mut convert: impl FnMut(Decoded) -> T,
+    ) -> bool {
+        let (Some(h), Some(p)) = (self.hot.get(index), self.plans.get(index)) else {
+            return false;
+        };
+        if !self.decodes_by_word() || h.past_end {
+            return false;
+        }
+        // One loop per kernel and byte order: each loop's work is its kernel's alone.
+        let c = &mut convert;
+        match (h.kernel, h.big_endian) {
+            (k @ Kernel::UnsignedRaw, false) => column::<false, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::UnsignedRaw, true) => column::<true, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::SignedRaw { .. }, false) => column::<false, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::SignedRaw { .. }, true) => column::<true, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::UnsignedFloat { .. }, false) => {
+                column::<false, T>(k, h, p, payloads, out, c)
+            }
+            (k @ Kernel::UnsignedFloat { .. }, true) => {
+                column::<true, T>(k, h, p, payloads, out, c)
+            }
+            (k @ Kernel::SignedFloat { .. }, false) => {
+                column::<false, T>(k, h, p, payloads, out, c)
+            }
+            (k @ Kernel::SignedFloat { .. }, true) => column::<true, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::General, false) => column::<false, T>(k, h, p, payloads, out, c),
+            (k @ Kernel::General, true) => column::<true, T>(k, h, p, payloads, out, c),
+        }
+        true
     }
 
     /// The mask of signal `index`'s raw width (`None` for no such signal).

@@ -149,6 +149,11 @@ impl Decoder {
         &self.db
     }
 
+    /// The message at `index` in the database and its codec.
+    pub fn message_at(&self, index: usize) -> Option<(&Message, &MessageCodec)> {
+        Some((self.db.messages.get(index)?, self.codecs.get(index)?))
+    }
+
     /// The codec of `message` (a message of this database).
     pub fn codec(&self, message: &Message) -> Option<&MessageCodec> {
         let index = self.index_of(message.id, message.extended)?;
@@ -160,6 +165,22 @@ impl Decoder {
     fn lookup(&self, frame: &Frame) -> Option<(usize, &Message, &MessageCodec)> {
         let id = frame.id()?;
         self.message_with_id(id.as_raw(), id.is_extended())
+    }
+
+    /// The message `frame` is (its index in the database, the message and its codec) and the
+    /// bytes it decodes from (none for a remote frame); `None` when no message has its
+    /// identifier (or it is an error frame).
+    pub fn message_of<'f>(
+        &self,
+        frame: &'f Frame,
+    ) -> Option<(usize, &Message, &MessageCodec, &'f [u8])> {
+        let (index, message, codec) = self.lookup(frame)?;
+        let data = if frame.is_remote() {
+            &[][..]
+        } else {
+            frame.data()
+        };
+        Some((index, message, codec, data))
     }
 
     /// The message with identifier `raw` (extended or standard): its index in the database, the
@@ -182,14 +203,9 @@ impl Decoder {
         frame: &Frame,
         values: &mut Vec<Option<Decoded>>,
     ) -> Option<(usize, &Message, Result<(), DecodeError>)> {
-        let (index, message, codec) = self.lookup(frame)?;
+        let (index, message, codec, data) = self.message_of(frame)?;
         values.clear();
         values.resize(codec.signal_count(), None);
-        let data = if frame.is_remote() {
-            &[][..]
-        } else {
-            frame.data()
-        };
         Some((index, message, codec.decode(data, values)))
     }
 

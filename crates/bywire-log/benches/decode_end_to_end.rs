@@ -5,7 +5,8 @@
 #![allow(missing_docs, clippy::unwrap_used, clippy::indexing_slicing)]
 
 use bywire_dbc::decoder::Decoder;
-use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
+use bywire_log::parquet::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
+use bywire_log::parquet::{raw_schema, FrameColumns};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 const FRAMES: u64 = 1_000_000;
@@ -72,6 +73,25 @@ fn end_to_end(c: &mut Criterion) {
                 }
             }
             signals
+        })
+    });
+    // What the Python package's `decode_arrow` does: raw frames already in Arrow batches.
+    let mut batches = Vec::new();
+    let mut columns = FrameColumns::new();
+    for record in bywire_log::Reader::new(log.as_bytes()) {
+        columns.push(&record.unwrap());
+        if columns.rows() == 65_536 {
+            batches.push(columns.finish(&raw_schema()).unwrap());
+        }
+    }
+    batches.push(columns.finish(&raw_schema()).unwrap());
+    group.bench_function("raw frames batches decoded to tables", |b| {
+        b.iter(|| {
+            let mut tables = 0;
+            for batch in &batches {
+                tables += decode_frames_batch(&decoder, batch).unwrap().0.len();
+            }
+            tables
         })
     });
     group.finish();

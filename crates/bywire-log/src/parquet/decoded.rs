@@ -33,9 +33,11 @@ use ::parquet::arrow::ArrowWriter;
 use arrow_array::builder::{
     Float64Builder, Int64Builder, TimestampNanosecondBuilder, UInt64Builder,
 };
-use arrow_array::{ArrayRef, RecordBatch};
+use arrow_array::types::{ArrowPrimitiveType, Float64Type, Int64Type, UInt64Type};
+use arrow_array::{new_null_array, ArrayRef, PrimitiveArray, RecordBatch};
+use arrow_buffer::NullBuffer;
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use bywire_dbc::codec::{whole_scaling, Decoded, Value};
+use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, PayloadWords, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
@@ -137,14 +139,15 @@ enum ValueColumn {
 }
 
 impl ValueColumn {
-    fn new(kind: Kind) -> Self {
+    fn new(kind: Kind, rows: usize) -> Self {
         match kind {
-            Kind::Int => ValueColumn::Int(Int64Builder::with_capacity(TABLE_BATCH)),
-            Kind::UInt => ValueColumn::UInt(UInt64Builder::with_capacity(TABLE_BATCH)),
-            Kind::Float => ValueColumn::Float(Float64Builder::with_capacity(TABLE_BATCH)),
+            Kind::Int => ValueColumn::Int(Int64Builder::with_capacity(rows)),
+            Kind::UInt => ValueColumn::UInt(UInt64Builder::with_capacity(rows)),
+            Kind::Float => ValueColumn::Float(Float64Builder::with_capacity(rows)),
         }
     }
 
+    #[inline]
     fn push(&mut self, value: Option<Value>) {
         // The kind was chosen so that every value the signal can take fits it exactly.
         match (self, value) {
@@ -178,11 +181,48 @@ impl ValueColumn {
     }
 }
 
-/// One message's columns: the schema and what is being built.
+/// A frame's values as a table takes them: the payload of a message that [decodes by
+/// word](MessageCodec::decodes_by_word), decoded later a column at a time, or the values
+/// decoded now (multiplexed messages, longer payloads).
+enum Row {
+    Words(PayloadWords),
+    Decoded,
+}
+
+/// Check `data` as `codec`'s message: its payload words, or its values decoded into `values`.
+fn decode_row(
+    codec: &MessageCodec,
+    data: &[u8],
+    values: &mut Vec<Option<Decoded>>,
+) -> Result<Row, DecodeError> {
+    if codec.decodes_by_word() {
+        return codec.words_of(data).map(Row::Words);
+    }
+    values.clear();
+    values.resize(codec.signal_count(), None);
+    codec.decode(data, values).map(|()| Row::Decoded)
+}
+
+/// The index of a value's description among the signal's value descriptions.
+#[inline]
+fn choice_of(signal: &Signal, value: Decoded) -> Option<usize> {
+    let key = SignalValue { signal, value }.description_key()?;
+    signal
+        .value_descriptions
+        .iter()
+        .position(|(k, _)| *k == key)
+}
+
+/// One message's rows until they become a batch: its schema, times, channels, and the
+/// payloads decoded a column at a time when the batch is made (or the values decoded as the
+/// rows came, for messages that do not decode by word).
 struct MessageColumns {
     schema: SchemaRef,
+    kinds: Vec<Kind>,
     ts: TimestampNanosecondBuilder,
     channel: Option<Labels>,
+    words: Vec<PayloadWords>,
+    /// Values of rows decoded as they came (empty until a batch is made, for the others).
     values: Vec<ValueColumn>,
     /// Per signal, its description column when it has value descriptions.
     choices: Vec<Option<Labels>>,
@@ -190,7 +230,8 @@ struct MessageColumns {
 }
 
 impl MessageColumns {
-    fn new(message: &Message, with_channel: bool) -> Self {
+    /// A message's table, with room for `rows` rows.
+    fn new(message: &Message, with_channel: bool, rows: usize) -> Self {
         let names = field_names(message);
         let kinds: Vec<Kind> = message.signals.iter().map(kind).collect();
         let mut fields = vec![Field::new("ts", timestamp_type(), false)];
@@ -209,63 +250,113 @@ impl MessageColumns {
         }
         MessageColumns {
             schema: Arc::new(Schema::new(fields)),
-            ts: TimestampNanosecondBuilder::with_capacity(TABLE_BATCH).with_timezone("UTC"),
-            channel: with_channel.then(|| Labels::new(Vec::new())),
-            values: kinds.into_iter().map(ValueColumn::new).collect(),
+            ts: TimestampNanosecondBuilder::with_capacity(rows).with_timezone("UTC"),
+            channel: with_channel.then(|| Labels::new(Vec::new(), rows)),
+            words: Vec::with_capacity(rows),
+            // Built up as rows come (multiplexed messages), or made with the batch's size when
+            // its payloads are decoded by column.
+            values: kinds.iter().map(|k| ValueColumn::new(*k, 0)).collect(),
+            kinds,
             choices: message
                 .signals
                 .iter()
                 .map(|s| {
                     let labels = s.value_descriptions.iter().map(|(_, l)| l.clone());
-                    (!s.value_descriptions.is_empty()).then(|| Labels::new(labels.collect()))
+                    (!s.value_descriptions.is_empty()).then(|| Labels::new(labels.collect(), rows))
                 })
                 .collect(),
             rows: 0,
         }
     }
 
-    fn push(&mut self, message: &Message, record: &LogRecord, decoded: &[Option<Decoded>]) {
-        self.push_values(message, nanos(record.timestamp), &record.interface, decoded);
-    }
-
-    fn push_values(
+    /// Add a row: `row` as [`decode_row`] made it, with `decoded` the values it decoded; the
+    /// channel with its input dictionary key, if it has one.
+    fn push(
         &mut self,
         message: &Message,
         ts: i64,
-        channel: &str,
+        (channel_key, channel): (Option<usize>, &str),
+        row: Row,
         decoded: &[Option<Decoded>],
     ) {
         self.ts.append_value(ts);
         if let Some(labels) = &mut self.channel {
-            labels.push_text(channel);
+            labels.push_text_keyed(channel_key, channel);
+        }
+        self.rows += 1;
+        if let Row::Words(words) = row {
+            self.words.push(words);
+            return;
         }
         let columns = self.values.iter_mut().zip(&mut self.choices);
         for ((signal, value), (column, choice)) in message.signals.iter().zip(decoded).zip(columns)
         {
             column.push(value.map(|v| v.physical));
             if let Some(choice) = choice {
-                // The description's index among the signal's value descriptions.
-                let key = value
-                    .and_then(|value| SignalValue { signal, value }.description_key())
-                    .and_then(|key| {
-                        signal
-                            .value_descriptions
-                            .iter()
-                            .position(|(k, _)| *k == key)
-                    });
-                choice.push_key(key);
+                choice.push_key(value.and_then(|v| choice_of(signal, v)));
             }
         }
-        self.rows += 1;
     }
 
-    fn finish(&mut self) -> std::io::Result<RecordBatch> {
+    /// Decode the payloads kept a column at a time into the columns.
+    fn decode_words(&mut self, message: &Message, codec: &MessageCodec) -> Vec<ArrayRef> {
+        let rows = self.words.len();
+        let mut columns = Vec::new();
+        for (index, ((signal, kind), choice)) in message
+            .signals
+            .iter()
+            .zip(&self.kinds)
+            .zip(&mut self.choices)
+            .enumerate()
+        {
+            let words = &self.words;
+            // The column's type is matched once, not once per value. Every value the signal
+            // can take fits its type (see `kind`).
+            let values: Option<ArrayRef> = match kind {
+                Kind::Int => typed_column::<Int64Type>(codec, index, words, |v| match v {
+                    Value::Int(i) => Some(i),
+                    _ => None,
+                }),
+                Kind::UInt => typed_column::<UInt64Type>(codec, index, words, |v| {
+                    v.as_i128().and_then(|i| u64::try_from(i).ok())
+                }),
+                Kind::Float => {
+                    typed_column::<Float64Type>(codec, index, words, |v| Some(v.as_f64()))
+                }
+            };
+            columns.push(
+                values.unwrap_or_else(|| new_null_array(&ValueColumn::data_type(*kind), rows)),
+            );
+            if let Some(choice) = choice {
+                let mut keys = Vec::with_capacity(rows);
+                if !codec.decode_column(index, words, &mut keys, |v| choice_of(signal, v)) {
+                    keys.resize(rows, None);
+                }
+                // Finished below, beside its values.
+                choice.extend_keys(keys);
+            }
+        }
+        self.words.clear();
+        columns
+    }
+
+    fn finish(&mut self, message: &Message, codec: &MessageCodec) -> std::io::Result<RecordBatch> {
+        // Columns decoded now from the payloads kept, or (none kept) built as rows came.
+        let decoded = if self.words.is_empty() {
+            Vec::new()
+        } else {
+            self.decode_words(message, codec)
+        };
         let mut columns: Vec<ArrayRef> = vec![Arc::new(self.ts.finish())];
         if let Some(channel) = &mut self.channel {
             columns.push(channel.finish()?);
         }
+        let mut decoded = decoded.into_iter();
         for (value, choice) in self.values.iter_mut().zip(&mut self.choices) {
-            columns.push(value.finish());
+            match decoded.next() {
+                Some(column) => columns.push(column),
+                None => columns.push(value.finish()),
+            }
             if let Some(choice) = choice {
                 columns.push(choice.finish()?);
             }
@@ -273,6 +364,33 @@ impl MessageColumns {
         self.rows = 0;
         RecordBatch::try_new(self.schema.clone(), columns).map_err(io_error)
     }
+}
+
+/// Signal `index` of payloads decoded by word as an Arrow array: values through `convert`, a
+/// value it refuses null; `None` when the signal is never present.
+fn typed_column<T: ArrowPrimitiveType>(
+    codec: &MessageCodec,
+    index: usize,
+    words: &[PayloadWords],
+    convert: impl Fn(Value) -> Option<T::Native>,
+) -> Option<ArrayRef> {
+    let mut values = Vec::with_capacity(words.len());
+    let mut refused = false;
+    let decoded = codec.decode_column(index, words, &mut values, |d| {
+        convert(d.physical).unwrap_or_else(|| {
+            refused = true;
+            T::Native::default()
+        })
+    });
+    if !decoded {
+        return None;
+    }
+    let nulls = refused.then(|| {
+        let mut valid = Vec::with_capacity(words.len());
+        codec.decode_column(index, words, &mut valid, |d| convert(d.physical).is_some());
+        NullBuffer::from(valid)
+    });
+    Some(Arc::new(PrimitiveArray::<T>::new(values.into(), nulls)))
 }
 
 /// Where a row goes: the message and, when partitioned, its channel and day.
@@ -304,6 +422,7 @@ impl std::io::Write for AppendFile {
 
 /// An open table of one partition.
 struct OpenTable {
+    message: usize,
     columns: MessageColumns,
     writer: ArrowWriter<BufWriter<AppendFile>>,
     last_used: u64,
@@ -361,10 +480,17 @@ impl<'a> DecodedDataset<'a> {
 
     /// Decode one record and add its row.
     pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
-        let Some((index, message)) =
-            decode_counted(self.decoder, record, &mut self.decoded, &mut self.summary)
-        else {
+        let decoder = self.decoder;
+        let Some((index, message, codec, data)) = decoder.message_of(&record.frame) else {
+            self.summary.unknown += 1;
             return Ok(());
+        };
+        let row = match decode_row(codec, data, &mut self.decoded) {
+            Ok(row) => row,
+            Err(e) => {
+                self.summary.count_undecodable(message, &e);
+                return Ok(());
+            }
         };
         let key = PartitionKey {
             message: index,
@@ -387,11 +513,14 @@ impl<'a> DecodedDataset<'a> {
             return Ok(());
         };
         table.last_used = self.clock;
-        table.columns.push(message, record, &self.decoded);
+        let ts = nanos(record.timestamp);
+        table
+            .columns
+            .push(message, ts, (None, &record.interface), row, &self.decoded);
         let mut finished_row_group = false;
         if table.columns.rows >= batch {
             let row_groups = table.writer.flushed_row_groups().len();
-            let batch = table.columns.finish()?;
+            let batch = table.columns.finish(message, codec)?;
             table.writer.write(&batch).map_err(io_error)?;
             if table.writer.in_progress_size() > budget {
                 table.writer.flush().map_err(io_error)?;
@@ -424,7 +553,7 @@ impl<'a> DecodedDataset<'a> {
                 .max_by_key(|(_, t)| t.held_chunks())
                 .map(|(k, _)| k.clone());
             match fullest.and_then(|k| self.open.remove(&k)) {
-                Some(table) => close(table)?,
+                Some(table) => close(table, self.decoder)?,
                 None => break,
             }
         }
@@ -439,7 +568,7 @@ impl<'a> DecodedDataset<'a> {
                 .min_by_key(|(_, t)| t.last_used)
                 .map(|(k, _)| k.clone());
             if let Some(table) = oldest.and_then(|k| self.open.remove(&k)) {
-                close(table)?;
+                close(table, self.decoder)?;
             }
         }
         let mut dir = self
@@ -456,7 +585,7 @@ impl<'a> DecodedDataset<'a> {
         let part = self.parts.entry(key.clone()).or_insert(0);
         let path = dir.join(format!("part-{part:05}.parquet"));
         *part += 1;
-        let columns = MessageColumns::new(message, !self.partitioning.channel);
+        let columns = MessageColumns::new(message, !self.partitioning.channel, TABLE_BATCH);
         File::create(&path)?;
         let writer = ArrowWriter::try_new(
             BufWriter::with_capacity(FILE_BUFFER, AppendFile { path: path.clone() }),
@@ -468,6 +597,7 @@ impl<'a> DecodedDataset<'a> {
         self.open.insert(
             key.clone(),
             OpenTable {
+                message: key.message,
                 columns,
                 writer,
                 last_used: self.clock,
@@ -481,7 +611,7 @@ impl<'a> DecodedDataset<'a> {
         let mut open: Vec<_> = self.open.drain().collect();
         open.sort_by(|a, b| a.0.cmp(&b.0));
         for (_, table) in open {
-            close(table)?;
+            close(table, self.decoder)?;
         }
         let messages = &self.decoder.database().messages;
         for (message, rows) in messages.iter().zip(&self.rows) {
@@ -497,25 +627,6 @@ impl<'a> DecodedDataset<'a> {
     }
 }
 
-/// Decode `record` into `values`: its message's index and the message, or `None` when it is of
-/// no message or does not decode (counted in `summary`).
-fn decode_counted<'d>(
-    decoder: &'d Decoder,
-    record: &LogRecord,
-    values: &mut Vec<Option<Decoded>>,
-    summary: &mut DatasetSummary,
-) -> Option<(usize, &'d Message)> {
-    let Some((index, message, decoded)) = decoder.decode_into(&record.frame, values) else {
-        summary.unknown += 1;
-        return None;
-    };
-    if let Err(e) = decoded {
-        summary.count_undecodable(message, &e);
-        return None;
-    }
-    Some((index, message))
-}
-
 /// A batch of raw frames (the layout [`super::raw_schema`] gives, or any batch
 /// [`super::records_of_batch`] reads) decoded straight from its columns into one batch per
 /// message with the columns a dataset's table has (`channel` always), in the database's order,
@@ -527,52 +638,64 @@ pub fn decode_frames_batch(
 ) -> Result<(Vec<(String, RecordBatch)>, DatasetSummary), LogError> {
     let frames = FrameColumnsRef::of(batch)?;
     let messages = &decoder.database().messages;
-    let mut tables: Vec<Option<MessageColumns>> = Vec::new();
-    tables.resize_with(messages.len(), || None);
     let mut summary = DatasetSummary::default();
-    let mut values: Vec<Option<Decoded>> = Vec::new();
+    // The rows of each message, so that each table is built with its size known.
+    let mut rows_of: Vec<Vec<u32>> = vec![Vec::new(); messages.len()];
     for row in 0..batch.num_rows() {
-        let Some((ts, channel, id, extended, data)) = frames.row(row) else {
-            summary.unknown += 1;
-            continue;
-        };
-        let Some((index, message, codec)) = decoder.message_with_id(id, extended) else {
-            summary.unknown += 1;
-            continue;
-        };
-        values.clear();
-        values.resize(codec.signal_count(), None);
-        if let Err(e) = codec.decode(data, &mut values) {
-            summary.count_undecodable(message, &e);
-            continue;
+        let message = frames
+            .id(row)
+            .and_then(|(id, extended)| decoder.message_with_id(id, extended));
+        match (message, rows_of.get_mut(message.map_or(0, |m| m.0))) {
+            (Some(_), Some(rows)) => rows.push(u32::try_from(row).unwrap_or(u32::MAX)),
+            _ => summary.unknown += 1,
         }
-        let Some(slot) = tables.get_mut(index) else {
-            continue;
-        };
-        slot.get_or_insert_with(|| MessageColumns::new(message, true))
-            .push_values(message, ts, channel, &values);
     }
+    let mut values: Vec<Option<Decoded>> = Vec::new();
     let mut batches = Vec::new();
-    for (message, table) in messages.iter().zip(&mut tables) {
-        if let Some(table) = table {
-            *summary
-                .rows
-                .entry(message.display_name().to_string())
-                .or_default() += table.rows as u64;
-            let batch = table.finish().map_err(|e| LogError::Table {
-                row: 0,
-                what: e.to_string(),
-            })?;
-            batches.push((message.display_name().to_string(), batch));
+    for (index, rows) in rows_of.iter().enumerate() {
+        let Some((message, codec)) = decoder.message_at(index).filter(|_| !rows.is_empty()) else {
+            continue;
+        };
+        let mut table = MessageColumns::new(message, true, rows.len());
+        for &row in rows {
+            let Some(frame) = frames.row(row as usize) else {
+                // No time or no channel: not a frame a table can hold.
+                summary.unknown += 1;
+                continue;
+            };
+            match decode_row(codec, frame.data, &mut values) {
+                Ok(decoded) => table.push(
+                    message,
+                    frame.ts,
+                    (frame.channel_key, frame.channel),
+                    decoded,
+                    &values,
+                ),
+                Err(e) => summary.count_undecodable(message, &e),
+            }
         }
+        if table.rows == 0 {
+            continue;
+        }
+        *summary
+            .rows
+            .entry(message.display_name().to_string())
+            .or_default() += table.rows as u64;
+        let batch = table.finish(message, codec).map_err(|e| LogError::Table {
+            row: 0,
+            what: e.to_string(),
+        })?;
+        batches.push((message.display_name().to_string(), batch));
     }
     Ok((batches, summary))
 }
 
-fn close(mut table: OpenTable) -> std::io::Result<()> {
+fn close(mut table: OpenTable, decoder: &Decoder) -> std::io::Result<()> {
     if table.columns.rows > 0 {
-        let batch = table.columns.finish()?;
-        table.writer.write(&batch).map_err(io_error)?;
+        if let Some((message, codec)) = decoder.message_at(table.message) {
+            let batch = table.columns.finish(message, codec)?;
+            table.writer.write(&batch).map_err(io_error)?;
+        }
     }
     let mut file = table.writer.into_inner().map_err(io_error)?;
     std::io::Write::flush(&mut file)?;
@@ -666,6 +789,164 @@ mod tests {
         }
         assert_eq!(ts, (0..60_000i64).collect::<Vec<_>>());
         std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// Each table's cell as text: values, descriptions and channels alike.
+    fn cell(column: &ArrayRef, row: usize) -> String {
+        use arrow_array::cast::AsArray;
+        use arrow_array::types::Int32Type;
+        if column.is_null(row) {
+            return "null".into();
+        }
+        match column.data_type() {
+            DataType::Int64 => column.as_primitive::<Int64Type>().value(row).to_string(),
+            DataType::UInt64 => column.as_primitive::<UInt64Type>().value(row).to_string(),
+            DataType::Float64 => format!("{:?}", column.as_primitive::<Float64Type>().value(row)),
+            DataType::Timestamp(..) => column
+                .as_primitive::<arrow_array::types::TimestampNanosecondType>()
+                .value(row)
+                .to_string(),
+            DataType::Dictionary(..) => {
+                let d = column.as_dictionary::<Int32Type>();
+                let key = usize::try_from(d.keys().value(row)).unwrap();
+                d.values().as_string::<i32>().value(key).to_string()
+            }
+            other => panic!("unexpected column type {other}"),
+        }
+    }
+
+    /// What a table's row should hold, from decoding its frame alone.
+    fn expected_row(decoder: &Decoder, record: &LogRecord) -> Option<(String, Vec<String>)> {
+        let mut values = Vec::new();
+        let (_, message, decoded) = decoder.decode_into(&record.frame, &mut values)?;
+        decoded.ok()?;
+        let mut row = vec![
+            nanos(record.timestamp).to_string(),
+            record.interface.clone(),
+        ];
+        for (signal, (value, kind)) in message
+            .signals
+            .iter()
+            .zip(values.iter().zip(message.signals.iter().map(kind)))
+        {
+            row.push(match (value, kind) {
+                (None, _) => "null".into(),
+                (Some(v), Kind::Float) => format!("{:?}", v.physical.as_f64()),
+                (Some(v), _) => v.physical.as_i128().unwrap().to_string(),
+            });
+            if !signal.value_descriptions.is_empty() {
+                let text = value.and_then(|v| {
+                    SignalValue { signal, value: v }
+                        .description()
+                        .map(str::to_string)
+                });
+                row.push(text.unwrap_or_else(|| "null".into()));
+            }
+        }
+        Some((message.display_name().to_string(), row))
+    }
+
+    #[test]
+    fn a_batch_decodes_as_its_frames_do_one_by_one() {
+        let text = concat!(
+            "BO_ 256 Plain: 8 X\n",
+            " SG_ Mode : 0|3@1+ (1,0) [0|0] \"\" X\n",
+            " SG_ Angle : 8|12@1- (0.5,-3) [0|0] \"\" X\n",
+            " SG_ Big : 39|16@0+ (2,100) [0|0] \"\" X\n",
+            " SG_ Tail : 56|8@1- (1,0) [0|0] \"\" X\n",
+            "BO_ 512 Short: 3 X\n",
+            " SG_ S : 4|16@1+ (0.25,0) [0|0] \"\" X\n",
+            "BO_ 768 Muxed: 8 X\n",
+            " SG_ Sel M : 0|2@1+ (1,0) [0|0] \"\" X\n",
+            " SG_ Zero m0 : 8|8@1+ (1,0) [0|0] \"\" X\n",
+            " SG_ One m1 : 8|16@1- (0.1,0) [0|0] \"\" X\n",
+            "BO_ 2147484672 Long: 12 X\n",
+            " SG_ Far : 80|16@1+ (1,0) [0|0] \"\" X\n",
+            "VAL_ 256 Mode 0 \"Off\" 1 \"On\" 5 \"Crab\" ;\n",
+        );
+        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let mut state = 0x1234_5678_9ABC_DEF1u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut records = Vec::new();
+        for i in 0..3000u64 {
+            let pick = next();
+            let bytes: Vec<u8> = (0..12).map(|_| next().to_le_bytes()[0]).collect();
+            let (id, length) = match pick % 7 {
+                0 | 1 => (bywire_core::Id::standard(256), 8),
+                2 => (bywire_core::Id::standard(512), 3),
+                3 => (bywire_core::Id::standard(256), 5), // too short
+                4 => (bywire_core::Id::standard(768), 8),
+                5 => (bywire_core::Id::extended(1024), 12),
+                _ => (bywire_core::Id::standard(0x7FF), 8), // no message
+            };
+            let id = id.unwrap();
+            let frame = if length == 12 {
+                bywire_core::Frame::fd(id, &bytes, true, false).unwrap()
+            } else if pick % 53 == 0 {
+                bywire_core::Frame::remote(id, bywire_core::Dlc::new(8).unwrap())
+            } else {
+                bywire_core::Frame::classic(id, &bytes[..length]).unwrap()
+            };
+            records.push(LogRecord {
+                timestamp: bywire_core::Timestamp::from_nanos(1_000_000 * i),
+                interface: format!("can{}", (pick >> 8) % 3),
+                frame,
+                direction: None,
+            });
+        }
+        let mut expected: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
+        for record in &records {
+            if let Some((message, row)) = expected_row(&decoder, record) {
+                expected.entry(message).or_default().push(row);
+            }
+        }
+        assert_eq!(expected.len(), 4, "every kind of message has rows");
+        let mut columns = super::super::FrameColumns::new();
+        for record in &records {
+            columns.push(record);
+        }
+        let dictionary = columns.finish(&super::super::raw_schema()).unwrap();
+        // The same frames with the channel as plain strings (as Spark and pandas give them).
+        let plain = {
+            let at = dictionary.schema().index_of("channel").unwrap();
+            let mut fields: Vec<Field> = dictionary
+                .schema()
+                .fields()
+                .iter()
+                .map(|f| f.as_ref().clone())
+                .collect();
+            fields[at] = Field::new("channel", DataType::Utf8, false);
+            let mut arrays = dictionary.columns().to_vec();
+            let texts: Vec<String> = records.iter().map(|r| r.interface.clone()).collect();
+            arrays[at] = Arc::new(arrow_array::StringArray::from(texts));
+            RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).unwrap()
+        };
+        for batch in [dictionary, plain] {
+            let (tables, summary) = decode_frames_batch(&decoder, &batch).unwrap();
+            let mut got: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
+            for (name, table) in &tables {
+                let rows = got.entry(name.clone()).or_default();
+                for row in 0..table.num_rows() {
+                    rows.push(table.columns().iter().map(|c| cell(c, row)).collect());
+                }
+            }
+            assert_eq!(got, expected);
+            let short = summary.undecodable.get("Plain").map(|(n, _)| *n);
+            assert!(short.is_some_and(|n| n > 0), "{summary:?}");
+            assert!(summary.unknown > 0);
+            let decoded: u64 = summary.rows.values().sum();
+            let undecodable: u64 = summary.undecodable.values().map(|(n, _)| n).sum();
+            assert_eq!(
+                decoded + undecodable + summary.unknown,
+                records.len() as u64
+            );
+        }
     }
 
     #[test]

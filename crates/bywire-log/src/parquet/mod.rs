@@ -118,18 +118,44 @@ pub(crate) struct Labels {
     index: HashMap<String, usize>,
     /// The last text's key: rows of one channel follow each other, found with one comparison.
     last: Option<usize>,
+    /// Keys of the texts of an input dictionary's keys, as they were seen (input key → ours):
+    /// a dictionary-encoded input's texts are compared once, not once per row.
+    seen: Vec<Option<usize>>,
 }
+
+/// Input dictionary keys remembered by [`Labels::push_text_keyed`] (beyond, texts compared).
+const LABELS_SEEN: usize = 1024;
 
 /// Up to this many values a text is found by comparing (a log's few channels); beyond, by hash.
 const LABELS_SCANNED: usize = 16;
 
 impl Labels {
-    pub(crate) fn new(values: Vec<String>) -> Self {
+    /// Labels from `values` (more are added as texts come), room for `rows` keys.
+    pub(crate) fn new(values: Vec<String>, rows: usize) -> Self {
         Labels {
-            keys: Int32Builder::with_capacity(BATCH_ROWS),
+            keys: Int32Builder::with_capacity(rows),
             index: values.iter().cloned().zip(0..).collect(),
             values,
             last: None,
+            seen: Vec::new(),
+        }
+    }
+
+    /// As [`Labels::push_text`], for a text that is value `input` of a dictionary-encoded
+    /// input (`None`: a plain string).
+    #[inline]
+    pub(crate) fn push_text_keyed(&mut self, input: Option<usize>, text: &str) {
+        if let Some(Some(key)) = input.and_then(|i| self.seen.get(i)) {
+            return self.push_key(Some(*key));
+        }
+        self.push_text(text);
+        if let Some(i) = input.filter(|i| *i < LABELS_SEEN) {
+            if self.seen.len() <= i {
+                self.seen.resize(i + 1, None);
+            }
+            if let Some(slot) = self.seen.get_mut(i) {
+                *slot = self.last;
+            }
         }
     }
 
@@ -154,9 +180,19 @@ impl Labels {
         self.push_key(Some(key));
     }
 
+    /// Add keys already found (indexes into the values).
+    pub(crate) fn extend_keys(&mut self, keys: Vec<Option<usize>>) {
+        for key in keys {
+            self.push_key(key);
+        }
+    }
+
+    #[inline]
     pub(crate) fn push_key(&mut self, key: Option<usize>) {
-        self.keys
-            .append_option(key.and_then(|k| i32::try_from(k).ok()));
+        match key.and_then(|k| i32::try_from(k).ok()) {
+            Some(key) => self.keys.append_value(key),
+            None => self.keys.append_null(),
+        }
     }
 
     pub(crate) fn finish(&mut self) -> std::io::Result<ArrayRef> {
@@ -198,7 +234,7 @@ impl FrameColumns {
     pub fn new() -> Self {
         FrameColumns {
             ts: TimestampNanosecondBuilder::with_capacity(BATCH_ROWS).with_timezone("UTC"),
-            channel: Labels::new(Vec::new()),
+            channel: Labels::new(Vec::new(), BATCH_ROWS),
             id: UInt32Builder::with_capacity(BATCH_ROWS),
             extended: BooleanBuilder::with_capacity(BATCH_ROWS),
             remote: BooleanBuilder::with_capacity(BATCH_ROWS),
@@ -206,7 +242,7 @@ impl FrameColumns {
             fd: BooleanBuilder::with_capacity(BATCH_ROWS),
             brs: BooleanBuilder::with_capacity(BATCH_ROWS),
             esi: BooleanBuilder::with_capacity(BATCH_ROWS),
-            dir: Labels::new(vec!["rx".into(), "tx".into()]),
+            dir: Labels::new(vec!["rx".into(), "tx".into()], BATCH_ROWS),
             dlc: UInt8Builder::with_capacity(BATCH_ROWS),
             data: BinaryBuilder::with_capacity(BATCH_ROWS, BATCH_ROWS * 8),
         }
@@ -483,12 +519,18 @@ impl<'a> FrameColumnsRef<'a> {
         }
     }
 
-    /// What decoding needs of row `i`: time (ns), channel, identifier, whether extended, and
-    /// the data (none for a remote frame). `None` for an error frame or a row without them.
-    pub(crate) fn row(&self, i: usize) -> Option<(i64, &'a str, u32, bool, &'a [u8])> {
+    /// The identifier of row `i` and whether it is extended; `None` for an error frame or a
+    /// row without one.
+    pub(crate) fn id(&self, i: usize) -> Option<(u32, bool)> {
         if Self::set(self.error, i) || !self.id.is_valid(i) {
             return None;
         }
+        Some((self.id.value(i), Self::set(self.extended, i)))
+    }
+
+    /// What decoding needs of row `i` (whose identifier [`FrameColumnsRef::id`] gave): time
+    /// (ns), channel, and the data (none for a remote frame). `None` for a row without them.
+    pub(crate) fn row(&self, i: usize) -> Option<FrameRow<'a>> {
         let ts = self.ts.get(i).copied().flatten()?;
         let channel = self.channel.get(i)?;
         let data = if Self::set(self.remote, i) || !self.data.is_valid(i) {
@@ -496,14 +538,23 @@ impl<'a> FrameColumnsRef<'a> {
         } else {
             self.data.value(i)
         };
-        Some((
+        Some(FrameRow {
             ts,
             channel,
-            self.id.value(i),
-            Self::set(self.extended, i),
+            channel_key: self.channel.key(i),
             data,
-        ))
+        })
     }
+}
+
+/// A row of a raw frames batch, as decoding reads it.
+pub(crate) struct FrameRow<'a> {
+    /// Time, ns since the epoch.
+    pub(crate) ts: i64,
+    pub(crate) channel: &'a str,
+    /// The channel's key when the column is dictionary-encoded.
+    pub(crate) channel_key: Option<usize>,
+    pub(crate) data: &'a [u8],
 }
 
 impl Iterator for ParquetReader {
@@ -629,6 +680,18 @@ impl<'a> Strings<'a> {
         match self {
             Strings::Plain(a) => a.is_valid(i).then(|| a.value(i)),
             Strings::Dictionary(d) => d.is_valid(i).then(|| d.value(i)),
+        }
+    }
+
+    /// The dictionary key of row `i` (`None` for plain strings).
+    fn key(&self, i: usize) -> Option<usize> {
+        match self {
+            Strings::Plain(_) => None,
+            Strings::Dictionary(d) => d
+                .keys()
+                .values()
+                .get(i)
+                .and_then(|k| usize::try_from(*k).ok()),
         }
     }
 }
