@@ -222,43 +222,73 @@ struct Hot {
 }
 
 impl Hot {
-    /// The signal's raw bits in a payload read as words.
+    /// The signal's raw bits in a payload read as a word.
     #[inline(always)]
-    fn raw_of(&self, words: PayloadWords) -> u64 {
-        let word = if self.big_endian { words.1 } else { words.0 };
+    fn raw_of(&self, payload: PayloadWord) -> u64 {
+        let word = payload.word(self.big_endian);
         (word >> self.word_shift) & self.mask
     }
 }
 
-/// One signal of many payloads by `kernel` (known in each caller's arm, so the loop computes
-/// only its kernel's value), read from the big-endian word when `BIG`.
+/// One signal of many payloads: each payload's raw bits as `h` places them, read from the
+/// big-endian word when `BIG`, its value by `value` (one kernel's arithmetic: each caller
+/// passes its own, so every loop is compiled for one kernel and has no dispatch inside).
 #[inline(always)]
 fn column<const BIG: bool, T>(
-    kernel: Kernel,
     h: &Hot,
-    p: &Plan,
-    payloads: &[PayloadWords],
+    payloads: &[PayloadWord],
     out: &mut Vec<T>,
+    value: impl Fn(u64) -> Value,
     convert: &mut impl FnMut(Decoded) -> T,
 ) {
     let (shift, mask) = (h.word_shift, h.mask);
-    out.extend(payloads.iter().map(|words| {
-        let word = if BIG { words.1 } else { words.0 };
+    out.extend(payloads.iter().map(|payload| {
+        let word = payload.word(BIG);
         let raw = (word >> shift) & mask;
         convert(Decoded {
             raw,
-            physical: value_of(kernel, p, raw),
+            physical: value(raw),
         })
     }));
 }
 
-/// A payload of at most 8 bytes, zero-padded, read as one little-endian and one big-endian
-/// word: each signal of it is then one shift and one mask.
+/// [`column`] for `h`'s byte order.
+#[inline(always)]
+fn column_in_order<T>(
+    h: &Hot,
+    payloads: &[PayloadWord],
+    out: &mut Vec<T>,
+    value: impl Fn(u64) -> Value,
+    convert: &mut impl FnMut(Decoded) -> T,
+) {
+    if h.big_endian {
+        column::<true, T>(h, payloads, out, value, convert);
+    } else {
+        column::<false, T>(h, payloads, out, value, convert);
+    }
+}
+
+/// A payload of at most 8 bytes, zero-padded, read as a little-endian word: each signal of
+/// it is then one shift and one mask of that word or (big-endian signals) of its bytes
+/// swapped, one instruction. Eight bytes a payload, so a table keeps its payloads compactly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct PayloadWords(u64, u64);
+pub struct PayloadWord(u64);
+
+impl PayloadWord {
+    /// The payload read in the byte order of a big-endian signal when `big`, else of a
+    /// little-endian one.
+    #[inline(always)]
+    fn word(self, big: bool) -> u64 {
+        if big {
+            self.0.swap_bytes()
+        } else {
+            self.0
+        }
+    }
+}
 
 #[inline(always)]
-fn payload_words(payload: &[u8]) -> PayloadWords {
+fn payload_word(payload: &[u8]) -> PayloadWord {
     // Eight bytes (the common case) convert without a copy loop or a library call.
     let bytes: [u8; 8] = payload.try_into().unwrap_or_else(|_| {
         let mut padded = [0u8; 8];
@@ -267,7 +297,7 @@ fn payload_words(payload: &[u8]) -> PayloadWords {
         }
         padded
     });
-    PayloadWords(u64::from_le_bytes(bytes), u64::from_be_bytes(bytes))
+    PayloadWord(u64::from_le_bytes(bytes))
 }
 
 /// A message compiled for decoding and encoding.
@@ -515,10 +545,10 @@ impl MessageCodec {
             got: data.len(),
         })?;
         if self.decodes_by_word() {
-            let words = payload_words(payload);
+            let word = payload_word(payload);
             for ((h, p), slot) in self.hot.iter().zip(&self.plans).zip(out.iter_mut()) {
                 *slot = (!h.past_end).then(|| {
-                    let raw = h.raw_of(words);
+                    let raw = h.raw_of(word);
                     Decoded {
                         raw,
                         physical: value_of(h.kernel, p, raw),
@@ -581,11 +611,11 @@ impl MessageCodec {
         self.plain && self.size <= 8
     }
 
-    /// The message's payload in `data` as the words [`MessageCodec::decode_column`] reads
-    /// (little- and big-endian); an error when `data` is shorter than the message.
-    pub fn words_of(&self, data: &[u8]) -> Result<PayloadWords, DecodeError> {
+    /// The message's payload in `data` as the word [`MessageCodec::decode_column`] reads; an
+    /// error when `data` is shorter than the message.
+    pub fn word_of(&self, data: &[u8]) -> Result<PayloadWord, DecodeError> {
         match data.get(..self.size) {
-            Some(payload) => Ok(payload_words(payload)),
+            Some(payload) => Ok(payload_word(payload)),
             None => Err(DecodeError::TooShort {
                 needed: self.size,
                 got: data.len(),
@@ -602,7 +632,7 @@ impl MessageCodec {
     pub fn decode_column<T>(
         &self,
         index: usize,
-        payloads: &[PayloadWords],
+        payloads: &[PayloadWord],
         out: &mut Vec<T>,
         mut convert: impl FnMut(Decoded) -> T,
     ) -> bool {
@@ -614,23 +644,24 @@ impl MessageCodec {
         }
         // One loop per kernel and byte order: each loop's work is its kernel's alone.
         let c = &mut convert;
-        match (h.kernel, h.big_endian) {
-            (k @ Kernel::UnsignedRaw, false) => column::<false, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::UnsignedRaw, true) => column::<true, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::SignedRaw { .. }, false) => column::<false, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::SignedRaw { .. }, true) => column::<true, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::UnsignedFloat { .. }, false) => {
-                column::<false, T>(k, h, p, payloads, out, c)
+        match h.kernel {
+            Kernel::UnsignedRaw => column_in_order(h, payloads, out, unsigned_raw, c),
+            Kernel::SignedRaw { unused } => {
+                column_in_order(h, payloads, out, |raw| signed_raw(raw, unused), c);
             }
-            (k @ Kernel::UnsignedFloat { .. }, true) => {
-                column::<true, T>(k, h, p, payloads, out, c)
+            Kernel::UnsignedFloat { scale, offset } => {
+                let value = |raw| unsigned_float(raw, scale, offset);
+                column_in_order(h, payloads, out, value, c);
             }
-            (k @ Kernel::SignedFloat { .. }, false) => {
-                column::<false, T>(k, h, p, payloads, out, c)
+            Kernel::SignedFloat {
+                unused,
+                scale,
+                offset,
+            } => {
+                let value = |raw| signed_float(raw, unused, scale, offset);
+                column_in_order(h, payloads, out, value, c);
             }
-            (k @ Kernel::SignedFloat { .. }, true) => column::<true, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::General, false) => column::<false, T>(k, h, p, payloads, out, c),
-            (k @ Kernel::General, true) => column::<true, T>(k, h, p, payloads, out, c),
+            Kernel::General => column_in_order(h, payloads, out, |raw| general(p, raw), c),
         }
         true
     }
@@ -856,44 +887,62 @@ fn physical(p: &Plan, raw: u64) -> Decoded {
 /// The physical value of `raw` by the signal's kernel: one flat match, so the value stays in
 /// registers (a nested dispatch made the compiler build it in memory and reload it).
 #[inline(always)]
-#[allow(clippy::cast_precision_loss, clippy::cast_possible_wrap)]
 fn value_of(kernel: Kernel, p: &Plan, raw: u64) -> Value {
-    // Two's complement from `64 - unused` bits: move the sign bit to bit 63, shift back.
-    let signed = |unused: u32| ((raw << unused) as i64) >> unused;
     match kernel {
-        Kernel::UnsignedRaw => match i64::try_from(raw) {
-            Ok(small) => Value::Int(small),
-            Err(_) => Value::UInt(raw),
-        },
-        Kernel::SignedRaw { unused } => Value::Int(signed(unused)),
-        // Fewer than 64 bits (see the kernel's choice): the one-instruction signed conversion
-        // gives what the unsigned one would.
-        Kernel::UnsignedFloat { scale, offset } => {
-            Value::Float((raw as i64) as f64 * scale + offset)
-        }
+        Kernel::UnsignedRaw => unsigned_raw(raw),
+        Kernel::SignedRaw { unused } => signed_raw(raw, unused),
+        Kernel::UnsignedFloat { scale, offset } => unsigned_float(raw, scale, offset),
         Kernel::SignedFloat {
             unused,
             scale,
             offset,
-        } => Value::Float(signed(unused) as f64 * scale + offset),
+        } => signed_float(raw, unused, scale, offset),
         Kernel::General => general(p, raw),
     }
+}
+
+/// [`Kernel::UnsignedRaw`]'s value.
+#[inline(always)]
+fn unsigned_raw(raw: u64) -> Value {
+    match i64::try_from(raw) {
+        Ok(small) => Value::Int(small),
+        Err(_) => Value::UInt(raw),
+    }
+}
+
+/// Two's complement from `64 - unused` bits: the sign bit moved to bit 63 and shifted back.
+#[inline(always)]
+#[allow(clippy::cast_possible_wrap)]
+fn sign_extended(raw: u64, unused: u32) -> i64 {
+    ((raw << unused) as i64) >> unused
+}
+
+/// [`Kernel::SignedRaw`]'s value.
+#[inline(always)]
+fn signed_raw(raw: u64, unused: u32) -> Value {
+    Value::Int(sign_extended(raw, unused))
+}
+
+/// [`Kernel::UnsignedFloat`]'s value. Fewer than 64 bits (see the kernel's choice): the
+/// one-instruction signed conversion gives what the unsigned one would.
+#[inline(always)]
+#[allow(clippy::cast_precision_loss, clippy::cast_possible_wrap)]
+fn unsigned_float(raw: u64, scale: f64, offset: f64) -> Value {
+    Value::Float((raw as i64) as f64 * scale + offset)
+}
+
+/// [`Kernel::SignedFloat`]'s value.
+#[inline(always)]
+#[allow(clippy::cast_precision_loss)]
+fn signed_float(raw: u64, unused: u32, scale: f64, offset: f64) -> Value {
+    Value::Float(sign_extended(raw, unused) as f64 * scale + offset)
 }
 
 /// Any value type with any conversion, by Python's rules.
 fn general(p: &Plan, raw: u64) -> Value {
     let number = match p.value_type {
-        ValueType::Integer { signed: false } => match i64::try_from(raw) {
-            Ok(small) => Value::Int(small),
-            Err(_) => Value::UInt(raw),
-        },
-        ValueType::Integer { signed: true } => {
-            let unused = 64 - p.length;
-            // Sign-extend: move the sign bit to bit 63 and shift back arithmetically.
-            #[allow(clippy::cast_possible_wrap)]
-            let v = ((raw << unused) as i64) >> unused;
-            Value::Int(v)
-        }
+        ValueType::Integer { signed: false } => unsigned_raw(raw),
+        ValueType::Integer { signed: true } => signed_raw(raw, 64 - p.length),
         // The raw bits of a float signal are its IEEE representation; 32 low bits for f32.
         #[allow(clippy::cast_possible_truncation)]
         ValueType::Float32 => Value::Float(f64::from(f32::from_bits(raw as u32))),

@@ -319,7 +319,7 @@ fn check_columns(path: &Path) -> Result<(), Failed> {
             let mut out = vec![None; codec.signal_count()];
             if codec.decode(&payload, &mut out).is_ok() {
                 rows.push(out);
-                payloads.push(codec.words_of(&payload).unwrap());
+                payloads.push(codec.word_of(&payload).unwrap());
             }
         }
         if !codec.decodes_by_word() {
@@ -332,7 +332,7 @@ fn check_columns(path: &Path) -> Result<(), Failed> {
             return Err(format!("{}: a payload by word did not decode", message.name).into());
         }
         let short = vec![0u8; codec.size().saturating_sub(1)];
-        if codec.size() > 0 && codec.words_of(&short).is_ok() {
+        if codec.size() > 0 && codec.word_of(&short).is_ok() {
             return Err(format!("{}: a short payload was taken", message.name).into());
         }
         for signal in 0..codec.signal_count() {

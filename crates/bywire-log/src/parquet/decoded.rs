@@ -30,19 +30,20 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use ::parquet::arrow::ArrowWriter;
-use arrow_array::builder::{
-    Float64Builder, Int64Builder, TimestampNanosecondBuilder, UInt64Builder,
-};
+use arrow_array::builder::{Float64Builder, Int64Builder, UInt64Builder};
 use arrow_array::types::{ArrowPrimitiveType, Float64Type, Int64Type, UInt64Type};
-use arrow_array::{new_null_array, ArrayRef, PrimitiveArray, RecordBatch};
+use arrow_array::{
+    new_null_array, ArrayRef, Int32Array, PrimitiveArray, RecordBatch, TimestampNanosecondArray,
+};
 use arrow_buffer::NullBuffer;
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, PayloadWords, Value};
+use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, PayloadWord, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
 use super::{
-    dictionary_type, io_error, nanos, properties, timestamp_type, FrameColumnsRef, Labels,
+    dictionary_type, io_error, nanos, properties, timestamp_type, ChannelRef, FrameColumnsRef,
+    Labels,
 };
 use crate::calendar;
 use crate::candump::{LogError, LogRecord};
@@ -185,7 +186,7 @@ impl ValueColumn {
 /// word](MessageCodec::decodes_by_word), decoded later a column at a time, or the values
 /// decoded now (multiplexed messages, longer payloads).
 enum Row {
-    Words(PayloadWords),
+    Word(PayloadWord),
     Decoded,
 }
 
@@ -196,7 +197,7 @@ fn decode_row(
     values: &mut Vec<Option<Decoded>>,
 ) -> Result<Row, DecodeError> {
     if codec.decodes_by_word() {
-        return codec.words_of(data).map(Row::Words);
+        return codec.word_of(data).map(Row::Word);
     }
     values.clear();
     values.resize(codec.signal_count(), None);
@@ -213,15 +214,52 @@ fn choice_of(signal: &Signal, value: Decoded) -> Option<usize> {
         .position(|(k, _)| *k == key)
 }
 
+/// Integer signals of at most this many bits find their descriptions in a table by raw value.
+const CHOICE_TABLE_BITS: u32 = 8;
+
+/// Signal `index`'s description keys (what [`choice_of`] gives) of payloads decoded by word;
+/// `None` when the signal is never present. A short integer signal's keys are looked up in a
+/// table of its every raw value, made once per batch, instead of searched for on every row.
+fn choice_column(
+    codec: &MessageCodec,
+    index: usize,
+    signal: &Signal,
+    words: &[PayloadWord],
+) -> Option<Int32Array> {
+    let key = |d| choice_of(signal, d).and_then(|k| i32::try_from(k).ok());
+    let short = matches!(signal.value_type, ValueType::Integer { .. })
+        && signal.length <= CHOICE_TABLE_BITS;
+    let (keys, nulls) = if short {
+        // An integer signal's description key is its raw bits alone (`description_key`).
+        let table: Vec<Option<i32>> = (0..1u64 << signal.length)
+            .map(|raw| {
+                key(Decoded {
+                    raw,
+                    physical: Value::UInt(raw),
+                })
+            })
+            .collect();
+        decoded_column(codec, index, words, |d| {
+            usize::try_from(d.raw)
+                .ok()
+                .and_then(|raw| table.get(raw).copied().flatten())
+        })?
+    } else {
+        decoded_column(codec, index, words, key)?
+    };
+    Some(Int32Array::new(keys.into(), nulls))
+}
+
 /// One message's rows until they become a batch: its schema, times, channels, and the
 /// payloads decoded a column at a time when the batch is made (or the values decoded as the
 /// rows came, for messages that do not decode by word).
 struct MessageColumns {
     schema: SchemaRef,
     kinds: Vec<Kind>,
-    ts: TimestampNanosecondBuilder,
+    /// Times (ns): never null, so a plain vector (a push is a store).
+    ts: Vec<i64>,
     channel: Option<Labels>,
-    words: Vec<PayloadWords>,
+    words: Vec<PayloadWord>,
     /// Values of rows decoded as they came (empty until a batch is made, for the others).
     values: Vec<ValueColumn>,
     /// Per signal, its description column when it has value descriptions.
@@ -250,7 +288,7 @@ impl MessageColumns {
         }
         MessageColumns {
             schema: Arc::new(Schema::new(fields)),
-            ts: TimestampNanosecondBuilder::with_capacity(rows).with_timezone("UTC"),
+            ts: Vec::with_capacity(rows),
             channel: with_channel.then(|| Labels::new(Vec::new(), rows)),
             words: Vec::with_capacity(rows),
             // Built up as rows come (multiplexed messages), or made with the batch's size when
@@ -269,25 +307,29 @@ impl MessageColumns {
         }
     }
 
-    /// Add a row: `row` as [`decode_row`] made it, with `decoded` the values it decoded; the
-    /// channel with its input dictionary key, if it has one.
+    /// Add a row: `row` as [`decode_row`] made it, with `decoded` the values it decoded.
+    #[inline(always)]
     fn push(
         &mut self,
         message: &Message,
         ts: i64,
-        (channel_key, channel): (Option<usize>, &str),
+        channel: ChannelRef<'_>,
         row: Row,
         decoded: &[Option<Decoded>],
     ) {
-        self.ts.append_value(ts);
+        self.ts.push(ts);
         if let Some(labels) = &mut self.channel {
-            labels.push_text_keyed(channel_key, channel);
+            labels.push_channel(channel);
         }
         self.rows += 1;
-        if let Row::Words(words) = row {
-            self.words.push(words);
-            return;
+        match row {
+            Row::Word(word) => self.words.push(word),
+            Row::Decoded => self.push_decoded(message, decoded),
         }
+    }
+
+    /// The values of a row decoded as it came.
+    fn push_decoded(&mut self, message: &Message, decoded: &[Option<Decoded>]) {
         let columns = self.values.iter_mut().zip(&mut self.choices);
         for ((signal, value), (column, choice)) in message.signals.iter().zip(decoded).zip(columns)
         {
@@ -328,12 +370,10 @@ impl MessageColumns {
                 values.unwrap_or_else(|| new_null_array(&ValueColumn::data_type(*kind), rows)),
             );
             if let Some(choice) = choice {
-                let mut keys = Vec::with_capacity(rows);
-                if !codec.decode_column(index, words, &mut keys, |v| choice_of(signal, v)) {
-                    keys.resize(rows, None);
-                }
                 // Finished below, beside its values.
-                choice.extend_keys(keys);
+                let keys = choice_column(codec, index, signal, words)
+                    .unwrap_or_else(|| Int32Array::new_null(rows));
+                choice.append_keys(&keys);
             }
         }
         self.words.clear();
@@ -347,7 +387,8 @@ impl MessageColumns {
         } else {
             self.decode_words(message, codec)
         };
-        let mut columns: Vec<ArrayRef> = vec![Arc::new(self.ts.finish())];
+        let ts = TimestampNanosecondArray::new(std::mem::take(&mut self.ts).into(), None);
+        let mut columns: Vec<ArrayRef> = vec![Arc::new(ts.with_timezone("UTC"))];
         if let Some(channel) = &mut self.channel {
             columns.push(channel.finish()?);
         }
@@ -371,26 +412,41 @@ impl MessageColumns {
 fn typed_column<T: ArrowPrimitiveType>(
     codec: &MessageCodec,
     index: usize,
-    words: &[PayloadWords],
+    words: &[PayloadWord],
     convert: impl Fn(Value) -> Option<T::Native>,
 ) -> Option<ArrayRef> {
+    let (values, nulls) = decoded_column(codec, index, words, |d| convert(d.physical))?;
+    Some(Arc::new(PrimitiveArray::<T>::new(values.into(), nulls)))
+}
+
+/// Signal `index` of payloads decoded by word, each through `convert`, with the rows it
+/// refused as nulls (no null buffer when it refused none); `None` when the signal is never
+/// present.
+fn decoded_column<T: Default>(
+    codec: &MessageCodec,
+    index: usize,
+    words: &[PayloadWord],
+    convert: impl Fn(Decoded) -> Option<T>,
+) -> Option<(Vec<T>, Option<NullBuffer>)> {
     let mut values = Vec::with_capacity(words.len());
     let mut refused = false;
     let decoded = codec.decode_column(index, words, &mut values, |d| {
-        convert(d.physical).unwrap_or_else(|| {
+        convert(d).unwrap_or_else(|| {
             refused = true;
-            T::Native::default()
+            T::default()
         })
     });
     if !decoded {
         return None;
     }
+    // Refusals are rare (no description for a value, a value outside its column's type):
+    // their rows are found in a second pass rather than tracked on every row.
     let nulls = refused.then(|| {
         let mut valid = Vec::with_capacity(words.len());
-        codec.decode_column(index, words, &mut valid, |d| convert(d.physical).is_some());
+        codec.decode_column(index, words, &mut valid, |d| convert(d).is_some());
         NullBuffer::from(valid)
     });
-    Some(Arc::new(PrimitiveArray::<T>::new(values.into(), nulls)))
+    Some((values, nulls))
 }
 
 /// Where a row goes: the message and, when partitioned, its channel and day.
@@ -514,9 +570,13 @@ impl<'a> DecodedDataset<'a> {
         };
         table.last_used = self.clock;
         let ts = nanos(record.timestamp);
-        table
-            .columns
-            .push(message, ts, (None, &record.interface), row, &self.decoded);
+        table.columns.push(
+            message,
+            ts,
+            ChannelRef::Text(&record.interface),
+            row,
+            &self.decoded,
+        );
         let mut finished_row_group = false;
         if table.columns.rows >= batch {
             let row_groups = table.writer.flushed_row_groups().len();
@@ -627,6 +687,9 @@ impl<'a> DecodedDataset<'a> {
     }
 }
 
+/// A row of no message (in [`decode_frames_batch`]'s rows' messages).
+const NO_MESSAGE: u32 = u32::MAX;
+
 /// A batch of raw frames (the layout [`super::raw_schema`] gives, or any batch
 /// [`super::records_of_batch`] reads) decoded straight from its columns into one batch per
 /// message with the columns a dataset's table has (`channel` always), in the database's order,
@@ -639,41 +702,57 @@ pub fn decode_frames_batch(
     let frames = FrameColumnsRef::of(batch)?;
     let messages = &decoder.database().messages;
     let mut summary = DatasetSummary::default();
-    // The rows of each message, so that each table is built with its size known.
-    let mut rows_of: Vec<Vec<u32>> = vec![Vec::new(); messages.len()];
-    for row in 0..batch.num_rows() {
-        let message = frames
-            .id(row)
-            .and_then(|(id, extended)| decoder.message_with_id(id, extended));
-        match (message, rows_of.get_mut(message.map_or(0, |m| m.0))) {
-            (Some(_), Some(rows)) => rows.push(u32::try_from(row).unwrap_or(u32::MAX)),
-            _ => summary.unknown += 1,
-        }
-    }
+    // Each row's message and each message's row count first, so that each table is built
+    // with its size known; then the rows are read once, in order, each into its table (a
+    // table's rows are spread over the batch: reading them message by message would fetch
+    // the batch's memory once per message).
+    let mut counts = vec![0usize; messages.len()];
+    let message_of_row: Vec<u32> = (0..batch.num_rows())
+        .map(|row| {
+            let message = frames
+                .id(row)
+                .and_then(|(id, extended)| decoder.message_with_id(id, extended))
+                .and_then(|(index, ..)| Some((u32::try_from(index).ok()?, counts.get_mut(index)?)));
+            match message {
+                Some((index, count)) => {
+                    *count += 1;
+                    index
+                }
+                None => {
+                    summary.unknown += 1;
+                    NO_MESSAGE
+                }
+            }
+        })
+        .collect();
+    let mut tables: Vec<Option<MessageColumns>> = counts
+        .iter()
+        .zip(messages)
+        .map(|(&rows, message)| (rows > 0).then(|| MessageColumns::new(message, true, rows)))
+        .collect();
     let mut values: Vec<Option<Decoded>> = Vec::new();
-    let mut batches = Vec::new();
-    for (index, rows) in rows_of.iter().enumerate() {
-        let Some((message, codec)) = decoder.message_at(index).filter(|_| !rows.is_empty()) else {
+    for (row, &index) in message_of_row.iter().enumerate() {
+        let index = index as usize;
+        let (Some(Some(table)), Some((message, codec))) =
+            (tables.get_mut(index), decoder.message_at(index))
+        else {
             continue;
         };
-        let mut table = MessageColumns::new(message, true, rows.len());
-        for &row in rows {
-            let Some(frame) = frames.row(row as usize) else {
-                // No time or no channel: not a frame a table can hold.
-                summary.unknown += 1;
-                continue;
-            };
-            match decode_row(codec, frame.data, &mut values) {
-                Ok(decoded) => table.push(
-                    message,
-                    frame.ts,
-                    (frame.channel_key, frame.channel),
-                    decoded,
-                    &values,
-                ),
-                Err(e) => summary.count_undecodable(message, &e),
-            }
+        let Some(frame) = frames.row(row) else {
+            // No time or no channel: not a frame a table can hold.
+            summary.unknown += 1;
+            continue;
+        };
+        match decode_row(codec, frame.data, &mut values) {
+            Ok(decoded) => table.push(message, frame.ts, frame.channel, decoded, &values),
+            Err(e) => summary.count_undecodable(message, &e),
         }
+    }
+    let mut batches = Vec::new();
+    for (index, table) in tables.iter_mut().enumerate() {
+        let (Some(table), Some((message, codec))) = (table, decoder.message_at(index)) else {
+            continue;
+        };
         if table.rows == 0 {
             continue;
         }
@@ -863,6 +942,10 @@ mod tests {
             "BO_ 2147484672 Long: 12 X\n",
             " SG_ Far : 80|16@1+ (1,0) [0|0] \"\" X\n",
             "VAL_ 256 Mode 0 \"Off\" 1 \"On\" 5 \"Crab\" ;\n",
+            // Signed, short: looked up by raw bits (-1 is 0xFF); longer: searched.
+            "VAL_ 256 Tail -1 \"Invalid\" 3 \"Three\" 127 \"Max\" -128 \"Min\" ;\n",
+            "VAL_ 256 Angle 0 \"Zero\" -1 \"MinusOne\" 2047 \"Top\" ;\n",
+            "VAL_ 768 Zero 1 \"One\" 200 \"Many\" ;\n",
         );
         let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
         let decoder = Decoder::new(db);

@@ -33,8 +33,8 @@ use ::parquet::basic::{Compression, ZstdLevel};
 use ::parquet::file::metadata::KeyValue;
 use ::parquet::file::properties::WriterProperties;
 use arrow_array::builder::{
-    ArrayBuilder, BinaryBuilder, BooleanBuilder, Int32Builder, TimestampNanosecondBuilder,
-    UInt32Builder, UInt8Builder,
+    ArrayBuilder, BinaryBuilder, BooleanBuilder, TimestampNanosecondBuilder, UInt32Builder,
+    UInt8Builder,
 };
 use arrow_array::cast::AsArray;
 use arrow_array::types::{Int32Type, UInt32Type, UInt8Type};
@@ -112,7 +112,11 @@ pub(crate) fn nanos(timestamp: Timestamp) -> i64 {
 /// of values, with no hashing per row (profiled: hashing each row's string in arrow's
 /// dictionary builder took 40 % of the time).
 pub(crate) struct Labels {
-    keys: Int32Builder,
+    /// Keys as plain vectors, not an Arrow builder: a push is a store (the builder's
+    /// bookkeeping cost several times that on every row).
+    keys: Vec<i32>,
+    /// Which keys are values, once one is null (until then, all are).
+    valid: Option<Vec<bool>>,
     values: Vec<String>,
     /// The values' keys, for texts not known in advance (channels), once there are many.
     index: HashMap<String, usize>,
@@ -123,7 +127,7 @@ pub(crate) struct Labels {
     seen: Vec<Option<usize>>,
 }
 
-/// Input dictionary keys remembered by [`Labels::push_text_keyed`] (beyond, texts compared).
+/// Input dictionary keys remembered by [`Labels::push_channel`] (beyond, texts compared).
 const LABELS_SEEN: usize = 1024;
 
 /// Up to this many values a text is found by comparing (a log's few channels); beyond, by hash.
@@ -133,7 +137,8 @@ impl Labels {
     /// Labels from `values` (more are added as texts come), room for `rows` keys.
     pub(crate) fn new(values: Vec<String>, rows: usize) -> Self {
         Labels {
-            keys: Int32Builder::with_capacity(rows),
+            keys: Vec::with_capacity(rows),
+            valid: None,
             index: values.iter().cloned().zip(0..).collect(),
             values,
             last: None,
@@ -141,19 +146,22 @@ impl Labels {
         }
     }
 
-    /// As [`Labels::push_text`], for a text that is value `input` of a dictionary-encoded
-    /// input (`None`: a plain string).
-    #[inline]
-    pub(crate) fn push_text_keyed(&mut self, input: Option<usize>, text: &str) {
-        if let Some(Some(key)) = input.and_then(|i| self.seen.get(i)) {
+    /// As [`Labels::push_text`], for a row's channel: a dictionary-encoded input's keys are
+    /// matched once each (texts compared on a key's first row, not on every row).
+    #[inline(always)]
+    pub(crate) fn push_channel(&mut self, channel: ChannelRef<'_>) {
+        let ChannelRef::Key(input, _) = channel else {
+            return self.push_text(channel.text());
+        };
+        if let Some(Some(key)) = self.seen.get(input) {
             return self.push_key(Some(*key));
         }
-        self.push_text(text);
-        if let Some(i) = input.filter(|i| *i < LABELS_SEEN) {
-            if self.seen.len() <= i {
-                self.seen.resize(i + 1, None);
+        self.push_text(channel.text());
+        if input < LABELS_SEEN {
+            if self.seen.len() <= input {
+                self.seen.resize(input + 1, None);
             }
-            if let Some(slot) = self.seen.get_mut(i) {
+            if let Some(slot) = self.seen.get_mut(input) {
                 *slot = self.last;
             }
         }
@@ -180,28 +188,46 @@ impl Labels {
         self.push_key(Some(key));
     }
 
-    /// Add keys already found (indexes into the values).
-    pub(crate) fn extend_keys(&mut self, keys: Vec<Option<usize>>) {
-        for key in keys {
-            self.push_key(key);
+    /// Add keys already found (indexes into the values; a null key, no value).
+    pub(crate) fn append_keys(&mut self, keys: &arrow_array::Int32Array) {
+        let before = self.keys.len();
+        self.keys.extend_from_slice(keys.values());
+        match (keys.nulls(), &mut self.valid) {
+            (None, None) => {}
+            (None, Some(valid)) => valid.resize(self.keys.len(), true),
+            (Some(nulls), valid) => valid
+                .get_or_insert_with(|| vec![true; before])
+                .extend(nulls.iter()),
         }
     }
 
-    #[inline]
+    #[inline(always)]
     pub(crate) fn push_key(&mut self, key: Option<usize>) {
         match key.and_then(|k| i32::try_from(k).ok()) {
-            Some(key) => self.keys.append_value(key),
-            None => self.keys.append_null(),
+            Some(key) => {
+                self.keys.push(key);
+                if let Some(valid) = &mut self.valid {
+                    valid.push(true);
+                }
+            }
+            None => {
+                let valid = self
+                    .valid
+                    .get_or_insert_with(|| vec![true; self.keys.len()]);
+                valid.push(false);
+                self.keys.push(0);
+            }
         }
     }
 
     pub(crate) fn finish(&mut self) -> std::io::Result<ArrayRef> {
         let values = arrow_array::StringArray::from_iter_values(&self.values);
-        let array = arrow_array::DictionaryArray::<Int32Type>::try_new(
-            self.keys.finish(),
-            Arc::new(values),
-        )
-        .map_err(io_error)?;
+        let keys = arrow_array::Int32Array::new(
+            std::mem::take(&mut self.keys).into(),
+            self.valid.take().map(arrow_buffer::NullBuffer::from),
+        );
+        let array = arrow_array::DictionaryArray::<Int32Type>::try_new(keys, Arc::new(values))
+            .map_err(io_error)?;
         Ok(Arc::new(array))
     }
 }
@@ -407,7 +433,7 @@ pub fn records_of_batch(
     for i in 0..batch.num_rows() {
         let row = first_row + i as u64;
         let at = |what: String| LogError::Table { row, what };
-        let record = match (columns.ts.get(i).copied().flatten(), columns.channel.get(i)) {
+        let record = match (columns.ts.get(i), columns.channel.get(i)) {
             (Some(t), Some(c)) => columns.raw_row(i).frame().map(|frame| LogRecord {
                 timestamp: Timestamp::from_nanos(u64::try_from(t).unwrap_or(0)),
                 interface: c.to_string(),
@@ -428,7 +454,7 @@ pub fn records_of_batch(
 /// A raw frames batch's columns, found and type-checked once: what [`records_of_batch`] and
 /// the columnar decoder ([`decoded::decode_frames_batch`]) read.
 pub(crate) struct FrameColumnsRef<'a> {
-    ts: Vec<Option<i64>>,
+    ts: Times<'a>,
     channel: Strings<'a>,
     id: &'a arrow_array::PrimitiveArray<UInt32Type>,
     data: &'a arrow_array::BinaryArray,
@@ -461,14 +487,15 @@ impl<'a> FrameColumnsRef<'a> {
         let flag = |name: &str| -> Result<Option<&'a arrow_array::BooleanArray>, LogError> {
             match batch.column_by_name(name) {
                 None => Ok(None),
+                // A flag set on no row is read as absent: no test per row (most logs' flags).
                 Some(c) => c
                     .as_boolean_opt()
-                    .map(Some)
+                    .map(|c| (c.true_count() > 0).then_some(c))
                     .ok_or_else(|| fail(format!("the '{name}' column is not boolean"))),
             }
         };
         Ok(FrameColumnsRef {
-            ts: timestamps(column("ts")?.as_ref()).map_err(fail)?,
+            ts: Times::of(column("ts")?.as_ref()).map_err(fail)?,
             channel: Strings::of(column("channel")?.as_ref(), "channel").map_err(fail)?,
             id: column("id")?
                 .as_primitive_opt::<UInt32Type>()
@@ -530,20 +557,16 @@ impl<'a> FrameColumnsRef<'a> {
 
     /// What decoding needs of row `i` (whose identifier [`FrameColumnsRef::id`] gave): time
     /// (ns), channel, and the data (none for a remote frame). `None` for a row without them.
+    #[inline]
     pub(crate) fn row(&self, i: usize) -> Option<FrameRow<'a>> {
-        let ts = self.ts.get(i).copied().flatten()?;
-        let channel = self.channel.get(i)?;
+        let ts = self.ts.get(i)?;
+        let channel = self.channel.channel(i)?;
         let data = if Self::set(self.remote, i) || !self.data.is_valid(i) {
             &[][..]
         } else {
             self.data.value(i)
         };
-        Some(FrameRow {
-            ts,
-            channel,
-            channel_key: self.channel.key(i),
-            data,
-        })
+        Some(FrameRow { ts, channel, data })
     }
 }
 
@@ -551,10 +574,27 @@ impl<'a> FrameColumnsRef<'a> {
 pub(crate) struct FrameRow<'a> {
     /// Time, ns since the epoch.
     pub(crate) ts: i64,
-    pub(crate) channel: &'a str,
-    /// The channel's key when the column is dictionary-encoded.
-    pub(crate) channel_key: Option<usize>,
+    pub(crate) channel: ChannelRef<'a>,
     pub(crate) data: &'a [u8],
+}
+
+/// A row's channel: its text, or (a dictionary-encoded column) its key in the column's values,
+/// so that its text is read only when the key is new.
+#[derive(Clone, Copy)]
+pub(crate) enum ChannelRef<'a> {
+    Text(&'a str),
+    /// A key [`Strings::channel`] found within `values`.
+    Key(usize, &'a arrow_array::StringArray),
+}
+
+impl<'a> ChannelRef<'a> {
+    pub(crate) fn text(self) -> &'a str {
+        match self {
+            ChannelRef::Text(text) => text,
+            ChannelRef::Key(key, values) if key < values.len() => values.value(key),
+            ChannelRef::Key(..) => "",
+        }
+    }
 }
 
 impl Iterator for ParquetReader {
@@ -635,27 +675,65 @@ impl RawRow<'_> {
     }
 }
 
-/// A timestamp column in nanoseconds, whatever its unit.
-fn timestamps(column: &dyn Array) -> Result<Vec<Option<i64>>, String> {
-    let scale: i64 = match column.data_type() {
-        DataType::Timestamp(TimeUnit::Nanosecond, _) => 1,
-        DataType::Timestamp(TimeUnit::Microsecond, _) => 1_000,
-        DataType::Timestamp(TimeUnit::Millisecond, _) => 1_000_000,
-        DataType::Timestamp(TimeUnit::Second, _) => 1_000_000_000,
-        other => return Err(format!("the 'ts' column is {other}, not a timestamp")),
-    };
-    // Every unit's values are i64: read them through the nanosecond type's layout.
-    let data = column.to_data();
-    let values = arrow_array::PrimitiveArray::<arrow_array::types::Int64Type>::from(
-        data.into_builder()
-            .data_type(DataType::Int64)
-            .build()
-            .map_err(|e| e.to_string())?,
-    );
-    Ok(values
-        .iter()
-        .map(|v| v.and_then(|v| v.checked_mul(scale)))
-        .collect())
+/// A timestamp column read in nanoseconds, whatever its unit (read in place: a batch's times
+/// are not copied).
+struct Times<'a> {
+    values: &'a [i64],
+    nulls: Option<&'a arrow_buffer::NullBuffer>,
+    /// Nanoseconds in the column's unit.
+    scale: i64,
+}
+
+impl<'a> Times<'a> {
+    fn of(column: &'a dyn Array) -> Result<Self, String> {
+        use arrow_array::types::{
+            TimestampMicrosecondType, TimestampMillisecondType, TimestampNanosecondType,
+            TimestampSecondType,
+        };
+        let (values, scale) = match column.data_type() {
+            DataType::Timestamp(TimeUnit::Nanosecond, _) => (
+                column
+                    .as_primitive_opt::<TimestampNanosecondType>()
+                    .map(|a| &a.values()[..]),
+                1,
+            ),
+            DataType::Timestamp(TimeUnit::Microsecond, _) => (
+                column
+                    .as_primitive_opt::<TimestampMicrosecondType>()
+                    .map(|a| &a.values()[..]),
+                1_000,
+            ),
+            DataType::Timestamp(TimeUnit::Millisecond, _) => (
+                column
+                    .as_primitive_opt::<TimestampMillisecondType>()
+                    .map(|a| &a.values()[..]),
+                1_000_000,
+            ),
+            DataType::Timestamp(TimeUnit::Second, _) => (
+                column
+                    .as_primitive_opt::<TimestampSecondType>()
+                    .map(|a| &a.values()[..]),
+                1_000_000_000,
+            ),
+            _ => (None, 0),
+        };
+        let values = values
+            .ok_or_else(|| format!("the 'ts' column is {}, not a timestamp", column.data_type()))?;
+        Ok(Times {
+            values,
+            nulls: column.nulls(),
+            scale,
+        })
+    }
+
+    /// Row `i`'s time in nanoseconds; `None` when it has none or it does not fit.
+    #[inline]
+    fn get(&self, i: usize) -> Option<i64> {
+        if self.nulls.is_some_and(|n| n.is_null(i)) {
+            return None;
+        }
+        self.values.get(i)?.checked_mul(self.scale)
+    }
 }
 
 /// A string column: plain or dictionary-encoded.
@@ -683,15 +761,22 @@ impl<'a> Strings<'a> {
         }
     }
 
-    /// The dictionary key of row `i` (`None` for plain strings).
-    fn key(&self, i: usize) -> Option<usize> {
+    /// Row `i` as a [`ChannelRef`]; `None` when it has no text.
+    #[inline]
+    fn channel(&self, i: usize) -> Option<ChannelRef<'a>> {
         match self {
-            Strings::Plain(_) => None,
-            Strings::Dictionary(d) => d
-                .keys()
-                .values()
-                .get(i)
-                .and_then(|k| usize::try_from(*k).ok()),
+            Strings::Plain(a) => a.is_valid(i).then(|| ChannelRef::Text(a.value(i))),
+            Strings::Dictionary(d) => {
+                let keys = d.keys();
+                let values = d.values();
+                let key = keys
+                    .is_valid(i)
+                    .then(|| keys.values().get(i))
+                    .flatten()
+                    .and_then(|k| usize::try_from(*k).ok())
+                    .filter(|k| *k < values.len())?;
+                Some(ChannelRef::Key(key, values))
+            }
         }
     }
 }
