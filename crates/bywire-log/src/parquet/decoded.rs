@@ -1033,6 +1033,72 @@ mod tests {
     }
 
     #[test]
+    fn rows_without_a_time_or_a_channel_are_no_rows_and_times_come_in_any_unit() {
+        use arrow_array::cast::AsArray;
+        use arrow_array::types::TimestampNanosecondType;
+        use arrow_array::{
+            BinaryArray, DictionaryArray, StringArray, TimestampMicrosecondArray,
+            TimestampSecondArray, UInt32Array,
+        };
+        let text = "BO_ 256 M: 1 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n";
+        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let data = BinaryArray::from_iter_values([[1u8], [2], [3], [4], [5]]);
+        let id = UInt32Array::from(vec![256; 5]);
+        let batch = |ts: ArrayRef, channel: ArrayRef| {
+            let fields = vec![
+                Field::new("ts", ts.data_type().clone(), true),
+                Field::new("channel", channel.data_type().clone(), true),
+                Field::new("id", DataType::UInt32, false),
+                Field::new("data", DataType::Binary, false),
+            ];
+            let columns = vec![ts, channel, Arc::new(id.clone()), Arc::new(data.clone())];
+            RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).unwrap()
+        };
+        // Row 1 has no time, row 3 no channel (a null key; row 4's key names a null text).
+        let keys = arrow_array::Int32Array::from(vec![Some(1), Some(0), Some(1), None, Some(2)]);
+        let texts = StringArray::from(vec![Some("can1"), Some("can0"), None]);
+        let keyed: ArrayRef = Arc::new(DictionaryArray::try_new(keys, Arc::new(texts)).unwrap());
+        let plain: ArrayRef = Arc::new(StringArray::from(vec![
+            Some("can0"),
+            Some("can1"),
+            Some("can0"),
+            None,
+            Some(""),
+        ]));
+        let micros: ArrayRef = Arc::new(
+            TimestampMicrosecondArray::from(vec![Some(10), None, Some(30), Some(40), Some(50)])
+                .with_timezone("UTC"),
+        );
+        for channel in [keyed, plain] {
+            let (tables, summary) =
+                decode_frames_batch(&decoder, &batch(micros.clone(), channel)).unwrap();
+            assert_eq!(summary.unknown, 2);
+            let table = &tables[0].1;
+            let ts = table.column(0).as_primitive::<TimestampNanosecondType>();
+            assert_eq!(ts.values().to_vec(), [10_000, 30_000, 50_000]);
+            let values = table.column(2).as_primitive::<Int64Type>();
+            assert_eq!(values.values().to_vec(), [1, 3, 5]);
+            let channel = |row| cell(table.column(1), row);
+            assert_eq!(channel(2), "");
+        }
+        // Seconds too large for nanoseconds are no time either.
+        let seconds: ArrayRef =
+            Arc::new(TimestampSecondArray::from(vec![1, i64::MAX / 10, 3, 4, 5]));
+        let plain: ArrayRef = Arc::new(StringArray::from(vec!["can0"; 5]));
+        let (tables, summary) = decode_frames_batch(&decoder, &batch(seconds, plain)).unwrap();
+        assert_eq!(summary.unknown, 1);
+        let ts = tables[0]
+            .1
+            .column(0)
+            .as_primitive::<TimestampNanosecondType>();
+        assert_eq!(
+            ts.values().to_vec(),
+            [1, 3, 4, 5].map(|s| s * 1_000_000_000)
+        );
+    }
+
+    #[test]
     fn column_types_hold_every_value_a_signal_can_take() {
         let text = "BO_ 1 M: 8 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ B : 8|8@1- (0.5,0) [0|0] \"\" X\n SG_ C : 0|64@1+ (1,0) [0|0] \"\" X\n SG_ D : 0|64@1+ (2,0) [0|0] \"\" X\n SG_ E : 0|64@1- (1,-3) [0|0] \"\" X\n";
         let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
