@@ -219,7 +219,8 @@ const CHOICE_TABLE_BITS: u32 = 8;
 
 /// Signal `index`'s description keys (what [`choice_of`] gives) of payloads decoded by word;
 /// `None` when the signal is never present. A short integer signal's keys are looked up in a
-/// table of its every raw value, made once per batch, instead of searched for on every row.
+/// table of its every raw value, made once per batch (of more rows than the table has), instead
+/// of searched for on every row.
 fn choice_column(
     codec: &MessageCodec,
     index: usize,
@@ -227,8 +228,10 @@ fn choice_column(
     words: &[PayloadWord],
 ) -> Option<Int32Array> {
     let key = |d| choice_of(signal, d).and_then(|k| i32::try_from(k).ok());
+    // The table pays once it has fewer entries than the batch has rows.
     let short = matches!(signal.value_type, ValueType::Integer { .. })
-        && signal.length <= CHOICE_TABLE_BITS;
+        && signal.length <= CHOICE_TABLE_BITS
+        && 1usize << signal.length <= words.len();
     let (keys, nulls) = if short {
         // An integer signal's description key is its raw bits alone (`description_key`).
         let table: Vec<Option<i32>> = (0..1u64 << signal.length)
@@ -983,12 +986,26 @@ mod tests {
                 direction: None,
             });
         }
-        let mut expected: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
-        for record in &records {
-            if let Some((message, row)) = expected_row(&decoder, record) {
-                expected.entry(message).or_default().push(row);
+        let expected_of = |records: &[LogRecord]| {
+            let mut expected: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
+            for record in records {
+                if let Some((message, row)) = expected_row(&decoder, record) {
+                    expected.entry(message).or_default().push(row);
+                }
             }
-        }
+            expected
+        };
+        let cells_of = |tables: &[(String, RecordBatch)]| {
+            let mut got: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
+            for (name, table) in tables {
+                let rows = got.entry(name.clone()).or_default();
+                for row in 0..table.num_rows() {
+                    rows.push(table.columns().iter().map(|c| cell(c, row)).collect());
+                }
+            }
+            got
+        };
+        let expected = expected_of(&records);
         assert_eq!(expected.len(), 4, "every kind of message has rows");
         let mut columns = super::super::FrameColumns::new();
         for record in &records {
@@ -1010,16 +1027,14 @@ mod tests {
             arrays[at] = Arc::new(arrow_array::StringArray::from(texts));
             RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).unwrap()
         };
+        // A short batch: its 8-bit choice signal is searched for on each row rather than
+        // looked up in a table of 256 entries.
+        let few = 40;
+        let (tables, _) = decode_frames_batch(&decoder, &dictionary.slice(0, few)).unwrap();
+        assert_eq!(cells_of(&tables), expected_of(&records[..few]));
         for batch in [dictionary, plain] {
             let (tables, summary) = decode_frames_batch(&decoder, &batch).unwrap();
-            let mut got: BTreeMap<String, Vec<Vec<String>>> = BTreeMap::new();
-            for (name, table) in &tables {
-                let rows = got.entry(name.clone()).or_default();
-                for row in 0..table.num_rows() {
-                    rows.push(table.columns().iter().map(|c| cell(c, row)).collect());
-                }
-            }
-            assert_eq!(got, expected);
+            assert_eq!(cells_of(&tables), expected);
             let short = summary.undecodable.get("Plain").map(|(n, _)| *n);
             assert!(short.is_some_and(|n| n > 0), "{summary:?}");
             assert!(summary.unknown > 0);

@@ -687,34 +687,20 @@ struct Times<'a> {
 impl<'a> Times<'a> {
     fn of(column: &'a dyn Array) -> Result<Self, String> {
         use arrow_array::types::{
-            TimestampMicrosecondType, TimestampMillisecondType, TimestampNanosecondType,
-            TimestampSecondType,
+            TimestampMicrosecondType as Micro, TimestampMillisecondType as Milli,
+            TimestampNanosecondType as Nano, TimestampSecondType as Second,
         };
+        // Every unit's values are i64 nanoseconds, microseconds... since the epoch.
+        fn values<T: arrow_array::ArrowPrimitiveType<Native = i64>>(
+            column: &dyn Array,
+        ) -> Option<&[i64]> {
+            column.as_primitive_opt::<T>().map(|a| &a.values()[..])
+        }
         let (values, scale) = match column.data_type() {
-            DataType::Timestamp(TimeUnit::Nanosecond, _) => (
-                column
-                    .as_primitive_opt::<TimestampNanosecondType>()
-                    .map(|a| &a.values()[..]),
-                1,
-            ),
-            DataType::Timestamp(TimeUnit::Microsecond, _) => (
-                column
-                    .as_primitive_opt::<TimestampMicrosecondType>()
-                    .map(|a| &a.values()[..]),
-                1_000,
-            ),
-            DataType::Timestamp(TimeUnit::Millisecond, _) => (
-                column
-                    .as_primitive_opt::<TimestampMillisecondType>()
-                    .map(|a| &a.values()[..]),
-                1_000_000,
-            ),
-            DataType::Timestamp(TimeUnit::Second, _) => (
-                column
-                    .as_primitive_opt::<TimestampSecondType>()
-                    .map(|a| &a.values()[..]),
-                1_000_000_000,
-            ),
+            DataType::Timestamp(TimeUnit::Nanosecond, _) => (values::<Nano>(column), 1),
+            DataType::Timestamp(TimeUnit::Microsecond, _) => (values::<Micro>(column), 1_000),
+            DataType::Timestamp(TimeUnit::Millisecond, _) => (values::<Milli>(column), 1_000_000),
+            DataType::Timestamp(TimeUnit::Second, _) => (values::<Second>(column), 1_000_000_000),
             _ => (None, 0),
         };
         let values = values
