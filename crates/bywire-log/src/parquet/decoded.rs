@@ -42,8 +42,8 @@ use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
 use super::{
-    dictionary_type, io_error, nanos, properties, timestamp_type, ChannelRef, FrameColumnsRef,
-    Labels,
+    dictionary_type, io_error, nanos, properties_with_dictionaries, timestamp_type, ChannelRef,
+    FrameColumnsRef, Labels,
 };
 use crate::calendar;
 use crate::candump::{LogError, LogRecord};
@@ -649,11 +649,20 @@ impl<'a> DecodedDataset<'a> {
         let path = dir.join(format!("part-{part:05}.parquet"));
         *part += 1;
         let columns = MessageColumns::new(message, !self.partitioning.channel, TABLE_BATCH);
+        // Channels and value descriptions are a few texts each: dictionary pages hold them as
+        // small keys (the values' pages, mostly distinct numbers, go without).
+        let labels: Vec<&str> = columns
+            .schema
+            .fields()
+            .iter()
+            .filter(|f| matches!(f.data_type(), DataType::Dictionary(..)))
+            .map(|f| f.name().as_str())
+            .collect();
         File::create(&path)?;
         let writer = ArrowWriter::try_new(
             BufWriter::with_capacity(FILE_BUFFER, AppendFile { path: path.clone() }),
             columns.schema.clone(),
-            Some(properties(DECODED_LAYOUT, false)),
+            Some(properties_with_dictionaries(DECODED_LAYOUT, false, &labels)),
         )
         .map_err(io_error)?;
         self.summary.files.push(path);
@@ -1111,6 +1120,74 @@ mod tests {
             ts.values().to_vec(),
             [1, 3, 4, 5].map(|s| s * 1_000_000_000)
         );
+    }
+
+    #[test]
+    fn channels_and_descriptions_are_written_as_dictionaries_and_read_back_as_written() {
+        use arrow_array::cast::AsArray;
+        let text = "BO_ 1 M: 2 X\n SG_ A : 0|8@1+ (0.5,0) [0|0] \"\" X\n SG_ B : 8|2@1+ (1,0) [0|0] \"\" X\nVAL_ 1 B 0 \"Off\" 1 \"On\" ;\n";
+        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
+        let decoder = Decoder::new(db);
+        let root = std::env::temp_dir().join(format!("bywire-labels-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let mut dataset = DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
+        let id = bywire_core::Id::standard(1).unwrap();
+        for i in 0..1000u32 {
+            let [low, ..] = i.to_le_bytes();
+            dataset
+                .write(&LogRecord {
+                    timestamp: bywire_core::Timestamp::from_nanos(u64::from(i)),
+                    interface: format!("can{}", i % 3),
+                    frame: bywire_core::Frame::classic(id, &[low, low % 4]).unwrap(),
+                    direction: None,
+                })
+                .unwrap();
+        }
+        let summary = dataset.finish().unwrap();
+        let [path] = &summary.files[..] else {
+            panic!("{:?}", summary.files)
+        };
+        let reader =
+            ::parquet::file::reader::SerializedFileReader::new(File::open(path).unwrap()).unwrap();
+        let metadata = ::parquet::file::reader::FileReader::metadata(&reader);
+        let schema = metadata.file_metadata().schema_descr();
+        for chunk in metadata.row_groups().iter().flat_map(|g| g.columns()) {
+            let name = chunk.column_path().string();
+            let dictionary = chunk.dictionary_page_offset().is_some();
+            assert_eq!(
+                dictionary,
+                name == "channel" || name == "B_choice",
+                "{name}"
+            );
+        }
+        assert_eq!(schema.num_columns(), 5);
+        let batches = ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
+            File::open(path).unwrap(),
+            1 << 16,
+        )
+        .unwrap();
+        let (mut channels, mut choices) = (Vec::new(), Vec::new());
+        for batch in batches {
+            let batch = batch.unwrap();
+            for row in 0..batch.num_rows() {
+                channels.push(cell(batch.column(1), row));
+                choices.push(cell(batch.column(4), row));
+            }
+            assert!(batch.column(1).as_any_dictionary_opt().is_some());
+        }
+        let expected_choice = |i: u32| match i % 4 {
+            0 => "Off".to_string(),
+            1 => "On".to_string(),
+            _ => "null".to_string(),
+        };
+        assert_eq!(
+            channels,
+            (0..1000)
+                .map(|i| format!("can{}", i % 3))
+                .collect::<Vec<_>>()
+        );
+        assert_eq!(choices, (0..1000).map(expected_choice).collect::<Vec<_>>());
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

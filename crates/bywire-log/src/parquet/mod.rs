@@ -87,7 +87,22 @@ pub fn raw_schema() -> SchemaRef {
 /// dictionary pages when asked (the decoded tables go without: measured, they cost a third of
 /// the throughput on signal values, and zstd already folds repeated values).
 pub(crate) fn properties(layout: &str, dictionary_pages: bool) -> WriterProperties {
-    WriterProperties::builder()
+    properties_with_dictionaries(layout, dictionary_pages, &[])
+}
+
+/// As [`properties`], with dictionary pages for the columns named in `dictionaries` whatever
+/// `dictionary_pages` says.
+pub(crate) fn properties_with_dictionaries(
+    layout: &str,
+    dictionary_pages: bool,
+    dictionaries: &[&str],
+) -> WriterProperties {
+    let mut builder = WriterProperties::builder();
+    for name in dictionaries {
+        builder = builder
+            .set_column_dictionary_enabled(::parquet::schema::types::ColumnPath::from(*name), true);
+    }
+    builder
         .set_compression(Compression::ZSTD(ZstdLevel::default()))
         .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
         .set_dictionary_enabled(dictionary_pages)
