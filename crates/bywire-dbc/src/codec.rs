@@ -231,7 +231,7 @@ impl Hot {
 }
 
 /// One signal of many payloads: each payload's raw bits as `h` places them, read from the
-/// big-endian word when `BIG`, its value by `value` (one kernel's arithmetic: each caller
+/// byte-swapped word when `BIG`, its value by `value` (one kernel's arithmetic: each caller
 /// passes its own, so every loop is compiled for one kernel and has no dispatch inside).
 #[inline(always)]
 fn column<const BIG: bool, T>(

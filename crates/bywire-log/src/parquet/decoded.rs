@@ -442,8 +442,9 @@ fn decoded_column<T: Default>(
     if !decoded {
         return None;
     }
-    // Refusals are rare (no description for a value, a value outside its column's type):
-    // their rows are found in a second pass rather than tracked on every row.
+    // Most columns refuse nothing (a value outside its column's type never happens; a value
+    // without a description can): refused rows are found in a second pass, only when there
+    // are some, rather than tracked on every row.
     let nulls = refused.then(|| {
         let mut valid = Vec::with_capacity(words.len());
         codec.decode_column(index, words, &mut valid, |d| convert(d).is_some());
@@ -737,17 +738,18 @@ pub fn decode_frames_batch(
             }
         })
         .collect();
-    let mut tables: Vec<Option<MessageColumns>> = counts
+    // Each table with its message and codec, found once rather than on every row.
+    let mut tables: Vec<Option<(&Message, &MessageCodec, MessageColumns)>> = counts
         .iter()
-        .zip(messages)
-        .map(|(&rows, message)| (rows > 0).then(|| MessageColumns::new(message, true, rows)))
+        .enumerate()
+        .map(|(index, &rows)| {
+            let (message, codec) = decoder.message_at(index).filter(|_| rows > 0)?;
+            Some((message, codec, MessageColumns::new(message, true, rows)))
+        })
         .collect();
     let mut values: Vec<Option<Decoded>> = Vec::new();
     for (row, &index) in message_of_row.iter().enumerate() {
-        let index = index as usize;
-        let (Some(Some(table)), Some((message, codec))) =
-            (tables.get_mut(index), decoder.message_at(index))
-        else {
+        let Some(Some((message, codec, table))) = tables.get_mut(index as usize) else {
             continue;
         };
         let Some(frame) = frames.row(row) else {
@@ -761,10 +763,7 @@ pub fn decode_frames_batch(
         }
     }
     let mut batches = Vec::new();
-    for (index, table) in tables.iter_mut().enumerate() {
-        let (Some(table), Some((message, codec))) = (table, decoder.message_at(index)) else {
-            continue;
-        };
+    for (message, codec, table) in tables.iter_mut().flatten() {
         if table.rows == 0 {
             continue;
         }
