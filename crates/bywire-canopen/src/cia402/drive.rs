@@ -52,14 +52,31 @@ impl Params {
     ];
 
     fn read(od: &ObjectDictionary) -> Params {
-        let read = |index: u16| real(od.get_signed(index, 0).unwrap_or(0));
-        Params {
-            mode: Mode::from_code(od.get_signed(object::MODES, 0).unwrap_or(0)),
-            acceleration: read(object::PROFILE_ACCELERATION).max(1.0),
-            deceleration: read(object::PROFILE_DECELERATION).max(1.0),
-            quick: read(object::QUICK_STOP_DECELERATION).max(1.0),
-            profile_velocity: read(object::PROFILE_VELOCITY),
-            target_velocity: read(object::TARGET_VELOCITY),
+        let mut params = Params {
+            mode: None,
+            acceleration: 1.0,
+            deceleration: 1.0,
+            quick: 1.0,
+            profile_velocity: 0.0,
+            target_velocity: 0.0,
+        };
+        for index in Params::INDICES {
+            params.update(od, index);
+        }
+        params
+    }
+
+    /// Read the one parameter `index` holds again (nothing for other objects).
+    fn update(&mut self, od: &ObjectDictionary, index: u16) {
+        let value = || od.get_signed(index, 0).unwrap_or(0);
+        match index {
+            object::MODES => self.mode = Mode::from_code(value()),
+            object::PROFILE_ACCELERATION => self.acceleration = real(value()).max(1.0),
+            object::PROFILE_DECELERATION => self.deceleration = real(value()).max(1.0),
+            object::QUICK_STOP_DECELERATION => self.quick = real(value()).max(1.0),
+            object::PROFILE_VELOCITY => self.profile_velocity = real(value()),
+            object::TARGET_VELOCITY => self.target_velocity = real(value()),
+            _ => {}
         }
     }
 }
@@ -315,10 +332,12 @@ impl Application for Drive {
     }
 
     fn on_written(&mut self, _now: Timestamp, od: &mut ObjectDictionary, index: u16, _sub: u8) {
-        // The cached parameters are read again when one of them changed (targets of position
-        // arrive every cycle and are not among them).
-        if Params::INDICES.contains(&index) {
-            self.params = Some(Params::read(od));
+        // A cached parameter is read again when its object is written (targets of velocity
+        // and the mode arrive every cycle: one read each, not all six).
+        match self.params.as_mut() {
+            Some(params) => params.update(od, index),
+            None if Params::INDICES.contains(&index) => self.params = Some(Params::read(od)),
+            None => {}
         }
         match index {
             object::CONTROLWORD => {
