@@ -542,9 +542,16 @@ impl SimBus {
     }
 
     fn bits(&self, n: u64) -> u64 {
-        // Nanoseconds for n nominal bits, exact when the bit time is a whole number of ns.
-        let ns = u128::from(n) * 1_000_000_000 / u128::from(self.nominal);
-        u64::try_from(ns).unwrap_or(u64::MAX)
+        // Nanoseconds for n nominal bits, exact when the bit time is a whole number of ns. In
+        // 64 bits while the product fits (a frame's few hundred bits): a 128-bit division is a
+        // library call, and this runs several times a frame.
+        match n.checked_mul(1_000_000_000) {
+            Some(product) => product / u64::from(self.nominal),
+            None => {
+                let ns = u128::from(n) * 1_000_000_000 / u128::from(self.nominal);
+                u64::try_from(ns).unwrap_or(u64::MAX)
+            }
+        }
     }
 
     fn set_state(&mut self, node: NodeId, event: Event, at: Timestamp) {

@@ -55,7 +55,10 @@ impl<'a> Path<'a> {
     /// The nearest point of the path to `p`. `offset` is positive when the path passes to
     /// the left of `p` (seen along the path's direction, `p` is on its right).
     pub fn project(&self, p: Point) -> Projection {
-        let mut best: Option<(f64, Projection)> = None;
+        // The nearest by `hypot`, as ever; a segment whose squared distance is clearly more
+        // than the best's cannot be nearer by `hypot` (whose error is an ulp), so it is passed
+        // over without one. The heading is worked out for the nearest alone.
+        let mut best: Option<(f64, f64, Projection, (f64, f64))> = None;
         let mut station = 0.0;
         for (segment, a, b) in self.segments() {
             let (dx, dy) = (b.x - a.x, b.y - a.y);
@@ -70,22 +73,27 @@ impl<'a> Path<'a> {
                 x: a.x + t * dx,
                 y: a.y + t * dy,
             };
-            let distance = math::hypot(p.x - point.x, p.y - point.y);
-            if best.as_ref().is_none_or(|(d, _)| distance < *d) {
-                // Cross product of the path direction with (p − point): negative when p is
-                // on the right, i.e. the path is to its left.
-                let cross = dx * (p.y - point.y) - dy * (p.x - point.x);
-                let side = if cross > 0.0 { -1.0 } else { 1.0 };
-                best = Some((
-                    distance,
-                    Projection {
+            let (ex, ey) = (p.x - point.x, p.y - point.y);
+            let squared = ex * ex + ey * ey;
+            let clearly_farther = best
+                .as_ref()
+                .is_some_and(|(_, best_squared, _, _)| squared > best_squared * (1.0 + 1e-9));
+            if !clearly_farther {
+                let distance = math::hypot(ex, ey);
+                if best.as_ref().is_none_or(|(d, _, _, _)| distance < *d) {
+                    // Cross product of the path direction with (p − point): negative when p
+                    // is on the right, i.e. the path is to its left.
+                    let cross = dx * ey - dy * ex;
+                    let side = if cross > 0.0 { -1.0 } else { 1.0 };
+                    let projection = Projection {
                         segment,
                         point,
                         station: station + t * len,
                         offset: side * distance,
-                        heading: math::atan2(dy, dx),
-                    },
-                ));
+                        heading: 0.0,
+                    };
+                    best = Some((distance, squared, projection, (dx, dy)));
+                }
             }
             station += len;
         }
@@ -97,7 +105,10 @@ impl<'a> Path<'a> {
                 offset: 0.0,
                 heading: 0.0,
             },
-            |(_, projection)| projection,
+            |(_, _, projection, (dx, dy))| Projection {
+                heading: math::atan2(dy, dx),
+                ..projection
+            },
         )
     }
 
