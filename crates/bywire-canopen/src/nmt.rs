@@ -217,6 +217,9 @@ pub struct HeartbeatConsumer {
     watched: [Option<Watched>; HeartbeatConsumer::CAPACITY],
     used: usize,
     events: EventQueue<HeartbeatEvent, 32>,
+    /// The earliest time a watched node would be declared lost, worked out again whenever a
+    /// node's watch or liveness changes: runners ask for it after every poll and frame.
+    deadline: Option<Timestamp>,
 }
 
 impl Default for HeartbeatConsumer {
@@ -225,6 +228,7 @@ impl Default for HeartbeatConsumer {
             watched: [None; HeartbeatConsumer::CAPACITY],
             used: 0,
             events: EventQueue::new(),
+            deadline: None,
         }
     }
 }
@@ -236,6 +240,12 @@ impl HeartbeatConsumer {
     /// Watch `node` with `timeout` (replacing an earlier time); a zero timeout stops
     /// watching it. `false` if the table is full.
     pub fn watch(&mut self, node: u8, timeout: Duration) -> bool {
+        let watched = self.watch_entry(node, timeout);
+        self.deadline = self.earliest_loss();
+        watched
+    }
+
+    fn watch_entry(&mut self, node: u8, timeout: Duration) -> bool {
         let entry = Watched {
             node,
             timeout,
@@ -278,6 +288,7 @@ impl HeartbeatConsumer {
     pub fn clear(&mut self) {
         self.watched = [None; HeartbeatConsumer::CAPACITY];
         self.used = 0;
+        self.deadline = None;
     }
 
     fn in_use(&self) -> impl Iterator<Item = &Watched> {
@@ -320,10 +331,15 @@ impl HeartbeatConsumer {
         if let Some(event) = event {
             let _ = self.events.push(event);
         }
+        self.deadline = self.earliest_loss();
     }
 
     /// Mark nodes silent past their consumer time as lost.
     pub fn poll(&mut self, now: Timestamp) {
+        // Nothing is lost before the deadline (and a loss is all that moves it here).
+        if self.deadline.is_none_or(|deadline| now < deadline) {
+            return;
+        }
         for watched in self.watched.iter_mut().take(self.used).flatten() {
             if let Liveness::Alive { state, last } = watched.liveness {
                 if now >= last.saturating_add(watched.timeout) {
@@ -334,10 +350,15 @@ impl HeartbeatConsumer {
                 }
             }
         }
+        self.deadline = self.earliest_loss();
     }
 
     /// The earliest time a watched node would be declared lost.
     pub fn next_deadline(&self) -> Option<Timestamp> {
+        self.deadline
+    }
+
+    fn earliest_loss(&self) -> Option<Timestamp> {
         self.in_use()
             .filter_map(|w| match w.liveness {
                 Liveness::Alive { last, .. } => Some(last.saturating_add(w.timeout)),
@@ -548,6 +569,68 @@ mod tests {
             assert!(consumer.watch(node, Duration::from_millis(1)));
         }
         assert!(!consumer.watch(0, Duration::from_millis(1)), "full");
+    }
+
+    /// What the consumer does to its table, for the deadline property.
+    #[derive(Debug, Clone)]
+    enum ConsumerStep {
+        Watch(u8, u64),
+        Heartbeat(u8),
+        Poll,
+        Clear,
+    }
+
+    fn consumer_step() -> impl proptest::strategy::Strategy<Value = ConsumerStep> {
+        use proptest::prelude::*;
+        prop_oneof![
+            (1u8..=4, 0u64..=30).prop_map(|(n, t)| ConsumerStep::Watch(n, t)),
+            (1u8..=5).prop_map(ConsumerStep::Heartbeat),
+            Just(ConsumerStep::Poll),
+            Just(ConsumerStep::Clear),
+        ]
+    }
+
+    proptest::proptest! {
+        /// The deadline kept between changes is always the earliest loss worked out afresh
+        /// from what is known of each watched node.
+        #[test]
+        fn the_deadline_is_always_the_earliest_loss(
+            steps in proptest::collection::vec((consumer_step(), 0u64..=20), 1..60)
+        ) {
+            let mut consumer = HeartbeatConsumer::default();
+            let mut timeouts = [None::<u64>; 6];
+            let mut now = 0u64;
+            for (step, advance) in steps {
+                now += advance;
+                let at = Timestamp::from_millis(now);
+                match step {
+                    ConsumerStep::Watch(node, millis) => {
+                        consumer.watch(node, Duration::from_millis(millis));
+                        timeouts[usize::from(node)] = (millis > 0).then_some(millis);
+                    }
+                    ConsumerStep::Heartbeat(node) => {
+                        consumer.on_frame(at, &heartbeat_frame(node, NmtState::Operational));
+                    }
+                    ConsumerStep::Poll => consumer.poll(at),
+                    ConsumerStep::Clear => {
+                        consumer.clear();
+                        timeouts = [None; 6];
+                    }
+                }
+                let expected = (1u8..=5)
+                    .filter_map(|node| {
+                        let timeout = timeouts[usize::from(node)]?;
+                        match consumer.liveness(node)? {
+                            Liveness::Alive { last, .. } => {
+                                Some(last.saturating_add(Duration::from_millis(timeout)))
+                            }
+                            Liveness::Unknown | Liveness::Lost { .. } => None,
+                        }
+                    })
+                    .min();
+                proptest::prop_assert_eq!(consumer.next_deadline(), expected);
+            }
+        }
     }
 
     #[test]

@@ -31,6 +31,7 @@ use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
@@ -156,6 +157,10 @@ pub struct VehicleControlEcu {
     plausibility: SteeringPlausibility,
     swerve: Swerve<4>,
     wheel_targets: [WheelState; 4],
+    /// What the wheel targets were last worked out from (the command and the targets before
+    /// them) and what came out: the same again gives the same, so most polls (between
+    /// commands) reuse it.
+    last_wheel_states: Option<(WheelInputs, [WheelState; 4])>,
     drives_lost: bool,
     status: StatusInputs,
     next_report: Timestamp,
@@ -210,6 +215,7 @@ impl VehicleControlEcu {
             plausibility: SteeringPlausibility::default(),
             swerve: four_wheel(geometry.wheelbase, geometry.track),
             wheel_targets: [WheelState::default(); 4],
+            last_wheel_states: None,
             drives_lost: false,
             status: StatusInputs::default(),
             next_report: Timestamp::ZERO,
@@ -425,12 +431,29 @@ impl VehicleControlEcu {
                     speed: 0.0,
                 }; 4]
             }
-            None => a.steering_mode.wheel_states(
-                speed,
-                a.steering.to_radians(),
-                &self.swerve,
-                &self.wheel_targets,
-            ),
+            None => {
+                let inputs = WheelInputs {
+                    mode: a.steering_mode,
+                    speed: speed.to_bits(),
+                    steering: a.steering.to_bits(),
+                    before: self
+                        .wheel_targets
+                        .map(|w| (w.angle.to_bits(), w.speed.to_bits())),
+                };
+                match self.last_wheel_states {
+                    Some((last, states)) if last == inputs => states,
+                    _ => {
+                        let states = a.steering_mode.wheel_states(
+                            speed,
+                            a.steering.to_radians(),
+                            &self.swerve,
+                            &self.wheel_targets,
+                        );
+                        self.last_wheel_states = Some((inputs, states));
+                        states
+                    }
+                }
+            }
         };
         self.wheel_targets = targets;
         let steering_on = a.steering_enabled || a.motors_enabled || sweep.is_some();
@@ -709,6 +732,16 @@ impl Node for VehicleControlEcu {
             self.diagnostics.next_deadline(),
         ])
     }
+}
+
+/// What the wheel targets are worked out from, bit for bit: the steering mode, speed (m/s),
+/// steering angle (degrees) and the targets before (each wheel's angle and speed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct WheelInputs {
+    mode: SteeringMode,
+    speed: u64,
+    steering: u64,
+    before: [(u64, u64); 4],
 }
 
 /// Round to the nearest `i32` (saturating).

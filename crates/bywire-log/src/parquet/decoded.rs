@@ -561,17 +561,24 @@ impl<'a> DecodedDataset<'a> {
                 .then(|| record.timestamp.as_nanos() / 86_400_000_000_000),
         };
         self.clock += 1;
-        if !self.open.contains_key(&key) {
-            self.open_table(&key, message)?;
-        }
-        let open = self.open.len().max(1);
+        // One lookup for a table already open (most rows); a new one is opened, then found.
+        let mut open = self.open.len();
+        let table = match self.open.get_mut(&key) {
+            Some(table) => table,
+            None => {
+                self.open_table(&key, message)?;
+                open = self.open.len();
+                match self.open.get_mut(&key) {
+                    Some(table) => table,
+                    None => return Ok(()),
+                }
+            }
+        };
+        let open = open.max(1);
         let (budget, batch) = (
             self.memory_budget / open,
             (BUILT_ROWS / open).clamp(16, TABLE_BATCH),
         );
-        let Some(table) = self.open.get_mut(&key) else {
-            return Ok(());
-        };
         table.last_used = self.clock;
         let ts = nanos(record.timestamp);
         table.columns.push(
