@@ -158,8 +158,8 @@ pub struct VehicleControlEcu {
     swerve: Swerve<4>,
     wheel_targets: [WheelState; 4],
     /// What the wheel targets were last worked out from (the command and the targets before
-    /// them) and what came out: the same again gives the same, so most polls (between
-    /// commands) reuse it.
+    /// them) and what came out: the same again gives the same, so a poll between commands
+    /// reuses it.
     last_wheel_states: Option<(WheelInputs, [WheelState; 4])>,
     drives_lost: bool,
     status: StatusInputs,

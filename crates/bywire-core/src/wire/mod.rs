@@ -531,20 +531,14 @@ pub fn classic_length(frame: &Frame) -> Option<(usize, usize)> {
     let Frame::Classic(c) = frame else {
         return None;
     };
-    // SOF through the CRC, at most 1 + 32 + 3 + 4 + 64 + 15 = 119 bits, as one number: the
-    // header's fields as `header` lays them out (SOF the leading 0), then the data.
-    let remote = u128::from(c.is_remote());
-    let dlc = u128::from(c.dlc().as_raw() & 0xF);
-    let (mut stream, mut bits) = match c.id() {
-        // SOF, identifier, RTR, IDE (0), r0 (0), DLC.
-        Id::Standard(id) => ((u128::from(id.as_raw()) << 1 | remote) << 6 | dlc, 19u32),
-        // SOF, base identifier, SRR (1), IDE (1), extension, RTR, r1 (0), r0 (0), DLC.
-        Id::Extended(id) => {
-            let arbitration =
-                (u128::from(id.base()) << 2 | 0b11) << 18 | u128::from(id.extension());
-            ((arbitration << 1 | remote) << 6 | dlc, 39)
-        }
-    };
+    // SOF through the CRC, at most 1 + 32 + 3 + 4 + 64 + 15 = 119 bits, as one number.
+    let (pieces, count) = header(c.id(), c.is_remote(), None, c.dlc());
+    let (mut stream, mut bits) = (0u128, 0u32);
+    for p in pieces.iter().take(count) {
+        let value = p.value & ((1u32 << p.width) - 1);
+        stream = (stream << p.width) | u128::from(value);
+        bits += u32::from(p.width);
+    }
     for &byte in frame.data() {
         stream = (stream << 8) | u128::from(byte);
         bits += 8;
@@ -560,16 +554,13 @@ pub fn classic_length(frame: &Frame) -> Option<(usize, usize)> {
 /// CRC-15/CAN of the low `bits` bits of `stream`, most significant first: the bits short of
 /// a whole byte one at a time, then a byte at a time.
 fn crc15_of_stream(stream: u128, bits: u32) -> u32 {
-    let mut crc = 0u32;
     let odd = bits % 8;
-    for i in (bits - odd..bits).rev() {
-        let feedback = (crc >> 14 & 1) ^ u32::from(stream >> i & 1 == 1);
-        crc = (crc << 1) & 0x7FFF;
-        if feedback == 1 {
-            crc ^= 0x4599;
-        }
-    }
-    for k in (0..(bits - odd) / 8).rev() {
+    let whole_bytes = (bits - odd) / 8;
+    let mut register = CrcRegister::crc15();
+    let leading = u64::try_from(stream >> (8 * whole_bytes) & 0xFF).unwrap_or(0);
+    register.push_bits(leading, u8::try_from(odd).unwrap_or(0));
+    let mut crc = register.value();
+    for k in (0..whole_bytes).rev() {
         crc = crc15_byte(crc, u8::try_from(stream >> (8 * k) & 0xFF).unwrap_or(0));
     }
     crc

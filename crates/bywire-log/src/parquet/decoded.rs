@@ -835,10 +835,8 @@ mod tests {
     #[test]
     fn a_table_past_the_held_metadata_budget_continues_in_its_next_file() {
         let text = "BO_ 1 M: 2 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ B : 8|8@1+ (1,0) [0|0] \"\" X\n";
-        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
-        let decoder = Decoder::new(db);
-        let root = std::env::temp_dir().join(format!("bywire-held-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
+        let decoder = decoder_of(text);
+        let root = fresh_dir("held");
         let mut dataset = DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
         // Every batch (4096 rows) a row group of 4 column chunks (ts, channel, A, B); a table
         // holding more than 8 is finished after its third.
@@ -889,6 +887,19 @@ mod tests {
     }
 
     /// Each table's cell as text: values, descriptions and channels alike.
+    /// A decoder of the DBC `text`.
+    fn decoder_of(text: &str) -> Decoder {
+        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
+        Decoder::new(db)
+    }
+
+    /// An empty folder, named for one test, for its dataset.
+    fn fresh_dir(name: &str) -> PathBuf {
+        let root = std::env::temp_dir().join(format!("bywire-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        root
+    }
+
     fn cell(column: &ArrayRef, row: usize) -> String {
         use arrow_array::cast::AsArray;
         use arrow_array::types::Int32Type;
@@ -965,8 +976,7 @@ mod tests {
             "VAL_ 256 Angle 0 \"Zero\" -1 \"MinusOne\" 2047 \"Top\" ;\n",
             "VAL_ 768 Zero 1 \"One\" 200 \"Many\" ;\n",
         );
-        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
-        let decoder = Decoder::new(db);
+        let decoder = decoder_of(text);
         let mut state = 0x1234_5678_9ABC_DEF1u64;
         let mut next = move || {
             state ^= state << 13;
@@ -1071,8 +1081,7 @@ mod tests {
             TimestampSecondArray, UInt32Array,
         };
         let text = "BO_ 256 M: 1 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n";
-        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
-        let decoder = Decoder::new(db);
+        let decoder = decoder_of(text);
         let data = BinaryArray::from_iter_values([[1u8], [2], [3], [4], [5]]);
         let id = UInt32Array::from(vec![256; 5]);
         let batch = |ts: ArrayRef, channel: ArrayRef| {
@@ -1132,10 +1141,8 @@ mod tests {
     fn channels_and_descriptions_are_written_as_dictionaries_and_read_back_as_written() {
         use arrow_array::cast::AsArray;
         let text = "BO_ 1 M: 2 X\n SG_ A : 0|8@1+ (0.5,0) [0|0] \"\" X\n SG_ B : 8|2@1+ (1,0) [0|0] \"\" X\nVAL_ 1 B 0 \"Off\" 1 \"On\" ;\n";
-        let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
-        let decoder = Decoder::new(db);
-        let root = std::env::temp_dir().join(format!("bywire-labels-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
+        let decoder = decoder_of(text);
+        let root = fresh_dir("labels");
         let mut dataset = DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
         let id = bywire_core::Id::standard(1).unwrap();
         for i in 0..1000u32 {
