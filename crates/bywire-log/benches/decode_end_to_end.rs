@@ -1,12 +1,12 @@
 //! The data engineer's path end to end: a candump log of a real vehicle DBC's traffic (Ford's
 //! powertrain bus, 331 messages, random payloads) read, every signal decoded, and written as
-//! the decoded Parquet dataset (a table per message, zstd). The peer figures (`python -m
-//! cantools decode`) come from running it on the same log; see the project's notes.
+//! the decoded Parquet dataset (a table per message; zstd, and snappy). The peer figures
+//! (`python -m cantools decode`) come from running it on the same log; see the project's notes.
 #![allow(missing_docs, clippy::unwrap_used, clippy::indexing_slicing)]
 
 use bywire_dbc::decoder::Decoder;
 use bywire_log::parquet::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
-use bywire_log::parquet::{raw_schema, FrameColumns};
+use bywire_log::parquet::{raw_schema, FrameColumns, ParquetCompression};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 const FRAMES: u64 = 1_000_000;
@@ -53,17 +53,26 @@ fn end_to_end(c: &mut Criterion) {
     let mut group = c.benchmark_group("decode 1,000,000 frames of a vehicle DBC");
     group.throughput(Throughput::Elements(FRAMES));
     group.sample_size(10);
-    group.bench_function("candump to decoded Parquet", |b| {
-        b.iter(|| {
-            let _ = std::fs::remove_dir_all(&out);
-            let mut dataset =
-                DecodedDataset::create(&out, &decoder, Partitioning::default()).unwrap();
-            for record in bywire_log::Reader::new(log.as_bytes()) {
-                dataset.write(&record.unwrap()).unwrap();
-            }
-            dataset.finish().unwrap()
-        })
-    });
+    for (name, compression) in [
+        ("candump to decoded Parquet", ParquetCompression::Zstd),
+        (
+            "candump to decoded Parquet, snappy",
+            ParquetCompression::Snappy,
+        ),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let _ = std::fs::remove_dir_all(&out);
+                let mut dataset =
+                    DecodedDataset::create(&out, &decoder, Partitioning::default()).unwrap();
+                dataset.set_compression(compression);
+                for record in bywire_log::Reader::new(log.as_bytes()) {
+                    dataset.write(&record.unwrap()).unwrap();
+                }
+                dataset.finish().unwrap()
+            })
+        });
+    }
     group.bench_function("candump read and decoded (no output)", |b| {
         b.iter(|| {
             let mut signals = 0usize;

@@ -11,6 +11,18 @@ use crate::mf4::{Mf4Reader, Mf4Writer};
 use crate::pcapng::{PcapngReader, PcapngWriter};
 use crate::trc::{TrcReader, TrcWriter};
 
+/// How Parquet output compresses its pages (the other formats have no such choice).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ParquetCompression {
+    /// Zstandard at level 1: the smallest files of the three, what datasets are kept in.
+    #[default]
+    Zstd,
+    /// Snappy: Spark's and pyarrow's default; larger files, cheaper to write and read.
+    Snappy,
+    /// No compression.
+    Uncompressed,
+}
+
 /// A log format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
@@ -216,6 +228,17 @@ impl Format {
 
     /// A writer of this format to `output` (seekable: BLF completes its header at the end).
     pub fn writer<W: Write + Seek + Send>(self, output: W) -> io::Result<RecordWriter<W>> {
+        self.writer_with(output, ParquetCompression::default())
+    }
+
+    /// As [`Format::writer`], Parquet pages compressed with `compression` (other formats
+    /// ignore it).
+    pub fn writer_with<W: Write + Seek + Send>(
+        self,
+        output: W,
+        #[cfg_attr(not(feature = "parquet"), allow(unused_variables))]
+        compression: ParquetCompression,
+    ) -> io::Result<RecordWriter<W>> {
         Ok(match self {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
@@ -232,7 +255,9 @@ impl Format {
                 ))
             }
             #[cfg(feature = "parquet")]
-            Format::Parquet => RecordWriter::Parquet(crate::parquet::ParquetWriter::new(output)?),
+            Format::Parquet => RecordWriter::Parquet(
+                crate::parquet::ParquetWriter::with_compression(output, compression)?,
+            ),
             #[cfg(not(feature = "parquet"))]
             Format::Parquet => {
                 return Err(io::Error::other(

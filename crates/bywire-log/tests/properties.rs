@@ -248,6 +248,7 @@ proptest! {
 #[cfg(feature = "parquet")]
 mod parquet_files {
     use super::*;
+    use bywire_log::format::ParquetCompression;
     use std::io::Write as _;
 
     /// A file of its own for each case (the reader needs a file: Parquet's index is at its end).
@@ -271,7 +272,12 @@ mod parquet_files {
 
         #[test]
         fn parquet_reads_back_every_frame_exactly(
-            frames in proptest::collection::vec((any_frame(), any::<u64>(), 0u8..4, 0u8..3), 0..40)
+            frames in proptest::collection::vec((any_frame(), any::<u64>(), 0u8..4, 0u8..3), 0..40),
+            compression in prop::sample::select(vec![
+                ParquetCompression::Zstd,
+                ParquetCompression::Snappy,
+                ParquetCompression::Uncompressed,
+            ]),
         ) {
             let records: Vec<bywire_log::LogRecord> = frames
                 .iter()
@@ -283,7 +289,8 @@ mod parquet_files {
                 })
                 .collect();
             let path = scratch("roundtrip");
-            let mut writer = Format::Parquet.writer(std::fs::File::create(&path).unwrap()).unwrap();
+            let file = std::fs::File::create(&path).unwrap();
+            let mut writer = Format::Parquet.writer_with(file, compression).unwrap();
             for record in &records {
                 writer.write(record).unwrap();
             }

@@ -1092,6 +1092,108 @@ fn decoded_parquet_agrees_with_cantools_through_pyarrow_and_polars() {
     }
 }
 
+/// The page codecs of every column chunk of the Parquet files at `path` (a file or a
+/// directory), and their rows, as pyarrow reads them.
+const PARQUET_CODECS: &str = "
+import pathlib, sys
+import pyarrow.parquet as pq
+root = pathlib.Path(sys.argv[1])
+files = [root] if root.is_file() else sorted(root.rglob('*.parquet'))
+codecs, rows = set(), 0
+for f in files:
+    meta = pq.ParquetFile(f).metadata
+    rows += meta.num_rows
+    for g in range(meta.num_row_groups):
+        for c in range(meta.num_columns):
+            codecs.add(meta.row_group(g).column(c).compression)
+print(' '.join(sorted(codecs)), rows)
+";
+
+#[test]
+fn parquet_pages_are_compressed_as_asked_and_pyarrow_reads_them() {
+    let dbc = PathBuf::from(common::corpus("opendbc/opendbc__dbc__vw_mlb.dbc"));
+    let dir = scratch("compression");
+    let log = dir.join("traffic.log");
+    let traffic = oracle("dbc_traffic.py", &[&dbc, Path::new("4"), Path::new("11")]);
+    std::fs::write(&log, &traffic).unwrap();
+    let frames = traffic.lines().count();
+    // Decoded tables, snappy: pyarrow and polars read cantools' values from them.
+    let dataset = dir.join("snappy");
+    bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        dataset.to_str().unwrap(),
+        "--dbc",
+        dbc.to_str().unwrap(),
+        "--compression",
+        "snappy",
+    ]);
+    let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
+    assert!(agreed.contains("values agree"), "{agreed}");
+    let rows = agreed
+        .split(" tables, ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next());
+    let codecs = python(PARQUET_CODECS, &[&dataset]);
+    assert_eq!(codecs.trim(), format!("SNAPPY {}", rows.unwrap()));
+    // `decode --parquet` takes the same option.
+    let decoded = dir.join("decoded");
+    bywire(&[
+        "decode",
+        dbc.to_str().unwrap(),
+        "-I",
+        log.to_str().unwrap(),
+        "--parquet",
+        decoded.to_str().unwrap(),
+        "--compression",
+        "none",
+    ]);
+    let codecs = python(PARQUET_CODECS, &[&decoded]);
+    assert_eq!(codecs.trim(), format!("UNCOMPRESSED {}", rows.unwrap()));
+    // Raw frames, uncompressed and by default: every frame back, zstd unless asked.
+    for (option, codec) in [(Some("none"), "UNCOMPRESSED"), (None, "ZSTD")] {
+        let (raw, back) = (dir.join("frames.parquet"), dir.join("back.log"));
+        let mut args = vec![
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            raw.to_str().unwrap(),
+        ];
+        args.extend(option.iter().flat_map(|o| ["--compression", o]));
+        bywire(&args);
+        assert_eq!(
+            python(PARQUET_CODECS, &[&raw]).trim(),
+            format!("{codec} {frames}")
+        );
+        bywire(&[
+            "log",
+            "convert",
+            raw.to_str().unwrap(),
+            back.to_str().unwrap(),
+        ]);
+        assert_eq!(records(&back), records(&log));
+        std::fs::remove_file(&raw).unwrap();
+    }
+    // Another format has no pages to compress: refused, nothing written.
+    let asc = dir.join("traffic.asc");
+    let (code, _, err) = common::bywire(
+        &[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            asc.to_str().unwrap(),
+            "--compression",
+            "snappy",
+        ],
+        "",
+    );
+    assert_ne!(code, 0);
+    assert!(err.contains("--compression is for Parquet output"), "{err}");
+    assert!(!asc.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn decoded_datasets_partition_by_channel_and_date_as_hive_readers_expect() {
     let dbc = PathBuf::from(common::corpus(

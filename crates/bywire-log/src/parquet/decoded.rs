@@ -43,7 +43,7 @@ use bywire_dbc::{Message, Signal, ValueType};
 
 use super::{
     dictionary_type, io_error, nanos, properties_with_dictionaries, timestamp_type, ChannelRef,
-    FrameColumnsRef, Labels,
+    FrameColumnsRef, Labels, ParquetCompression,
 };
 use crate::calendar;
 use crate::candump::{LogError, LogRecord};
@@ -512,6 +512,7 @@ pub struct DecodedDataset<'a> {
     held_budget: usize,
     /// [`MEMORY_BUDGET`] (a field for the tests).
     memory_budget: usize,
+    compression: ParquetCompression,
 }
 
 impl<'a> DecodedDataset<'a> {
@@ -535,7 +536,14 @@ impl<'a> DecodedDataset<'a> {
             clock: 0,
             held_budget: HELD_CHUNKS,
             memory_budget: MEMORY_BUDGET,
+            compression: ParquetCompression::default(),
         })
+    }
+
+    /// Compress the pages of the tables opened from now on with `compression` (zstd unless
+    /// set).
+    pub fn set_compression(&mut self, compression: ParquetCompression) {
+        self.compression = compression;
     }
 
     /// Decode one record and add its row.
@@ -670,7 +678,12 @@ impl<'a> DecodedDataset<'a> {
         let writer = ArrowWriter::try_new(
             BufWriter::with_capacity(FILE_BUFFER, AppendFile { path: path.clone() }),
             columns.schema.clone(),
-            Some(properties_with_dictionaries(DECODED_LAYOUT, false, &labels)),
+            Some(properties_with_dictionaries(
+                DECODED_LAYOUT,
+                false,
+                &labels,
+                self.compression,
+            )),
         )
         .map_err(io_error)?;
         self.summary.files.push(path);
@@ -1201,6 +1214,68 @@ mod tests {
         );
         assert_eq!(choices, (0..1000).map(expected_choice).collect::<Vec<_>>());
         std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn every_compression_holds_the_same_rows_in_pages_compressed_as_asked() {
+        use ::parquet::basic::Compression;
+        let text = "BO_ 1 M: 2 X\n SG_ A : 0|8@1+ (0.5,0) [0|0] \"\" X\n SG_ B : 8|2@1+ (1,0) [0|0] \"\" X\nVAL_ 1 B 0 \"Off\" 1 \"On\" ;\n";
+        let decoder = decoder_of(text);
+        let id = bywire_core::Id::standard(1).unwrap();
+        let mut tables = Vec::new();
+        for (compression, codec) in [
+            (
+                ParquetCompression::Zstd,
+                Compression::ZSTD(Default::default()),
+            ),
+            (ParquetCompression::Snappy, Compression::SNAPPY),
+            (ParquetCompression::Uncompressed, Compression::UNCOMPRESSED),
+        ] {
+            let root = fresh_dir(&format!("compression-{compression:?}"));
+            let mut dataset =
+                DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
+            dataset.set_compression(compression);
+            for i in 0..2000u32 {
+                let [low, high, ..] = i.to_le_bytes();
+                dataset
+                    .write(&LogRecord {
+                        timestamp: bywire_core::Timestamp::from_nanos(u64::from(i) * 1000),
+                        interface: format!("can{}", i % 2),
+                        frame: bywire_core::Frame::classic(id, &[low, high]).unwrap(),
+                        direction: None,
+                    })
+                    .unwrap();
+            }
+            let summary = dataset.finish().unwrap();
+            let [path] = &summary.files[..] else {
+                panic!("{:?}", summary.files)
+            };
+            let reader =
+                ::parquet::file::reader::SerializedFileReader::new(File::open(path).unwrap())
+                    .unwrap();
+            let metadata = ::parquet::file::reader::FileReader::metadata(&reader);
+            for chunk in metadata.row_groups().iter().flat_map(|g| g.columns()) {
+                assert_eq!(chunk.compression(), codec, "{compression:?}");
+            }
+            let batches = ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
+                File::open(path).unwrap(),
+                1 << 16,
+            )
+            .unwrap();
+            let mut rows = Vec::new();
+            for batch in batches {
+                let batch = batch.unwrap();
+                for row in 0..batch.num_rows() {
+                    let cells: Vec<String> = batch.columns().iter().map(|c| cell(c, row)).collect();
+                    rows.push(cells.join(","));
+                }
+            }
+            assert_eq!(rows.len(), 2000);
+            tables.push(rows);
+            std::fs::remove_dir_all(&root).unwrap();
+        }
+        assert_eq!(tables[0], tables[1]);
+        assert_eq!(tables[0], tables[2]);
     }
 
     #[test]

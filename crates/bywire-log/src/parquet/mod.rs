@@ -1,7 +1,8 @@
 //! Parquet (feature `parquet`): raw frames read and written as one table, and — with a DBC —
 //! decoded tables, one per message ([`decoded`]).
 //!
-//! The raw table has one row a frame, zstd-compressed, in row groups of [`ROW_GROUP_ROWS`]:
+//! The raw table has one row a frame, zstd-compressed unless asked otherwise
+//! ([`ParquetCompression`]), in row groups of [`ROW_GROUP_ROWS`]:
 //!
 //! | column | type | |
 //! |---|---|---|
@@ -44,6 +45,7 @@ use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::candump::{LogError, LogRecord};
+pub use crate::format::ParquetCompression;
 
 /// Rows a row group holds (about 20–40 MB of frames before compression).
 pub const ROW_GROUP_ROWS: usize = 1 << 20;
@@ -83,11 +85,16 @@ pub fn raw_schema() -> SchemaRef {
     ]))
 }
 
-/// Writer properties: zstd, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata,
-/// dictionary pages when asked (the decoded tables go without: measured, they cost a third of
-/// the throughput on signal values, and zstd already folds repeated values).
-pub(crate) fn properties(layout: &str, dictionary_pages: bool) -> WriterProperties {
-    properties_with_dictionaries(layout, dictionary_pages, &[])
+/// Writer properties: pages compressed as asked, row groups of [`ROW_GROUP_ROWS`], the layout
+/// in the metadata, dictionary pages when asked (the decoded tables go without: measured, they
+/// cost a third of the throughput on signal values, and compression already folds repeated
+/// values).
+pub(crate) fn properties(
+    layout: &str,
+    dictionary_pages: bool,
+    compression: ParquetCompression,
+) -> WriterProperties {
+    properties_with_dictionaries(layout, dictionary_pages, &[], compression)
 }
 
 /// As [`properties`], with dictionary pages for the columns named in `dictionaries` whatever
@@ -96,6 +103,7 @@ pub(crate) fn properties_with_dictionaries(
     layout: &str,
     dictionary_pages: bool,
     dictionaries: &[&str],
+    compression: ParquetCompression,
 ) -> WriterProperties {
     let mut builder = WriterProperties::builder();
     for name in dictionaries {
@@ -103,7 +111,11 @@ pub(crate) fn properties_with_dictionaries(
             .set_column_dictionary_enabled(::parquet::schema::types::ColumnPath::from(*name), true);
     }
     builder
-        .set_compression(Compression::ZSTD(ZstdLevel::default()))
+        .set_compression(match compression {
+            ParquetCompression::Zstd => Compression::ZSTD(ZstdLevel::default()),
+            ParquetCompression::Snappy => Compression::SNAPPY,
+            ParquetCompression::Uncompressed => Compression::UNCOMPRESSED,
+        })
         .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
         .set_dictionary_enabled(dictionary_pages)
         .set_key_value_metadata(Some(vec![KeyValue::new(
@@ -356,12 +368,20 @@ pub struct ParquetWriter<W: Write + Send> {
 }
 
 impl<W: Write + Send> ParquetWriter<W> {
-    /// A writer to `output` (the file's header is written at once).
+    /// A writer to `output` (the file's header is written at once), zstd-compressed.
     pub fn new(output: W) -> std::io::Result<Self> {
+        Self::with_compression(output, ParquetCompression::default())
+    }
+
+    /// A writer to `output` whose pages are compressed with `compression`.
+    pub fn with_compression(output: W, compression: ParquetCompression) -> std::io::Result<Self> {
         let schema = raw_schema();
-        let writer =
-            ArrowWriter::try_new(output, schema.clone(), Some(properties(RAW_LAYOUT, true)))
-                .map_err(io_error)?;
+        let writer = ArrowWriter::try_new(
+            output,
+            schema.clone(),
+            Some(properties(RAW_LAYOUT, true, compression)),
+        )
+        .map_err(io_error)?;
         Ok(ParquetWriter {
             writer,
             schema,

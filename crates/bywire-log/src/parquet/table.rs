@@ -14,7 +14,7 @@ use ::parquet::arrow::ArrowWriter;
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
 
-use super::{io_error as parquet_error, properties};
+use super::{io_error as parquet_error, properties, ParquetCompression};
 
 /// One value column: its name and unit.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -71,9 +71,16 @@ impl TableWriter {
             .unwrap_or_default();
         let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
         let file = File::create(&tmp)?;
-        let writer =
-            ArrowWriter::try_new(file, schema.clone(), Some(properties(TABLE_LAYOUT, true)))
-                .map_err(parquet_error)?;
+        let writer = ArrowWriter::try_new(
+            file,
+            schema.clone(),
+            Some(properties(
+                TABLE_LAYOUT,
+                true,
+                ParquetCompression::default(),
+            )),
+        )
+        .map_err(parquet_error)?;
         Ok(TableWriter {
             writer,
             schema,

@@ -88,6 +88,14 @@ pub struct DecodeArgs {
         requires = "parquet"
     )]
     partition: Vec<crate::support::logs::PartitionBy>,
+    /// With --parquet: what the pages are compressed with.
+    #[arg(
+        long,
+        value_name = "CODEC",
+        default_value = "zstd",
+        requires = "parquet"
+    )]
+    compression: crate::support::logs::CompressionArg,
 }
 
 fn is_json(path: &Path) -> bool {
@@ -435,7 +443,8 @@ fn decode_records(
             channel: args.partition.contains(&logs::PartitionBy::Channel),
             date: args.partition.contains(&logs::PartitionBy::Date),
         };
-        let notes = logs::write_dataset(dir, decoder, partitioning, &mut pump, records)?;
+        let layout = (partitioning, args.compression.into());
+        let notes = logs::write_dataset(dir, decoder, layout, &mut pump, records)?;
         pump.progress.finish();
         writeln!(
             out,

@@ -14,7 +14,8 @@ use bywire_log::{FrameView, Precision, View};
 use crate::support::busarg;
 use crate::support::files::write_atomically;
 use crate::support::logs::{
-    for_each_lent, inputs, records, write_dataset, PartitionBy, Pump, Selection, Skip,
+    for_each_lent, inputs, records, write_dataset, CompressionArg, PartitionBy, Pump, Selection,
+    Skip,
 };
 use crate::support::progress::Progress;
 use bywire_log::mcap::DecodedMcapWriter;
@@ -56,6 +57,7 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert vector.blf frames.parquet    (one row per frame: ts, channel, id, flags, data)
   bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
                                                   (a Parquet table per message, typed signals)
+  bywire log convert drive.log lake --dbc vehicle.dbc --compression snappy   (zstd by default)
   bywire log convert drive.log drive.mcap --dbc vehicle.dbc   (+ JSON channels for Foxglove)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
@@ -103,6 +105,9 @@ conversion leaves no half-written file.")]
             requires = "dbc"
         )]
         partition: Vec<PartitionBy>,
+        /// With Parquet output: what the pages are compressed with.
+        #[arg(long, value_name = "CODEC")]
+        compression: Option<CompressionArg>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
     #[command(after_help = "Examples:
@@ -139,6 +144,7 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
             dbc,
             strict,
             partition,
+            compression,
         } => {
             let (output, inputs) = files
                 .split_last()
@@ -151,6 +157,7 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
                     channel: partition.contains(&PartitionBy::Channel),
                     date: partition.contains(&PartitionBy::Date),
                 },
+                compression: *compression,
             };
             convert(
                 inputs,
@@ -169,6 +176,8 @@ struct Decoding<'a> {
     dbc: Option<&'a Path>,
     strict: bool,
     partitioning: Partitioning,
+    /// Parquet's page compression, when given (an error for any other output).
+    compression: Option<CompressionArg>,
 }
 
 fn convert(
@@ -193,6 +202,12 @@ fn convert(
             )
         })?,
     };
+    if decoding.compression.is_some() && format != Format::Parquet {
+        return Err(anyhow!(
+            "--compression is for Parquet output; {} is not Parquet",
+            output.display()
+        ));
+    }
     let decoder = match decoding.dbc {
         None => None,
         Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
@@ -232,7 +247,10 @@ fn convert(
             notes = write_dataset(
                 output,
                 decoder,
-                decoding.partitioning,
+                (
+                    decoding.partitioning,
+                    decoding.compression.unwrap_or_default().into(),
+                ),
                 &mut pump,
                 bywire_log::merge::merge(readers),
             )?;
@@ -262,8 +280,9 @@ fn convert(
         })?,
         (None, _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
+            let compression = decoding.compression.unwrap_or_default().into();
             let mut writer = format
-                .writer(std::io::BufWriter::new(file))
+                .writer_with(std::io::BufWriter::new(file), compression)
                 .with_context(cannot_write)?;
             pump.run(bywire_log::merge::merge(readers), |r| {
                 writer.write(r).with_context(cannot_write)

@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
 use bywire_dbc::decoder::Decoder;
+use bywire_log::format::ParquetCompression;
 use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 
 use crate::support::files::write_dir_atomically;
@@ -289,7 +290,7 @@ impl<'a> Pump<'a> {
 pub fn write_dataset(
     output: &Path,
     decoder: &Decoder,
-    partitioning: Partitioning,
+    (partitioning, compression): (Partitioning, ParquetCompression),
     pump: &mut Pump<'_>,
     records: impl Iterator<Item = Result<LogRecord>>,
 ) -> Result<Vec<String>> {
@@ -297,6 +298,7 @@ pub fn write_dataset(
     let summary = write_dir_atomically(output, |tmp| {
         let mut dataset =
             DecodedDataset::create(tmp, decoder, partitioning).with_context(cannot_write)?;
+        dataset.set_compression(compression);
         pump.run(records, |r| dataset.write(r).with_context(cannot_write))?;
         dataset.finish().with_context(cannot_write)
     })?;
@@ -318,6 +320,28 @@ pub fn write_dataset(
         ));
     }
     Ok(notes)
+}
+
+/// What Parquet pages are compressed with.
+#[derive(Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum CompressionArg {
+    /// Zstandard: the smallest files.
+    #[default]
+    Zstd,
+    /// Snappy: Spark's and pyarrow's default; larger files, quicker to write and read.
+    Snappy,
+    /// No compression.
+    None,
+}
+
+impl From<CompressionArg> for ParquetCompression {
+    fn from(arg: CompressionArg) -> ParquetCompression {
+        match arg {
+            CompressionArg::Zstd => ParquetCompression::Zstd,
+            CompressionArg::Snappy => ParquetCompression::Snappy,
+            CompressionArg::None => ParquetCompression::Uncompressed,
+        }
+    }
 }
 
 /// A partition of a decoded Parquet dataset.
