@@ -43,6 +43,20 @@ fn bywire(args: &[&str]) -> String {
     out
 }
 
+/// `bywire log convert INPUT OUTPUT --dbc DBC` and `extra` options: what it said.
+fn convert_decoded(input: &Path, output: &Path, dbc: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "log",
+        "convert",
+        input.to_str().unwrap(),
+        output.to_str().unwrap(),
+        "--dbc",
+        dbc.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    bywire(&args)
+}
+
 fn records(path: &Path) -> Vec<LogRecord> {
     let file = std::fs::File::open(path).unwrap();
     bywire_log::Reader::new(std::io::BufReader::new(file))
@@ -1063,14 +1077,7 @@ fn decoded_parquet_agrees_with_cantools_through_pyarrow_and_polars() {
             &[&dbc, Path::new(&rounds.to_string()), Path::new("7")],
         );
         std::fs::write(&log, traffic).unwrap();
-        let said = bywire(&[
-            "log",
-            "convert",
-            log.to_str().unwrap(),
-            dataset.to_str().unwrap(),
-            "--dbc",
-            dbc.to_str().unwrap(),
-        ]);
+        let said = convert_decoded(&log, &dataset, &dbc, &[]);
         assert!(said.contains("rows in"), "{said}");
         let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
         assert!(agreed.contains("values agree"), "{file}: {agreed}");
@@ -1119,16 +1126,7 @@ fn parquet_pages_are_compressed_as_asked_and_pyarrow_reads_them() {
     let frames = traffic.lines().count();
     // Decoded tables, snappy: pyarrow and polars read cantools' values from them.
     let dataset = dir.join("snappy");
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        dataset.to_str().unwrap(),
-        "--dbc",
-        dbc.to_str().unwrap(),
-        "--compression",
-        "snappy",
-    ]);
+    convert_decoded(&log, &dataset, &dbc, &["--compression", "snappy"]);
     let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
     assert!(agreed.contains("values agree"), "{agreed}");
     let rows = agreed
@@ -1207,16 +1205,7 @@ fn decoded_datasets_partition_by_channel_and_date_as_hive_readers_expect() {
         "(1700000000.000000) can0 00123456#2003000000000000\n(1700000001.000000) can1 00123456#2003000000000000\n(1700086400.000000) can1 00123456#2003000000000000\n",
     )
     .unwrap();
-    let said = bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        dataset.to_str().unwrap(),
-        "--dbc",
-        dbc.to_str().unwrap(),
-        "--partition",
-        "channel,date",
-    ]);
+    let said = convert_decoded(&log, &dataset, &dbc, &["--partition", "channel,date"]);
     assert!(said.contains("3 rows in 1 tables, 3 files"), "{said}");
     let read = python(
         r#"
@@ -1262,14 +1251,7 @@ fn decoded_mcap_channels_hold_cantools_values_valid_against_their_schemas() {
         let (log, bag) = (dir.join("traffic.log"), dir.join("decoded.mcap"));
         let traffic = oracle("dbc_traffic.py", &[&dbc, Path::new("6"), Path::new("3")]);
         std::fs::write(&log, traffic).unwrap();
-        bywire(&[
-            "log",
-            "convert",
-            log.to_str().unwrap(),
-            bag.to_str().unwrap(),
-            "--dbc",
-            dbc.to_str().unwrap(),
-        ]);
+        convert_decoded(&log, &bag, &dbc, &[]);
         let checked = oracle("mcap_decoded.py", &[&dbc, &log, &bag]);
         assert!(
             checked.contains("valid and equal to cantools"),

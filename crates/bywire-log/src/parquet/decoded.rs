@@ -901,6 +901,19 @@ mod tests {
 
     /// Each table's cell as text: values, descriptions and channels alike.
     /// A decoder of the DBC `text`.
+    /// The dataset's one file and its Parquet metadata.
+    fn only_file(
+        summary: &DatasetSummary,
+    ) -> (PathBuf, ::parquet::file::metadata::ParquetMetaData) {
+        let [path] = &summary.files[..] else {
+            panic!("{:?}", summary.files)
+        };
+        let reader =
+            ::parquet::file::reader::SerializedFileReader::new(File::open(path).unwrap()).unwrap();
+        let metadata = ::parquet::file::reader::FileReader::metadata(&reader).clone();
+        (path.clone(), metadata)
+    }
+
     fn decoder_of(text: &str) -> Decoder {
         let (db, _) = bywire_dbc::parse_str(text, bywire_dbc::Mode::Lenient).unwrap();
         Decoder::new(db)
@@ -1169,13 +1182,7 @@ mod tests {
                 })
                 .unwrap();
         }
-        let summary = dataset.finish().unwrap();
-        let [path] = &summary.files[..] else {
-            panic!("{:?}", summary.files)
-        };
-        let reader =
-            ::parquet::file::reader::SerializedFileReader::new(File::open(path).unwrap()).unwrap();
-        let metadata = ::parquet::file::reader::FileReader::metadata(&reader);
+        let (path, metadata) = only_file(&dataset.finish().unwrap());
         let schema = metadata.file_metadata().schema_descr();
         for chunk in metadata.row_groups().iter().flat_map(|g| g.columns()) {
             let name = chunk.column_path().string();
@@ -1188,7 +1195,7 @@ mod tests {
         }
         assert_eq!(schema.num_columns(), 5);
         let batches = ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
-            File::open(path).unwrap(),
+            File::open(&path).unwrap(),
             1 << 16,
         )
         .unwrap();
@@ -1246,19 +1253,12 @@ mod tests {
                     })
                     .unwrap();
             }
-            let summary = dataset.finish().unwrap();
-            let [path] = &summary.files[..] else {
-                panic!("{:?}", summary.files)
-            };
-            let reader =
-                ::parquet::file::reader::SerializedFileReader::new(File::open(path).unwrap())
-                    .unwrap();
-            let metadata = ::parquet::file::reader::FileReader::metadata(&reader);
+            let (path, metadata) = only_file(&dataset.finish().unwrap());
             for chunk in metadata.row_groups().iter().flat_map(|g| g.columns()) {
                 assert_eq!(chunk.compression(), codec, "{compression:?}");
             }
             let batches = ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
-                File::open(path).unwrap(),
+                File::open(&path).unwrap(),
                 1 << 16,
             )
             .unwrap();
