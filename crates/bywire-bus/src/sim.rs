@@ -266,6 +266,8 @@ pub struct SimBus {
     events: Vec<BusEvent>,
     next_seq: u64,
     busy_ns: u64,
+    /// Nodes that are bus-off (counted when a state changes).
+    bus_off_nodes: usize,
 }
 
 impl SimBus {
@@ -287,6 +289,7 @@ impl SimBus {
             events: Vec::new(),
             next_seq: 0,
             busy_ns: 0,
+            bus_off_nodes: 0,
         }
     }
 
@@ -510,9 +513,7 @@ impl SimBus {
     }
 
     fn any_bus_off(&self) -> bool {
-        self.nodes
-            .iter()
-            .any(|n| n.confinement.state() == NodeState::BusOff)
+        self.bus_off_nodes > 0
     }
 
     /// A node's fault-confinement state and counters.
@@ -577,6 +578,13 @@ impl SimBus {
                 state: change.to,
                 at,
             });
+            // States change only here: the count is made again (rarely) for the checks on
+            // every frame and every gap.
+            self.bus_off_nodes = self
+                .nodes
+                .iter()
+                .filter(|n| n.confinement.state() == NodeState::BusOff)
+                .count();
         }
     }
 

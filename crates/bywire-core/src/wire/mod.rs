@@ -595,38 +595,71 @@ const CRC15_TABLE: [u16; 256] = {
     table
 };
 
-/// The stuff bits the first `bits` bits of `stream` (most significant first) take: a run at a
-/// time — after five equal levels a complement bit, which starts the next run.
-fn stuff_bits(stream: u128, bits: u32) -> u32 {
-    let mut rest = stream << (128 - bits.clamp(1, 128));
-    let mut left = bits.min(128);
-    // The level of the last bit sent and how many of it in a row (0: nothing sent yet).
-    let (mut last, mut run) = (true, 0u32);
-    let mut stuffed = 0;
-    // Each pass takes a whole run of equal bits: at most `bits` passes.
-    while left > 0 {
-        let level = rest >> 127 == 1;
-        let same = if level { !rest } else { rest }.leading_zeros();
-        let len = same.min(left).max(1);
-        let need = if level == last && run > 0 { 5 - run } else { 5 };
-        if len >= need {
-            stuffed += 1 + (len - need) / 5;
-            let after = (len - need) % 5;
-            (last, run) = if after == 0 {
-                (!level, 1)
-            } else {
-                (level, after)
-            };
-        } else {
-            run = if level == last && run > 0 {
-                run + len
-            } else {
-                len
-            };
-            last = level;
+/// Bit stuffing as a state machine over the bits sent: the level of the last bit on the wire
+/// and how many of it in a row (1–4; the fifth makes a stuff bit, the complement, which starts
+/// the next run). A state is `level * 4 + run - 1`.
+const fn stuff_step(state: u8, bit: u8) -> (u8, u8) {
+    let (level, run) = (state / 4, state % 4 + 1);
+    if bit != level {
+        (bit * 4, 0)
+    } else if run == 4 {
+        // The fifth equal bit: a stuff bit of the other level follows, a run of one.
+        ((1 - level) * 4, 1)
+    } else {
+        (state + 1, 0)
+    }
+}
+
+/// For each state and each byte sent from it (most significant bit first): the state after
+/// it, and the stuff bits it takes (at most two). Computed at compile time, where an index
+/// out of range or a truncation would fail the build, not a run.
+#[allow(clippy::indexing_slicing, clippy::cast_possible_truncation)]
+const STUFF_TABLE: [[(u8, u8); 256]; 8] = {
+    let mut table = [[(0u8, 0u8); 256]; 8];
+    let mut state = 0;
+    while state < 8 {
+        let mut byte = 0;
+        while byte < 256 {
+            let (mut now, mut stuffed) = (state as u8, 0u8);
+            let mut k = 8;
+            while k > 0 {
+                k -= 1;
+                let (next, stuff) = stuff_step(now, ((byte >> k) & 1) as u8);
+                now = next;
+                stuffed += stuff;
+            }
+            table[state][byte] = (now, stuffed);
+            byte += 1;
         }
-        rest = rest.checked_shl(len).unwrap_or(0);
-        left -= len;
+        state += 1;
+    }
+    table
+};
+
+/// The stuff bits the first `bits` bits of `stream` (most significant first) take: the first
+/// bit starts a run, the bits short of a whole byte go one at a time, then a byte at a time by
+/// [`STUFF_TABLE`].
+fn stuff_bits(stream: u128, bits: u32) -> u32 {
+    let Some(after_first) = bits.min(128).checked_sub(1) else {
+        return 0;
+    };
+    let bit = |k: u32| u8::from(stream >> k & 1 == 1);
+    let mut state = bit(after_first) * 4;
+    let mut stuffed = 0;
+    let odd = after_first % 8;
+    for k in (after_first - odd..after_first).rev() {
+        let (next, stuff) = stuff_step(state, bit(k));
+        state = next;
+        stuffed += u32::from(stuff);
+    }
+    for k in (0..(after_first - odd) / 8).rev() {
+        let byte = usize::from(u8::try_from(stream >> (8 * k) & 0xFF).unwrap_or(0));
+        let row = STUFF_TABLE
+            .get(usize::from(state))
+            .unwrap_or(&STUFF_TABLE[0]);
+        let (next, stuff) = row.get(byte).copied().unwrap_or((0, 0));
+        state = next;
+        stuffed += u32::from(stuff);
     }
     stuffed
 }
