@@ -71,6 +71,9 @@ impl Controlled {
     }
 }
 
+/// No controlled device at a node (see `Master::position_of`).
+const NOT_CONTROLLED: u16 = u16::MAX;
+
 /// The NMT master.
 #[derive(Debug, Clone)]
 pub struct Master {
@@ -84,6 +87,9 @@ pub struct Master {
     consumer: HeartbeatConsumer,
     sdo: SdoClient,
     controlled: Vec<Controlled>,
+    /// Where each node's first controlled device is in `controlled` ([`NOT_CONTROLLED`]:
+    /// none): the ECU looks its drives up several times a poll.
+    position_of: [u16; 256],
     outbox: EventQueue<Frame, 64>,
     events: EventQueue<MasterEvent, 64>,
 }
@@ -103,6 +109,7 @@ impl Master {
             consumer: HeartbeatConsumer::default(),
             sdo: SdoClient::new(16, Duration::from_millis(500)),
             controlled: Vec::new(),
+            position_of: [NOT_CONTROLLED; 256],
             outbox: EventQueue::new(),
             events: EventQueue::new(),
         }
@@ -137,12 +144,24 @@ impl Master {
 
     /// Control a drive or motor (at start: the table is fixed after).
     pub fn add(&mut self, controlled: Controlled) {
+        let position = u16::try_from(self.controlled.len()).unwrap_or(NOT_CONTROLLED);
+        if let Some(slot) = self.position_of.get_mut(usize::from(controlled.node())) {
+            if *slot == NOT_CONTROLLED {
+                *slot = position;
+            }
+        }
         self.controlled.push(controlled);
     }
 
-    /// The controlled device at `node`.
+    /// The controlled device at `node` (the first added, if several).
     pub fn controlled(&mut self, node: u8) -> Option<&mut Controlled> {
-        self.controlled.iter_mut().find(|c| c.node() == node)
+        match self.position_of.get(usize::from(node)) {
+            Some(&position) if position != NOT_CONTROLLED => {
+                self.controlled.get_mut(usize::from(position))
+            }
+            // Not indexed: none at that node, or past the index's reach (65,535 devices).
+            _ => self.controlled.iter_mut().find(|c| c.node() == node),
+        }
     }
 
     /// Send an NMT command to `node` (0: all).
@@ -184,7 +203,7 @@ impl Master {
         let mut stop_now = false;
         while let Some(event) = self.consumer.next_event() {
             if let HeartbeatEvent::Lost { node } = event {
-                if let Some(controlled) = self.controlled.iter_mut().find(|c| c.node() == node) {
+                if let Some(controlled) = self.controlled(node) {
                     controlled.stop(StopReason::HeartbeatLost);
                     stop_now = true;
                 }
@@ -229,5 +248,40 @@ impl Master {
             self.consumer.next_deadline(),
             self.sdo.next_deadline(),
         ])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use crate::cia402::Mode;
+    use crate::roboteq::RoboteqCommand;
+
+    #[test]
+    fn a_device_is_found_by_its_node_the_first_of_a_node_and_none_for_others() {
+        let mut master = Master::new(0x7F, Duration::ZERO, Duration::from_millis(10));
+        let timeout = Duration::from_millis(100);
+        master.add(Controlled::Drive(DriveController::new(
+            3,
+            Mode::ProfileVelocity,
+            timeout,
+        )));
+        master.add(Controlled::Roboteq(RoboteqMotor::new(
+            9,
+            RoboteqCommand::Velocity(0),
+        )));
+        master.add(Controlled::Drive(DriveController::new(
+            9,
+            Mode::ProfileVelocity,
+            timeout,
+        )));
+        assert!(matches!(master.controlled(3), Some(Controlled::Drive(d)) if d.node() == 3));
+        // Two at node 9: the first added.
+        assert!(matches!(master.controlled(9), Some(Controlled::Roboteq(m)) if m.node() == 9));
+        for absent in [0, 4, 127, 255] {
+            assert!(master.controlled(absent).is_none(), "{absent}");
+        }
     }
 }

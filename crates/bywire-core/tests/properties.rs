@@ -19,6 +19,16 @@ fn id() -> impl Strategy<Value = Id> {
     ]
 }
 
+/// Identifiers from anywhere, or from a few neighbouring bases (standard and extended with the
+/// same base bits, where arbitration is decided by the SRR bit and the extension).
+fn near_id() -> impl Strategy<Value = Id> {
+    prop_oneof![
+        id(),
+        (0u32..4).prop_map(|v| Id::standard(v).unwrap()),
+        (0u32..4, 0u32..4).prop_map(|(base, ext)| Id::extended(base << 18 | ext).unwrap()),
+    ]
+}
+
 /// Payloads biased towards long runs of equal bits, where stuffing happens.
 fn payload(max: usize) -> impl Strategy<Value = Vec<u8>> {
     prop::collection::vec(prop_oneof![Just(0x00u8), Just(0xFF), any::<u8>()], 0..=max)
@@ -57,6 +67,18 @@ proptest! {
     fn error_frame_text_round_trip(class in 0u32..=0x3FF, data in prop::collection::vec(any::<u8>(), 8)) {
         let f = Frame::Error(bywire_core::ErrorFrame::new(class, &data).unwrap());
         prop_assert_eq!(f.to_string().parse::<Frame>(), Ok(f));
+    }
+
+    #[test]
+    fn identifiers_sort_in_arbitration_order(a in near_id(), b in near_id()) {
+        // The base identifier's bits go first; at an equal base a standard frame's dominant RTR
+        // beats an extended frame's recessive SRR; then the extension's bits.
+        let wire_order = |id: Id| match id {
+            Id::Standard(s) => (u32::from(s.as_raw()), 0, 0),
+            Id::Extended(e) => (e.as_raw() >> 18, 1, e.as_raw() & 0x3_FFFF),
+        };
+        prop_assert_eq!(a.cmp(&b), wire_order(a).cmp(&wire_order(b)));
+        prop_assert_eq!(a.cmp(&b) == std::cmp::Ordering::Equal, a == b);
     }
 
     #[test]
