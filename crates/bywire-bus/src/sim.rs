@@ -268,6 +268,8 @@ pub struct SimBus {
     busy_ns: u64,
     /// Nodes that are bus-off (counted when a state changes).
     bus_off_nodes: usize,
+    /// Nodes a successful reception changes (receive errors to count down), counted likewise.
+    counting_receivers: usize,
 }
 
 impl SimBus {
@@ -290,6 +292,7 @@ impl SimBus {
             next_seq: 0,
             busy_ns: 0,
             bus_off_nodes: 0,
+            counting_receivers: 0,
         }
     }
 
@@ -560,7 +563,23 @@ impl SimBus {
         let Some(n) = self.nodes.get_mut(node) else {
             return;
         };
-        if let Some(change) = n.confinement.on_event(event) {
+        let change = n.confinement.on_event(event);
+        // Counters and states change only here: what every frame and gap asks of all the
+        // nodes is counted again (rarely: a healthy bus has nothing to count down).
+        self.bus_off_nodes = self
+            .nodes
+            .iter()
+            .filter(|n| n.confinement.state() == NodeState::BusOff)
+            .count();
+        self.counting_receivers = self
+            .nodes
+            .iter()
+            .filter(|n| !unchanged_by(&n.confinement, Event::ReceiveSuccess))
+            .count();
+        let Some(n) = self.nodes.get_mut(node) else {
+            return;
+        };
+        if let Some(change) = change {
             if change.to == NodeState::BusOff {
                 n.recessive_run = 0;
             }
@@ -578,18 +597,14 @@ impl SimBus {
                 state: change.to,
                 at,
             });
-            // States change only here: the count is made again (rarely) for the checks on
-            // every frame and every gap.
-            self.bus_off_nodes = self
-                .nodes
-                .iter()
-                .filter(|n| n.confinement.state() == NodeState::BusOff)
-                .count();
         }
     }
 
     /// Apply `event` to every node on the bus except the sender.
     fn tell_receivers(&mut self, sender: NodeId, event: Event, at: Timestamp) {
+        if event == Event::ReceiveSuccess && self.counting_receivers == 0 {
+            return;
+        }
         for node in 0..self.nodes.len() {
             let affected = self
                 .nodes
@@ -788,7 +803,9 @@ impl SimBus {
             let eof = start.saturating_add(std::time::Duration::from_nanos(time.round() as u64));
             end = eof;
             if let Some(n) = self.nodes.get_mut(winner) {
-                n.queue.remove(index);
+                // The queue's order means nothing (arbitration takes the least identifier and
+                // submission number): the last frame fills the gap.
+                n.queue.swap_remove(index);
             }
             self.events.push(BusEvent::Transmitted {
                 node: winner,
