@@ -563,23 +563,7 @@ impl SimBus {
         let Some(n) = self.nodes.get_mut(node) else {
             return;
         };
-        let change = n.confinement.on_event(event);
-        // Counters and states change only here: what every frame and gap asks of all the
-        // nodes is counted again (rarely: a healthy bus has nothing to count down).
-        self.bus_off_nodes = self
-            .nodes
-            .iter()
-            .filter(|n| n.confinement.state() == NodeState::BusOff)
-            .count();
-        self.counting_receivers = self
-            .nodes
-            .iter()
-            .filter(|n| !unchanged_by(&n.confinement, Event::ReceiveSuccess))
-            .count();
-        let Some(n) = self.nodes.get_mut(node) else {
-            return;
-        };
-        if let Some(change) = change {
+        if let Some(change) = n.confinement.on_event(event) {
             if change.to == NodeState::BusOff {
                 n.recessive_run = 0;
             }
@@ -598,6 +582,19 @@ impl SimBus {
                 at,
             });
         }
+        self.count_states();
+    }
+
+    /// Counters and states change only in `set_state`: what every frame and gap asks of all the
+    /// nodes is counted there again (rarely: a healthy bus has nothing to count down).
+    fn count_states(&mut self) {
+        let (mut off, mut counting) = (0, 0);
+        for n in &self.nodes {
+            off += usize::from(n.confinement.state() == NodeState::BusOff);
+            counting += usize::from(!unchanged_by(&n.confinement, Event::ReceiveSuccess));
+        }
+        self.bus_off_nodes = off;
+        self.counting_receivers = counting;
     }
 
     /// Apply `event` to every node on the bus except the sender.

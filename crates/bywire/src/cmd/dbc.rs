@@ -443,8 +443,9 @@ fn decode_records(
             channel: args.partition.contains(&logs::PartitionBy::Channel),
             date: args.partition.contains(&logs::PartitionBy::Date),
         };
-        let layout = (partitioning, args.compression.into());
-        let notes = logs::write_dataset(dir, decoder, layout, &mut pump, records)?;
+        let compression = args.compression.into();
+        let notes =
+            logs::write_dataset(dir, decoder, partitioning, compression, &mut pump, records)?;
         pump.progress.finish();
         writeln!(
             out,

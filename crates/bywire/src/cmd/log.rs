@@ -247,10 +247,8 @@ fn convert(
             notes = write_dataset(
                 output,
                 decoder,
-                (
-                    decoding.partitioning,
-                    decoding.compression.unwrap_or_default().into(),
-                ),
+                decoding.partitioning,
+                decoding.compression.unwrap_or_default().into(),
                 &mut pump,
                 bywire_log::merge::merge(readers),
             )?;

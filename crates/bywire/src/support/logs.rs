@@ -290,7 +290,8 @@ impl<'a> Pump<'a> {
 pub fn write_dataset(
     output: &Path,
     decoder: &Decoder,
-    (partitioning, compression): (Partitioning, ParquetCompression),
+    partitioning: Partitioning,
+    compression: ParquetCompression,
     pump: &mut Pump<'_>,
     records: impl Iterator<Item = Result<LogRecord>>,
 ) -> Result<Vec<String>> {
