@@ -500,7 +500,7 @@ pub struct DecodedDataset<'a> {
     decoder: &'a Decoder,
     root: PathBuf,
     partitioning: Partitioning,
-    open: HashMap<PartitionKey, OpenTable>,
+    open: HashMap<PartitionKey, OpenTable, foldhash::fast::RandomState>,
     /// Files started per partition (the next file's number).
     parts: HashMap<PartitionKey, u32>,
     decoded: Vec<Option<Decoded>>,
@@ -528,7 +528,7 @@ impl<'a> DecodedDataset<'a> {
             decoder,
             root: root.to_path_buf(),
             partitioning,
-            open: HashMap::new(),
+            open: HashMap::default(),
             parts: HashMap::new(),
             decoded: Vec::new(),
             rows: vec![0; decoder.database().messages.len()],
