@@ -52,6 +52,9 @@ struct Slot {
     deadline: Option<Timestamp>,
     /// When it was last polled.
     polled: Option<Timestamp>,
+    /// When it must next run, worked out from the two above whenever they change (the runner
+    /// looks for the earliest of every node's at each event).
+    wake: Option<Timestamp>,
     /// Changed by the caller since the last run (its deadline is asked again).
     changed: bool,
     /// It received something at the current instant.
@@ -64,16 +67,30 @@ impl Slot {
     const NEW: Slot = Slot {
         deadline: None,
         polled: None,
+        wake: Some(Timestamp::ZERO),
         changed: true,
         received: false,
         dropped: false,
     };
 
-    /// When it must next run: now if never polled; a deadline at or before its last poll
-    /// counts RESOLUTION after that poll, so a node asking for the past cannot stall time.
-    fn wake(&self, now: Timestamp) -> Option<Timestamp> {
+    /// A new deadline, asked of the node.
+    fn set_deadline(&mut self, deadline: Option<Timestamp>) {
+        self.deadline = deadline;
+        self.wake = self.wake();
+    }
+
+    /// Polled at `now`, after which the node asked for `deadline`.
+    fn set_polled(&mut self, now: Timestamp, deadline: Option<Timestamp>) {
+        self.polled = Some(now);
+        self.set_deadline(deadline);
+    }
+
+    /// When it must next run: at once (time zero, which is never later than the present) if
+    /// never polled; a deadline at or before its last poll counts RESOLUTION after that poll,
+    /// so a node asking for the past cannot stall time.
+    fn wake(&self) -> Option<Timestamp> {
         match (self.polled, self.deadline) {
-            (None, _) => Some(now),
+            (None, _) => Some(Timestamp::ZERO),
             (Some(last), Some(d)) if d <= last => Some(last.saturating_add(RESOLUTION)),
             (Some(_), deadline) => deadline,
         }
@@ -244,7 +261,7 @@ impl Network {
         self.size_for(nodes.len());
         for (slot, node) in self.slots.iter_mut().zip(nodes.iter()) {
             if slot.changed {
-                slot.deadline = node.next_deadline();
+                slot.set_deadline(node.next_deadline());
                 slot.changed = false;
             }
         }
@@ -287,7 +304,7 @@ impl Network {
     fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
         let mut next: Option<Timestamp> = None;
         for slot in self.slots.iter().take(nodes) {
-            next = earliest([next, slot.wake(self.now)]);
+            next = earliest([next, slot.wake]);
         }
         for b in &mut self.buses {
             next = earliest([next, b.next_change()]);
@@ -329,7 +346,7 @@ impl Network {
                 // A confirmation moves the node's deadline (its next frame may be due now);
                 // it is polled when that comes, not for the confirmation itself.
                 if confirmed {
-                    slot.deadline = node.next_deadline();
+                    slot.set_deadline(node.next_deadline());
                 }
                 if got {
                     slot.received = true;
@@ -341,10 +358,9 @@ impl Network {
             if !(slot.due(now) || slot.received) {
                 continue;
             }
-            slot.polled = Some(now);
             self.outgoing.clear();
             node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
-            slot.deadline = node.next_deadline();
+            slot.set_polled(now, node.next_deadline());
             if slot.dropped {
                 continue;
             }
