@@ -87,6 +87,9 @@ pub struct SteeringChain {
     pub params: SteeringParams,
     shaft_rpm: f64,
     piston: f64,
+    /// The wheel's angle from the piston, worked out once a step (it is read several times a
+    /// step: the sensors, the plant, the truth).
+    angle_deg: f64,
     drift: f64,
     fault: SensorFault,
 }
@@ -98,6 +101,7 @@ impl SteeringChain {
             params,
             shaft_rpm: 0.0,
             piston: 0.0,
+            angle_deg: 0.0,
             drift: 0.0,
             fault: SensorFault::None,
         }
@@ -140,6 +144,7 @@ impl SteeringChain {
         };
         let speed = flow / area * self.shaft_rpm.signum();
         self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
+        self.angle_deg = libm::asin((self.piston / p.arm).clamp(-1.0, 1.0)).to_degrees();
         if let SensorFault::Drift(rate) = self.fault {
             self.drift += rate * dt;
         }
@@ -147,7 +152,7 @@ impl SteeringChain {
 
     /// The wheel's angle, degrees (the linkage: the piston turns the arm).
     pub fn wheel_angle_deg(&self) -> f64 {
-        libm::asin((self.piston / self.params.arm).clamp(-1.0, 1.0)).to_degrees()
+        self.angle_deg
     }
 
     /// The valve input shaft's speed, rpm.
