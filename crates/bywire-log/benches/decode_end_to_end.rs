@@ -4,6 +4,8 @@
 //! (`python -m cantools decode`) come from running it on the same log; see the project's notes.
 #![allow(missing_docs, clippy::unwrap_used, clippy::indexing_slicing)]
 
+use std::ops::ControlFlow;
+
 use bywire_dbc::decoder::Decoder;
 use bywire_log::parquet::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
 use bywire_log::parquet::{raw_schema, FrameColumns, ParquetCompression};
@@ -66,9 +68,11 @@ fn end_to_end(c: &mut Criterion) {
                 let mut dataset =
                     DecodedDataset::create(&out, &decoder, Partitioning::default()).unwrap();
                 dataset.set_compression(compression);
-                for record in bywire_log::Reader::new(log.as_bytes()) {
-                    dataset.write(&record.unwrap()).unwrap();
-                }
+                // Records lent by the reader, as `bywire decode --parquet` reads one log.
+                bywire_log::Reader::new(log.as_bytes()).for_each_ref(|record| {
+                    dataset.write_lent(record.unwrap()).unwrap();
+                    ControlFlow::<()>::Continue(())
+                });
                 dataset.finish().unwrap()
             })
         });

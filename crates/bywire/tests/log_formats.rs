@@ -1290,6 +1290,39 @@ fn decode_writes_csv_and_parquet_from_any_format_as_cantools_decodes() {
     assert!(said.contains("rows in"), "{said}");
     let agreed = oracle("parquet_decoded.py", &[&dbc, &log, &dataset]);
     assert!(agreed.contains("values agree"), "{agreed}");
+    // From the candump log, a file and standard input (its records lent on the way, lines
+    // that are not log lines passed over): the same tables.
+    let noted = dir.join("noted.log");
+    let text = format!(
+        "# recorded on the test bench\n{}not a log line\n",
+        std::fs::read_to_string(&log).unwrap()
+    );
+    std::fs::write(&noted, &text).unwrap();
+    let (from_file, from_stdin) = (dir.join("from-file"), dir.join("from-stdin"));
+    let said_file = bywire(&[
+        "decode",
+        dbc.to_str().unwrap(),
+        "-I",
+        noted.to_str().unwrap(),
+        "--parquet",
+        from_file.to_str().unwrap(),
+    ]);
+    let (code, said_stdin, err) = common::bywire(
+        &[
+            "decode",
+            dbc.to_str().unwrap(),
+            "--parquet",
+            from_stdin.to_str().unwrap(),
+        ],
+        &text,
+    );
+    assert_eq!(code, 0, "{err}");
+    for (said_here, output) in [(&said_file, &from_file), (&said_stdin, &from_stdin)] {
+        let rows = |s: &str| s.split("; ").nth(1).map(str::to_string);
+        assert_eq!(rows(said_here), rows(&said), "{said_here}");
+        let agreed = oracle("parquet_decoded.py", &[&dbc, &log, output]);
+        assert!(agreed.contains("values agree"), "{agreed}");
+    }
     // CSV from the BLF: one row per signal, values and choices as cantools gives them.
     let csv = dir.join("decoded.csv");
     std::fs::write(

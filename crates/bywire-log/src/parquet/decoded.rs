@@ -46,7 +46,7 @@ use super::{
     FrameColumnsRef, Labels, ParquetCompression,
 };
 use crate::calendar;
-use crate::candump::{LogError, LogRecord};
+use crate::candump::{LogError, LogRecord, LogRecordRef};
 
 /// Rows a table builds up before they are encoded (fewer when many tables are open).
 pub const TABLE_BATCH: usize = 4096;
@@ -548,6 +548,14 @@ impl<'a> DecodedDataset<'a> {
 
     /// Decode one record and add its row.
     pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
+        self.write_lent(&record.as_record_ref())
+    }
+
+    /// [`DecodedDataset::write`] for a record lent by a reader ([`Reader::for_each_ref`]): no
+    /// copy of its interface name is made unless the dataset is partitioned by channel.
+    ///
+    /// [`Reader::for_each_ref`]: crate::Reader::for_each_ref
+    pub fn write_lent(&mut self, record: &LogRecordRef<'_>) -> std::io::Result<()> {
         let decoder = self.decoder;
         let Some((index, message, codec, data)) = decoder.message_of(&record.frame) else {
             self.summary.unknown += 1;
@@ -562,7 +570,10 @@ impl<'a> DecodedDataset<'a> {
         };
         let key = PartitionKey {
             message: index,
-            channel: self.partitioning.channel.then(|| record.interface.clone()),
+            channel: self
+                .partitioning
+                .channel
+                .then(|| record.interface.to_string()),
             day: self
                 .partitioning
                 .date
@@ -592,7 +603,7 @@ impl<'a> DecodedDataset<'a> {
         table.columns.push(
             message,
             ts,
-            ChannelRef::Text(&record.interface),
+            ChannelRef::Text(record.interface),
             row,
             &self.decoded,
         );

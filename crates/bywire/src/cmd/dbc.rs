@@ -435,7 +435,6 @@ fn decode_records(
     };
     let progress =
         crate::support::progress::Progress::new(input.position_probe().into_iter().collect());
-    let records = logs::records(&name, input, Skip::NonLogLines);
     let everything = Selection::everything();
     let mut pump = Pump::new(&everything, progress);
     if let Some(dir) = &args.parquet {
@@ -444,8 +443,10 @@ fn decode_records(
             date: args.partition.contains(&logs::PartitionBy::Date),
         };
         let compression = args.compression.into();
-        let notes =
-            logs::write_dataset(dir, decoder, partitioning, compression, &mut pump, records)?;
+        // One input: its records lent, not copied, on their way to the tables.
+        let notes = logs::write_dataset(dir, decoder, partitioning, compression, |sink| {
+            pump.run_lent(&name, input, Skip::NonLogLines, sink)
+        })?;
         pump.progress.finish();
         writeln!(
             out,
@@ -456,6 +457,7 @@ fn decode_records(
         )?;
         return Ok(());
     }
+    let records = logs::records(&name, input, Skip::NonLogLines);
     writeln!(out, "ts,channel,message,signal,value,choice,unit")?;
     let choices = !args.no_decode_choices;
     pump.run(records, |record| {

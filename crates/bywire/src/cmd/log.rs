@@ -249,8 +249,11 @@ fn convert(
                 decoder,
                 decoding.partitioning,
                 decoding.compression.unwrap_or_default().into(),
-                &mut pump,
-                bywire_log::merge::merge(readers),
+                |sink| {
+                    pump.run(bywire_log::merge::merge(readers), |r| {
+                        sink(&r.as_record_ref())
+                    })
+                },
             )?;
         }
         (Some(decoder), _) => write_atomically(output, |tmp| {
@@ -397,7 +400,10 @@ fn cat_to(
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
     let mut stats = LogStats::new();
     for (name, input) in inputs(files)? {
-        for_each_lent(&name, input, |record| stats.add(record))?;
+        for_each_lent(&name, input, Skip::Unreadable, |record| {
+            stats.add(record);
+            Ok(())
+        })?;
     }
     stats.write_report(out)?;
     Ok(())

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
+use bywire_core::Timestamp;
 use bywire_dbc::decoder::Decoder;
 use bywire_log::format::ParquetCompression;
 use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
@@ -126,16 +127,18 @@ fn skipped(name: &str, e: &LogError, skip: Skip) -> bool {
 }
 
 /// Each record of `input` handed to `each`, lent: a candump log is read without a copy of any
-/// line. Unreadable lines are skipped as [`records`] skips them; any other error ends it.
+/// line. Bad lines are skipped as [`records`] skips them; any other error, or one from `each`,
+/// ends it.
 pub fn for_each_lent(
     name: &str,
     input: LogInput,
-    mut each: impl FnMut(&LogRecordRef<'_>),
+    skip: Skip,
+    mut each: impl FnMut(&LogRecordRef<'_>) -> Result<()>,
 ) -> Result<()> {
     let LogInput { mut bytes, file } = input;
     if Format::sniff_input(&mut bytes).unwrap_or(Format::Candump) != Format::Candump {
-        for record in records(name, LogInput { bytes, file }, Skip::Unreadable) {
-            each(&record?.as_record_ref());
+        for record in records(name, LogInput { bytes, file }, skip) {
+            each(&record?.as_record_ref())?;
         }
         return Ok(());
     }
@@ -143,22 +146,32 @@ pub fn for_each_lent(
     // line's reads are inlined rather than called through `dyn`; a pipe that cannot seek is
     // read on from what was peeked at.
     match file.filter(|mut f| f.seek(SeekFrom::Start(0)).is_ok()) {
-        Some(file) => lent_candump(name, BufReader::with_capacity(READ_BUFFER, file), each),
-        None => lent_candump(name, bytes, each),
+        Some(file) => lent_candump(
+            name,
+            BufReader::with_capacity(READ_BUFFER, file),
+            skip,
+            each,
+        ),
+        None => lent_candump(name, bytes, skip, each),
     }
 }
 
 fn lent_candump(
     name: &str,
     bytes: impl BufRead,
-    mut each: impl FnMut(&LogRecordRef<'_>),
+    skip: Skip,
+    mut each: impl FnMut(&LogRecordRef<'_>) -> Result<()>,
 ) -> Result<()> {
-    let failed = Reader::new(bytes).for_each_ref(|record| match record {
-        Ok(record) => {
-            each(record);
-            ControlFlow::Continue(())
-        }
-        Err(e) if skipped(name, &e, Skip::Unreadable) => ControlFlow::Continue(()),
+    let mut reader = Reader::new(bytes);
+    if matches!(skip, Skip::AnyBadLine | Skip::NonLogLines) {
+        reader = reader.log_lines_only();
+    }
+    let failed = reader.for_each_ref(|record| match record {
+        Ok(record) => match each(record) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => ControlFlow::Break(e),
+        },
+        Err(e) if skipped(name, &e, skip) => ControlFlow::Continue(()),
         Err(e) => ControlFlow::Break(anyhow!("{name}: {e}")),
     });
     failed.map_or(Ok(()), Err)
@@ -224,13 +237,36 @@ impl Selection {
 
     /// The record as it is written (renamed), or `None` to leave it out.
     fn keep(&self, mut record: LogRecord, since_first: Duration) -> Option<LogRecord> {
+        let renamed = self.written_channel(&record.interface, since_first)?;
+        if let Some(name) = renamed {
+            record.interface = name.to_string();
+        }
+        Some(record)
+    }
+
+    /// [`Selection::keep`] for a lent record.
+    fn keep_lent<'a>(
+        &'a self,
+        record: &LogRecordRef<'a>,
+        since_first: Duration,
+    ) -> Option<LogRecordRef<'a>> {
+        let renamed = self.written_channel(record.interface, since_first)?;
+        Some(LogRecordRef {
+            interface: renamed.unwrap_or(record.interface),
+            ..*record
+        })
+    }
+
+    /// Whether a record on `interface` this long after the first is kept (`None`: left out),
+    /// and the name its channel is written under when renamed.
+    fn written_channel(&self, interface: &str, since_first: Duration) -> Option<Option<&str>> {
         if since_first < self.from || self.to.is_some_and(|to| since_first > to) {
             return None;
         }
-        if !self.channels.is_empty() {
-            record.interface = self.channels.get(&record.interface)?.clone();
+        if self.channels.is_empty() {
+            return Some(None);
         }
-        Some(record)
+        self.channels.get(interface).map(|name| Some(name.as_str()))
     }
 }
 
@@ -266,14 +302,8 @@ impl<'a> Pump<'a> {
     ) -> Result<()> {
         let stop = crate::interrupt_flag();
         for record in records {
-            if stop.load(std::sync::atomic::Ordering::Relaxed) {
-                return Err(anyhow!("interrupted: nothing written"));
-            }
             let record = record?;
-            self.progress.frame();
-            let at = record.timestamp.as_nanos();
-            let since_first =
-                Duration::from_nanos(at.saturating_sub(*self.first.get_or_insert(at)));
+            let since_first = self.next(&stop, record.timestamp)?;
             let Some(record) = self.selection.keep(record, since_first) else {
                 self.left_out += 1;
                 continue;
@@ -283,24 +313,58 @@ impl<'a> Pump<'a> {
         }
         Ok(())
     }
+
+    /// [`Pump::run`] over one input's records, lent ([`for_each_lent`]): a candump log's
+    /// records go to `write` without a copy of their interface names.
+    pub fn run_lent(
+        &mut self,
+        name: &str,
+        input: LogInput,
+        skip: Skip,
+        mut write: impl FnMut(&LogRecordRef<'_>) -> Result<()>,
+    ) -> Result<()> {
+        let stop = crate::interrupt_flag();
+        for_each_lent(name, input, skip, |record| {
+            let since_first = self.next(&stop, record.timestamp)?;
+            let Some(record) = self.selection.keep_lent(record, since_first) else {
+                self.left_out += 1;
+                return Ok(());
+            };
+            write(&record)?;
+            self.frames += 1;
+            Ok(())
+        })
+    }
+
+    /// One more record read at `at`: Ctrl-C obeyed, progress shown; how long after the first
+    /// record it is.
+    fn next(&mut self, stop: &std::sync::atomic::AtomicBool, at: Timestamp) -> Result<Duration> {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(anyhow!("interrupted: nothing written"));
+        }
+        self.progress.frame();
+        let at = at.as_nanos();
+        Ok(Duration::from_nanos(
+            at.saturating_sub(*self.first.get_or_insert(at)),
+        ))
+    }
 }
 
-/// Decode the records into a Parquet dataset at `output` (made whole or not at all); notes on
-/// what it holds and what could not be decoded.
+/// Decode the records `feed` hands to its sink (through a [`Pump`]) into a Parquet dataset at
+/// `output` (made whole or not at all); notes on what it holds and what could not be decoded.
 pub fn write_dataset(
     output: &Path,
     decoder: &Decoder,
     partitioning: Partitioning,
     compression: ParquetCompression,
-    pump: &mut Pump<'_>,
-    records: impl Iterator<Item = Result<LogRecord>>,
+    feed: impl FnOnce(&mut dyn FnMut(&LogRecordRef<'_>) -> Result<()>) -> Result<()>,
 ) -> Result<Vec<String>> {
     let cannot_write = || format!("cannot write {}", output.display());
     let summary = write_dir_atomically(output, |tmp| {
         let mut dataset =
             DecodedDataset::create(tmp, decoder, partitioning).with_context(cannot_write)?;
         dataset.set_compression(compression);
-        pump.run(records, |r| dataset.write(r).with_context(cannot_write))?;
+        feed(&mut |r| dataset.write_lent(r).with_context(cannot_write))?;
         dataset.finish().with_context(cannot_write)
     })?;
     let rows: u64 = summary.rows.values().sum();
