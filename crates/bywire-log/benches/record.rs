@@ -20,7 +20,7 @@ use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_log::format::Format;
+use bywire_log::format::{Format, ParquetCompression};
 use bywire_log::recorder::{Config, Layout, Recorder, Rotation};
 use bywire_log::LogRecord;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -41,6 +41,7 @@ fn config(dir: PathBuf, format: Format, name: String) -> Config {
         dir,
         name,
         format,
+        compression: ParquetCompression::default(),
         layout: Layout::PerBus,
         rotation: Rotation::default(),
         checkpoint_ns: 2_000_000_000,

@@ -28,7 +28,7 @@ use std::sync::Arc;
 
 use crate::calendar::utc_text;
 use crate::candump::LogRecord;
-use crate::format::{Format, RecordWriter};
+use crate::format::{Format, ParquetCompression, RecordWriter};
 
 /// The most triggers a file's metadata lists (more are counted).
 pub const MAX_TRIGGERS_LISTED: usize = 10_000;
@@ -71,6 +71,8 @@ pub struct Config {
     pub name: String,
     /// The files' format.
     pub format: Format,
+    /// What Parquet files' pages are compressed with (other formats ignore it).
+    pub compression: ParquetCompression,
     /// A file per bus or one for all.
     pub layout: Layout,
     /// When files are rotated.
@@ -488,7 +490,10 @@ impl Recorder {
             at: 0,
             end: Arc::clone(&end),
         };
-        let mut writer = self.config.format.writer(counted)?;
+        let mut writer = self
+            .config
+            .format
+            .writer_with(counted, self.config.compression)?;
         // On disk complete from the start (a header, MF4's empty groups): a kill before the
         // first checkpoint leaves an empty log, not a broken one.
         writer.checkpoint()?;
@@ -625,6 +630,7 @@ mod tests {
             dir: dir.to_path_buf(),
             name: "run".into(),
             format,
+            compression: ParquetCompression::default(),
             layout,
             rotation: Rotation::default(),
             checkpoint_ns: 1_000 * MS,

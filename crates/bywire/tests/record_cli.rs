@@ -420,8 +420,12 @@ wait
 fn bad_options_are_named_before_any_bus_is_opened() {
     let dir = folder("bad");
     let out = dir.to_str().unwrap();
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 8] = [
         (&["--format", "xls"], "--format xls"),
+        (
+            &["--format", "mf4", "--compression", "snappy"],
+            "--compression is for Parquet output; --format mf4",
+        ),
         (&["--pre", "5s"], "give at least one --trigger"),
         (
             &["--trigger", "VehicleToAds_State.Speed > 1"],

@@ -8,6 +8,7 @@
     clippy::indexing_slicing
 )]
 
+use std::path::Path;
 use std::process::Command;
 
 mod common;
@@ -96,6 +97,16 @@ fn bad_input_names_the_problem() {
     );
     fails_with(&["dump", "vcan0,12G:7FF"], "", "filter '12G:7FF'");
     fails_with(&["dump", "nosuch:x"], "", "bus 'nosuch:x'");
+    // Compression is for a Parquet log file only, refused before any file is made.
+    let blf = std::env::temp_dir().join(format!("bywire-refused-{}.blf", std::process::id()));
+    let blf = blf.to_str().unwrap();
+    for args in [
+        &["dump", "virtual:c", "-f", blf, "--compression", "snappy"][..],
+        &["dump", "virtual:c", "--compression", "none"][..],
+    ] {
+        fails_with(args, "", "--compression is for Parquet output");
+    }
+    assert!(!Path::new(blf).exists());
     fails_with(
         &["dump", "-L", "--dbc", &m, "virtual:t"],
         "",
@@ -1134,8 +1145,20 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Each column chunk's codec in a Parquet file, and its rows, as pyarrow reads them.
+const PARQUET_CODECS: &str = "
+import sys
+import pyarrow.parquet as pq
+meta = pq.ParquetFile(sys.argv[1]).metadata
+codecs = {meta.row_group(g).column(c).compression
+          for g in range(meta.num_row_groups) for c in range(meta.num_columns)}
+print(' '.join(sorted(codecs)), meta.num_rows)
+";
+
 /// `dump -f FILE` logs in the format the extension names and finishes the file whichever way
-/// the dump ends: after `-n` frames (BLF), or on Ctrl-C (MCAP, whose summary comes last).
+/// the dump ends: after `-n` frames (BLF; Parquet, its pages compressed as asked, as pyarrow
+/// reads them), or on Ctrl-C (MCAP, whose summary comes last); `record` compresses a Parquet
+/// log as asked too.
 #[test]
 fn dump_logs_to_any_format_and_finishes_the_file() {
     let (server, address) = start_serve(
@@ -1146,7 +1169,12 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
     let dir = std::env::temp_dir().join(format!("bywire-dump-formats-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let frames = ["123#DEADBEEF", "1ABCDEF0#0102", "7FF#"];
-    for (file, by_count) in [("out.blf", true), ("out.mcap", false)] {
+    let cases = [
+        ("out.blf", true, None),
+        ("out.mcap", false, None),
+        ("out.parquet", true, Some("snappy")),
+    ];
+    for (file, by_count, compression) in cases {
         let path = dir.join(file);
         let mut args = vec![
             "dump".to_string(),
@@ -1156,6 +1184,9 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         ];
         if by_count {
             args.extend(["-n".to_string(), "3".to_string()]);
+        }
+        if let Some(codec) = compression {
+            args.extend(["--compression".to_string(), codec.to_string()]);
         }
         let mut dump = Command::new(env!("CARGO_BIN_EXE_bywire"))
             .args(&args)
@@ -1181,7 +1212,58 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
             .map(|l| l.rsplit(' ').next().unwrap())
             .collect();
         assert_eq!(got, frames, "{file}: {text}");
+        if let Some(codec) = compression {
+            let read = Command::new("python3")
+                .args(["-c", PARQUET_CODECS])
+                .arg(&path)
+                .output()
+                .unwrap();
+            let said = String::from_utf8_lossy(&read.stdout);
+            assert_eq!(
+                said.trim(),
+                format!("{} 3", codec.to_uppercase()),
+                "{read:?}"
+            );
+        }
     }
+    // `record --format parquet` takes the same option.
+    let recorded = dir.join("recorded");
+    let mut record = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "record",
+            &bus,
+            "--format",
+            "parquet",
+            "--compression",
+            "none",
+        ])
+        .args(["--duration", "3s", "--quiet", "--name", "run", "--out"])
+        .arg(&recorded)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1_000));
+    for frame in frames {
+        let (code, _, err) = bywire(&["send", &bus, frame], "");
+        assert_eq!(code, 0, "{err}");
+    }
+    assert!(record.wait().unwrap().success());
+    let files: Vec<_> = std::fs::read_dir(&recorded)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let read = Command::new("python3")
+        .args(["-c", PARQUET_CODECS])
+        .arg(&files[0])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&read.stdout).trim(),
+        "UNCOMPRESSED 3",
+        "{read:?}"
+    );
     let _ = stop_serve(server);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -11,10 +11,11 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
 use bywire_core::Frame;
 use bywire_log::candump::{frame_text, timestamp_text};
-use bywire_log::format::{Format, RecordWriter};
+use bywire_log::format::{Format, ParquetCompression, RecordWriter};
 use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg::{self, BusArg, Event, Readers};
+use crate::support::logs::CompressionArg;
 use crate::support::signals::Dbc;
 use crate::support::signals::FrameText;
 
@@ -24,6 +25,7 @@ use crate::support::signals::FrameText;
   bywire dump -ta can0,123:7FF,400:700,#000000FF vcan1
   bywire dump -L virtual:test > traffic.log
   bywire dump -l -n 1000 can0              (writes candump-YYYY-MM-DD_HHMMSS.log)
+  bywire dump -f drive.parquet --compression snappy can0 can1
   bywire dump --dbc vehicle.dbc can0,100:7F0
 
 Filters follow the bus as in candump: ID:MASK matches when id & mask == ID & mask, ID~MASK
@@ -49,9 +51,13 @@ pub struct Args {
     #[arg(short = 'l')]
     log_file: bool,
     /// Write the log file to this path instead (implies -l); its extension picks the format
-    /// (.asc, .blf, .trc, .pcapng, .mcap; anything else: candump), finished properly on Ctrl-C.
+    /// (.asc, .blf, .trc, .pcapng, .mf4, .mcap, .parquet; anything else: candump), finished
+    /// properly on Ctrl-C.
     #[arg(short = 'f', value_name = "FILE")]
     log_path: Option<PathBuf>,
+    /// With a Parquet log file: what its pages are compressed with (zstd by default).
+    #[arg(long, value_name = "CODEC")]
+    compression: Option<CompressionArg>,
     /// Exit after this many frames.
     #[arg(short = 'n', value_name = "COUNT")]
     count: Option<u64>,
@@ -84,15 +90,30 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         Some(path) => Some(Dbc::new(crate::support::dbc::load(path, false)?)),
         None => None,
     };
-    let opened = busarg::open_all(&buses)?;
-    let mut log = match (args.log_file, &args.log_path) {
-        (_, Some(path)) => Some(create_log(path.clone())?),
-        (true, None) => Some(create_log(PathBuf::from(
+    let log_path = match (args.log_file, &args.log_path) {
+        (_, Some(path)) => Some(path.clone()),
+        (true, None) => Some(PathBuf::from(
             chrono::Local::now()
                 .format("candump-%Y-%m-%d_%H%M%S.log")
                 .to_string(),
-        ))?),
+        )),
         (false, None) => None,
+    };
+    // The log file's format by its name (candump unless known), checked with the compression
+    // before a bus is opened or a file made.
+    let log_format = log_path
+        .as_deref()
+        .and_then(Format::from_path)
+        .unwrap_or(Format::Candump);
+    let what = log_path.as_ref().map_or_else(
+        || "standard output".to_string(),
+        |p| p.display().to_string(),
+    );
+    let compression = CompressionArg::for_output(args.compression, log_format, &what)?;
+    let opened = busarg::open_all(&buses)?;
+    let mut log = match log_path {
+        Some(path) => Some(create_log(path, log_format, compression)?),
+        None => None,
     };
     let stop = crate::interrupt_flag();
     let readers = Readers::start(opened);
@@ -136,16 +157,16 @@ impl LogFile {
     }
 }
 
-fn create_log(path: PathBuf) -> Result<LogFile> {
+fn create_log(path: PathBuf, format: Format, compression: ParquetCompression) -> Result<LogFile> {
     let file = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
     // As candump says it; a closed standard error is no reason to fail.
     let _ = writeln!(std::io::stderr(), "Enabling Logfile '{}'", path.display());
     let output = BufWriter::new(file);
-    Ok(match Format::from_path(&path) {
-        None | Some(Format::Candump) => LogFile::Candump(output),
-        Some(format) => LogFile::Other(Box::new(
+    Ok(match format {
+        Format::Candump => LogFile::Candump(output),
+        format => LogFile::Other(Box::new(
             format
-                .writer(output)
+                .writer_with(output, compression)
                 .with_context(|| format!("cannot write {}", path.display()))?,
         )),
     })

@@ -202,12 +202,8 @@ fn convert(
             )
         })?,
     };
-    if decoding.compression.is_some() && format != Format::Parquet {
-        return Err(anyhow!(
-            "--compression is for Parquet output; {} is not Parquet",
-            output.display()
-        ));
-    }
+    let compression =
+        CompressionArg::for_output(decoding.compression, format, &output.display().to_string())?;
     let decoder = match decoding.dbc {
         None => None,
         Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
@@ -248,7 +244,7 @@ fn convert(
                 output,
                 decoder,
                 decoding.partitioning,
-                decoding.compression.unwrap_or_default().into(),
+                compression,
                 |sink| {
                     pump.run(bywire_log::merge::merge(readers), |r| {
                         sink(&r.as_record_ref())
@@ -281,7 +277,6 @@ fn convert(
         })?,
         (None, _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
-            let compression = decoding.compression.unwrap_or_default().into();
             let mut writer = format
                 .writer_with(std::io::BufWriter::new(file), compression)
                 .with_context(cannot_write)?;

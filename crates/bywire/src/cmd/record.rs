@@ -20,6 +20,7 @@ use bywire_log::LogRecord;
 use serde_json::json;
 
 use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::logs::CompressionArg;
 use crate::support::numbers;
 
 #[derive(clap::Args)]
@@ -56,6 +57,9 @@ pub struct Args {
     /// The files' format: blf, mf4, asc, trc, candump, pcapng, mcap, parquet.
     #[arg(long, default_value = "blf")]
     format: String,
+    /// With --format parquet: what the pages are compressed with (zstd by default).
+    #[arg(long, value_name = "CODEC")]
+    compression: Option<CompressionArg>,
     /// One file for all buses (default: a file per bus).
     #[arg(long)]
     merged: bool,
@@ -176,6 +180,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
         anyhow!("--format {}: one of {}", args.format, names.join(", "))
     })?;
+    let compression = CompressionArg::for_output(
+        args.compression,
+        format,
+        &format!("--format {}", args.format),
+    )?;
     let window = match (args.pre, args.post) {
         (None, None) => None,
         (pre, post) => Some(Window {
@@ -295,6 +304,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         dir: args.out.clone(),
         name,
         format,
+        compression,
         layout: if args.merged {
             Layout::Merged
         } else {

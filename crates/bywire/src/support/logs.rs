@@ -399,6 +399,23 @@ pub enum CompressionArg {
     None,
 }
 
+impl CompressionArg {
+    /// The compression for output in `format` to `what` (a file or a command's output, for the
+    /// error): zstd unless given; an error when given for anything but Parquet.
+    pub fn for_output(
+        arg: Option<CompressionArg>,
+        format: Format,
+        what: &str,
+    ) -> Result<ParquetCompression> {
+        if arg.is_some() && format != Format::Parquet {
+            return Err(anyhow!(
+                "--compression is for Parquet output; {what} is not Parquet"
+            ));
+        }
+        Ok(arg.unwrap_or_default().into())
+    }
+}
+
 impl From<CompressionArg> for ParquetCompression {
     fn from(arg: CompressionArg) -> ParquetCompression {
         match arg {
