@@ -1146,7 +1146,8 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
 }
 
 /// Each column chunk's codec in a Parquet file, and its rows, as pyarrow reads them.
-const PARQUET_CODECS: &str = "
+fn parquet_codecs(path: &Path) -> String {
+    let script = "
 import sys
 import pyarrow.parquet as pq
 meta = pq.ParquetFile(sys.argv[1]).metadata
@@ -1154,6 +1155,22 @@ codecs = {meta.row_group(g).column(c).compression
           for g in range(meta.num_row_groups) for c in range(meta.num_columns)}
 print(' '.join(sorted(codecs)), meta.num_rows)
 ";
+    let read = Command::new("python3")
+        .args(["-c", script])
+        .arg(path)
+        .output()
+        .unwrap();
+    assert!(read.status.success(), "{read:?}");
+    String::from_utf8_lossy(&read.stdout).trim().to_string()
+}
+
+/// Each frame sent on `bus` by `bywire send`.
+fn send_each(bus: &str, frames: &[&str]) {
+    for frame in frames {
+        let (code, _, err) = bywire(&["send", bus, frame], "");
+        assert_eq!(code, 0, "{err}");
+    }
+}
 
 /// `dump -f FILE` logs in the format the extension names and finishes the file whichever way
 /// the dump ends: after `-n` frames (BLF; Parquet, its pages compressed as asked, as pyarrow
@@ -1194,10 +1211,7 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
             .spawn()
             .unwrap();
         std::thread::sleep(std::time::Duration::from_millis(700));
-        for frame in frames {
-            let (code, _, err) = bywire(&["send", &bus, frame], "");
-            assert_eq!(code, 0, "{err}");
-        }
+        send_each(&bus, &frames);
         std::thread::sleep(std::time::Duration::from_millis(500));
         if !by_count {
             let _ = Command::new("kill")
@@ -1213,17 +1227,8 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
             .collect();
         assert_eq!(got, frames, "{file}: {text}");
         if let Some(codec) = compression {
-            let read = Command::new("python3")
-                .args(["-c", PARQUET_CODECS])
-                .arg(&path)
-                .output()
-                .unwrap();
-            let said = String::from_utf8_lossy(&read.stdout);
-            assert_eq!(
-                said.trim(),
-                format!("{} 3", codec.to_uppercase()),
-                "{read:?}"
-            );
+            let expected = format!("{} 3", codec.to_uppercase());
+            assert_eq!(parquet_codecs(&path), expected);
         }
     }
     // `record --format parquet` takes the same option.
@@ -1243,10 +1248,7 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1_000));
-    for frame in frames {
-        let (code, _, err) = bywire(&["send", &bus, frame], "");
-        assert_eq!(code, 0, "{err}");
-    }
+    send_each(&bus, &frames);
     assert!(record.wait().unwrap().success());
     let files: Vec<_> = std::fs::read_dir(&recorded)
         .unwrap()
@@ -1254,16 +1256,7 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
         .collect();
     assert_eq!(files.len(), 1, "{files:?}");
-    let read = Command::new("python3")
-        .args(["-c", PARQUET_CODECS])
-        .arg(&files[0])
-        .output()
-        .unwrap();
-    assert_eq!(
-        String::from_utf8_lossy(&read.stdout).trim(),
-        "UNCOMPRESSED 3",
-        "{read:?}"
-    );
+    assert_eq!(parquet_codecs(&files[0]), "UNCOMPRESSED 3");
     let _ = stop_serve(server);
     std::fs::remove_dir_all(&dir).unwrap();
 }
