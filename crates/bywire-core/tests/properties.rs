@@ -46,6 +46,37 @@ fn frame() -> impl Strategy<Value = Frame> {
     ]
 }
 
+/// The compact text as can-utils' `lib.c` builds it, field by field through `format!`: the
+/// reference the byte-built text is held to.
+fn can_utils_text(f: &Frame) -> String {
+    let id = |id: Id| match id {
+        Id::Standard(_) => format!("{:03X}#", id.as_raw()),
+        Id::Extended(_) => format!("{:08X}#", id.as_raw()),
+    };
+    let hex = |data: &[u8]| data.iter().map(|b| format!("{b:02X}")).collect::<String>();
+    match f {
+        Frame::Classic(c) => {
+            let dlc = c.dlc().as_raw();
+            let body = match (c.is_remote(), dlc) {
+                (true, 0) => "R".to_string(),
+                (true, _) => format!("R{}", c.len()),
+                (false, _) => hex(c.data()),
+            };
+            let raw_dlc = if dlc > 8 {
+                format!("_{dlc:X}")
+            } else {
+                String::new()
+            };
+            format!("{}{body}{raw_dlc}", id(c.id()))
+        }
+        Frame::Fd(d) => {
+            let flags = 4 | u8::from(d.brs()) | u8::from(d.esi()) << 1;
+            format!("{}#{flags:X}{}", id(d.id()), hex(d.data()))
+        }
+        Frame::Error(e) => format!("{:08X}#{}", 0x2000_0000 | e.class_bits(), hex(e.data())),
+    }
+}
+
 fn shape(f: &Frame) -> FrameShape {
     FrameShape {
         extended: f.id().unwrap().is_extended(),
@@ -61,6 +92,20 @@ proptest! {
     fn text_round_trip(f in frame()) {
         let text = f.to_string();
         prop_assert_eq!(text.parse::<Frame>(), Ok(f));
+    }
+
+    #[test]
+    fn text_is_built_as_can_utils_builds_it(
+        f in prop_oneof![
+            frame(),
+            (0u32..=0x1FFF_FFFF, prop::collection::vec(any::<u8>(), 8))
+                .prop_map(|(class, data)| Frame::Error(bywire_core::ErrorFrame::new(class, &data).unwrap())),
+        ]
+    ) {
+        let expected = can_utils_text(&f);
+        let text = f.text();
+        prop_assert_eq!(text.as_str(), expected.as_str());
+        prop_assert_eq!(f.to_string(), expected);
     }
 
     #[test]

@@ -11,11 +11,11 @@
 //! in can-utils' compact form (FD flags, remote frames, raw DLCs and error frames included).
 //! Newer can-utils may append a direction (`R` or `T`); it is read and kept.
 
-use std::fmt::{self, Write as _};
+use std::fmt;
 use std::io::{self, BufRead, Write};
 use std::ops::ControlFlow;
 
-use bywire_core::frame::ParseFrameErrorKind;
+use bywire_core::frame::{FrameText, ParseFrameErrorKind};
 use bywire_core::{ClassicFrame, Dlc, Frame, Timestamp};
 
 use crate::lines::{line_ref, CappedLines, LineBytes, LineRef};
@@ -466,24 +466,30 @@ pub enum Precision {
 /// The frame as candump prints it: with `raw_dlc` (candump `-8`) a classic frame's DLC above 8
 /// shows as `_X`; without, the frame is printed as its 8 bytes.
 pub fn frame_text(frame: &Frame, raw_dlc: bool) -> impl fmt::Display + '_ {
-    FrameText(frame, raw_dlc)
+    CandumpFrame(frame, raw_dlc)
 }
 
-struct FrameText<'a>(&'a Frame, bool);
+struct CandumpFrame<'a>(&'a Frame, bool);
 
-impl fmt::Display for FrameText<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl CandumpFrame<'_> {
+    fn text(&self) -> FrameText {
         match self.0 {
             Frame::Classic(c) if !self.1 && c.dlc().as_raw() > 8 => {
                 let plain = if c.is_remote() {
-                    ClassicFrame::remote(c.id(), Dlc::from_classic_len(8).ok_or(fmt::Error)?)
+                    Dlc::from_classic_len(8).map(|eight| ClassicFrame::remote(c.id(), eight))
                 } else {
-                    ClassicFrame::new(c.id(), c.data()).map_err(|_| fmt::Error)?
+                    ClassicFrame::new(c.id(), c.data()).ok()
                 };
-                Frame::Classic(plain).fmt(f)
+                plain.map_or_else(|| self.0.text(), |p| Frame::Classic(p).text())
             }
-            other => other.fmt(f),
+            other => other.text(),
         }
+    }
+}
+
+impl fmt::Display for CandumpFrame<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 
@@ -494,14 +500,69 @@ pub fn timestamp_text(timestamp: Timestamp, precision: Precision) -> impl fmt::D
 
 struct TimestampText(Timestamp, Precision);
 
-impl fmt::Display for TimestampText {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl TimestampText {
+    /// The text in a buffer on the stack (at most 11 digits of seconds, a point and 9 of
+    /// fraction), and its length.
+    fn bytes(&self) -> ([u8; 24], usize) {
         let nanos = self.0.as_nanos();
         let (secs, sub) = (nanos / 1_000_000_000, nanos % 1_000_000_000);
-        match self.1 {
-            Precision::Micros => write!(f, "{secs:010}.{:06}", sub / 1000),
-            Precision::Nanos => write!(f, "{secs:010}.{sub:09}"),
+        let (fraction, digits) = match self.1 {
+            Precision::Micros => (sub / 1000, 6),
+            Precision::Nanos => (sub, 9),
+        };
+        let mut text = [0u8; 24];
+        let mut len = push_decimal(&mut text, 0, secs, 10);
+        if let Some(point) = text.get_mut(len) {
+            *point = b'.';
+            len += 1;
         }
+        len = push_decimal(&mut text, len, fraction, digits);
+        (text, len)
+    }
+}
+
+/// `value` in decimal at `at` in `text`, zero-padded to `width` digits; where it ends. Two
+/// digits a step through a table (a division by 10 a digit cost most of a line's writing).
+fn push_decimal(text: &mut [u8], at: usize, value: u64, width: usize) -> usize {
+    const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
+        2021222324252627282930313233343536373839\
+        4041424344454647484950515253545556575859\
+        6061626364656667686970717273747576777879\
+        8081828384858687888990919293949596979899";
+    // At most 20 digits in a u64, filled from the right.
+    let mut digits = [b'0'; 20];
+    let mut start = digits.len();
+    let mut rest = value;
+    while rest >= 10 {
+        let pair = usize::try_from(rest % 100).unwrap_or(0) * 2;
+        rest /= 100;
+        start = start.saturating_sub(2);
+        if let (Some(slot), Some(two)) =
+            (digits.get_mut(start..start + 2), PAIRS.get(pair..pair + 2))
+        {
+            slot.copy_from_slice(two);
+        }
+    }
+    if rest > 0 || start == digits.len() {
+        start = start.saturating_sub(1);
+        if let Some(slot) = digits.get_mut(start) {
+            *slot = b'0' + u8::try_from(rest).unwrap_or(0);
+        }
+    }
+    // Zero-padded: the leading zeros are already in place.
+    let start = start.min(digits.len().saturating_sub(width));
+    let shown = digits.get(start..).unwrap_or(&[]);
+    let end = (at + shown.len()).min(text.len());
+    if let Some(slot) = text.get_mut(at..end) {
+        slot.copy_from_slice(shown.get(..end - at).unwrap_or(&[]));
+    }
+    end
+}
+
+impl fmt::Display for TimestampText {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (text, len) = self.bytes();
+        f.write_str(std::str::from_utf8(text.get(..len).unwrap_or(&[])).unwrap_or(""))
     }
 }
 
@@ -510,7 +571,7 @@ pub struct Writer<W> {
     output: W,
     precision: Precision,
     raw_dlc: bool,
-    line: String,
+    line: Vec<u8>,
 }
 
 impl<W: Write> Writer<W> {
@@ -520,7 +581,7 @@ impl<W: Write> Writer<W> {
             output,
             precision: Precision::Micros,
             raw_dlc: false,
-            line: String::new(),
+            line: Vec::with_capacity(192),
         }
     }
 
@@ -536,41 +597,50 @@ impl<W: Write> Writer<W> {
         self
     }
 
-    /// Write one line; the whole line is formatted first, so a failed write never leaves a
-    /// partial line from this call in the output buffer's logic.
+    /// Write one line; the whole line is built first (bytes copied, not formatted), so a
+    /// failed write never leaves a partial line from this call in the output buffer's logic.
     pub fn write(
         &mut self,
         timestamp: Timestamp,
         interface: &str,
         frame: &Frame,
     ) -> io::Result<()> {
-        self.line.clear();
-        // Writing to a String cannot fail.
-        let _ = writeln!(
-            self.line,
-            "({}) {interface} {}",
-            timestamp_text(timestamp, self.precision),
-            frame_text(frame, self.raw_dlc)
-        );
-        self.output.write_all(self.line.as_bytes())
+        self.write_line(timestamp, interface, frame, None)
     }
 
     /// Write a record (its direction too).
     pub fn write_record(&mut self, record: &LogRecord) -> io::Result<()> {
-        match record.direction {
-            None => self.write(record.timestamp, &record.interface, &record.frame),
-            Some(direction) => {
-                self.line.clear();
-                let _ = writeln!(
-                    self.line,
-                    "({}) {} {} {direction}",
-                    timestamp_text(record.timestamp, self.precision),
-                    record.interface,
-                    frame_text(&record.frame, self.raw_dlc)
-                );
-                self.output.write_all(self.line.as_bytes())
-            }
+        self.write_line(
+            record.timestamp,
+            &record.interface,
+            &record.frame,
+            record.direction,
+        )
+    }
+
+    fn write_line(
+        &mut self,
+        timestamp: Timestamp,
+        interface: &str,
+        frame: &Frame,
+        direction: Option<char>,
+    ) -> io::Result<()> {
+        let line = &mut self.line;
+        line.clear();
+        let (stamp, stamp_len) = TimestampText(timestamp, self.precision).bytes();
+        line.push(b'(');
+        line.extend_from_slice(stamp.get(..stamp_len).unwrap_or(&[]));
+        line.extend_from_slice(b") ");
+        line.extend_from_slice(interface.as_bytes());
+        line.push(b' ');
+        line.extend_from_slice(CandumpFrame(frame, self.raw_dlc).text().as_bytes());
+        if let Some(direction) = direction {
+            let mut utf8 = [0u8; 4];
+            line.push(b' ');
+            line.extend_from_slice(direction.encode_utf8(&mut utf8).as_bytes());
         }
+        line.push(b'\n');
+        self.output.write_all(line)
     }
 
     /// Flush the output.
@@ -667,6 +737,63 @@ mod tests {
     }
 
     proptest! {
+        /// A line built from bytes is the line `format!` builds field by field from candump's
+        /// forms: `{secs:010}.{micros:06}` (or nanoseconds), the interface, the frame (a raw DLC
+        /// shown or not), the direction.
+        #[test]
+        fn lines_are_built_as_format_builds_them(
+            nanos in prop_oneof![any::<u64>(), 0u64..2_000_000_000_000_000_000],
+            nanoseconds in any::<bool>(),
+            raw_dlc in any::<bool>(),
+            interface in "[a-z]{1,5}[0-9]",
+            id in 0u32..=0x7FF,
+            data in any::<[u8; 8]>(),
+            dlc in 0u8..=15,
+            direction in prop::option::of(prop_oneof![Just('R'), Just('T')]),
+        ) {
+            let id = bywire_core::Id::standard(id).unwrap();
+            let dlc = Dlc::new(dlc).unwrap();
+            let data = &data[..dlc.classic_len()];
+            let frame = Frame::Classic(ClassicFrame::with_dlc(id, dlc, data).unwrap());
+            let (secs, sub) = (nanos / 1_000_000_000, nanos % 1_000_000_000);
+            let stamp = if nanoseconds {
+                format!("{secs:010}.{sub:09}")
+            } else {
+                format!("{secs:010}.{:06}", sub / 1000)
+            };
+            let shown = if raw_dlc || dlc.as_raw() <= 8 {
+                frame.to_string()
+            } else {
+                Frame::Classic(ClassicFrame::new(id, data).unwrap()).to_string()
+            };
+            let tail = direction.map(|d| format!(" {d}")).unwrap_or_default();
+            let expected = format!("({stamp}) {interface} {shown}{tail}\n");
+            let precision = if nanoseconds { Precision::Nanos } else { Precision::Micros };
+            let mut w = Writer::new(Vec::new()).precision(precision).raw_dlc(raw_dlc);
+            w.write_record(&LogRecord {
+                timestamp: Timestamp::from_nanos(nanos),
+                interface: interface.clone(),
+                frame,
+                direction,
+            })
+            .unwrap();
+            prop_assert_eq!(String::from_utf8(w.into_inner()).unwrap(), expected.clone());
+            let displayed = format!(
+                "({}) {interface} {}{tail}\n",
+                timestamp_text(Timestamp::from_nanos(nanos), precision),
+                frame_text(&frame, raw_dlc)
+            );
+            prop_assert_eq!(displayed, expected);
+        }
+
+        #[test]
+        fn decimals_are_written_as_format_writes_them(value in prop_oneof![any::<u64>(), 0u64..1000], width in 0usize..=20) {
+            let mut text = [0u8; 24];
+            let end = push_decimal(&mut text, 2, value, width);
+            let expected = format!("{value:0width$}");
+            prop_assert_eq!(&text[2..end], expected.as_bytes());
+        }
+
         #[test]
         fn eight_digits_at_once_read_as_one_at_a_time(chunk in any::<[u8; 8]>(), digits in "[0-9]{8}") {
             let one_at_a_time = |chunk: [u8; 8]| {

@@ -9,7 +9,7 @@ mod error_frame;
 mod text;
 
 pub use error_frame::{ErrorClass, ErrorFrame};
-pub use text::{ParseFrameError, ParseFrameErrorKind};
+pub use text::{FrameText, ParseFrameError, ParseFrameErrorKind};
 
 /// Extended frame format flag in a SocketCAN `can_id`.
 pub const EFF_FLAG: u32 = 0x8000_0000;

@@ -281,49 +281,95 @@ impl Frame {
     }
 }
 
-fn write_hex(f: &mut fmt::Formatter<'_>, data: &[u8]) -> fmt::Result {
-    // Through a buffer on the stack, written once: a `write!` per byte costs ten times more.
-    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
-    let mut text = [0u8; 128];
-    for (pair, byte) in text.chunks_exact_mut(2).zip(data) {
-        if let [high, low] = pair {
-            *high = DIGITS.get(usize::from(byte >> 4)).copied().unwrap_or(b'0');
-            *low = DIGITS.get(usize::from(byte & 0xF)).copied().unwrap_or(b'0');
+/// A frame's compact text, built on the stack: what [`Frame`]'s `Display` prints, as bytes for
+/// writers that copy them (formatting each field through `core::fmt` cost ten times more). At
+/// most 139 bytes: an extended identifier, `##`, the flags and 64 data bytes in hex.
+#[derive(Clone, Copy)]
+pub struct FrameText {
+    bytes: [u8; FrameText::CAPACITY],
+    len: usize,
+}
+
+impl FrameText {
+    const CAPACITY: usize = 140;
+    const DIGITS: &'static [u8; 16] = b"0123456789ABCDEF";
+
+    /// The text's bytes (ASCII).
+    pub fn as_bytes(&self) -> &[u8] {
+        self.bytes.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The text.
+    pub fn as_str(&self) -> &str {
+        core::str::from_utf8(self.as_bytes()).unwrap_or("")
+    }
+
+    fn push(&mut self, byte: u8) {
+        if let Some(slot) = self.bytes.get_mut(self.len) {
+            *slot = byte;
+            self.len += 1;
         }
     }
-    let used = text.get(..data.len().min(64) * 2).unwrap_or(&[]);
-    f.write_str(core::str::from_utf8(used).unwrap_or(""))
-}
 
-fn write_id(f: &mut fmt::Formatter<'_>, id: Id) -> fmt::Result {
-    match id {
-        Id::Standard(s) => write!(f, "{:03X}#", s.as_raw()),
-        Id::Extended(e) => write!(f, "{:08X}#", e.as_raw()),
+    /// `value`'s last `digits` hex digits, upper case (the identifiers' `{:03X}`/`{:08X}`).
+    fn push_hex(&mut self, value: u32, digits: u32) {
+        for shift in (0..digits).rev() {
+            let nibble = value.checked_shr(4 * shift).unwrap_or(0) & 0xF;
+            self.push(Self::digit(nibble));
+        }
+    }
+
+    fn push_data(&mut self, data: &[u8]) {
+        for byte in data {
+            self.push(Self::digit(u32::from(byte >> 4)));
+            self.push(Self::digit(u32::from(byte & 0xF)));
+        }
+    }
+
+    fn push_id(&mut self, id: Id) {
+        match id {
+            Id::Standard(s) => self.push_hex(u32::from(s.as_raw()), 3),
+            Id::Extended(e) => self.push_hex(e.as_raw(), 8),
+        }
+        self.push(b'#');
+    }
+
+    fn digit(nibble: u32) -> u8 {
+        usize::try_from(nibble)
+            .ok()
+            .and_then(|n| Self::DIGITS.get(n))
+            .copied()
+            .unwrap_or(b'0')
     }
 }
 
-/// Prints the compact can-utils form, byte-identical to `candump`'s.
-impl fmt::Display for Frame {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl Frame {
+    /// The compact can-utils form, byte-identical to `candump`'s (what `Display` prints).
+    pub fn text(&self) -> FrameText {
+        let mut text = FrameText {
+            bytes: [0; FrameText::CAPACITY],
+            len: 0,
+        };
         match self {
             Frame::Classic(c) => {
-                write_id(f, c.id())?;
+                text.push_id(c.id());
                 let dlc = c.dlc().as_raw();
                 if c.is_remote() {
-                    f.write_str("R")?;
+                    text.push(b'R');
                     if dlc > 0 {
-                        write!(f, "{}", c.len())?;
+                        // A remote frame's length is at most 8: one digit.
+                        text.push_hex(u32::try_from(c.len()).unwrap_or(0), 1);
                     }
                 } else {
-                    write_hex(f, c.data())?;
+                    text.push_data(c.data());
                 }
                 if dlc > 8 {
-                    write!(f, "_{dlc:X}")?;
+                    text.push(b'_');
+                    text.push_hex(u32::from(dlc), 1);
                 }
-                Ok(())
             }
             Frame::Fd(d) => {
-                write_id(f, d.id())?;
+                text.push_id(d.id());
                 // FDF (4) is always set, as Linux and can-utils write it.
                 let mut flags = FLAG_FDF;
                 if d.brs() {
@@ -332,14 +378,24 @@ impl fmt::Display for Frame {
                 if d.esi() {
                     flags |= FLAG_ESI;
                 }
-                write!(f, "#{flags:X}")?;
-                write_hex(f, d.data())
+                text.push(b'#');
+                text.push_hex(u32::from(flags), 1);
+                text.push_data(d.data());
             }
             Frame::Error(e) => {
-                write!(f, "{:08X}#", ERR_FLAG | e.class_bits())?;
-                write_hex(f, e.data())
+                text.push_hex(ERR_FLAG | e.class_bits(), 8);
+                text.push(b'#');
+                text.push_data(e.data());
             }
         }
+        text
+    }
+}
+
+/// Prints the compact can-utils form, byte-identical to `candump`'s.
+impl fmt::Display for Frame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 

@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
-use bywire_log::candump::{frame_text, timestamp_text};
+use bywire_log::candump::timestamp_text;
 use bywire_log::format::Format;
 use bywire_log::stats::LogStats;
+use bywire_log::LogRecord;
 use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
@@ -359,37 +360,43 @@ fn cat_to(
     } else {
         Precision::Micros
     };
-    let mut view = View::default();
-    for (name, input) in inputs(files)? {
-        for record in records(&name, input, Skip::Unreadable) {
-            let record = record?;
-            if filtering.is_some_and(|f| !f.accepts(&record.frame)) {
-                continue;
-            }
-            if screen {
-                view.indent_standard |= record.frame.id().is_some_and(|id| id.is_extended());
-                writeln!(
-                    out,
-                    " ({})  {}  {}",
-                    timestamp_text(record.timestamp, precision),
-                    record.interface,
-                    FrameView {
-                        frame: &record.frame,
-                        view
-                    }
-                )?;
-            } else {
-                writeln!(
-                    out,
-                    "({}) {} {}",
-                    timestamp_text(record.timestamp, precision),
-                    record.interface,
-                    frame_text(&record.frame, true)
-                )?;
+    let each_record = |write: &mut dyn FnMut(&LogRecord) -> Result<()>| -> Result<()> {
+        for (name, input) in inputs(files)? {
+            for record in records(&name, input, Skip::Unreadable) {
+                let record = record?;
+                if filtering.is_some_and(|f| !f.accepts(&record.frame)) {
+                    continue;
+                }
+                write(&record)?;
             }
         }
+        Ok(())
+    };
+    if screen {
+        let mut view = View::default();
+        return each_record(&mut |record| {
+            view.indent_standard |= record.frame.id().is_some_and(|id| id.is_extended());
+            writeln!(
+                out,
+                " ({})  {}  {}",
+                timestamp_text(record.timestamp, precision),
+                record.interface,
+                FrameView {
+                    frame: &record.frame,
+                    view
+                }
+            )?;
+            Ok(())
+        });
     }
-    Ok(())
+    // Log lines as candump writes them with `-8` (a raw DLC shown), directions left out.
+    let mut lines = bywire_log::Writer::new(out)
+        .precision(precision)
+        .raw_dlc(true);
+    each_record(&mut |record| {
+        lines.write(record.timestamp, &record.interface, &record.frame)?;
+        Ok(())
+    })
 }
 
 fn stats(files: &[PathBuf], out: &mut impl Write) -> Result<()> {
