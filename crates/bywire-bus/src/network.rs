@@ -76,7 +76,7 @@ impl Slot {
     /// A new deadline, asked of the node.
     fn set_deadline(&mut self, deadline: Option<Timestamp>) {
         self.deadline = deadline;
-        self.wake = self.wake();
+        self.wake = self.next_wake();
     }
 
     /// Polled at `now`, after which the node asked for `deadline`.
@@ -88,7 +88,7 @@ impl Slot {
     /// When it must next run: at once (time zero, which is never later than the present) if
     /// never polled; a deadline at or before its last poll counts RESOLUTION after that poll,
     /// so a node asking for the past cannot stall time.
-    fn wake(&self) -> Option<Timestamp> {
+    fn next_wake(&self) -> Option<Timestamp> {
         match (self.polled, self.deadline) {
             (None, _) => Some(Timestamp::ZERO),
             (Some(last), Some(d)) if d <= last => Some(last.saturating_add(RESOLUTION)),
