@@ -1,10 +1,14 @@
-"""Spark: a fleet's logs (candump and BLF) decoded into the partitioned Parquet data lake, by
-bywire's data source and the way it is done without it (python-can's readers and cantools'
-decode_message in mapInPandas over the file paths), same Spark, same files, same output.
+"""Spark: a fleet's logs (candump and BLF) decoded into the partitioned Parquet data lake, same
+Spark, same files, same lake, three ways: bywire's data source with Spark's Parquet writer,
+bywire.spark.write_lake (bywire writes the lake on the executors), and the way it is done
+without bywire (python-can's readers and cantools' decode_message in mapInPandas over the
+file paths). Each job is timed from its start to its lake being committed; the lakes' rows are
+counted afterwards and must agree.
 
-    python3 python/benchmarks/bench_spark.py [FOLDER] [--cores 1,2]
+    python3 python/benchmarks/bench_spark.py [FOLDER] [--cores 1,2] [--vehicles 4]
 
-Run it inside ../shared/tools/lonet.sh (Spark binds loopback only there).
+Run it inside ../shared/tools/lonet.sh (Spark binds loopback only there). A fleet is made once
+in FOLDER (for another size, another folder).
 """
 
 from __future__ import annotations
@@ -64,11 +68,11 @@ def with_python_can(dbc: str):
     return run
 
 
-def timed(what, job) -> float:
+def timed(what, job, lake: pathlib.Path, count) -> float:
     start = time.perf_counter()
-    rows = job()
+    job()
     seconds = time.perf_counter() - start
-    print(f"  {what}: {seconds:.2f} s ({rows} rows)")
+    print(f"  {what}: {seconds:.2f} s ({count(lake)} rows)", flush=True)
     return seconds
 
 
@@ -76,9 +80,11 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("folder", nargs="?")
     parser.add_argument("--cores", default="1,2")
+    parser.add_argument("--vehicles", type=int, default=4, help="the fleet's size, when it is made")
     args = parser.parse_args()
     folder = pathlib.Path(args.folder or tempfile.mkdtemp(prefix="bywire-bench-"))
-    logs = sorted(fleet(folder).glob("vehicle=*/date=*/bus*.*"))
+    logs = sorted(fleet(folder, vehicles=args.vehicles).glob("vehicle=*/date=*/bus*.*"))
+    pattern = str(folder / "vehicle=*" / "date=*" / "bus*.*")
     out = pathlib.Path(tempfile.mkdtemp(prefix="bywire-lake-"))
     dbc = str(TUG_DBC)
     for cores in (int(c) for c in args.cores.split(",")):
@@ -88,25 +94,30 @@ def main() -> None:
             .config("spark.sql.shuffle.partitions", str(cores))
             .getOrCreate()
         )
+        spark.sparkContext.setLogLevel("ERROR")
         bywire.spark.register(spark)
-        print(f"local[{cores}], {len(logs)} files, {sum(p.stat().st_size for p in logs) / 1e6:.1f} MB")
+        count = lambda lake: spark.read.parquet(str(lake)).count()  # noqa: E731
+        print(f"local[{cores}], {len(logs)} files, {sum(p.stat().st_size for p in logs) / 1e6:.1f} MB", flush=True)
 
-        def ours():
-            df = spark.read.format("bywire").option("dbc", dbc).option("output", "signals").load(str(folder / "vehicle=*" / "date=*" / "bus*.*"))
-            df.write.mode("overwrite").partitionBy("vehicle", "date", "message").parquet(str(out / "bywire"))
-            return spark.read.parquet(str(out / "bywire")).count()
+        def data_source():
+            df = spark.read.format("bywire").option("dbc", dbc).option("output", "signals").load(pattern)
+            df.write.mode("overwrite").partitionBy("vehicle", "date", "message").parquet(str(out / "data-source"))
+
+        def write_lake():
+            bywire.spark.write_lake(spark, pattern, dbc, str(out / "write-lake"), mode="overwrite")
 
         def theirs():
             rows = [(str(p), p.parent.parent.name.split("=")[1], p.parent.name.split("=")[1]) for p in logs]
             paths = spark.createDataFrame(rows, "path string, vehicle string, date string").repartition(len(rows))
             df = paths.mapInPandas(with_python_can(dbc), LONG)
             df.write.mode("overwrite").partitionBy("vehicle", "date", "message").parquet(str(out / "python-can"))
-            return spark.read.parquet(str(out / "python-can")).count()
 
-        ours()  # warm: the executors' Python workers start
-        a = min(timed("bywire data source", ours) for _ in range(3))
-        b = timed("python-can + cantools in mapInPandas", theirs)
-        print(f"  ratio: {b / a:.1f} x")
+        data_source()  # warm: the JVM's code and the executors' Python workers
+        write_lake()
+        a = min(timed("bywire data source + Spark's writer", data_source, out / "data-source", count) for _ in range(3))
+        b = min(timed("bywire.spark.write_lake", write_lake, out / "write-lake", count) for _ in range(3))
+        c = timed("python-can + cantools in mapInPandas", theirs, out / "python-can", count)
+        print(f"  ratio, data source: {c / a:.1f} x; write_lake: {c / b:.1f} x", flush=True)
         spark.stop()
     shutil.rmtree(out, ignore_errors=True)
 

@@ -23,14 +23,14 @@ def cli() -> str:
 
 
 def fleet(folder: pathlib.Path, vehicles: int = 4, seconds: float = 120.0) -> pathlib.Path:
-    """vehicle=tugN/date=2026-12-0N/{bus1.log, bus3.blf}: command and sensor buses of one run
-    per vehicle (made once, kept in `folder`)."""
+    """vehicle=tugN/date=2026-12-DD/{bus1.log, bus3.blf}: command and sensor buses of one run
+    per vehicle, seeded by N (made once, kept in `folder`)."""
     done = folder / "done"
     if done.exists():
         return folder
     for n in range(1, vehicles + 1):
         run = bywire.sim.run("apron-loop", seed=n, out=folder / f"run{n}", max_seconds=seconds)
-        target = folder / f"vehicle=tug{n}" / f"date=2026-12-0{n}"
+        target = folder / f"vehicle=tug{n}" / f"date=2026-12-{(n - 1) % 28 + 1:02d}"
         target.mkdir(parents=True, exist_ok=True)
         os.replace(run.bus_logs["bus1"], target / "bus1.log")
         subprocess.run([cli(), "log", "convert", run.bus_logs["bus3"], str(target / "bus3.blf")], check=True, capture_output=True)

@@ -66,3 +66,11 @@ def run_sim(
     secoc: bool = False,
     max_seconds: float = 300.0,
 ) -> tuple[str, list[str]]: ...
+
+def signals_long(
+    table: pa.RecordBatch,
+    message: str,
+    vehicle: str | None = None,
+    date: str | None = None,
+    labelled: bool = True,
+) -> pa.RecordBatch: ...

@@ -27,7 +27,12 @@ Options:
 - ``split_mb``: candump logs bigger than this (256 MB) are read in ranges of this size, one
   partition each (other formats: one partition a file).
 
-:func:`decode` decodes a frames DataFrame with ``mapInArrow``.
+:func:`decode` decodes a frames DataFrame with ``mapInArrow``. :func:`write_lake` writes the
+partitioned data lake the example above writes, with bywire writing the Parquet files on the
+executors (the rows do not pass through Spark: several times faster), committed as Spark
+commits a job::
+
+    bywire.spark.write_lake(spark, "logs/**/*.blf", "vehicle.dbc", "lake", mode="overwrite")
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from __future__ import annotations
 import glob
 import os
 import re
+import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -136,34 +142,18 @@ def signals_long(
     message: str, table: pa.RecordBatch | pa.Table, vehicle: str | None, date: str | None
 ) -> pa.RecordBatch | None:
     """One message's decoded table in :data:`SIGNALS_SCHEMA`'s long form (one row per signal
-    value; absent multiplexed signals are no rows)."""
-    ts = table.column("ts").cast(_TIMESTAMP)
-    channel = table.column("channel").cast(pa.string())
-    vehicles, dates = _labels(table.num_rows, ts, vehicle, date)
-    parts = []
-    for name in table.column_names:
-        if name in ("ts", "channel") or name.endswith("_choice"):
-            continue
-        values = table.column(name)
-        present = pc.is_valid(values)
-        rows = len(values) - values.null_count
-        parts.append(
-            pa.table(
-                {
-                    "ts": pc.filter(ts, present),
-                    "vehicle": pc.filter(vehicles, present),
-                    "date": pc.filter(dates, present),
-                    "channel": pc.filter(channel, present),
-                    "message": pa.array([message] * rows, pa.string()),
-                    "signal": pa.array([name] * rows, pa.string()),
-                    "value": pc.filter(values, present).cast(pa.float64()),
-                }
-            )
-        )
-    if not parts:
+    value, in the frames' order; absent multiplexed signals are no rows)."""
+    batch = _one_batch(table)
+    if batch is None:
         return None
-    combined = pa.concat_tables(parts).combine_chunks()
-    batches = combined.to_batches()
+    long = bywire._native.signals_long(batch, message, vehicle, date)
+    return long if long.num_rows else None
+
+
+def _one_batch(table: pa.RecordBatch | pa.Table) -> pa.RecordBatch | None:
+    if isinstance(table, pa.RecordBatch):
+        return table
+    batches = table.combine_chunks().to_batches()
     return batches[0] if batches else None
 
 
@@ -337,3 +327,287 @@ def _equal_or_null(column: pa.Array, value) -> pa.Array:
     if value is None:
         return pc.is_null(column)
     return pc.fill_null(pc.equal(column, value), False)
+
+
+# The data lake written by bywire on the executors ----------------------------------------------
+
+#: Rows one (date, message) file holds back before writing them as a row group, and rows all of
+#: a task's files hold back at most (then every file writes what it holds).
+_LAKE_GROUP_ROWS = 1 << 17
+_LAKE_HELD_ROWS = 1 << 20
+#: Spark's name for a partition value that is null.
+_NULL_PARTITION = "__HIVE_DEFAULT_PARTITION__"
+#: Characters Spark escapes in a partition value (as ``%XX``), so that the folders are the ones
+#: Spark's own writer makes.
+_ESCAPED = set('"#%\'*/:=?\\\x7f{[]^') | {chr(c) for c in range(1, 0x20)}
+
+
+@dataclass
+class LakeSummary:
+    """What :func:`write_lake` wrote: the files (relative to the lake) and their rows."""
+
+    files: list[str]
+    rows: int
+
+
+def partition_folder(column: str, value: str | None) -> str:
+    """``column=value`` as Spark names a partition's folder (null and escaped characters
+    included)."""
+    if value is None or value == "":
+        return f"{column}={_NULL_PARTITION}"
+    return column + "=" + "".join(f"%{ord(c):02X}" if c in _ESCAPED else c for c in value)
+
+
+def write_lake(
+    spark,
+    path: str,
+    dbc: str,
+    lake: str,
+    *,
+    mode: str = "errorifexists",
+    path_pattern: str | None = None,
+    compression: str = "snappy",
+    split_mb: float = 256.0,
+    batch_rows: int = bywire.BATCH_ROWS,
+) -> LakeSummary:
+    """Decode the logs ``path`` names (as the data source's ``path``) into the data lake
+    ``lake``: Parquet partitioned by ``vehicle``, ``date`` and ``message``, one row a signal
+    value (``ts, channel, signal, value``), the lake
+    ``signals.write.partitionBy("vehicle", "date", "message").parquet(lake)`` gives and
+    ``spark.read.parquet(lake)`` reads — written by bywire on the executors, one task a file
+    (or a range of a big candump log), without the rows passing through Spark.
+
+    Committed as Spark commits a job: each task writes under ``lake/_temporary/JOB`` (a file
+    under a hidden name until it is whole), and only when every task has succeeded are the
+    files moved into place and ``_SUCCESS`` written; a failed job leaves the lake as it was.
+    ``mode``: ``errorifexists`` (a lake with files is refused before any work), ``overwrite``
+    (the old lake's files are removed once the new ones are ready), ``append`` or
+    ``ignore``. ``compression``: ``snappy`` (Spark's), ``zstd``, ``gzip`` or ``none``.
+    The logs and the lake must be where every executor can reach them (a shared file
+    system)."""
+    import uuid
+
+    mode = mode.lower()
+    if mode not in ("errorifexists", "error", "overwrite", "append", "ignore"):
+        raise ValueError(f"mode={mode}: errorifexists, overwrite, append or ignore")
+    if compression.lower() not in ("snappy", "zstd", "gzip", "none"):
+        raise ValueError(f"compression={compression}: snappy, zstd, gzip or none")
+    settings = _Settings.of({"output": "signals", "dbc": dbc, "split_mb": split_mb, "batch_rows": batch_rows})
+    bywire.Database.load(dbc)  # a DBC that does not load is named here, not on an executor
+    files = files_of(path)
+    if not files:
+        raise FileNotFoundError(f"{path}: no files")
+    existing = [e for e in os.listdir(lake) if e != "_temporary"] if os.path.isdir(lake) else []
+    if existing and mode in ("errorifexists", "error"):
+        raise FileExistsError(f"{lake}: the lake exists (mode overwrite, append or ignore)")
+    if existing and mode == "ignore":
+        return LakeSummary([], 0)
+    parts = [(p.path, p.byte_range) for f in files for p in split(f, settings.split_bytes)]
+    tasks = pack(parts, *_packing(spark, len(parts)))
+    job = uuid.uuid4().hex
+    staging = os.path.join(lake, "_temporary", job)
+    os.makedirs(staging)
+    task = _lake_task(parts, tasks, dbc, staging, job, path_pattern, compression.lower(), batch_rows)
+    try:
+        written = (
+            spark.range(len(tasks), numPartitions=len(tasks))
+            .mapInArrow(task, "file string, rows long")
+            .collect()
+        )
+        if mode == "overwrite":
+            for entry in existing:
+                target = os.path.join(lake, entry)
+                if os.path.isdir(target):
+                    shutil.rmtree(target)
+                else:
+                    os.remove(target)
+        for row in written:
+            target = os.path.join(lake, row.file)
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            os.replace(os.path.join(staging, row.file), target)
+        with open(os.path.join(lake, "_SUCCESS"), "w"):
+            pass
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        try:
+            os.rmdir(os.path.join(lake, "_temporary"))
+        except OSError:
+            pass  # another job's staging is there
+    return LakeSummary(sorted(row.file for row in written), sum(row.rows for row in written))
+
+
+def pack(
+    parts: list[tuple[str, tuple[int, int] | None]], max_bytes: int, open_cost: int, parallelism: int
+) -> list[list[int]]:
+    """The parts (``(path, byte range)``) grouped into tasks as Spark's file sources group
+    files (``spark.sql.files.maxPartitionBytes`` and ``openCostInBytes``): small files share a
+    task, so that a folder of many small logs does not pay a task's start for each, and there
+    are still enough tasks for every core. Each group: the parts' indexes."""
+
+    def size(index: int) -> int:
+        path, byte_range = parts[index]
+        return byte_range[1] - byte_range[0] if byte_range else os.path.getsize(path)
+
+    sizes = {index: size(index) for index in range(len(parts))}
+    total = sum(sizes.values()) + open_cost * len(parts)
+    most = min(max_bytes, max(open_cost, total // max(1, parallelism)))
+    tasks: list[list[int]] = []
+    current: list[int] = []
+    current_size = 0
+    for index in sorted(sizes, key=lambda i: (-sizes[i], i)):
+        if current and current_size + sizes[index] > most:
+            tasks.append(current)
+            current, current_size = [], 0
+        current.append(index)
+        current_size += sizes[index] + open_cost
+    if current:
+        tasks.append(current)
+    return tasks
+
+
+def _packing(spark, parts: int) -> tuple[int, int, int]:
+    """Spark's settings for :func:`pack` (a session without a SparkContext: a task a part)."""
+    max_bytes = _bytes(spark.conf.get("spark.sql.files.maxPartitionBytes", "128m"))
+    open_cost = _bytes(spark.conf.get("spark.sql.files.openCostInBytes", "4m"))
+    try:
+        parallelism = spark.sparkContext.defaultParallelism
+    except Exception:  # Spark Connect has no SparkContext
+        return max_bytes, 0, parts
+    return max_bytes, open_cost, parallelism
+
+
+def _bytes(text: str) -> int:
+    """A Spark size (``134217728b``, ``128m``, ``4MB``) in bytes."""
+    text = text.strip().lower().removesuffix("b")
+    scale = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}.get(text[-1:], 1)
+    return int(float(text.rstrip("kmgt")) * scale)
+
+
+def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows):
+    """The function each task runs (``mapInArrow`` over the tasks' indexes): its parts
+    decoded into files under ``staging``, named by part and job; ``(file, rows)`` for each."""
+
+    def run(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+        db = bywire.Database.load(dbc)
+        for batch in batches:
+            for index in (i for task in batch.column(0).to_pylist() for i in tasks[task]):
+                path, byte_range = parts[index]
+                name = f"part-{index:05d}-{job}.c000.{compression}.parquet"
+                files = _LakeFiles(staging, name, compression)
+                try:
+                    vehicle, date = path_labels(path, pattern)
+                    frames = bywire.read_log(path, batch_rows, byte_range)
+                    for message, table in db.iter_decoded(frames):
+                        for day, long in _by_day(message, table, vehicle, date):
+                            folder = os.path.join(
+                                partition_folder("vehicle", vehicle),
+                                partition_folder("date", day),
+                                partition_folder("message", message),
+                            )
+                            files.add(folder, long)
+                    written = files.close()
+                except BaseException:
+                    files.discard()
+                    raise
+                yield pa.RecordBatch.from_pydict(
+                    {"file": [f for f, _ in written], "rows": [n for _, n in written]},
+                    schema=pa.schema([("file", pa.string()), ("rows", pa.int64())]),
+                )
+
+    return run
+
+
+def _by_day(message: str, table, vehicle, date) -> Iterator[tuple[str | None, pa.RecordBatch]]:
+    """A decoded table's long rows (``ts, channel, signal, value``) for each day: the path's,
+    or each row's UTC day."""
+    batch = _one_batch(table)
+    if batch is None:
+        return
+    if date is not None:
+        long = bywire._native.signals_long(batch, message, labelled=False)
+        if long.num_rows:
+            yield date, long
+        return
+    long = bywire._native.signals_long(batch, message, vehicle, None)
+    days = long.column("date")
+    rest = long.select(["ts", "channel", "signal", "value"])
+    for day in pc.unique(days).to_pylist():
+        yield day, rest.filter(pc.equal(days, day))
+
+
+class _LakeFiles:
+    """A task's files, one a partition folder: rows held back, then written a row group at a
+    time, each file under a hidden name until it is closed (a failed attempt leaves no file
+    that looks whole)."""
+
+    def __init__(self, staging: str, name: str, compression: str) -> None:
+        self.staging = staging
+        self.name = name
+        self.compression = compression
+        self.held: dict[str, list[pa.RecordBatch]] = {}
+        self.held_rows: dict[str, int] = {}
+        self.writers: dict[str, object] = {}
+        self.rows: dict[str, int] = {}
+
+    def _hidden(self, folder: str) -> str:
+        return os.path.join(self.staging, folder, f".{self.name}.{os.getpid()}.inprogress")
+
+    def add(self, folder: str, rows: pa.RecordBatch) -> None:
+        self.held.setdefault(folder, []).append(rows)
+        self.held_rows[folder] = self.held_rows.get(folder, 0) + rows.num_rows
+        if self.held_rows[folder] >= _LAKE_GROUP_ROWS:
+            self._write(folder)
+        elif sum(self.held_rows.values()) >= _LAKE_HELD_ROWS:
+            for held in list(self.held):
+                self._write(held)
+
+    def _write(self, folder: str) -> None:
+        import pyarrow.parquet as pq
+
+        batches = self.held.pop(folder, [])
+        self.held_rows.pop(folder, None)
+        if not batches:
+            return
+        writer = self.writers.get(folder)
+        if writer is None:
+            os.makedirs(os.path.join(self.staging, folder), exist_ok=True)
+            writer = pq.ParquetWriter(
+                self._hidden(folder),
+                batches[0].schema,
+                compression=self.compression,
+                # Channels and signal names are a few texts (dictionary arrays: their keys are
+                # written as they are); times and values are mostly distinct: plain.
+                use_dictionary=["channel", "signal"],
+                # A file holds every signal of its message: the values' minimum and maximum,
+                # over signals of different meanings, would prune nothing (and cost a tenth of
+                # the writing).
+                write_statistics=["ts", "channel", "signal"],
+            )
+            self.writers[folder] = writer
+        table = pa.Table.from_batches(batches)
+        writer.write_table(table, row_group_size=len(table))
+        self.rows[folder] = self.rows.get(folder, 0) + len(table)
+
+    def close(self) -> list[tuple[str, int]]:
+        """Write what is held, close every file and give it its name: ``(file, rows)``."""
+        for folder in list(self.held):
+            self._write(folder)
+        written = []
+        for folder, writer in self.writers.items():
+            writer.close()
+            file = os.path.join(folder, self.name)
+            os.replace(self._hidden(folder), os.path.join(self.staging, file))
+            written.append((file, self.rows[folder]))
+        self.writers.clear()
+        return written
+
+    def discard(self) -> None:
+        for folder, writer in self.writers.items():
+            try:
+                writer.close()
+            finally:
+                try:
+                    os.remove(self._hidden(folder))
+                except OSError:
+                    pass
+        self.writers.clear()

@@ -5,6 +5,7 @@ cantools' decode of the same frames."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -107,10 +108,122 @@ def test_bad_options_are_named(spark, fleet):
         spark.read.format("bywire").load(str(fleet / "nothing-here" / "*.log")).count()
 
 
-def test_the_data_lake_example(fleet, tmp_path):
+def lake_rows(spark, lake) -> Counter:
+    """The lake as Spark reads it: (vehicle, date, message, ts, channel, signal, value)."""
+    return Counter(
+        (r.vehicle, str(r.date), r.message, r.ts, r.channel, r.signal, r.value)
+        for r in spark.read.parquet(str(lake)).collect()
+    )
+
+
+def partition_folders(lake) -> set:
+    return {p.parent.relative_to(lake) for p in lake.rglob("*.parquet")}
+
+
+def test_write_lake_gives_the_lake_spark_writes(spark, fleet, tmp_path):
+    import bywire.spark
+
+    ours = tmp_path / "ours"
+    summary = bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(ours))
+    through_spark = tmp_path / "spark"
+    signals = spark.read.format("bywire").option("dbc", str(TUG_DBC)).option("output", "signals").load(str(fleet))
+    signals.write.partitionBy("vehicle", "date", "message").parquet(str(through_spark))
+    rows = lake_rows(spark, ours)
+    assert rows == lake_rows(spark, through_spark)
+    assert sum(rows.values()) == summary.rows == len(cantools_rows(fleet))
+    assert partition_folders(ours) == partition_folders(through_spark)
+    assert sorted(str(p.relative_to(ours)) for p in ours.rglob("*.parquet")) == summary.files
+    assert (ours / "_SUCCESS").exists() and not (ours / "_temporary").exists()
+    # Against cantools too, row for row (times as the data source's test rounds them).
+    by_cantools = Counter(cantools_rows(fleet))
+    assert Counter((v, d, round(ts.timestamp(), 6), m, s, x) for v, d, m, ts, _, s, x in rows.elements()) == Counter(
+        (v, str(d), t, m, s, x) for v, d, t, m, s, x in by_cantools.elements()
+    )
+
+
+def test_write_lake_commits_all_or_nothing(spark, fleet, tmp_path):
+    import bywire.spark
+
+    lake = tmp_path / "lake"
+    first = bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(lake))
+    before = sorted(p.relative_to(lake) for p in lake.rglob("*") if p.is_file())
+    with pytest.raises(FileExistsError, match="the lake exists"):
+        bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(lake))
+    assert bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(lake), mode="ignore").rows == 0
+    # A log that breaks mid-file fails the job: the old lake stays as it was, nothing is left
+    # staged, and the error names the file.
+    broken = tmp_path / "broken" / "vehicle=tug3" / "date=2026-12-03"
+    broken.mkdir(parents=True)
+    good = next(fleet.rglob("*.log")).read_bytes()
+    cut = good.index(b"\n", len(good) // 2) + 1
+    (broken / "bus1.log").write_bytes(good[:cut] + b"(12.5) can0 12#\xff\n" + good[cut:])
+    shutil.copytree(fleet / "vehicle=tug1", tmp_path / "broken" / "vehicle=tug1")
+    with pytest.raises(Exception, match="bus1.log"):
+        bywire.spark.write_lake(spark, str(tmp_path / "broken"), str(TUG_DBC), str(lake), mode="overwrite")
+    assert sorted(p.relative_to(lake) for p in lake.rglob("*") if p.is_file()) == before
+    assert not (lake / "_temporary").exists()
+    # Append adds a job's files beside the others; overwrite replaces them.
+    appended = bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(lake), mode="append")
+    assert sum(lake_rows(spark, lake).values()) == first.rows + appended.rows
+    only = bywire.spark.write_lake(spark, str(fleet / "vehicle=tug1"), str(TUG_DBC), str(lake), mode="overwrite")
+    assert sorted(str(p.relative_to(lake)) for p in lake.rglob("*.parquet")) == only.files
+    assert {r.vehicle for r in spark.read.parquet(str(lake)).select("vehicle").distinct().collect()} == {"tug1"}
+
+
+def test_write_lake_dates_rows_by_their_day_without_one_in_the_path(spark, fleet, tmp_path):
+    import datetime
+
+    import bywire.spark
+
+    logs = tmp_path / "logs" / "tug9"
+    logs.mkdir(parents=True)
+    candump = next(fleet.rglob("*.log"))
+    (logs / "bus1.log").write_bytes(candump.read_bytes())
+    lake = tmp_path / "lake"
+    bywire.spark.write_lake(spark, str(tmp_path / "logs"), str(TUG_DBC), str(lake), path_pattern="{vehicle}/*.log")
+    days = Counter(
+        datetime.datetime.fromtimestamp(m.timestamp, datetime.timezone.utc).strftime("%Y-%m-%d")
+        for m in can.LogReader(str(candump))
+        for _ in range(len(cantools.database.load_file(str(TUG_DBC)).get_message_by_frame_id(m.arbitration_id).signals))
+    )
+    table = spark.read.parquet(str(lake))
+    assert {r.vehicle for r in table.select("vehicle").distinct().collect()} == {"tug9"}
+    assert Counter(str(r.date) for r in table.select("date").collect()) == days
+
+
+def test_partition_folders_are_named_as_spark_names_them(spark, tmp_path):
+    import bywire.spark
+
+    values = ["tug 1", "a:b=c", "50%/x", "#hash?", "caf\u00e9[1]^{2}", "quote'\"", "tab\tend", None, ""]
+    df = spark.createDataFrame([(v, 1) for v in values], "k string, v int")
+    df.write.partitionBy("k").parquet(str(tmp_path / "spark"))
+    written = {p.name for p in (tmp_path / "spark").iterdir() if p.name.startswith("k=")}
+    assert written == {bywire.spark.partition_folder("k", v) for v in values}
+
+
+def test_small_files_share_a_task_as_in_spark_file_sources(tmp_path):
+    import bywire.spark
+
+    sizes = [10, 300, 20, 700, 5]
+    parts = []
+    for n, size in enumerate(sizes):
+        path = tmp_path / f"f{n}.log"
+        path.write_bytes(b"x" * size)
+        parts.append((str(path), None))
+    parts.append((str(tmp_path / "f1.log"), (100, 400)))  # a range: its length counts
+    # 1335 bytes + 6 x 50 (the open cost) = 1635, over 2 cores: at most 817 a task, filled
+    # biggest first, each part counted with its open cost.
+    tasks = bywire.spark.pack(parts, max_bytes=10_000, open_cost=50, parallelism=2)
+    assert sorted(i for t in tasks for i in t) == list(range(len(parts)))
+    assert tasks == [[3], [1, 5, 2, 0], [4]]
+    assert bywire.spark.pack(parts, max_bytes=100, open_cost=50, parallelism=1) == [[3], [1], [5], [2, 0], [4]]
+
+
+@pytest.mark.parametrize("writer", ["bywire", "spark"])
+def test_the_data_lake_example(fleet, tmp_path, writer):
     out = tmp_path / "lake"
     subprocess.run(
-        [sys.executable, str(ROOT / "examples" / "spark_data_lake.py"), str(fleet), str(TUG_DBC), str(out)],
+        [sys.executable, str(ROOT / "examples" / "spark_data_lake.py"), str(fleet), str(TUG_DBC), str(out), "--writer", writer],
         check=True,
         env={**env_for_spark(), "PYSPARK_PYTHON": sys.executable},
         capture_output=True,

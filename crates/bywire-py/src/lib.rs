@@ -22,6 +22,7 @@ use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
 use bywire_log::format::{Format, Records};
 use bywire_log::parquet::decoded::decode_frames_batch;
+use bywire_log::parquet::long::{self, LongLabels};
 use bywire_log::parquet::{raw_schema, FrameColumns};
 use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -961,6 +962,30 @@ fn run_sim(
     Ok((json, files))
 }
 
+/// A decoded batch (what `decode_arrow` gives for `message`) in long form: one row a signal
+/// value, labelled with `message`, `vehicle` and `date` (none: each row's UTC day) or, with
+/// `labelled=False`, only `ts, channel, signal, value`.
+#[pyfunction]
+#[pyo3(signature = (table, message, vehicle = None, date = None, labelled = true))]
+fn signals_long(
+    py: Python<'_>,
+    table: PyArrowType<RecordBatch>,
+    message: &str,
+    vehicle: Option<&str>,
+    date: Option<&str>,
+    labelled: bool,
+) -> PyResult<PyArrowType<RecordBatch>> {
+    let labels = LongLabels {
+        message,
+        vehicle,
+        date,
+    };
+    let table = table.0;
+    py.detach(|| long::signals_long(&table, labelled.then_some(&labels)))
+        .map(PyArrowType)
+        .map_err(|e| PyValueError::new_err(format!("{message}: {e}")))
+}
+
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -968,6 +993,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Database>()?;
     m.add_class::<LogBatches>()?;
     m.add_function(wrap_pyfunction!(run_sim, m)?)?;
+    m.add_function(wrap_pyfunction!(signals_long, m)?)?;
     m.add("Error", py.get_type::<Error>())?;
     m.add("ParseError", py.get_type::<ParseError>())?;
     m.add("DecodeError", py.get_type::<DecodeError>())?;

@@ -21,6 +21,7 @@
 
 pub mod decoded;
 mod footer;
+pub mod long;
 pub mod table;
 
 use std::collections::{HashMap, VecDeque};
