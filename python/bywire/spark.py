@@ -394,7 +394,9 @@ def write_lake(
         raise ValueError(f"compression={compression}: snappy, zstd, gzip or none")
     settings = _Settings.of({"output": "signals", "dbc": dbc, "split_mb": split_mb, "batch_rows": batch_rows})
     bywire.Database.load(dbc)  # a DBC that does not load is named here, not on an executor
-    files = files_of(path)
+    # Executors may not share the driver's working directory.
+    dbc, lake = os.path.abspath(dbc), os.path.abspath(lake)
+    files = [os.path.abspath(f) for f in files_of(path)]
     if not files:
         raise FileNotFoundError(f"{path}: no files")
     existing = [e for e in os.listdir(lake) if e != "_temporary"] if os.path.isdir(lake) else []
