@@ -376,7 +376,7 @@ mod tests {
             let values = dictionary.values().as_string::<i32>();
             let keys = dictionary.keys().iter();
             return keys
-                .map(|k| k.map(|k| values.value(k as usize).to_string()))
+                .map(|k| k.map(|k| values.value(usize::try_from(k).unwrap()).to_string()))
                 .collect();
         }
         let column = column.as_string::<i32>();
