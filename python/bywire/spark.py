@@ -41,6 +41,7 @@ import glob
 import os
 import re
 import shutil
+import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -374,8 +375,9 @@ def write_lake(
     ``lake``: Parquet partitioned by ``vehicle``, ``date`` and ``message``, one row a signal
     value (``ts, channel, signal, value``), the lake
     ``signals.write.partitionBy("vehicle", "date", "message").parquet(lake)`` gives and
-    ``spark.read.parquet(lake)`` reads — written by bywire on the executors, one task a file
-    (or a range of a big candump log), without the rows passing through Spark.
+    ``spark.read.parquet(lake)`` reads — written by bywire on the executors, without the rows
+    passing through Spark. Files (and the ranges of big candump logs) are grouped into tasks
+    as Spark's file sources group them (:func:`pack`).
 
     Committed as Spark commits a job: each task writes under ``lake/_temporary/JOB`` (a file
     under a hidden name until it is whole), and only when every task has succeeded are the
@@ -385,8 +387,6 @@ def write_lake(
     ``ignore``. ``compression``: ``snappy`` (Spark's), ``zstd``, ``gzip`` or ``none``.
     The logs and the lake must be where every executor can reach them (a shared file
     system)."""
-    import uuid
-
     mode = mode.lower()
     if mode not in ("errorifexists", "error", "overwrite", "append", "ignore"):
         raise ValueError(f"mode={mode}: errorifexists, overwrite, append or ignore")
@@ -525,16 +525,16 @@ def _by_day(message: str, table, vehicle, date) -> Iterator[tuple[str | None, pa
     batch = _one_batch(table)
     if batch is None:
         return
-    if date is not None:
-        long = bywire._native.signals_long(batch, message, labelled=False)
-        if long.num_rows:
-            yield date, long
+    long = bywire._native.signals_long(batch, message, labelled=False)
+    if not long.num_rows:
         return
-    long = bywire._native.signals_long(batch, message, vehicle, None)
-    days = long.column("date")
-    rest = long.select(["ts", "channel", "signal", "value"])
+    if date is not None:
+        yield date, long
+        return
+    # The labelled form's rows are the same rows in the same order, with their days.
+    days = bywire._native.signals_long(batch, message, None, None).column("date")
     for day in pc.unique(days).to_pylist():
-        yield day, rest.filter(pc.equal(days, day))
+        yield day, long.filter(pc.equal(days, day))
 
 
 class _LakeFiles:
@@ -581,8 +581,8 @@ class _LakeFiles:
                 # written as they are); times and values are mostly distinct: plain.
                 use_dictionary=["channel", "signal"],
                 # A file holds every signal of its message: the values' minimum and maximum,
-                # over signals of different meanings, would prune nothing (and cost a tenth of
-                # the writing).
+                # over signals of different meanings, would prune nothing (and cost about a
+                # tenth of the writing).
                 write_statistics=["ts", "channel", "signal"],
             )
             self.writers[folder] = writer
@@ -604,12 +604,14 @@ class _LakeFiles:
         return written
 
     def discard(self) -> None:
+        """Close and remove the unfinished files (the task's own error is what is raised)."""
         for folder, writer in self.writers.items():
             try:
                 writer.close()
-            finally:
-                try:
-                    os.remove(self._hidden(folder))
-                except OSError:
-                    pass
+            except Exception:  # noqa: S110 - the file is removed, whatever state it is in
+                pass
+            try:
+                os.remove(self._hidden(folder))
+            except OSError:
+                pass
         self.writers.clear()
