@@ -42,6 +42,7 @@ import os
 import re
 import shutil
 import uuid
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -332,10 +333,9 @@ def _equal_or_null(column: pa.Array, value) -> pa.Array:
 
 # The data lake written by bywire on the executors ----------------------------------------------
 
-#: Rows one (date, message) file holds back before writing them as a row group, and rows all of
-#: a task's files hold back at most (then every file writes what it holds).
+#: Rows one (date, message) file holds back before writing them as a row group (and all of a
+#: part's files hold back at most 8 times as many: then every file writes what it holds).
 _LAKE_GROUP_ROWS = 1 << 17
-_LAKE_HELD_ROWS = 1 << 20
 #: Spark's name for a partition value that is null.
 _NULL_PARTITION = "__HIVE_DEFAULT_PARTITION__"
 #: Characters Spark escapes in a partition value (as ``%XX``), so that the folders are the ones
@@ -370,6 +370,7 @@ def write_lake(
     compression: str = "snappy",
     split_mb: float = 256.0,
     batch_rows: int = bywire.BATCH_ROWS,
+    open_files: int = 256,
 ) -> LakeSummary:
     """Decode the logs ``path`` names (as the data source's ``path``) into the data lake
     ``lake``: Parquet partitioned by ``vehicle``, ``date`` and ``message``, one row a signal
@@ -385,6 +386,9 @@ def write_lake(
     ``mode``: ``errorifexists`` (a lake with files is refused before any work), ``overwrite``
     (the old lake's files are removed once the new ones are ready), ``append`` or
     ``ignore``. ``compression``: ``snappy`` (Spark's), ``zstd``, ``gzip`` or ``none``.
+    ``open_files``: files a task keeps open at once (a DBC of many messages over many days
+    would otherwise open one per message and day); past it a folder's rows go on in a new
+    file.
     The logs and the lake must be where every executor can reach them (a shared file
     system)."""
     mode = mode.lower()
@@ -392,6 +396,8 @@ def write_lake(
         raise ValueError(f"mode={mode}: errorifexists, overwrite, append or ignore")
     if compression.lower() not in ("snappy", "zstd", "gzip", "none"):
         raise ValueError(f"compression={compression}: snappy, zstd, gzip or none")
+    if not 1 <= open_files <= 4096:
+        raise ValueError(f"open_files={open_files}: 1 to 4096")
     settings = _Settings.of({"output": "signals", "dbc": dbc, "split_mb": split_mb, "batch_rows": batch_rows})
     bywire.Database.load(dbc)  # a DBC that does not load is named here, not on an executor
     # Executors may not share the driver's working directory.
@@ -409,7 +415,7 @@ def write_lake(
     job = uuid.uuid4().hex
     staging = os.path.join(lake, "_temporary", job)
     os.makedirs(staging)
-    task = _lake_task(parts, tasks, dbc, staging, job, path_pattern, compression.lower(), batch_rows)
+    task = _lake_task(parts, tasks, dbc, staging, job, path_pattern, compression.lower(), batch_rows, open_files)
     try:
         written = (
             spark.range(len(tasks), numPartitions=len(tasks))
@@ -485,7 +491,7 @@ def _bytes(text: str) -> int:
     return int(float(text.rstrip("kmgt")) * scale)
 
 
-def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows):
+def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows, open_files):
     """The function each task runs (``mapInArrow`` over the tasks' indexes): its parts
     decoded into files under ``staging``, named by part and job; ``(file, rows)`` for each."""
 
@@ -494,8 +500,7 @@ def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows
         for batch in batches:
             for index in (i for task in batch.column(0).to_pylist() for i in tasks[task]):
                 path, byte_range = parts[index]
-                name = f"part-{index:05d}-{job}.c000.{compression}.parquet"
-                files = _LakeFiles(staging, name, compression)
+                files = _LakeFiles(staging, f"part-{index:05d}-{job}", compression, open_files)
                 try:
                     vehicle, date = path_labels(path, pattern)
                     frames = bywire.read_log(path, batch_rows, byte_range)
@@ -537,29 +542,42 @@ def _by_day(message: str, table, vehicle, date) -> Iterator[tuple[str | None, pa
         yield day, long.filter(pc.equal(days, day))
 
 
-class _LakeFiles:
-    """A task's files, one a partition folder: rows held back, then written a row group at a
-    time, each file under a hidden name until it is closed (a failed attempt leaves no file
-    that looks whole)."""
+@dataclass
+class _OpenFile:
+    writer: object
+    hidden: str
+    file: str
+    rows: int = 0
 
-    def __init__(self, staging: str, name: str, compression: str) -> None:
+
+class _LakeFiles:
+    """A part's files, one a partition folder at a time: rows held back, then written a row
+    group at a time, each file under a hidden name until it is closed (a failed attempt leaves
+    no file that looks whole). At most ``open_files`` are open: past that the least recently
+    written is finished, and the folder's next rows start its next file (``c001``...), as
+    Spark's writer numbers them."""
+
+    def __init__(
+        self, staging: str, prefix: str, compression: str, open_files: int, group_rows: int = _LAKE_GROUP_ROWS
+    ) -> None:
         self.staging = staging
-        self.name = name
+        self.prefix = prefix
         self.compression = compression
+        self.open_files = open_files
+        self.group_rows = group_rows
         self.held: dict[str, list[pa.RecordBatch]] = {}
         self.held_rows: dict[str, int] = {}
-        self.writers: dict[str, object] = {}
-        self.rows: dict[str, int] = {}
-
-    def _hidden(self, folder: str) -> str:
-        return os.path.join(self.staging, folder, f".{self.name}.{os.getpid()}.inprogress")
+        #: Open files by folder, least recently written first.
+        self.open: OrderedDict[str, _OpenFile] = OrderedDict()
+        self.made: dict[str, int] = {}
+        self.written: list[tuple[str, int]] = []
 
     def add(self, folder: str, rows: pa.RecordBatch) -> None:
         self.held.setdefault(folder, []).append(rows)
         self.held_rows[folder] = self.held_rows.get(folder, 0) + rows.num_rows
-        if self.held_rows[folder] >= _LAKE_GROUP_ROWS:
+        if self.held_rows[folder] >= self.group_rows:
             self._write(folder)
-        elif sum(self.held_rows.values()) >= _LAKE_HELD_ROWS:
+        elif sum(self.held_rows.values()) >= 8 * self.group_rows:
             for held in list(self.held):
                 self._write(held)
 
@@ -570,11 +588,16 @@ class _LakeFiles:
         self.held_rows.pop(folder, None)
         if not batches:
             return
-        writer = self.writers.get(folder)
-        if writer is None:
+        if folder not in self.open:
+            while len(self.open) >= self.open_files:
+                self._finish(next(iter(self.open)))
+            number = self.made.get(folder, 0)
+            self.made[folder] = number + 1
+            name = f"{self.prefix}.c{number:03d}.{self.compression}.parquet"
             os.makedirs(os.path.join(self.staging, folder), exist_ok=True)
+            hidden = os.path.join(self.staging, folder, f".{name}.{os.getpid()}.inprogress")
             writer = pq.ParquetWriter(
-                self._hidden(folder),
+                hidden,
                 batches[0].schema,
                 compression=self.compression,
                 # Channels and signal names are a few texts (dictionary arrays: their keys are
@@ -585,33 +608,36 @@ class _LakeFiles:
                 # tenth of the writing).
                 write_statistics=["ts", "channel", "signal"],
             )
-            self.writers[folder] = writer
+            self.open[folder] = _OpenFile(writer, hidden, os.path.join(folder, name))
+        opened = self.open[folder]
+        self.open.move_to_end(folder)
         table = pa.Table.from_batches(batches)
-        writer.write_table(table, row_group_size=len(table))
-        self.rows[folder] = self.rows.get(folder, 0) + len(table)
+        opened.writer.write_table(table, row_group_size=len(table))
+        opened.rows += len(table)
+
+    def _finish(self, folder: str) -> None:
+        opened = self.open.pop(folder)
+        opened.writer.close()
+        os.replace(opened.hidden, os.path.join(self.staging, opened.file))
+        self.written.append((opened.file, opened.rows))
 
     def close(self) -> list[tuple[str, int]]:
-        """Write what is held, close every file and give it its name: ``(file, rows)``."""
+        """Write what is held, finish every file: ``(file, rows)`` for each file made."""
         for folder in list(self.held):
             self._write(folder)
-        written = []
-        for folder, writer in self.writers.items():
-            writer.close()
-            file = os.path.join(folder, self.name)
-            os.replace(self._hidden(folder), os.path.join(self.staging, file))
-            written.append((file, self.rows[folder]))
-        self.writers.clear()
-        return written
+        while self.open:
+            self._finish(next(iter(self.open)))
+        return self.written
 
     def discard(self) -> None:
         """Close and remove the unfinished files (the task's own error is what is raised)."""
-        for folder, writer in self.writers.items():
+        for opened in self.open.values():
             try:
-                writer.close()
+                opened.writer.close()
             except Exception:  # noqa: S110 - the file is removed, whatever state it is in
                 pass
             try:
-                os.remove(self._hidden(folder))
+                os.remove(opened.hidden)
             except OSError:
                 pass
-        self.writers.clear()
+        self.open.clear()

@@ -170,6 +170,52 @@ def test_write_lake_commits_all_or_nothing(spark, fleet, tmp_path):
     assert {r.vehicle for r in spark.read.parquet(str(lake)).select("vehicle").distinct().collect()} == {"tug1"}
 
 
+def test_write_lake_keeps_few_files_open(spark, fleet, tmp_path):
+    import bywire.spark
+
+    everything = tmp_path / "everything"
+    bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(everything))
+    # One open file a task: each folder's file is finished before the next is opened.
+    few = tmp_path / "few"
+    bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(few), open_files=1)
+    assert partition_folders(few) == partition_folders(everything)
+    assert lake_rows(spark, few) == lake_rows(spark, everything)
+    with pytest.raises(ValueError, match="open_files=0"):
+        bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(tmp_path / "none"), open_files=0)
+
+
+def test_a_folder_whose_file_was_closed_goes_on_in_its_next_file(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    import bywire.spark
+
+    files = bywire.spark._LakeFiles(str(tmp_path), "part-00000-job", "snappy", open_files=1, group_rows=10)
+    rows = lambda start: pa.RecordBatch.from_pydict({"value": [float(v) for v in range(start, start + 10)]})  # noqa: E731
+    # a, b, a: with one file open, a's first file is finished when b's opens, and a's later
+    # rows start a's next file.
+    files.add("m=a", rows(0))
+    files.add("m=b", rows(100))
+    files.add("m=a", rows(10))
+    written = files.close()
+    assert written == [
+        ("m=a/part-00000-job.c000.snappy.parquet", 10),
+        ("m=b/part-00000-job.c000.snappy.parquet", 10),
+        ("m=a/part-00000-job.c001.snappy.parquet", 10),
+    ]
+    values = lambda folder: sorted(  # noqa: E731
+        v for f in sorted((tmp_path / folder).glob("*.parquet")) for v in pq.read_table(f).column("value").to_pylist()
+    )
+    assert values("m=a") == [float(v) for v in range(20)]
+    assert not list(tmp_path.rglob(".*inprogress"))
+    # A failed part leaves no file under construction.
+    broken = bywire.spark._LakeFiles(str(tmp_path / "broken"), "part-00001-job", "snappy", open_files=4, group_rows=10)
+    broken.add("m=a", rows(0))
+    assert list((tmp_path / "broken").rglob(".*inprogress"))
+    broken.discard()
+    assert not list((tmp_path / "broken").rglob(".*inprogress"))
+
+
 def test_write_lake_dates_rows_by_their_day_without_one_in_the_path(spark, fleet, tmp_path):
     import datetime
 
