@@ -456,13 +456,13 @@ def pack(
         path, byte_range = parts[index]
         return byte_range[1] - byte_range[0] if byte_range else os.path.getsize(path)
 
-    sizes = {index: size(index) for index in range(len(parts))}
-    total = sum(sizes.values()) + open_cost * len(parts)
+    sizes = [size(index) for index in range(len(parts))]
+    total = sum(sizes) + open_cost * len(parts)
     most = min(max_bytes, max(open_cost, total // max(1, parallelism)))
     tasks: list[list[int]] = []
     current: list[int] = []
     current_size = 0
-    for index in sorted(sizes, key=lambda i: (-sizes[i], i)):
+    for index in sorted(range(len(parts)), key=lambda i: (-sizes[i], i)):
         if current and current_size + sizes[index] > most:
             tasks.append(current)
             current, current_size = [], 0
@@ -536,8 +536,7 @@ def _by_day(message: str, table, vehicle, date) -> Iterator[tuple[str | None, pa
     if date is not None:
         yield date, long
         return
-    # The labelled form's rows are the same rows in the same order, with their days.
-    days = bywire._native.signals_long(batch, message, None, None).column("date")
+    days = _days(long.column("ts"))
     for day in pc.unique(days).to_pylist():
         yield day, long.filter(pc.equal(days, day))
 
