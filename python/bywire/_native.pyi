@@ -74,3 +74,13 @@ def signals_long(
     date: str | None = None,
     labelled: bool = True,
 ) -> pa.RecordBatch: ...
+def write_lake_files(
+    database: Database,
+    parts: list[tuple[str, tuple[int, int] | None, str | None, str | None]],
+    staging: str,
+    prefix: str,
+    compression: str = "snappy",
+    batch_rows: int = 65536,
+    open_files: int = 256,
+) -> list[tuple[str, int]]: ...
+def partition_folder(column: str, value: str | None = None) -> str: ...

@@ -42,7 +42,6 @@ import os
 import re
 import shutil
 import uuid
-from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -333,16 +332,6 @@ def _equal_or_null(column: pa.Array, value) -> pa.Array:
 
 # The data lake written by bywire on the executors ----------------------------------------------
 
-#: Rows one (date, message) file holds back before writing them as a row group (and all of a
-#: part's files hold back at most 8 times as many: then every file writes what it holds).
-_LAKE_GROUP_ROWS = 1 << 17
-#: Spark's name for a partition value that is null.
-_NULL_PARTITION = "__HIVE_DEFAULT_PARTITION__"
-#: Characters Spark escapes in a partition value (as ``%XX``), so that the folders are the ones
-#: Spark's own writer makes.
-_ESCAPED = set('"#%\'*/:=?\\\x7f{[]^') | {chr(c) for c in range(1, 0x20)}
-
-
 @dataclass
 class LakeSummary:
     """What :func:`write_lake` wrote: the files (relative to the lake) and their rows."""
@@ -354,9 +343,7 @@ class LakeSummary:
 def partition_folder(column: str, value: str | None) -> str:
     """``column=value`` as Spark names a partition's folder (null and escaped characters
     included)."""
-    if value is None or value == "":
-        return f"{column}={_NULL_PARTITION}"
-    return column + "=" + "".join(f"%{ord(c):02X}" if c in _ESCAPED else c for c in value)
+    return bywire._native.partition_folder(column, value)
 
 
 def write_lake(
@@ -415,13 +402,9 @@ def write_lake(
     job = uuid.uuid4().hex
     staging = os.path.join(lake, "_temporary", job)
     os.makedirs(staging)
-    task = _lake_task(parts, tasks, dbc, staging, job, path_pattern, compression.lower(), batch_rows, open_files)
+    write = _lake_task(parts, tasks, dbc, staging, job, path_pattern, compression.lower(), batch_rows, open_files)
     try:
-        written = (
-            spark.range(len(tasks), numPartitions=len(tasks))
-            .mapInArrow(task, "file string, rows long")
-            .collect()
-        )
+        written = _run_tasks(spark, len(tasks), write)
         if mode == "overwrite":
             for entry in existing:
                 target = os.path.join(lake, entry)
@@ -429,10 +412,7 @@ def write_lake(
                     shutil.rmtree(target)
                 else:
                     os.remove(target)
-        for row in written:
-            target = os.path.join(lake, row.file)
-            os.makedirs(os.path.dirname(target), exist_ok=True)
-            os.replace(os.path.join(staging, row.file), target)
+        _commit(staging, lake, {file for file, _ in written})
         with open(os.path.join(lake, "_SUCCESS"), "w"):
             pass
     finally:
@@ -441,7 +421,60 @@ def write_lake(
             os.rmdir(os.path.join(lake, "_temporary"))
         except OSError:
             pass  # another job's staging is there
-    return LakeSummary(sorted(row.file for row in written), sum(row.rows for row in written))
+    return LakeSummary(sorted(file for file, _ in written), sum(rows for _, rows in written))
+
+
+def _run_tasks(spark, count: int, write: Callable[[int], list[tuple[str, int]]]) -> list[tuple[str, int]]:
+    """``write`` run for each task index on the executors, one Spark task each: what they
+    return, gathered. Through the RDD API where there is a SparkContext (a job of it starts
+    about 60 ms sooner than a DataFrame's, measured), through ``mapInArrow`` on Spark
+    Connect."""
+    try:
+        context = spark.sparkContext
+    except Exception:  # Spark Connect has no SparkContext
+        context = None
+    if context is not None:
+        return context.parallelize(range(count), count).flatMap(write).collect()
+
+    def run(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+        for batch in batches:
+            for task in batch.column(0).to_pylist():
+                files = write(task)
+                yield pa.RecordBatch.from_pydict(
+                    {"file": [f for f, _ in files], "rows": [n for _, n in files]},
+                    schema=pa.schema([("file", pa.string()), ("rows", pa.int64())]),
+                )
+
+    rows = spark.range(count, numPartitions=count).mapInArrow(run, "file string, rows long").collect()
+    return [(row.file, row.rows) for row in rows]
+
+
+def _commit(staging: str, lake: str, written: set[str]) -> None:
+    """Move the job's files (``written``, relative paths) from ``staging`` into ``lake``. What
+    else is in ``staging`` (an attempt killed before it could clean up) is left there. A
+    folder the lake does not have yet moves in whole, with one rename, not file by file."""
+    for folder, _, files in os.walk(staging):
+        for name in files:
+            if os.path.relpath(os.path.join(folder, name), staging).replace(os.sep, "/") not in written:
+                os.remove(os.path.join(folder, name))
+
+    def move(source: str, target: str) -> None:
+        with os.scandir(source) as entries:
+            for entry in entries:
+                destination = os.path.join(target, entry.name)
+                if not entry.is_dir(follow_symlinks=False):
+                    os.replace(entry.path, destination)
+                    continue
+                if not os.path.exists(destination):
+                    try:
+                        os.replace(entry.path, destination)
+                        continue
+                    except OSError:
+                        pass  # made meanwhile (another job's): filled below
+                os.makedirs(destination, exist_ok=True)
+                move(entry.path, destination)
+
+    move(staging, lake)
 
 
 def pack(
@@ -492,151 +525,15 @@ def _bytes(text: str) -> int:
 
 
 def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows, open_files):
-    """The function each task runs (``mapInArrow`` over the tasks' indexes): its parts
-    decoded into files under ``staging``, named by part and job; ``(file, rows)`` for each."""
+    """What each task runs, given its index: its parts decoded into files under ``staging``
+    (bywire writes them: ``bywire._native.write_lake_files``), named by task and job as Spark
+    names a task's files; ``(file, rows)`` for each."""
 
-    def run(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+    def write(task: int) -> list[tuple[str, int]]:
         db = bywire.Database.load(dbc)
-        for batch in batches:
-            for index in (i for task in batch.column(0).to_pylist() for i in tasks[task]):
-                path, byte_range = parts[index]
-                files = _LakeFiles(staging, f"part-{index:05d}-{job}", compression, open_files)
-                try:
-                    vehicle, date = path_labels(path, pattern)
-                    frames = bywire.read_log(path, batch_rows, byte_range)
-                    for message, table in db.iter_decoded(frames):
-                        for day, long in _by_day(message, table, vehicle, date):
-                            folder = os.path.join(
-                                partition_folder("vehicle", vehicle),
-                                partition_folder("date", day),
-                                partition_folder("message", message),
-                            )
-                            files.add(folder, long)
-                    written = files.close()
-                except BaseException:
-                    files.discard()
-                    raise
-                yield pa.RecordBatch.from_pydict(
-                    {"file": [f for f, _ in written], "rows": [n for _, n in written]},
-                    schema=pa.schema([("file", pa.string()), ("rows", pa.int64())]),
-                )
+        labelled = [(path, byte_range, *path_labels(path, pattern)) for path, byte_range in (parts[i] for i in tasks[task])]
+        return bywire._native.write_lake_files(
+            db._db, labelled, staging, f"part-{task:05d}-{job}", compression, batch_rows, open_files
+        )
 
-    return run
-
-
-def _by_day(message: str, table, vehicle, date) -> Iterator[tuple[str | None, pa.RecordBatch]]:
-    """A decoded table's long rows (``ts, channel, signal, value``) for each day: the path's,
-    or each row's UTC day."""
-    batch = _one_batch(table)
-    if batch is None:
-        return
-    long = bywire._native.signals_long(batch, message, labelled=False)
-    if not long.num_rows:
-        return
-    if date is not None:
-        yield date, long
-        return
-    days = _days(long.column("ts"))
-    for day in pc.unique(days).to_pylist():
-        yield day, long.filter(pc.equal(days, day))
-
-
-@dataclass
-class _OpenFile:
-    writer: object
-    hidden: str
-    file: str
-    rows: int = 0
-
-
-class _LakeFiles:
-    """A part's files, one a partition folder at a time: rows held back, then written a row
-    group at a time, each file under a hidden name until it is closed (a failed attempt leaves
-    no file that looks whole). At most ``open_files`` are open: past that the least recently
-    written is finished, and the folder's next rows start its next file (``c001``...), as
-    Spark's writer numbers them."""
-
-    def __init__(
-        self, staging: str, prefix: str, compression: str, open_files: int, group_rows: int = _LAKE_GROUP_ROWS
-    ) -> None:
-        self.staging = staging
-        self.prefix = prefix
-        self.compression = compression
-        self.open_files = open_files
-        self.group_rows = group_rows
-        self.held: dict[str, list[pa.RecordBatch]] = {}
-        self.held_rows: dict[str, int] = {}
-        #: Open files by folder, least recently written first.
-        self.open: OrderedDict[str, _OpenFile] = OrderedDict()
-        self.made: dict[str, int] = {}
-        self.written: list[tuple[str, int]] = []
-
-    def add(self, folder: str, rows: pa.RecordBatch) -> None:
-        self.held.setdefault(folder, []).append(rows)
-        self.held_rows[folder] = self.held_rows.get(folder, 0) + rows.num_rows
-        if self.held_rows[folder] >= self.group_rows:
-            self._write(folder)
-        elif sum(self.held_rows.values()) >= 8 * self.group_rows:
-            for held in list(self.held):
-                self._write(held)
-
-    def _write(self, folder: str) -> None:
-        import pyarrow.parquet as pq
-
-        batches = self.held.pop(folder, [])
-        self.held_rows.pop(folder, None)
-        if not batches:
-            return
-        if folder not in self.open:
-            while len(self.open) >= self.open_files:
-                self._finish(next(iter(self.open)))
-            number = self.made.get(folder, 0)
-            self.made[folder] = number + 1
-            name = f"{self.prefix}.c{number:03d}.{self.compression}.parquet"
-            os.makedirs(os.path.join(self.staging, folder), exist_ok=True)
-            hidden = os.path.join(self.staging, folder, f".{name}.{os.getpid()}.inprogress")
-            writer = pq.ParquetWriter(
-                hidden,
-                batches[0].schema,
-                compression=self.compression,
-                # Channels and signal names are a few texts (dictionary arrays: their keys are
-                # written as they are); times and values are mostly distinct: plain.
-                use_dictionary=["channel", "signal"],
-                # A file holds every signal of its message: the values' minimum and maximum,
-                # over signals of different meanings, would prune nothing (and cost about a
-                # tenth of the writing).
-                write_statistics=["ts", "channel", "signal"],
-            )
-            self.open[folder] = _OpenFile(writer, hidden, os.path.join(folder, name))
-        opened = self.open[folder]
-        self.open.move_to_end(folder)
-        table = pa.Table.from_batches(batches)
-        opened.writer.write_table(table, row_group_size=len(table))
-        opened.rows += len(table)
-
-    def _finish(self, folder: str) -> None:
-        opened = self.open.pop(folder)
-        opened.writer.close()
-        os.replace(opened.hidden, os.path.join(self.staging, opened.file))
-        self.written.append((opened.file, opened.rows))
-
-    def close(self) -> list[tuple[str, int]]:
-        """Write what is held, finish every file: ``(file, rows)`` for each file made."""
-        for folder in list(self.held):
-            self._write(folder)
-        while self.open:
-            self._finish(next(iter(self.open)))
-        return self.written
-
-    def discard(self) -> None:
-        """Close and remove the unfinished files (the task's own error is what is raised)."""
-        for opened in self.open.values():
-            try:
-                opened.writer.close()
-            except Exception:  # noqa: S110 - the file is removed, whatever state it is in
-                pass
-            try:
-                os.remove(opened.hidden)
-            except OSError:
-                pass
-        self.open.clear()
+    return write

@@ -184,36 +184,30 @@ def test_write_lake_keeps_few_files_open(spark, fleet, tmp_path):
         bywire.spark.write_lake(spark, str(fleet), str(TUG_DBC), str(tmp_path / "none"), open_files=0)
 
 
-def test_a_folder_whose_file_was_closed_goes_on_in_its_next_file(tmp_path):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
+def test_lake_files_are_read_by_pyarrow_as_written(fleet, tmp_path):
     import bywire.spark
 
-    files = bywire.spark._LakeFiles(str(tmp_path), "part-00000-job", "snappy", open_files=1, group_rows=10)
-    rows = lambda start: pa.RecordBatch.from_pydict({"value": [float(v) for v in range(start, start + 10)]})  # noqa: E731
-    # a, b, a: with one file open, a's first file is finished when b's opens, and a's later
-    # rows start a's next file.
-    files.add("m=a", rows(0))
-    files.add("m=b", rows(100))
-    files.add("m=a", rows(10))
-    written = files.close()
-    assert written == [
-        ("m=a/part-00000-job.c000.snappy.parquet", 10),
-        ("m=b/part-00000-job.c000.snappy.parquet", 10),
-        ("m=a/part-00000-job.c001.snappy.parquet", 10),
-    ]
-    values = lambda folder: sorted(  # noqa: E731
-        v for f in sorted((tmp_path / folder).glob("*.parquet")) for v in pq.read_table(f).column("value").to_pylist()
-    )
-    assert values("m=a") == [float(v) for v in range(20)]
-    assert not list(tmp_path.rglob(".*inprogress"))
-    # A failed part leaves no file under construction.
-    broken = bywire.spark._LakeFiles(str(tmp_path / "broken"), "part-00001-job", "snappy", open_files=4, group_rows=10)
-    broken.add("m=a", rows(0))
-    assert list((tmp_path / "broken").rglob(".*inprogress"))
-    broken.discard()
-    assert not list((tmp_path / "broken").rglob(".*inprogress"))
+    # One task's files, written by bywire (not pyarrow nor Spark), read back by pyarrow's
+    # Hive-partitioned dataset: every signal value cantools decodes, in its folder.
+    db = bywire.Database.load(str(TUG_DBC))
+    logs = sorted(fleet.rglob("bus*.*"))
+    parts = [(str(p), None, *bywire.spark.path_labels(str(p), None)) for p in logs]
+    for compression, extension in [("snappy", ".snappy"), ("zstd", ".zstd"), ("gzip", ".gz"), ("none", "")]:
+        staging = tmp_path / compression
+        written = bywire._native.write_lake_files(db._db, parts, str(staging), "part-00007-job", compression)
+        assert sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file()) == sorted(f for f, _ in written)
+        assert all(f.endswith(f"/part-00007-job.c000{extension}.parquet") for f, _ in written)
+        table = ds.dataset(str(staging), format="parquet", partitioning="hive").to_table()
+        assert table.num_rows == sum(n for _, n in written)
+        rows = Counter(
+            (v, str(d), round(ts.timestamp(), 6), m, s, x)
+            for v, d, m, ts, s, x in zip(
+                *(table.column(c).to_pylist() for c in ("vehicle", "date", "message", "ts", "signal", "value"))
+            )
+        )
+        assert rows == Counter((v, str(d), t, m, s, x) for v, d, t, m, s, x in cantools_rows(fleet)), compression
+    with pytest.raises(ValueError, match="compression lz4"):
+        bywire._native.write_lake_files(db._db, parts, str(tmp_path / "x"), "p", "lz4")
 
 
 def test_write_lake_dates_rows_by_their_day_without_one_in_the_path(spark, fleet, tmp_path):

@@ -22,6 +22,7 @@ use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
 use bywire_log::format::{Format, Records};
 use bywire_log::parquet::decoded::decode_frames_batch;
+use bywire_log::parquet::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_ROWS};
 use bywire_log::parquet::long::{self, LongLabels};
 use bywire_log::parquet::{raw_schema, FrameColumns};
 use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
@@ -986,6 +987,69 @@ fn signals_long(
         .map_err(|e| PyValueError::new_err(format!("{message}: {e}")))
 }
 
+/// Decode `parts` (`(path, byte_range, vehicle, date)`: a log, or a byte range of a candump
+/// log, and the vehicle and day its path gives, none: each row's UTC day) into a data lake's
+/// files under `staging` (one task's work; `bywire.spark.write_lake` runs it on each
+/// executor): `[(file, rows)]`, the files relative to `staging`.
+#[pyfunction]
+#[pyo3(signature = (database, parts, staging, prefix, compression = "snappy", batch_rows = DEFAULT_BATCH_ROWS, open_files = 256))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn write_lake_files(
+    py: Python<'_>,
+    database: &Database,
+    parts: Vec<(PathBuf, Option<(u64, u64)>, Option<String>, Option<String>)>,
+    staging: PathBuf,
+    prefix: &str,
+    compression: &str,
+    batch_rows: usize,
+    open_files: usize,
+) -> PyResult<Vec<(String, u64)>> {
+    let compression = LakeCompression::from_name(compression).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "compression {compression}: snappy, zstd, gzip or none"
+        ))
+    })?;
+    if !(1..=MAX_BATCH_ROWS).contains(&batch_rows) {
+        return Err(PyValueError::new_err(format!(
+            "batch_rows {batch_rows}: 1 to {MAX_BATCH_ROWS}"
+        )));
+    }
+    if !(1..=4096).contains(&open_files) {
+        return Err(PyValueError::new_err(format!(
+            "open_files {open_files}: 1 to 4096"
+        )));
+    }
+    let parts: Vec<LakePart> = parts
+        .into_iter()
+        .map(|(path, byte_range, vehicle, date)| LakePart {
+            path,
+            byte_range,
+            vehicle,
+            date,
+        })
+        .collect();
+    let decoder = Arc::clone(&database.decoder);
+    py.detach(move || {
+        let mut files = LakeFiles::new(&staging, prefix, compression, open_files, LAKE_GROUP_ROWS);
+        lake::write_parts(&decoder, &parts, &mut files, batch_rows)?;
+        files.finish()
+    })
+    .map_err(|e| match e.kind() {
+        std::io::ErrorKind::InvalidData | std::io::ErrorKind::InvalidInput => {
+            LogError::new_err(e.to_string())
+        }
+        _ => PyOSError::new_err(e.to_string()),
+    })
+}
+
+/// `column=value` as Spark names a partition's folder (a null or empty value:
+/// `__HIVE_DEFAULT_PARTITION__`; the characters Spark escapes as `%XX`).
+#[pyfunction]
+#[pyo3(signature = (column, value = None))]
+fn partition_folder(column: &str, value: Option<&str>) -> String {
+    lake::partition_folder(column, value)
+}
+
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -994,6 +1058,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<LogBatches>()?;
     m.add_function(wrap_pyfunction!(run_sim, m)?)?;
     m.add_function(wrap_pyfunction!(signals_long, m)?)?;
+    m.add_function(wrap_pyfunction!(write_lake_files, m)?)?;
+    m.add_function(wrap_pyfunction!(partition_folder, m)?)?;
     m.add("Error", py.get_type::<Error>())?;
     m.add("ParseError", py.get_type::<ParseError>())?;
     m.add("DecodeError", py.get_type::<DecodeError>())?;

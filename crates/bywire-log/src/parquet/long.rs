@@ -75,18 +75,18 @@ pub fn long_schema(labelled: bool) -> SchemaRef {
     Arc::new(Schema::new(fields))
 }
 
-/// A decoded table's columns, read where they are.
-struct Wide<'a> {
-    ts: &'a arrow_array::PrimitiveArray<TimestampNanosecondType>,
-    channel: Channels<'a>,
+/// A decoded table's columns, read where they are (also what [`super::lake`] writes from).
+pub(crate) struct Wide<'a> {
+    pub(crate) ts: &'a arrow_array::PrimitiveArray<TimestampNanosecondType>,
+    pub(crate) channel: Channels<'a>,
     /// Each value column's name and its values (multiplexed ones with nulls).
-    values: Vec<(&'a str, ValueColumn<'a>)>,
+    pub(crate) values: Vec<(&'a str, ValueColumn<'a>)>,
 }
 
 /// Each row's channel as a key into `texts`: the keys of a dictionary column as they are, or
 /// a plain column's texts numbered as they are first seen.
-struct Channels<'a> {
-    texts: Vec<&'a str>,
+pub(crate) struct Channels<'a> {
+    pub(crate) texts: Vec<&'a str>,
     rows: ChannelRows<'a>,
 }
 
@@ -127,7 +127,7 @@ impl<'a> Channels<'a> {
     }
 
     /// The row's key into `texts`, or none (a null channel).
-    fn key(&mut self, row: usize) -> Option<i32> {
+    pub(crate) fn key(&mut self, row: usize) -> Option<i32> {
         match &mut self.rows {
             ChannelRows::Dictionary(keys) => {
                 let key = keys.is_valid(row).then(|| keys.value(row))?;
@@ -149,7 +149,7 @@ impl<'a> Channels<'a> {
 }
 
 /// A signal's values as the decoded table typed them.
-enum ValueColumn<'a> {
+pub(crate) enum ValueColumn<'a> {
     Int(&'a arrow_array::PrimitiveArray<Int64Type>),
     UInt(&'a arrow_array::PrimitiveArray<UInt64Type>),
     Float(&'a arrow_array::PrimitiveArray<Float64Type>),
@@ -175,7 +175,7 @@ impl ValueColumn<'_> {
 
     /// The row's value as a double (what cantools' values give through `float()`), or none.
     #[allow(clippy::cast_precision_loss)] // as Python's float(int): the nearest double
-    fn value(&self, row: usize) -> Option<f64> {
+    pub(crate) fn value(&self, row: usize) -> Option<f64> {
         match self {
             ValueColumn::Int(a) => a.is_valid(row).then(|| a.value(row) as f64),
             ValueColumn::UInt(a) => a.is_valid(row).then(|| a.value(row) as f64),
@@ -185,7 +185,7 @@ impl ValueColumn<'_> {
 }
 
 impl<'a> Wide<'a> {
-    fn of(table: &'a RecordBatch) -> Result<Self, LogError> {
+    pub(crate) fn of(table: &'a RecordBatch) -> Result<Self, LogError> {
         let wrong = |what: String| LogError::Table { row: 0, what };
         let schema = table.schema_ref();
         let column = |name: &str| {

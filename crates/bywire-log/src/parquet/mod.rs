@@ -21,8 +21,10 @@
 
 pub mod decoded;
 mod footer;
+pub mod lake;
 pub mod long;
 pub mod table;
+mod thrift;
 
 use std::collections::{HashMap, VecDeque};
 use std::fs::File;

@@ -1,0 +1,1325 @@
+//! A data lake's files: decoded signals in long form (`ts, channel, signal, value`, see
+//! [`super::long`]), partitioned into `vehicle=/date=/message=` folders as Spark's
+//! `partitionBy("vehicle", "date", "message")` lays them out, written straight from the
+//! decoded tables.
+//!
+//! The Parquet files are encoded here rather than through parquet-rs: a long file's `channel`
+//! and `signal` are a few texts whose keys are known, and parquet-rs hashes each row's text
+//! again to find its dictionary key (profiled: a third of writing these files, and pyarrow's
+//! writer is no faster). Here the keys are written as they are. The files are what Spark's
+//! writer makes of the same rows (format version 1, dictionary pages for the texts, plain
+//! times and values, one data page a column a row group) and are read by Spark, pyarrow,
+//! parquet-rs and polars (the tests read them back with parquet-rs; the Python tests with
+//! Spark and pyarrow).
+//!
+//! [`LakeFiles`] holds a task's files: each folder's rows are held until there are a row
+//! group's worth, each file is written under a hidden name until it is whole, and at most a
+//! given number are open at once (past that the least recently written is finished and its
+//! folder's later rows start its next file, `c001`..., as Spark numbers them).
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use arrow_array::{Array, RecordBatch};
+use bywire_dbc::decoder::Decoder;
+
+use super::long::Wide;
+use super::thrift::{varint, Kind, Thrift};
+use super::FrameColumns;
+use crate::calendar;
+use crate::format::Format;
+
+/// Rows a folder holds back before writing them as a row group (and all of a task's folders
+/// hold at most 8 times as many: then every folder writes what it holds).
+pub const LAKE_GROUP_ROWS: usize = 1 << 17;
+/// Rows a row group may hold (a page holds a column's row group: 8 bytes a row at most).
+const MAX_GROUP_ROWS: usize = 1 << 20;
+/// Spark's name for a partition whose value is null (or empty).
+pub const NULL_PARTITION: &str = "__HIVE_DEFAULT_PARTITION__";
+const NANOS_PER_DAY: i64 = 86_400_000_000_000;
+/// A row whose channel is null.
+const NULL_KEY: u32 = u32::MAX;
+
+/// How a lake's pages are compressed (Spark's `compression` option's names).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LakeCompression {
+    /// Spark's and pyarrow's default.
+    Snappy,
+    /// Zstandard at level 1.
+    Zstd,
+    /// gzip.
+    Gzip,
+    /// No compression.
+    Uncompressed,
+}
+
+impl LakeCompression {
+    /// `snappy`, `zstd`, `gzip` or `none` (`uncompressed`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name.to_ascii_lowercase().as_str() {
+            "snappy" => Some(Self::Snappy),
+            "zstd" => Some(Self::Zstd),
+            "gzip" => Some(Self::Gzip),
+            "none" | "uncompressed" => Some(Self::Uncompressed),
+            _ => None,
+        }
+    }
+
+    /// What Spark puts in a file's name before `.parquet`.
+    fn extension(self) -> &'static str {
+        match self {
+            Self::Snappy => ".snappy",
+            Self::Zstd => ".zstd",
+            Self::Gzip => ".gz",
+            Self::Uncompressed => "",
+        }
+    }
+
+    /// Parquet's `CompressionCodec`.
+    fn codec(self) -> i32 {
+        match self {
+            Self::Uncompressed => 0,
+            Self::Snappy => 1,
+            Self::Gzip => 2,
+            Self::Zstd => 6,
+        }
+    }
+}
+
+/// `column=value` as Spark names a partition's folder: a null or empty value is
+/// [`NULL_PARTITION`], and the characters Spark escapes are `%XX`.
+pub fn partition_folder(column: &str, value: Option<&str>) -> String {
+    let Some(value) = value.filter(|v| !v.is_empty()) else {
+        return format!("{column}={NULL_PARTITION}");
+    };
+    let mut folder = format!("{column}=");
+    for c in value.chars() {
+        let escaped = matches!(
+            c,
+            '"' | '#'
+                | '%'
+                | '\''
+                | '*'
+                | '/'
+                | ':'
+                | '='
+                | '?'
+                | '\\'
+                | '\x7f'
+                | '{'
+                | '['
+                | ']'
+                | '^'
+        ) || ('\x01'..'\x20').contains(&c);
+        if escaped {
+            folder.push_str(&format!("%{:02X}", u32::from(c)));
+        } else {
+            folder.push(c);
+        }
+    }
+    folder
+}
+
+/// Long rows as keys: into the task's channels and the folder's signals.
+#[derive(Default)]
+struct LongColumns {
+    ts: Vec<i64>,
+    channels: Vec<u32>,
+    signals: Vec<u32>,
+    values: Vec<f64>,
+}
+
+impl LongColumns {
+    fn len(&self) -> usize {
+        self.ts.len()
+    }
+}
+
+// Parquet's numbers (parquet.thrift).
+const INT64: i32 = 2;
+const DOUBLE: i32 = 5;
+const BYTE_ARRAY: i32 = 6;
+const PLAIN: i32 = 0;
+const PLAIN_DICTIONARY: i32 = 2;
+const RLE: i32 = 3;
+const DATA_PAGE: i32 = 0;
+const DICTIONARY_PAGE: i32 = 2;
+const OPTIONAL: i32 = 1;
+const UTF8: i32 = 0;
+const TIMESTAMP_MICROS: i32 = 10;
+
+/// A column chunk's place and sizes, for the footer.
+struct Chunk {
+    physical: i32,
+    name: &'static str,
+    encodings: &'static [i32],
+    values: i64,
+    uncompressed: i64,
+    compressed: i64,
+    data_page: i64,
+    dictionary_page: Option<i64>,
+    /// Minimum and maximum (plain-encoded; empty: none) and nulls.
+    statistics: Option<(Vec<u8>, Vec<u8>, i64)>,
+}
+
+struct RowGroup {
+    chunks: Vec<Chunk>,
+    rows: i64,
+}
+
+enum Compressor {
+    Uncompressed,
+    Snappy(Box<snap::raw::Encoder>),
+    Zstd(zstd::bulk::Compressor<'static>),
+    Gzip,
+}
+
+impl Compressor {
+    fn new(compression: LakeCompression) -> io::Result<Self> {
+        Ok(match compression {
+            LakeCompression::Uncompressed => Self::Uncompressed,
+            LakeCompression::Snappy => Self::Snappy(Box::new(snap::raw::Encoder::new())),
+            LakeCompression::Zstd => Self::Zstd(zstd::bulk::Compressor::new(1)?),
+            LakeCompression::Gzip => Self::Gzip,
+        })
+    }
+
+    /// `page` compressed (`None`: as it is).
+    fn compress(&mut self, page: &[u8]) -> io::Result<Option<Vec<u8>>> {
+        match self {
+            Self::Uncompressed => Ok(None),
+            Self::Snappy(encoder) => encoder
+                .compress_vec(page)
+                .map(Some)
+                .map_err(io::Error::other),
+            Self::Zstd(compressor) => compressor.compress(page).map(Some),
+            Self::Gzip => {
+                let mut encoder =
+                    flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+                encoder.write_all(page)?;
+                encoder.finish().map(Some)
+            }
+        }
+    }
+}
+
+/// A Parquet file of long rows (`ts, channel, signal, value`), a row group at a time.
+pub struct LongFile<W: Write> {
+    out: W,
+    at: u64,
+    compression: LakeCompression,
+    compressor: Compressor,
+    groups: Vec<RowGroup>,
+    /// The page being built (kept between pages).
+    page: Vec<u8>,
+}
+
+fn too_big(what: &str) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!("{what} too big for a Parquet page"),
+    )
+}
+
+fn as_i32(n: usize, what: &str) -> io::Result<i32> {
+    i32::try_from(n).map_err(|_| too_big(what))
+}
+
+fn as_i64(n: u64) -> i64 {
+    i64::try_from(n).unwrap_or(i64::MAX)
+}
+
+/// Parquet's RLE / bit-packing hybrid of `values` (each below 2^`width`): runs of 8 or more
+/// equal values as runs, the rest bit-packed in groups of 8 (the last group padded).
+fn hybrid(values: &[u32], width: u32, out: &mut Vec<u8>) {
+    let value_bytes = width.div_ceil(8) as usize;
+    let mut at = 0;
+    while let Some(&first) = values.get(at) {
+        let rest = values.get(at..).unwrap_or_default();
+        let run = rest.iter().take_while(|&&v| v == first).count();
+        if run >= 8 {
+            varint(out, (run as u64) << 1);
+            out.extend(first.to_le_bytes().iter().take(value_bytes));
+            at += run;
+            continue;
+        }
+        // Groups of 8 until 8 equal values start a group (a run is cheaper) or 63 groups
+        // (what parquet-mr's readers expect a run to hold at most).
+        let start = at;
+        let mut groups = 0u64;
+        loop {
+            groups += 1;
+            at += 8;
+            let next = values.get(at..at + 8);
+            if groups == 63 || next.is_none_or(|n| n.iter().all(|&v| Some(&v) == n.first())) {
+                break;
+            }
+        }
+        let end = at.min(values.len());
+        varint(out, (groups << 1) | 1);
+        let packed = values.get(start..end).unwrap_or_default();
+        let padding = std::iter::repeat_n(0, at - end);
+        let (mut bits, mut filled) = (0u64, 0u32);
+        for value in packed.iter().copied().chain(padding) {
+            bits |= u64::from(value) << filled;
+            filled += width;
+            while filled >= 8 {
+                out.push((bits & 0xff) as u8);
+                bits >>= 8;
+                filled -= 8;
+            }
+        }
+    }
+}
+
+/// The bits a key below `entries` needs (at least 1: every reader takes it).
+fn key_width(entries: usize) -> u32 {
+    (usize::BITS - entries.saturating_sub(1).leading_zeros()).max(1)
+}
+
+impl<W: Write> LongFile<W> {
+    /// A file starting on `out`.
+    pub fn new(mut out: W, compression: LakeCompression) -> io::Result<Self> {
+        out.write_all(b"PAR1")?;
+        Ok(LongFile {
+            out,
+            at: 4,
+            compression,
+            compressor: Compressor::new(compression)?,
+            groups: Vec::new(),
+            page: Vec::new(),
+        })
+    }
+
+    /// Write `self.page` as a page: `(uncompressed, compressed)` sizes with its header.
+    fn write_page(&mut self, kind: i32, values: usize, encoding: i32) -> io::Result<(i64, i64)> {
+        let compressed = self.compressor.compress(&self.page)?;
+        let body = compressed.as_deref().unwrap_or(&self.page);
+        let mut header = Thrift::default();
+        header.i32(1, kind);
+        header.i32(2, as_i32(self.page.len(), "a page")?);
+        header.i32(3, as_i32(body.len(), "a page")?);
+        let values = as_i32(values, "a page's values")?;
+        if kind == DICTIONARY_PAGE {
+            header.begin(7);
+            header.i32(1, values);
+            header.i32(2, encoding);
+        } else {
+            header.begin(5);
+            header.i32(1, values);
+            header.i32(2, encoding);
+            header.i32(3, RLE);
+            header.i32(4, RLE);
+        }
+        header.end();
+        header.end();
+        self.out.write_all(&header.bytes)?;
+        self.out.write_all(body)?;
+        let head = header.bytes.len() as u64;
+        self.at += head + body.len() as u64;
+        Ok((
+            as_i64(head + self.page.len() as u64),
+            as_i64(head + body.len() as u64),
+        ))
+    }
+
+    /// The page's definition levels (every column is optional, as Spark writes them): one run
+    /// when every row has a value.
+    fn levels(&mut self, present: Option<&[u32]>, rows: usize) {
+        let mut levels = Vec::new();
+        match present {
+            None => {
+                varint(&mut levels, (rows as u64) << 1);
+                levels.push(1);
+            }
+            Some(present) => hybrid(present, 1, &mut levels),
+        }
+        let length = u32::try_from(levels.len()).unwrap_or(u32::MAX);
+        self.page.extend_from_slice(&length.to_le_bytes());
+        self.page.extend_from_slice(&levels);
+    }
+
+    /// A plain column chunk of fixed-width values.
+    fn plain_chunk(
+        &mut self,
+        name: &'static str,
+        physical: i32,
+        rows: usize,
+        values: impl Iterator<Item = [u8; 8]>,
+        statistics: Option<(Vec<u8>, Vec<u8>, i64)>,
+    ) -> io::Result<Chunk> {
+        self.page.clear();
+        self.levels(None, rows);
+        for value in values {
+            self.page.extend_from_slice(&value);
+        }
+        let data_page = as_i64(self.at);
+        let (uncompressed, compressed) = self.write_page(DATA_PAGE, rows, PLAIN)?;
+        Ok(Chunk {
+            physical,
+            name,
+            encodings: &[PLAIN, RLE],
+            values: as_i64(rows as u64),
+            uncompressed,
+            compressed,
+            data_page,
+            dictionary_page: None,
+            statistics,
+        })
+    }
+
+    /// A dictionary column chunk: `texts` as its dictionary page, `keys` (null: [`NULL_KEY`])
+    /// as its data page; the minimum and maximum of the texts used.
+    fn dictionary_chunk(
+        &mut self,
+        name: &'static str,
+        keys: &[u32],
+        texts: &[String],
+    ) -> io::Result<Chunk> {
+        self.page.clear();
+        for text in texts {
+            let length = u32::try_from(text.len()).map_err(|_| too_big("a text"))?;
+            self.page.extend_from_slice(&length.to_le_bytes());
+            self.page.extend_from_slice(text.as_bytes());
+        }
+        let dictionary_page = as_i64(self.at);
+        let (dictionary_uncompressed, dictionary_compressed) =
+            self.write_page(DICTIONARY_PAGE, texts.len(), PLAIN_DICTIONARY)?;
+        let mut used = vec![false; texts.len()];
+        let mut nulls = 0usize;
+        for &key in keys {
+            match used.get_mut(key as usize) {
+                Some(seen) => *seen = true,
+                None => nulls += 1,
+            }
+        }
+        self.page.clear();
+        if nulls == 0 {
+            self.levels(None, keys.len());
+        } else {
+            let present: Vec<u32> = keys.iter().map(|&k| u32::from(k != NULL_KEY)).collect();
+            self.levels(Some(&present), keys.len());
+        }
+        let width = key_width(texts.len());
+        #[allow(clippy::cast_possible_truncation)] // at most 32
+        self.page.push(width as u8);
+        if nulls == 0 {
+            hybrid(keys, width, &mut self.page);
+        } else {
+            let present: Vec<u32> = keys.iter().copied().filter(|&k| k != NULL_KEY).collect();
+            hybrid(&present, width, &mut self.page);
+        }
+        let data_page = as_i64(self.at);
+        let (uncompressed, compressed) =
+            self.write_page(DATA_PAGE, keys.len(), PLAIN_DICTIONARY)?;
+        let mut seen = texts
+            .iter()
+            .zip(&used)
+            .filter(|(_, &u)| u)
+            .map(|(t, _)| t.as_bytes());
+        let statistics = seen.next().map(|first| {
+            let (min, max) = seen.fold((first, first), |(lo, hi), t| (lo.min(t), hi.max(t)));
+            (min.to_vec(), max.to_vec(), as_i64(nulls as u64))
+        });
+        Ok(Chunk {
+            physical: BYTE_ARRAY,
+            name,
+            encodings: &[PLAIN_DICTIONARY, RLE],
+            values: as_i64(keys.len() as u64),
+            uncompressed: dictionary_uncompressed + uncompressed,
+            compressed: dictionary_compressed + compressed,
+            data_page,
+            dictionary_page: Some(dictionary_page),
+            statistics: statistics.or(Some((Vec::new(), Vec::new(), as_i64(nulls as u64)))),
+        })
+    }
+
+    /// Write `rows` as a row group: their channels' keys index `channels`, their signals'
+    /// `signals`.
+    fn row_group(
+        &mut self,
+        rows: &LongColumns,
+        channels: &[String],
+        signals: &[String],
+    ) -> io::Result<()> {
+        let count = rows.len();
+        if count == 0 {
+            return Ok(());
+        }
+        if count > MAX_GROUP_ROWS {
+            return Err(too_big("a row group"));
+        }
+        let (lo, hi) = rows
+            .ts
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+        let ts_statistics = (lo.to_le_bytes().to_vec(), hi.to_le_bytes().to_vec(), 0);
+        let ts = rows.ts.iter().map(|t| t.to_le_bytes());
+        let ts = self.plain_chunk("ts", INT64, count, ts, Some(ts_statistics))?;
+        let channel = self.dictionary_chunk("channel", &rows.channels, channels)?;
+        let signal = self.dictionary_chunk("signal", &rows.signals, signals)?;
+        let values = rows.values.iter().map(|v| v.to_le_bytes());
+        let value = self.plain_chunk("value", DOUBLE, count, values, None)?;
+        self.groups.push(RowGroup {
+            chunks: vec![ts, channel, signal, value],
+            rows: as_i64(count as u64),
+        });
+        Ok(())
+    }
+
+    /// Write the footer: the file is whole. `out` is given back (flushed).
+    pub fn finish(mut self) -> io::Result<W> {
+        let mut meta = Thrift::default();
+        meta.i32(1, 1);
+        meta.list(2, Kind::Struct, 5);
+        meta.begin_item();
+        meta.binary(4, b"schema");
+        meta.i32(5, 4);
+        meta.end();
+        for (name, physical) in [
+            ("ts", INT64),
+            ("channel", BYTE_ARRAY),
+            ("signal", BYTE_ARRAY),
+            ("value", DOUBLE),
+        ] {
+            meta.begin_item();
+            meta.i32(1, physical);
+            meta.i32(3, OPTIONAL);
+            meta.binary(4, name.as_bytes());
+            match physical {
+                INT64 => {
+                    meta.i32(6, TIMESTAMP_MICROS);
+                    meta.begin(10); // LogicalType: TIMESTAMP (UTC, microseconds)
+                    meta.begin(8);
+                    meta.bool(1, true);
+                    meta.begin(2);
+                    meta.begin(2);
+                    meta.end();
+                    meta.end();
+                    meta.end();
+                    meta.end();
+                }
+                BYTE_ARRAY => {
+                    meta.i32(6, UTF8);
+                    meta.begin(10); // LogicalType: STRING
+                    meta.begin(1);
+                    meta.end();
+                    meta.end();
+                }
+                _ => {}
+            }
+            meta.end();
+        }
+        let rows: i64 = self.groups.iter().map(|g| g.rows).sum();
+        meta.i64(3, rows);
+        meta.list(4, Kind::Struct, self.groups.len());
+        for group in &self.groups {
+            meta.begin_item();
+            meta.list(1, Kind::Struct, group.chunks.len());
+            for chunk in &group.chunks {
+                let start = chunk.dictionary_page.unwrap_or(chunk.data_page);
+                meta.begin_item();
+                meta.i64(2, start);
+                meta.begin(3);
+                meta.i32(1, chunk.physical);
+                meta.list(2, Kind::I32, chunk.encodings.len());
+                for &encoding in chunk.encodings {
+                    meta.list_item_i32(encoding);
+                }
+                meta.list(3, Kind::Binary, 1);
+                meta.list_item_binary(chunk.name.as_bytes());
+                meta.i32(4, self.compression.codec());
+                meta.i64(5, chunk.values);
+                meta.i64(6, chunk.uncompressed);
+                meta.i64(7, chunk.compressed);
+                meta.i64(9, chunk.data_page);
+                if let Some(offset) = chunk.dictionary_page {
+                    meta.i64(11, offset);
+                }
+                if let Some((min, max, nulls)) = &chunk.statistics {
+                    meta.begin(12);
+                    meta.i64(3, *nulls);
+                    if !min.is_empty() || !max.is_empty() || chunk.physical != BYTE_ARRAY {
+                        meta.binary(5, max);
+                        meta.binary(6, min);
+                    }
+                    meta.end();
+                }
+                meta.end();
+                meta.end();
+            }
+            let start = group
+                .chunks
+                .first()
+                .map_or(0, |c| c.dictionary_page.unwrap_or(c.data_page));
+            meta.i64(2, group.chunks.iter().map(|c| c.uncompressed).sum());
+            meta.i64(3, group.rows);
+            meta.i64(5, start);
+            meta.i64(6, group.chunks.iter().map(|c| c.compressed).sum());
+            meta.end();
+        }
+        meta.binary(
+            6,
+            format!("bywire version {}", env!("CARGO_PKG_VERSION")).as_bytes(),
+        );
+        // Every column's statistics in its type's order (strings: bytewise, unsigned).
+        meta.list(7, Kind::Struct, 4);
+        for _ in 0..4 {
+            meta.begin_item();
+            meta.begin(1);
+            meta.end();
+            meta.end();
+        }
+        meta.end();
+        let length = u32::try_from(meta.bytes.len()).map_err(|_| too_big("the footer"))?;
+        self.out.write_all(&meta.bytes)?;
+        self.out.write_all(&length.to_le_bytes())?;
+        self.out.write_all(b"PAR1")?;
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+/// A part to write: a log (or a byte range of a candump log) and the vehicle and day its
+/// path gives (no day: each row's UTC day).
+#[derive(Debug, Clone)]
+pub struct LakePart {
+    /// The log.
+    pub path: PathBuf,
+    /// Only the lines starting in `[start, end)` (a split candump log).
+    pub byte_range: Option<(u64, u64)>,
+    /// The vehicle (null partition when none).
+    pub vehicle: Option<String>,
+    /// The day; none: each row's UTC day.
+    pub date: Option<String>,
+}
+
+/// A folder's file being written.
+struct OpenFile {
+    writer: LongFile<BufWriter<File>>,
+    hidden: PathBuf,
+    name: String,
+    rows: u64,
+}
+
+/// One `vehicle=/date=/message=` folder's rows.
+struct Folder {
+    path: String,
+    signals: Vec<String>,
+    held: LongColumns,
+    file: Option<OpenFile>,
+    /// Files made for it so far (the next one's `cNNN`).
+    made: u32,
+    /// When it was last written (the least recent open file is the one finished).
+    written_at: u64,
+}
+
+/// A task's files in a lake's staging folder (see the module's documentation).
+pub struct LakeFiles {
+    staging: PathBuf,
+    prefix: String,
+    compression: LakeCompression,
+    open_files: usize,
+    group_rows: usize,
+    channels: Vec<String>,
+    channel_keys: HashMap<String, u32>,
+    folders: Vec<Folder>,
+    folder_of: HashMap<String, usize>,
+    held: usize,
+    open: usize,
+    clock: u64,
+    written: Vec<(String, u64)>,
+}
+
+impl LakeFiles {
+    /// Files named `PREFIX.cNNN.CODEC.parquet` under `staging`'s partition folders, at most
+    /// `open_files` open at once, rows written a row group of `group_rows` at a time.
+    pub fn new(
+        staging: &Path,
+        prefix: &str,
+        compression: LakeCompression,
+        open_files: usize,
+        group_rows: usize,
+    ) -> Self {
+        LakeFiles {
+            staging: staging.to_path_buf(),
+            prefix: prefix.to_string(),
+            compression,
+            open_files: open_files.max(1),
+            group_rows: group_rows.clamp(1, MAX_GROUP_ROWS),
+            channels: Vec::new(),
+            channel_keys: HashMap::new(),
+            folders: Vec::new(),
+            folder_of: HashMap::new(),
+            held: 0,
+            open: 0,
+            clock: 0,
+            written: Vec::new(),
+        }
+    }
+
+    fn folder(&mut self, vehicle: Option<&str>, date: Option<&str>, message: &str) -> usize {
+        let path = format!(
+            "{}/{}/{}",
+            partition_folder("vehicle", vehicle),
+            partition_folder("date", date),
+            partition_folder("message", Some(message))
+        );
+        if let Some(&index) = self.folder_of.get(&path) {
+            return index;
+        }
+        self.folder_of.insert(path.clone(), self.folders.len());
+        self.folders.push(Folder {
+            path,
+            signals: Vec::new(),
+            held: LongColumns::default(),
+            file: None,
+            made: 0,
+            written_at: 0,
+        });
+        self.folders.len() - 1
+    }
+
+    /// The task's key of a channel's text.
+    fn channel_key(&mut self, text: &str) -> u32 {
+        if let Some(&key) = self.channel_keys.get(text) {
+            return key;
+        }
+        let key = u32::try_from(self.channels.len()).unwrap_or(NULL_KEY - 1);
+        self.channels.push(text.to_string());
+        self.channel_keys.insert(text.to_string(), key);
+        key
+    }
+
+    /// Add a decoded table of `message` (what [`super::decoded::decode_frames_batch`]
+    /// gives) to the folders of `vehicle` and `date` (none: each row's UTC day).
+    pub fn add(
+        &mut self,
+        vehicle: Option<&str>,
+        date: Option<&str>,
+        message: &str,
+        table: &RecordBatch,
+    ) -> io::Result<()> {
+        let mut wide = Wide::of(table)
+            .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("{message}: {e}")))?;
+        let names: Vec<&str> = wide.values.iter().map(|(name, _)| *name).collect();
+        // The table's channel keys and signal indexes as the task's and the folder's keys.
+        let mut channel_keys: Vec<Option<u32>> = Vec::new();
+        let mut current: Option<(i64, usize, Vec<u32>)> = None;
+        let mut touched: Vec<usize> = Vec::new();
+        for row in 0..wide.ts.len() {
+            if wide.ts.is_null(row) {
+                continue;
+            }
+            let nanos = wide.ts.value(row);
+            let day = if date.is_some() {
+                0
+            } else {
+                nanos.div_euclid(NANOS_PER_DAY)
+            };
+            if current.as_ref().is_none_or(|(d, ..)| *d != day) {
+                let day_text = match date {
+                    Some(date) => date.to_string(),
+                    None => {
+                        let (year, month, of_month) = calendar::civil_from_days(day);
+                        format!("{year:04}-{month:02}-{of_month:02}")
+                    }
+                };
+                let index = self.folder(vehicle, Some(&day_text), message);
+                let folder = self
+                    .folders
+                    .get_mut(index)
+                    .ok_or_else(|| io::Error::other("folder"))?;
+                let keys = names
+                    .iter()
+                    .map(|name| signal_key(&mut folder.signals, name))
+                    .collect();
+                if !touched.contains(&index) {
+                    touched.push(index);
+                }
+                current = Some((day, index, keys));
+            }
+            let channel = match wide.channel.key(row).and_then(|k| usize::try_from(k).ok()) {
+                None => NULL_KEY,
+                Some(key) => {
+                    if channel_keys.len() <= key {
+                        channel_keys.resize(key + 1, None);
+                    }
+                    match channel_keys.get(key).copied().flatten() {
+                        Some(ours) => ours,
+                        None => {
+                            let text = wide.channel.texts.get(key).copied().unwrap_or_default();
+                            let ours = self.channel_key(text);
+                            if let Some(slot) = channel_keys.get_mut(key) {
+                                *slot = Some(ours);
+                            }
+                            ours
+                        }
+                    }
+                }
+            };
+            let Some((_, index, keys)) = &current else {
+                continue;
+            };
+            let Some(folder) = self.folders.get_mut(*index) else {
+                continue;
+            };
+            let micros = nanos.div_euclid(1000);
+            let held = &mut folder.held;
+            let before = held.len();
+            for ((_, column), &key) in wide.values.iter().zip(keys) {
+                if let Some(value) = column.value(row) {
+                    held.ts.push(micros);
+                    held.channels.push(channel);
+                    held.signals.push(key);
+                    held.values.push(value);
+                }
+            }
+            self.held += held.len() - before;
+        }
+        for index in touched {
+            let full = self
+                .folders
+                .get(index)
+                .is_some_and(|f| f.held.len() >= self.group_rows);
+            if full {
+                self.write(index)?;
+            }
+        }
+        if self.held >= 8 * self.group_rows {
+            for index in 0..self.folders.len() {
+                self.write(index)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Write what `index`'s folder holds as a row group of its file (opened if need be).
+    fn write(&mut self, index: usize) -> io::Result<()> {
+        let Some(folder) = self.folders.get(index) else {
+            return Ok(());
+        };
+        if folder.held.len() == 0 {
+            return Ok(());
+        }
+        if folder.file.is_none() {
+            while self.open >= self.open_files {
+                let oldest = self
+                    .folders
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, f)| f.file.is_some())
+                    .min_by_key(|(_, f)| f.written_at)
+                    .map(|(i, _)| i);
+                match oldest {
+                    Some(oldest) => self.finish_file(oldest)?,
+                    None => break,
+                }
+            }
+            self.open_file(index)?;
+        }
+        self.clock += 1;
+        let Some(folder) = self.folders.get_mut(index) else {
+            return Ok(());
+        };
+        folder.written_at = self.clock;
+        let held = std::mem::take(&mut folder.held);
+        self.held -= held.len();
+        if let Some(file) = folder.file.as_mut() {
+            file.writer
+                .row_group(&held, &self.channels, &folder.signals)?;
+            file.rows += held.len() as u64;
+        }
+        Ok(())
+    }
+
+    fn open_file(&mut self, index: usize) -> io::Result<()> {
+        let Some(folder) = self.folders.get_mut(index) else {
+            return Ok(());
+        };
+        let name = format!(
+            "{}.c{:03}{}.parquet",
+            self.prefix,
+            folder.made,
+            self.compression.extension()
+        );
+        folder.made += 1;
+        let directory = self.staging.join(&folder.path);
+        std::fs::create_dir_all(&directory)?;
+        let hidden = directory.join(format!(".{name}.{}.inprogress", std::process::id()));
+        let writer = LongFile::new(BufWriter::new(File::create(&hidden)?), self.compression)?;
+        folder.file = Some(OpenFile {
+            writer,
+            hidden,
+            name: format!("{}/{name}", folder.path),
+            rows: 0,
+        });
+        self.open += 1;
+        Ok(())
+    }
+
+    /// Finish `index`'s file: its footer, then its own name.
+    fn finish_file(&mut self, index: usize) -> io::Result<()> {
+        let Some(file) = self.folders.get_mut(index).and_then(|f| f.file.take()) else {
+            return Ok(());
+        };
+        self.open -= 1;
+        let hidden = file.hidden.clone();
+        // Not synced: as Spark's writers, the job's commit is the renames.
+        let done = file.writer.finish().map(drop);
+        if let Err(e) = done {
+            let _ = std::fs::remove_file(&hidden);
+            return Err(e);
+        }
+        std::fs::rename(&hidden, self.staging.join(&file.name))?;
+        self.written.push((file.name, file.rows));
+        Ok(())
+    }
+
+    /// Write what is held and finish every file: `(file, rows)` for each file made, the files
+    /// relative to the staging folder.
+    pub fn finish(mut self) -> io::Result<Vec<(String, u64)>> {
+        for index in 0..self.folders.len() {
+            self.write(index)?;
+        }
+        for index in 0..self.folders.len() {
+            self.finish_file(index)?;
+        }
+        Ok(std::mem::take(&mut self.written))
+    }
+}
+
+impl Drop for LakeFiles {
+    /// Files not finished (an error, or a panic elsewhere) are removed: no file that looks
+    /// whole is left.
+    fn drop(&mut self) {
+        for folder in &mut self.folders {
+            if let Some(file) = folder.file.take() {
+                let _ = std::fs::remove_file(&file.hidden);
+            }
+        }
+    }
+}
+
+/// A signal's key in a folder's signals (added when new).
+fn signal_key(signals: &mut Vec<String>, name: &str) -> u32 {
+    let at = signals.iter().position(|s| s == name).unwrap_or_else(|| {
+        signals.push(name.to_string());
+        signals.len() - 1
+    });
+    u32::try_from(at).unwrap_or(NULL_KEY - 1)
+}
+
+/// Decode `parts` with `decoder` into `files` (a task's work), reading `batch_rows` frames at
+/// a time. An error names the part's file.
+pub fn write_parts(
+    decoder: &Decoder,
+    parts: &[LakePart],
+    files: &mut LakeFiles,
+    batch_rows: usize,
+) -> io::Result<()> {
+    let schema = super::raw_schema();
+    for part in parts {
+        let named = |e: &dyn std::fmt::Display| format!("{}: {e}", part.path.display());
+        let records = match part.byte_range {
+            None => Format::open_file(&part.path).map(|(_, records)| records),
+            Some((start, end)) => Format::open_file_range(&part.path, start, end),
+        }
+        .map_err(|e| io::Error::new(e.kind(), named(&e)))?;
+        let mut records = records.peekable();
+        while records.peek().is_some() {
+            let mut columns = FrameColumns::new();
+            while columns.rows() < batch_rows.max(1) {
+                match records.next() {
+                    Some(Ok(record)) => columns.push(&record),
+                    Some(Err(e)) => {
+                        return Err(io::Error::new(io::ErrorKind::InvalidData, named(&e)))
+                    }
+                    None => break,
+                }
+            }
+            let batch = columns
+                .finish(&schema)
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, named(&e)))?;
+            let (tables, _) = super::decoded::decode_frames_batch(decoder, &batch)
+                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, named(&e)))?;
+            for (message, table) in &tables {
+                files.add(
+                    part.vehicle.as_deref(),
+                    part.date.as_deref(),
+                    message,
+                    table,
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::panic,
+    clippy::cast_precision_loss,
+    clippy::cast_possible_truncation,
+    clippy::cast_possible_wrap
+)]
+mod tests {
+    use super::*;
+    use ::parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    use ::parquet::file::reader::{FileReader, SerializedFileReader};
+    use ::parquet::file::statistics::Statistics;
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::{Float64Type, Int32Type, TimestampMicrosecondType};
+    use arrow_array::{DictionaryArray, Float64Array, TimestampNanosecondArray};
+    use arrow_schema::{DataType, Field, Schema, TimeUnit};
+    use std::sync::Arc;
+
+    fn fresh_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("bywire-lake-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// Every row of a Parquet file, as parquet-rs reads it: (µs, channel, signal, value).
+    type Row = (i64, Option<String>, Option<String>, Option<f64>);
+
+    fn read_rows(path: &Path) -> Vec<Row> {
+        let reader = ParquetRecordBatchReaderBuilder::try_new(File::open(path).unwrap())
+            .unwrap()
+            .build()
+            .unwrap();
+        let mut rows = Vec::new();
+        for batch in reader {
+            let batch = batch.unwrap();
+            let schema = batch.schema();
+            assert_eq!(
+                schema.field(0).data_type(),
+                &DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()))
+            );
+            assert_eq!(schema.field(1).data_type(), &DataType::Utf8);
+            assert_eq!(schema.field(2).data_type(), &DataType::Utf8);
+            assert_eq!(schema.field(3).data_type(), &DataType::Float64);
+            let ts = batch.column(0).as_primitive::<TimestampMicrosecondType>();
+            let channel = batch.column(1).as_string::<i32>();
+            let signal = batch.column(2).as_string::<i32>();
+            let value = batch.column(3).as_primitive::<Float64Type>();
+            for row in 0..batch.num_rows() {
+                rows.push((
+                    ts.value(row),
+                    channel
+                        .is_valid(row)
+                        .then(|| channel.value(row).to_string()),
+                    signal.is_valid(row).then(|| signal.value(row).to_string()),
+                    value.is_valid(row).then(|| value.value(row)),
+                ));
+            }
+        }
+        rows
+    }
+
+    /// Rows with keys of many shapes: runs (longer and shorter than 8), cycles, null
+    /// channels, so that every branch of the hybrid encoding is read back.
+    fn columns(rows: usize, channels: usize, signals: usize, seed: u64) -> LongColumns {
+        let mut state = seed | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut out = LongColumns::default();
+        let mut channel = 0u32;
+        for row in 0..rows {
+            if next() % 16 == 0 {
+                channel = (next() % (channels as u64 + 1)) as u32;
+            }
+            let signal = if (row / 100) % 2 == 0 {
+                row % signals
+            } else {
+                (next() % signals as u64) as usize
+            };
+            out.ts
+                .push(1_764_633_600_000_000 + (row as i64) * 10 - 5_000);
+            out.channels.push(if channel as usize == channels {
+                NULL_KEY
+            } else {
+                channel
+            });
+            out.signals.push(u32::try_from(signal).unwrap());
+            out.values.push((next() % 1000) as f64 / 8.0 - 60.0);
+        }
+        out
+    }
+
+    fn texts(prefix: &str, n: usize) -> Vec<String> {
+        (0..n).map(|i| format!("{prefix}{i}")).collect()
+    }
+
+    fn expected(columns: &LongColumns, channels: &[String], signals: &[String]) -> Vec<Row> {
+        (0..columns.len())
+            .map(|i| {
+                (
+                    columns.ts[i],
+                    channels.get(columns.channels[i] as usize).cloned(),
+                    Some(signals[columns.signals[i] as usize].clone()),
+                    Some(columns.values[i]),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn parquet_rs_reads_every_row_of_every_compression() {
+        let dir = fresh_dir("compressions");
+        for compression in [
+            LakeCompression::Snappy,
+            LakeCompression::Zstd,
+            LakeCompression::Gzip,
+            LakeCompression::Uncompressed,
+        ] {
+            let path = dir.join(format!("{compression:?}.parquet"));
+            let mut file = LongFile::new(File::create(&path).unwrap(), compression).unwrap();
+            let mut all = Vec::new();
+            // Dictionaries of 1, 2, 3, 17 and 300 texts: key widths 1 to 9 bits.
+            for (group, (channels, signals)) in
+                [(1, 1), (2, 2), (3, 17), (2, 300)].into_iter().enumerate()
+            {
+                let rows = columns(1000 + group * 777, channels, signals, group as u64 + 7);
+                let (channels, signals) = (texts("can", channels), texts("Signal", signals));
+                file.row_group(&rows, &channels, &signals).unwrap();
+                all.extend(expected(&rows, &channels, &signals));
+            }
+            file.finish().unwrap();
+            assert_eq!(read_rows(&path), all, "{compression:?}");
+            let reader = SerializedFileReader::new(File::open(&path).unwrap()).unwrap();
+            let meta = reader.metadata();
+            assert_eq!(meta.num_row_groups(), 4);
+            let column = meta.row_group(0).column(0);
+            assert_eq!(column.compression(), compression.codec_name());
+        }
+    }
+
+    impl LakeCompression {
+        fn codec_name(self) -> ::parquet::basic::Compression {
+            use ::parquet::basic::{Compression, GzipLevel, ZstdLevel};
+            match self {
+                Self::Snappy => Compression::SNAPPY,
+                Self::Zstd => Compression::ZSTD(ZstdLevel::default()),
+                Self::Gzip => Compression::GZIP(GzipLevel::default()),
+                Self::Uncompressed => Compression::UNCOMPRESSED,
+            }
+        }
+    }
+
+    #[test]
+    fn statistics_give_the_times_and_texts_present_and_the_nulls() {
+        let dir = fresh_dir("statistics");
+        let path = dir.join("s.parquet");
+        let mut rows = LongColumns::default();
+        for (ts, channel, signal) in [(30, 1, 0), (-5, NULL_KEY, 2), (12, 1, 2)] {
+            rows.ts.push(ts);
+            rows.channels.push(channel);
+            rows.signals.push(signal);
+            rows.values.push(1.0);
+        }
+        let mut file =
+            LongFile::new(File::create(&path).unwrap(), LakeCompression::Snappy).unwrap();
+        let channels = texts("can", 3);
+        file.row_group(&rows, &channels, &["b".into(), "z".into(), "a".into()])
+            .unwrap();
+        file.finish().unwrap();
+        let reader = SerializedFileReader::new(File::open(&path).unwrap()).unwrap();
+        let group = reader.metadata().row_group(0);
+        match group.column(0).statistics().unwrap() {
+            Statistics::Int64(s) => {
+                assert_eq!((s.min_opt(), s.max_opt()), (Some(&-5), Some(&30)));
+                assert_eq!(s.null_count_opt(), Some(0));
+            }
+            other => panic!("{other:?}"),
+        }
+        let texts_of = |column: usize| match group.column(column).statistics().unwrap() {
+            Statistics::ByteArray(s) => (
+                s.min_opt().unwrap().as_utf8().unwrap().to_string(),
+                s.max_opt().unwrap().as_utf8().unwrap().to_string(),
+                s.null_count_opt(),
+            ),
+            other => panic!("{other:?}"),
+        };
+        // Only the texts used: can1 (not can0 nor can2), a and... a (not b nor z).
+        assert_eq!(texts_of(1), ("can1".into(), "can1".into(), Some(1)));
+        assert_eq!(texts_of(2), ("a".into(), "b".into(), Some(0)));
+    }
+
+    #[test]
+    fn folders_are_escaped_as_spark_names_them() {
+        assert_eq!(
+            partition_folder("vehicle", None),
+            "vehicle=__HIVE_DEFAULT_PARTITION__"
+        );
+        assert_eq!(
+            partition_folder("vehicle", Some("")),
+            "vehicle=__HIVE_DEFAULT_PARTITION__"
+        );
+        assert_eq!(
+            partition_folder("message", Some("a/b=c d%")),
+            "message=a%2Fb%3Dc d%25"
+        );
+        assert_eq!(partition_folder("m", Some("\u{1}\u{7f}é")), "m=%01%7Fé");
+    }
+
+    /// A decoded table of two signals (one multiplexed) over the times given (ns).
+    fn decoded(times: &[i64], channels: &[&str]) -> RecordBatch {
+        let ts = TimestampNanosecondArray::from(times.to_vec()).with_timezone("UTC");
+        let channel: DictionaryArray<Int32Type> = channels.iter().copied().collect();
+        let speed = Float64Array::from_iter_values((0..times.len()).map(|i| i as f64));
+        let gear =
+            Float64Array::from_iter((0..times.len()).map(|i| (i % 2 == 0).then_some(-(i as f64))));
+        let schema = Schema::new(vec![
+            Field::new("ts", ts.data_type().clone(), false),
+            Field::new("channel", channel.data_type().clone(), false),
+            Field::new("Speed", DataType::Float64, true),
+            Field::new("Gear", DataType::Float64, true),
+        ]);
+        RecordBatch::try_new(
+            Arc::new(schema),
+            vec![
+                Arc::new(ts),
+                Arc::new(channel),
+                Arc::new(speed),
+                Arc::new(gear),
+            ],
+        )
+        .unwrap()
+    }
+
+    fn lake_files(root: &Path) -> Vec<String> {
+        let mut found = Vec::new();
+        let mut stack = vec![root.to_path_buf()];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else {
+                    found.push(path.strip_prefix(root).unwrap().display().to_string());
+                }
+            }
+        }
+        found.sort();
+        found
+    }
+
+    #[test]
+    fn rows_go_to_their_day_folders_and_a_full_task_rolls_files_over() {
+        let staging = fresh_dir("days");
+        let day = NANOS_PER_DAY;
+        let start = 20_000 * day; // 2024-10-04
+        let times = [start - 1, start, start + 1_500, start + day];
+        // At most one open file: the folders take turns, each turn a new file.
+        let mut files = LakeFiles::new(&staging, "part-00003-job", LakeCompression::Snappy, 1, 2);
+        let table = decoded(&times, &["can0", "can1", "can0", "can0"]);
+        files.add(Some("tug 1"), None, "Drive", &table).unwrap();
+        files
+            .add(
+                Some("tug 1"),
+                None,
+                "Drive",
+                &decoded(&[start - 2], &["can1"]),
+            )
+            .unwrap();
+        let mut written = files.finish().unwrap();
+        written.sort();
+        let folder = |d: &str| format!("vehicle=tug 1/date={d}/message=Drive");
+        let names: Vec<_> = written.iter().map(|(f, _)| f.clone()).collect();
+        assert_eq!(names, lake_files(&staging), "no hidden file left");
+        let by_folder = |d: &str| -> Vec<&(String, u64)> {
+            written
+                .iter()
+                .filter(|(f, _)| f.starts_with(&folder(d)))
+                .collect()
+        };
+        assert_eq!(by_folder("2024-10-03").len(), 2, "{written:?}");
+        assert_eq!(
+            by_folder("2024-10-03")[1].0,
+            format!(
+                "{}/part-00003-job.c001.snappy.parquet",
+                folder("2024-10-03")
+            )
+        );
+        let rows_of = |d: &str| -> Vec<Row> {
+            by_folder(d)
+                .iter()
+                .flat_map(|(f, _)| read_rows(&staging.join(f)))
+                .collect()
+        };
+        let row = |ts: i64, channel: &str, signal: &str, value: f64| {
+            (
+                ts.div_euclid(1000),
+                Some(channel.to_string()),
+                Some(signal.to_string()),
+                Some(value),
+            )
+        };
+        assert_eq!(
+            rows_of("2024-10-03"),
+            [
+                row(start - 1, "can0", "Speed", 0.0),
+                row(start - 1, "can0", "Gear", 0.0),
+                row(start - 2, "can1", "Speed", 0.0),
+                row(start - 2, "can1", "Gear", 0.0)
+            ]
+        );
+        assert_eq!(
+            rows_of("2024-10-04"),
+            [
+                row(start, "can1", "Speed", 1.0),
+                row(start + 1_500, "can0", "Speed", 2.0),
+                row(start + 1_500, "can0", "Gear", -2.0)
+            ]
+        );
+        assert_eq!(
+            rows_of("2024-10-05"),
+            [row(start + day, "can0", "Speed", 3.0)]
+        );
+        let total: u64 = written.iter().map(|(_, rows)| rows).sum();
+        assert_eq!(total, 8);
+    }
+
+    #[test]
+    fn a_given_date_is_every_row_s_and_an_unfinished_task_leaves_nothing() {
+        let staging = fresh_dir("given");
+        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Zstd, 8, 1);
+        let day = NANOS_PER_DAY;
+        files
+            .add(
+                None,
+                Some("2026-12-04"),
+                "M",
+                &decoded(&[0, 3 * day], &["a", "b"]),
+            )
+            .unwrap();
+        let written = files.finish().unwrap();
+        assert_eq!(
+            written,
+            [(
+                "vehicle=__HIVE_DEFAULT_PARTITION__/date=2026-12-04/message=M/p.c000.zstd.parquet"
+                    .to_string(),
+                3
+            )]
+        );
+
+        let staging = fresh_dir("dropped");
+        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Snappy, 8, 1);
+        files
+            .add(None, None, "M", &decoded(&[0, 1], &["a", "b"]))
+            .unwrap();
+        assert_eq!(lake_files(&staging).len(), 1, "a file being written");
+        drop(files);
+        assert!(lake_files(&staging).is_empty());
+    }
+}
