@@ -373,9 +373,9 @@ def write_lake(
     ``mode``: ``errorifexists`` (a lake with files is refused before any work), ``overwrite``
     (the old lake's files are removed once the new ones are ready), ``append`` or
     ``ignore``. ``compression``: ``snappy`` (Spark's), ``zstd``, ``gzip`` or ``none``.
-    ``open_files``: files a task keeps open at once (a DBC of many messages over many days
-    would otherwise open one per message and day); past it a folder's rows go on in a new
-    file.
+    ``open_files``: files a task holds a descriptor of at once (a DBC of many messages over
+    many days would otherwise hold one per message and day); past it the least recently
+    written file is closed, and opened again to append. A task writes one file a folder.
     The logs and the lake must be where every executor can reach them (a shared file
     system)."""
     mode = mode.lower()

@@ -9,7 +9,7 @@ use std::ops::ControlFlow;
 use bywire_dbc::decoder::Decoder;
 use bywire_log::parquet::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
 use bywire_log::parquet::{raw_schema, FrameColumns, ParquetCompression};
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 
 const FRAMES: u64 = 1_000_000;
 const DBC: &str = "../../../shared/corpus/dbc/opendbc/opendbc__dbc__ford_lincoln_base_pt.dbc";
@@ -106,6 +106,93 @@ fn end_to_end(c: &mut Criterion) {
             }
             tables
         })
+    });
+    group.finish();
+    let _ = std::fs::remove_dir_all(&out);
+    lake(c, &decoder, &batches);
+}
+
+/// A data lake's long files (`ts, channel, signal, value`, a file a message folder, snappy)
+/// written from the decoded tables: bywire's encoding (`parquet::lake`) against parquet-rs's
+/// `ArrowWriter` given the same rows as Arrow (`signals_long`), dictionaries for the texts,
+/// into the same folders. The previous run's lake is removed untimed.
+fn lake(c: &mut Criterion, decoder: &Decoder, batches: &[arrow_array::RecordBatch]) {
+    use bywire_log::parquet::lake::{LakeCompression, LakeFiles, LAKE_GROUP_ROWS};
+    use bywire_log::parquet::long::signals_long;
+    use parquet::arrow::ArrowWriter;
+    use parquet::file::properties::{EnabledStatistics, WriterProperties};
+    use parquet::schema::types::ColumnPath;
+
+    let tables: Vec<(String, arrow_array::RecordBatch)> = batches
+        .iter()
+        .flat_map(|batch| decode_frames_batch(decoder, batch).unwrap().0)
+        .collect();
+    let rows: usize = tables
+        .iter()
+        .map(|(_, t)| signals_long(t, None).unwrap().num_rows())
+        .sum();
+    let out = std::env::temp_dir().join(format!("bywire-bench-lake-{}", std::process::id()));
+    let mut group = c.benchmark_group("a lake's long files from decoded tables");
+    group.throughput(Throughput::Elements(rows as u64));
+    group.sample_size(10);
+    let fresh = || {
+        let _ = std::fs::remove_dir_all(&out);
+        out.clone()
+    };
+    group.bench_function("bywire (parquet::lake)", |b| {
+        b.iter_batched(
+            fresh,
+            |out| {
+                let mut files = LakeFiles::new(
+                    &out,
+                    "part-0",
+                    LakeCompression::Snappy,
+                    256,
+                    LAKE_GROUP_ROWS,
+                )
+                .unwrap();
+                for (message, table) in &tables {
+                    files
+                        .add(Some("v"), Some("2026-12-04"), message, table)
+                        .unwrap();
+                }
+                files.finish().unwrap().len()
+            },
+            BatchSize::PerIteration,
+        )
+    });
+    group.bench_function("parquet-rs ArrowWriter (signals_long)", |b| {
+        b.iter_batched(
+            fresh,
+            |out| {
+                let properties = WriterProperties::builder()
+                    .set_compression(parquet::basic::Compression::SNAPPY)
+                    .set_dictionary_enabled(false)
+                    .set_column_dictionary_enabled(ColumnPath::from("channel"), true)
+                    .set_column_dictionary_enabled(ColumnPath::from("signal"), true)
+                    .set_statistics_enabled(EnabledStatistics::None)
+                    .set_column_statistics_enabled(ColumnPath::from("ts"), EnabledStatistics::Chunk)
+                    .build();
+                let mut writers = std::collections::HashMap::new();
+                for (message, table) in &tables {
+                    let long = signals_long(table, None).unwrap();
+                    let writer = writers.entry(message.clone()).or_insert_with(|| {
+                        let folder =
+                            out.join(format!("vehicle=v/date=2026-12-04/message={message}"));
+                        std::fs::create_dir_all(&folder).unwrap();
+                        let file = std::fs::File::create(folder.join("part-0.parquet")).unwrap();
+                        ArrowWriter::try_new(file, long.schema(), Some(properties.clone())).unwrap()
+                    });
+                    writer.write(&long).unwrap();
+                }
+                let files = writers.len();
+                for (_, writer) in writers {
+                    writer.close().unwrap();
+                }
+                files
+            },
+            BatchSize::PerIteration,
+        )
     });
     group.finish();
     let _ = std::fs::remove_dir_all(&out);

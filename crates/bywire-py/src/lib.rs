@@ -1030,7 +1030,7 @@ fn write_lake_files(
         .collect();
     let decoder = Arc::clone(&database.decoder);
     py.detach(move || {
-        let mut files = LakeFiles::new(&staging, prefix, compression, open_files, LAKE_GROUP_ROWS);
+        let mut files = LakeFiles::new(&staging, prefix, compression, open_files, LAKE_GROUP_ROWS)?;
         lake::write_parts(&decoder, &parts, &mut files, batch_rows)?;
         files.finish()
     })

@@ -12,10 +12,13 @@
 //! parquet-rs and polars (the tests read them back with parquet-rs; the Python tests with
 //! Spark and pyarrow).
 //!
-//! [`LakeFiles`] holds a task's files: each folder's rows are held until there are a row
-//! group's worth, each file is written under a hidden name until it is whole, and at most a
-//! given number are open at once (past that the least recently written is finished and its
-//! folder's later rows start its next file, `c001`..., as Spark numbers them).
+//! [`LakeFiles`] holds a task's files, one a folder as Spark's writer makes them: each
+//! folder's rows are held until there are a row group's worth (and all folders hold at most
+//! 8 row groups' worth: then the fullest write theirs), each file is written under a hidden
+//! name until it is whole, and at most a given number hold a descriptor (past that, the least
+//! recently written file's is closed, and the file is opened again to append its next row
+//! group: a DBC of hundreds of messages over many days neither runs a task out of descriptors
+//! nor splits a folder into many small files).
 
 use std::collections::HashMap;
 use std::fs::File;
@@ -205,15 +208,39 @@ impl Compressor {
     }
 }
 
-/// A Parquet file of long rows (`ts, channel, signal, value`), a row group at a time.
-pub struct LongFile<W: Write> {
-    out: W,
-    at: u64,
+/// What a task's files share while they are written: the compressor and the page being
+/// built (a compressor a file would cost each folder its own context).
+pub struct LongEncoder {
     compression: LakeCompression,
     compressor: Compressor,
-    groups: Vec<RowGroup>,
-    /// The page being built (kept between pages).
     page: Vec<u8>,
+}
+
+impl LongEncoder {
+    /// Pages compressed with `compression`.
+    pub fn new(compression: LakeCompression) -> io::Result<Self> {
+        Ok(LongEncoder {
+            compression,
+            compressor: Compressor::new(compression)?,
+            page: Vec::new(),
+        })
+    }
+}
+
+/// A Parquet file of long rows (`ts, channel, signal, value`) being written, a row group at a
+/// time: where it is and what its footer will say. The file itself is the caller's, given to
+/// each call, so that it can be closed between row groups and opened again to append.
+pub struct LongFile {
+    at: u64,
+    groups: Vec<RowGroup>,
+}
+
+/// A row group being written: the file, the encoder and the output.
+struct Pages<'a, W: Write> {
+    out: &'a mut W,
+    at: &'a mut u64,
+    compressor: &'a mut Compressor,
+    page: &'a mut Vec<u8>,
 }
 
 fn too_big(what: &str) -> io::Error {
@@ -279,24 +306,11 @@ fn key_width(entries: usize) -> u32 {
     (usize::BITS - entries.saturating_sub(1).leading_zeros()).max(1)
 }
 
-impl<W: Write> LongFile<W> {
-    /// A file starting on `out`.
-    pub fn new(mut out: W, compression: LakeCompression) -> io::Result<Self> {
-        out.write_all(b"PAR1")?;
-        Ok(LongFile {
-            out,
-            at: 4,
-            compression,
-            compressor: Compressor::new(compression)?,
-            groups: Vec::new(),
-            page: Vec::new(),
-        })
-    }
-
+impl<W: Write> Pages<'_, W> {
     /// Write `self.page` as a page: `(uncompressed, compressed)` sizes with its header.
     fn write_page(&mut self, kind: i32, values: usize, encoding: i32) -> io::Result<(i64, i64)> {
-        let compressed = self.compressor.compress(&self.page)?;
-        let body = compressed.as_deref().unwrap_or(&self.page);
+        let compressed = self.compressor.compress(self.page)?;
+        let body = compressed.as_deref().unwrap_or(self.page);
         let mut header = Thrift::default();
         header.i32(1, kind);
         header.i32(2, as_i32(self.page.len(), "a page")?);
@@ -318,7 +332,7 @@ impl<W: Write> LongFile<W> {
         self.out.write_all(&header.bytes)?;
         self.out.write_all(body)?;
         let head = header.bytes.len() as u64;
-        self.at += head + body.len() as u64;
+        *self.at += head + body.len() as u64;
         Ok((
             as_i64(head + self.page.len() as u64),
             as_i64(head + body.len() as u64),
@@ -355,7 +369,7 @@ impl<W: Write> LongFile<W> {
         for value in values {
             self.page.extend_from_slice(&value);
         }
-        let data_page = as_i64(self.at);
+        let data_page = as_i64(*self.at);
         let (uncompressed, compressed) = self.write_page(DATA_PAGE, rows, PLAIN)?;
         Ok(Chunk {
             physical,
@@ -384,7 +398,7 @@ impl<W: Write> LongFile<W> {
             self.page.extend_from_slice(&length.to_le_bytes());
             self.page.extend_from_slice(text.as_bytes());
         }
-        let dictionary_page = as_i64(self.at);
+        let dictionary_page = as_i64(*self.at);
         let (dictionary_uncompressed, dictionary_compressed) =
             self.write_page(DICTIONARY_PAGE, texts.len(), PLAIN_DICTIONARY)?;
         let mut used = vec![false; texts.len()];
@@ -406,12 +420,12 @@ impl<W: Write> LongFile<W> {
         #[allow(clippy::cast_possible_truncation)] // at most 32
         self.page.push(width as u8);
         if nulls == 0 {
-            hybrid(keys, width, &mut self.page);
+            hybrid(keys, width, self.page);
         } else {
             let present: Vec<u32> = keys.iter().copied().filter(|&k| k != NULL_KEY).collect();
-            hybrid(&present, width, &mut self.page);
+            hybrid(&present, width, self.page);
         }
-        let data_page = as_i64(self.at);
+        let data_page = as_i64(*self.at);
         let (uncompressed, compressed) =
             self.write_page(DATA_PAGE, keys.len(), PLAIN_DICTIONARY)?;
         let mut seen = texts
@@ -435,11 +449,24 @@ impl<W: Write> LongFile<W> {
             statistics: statistics.or(Some((Vec::new(), Vec::new(), as_i64(nulls as u64)))),
         })
     }
+}
+
+impl LongFile {
+    /// A file starting on `out` (its first bytes).
+    pub fn start(out: &mut impl Write) -> io::Result<Self> {
+        out.write_all(b"PAR1")?;
+        Ok(LongFile {
+            at: 4,
+            groups: Vec::new(),
+        })
+    }
 
     /// Write `rows` as a row group: their channels' keys index `channels`, their signals'
     /// `signals`.
     fn row_group(
         &mut self,
+        encoder: &mut LongEncoder,
+        out: &mut impl Write,
         rows: &LongColumns,
         channels: &[String],
         signals: &[String],
@@ -456,12 +483,18 @@ impl<W: Write> LongFile<W> {
             .iter()
             .fold((i64::MAX, i64::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
         let ts_statistics = (lo.to_le_bytes().to_vec(), hi.to_le_bytes().to_vec(), 0);
+        let mut pages = Pages {
+            out,
+            at: &mut self.at,
+            compressor: &mut encoder.compressor,
+            page: &mut encoder.page,
+        };
         let ts = rows.ts.iter().map(|t| t.to_le_bytes());
-        let ts = self.plain_chunk("ts", INT64, count, ts, Some(ts_statistics))?;
-        let channel = self.dictionary_chunk("channel", &rows.channels, channels)?;
-        let signal = self.dictionary_chunk("signal", &rows.signals, signals)?;
+        let ts = pages.plain_chunk("ts", INT64, count, ts, Some(ts_statistics))?;
+        let channel = pages.dictionary_chunk("channel", &rows.channels, channels)?;
+        let signal = pages.dictionary_chunk("signal", &rows.signals, signals)?;
         let values = rows.values.iter().map(|v| v.to_le_bytes());
-        let value = self.plain_chunk("value", DOUBLE, count, values, None)?;
+        let value = pages.plain_chunk("value", DOUBLE, count, values, None)?;
         self.groups.push(RowGroup {
             chunks: vec![ts, channel, signal, value],
             rows: as_i64(count as u64),
@@ -469,8 +502,8 @@ impl<W: Write> LongFile<W> {
         Ok(())
     }
 
-    /// Write the footer: the file is whole. `out` is given back (flushed).
-    pub fn finish(mut self) -> io::Result<W> {
+    /// Write the footer on `out` (flushed): the file is whole.
+    pub fn finish(self, encoder: &LongEncoder, out: &mut impl Write) -> io::Result<()> {
         let mut meta = Thrift::default();
         meta.i32(1, 1);
         meta.list(2, Kind::Struct, 5);
@@ -530,7 +563,7 @@ impl<W: Write> LongFile<W> {
                 }
                 meta.list(3, Kind::Binary, 1);
                 meta.list_item_binary(chunk.name.as_bytes());
-                meta.i32(4, self.compression.codec());
+                meta.i32(4, encoder.compression.codec());
                 meta.i64(5, chunk.values);
                 meta.i64(6, chunk.uncompressed);
                 meta.i64(7, chunk.compressed);
@@ -574,11 +607,10 @@ impl<W: Write> LongFile<W> {
         }
         meta.end();
         let length = u32::try_from(meta.bytes.len()).map_err(|_| too_big("the footer"))?;
-        self.out.write_all(&meta.bytes)?;
-        self.out.write_all(&length.to_le_bytes())?;
-        self.out.write_all(b"PAR1")?;
-        self.out.flush()?;
-        Ok(self.out)
+        out.write_all(&meta.bytes)?;
+        out.write_all(&length.to_le_bytes())?;
+        out.write_all(b"PAR1")?;
+        out.flush()
     }
 }
 
@@ -596,9 +628,10 @@ pub struct LakePart {
     pub date: Option<String>,
 }
 
-/// A folder's file being written.
-struct OpenFile {
-    writer: LongFile<BufWriter<File>>,
+/// A folder's file being written, and its descriptor while it holds one.
+struct FolderFile {
+    long: LongFile,
+    handle: Option<BufWriter<File>>,
     hidden: PathBuf,
     name: String,
     rows: u64,
@@ -609,10 +642,8 @@ struct Folder {
     path: String,
     signals: Vec<String>,
     held: LongColumns,
-    file: Option<OpenFile>,
-    /// Files made for it so far (the next one's `cNNN`).
-    made: u32,
-    /// When it was last written (the least recent open file is the one finished).
+    file: Option<FolderFile>,
+    /// When it was last written (the least recent descriptor is the one closed).
     written_at: u64,
 }
 
@@ -620,7 +651,7 @@ struct Folder {
 pub struct LakeFiles {
     staging: PathBuf,
     prefix: String,
-    compression: LakeCompression,
+    encoder: LongEncoder,
     open_files: usize,
     group_rows: usize,
     channels: Vec<String>,
@@ -634,19 +665,21 @@ pub struct LakeFiles {
 }
 
 impl LakeFiles {
-    /// Files named `PREFIX.cNNN.CODEC.parquet` under `staging`'s partition folders, at most
-    /// `open_files` open at once, rows written a row group of `group_rows` at a time.
+    /// Files named `PREFIX.c000.CODEC.parquet` (Spark's names) under `staging`'s partition
+    /// folders, one a folder, rows written a row group of `group_rows` at a time; at most
+    /// `open_files` descriptors held (past that, the least recently written file's is closed,
+    /// and the file opened again to append its next row group).
     pub fn new(
         staging: &Path,
         prefix: &str,
         compression: LakeCompression,
         open_files: usize,
         group_rows: usize,
-    ) -> Self {
-        LakeFiles {
+    ) -> io::Result<Self> {
+        Ok(LakeFiles {
             staging: staging.to_path_buf(),
             prefix: prefix.to_string(),
-            compression,
+            encoder: LongEncoder::new(compression)?,
             open_files: open_files.max(1),
             group_rows: group_rows.clamp(1, MAX_GROUP_ROWS),
             channels: Vec::new(),
@@ -657,7 +690,7 @@ impl LakeFiles {
             open: 0,
             clock: 0,
             written: Vec::new(),
-        }
+        })
     }
 
     fn folder(&mut self, vehicle: Option<&str>, date: Option<&str>, message: &str) -> usize {
@@ -676,7 +709,6 @@ impl LakeFiles {
             signals: Vec::new(),
             held: LongColumns::default(),
             file: None,
-            made: 0,
             written_at: 0,
         });
         self.folders.len() - 1
@@ -789,92 +821,145 @@ impl LakeFiles {
             }
         }
         if self.held >= 8 * self.group_rows {
-            for index in 0..self.folders.len() {
+            // The folders holding most first, until half the bound is held: the others'
+            // row groups grow meanwhile.
+            let mut by_size: Vec<usize> = (0..self.folders.len()).collect();
+            by_size.sort_by_key(|&i| {
+                std::cmp::Reverse(self.folders.get(i).map_or(0, |f| f.held.len()))
+            });
+            for index in by_size {
+                if self.held <= 4 * self.group_rows {
+                    break;
+                }
                 self.write(index)?;
             }
         }
         Ok(())
     }
 
-    /// Write what `index`'s folder holds as a row group of its file (opened if need be).
-    fn write(&mut self, index: usize) -> io::Result<()> {
-        let Some(folder) = self.folders.get(index) else {
+    /// `index`'s file with a descriptor: made, or opened again to append (another file's
+    /// descriptor closed first when `open_files` are held).
+    fn handle(&mut self, index: usize) -> io::Result<()> {
+        let held = self
+            .folders
+            .get(index)
+            .and_then(|f| f.file.as_ref())
+            .map(|f| f.handle.is_some());
+        if held == Some(true) {
+            return Ok(());
+        }
+        while self.open >= self.open_files {
+            let oldest = self
+                .folders
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| f.file.as_ref().is_some_and(|f| f.handle.is_some()))
+                .min_by_key(|(_, f)| f.written_at)
+                .map(|(i, _)| i);
+            let Some(handle) = oldest
+                .and_then(|i| self.folders.get_mut(i))
+                .and_then(|f| f.file.as_mut())
+                .and_then(|f| f.handle.take())
+            else {
+                break;
+            };
+            self.open -= 1;
+            handle
+                .into_inner()
+                .map_err(io::IntoInnerError::into_error)?;
+        }
+        let Some(folder) = self.folders.get_mut(index) else {
             return Ok(());
         };
-        if folder.held.len() == 0 {
+        match folder.file.as_mut() {
+            Some(file) => {
+                let reopened = std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(&file.hidden)?;
+                file.handle = Some(BufWriter::new(reopened));
+            }
+            None => {
+                let name = format!(
+                    "{}.c000{}.parquet",
+                    self.prefix,
+                    self.encoder.compression.extension()
+                );
+                let directory = self.staging.join(&folder.path);
+                std::fs::create_dir_all(&directory)?;
+                let hidden = directory.join(format!(".{name}.{}.inprogress", std::process::id()));
+                let mut handle = BufWriter::new(File::create(&hidden)?);
+                let long = LongFile::start(&mut handle)?;
+                folder.file = Some(FolderFile {
+                    long,
+                    handle: Some(handle),
+                    hidden,
+                    name: format!("{}/{name}", folder.path),
+                    rows: 0,
+                });
+            }
+        }
+        self.open += 1;
+        Ok(())
+    }
+
+    /// Write what `index`'s folder holds as a row group of its file.
+    fn write(&mut self, index: usize) -> io::Result<()> {
+        if self.folders.get(index).is_none_or(|f| f.held.len() == 0) {
             return Ok(());
         }
-        if folder.file.is_none() {
-            while self.open >= self.open_files {
-                let oldest = self
-                    .folders
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, f)| f.file.is_some())
-                    .min_by_key(|(_, f)| f.written_at)
-                    .map(|(i, _)| i);
-                match oldest {
-                    Some(oldest) => self.finish_file(oldest)?,
-                    None => break,
-                }
-            }
-            self.open_file(index)?;
-        }
+        self.handle(index)?;
         self.clock += 1;
         let Some(folder) = self.folders.get_mut(index) else {
             return Ok(());
         };
         folder.written_at = self.clock;
         let held = std::mem::take(&mut folder.held);
-        self.held -= held.len();
-        if let Some(file) = folder.file.as_mut() {
-            file.writer
-                .row_group(&held, &self.channels, &folder.signals)?;
-            file.rows += held.len() as u64;
-        }
-        Ok(())
-    }
-
-    fn open_file(&mut self, index: usize) -> io::Result<()> {
-        let Some(folder) = self.folders.get_mut(index) else {
+        self.held = self.held.saturating_sub(held.len());
+        let Some(file) = folder.file.as_mut() else {
             return Ok(());
         };
-        let name = format!(
-            "{}.c{:03}{}.parquet",
-            self.prefix,
-            folder.made,
-            self.compression.extension()
-        );
-        folder.made += 1;
-        let directory = self.staging.join(&folder.path);
-        std::fs::create_dir_all(&directory)?;
-        let hidden = directory.join(format!(".{name}.{}.inprogress", std::process::id()));
-        let writer = LongFile::new(BufWriter::new(File::create(&hidden)?), self.compression)?;
-        folder.file = Some(OpenFile {
-            writer,
-            hidden,
-            name: format!("{}/{name}", folder.path),
-            rows: 0,
-        });
-        self.open += 1;
+        let Some(handle) = file.handle.as_mut() else {
+            return Ok(());
+        };
+        file.long.row_group(
+            &mut self.encoder,
+            handle,
+            &held,
+            &self.channels,
+            &folder.signals,
+        )?;
+        file.rows += held.len() as u64;
         Ok(())
     }
 
     /// Finish `index`'s file: its footer, then its own name.
     fn finish_file(&mut self, index: usize) -> io::Result<()> {
+        if self.folders.get(index).is_none_or(|f| f.file.is_none()) {
+            return Ok(());
+        }
+        self.handle(index)?;
         let Some(file) = self.folders.get_mut(index).and_then(|f| f.file.take()) else {
             return Ok(());
         };
-        self.open -= 1;
-        let hidden = file.hidden.clone();
-        // Not synced: as Spark's writers, the job's commit is the renames.
-        let done = file.writer.finish().map(drop);
+        let FolderFile {
+            long,
+            handle,
+            hidden,
+            name,
+            rows,
+        } = file;
+        self.open = self.open.saturating_sub(1);
+        let done = match handle {
+            Some(mut handle) => long.finish(&self.encoder, &mut handle),
+            None => Err(io::Error::other("a lake file without a descriptor")),
+        };
         if let Err(e) = done {
             let _ = std::fs::remove_file(&hidden);
             return Err(e);
         }
-        std::fs::rename(&hidden, self.staging.join(&file.name))?;
-        self.written.push((file.name, file.rows));
+        // Not synced: as Spark's writers, the job's commit is the renames.
+        std::fs::rename(&hidden, self.staging.join(&name))?;
+        self.written.push((name, rows));
         Ok(())
     }
 
@@ -883,8 +968,6 @@ impl LakeFiles {
     pub fn finish(mut self) -> io::Result<Vec<(String, u64)>> {
         for index in 0..self.folders.len() {
             self.write(index)?;
-        }
-        for index in 0..self.folders.len() {
             self.finish_file(index)?;
         }
         Ok(std::mem::take(&mut self.written))
@@ -897,6 +980,7 @@ impl Drop for LakeFiles {
     fn drop(&mut self) {
         for folder in &mut self.folders {
             if let Some(file) = folder.file.take() {
+                drop(file.handle);
                 let _ = std::fs::remove_file(&file.hidden);
             }
         }
@@ -1083,7 +1167,9 @@ mod tests {
             LakeCompression::Uncompressed,
         ] {
             let path = dir.join(format!("{compression:?}.parquet"));
-            let mut file = LongFile::new(File::create(&path).unwrap(), compression).unwrap();
+            let mut encoder = LongEncoder::new(compression).unwrap();
+            let mut out = File::create(&path).unwrap();
+            let mut file = LongFile::start(&mut out).unwrap();
             let mut all = Vec::new();
             // Dictionaries of 1, 2, 3, 17 and 300 texts: key widths 1 to 9 bits.
             for (group, (channels, signals)) in
@@ -1091,10 +1177,11 @@ mod tests {
             {
                 let rows = columns(1000 + group * 777, channels, signals, group as u64 + 7);
                 let (channels, signals) = (texts("can", channels), texts("Signal", signals));
-                file.row_group(&rows, &channels, &signals).unwrap();
+                file.row_group(&mut encoder, &mut out, &rows, &channels, &signals)
+                    .unwrap();
                 all.extend(expected(&rows, &channels, &signals));
             }
-            file.finish().unwrap();
+            file.finish(&encoder, &mut out).unwrap();
             assert_eq!(read_rows(&path), all, "{compression:?}");
             let reader = SerializedFileReader::new(File::open(&path).unwrap()).unwrap();
             let meta = reader.metadata();
@@ -1127,12 +1214,14 @@ mod tests {
             rows.signals.push(signal);
             rows.values.push(1.0);
         }
-        let mut file =
-            LongFile::new(File::create(&path).unwrap(), LakeCompression::Snappy).unwrap();
+        let mut encoder = LongEncoder::new(LakeCompression::Snappy).unwrap();
+        let mut out = File::create(&path).unwrap();
+        let mut file = LongFile::start(&mut out).unwrap();
         let channels = texts("can", 3);
-        file.row_group(&rows, &channels, &["b".into(), "z".into(), "a".into()])
+        let signals = ["b".into(), "z".into(), "a".into()];
+        file.row_group(&mut encoder, &mut out, &rows, &channels, &signals)
             .unwrap();
-        file.finish().unwrap();
+        file.finish(&encoder, &mut out).unwrap();
         let reader = SerializedFileReader::new(File::open(&path).unwrap()).unwrap();
         let group = reader.metadata().row_group(0);
         match group.column(0).statistics().unwrap() {
@@ -1215,13 +1304,15 @@ mod tests {
     }
 
     #[test]
-    fn rows_go_to_their_day_folders_and_a_full_task_rolls_files_over() {
+    fn rows_go_to_their_day_folders_and_files_are_opened_again_to_append() {
         let staging = fresh_dir("days");
         let day = NANOS_PER_DAY;
         let start = 20_000 * day; // 2024-10-04
         let times = [start - 1, start, start + 1_500, start + day];
-        // At most one open file: the folders take turns, each turn a new file.
-        let mut files = LakeFiles::new(&staging, "part-00003-job", LakeCompression::Snappy, 1, 2);
+        // At most one descriptor: the folders take turns, each file closed and opened again
+        // to append its next row group.
+        let mut files =
+            LakeFiles::new(&staging, "part-00003-job", LakeCompression::Snappy, 1, 2).unwrap();
         let table = decoded(&times, &["can0", "can1", "can0", "can0"]);
         files.add(Some("tug 1"), None, "Drive", &table).unwrap();
         files
@@ -1243,14 +1334,14 @@ mod tests {
                 .filter(|(f, _)| f.starts_with(&folder(d)))
                 .collect()
         };
-        assert_eq!(by_folder("2024-10-03").len(), 2, "{written:?}");
-        assert_eq!(
-            by_folder("2024-10-03")[1].0,
-            format!(
-                "{}/part-00003-job.c001.snappy.parquet",
-                folder("2024-10-03")
-            )
+        assert_eq!(written.len(), 3, "a file a folder: {written:?}");
+        let first_day = format!(
+            "{}/part-00003-job.c000.snappy.parquet",
+            folder("2024-10-03")
         );
+        assert_eq!(by_folder("2024-10-03")[0].0, first_day);
+        let reader = SerializedFileReader::new(File::open(staging.join(&first_day)).unwrap());
+        assert_eq!(reader.unwrap().metadata().num_row_groups(), 2);
         let rows_of = |d: &str| -> Vec<Row> {
             by_folder(d)
                 .iter()
@@ -1293,7 +1384,7 @@ mod tests {
     #[test]
     fn a_given_date_is_every_row_s_and_an_unfinished_task_leaves_nothing() {
         let staging = fresh_dir("given");
-        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Zstd, 8, 1);
+        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Zstd, 8, 1).unwrap();
         let day = NANOS_PER_DAY;
         files
             .add(
@@ -1314,7 +1405,7 @@ mod tests {
         );
 
         let staging = fresh_dir("dropped");
-        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Snappy, 8, 1);
+        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Snappy, 8, 1).unwrap();
         files
             .add(None, None, "M", &decoded(&[0, 1], &["a", "b"]))
             .unwrap();
