@@ -97,18 +97,26 @@ pub(crate) fn properties(
     dictionary_pages: bool,
     compression: ParquetCompression,
 ) -> WriterProperties {
-    properties_with_dictionaries(layout, dictionary_pages, &[], compression)
+    properties_with_dictionaries(layout, dictionary_pages, &[], &[], compression)
 }
 
 /// As [`properties`], with dictionary pages for the columns named in `dictionaries` whatever
-/// `dictionary_pages` says.
+/// `dictionary_pages` says, and the integer columns named in `deltas` delta-encoded
+/// (`DELTA_BINARY_PACKED`).
 pub(crate) fn properties_with_dictionaries(
     layout: &str,
     dictionary_pages: bool,
     dictionaries: &[&str],
+    deltas: &[&str],
     compression: ParquetCompression,
 ) -> WriterProperties {
     let mut builder = WriterProperties::builder();
+    for name in deltas {
+        builder = builder.set_column_encoding(
+            ::parquet::schema::types::ColumnPath::from(*name),
+            ::parquet::basic::Encoding::DELTA_BINARY_PACKED,
+        );
+    }
     for name in dictionaries {
         builder = builder
             .set_column_dictionary_enabled(::parquet::schema::types::ColumnPath::from(*name), true);
