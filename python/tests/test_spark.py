@@ -210,6 +210,22 @@ def test_lake_files_are_read_by_pyarrow_as_written(fleet, tmp_path):
         bywire._native.write_lake_files(db._db, parts, str(tmp_path / "x"), "p", "lz4")
 
 
+def test_a_commit_moves_only_the_job_s_files_and_new_folders_whole(tmp_path):
+    import bywire.spark
+
+    staging, lake = tmp_path / "staging", tmp_path / "lake"
+    for file in ["v=a/m=x/part-0.parquet", "v=b/m=y/part-0.parquet", "v=b/m=y/.part-1.parquet.9.inprogress"]:
+        (staging / file).parent.mkdir(parents=True, exist_ok=True)
+        (staging / file).write_text(file)
+    (lake / "v=b" / "m=z").mkdir(parents=True)
+    (lake / "v=b" / "m=z" / "old.parquet").write_text("old")
+    bywire.spark._commit(str(staging), str(lake), {"v=a/m=x/part-0.parquet", "v=b/m=y/part-0.parquet"})
+    files = sorted(str(p.relative_to(lake)) for p in lake.rglob("*") if p.is_file())
+    # The job's two files in place, the lake's own file kept, a killed attempt's file not moved.
+    assert files == ["v=a/m=x/part-0.parquet", "v=b/m=y/part-0.parquet", "v=b/m=z/old.parquet"]
+    assert (lake / "v=a" / "m=x" / "part-0.parquet").read_text() == "v=a/m=x/part-0.parquet"
+
+
 def test_write_lake_dates_rows_by_their_day_without_one_in_the_path(spark, fleet, tmp_path):
     import datetime
 
