@@ -163,8 +163,14 @@ struct Chunk {
     compressed: i64,
     data_page: i64,
     dictionary_page: Option<i64>,
-    /// Minimum and maximum (plain-encoded; empty: none) and nulls.
-    statistics: Option<(Vec<u8>, Vec<u8>, i64)>,
+    statistics: Option<Statistics>,
+}
+
+/// A column chunk's statistics: its nulls, and the minimum and maximum of its values
+/// (plain-encoded; none when it has no value).
+struct Statistics {
+    nulls: i64,
+    range: Option<(Vec<u8>, Vec<u8>)>,
 }
 
 struct RowGroup {
@@ -362,7 +368,7 @@ impl<W: Write> Pages<'_, W> {
         physical: i32,
         rows: usize,
         values: impl Iterator<Item = [u8; 8]>,
-        statistics: Option<(Vec<u8>, Vec<u8>, i64)>,
+        statistics: Option<Statistics>,
     ) -> io::Result<Chunk> {
         self.page.clear();
         self.levels(None, rows);
@@ -433,9 +439,9 @@ impl<W: Write> Pages<'_, W> {
             .zip(&used)
             .filter(|(_, &u)| u)
             .map(|(t, _)| t.as_bytes());
-        let statistics = seen.next().map(|first| {
+        let range = seen.next().map(|first| {
             let (min, max) = seen.fold((first, first), |(lo, hi), t| (lo.min(t), hi.max(t)));
-            (min.to_vec(), max.to_vec(), as_i64(nulls as u64))
+            (min.to_vec(), max.to_vec())
         });
         Ok(Chunk {
             physical: BYTE_ARRAY,
@@ -446,7 +452,10 @@ impl<W: Write> Pages<'_, W> {
             compressed: dictionary_compressed + compressed,
             data_page,
             dictionary_page: Some(dictionary_page),
-            statistics: statistics.or(Some((Vec::new(), Vec::new(), as_i64(nulls as u64)))),
+            statistics: Some(Statistics {
+                nulls: as_i64(nulls as u64),
+                range,
+            }),
         })
     }
 }
@@ -482,7 +491,10 @@ impl LongFile {
             .ts
             .iter()
             .fold((i64::MAX, i64::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
-        let ts_statistics = (lo.to_le_bytes().to_vec(), hi.to_le_bytes().to_vec(), 0);
+        let ts_statistics = Statistics {
+            nulls: 0,
+            range: Some((lo.to_le_bytes().to_vec(), hi.to_le_bytes().to_vec())),
+        };
         let mut pages = Pages {
             out,
             at: &mut self.at,
@@ -571,10 +583,10 @@ impl LongFile {
                 if let Some(offset) = chunk.dictionary_page {
                     meta.i64(11, offset);
                 }
-                if let Some((min, max, nulls)) = &chunk.statistics {
+                if let Some(statistics) = &chunk.statistics {
                     meta.begin(12);
-                    meta.i64(3, *nulls);
-                    if !min.is_empty() || !max.is_empty() || chunk.physical != BYTE_ARRAY {
+                    meta.i64(3, statistics.nulls);
+                    if let Some((min, max)) = &statistics.range {
                         meta.binary(5, max);
                         meta.binary(6, min);
                     }
