@@ -359,3 +359,50 @@ fn a_parquet_footer_declaring_more_than_it_holds_is_refused_with_its_offset() {
         "{error}"
     );
 }
+
+/// A raw frames file holds its times as deltas (no dictionary page), the rest as before.
+#[cfg(feature = "parquet")]
+#[test]
+fn raw_parquet_times_are_delta_encoded() {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let path =
+        std::env::temp_dir().join(format!("bywire-raw-delta-{}.parquet", std::process::id()));
+    let file = std::fs::File::create(&path).unwrap();
+    let mut writer = Format::Parquet
+        .writer_with(file, bywire_log::format::ParquetCompression::Zstd)
+        .unwrap();
+    for i in 0..1000u64 {
+        let id = bywire_core::Id::standard(u32::try_from(i % 7).unwrap()).unwrap();
+        writer
+            .write(&bywire_log::LogRecord {
+                timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + i * 250_000),
+                interface: "can0".into(),
+                frame: bywire_core::Frame::classic(id, &[1, 2]).unwrap(),
+                direction: None,
+            })
+            .unwrap();
+    }
+    writer.finish().unwrap();
+    let reader = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let group = reader.metadata().row_group(0);
+    for chunk in group.columns() {
+        let name = chunk.column_path().string();
+        let delta = chunk
+            .encodings()
+            .any(|e| e == parquet::basic::Encoding::DELTA_BINARY_PACKED);
+        assert_eq!(delta, name == "ts", "{name}");
+        if name == "ts" {
+            assert!(chunk.dictionary_page_offset().is_none());
+        }
+    }
+    let back: Vec<_> = Format::Parquet
+        .file_reader(std::fs::File::open(&path).unwrap())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(back.len(), 1000);
+    assert_eq!(
+        back[999].timestamp,
+        Timestamp::from_nanos(1_700_000_000_000_000_000 + 999 * 250_000)
+    );
+}

@@ -112,10 +112,10 @@ pub(crate) fn properties_with_dictionaries(
 ) -> WriterProperties {
     let mut builder = WriterProperties::builder();
     for name in deltas {
-        builder = builder.set_column_encoding(
-            ::parquet::schema::types::ColumnPath::from(*name),
-            ::parquet::basic::Encoding::DELTA_BINARY_PACKED,
-        );
+        let path = ::parquet::schema::types::ColumnPath::from(*name);
+        builder = builder
+            .set_column_dictionary_enabled(path.clone(), false)
+            .set_column_encoding(path, ::parquet::basic::Encoding::DELTA_BINARY_PACKED);
     }
     for name in dictionaries {
         builder = builder
@@ -390,7 +390,14 @@ impl<W: Write + Send> ParquetWriter<W> {
         let writer = ArrowWriter::try_new(
             output,
             schema.clone(),
-            Some(properties(RAW_LAYOUT, true, compression)),
+            // Times as deltas: frames follow each other by little.
+            Some(properties_with_dictionaries(
+                RAW_LAYOUT,
+                true,
+                &[],
+                &["ts"],
+                compression,
+            )),
         )
         .map_err(io_error)?;
         Ok(ParquetWriter {
