@@ -20,11 +20,11 @@ use bywire_core::Timestamp;
 use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
-use bywire_log::format::{Format, Records};
+use bywire_log::format::Format;
 use bywire_log::parquet::decoded::decode_frames_batch;
 use bywire_log::parquet::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_ROWS};
 use bywire_log::parquet::long::{self, LongLabels};
-use bywire_log::parquet::{raw_schema, FrameColumns};
+use bywire_log::parquet::{raw_schema, FrameBatches};
 use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
@@ -824,10 +824,7 @@ impl Database {
 struct LogBatches {
     path: String,
     format: &'static str,
-    records: Records<'static>,
-    columns: FrameColumns,
-    batch_rows: usize,
-    done: bool,
+    batches: FrameBatches,
 }
 
 #[pymethods]
@@ -842,13 +839,8 @@ impl LogBatches {
                 "batch_rows {batch_rows}: 1 to {MAX_BATCH_ROWS}"
             )));
         }
-        let opened = match byte_range {
-            None => Format::open_file(&path),
-            Some((start, end)) => {
-                Format::open_file_range(&path, start, end).map(|records| (Format::Candump, records))
-            }
-        };
-        let (format, records) = opened.map_err(|e| match e.kind() {
+        let opened = FrameBatches::open(&path, byte_range, batch_rows);
+        let (format, batches) = opened.map_err(|e| match e.kind() {
             std::io::ErrorKind::InvalidInput => {
                 PyValueError::new_err(format!("{}: {e}", path.display()))
             }
@@ -861,10 +853,7 @@ impl LogBatches {
         Ok(LogBatches {
             path: path.display().to_string(),
             format: name,
-            records,
-            columns: FrameColumns::new(),
-            batch_rows,
-            done: false,
+            batches,
         })
     }
 
@@ -885,24 +874,11 @@ impl LogBatches {
     }
 
     fn __next__(&mut self) -> PyResult<Option<PyArrowType<RecordBatch>>> {
-        while !self.done && self.columns.rows() < self.batch_rows {
-            match self.records.next() {
-                Some(Ok(record)) => self.columns.push(&record),
-                Some(Err(e)) => {
-                    self.done = true;
-                    return Err(LogError::new_err(format!("{}: {e}", self.path)));
-                }
-                None => self.done = true,
-            }
+        match self.batches.next() {
+            None => Ok(None),
+            Some(Ok(batch)) => Ok(Some(PyArrowType(batch))),
+            Some(Err(e)) => Err(LogError::new_err(format!("{}: {e}", self.path))),
         }
-        if self.columns.rows() == 0 {
-            return Ok(None);
-        }
-        let batch = self
-            .columns
-            .finish(&raw_schema())
-            .map_err(|e| LogError::new_err(format!("{}: {e}", self.path)))?;
-        Ok(Some(PyArrowType(batch)))
     }
 }
 

@@ -30,9 +30,8 @@ use bywire_dbc::decoder::Decoder;
 
 use super::long::Wide;
 use super::thrift::{varint, Kind, Thrift};
-use super::FrameColumns;
+use super::FrameBatches;
 use crate::calendar;
-use crate::format::Format;
 
 /// Rows a folder holds back before writing them as a row group (and all of a task's folders
 /// hold at most 8 times as many: then every folder writes what it holds).
@@ -1016,31 +1015,15 @@ pub fn write_parts(
     files: &mut LakeFiles,
     batch_rows: usize,
 ) -> io::Result<()> {
-    let schema = super::raw_schema();
     for part in parts {
-        let named = |e: &dyn std::fmt::Display| format!("{}: {e}", part.path.display());
-        let records = match part.byte_range {
-            None => Format::open_file(&part.path).map(|(_, records)| records),
-            Some((start, end)) => Format::open_file_range(&part.path, start, end),
-        }
-        .map_err(|e| io::Error::new(e.kind(), named(&e)))?;
-        let mut records = records.peekable();
-        while records.peek().is_some() {
-            let mut columns = FrameColumns::new();
-            while columns.rows() < batch_rows.max(1) {
-                match records.next() {
-                    Some(Ok(record)) => columns.push(&record),
-                    Some(Err(e)) => {
-                        return Err(io::Error::new(io::ErrorKind::InvalidData, named(&e)))
-                    }
-                    None => break,
-                }
-            }
-            let batch = columns
-                .finish(&schema)
-                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, named(&e)))?;
+        let named =
+            |e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", part.path.display()));
+        let (_, batches) =
+            FrameBatches::open(&part.path, part.byte_range, batch_rows).map_err(named)?;
+        for batch in batches {
+            let batch = batch.map_err(named)?;
             let (tables, _) = super::decoded::decode_frames_batch(decoder, &batch)
-                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, named(&e)))?;
+                .map_err(|e| named(io::Error::new(io::ErrorKind::InvalidData, e.to_string())))?;
             for (message, table) in &tables {
                 files.add(
                     part.vehicle.as_deref(),
