@@ -3,14 +3,13 @@
 //! `partitionBy("vehicle", "date", "message")` lays them out, written straight from the
 //! decoded tables.
 //!
-//! The Parquet files are encoded here rather than through parquet-rs: a long file's `channel`
-//! and `signal` are a few texts whose keys are known, and parquet-rs hashes each row's text
-//! again to find its dictionary key (profiled: a third of writing these files, and pyarrow's
-//! writer is no faster). Here the keys are written as they are. The files are what Spark's
-//! writer makes of the same rows (format version 1, dictionary pages for the texts, plain
-//! times and values, one data page a column a row group) and are read by Spark, pyarrow,
-//! parquet-rs and polars (the tests read them back with parquet-rs; the Python tests with
-//! Spark and pyarrow).
+//! The Parquet files are encoded by bywire ([`super::encode`]): a long file's `channel` and
+//! `signal` are a few texts whose keys are known (profiled, parquet-rs finding them again
+//! was a third of writing these files, and pyarrow's writer is no faster). The files are what
+//! Spark's writer makes of the same rows (format version 1, dictionary pages for the texts,
+//! plain times and values, one data page a column a row group) and are read by Spark,
+//! pyarrow, parquet-rs and polars (the tests read them back with parquet-rs; the Python tests
+//! with Spark and pyarrow).
 //!
 //! [`LakeFiles`] holds a task's files, one a folder as Spark's writer makes them: each
 //! folder's rows are held until there are a row group's worth (and all folders hold at most
@@ -28,8 +27,11 @@ use std::path::{Path, PathBuf};
 use arrow_array::{Array, RecordBatch};
 use bywire_dbc::decoder::Decoder;
 
+use super::encode::{
+    dictionary_keys, float_range, int_range, levels, plain_texts, texts_range, too_big, Chunk,
+    Column, FileLayout, Logical, Pages, Physical, Range, TimeUnit, PLAIN, PLAIN_DICTIONARY,
+};
 use super::long::Wide;
-use super::thrift::{varint, Kind, Thrift};
 use super::FrameBatches;
 use crate::calendar;
 
@@ -70,7 +72,7 @@ impl LakeCompression {
     }
 
     /// What Spark puts in a file's name before `.parquet`.
-    fn extension(self) -> &'static str {
+    pub(crate) fn extension(self) -> &'static str {
         match self {
             Self::Snappy => ".snappy",
             Self::Zstd => ".zstd",
@@ -80,12 +82,22 @@ impl LakeCompression {
     }
 
     /// Parquet's `CompressionCodec`.
-    fn codec(self) -> i32 {
+    pub(crate) fn codec(self) -> i32 {
         match self {
             Self::Uncompressed => 0,
             Self::Snappy => 1,
             Self::Gzip => 2,
             Self::Zstd => 6,
+        }
+    }
+}
+
+impl From<super::ParquetCompression> for LakeCompression {
+    fn from(compression: super::ParquetCompression) -> Self {
+        match compression {
+            super::ParquetCompression::Zstd => Self::Zstd,
+            super::ParquetCompression::Snappy => Self::Snappy,
+            super::ParquetCompression::Uncompressed => Self::Uncompressed,
         }
     }
 }
@@ -139,273 +151,76 @@ impl LongColumns {
     }
 }
 
-// Parquet's numbers (parquet.thrift).
-const INT64: i32 = 2;
-const DOUBLE: i32 = 5;
-const BYTE_ARRAY: i32 = 6;
-const PLAIN: i32 = 0;
-const PLAIN_DICTIONARY: i32 = 2;
-const RLE: i32 = 3;
-const DATA_PAGE: i32 = 0;
-const DICTIONARY_PAGE: i32 = 2;
-const OPTIONAL: i32 = 1;
-const UTF8: i32 = 0;
-const TIMESTAMP_MICROS: i32 = 10;
-
-/// A column chunk's place and sizes, for the footer.
-struct Chunk {
-    physical: i32,
-    name: &'static str,
-    encodings: &'static [i32],
-    values: i64,
-    uncompressed: i64,
-    compressed: i64,
-    data_page: i64,
-    dictionary_page: Option<i64>,
-    statistics: Option<Statistics>,
+/// The long files' columns (all optional, as Spark writes them).
+fn long_columns() -> [Column; 4] {
+    let column = |name: &str, physical, logical| Column {
+        name: name.to_string(),
+        physical,
+        logical,
+        optional: true,
+    };
+    [
+        column(
+            "ts",
+            Physical::Int64,
+            Logical::Timestamp {
+                unit: TimeUnit::Micros,
+                utc: true,
+            },
+        ),
+        column("channel", Physical::ByteArray, Logical::String),
+        column("signal", Physical::ByteArray, Logical::String),
+        column("value", Physical::Double, Logical::None),
+    ]
 }
 
-/// A column chunk's statistics: its nulls, and the minimum and maximum of its values
-/// (plain-encoded; none when it has no value).
-struct Statistics {
-    nulls: i64,
-    range: Option<(Vec<u8>, Vec<u8>)>,
-}
-
-struct RowGroup {
-    chunks: Vec<Chunk>,
-    rows: i64,
-}
-
-enum Compressor {
-    Uncompressed,
-    Snappy(Box<snap::raw::Encoder>),
-    Zstd(zstd::bulk::Compressor<'static>),
-    Gzip,
-}
-
-impl Compressor {
-    fn new(compression: LakeCompression) -> io::Result<Self> {
-        Ok(match compression {
-            LakeCompression::Uncompressed => Self::Uncompressed,
-            LakeCompression::Snappy => Self::Snappy(Box::new(snap::raw::Encoder::new())),
-            LakeCompression::Zstd => Self::Zstd(zstd::bulk::Compressor::new(1)?),
-            LakeCompression::Gzip => Self::Gzip,
-        })
-    }
-
-    /// `page` compressed (`None`: as it is).
-    fn compress(&mut self, page: &[u8]) -> io::Result<Option<Vec<u8>>> {
-        match self {
-            Self::Uncompressed => Ok(None),
-            Self::Snappy(encoder) => encoder
-                .compress_vec(page)
-                .map(Some)
-                .map_err(io::Error::other),
-            Self::Zstd(compressor) => compressor.compress(page).map(Some),
-            Self::Gzip => {
-                let mut encoder =
-                    flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-                encoder.write_all(page)?;
-                encoder.finish().map(Some)
-            }
-        }
-    }
-}
-
-/// What a task's files share while they are written: the compressor and the page being
-/// built (a compressor a file would cost each folder its own context).
+/// What a task's files share while they are written: the compressor, the page and the
+/// column chunks being built (a compressor a file would cost each folder its own context).
 pub struct LongEncoder {
-    compression: LakeCompression,
-    compressor: Compressor,
-    page: Vec<u8>,
+    pages: Pages,
+    chunks: [Chunk; 4],
 }
 
 impl LongEncoder {
     /// Pages compressed with `compression`.
     pub fn new(compression: LakeCompression) -> io::Result<Self> {
         Ok(LongEncoder {
-            compression,
-            compressor: Compressor::new(compression)?,
-            page: Vec::new(),
+            pages: Pages::new(compression)?,
+            chunks: Default::default(),
         })
     }
-}
 
-/// A Parquet file of long rows (`ts, channel, signal, value`) being written, a row group at a
-/// time: where it is and what its footer will say. The file itself is the caller's, given to
-/// each call, so that it can be closed between row groups and opened again to append.
-pub struct LongFile {
-    at: u64,
-    groups: Vec<RowGroup>,
-}
-
-/// A row group being written: the file, the encoder and the output.
-struct Pages<'a, W: Write> {
-    out: &'a mut W,
-    at: &'a mut u64,
-    compressor: &'a mut Compressor,
-    page: &'a mut Vec<u8>,
-}
-
-fn too_big(what: &str) -> io::Error {
-    io::Error::new(
-        io::ErrorKind::InvalidInput,
-        format!("{what} too big for a Parquet page"),
-    )
-}
-
-fn as_i32(n: usize, what: &str) -> io::Result<i32> {
-    i32::try_from(n).map_err(|_| too_big(what))
-}
-
-fn as_i64(n: u64) -> i64 {
-    i64::try_from(n).unwrap_or(i64::MAX)
-}
-
-/// Parquet's RLE / bit-packing hybrid of `values` (each below 2^`width`): runs of 8 or more
-/// equal values as runs, the rest bit-packed in groups of 8 (the last group padded).
-fn hybrid(values: &[u32], width: u32, out: &mut Vec<u8>) {
-    let value_bytes = width.div_ceil(8) as usize;
-    let mut at = 0;
-    while let Some(&first) = values.get(at) {
-        let rest = values.get(at..).unwrap_or_default();
-        let run = rest.iter().take_while(|&&v| v == first).count();
-        if run >= 8 {
-            varint(out, (run as u64) << 1);
-            out.extend(first.to_le_bytes().iter().take(value_bytes));
-            at += run;
-            continue;
-        }
-        // Groups of 8 until 8 equal values start a group (a run is cheaper) or 63 groups
-        // (what parquet-mr's readers expect a run to hold at most).
-        let start = at;
-        let mut groups = 0u64;
-        loop {
-            groups += 1;
-            at += 8;
-            let next = values.get(at..at + 8);
-            if groups == 63 || next.is_none_or(|n| n.iter().all(|&v| Some(&v) == n.first())) {
-                break;
-            }
-        }
-        let end = at.min(values.len());
-        varint(out, (groups << 1) | 1);
-        let packed = values.get(start..end).unwrap_or_default();
-        let padding = std::iter::repeat_n(0, at - end);
-        let (mut bits, mut filled) = (0u64, 0u32);
-        for value in packed.iter().copied().chain(padding) {
-            bits |= u64::from(value) << filled;
-            filled += width;
-            while filled >= 8 {
-                out.push((bits & 0xff) as u8);
-                bits >>= 8;
-                filled -= 8;
-            }
-        }
-    }
-}
-
-/// The bits a key below `entries` needs (at least 1: every reader takes it).
-fn key_width(entries: usize) -> u32 {
-    (usize::BITS - entries.saturating_sub(1).leading_zeros()).max(1)
-}
-
-impl<W: Write> Pages<'_, W> {
-    /// Write `self.page` as a page: `(uncompressed, compressed)` sizes with its header.
-    fn write_page(&mut self, kind: i32, values: usize, encoding: i32) -> io::Result<(i64, i64)> {
-        let compressed = self.compressor.compress(self.page)?;
-        let body = compressed.as_deref().unwrap_or(self.page);
-        let mut header = Thrift::default();
-        header.i32(1, kind);
-        header.i32(2, as_i32(self.page.len(), "a page")?);
-        header.i32(3, as_i32(body.len(), "a page")?);
-        let values = as_i32(values, "a page's values")?;
-        if kind == DICTIONARY_PAGE {
-            header.begin(7);
-            header.i32(1, values);
-            header.i32(2, encoding);
-        } else {
-            header.begin(5);
-            header.i32(1, values);
-            header.i32(2, encoding);
-            header.i32(3, RLE);
-            header.i32(4, RLE);
-        }
-        header.end();
-        header.end();
-        self.out.write_all(&header.bytes)?;
-        self.out.write_all(body)?;
-        let head = header.bytes.len() as u64;
-        *self.at += head + body.len() as u64;
-        Ok((
-            as_i64(head + self.page.len() as u64),
-            as_i64(head + body.len() as u64),
-        ))
-    }
-
-    /// The page's definition levels (every column is optional, as Spark writes them): one run
-    /// when every row has a value.
-    fn levels(&mut self, present: Option<&[u32]>, rows: usize) {
-        let mut levels = Vec::new();
-        match present {
-            None => {
-                varint(&mut levels, (rows as u64) << 1);
-                levels.push(1);
-            }
-            Some(present) => hybrid(present, 1, &mut levels),
-        }
-        let length = u32::try_from(levels.len()).unwrap_or(u32::MAX);
-        self.page.extend_from_slice(&length.to_le_bytes());
-        self.page.extend_from_slice(&levels);
-    }
-
-    /// A plain column chunk of fixed-width values.
+    /// A plain page of 8-byte values as `chunk`'s.
     fn plain_chunk(
         &mut self,
-        name: &'static str,
-        physical: i32,
+        chunk: usize,
         rows: usize,
         values: impl Iterator<Item = [u8; 8]>,
-        statistics: Option<Statistics>,
-    ) -> io::Result<Chunk> {
-        self.page.clear();
-        self.levels(None, rows);
+        range: Option<Range>,
+    ) -> io::Result<()> {
+        let Some(chunk) = self.chunks.get_mut(chunk) else {
+            return Ok(());
+        };
+        let body = &mut self.pages.body;
+        body.clear();
+        levels(None, rows, body);
         for value in values {
-            self.page.extend_from_slice(&value);
+            body.extend_from_slice(&value);
         }
-        let data_page = as_i64(*self.at);
-        let (uncompressed, compressed) = self.write_page(DATA_PAGE, rows, PLAIN)?;
-        Ok(Chunk {
-            physical,
-            name,
-            encodings: &[PLAIN, RLE],
-            values: as_i64(rows as u64),
-            uncompressed,
-            compressed,
-            data_page,
-            dictionary_page: None,
-            statistics,
-        })
+        chunk.statistics.add(0, range);
+        self.pages.data_page(chunk, rows, PLAIN)
     }
 
-    /// A dictionary column chunk: `texts` as its dictionary page, `keys` (null: [`NULL_KEY`])
-    /// as its data page; the minimum and maximum of the texts used.
-    fn dictionary_chunk(
-        &mut self,
-        name: &'static str,
-        keys: &[u32],
-        texts: &[String],
-    ) -> io::Result<Chunk> {
-        self.page.clear();
-        for text in texts {
-            let length = u32::try_from(text.len()).map_err(|_| too_big("a text"))?;
-            self.page.extend_from_slice(&length.to_le_bytes());
-            self.page.extend_from_slice(text.as_bytes());
-        }
-        let dictionary_page = as_i64(*self.at);
-        let (dictionary_uncompressed, dictionary_compressed) =
-            self.write_page(DICTIONARY_PAGE, texts.len(), PLAIN_DICTIONARY)?;
+    /// `texts` as `chunk`'s dictionary page, `keys` (null: [`NULL_KEY`]) as its data page;
+    /// the range of the texts used.
+    fn dictionary_chunk(&mut self, chunk: usize, keys: &[u32], texts: &[String]) -> io::Result<()> {
+        let Some(chunk) = self.chunks.get_mut(chunk) else {
+            return Ok(());
+        };
+        let body = &mut self.pages.body;
+        body.clear();
+        plain_texts(texts.iter().map(String::as_bytes), body)?;
+        self.pages.dictionary_page(chunk, texts.len())?;
         let mut used = vec![false; texts.len()];
         let mut nulls = 0usize;
         for &key in keys {
@@ -414,58 +229,35 @@ impl<W: Write> Pages<'_, W> {
                 None => nulls += 1,
             }
         }
-        self.page.clear();
+        let body = &mut self.pages.body;
+        body.clear();
         if nulls == 0 {
-            self.levels(None, keys.len());
+            levels(None, keys.len(), body);
+            dictionary_keys(keys, texts.len(), body);
         } else {
             let present: Vec<u32> = keys.iter().map(|&k| u32::from(k != NULL_KEY)).collect();
-            self.levels(Some(&present), keys.len());
-        }
-        let width = key_width(texts.len());
-        #[allow(clippy::cast_possible_truncation)] // at most 32
-        self.page.push(width as u8);
-        if nulls == 0 {
-            hybrid(keys, width, self.page);
-        } else {
+            levels(Some(&present), keys.len(), body);
             let present: Vec<u32> = keys.iter().copied().filter(|&k| k != NULL_KEY).collect();
-            hybrid(&present, width, self.page);
+            dictionary_keys(&present, texts.len(), body);
         }
-        let data_page = as_i64(*self.at);
-        let (uncompressed, compressed) =
-            self.write_page(DATA_PAGE, keys.len(), PLAIN_DICTIONARY)?;
-        let mut seen = texts
-            .iter()
-            .zip(&used)
-            .filter(|(_, &u)| u)
-            .map(|(t, _)| t.as_bytes());
-        let range = seen.next().map(|first| {
-            let (min, max) = seen.fold((first, first), |(lo, hi), t| (lo.min(t), hi.max(t)));
-            (min.to_vec(), max.to_vec())
-        });
-        Ok(Chunk {
-            physical: BYTE_ARRAY,
-            name,
-            encodings: &[PLAIN_DICTIONARY, RLE],
-            values: as_i64(keys.len() as u64),
-            uncompressed: dictionary_uncompressed + uncompressed,
-            compressed: dictionary_compressed + compressed,
-            data_page,
-            dictionary_page: Some(dictionary_page),
-            statistics: Some(Statistics {
-                nulls: as_i64(nulls as u64),
-                range,
-            }),
-        })
+        let range = texts_range(texts.iter().map(String::as_bytes), &used);
+        chunk.statistics.add(nulls, range);
+        self.pages.data_page(chunk, keys.len(), PLAIN_DICTIONARY)
     }
+}
+
+/// A Parquet file of long rows (`ts, channel, signal, value`) being written, a row group at a
+/// time. The file itself is the caller's, given to each call, so that it can be closed
+/// between row groups and opened again to append.
+pub struct LongFile {
+    layout: FileLayout,
 }
 
 impl LongFile {
     /// A file starting on `out` (its first bytes).
     pub fn start(out: &mut impl Write) -> io::Result<Self> {
-        out.write_all(b"PAR1")?;
         Ok(LongFile {
-            at: 4,
-            groups: Vec::new(),
+            layout: FileLayout::start(out)?,
         })
     }
 
@@ -486,142 +278,19 @@ impl LongFile {
         if count > MAX_GROUP_ROWS {
             return Err(too_big("a row group"));
         }
-        let (lo, hi) = rows
-            .ts
-            .iter()
-            .fold((i64::MAX, i64::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
-        let ts_statistics = Statistics {
-            nulls: 0,
-            range: Some((lo.to_le_bytes().to_vec(), hi.to_le_bytes().to_vec())),
-        };
-        let mut pages = Pages {
-            out,
-            at: &mut self.at,
-            compressor: &mut encoder.compressor,
-            page: &mut encoder.page,
-        };
         let ts = rows.ts.iter().map(|t| t.to_le_bytes());
-        let ts = pages.plain_chunk("ts", INT64, count, ts, Some(ts_statistics))?;
-        let channel = pages.dictionary_chunk("channel", &rows.channels, channels)?;
-        let signal = pages.dictionary_chunk("signal", &rows.signals, signals)?;
+        encoder.plain_chunk(0, count, ts, int_range(rows.ts.iter().copied()))?;
+        encoder.dictionary_chunk(1, &rows.channels, channels)?;
+        encoder.dictionary_chunk(2, &rows.signals, signals)?;
         let values = rows.values.iter().map(|v| v.to_le_bytes());
-        let value = pages.plain_chunk("value", DOUBLE, count, values, None)?;
-        self.groups.push(RowGroup {
-            chunks: vec![ts, channel, signal, value],
-            rows: as_i64(count as u64),
-        });
-        Ok(())
+        encoder.plain_chunk(3, count, values, float_range(rows.values.iter().copied()))?;
+        self.layout.row_group(out, count, &mut encoder.chunks)
     }
 
     /// Write the footer on `out` (flushed): the file is whole.
     pub fn finish(self, encoder: &LongEncoder, out: &mut impl Write) -> io::Result<()> {
-        let mut meta = Thrift::default();
-        meta.i32(1, 1);
-        meta.list(2, Kind::Struct, 5);
-        meta.begin_item();
-        meta.binary(4, b"schema");
-        meta.i32(5, 4);
-        meta.end();
-        for (name, physical) in [
-            ("ts", INT64),
-            ("channel", BYTE_ARRAY),
-            ("signal", BYTE_ARRAY),
-            ("value", DOUBLE),
-        ] {
-            meta.begin_item();
-            meta.i32(1, physical);
-            meta.i32(3, OPTIONAL);
-            meta.binary(4, name.as_bytes());
-            match physical {
-                INT64 => {
-                    meta.i32(6, TIMESTAMP_MICROS);
-                    meta.begin(10); // LogicalType: TIMESTAMP (UTC, microseconds)
-                    meta.begin(8);
-                    meta.bool(1, true);
-                    meta.begin(2);
-                    meta.begin(2);
-                    meta.end();
-                    meta.end();
-                    meta.end();
-                    meta.end();
-                }
-                BYTE_ARRAY => {
-                    meta.i32(6, UTF8);
-                    meta.begin(10); // LogicalType: STRING
-                    meta.begin(1);
-                    meta.end();
-                    meta.end();
-                }
-                _ => {}
-            }
-            meta.end();
-        }
-        let rows: i64 = self.groups.iter().map(|g| g.rows).sum();
-        meta.i64(3, rows);
-        meta.list(4, Kind::Struct, self.groups.len());
-        for group in &self.groups {
-            meta.begin_item();
-            meta.list(1, Kind::Struct, group.chunks.len());
-            for chunk in &group.chunks {
-                let start = chunk.dictionary_page.unwrap_or(chunk.data_page);
-                meta.begin_item();
-                meta.i64(2, start);
-                meta.begin(3);
-                meta.i32(1, chunk.physical);
-                meta.list(2, Kind::I32, chunk.encodings.len());
-                for &encoding in chunk.encodings {
-                    meta.list_item_i32(encoding);
-                }
-                meta.list(3, Kind::Binary, 1);
-                meta.list_item_binary(chunk.name.as_bytes());
-                meta.i32(4, encoder.compression.codec());
-                meta.i64(5, chunk.values);
-                meta.i64(6, chunk.uncompressed);
-                meta.i64(7, chunk.compressed);
-                meta.i64(9, chunk.data_page);
-                if let Some(offset) = chunk.dictionary_page {
-                    meta.i64(11, offset);
-                }
-                if let Some(statistics) = &chunk.statistics {
-                    meta.begin(12);
-                    meta.i64(3, statistics.nulls);
-                    if let Some((min, max)) = &statistics.range {
-                        meta.binary(5, max);
-                        meta.binary(6, min);
-                    }
-                    meta.end();
-                }
-                meta.end();
-                meta.end();
-            }
-            let start = group
-                .chunks
-                .first()
-                .map_or(0, |c| c.dictionary_page.unwrap_or(c.data_page));
-            meta.i64(2, group.chunks.iter().map(|c| c.uncompressed).sum());
-            meta.i64(3, group.rows);
-            meta.i64(5, start);
-            meta.i64(6, group.chunks.iter().map(|c| c.compressed).sum());
-            meta.end();
-        }
-        meta.binary(
-            6,
-            format!("bywire version {}", env!("CARGO_PKG_VERSION")).as_bytes(),
-        );
-        // Every column's statistics in its type's order (strings: bytewise, unsigned).
-        meta.list(7, Kind::Struct, 4);
-        for _ in 0..4 {
-            meta.begin_item();
-            meta.begin(1);
-            meta.end();
-            meta.end();
-        }
-        meta.end();
-        let length = u32::try_from(meta.bytes.len()).map_err(|_| too_big("the footer"))?;
-        out.write_all(&meta.bytes)?;
-        out.write_all(&length.to_le_bytes())?;
-        out.write_all(b"PAR1")?;
-        out.flush()
+        self.layout
+            .finish(&long_columns(), encoder.pages.compression(), &[], out)
     }
 }
 
@@ -893,7 +562,7 @@ impl LakeFiles {
                 let name = format!(
                     "{}.c000{}.parquet",
                     self.prefix,
-                    self.encoder.compression.extension()
+                    self.encoder.pages.compression().extension()
                 );
                 let directory = self.staging.join(&folder.path);
                 std::fs::create_dir_all(&directory)?;

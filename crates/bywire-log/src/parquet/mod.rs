@@ -19,7 +19,9 @@
 //! group's encoded columns at most, and [`ParquetWriter::finish`] writes the footer (a file
 //! without one is not a Parquet file, which is why conversions write to a temporary name).
 
+mod batch_file;
 pub mod decoded;
+mod encode;
 mod footer;
 pub mod lake;
 pub mod long;

@@ -1,5 +1,5 @@
 //! Thrift's compact protocol, writing only: what a Parquet footer and page headers are made of
-//! (Parquet's `parquet.thrift`), for [`super::lake`]'s files.
+//! (Parquet's `parquet.thrift`), for [`super::encode`]'s files.
 //!
 //! Each `write_*` writes one field of the struct being written, by its field id; fields go in
 //! increasing id order, as the protocol's deltas expect.
@@ -8,6 +8,7 @@
 #[derive(Clone, Copy)]
 #[repr(u8)]
 pub(crate) enum Kind {
+    I8 = 3,
     I32 = 5,
     I64 = 6,
     Binary = 8,
@@ -55,6 +56,12 @@ impl Thrift {
             self.zigzag(i64::from(id));
         }
         self.last = id;
+    }
+
+    pub(crate) fn i8(&mut self, id: i16, value: i8) {
+        // A byte is itself, not a varint.
+        self.field(id, Kind::I8 as u8);
+        self.bytes.push(value.to_le_bytes()[0]);
     }
 
     pub(crate) fn i32(&mut self, id: i16, value: i32) {
