@@ -412,7 +412,9 @@ impl<W: Write> BatchFile<W> {
 #[allow(
     clippy::unwrap_used,
     clippy::cast_possible_wrap,
-    clippy::cast_sign_loss
+    clippy::cast_sign_loss,
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss
 )]
 mod tests {
     use std::sync::Arc;
@@ -428,6 +430,7 @@ mod tests {
     use bytes::Bytes;
     use proptest::prelude::*;
 
+    use super::super::test_support::{row_texts, xorshift};
     use super::*;
 
     fn schema() -> SchemaRef {
@@ -500,43 +503,6 @@ mod tests {
             .unwrap()
     }
 
-    fn cell(column: &dyn Array, row: usize) -> String {
-        if column.is_null(row) {
-            return "null".into();
-        }
-        match column.data_type() {
-            DataType::Int64 => column.as_primitive::<Int64Type>().value(row).to_string(),
-            DataType::UInt64 => column.as_primitive::<UInt64Type>().value(row).to_string(),
-            DataType::Float64 => format!("{:?}", column.as_primitive::<Float64Type>().value(row)),
-            DataType::Timestamp(..) => column
-                .as_primitive::<TimestampNanosecondType>()
-                .value(row)
-                .to_string(),
-            DataType::Dictionary(..) => {
-                let d = column.as_dictionary::<Int32Type>();
-                let key = usize::try_from(d.keys().value(row)).unwrap();
-                d.values().as_string::<i32>().value(key).to_string()
-            }
-            other => panic!("unexpected column type {other}"),
-        }
-    }
-
-    /// Each batch's rows as text, the way they read back: one string a row.
-    fn row_texts(batches: &[RecordBatch]) -> Vec<String> {
-        let mut rows = Vec::new();
-        for batch in batches {
-            for row in 0..batch.num_rows() {
-                let cells: Vec<String> = batch
-                    .columns()
-                    .iter()
-                    .map(|c| cell(c.as_ref(), row))
-                    .collect();
-                rows.push(cells.join("|"));
-            }
-        }
-        rows
-    }
-
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -554,13 +520,7 @@ mod tests {
                 Just(LakeCompression::Uncompressed),
             ],
         ) {
-            let mut state = seed | 1;
-            let mut next = move || {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                state
-            };
+            let mut next = xorshift(seed);
             let wide = |v: u64| if spread == 63 { v } else { v & ((1u64 << spread) - 1) };
             let schema = schema();
             let labels = ["off", "on", "fault", "é"];
@@ -568,6 +528,7 @@ mod tests {
             let mut start = 0;
             let mut t = next() as i64;
             while start < rows {
+                let known = (batches.len() + 1).min(3);
                 let n = ((next() % 700) as usize + 1).min(rows - start);
                 let mut ts = Vec::new();
                 let (mut channels, mut ints, mut uints, mut floats, mut choices) =
@@ -575,16 +536,32 @@ mod tests {
                 for _ in 0..n {
                     t = t.wrapping_add(wide(next()) as i64);
                     ts.push(t);
-                    channels.push((next() % 3) as i32);
+                    channels.push((next() % known as u64) as i32);
                     let r = next();
-                    ints.push((r % 5 != 0).then(|| match r % 7 { 0 => i64::MIN, 1 => i64::MAX, _ => wide(next()) as i64 - 7 }));
-                    uints.push((r % 6 != 0).then(|| match r % 11 { 0 => u64::MAX, 1 => 0, _ => wide(next()) }));
-                    floats.push((r % 4 != 0).then(|| match r % 13 { 0 => f64::NAN, 1 => -0.0, 2 => f64::INFINITY, _ => (next() as f64) / 3.0 - 1e18 }));
-                    choices.push((r % 3 != 0).then(|| (next() % 4) as i32));
+                    ints.push((!r.is_multiple_of(5)).then(|| match r % 7 {
+                        0 => i64::MIN,
+                        1 => i64::MAX,
+                        _ => (wide(next()) as i64).wrapping_sub(7),
+                    }));
+                    uints.push((!r.is_multiple_of(6)).then(|| match r % 11 {
+                        0 => u64::MAX,
+                        1 => 0,
+                        _ => wide(next()),
+                    }));
+                    floats.push((!r.is_multiple_of(4)).then(|| match r % 13 {
+                        0 => f64::NAN,
+                        1 => -0.0,
+                        2 => f64::INFINITY,
+                        _ => (next() as f64) / 3.0 - 1e18,
+                    }));
+                    choices.push((!r.is_multiple_of(3)).then(|| (next() % 4) as i32));
                 }
                 // Channel texts grow from batch to batch, as the decoded tables' do.
-                let channel_texts: Vec<&str> = ["can0", "can1", "can2"].to_vec();
-                batches.push(batch(&schema, &ts, &channels, &channel_texts, &ints, &uints, &floats, &choices, &labels));
+                let channel_texts = &["can0", "can1", "can2"][..known];
+                batches.push(batch(
+                    &schema, &ts, &channels, channel_texts, &ints, &uints, &floats, &choices,
+                    &labels,
+                ));
                 start += n;
             }
             let bytes = write(&batches, compression);

@@ -838,6 +838,7 @@ fn path_value(value: &str) -> String {
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
+    use super::super::test_support::{cell, row_texts};
     use super::*;
 
     #[test]
@@ -928,29 +929,6 @@ mod tests {
         let root = std::env::temp_dir().join(format!("bywire-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
         root
-    }
-
-    fn cell(column: &ArrayRef, row: usize) -> String {
-        use arrow_array::cast::AsArray;
-        use arrow_array::types::Int32Type;
-        if column.is_null(row) {
-            return "null".into();
-        }
-        match column.data_type() {
-            DataType::Int64 => column.as_primitive::<Int64Type>().value(row).to_string(),
-            DataType::UInt64 => column.as_primitive::<UInt64Type>().value(row).to_string(),
-            DataType::Float64 => format!("{:?}", column.as_primitive::<Float64Type>().value(row)),
-            DataType::Timestamp(..) => column
-                .as_primitive::<arrow_array::types::TimestampNanosecondType>()
-                .value(row)
-                .to_string(),
-            DataType::Dictionary(..) => {
-                let d = column.as_dictionary::<Int32Type>();
-                let key = usize::try_from(d.keys().value(row)).unwrap();
-                d.values().as_string::<i32>().value(key).to_string()
-            }
-            other => panic!("unexpected column type {other}"),
-        }
     }
 
     /// What a table's row should hold, from decoding its frame alone.
@@ -1055,7 +1033,13 @@ mod tests {
             for (name, table) in tables {
                 let rows = got.entry(name.clone()).or_default();
                 for row in 0..table.num_rows() {
-                    rows.push(table.columns().iter().map(|c| cell(c, row)).collect());
+                    rows.push(
+                        table
+                            .columns()
+                            .iter()
+                            .map(|c| cell(c.as_ref(), row))
+                            .collect(),
+                    );
                 }
             }
             got
@@ -1148,7 +1132,7 @@ mod tests {
             assert_eq!(ts.values().to_vec(), [10_000, 30_000, 50_000]);
             let values = table.column(2).as_primitive::<Int64Type>();
             assert_eq!(values.values().to_vec(), [1, 3, 5]);
-            let channel = |row| cell(table.column(1), row);
+            let channel = |row| cell(table.column(1).as_ref(), row);
             assert_eq!(channel(2), "");
         }
         // Seconds too large for nanoseconds are no time either.
@@ -1212,8 +1196,8 @@ mod tests {
         for batch in batches {
             let batch = batch.unwrap();
             for row in 0..batch.num_rows() {
-                channels.push(cell(batch.column(1), row));
-                choices.push(cell(batch.column(4), row));
+                channels.push(cell(batch.column(1).as_ref(), row));
+                choices.push(cell(batch.column(4).as_ref(), row));
             }
             assert!(batch.column(1).as_any_dictionary_opt().is_some());
         }
@@ -1271,14 +1255,8 @@ mod tests {
                 1 << 16,
             )
             .unwrap();
-            let mut rows = Vec::new();
-            for batch in batches {
-                let batch = batch.unwrap();
-                for row in 0..batch.num_rows() {
-                    let cells: Vec<String> = batch.columns().iter().map(|c| cell(c, row)).collect();
-                    rows.push(cells.join(","));
-                }
-            }
+            let batches: Vec<RecordBatch> = batches.map(Result::unwrap).collect();
+            let rows = row_texts(&batches);
             assert_eq!(rows.len(), 2000);
             tables.push(rows);
             std::fs::remove_dir_all(&root).unwrap();

@@ -773,17 +773,11 @@ mod tests {
     /// Rows with keys of many shapes: runs (longer and shorter than 8), cycles, null
     /// channels, so that every branch of the hybrid encoding is read back.
     fn columns(rows: usize, channels: usize, signals: usize, seed: u64) -> LongColumns {
-        let mut state = seed | 1;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = super::super::test_support::xorshift(seed);
         let mut out = LongColumns::default();
         let mut channel = 0u32;
         for row in 0..rows {
-            if next() % 16 == 0 {
+            if next().is_multiple_of(16) {
                 channel = (next() % (channels as u64 + 1)) as u32;
             }
             let signal = if (row / 100) % 2 == 0 {

@@ -26,6 +26,8 @@ mod footer;
 pub mod lake;
 pub mod long;
 pub mod table;
+#[cfg(test)]
+mod test_support;
 mod thrift;
 
 use std::collections::{HashMap, VecDeque};
