@@ -23,7 +23,7 @@
 //! append each buffer), so a DBC of hundreds of messages on several channels needs no more
 //! than one descriptor at a time.
 //!
-//! The files are encoded by bywire ([`super::batch_file`]): times and integer signals as
+//! The files are encoded by bywire (its `batch_file` module): times and integer signals as
 //! deltas, channels and descriptions as the keys they already are behind a dictionary page.
 
 use std::collections::{BTreeMap, HashMap};

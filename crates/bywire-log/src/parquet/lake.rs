@@ -3,7 +3,7 @@
 //! `partitionBy("vehicle", "date", "message")` lays them out, written straight from the
 //! decoded tables.
 //!
-//! The Parquet files are encoded by bywire ([`super::encode`]): a long file's `channel` and
+//! The Parquet files are encoded by bywire (its `encode` module): a long file's `channel` and
 //! `signal` are a few texts whose keys are known (profiled, parquet-rs finding them again
 //! was a third of writing these files, and pyarrow's writer is no faster). The files are what
 //! Spark's writer makes of the same rows (format version 1, dictionary pages for the texts,
