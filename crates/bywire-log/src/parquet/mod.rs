@@ -92,10 +92,9 @@ pub fn raw_schema() -> SchemaRef {
     ]))
 }
 
-/// Writer properties: pages compressed as asked, row groups of [`ROW_GROUP_ROWS`], the layout
-/// in the metadata, dictionary pages when asked (the decoded tables go without: measured, they
-/// cost a third of the throughput on signal values, and compression already folds repeated
-/// values).
+/// parquet-rs's writer properties (the raw frames' files and numeric tables): pages
+/// compressed as asked, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata,
+/// dictionary pages when asked.
 pub(crate) fn properties(
     layout: &str,
     dictionary_pages: bool,
