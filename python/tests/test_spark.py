@@ -212,7 +212,7 @@ def test_spark_reads_the_decoded_tables_as_pyarrow_does(spark, fleet, tmp_path, 
     # The decoded tables (bywire's own Parquet encoding: delta-encoded times and integers,
     # dictionary keys) read by Spark's Parquet reader, table by table, equal pyarrow's reading
     # of them (which the Rust tests hold equal to cantools). Spark reads nanosecond times only
-    # as numbers.
+    # as numbers; written with --time-unit us, it reads them as times.
     if seed is None:
         log = next(fleet.rglob("bus1.log"))
     else:
@@ -223,32 +223,49 @@ def test_spark_reads_the_decoded_tables_as_pyarrow_does(spark, fleet, tmp_path, 
             capture_output=True,
         )
         log.write_bytes(traffic.stdout)
-    dataset = tmp_path / "dataset"
-    subprocess.run([bywire_cli(), "log", "convert", str(log), str(dataset), "--dbc", str(dbc)], check=True, capture_output=True)
-    tables = sorted(p.parent for p in dataset.rglob("*.parquet"))
-    assert tables
-    spark.conf.set("spark.sql.legacy.parquet.nanosAsLong", "true")
-    try:
-        compare_tables(spark, tables)
-    finally:
-        spark.conf.unset("spark.sql.legacy.parquet.nanosAsLong")
-
-
-def compare_tables(spark, tables):
-    for table in tables:
-        ours = pq.read_table(table)
-        columns = ours.column_names
-        arrow_rows = Counter(
-            tuple(comparable(v) for v in row)
-            for row in zip(
-                ours.column("ts").cast("int64").to_pylist(),
-                *(ours.column(c).to_pylist() for c in columns[1:]),
-            )
+    nanos, micros = tmp_path / "nanos", tmp_path / "micros"
+    for dataset, unit in [(nanos, "ns"), (micros, "us")]:
+        subprocess.run(
+            [bywire_cli(), "log", "convert", str(log), str(dataset), "--dbc", str(dbc), "--time-unit", unit],
+            check=True,
+            capture_output=True,
         )
-        frame = spark.read.parquet(str(table))
-        assert frame.columns == columns, table.name
-        spark_rows = Counter(tuple(comparable(v) for v in row) for row in frame.collect())
-        assert spark_rows == arrow_rows, table.name
+    tables = sorted(p.parent.relative_to(nanos) for p in nanos.rglob("*.parquet"))
+    assert tables
+    assert tables == sorted(p.parent.relative_to(micros) for p in micros.rglob("*.parquet"))
+    for table in tables:
+        ours = arrow_rows(nanos / table)
+        # The same rows in microseconds, each time floored.
+        assert arrow_rows(micros / table) == Counter((row[0] // 1000, *row[1:]) for row in ours.elements())
+        spark.conf.set("spark.sql.legacy.parquet.nanosAsLong", "true")
+        try:
+            assert spark_rows(spark, nanos / table, as_time=False) == ours, table
+        finally:
+            spark.conf.unset("spark.sql.legacy.parquet.nanosAsLong")
+        assert spark_rows(spark, micros / table, as_time=True) == arrow_rows(micros / table), table
+
+
+def arrow_rows(table) -> Counter:
+    """A table's rows as pyarrow reads them, ts as the integer it holds."""
+    ours = pq.read_table(table)
+    columns = ours.column_names
+    assert columns[0] == "ts"
+    return Counter(
+        tuple(comparable(v) for v in row)
+        for row in zip(ours.column("ts").cast("int64").to_pylist(), *(ours.column(c).to_pylist() for c in columns[1:]))
+    )
+
+
+def spark_rows(spark, table, as_time) -> Counter:
+    """A table's rows as Spark reads them; `as_time`: ts read as a time, given in microseconds."""
+    from pyspark.sql import functions
+
+    frame = spark.read.parquet(str(table))
+    assert frame.columns == pq.read_schema(next(table.glob("*.parquet"))).names, table
+    if as_time:
+        assert frame.schema["ts"].dataType.typeName() == "timestamp", frame.schema
+        frame = frame.withColumn("ts", functions.unix_micros("ts"))
+    return Counter(tuple(comparable(v) for v in row) for row in frame.collect())
 
 
 def test_lake_files_are_read_by_pyarrow_as_written(fleet, tmp_path):

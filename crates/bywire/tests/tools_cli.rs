@@ -107,6 +107,37 @@ fn bad_input_names_the_problem() {
         fails_with(args, "", "--compression is for Parquet output");
     }
     assert!(!Path::new(blf).exists());
+    // A time unit is for decoded Parquet tables only.
+    let mcap = blf.replace(".blf", ".mcap");
+    fails_with(
+        &[
+            "log",
+            "convert",
+            "in.log",
+            &mcap,
+            "--dbc",
+            &m,
+            "--time-unit",
+            "us",
+        ],
+        "",
+        "--time-unit is for decoded Parquet tables",
+    );
+    assert!(!Path::new(&mcap).exists());
+    let args = [
+        "log",
+        "convert",
+        "in.log",
+        "out.parquet",
+        "--time-unit",
+        "us",
+    ];
+    let (code, _, err) = bywire(&args, "");
+    assert_ne!(code, 0, "{err}");
+    assert!(
+        err.contains("required arguments were not provided") && err.contains("--dbc"),
+        "{err}"
+    );
     fails_with(
         &["dump", "-L", "--dbc", &m, "virtual:t"],
         "",

@@ -6,7 +6,7 @@
 //! OUT/message=VehicleToAds_State/channel=can0/date=2024-05-01/part-00000.parquet   (when asked)
 //! ```
 //!
-//! A table's columns are `ts` (timestamp, ns, UTC), `channel` (unless the channel is a partition),
+//! A table's columns are `ts` (timestamp, UTC; ns, or µs when asked), `channel` (unless the channel is a partition),
 //! then each signal under its display name: `int64` where the signal's scale and offset are
 //! whole numbers and every value fits (`uint64` for the widest unsigned ones), else `float64`,
 //! null where a multiplexed signal is not in the frame. A signal with value descriptions gets a
@@ -35,10 +35,11 @@ use std::sync::Arc;
 use arrow_array::builder::{Float64Builder, Int64Builder, UInt64Builder};
 use arrow_array::types::{ArrowPrimitiveType, Float64Type, Int64Type, UInt64Type};
 use arrow_array::{
-    new_null_array, ArrayRef, Int32Array, PrimitiveArray, RecordBatch, TimestampNanosecondArray,
+    new_null_array, ArrayRef, Int32Array, PrimitiveArray, RecordBatch, TimestampMicrosecondArray,
+    TimestampNanosecondArray,
 };
 use arrow_buffer::NullBuffer;
-use arrow_schema::{DataType, Field, Schema, SchemaRef};
+use arrow_schema::{DataType, Field, Schema, SchemaRef, TimeUnit};
 use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, PayloadWord, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
@@ -49,7 +50,7 @@ use super::{
     ParquetCompression, LAYOUT_KEY,
 };
 use crate::calendar;
-use crate::candump::{LogError, LogRecord, LogRecordRef};
+use crate::candump::{LogError, LogRecord, LogRecordRef, Precision};
 
 /// Rows a table builds up before they are encoded (fewer when many tables are open).
 pub const TABLE_BATCH: usize = 16_384;
@@ -264,6 +265,8 @@ struct MessageColumns {
     kinds: Vec<Kind>,
     /// Times (ns): never null, so a plain vector (a push is a store).
     ts: Vec<i64>,
+    /// The table's times in microseconds (floored when the batch is made), else nanoseconds.
+    micros: bool,
     channel: Option<Labels>,
     words: Vec<PayloadWord>,
     /// Values of rows decoded as they came (empty until a batch is made, for the others).
@@ -274,11 +277,17 @@ struct MessageColumns {
 }
 
 impl MessageColumns {
-    /// A message's table, with room for `rows` rows.
-    fn new(message: &Message, with_channel: bool, rows: usize) -> Self {
+    /// A message's table, with room for `rows` rows, its times to `precision`.
+    fn new(message: &Message, with_channel: bool, rows: usize, precision: Precision) -> Self {
         let names = field_names(message);
         let kinds: Vec<Kind> = message.signals.iter().map(kind).collect();
-        let mut fields = vec![Field::new("ts", timestamp_type(), false)];
+        let micros = precision == Precision::Micros;
+        let ts_type = if micros {
+            DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()))
+        } else {
+            timestamp_type()
+        };
+        let mut fields = vec![Field::new("ts", ts_type, false)];
         if with_channel {
             fields.push(Field::new("channel", dictionary_type(), false));
         }
@@ -295,6 +304,7 @@ impl MessageColumns {
         MessageColumns {
             schema: Arc::new(Schema::new(fields)),
             ts: Vec::with_capacity(rows),
+            micros,
             channel: with_channel.then(|| Labels::new(Vec::new(), rows)),
             words: Vec::with_capacity(rows),
             // Built up as rows come (multiplexed messages), or made with the batch's size when
@@ -393,8 +403,14 @@ impl MessageColumns {
         } else {
             self.decode_words(message, codec)
         };
-        let ts = TimestampNanosecondArray::new(std::mem::take(&mut self.ts).into(), None);
-        let mut columns: Vec<ArrayRef> = vec![Arc::new(ts.with_timezone("UTC"))];
+        let mut ts = std::mem::take(&mut self.ts);
+        let ts: ArrayRef = if self.micros {
+            ts.iter_mut().for_each(|t| *t = t.div_euclid(1000));
+            Arc::new(TimestampMicrosecondArray::new(ts.into(), None).with_timezone("UTC"))
+        } else {
+            Arc::new(TimestampNanosecondArray::new(ts.into(), None).with_timezone("UTC"))
+        };
+        let mut columns: Vec<ArrayRef> = vec![ts];
         if let Some(channel) = &mut self.channel {
             columns.push(channel.finish()?);
         }
@@ -516,6 +532,7 @@ pub struct DecodedDataset<'a> {
     /// [`MEMORY_BUDGET`] (a field for the tests).
     memory_budget: usize,
     compression: ParquetCompression,
+    precision: Precision,
 }
 
 impl<'a> DecodedDataset<'a> {
@@ -540,6 +557,7 @@ impl<'a> DecodedDataset<'a> {
             held_budget: HELD_CHUNKS,
             memory_budget: MEMORY_BUDGET,
             compression: ParquetCompression::default(),
+            precision: Precision::Nanos,
         })
     }
 
@@ -547,6 +565,12 @@ impl<'a> DecodedDataset<'a> {
     /// set).
     pub fn set_compression(&mut self, compression: ParquetCompression) {
         self.compression = compression;
+    }
+
+    /// Give the `ts` of the tables opened from now on to `precision`: nanoseconds unless set;
+    /// microseconds (each time floored) are what Spark reads as times.
+    pub fn set_time_precision(&mut self, precision: Precision) {
+        self.precision = precision;
     }
 
     /// Decode one record and add its row.
@@ -678,7 +702,12 @@ impl<'a> DecodedDataset<'a> {
         let part = self.parts.entry(key.clone()).or_insert(0);
         let path = dir.join(format!("part-{part:05}.parquet"));
         *part += 1;
-        let columns = MessageColumns::new(message, !self.partitioning.channel, TABLE_BATCH);
+        let columns = MessageColumns::new(
+            message,
+            !self.partitioning.channel,
+            TABLE_BATCH,
+            self.precision,
+        );
         // Channels and value descriptions are dictionaries (their keys as they are), times
         // and integer signals deltas: they change by little from frame to frame, so their pages
         // shrink to a few bits a row before compression (measured on the tug's traffic: files
@@ -768,7 +797,8 @@ pub fn decode_frames_batch(
         .enumerate()
         .map(|(index, &rows)| {
             let (message, codec) = decoder.message_at(index).filter(|_| rows > 0)?;
-            Some((message, codec, MessageColumns::new(message, true, rows)))
+            let columns = MessageColumns::new(message, true, rows, Precision::Nanos);
+            Some((message, codec, columns))
         })
         .collect();
     let mut values: Vec<Option<Decoded>> = Vec::new();
@@ -1263,6 +1293,48 @@ mod tests {
         }
         assert_eq!(tables[0], tables[1]);
         assert_eq!(tables[0], tables[2]);
+    }
+
+    #[test]
+    fn times_in_microseconds_are_floored_and_typed_as_such() {
+        use arrow_array::cast::AsArray;
+        use arrow_array::types::TimestampMicrosecondType;
+        let decoder = decoder_of("BO_ 1 M: 1 X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n");
+        let root = fresh_dir("micros");
+        let mut dataset = DecodedDataset::create(&root, &decoder, Partitioning::default()).unwrap();
+        dataset.set_time_precision(Precision::Micros);
+        let id = bywire_core::Id::standard(1).unwrap();
+        let nanos = [1_999u64, 2_000, 1_700_000_000_123_456_789];
+        for (at, value) in nanos.iter().zip(1u8..) {
+            dataset
+                .write(&LogRecord {
+                    timestamp: bywire_core::Timestamp::from_nanos(*at),
+                    interface: "can0".into(),
+                    frame: bywire_core::Frame::classic(id, &[value]).unwrap(),
+                    direction: None,
+                })
+                .unwrap();
+        }
+        let (path, _) = only_file(&dataset.finish().unwrap());
+        let batches: Vec<RecordBatch> =
+            ::parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
+                File::open(&path).unwrap(),
+                1024,
+            )
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        let ts = batches[0].column(0);
+        assert_eq!(
+            ts.data_type(),
+            &DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()))
+        );
+        let micros = ts
+            .as_primitive::<TimestampMicrosecondType>()
+            .values()
+            .to_vec();
+        assert_eq!(micros, [1, 2, 1_700_000_000_123_456]);
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

@@ -96,6 +96,9 @@ pub struct DecodeArgs {
         requires = "parquet"
     )]
     compression: crate::support::logs::CompressionArg,
+    /// With --parquet: the unit of the tables' times (us: what Spark reads as times).
+    #[arg(long, value_name = "UNIT", default_value = "ns", requires = "parquet")]
+    time_unit: crate::support::logs::TimeUnitArg,
 }
 
 fn is_json(path: &Path) -> bool {
@@ -442,9 +445,12 @@ fn decode_records(
             channel: args.partition.contains(&logs::PartitionBy::Channel),
             date: args.partition.contains(&logs::PartitionBy::Date),
         };
-        let compression = args.compression.into();
+        let tables = logs::TableOptions {
+            compression: args.compression.into(),
+            times: args.time_unit,
+        };
         // One input: its records lent, not copied, on their way to the tables.
-        let notes = logs::write_dataset(dir, decoder, partitioning, compression, |sink| {
+        let notes = logs::write_dataset(dir, decoder, partitioning, tables, |sink| {
             pump.run_lent(&name, input, Skip::NonLogLines, sink)
         })?;
         pump.progress.finish();

@@ -16,7 +16,7 @@ use crate::support::busarg;
 use crate::support::files::write_atomically;
 use crate::support::logs::{
     for_each_lent, inputs, records, write_dataset, CompressionArg, PartitionBy, Pump, Selection,
-    Skip,
+    Skip, TableOptions, TimeUnitArg,
 };
 use crate::support::progress::Progress;
 use bywire_log::mcap::DecodedMcapWriter;
@@ -59,6 +59,7 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
                                                   (a Parquet table per message, typed signals)
   bywire log convert drive.log lake --dbc vehicle.dbc --compression snappy   (zstd by default)
+  bywire log convert drive.log lake --dbc vehicle.dbc --time-unit us   (times Spark reads as such)
   bywire log convert drive.log drive.mcap --dbc vehicle.dbc   (+ JSON channels for Foxglove)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
@@ -109,6 +110,10 @@ conversion leaves no half-written file.")]
         /// With Parquet output: what the pages are compressed with.
         #[arg(long, value_name = "CODEC")]
         compression: Option<CompressionArg>,
+        /// With --dbc and Parquet: the unit of the tables' times (ns by default; us: what Spark
+        /// reads as times).
+        #[arg(long, value_name = "UNIT", requires = "dbc")]
+        time_unit: Option<TimeUnitArg>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
     #[command(after_help = "Examples:
@@ -146,6 +151,7 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
             strict,
             partition,
             compression,
+            time_unit,
         } => {
             let (output, inputs) = files
                 .split_last()
@@ -159,6 +165,7 @@ pub fn run(command: &LogCommand, out: &mut impl Write) -> Result<()> {
                     date: partition.contains(&PartitionBy::Date),
                 },
                 compression: *compression,
+                time_unit: *time_unit,
             };
             convert(
                 inputs,
@@ -179,6 +186,8 @@ struct Decoding<'a> {
     partitioning: Partitioning,
     /// Parquet's page compression, when given (an error for any other output).
     compression: Option<CompressionArg>,
+    /// The decoded tables' time unit, when given (an error for any other output).
+    time_unit: Option<TimeUnitArg>,
 }
 
 fn convert(
@@ -205,6 +214,12 @@ fn convert(
     };
     let compression =
         CompressionArg::for_output(decoding.compression, format, &output.display().to_string())?;
+    if decoding.time_unit.is_some() && format != Format::Parquet {
+        return Err(anyhow!(
+            "--time-unit is for decoded Parquet tables; {} is not Parquet",
+            output.display()
+        ));
+    }
     let decoder = match decoding.dbc {
         None => None,
         Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
@@ -241,17 +256,15 @@ fn convert(
     let mut notes = Vec::new();
     match (&decoder, format) {
         (Some(decoder), Format::Parquet) => {
-            notes = write_dataset(
-                output,
-                decoder,
-                decoding.partitioning,
+            let tables = TableOptions {
                 compression,
-                |sink| {
-                    pump.run(bywire_log::merge::merge(readers), |r| {
-                        sink(&r.as_record_ref())
-                    })
-                },
-            )?;
+                times: decoding.time_unit.unwrap_or_default(),
+            };
+            notes = write_dataset(output, decoder, decoding.partitioning, tables, |sink| {
+                pump.run(bywire_log::merge::merge(readers), |r| {
+                    sink(&r.as_record_ref())
+                })
+            })?;
         }
         (Some(decoder), _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;

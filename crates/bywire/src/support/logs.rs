@@ -356,14 +356,15 @@ pub fn write_dataset(
     output: &Path,
     decoder: &Decoder,
     partitioning: Partitioning,
-    compression: ParquetCompression,
+    tables: TableOptions,
     feed: impl FnOnce(&mut dyn FnMut(&LogRecordRef<'_>) -> Result<()>) -> Result<()>,
 ) -> Result<Vec<String>> {
     let cannot_write = || format!("cannot write {}", output.display());
     let summary = write_dir_atomically(output, |tmp| {
         let mut dataset =
             DecodedDataset::create(tmp, decoder, partitioning).with_context(cannot_write)?;
-        dataset.set_compression(compression);
+        dataset.set_compression(tables.compression);
+        dataset.set_time_precision(tables.times.into());
         feed(&mut |r| dataset.write_lent(r).with_context(cannot_write))?;
         dataset.finish().with_context(cannot_write)
     })?;
@@ -385,6 +386,32 @@ pub fn write_dataset(
         ));
     }
     Ok(notes)
+}
+
+/// How a decoded dataset's tables are written.
+#[derive(Clone, Copy)]
+pub struct TableOptions {
+    pub compression: ParquetCompression,
+    pub times: TimeUnitArg,
+}
+
+/// The unit of a decoded table's times.
+#[derive(Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum TimeUnitArg {
+    /// Nanoseconds: what the logs hold (pandas, polars, pyarrow and DuckDB read them as times).
+    #[default]
+    Ns,
+    /// Microseconds, floored: what Spark reads as times.
+    Us,
+}
+
+impl From<TimeUnitArg> for bywire_log::Precision {
+    fn from(unit: TimeUnitArg) -> Self {
+        match unit {
+            TimeUnitArg::Ns => bywire_log::Precision::Nanos,
+            TimeUnitArg::Us => bywire_log::Precision::Micros,
+        }
+    }
 }
 
 /// What Parquet pages are compressed with.
