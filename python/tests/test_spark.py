@@ -189,7 +189,9 @@ def test_write_lake_keeps_few_files_open(spark, fleet, tmp_path):
 
 def comparable(value):
     """A cell as both readers can agree on it: Spark's decimal(20,0) of an unsigned column as
-    an integer, NaN as text."""
+    an integer, NaN as text, binary as bytes."""
+    if isinstance(value, (bytes, bytearray)):
+        return bytes(value)
     if isinstance(value, decimal.Decimal):
         return int(value)
     if isinstance(value, float) and math.isnan(value):
@@ -243,6 +245,27 @@ def test_spark_reads_the_decoded_tables_as_pyarrow_does(spark, fleet, tmp_path, 
         finally:
             spark.conf.unset("spark.sql.legacy.parquet.nanosAsLong")
         assert spark_rows(spark, micros / table, as_time=True) == arrow_rows(micros / table), table
+
+
+def test_spark_reads_raw_frames_in_microseconds_as_times(spark, fleet, tmp_path):
+    # The raw frames' table (one row a frame) written with --time-unit us: Spark reads its
+    # times as timestamps, every row as pyarrow reads it, and the times are the nanosecond
+    # file's floored.
+    log = next(fleet.rglob("bus1.log"))
+    tables = {}
+    for unit in ["ns", "us"]:
+        tables[unit] = tmp_path / unit
+        tables[unit].mkdir()
+        subprocess.run(
+            [bywire_cli(), "log", "convert", str(log), str(tables[unit] / "frames.parquet"), "--time-unit", unit],
+            check=True,
+            capture_output=True,
+        )
+    ours = arrow_rows(tables["ns"])
+    assert sum(ours.values()) > 1000
+    micros = arrow_rows(tables["us"])
+    assert micros == Counter((row[0] // 1000, *row[1:]) for row in ours.elements())
+    assert spark_rows(spark, tables["us"], as_time=True) == micros
 
 
 def arrow_rows(table) -> Counter:

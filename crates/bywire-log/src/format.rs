@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::asc::{AscReader, AscWriter};
 use crate::blf::{BlfReader, BlfWriter};
-use crate::candump::{LogError, LogRecord, Reader, Writer};
+use crate::candump::{LogError, LogRecord, Precision, Reader, Writer};
 use crate::mf4::{Mf4Reader, Mf4Writer};
 use crate::pcapng::{PcapngReader, PcapngWriter};
 use crate::trc::{TrcReader, TrcWriter};
@@ -21,6 +21,35 @@ pub enum ParquetCompression {
     Snappy,
     /// No compression.
     Uncompressed,
+}
+
+/// How Parquet output is written (the other formats ignore it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParquetOptions {
+    /// What the pages are compressed with.
+    pub compression: ParquetCompression,
+    /// The unit of the `ts` column: nanoseconds (the default), or microseconds, floored
+    /// (what Spark reads as times).
+    pub times: Precision,
+}
+
+impl Default for ParquetOptions {
+    /// zstd, nanoseconds (not [`Precision`]'s own default, which is candump text's).
+    fn default() -> Self {
+        ParquetOptions {
+            compression: ParquetCompression::default(),
+            times: Precision::Nanos,
+        }
+    }
+}
+
+impl From<ParquetCompression> for ParquetOptions {
+    fn from(compression: ParquetCompression) -> Self {
+        ParquetOptions {
+            compression,
+            ..ParquetOptions::default()
+        }
+    }
 }
 
 /// A log format.
@@ -231,14 +260,15 @@ impl Format {
         self.writer_with(output, ParquetCompression::default())
     }
 
-    /// As [`Format::writer`], Parquet pages compressed with `compression` (other formats
-    /// ignore it).
+    /// As [`Format::writer`], Parquet written as `parquet` says (a [`ParquetCompression`]
+    /// alone will do; other formats ignore it).
     pub fn writer_with<W: Write + Seek + Send>(
         self,
         output: W,
-        #[cfg_attr(not(feature = "parquet"), allow(unused_variables))]
-        compression: ParquetCompression,
+        parquet: impl Into<ParquetOptions>,
     ) -> io::Result<RecordWriter<W>> {
+        #[cfg_attr(not(feature = "parquet"), allow(unused_variables))]
+        let parquet = parquet.into();
         Ok(match self {
             Format::Candump => RecordWriter::Candump(Writer::new(output)),
             Format::Asc => RecordWriter::Asc(AscWriter::new(output)),
@@ -255,9 +285,9 @@ impl Format {
                 ))
             }
             #[cfg(feature = "parquet")]
-            Format::Parquet => RecordWriter::Parquet(
-                crate::parquet::ParquetWriter::with_compression(output, compression)?,
-            ),
+            Format::Parquet => RecordWriter::Parquet(crate::parquet::ParquetWriter::with_options(
+                output, parquet,
+            )?),
             #[cfg(not(feature = "parquet"))]
             Format::Parquet => {
                 return Err(io::Error::other(

@@ -406,3 +406,54 @@ fn raw_parquet_times_are_delta_encoded() {
         Timestamp::from_nanos(1_700_000_000_000_000_000 + 999 * 250_000)
     );
 }
+
+/// Raw frames written with their times in microseconds: the column is typed so (what Spark
+/// reads as times) and each time is floored, never rounded past the next frame's; read back,
+/// the frames are the same.
+#[cfg(feature = "parquet")]
+#[test]
+fn raw_parquet_times_in_microseconds_are_floored() {
+    use bywire_log::format::{ParquetCompression, ParquetOptions};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let path = std::env::temp_dir().join(format!("bywire-raw-us-{}.parquet", std::process::id()));
+    let options = ParquetOptions {
+        compression: ParquetCompression::Snappy,
+        times: bywire_log::Precision::Micros,
+    };
+    let mut writer = Format::Parquet
+        .writer_with(std::fs::File::create(&path).unwrap(), options)
+        .unwrap();
+    // 999 ns apart: every other pair shares a microsecond once floored.
+    let nanos: Vec<u64> = (0..20_000u64)
+        .map(|i| 1_700_000_000_000_000_000 + i * 999)
+        .collect();
+    let frame =
+        bywire_core::Frame::classic(bywire_core::Id::standard(0x123).unwrap(), &[7]).unwrap();
+    for t in &nanos {
+        let record = bywire_log::LogRecord {
+            timestamp: Timestamp::from_nanos(*t),
+            interface: "can1".into(),
+            frame,
+            direction: Some('T'),
+        };
+        writer.write(&record).unwrap();
+    }
+    writer.finish().unwrap();
+    let builder =
+        ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(&path).unwrap()).unwrap();
+    assert_eq!(
+        builder.schema().field(0).data_type(),
+        &arrow_schema::DataType::Timestamp(arrow_schema::TimeUnit::Microsecond, Some("UTC".into()))
+    );
+    let back: Vec<_> = Format::Parquet
+        .file_reader(std::fs::File::open(&path).unwrap())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(back.len(), nanos.len());
+    for (record, t) in back.iter().zip(&nanos) {
+        assert_eq!(record.timestamp, Timestamp::from_nanos(t / 1000 * 1000));
+        assert_eq!((record.frame, record.direction), (frame, Some('T')));
+        assert_eq!(record.interface, "can1");
+    }
+}

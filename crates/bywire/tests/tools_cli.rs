@@ -107,9 +107,9 @@ fn bad_input_names_the_problem() {
         fails_with(args, "", "--compression is for Parquet output");
     }
     assert!(!Path::new(blf).exists());
-    // A time unit is for decoded Parquet tables only.
+    // A time unit is for Parquet output only, raw or decoded, refused before any file is made.
     let mcap = blf.replace(".blf", ".mcap");
-    fails_with(
+    for args in [
         &[
             "log",
             "convert",
@@ -119,25 +119,14 @@ fn bad_input_names_the_problem() {
             &m,
             "--time-unit",
             "us",
-        ],
-        "",
-        "--time-unit is for decoded Parquet tables",
-    );
+        ][..],
+        &["log", "convert", "in.log", &mcap, "--time-unit", "us"][..],
+        &["dump", "virtual:c", "-f", blf, "--time-unit", "us"][..],
+    ] {
+        fails_with(args, "", "--time-unit is for Parquet output");
+    }
     assert!(!Path::new(&mcap).exists());
-    let args = [
-        "log",
-        "convert",
-        "in.log",
-        "out.parquet",
-        "--time-unit",
-        "us",
-    ];
-    let (code, _, err) = bywire(&args, "");
-    assert_ne!(code, 0, "{err}");
-    assert!(
-        err.contains("required arguments were not provided") && err.contains("--dbc"),
-        "{err}"
-    );
+    assert!(!Path::new(blf).exists());
     fails_with(
         &["dump", "-L", "--dbc", &m, "virtual:t"],
         "",
@@ -1176,15 +1165,17 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Each column chunk's codec in a Parquet file, and its rows, as pyarrow reads them.
-fn parquet_codecs(path: &Path) -> String {
+/// Each column chunk's codec in a Parquet file, its rows, and its `ts` column's type, as
+/// pyarrow reads them.
+fn parquet_summary(path: &Path) -> String {
     let script = "
 import sys
 import pyarrow.parquet as pq
-meta = pq.ParquetFile(sys.argv[1]).metadata
+file = pq.ParquetFile(sys.argv[1])
+meta = file.metadata
 codecs = {meta.row_group(g).column(c).compression
           for g in range(meta.num_row_groups) for c in range(meta.num_columns)}
-print(' '.join(sorted(codecs)), meta.num_rows)
+print(' '.join(sorted(codecs)), meta.num_rows, file.schema_arrow.field('ts').type)
 ";
     let read = Command::new("python3")
         .args(["-c", script])
@@ -1204,9 +1195,9 @@ fn send_each(bus: &str, frames: &[&str]) {
 }
 
 /// `dump -f FILE` logs in the format the extension names and finishes the file whichever way
-/// the dump ends: after `-n` frames (BLF; Parquet, its pages compressed as asked, as pyarrow
-/// reads them), or on Ctrl-C (MCAP, whose summary comes last); `record` compresses a Parquet
-/// log as asked too.
+/// the dump ends: after `-n` frames (BLF; Parquet, its pages compressed and its times in the
+/// unit asked, as pyarrow reads them), or on Ctrl-C (MCAP, whose summary comes last); `record`
+/// compresses a Parquet log as asked too.
 #[test]
 fn dump_logs_to_any_format_and_finishes_the_file() {
     let (server, address) = start_serve(
@@ -1235,6 +1226,7 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         }
         if let Some(codec) = compression {
             args.extend(["--compression".to_string(), codec.to_string()]);
+            args.extend(["--time-unit".to_string(), "us".to_string()]);
         }
         let mut dump = Command::new(env!("CARGO_BIN_EXE_bywire"))
             .args(&args)
@@ -1258,8 +1250,8 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
             .collect();
         assert_eq!(got, frames, "{file}: {text}");
         if let Some(codec) = compression {
-            let expected = format!("{} 3", codec.to_uppercase());
-            assert_eq!(parquet_codecs(&path), expected);
+            let expected = format!("{} 3 timestamp[us, tz=UTC]", codec.to_uppercase());
+            assert_eq!(parquet_summary(&path), expected);
         }
     }
     // `record --format parquet` takes the same option.
@@ -1287,7 +1279,10 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
         .collect();
     assert_eq!(files.len(), 1, "{files:?}");
-    assert_eq!(parquet_codecs(&files[0]), "UNCOMPRESSED 3");
+    assert_eq!(
+        parquet_summary(&files[0]),
+        "UNCOMPRESSED 3 timestamp[ns, tz=UTC]"
+    );
     let _ = stop_serve(server);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -34,20 +34,17 @@ use std::sync::Arc;
 
 use arrow_array::builder::{Float64Builder, Int64Builder, UInt64Builder};
 use arrow_array::types::{ArrowPrimitiveType, Float64Type, Int64Type, UInt64Type};
-use arrow_array::{
-    new_null_array, ArrayRef, Int32Array, PrimitiveArray, RecordBatch, TimestampMicrosecondArray,
-    TimestampNanosecondArray,
-};
+use arrow_array::{new_null_array, ArrayRef, Int32Array, PrimitiveArray, RecordBatch};
 use arrow_buffer::NullBuffer;
-use arrow_schema::{DataType, Field, Schema, SchemaRef, TimeUnit};
+use arrow_schema::{DataType, Field, Schema, SchemaRef};
 use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, PayloadWord, Value};
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
 use super::batch_file::BatchFile;
 use super::{
-    dictionary_type, io_error, nanos, timestamp_type, ChannelRef, FrameColumnsRef, Labels,
-    ParquetCompression, LAYOUT_KEY,
+    dictionary_type, io_error, nanos, time_array, timestamp_type_in, ChannelRef, FrameColumnsRef,
+    Labels, ParquetCompression, LAYOUT_KEY,
 };
 use crate::calendar;
 use crate::candump::{LogError, LogRecord, LogRecordRef, Precision};
@@ -265,8 +262,8 @@ struct MessageColumns {
     kinds: Vec<Kind>,
     /// Times (ns): never null, so a plain vector (a push is a store).
     ts: Vec<i64>,
-    /// The table's times in microseconds (floored when the batch is made), else nanoseconds.
-    micros: bool,
+    /// The unit of the table's times (microseconds floored when the batch is made).
+    precision: Precision,
     channel: Option<Labels>,
     words: Vec<PayloadWord>,
     /// Values of rows decoded as they came (empty until a batch is made, for the others).
@@ -281,13 +278,7 @@ impl MessageColumns {
     fn new(message: &Message, with_channel: bool, rows: usize, precision: Precision) -> Self {
         let names = field_names(message);
         let kinds: Vec<Kind> = message.signals.iter().map(kind).collect();
-        let micros = precision == Precision::Micros;
-        let ts_type = if micros {
-            DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()))
-        } else {
-            timestamp_type()
-        };
-        let mut fields = vec![Field::new("ts", ts_type, false)];
+        let mut fields = vec![Field::new("ts", timestamp_type_in(precision), false)];
         if with_channel {
             fields.push(Field::new("channel", dictionary_type(), false));
         }
@@ -304,7 +295,7 @@ impl MessageColumns {
         MessageColumns {
             schema: Arc::new(Schema::new(fields)),
             ts: Vec::with_capacity(rows),
-            micros,
+            precision,
             channel: with_channel.then(|| Labels::new(Vec::new(), rows)),
             words: Vec::with_capacity(rows),
             // Built up as rows come (multiplexed messages), or made with the batch's size when
@@ -403,14 +394,8 @@ impl MessageColumns {
         } else {
             self.decode_words(message, codec)
         };
-        let mut ts = std::mem::take(&mut self.ts);
-        let ts: ArrayRef = if self.micros {
-            ts.iter_mut().for_each(|t| *t = t.div_euclid(1000));
-            Arc::new(TimestampMicrosecondArray::new(ts.into(), None).with_timezone("UTC"))
-        } else {
-            Arc::new(TimestampNanosecondArray::new(ts.into(), None).with_timezone("UTC"))
-        };
-        let mut columns: Vec<ArrayRef> = vec![ts];
+        let mut columns: Vec<ArrayRef> =
+            vec![time_array(std::mem::take(&mut self.ts), self.precision)];
         if let Some(channel) = &mut self.channel {
             columns.push(channel.finish()?);
         }
@@ -1327,7 +1312,7 @@ mod tests {
         let ts = batches[0].column(0);
         assert_eq!(
             ts.data_type(),
-            &DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()))
+            &DataType::Timestamp(arrow_schema::TimeUnit::Microsecond, Some("UTC".into()))
         );
         let micros = ts
             .as_primitive::<TimestampMicrosecondType>()

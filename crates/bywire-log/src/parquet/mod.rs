@@ -6,7 +6,7 @@
 //!
 //! | column | type | |
 //! |---|---|---|
-//! | `ts` | timestamp (ns, UTC) | when the frame was on the bus |
+//! | `ts` | timestamp (ns, UTC; µs when asked, floored) | when the frame was on the bus |
 //! | `channel` | dictionary string | the interface (`can0`) |
 //! | `id` | uint32 | the identifier (an error frame: its SocketCAN class bits) |
 //! | `extended`, `remote`, `error`, `fd`, `brs`, `esi` | bool | the frame's kind and flags |
@@ -41,18 +41,20 @@ use ::parquet::basic::{Compression, ZstdLevel};
 use ::parquet::file::metadata::KeyValue;
 use ::parquet::file::properties::WriterProperties;
 use arrow_array::builder::{
-    ArrayBuilder, BinaryBuilder, BooleanBuilder, TimestampNanosecondBuilder, UInt32Builder,
-    UInt8Builder,
+    ArrayBuilder, BinaryBuilder, BooleanBuilder, UInt32Builder, UInt8Builder,
 };
 use arrow_array::cast::AsArray;
 use arrow_array::types::{Int32Type, UInt32Type, UInt8Type};
-use arrow_array::{Array, ArrayAccessor, ArrayRef, RecordBatch};
+use arrow_array::{
+    Array, ArrayAccessor, ArrayRef, RecordBatch, TimestampMicrosecondArray,
+    TimestampNanosecondArray,
+};
 use arrow_schema::{DataType, Field, Schema, SchemaRef, TimeUnit};
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
-use crate::candump::{LogError, LogRecord};
-pub use crate::format::ParquetCompression;
+use crate::candump::{LogError, LogRecord, Precision};
+pub use crate::format::{ParquetCompression, ParquetOptions};
 
 /// Rows a row group holds (about 20–40 MB of frames before compression).
 pub const ROW_GROUP_ROWS: usize = 1 << 20;
@@ -63,9 +65,27 @@ pub const LAYOUT_KEY: &str = "bywire.layout";
 /// The raw frames' layout, as [`LAYOUT_KEY`] names it.
 pub const RAW_LAYOUT: &str = "can-frames/1";
 
-/// The `ts` column's type: nanoseconds, UTC.
-pub(crate) fn timestamp_type() -> DataType {
-    DataType::Timestamp(TimeUnit::Nanosecond, Some("UTC".into()))
+/// A `ts` column's type in `precision` (UTC).
+pub(crate) fn timestamp_type_in(precision: Precision) -> DataType {
+    let unit = match precision {
+        Precision::Nanos => TimeUnit::Nanosecond,
+        Precision::Micros => TimeUnit::Microsecond,
+    };
+    DataType::Timestamp(unit, Some("UTC".into()))
+}
+
+/// A `ts` column from nanoseconds, in `precision` (microseconds floored: a time never moves
+/// past the next frame's).
+pub(crate) fn time_array(mut nanos: Vec<i64>, precision: Precision) -> ArrayRef {
+    match precision {
+        Precision::Nanos => {
+            Arc::new(TimestampNanosecondArray::new(nanos.into(), None).with_timezone("UTC"))
+        }
+        Precision::Micros => {
+            nanos.iter_mut().for_each(|t| *t = t.div_euclid(1000));
+            Arc::new(TimestampMicrosecondArray::new(nanos.into(), None).with_timezone("UTC"))
+        }
+    }
 }
 
 /// A dictionary-encoded string column's type (what pandas opens as a category).
@@ -75,9 +95,14 @@ pub(crate) fn dictionary_type() -> DataType {
 
 /// The raw frames' schema.
 pub fn raw_schema() -> SchemaRef {
+    raw_schema_in(Precision::Nanos)
+}
+
+/// The raw frames' schema with its times in `precision`.
+pub fn raw_schema_in(precision: Precision) -> SchemaRef {
     let flag = |name: &str| Field::new(name, DataType::Boolean, false);
     Arc::new(Schema::new(vec![
-        Field::new("ts", timestamp_type(), false),
+        Field::new("ts", timestamp_type_in(precision), false),
         Field::new("channel", dictionary_type(), false),
         Field::new("id", DataType::UInt32, false),
         flag("extended"),
@@ -333,7 +358,9 @@ impl Iterator for FrameBatches {
 /// Raw frames' columns being built: records in, [`raw_schema`] batches out (the writer's
 /// buffer, and how other Arrow users get a log's frames without a file).
 pub struct FrameColumns {
-    ts: TimestampNanosecondBuilder,
+    /// Nanoseconds, put in the schema's unit when a batch is made.
+    ts: Vec<i64>,
+    precision: Precision,
     channel: Labels,
     id: UInt32Builder,
     extended: BooleanBuilder,
@@ -354,10 +381,16 @@ impl Default for FrameColumns {
 }
 
 impl FrameColumns {
-    /// No rows yet.
+    /// No rows yet; times in nanoseconds ([`raw_schema`]).
     pub fn new() -> Self {
+        Self::with_precision(Precision::Nanos)
+    }
+
+    /// No rows yet; times in `precision` ([`raw_schema_in`]).
+    pub fn with_precision(precision: Precision) -> Self {
         FrameColumns {
-            ts: TimestampNanosecondBuilder::with_capacity(BATCH_ROWS).with_timezone("UTC"),
+            ts: Vec::with_capacity(BATCH_ROWS),
+            precision,
             channel: Labels::new(Vec::new(), BATCH_ROWS),
             id: UInt32Builder::with_capacity(BATCH_ROWS),
             extended: BooleanBuilder::with_capacity(BATCH_ROWS),
@@ -375,7 +408,7 @@ impl FrameColumns {
     /// Add one record's row.
     pub fn push(&mut self, record: &LogRecord) {
         let frame = &record.frame;
-        self.ts.append_value(nanos(record.timestamp));
+        self.ts.push(nanos(record.timestamp));
         self.channel.push_text(&record.interface);
         let (id, extended) = match frame.id() {
             Some(id) => (id.as_raw(), id.is_extended()),
@@ -410,11 +443,12 @@ impl FrameColumns {
         self.id.len()
     }
 
-    /// The rows added so far as one batch of `schema` ([`raw_schema`]); the columns start
-    /// empty again.
+    /// The rows added so far as one batch of `schema` ([`raw_schema`], or [`raw_schema_in`]
+    /// the columns' precision); the columns start empty again.
     pub fn finish(&mut self, schema: &SchemaRef) -> std::io::Result<RecordBatch> {
+        let ts = std::mem::replace(&mut self.ts, Vec::with_capacity(BATCH_ROWS));
         let columns: Vec<ArrayRef> = vec![
-            Arc::new(self.ts.finish()),
+            time_array(ts, self.precision),
             self.channel.finish()?,
             Arc::new(self.id.finish()),
             Arc::new(self.extended.finish()),
@@ -446,7 +480,14 @@ impl<W: Write + Send> ParquetWriter<W> {
 
     /// A writer to `output` whose pages are compressed with `compression`.
     pub fn with_compression(output: W, compression: ParquetCompression) -> std::io::Result<Self> {
-        let schema = raw_schema();
+        Self::with_options(output, compression.into())
+    }
+
+    /// A writer to `output` with its pages compressed and its times in the units `options`
+    /// say.
+    pub fn with_options(output: W, options: ParquetOptions) -> std::io::Result<Self> {
+        let ParquetOptions { compression, times } = options;
+        let schema = raw_schema_in(times);
         let writer = ArrowWriter::try_new(
             output,
             schema.clone(),
@@ -463,7 +504,7 @@ impl<W: Write + Send> ParquetWriter<W> {
         Ok(ParquetWriter {
             writer,
             schema,
-            columns: FrameColumns::new(),
+            columns: FrameColumns::with_precision(times),
         })
     }
 

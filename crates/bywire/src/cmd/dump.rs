@@ -11,11 +11,11 @@ use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
 use bywire_core::Frame;
 use bywire_log::candump::{frame_text, timestamp_text};
-use bywire_log::format::{Format, ParquetCompression, RecordWriter};
+use bywire_log::format::{Format, ParquetOptions, RecordWriter};
 use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg::{self, BusArg, Event, Readers};
-use crate::support::logs::CompressionArg;
+use crate::support::logs::{CompressionArg, TimeUnitArg};
 use crate::support::signals::Dbc;
 use crate::support::signals::FrameText;
 
@@ -26,6 +26,7 @@ use crate::support::signals::FrameText;
   bywire dump -L virtual:test > traffic.log
   bywire dump -l -n 1000 can0              (writes candump-YYYY-MM-DD_HHMMSS.log)
   bywire dump -f drive.parquet --compression snappy can0 can1
+  bywire dump -f drive.parquet --time-unit us can0   (times Spark reads as such)
   bywire dump --dbc vehicle.dbc can0,100:7F0
 
 Filters follow the bus as in candump: ID:MASK matches when id & mask == ID & mask, ID~MASK
@@ -58,6 +59,10 @@ pub struct Args {
     /// With a Parquet log file: what its pages are compressed with (zstd by default).
     #[arg(long, value_name = "CODEC")]
     compression: Option<CompressionArg>,
+    /// With a Parquet log file: the unit of its times (ns by default; us, floored: what Spark
+    /// reads as times).
+    #[arg(long, value_name = "UNIT")]
+    time_unit: Option<TimeUnitArg>,
     /// Exit after this many frames.
     #[arg(short = 'n', value_name = "COUNT")]
     count: Option<u64>,
@@ -109,10 +114,13 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         || "standard output".to_string(),
         |p| p.display().to_string(),
     );
-    let compression = CompressionArg::for_output(args.compression, log_format, &what)?;
+    let parquet = ParquetOptions {
+        compression: CompressionArg::for_output(args.compression, log_format, &what)?,
+        times: TimeUnitArg::for_output(args.time_unit, log_format, &what)?.into(),
+    };
     let opened = busarg::open_all(&buses)?;
     let mut log = match log_path {
-        Some(path) => Some(create_log(path, log_format, compression)?),
+        Some(path) => Some(create_log(path, log_format, parquet)?),
         None => None,
     };
     let stop = crate::interrupt_flag();
@@ -157,7 +165,7 @@ impl LogFile {
     }
 }
 
-fn create_log(path: PathBuf, format: Format, compression: ParquetCompression) -> Result<LogFile> {
+fn create_log(path: PathBuf, format: Format, parquet: ParquetOptions) -> Result<LogFile> {
     let file = File::create(&path).with_context(|| format!("cannot create {}", path.display()))?;
     // As candump says it; a closed standard error is no reason to fail.
     let _ = writeln!(std::io::stderr(), "Enabling Logfile '{}'", path.display());
@@ -166,7 +174,7 @@ fn create_log(path: PathBuf, format: Format, compression: ParquetCompression) ->
         Format::Candump => LogFile::Candump(output),
         format => LogFile::Other(Box::new(
             format
-                .writer_with(output, compression)
+                .writer_with(output, parquet)
                 .with_context(|| format!("cannot write {}", path.display()))?,
         )),
     })

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::timestamp_text;
-use bywire_log::format::Format;
+use bywire_log::format::{Format, ParquetOptions};
 use bywire_log::stats::LogStats;
 use bywire_log::LogRecord;
 use bywire_log::{FrameView, Precision, View};
@@ -60,6 +60,7 @@ Every line is checked; a malformed one is an error naming its file, line and col
                                                   (a Parquet table per message, typed signals)
   bywire log convert drive.log lake --dbc vehicle.dbc --compression snappy   (zstd by default)
   bywire log convert drive.log lake --dbc vehicle.dbc --time-unit us   (times Spark reads as such)
+  bywire log convert drive.blf drive.parquet --time-unit us
   bywire log convert drive.log drive.mcap --dbc vehicle.dbc   (+ JSON channels for Foxglove)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
@@ -110,9 +111,9 @@ conversion leaves no half-written file.")]
         /// With Parquet output: what the pages are compressed with.
         #[arg(long, value_name = "CODEC")]
         compression: Option<CompressionArg>,
-        /// With --dbc and Parquet: the unit of the tables' times (ns by default; us: what Spark
-        /// reads as times).
-        #[arg(long, value_name = "UNIT", requires = "dbc")]
+        /// With Parquet output: the unit of the times, raw frames' or decoded tables' (ns by
+        /// default; us, floored: what Spark reads as times).
+        #[arg(long, value_name = "UNIT")]
         time_unit: Option<TimeUnitArg>,
     },
     /// Summarise logs: frames, interfaces, time span, identifiers with counts and cycle times.
@@ -214,12 +215,7 @@ fn convert(
     };
     let compression =
         CompressionArg::for_output(decoding.compression, format, &output.display().to_string())?;
-    if decoding.time_unit.is_some() && format != Format::Parquet {
-        return Err(anyhow!(
-            "--time-unit is for decoded Parquet tables; {} is not Parquet",
-            output.display()
-        ));
-    }
+    let times = TimeUnitArg::for_output(decoding.time_unit, format, &output.display().to_string())?;
     let decoder = match decoding.dbc {
         None => None,
         Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
@@ -256,10 +252,7 @@ fn convert(
     let mut notes = Vec::new();
     match (&decoder, format) {
         (Some(decoder), Format::Parquet) => {
-            let tables = TableOptions {
-                compression,
-                times: decoding.time_unit.unwrap_or_default(),
-            };
+            let tables = TableOptions { compression, times };
             notes = write_dataset(output, decoder, decoding.partitioning, tables, |sink| {
                 pump.run(bywire_log::merge::merge(readers), |r| {
                     sink(&r.as_record_ref())
@@ -292,7 +285,13 @@ fn convert(
         (None, _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
             let mut writer = format
-                .writer_with(std::io::BufWriter::new(file), compression)
+                .writer_with(
+                    std::io::BufWriter::new(file),
+                    ParquetOptions {
+                        compression,
+                        times: times.into(),
+                    },
+                )
                 .with_context(cannot_write)?;
             pump.run(bywire_log::merge::merge(readers), |r| {
                 writer.write(r).with_context(cannot_write)

@@ -395,7 +395,7 @@ pub struct TableOptions {
     pub times: TimeUnitArg,
 }
 
-/// The unit of a decoded table's times.
+/// The unit of a Parquet table's times.
 #[derive(Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum TimeUnitArg {
     /// Nanoseconds: what the logs hold (pandas, polars, pyarrow and DuckDB read them as times).
@@ -403,6 +403,19 @@ pub enum TimeUnitArg {
     Ns,
     /// Microseconds, floored: what Spark reads as times.
     Us,
+}
+
+impl TimeUnitArg {
+    /// The unit for output in `format` to `what` (a file, for the error): nanoseconds unless
+    /// given; an error when given for anything but Parquet.
+    pub fn for_output(arg: Option<TimeUnitArg>, format: Format, what: &str) -> Result<TimeUnitArg> {
+        if arg.is_some() && format != Format::Parquet {
+            return Err(anyhow!(
+                "--time-unit is for Parquet output; {what} is not Parquet"
+            ));
+        }
+        Ok(arg.unwrap_or_default())
+    }
 }
 
 impl From<TimeUnitArg> for bywire_log::Precision {
