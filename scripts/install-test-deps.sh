@@ -28,8 +28,8 @@ python3 -m pip install -q --disable-pip-version-check mcap==1.6.0 mcap-ros2-supp
 # asammdf: the MF4 peer (python-can's MF4 reader and writer are asammdf's; its bus logging
 # extraction decodes our files with a DBC).
 python3 -m pip install -q --disable-pip-version-check asammdf==8.6.10
-# pyarrow, polars and pandas: the Parquet peers (and the README's walk-through into pandas).
-python3 -m pip install -q --disable-pip-version-check pyarrow==26.0.1 polars==2.1.0 "pandas>=2.2,<3"
+# pyarrow, polars, DuckDB and pandas: the Parquet peers (and the README's walk-through into pandas).
+python3 -m pip install -q --disable-pip-version-check pyarrow==26.0.1 polars==2.1.0 duckdb==2.0.1 "pandas>=2.2,<3"
 # cyclonedds: the DDS of ROS 2's default middleware, the peer of `bywire ros2` (binary wheel with
 # the C library; its types declared under ROS 2's names).
 python3 -m pip install -q --disable-pip-version-check cyclonedds==11.0.1

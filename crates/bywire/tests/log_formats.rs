@@ -936,7 +936,7 @@ with open(sys.argv[1], "wb") as f:
 }
 
 #[test]
-fn pyarrow_and_polars_read_our_parquet_and_we_read_theirs() {
+fn pyarrow_polars_and_duckdb_read_our_parquet_and_we_read_theirs() {
     let dir = scratch("parquet");
     let (log, ours, theirs) = (
         dir.join("in.log"),
@@ -954,11 +954,17 @@ fn pyarrow_and_polars_read_our_parquet_and_we_read_theirs() {
     let read = python(
         r#"
 import sys
+import duckdb
 import polars
 import pyarrow.parquet as pq
 t = pq.read_table(sys.argv[1])
 print(";".join(f"{f.name}:{f.type}" for f in t.schema))
 assert polars.read_parquet(sys.argv[1]).height == t.num_rows
+# DuckDB reads every row as pyarrow does, times to the nanosecond.
+columns = t.column_names[1:]
+ducks = duckdb.execute(f"SELECT epoch_ns(ts), {', '.join(columns)} FROM read_parquet(?)", [sys.argv[1]]).fetchall()
+arrows = zip(t.column("ts").cast("int64").to_pylist(), *(t.column(c).to_pylist() for c in columns))
+assert ducks == list(arrows), ducks
 for r in t.to_pylist():
     ts = int(r["ts"].timestamp()) * 10**9 + r["ts"].microsecond * 1000
     flags = "".join("1" if r[k] else "0" for k in ("extended", "remote", "error", "fd", "brs", "esi"))

@@ -4,13 +4,15 @@ Arguments: the DBC, the candump log that was converted, the dataset's directory.
 of the log is decoded with cantools (numbers, and separately the value descriptions); every
 message's table is read with pyarrow and with polars, and each row must equal cantools'
 decode of the same frame: same rows in the same order, every signal equal (integers exactly,
-floats to the bit), every `_choice` column equal to cantools' choice name. Prints a summary.
+floats to the bit), every `_choice` column equal to cantools' choice name. DuckDB reads every
+row as pyarrow does. Prints a summary.
 """
 import math
 import pathlib
 import sys
 
 import corpus_dbc
+import duckdb
 import polars
 import pyarrow.parquet as pq
 
@@ -50,6 +52,13 @@ for name, rows in expected.items():
     assert str(table.schema.field("ts").type) == "timestamp[ns, tz=UTC]", table.schema
     columns = table.to_pydict()
     ts = table.column("ts").cast("int64").to_pylist()
+    names = table.column_names[1:]
+    quoted = ", ".join('"' + n.replace('"', '""') + '"' for n in names)
+    ducks = duckdb.execute(f"SELECT epoch_ns(ts), {quoted} FROM read_parquet(?)", [str(directory / "*.parquet")]).fetchall()
+    assert len(ducks) == len(rows), (name, len(ducks), len(rows))
+    for i, duck in enumerate(ducks):
+        arrow = (ts[i], *(columns[n][i] for n in names))
+        assert all(a == d or (isinstance(a, float) and isinstance(d, float) and same(a, d)) for a, d in zip(arrow, duck)), (name, i, arrow, duck)
     message = db.get_message_by_name(name)
     for i, (when, channel, numbers, named) in enumerate(rows):
         assert ts[i] == when, (name, i, ts[i], when)
