@@ -3,11 +3,32 @@
 #![no_main]
 
 use std::io::Write;
+use std::sync::Once;
 
 use bywire_log::format::Format;
 use libfuzzer_sys::fuzz_target;
 
+/// libfuzzer-sys aborts at any panic, caught or not. parquet-rs asserts on some malformed
+/// pages, and the reader takes those panics as the file's error: a panic inside parquet-rs
+/// is let unwind to the reader, every other one still aborts (a finding). An uncaught panic
+/// from parquet-rs would still abort in libfuzzer-sys's own wrapper.
+fn let_parquet_panics_unwind() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let aborting = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let in_parquet = info
+                .location()
+                .is_some_and(|l| l.file().contains("/parquet-"));
+            if !in_parquet {
+                aborting(info);
+            }
+        }));
+    });
+}
+
 fuzz_target!(|data: &[u8]| {
+    let_parquet_panics_unwind();
     let path = std::env::temp_dir().join(format!("bywire-fuzz-{}.parquet", std::process::id()));
     std::fs::File::create(&path).unwrap().write_all(data).unwrap();
     let file = std::fs::File::open(&path).unwrap();

@@ -457,3 +457,56 @@ fn raw_parquet_times_in_microseconds_are_floored() {
         assert_eq!(record.interface, "can1");
     }
 }
+
+/// A delta-encoded page whose header holds an over-long varint (parquet-rs asserts there,
+/// found by the `parquet_reader` fuzz target) is an error naming the row, not a panic.
+#[cfg(feature = "parquet")]
+#[test]
+fn a_malformed_delta_page_is_an_error_not_a_panic() {
+    use bywire_log::format::{ParquetCompression, ParquetOptions};
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let path =
+        std::env::temp_dir().join(format!("bywire-bad-delta-{}.parquet", std::process::id()));
+    let options = ParquetOptions {
+        compression: ParquetCompression::Uncompressed,
+        ..ParquetOptions::default()
+    };
+    let mut writer = Format::Parquet
+        .writer_with(std::fs::File::create(&path).unwrap(), options)
+        .unwrap();
+    for i in 0..6u64 {
+        let record = bywire_log::LogRecord {
+            timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + i * 1_000),
+            interface: "can0".into(),
+            frame: bywire_core::Frame::classic(bywire_core::Id::standard(0x10).unwrap(), &[1])
+                .unwrap(),
+            direction: None,
+        };
+        writer.write(&record).unwrap();
+    }
+    writer.finish().unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let reader = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let page =
+        usize::try_from(reader.metadata().row_group(0).column(0).data_page_offset()).unwrap();
+    // The `ts` page's delta header: a block size in two varint bytes (a multiple of 128), 4
+    // miniblocks, 6 values; then the first value, made an 11-byte varint (at most 10 are
+    // allowed).
+    let header = bytes[page..]
+        .windows(4)
+        .position(|w| w[0] == 0x80 && w[2..] == [0x04, 0x06])
+        .unwrap()
+        + page;
+    bytes[header + 4..header + 15].fill(0xFF);
+    std::fs::write(&path, &bytes).unwrap();
+    let read: Vec<_> = Format::Parquet
+        .file_reader(std::fs::File::open(&path).unwrap())
+        .collect();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(read.len(), 1, "{read:?}");
+    let error = read[0].as_ref().unwrap_err().to_string();
+    assert!(
+        error.contains("row 0") && error.contains("malformed page"),
+        "{error}"
+    );
+}

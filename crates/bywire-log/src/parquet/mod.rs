@@ -762,21 +762,42 @@ impl Iterator for ParquetReader {
             if self.failed {
                 return None;
             }
-            match self.batches.next()? {
-                Ok(batch) => {
+            match next_batch(&mut self.batches) {
+                None => return None,
+                Some(Ok(batch)) => {
                     if let Err(e) = self.read_batch(&batch) {
                         self.failed = true;
                         return Some(Err(e));
                     }
                 }
-                Err(e) => {
+                Some(Err(what)) => {
                     self.failed = true;
                     return Some(Err(LogError::Table {
                         row: self.row,
-                        what: format!("cannot read: {e}"),
+                        what: format!("cannot read: {what}"),
                     }));
                 }
             }
+        }
+    }
+}
+
+/// The next batch parquet-rs reads, or why it cannot.
+///
+/// parquet-rs 60 asserts where some malformed pages should be errors (an over-long varint in a
+/// DELTA_BINARY_PACKED page's header panics in its bit reader): a file is outside input, so
+/// such a panic is taken as the file's error here. The caller reads no further from `batches`
+/// afterwards, since its state after the panic is not to be trusted.
+fn next_batch(batches: &mut ParquetRecordBatchReader) -> Option<Result<RecordBatch, String>> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| batches.next())) {
+        Ok(next) => next.map(|batch| batch.map_err(|e| e.to_string())),
+        Err(panic) => {
+            let text = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("the decoder failed");
+            Some(Err(format!("a malformed page ({text})")))
         }
     }
 }
