@@ -34,6 +34,9 @@ pub type BusIndex = usize;
 /// a node that keeps asking for the past cannot stall simulated time.
 const RESOLUTION: Duration = Duration::from_micros(1);
 
+/// A slot's wake time when it has none (no run ends this late: every `until` is at most this).
+const NEVER: u64 = u64::MAX;
+
 /// Passes at one instant after which time is moved on by [`RESOLUTION`] (a bus that keeps
 /// reporting a change it does not make must not stall the run).
 const PASSES_PER_INSTANT: u32 = 64;
@@ -52,9 +55,10 @@ struct Slot {
     deadline: Option<Timestamp>,
     /// When it was last polled.
     polled: Option<Timestamp>,
-    /// When it must next run, worked out from the two above whenever they change (the runner
-    /// looks for the earliest of every node's at each event).
-    wake: Option<Timestamp>,
+    /// When it must next run, in nanoseconds ([`NEVER`] for no time), worked out from the two
+    /// above whenever they change: the runner looks for the earliest of every node's at each
+    /// event, a plain minimum over integers.
+    wake: u64,
     /// Changed by the caller since the last run (its deadline is asked again).
     changed: bool,
     /// It received something at the current instant.
@@ -67,7 +71,7 @@ impl Slot {
     const NEW: Slot = Slot {
         deadline: None,
         polled: None,
-        wake: Some(Timestamp::ZERO),
+        wake: 0,
         changed: true,
         received: false,
         dropped: false,
@@ -76,7 +80,7 @@ impl Slot {
     /// A new deadline, asked of the node.
     fn set_deadline(&mut self, deadline: Option<Timestamp>) {
         self.deadline = deadline;
-        self.wake = self.next_wake();
+        self.wake = self.next_wake().map_or(NEVER, Timestamp::as_nanos);
     }
 
     /// Polled at `now`, after which the node asked for `deadline`.
@@ -302,10 +306,8 @@ impl Network {
 
     /// The earliest time something happens: a node's deadline or a bus's next change.
     fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
-        let mut next: Option<Timestamp> = None;
-        for slot in self.slots.iter().take(nodes) {
-            next = earliest([next, slot.wake]);
-        }
+        let wake = self.slots.iter().take(nodes).map(|s| s.wake).min();
+        let mut next = wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos);
         for b in &mut self.buses {
             next = earliest([next, b.next_change()]);
         }
