@@ -8,19 +8,21 @@ use std::sync::Once;
 use bywire_log::format::Format;
 use libfuzzer_sys::fuzz_target;
 
-/// libfuzzer-sys aborts at any panic, caught or not. parquet-rs asserts on some malformed
-/// pages, and the reader takes those panics as the file's error: a panic inside parquet-rs
-/// is let unwind to the reader, every other one still aborts (a finding). An uncaught panic
-/// from parquet-rs would still abort in libfuzzer-sys's own wrapper.
+/// libfuzzer-sys aborts at any panic, caught or not. parquet-rs (and the arrow-rs buffers it
+/// fills) asserts on some malformed pages, and the reader takes those panics as the file's
+/// error: a panic inside arrow-rs or parquet-rs is let unwind to the reader, every other one
+/// still aborts (a finding). One the reader did not catch would still abort in libfuzzer-sys's
+/// own wrapper.
 fn let_parquet_panics_unwind() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         let aborting = std::panic::take_hook();
         std::panic::set_hook(Box::new(move |info| {
-            let in_parquet = info
-                .location()
-                .is_some_and(|l| l.file().contains("/parquet-"));
-            if !in_parquet {
+            let in_arrow_rs = info.location().is_some_and(|l| {
+                let file = l.file();
+                file.contains("/parquet-") || file.contains("/arrow-")
+            });
+            if !in_arrow_rs {
                 aborting(info);
             }
         }));

@@ -510,3 +510,34 @@ fn a_malformed_delta_page_is_an_error_not_a_panic() {
         "{error}"
     );
 }
+
+/// The files the `parquet_reader` fuzz target found making parquet-rs or arrow-rs panic: each
+/// reads to an error naming a row, and nothing panics through the reader.
+#[cfg(feature = "parquet")]
+#[test]
+fn fuzz_findings_in_parquet_files_are_errors() {
+    let folder =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz-regressions/parquet");
+    let mut files: Vec<_> = std::fs::read_dir(&folder)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert!(files.len() >= 2, "{files:?}");
+    for path in files {
+        let read: Vec<_> = Format::Parquet
+            .file_reader(std::fs::File::open(&path).unwrap())
+            .collect();
+        let error = read
+            .iter()
+            .find_map(|r| r.as_ref().err())
+            .unwrap_or_else(|| panic!("{}: read without an error", path.display()))
+            .to_string();
+        assert!(error.contains("row "), "{}: {error}", path.display());
+        assert!(
+            read.last().unwrap().is_err(),
+            "{}: read on after the error",
+            path.display()
+        );
+    }
+}
