@@ -551,14 +551,33 @@ impl ParquetReader {
     /// A reader of `file` (its footer is read at once, so a file that is not Parquet fails
     /// here).
     pub fn open(mut file: File) -> Result<Self, LogError> {
-        // The crate reserves what a footer declares: checked against its bytes first.
+        // The crate reserves what a footer or a page header declares: both checked against
+        // their bytes first.
         footer::check(&mut file)?;
-        let batches = ParquetRecordBatchReaderBuilder::try_new(file)
-            .and_then(|b| b.with_batch_size(BATCH_ROWS).build())
-            .map_err(|e| LogError::Table {
-                row: 0,
-                what: format!("not a readable Parquet file: {e}"),
-            })?;
+        let unreadable = |e: ::parquet::errors::ParquetError| LogError::Table {
+            row: 0,
+            what: format!("not a readable Parquet file: {e}"),
+        };
+        let mut pages = file.try_clone().map_err(|e| LogError::Binary {
+            offset: 0,
+            what: format!("cannot read: {e}"),
+        })?;
+        let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(unreadable)?;
+        let chunks = builder.metadata().row_groups().iter().flat_map(|group| {
+            // Not `byte_range`: the crate asserts there that the footer's numbers are not
+            // negative; they are checked where they are used instead.
+            group.columns().iter().map(|chunk| {
+                let start = chunk
+                    .dictionary_page_offset()
+                    .unwrap_or(chunk.data_page_offset());
+                (start, chunk.compressed_size())
+            })
+        });
+        footer::check_pages(&mut pages, chunks)?;
+        let batches = builder
+            .with_batch_size(BATCH_ROWS)
+            .build()
+            .map_err(unreadable)?;
         Ok(ParquetReader {
             batches,
             pending: VecDeque::new(),
