@@ -1427,3 +1427,40 @@ fn the_readmes_pandas_walk_through_runs_as_written() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A raw frames' file on which parquet-rs panics while decoding (its delta header's first
+/// value made an 11-byte varint): `log cat` says what is wrong and where, as an error, with no
+/// panic message and no crash.
+#[test]
+fn a_file_parquet_rs_panics_on_is_an_error_without_a_panic_message() {
+    let dir = scratch("parquet-panic");
+    let (log, table) = (dir.join("in.log"), dir.join("frames.parquet"));
+    let six = "(1700000000.000001) can0 010#01\n".repeat(6);
+    std::fs::write(&log, six).unwrap();
+    let said = bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        table.to_str().unwrap(),
+        "--compression",
+        "none",
+    ]);
+    assert!(said.starts_with("6 frames written"), "{said}");
+    let mut bytes = std::fs::read(&table).unwrap();
+    // The `ts` page's delta header: a two-byte block size, 4 miniblocks, 6 values, then the
+    // first value.
+    let header = bytes
+        .windows(4)
+        .position(|w| w[0] == 0x80 && w[2..] == [0x04, 0x06])
+        .unwrap();
+    bytes[header + 4..header + 15].fill(0xFF);
+    std::fs::write(&table, &bytes).unwrap();
+    let (code, out, err) = common::bywire(&["log", "cat", table.to_str().unwrap()], "");
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(
+        err.contains("row 0") && err.contains("malformed page"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}

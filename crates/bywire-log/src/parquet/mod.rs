@@ -801,6 +801,18 @@ impl Iterator for ParquetReader {
     }
 }
 
+thread_local! {
+    /// Set while parquet-rs decodes a batch for the reader ([`next_batch`]).
+    static DECODING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether this thread is inside the reader's parquet-rs decoding, whose panics the reader
+/// takes as the file's error: a panic hook may leave those unreported, since the error that
+/// follows says what was wrong (the command line's does).
+pub fn panic_is_caught_by_reader() -> bool {
+    DECODING.with(std::cell::Cell::get)
+}
+
 /// The next batch parquet-rs reads, or why it cannot.
 ///
 /// parquet-rs 60 asserts where some malformed pages should be errors (an over-long varint in a
@@ -808,7 +820,10 @@ impl Iterator for ParquetReader {
 /// such a panic is taken as the file's error here. The caller reads no further from `batches`
 /// afterwards, since its state after the panic is not to be trusted.
 fn next_batch(batches: &mut ParquetRecordBatchReader) -> Option<Result<RecordBatch, String>> {
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| batches.next())) {
+    DECODING.with(|d| d.set(true));
+    let next = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| batches.next()));
+    DECODING.with(|d| d.set(false));
+    match next {
         Ok(next) => next.map(|batch| batch.map_err(|e| e.to_string())),
         Err(panic) => {
             let text = panic
