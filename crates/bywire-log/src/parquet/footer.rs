@@ -137,8 +137,9 @@ fn page_at(
                 }
                 return Ok((walker.at as u64, compressed));
             }
-            // Cut short by the window, not by the chunk: look again in a larger one.
-            Err(_) if walker.at >= window.len() && size < end - at => continue,
+            // The window held less than the chunk has left: whatever it found wanting (the
+            // header's end, or bytes for a long statistics string), look again in a larger one.
+            Err(_) if size < end - at && most < MAX_HEADER_BYTES => continue,
             Err((offset, what)) => {
                 return Err(fail(
                     at + offset as u64,
@@ -448,5 +449,10 @@ mod tests {
         ];
         let error = check_chunk(&string, 13).unwrap_err().to_string();
         assert!(error.contains("a string of 2147483648 elements"), "{error}");
+        // A header longer than the first window (a 10,000-byte string in it) is read whole.
+        let mut long = vec![0x15, 0x00, 0x15, 0x08, 0x15, 0x08, 0x18, 0x90, 0x4E];
+        long.extend([7u8; 10_000]);
+        long.extend([0x00, 1, 2, 3, 4]);
+        assert!(check_chunk(&long, i64::try_from(long.len()).unwrap()).is_ok());
     }
 }
