@@ -34,6 +34,21 @@ def latest(r, timeout=5.0):
     return got
 
 
+def settled(r, want, timeout=5.0):
+    """The topic's last text once it reads `want`, or after `timeout` whatever it last read: a
+    service's reply can arrive before the state sample it caused."""
+    end = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < end:
+        samples = r.take(N=100)
+        if samples:
+            last = samples[-1].data
+            if last == want:
+                break
+        time.sleep(0.01)
+    return last
+
+
 def velocity_after(seconds):
     time.sleep(seconds)
     joints.take(N=1000)
@@ -47,8 +62,8 @@ def call(service, **fields):
 
 
 out = {"init": call("init"), "velocity_mode": call("velocity_mode")}
-out["nmt"] = latest(nmt).data
-out["state"] = latest(drive_state).data
+out["nmt"] = settled(nmt, "operational")
+out["state"] = settled(drive_state, "operation enabled")
 for _ in range(20):
     target_topic.write(Float64(data=1000.0))
     time.sleep(0.05)
