@@ -21,7 +21,7 @@ use bywire_core::node::{Node, Port};
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
-use crate::sim::{NodeId, SimBus};
+use crate::sim::{NodeId, SimBus, MAX_ROUTED};
 use crate::Filtering;
 
 /// A node's index in the slice given to [`Network::run_until`].
@@ -59,6 +59,9 @@ struct Slot {
     /// above whenever they change: the runner looks for the earliest of every node's at each
     /// event, a plain minimum over integers.
     wake: u64,
+    /// From when it is due, in nanoseconds ([`NEVER`] for never; see [`Slot::due`]), worked
+    /// out likewise: every node is asked at every event.
+    due_from: u64,
     /// Changed by the caller since the last run (its deadline is asked again).
     changed: bool,
     /// It received something at the current instant.
@@ -72,6 +75,7 @@ impl Slot {
         deadline: None,
         polled: None,
         wake: 0,
+        due_from: 0,
         changed: true,
         received: false,
         dropped: false,
@@ -81,6 +85,14 @@ impl Slot {
     fn set_deadline(&mut self, deadline: Option<Timestamp>) {
         self.deadline = deadline;
         self.wake = self.next_wake().map_or(NEVER, Timestamp::as_nanos);
+        self.due_from = match (self.polled, deadline) {
+            (None, _) => 0,
+            (Some(_), None) => NEVER,
+            // Any time after the last poll (the deadline has passed by then).
+            (Some(last), Some(d)) if d <= last => last.as_nanos().saturating_add(1),
+            // The deadline, which is after the last poll.
+            (Some(_), Some(d)) => d.as_nanos(),
+        };
     }
 
     /// Polled at `now`, after which the node asked for `deadline`.
@@ -103,10 +115,7 @@ impl Slot {
     /// Whether it is due at `now`: never polled, or polled before `now` with its deadline
     /// reached (one at or before the last poll, too: `wake` moved it on by RESOLUTION).
     fn due(&self, now: Timestamp) -> bool {
-        match self.polled {
-            None => true,
-            Some(last) => last < now && self.deadline.is_some_and(|d| d <= now),
-        }
+        now.as_nanos() >= self.due_from
     }
 }
 
@@ -114,12 +123,20 @@ impl Slot {
 struct NetBus {
     name: String,
     sim: SimBus,
-    /// The wires to it (indices into the network's wires), in the order they were made.
-    wires: Vec<usize>,
-    /// The endpoints nodes are wired to (taps are read by their owner, not here).
-    endpoints: Vec<NodeId>,
+    /// The wire (an index into the network's wires) of each endpoint, by its number on the
+    /// bus (taps have none: their owner reads them).
+    wire_of: Vec<Option<usize>>,
     /// When it next changes, cached until it is advanced, given a frame or read.
-    next: Option<Option<Timestamp>>,
+    next: Option<NextChange>,
+}
+
+/// When a bus next changes, in its two kinds.
+#[derive(Clone, Copy)]
+struct NextChange {
+    /// A frame (or state report) arrives at the wired nodes.
+    arrival: Option<Timestamp>,
+    /// A transmission starts or a node recovers from bus-off.
+    activity: Option<Timestamp>,
 }
 
 /// Named bit-timed buses and the wiring of nodes to them.
@@ -158,8 +175,7 @@ impl Network {
         self.buses.push(NetBus {
             name: name.to_string(),
             sim: SimBus::new(nominal, data),
-            wires: Vec::new(),
-            endpoints: Vec::new(),
+            wire_of: Vec::new(),
             next: None,
         });
         self.buses.len() - 1
@@ -171,14 +187,21 @@ impl Network {
     }
 
     /// Wire `node`'s `port` to `bus`; the endpoint's number on that bus is returned (for the
-    /// bus's events and faults).
+    /// bus's events and faults). `None` for a bus that does not exist or already has
+    /// [`MAX_ROUTED`] endpoints (taps included).
     pub fn wire(&mut self, node: NodeIndex, port: Port, bus: BusIndex) -> Option<NodeId> {
         let net_bus = self.buses.get_mut(bus)?;
+        if net_bus.sim.node_count() >= MAX_ROUTED {
+            return None;
+        }
         let endpoint = net_bus.sim.add_node();
-        // A node's own frames come back as its transmit confirmations.
+        // A node's own frames come back as its transmit confirmations; every frame a wired
+        // node takes arrives once for all of them (the runner hands it to each).
         net_bus.sim.set_receive_own(endpoint, true);
-        net_bus.wires.push(self.wires.len());
-        net_bus.endpoints.push(endpoint);
+        net_bus.sim.route(endpoint);
+        net_bus.next = None;
+        net_bus.wire_of.resize(endpoint, None);
+        net_bus.wire_of.push(Some(self.wires.len()));
         self.wires.push(Wire {
             node,
             port,
@@ -273,6 +296,7 @@ impl Network {
         // events between now and `until`, and by PASSES_PER_INSTANT at any one time.
         let mut passes_here = 0u32;
         loop {
+            self.start_ahead(nodes.len(), until);
             let next = self.next_event(nodes.len()).map(|at| {
                 if at > self.now {
                     passes_here = 0;
@@ -306,16 +330,46 @@ impl Network {
 
     /// The earliest time something happens: a node's deadline or a bus's next change.
     fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
-        let wake = self.slots.iter().take(nodes).map(|s| s.wake).min();
-        let mut next = wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos);
+        let mut next = self.earliest_wake(nodes);
         for b in &mut self.buses {
-            next = earliest([next, b.next_change()]);
+            let change = b.next_change();
+            next = earliest([next, change.arrival, change.activity]);
         }
         next
     }
 
+    /// The earliest deadline of the nodes.
+    fn earliest_wake(&self, nodes: usize) -> Option<Timestamp> {
+        let wake = self.slots.iter().take(nodes).map(|s| s.wake).min();
+        wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos)
+    }
+
+    /// Advance each bus whose next activity (a transmission's start, a recovery) comes no
+    /// later than anything else — a node's deadline, a frame's arrival — and before `until`:
+    /// nothing is polled or delivered before it, so the bus gets there exactly as it would in
+    /// an instant of its own, which would cost a pass over every node and bus. Its frame then
+    /// arrives at its end of frame, an event like any other.
+    fn start_ahead(&mut self, nodes: usize, until: Timestamp) {
+        let mut others = self.earliest_wake(nodes);
+        for b in &mut self.buses {
+            others = earliest([others, b.next_change().arrival]);
+        }
+        for b in &mut self.buses {
+            let Some(start) = b.next_change().activity else {
+                continue;
+            };
+            if start >= until || others.is_some_and(|o| start > o) {
+                continue;
+            }
+            b.sim.advance(start);
+            b.next = None;
+            others = earliest([others, b.next_change().arrival]);
+        }
+    }
+
     /// Everything that happens at `self.now`: buses advanced, frames delivered (bus by bus, in
-    /// the order the buses were added, each to its wires in the order they were made), the
+    /// the order the buses were added; on each, frame by frame, each to its wires in the order
+    /// they were made: a node sees its frames of one bus in the order they arrived), the
     /// nodes that are due or received something polled, and their frames submitted (which end
     /// later: a frame takes time on the wire, so nothing more arrives at this instant).
     fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
@@ -324,35 +378,37 @@ impl Network {
         for b in &mut self.buses {
             // A bus with nothing to do before now is left where it is (and, having nothing
             // due, delivers nothing now).
-            if b.next_change().is_none_or(|at| at > now) {
+            let change = b.next_change();
+            if earliest([change.arrival, change.activity]).is_none_or(|at| at > now) {
                 continue;
             }
             b.sim.advance(now);
             b.next = None;
-            for w in b.wires.iter().filter_map(|&i| self.wires.get(i)) {
-                let (Some(node), Some(slot)) = (nodes.get_mut(w.node), self.slots.get_mut(w.node))
-                else {
-                    continue;
-                };
-                let mut got = false;
-                let mut confirmed = false;
-                while let Some(r) = b.sim.receive_by(w.endpoint, now) {
-                    if r.own {
+            // Frames in the order they arrived, each to its wires in the order they were made.
+            while let Some(routed) = b.sim.next_routed(now) {
+                let mut to = routed.to;
+                while to != 0 {
+                    let endpoint = to.trailing_zeros() as usize;
+                    to &= to - 1;
+                    let wire = b.wire_of.get(endpoint).copied().flatten();
+                    let Some(w) = wire.and_then(|i| self.wires.get(i)) else {
+                        continue;
+                    };
+                    let (Some(node), Some(slot)) =
+                        (nodes.get_mut(w.node), self.slots.get_mut(w.node))
+                    else {
+                        continue;
+                    };
+                    let r = &routed.received;
+                    if routed.sender == Some(endpoint) {
                         node.on_sent(r.timestamp, w.port, &r.frame);
-                        confirmed = true;
+                        // A confirmation moves the node's deadline (its next frame may be due
+                        // now); it is polled when that comes, not for the confirmation itself.
+                        slot.set_deadline(node.next_deadline());
                     } else {
                         node.on_frame(r.timestamp, w.port, &r.frame);
-                        got = true;
+                        slot.received = true;
                     }
-                }
-                // A confirmation moves the node's deadline (its next frame may be due now);
-                // it is polled when that comes, not for the confirmation itself.
-                if confirmed {
-                    slot.set_deadline(node.next_deadline());
-                }
-                if got {
-                    slot.received = true;
-                    b.next = None;
                 }
             }
         }
@@ -382,11 +438,14 @@ impl Network {
 
 impl NetBus {
     /// When it next changes (cached).
-    fn next_change(&mut self) -> Option<Timestamp> {
+    fn next_change(&mut self) -> NextChange {
         if let Some(cached) = self.next {
             return cached;
         }
-        let next = self.sim.next_change_of(&self.endpoints);
+        let next = NextChange {
+            arrival: self.sim.next_routed_arrival(),
+            activity: self.sim.next_activity(),
+        };
         self.next = Some(next);
         next
     }

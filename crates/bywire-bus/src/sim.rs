@@ -19,6 +19,7 @@ use std::collections::VecDeque;
 
 use bywire_core::confinement::{Confinement, Event, NodeState, StateChange, TransmitErrorCause};
 use bywire_core::frame::{ErrorClass, ErrorFrame};
+use bywire_core::time::earliest;
 use bywire_core::wire::{self, Field};
 use bywire_core::{Frame, Id, Timestamp};
 
@@ -38,6 +39,21 @@ pub const DEFAULT_RX_CAPACITY: usize = 4096;
 
 /// A node's index on the bus.
 pub type NodeId = usize;
+
+/// Nodes a bus routes ([`SimBus::route`]): one bit each, so at most this many.
+pub const MAX_ROUTED: usize = 64;
+
+/// A frame (or a controller's state report) for the nodes a runner routes: one copy for all
+/// the nodes it goes to, in the order the bus produced them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Routed {
+    /// The frame and when it arrived (`own` is unset: see `sender`).
+    pub received: Received,
+    /// The routed nodes it goes to, one bit each.
+    pub to: u64,
+    /// The node that sent it: its copy is the transmit confirmation (`None` for a report).
+    pub sender: Option<NodeId>,
+}
 
 /// What happened on the bus, in time order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -270,6 +286,11 @@ pub struct SimBus {
     bus_off_nodes: usize,
     /// Nodes a successful reception changes (receive errors to count down), counted likewise.
     counting_receivers: usize,
+    /// Nodes whose frames go to `routed_rx` instead of their own queue, one bit each.
+    routed: u64,
+    /// Their frames, one copy for all of them: a runner with a dozen nodes on a bus would
+    /// otherwise copy every frame a dozen times and look in every queue for the next.
+    routed_rx: VecDeque<Routed>,
 }
 
 impl SimBus {
@@ -293,7 +314,45 @@ impl SimBus {
             busy_ns: 0,
             bus_off_nodes: 0,
             counting_receivers: 0,
+            routed: 0,
+            routed_rx: VecDeque::new(),
         }
+    }
+
+    /// Route a node's frames to [`SimBus::next_routed`] instead of its own queue (a runner
+    /// that drives many nodes takes each frame once for all of them); `false` when the node
+    /// does not exist or is past the first [`MAX_ROUTED`].
+    pub fn route(&mut self, node: NodeId) -> bool {
+        if node >= MAX_ROUTED || node >= self.nodes.len() {
+            return false;
+        }
+        self.routed |= 1 << node;
+        true
+    }
+
+    /// The next frame for the routed nodes that arrived by `at`.
+    pub fn next_routed(&mut self, at: Timestamp) -> Option<Routed> {
+        if self.routed_rx.front()?.received.timestamp > at {
+            return None;
+        }
+        self.routed_rx.pop_front()
+    }
+
+    /// When the next frame for the routed nodes arrives (already decided: a transmission
+    /// that started).
+    pub fn next_routed_arrival(&self) -> Option<Timestamp> {
+        self.routed_rx.front().map(|r| r.received.timestamp)
+    }
+
+    /// When the bus itself next does something a runner must [`advance`](Self::advance) to:
+    /// the next transmission's start or a bus-off recovery (arrivals aside).
+    pub fn next_activity(&self) -> Option<Timestamp> {
+        let from = self.idle_from.max(self.now);
+        earliest([self.next_start(), self.next_recovery(from)])
+    }
+
+    fn is_routed(&self, node: NodeId) -> bool {
+        node < MAX_ROUTED && self.routed >> node & 1 == 1
     }
 
     /// Add a node; it receives every data frame until its filtering says otherwise.
@@ -312,6 +371,11 @@ impl SimBus {
         self.forget_acceptance();
         self.ready.set(None);
         self.nodes.len() - 1
+    }
+
+    /// How many nodes the bus has.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
     }
 
     /// Replace a node's receive filtering.
@@ -388,6 +452,11 @@ impl SimBus {
             n.queue.clear();
             n.rx.clear();
         }
+        if self.is_routed(node) {
+            let bit = 1u64 << node;
+            self.routed_rx.iter_mut().for_each(|r| r.to &= !bit);
+            self.routed_rx.retain(|r| r.to != 0);
+        }
         self.ready.set(None);
     }
 
@@ -431,11 +500,12 @@ impl SimBus {
             .get(node)
             .and_then(|n| n.rx.front())
             .map(|r| r.timestamp);
-        let from = self.idle_from.max(self.now);
-        [delivery, self.next_start(), self.next_recovery(from)]
-            .into_iter()
-            .flatten()
-            .min()
+        let delivery = if self.is_routed(node) {
+            self.next_routed_arrival()
+        } else {
+            delivery
+        };
+        earliest([delivery, self.next_activity()])
     }
 
     /// [`next_change`](Self::next_change) for several nodes at once: the earliest frame any
@@ -446,11 +516,8 @@ impl SimBus {
             .filter_map(|node| self.nodes.get(*node).and_then(|n| n.rx.front()))
             .map(|r| r.timestamp)
             .min();
-        let from = self.idle_from.max(self.now);
-        [delivery, self.next_start(), self.next_recovery(from)]
-            .into_iter()
-            .flatten()
-            .min()
+        let delivery = earliest([delivery, self.next_routed_arrival()]);
+        earliest([delivery, self.next_activity()])
     }
 
     /// The earliest start of a transmission with the frames queued now.
@@ -560,6 +627,7 @@ impl SimBus {
 
     fn set_state(&mut self, node: NodeId, event: Event, at: Timestamp) {
         self.ready.set(None);
+        let routed = self.is_routed(node);
         let Some(n) = self.nodes.get_mut(node) else {
             return;
         };
@@ -569,12 +637,21 @@ impl SimBus {
             }
             let report = Frame::Error(state_report(change, &n.confinement));
             if n.filtering.accepts(&report) {
-                n.deliver(Received {
+                let received = Received {
                     frame: report,
                     timestamp: at,
                     own: false,
                     hardware: None,
-                });
+                };
+                if routed {
+                    self.routed_rx.push_back(Routed {
+                        received,
+                        to: 1 << node,
+                        sender: None,
+                    });
+                } else {
+                    n.deliver(received);
+                }
             }
             self.events.push(BusEvent::StateChanged {
                 node,
@@ -813,6 +890,8 @@ impl SimBus {
                     .unwrap_or(u64::MAX),
             });
             let accepting = self.accepting(&frame);
+            let routed = self.routed;
+            let mut routed_to = 0u64;
             for (node, n) in self.nodes.iter_mut().enumerate() {
                 let own = node == winner;
                 let accepts = accepting
@@ -824,11 +903,27 @@ impl SimBus {
                 {
                     continue;
                 }
+                if node < MAX_ROUTED && routed >> node & 1 == 1 {
+                    routed_to |= 1 << node;
+                    continue;
+                }
                 n.deliver(Received {
                     frame,
                     timestamp: eof,
                     own,
                     hardware: None,
+                });
+            }
+            if routed_to != 0 {
+                self.routed_rx.push_back(Routed {
+                    received: Received {
+                        frame,
+                        timestamp: eof,
+                        own: false,
+                        hardware: None,
+                    },
+                    to: routed_to,
+                    sender: Some(winner),
                 });
             }
             if self

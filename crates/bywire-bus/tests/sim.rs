@@ -306,3 +306,118 @@ fn filters_nodes_and_queued_frames_changed_between_frames_count_at_once() {
     assert_eq!(heard(&mut bus, late), [0x123]);
     assert!(heard(&mut bus, listener).is_empty());
 }
+
+/// Builds the same bus twice, one with its first `routed` nodes routed, runs the same
+/// traffic (a node corrupted to bus-off and back, a filter, own frames echoed) and returns
+/// what each node received on each: the routed copies spread out to the nodes they name.
+fn same_traffic_routed_or_not() -> [Vec<Vec<(u64, String, bool)>>; 2] {
+    use bywire_bus::Filtering;
+    use bywire_core::Filter;
+    [false, true].map(|routed| {
+        let mut bus = SimBus::new(500_000, None);
+        let nodes: Vec<usize> = (0..4).map(|_| bus.add_node()).collect();
+        for &n in &nodes[..3] {
+            bus.set_receive_own(n, true);
+            if routed {
+                assert!(bus.route(n));
+            }
+        }
+        bus.set_filtering(
+            nodes[2],
+            Filtering {
+                filters: vec![Filter::new(0x200, 0x700)],
+                ..Filtering::default()
+            },
+        );
+        // Node 1, the victim, takes every error frame: its state reports.
+        bus.set_filtering(
+            nodes[1],
+            Filtering {
+                error_mask: bywire_core::filter::ErrorMask::ALL,
+                ..Filtering::default()
+            },
+        );
+        bus.corrupt(Fault {
+            node: Some(nodes[1]),
+            id: None,
+            count: 40,
+        });
+        let mut heard = vec![Vec::new(); nodes.len()];
+        for step in 0..400u64 {
+            let at = Timestamp::from_micros(step * 250);
+            bus.advance(at);
+            while let Some(r) = bus.next_routed(at) {
+                for (n, heard) in heard.iter_mut().enumerate() {
+                    if r.to >> n & 1 == 1 {
+                        let own = r.sender == Some(n);
+                        heard.push((ns(r.received.timestamp), r.received.frame.to_string(), own));
+                    }
+                }
+            }
+            for (n, heard) in heard.iter_mut().enumerate() {
+                while let Some(r) = bus.receive_by(n, at) {
+                    heard.push((ns(r.timestamp), r.frame.to_string(), r.own));
+                }
+            }
+            if step % 4 == 0 {
+                let id = 0x100 + 0x100 * (step % 3);
+                let sender = nodes[usize::try_from(step % 3).unwrap()];
+                bus.submit(sender, frame(&format!("{id:03X}#{step:04X}")), at);
+            }
+        }
+        heard
+    })
+}
+
+#[test]
+fn routed_nodes_get_what_their_own_queues_would_have_held() {
+    let [plain, routed] = same_traffic_routed_or_not();
+    assert_eq!(plain, routed);
+    // The traffic reached every kind of delivery: frames, own echoes, state reports.
+    let all: Vec<&(u64, String, bool)> = plain.iter().flatten().collect();
+    assert!(all.iter().any(|(_, _, own)| *own));
+    assert!(all.iter().any(|(_, text, _)| text.contains("#")));
+    let reports: Vec<&String> = plain[1]
+        .iter()
+        .map(|(_, t, _)| t)
+        .filter(|t| t.len() > 12)
+        .collect();
+    // Error passive, bus-off and restarted, each with the counters.
+    for class in ["20000204", "20000240", "20000300"] {
+        assert!(
+            reports.iter().any(|t| t.starts_with(class)),
+            "{class} in {reports:?}"
+        );
+    }
+    // Node 2 takes 0x2xx only (and its own frames).
+    assert!(plain[2]
+        .iter()
+        .all(|(_, text, own)| *own || text.starts_with("2") || text.len() > 12));
+}
+
+#[test]
+fn routing_stops_at_max_routed_and_a_withdrawn_node_gets_nothing_queued() {
+    use bywire_bus::sim::MAX_ROUTED;
+    let mut bus = SimBus::new(500_000, None);
+    let nodes: Vec<usize> = (0..=MAX_ROUTED).map(|_| bus.add_node()).collect();
+    assert!(bus.route(nodes[0]) && bus.route(nodes[1]));
+    assert!(!bus.route(nodes[MAX_ROUTED]), "one bit a node");
+    assert!(!bus.route(MAX_ROUTED + 5), "no such node");
+    bus.submit(nodes[2], frame("123#01"), Timestamp::ZERO);
+    bus.submit(nodes[2], frame("124#02"), Timestamp::ZERO);
+    bus.advance(Timestamp::from_micros(100));
+    // The first frame is on its way (decided), the second waits.
+    assert!(bus.next_routed_arrival().is_some());
+    assert_eq!(bus.next_routed(Timestamp::from_micros(100)), None);
+    bus.withdraw(nodes[0]);
+    bus.advance(Timestamp::from_millis(2));
+    let mut got = Vec::new();
+    while let Some(r) = bus.next_routed(Timestamp::from_millis(2)) {
+        got.push((r.to, r.received.frame.to_string()));
+    }
+    // Node 0 left while the first frame was on the wire: neither frame is queued for it.
+    assert_eq!(
+        got,
+        [(0b10, "123#01".to_string()), (0b11, "124#02".to_string())]
+    );
+}
