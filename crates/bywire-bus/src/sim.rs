@@ -126,6 +126,31 @@ struct Node {
 }
 
 impl Node {
+    /// A frame `winner` sent reaches node `index` (`accepts`: its filters take it): queued
+    /// here, or its bit returned when the node is routed (one of `routed`).
+    fn receive(
+        &mut self,
+        index: NodeId,
+        winner: NodeId,
+        accepts: bool,
+        routed: u64,
+        received: Received,
+    ) -> u64 {
+        let own = index == winner;
+        // The sender's own copy is its transmit confirmation, past its filters.
+        if self.confinement.state() == NodeState::BusOff
+            || (own && !self.receive_own)
+            || (!own && !accepts)
+        {
+            return 0;
+        }
+        if index < MAX_ROUTED && routed >> index & 1 == 1 {
+            return 1 << index;
+        }
+        self.deliver(Received { own, ..received });
+        0
+    }
+
     fn deliver(&mut self, received: Received) {
         if self.rx.len() >= self.rx_capacity {
             self.rx_dropped += 1;
@@ -291,6 +316,9 @@ pub struct SimBus {
     /// Their frames, one copy for all of them: a runner with a dozen nodes on a bus would
     /// otherwise copy every frame a dozen times and look in every queue for the next.
     routed_rx: VecDeque<Routed>,
+    /// The nodes with frames queued, in node order: arbitration and the next start look at
+    /// these, not at every node on the bus.
+    queued: Vec<NodeId>,
 }
 
 impl SimBus {
@@ -316,6 +344,7 @@ impl SimBus {
             counting_receivers: 0,
             routed: 0,
             routed_rx: VecDeque::new(),
+            queued: Vec::new(),
         }
     }
 
@@ -422,18 +451,30 @@ impl SimBus {
             Some(Tamper::Duplicate) => (frame, at, 2),
             Some(Tamper::Delay(delay)) => (frame, at.saturating_add(delay), 1),
         };
-        for _ in 0..copies {
-            let seq = self.next_seq;
-            self.next_seq += 1;
-            if let Some(n) = self.nodes.get_mut(node) {
-                n.queue.push(Pending {
-                    frame,
-                    submitted: at,
-                    seq,
-                });
+        let Some(n) = self.nodes.get_mut(node) else {
+            return;
+        };
+        if n.queue.is_empty() {
+            if let Err(at) = self.queued.binary_search(&node) {
+                self.queued.insert(at, node);
             }
         }
-        self.ready.set(None);
+        for _ in 0..copies {
+            n.queue.push(Pending {
+                frame,
+                submitted: at,
+                seq: self.next_seq,
+            });
+            self.next_seq += 1;
+        }
+        // The earliest start moves to this frame's if it is earlier (and its node takes
+        // part): nodes submit far more often than frames start, so it is not looked for again.
+        let ready = match self.ready.get() {
+            Some(_) if n.confinement.state() == NodeState::BusOff => self.ready.get(),
+            Some(ready) => Some(earliest([ready, Some(at.max(n.not_before))])),
+            None => None,
+        };
+        self.ready.set(ready);
     }
 
     /// A faulty sender for frames with identifier `id`, from whichever node (`None`: mend it):
@@ -452,6 +493,7 @@ impl SimBus {
             n.queue.clear();
             n.rx.clear();
         }
+        self.queued.retain(|q| *q != node);
         if self.is_routed(node) {
             let bit = 1u64 << node;
             self.routed_rx.iter_mut().for_each(|r| r.to &= !bit);
@@ -524,8 +566,9 @@ impl SimBus {
     fn next_start(&self) -> Option<Timestamp> {
         let ready = self.ready.get().unwrap_or_else(|| {
             let ready = self
-                .nodes
+                .queued
                 .iter()
+                .filter_map(|node| self.nodes.get(*node))
                 .filter(|n| n.confinement.state() != NodeState::BusOff)
                 .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
                 .min();
@@ -796,7 +839,11 @@ impl SimBus {
         // Every ready node offers its highest-priority frame; the lowest identifier wins.
         let mut offers = std::mem::take(&mut self.offers);
         offers.clear();
-        for (node, n) in self.nodes.iter().enumerate() {
+        for (node, n) in self
+            .queued
+            .iter()
+            .filter_map(|&q| Some((q, self.nodes.get(q)?)))
+        {
             if n.confinement.state() == NodeState::BusOff || n.not_before > start {
                 continue;
             }
@@ -880,6 +927,9 @@ impl SimBus {
                 // The queue's order means nothing (arbitration takes the least identifier and
                 // submission number): the last frame fills the gap.
                 n.queue.swap_remove(index);
+                if n.queue.is_empty() {
+                    self.queued.retain(|q| *q != winner);
+                }
             }
             self.events.push(BusEvent::Transmitted {
                 node: winner,
@@ -889,39 +939,36 @@ impl SimBus {
                 latency_ns: u64::try_from(eof.saturating_since(submitted).as_nanos())
                     .unwrap_or(u64::MAX),
             });
-            let accepting = self.accepting(&frame);
-            let routed = self.routed;
+            let received = Received {
+                frame,
+                timestamp: eof,
+                own: false,
+                hardware: None,
+            };
             let mut routed_to = 0u64;
-            for (node, n) in self.nodes.iter_mut().enumerate() {
-                let own = node == winner;
-                let accepts = accepting
-                    .map_or_else(|| n.filtering.accepts(&frame), |set| set >> node & 1 == 1);
-                // The sender's own copy is its transmit confirmation, past its filters.
-                if n.confinement.state() == NodeState::BusOff
-                    || (own && !n.receive_own)
-                    || (!own && !accepts)
-                {
-                    continue;
+            match self.accepting(&frame) {
+                // The nodes whose filters take it and the sender, one bit each.
+                Some(accepting) => {
+                    let mut candidates = accepting | 1 << winner;
+                    while candidates != 0 {
+                        let node = candidates.trailing_zeros() as usize;
+                        candidates &= candidates - 1;
+                        if let Some(n) = self.nodes.get_mut(node) {
+                            let accepts = accepting >> node & 1 == 1;
+                            routed_to |= n.receive(node, winner, accepts, self.routed, received);
+                        }
+                    }
                 }
-                if node < MAX_ROUTED && routed >> node & 1 == 1 {
-                    routed_to |= 1 << node;
-                    continue;
+                None => {
+                    for (node, n) in self.nodes.iter_mut().enumerate() {
+                        let accepts = n.filtering.accepts(&frame);
+                        routed_to |= n.receive(node, winner, accepts, self.routed, received);
+                    }
                 }
-                n.deliver(Received {
-                    frame,
-                    timestamp: eof,
-                    own,
-                    hardware: None,
-                });
             }
             if routed_to != 0 {
                 self.routed_rx.push_back(Routed {
-                    received: Received {
-                        frame,
-                        timestamp: eof,
-                        own: false,
-                        hardware: None,
-                    },
+                    received,
                     to: routed_to,
                     sender: Some(winner),
                 });

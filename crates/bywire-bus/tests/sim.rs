@@ -421,3 +421,37 @@ fn routing_stops_at_max_routed_and_a_withdrawn_node_gets_nothing_queued() {
         [(0b10, "123#01".to_string()), (0b11, "124#02".to_string())]
     );
 }
+
+#[test]
+fn a_bus_of_more_than_64_nodes_delivers_to_each_filter_and_echoes_the_sender() {
+    use bywire_bus::Filtering;
+    use bywire_core::Filter;
+    let mut bus = SimBus::new(500_000, None);
+    let nodes: Vec<usize> = (0..70).map(|_| bus.add_node()).collect();
+    // Odd nodes take 0x100 only; node 66 sends and hears its own frames.
+    for &n in nodes.iter().filter(|n| *n % 2 == 1) {
+        bus.set_filtering(
+            n,
+            Filtering {
+                filters: vec![Filter::new(0x100, 0x7FF)],
+                ..Filtering::default()
+            },
+        );
+    }
+    bus.set_receive_own(66, true);
+    bus.submit(66, frame("100#01"), Timestamp::ZERO);
+    bus.submit(66, frame("200#02"), Timestamp::ZERO);
+    bus.advance(Timestamp::from_millis(2));
+    for &n in &nodes {
+        let mut heard = Vec::new();
+        while let Some(r) = bus.receive(n) {
+            heard.push((r.frame.to_string(), r.own));
+        }
+        let expected: Vec<(String, bool)> = match n {
+            66 => vec![("100#01".into(), true), ("200#02".into(), true)],
+            n if n % 2 == 1 => vec![("100#01".into(), false)],
+            _ => vec![("100#01".into(), false), ("200#02".into(), false)],
+        };
+        assert_eq!(heard, expected, "node {n}");
+    }
+}

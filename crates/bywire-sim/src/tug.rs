@@ -441,6 +441,8 @@ pub struct Tug {
     pub truth: Vec<TruthSample>,
     /// Faults active until their end time (`None`: for good).
     active: Vec<(Fault, Option<Timestamp>)>,
+    /// The faults changed since the network's cut connections were last set from them.
+    cuts_stale: bool,
     last_seen: (Watchdog, EstopState, ControlMode),
     last_degraded: Option<Channel>,
     ads_external: bool,
@@ -680,6 +682,7 @@ impl Tug {
             trace: Vec::new(),
             truth: Vec::new(),
             active: Vec::new(),
+            cuts_stale: true,
             last_seen: (
                 Watchdog::FullBraking,
                 EstopState::Normal,
@@ -799,6 +802,7 @@ impl Tug {
         }
         self.active
             .push((fault, duration.map(|d| now.saturating_add(d))));
+        self.cuts_stale = true;
     }
 
     fn is_active(&self, fault: Fault) -> bool {
@@ -929,16 +933,21 @@ impl Tug {
     /// faults at the edges (outputs dropped, a hand on the wheel, the E-stop chain), and the
     /// sensor nodes' readings when they send within this millisecond.
     fn set_inputs(&mut self, until: Timestamp) {
-        let silent = self.is_active(Fault::AdsSilence);
-        self.net.drop_output(ADS, silent);
-        let b_lost = self.is_active(Fault::RedundantBusLoss);
-        self.net
-            .drop_port_output(ADS, Ads::<TugWire>::PORT_B, b_lost);
-        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
-            let steer_silent = self.is_active(Fault::DriveSilence(*steer));
-            let drive_silent = self.is_active(Fault::DriveSilence(drive));
-            self.net.drop_output(FIRST_STEER + i, steer_silent);
-            self.net.drop_output(FIRST_DRIVE + i, drive_silent);
+        // The cut connections change only with the faults (every step costs a pass over the
+        // nodes otherwise).
+        if self.cuts_stale {
+            self.cuts_stale = false;
+            let silent = self.is_active(Fault::AdsSilence);
+            self.net.drop_output(ADS, silent);
+            let b_lost = self.is_active(Fault::RedundantBusLoss);
+            self.net
+                .drop_port_output(ADS, Ads::<TugWire>::PORT_B, b_lost);
+            for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
+                let steer_silent = self.is_active(Fault::DriveSilence(*steer));
+                let drive_silent = self.is_active(Fault::DriveSilence(drive));
+                self.net.drop_output(FIRST_STEER + i, steer_silent);
+                self.net.drop_output(FIRST_DRIVE + i, drive_silent);
+            }
         }
         let takeover = if self.is_active(Fault::DriverTakeover) {
             8.0
@@ -1050,6 +1059,7 @@ impl Tug {
             .filter(|(_, end)| end.is_some_and(|end| now >= end))
             .map(|(f, _)| *f)
             .collect();
+        let expired_any = !expired.is_empty();
         for fault in expired {
             match fault {
                 Fault::SensorFault(corner, _) => {
@@ -1063,6 +1073,7 @@ impl Tug {
         }
         self.active
             .retain(|(_, end)| end.is_none_or(|end| now < end));
+        self.cuts_stale |= expired_any;
     }
 
     /// The loggers' frames into the logs.
