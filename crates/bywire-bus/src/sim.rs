@@ -232,8 +232,9 @@ fn unchanged_by(confinement: &Confinement, event: Event) -> bool {
     }
 }
 
-/// Slots of the acceptance table (a power of two).
-const ACCEPTANCE_CACHE: usize = 1 << 8;
+/// Slots of the acceptance table (a power of two): with 256, three pairs of the tug's CANopen
+/// identifiers (0x191 and 0x221 among them) shared a slot and missed on every frame.
+const ACCEPTANCE_CACHE: usize = 1 << 10;
 
 /// Slots of the classic-frame timing table (a power of two).
 const CLASSIC_CACHE: usize = 1 << 10;
