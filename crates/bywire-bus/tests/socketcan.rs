@@ -17,7 +17,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, SystemTime};
 
 use bywire_bus::socketcan::{self, LinkConfig, SocketCan};
-use bywire_bus::{open, Bus, BusRx, ControllerState};
+use bywire_bus::{open, Bus, ControllerState};
 use common::*;
 
 const IN_VM: &str = "BYWIRE_IN_CANVM";
@@ -251,6 +251,7 @@ fn sja1000_controllers_are_configured_and_talk_through_netlink() {
 #[cfg(feature = "tokio")]
 #[test]
 fn async_socketcan_receives_and_sends_without_blocking_the_runtime() {
+    use bywire_bus::BusRx;
     if !inside_canvm(
         "async_socketcan_receives_and_sends_without_blocking_the_runtime",
         &["--can-utils"],
