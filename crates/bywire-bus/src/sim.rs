@@ -43,6 +43,11 @@ pub type NodeId = usize;
 /// Nodes a bus routes ([`SimBus::route`]): one bit each, so at most this many.
 pub const MAX_ROUTED: usize = 64;
 
+/// Whether `node` is in `set`, a set of nodes one bit each (none past [`MAX_ROUTED`]).
+fn has_node(set: u64, node: NodeId) -> bool {
+    node < MAX_ROUTED && set >> node & 1 == 1
+}
+
 /// A frame (or a controller's state report) for the nodes a runner routes: one copy for all
 /// the nodes it goes to, in the order the bus produced them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,7 +149,7 @@ impl Node {
         {
             return 0;
         }
-        if index < MAX_ROUTED && routed >> index & 1 == 1 {
+        if has_node(routed, index) {
             return 1 << index;
         }
         self.deliver(Received { own, ..received });
@@ -382,7 +387,7 @@ impl SimBus {
     }
 
     fn is_routed(&self, node: NodeId) -> bool {
-        node < MAX_ROUTED && self.routed >> node & 1 == 1
+        has_node(self.routed, node)
     }
 
     /// Add a node; it receives every data frame until its filtering says otherwise.
@@ -955,7 +960,7 @@ impl SimBus {
                         let node = candidates.trailing_zeros() as usize;
                         candidates &= candidates - 1;
                         if let Some(n) = self.nodes.get_mut(node) {
-                            let accepts = accepting >> node & 1 == 1;
+                            let accepts = has_node(accepting, node);
                             routed_to |= n.receive(node, winner, accepts, self.routed, received);
                         }
                     }
