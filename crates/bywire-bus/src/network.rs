@@ -149,6 +149,9 @@ pub struct Network {
     slots: Vec<Slot>,
     now: Timestamp,
     outgoing: Vec<(Port, Frame)>,
+    /// The earliest wake of the first `.0` nodes, kept until a node's deadline changes (the
+    /// runner looks for it at every pass; it changes only when a node was asked).
+    earliest_wake: Option<(usize, Option<Timestamp>)>,
 }
 
 impl Default for Network {
@@ -167,6 +170,7 @@ impl Network {
             slots: Vec::new(),
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
+            earliest_wake: None,
         }
     }
 
@@ -215,6 +219,7 @@ impl Network {
     fn size_for(&mut self, nodes: usize) {
         if self.slots.len() < nodes {
             self.slots.resize(nodes, Slot::NEW);
+            self.earliest_wake = None;
         }
     }
 
@@ -290,14 +295,14 @@ impl Network {
             if slot.changed {
                 slot.set_deadline(node.next_deadline());
                 slot.changed = false;
+                self.earliest_wake = None;
             }
         }
         // Each pass moves time forward to the next event (or ends at `until`): bounded by the
         // events between now and `until`, and by PASSES_PER_INSTANT at any one time.
         let mut passes_here = 0u32;
         loop {
-            self.start_ahead(nodes.len(), until);
-            let next = self.next_event(nodes.len()).map(|at| {
+            let next = self.start_ahead(nodes.len(), until).map(|at| {
                 if at > self.now {
                     passes_here = 0;
                     at
@@ -328,43 +333,48 @@ impl Network {
         self.run_until(until, nodes);
     }
 
-    /// The earliest time something happens: a node's deadline or a bus's next change.
-    fn next_event(&mut self, nodes: usize) -> Option<Timestamp> {
-        let mut next = self.earliest_wake(nodes);
-        for b in &mut self.buses {
-            let change = b.next_change();
-            next = earliest([next, change.arrival, change.activity]);
+    /// The earliest deadline of the nodes (kept until one changes).
+    fn earliest_wake(&mut self, nodes: usize) -> Option<Timestamp> {
+        if let Some((counted, wake)) = self.earliest_wake {
+            if counted == nodes {
+                return wake;
+            }
         }
-        next
-    }
-
-    /// The earliest deadline of the nodes.
-    fn earliest_wake(&self, nodes: usize) -> Option<Timestamp> {
         let wake = self.slots.iter().take(nodes).map(|s| s.wake).min();
-        wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos)
+        let wake = wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos);
+        self.earliest_wake = Some((nodes, wake));
+        wake
     }
 
     /// Advance each bus whose next activity (a transmission's start, a recovery) comes no
     /// later than anything else — a node's deadline, a frame's arrival — and before `until`:
     /// nothing is polled or delivered before it, so the bus gets there exactly as it would in
     /// an instant of its own, which would cost a pass over every node and bus. Its frame then
-    /// arrives at its end of frame, an event like any other.
-    fn start_ahead(&mut self, nodes: usize, until: Timestamp) {
+    /// arrives at its end of frame, an event like any other. Returns the earliest time
+    /// something happens then: a node's deadline or a bus's next change.
+    fn start_ahead(&mut self, nodes: usize, until: Timestamp) -> Option<Timestamp> {
         let mut others = self.earliest_wake(nodes);
         for b in &mut self.buses {
             others = earliest([others, b.next_change().arrival]);
         }
+        // A bus advanced only moves its own changes, and its arrivals come no later than
+        // before: the earliest event is gathered bus by bus as each is settled.
+        let mut next = others;
         for b in &mut self.buses {
-            let Some(start) = b.next_change().activity else {
-                continue;
+            let change = b.next_change();
+            let change = match change.activity {
+                Some(start) if start < until && others.is_none_or(|o| start <= o) => {
+                    b.sim.advance(start);
+                    b.next = None;
+                    let advanced = b.next_change();
+                    others = earliest([others, advanced.arrival]);
+                    advanced
+                }
+                _ => change,
             };
-            if start >= until || others.is_some_and(|o| start > o) {
-                continue;
-            }
-            b.sim.advance(start);
-            b.next = None;
-            others = earliest([others, b.next_change().arrival]);
+            next = earliest([next, change.arrival, change.activity]);
         }
+        next
     }
 
     /// Everything that happens at `self.now`: buses advanced, frames delivered (bus by bus, in
@@ -405,6 +415,7 @@ impl Network {
                         // A confirmation moves the node's deadline (its next frame may be due
                         // now); it is polled when that comes, not for the confirmation itself.
                         slot.set_deadline(node.next_deadline());
+                        self.earliest_wake = None;
                     } else {
                         node.on_frame(r.timestamp, w.port, &r.frame);
                         slot.received = true;
@@ -419,6 +430,7 @@ impl Network {
             self.outgoing.clear();
             node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
             slot.set_polled(now, node.next_deadline());
+            self.earliest_wake = None;
             if slot.dropped {
                 continue;
             }

@@ -109,6 +109,11 @@ pub enum BusEvent {
 
 struct Pending {
     frame: Frame,
+    /// Its identifier (every queued frame has one: error frames are never queued).
+    id: Id,
+    /// Its priority in arbitration, worked out once ([`Id::arbitration_key`]): the queue is
+    /// searched at every arbitration.
+    priority: u32,
     submitted: Timestamp,
     /// Submission order, for equal identifiers.
     seq: u64,
@@ -443,13 +448,14 @@ impl SimBus {
     /// Hand a frame to a node's controller at `at` (not before the current simulated time).
     /// Error frames are controller reports, not frames to send: they are ignored.
     pub fn submit(&mut self, node: NodeId, frame: Frame, at: Timestamp) {
-        if frame.is_error() {
+        let Some(id) = frame.id() else {
             return;
-        }
+        };
         let at = at.max(self.now);
-        let tamper = frame
-            .id()
-            .and_then(|id| self.tampered.iter().find(|(t, _)| *t == id))
+        let tamper = self
+            .tampered
+            .iter()
+            .find(|(t, _)| *t == id)
             .map(|(_, tamper)| *tamper);
         let (frame, at, copies) = match tamper {
             None => (frame, at, 1),
@@ -457,7 +463,8 @@ impl SimBus {
             Some(Tamper::Duplicate) => (frame, at, 2),
             Some(Tamper::Delay(delay)) => (frame, at.saturating_add(delay), 1),
         };
-        let Some(n) = self.nodes.get_mut(node) else {
+        // A tampered identifier is the one that goes out.
+        let (Some(id), Some(n)) = (frame.id(), self.nodes.get_mut(node)) else {
             return;
         };
         if n.queue.is_empty() {
@@ -468,6 +475,8 @@ impl SimBus {
         for _ in 0..copies {
             n.queue.push(Pending {
                 frame,
+                id,
+                priority: id.arbitration_key(),
                 submitted: at,
                 seq: self.next_seq,
             });
@@ -858,10 +867,9 @@ impl SimBus {
                 .iter()
                 .enumerate()
                 .filter(|(_, p)| p.submitted <= start)
-                .filter_map(|(i, p)| p.frame.id().map(|id| (i, id, p.seq)))
-                .min_by_key(|&(_, id, seq)| (id, seq));
-            if let Some((i, id, seq)) = best {
-                offers.push((node, i, id, seq));
+                .min_by_key(|(_, p)| (p.priority, p.seq));
+            if let Some((i, p)) = best {
+                offers.push((node, i, p.id, p.seq));
             }
         }
         let Some(&(winner, index, id, _)) = offers

@@ -167,7 +167,7 @@ impl Id {
     /// frames send a dominant RTR where extended frames send a recessive SRR), then the extension;
     /// packed into one word (11 + 1 + 18 bits), as the bits go out on the wire. A simulated bus
     /// compares identifiers many times a frame.
-    const fn arbitration_key(self) -> u32 {
+    pub const fn arbitration_key(self) -> u32 {
         match self {
             Id::Standard(id) => (id.0 as u32) << 19,
             Id::Extended(id) => (id.base() as u32) << 19 | 1 << 18 | id.extension(),
