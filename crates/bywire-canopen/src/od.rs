@@ -489,10 +489,12 @@ impl Entry {
             None if bytes.len() > self.capacity() => return Err(Abort::LengthTooHigh),
             _ => {}
         }
+        // Only limits make the value itself matter.
+        if self.low.is_none() && self.high.is_none() {
+            return Ok(());
+        }
         if let Some(value) = Number::decode(self.data_type, bytes) {
-            if matches!(value, Number::Real(v) if v.is_nan())
-                && (self.low.is_some() || self.high.is_some())
-            {
+            if matches!(value, Number::Real(v) if v.is_nan()) {
                 return Err(Abort::InvalidValue);
             }
             if let Some(low) = self.low {
@@ -676,6 +678,20 @@ impl ObjectDictionary {
         Ok(Slot { object, entry })
     }
 
+    /// Where `index:sub` lives, trying `hint` (a slot it was found at before) first: no search
+    /// while the dictionary keeps its objects where they were.
+    pub fn relocate(&self, hint: Slot, index: u16, sub: u8) -> Result<Slot, Abort> {
+        let object = self.objects.get(hint.object);
+        let still = object.is_some_and(|o| {
+            o.index == index && o.entries.get(hint.entry).is_some_and(|e| e.sub == sub)
+        });
+        if still {
+            Ok(hint)
+        } else {
+            self.locate(index, sub)
+        }
+    }
+
     /// The entry in a slot from [`ObjectDictionary::locate`].
     pub fn at(&self, slot: Slot) -> Option<&Entry> {
         self.objects.get(slot.object)?.entries.get(slot.entry)
@@ -756,6 +772,11 @@ impl ObjectDictionary {
     /// is the two's-complement encoding for in-range values).
     pub fn set_int(&mut self, index: u16, sub: u8, value: i64) -> Result<(), Abort> {
         let slot = self.locate(index, sub)?;
+        self.set_int_at(slot, value)
+    }
+
+    /// [`ObjectDictionary::set_int`] through a slot.
+    pub fn set_int_at(&mut self, slot: Slot, value: i64) -> Result<(), Abort> {
         let width = self
             .at(slot)
             .and_then(|entry| entry.data_type.size())
@@ -902,6 +923,51 @@ mod tests {
         assert_eq!(od.get_signed(0x2000, 0), Some(-700));
         od.restore_defaults(0x2000..=0x2000);
         assert_eq!(od.get_signed(0x2000, 0), Some(0));
+    }
+
+    #[test]
+    fn a_slot_found_before_is_kept_until_the_objects_move() {
+        let mut od = sample();
+        let controlword = od.locate(0x6040, 0).unwrap();
+        assert_eq!(od.relocate(controlword, 0x6040, 0), Ok(controlword));
+        // A hint for another entry is not taken for this one.
+        let identity = od.locate(0x1018, 2).unwrap();
+        assert_eq!(od.relocate(identity, 0x6040, 0), Ok(controlword));
+        assert_eq!(od.relocate(identity, 0x1018, 1), od.locate(0x1018, 1));
+        // An object added before it moves it: the hint is stale and the search finds it.
+        od.add_var(
+            0x1001,
+            Entry::new(0, "Error register", DataType::U8, Access::ReadOnly),
+        );
+        let moved = od.relocate(controlword, 0x6040, 0).unwrap();
+        assert_ne!(moved, controlword);
+        od.set_int_at(moved, 0x0F).unwrap();
+        assert_eq!(od.get_unsigned(0x6040, 0), Some(0x0F));
+        assert_eq!(od.relocate(moved, 0x6041, 0), Err(Abort::NoObject));
+        assert_eq!(od.relocate(moved, 0x6040, 1), Err(Abort::NoSubindex));
+    }
+
+    #[test]
+    fn values_without_limits_are_checked_for_length_only_and_real_limits_refuse_nan() {
+        let mut od = sample();
+        od.add_var(
+            0x2001,
+            Entry::new(0, "Unlimited real", DataType::Real32, Access::ReadWrite),
+        );
+        od.add_var(
+            0x2002,
+            Entry::new(0, "Limited real", DataType::Real32, Access::ReadWrite)
+                .with_limits(Some(Number::Real(-1.0)), None),
+        );
+        let nan = f32::NAN.to_le_bytes();
+        assert_eq!(od.set(0x2001, 0, &nan), Ok(()));
+        assert_eq!(od.set(0x2001, 0, &[0; 3]), Err(Abort::LengthTooLow));
+        assert_eq!(od.set(0x2002, 0, &nan), Err(Abort::InvalidValue));
+        assert_eq!(
+            od.set(0x2002, 0, &(-2.0f32).to_le_bytes()),
+            Err(Abort::ValueTooLow)
+        );
+        assert_eq!(od.set(0x2002, 0, &(0.5f32).to_le_bytes()), Ok(()));
     }
 
     #[test]

@@ -84,6 +84,8 @@ impl Chassis {
         let p = self.params;
         let quarter = (p.mass + p.payload.max(0.0)) / 4.0;
         let slope = libm::atan(grade);
+        // The same for every wheel (worked out once: a step is a millisecond).
+        let (along_slope, across_slope) = (libm::sin(slope), libm::cos(slope));
         for ((speed, angle), wheel) in self
             .speeds
             .iter_mut()
@@ -93,9 +95,9 @@ impl Chassis {
             *angle = wheel.angle_deg;
             let heading = libm::cos(wheel.angle_deg.to_radians());
             // Grade acts along the body; each wheel feels it along its own heading.
-            let gravity = -quarter * G * libm::sin(slope) * heading;
+            let gravity = -quarter * G * along_slope * heading;
             let drive = wheel.drive_torque / p.wheel_radius;
-            let resist = quarter * G * libm::cos(slope) * p.rolling
+            let resist = quarter * G * across_slope * p.rolling
                 + wheel.brake_torque.max(0.0) / p.wheel_radius;
             let pushing = drive + gravity;
             let next = if speed.abs() < 1e-6 && pushing.abs() <= resist {

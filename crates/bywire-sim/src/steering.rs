@@ -90,6 +90,8 @@ pub struct SteeringChain {
     /// The wheel's angle from the piston, worked out once a step (it is read several times a
     /// step: the sensors, the plant, the truth).
     angle_deg: f64,
+    /// The piston's position and the arm's length `angle_deg` was worked out from (bits).
+    angle_from: [u64; 2],
     drift: f64,
     fault: SensorFault,
 }
@@ -102,6 +104,7 @@ impl SteeringChain {
             shaft_rpm: 0.0,
             piston: 0.0,
             angle_deg: 0.0,
+            angle_from: [0.0f64.to_bits(), params.arm.to_bits()],
             drift: 0.0,
             fault: SensorFault::None,
         }
@@ -144,7 +147,12 @@ impl SteeringChain {
         };
         let speed = flow / area * self.shaft_rpm.signum();
         self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
-        self.angle_deg = libm::asin((self.piston / p.arm).clamp(-1.0, 1.0)).to_degrees();
+        // A piston at rest (the valve closed, as it mostly is) leaves the angle as it was.
+        let angle_from = [self.piston.to_bits(), p.arm.to_bits()];
+        if angle_from != self.angle_from {
+            self.angle_from = angle_from;
+            self.angle_deg = libm::asin((self.piston / p.arm).clamp(-1.0, 1.0)).to_degrees();
+        }
         if let SensorFault::Drift(rate) = self.fault {
             self.drift += rate * dt;
         }

@@ -9,7 +9,7 @@ use bywire_core::time::Timestamp;
 use crate::abort::Abort;
 use crate::device::{error_register, Application, EmcyProducer};
 use crate::nmt::NmtState;
-use crate::od::ObjectDictionary;
+use crate::od::{ObjectDictionary, Slot};
 
 /// A motor with limited acceleration: velocity in units/s, position in units.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -96,6 +96,9 @@ pub struct Drive {
     /// What was last written to the dictionary (statusword, mode display, position and
     /// velocity actual): unchanged values are not written again.
     published: Option<(u16, i8, i64, i64)>,
+    /// Where those four objects were last found in the dictionary (they are written every
+    /// step a motor moves).
+    published_at: [Option<Slot>; 4],
     /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
     /// and is told the actual position and velocity.
     external: bool,
@@ -138,6 +141,7 @@ impl Drive {
             raised: None,
             params: None,
             published: None,
+            published_at: [None; 4],
             external: false,
             demand: 0.0,
             position_per_velocity: 1.0,
@@ -249,17 +253,26 @@ impl Drive {
         let changed = |field: fn(&(u16, i8, i64, i64)) -> i64| {
             before.as_ref().map(field) != Some(field(&values))
         };
+        let [at_status, at_display, at_position, at_velocity] = &mut self.published_at;
         if changed(|v| i64::from(v.0)) {
-            let _ = od.set(object::STATUSWORD, 0, &statusword.to_le_bytes());
+            if let Some(slot) = find(od, at_status, object::STATUSWORD) {
+                let _ = od.set_at(slot, &statusword.to_le_bytes());
+            }
         }
         if changed(|v| i64::from(v.1)) {
-            let _ = od.set(object::MODES_DISPLAY, 0, &display.to_le_bytes());
+            if let Some(slot) = find(od, at_display, object::MODES_DISPLAY) {
+                let _ = od.set_at(slot, &display.to_le_bytes());
+            }
         }
         if changed(|v| v.2) {
-            let _ = od.set_int(object::POSITION_ACTUAL, 0, values.2);
+            if let Some(slot) = find(od, at_position, object::POSITION_ACTUAL) {
+                let _ = od.set_int_at(slot, values.2);
+            }
         }
         if changed(|v| v.3) {
-            let _ = od.set_int(object::VELOCITY_ACTUAL, 0, values.3);
+            if let Some(slot) = find(od, at_velocity, object::VELOCITY_ACTUAL) {
+                let _ = od.set_int_at(slot, values.3);
+            }
         }
     }
 
@@ -301,6 +314,16 @@ impl Drive {
             }
         }
     }
+}
+
+/// Where `index:0` is in `od`, from where it was last found (`at`, kept up to date).
+fn find(od: &ObjectDictionary, at: &mut Option<Slot>, index: u16) -> Option<Slot> {
+    let found = match *at {
+        Some(hint) => od.relocate(hint, index, 0),
+        None => od.locate(index, 0),
+    };
+    *at = found.ok();
+    *at
 }
 
 /// Round to the nearest integer (saturating at the ends of `i64`, as `as` does for floats).
