@@ -411,11 +411,12 @@ impl Network {
                     };
                     let r = &routed.received;
                     if routed.sender == Some(endpoint) {
-                        node.on_sent(r.timestamp, w.port, &r.frame);
-                        // A confirmation moves the node's deadline (its next frame may be due
-                        // now); it is polled when that comes, not for the confirmation itself.
-                        slot.set_deadline(node.next_deadline());
-                        self.earliest_wake = None;
+                        // A confirmation may move the node's deadline (its next frame may be
+                        // due now); it is polled when that comes, not for the confirmation.
+                        if node.on_sent(r.timestamp, w.port, &r.frame) {
+                            slot.set_deadline(node.next_deadline());
+                            self.earliest_wake = None;
+                        }
                     } else {
                         node.on_frame(r.timestamp, w.port, &r.frame);
                         slot.received = true;
@@ -540,5 +541,72 @@ mod tests {
         net.run_until(Timestamp::from_millis(50), &mut [&mut a, &mut b]);
         assert!(a.heard.is_empty());
         assert_eq!(b.heard.len(), 5);
+    }
+
+    /// Sends its next frame a gap after the last one's confirmation (as ISO-TP's STmin
+    /// does), saying so from `on_sent` when `retimes`; counts the deadlines asked of it.
+    struct Paced {
+        retimes: bool,
+        gap: Duration,
+        next: Option<Timestamp>,
+        sent_at: Vec<Timestamp>,
+        asked: std::cell::Cell<u32>,
+    }
+
+    impl Node for Paced {
+        fn on_frame(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {}
+        fn on_sent(&mut self, now: Timestamp, _port: Port, _frame: &Frame) -> bool {
+            self.sent_at.push(now);
+            self.next = Some(now.saturating_add(self.gap));
+            self.retimes
+        }
+        fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            if self.next.is_some_and(|next| now >= next) {
+                self.next = None;
+                out(
+                    Port::MAIN,
+                    Frame::classic(Id::standard(0x10).unwrap(), &[0; 8]).unwrap(),
+                );
+            }
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            self.asked.set(self.asked.get() + 1);
+            self.next
+        }
+    }
+
+    fn paced(retimes: bool) -> Paced {
+        Paced {
+            retimes,
+            gap: Duration::from_millis(2),
+            next: Some(Timestamp::ZERO),
+            sent_at: Vec::new(),
+            asked: std::cell::Cell::new(0),
+        }
+    }
+
+    #[test]
+    fn a_confirmation_retimes_a_node_only_when_it_says_its_deadline_moved() {
+        let run = |node: &mut Paced| {
+            let mut net = Network::new();
+            let bus = net.add_bus("bus1", 500_000, None);
+            net.wire(0, Port::MAIN, bus).unwrap();
+            net.run_until(Timestamp::from_millis(20), &mut [node]);
+        };
+        // Said: each frame goes the gap after the last one's confirmation.
+        let mut retimed = paced(true);
+        run(&mut retimed);
+        assert!(retimed.sent_at.len() >= 7, "{:?}", retimed.sent_at);
+        for pair in retimed.sent_at.windows(2) {
+            let between = pair[1].saturating_since(pair[0]);
+            // The gap, then the frame's own time on the wire (under 300 µs).
+            assert!(between > Duration::from_millis(2), "{between:?}");
+            assert!(between < Duration::from_micros(2_300), "{between:?}");
+        }
+        // Not said: the runner does not ask; the node waits for a frame that never comes.
+        let mut silent = paced(false);
+        run(&mut silent);
+        assert_eq!(silent.sent_at.len(), 1, "{:?}", silent.sent_at);
+        assert!(silent.asked.get() < retimed.asked.get());
     }
 }

@@ -243,7 +243,10 @@ impl Runner {
                         self.stats.received = self.stats.received.saturating_add(1);
                         node.on_frame(now, port, &frame);
                     }
-                    Arrival::Sent(port, frame) => node.on_sent(now, port, &frame),
+                    // The deadline is asked at every turn of the loop whatever this says.
+                    Arrival::Sent(port, frame) => {
+                        node.on_sent(now, port, &frame);
+                    }
                     Arrival::Lost(port, error) => self.lose(node, hooks, now, port, &error),
                     Arrival::Wake => {}
                 }
@@ -423,8 +426,9 @@ mod tests {
         fn on_frame(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {
             self.heard += 1;
         }
-        fn on_sent(&mut self, _now: Timestamp, port: Port, frame: &Frame) {
+        fn on_sent(&mut self, _now: Timestamp, port: Port, frame: &Frame) -> bool {
             self.confirmed.push((port, *frame));
+            false
         }
         fn poll(&mut self, _now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
             if !std::mem::replace(&mut self.sent, true) {

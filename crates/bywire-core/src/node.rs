@@ -86,9 +86,12 @@ impl fmt::Display for Port {
 pub trait Node {
     /// Take in a frame seen on `port` (a node's own frames are not given back to it).
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame);
-    /// A frame this node sent on `port` is on the bus (its transmit confirmation). Nodes that
-    /// do not time their own transmissions ignore it; its next deadline is asked again after.
-    fn on_sent(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {}
+    /// A frame this node sent on `port` is on the bus (its transmit confirmation). Returns
+    /// whether taking it may have moved the node's deadline: a runner asks the deadline again
+    /// only then. Nodes that do not time their own transmissions ignore it (`false`).
+    fn on_sent(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) -> bool {
+        false
+    }
     /// Do what is due at `now`; frames to send go to `out` with the port to send them on.
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame));
     /// The latest time `poll` should next be called (`None`: only when a frame arrives).
@@ -99,8 +102,8 @@ impl<N: Node + ?Sized> Node for &mut N {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         (**self).on_frame(now, port, frame);
     }
-    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
-        (**self).on_sent(now, port, frame);
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        (**self).on_sent(now, port, frame)
     }
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         (**self).poll(now, out);

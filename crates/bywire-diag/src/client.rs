@@ -408,8 +408,9 @@ impl Node for UdsClient {
         UdsClient::on_frame(self, now, frame);
     }
 
-    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) -> bool {
         UdsClient::on_sent(self, now, frame);
+        true
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

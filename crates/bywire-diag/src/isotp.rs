@@ -967,10 +967,11 @@ impl bywire_core::node::Node for IsoTp {
         }
     }
 
-    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
         if port == self.port {
             IsoTp::on_sent(self, now, frame);
         }
+        port == self.port
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

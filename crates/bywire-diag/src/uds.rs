@@ -866,8 +866,9 @@ impl Node for UdsServer {
         UdsServer::on_frame(self, now, frame);
     }
 
-    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+    fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) -> bool {
         UdsServer::on_sent(self, now, frame);
+        true
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

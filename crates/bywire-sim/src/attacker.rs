@@ -159,10 +159,11 @@ impl Node for Attacker {
         }
     }
 
-    fn on_sent(&mut self, now: Timestamp, _port: Port, _frame: &Frame) {
+    fn on_sent(&mut self, now: Timestamp, _port: Port, _frame: &Frame) -> bool {
         self.last_seen = now;
         self.sent = self.sent.saturating_add(1);
         self.in_flight = false;
+        true
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

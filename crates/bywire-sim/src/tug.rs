@@ -379,10 +379,8 @@ impl<N: Node> Node for OnBothCommandBuses<N> {
             self.0.on_frame(now, port, frame);
         }
     }
-    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
-        if port == Port::MAIN {
-            self.0.on_sent(now, port, frame);
-        }
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        port == Port::MAIN && self.0.on_sent(now, port, frame)
     }
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         self.0.poll(now, &mut |port, frame| {

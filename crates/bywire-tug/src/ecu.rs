@@ -693,11 +693,14 @@ impl Node for VehicleControlEcu {
         }
     }
 
-    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        // Only the diagnostic responses are timed by their confirmations.
         let raw = frame.id().filter(|id| !id.is_extended()).map(Id::as_raw);
-        if port == BUS1 && raw == Some(diagnostics::RESPONSE_ID) {
+        let response = port == BUS1 && raw == Some(diagnostics::RESPONSE_ID);
+        if response {
             self.diagnostics.on_sent(now, frame);
         }
+        response
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

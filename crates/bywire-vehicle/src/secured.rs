@@ -535,8 +535,8 @@ impl<N: Node> Node for Signing<N> {
         self.node.on_frame(now, port, frame);
     }
 
-    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) {
-        self.node.on_sent(now, port, frame);
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        self.node.on_sent(now, port, frame)
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
