@@ -225,7 +225,18 @@ impl PurePursuit {
             x: pose.x,
             y: pose.y,
         };
-        let projection = path.project(here);
+        self.steer_from(pose, speed, path, &path.project(here))
+    }
+
+    /// The same, given where `pose` projects onto `path` (`path.project` of its position),
+    /// for a caller that needs the projection too.
+    pub fn steer_from(
+        &self,
+        pose: Pose,
+        speed: f64,
+        path: &Path<'_>,
+        projection: &Projection,
+    ) -> SteeringCommand {
         let target = path.at_station(projection.station + self.lookahead.at(speed));
         let local = pose.to_body(target);
         let distance = math::hypot(local.x, local.y);

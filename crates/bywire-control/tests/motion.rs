@@ -222,6 +222,13 @@ fn pure_pursuit_converges_for_every_geometry() {
             &straight(),
             &|pose, path| {
                 let c = follower.steer(pose, 2.0, path);
+                // Given the projection a caller already has, the same command.
+                let here = Point {
+                    x: pose.x,
+                    y: pose.y,
+                };
+                let from = follower.steer_from(pose, 2.0, path, &path.project(here));
+                assert_eq!(c, from);
                 (c.front, c.rear)
             },
             geometry,

@@ -106,6 +106,8 @@ pub struct ActiveStep {
 pub struct Mission {
     params: MissionParams,
     follower: PurePursuit,
+    /// The route's length, m (the route does not change).
+    route_length: f64,
     /// Each wheel's angle for a tank turn (constant: the tug's geometry).
     tank_angles: [WheelState; 4],
     stop_index: usize,
@@ -144,6 +146,7 @@ impl Mission {
                 Motion::Tank { yaw_rate: 1.0 }.twist(),
                 &[WheelState::default(); 4],
             ),
+            route_length: Path::new(&params.route).map_or(0.0, |path| path.length()),
             params,
             stop_index: 0,
             dwell_until: None,
@@ -322,11 +325,14 @@ impl Mission {
                         .clamp(-self.follower.max_steer, self.follower.max_steer)
                         .to_degrees()
                 } else {
-                    self.follower.steer(pose, speed, &path).front.to_degrees()
+                    self.follower
+                        .steer_from(pose, speed, &path, &projection)
+                        .front
+                        .to_degrees()
                 };
                 (
                     steering,
-                    path.length() - projection.station,
+                    self.route_length - projection.station,
                     projection.station,
                 )
             }
