@@ -316,6 +316,8 @@ pub struct SimBus {
     /// Faults, each with whether it ends when its victim is bus-off.
     faults: Vec<(Fault, bool)>,
     events: Vec<BusEvent>,
+    /// Whether arbitration losses are among the events.
+    report_arbitration: bool,
     next_seq: u64,
     busy_ns: u64,
     /// Nodes that are bus-off (counted when a state changes).
@@ -349,6 +351,7 @@ impl SimBus {
             nodes: Vec::new(),
             faults: Vec::new(),
             events: Vec::new(),
+            report_arbitration: true,
             next_seq: 0,
             busy_ns: 0,
             bus_off_nodes: 0,
@@ -649,6 +652,13 @@ impl SimBus {
         self.nodes.get(node).map(|n| n.confinement)
     }
 
+    /// Whether arbitration losses are reported ([`BusEvent::ArbitrationLost`]; on by
+    /// default): a busy bus has several for most frames, and a reader that does not look at
+    /// them need not have them made.
+    pub fn report_arbitration(&mut self, report: bool) {
+        self.report_arbitration = report;
+    }
+
     /// Events since the last call.
     pub fn take_events(&mut self) -> Vec<BusEvent> {
         std::mem::take(&mut self.events)
@@ -879,7 +889,7 @@ impl SimBus {
             self.offers = offers;
             return;
         };
-        for &(node, _, lost_id, _) in &offers {
+        for &(node, _, lost_id, _) in offers.iter().filter(|_| self.report_arbitration) {
             if node != winner {
                 self.events.push(BusEvent::ArbitrationLost {
                     node,

@@ -81,6 +81,19 @@ fn three_nodes_start_together_and_leave_in_id_order() {
             ("300#0102".to_string(), sent[2].2)
         ]
     );
+    // Unreported, the losses are left out and nothing else changes.
+    let mut quiet = SimBus::new(500_000, None);
+    quiet.report_arbitration(false);
+    let quiet_nodes = [quiet.add_node(), quiet.add_node(), quiet.add_node()];
+    for (n, f) in quiet_nodes.iter().zip(frames) {
+        quiet.submit(*n, frame(f), Timestamp::ZERO);
+    }
+    quiet.advance(Timestamp::from_millis(10));
+    let reported: Vec<BusEvent> = events
+        .into_iter()
+        .filter(|e| !matches!(e, BusEvent::ArbitrationLost { .. }))
+        .collect();
+    assert_eq!(quiet.take_events(), reported);
 }
 
 #[test]

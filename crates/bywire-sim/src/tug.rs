@@ -532,6 +532,12 @@ impl Tug {
             net.add_bus("bus1b", 500_000, command_data),
         ];
         let [bus1, bus2, bus3, bus1b] = buses;
+        // The run reports what was sent and the controllers' states, not who lost arbitration.
+        for bus in buses {
+            if let Some(sim) = net.bus_mut(bus) {
+                sim.report_arbitration(false);
+            }
+        }
         let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
         let mut wire = |net: &mut Network, node: NodeIndex, port: Port, bus: usize, name: &str| {
             let index = buses.get(bus).copied().unwrap_or_default();
