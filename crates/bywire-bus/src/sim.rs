@@ -20,7 +20,7 @@ use std::collections::VecDeque;
 use bywire_core::confinement::{Confinement, Event, NodeState, StateChange, TransmitErrorCause};
 use bywire_core::frame::{ErrorClass, ErrorFrame};
 use bywire_core::time::earliest;
-use bywire_core::wire::{self, Field};
+use bywire_core::wire::{self, ClassicHeader, Field};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::{Filtering, Received};
@@ -249,6 +249,9 @@ const ACCEPTANCE_CACHE: usize = 1 << 10;
 /// Slots of the classic-frame timing table (a power of two).
 const CLASSIC_CACHE: usize = 1 << 10;
 
+/// Slots for classic frame headers (by identifier, flags and DLC).
+const HEADER_CACHE: usize = 1 << 8;
+
 /// A classic frame's content as a table key: identifier with its extended and remote flags,
 /// DLC, and the data bytes as one word.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -276,6 +279,13 @@ impl ClassicKey {
         })
     }
 
+    /// Its header's slot (identifier, flags and DLC alone).
+    fn header_slot(self) -> usize {
+        let mixed =
+            (u64::from(self.id) | u64::from(self.dlc) << 32).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        usize::try_from(mixed >> (64 - HEADER_CACHE.trailing_zeros())).unwrap_or(0)
+    }
+
     /// Its slot: a multiplicative hash's top bits.
     fn slot(self) -> usize {
         let mixed = (u64::from(self.id) | u64::from(self.dlc) << 32)
@@ -293,6 +303,9 @@ pub struct SimBus {
     timings: std::collections::HashMap<Frame, (f64, usize)>,
     /// The same for classic frames, direct-mapped by content: cheaper than hashing them.
     classic_timings: Vec<Option<(ClassicKey, (f64, usize))>>,
+    /// Classic frames' headers by identifier (with its flags) and DLC: a payload not yet
+    /// timed is counted on from its header.
+    classic_headers: Vec<Option<(u32, u8, ClassicHeader)>>,
     /// Which nodes' filters take a frame, by its SocketCAN identifier (all that acceptance
     /// depends on): a direct-mapped table of node bit sets, emptied whenever a node or a
     /// filter changes. Delivering is where a bus's time goes; most buses carry a few dozen
@@ -340,6 +353,7 @@ impl SimBus {
         SimBus {
             timings: std::collections::HashMap::new(),
             classic_timings: vec![None; CLASSIC_CACHE],
+            classic_headers: vec![None; HEADER_CACHE],
             acceptance: vec![None; ACCEPTANCE_CACHE],
             tampered: Vec::new(),
             offers: Vec::new(),
@@ -808,16 +822,27 @@ impl SimBus {
         // Classic frames are counted (without building their bits) and remembered in a small
         // direct-mapped table; FD frames are encoded once and remembered.
         if let Some(key) = ClassicKey::of(frame) {
-            let slot = self.classic_timings.get_mut(key.slot())?;
-            if let Some((cached, timing)) = slot {
+            if let Some(Some((cached, timing))) = self.classic_timings.get(key.slot()) {
                 if *cached == key {
                     return Some(*timing);
                 }
             }
-            let (bits, detected) = wire::classic_length(frame)?;
+            // A new payload (a setpoint, a reading): counted on from its identifier's header.
+            let header_slot = self.classic_headers.get_mut(key.header_slot())?;
+            let header = match header_slot {
+                Some((id, dlc, header)) if (*id, *dlc) == (key.id, key.dlc) => *header,
+                _ => {
+                    let header = ClassicHeader::of(frame)?;
+                    *header_slot = Some((key.id, key.dlc, header));
+                    header
+                }
+            };
+            let (bits, detected) = header.length(frame.data());
             let bits = f64::from(u32::try_from(bits).unwrap_or(u32::MAX));
             let timing = (bits * (1e9 / f64::from(self.nominal.max(1))), detected + 1);
-            *slot = Some((key, timing));
+            if let Some(slot) = self.classic_timings.get_mut(key.slot()) {
+                *slot = Some((key, timing));
+            }
             return Some(timing);
         }
         if let Some(timing) = self.timings.get(frame) {

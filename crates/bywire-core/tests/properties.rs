@@ -136,6 +136,24 @@ proptest! {
         }
     }
 
+    /// A header counted once times every payload of its identifier and length, as the
+    /// encoder does.
+    #[test]
+    fn a_classic_header_times_any_payload_of_its_length(
+        id in id(),
+        payloads in (0usize..=8).prop_flat_map(|n| prop::collection::vec(
+            prop::collection::vec(prop_oneof![Just(0x00u8), Just(0xFF), any::<u8>()], n), 2..4)),
+    ) {
+        let first = Frame::classic(id, &payloads[0]).unwrap();
+        let header = wire::ClassicHeader::of(&first).unwrap();
+        for data in &payloads {
+            let f = Frame::classic(id, data).unwrap();
+            let w = wire::encode(&f).unwrap();
+            let crc_delimiter = w.spans().iter().find(|s| s.field == Field::CrcDelimiter).unwrap().start;
+            prop_assert_eq!(header.length(f.data()), (w.len(), crc_delimiter));
+        }
+    }
+
     #[test]
     fn wire_round_trip_within_bounds(f in frame()) {
         let w = wire::encode(&f).unwrap();

@@ -528,27 +528,69 @@ pub fn encode_with_ack(frame: &Frame, acknowledged: bool) -> Result<WireFrame, E
 /// every frame it times. Agrees with [`encode`] (a property test holds the two together);
 /// `None` for FD and error frames.
 pub fn classic_length(frame: &Frame) -> Option<(usize, usize)> {
-    let Frame::Classic(c) = frame else {
-        return None;
-    };
-    // SOF through the CRC, at most 1 + 32 + 3 + 4 + 64 + 15 = 119 bits, as one number.
-    let (pieces, count) = header(c.id(), c.is_remote(), None, c.dlc());
-    let (mut stream, mut bits) = (0u128, 0u32);
-    for p in pieces.iter().take(count) {
-        let value = p.value & ((1u32 << p.width) - 1);
-        stream = (stream << p.width) | u128::from(value);
-        bits += u32::from(p.width);
+    ClassicHeader::of(frame).map(|header| header.length(frame.data()))
+}
+
+/// A classic frame up to its data field (start of frame, arbitration and control fields) as
+/// the CRC and bit stuffing leave it: all of a frame's length that its identifier, RTR bit
+/// and DLC decide. [`ClassicHeader::length`] finishes the count for a payload, so a bus
+/// simulation that keeps the header of each identifier times a new payload without going
+/// over the header again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClassicHeader {
+    /// The CRC register after the header's bits.
+    crc: u32,
+    /// The stuffing state after them (see `stuff_step`).
+    stuff_state: u8,
+    /// Stuff bits among them.
+    stuffed: u32,
+    /// The header's bits, stuff bits not counted.
+    bits: u32,
+}
+
+impl ClassicHeader {
+    /// The header of a classic frame (`None` for FD and error frames).
+    pub fn of(frame: &Frame) -> Option<ClassicHeader> {
+        let Frame::Classic(c) = frame else {
+            return None;
+        };
+        // At most 1 + 32 + 3 + 4 = 40 bits, as one number.
+        let (pieces, count) = header(c.id(), c.is_remote(), None, c.dlc());
+        let (mut stream, mut bits) = (0u128, 0u32);
+        for p in pieces.iter().take(count) {
+            let value = p.value & ((1u32 << p.width) - 1);
+            stream = (stream << p.width) | u128::from(value);
+            bits += u32::from(p.width);
+        }
+        let crc = crc15_of_stream(stream, bits);
+        // The first bit (start of frame) starts a run; the rest go through the stuffing.
+        let after_first = bits.saturating_sub(1);
+        let first = u8::from(stream >> after_first & 1 == 1);
+        let (stuff_state, stuffed) = stuff_run(first * 4, 0, stream, after_first);
+        Some(ClassicHeader {
+            crc,
+            stuff_state,
+            stuffed,
+            bits,
+        })
     }
-    for &byte in frame.data() {
-        stream = (stream << 8) | u128::from(byte);
-        bits += 8;
+
+    /// The length in bits of the frame with this header and `data` (at most 8 bytes are
+    /// counted) as sent and acknowledged, and where its CRC delimiter is: as
+    /// [`classic_length`] of that frame.
+    pub fn length(&self, data: &[u8]) -> (usize, usize) {
+        let (mut crc, mut state, mut stuffed) = (self.crc, self.stuff_state, self.stuffed);
+        let mut bits = self.bits;
+        for &byte in data.iter().take(8) {
+            crc = crc15_byte(crc, byte);
+            (state, stuffed) = stuff_run(state, stuffed, u128::from(byte), 8);
+            bits += 8;
+        }
+        (_, stuffed) = stuff_run(state, stuffed, u128::from(crc & 0x7FFF), 15);
+        let sent = usize::try_from(bits + 15 + stuffed).unwrap_or(usize::MAX);
+        // CRC delimiter, ACK slot, ACK delimiter, 7 bits of end of frame.
+        (sent.saturating_add(10), sent)
     }
-    let crc = crc15_of_stream(stream, bits);
-    stream = (stream << 15) | u128::from(crc & 0x7FFF);
-    bits += 15;
-    let stuffed = usize::try_from(bits + stuff_bits(stream, bits)).ok()?;
-    // CRC delimiter, ACK slot, ACK delimiter, 7 bits of end of frame.
-    Some((stuffed + 10, stuffed))
 }
 
 /// CRC-15/CAN of the low `bits` bits of `stream`, most significant first: the bits short of
@@ -636,23 +678,19 @@ const STUFF_TABLE: [[(u8, u8); 256]; 8] = {
     table
 };
 
-/// The stuff bits the first `bits` bits of `stream` (most significant first) take: the first
-/// bit starts a run, the bits short of a whole byte go one at a time, then a byte at a time by
-/// [`STUFF_TABLE`].
-fn stuff_bits(stream: u128, bits: u32) -> u32 {
-    let Some(after_first) = bits.min(128).checked_sub(1) else {
-        return 0;
-    };
+/// Bit stuffing over the low `bits` bits of `stream` (most significant first, at most 128),
+/// from `state` with `stuffed` stuff bits so far: the state and the count after them. The bits
+/// short of a whole byte go one at a time, then a byte at a time by [`STUFF_TABLE`].
+fn stuff_run(mut state: u8, mut stuffed: u32, stream: u128, bits: u32) -> (u8, u32) {
+    let bits = bits.min(128);
     let bit = |k: u32| u8::from(stream >> k & 1 == 1);
-    let mut state = bit(after_first) * 4;
-    let mut stuffed = 0;
-    let odd = after_first % 8;
-    for k in (after_first - odd..after_first).rev() {
+    let odd = bits % 8;
+    for k in (bits - odd..bits).rev() {
         let (next, stuff) = stuff_step(state, bit(k));
         state = next;
         stuffed += u32::from(stuff);
     }
-    for k in (0..(after_first - odd) / 8).rev() {
+    for k in (0..(bits - odd) / 8).rev() {
         let byte = usize::from(u8::try_from(stream >> (8 * k) & 0xFF).unwrap_or(0));
         let row = STUFF_TABLE
             .get(usize::from(state))
@@ -661,7 +699,7 @@ fn stuff_bits(stream: u128, bits: u32) -> u32 {
         state = next;
         stuffed += u32::from(stuff);
     }
-    stuffed
+    (state, stuffed)
 }
 
 #[cfg(test)]
