@@ -43,7 +43,7 @@ impl Pose {
     /// A world point in this pose's body frame.
     pub fn to_body(&self, p: Point) -> Point {
         let (dx, dy) = (p.x - self.x, p.y - self.y);
-        let (s, c) = (math::sin(self.yaw), math::cos(self.yaw));
+        let (s, c) = math::sin_cos(self.yaw);
         Point {
             x: c * dx + s * dy,
             y: -s * dx + c * dy,
@@ -52,7 +52,7 @@ impl Pose {
 
     /// A body-frame point in the world.
     pub fn to_world(&self, p: Point) -> Point {
-        let (s, c) = (math::sin(self.yaw), math::cos(self.yaw));
+        let (s, c) = math::sin_cos(self.yaw);
         Point {
             x: self.x + c * p.x - s * p.y,
             y: self.y + s * p.x + c * p.y,
@@ -183,10 +183,8 @@ impl<const N: usize> Swerve<N> {
         let (mut n, mut sx, mut sy, mut sr2) = (0.0, 0.0, 0.0, 0.0);
         let (mut bx, mut by, mut bw) = (0.0, 0.0, 0.0);
         for (state, p) in states.iter().zip(&self.wheels) {
-            let (vx, vy) = (
-                state.speed * math::cos(state.angle),
-                state.speed * math::sin(state.angle),
-            );
+            let (sin, cos) = math::sin_cos(state.angle);
+            let (vx, vy) = (state.speed * cos, state.speed * sin);
             n += 1.0;
             sx += p.x;
             sy += p.y;
@@ -307,14 +305,14 @@ impl Odometry {
         let (dx, dy) = if turn.abs() < 1e-9 {
             // Straight: rotate the body displacement at the mid heading.
             let mid = yaw + turn / 2.0;
-            let (s, c) = (math::sin(mid), math::cos(mid));
+            let (s, c) = math::sin_cos(mid);
             (
                 (twist.vx * c - twist.vy * s) * dt,
                 (twist.vx * s + twist.vy * c) * dt,
             )
         } else {
-            let (s0, c0) = (math::sin(yaw), math::cos(yaw));
-            let (s1, c1) = (math::sin(yaw + turn), math::cos(yaw + turn));
+            let (s0, c0) = math::sin_cos(yaw);
+            let (s1, c1) = math::sin_cos(yaw + turn);
             (
                 (twist.vx * (s1 - s0) + twist.vy * (c1 - c0)) / twist.omega,
                 (-twist.vx * (c1 - c0) + twist.vy * (s1 - s0)) / twist.omega,
