@@ -55,6 +55,22 @@ impl<'a> Path<'a> {
     /// The nearest point of the path to `p`. `offset` is positive when the path passes to
     /// the left of `p` (seen along the path's direction, `p` is on its right).
     pub fn project(&self, p: Point) -> Projection {
+        self.project_near(p, None)
+    }
+
+    /// [`Path::project`], looking first at segment `near` (where `p` was found last time, for
+    /// a follower that projects every cycle): the answer is the same whatever `near` says, but
+    /// with a good guess the segments whose bounding boxes lie clearly beyond it are passed
+    /// over without projecting onto them.
+    pub fn project_near(&self, p: Point, near: Option<usize>) -> Projection {
+        // No segment whose box is farther than the guess's nearest point can be the nearest
+        // (the margin is far beyond rounding), nor tie with it.
+        let bound = near
+            .and_then(|i| self.points.get(i..i.saturating_add(2)))
+            .and_then(|w| match w {
+                [a, b] => Some(Foot::on(*a, *b, p).squared * (1.0 + 1e-6)),
+                _ => None,
+            });
         // The nearest by `hypot`, as ever; a segment whose squared distance is clearly more
         // than the best's cannot be nearer by `hypot` (whose error is an ulp), so it is passed
         // over without one. The heading is worked out for the nearest alone.
@@ -62,19 +78,18 @@ impl<'a> Path<'a> {
         let mut station = 0.0;
         for (segment, a, b) in self.segments() {
             let (dx, dy) = (b.x - a.x, b.y - a.y);
-            let len2 = dx * dx + dy * dy;
-            let len = math::sqrt(len2);
-            let t = if len2 > 0.0 {
-                (((p.x - a.x) * dx + (p.y - a.y) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let point = Point {
-                x: a.x + t * dx,
-                y: a.y + t * dy,
-            };
-            let (ex, ey) = (p.x - point.x, p.y - point.y);
-            let squared = ex * ex + ey * ey;
+            let len = math::sqrt(dx * dx + dy * dy);
+            if bound.is_some_and(|bound| box_squared(a, b, p) > bound) {
+                station += len;
+                continue;
+            }
+            let Foot {
+                t,
+                point,
+                ex,
+                ey,
+                squared,
+            } = Foot::on(a, b, p);
             let clearly_farther = best
                 .as_ref()
                 .is_some_and(|(_, best_squared, _, _)| squared > best_squared * (1.0 + 1e-9));
@@ -130,6 +145,48 @@ impl<'a> Path<'a> {
         }
         last
     }
+}
+
+/// The foot of the perpendicular from `p` onto segment `a`–`b` (clamped to it): where along
+/// it (0–1), the point, and `p`'s offset from it, also squared.
+struct Foot {
+    t: f64,
+    point: Point,
+    ex: f64,
+    ey: f64,
+    squared: f64,
+}
+
+impl Foot {
+    fn on(a: Point, b: Point, p: Point) -> Foot {
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((p.x - a.x) * dx + (p.y - a.y) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let point = Point {
+            x: a.x + t * dx,
+            y: a.y + t * dy,
+        };
+        let (ex, ey) = (p.x - point.x, p.y - point.y);
+        Foot {
+            t,
+            point,
+            ex,
+            ey,
+            squared: ex * ex + ey * ey,
+        }
+    }
+}
+
+/// The squared distance from `p` to the bounding box of segment `a`–`b` (no more than to
+/// any point of the segment).
+fn box_squared(a: Point, b: Point, p: Point) -> f64 {
+    let outside = |p: f64, a: f64, b: f64| (a.min(b) - p).max(p - a.max(b)).max(0.0);
+    let (gx, gy) = (outside(p.x, a.x, b.x), outside(p.y, a.y, b.y));
+    gx * gx + gy * gy
 }
 
 /// How the vehicle steers.

@@ -24,6 +24,22 @@ fn close(a: f64, b: f64) -> bool {
 }
 
 proptest! {
+    /// Looking first at any segment (the right one, a wrong one, one past the end) gives the
+    /// projection a full search gives, on paths that double back and cross themselves.
+    #[test]
+    fn a_projection_is_the_same_whichever_segment_is_looked_at_first(
+        corners in prop::collection::vec((-50.0..50.0f64, -50.0..50.0f64), 2..40),
+        x in -60.0..60.0f64, y in -60.0..60.0f64,
+        near in 0usize..45,
+    ) {
+        let points: Vec<Point> = corners.iter().map(|&(x, y)| Point { x, y }).collect();
+        let path = Path::new(&points).unwrap();
+        let p = Point { x, y };
+        let full = path.project(p);
+        prop_assert_eq!(path.project_near(p, Some(near)), full);
+        prop_assert_eq!(path.project_near(p, Some(full.segment)), full);
+    }
+
     #[test]
     fn swerve_forward_inverts_inverse(
         vx in -5.0..5.0f64, vy in -5.0..5.0f64, omega in -2.0..2.0f64,
@@ -315,4 +331,24 @@ fn paths_need_two_points_and_project_with_a_side() {
     let right = path.project(Point { x: 5.0, y: -2.0 });
     assert!(close(right.offset, 2.0));
     assert_eq!(path.at_station(1e9), Point { x: 200.0, y: 0.0 });
+}
+
+/// Two segments equally near: the first along the path is the answer, whichever is looked at
+/// first.
+#[test]
+fn a_tie_goes_to_the_first_segment_whichever_is_looked_at_first() {
+    let points = [
+        Point { x: -5.0, y: 0.0 },
+        Point { x: 5.0, y: 0.0 },
+        Point { x: 5.0, y: 10.0 },
+        Point { x: -5.0, y: 10.0 },
+    ];
+    let path = Path::new(&points).unwrap();
+    let p = Point { x: 0.0, y: 5.0 };
+    for near in [None, Some(0), Some(1), Some(2), Some(7)] {
+        let projection = path.project_near(p, near);
+        assert_eq!(projection.segment, 0, "{near:?}");
+        assert_eq!(projection.point, Point { x: 0.0, y: 0.0 });
+        assert_eq!(projection, path.project(p));
+    }
 }

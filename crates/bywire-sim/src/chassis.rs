@@ -59,6 +59,9 @@ pub struct Chassis {
     swerve: Swerve<4>,
     speeds: [f64; 4],
     angles: [f64; 4],
+    /// Each wheel's angle (degrees, bits) and its cosine: a wheel held still keeps its angle
+    /// step after step.
+    headings: [(u64, f64); 4],
     odometry: Odometry,
     twist: Twist,
     last_twist: Twist,
@@ -72,6 +75,7 @@ impl Chassis {
             swerve: four_wheel(params.wheelbase, params.track),
             speeds: [0.0; 4],
             angles: [0.0; 4],
+            headings: [(0.0f64.to_bits(), 1.0); 4],
             odometry: Odometry::new(pose),
             twist: Twist::default(),
             last_twist: Twist::default(),
@@ -86,14 +90,21 @@ impl Chassis {
         let slope = libm::atan(grade);
         // The same for every wheel (worked out once: a step is a millisecond).
         let (along_slope, across_slope) = (libm::sin(slope), libm::cos(slope));
-        for ((speed, angle), wheel) in self
+        for (((speed, angle), heading), wheel) in self
             .speeds
             .iter_mut()
             .zip(self.angles.iter_mut())
+            .zip(self.headings.iter_mut())
             .zip(wheels)
         {
             *angle = wheel.angle_deg;
-            let heading = libm::cos(wheel.angle_deg.to_radians());
+            if heading.0 != wheel.angle_deg.to_bits() {
+                *heading = (
+                    wheel.angle_deg.to_bits(),
+                    libm::cos(wheel.angle_deg.to_radians()),
+                );
+            }
+            let heading = heading.1;
             // Grade acts along the body; each wheel feels it along its own heading.
             let gravity = -quarter * G * along_slope * heading;
             let drive = wheel.drive_torque / p.wheel_radius;

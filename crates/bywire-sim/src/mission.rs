@@ -108,6 +108,8 @@ pub struct Mission {
     follower: PurePursuit,
     /// The route's length, m (the route does not change).
     route_length: f64,
+    /// The route's segment the tug was last found on (where the next projection looks first).
+    last_segment: Option<usize>,
     /// Each wheel's angle for a tank turn (constant: the tug's geometry).
     tank_angles: [WheelState; 4],
     stop_index: usize,
@@ -147,6 +149,7 @@ impl Mission {
                 &[WheelState::default(); 4],
             ),
             route_length: Path::new(&params.route).map_or(0.0, |path| path.length()),
+            last_segment: None,
             params,
             stop_index: 0,
             dwell_until: None,
@@ -311,10 +314,12 @@ impl Mission {
         let crab = self.remaining < self.params.crab_final_m;
         let (steering, remaining, station) = match Path::new(&self.params.route) {
             Some(path) => {
-                let projection = path.project(Point {
+                let here = Point {
                     x: pose.x,
                     y: pose.y,
-                });
+                };
+                let projection = path.project_near(here, self.last_segment);
+                self.last_segment = Some(projection.segment);
                 let steering = if crab {
                     // The stand approach in crab: every wheel toward the point a lookahead
                     // ahead on the route, the heading held.

@@ -431,6 +431,8 @@ pub struct Tug {
     pub bus1b_log: Vec<Logged>,
     /// Cross-track error of the true pose to the route every 20 ms once engaged, m.
     pub tracking_errors: Vec<f64>,
+    /// The route's segment the tug was last found on (where the next sample looks first).
+    tracked_segment: Option<usize>,
     /// What happened, in time order.
     pub events: Vec<SimEvent>,
     /// The state every 50 ms.
@@ -682,6 +684,7 @@ impl Tug {
             bus3_log: Vec::new(),
             bus1b_log: Vec::new(),
             tracking_errors: Vec::new(),
+            tracked_segment: None,
             events: Vec::new(),
             trace: Vec::new(),
             truth: Vec::new(),
@@ -1145,14 +1148,13 @@ impl Tug {
         let pose = self.chassis.pose();
         if self.ads.engaged_at().is_some() && now.as_nanos().is_multiple_of(20_000_000) {
             if let Some(path) = Path::new(&self.params.route) {
-                let error = path
-                    .project(Point {
-                        x: pose.x,
-                        y: pose.y,
-                    })
-                    .offset
-                    .abs();
-                self.tracking_errors.push(error);
+                let here = Point {
+                    x: pose.x,
+                    y: pose.y,
+                };
+                let projection = path.project_near(here, self.tracked_segment);
+                self.tracked_segment = Some(projection.segment);
+                self.tracking_errors.push(projection.offset.abs());
             }
         }
         if now.as_nanos().is_multiple_of(10_000_000) {
