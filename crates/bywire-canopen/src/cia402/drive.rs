@@ -51,6 +51,10 @@ impl Params {
         object::TARGET_VELOCITY,
     ];
 
+    // Seldom (until the first read, and after a reset): out of line, so that the methods that
+    // fall back on it, asked many times a step, stay small enough to inline.
+    #[cold]
+    #[inline(never)]
     fn read(od: &ObjectDictionary) -> Params {
         let mut params = Params {
             mode: None,
