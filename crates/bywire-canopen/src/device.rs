@@ -160,6 +160,7 @@ impl EmcyProducer {
         core::iter::from_fn(|| copy.pop()).fold(0, |register, (_, bits)| register | bits)
     }
 
+    #[inline]
     fn poll(
         &mut self,
         now: Timestamp,
@@ -167,9 +168,11 @@ impl EmcyProducer {
         inhibit: Duration,
         out: &mut dyn FnMut(Frame),
     ) {
-        if self
-            .last_sent
-            .is_some_and(|last| now < last.saturating_add(inhibit))
+        // Nothing to send is the usual case, inlined into every poll.
+        if self.outbox.is_empty()
+            || self
+                .last_sent
+                .is_some_and(|last| now < last.saturating_add(inhibit))
         {
             return;
         }
@@ -692,7 +695,15 @@ impl<A: Application> Device<A> {
     }
 
     /// React to written objects: reload what they configure, tell the application.
+    #[inline]
     fn react(&mut self, now: Timestamp) {
+        // Nothing written is the usual case, inlined into every poll.
+        if !self.written.is_empty() {
+            self.react_to_written(now);
+        }
+    }
+
+    fn react_to_written(&mut self, now: Timestamp) {
         while let Some((index, sub)) = self.written.pop() {
             if (0x1000..=0x1FFF).contains(&index) {
                 self.comm = Communication::read(&self.od, self.node);

@@ -335,11 +335,17 @@ impl HeartbeatConsumer {
     }
 
     /// Mark nodes silent past their consumer time as lost.
+    #[inline]
     pub fn poll(&mut self, now: Timestamp) {
-        // Nothing is lost before the deadline (and a loss is all that moves it here).
+        // Nothing is lost before the deadline (and a loss is all that moves it here): the
+        // usual case, inlined into every device's poll.
         if self.deadline.is_none_or(|deadline| now < deadline) {
             return;
         }
+        self.find_losses(now);
+    }
+
+    fn find_losses(&mut self, now: Timestamp) {
         for watched in self.watched.iter_mut().take(self.used).flatten() {
             if let Liveness::Alive { state, last } = watched.liveness {
                 if now >= last.saturating_add(watched.timeout) {
