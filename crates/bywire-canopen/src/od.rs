@@ -405,6 +405,19 @@ pub struct Entry {
     pub high: Option<Number>,
     default: Vec<u8>,
     value: Vec<u8>,
+    /// The dictionary's change count when the value last changed.
+    changed: ChangeStamp,
+}
+
+/// When an entry's value last changed, as the dictionary's change count: history, not
+/// content, so two entries are equal whatever their stamps.
+#[derive(Debug, Clone, Copy, Default)]
+struct ChangeStamp(u64);
+
+impl PartialEq for ChangeStamp {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// Bytes reserved for a string or domain entry whose default is shorter.
@@ -426,6 +439,7 @@ impl Entry {
             high: None,
             default,
             value,
+            changed: ChangeStamp::default(),
         }
     }
 
@@ -517,6 +531,13 @@ impl Entry {
         self.value.clear();
         self.value.extend_from_slice(bytes);
         Ok(())
+    }
+
+    /// The dictionary's change count ([`ObjectDictionary::generation`]) when the value last
+    /// changed (or the entry was added): a reader that looked at a generation since then has
+    /// seen the value as it is.
+    pub fn changed(&self) -> u64 {
+        self.changed.0
     }
 
     fn restore(&mut self) {
@@ -639,6 +660,10 @@ impl ObjectDictionary {
             entries,
         };
         self.generation = self.generation.wrapping_add(1);
+        let mut object = object;
+        for entry in &mut object.entries {
+            entry.changed = ChangeStamp(self.generation);
+        }
         match self.objects.binary_search_by_key(&index, |o| o.index) {
             Ok(at) => {
                 if let Some(slot) = self.objects.get_mut(at) {
@@ -735,13 +760,15 @@ impl ObjectDictionary {
 
     /// [`ObjectDictionary::set`] through a slot.
     pub fn set_at(&mut self, slot: Slot, bytes: &[u8]) -> Result<(), Abort> {
+        let generation = self.generation.wrapping_add(1);
         let entry = self.at_mut(slot).ok_or(Abort::NoObject)?;
         // The same value again changes nothing (and was checked when it was stored).
         if same_value(entry.value(), bytes) {
             return Ok(());
         }
         entry.store(bytes)?;
-        self.generation = self.generation.wrapping_add(1);
+        entry.changed = ChangeStamp(generation);
+        self.generation = generation;
         Ok(())
     }
 
@@ -794,6 +821,7 @@ impl ObjectDictionary {
         for object in self.objects.iter_mut().filter(|o| range.contains(&o.index)) {
             for entry in &mut object.entries {
                 entry.restore();
+                entry.changed = ChangeStamp(self.generation);
             }
         }
     }
@@ -892,6 +920,37 @@ mod tests {
         assert_eq!(od.get_unsigned(0x6040, 0), Some(0));
         // Equality is of content, not of history.
         assert_eq!(od, sample());
+    }
+
+    #[test]
+    fn an_entry_knows_when_its_value_last_changed() {
+        let mut od = sample();
+        let added = od.entry(0x6040, 0).unwrap().changed();
+        od.set_int(0x2000, 0, 5).unwrap();
+        // Another entry's change moves the count, not this entry's stamp.
+        assert!(od.generation() > added);
+        assert_eq!(od.entry(0x6040, 0).unwrap().changed(), added);
+        od.set_int(0x6040, 0, 0x0F).unwrap();
+        let written = od.entry(0x6040, 0).unwrap().changed();
+        assert_eq!(written, od.generation());
+        // The same value again, or a refused one, is no change.
+        od.set_int(0x6040, 0, 0x0F).unwrap();
+        assert!(od.set(0x6040, 0, &[1]).is_err());
+        assert_eq!(od.entry(0x6040, 0).unwrap().changed(), written);
+        // Restoring defaults, and replacing an object, change its entries.
+        od.restore_defaults(0x6000..=0x6FFF);
+        assert_eq!(od.entry(0x6040, 0).unwrap().changed(), od.generation());
+        od.add_var(
+            0x2000,
+            Entry::new(0, "Replaced", DataType::I16, Access::ReadWrite),
+        );
+        assert_eq!(od.entry(0x2000, 0).unwrap().changed(), od.generation());
+        // Stamps are history, not content.
+        let mut other = sample();
+        other.set_int(0x2000, 0, 5).unwrap();
+        other.set_int(0x2000, 0, 0).unwrap();
+        assert_ne!(other.entry(0x2000, 0).unwrap().changed(), 0);
+        assert_eq!(sample(), other);
     }
 
     #[test]

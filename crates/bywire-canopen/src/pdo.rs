@@ -156,6 +156,13 @@ impl Pdo {
     }
 
     /// Fill a payload from the dictionary.
+    /// Whether a mapped object's value changed after the dictionary's change count was
+    /// `generation` (an object gone counts as changed).
+    fn changed_since(&self, od: &ObjectDictionary, generation: u64) -> bool {
+        self.entries()
+            .any(|mapped| od.at(mapped.slot).is_none_or(|e| e.changed() > generation))
+    }
+
     fn sample(&self, od: &ObjectDictionary) -> ([u8; 8], usize) {
         let mut payload = [0u8; 8];
         let mut bit = 0usize;
@@ -460,9 +467,12 @@ impl Pdos {
                         if inhibited {
                             continue;
                         }
+                        // What was sampled last is what was last sent (it was sent, or it
+                        // matched): only a mapped object changed since can change it.
                         let generation = od.generation();
-                        let changed =
-                            pdo.sampled != Some(generation) && pdo.sample(od).0 != pdo.last_payload;
+                        let changed = pdo.sampled != Some(generation)
+                            && pdo.sampled.is_none_or(|at| pdo.changed_since(od, at))
+                            && pdo.sample(od).0 != pdo.last_payload;
                         pdo.sampled = Some(generation);
                         let timer_due = !pdo.event_timer.is_zero()
                             && pdo
@@ -769,6 +779,39 @@ mod tests {
             &mut |_| {},
         );
         assert_eq!(sent.len(), 1, "unchanged, no event timer: nothing sent");
+        // Other objects changing (the dictionary's count moving) send nothing; the mapped
+        // one changing again, after them, does.
+        for (ms, velocity) in [(2u64, 1300i64), (3, 1400)] {
+            od.set_int(0x60FF, 0, velocity).unwrap();
+            pdos.poll(
+                Timestamp::from_millis(ms),
+                &od,
+                &mut |f| sent.push(f),
+                &mut |_| {},
+            );
+        }
+        assert_eq!(sent.len(), 1, "only unmapped objects changed");
+        od.set_int(0x60FF, 0, 1500).unwrap();
+        od.set(0x6041, 0, &0x0237u16.to_le_bytes()).unwrap();
+        od.set_int(0x60FF, 0, 1600).unwrap();
+        pdos.poll(
+            Timestamp::from_millis(4),
+            &od,
+            &mut |f| sent.push(f),
+            &mut |_| {},
+        );
+        assert_eq!(sent.len(), 2);
+        assert_eq!(sent[1].data(), [0x37, 0x02]);
+        // Set back to what was last sent: a change of the object, none of the frame.
+        od.set(0x6041, 0, &0x0627u16.to_le_bytes()).unwrap();
+        od.set(0x6041, 0, &0x0237u16.to_le_bytes()).unwrap();
+        pdos.poll(
+            Timestamp::from_millis(5),
+            &od,
+            &mut |f| sent.push(f),
+            &mut |_| {},
+        );
+        assert_eq!(sent.len(), 2);
         let mut events = Vec::new();
         let short = crate::nmt::classic(0x201, &[0x0F]);
         pdos.on_frame(Timestamp::ZERO, &short, &mut od, &mut |_, _| {}, &mut |e| {
