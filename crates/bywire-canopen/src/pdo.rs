@@ -781,36 +781,29 @@ mod tests {
         assert_eq!(sent.len(), 1, "unchanged, no event timer: nothing sent");
         // Other objects changing (the dictionary's count moving) send nothing; the mapped
         // one changing again, after them, does.
-        for (ms, velocity) in [(2u64, 1300i64), (3, 1400)] {
-            od.set_int(0x60FF, 0, velocity).unwrap();
+        let poll_at = |pdos: &mut Pdos, od: &ObjectDictionary, sent: &mut Vec<Frame>, ms| {
             pdos.poll(
                 Timestamp::from_millis(ms),
-                &od,
+                od,
                 &mut |f| sent.push(f),
                 &mut |_| {},
             );
+        };
+        for (ms, velocity) in [(2u64, 1300i64), (3, 1400)] {
+            od.set_int(0x60FF, 0, velocity).unwrap();
+            poll_at(&mut pdos, &od, &mut sent, ms);
         }
         assert_eq!(sent.len(), 1, "only unmapped objects changed");
         od.set_int(0x60FF, 0, 1500).unwrap();
         od.set(0x6041, 0, &0x0237u16.to_le_bytes()).unwrap();
         od.set_int(0x60FF, 0, 1600).unwrap();
-        pdos.poll(
-            Timestamp::from_millis(4),
-            &od,
-            &mut |f| sent.push(f),
-            &mut |_| {},
-        );
+        poll_at(&mut pdos, &od, &mut sent, 4);
         assert_eq!(sent.len(), 2);
         assert_eq!(sent[1].data(), [0x37, 0x02]);
         // Set back to what was last sent: a change of the object, none of the frame.
         od.set(0x6041, 0, &0x0627u16.to_le_bytes()).unwrap();
         od.set(0x6041, 0, &0x0237u16.to_le_bytes()).unwrap();
-        pdos.poll(
-            Timestamp::from_millis(5),
-            &od,
-            &mut |f| sent.push(f),
-            &mut |_| {},
-        );
+        poll_at(&mut pdos, &od, &mut sent, 5);
         assert_eq!(sent.len(), 2);
         let mut events = Vec::new();
         let short = crate::nmt::classic(0x201, &[0x0F]);
