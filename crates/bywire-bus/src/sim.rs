@@ -914,13 +914,15 @@ impl SimBus {
             self.offers = offers;
             return;
         };
-        for &(node, _, lost_id, _) in offers.iter().filter(|_| self.report_arbitration) {
-            if node != winner {
-                self.events.push(BusEvent::ArbitrationLost {
-                    node,
-                    id: lost_id,
-                    at: start,
-                });
+        if self.report_arbitration {
+            for &(node, _, lost_id, _) in &offers {
+                if node != winner {
+                    self.events.push(BusEvent::ArbitrationLost {
+                        node,
+                        id: lost_id,
+                        at: start,
+                    });
+                }
             }
         }
         // The buffer is kept for the next arbitration.

@@ -653,17 +653,16 @@ impl ObjectDictionary {
                 .with_int(i64::from(highest)),
             );
         }
+        self.generation = self.generation.wrapping_add(1);
+        for entry in &mut entries {
+            entry.changed = ChangeStamp(self.generation);
+        }
         let object = Object {
             index,
             name: name.to_string(),
             kind,
             entries,
         };
-        self.generation = self.generation.wrapping_add(1);
-        let mut object = object;
-        for entry in &mut object.entries {
-            entry.changed = ChangeStamp(self.generation);
-        }
         match self.objects.binary_search_by_key(&index, |o| o.index) {
             Ok(at) => {
                 if let Some(slot) = self.objects.get_mut(at) {
