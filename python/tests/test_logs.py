@@ -164,6 +164,29 @@ def test_a_bad_candump_line_is_named(tmp_path):
         bywire.read_log(path, batch_rows=0)
 
 
+def test_a_parquet_page_the_decoder_panics_on_is_a_log_error_without_a_panic_message(tmp_path, capfd):
+    """parquet-rs panics on an over-long varint in a delta header: the reader takes that as the
+    file's error, and nothing about a panic reaches stderr."""
+    source = tmp_path / "six.log"
+    source.write_text("(1700000000.000001) can0 010#01\n" * 6)
+    table = tmp_path / "bad.parquet"
+    subprocess.run(
+        [bywire_cli(), "log", "convert", str(source), str(table), "--compression", "none"],
+        check=True,
+        capture_output=True,
+    )
+    data = bytearray(table.read_bytes())
+    # The `ts` page's delta header: a two-byte block size, 4 miniblocks, 6 values, then the
+    # first value, made an 11-byte varint.
+    header = next(i for i in range(len(data) - 3) if data[i] == 0x80 and data[i + 2 : i + 4] == b"\x04\x06")
+    data[header + 4 : header + 15] = b"\xff" * 11
+    table.write_bytes(bytes(data))
+    capfd.readouterr()
+    with pytest.raises(bywire.LogError, match=r"bad\.parquet.*malformed page"):
+        bywire.read_log(table).read_all()
+    assert "panicked" not in capfd.readouterr().err
+
+
 def test_batches_stream_with_the_rows_asked_for(tmp_path):
     path = tmp_path / "frames.log"
     write(path, messages())

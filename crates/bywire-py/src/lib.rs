@@ -1030,6 +1030,8 @@ fn partition_folder(column: &str, value: Option<&str>) -> String {
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
+    // A malformed Parquet page raises LogError without parquet-rs's panic message on stderr.
+    bywire_log::parquet::quiet_panics_taken_as_errors();
     m.add_class::<Database>()?;
     m.add_class::<LogBatches>()?;
     m.add_function(wrap_pyfunction!(run_sim, m)?)?;

@@ -128,20 +128,10 @@ enum Command {
     },
 }
 
-/// A panic inside parquet-rs while it reads a file is taken as the file's error, which is
-/// printed: its panic message would only say the same less clearly. Every other panic is
-/// reported as usual.
-fn report_panics_the_log_readers_do_not_catch() {
-    let report = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        if !bywire_log::parquet::panic_is_caught_by_reader() {
-            report(info);
-        }
-    }));
-}
-
 fn main() -> ExitCode {
-    report_panics_the_log_readers_do_not_catch();
+    // A panic inside parquet-rs while it reads a file is taken as the file's error, which is
+    // printed; every other panic is reported as usual.
+    bywire_log::parquet::quiet_panics_taken_as_errors();
     let cli = Cli::parse();
     let mut out = io::stdout().lock();
     let result = match cli.command {
