@@ -18,7 +18,6 @@
 use std::time::Duration;
 
 use bywire_core::node::{Node, Port};
-use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
 use crate::sim::{NodeId, SimBus, MAX_ROUTED};
@@ -130,13 +129,19 @@ struct NetBus {
     next: Option<NextChange>,
 }
 
-/// When a bus next changes, in its two kinds.
+/// When a bus next changes, in its two kinds, in nanoseconds ([`NEVER`] for no time): the
+/// runner takes the least of every bus's at every pass, plain minimums over integers.
 #[derive(Clone, Copy)]
 struct NextChange {
     /// A frame (or state report) arrives at the wired nodes.
-    arrival: Option<Timestamp>,
+    arrival: u64,
     /// A transmission starts or a node recovers from bus-off.
-    activity: Option<Timestamp>,
+    activity: u64,
+}
+
+/// A time in nanoseconds, [`NEVER`] for none.
+fn nanos(at: Option<Timestamp>) -> u64 {
+    at.map_or(NEVER, Timestamp::as_nanos)
 }
 
 /// Named bit-timed buses and the wiring of nodes to them.
@@ -149,9 +154,22 @@ pub struct Network {
     slots: Vec<Slot>,
     now: Timestamp,
     outgoing: Vec<(Port, Frame)>,
-    /// The earliest wake of the first `.0` nodes, kept until a node's deadline changes (the
-    /// runner looks for it at every pass; it changes only when a node was asked).
-    earliest_wake: Option<(usize, Option<Timestamp>)>,
+    /// The earliest wake and the earliest due time of the first `nodes` nodes, kept until a
+    /// node's deadline changes (the runner looks for them at every pass and every instant;
+    /// they change only when a node was asked).
+    earliest_wake: Option<Earliest>,
+    /// The nodes given a frame at the current instant, each once: most instants are a
+    /// frame's arrival with no node due, and only these are polled then.
+    receivers: Vec<NodeIndex>,
+}
+
+/// The soonest any of the first `nodes` nodes must run ([`Slot::wake`]) and is due
+/// ([`Slot::due_from`]).
+#[derive(Clone, Copy)]
+struct Earliest {
+    nodes: usize,
+    wake: Option<Timestamp>,
+    due_from: u64,
 }
 
 impl Default for Network {
@@ -171,6 +189,7 @@ impl Network {
             now: Timestamp::ZERO,
             outgoing: Vec::with_capacity(64),
             earliest_wake: None,
+            receivers: Vec::new(),
         }
     }
 
@@ -333,17 +352,43 @@ impl Network {
         self.run_until(until, nodes);
     }
 
-    /// The earliest deadline of the nodes (kept until one changes).
-    fn earliest_wake(&mut self, nodes: usize) -> Option<Timestamp> {
-        if let Some((counted, wake)) = self.earliest_wake {
-            if counted == nodes {
-                return wake;
-            }
+    /// Node `i`'s wake and due time moved from `before` to `after`: the earliest of all
+    /// follows without a pass over every node, unless `i` held one of them and it moved later.
+    fn moved(&mut self, i: NodeIndex, before: (u64, u64), after: (u64, u64)) {
+        let Some(e) = self.earliest_wake.as_mut().filter(|e| i < e.nodes) else {
+            return;
+        };
+        let wake = nanos(e.wake);
+        let held = (before.0 == wake && after.0 > wake)
+            || (before.1 == e.due_from && after.1 > e.due_from);
+        if held {
+            self.earliest_wake = None;
+        } else {
+            let wake = wake.min(after.0);
+            e.wake = (wake != NEVER).then(|| Timestamp::from_nanos(wake));
+            e.due_from = e.due_from.min(after.1);
         }
-        let wake = self.slots.iter().take(nodes).map(|s| s.wake).min();
-        let wake = wake.filter(|w| *w != NEVER).map(Timestamp::from_nanos);
-        self.earliest_wake = Some((nodes, wake));
-        wake
+    }
+
+    /// The earliest wake and due time of the nodes (kept until one changes).
+    fn earliest(&mut self, nodes: usize) -> Earliest {
+        if let Some(earliest) = self.earliest_wake.filter(|e| e.nodes == nodes) {
+            return earliest;
+        }
+        let (wake, due_from) = self
+            .slots
+            .iter()
+            .take(nodes)
+            .fold((NEVER, NEVER), |(wake, due), s| {
+                (wake.min(s.wake), due.min(s.due_from))
+            });
+        let earliest = Earliest {
+            nodes,
+            wake: (wake != NEVER).then(|| Timestamp::from_nanos(wake)),
+            due_from,
+        };
+        self.earliest_wake = Some(earliest);
+        earliest
     }
 
     /// Advance each bus whose next activity (a transmission's start, a recovery) comes no
@@ -353,28 +398,25 @@ impl Network {
     /// arrives at its end of frame, an event like any other. Returns the earliest time
     /// something happens then: a node's deadline or a bus's next change.
     fn start_ahead(&mut self, nodes: usize, until: Timestamp) -> Option<Timestamp> {
-        let mut others = self.earliest_wake(nodes);
+        let until = until.as_nanos();
+        let mut others = nanos(self.earliest(nodes).wake);
         for b in &mut self.buses {
-            others = earliest([others, b.next_change().arrival]);
+            others = others.min(b.next_change().arrival);
         }
         // A bus advanced only moves its own changes, and its arrivals come no later than
         // before: the earliest event is gathered bus by bus as each is settled.
         let mut next = others;
         for b in &mut self.buses {
-            let change = b.next_change();
-            let change = match change.activity {
-                Some(start) if start < until && others.is_none_or(|o| start <= o) => {
-                    b.sim.advance(start);
-                    b.next = None;
-                    let advanced = b.next_change();
-                    others = earliest([others, advanced.arrival]);
-                    advanced
-                }
-                _ => change,
-            };
-            next = earliest([next, change.arrival, change.activity]);
+            let mut change = b.next_change();
+            if change.activity < until && change.activity <= others {
+                b.sim.advance(Timestamp::from_nanos(change.activity));
+                b.next = None;
+                change = b.next_change();
+                others = others.min(change.arrival);
+            }
+            next = next.min(change.arrival).min(change.activity);
         }
-        next
+        (next != NEVER).then(|| Timestamp::from_nanos(next))
     }
 
     /// Everything that happens at `self.now`: buses advanced, frames delivered (bus by bus, in
@@ -384,12 +426,11 @@ impl Network {
     /// later: a frame takes time on the wire, so nothing more arrives at this instant).
     fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
         let now = self.now;
-        self.slots.iter_mut().for_each(|s| s.received = false);
         for b in &mut self.buses {
             // A bus with nothing to do before now is left where it is (and, having nothing
             // due, delivers nothing now).
             let change = b.next_change();
-            if earliest([change.arrival, change.activity]).is_none_or(|at| at > now) {
+            if change.arrival.min(change.activity) > now.as_nanos() {
                 continue;
             }
             b.sim.advance(now);
@@ -415,35 +456,66 @@ impl Network {
                         // due now); it is polled when that comes, not for the confirmation.
                         if node.on_sent(r.timestamp, w.port, &r.frame) {
                             slot.set_deadline(node.next_deadline());
+                            // (Rare: only nodes that time something by its confirmation.)
                             self.earliest_wake = None;
                         }
                     } else {
                         node.on_frame(r.timestamp, w.port, &r.frame);
-                        slot.received = true;
+                        if !slot.received {
+                            slot.received = true;
+                            self.receivers.push(w.node);
+                        }
                     }
                 }
             }
         }
-        for (i, (node, slot)) in nodes.iter_mut().zip(self.slots.iter_mut()).enumerate() {
-            if !(slot.due(now) || slot.received) {
+        // The nodes due or given a frame, in node order. Polling one changes no other's
+        // deadline, so who is due is settled before the first poll.
+        let mut receivers = std::mem::take(&mut self.receivers);
+        if self.earliest(nodes.len()).due_from <= now.as_nanos() {
+            for i in 0..nodes.len() {
+                if self.slots.get(i).is_some_and(|s| s.due(now) || s.received) {
+                    self.poll(i, nodes);
+                }
+            }
+        } else {
+            receivers.sort_unstable();
+            for &i in &receivers {
+                self.poll(i, nodes);
+            }
+        }
+        for &i in &receivers {
+            if let Some(slot) = self.slots.get_mut(i) {
+                slot.received = false;
+            }
+        }
+        receivers.clear();
+        self.receivers = receivers;
+    }
+
+    /// Poll node `i` at `self.now` and submit what it sends.
+    fn poll(&mut self, i: NodeIndex, nodes: &mut [&mut dyn Node]) {
+        let now = self.now;
+        let (Some(node), Some(slot)) = (nodes.get_mut(i), self.slots.get_mut(i)) else {
+            return;
+        };
+        self.outgoing.clear();
+        node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
+        let before = (slot.wake, slot.due_from);
+        slot.set_polled(now, node.next_deadline());
+        let (after, dropped) = ((slot.wake, slot.due_from), slot.dropped);
+        self.moved(i, before, after);
+        if dropped {
+            return;
+        }
+        for (port, frame) in self.outgoing.drain(..) {
+            if self.dropped_ports.contains(&(i, port)) {
                 continue;
             }
-            self.outgoing.clear();
-            node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
-            slot.set_polled(now, node.next_deadline());
-            self.earliest_wake = None;
-            if slot.dropped {
-                continue;
-            }
-            for (port, frame) in self.outgoing.drain(..) {
-                if self.dropped_ports.contains(&(i, port)) {
-                    continue;
-                }
-                let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
-                if let Some((w, b)) = wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b))) {
-                    b.sim.submit(w.endpoint, frame, now);
-                    b.next = None;
-                }
+            let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
+            if let Some((w, b)) = wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b))) {
+                b.sim.submit(w.endpoint, frame, now);
+                b.next = None;
             }
         }
     }
@@ -456,8 +528,8 @@ impl NetBus {
             return cached;
         }
         let next = NextChange {
-            arrival: self.sim.next_routed_arrival(),
-            activity: self.sim.next_activity(),
+            arrival: nanos(self.sim.next_routed_arrival()),
+            activity: nanos(self.sim.next_activity()),
         };
         self.next = Some(next);
         next
