@@ -40,6 +40,7 @@ const NEVER: u64 = u64::MAX;
 /// reporting a change it does not make must not stall the run).
 const PASSES_PER_INSTANT: u32 = 64;
 
+#[derive(Clone, Copy)]
 struct Wire {
     node: NodeIndex,
     port: Port,
@@ -129,6 +130,17 @@ struct NetBus {
     next: Option<NextChange>,
 }
 
+/// The wire of `node`'s `port` (the first made, should there be several), among `wires` by
+/// node.
+fn port_wire(wires: &[Wire], wires_of: &[Vec<usize>], node: NodeIndex, port: Port) -> Option<Wire> {
+    wires_of
+        .get(node)?
+        .iter()
+        .filter_map(|&w| wires.get(w))
+        .find(|w| w.port == port)
+        .copied()
+}
+
 /// When a bus next changes, in its two kinds, in nanoseconds ([`NEVER`] for no time): the
 /// runner takes the least of every bus's at every pass, plain minimums over integers.
 #[derive(Clone, Copy)]
@@ -148,6 +160,9 @@ fn nanos(at: Option<Timestamp>) -> u64 {
 pub struct Network {
     buses: Vec<NetBus>,
     wires: Vec<Wire>,
+    /// Each node's wires (indices into `wires`, in the order they were made): where its
+    /// frames go, found without a pass over every wire.
+    wires_of: Vec<Vec<usize>>,
     /// Single ports whose output is dropped (one of a node's buses cut).
     dropped_ports: Vec<(NodeIndex, Port)>,
     /// Per node.
@@ -184,6 +199,7 @@ impl Network {
         Network {
             buses: Vec::new(),
             wires: Vec::new(),
+            wires_of: Vec::new(),
             dropped_ports: Vec::new(),
             slots: Vec::new(),
             now: Timestamp::ZERO,
@@ -225,6 +241,12 @@ impl Network {
         net_bus.next = None;
         net_bus.wire_of.resize(endpoint, None);
         net_bus.wire_of.push(Some(self.wires.len()));
+        if self.wires_of.len() <= node {
+            self.wires_of.resize_with(node.saturating_add(1), Vec::new);
+        }
+        if let Some(wires) = self.wires_of.get_mut(node) {
+            wires.push(self.wires.len());
+        }
         self.wires.push(Wire {
             node,
             port,
@@ -251,7 +273,7 @@ impl Network {
 
     /// Set what a port receives.
     pub fn set_filtering(&mut self, node: NodeIndex, port: Port, filtering: Filtering) {
-        if let Some(w) = self.wires.iter().find(|w| w.node == node && w.port == port) {
+        if let Some(w) = port_wire(&self.wires, &self.wires_of, node, port) {
             if let Some(b) = self.buses.get_mut(w.bus) {
                 b.sim.set_filtering(w.endpoint, filtering);
             }
@@ -512,7 +534,7 @@ impl Network {
             if self.dropped_ports.contains(&(i, port)) {
                 continue;
             }
-            let wire = self.wires.iter().find(|w| w.node == i && w.port == port);
+            let wire = port_wire(&self.wires, &self.wires_of, i, port);
             if let Some((w, b)) = wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b))) {
                 b.sim.submit(w.endpoint, frame, now);
                 b.next = None;
