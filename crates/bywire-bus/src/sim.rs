@@ -120,6 +120,8 @@ struct Pending {
 }
 
 struct Node {
+    /// Frames to send, in arbitration order (priority, then submission): the first that may
+    /// start is the node's offer.
     queue: Vec<Pending>,
     rx: VecDeque<Received>,
     /// Frames `rx` holds before new ones are dropped.
@@ -313,8 +315,6 @@ pub struct SimBus {
     acceptance: Vec<Option<(u32, u64)>>,
     /// Faulty senders, by identifier.
     tampered: Vec<(Id, Tamper)>,
-    /// Arbitration's offers (node, queue index, identifier, sequence), kept between frames.
-    offers: Vec<(NodeId, usize, Id, u64)>,
     nominal: u32,
     data: Option<u32>,
     /// The bus is idle from here on (after the last intermission).
@@ -356,7 +356,6 @@ impl SimBus {
             classic_headers: vec![None; HEADER_CACHE],
             acceptance: vec![None; ACCEPTANCE_CACHE],
             tampered: Vec::new(),
-            offers: Vec::new(),
             nominal: nominal.max(1),
             data,
             idle_from: Timestamp::ZERO,
@@ -489,14 +488,20 @@ impl SimBus {
                 self.queued.insert(at, node);
             }
         }
+        let priority = id.arbitration_key();
         for _ in 0..copies {
-            n.queue.push(Pending {
-                frame,
-                id,
-                priority: id.arbitration_key(),
-                submitted: at,
-                seq: self.next_seq,
-            });
+            // After every frame of the same or higher priority: those were submitted earlier.
+            let place = n.queue.partition_point(|p| p.priority <= priority);
+            n.queue.insert(
+                place,
+                Pending {
+                    frame,
+                    id,
+                    priority,
+                    submitted: at,
+                    seq: self.next_seq,
+                },
+            );
             self.next_seq += 1;
         }
         // The earliest start moves to this frame's if it is earlier (and its node takes
@@ -885,51 +890,48 @@ impl SimBus {
         }
     }
 
-    fn transmit_at(&mut self, start: Timestamp) {
-        // Every ready node offers its highest-priority frame; the lowest identifier wins.
-        let mut offers = std::mem::take(&mut self.offers);
-        offers.clear();
-        for (node, n) in self
-            .queued
+    /// A node's offer at `start`: the first frame in its queue that may start then (its
+    /// queue's index), unless the node is off the bus or suspended.
+    fn offer(n: &Node, start: Timestamp) -> Option<(usize, &Pending)> {
+        if n.confinement.state() == NodeState::BusOff || n.not_before > start {
+            return None;
+        }
+        n.queue
             .iter()
-            .filter_map(|&q| Some((q, self.nodes.get(q)?)))
-        {
-            if n.confinement.state() == NodeState::BusOff || n.not_before > start {
+            .enumerate()
+            .find(|(_, p)| p.submitted <= start)
+    }
+
+    fn transmit_at(&mut self, start: Timestamp) {
+        // Every ready node offers its highest-priority frame; the lowest identifier wins, the
+        // earlier submitted of two equal ones (submission numbers are unique on a bus).
+        let mut best: Option<(u32, u64, NodeId, usize)> = None;
+        for &node in &self.queued {
+            let Some((index, p)) = self.nodes.get(node).and_then(|n| Self::offer(n, start)) else {
                 continue;
-            }
-            let best = n
-                .queue
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| p.submitted <= start)
-                .min_by_key(|(_, p)| (p.priority, p.seq));
-            if let Some((i, p)) = best {
-                offers.push((node, i, p.id, p.seq));
+            };
+            if best.is_none_or(|(priority, seq, ..)| (p.priority, p.seq) < (priority, seq)) {
+                best = Some((p.priority, p.seq, node, index));
             }
         }
-        let Some(&(winner, index, id, _)) = offers
-            .iter()
-            .min_by_key(|&&(node, _, id, seq)| (id, seq, node))
-        else {
-            self.offers = offers;
+        let Some((_, _, winner, index)) = best else {
             return;
         };
         if self.report_arbitration {
-            for &(node, _, lost_id, _) in &offers {
-                if node != winner {
+            for &node in self.queued.iter().filter(|&&node| node != winner) {
+                if let Some((_, p)) = self.nodes.get(node).and_then(|n| Self::offer(n, start)) {
                     self.events.push(BusEvent::ArbitrationLost {
                         node,
-                        id: lost_id,
+                        id: p.id,
                         at: start,
                     });
                 }
             }
         }
-        // The buffer is kept for the next arbitration.
-        self.offers = offers;
         let Some(pending) = self.nodes.get(winner).and_then(|n| n.queue.get(index)) else {
             return;
         };
+        let id = pending.id;
         let (frame, submitted) = (pending.frame, pending.submitted);
         let Some((time, detected)) = self.timing(&frame) else {
             return;
@@ -975,9 +977,8 @@ impl SimBus {
             let eof = start.saturating_add(std::time::Duration::from_nanos(time.round() as u64));
             end = eof;
             if let Some(n) = self.nodes.get_mut(winner) {
-                // The queue's order means nothing (arbitration takes the least identifier and
-                // submission number): the last frame fills the gap.
-                n.queue.swap_remove(index);
+                // The rest stay in arbitration order.
+                n.queue.remove(index);
                 if n.queue.is_empty() {
                     self.queued.retain(|q| *q != winner);
                 }
