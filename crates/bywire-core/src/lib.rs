@@ -42,6 +42,7 @@ pub mod e2e;
 pub mod filter;
 pub mod frame;
 pub mod node;
+pub mod num;
 pub mod schedule;
 pub mod text;
 pub mod time;

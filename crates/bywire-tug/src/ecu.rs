@@ -29,6 +29,7 @@ use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
+use bywire_core::num::round_to_i32;
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::command::SteeringMode;
@@ -467,13 +468,13 @@ impl VehicleControlEcu {
             if let Some(Controlled::Drive(d)) = self.master.controlled(*steer) {
                 // A corner whose sensors disagree is not steered: its valve holds the wheel.
                 d.set_enabled(steering_on && faulted != Some(i));
-                d.set_setpoint(Setpoint::Position(round_i32(
+                d.set_setpoint(Setpoint::Position(round_to_i32(
                     (target.angle.to_degrees() + offset) * STEERING_UNITS_PER_DEG,
                 )));
             }
             if let Some(Controlled::Drive(d)) = self.master.controlled(drive) {
                 d.set_enabled(true);
-                d.set_setpoint(Setpoint::Velocity(round_i32(
+                d.set_setpoint(Setpoint::Velocity(round_to_i32(
                     target.speed * DRIVE_UNITS_PER_M,
                 )));
             }
@@ -745,10 +746,4 @@ struct WheelInputs {
     speed: u64,
     steering: u64,
     before: [(u64, u64); 4],
-}
-
-/// Round to the nearest `i32` (saturating).
-#[allow(clippy::cast_possible_truncation)]
-fn round_i32(value: f64) -> i32 {
-    libm::round(value).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
 }

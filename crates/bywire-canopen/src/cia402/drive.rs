@@ -331,9 +331,8 @@ fn find(od: &ObjectDictionary, at: &mut Option<Slot>, index: u16) -> Option<Slot
 }
 
 /// Round to the nearest integer (saturating at the ends of `i64`, as `as` does for floats).
-#[allow(clippy::cast_possible_truncation)]
 pub(crate) fn round(value: f64) -> i64 {
-    libm::round(value) as i64
+    bywire_core::num::round_to_i64(value)
 }
 
 #[allow(clippy::cast_precision_loss)]
