@@ -458,7 +458,7 @@ pub struct Tug {
     /// What the attacks achieved.
     pub security: SecurityWatch,
     /// Each bus's response times by identifier, in [`TugBus::ALL`]'s order.
-    response_times: [Vec<ResponseTimes>; 4],
+    response_times: [ResponseLog; 4],
 }
 
 /// How long one identifier's frames took on a bus: from being queued at the controller to the
@@ -824,7 +824,12 @@ impl Tug {
     /// Each bus's response times by identifier (lowest identifier first), under the bus's name.
     pub fn response_times(&self) -> [(&'static str, &[ResponseTimes]); 4] {
         let [a, b, c, d] = &self.response_times;
-        [("bus1", a), ("bus2", b), ("bus3", c), ("bus1b", d)]
+        [
+            ("bus1", &a.times),
+            ("bus2", &b.times),
+            ("bus3", &c.times),
+            ("bus1b", &d.times),
+        ]
     }
 
     /// Each bus's frames under the name its log file takes (`bus1`, `bus2`, `bus3`, `bus1b`).
@@ -1267,7 +1272,7 @@ impl Tug {
                         changes.push((bus, node, state));
                     }
                     BusEvent::Transmitted { id, latency_ns, .. } => {
-                        note_response(times, id, latency_ns);
+                        times.note(id, latency_ns);
                     }
                     _ => {}
                 }
@@ -1404,27 +1409,59 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
     Device::new(node, od, Drive::new().with_external_motor())
 }
 
-/// One more frame of `id` that took `latency_ns`; identifiers kept in order.
-fn note_response(times: &mut Vec<ResponseTimes>, id: Id, latency_ns: u64) {
-    let index = match times.binary_search_by_key(&id, |t| t.id) {
-        Ok(index) => index,
-        Err(index) => {
-            times.insert(
-                index,
-                ResponseTimes {
-                    id,
-                    count: 0,
-                    total_ns: 0,
-                    max_ns: 0,
-                },
-            );
-            index
+/// A bus's response times by identifier, lowest first.
+#[derive(Default)]
+struct ResponseLog {
+    times: Vec<ResponseTimes>,
+    /// Where each standard identifier's entry is in `times`, plus one (0: none yet), by its
+    /// value: every frame on every bus is counted, and a search by identifier would cost more
+    /// than the counting. Empty until the first frame.
+    standard: Vec<u16>,
+}
+
+impl ResponseLog {
+    /// One more frame of `id` that took `latency_ns`.
+    fn note(&mut self, id: Id, latency_ns: u64) {
+        let known = match id {
+            Id::Standard(s) => self
+                .standard
+                .get(usize::from(s.as_raw()))
+                .and_then(|at| usize::from(*at).checked_sub(1)),
+            Id::Extended(_) => self.times.binary_search_by_key(&id, |t| t.id).ok(),
+        };
+        let index = known.unwrap_or_else(|| self.insert(id));
+        if let Some(t) = self.times.get_mut(index) {
+            t.count += 1;
+            t.total_ns = t.total_ns.saturating_add(latency_ns);
+            t.max_ns = t.max_ns.max(latency_ns);
         }
-    };
-    if let Some(t) = times.get_mut(index) {
-        t.count += 1;
-        t.total_ns = t.total_ns.saturating_add(latency_ns);
-        t.max_ns = t.max_ns.max(latency_ns);
+    }
+
+    /// A new identifier in its place; the standard identifiers' places are worked out again.
+    fn insert(&mut self, id: Id) -> usize {
+        let index = self
+            .times
+            .binary_search_by_key(&id, |t| t.id)
+            .unwrap_or_else(|at| at);
+        self.times.insert(
+            index,
+            ResponseTimes {
+                id,
+                count: 0,
+                total_ns: 0,
+                max_ns: 0,
+            },
+        );
+        self.standard.clear();
+        self.standard.resize(0x800, 0);
+        for (at, t) in self.times.iter().enumerate() {
+            if let Id::Standard(standard) = t.id {
+                if let Some(slot) = self.standard.get_mut(usize::from(standard.as_raw())) {
+                    *slot = u16::try_from(at + 1).unwrap_or(0);
+                }
+            }
+        }
+        index
     }
 }
 
@@ -1464,5 +1501,46 @@ fn watchdog_name(watchdog: Watchdog) -> &'static str {
         Watchdog::Decelerating { .. } => "decelerating",
         Watchdog::FullBraking => "full_braking",
         Watchdog::Recovering { .. } => "recovering",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use proptest::prelude::*;
+    use std::collections::BTreeMap;
+
+    fn identifier() -> impl Strategy<Value = Id> {
+        prop_oneof![
+            (0u32..0x800).prop_map(|raw| Id::standard(raw).unwrap()),
+            (0u32..8).prop_map(|raw| Id::standard(raw).unwrap()),
+            (0u32..8).prop_map(|raw| Id::extended(raw << 18 | raw).unwrap()),
+            (0u32..0x2000_0000).prop_map(|raw| Id::extended(raw).unwrap()),
+        ]
+    }
+
+    proptest! {
+        /// Each identifier's count, total and longest, lowest identifier first, as a map by
+        /// identifier has them, in whatever order new identifiers come.
+        #[test]
+        fn response_times_are_kept_per_identifier_in_order(
+            frames in proptest::collection::vec((identifier(), 0u64..1_000_000), 0..300),
+        ) {
+            let mut log = ResponseLog::default();
+            let mut expected: BTreeMap<Id, (u64, u64, u64)> = BTreeMap::new();
+            for (id, latency) in frames {
+                log.note(id, latency);
+                let e = expected.entry(id).or_default();
+                *e = (e.0 + 1, e.1 + latency, e.2.max(latency));
+            }
+            let got: Vec<(Id, (u64, u64, u64))> = log
+                .times
+                .iter()
+                .map(|t| (t.id, (t.count, t.total_ns, t.max_ns)))
+                .collect();
+            prop_assert_eq!(got, expected.into_iter().collect::<Vec<_>>());
+        }
     }
 }
