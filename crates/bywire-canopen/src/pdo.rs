@@ -276,6 +276,10 @@ fn check_mapped(
 #[derive(Debug, Clone, Default)]
 pub struct Pdos {
     pdos: alloc::vec::Vec<Pdo>,
+    /// The PDOs a poll has work for (an RPDO's deadline, an event-driven or requested TPDO),
+    /// by index, listed again whenever one is compiled (within the capacity it was made
+    /// with): a device is polled many times a cycle, and most of its PDOs wait for SYNC.
+    timed: alloc::vec::Vec<usize>,
 }
 
 /// Something a PDO did that the device reports.
@@ -304,7 +308,26 @@ impl Pdos {
                 pdos.push(pdo);
             }
         }
-        Pdos { pdos }
+        let mut pdos = Pdos {
+            timed: alloc::vec::Vec::with_capacity(pdos.len()),
+            pdos,
+        };
+        pdos.list_timed();
+        pdos
+    }
+
+    fn list_timed(&mut self) {
+        self.timed.clear();
+        for (index, pdo) in self.pdos.iter().enumerate() {
+            let timed = pdo.is_enabled()
+                && match pdo.direction {
+                    Direction::Receive => !pdo.event_timer.is_zero(),
+                    Direction::Transmit => matches!(pdo.transmission, 252..=255),
+                };
+            if timed {
+                self.timed.push(index);
+            }
+        }
     }
 
     /// Recompile after a parameter object changed (no allocation).
@@ -317,6 +340,7 @@ impl Pdos {
             {
                 compile(od, pdo);
             }
+            self.list_timed();
         }
     }
 
@@ -325,6 +349,7 @@ impl Pdos {
         for pdo in &mut self.pdos {
             compile(od, pdo);
         }
+        self.list_timed();
     }
 
     /// Every PDO.
@@ -437,7 +462,10 @@ impl Pdos {
         out: &mut dyn FnMut(Frame),
         events: &mut dyn FnMut(PdoEvent),
     ) {
-        for pdo in self.pdos.iter_mut().filter(|p| p.is_enabled()) {
+        for &index in &self.timed {
+            let Some(pdo) = self.pdos.get_mut(index) else {
+                continue;
+            };
             match pdo.direction {
                 Direction::Receive => {
                     if let Some(last) = pdo.last_event {
@@ -516,9 +544,10 @@ impl Pdos {
 
     /// When an event timer, inhibit time or RPDO deadline next expires.
     pub fn next_deadline(&self) -> Option<Timestamp> {
-        self.pdos
+        self.timed
             .iter()
-            .filter(|p| p.is_enabled() && !p.event_timer.is_zero())
+            .filter_map(|&index| self.pdos.get(index))
+            .filter(|p| !p.event_timer.is_zero())
             .filter_map(|p| match p.direction {
                 Direction::Receive if !p.deadline_reported => {
                     p.last_event.map(|t| t.saturating_add(p.event_timer))
@@ -877,7 +906,8 @@ mod tests {
         od.set(0x1800, 2, &[255]).unwrap();
         od.set(0x1800, 5, &100u16.to_le_bytes()).unwrap();
         od.set(0x1800, 3, &500u16.to_le_bytes()).unwrap();
-        pdos.reload_all(&od);
+        // As a device does when its parameter object is written: that PDO alone.
+        pdos.reload(&od, 0x1800);
         sent.clear();
         for ms in 0..=250 {
             pdos.poll(
@@ -894,7 +924,7 @@ mod tests {
         assert_eq!(sent.len(), 3);
         // RPDO deadline monitoring.
         od.set(0x1400, 5, &50u16.to_le_bytes()).unwrap();
-        pdos.reload_all(&od);
+        pdos.reload(&od, 0x1400);
         let frame = crate::nmt::classic(0x201, &[0; 6]);
         pdos.on_frame(
             Timestamp::ZERO,
