@@ -123,6 +123,9 @@ struct Node {
     /// Frames to send, in arbitration order (priority, then submission): the first that may
     /// start is the node's offer.
     queue: Vec<Pending>,
+    /// The earliest submission time in `queue` (meaningless while it is empty): the bus asks
+    /// for it after every frame, and one node's queue changes at a time.
+    first_submitted: Timestamp,
     rx: VecDeque<Received>,
     /// Frames `rx` holds before new ones are dropped.
     rx_capacity: usize,
@@ -423,6 +426,7 @@ impl SimBus {
             confinement: Confinement::default(),
             not_before: Timestamp::ZERO,
             recessive_run: 0,
+            first_submitted: Timestamp::ZERO,
         });
         self.forget_acceptance();
         self.ready.set(None);
@@ -487,7 +491,9 @@ impl SimBus {
             if let Err(at) = self.queued.binary_search(&node) {
                 self.queued.insert(at, node);
             }
+            n.first_submitted = at;
         }
+        n.first_submitted = n.first_submitted.min(at);
         let priority = id.arbitration_key();
         for _ in 0..copies {
             // After every frame of the same or higher priority: those were submitted earlier.
@@ -607,7 +613,7 @@ impl SimBus {
                 .iter()
                 .filter_map(|node| self.nodes.get(*node))
                 .filter(|n| n.confinement.state() != NodeState::BusOff)
-                .flat_map(|n| n.queue.iter().map(move |p| p.submitted.max(n.not_before)))
+                .map(|n| n.first_submitted.max(n.not_before))
                 .min();
             self.ready.set(Some(ready));
             ready
@@ -979,6 +985,12 @@ impl SimBus {
             if let Some(n) = self.nodes.get_mut(winner) {
                 // The rest stay in arbitration order.
                 n.queue.remove(index);
+                n.first_submitted = n
+                    .queue
+                    .iter()
+                    .map(|p| p.submitted)
+                    .min()
+                    .unwrap_or(Timestamp::ZERO);
                 if n.queue.is_empty() {
                     self.queued.retain(|q| *q != winner);
                 }
