@@ -44,7 +44,12 @@ impl Timestamp {
 
     /// `self + d`, or `None` past the end of representable time.
     pub fn checked_add(self, d: Duration) -> Option<Timestamp> {
-        let nanos = u64::try_from(d.as_nanos()).ok()?;
+        // In 64 bits throughout (`Duration::as_nanos` is 128-bit): every deadline is one of
+        // these.
+        let nanos = d
+            .as_secs()
+            .checked_mul(1_000_000_000)?
+            .checked_add(u64::from(d.subsec_nanos()))?;
         self.0.checked_add(nanos).map(Timestamp)
     }
 

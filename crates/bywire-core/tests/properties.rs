@@ -204,3 +204,23 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// A deadline is the time plus the duration in nanoseconds, whatever their sizes, or
+    /// nothing past the end of representable time: as 128-bit arithmetic has it.
+    #[test]
+    fn a_timestamp_plus_a_duration_is_exact_or_none(
+        at in prop_oneof![any::<u64>(), 0u64..1 << 40, u64::MAX - (1 << 40)..=u64::MAX],
+        secs in prop_oneof![any::<u64>(), 0u64..1 << 20, 18_446_744_073u64..18_446_744_074],
+        nanos in 0u32..1_000_000_000,
+    ) {
+        use bywire_core::Timestamp;
+        use std::time::Duration;
+        let d = Duration::new(secs, nanos);
+        let exact = u128::from(at) + d.as_nanos();
+        let expected = u64::try_from(exact).ok().map(Timestamp::from_nanos);
+        let t = Timestamp::from_nanos(at);
+        prop_assert_eq!(t.checked_add(d), expected);
+        prop_assert_eq!(t.saturating_add(d), expected.unwrap_or(Timestamp::from_nanos(u64::MAX)));
+    }
+}
