@@ -85,6 +85,17 @@ impl Params {
     }
 }
 
+/// What a drive's published values are worked out from, floats as their bits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PublishedFrom {
+    state: State,
+    mode: Option<Mode>,
+    target_velocity: u64,
+    position_target: u64,
+    position: u64,
+    velocity: u64,
+}
+
 /// A CiA 402 drive: the application of a [`crate::device::Device`].
 #[derive(Debug, Clone)]
 pub struct Drive {
@@ -103,6 +114,10 @@ pub struct Drive {
     /// Where those four objects were last found in the dictionary (they are written every
     /// step a motor moves).
     published_at: [Option<Slot>; 4],
+    /// What they were last worked out from: the same again gives the same values, and a
+    /// drive publishes after every write of a setpoint, several times between two steps of
+    /// its motor.
+    published_from: Option<PublishedFrom>,
     /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
     /// and is told the actual position and velocity.
     external: bool,
@@ -146,6 +161,7 @@ impl Drive {
             params: None,
             published: None,
             published_at: [None; 4],
+            published_from: None,
             external: false,
             demand: 0.0,
             position_per_velocity: 1.0,
@@ -234,6 +250,20 @@ impl Drive {
     }
 
     fn publish(&mut self, od: &mut ObjectDictionary) {
+        // Everything the values depend on (with the parameters cached: without them, the
+        // dictionary too).
+        let from = self.params.map(|params| PublishedFrom {
+            state: self.state,
+            mode: params.mode,
+            target_velocity: params.target_velocity.to_bits(),
+            position_target: self.position_target.to_bits(),
+            position: self.motor.position.to_bits(),
+            velocity: self.motor.velocity.to_bits(),
+        });
+        if from.is_some() && from == self.published_from {
+            return;
+        }
+        self.published_from = from;
         let mut statusword = self.state.statusword_bits();
         if self.state.is_powered()
             || matches!(self.state, State::SwitchedOn | State::ReadyToSwitchOn)
@@ -538,5 +568,68 @@ impl Application for Drive {
             ..Drive::new()
         };
         self.publish(od);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use crate::cia402::drive_dictionary;
+    use crate::device::Device;
+    use crate::nmt::classic;
+    use bywire_core::frame::Frame;
+
+    fn statusword(device: &Device<Drive>) -> u16 {
+        u16::try_from(device.od().get_unsigned(object::STATUSWORD, 0).unwrap()).unwrap()
+    }
+
+    fn targets(position: i32, velocity: i32) -> Frame {
+        let mut data = [0u8; 8];
+        data[..4].copy_from_slice(&position.to_le_bytes());
+        data[4..].copy_from_slice(&velocity.to_le_bytes());
+        classic(0x301, &data)
+    }
+
+    /// A new target written between two steps of the motor (nothing else changed) changes
+    /// the published statusword at once: what the values are worked out from includes it.
+    #[test]
+    fn target_reached_follows_a_new_target_with_the_motor_unchanged() {
+        let at = Timestamp::from_millis;
+        let mut device = Device::new(1, drive_dictionary(1), Drive::new().with_external_motor());
+        let mut sent = |_: Frame| {};
+        device.poll(at(0), &mut sent);
+        device.on_frame(at(1), &classic(0x000, &[0x01, 1]));
+        // Profile velocity, walked to Operation enabled.
+        for controlword in [0x06u16, 0x07, 0x0F] {
+            let [lo, hi] = controlword.to_le_bytes();
+            device.on_frame(at(2), &classic(0x201, &[lo, hi, 3]));
+            device.poll(at(2), &mut sent);
+        }
+        device.on_frame(at(3), &targets(0, 500));
+        device.app_mut().0.set_actual(0.0, 500.0);
+        device.poll(at(4), &mut sent);
+        assert_eq!(device.app().state(), State::OperationEnabled);
+        assert_ne!(statusword(&device) & 0x0400, 0, "at its target velocity");
+        device.on_frame(at(4), &targets(0, 800));
+        assert_eq!(statusword(&device) & 0x0400, 0, "a new target velocity");
+        device.on_frame(at(4), &targets(0, 500));
+        assert_ne!(
+            statusword(&device) & 0x0400,
+            0,
+            "back to the one it runs at"
+        );
+        // Profile position, the motor still: a new set point is a target not yet reached.
+        device.on_frame(at(5), &classic(0x201, &[0x0F, 0, 1]));
+        device.on_frame(at(5), &targets(0, 0));
+        device.app_mut().0.set_actual(0.0, 0.0);
+        device.on_frame(at(5), &classic(0x201, &[0x1F, 0, 1]));
+        device.poll(at(5), &mut sent);
+        assert_ne!(statusword(&device) & 0x0400, 0, "at its set point");
+        device.on_frame(at(6), &classic(0x201, &[0x0F, 0, 1]));
+        device.on_frame(at(6), &targets(1_000, 0));
+        device.on_frame(at(6), &classic(0x201, &[0x1F, 0, 1]));
+        assert_eq!(statusword(&device) & 0x0400, 0, "a new set point");
     }
 }
