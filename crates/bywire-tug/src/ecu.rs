@@ -162,6 +162,9 @@ pub struct VehicleControlEcu {
     /// them) and what came out: the same again gives the same, so a poll between commands
     /// reuses it.
     last_wheel_states: Option<(WheelInputs, [WheelState; 4])>,
+    /// What the drives were last given: the same commands again are not given again (the
+    /// master's controllers keep them), so a poll between commands leaves them be.
+    last_commands: Option<DriveCommands>,
     drives_lost: bool,
     status: StatusInputs,
     next_report: Timestamp,
@@ -217,6 +220,7 @@ impl VehicleControlEcu {
             swerve: four_wheel(geometry.wheelbase, geometry.track),
             wheel_targets: [WheelState::default(); 4],
             last_wheel_states: None,
+            last_commands: None,
             drives_lost: false,
             status: StatusInputs::default(),
             next_report: Timestamp::ZERO,
@@ -269,8 +273,10 @@ impl VehicleControlEcu {
         &self.supervisor
     }
 
-    /// The CANopen master (its drive controllers' states).
+    /// The CANopen master (its drive controllers' states). Whatever is changed through it,
+    /// the next poll gives the drives their commands again.
     pub fn master(&mut self) -> &mut Master {
+        self.last_commands = None;
         &mut self.master
     }
 
@@ -459,6 +465,16 @@ impl VehicleControlEcu {
         self.wheel_targets = targets;
         let steering_on = a.steering_enabled || a.motors_enabled || sweep.is_some();
         let faulted = self.plausibility.faulted().map(|f| f.corner());
+        let commands = DriveCommands {
+            targets: targets.map(|w| (w.angle.to_bits(), w.speed.to_bits())),
+            offsets: self.offsets.map(f64::to_bits),
+            steering_on,
+            faulted,
+        };
+        if self.last_commands == Some(commands) {
+            return;
+        }
+        self.last_commands = Some(commands);
         for (i, (target, (steer, drive))) in targets
             .iter()
             .zip(STEERING_NODES.iter().zip(DRIVE_NODES))
@@ -738,6 +754,16 @@ impl Node for VehicleControlEcu {
     }
 }
 
+/// What the drives are given, bit for bit: each wheel's target angle and speed, the steering
+/// trims, whether steering is on and which corner is not steered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct DriveCommands {
+    targets: [(u64, u64); 4],
+    offsets: [u64; 4],
+    steering_on: bool,
+    faulted: Option<usize>,
+}
+
 /// What the wheel targets are worked out from, bit for bit: the steering mode, speed (m/s),
 /// steering angle (degrees) and the targets before (each wheel's angle and speed).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -746,4 +772,39 @@ struct WheelInputs {
     speed: u64,
     steering: u64,
     before: [(u64, u64); 4],
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn drive_setpoint(ecu: &mut VehicleControlEcu, node: u8) -> Setpoint {
+        match ecu.master().controlled(node) {
+            Some(Controlled::Drive(d)) => d.setpoint(),
+            _ => panic!("no drive at node {node}"),
+        }
+    }
+
+    /// The commands are not given again while they stay the same, but a change made through
+    /// `master()` is undone by the next poll, as it was when every poll gave them all.
+    #[test]
+    fn the_drives_get_their_commands_again_after_a_change_through_the_master() {
+        let geometry = Geometry {
+            wheelbase: 2.5,
+            track: 1.5,
+        };
+        let mut ecu = VehicleControlEcu::new(SupervisorConfig::default(), geometry);
+        let mut out = |_: Port, _: Frame| {};
+        ecu.poll(Timestamp::from_millis(1), &mut out);
+        let node = DRIVE_NODES[0];
+        let given = drive_setpoint(&mut ecu, node);
+        assert_eq!(given, Setpoint::Velocity(0));
+        if let Some(Controlled::Drive(d)) = ecu.master().controlled(node) {
+            d.set_setpoint(Setpoint::Velocity(1_234));
+        }
+        ecu.poll(Timestamp::from_millis(2), &mut out);
+        assert_eq!(drive_setpoint(&mut ecu, node), given);
+    }
 }

@@ -147,6 +147,11 @@ impl DriveController {
         self.setpoint = setpoint;
     }
 
+    /// The target it follows once enabled.
+    pub fn setpoint(&self) -> Setpoint {
+        self.setpoint
+    }
+
     /// Stop the drive now (quick stop) and hold it until acknowledged.
     pub fn stop(&mut self, reason: StopReason) {
         self.stopped.stop(reason);
