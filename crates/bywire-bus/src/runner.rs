@@ -23,6 +23,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
 use crate::{Bus, BusError, BusTx};
@@ -216,10 +217,7 @@ impl Runner {
             if self.attached.iter().all(|a| a.tx.is_none()) {
                 return Err(BusError::Closed);
             }
-            let deadline = [node.next_deadline(), hooks.wake_at()]
-                .into_iter()
-                .flatten()
-                .min();
+            let deadline = earliest([node.next_deadline(), hooks.wake_at()]);
             let wait = deadline
                 .map_or(MAX_WAIT, |at| at.saturating_since(self.now()))
                 .min(MAX_WAIT);

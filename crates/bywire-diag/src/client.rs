@@ -11,6 +11,7 @@ use core::fmt;
 use core::time::Duration;
 
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
 use crate::isotp::{IsoTp, IsoTpConfig, IsoTpError, IsoTpEvent, SendError};
@@ -392,14 +393,11 @@ impl UdsClient {
             State::Idle => None,
             State::Sending { deadline, .. } | State::Awaiting { deadline, .. } => Some(deadline),
         };
-        [
+        earliest([
             self.channel.next_deadline(),
             request,
             self.next_tester_present,
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        ])
     }
 }
 

@@ -17,6 +17,7 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 
 use crate::isotp::{IsoTp, IsoTpConfig, IsoTpEvent};
@@ -824,10 +825,7 @@ impl UdsServer {
         // An answer waits for the one before it to be sent (the channel says when).
         let out = (!self.outbox.is_empty() && !self.channel.sending()).then_some(Timestamp::ZERO);
         let pending = self.pending.map(|(_, due, reminder)| due.min(reminder));
-        [self.channel.next_deadline(), s3, out, pending]
-            .into_iter()
-            .flatten()
-            .min()
+        earliest([self.channel.next_deadline(), s3, out, pending])
     }
 }
 

@@ -23,6 +23,7 @@ use std::time::Duration;
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::{Bus, BusError};
 use bywire_core::node::Port;
+use bywire_core::time::earliest;
 use bywire_core::Timestamp;
 use bywire_secoc::store::FreshnessStore;
 use bywire_vehicle::ads::{Ads, AdsCommand};
@@ -508,10 +509,7 @@ impl Hooks<AdsSide> for VehicleInterface<'_> {
 
     fn wake_at(&self) -> Option<Timestamp> {
         let engage = self.engage.map(|(_, _, deadline)| deadline);
-        [Some(self.next_report), engage, self.braking_until]
-            .into_iter()
-            .flatten()
-            .min()
+        earliest([Some(self.next_report), engage, self.braking_until])
     }
 
     fn bus_lost(&mut self, _: &mut AdsSide, _: Timestamp, port: Port, error: &BusError) {

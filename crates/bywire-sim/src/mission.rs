@@ -11,6 +11,7 @@ use core::time::Duration;
 use bywire_control::kinematics::{four_wheel, Motion, Point, Pose, WheelState};
 use bywire_control::path::{Geometry, Lookahead, Path, PurePursuit};
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 use bywire_tug::secured::TugWire;
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
@@ -523,9 +524,6 @@ impl Node for AdsDriver {
         if !self.planning {
             return None;
         }
-        [Node::next_deadline(&self.ads), Some(self.next_plan)]
-            .into_iter()
-            .flatten()
-            .min()
+        earliest([Node::next_deadline(&self.ads), Some(self.next_plan)])
     }
 }

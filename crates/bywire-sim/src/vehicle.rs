@@ -16,6 +16,7 @@ use core::time::Duration;
 
 use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
@@ -229,14 +230,11 @@ impl<W: VehicleWire> Node for SimulatedVehicle<W> {
         let plant = self
             .last_step
             .map_or(Timestamp::ZERO, |t| t.saturating_add(self.params.step));
-        [
+        earliest([
             Node::next_deadline(&self.supervisor),
             Some(self.next_report),
             Some(plant),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        ])
     }
 }
 
