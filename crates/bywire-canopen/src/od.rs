@@ -787,7 +787,12 @@ impl ObjectDictionary {
 
     /// A signed value, or `None` if absent or not an integer.
     pub fn get_signed(&self, index: u16, sub: u8) -> Option<i64> {
-        match self.entry(index, sub).ok()?.number()? {
+        self.get_signed_at(self.locate(index, sub).ok()?)
+    }
+
+    /// [`ObjectDictionary::get_signed`] through a slot.
+    pub fn get_signed_at(&self, slot: Slot) -> Option<i64> {
+        match self.at(slot)?.number()? {
             Number::Int(v) => Some(v),
             Number::Uint(v) => i64::try_from(v).ok(),
             Number::Real(_) => None,

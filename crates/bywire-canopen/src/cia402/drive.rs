@@ -72,7 +72,11 @@ impl Params {
 
     /// Read the one parameter `index` holds again (nothing for other objects).
     fn update(&mut self, od: &ObjectDictionary, index: u16) {
-        let value = || od.get_signed(index, 0).unwrap_or(0);
+        self.update_to(index, || od.get_signed(index, 0).unwrap_or(0));
+    }
+
+    /// The parameter `index` holds is now `value` (nothing for other objects).
+    fn update_to(&mut self, index: u16, value: impl FnOnce() -> i64) {
         match index {
             object::MODES => self.mode = Mode::from_code(value()),
             object::PROFILE_ACCELERATION => self.acceleration = real(value()).max(1.0),
@@ -114,6 +118,9 @@ pub struct Drive {
     /// Where those four objects were last found in the dictionary (they are written every
     /// step a motor moves).
     published_at: [Option<Slot>; 4],
+    /// Where the objects a master writes every cycle (controlword, mode, targets) were last
+    /// found in the dictionary: each write is read back without a search.
+    written_at: [Option<Slot>; 4],
     /// What they were last worked out from: the same again gives the same values, and a
     /// drive publishes after every write of a setpoint, several times between two steps of
     /// its motor.
@@ -162,6 +169,7 @@ impl Drive {
             published: None,
             published_at: [None; 4],
             published_from: None,
+            written_at: [None; 4],
             external: false,
             demand: 0.0,
             position_per_velocity: 1.0,
@@ -310,6 +318,26 @@ impl Drive {
         }
     }
 
+    /// The value of `index` (sub-index 0) as a signed integer, 0 if absent: the objects a
+    /// master writes every cycle through their remembered slots, others by a search.
+    fn written(&mut self, od: &ObjectDictionary, index: u16) -> i64 {
+        const EVERY_CYCLE: [u16; 4] = [
+            object::CONTROLWORD,
+            object::MODES,
+            object::TARGET_VELOCITY,
+            object::TARGET_POSITION,
+        ];
+        let at = EVERY_CYCLE
+            .iter()
+            .position(|i| *i == index)
+            .and_then(|k| self.written_at.get_mut(k));
+        let value = match at {
+            Some(at) => find(od, at, index).and_then(|slot| od.get_signed_at(slot)),
+            None => od.get_signed(index, 0),
+        };
+        value.unwrap_or(0)
+    }
+
     fn target_reached(&self, od: &ObjectDictionary) -> bool {
         match (self.state, self.mode(od)) {
             (
@@ -390,16 +418,19 @@ impl Application for Drive {
     fn on_written(&mut self, _now: Timestamp, od: &mut ObjectDictionary, index: u16, _sub: u8) {
         // A cached parameter is read again when its object is written (targets of velocity
         // and the mode arrive every cycle: one read each, not all six).
-        match self.params.as_mut() {
-            Some(params) => params.update(od, index),
+        match self.params {
+            Some(_) if Params::INDICES.contains(&index) => {
+                let value = self.written(od, index);
+                if let Some(params) = self.params.as_mut() {
+                    params.update_to(index, || value);
+                }
+            }
             None if Params::INDICES.contains(&index) => self.params = Some(Params::read(od)),
-            None => {}
+            _ => {}
         }
         match index {
             object::CONTROLWORD => {
-                let controlword =
-                    u16::try_from(od.get_unsigned(object::CONTROLWORD, 0).unwrap_or(0))
-                        .unwrap_or(0);
+                let controlword = u16::try_from(self.written(od, index)).unwrap_or(0);
                 let command = Command::decode(controlword, self.previous_controlword);
                 let new_set_point = controlword & controlword::NEW_SET_POINT != 0
                     && self.previous_controlword & controlword::NEW_SET_POINT == 0;
@@ -411,12 +442,11 @@ impl Application for Drive {
                 }
                 self.apply(Event::Command(command), od);
                 if new_set_point && self.mode(od) == Some(Mode::ProfilePosition) {
-                    self.position_target =
-                        real(od.get_signed(object::TARGET_POSITION, 0).unwrap_or(0));
+                    self.position_target = real(self.written(od, object::TARGET_POSITION));
                 }
             }
             object::TARGET_POSITION if self.mode(od) == Some(Mode::CyclicSynchronousPosition) => {
-                self.position_target = real(od.get_signed(object::TARGET_POSITION, 0).unwrap_or(0));
+                self.position_target = real(self.written(od, object::TARGET_POSITION));
             }
             _ => self.publish(od),
         }
