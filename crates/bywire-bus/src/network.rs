@@ -458,7 +458,9 @@ impl Network {
             b.sim.advance(now);
             b.next = None;
             // Frames in the order they arrived, each to its wires in the order they were made.
-            while let Some(routed) = b.sim.next_routed(now) {
+            // Each frame handed over where it lies (a frame and its addressing are a few
+            // cache lines), then passed.
+            while let Some(routed) = b.sim.peek_routed(now) {
                 let mut to = routed.to;
                 while to != 0 {
                     let endpoint = to.trailing_zeros() as usize;
@@ -489,6 +491,7 @@ impl Network {
                         }
                     }
                 }
+                b.sim.pass_routed();
             }
         }
         // The nodes due or given a frame, in node order. Polling one changes no other's

@@ -397,6 +397,19 @@ impl SimBus {
         self.routed_rx.pop_front()
     }
 
+    /// The next frame for the routed nodes if it arrived by `at`, left in place (a runner
+    /// hands it to each node, then [`SimBus::pass_routed`]).
+    pub fn peek_routed(&self, at: Timestamp) -> Option<&Routed> {
+        self.routed_rx
+            .front()
+            .filter(|r| r.received.timestamp <= at)
+    }
+
+    /// Done with the next frame for the routed nodes.
+    pub fn pass_routed(&mut self) {
+        let _ = self.routed_rx.pop_front();
+    }
+
     /// When the next frame for the routed nodes arrives (already decided: a transmission
     /// that started).
     pub fn next_routed_arrival(&self) -> Option<Timestamp> {
