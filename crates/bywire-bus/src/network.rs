@@ -18,7 +18,7 @@
 use std::time::Duration;
 
 use bywire_core::node::{Node, Port};
-use bywire_core::{Frame, Timestamp};
+use bywire_core::Timestamp;
 
 use crate::sim::{NodeId, SimBus, MAX_ROUTED};
 use crate::Filtering;
@@ -168,7 +168,6 @@ pub struct Network {
     /// Per node.
     slots: Vec<Slot>,
     now: Timestamp,
-    outgoing: Vec<(Port, Frame)>,
     /// The earliest wake and the earliest due time of the first `nodes` nodes, kept until a
     /// node's deadline changes (the runner looks for them at every pass and every instant;
     /// they change only when a node was asked).
@@ -203,7 +202,6 @@ impl Network {
             dropped_ports: Vec::new(),
             slots: Vec::new(),
             now: Timestamp::ZERO,
-            outgoing: Vec::with_capacity(64),
             earliest_wake: None,
             receivers: Vec::new(),
         }
@@ -524,25 +522,25 @@ impl Network {
         let (Some(node), Some(slot)) = (nodes.get_mut(i), self.slots.get_mut(i)) else {
             return;
         };
-        self.outgoing.clear();
-        node.poll(now, &mut |port, frame| self.outgoing.push((port, frame)));
-        let before = (slot.wake, slot.due_from);
-        slot.set_polled(now, node.next_deadline());
-        let (after, dropped) = ((slot.wake, slot.due_from), slot.dropped);
-        self.moved(i, before, after);
-        if dropped {
-            return;
-        }
-        for (port, frame) in self.outgoing.drain(..) {
-            if self.dropped_ports.contains(&(i, port)) {
-                continue;
+        // What it sends goes to its buses as it is sent (they take it at `now`, whatever
+        // else the node does in this poll), unless its output is dropped.
+        let dropped = slot.dropped;
+        let (wires, wires_of, buses) = (&self.wires, &self.wires_of, &mut self.buses);
+        let dropped_ports = &self.dropped_ports;
+        node.poll(now, &mut |port, frame| {
+            if dropped || dropped_ports.contains(&(i, port)) {
+                return;
             }
-            let wire = port_wire(&self.wires, &self.wires_of, i, port);
-            if let Some((w, b)) = wire.and_then(|w| self.buses.get_mut(w.bus).map(|b| (w, b))) {
+            let wire = port_wire(wires, wires_of, i, port);
+            if let Some((w, b)) = wire.and_then(|w| buses.get_mut(w.bus).map(|b| (w, b))) {
                 b.sim.submit(w.endpoint, frame, now);
                 b.next = None;
             }
-        }
+        });
+        let before = (slot.wake, slot.due_from);
+        slot.set_polled(now, node.next_deadline());
+        let after = (slot.wake, slot.due_from);
+        self.moved(i, before, after);
     }
 }
 
@@ -566,6 +564,7 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
     use super::*;
+    use bywire_core::Frame;
     use bywire_core::Id;
 
     /// Sends one frame every 10 ms on its main port, counts what it hears.
