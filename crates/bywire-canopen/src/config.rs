@@ -319,7 +319,10 @@ impl BusConfig {
 impl BusConfig {
     /// The master this description calls for: its heartbeat, SYNC and cycle, every node
     /// monitored with its consumer time, and a controller for every driven node (disabled
-    /// until the application enables it: fail closed).
+    /// until the application enables it: fail closed). A CiA 402 drive's statusword may be
+    /// silent twice its heartbeat time before its controller stops it for that: a drive that
+    /// is gone stops both at once, and its heartbeat's loss is what happened (with equal times
+    /// the two would race, by where each last frame fell).
     pub fn master(&self) -> crate::master::Master {
         use crate::master::{Controlled, Master};
         let mut master =
@@ -328,9 +331,13 @@ impl BusConfig {
             let _ = master.monitor(node.id, node.heartbeat_timeout);
             match node.driver {
                 Driver::None => {}
-                Driver::Cia402(mode) => master.add(Controlled::Drive(
-                    crate::cia402::DriveController::new(node.id, mode, node.heartbeat_timeout),
-                )),
+                Driver::Cia402(mode) => {
+                    master.add(Controlled::Drive(crate::cia402::DriveController::new(
+                        node.id,
+                        mode,
+                        node.heartbeat_timeout.saturating_mul(2),
+                    )))
+                }
                 Driver::Roboteq(command) => master.add(Controlled::Roboteq(
                     crate::roboteq::RoboteqMotor::new(node.id, command),
                 )),
@@ -350,6 +357,27 @@ mod tests {
         BusConfig::parse(text, "bus.toml", Path::new("."))
             .unwrap_err()
             .to_string()
+    }
+
+    /// A gone drive stops its heartbeat and its statusword at once: the statusword is given
+    /// twice the heartbeat time, so the heartbeat's loss (250 ms) is what is reported.
+    #[test]
+    fn a_drive_controller_waits_twice_the_heartbeat_time_for_its_statusword() {
+        use crate::cia402::StopReason;
+        use crate::master::Controlled;
+        let bus = BusConfig::parse(BUS, "bus.toml", Path::new(".")).unwrap();
+        let mut master = bus.master();
+        let Some(Controlled::Drive(drive)) = master.controlled(3) else {
+            panic!("no controller for the drive");
+        };
+        drive.set_enabled(true);
+        let at = bywire_core::Timestamp::from_millis;
+        // Operation enabled, from the drive's TPDO1.
+        drive.on_frame(at(0), &crate::nmt::classic(0x183, &[0x27, 0x02, 3]));
+        drive.poll(at(499), &mut |_| {});
+        assert_eq!(drive.stopped(), None);
+        drive.poll(at(500), &mut |_| {});
+        assert_eq!(drive.stopped(), Some(StopReason::StatusTimeout));
     }
 
     #[test]
