@@ -178,11 +178,11 @@ pub struct Network {
 }
 
 /// The soonest any of the first `nodes` nodes must run ([`Slot::wake`]) and is due
-/// ([`Slot::due_from`]).
+/// ([`Slot::due_from`]), in nanoseconds ([`NEVER`] for never).
 #[derive(Clone, Copy)]
 struct Earliest {
     nodes: usize,
-    wake: Option<Timestamp>,
+    wake: u64,
     due_from: u64,
 }
 
@@ -378,14 +378,12 @@ impl Network {
         let Some(e) = self.earliest_wake.as_mut().filter(|e| i < e.nodes) else {
             return;
         };
-        let wake = nanos(e.wake);
-        let held = (before.0 == wake && after.0 > wake)
+        let held = (before.0 == e.wake && after.0 > e.wake)
             || (before.1 == e.due_from && after.1 > e.due_from);
         if held {
             self.earliest_wake = None;
         } else {
-            let wake = wake.min(after.0);
-            e.wake = (wake != NEVER).then(|| Timestamp::from_nanos(wake));
+            e.wake = e.wake.min(after.0);
             e.due_from = e.due_from.min(after.1);
         }
     }
@@ -404,7 +402,7 @@ impl Network {
             });
         let earliest = Earliest {
             nodes,
-            wake: (wake != NEVER).then(|| Timestamp::from_nanos(wake)),
+            wake,
             due_from,
         };
         self.earliest_wake = Some(earliest);
@@ -419,7 +417,7 @@ impl Network {
     /// something happens then: a node's deadline or a bus's next change.
     fn start_ahead(&mut self, nodes: usize, until: Timestamp) -> Option<Timestamp> {
         let until = until.as_nanos();
-        let mut others = nanos(self.earliest(nodes).wake);
+        let mut others = self.earliest(nodes).wake;
         for b in &mut self.buses {
             others = others.min(b.next_change().arrival);
         }

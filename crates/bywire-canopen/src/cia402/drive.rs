@@ -118,13 +118,13 @@ pub struct Drive {
     /// Where those four objects were last found in the dictionary (they are written every
     /// step a motor moves).
     published_at: [Option<Slot>; 4],
+    /// What the published values were last worked out from: the same again gives the same
+    /// values, and a drive publishes after every write of a setpoint, several times between
+    /// two steps of its motor.
+    published_from: Option<PublishedFrom>,
     /// Where the objects a master writes every cycle (controlword, mode, targets) were last
     /// found in the dictionary: each write is read back without a search.
     written_at: [Option<Slot>; 4],
-    /// What they were last worked out from: the same again gives the same values, and a
-    /// drive publishes after every write of a setpoint, several times between two steps of
-    /// its motor.
-    published_from: Option<PublishedFrom>,
     /// The motor is outside (a plant the runner steps): the drive computes a velocity demand
     /// and is told the actual position and velocity.
     external: bool,
