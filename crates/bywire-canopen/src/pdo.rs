@@ -155,7 +155,6 @@ impl Pdo {
             .flatten()
     }
 
-    /// Fill a payload from the dictionary.
     /// Whether a mapped object's value changed after the dictionary's change count was
     /// `generation` (an object gone counts as changed).
     fn changed_since(&self, od: &ObjectDictionary, generation: u64) -> bool {
@@ -163,6 +162,7 @@ impl Pdo {
             .any(|mapped| od.at(mapped.slot).is_none_or(|e| e.changed() > generation))
     }
 
+    /// Fill a payload from the dictionary.
     fn sample(&self, od: &ObjectDictionary) -> ([u8; 8], usize) {
         let mut payload = [0u8; 8];
         let mut bit = 0usize;

@@ -1416,7 +1416,7 @@ struct ResponseLog {
     /// Where each standard identifier's entry is in `times`, plus one (0: none yet), by its
     /// value: every frame on every bus is counted, and a search by identifier would cost more
     /// than the counting. Empty until the first frame.
-    standard: Vec<u16>,
+    standard: Vec<usize>,
 }
 
 impl ResponseLog {
@@ -1426,7 +1426,7 @@ impl ResponseLog {
             Id::Standard(s) => self
                 .standard
                 .get(usize::from(s.as_raw()))
-                .and_then(|at| usize::from(*at).checked_sub(1)),
+                .and_then(|at| at.checked_sub(1)),
             Id::Extended(_) => self.times.binary_search_by_key(&id, |t| t.id).ok(),
         };
         let index = known.unwrap_or_else(|| self.insert(id));
@@ -1457,7 +1457,7 @@ impl ResponseLog {
         for (at, t) in self.times.iter().enumerate() {
             if let Id::Standard(standard) = t.id {
                 if let Some(slot) = self.standard.get_mut(usize::from(standard.as_raw())) {
-                    *slot = u16::try_from(at + 1).unwrap_or(0);
+                    *slot = at + 1;
                 }
             }
         }
