@@ -13,8 +13,8 @@
 
 mod common;
 
-use std::process::{Command, Stdio};
-use std::time::{Duration, SystemTime};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant, SystemTime};
 
 use bywire_bus::socketcan::{self, LinkConfig, SocketCan};
 use bywire_bus::{open, Bus, ControllerState};
@@ -43,6 +43,37 @@ fn sh(command: &str) -> String {
         .unwrap();
     assert!(out.status.success(), "{command}: {out:?}");
     String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Raw sockets the kernel lists as receivers on `interface` (each listening socket has an
+/// entry per filter in /proc/net/can/rcvlist_all).
+fn receivers_on(interface: &str) -> usize {
+    std::fs::read_to_string("/proc/net/can/rcvlist_all")
+        .unwrap()
+        .lines()
+        .filter(|line| line.split_whitespace().next() == Some(interface))
+        .count()
+}
+
+/// `candump -L` on `interface` until `count` frames, returned once it listens (its socket is
+/// among the kernel's receivers: a fixed wait loses frames on a loaded machine). It gives up
+/// after 10 s without a frame, so a lost frame fails the test instead of hanging it.
+fn candump(interface: &str, count: u32) -> Child {
+    let before = receivers_on(interface);
+    let candump = Command::new("candump")
+        .args(["-L", "-n", &count.to_string(), "-T", "10000", interface])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while receivers_on(interface) <= before {
+        assert!(
+            Instant::now() < deadline,
+            "candump never listened on {interface}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    candump
 }
 
 #[test]
@@ -111,12 +142,7 @@ fn can_utils_see_our_frames_and_we_see_theirs() {
         "12345678##30011",
     ];
     // candump -L prints "(secs.usecs) vcan0 FRAME" with frames in cansend syntax.
-    let candump = Command::new("candump")
-        .args(["-L", "-n", "5", "vcan0"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
+    let candump = candump("vcan0", 5);
     for text in ours {
         bus.send(&frame(text)).unwrap();
         // The echo confirms the transmission, with the time it left.
@@ -205,12 +231,7 @@ fn sja1000_controllers_are_configured_and_talk_through_netlink() {
         (ControllerState::ErrorActive, 0, 0)
     );
     can0.set_receive_own(true).unwrap();
-    let candump = Command::new("candump")
-        .args(["-L", "-n", "2", "can1"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
+    let candump = candump("can1", 2);
     for text in ["123#0102030405060708", "1FFFFFFF#AA"] {
         can0.send(&frame(text)).unwrap();
         let confirmation = can0.recv(Some(WAIT)).unwrap().unwrap();
@@ -293,12 +314,7 @@ fn async_socketcan_receives_and_sends_without_blocking_the_runtime() {
             .unwrap();
         assert_eq!(second.frame, frame("1F334455##1AA"));
         peer.join().unwrap();
-        let candump = Command::new("candump")
-            .args(["-L", "-n", "1", "vcan0"])
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
-        tokio::time::sleep(Duration::from_millis(300)).await;
+        let candump = candump("vcan0", 1);
         bus.send(&frame("0AA#CAFE")).await.unwrap();
         let dumped =
             String::from_utf8_lossy(&candump.wait_with_output().unwrap().stdout).into_owned();
