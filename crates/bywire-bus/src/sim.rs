@@ -43,6 +43,13 @@ pub type NodeId = usize;
 /// Nodes a bus routes ([`SimBus::route`]): one bit each, so at most this many.
 pub const MAX_ROUTED: usize = 64;
 
+/// A frame's time in whole nanoseconds: exact at common bitrates, the rest rounded to nearest
+/// (worked out once, when the frame's timing is first remembered).
+#[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+fn whole_ns(time: f64) -> u64 {
+    time.round() as u64
+}
+
 /// Whether `node` is in `set`, a set of nodes one bit each (none past [`MAX_ROUTED`]).
 fn has_node(set: u64, node: NodeId) -> bool {
     node < MAX_ROUTED && set >> node & 1 == 1
@@ -305,9 +312,9 @@ pub struct SimBus {
     /// Frame time (ns) and the bits a receiver reads before it finds a destroyed frame's CRC
     /// wrong, by frame: the wire model is exact but costly, and periodic traffic repeats the
     /// same frames (bounded: cleared when full; a pure function, so runs stay deterministic).
-    timings: std::collections::HashMap<Frame, (f64, usize)>,
+    timings: std::collections::HashMap<Frame, (u64, usize)>,
     /// The same for classic frames, direct-mapped by content: cheaper than hashing them.
-    classic_timings: Vec<Option<(ClassicKey, (f64, usize))>>,
+    classic_timings: Vec<Option<(ClassicKey, (u64, usize))>>,
     /// Classic frames' headers by identifier (with its flags) and DLC: a payload not yet
     /// timed is counted on from its header.
     classic_headers: Vec<Option<(u32, u8, ClassicHeader)>>,
@@ -840,9 +847,9 @@ impl SimBus {
         recovery
     }
 
-    /// A frame's time on this bus (ns) and where receivers find a destroyed copy's CRC wrong
-    /// (bits from its start); `None` for what has no bits on the wire.
-    fn timing(&mut self, frame: &Frame) -> Option<(f64, usize)> {
+    /// A frame's time on this bus (whole ns) and where receivers find a destroyed copy's CRC
+    /// wrong (bits from its start); `None` for what has no bits on the wire.
+    fn timing(&mut self, frame: &Frame) -> Option<(u64, usize)> {
         // Classic frames are counted (without building their bits) and remembered in a small
         // direct-mapped table; FD frames are encoded once and remembered.
         if let Some(key) = ClassicKey::of(frame) {
@@ -863,7 +870,10 @@ impl SimBus {
             };
             let (bits, detected) = header.length(frame.data());
             let bits = f64::from(u32::try_from(bits).unwrap_or(u32::MAX));
-            let timing = (bits * (1e9 / f64::from(self.nominal.max(1))), detected + 1);
+            let timing = (
+                whole_ns(bits * (1e9 / f64::from(self.nominal.max(1)))),
+                detected + 1,
+            );
             if let Some(slot) = self.classic_timings.get_mut(key.slot()) {
                 *slot = Some((key, timing));
             }
@@ -884,8 +894,9 @@ impl SimBus {
         if self.timings.len() >= 4_096 {
             self.timings.clear();
         }
-        self.timings.insert(*frame, (time, detected));
-        Some((time, detected))
+        let timing = (whole_ns(time), detected);
+        self.timings.insert(*frame, timing);
+        Some(timing)
     }
 
     /// Run the bus up to `until`.
@@ -991,9 +1002,7 @@ impl SimBus {
             };
             self.faults.retain(|(f, until)| !ended(f, *until));
         } else {
-            // Frame times are whole nanoseconds at common bitrates; round the rest to nearest.
-            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-            let eof = start.saturating_add(std::time::Duration::from_nanos(time.round() as u64));
+            let eof = start.saturating_add(std::time::Duration::from_nanos(time));
             end = eof;
             if let Some(n) = self.nodes.get_mut(winner) {
                 // The rest stay in arbitration order.

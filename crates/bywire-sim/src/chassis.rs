@@ -62,6 +62,8 @@ pub struct Chassis {
     /// Each wheel's angle (degrees, bits) and its cosine: a wheel held still keeps its angle
     /// step after step.
     headings: [(u64, f64); 4],
+    /// The road's grade (bits) and the sine and cosine of its slope: one road for a run.
+    slope: (u64, f64, f64),
     odometry: Odometry,
     twist: Twist,
     last_twist: Twist,
@@ -76,6 +78,7 @@ impl Chassis {
             speeds: [0.0; 4],
             angles: [0.0; 4],
             headings: [(0.0f64.to_bits(), 1.0); 4],
+            slope: (0.0f64.to_bits(), 0.0, 1.0),
             odometry: Odometry::new(pose),
             twist: Twist::default(),
             last_twist: Twist::default(),
@@ -87,9 +90,12 @@ impl Chassis {
     pub fn step(&mut self, dt: f64, wheels: &[WheelInput; 4], grade: f64) {
         let p = self.params;
         let quarter = (p.mass + p.payload.max(0.0)) / 4.0;
-        let slope = libm::atan(grade);
-        // The same for every wheel (worked out once: a step is a millisecond).
-        let (along_slope, across_slope) = (libm::sin(slope), libm::cos(slope));
+        // The same for every wheel, and for every step on one road.
+        if self.slope.0 != grade.to_bits() {
+            let slope = libm::atan(grade);
+            self.slope = (grade.to_bits(), libm::sin(slope), libm::cos(slope));
+        }
+        let (_, along_slope, across_slope) = self.slope;
         for (((speed, angle), heading), wheel) in self
             .speeds
             .iter_mut()
