@@ -37,6 +37,37 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// The test frames as a candump log and as `bywire log convert` made them into another file.
+struct Converted {
+    /// The scratch folder holding both.
+    dir: PathBuf,
+    /// The candump log (`in.log`).
+    log: PathBuf,
+    /// The converted file.
+    out: PathBuf,
+    /// What the command said.
+    said: String,
+}
+
+/// The test frames converted into `file` in scratch folder `name`.
+fn converted(name: &str, file: &str) -> Converted {
+    let dir = scratch(name);
+    let (log, out) = (dir.join("in.log"), dir.join(file));
+    std::fs::write(&log, FRAMES).unwrap();
+    let said = bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    Converted {
+        dir,
+        log,
+        out,
+        said,
+    }
+}
+
 fn bywire(args: &[&str]) -> String {
     let (code, out, err) = common::bywire(args, "");
     assert_eq!(code, 0, "bywire {args:?}: {err}");
@@ -158,15 +189,12 @@ print("same", len(ours))
 
 #[test]
 fn python_can_reads_our_asc_frame_for_frame() {
-    let dir = scratch("ours");
-    let (log, asc) = (dir.join("in.log"), dir.join("out.asc"));
-    std::fs::write(&log, FRAMES).unwrap();
-    let said = bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        asc.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir,
+        log,
+        out: asc,
+        said,
+    } = converted("ours", "out.asc");
     assert_eq!(
         said.trim(),
         format!("9 frames written to {}", asc.display())
@@ -277,15 +305,9 @@ fn can_utils_log2asc_and_asc2log_agree_with_us() {
 
 #[test]
 fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
-    let dir = scratch("cat");
-    let (log, asc) = (dir.join("in.log"), dir.join("in.asc"));
-    std::fs::write(&log, FRAMES).unwrap();
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        asc.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir, log, out: asc, ..
+    } = converted("cat", "in.asc");
     // `log cat` of the ASC gives the candump lines back (the format is sniffed).
     assert_eq!(bywire(&["log", "cat", asc.to_str().unwrap()]), FRAMES);
     let stats = bywire(&["log", "stats", asc.to_str().unwrap()]);
@@ -327,15 +349,9 @@ fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
 
 #[test]
 fn python_can_reads_our_trc_frame_for_frame() {
-    let dir = scratch("trc-ours");
-    let (log, trc) = (dir.join("in.log"), dir.join("out.trc"));
-    std::fs::write(&log, FRAMES).unwrap();
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        trc.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir, log, out: trc, ..
+    } = converted("trc-ours", "out.trc");
     let compared = python(
         r#"
 import can, sys
@@ -424,15 +440,9 @@ fn tshark_fields(capture: &Path) -> Vec<Vec<String>> {
 
 #[test]
 fn tshark_reads_our_pcapng_frame_for_frame() {
-    let dir = scratch("pcapng-ours");
-    let (log, capture) = (dir.join("in.log"), dir.join("out.pcapng"));
-    std::fs::write(&log, FRAMES).unwrap();
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        capture.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir, out: capture, ..
+    } = converted("pcapng-ours", "out.pcapng");
     let rows = tshark_fields(&capture);
     let wanted = original();
     assert_eq!(rows.len(), wanted.len());
@@ -540,15 +550,9 @@ fn we_read_a_capture_text2pcap_writes() {
 
 #[test]
 fn python_can_and_tshark_read_our_blf_frame_for_frame() {
-    let dir = scratch("blf-ours");
-    let (log, blf) = (dir.join("in.log"), dir.join("out.blf"));
-    std::fs::write(&log, FRAMES).unwrap();
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        blf.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir, log, out: blf, ..
+    } = converted("blf-ours", "out.blf");
     assert_eq!(
         python(COMPARE, &[&blf, &log, Path::new("blf")]).trim(),
         "same 9"
@@ -603,15 +607,9 @@ fn we_read_python_cans_blf_frame_for_frame() {
 
 #[test]
 fn python_can_reads_our_mf4_frame_for_frame() {
-    let dir = scratch("mf4-ours");
-    let (log, mf4) = (dir.join("in.log"), dir.join("out.mf4"));
-    std::fs::write(&log, FRAMES).unwrap();
-    bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        mf4.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir, log, out: mf4, ..
+    } = converted("mf4-ours", "out.mf4");
     // (python-can's MF4 reader is asammdf's: both read it.)
     assert_eq!(
         python(COMPARE, &[&mf4, &log, Path::new("mf4")]).trim(),
@@ -826,20 +824,13 @@ fn convert_merges_inputs_and_selects_channels_and_time() {
 /// our `can_msgs/msg/Frame` messages against our schema, and we read the bag they write.
 #[test]
 fn mcap_ros2_reads_our_frames_and_we_read_theirs() {
-    let dir = scratch("mcap");
-    let (log, ours, theirs, back) = (
-        dir.join("in.log"),
-        dir.join("ours.mcap"),
-        dir.join("theirs.mcap"),
-        dir.join("back.log"),
-    );
-    std::fs::write(&log, FRAMES).unwrap();
-    let said = bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        ours.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir,
+        out: ours,
+        said,
+        ..
+    } = converted("mcap", "ours.mcap");
+    let (theirs, back) = (dir.join("theirs.mcap"), dir.join("back.log"));
     assert!(
         said.contains("7 frames written") && said.contains("2 CAN FD frames left out"),
         "{said}"
@@ -937,19 +928,13 @@ with open(sys.argv[1], "wb") as f:
 
 #[test]
 fn pyarrow_polars_and_duckdb_read_our_parquet_and_we_read_theirs() {
-    let dir = scratch("parquet");
-    let (log, ours, theirs) = (
-        dir.join("in.log"),
-        dir.join("ours.parquet"),
-        dir.join("theirs.parquet"),
-    );
-    std::fs::write(&log, FRAMES).unwrap();
-    let said = bywire(&[
-        "log",
-        "convert",
-        log.to_str().unwrap(),
-        ours.to_str().unwrap(),
-    ]);
+    let Converted {
+        dir,
+        out: ours,
+        said,
+        ..
+    } = converted("parquet", "ours.parquet");
+    let theirs = dir.join("theirs.parquet");
     assert!(said.starts_with("9 frames written"), "{said}");
     let read = python(
         r#"
