@@ -528,8 +528,16 @@ impl Entry {
     /// Store `bytes` after [`Entry::check`]; never reallocates.
     fn store(&mut self, bytes: &[u8]) -> Result<(), Abort> {
         self.check(bytes)?;
-        self.value.clear();
-        self.value.extend_from_slice(bytes);
+        // A number over one of its width (see `overwrite`), anything else afresh.
+        let value = self.value.as_mut_slice();
+        let overwritten = overwrite::<1>(value, bytes)
+            || overwrite::<2>(value, bytes)
+            || overwrite::<4>(value, bytes)
+            || overwrite::<8>(value, bytes);
+        if !overwritten {
+            self.value.clear();
+            self.value.extend_from_slice(bytes);
+        }
         Ok(())
     }
 
@@ -831,22 +839,37 @@ impl ObjectDictionary {
     }
 }
 
-/// Whether two values are equal, those of up to 8 bytes (every number) compared as one word:
-/// a call to `memcmp` for a few bytes costs more than the comparison, and drives set their
-/// values every millisecond.
+/// Whether two values are equal, those of 1, 2, 4 or 8 bytes (every number but the odd-width
+/// integers) compared as one word: a library call to compare a few bytes costs more than the
+/// comparison, and drives set their values every millisecond.
 fn same_value(a: &[u8], b: &[u8]) -> bool {
-    if a.len() != b.len() {
-        return false;
+    match (word(a), word(b)) {
+        (Some(x), Some(y)) => a.len() == b.len() && x == y,
+        _ => a == b,
     }
-    if a.len() > 8 {
-        return a == b;
+}
+
+/// A value of 1, 2, 4 or 8 bytes as one little-endian word.
+fn word(bytes: &[u8]) -> Option<u64> {
+    Some(match *bytes {
+        [a] => u64::from(a),
+        [a, b] => u64::from(u16::from_le_bytes([a, b])),
+        [a, b, c, d] => u64::from(u32::from_le_bytes([a, b, c, d])),
+        [a, b, c, d, e, f, g, h] => u64::from_le_bytes([a, b, c, d, e, f, g, h]),
+        _ => return None,
+    })
+}
+
+/// Copy `from` over `to` when both are `N` bytes long: a copy of a size known when compiled,
+/// where a copy of a run-time length is a library call costing more than a number's bytes.
+fn overwrite<const N: usize>(to: &mut [u8], from: &[u8]) -> bool {
+    match (<&mut [u8; N]>::try_from(to), <[u8; N]>::try_from(from)) {
+        (Ok(to), Ok(from)) => {
+            *to = from;
+            true
+        }
+        _ => false,
     }
-    let word = |bytes: &[u8]| {
-        let mut word = [0u8; 8];
-        word.iter_mut().zip(bytes).for_each(|(w, b)| *w = *b);
-        u64::from_le_bytes(word)
-    };
-    word(a) == word(b)
 }
 
 #[cfg(test)]
@@ -873,6 +896,43 @@ mod tests {
             for b in &values {
                 assert_eq!(same_value(a, b), a == b, "{a:?} {b:?}");
             }
+        }
+    }
+
+    /// Whatever its width, a stored value reads back as stored: numbers of every width (those
+    /// written over in place and the odd widths), and strings growing and shrinking.
+    #[test]
+    fn stored_values_read_back_at_every_width() {
+        let mut od = ObjectDictionary::new();
+        for width in 1..=8u8 {
+            od.add_var(
+                0x2100 + u16::from(width),
+                Entry::new(0, "Number", DataType::Unsigned(width), Access::ReadWrite),
+            );
+        }
+        od.add_var(
+            0x2200,
+            Entry::new(0, "Text", DataType::OctetString, Access::ReadWrite),
+        );
+        for width in 1..=8u8 {
+            let index = 0x2100 + u16::from(width);
+            for value in [0x0102_0304_0506_0708u64, 0, u64::MAX, 0x80] {
+                let bytes = value.to_le_bytes();
+                let bytes = &bytes[..usize::from(width)];
+                od.set(index, 0, bytes).unwrap();
+                assert_eq!(od.read(index, 0).unwrap(), bytes, "width {width}");
+            }
+        }
+        for len in [3usize, 8, 0, 10, 1, 4, 2, 9, 8] {
+            let bytes: Vec<u8> = (0..len)
+                .map(|i| u8::try_from((i * 37 + len) % 256).unwrap())
+                .collect();
+            od.set(0x2200, 0, &bytes).unwrap();
+            assert_eq!(
+                od.read(0x2200, 0).unwrap(),
+                bytes.as_slice(),
+                "length {len}"
+            );
         }
     }
 
