@@ -80,7 +80,15 @@ fn filters_agree_with_the_kernel() {
     for (i, f) in FILTERS.iter().enumerate() {
         script += &format!("candump -L vcan0,{f} > /tmp/f{i} & \n");
     }
-    script += "sleep 0.5\n";
+    // Every candump listening before the first frame: each of its filters is an entry on
+    // vcan0 in the kernel's receive lists (a fixed wait misses frames on a loaded machine).
+    let entries: usize = FILTERS
+        .iter()
+        .map(|f| f.split(',').filter(|item| *item != "j").count())
+        .sum();
+    script += &format!(
+        "for i in $(seq 300); do [ $(cat /proc/net/can/rcvlist_* | awk '$1 == \"vcan0\"' | wc -l) -ge {entries} ] && break; sleep 0.05; done\n"
+    );
     for frame in FRAMES {
         script += &format!("cansend vcan0 {frame}\n");
     }
