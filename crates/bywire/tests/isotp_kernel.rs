@@ -96,74 +96,75 @@ fn bywire_and_the_kernel_exchange_iso_tp_both_ways() {
     let script = format!(
         r#"B={bin}
 cd /tmp
-run() {{ sleep 0.3; "$@"; sleep 0.3; kill $D 2>/dev/null; wait; }}
-# The same with bywire listening: its debug binary takes up to half a second to start here.
-runb() {{ sleep 1.5; "$@"; sleep 0.3; kill $D 2>/dev/null; wait; }}
+# Entries for vcan0 in the kernel's receive lists: a listener adds its own once it is ready.
+entries() {{ cat /proc/net/can/rcvlist_* | awk '$1 == "vcan0"' | wc -l; }}
+# Start a listener in the background (its pid in L), back once it listens (15 s at most): a
+# fixed wait misses frames on a loaded machine.
+listen() {{ n=$(entries); "$@" & L=$!; for i in $(seq 300); do [ $(entries) -gt $n ] && return; sleep 0.05; done; }}
+# Send; give candump ($D) time to write the last frames, stop it, wait for the listeners.
+run() {{ "$@"; sleep 0.3; kill $D 2>/dev/null; wait; }}
 echo "== to the kernel"
-candump -ta vcan0 > dump1.txt & D=$!
-isotprecv -s 7E8 -d 7E0 -b 4 -m 01 vcan0 > recv1.txt &
+listen candump -ta vcan0 > dump1.txt; D=$L
+listen isotprecv -s 7E8 -d 7E0 -b 4 -m 01 vcan0 > recv1.txt
 run sh -c "$B isotp send vcan0 -s 7E0 -d 7E8 < {d}/m4095.txt"
 cat recv1.txt
 echo "== dump 1"
 cat dump1.txt
 echo "== from the kernel"
-candump -ta vcan0 > dump2.txt & D=$!
-$B isotp recv vcan0 -s 321 -d 123 -b 3 -m F5 > recv2.txt &
-runb sh -c "isotpsend -s 123 -d 321 vcan0 < {d}/m4095.txt"
+listen candump -ta vcan0 > dump2.txt; D=$L
+listen $B isotp recv vcan0 -s 321 -d 123 -b 3 -m F5 > recv2.txt
+run sh -c "isotpsend -s 123 -d 321 vcan0 < {d}/m4095.txt"
 cat recv2.txt
 echo "== dump 2"
 cat dump2.txt
 echo "== fd to the kernel"
-isotprecv -s 7E8 -d 7E0 -L 72:64:1 vcan0 > recv3.txt &
+listen isotprecv -s 7E8 -d 7E0 -L 72:64:1 vcan0 > recv3.txt
 run sh -c "$B isotp send vcan0 -s 7E0 -d 7E8 -L 72:64:1 < {d}/m4095.txt"
 cat recv3.txt
 echo "== fd from the kernel"
-$B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv4.txt &
-runb sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4095.txt"
+listen $B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv4.txt
+run sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4095.txt"
 cat recv4.txt
 echo "== long to the kernel"
-isotprecv -s 7E8 -d 7E0 -L 72:64:1 vcan0 > recv5.txt &
+listen isotprecv -s 7E8 -d 7E0 -L 72:64:1 vcan0 > recv5.txt
 run sh -c "$B isotp send vcan0 -s 7E0 -d 7E8 -L 72:64:1 < {d}/m4800.txt"
 cat recv5.txt
 echo "== long from the kernel"
-$B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv6.txt &
-runb sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4800.txt"
+listen $B isotp recv vcan0 -s 321 -d 123 -L 72:64:1 > recv6.txt
+run sh -c "isotpsend -s 123 -d 321 -L 72:64:1 vcan0 < {d}/m4800.txt"
 cat recv6.txt
 echo "== extended to the kernel"
-isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 -b 2 -m 01 vcan0 > recv7.txt &
+listen isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 -b 2 -m 01 vcan0 > recv7.txt
 run sh -c "head -c 900 {d}/m4095.txt | $B isotp send vcan0 -s 18DA10F1 -d 18DAF110 -x 10:F1"
 cat recv7.txt
 echo "== extended from the kernel"
-$B isotp recv vcan0 -s 18DAF110 -d 18DA10F1 -x F1:10 -b 3 > recv8.txt &
-runb sh -c "head -c 900 {d}/m4095.txt | isotpsend -s 18DA10F1 -d 18DAF110 -x 10:F1 vcan0"
+listen $B isotp recv vcan0 -s 18DAF110 -d 18DA10F1 -x F1:10 -b 3 > recv8.txt
+run sh -c "head -c 900 {d}/m4095.txt | isotpsend -s 18DA10F1 -d 18DAF110 -x 10:F1 vcan0"
 cat recv8.txt
 echo "== extended dump"
-candump -ta vcan0 > dump9.txt & D=$!
-isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 vcan0 > /dev/null &
+listen candump -ta vcan0 > dump9.txt; D=$L
+listen isotprecv -s 18DAF110 -d 18DA10F1 -x F1:10 vcan0 > /dev/null
 run sh -c "head -c 60 {d}/m4095.txt | $B isotp send vcan0 -s 18DA10F1 -d 18DAF110 -x 10:F1"
 cat dump9.txt
 echo "== padding checked"
-$B isotp recv vcan0 -s 321 -d 123 -p AA:AA -P a > recv10.txt &
-runb sh -c "head -c 57 {d}/m4095.txt | isotpsend -s 123 -d 321 -p AA:AA vcan0"
+listen $B isotp recv vcan0 -s 321 -d 123 -p AA:AA -P a > recv10.txt
+run sh -c "head -c 57 {d}/m4095.txt | isotpsend -s 123 -d 321 -p AA:AA vcan0"
 cat recv10.txt
 echo "== padding refused"
-timeout 4 $B isotp recv vcan0 -s 321 -d 123 -p AA:AA -P a > recv11.txt 2>&1 &
-runb sh -c "head -c 57 {d}/m4095.txt | isotpsend -s 123 -d 321 -p CC:AA vcan0"
+listen timeout 4 $B isotp recv vcan0 -s 321 -d 123 -p AA:AA -P a > recv11.txt 2>&1
+run sh -c "head -c 57 {d}/m4095.txt | isotpsend -s 123 -d 321 -p CC:AA vcan0"
 cat recv11.txt
 echo "== kernel checks ours"
-isotprecv -s 7E8 -d 7E0 -p AA:AA -P a vcan0 > recv12.txt &
+listen isotprecv -s 7E8 -d 7E0 -p AA:AA -P a vcan0 > recv12.txt
 run sh -c "head -c 57 {d}/m4095.txt | $B isotp send vcan0 -s 7E0 -d 7E8 -p AA:AA -P a"
 cat recv12.txt
 echo "== dumps"
-isotpdump -s 7E0 -d 7E8 -a vcan0 > theirs.txt & P1=$!
-$B isotp dump vcan0 -s 7E0 -d 7E8 -a > ours.txt & P2=$!
-sleep 1.5
-isotprecv -s 7E8 -d 7E0 -b 2 -m F3 vcan0 > /dev/null & R=$!
-sleep 0.3
+listen isotpdump -s 7E0 -d 7E8 -a vcan0 > theirs.txt; P1=$L
+listen $B isotp dump vcan0 -s 7E0 -d 7E8 -a > ours.txt; P2=$L
+listen isotprecv -s 7E8 -d 7E0 -b 2 -m F3 vcan0 > /dev/null; R=$L
 head -c 300 {d}/m4095.txt | $B isotp send vcan0 -s 7E0 -d 7E8
 wait $R
-isotprecv -s 7E8 -d 7E0 -m 7F -L 72:64:1 vcan0 > /dev/null & R=$!
-sleep 0.3
+listen isotprecv -s 7E8 -d 7E0 -m 7F -L 72:64:1 vcan0 > /dev/null; R=$L
 head -c 600 {d}/m4095.txt | isotpsend -s 7E0 -d 7E8 -L 72:64:1 vcan0
 wait $R
 echo 3E 00 | isotpsend -s 7E0 -d 7E8 vcan0
