@@ -528,7 +528,8 @@ impl Entry {
     /// Store `bytes` after [`Entry::check`]; never reallocates.
     fn store(&mut self, bytes: &[u8]) -> Result<(), Abort> {
         self.check(bytes)?;
-        // A number over one of its width (see `overwrite`), anything else afresh.
+        // A number is written over the one of its width in place (see `overwrite`); a value
+        // of another length replaces it.
         let value = self.value.as_mut_slice();
         let overwritten = overwrite::<1>(value, bytes)
             || overwrite::<2>(value, bytes)

@@ -815,8 +815,8 @@ fn panic_is_caught_by_reader() -> bool {
 /// Leave unreported the panics inside parquet-rs that the reader takes as the file's error:
 /// the error that follows says what was wrong, and the panic message would only say the same
 /// less clearly, on stderr, in the middle of the program's output. Every other panic goes to
-/// the hook there was before. Installed once per process, however often
-/// it is called (the command line and the Python module each call it as they start).
+/// the hook there was before. Installed once per process, however often it is called (the
+/// command line and the Python module each call it as they start).
 pub fn quiet_panics_taken_as_errors() {
     static INSTALL: std::sync::Once = std::sync::Once::new();
     INSTALL.call_once(|| {
