@@ -13,6 +13,8 @@
 //! - [`rng`]: the seeded random numbers every noise source draws from;
 //! - [`tug`]: the tug's network — the ADS side and the vehicle control ECU on bus 1, the ECU
 //!   commanding eight CiA 402 drives on bus 2 — around the plants, in simulated time;
+//! - [`fault`]: the faults a scenario injects; [`record`]: what a run records (events, trace,
+//!   truth, step responses, response times, what attacks achieved);
 //! - [`scenario`]: routes, load, grade and faults, built in or from TOML files;
 //! - [`attacker`]: a node on bus 1 without the key: forged and replayed commands, a forged
 //!   speed toward the ADS, a flood of identifier 0x000;
@@ -40,9 +42,11 @@ pub mod attacker;
 pub mod battery;
 pub mod chassis;
 pub mod drive;
+pub mod fault;
 pub mod mission;
 pub mod nodes;
 pub mod output;
+pub mod record;
 pub mod report;
 pub mod rng;
 pub mod scenario;

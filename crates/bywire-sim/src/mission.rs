@@ -48,6 +48,35 @@ pub struct MissionParams {
     pub track: f64,
 }
 
+/// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service
+/// road, a second turn and back toward the start (about 140 m).
+pub fn apron_loop() -> Vec<Point> {
+    let mut points: Vec<Point> = (0..=40)
+        .map(|x| Point {
+            x: f64::from(x),
+            y: 0.0,
+        })
+        .collect();
+    let arc = |cx: f64, cy: f64, from: f64, points: &mut Vec<Point>| {
+        for k in 1..=24 {
+            let a = from + f64::from(k) / 24.0 * core::f64::consts::PI;
+            points.push(Point {
+                x: cx + 15.0 * libm::cos(a),
+                y: cy + 15.0 * libm::sin(a),
+            });
+        }
+    };
+    // A half circle to the left brings the route back parallel, 30 m over.
+    arc(40.0, 15.0, -core::f64::consts::FRAC_PI_2, &mut points);
+    for x in (10..40).rev() {
+        points.push(Point {
+            x: f64::from(x),
+            y: 30.0,
+        });
+    }
+    points
+}
+
 /// Something the mission did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MissionEvent {

@@ -7,7 +7,8 @@ use core::time::Duration;
 
 use serde::Serialize;
 
-use crate::tug::{StepResponse, Tug};
+use crate::record::{ResponseTimes, StepResponse};
+use crate::tug::Tug;
 
 /// One event of the run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -245,7 +246,7 @@ pub struct ResponseRecord {
 }
 
 impl ResponseRecord {
-    fn all(times: &[crate::tug::ResponseTimes]) -> Vec<ResponseRecord> {
+    fn all(times: &[ResponseTimes]) -> Vec<ResponseRecord> {
         times
             .iter()
             .map(|t| ResponseRecord {
@@ -357,9 +358,10 @@ impl RunReport {
                 detail: "stopped at the end of the route".into(),
             });
         }
-        let steering_steps = tug.step_responses.iter().map(StepRecord::of).collect();
+        let steering_steps = tug.steering.steps.iter().map(StepRecord::of).collect();
         let tank_turn = tug
-            .tank_response
+            .steering
+            .tank_turn
             .as_ref()
             .map(|(_, response)| TankTurnRecord {
                 step: StepRecord::of(response),

@@ -35,8 +35,10 @@ use bywire_core::Timestamp;
 use serde::Deserialize;
 
 use crate::attacker::Attack;
+use crate::fault::Fault;
+use crate::mission::apron_loop;
 use crate::steering::SensorFault;
-use crate::tug::{apron_loop, Fault, Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
+use crate::tug::{Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
 use bywire_bus::sim::Tamper;
 
 /// A scenario.

@@ -7,7 +7,7 @@
 
 use std::io::{self, Write};
 
-use crate::tug::TruthSample;
+use crate::record::TruthSample;
 
 /// The columns, in order (units in the names).
 pub const COLUMNS: [&str; 16] = [

@@ -22,12 +22,11 @@
 use core::time::Duration;
 
 use bywire_bus::network::{BusIndex, Network, NodeIndex};
-use bywire_bus::sim::{BusEvent, NodeId, Tamper};
+use bywire_bus::sim::{BusEvent, NodeId};
 use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, Mode};
 use bywire_canopen::device::Device;
-use bywire_control::kinematics::{Point, Pose, Twist};
-use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
+use bywire_control::kinematics::{Point, Pose};
 use bywire_control::path::Path;
 use bywire_core::filter::{ErrorMask, Filter};
 use bywire_core::frame::ErrorClass;
@@ -40,22 +39,26 @@ use bywire_tug::ecu::{
 };
 pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
 use bywire_tug::messages::{
-    AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
+    AdsToVehicleControl, Battery as BatteryMessage, EmergencyBrake, EmergencyStop,
     SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::Ads;
 use bywire_vehicle::command::SteeringMode;
-use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::secured::Signing;
-use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, Watchdog};
+use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 
-use crate::attacker::{Attack, Attacker};
+use crate::attacker::Attacker;
 use crate::battery::{Battery, BatteryParams};
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
-use crate::mission::{AdsDriver, Mission, MissionParams};
+use crate::fault::Fault;
+use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
 use crate::nodes::{self, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController};
+use crate::record::{
+    Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SimEvent, SteeringRecord,
+    SupervisorWatch, TruthSample,
+};
 use crate::rng::Rng;
 use crate::steering::{SensorFault, SteeringChain, SteeringParams};
 
@@ -113,44 +116,6 @@ impl Default for TugParams {
 
 pub use crate::mission::STEP_HOLD;
 
-/// One steering step at a standstill: the ADS's command from `from` to `to` degrees and the
-/// front-left wheel's angle every millisecond after it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StepResponse {
-    /// The angle before, degrees.
-    pub from: f64,
-    /// The commanded angle, degrees.
-    pub to: f64,
-    /// Seconds since the command, one a millisecond.
-    pub times: Vec<f64>,
-    /// The wheel's angle at those times, degrees.
-    pub angles: Vec<f64>,
-}
-
-impl StepResponse {
-    /// Rise, settling, overshoot and steady-state error of this step.
-    pub fn metrics(&self) -> Result<StepMetrics, MetricsError> {
-        step_metrics(&self.times, &self.angles, self.from, self.to)
-    }
-
-    /// The angle's range (largest − smallest) over the second half of the record, degrees: a
-    /// wheel that holds its angle has little more than the sensor's noise; one that hunts, the
-    /// width of its swing.
-    pub fn hold_peak_to_peak(&self) -> f64 {
-        let half = self.angles.get(self.angles.len() / 2..).unwrap_or_default();
-        let (low, high) = half
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-                (lo.min(*a), hi.max(*a))
-            });
-        if half.is_empty() {
-            0.0
-        } else {
-            high - low
-        }
-    }
-}
-
 /// The tug's buses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TugBus {
@@ -182,136 +147,6 @@ impl TugBus {
     pub fn named(name: &str) -> Option<TugBus> {
         TugBus::ALL.into_iter().find(|b| b.name() == name)
     }
-}
-
-/// A frame seen on a bus, with its end-of-frame time.
-pub type Logged = (Timestamp, Frame);
-
-/// A fault (or operator action) a scenario injects.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Fault {
-    /// The ADS stops sending.
-    AdsSilence,
-    /// The E-stop chain opens (the safety controller requests an E-stop).
-    Estop,
-    /// The operator's reset: reset pressed until the latch clears, then engage.
-    OperatorReset,
-    /// A drive node (by node ID) stops sending (cut off, powered down).
-    DriveSilence(u8),
-    /// The angle sensor of a corner (0 FL … 3 RR) fails.
-    SensorFault(usize, SensorFault),
-    /// The ADS's commands arrive with a flipped bit (their checksum fails), on bus 1 and 1b.
-    CorruptCommands,
-    /// Every ADS command arrives twice, on bus 1 and 1b.
-    DuplicateCommands,
-    /// The ADS's commands arrive this many milliseconds late, on bus 1 and 1b.
-    DelayCommands(u64),
-    /// A driver turns the steering wheel (torque above the takeover threshold).
-    DriverTakeover,
-    /// The ECU's controller on bus 1 meets a burst of bus errors until it is bus-off; it
-    /// recovers after 128 × 11 recessive bits.
-    EcuBusOff,
-    /// The node that sends this identifier on this bus meets the same burst, from its next
-    /// frame of that identifier on, and recovers the same way.
-    BusOff {
-        /// The bus.
-        bus: TugBus,
-        /// An 11-bit identifier the node sends.
-        id: u16,
-    },
-    /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
-    RedundantBusLoss,
-    /// A node on bus 1 without the key attacks ([`crate::attacker`]).
-    Attack(Attack),
-    /// Whichever node sends frames with this identifier on this bus sends them corrupted
-    /// (a bit flipped), twice, or late (one such fault an identifier: the latest holds).
-    TamperFrames {
-        /// The bus.
-        bus: TugBus,
-        /// The 11-bit identifier.
-        id: u16,
-        /// What happens to them.
-        tamper: Tamper,
-    },
-}
-
-/// As in events and the live view: the variant's name, identifiers and node IDs in hex.
-impl core::fmt::Display for Fault {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Fault::DriveSilence(node) => write!(f, "DriveSilence(0x{node:02X})"),
-            Fault::TamperFrames { bus, id, tamper } => {
-                write!(f, "TamperFrames {{ {} 0x{id:03X} {tamper:?} }}", bus.name())
-            }
-            Fault::BusOff { bus, id } => write!(f, "BusOff {{ {} 0x{id:03X} }}", bus.name()),
-            other => write!(f, "{other:?}"),
-        }
-    }
-}
-
-/// The run's state every 50 ms, for plots.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Sample {
-    /// When.
-    pub t: Timestamp,
-    /// Pose.
-    pub pose: Pose,
-    /// Speed, m/s.
-    pub speed: f64,
-    /// The ADS's steering command, degrees.
-    pub steering_command: f64,
-    /// The front-left wheel's angle, degrees.
-    pub steering_actual: f64,
-    /// How long each bus (bus 1, 2, 3, 1b) has been busy since the start, ns.
-    pub busy_ns: [u64; 4],
-}
-
-/// The plant's true state, every 10 ms: what a dataset's ground truth holds beside what the
-/// buses show.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TruthSample {
-    /// When.
-    pub t: Timestamp,
-    /// The true pose.
-    pub pose: Pose,
-    /// The body's motion: forward and leftward speed (m/s), yaw rate (rad/s).
-    pub twist: Twist,
-    /// Each wheel's angle (FL, FR, RL, RR), degrees.
-    pub wheel_angles_deg: [f64; 4],
-    /// Each wheel's rolling speed (FL, FR, RL, RR), m/s.
-    pub wheel_speeds: [f64; 4],
-    /// The steering mode of the command the ECU follows (`None`: no command yet).
-    pub steering_mode: Option<SteeringMode>,
-}
-
-/// Each bus's load (bus 1, 2, 3, 1b; 0–1) over windows of `window` consecutive samples of
-/// `trace`, stamped at each window's end: what the buses carried over the run.
-pub fn windowed_loads(trace: &[Sample], window: usize) -> [Vec<(Timestamp, f64)>; 4] {
-    let mut loads: [Vec<(Timestamp, f64)>; 4] = Default::default();
-    let ends = trace.iter().step_by(window.max(1));
-    for (from, to) in ends.clone().zip(ends.skip(1)) {
-        let span = to.t.saturating_since(from.t).as_nanos() as f64;
-        if span <= 0.0 {
-            continue;
-        }
-        for (bus, series) in loads.iter_mut().enumerate() {
-            let busy = |s: &Sample| s.busy_ns.get(bus).copied().unwrap_or(0);
-            let load = busy(to).saturating_sub(busy(from)) as f64 / span;
-            series.push((to.t, load));
-        }
-    }
-    loads
-}
-
-/// Something that happened in a run.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SimEvent {
-    /// When.
-    pub t: Timestamp,
-    /// What kind (`watchdog`, `estop`, `mode`, `fault`, `heartbeat_lost`, ...).
-    pub kind: String,
-    /// Detail (the new state, the fault).
-    pub detail: String,
 }
 
 /// One corner's plants: the steering chain its steering drive turns, the wheel its drive turns.
@@ -443,15 +278,10 @@ pub struct Tug {
     active: Vec<(Fault, Option<Timestamp>)>,
     /// The faults changed since the network's cut connections were last set from them.
     cuts_stale: bool,
-    last_seen: (Watchdog, EstopState, ControlMode),
-    last_degraded: Option<Channel>,
+    supervisor_watch: SupervisorWatch,
     ads_external: bool,
-    /// The step test's responses, one a step.
-    pub step_responses: Vec<StepResponse>,
-    /// The tank turn: the front-left wheel every millisecond from the command into tank
-    /// steering until the tank turn ends, and when it began.
-    pub tank_response: Option<(Timestamp, StepResponse)>,
-    tank_over: bool,
+    /// The steering's responses: the step test's steps and the tank turn.
+    pub steering: SteeringRecord,
     /// Command to heartbeat echo, as the ADS measured it on every state frame.
     pub echo_latencies: Vec<Duration>,
     last_echo: Option<Timestamp>,
@@ -459,32 +289,6 @@ pub struct Tug {
     pub security: SecurityWatch,
     /// Each bus's response times by identifier, in [`TugBus::ALL`]'s order.
     response_times: [ResponseLog; 4],
-}
-
-/// How long one identifier's frames took on a bus: from being queued at the controller to the
-/// end of the frame (arbitration, waiting, retransmissions and the frame itself).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ResponseTimes {
-    /// The identifier.
-    pub id: Id,
-    /// Frames sent.
-    pub count: u64,
-    /// Their summed response times, ns.
-    pub total_ns: u64,
-    /// The longest, ns.
-    pub max_ns: u64,
-}
-
-/// What the run saw of the attacks: commands the vehicle took that the ADS never sent, and
-/// speeds the ADS took that the tug never had.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct SecurityWatch {
-    /// Commands the ECU accepted that differ from the ADS's own (by > 5° or > 1 m/s).
-    pub foreign_commands: u64,
-    /// State frames the ADS accepted whose speed is > 1.5 m/s off the tug's.
-    pub false_speeds: u64,
-    accepted: u64,
-    speed_at: Option<Timestamp>,
 }
 
 /// Why a tug could not be built.
@@ -690,16 +494,9 @@ impl Tug {
             truth: Vec::new(),
             active: Vec::new(),
             cuts_stale: true,
-            last_seen: (
-                Watchdog::FullBraking,
-                EstopState::Normal,
-                ControlMode::Manual,
-            ),
-            last_degraded: None,
+            supervisor_watch: SupervisorWatch::default(),
             ads_external: false,
-            step_responses: Vec::new(),
-            tank_response: None,
-            tank_over: false,
+            steering: SteeringRecord::default(),
             echo_latencies: Vec::new(),
             last_echo: None,
             security: SecurityWatch::default(),
@@ -715,27 +512,16 @@ impl Tug {
     /// Set (`on`) or mend the faults that are frames tampered with on their way; others are
     /// left alone.
     fn set_tampering(&mut self, fault: Fault, on: bool) {
-        // The ADS's commands on both buses that carry them, as a faulty ADS would send them.
-        const COMMAND_BUSES: [TugBus; 2] = [TugBus::Bus1, TugBus::Bus1b];
-        let command = u16::try_from(AdsToVehicleControl::ID).unwrap_or(0x100);
-        let (buses, id, tamper): (&[TugBus], u16, Tamper) = match &fault {
-            Fault::CorruptCommands => (&COMMAND_BUSES, command, Tamper::FlipBit),
-            Fault::DuplicateCommands => (&COMMAND_BUSES, command, Tamper::Duplicate),
-            Fault::DelayCommands(ms) => (
-                &COMMAND_BUSES,
-                command,
-                Tamper::Delay(Duration::from_millis(*ms)),
-            ),
-            Fault::TamperFrames { bus, id, tamper } => (core::slice::from_ref(bus), *id, *tamper),
-            _ => return,
-        };
-        let Ok(id) = Id::standard(u32::from(id)) else {
+        let Some(tampering) = fault.tampering() else {
             return;
         };
-        for bus in buses {
+        let Ok(id) = Id::standard(u32::from(tampering.id)) else {
+            return;
+        };
+        for bus in tampering.buses {
             let index = self.bus_index(*bus);
             if let Some(sim) = self.net.bus_mut(index) {
-                sim.tamper(id, on.then_some(tamper));
+                sim.tamper(id, on.then_some(tampering.tamper));
             }
         }
     }
@@ -1059,7 +845,7 @@ impl Tug {
         self.now = until;
         self.take_logs();
         self.watch_attacks();
-        self.record_step(until);
+        self.record_steering(until);
         self.note_changes();
         self.sample(until);
     }
@@ -1113,29 +899,21 @@ impl Tug {
     /// What the attacks achieve: each command the ECU took this step compared with the ADS's
     /// own, each speed the ADS took with the tug's.
     fn watch_attacks(&mut self) {
-        let accepted = self.ecu.supervisor().stats().accepted;
-        if accepted != self.security.accepted && !self.ads_external {
-            self.security.accepted = accepted;
-            let own = self.ads.ads().effective_command(self.now);
-            let taken = self.ecu.supervisor().command();
-            if let (Some(own), Some(taken)) = (own, taken) {
-                if (own.steering - taken.steering).abs() > 5.0
-                    || (own.velocity - taken.velocity).abs() > 1.0
-                {
-                    self.security.foreign_commands += 1;
-                }
-            }
+        if !self.ads_external {
+            let accepted = self.ecu.supervisor().stats().accepted;
+            let (ads, supervisor, now) = (self.ads.ads(), self.ecu.supervisor(), self.now);
+            self.security.note_accepted(accepted, || {
+                let own = ads.effective_command(now)?;
+                let taken = supervisor.command()?;
+                Some([
+                    (own.steering, own.velocity),
+                    (taken.steering, taken.velocity),
+                ])
+            });
         }
         let speed = self.ads.ads().state().velocity;
-        if speed.at != self.security.speed_at {
-            self.security.speed_at = speed.at;
-            if speed
-                .value
-                .is_some_and(|v| (v - self.pose_speed()).abs() > 1.5)
-            {
-                self.security.false_speeds += 1;
-            }
-        }
+        let actual = self.pose_speed();
+        self.security.note_speed(speed.at, speed.value, actual);
     }
 
     /// The attacker (its frames sent).
@@ -1192,68 +970,24 @@ impl Tug {
         }
     }
 
-    /// The tank turn's record: the front-left wheel every millisecond while the vehicle
-    /// follows a tank-steering command (the first such stretch).
-    fn record_tank_turn(&mut self, now: Timestamp) {
+    /// The step test's and the tank turn's records: the front-left wheel every millisecond.
+    fn record_steering(&mut self, now: Timestamp) {
+        let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) else {
+            return;
+        };
         let tank = self
             .ecu
             .supervisor()
             .command()
             .is_some_and(|c| c.steering_mode == SteeringMode::Tank);
-        let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) else {
-            return;
+        let ecu = &self.ecu;
+        let tank_target = || {
+            ecu.wheel_targets()
+                .first()
+                .map_or(0.0, |w| w.angle.to_degrees())
         };
-        match &mut self.tank_response {
-            None if tank => {
-                let to = self
-                    .ecu
-                    .wheel_targets()
-                    .first()
-                    .map_or(0.0, |w| w.angle.to_degrees());
-                self.tank_response = Some((
-                    now,
-                    StepResponse {
-                        from: angle,
-                        to,
-                        times: vec![0.0],
-                        angles: vec![angle],
-                    },
-                ));
-            }
-            Some((started, response)) if tank && !self.tank_over => {
-                response
-                    .times
-                    .push(now.saturating_since(*started).as_secs_f64());
-                response.angles.push(angle);
-            }
-            Some(_) => self.tank_over |= !tank,
-            None => {}
-        }
-    }
-
-    /// The step test's record: the front-left wheel every millisecond of the current step.
-    fn record_step(&mut self, now: Timestamp) {
-        self.record_tank_turn(now);
-        let Some(step) = self.ads.mission().active_step() else {
-            return;
-        };
-        if self.step_responses.len() == step.index {
-            self.step_responses.push(StepResponse {
-                from: step.from,
-                to: step.to,
-                times: Vec::new(),
-                angles: Vec::new(),
-            });
-        }
-        if now >= step.started.saturating_add(STEP_HOLD) {
-            return;
-        }
-        let angle = self.corners.first().map(|c| c.chain.wheel_angle_deg());
-        if let (Some(response), Some(angle)) = (self.step_responses.get_mut(step.index), angle) {
-            let since = now.saturating_since(step.started);
-            response.times.push(since.as_secs_f64());
-            response.angles.push(angle);
-        }
+        let step = self.ads.mission().active_step();
+        self.steering.note(now, angle, tank, tank_target, step);
     }
 
     /// Record the supervisor's state changes, bus state changes and the nodes' events.
@@ -1266,17 +1000,11 @@ impl Tug {
             else {
                 continue;
             };
-            for event in sim.drain_events() {
-                match event {
-                    BusEvent::StateChanged { node, state, .. } => {
-                        changes.push((bus, node, state));
-                    }
-                    BusEvent::Transmitted { id, latency_ns, .. } => {
-                        times.note(id, latency_ns);
-                    }
-                    _ => {}
+            times.note_events(sim.drain_events(), |event| {
+                if let BusEvent::StateChanged { node, state, .. } = event {
+                    changes.push((bus, node, state));
                 }
-            }
+            });
         }
         for (bus, node, state) in changes {
             let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
@@ -1285,26 +1013,14 @@ impl Tug {
         let supervisor = self.ecu.supervisor();
         let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
         let degraded = supervisor.degraded();
-        let (watchdog, estop, mode) = self.last_seen;
-        if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
-            self.record("watchdog", watchdog_name(seen.0).to_string());
-        }
-        if seen.1 != estop {
-            self.record("estop", format!("{:?}", seen.1));
-        }
-        if seen.2 != mode {
-            self.record("mode", format!("{:?}", seen.2));
-        }
-        self.last_seen = seen;
-        if degraded != self.last_degraded {
-            self.last_degraded = degraded;
-            let detail = match degraded {
-                Some(Channel::A) => "bus 1 alone (bus 1b lost)",
-                Some(Channel::B) => "bus 1b alone (bus 1 lost)",
-                None => "both buses agree",
-            };
-            self.record("redundancy", detail.to_string());
-        }
+        let (now, events) = (self.now, &mut self.events);
+        self.supervisor_watch.note(seen, degraded, |kind, detail| {
+            events.push(SimEvent {
+                t: now,
+                kind: kind.to_string(),
+                detail,
+            });
+        });
         self.take_node_events();
     }
 
@@ -1407,140 +1123,4 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
         &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
     );
     Device::new(node, od, Drive::new().with_external_motor())
-}
-
-/// A bus's response times by identifier, lowest first.
-#[derive(Default)]
-struct ResponseLog {
-    times: Vec<ResponseTimes>,
-    /// Where each standard identifier's entry is in `times`, plus one (0: none yet), by its
-    /// value: every frame on every bus is counted, and a search by identifier would cost more
-    /// than the counting. Empty until the first frame.
-    standard: Vec<usize>,
-}
-
-impl ResponseLog {
-    /// One more frame of `id` that took `latency_ns`.
-    fn note(&mut self, id: Id, latency_ns: u64) {
-        let known = match id {
-            Id::Standard(s) => self
-                .standard
-                .get(usize::from(s.as_raw()))
-                .and_then(|at| at.checked_sub(1)),
-            Id::Extended(_) => self.times.binary_search_by_key(&id, |t| t.id).ok(),
-        };
-        let index = known.unwrap_or_else(|| self.insert(id));
-        if let Some(t) = self.times.get_mut(index) {
-            t.count += 1;
-            t.total_ns = t.total_ns.saturating_add(latency_ns);
-            t.max_ns = t.max_ns.max(latency_ns);
-        }
-    }
-
-    /// A new identifier in its place; the standard identifiers' places are worked out again.
-    fn insert(&mut self, id: Id) -> usize {
-        let index = self
-            .times
-            .binary_search_by_key(&id, |t| t.id)
-            .unwrap_or_else(|at| at);
-        self.times.insert(
-            index,
-            ResponseTimes {
-                id,
-                count: 0,
-                total_ns: 0,
-                max_ns: 0,
-            },
-        );
-        self.standard.clear();
-        self.standard.resize(0x800, 0);
-        for (at, t) in self.times.iter().enumerate() {
-            if let Id::Standard(standard) = t.id {
-                if let Some(slot) = self.standard.get_mut(usize::from(standard.as_raw())) {
-                    *slot = at + 1;
-                }
-            }
-        }
-        index
-    }
-}
-
-/// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service
-/// road, a second turn and back toward the start (about 140 m).
-pub fn apron_loop() -> Vec<Point> {
-    let mut points: Vec<Point> = (0..=40)
-        .map(|x| Point {
-            x: f64::from(x),
-            y: 0.0,
-        })
-        .collect();
-    let arc = |cx: f64, cy: f64, from: f64, points: &mut Vec<Point>| {
-        for k in 1..=24 {
-            let a = from + f64::from(k) / 24.0 * core::f64::consts::PI;
-            points.push(Point {
-                x: cx + 15.0 * libm::cos(a),
-                y: cy + 15.0 * libm::sin(a),
-            });
-        }
-    };
-    // A half circle to the left brings the route back parallel, 30 m over.
-    arc(40.0, 15.0, -core::f64::consts::FRAC_PI_2, &mut points);
-    for x in (10..40).rev() {
-        points.push(Point {
-            x: f64::from(x),
-            y: 30.0,
-        });
-    }
-    points
-}
-
-fn watchdog_name(watchdog: Watchdog) -> &'static str {
-    match watchdog {
-        Watchdog::Normal => "normal",
-        Watchdog::Holding { .. } => "holding",
-        Watchdog::Decelerating { .. } => "decelerating",
-        Watchdog::FullBraking => "full_braking",
-        Watchdog::Recovering { .. } => "recovering",
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used)]
-
-    use super::*;
-    use proptest::prelude::*;
-    use std::collections::BTreeMap;
-
-    fn identifier() -> impl Strategy<Value = Id> {
-        prop_oneof![
-            (0u32..0x800).prop_map(|raw| Id::standard(raw).unwrap()),
-            (0u32..8).prop_map(|raw| Id::standard(raw).unwrap()),
-            (0u32..8).prop_map(|raw| Id::extended(raw << 18 | raw).unwrap()),
-            (0u32..0x2000_0000).prop_map(|raw| Id::extended(raw).unwrap()),
-        ]
-    }
-
-    proptest! {
-        /// Each identifier's count, total and longest, lowest identifier first, as a map by
-        /// identifier has them, in whatever order new identifiers come.
-        #[test]
-        fn response_times_are_kept_per_identifier_in_order(
-            frames in proptest::collection::vec((identifier(), 0u64..1_000_000), 0..300),
-        ) {
-            let mut log = ResponseLog::default();
-            let mut expected: BTreeMap<Id, (u64, u64, u64)> = BTreeMap::new();
-            for (id, latency) in frames {
-                log.note(id, latency);
-                let e = expected.entry(id).or_default();
-                *e = (e.0 + 1, e.1 + latency, e.2.max(latency));
-            }
-            let got: Vec<(Id, (u64, u64, u64))> = log
-                .times
-                .iter()
-                .map(|t| (t.id, (t.count, t.total_ns, t.max_ns)))
-                .collect();
-            prop_assert_eq!(got, expected.into_iter().collect::<Vec<_>>());
-        }
-    }
 }

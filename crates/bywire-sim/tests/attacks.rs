@@ -3,9 +3,10 @@
 #![allow(clippy::unwrap_used)]
 
 use bywire_core::Timestamp;
+use bywire_sim::record::SimEvent;
 use bywire_sim::report::SecurityCounts;
 use bywire_sim::scenario::Scenario;
-use bywire_sim::tug::{SimEvent, Tug};
+use bywire_sim::tug::Tug;
 
 /// The fault tour to its end, the tug plain or secured.
 fn tour(secoc: bool) -> Tug {
@@ -116,7 +117,7 @@ fn with_secoc_forgeries_and_replays_are_refused_and_counted_and_the_tug_drives_o
 /// second: with one bus left there is no copy to disagree with.
 fn forging_on_one_bus(secoc: bool) -> Tug {
     use bywire_sim::attacker::Attack;
-    use bywire_sim::tug::Fault;
+    use bywire_sim::fault::Fault;
     use std::time::Duration;
     let mut scenario = Scenario::builtin("apron-loop").unwrap();
     scenario.tug.secoc = secoc;

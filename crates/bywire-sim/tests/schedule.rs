@@ -13,7 +13,8 @@ use bywire_core::frame::ClassicFrame;
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_dbc::schedule::{analyse, Options, Schedule};
 use bywire_dbc::{parse, Database, Message, Mode};
-use bywire_sim::tug::{ResponseTimes, Tug, TugParams};
+use bywire_sim::record::ResponseTimes;
+use bywire_sim::tug::{Tug, TugParams};
 
 fn database(text: &str) -> Database {
     parse(text.as_bytes(), Mode::Lenient).unwrap().0

@@ -101,7 +101,8 @@ fn the_same_seed_gives_the_same_frames() {
 
 use std::time::Duration;
 
-use bywire_sim::tug::{Fault, SimEvent};
+use bywire_sim::fault::Fault;
+use bywire_sim::record::SimEvent;
 
 fn cruising() -> Tug {
     let mut tug = Tug::new(TugParams {
@@ -332,7 +333,11 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
     assert_eq!(modes, ["Tank", "Normal"]);
     // The front-left wheel goes to its tank angle and holds it (it used to hunt ±2° around
     // −60° for the whole turn: the linkage doubles the loop's gain there).
-    let (_, turn) = tug.tank_response.as_ref().expect("the turn was recorded");
+    let (_, turn) = tug
+        .steering
+        .tank_turn
+        .as_ref()
+        .expect("the turn was recorded");
     let m = turn.metrics().unwrap();
     assert!((turn.to + 60.6).abs() < 0.5, "{}", turn.to);
     assert!(m.settling_time_2 < 4.0, "{m:?}");
@@ -368,7 +373,7 @@ fn the_step_test_records_each_step_of_the_steering() {
         tug.step();
     }
     assert!(tug.pose().x > 0.5, "away after it: {:?}", tug.pose());
-    let steps = &tug.step_responses;
+    let steps = &tug.steering.steps;
     assert_eq!(steps.len(), 2);
     assert_eq!((steps[0].from, steps[0].to), (0.0, 10.0));
     assert_eq!((steps[1].from, steps[1].to), (10.0, -10.0));
@@ -545,7 +550,7 @@ fn the_sender_of_a_chosen_identifier_goes_bus_off_and_recovers() {
 fn bus_loads_over_windows_add_up_to_the_whole() {
     let mut tug = cruising();
     run_for(&mut tug, 6_000);
-    let loads = bywire_sim::tug::windowed_loads(&tug.trace, 10);
+    let loads = bywire_sim::record::windowed_loads(&tug.trace, 10);
     let overall = tug.bus_loads();
     for (bus, series) in loads.iter().enumerate() {
         assert!(series.len() >= 10, "bus {bus}: {} windows", series.len());

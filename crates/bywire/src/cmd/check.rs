@@ -6,8 +6,9 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use bywire_bus::runner;
+use bywire_sim::fault::Fault;
 use bywire_sim::steering::SensorFault;
-use bywire_sim::tug::{Fault, OnBothCommandBuses, Tug, TugParams};
+use bywire_sim::tug::{OnBothCommandBuses, Tug, TugParams};
 use bywire_vehicle::acceptance::{CheckConfig, Checker};
 use bywire_vehicle::profile::Profile;
 

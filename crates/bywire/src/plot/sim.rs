@@ -7,7 +7,8 @@ use std::path::Path;
 
 use anyhow::Result;
 use bywire_core::Timestamp;
-use bywire_sim::tug::{windowed_loads, Sample, Tug};
+use bywire_sim::record::{windowed_loads, Sample};
+use bywire_sim::tug::Tug;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 

@@ -5,8 +5,9 @@
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use bywire_sim::fault::Fault;
 use bywire_sim::scenario::Scenario;
-use bywire_sim::tug::{Fault, Tug};
+use bywire_sim::tug::Tug;
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
 use crate::support::sim_serve::Shared;

@@ -1,0 +1,138 @@
+//! The faults and operator actions a scenario injects into the simulated tug, applied at the
+//! edges of its network: outputs dropped, frames tampered with on a bus, a plant or an input
+//! changed (see [`crate::tug::Tug::inject`]).
+
+use core::time::Duration;
+
+use bywire_bus::sim::Tamper;
+use bywire_tug::messages::AdsToVehicleControl;
+
+use crate::attacker::Attack;
+use crate::steering::SensorFault;
+use crate::tug::TugBus;
+
+/// A fault (or operator action) a scenario injects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The ADS stops sending.
+    AdsSilence,
+    /// The E-stop chain opens (the safety controller requests an E-stop).
+    Estop,
+    /// The operator's reset: reset pressed until the latch clears, then engage.
+    OperatorReset,
+    /// A drive node (by node ID) stops sending (cut off, powered down).
+    DriveSilence(u8),
+    /// The angle sensor of a corner (0 FL … 3 RR) fails.
+    SensorFault(usize, SensorFault),
+    /// The ADS's commands arrive with a flipped bit (their checksum fails), on bus 1 and 1b.
+    CorruptCommands,
+    /// Every ADS command arrives twice, on bus 1 and 1b.
+    DuplicateCommands,
+    /// The ADS's commands arrive this many milliseconds late, on bus 1 and 1b.
+    DelayCommands(u64),
+    /// A driver turns the steering wheel (torque above the takeover threshold).
+    DriverTakeover,
+    /// The ECU's controller on bus 1 meets a burst of bus errors until it is bus-off; it
+    /// recovers after 128 × 11 recessive bits.
+    EcuBusOff,
+    /// The node that sends this identifier on this bus meets the same burst, from its next
+    /// frame of that identifier on, and recovers the same way.
+    BusOff {
+        /// The bus.
+        bus: TugBus,
+        /// An 11-bit identifier the node sends.
+        id: u16,
+    },
+    /// Bus 1b, the redundant command bus, is cut: the ECU votes with bus 1 alone.
+    RedundantBusLoss,
+    /// A node on bus 1 without the key attacks ([`crate::attacker`]).
+    Attack(Attack),
+    /// Whichever node sends frames with this identifier on this bus sends them corrupted
+    /// (a bit flipped), twice, or late (one such fault an identifier: the latest holds).
+    TamperFrames {
+        /// The bus.
+        bus: TugBus,
+        /// The 11-bit identifier.
+        id: u16,
+        /// What happens to them.
+        tamper: Tamper,
+    },
+}
+
+/// As in events and the live view: the variant's name, identifiers and node IDs in hex.
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Fault::DriveSilence(node) => write!(f, "DriveSilence(0x{node:02X})"),
+            Fault::TamperFrames { bus, id, tamper } => {
+                write!(f, "TamperFrames {{ {} 0x{id:03X} {tamper:?} }}", bus.name())
+            }
+            Fault::BusOff { bus, id } => write!(f, "BusOff {{ {} 0x{id:03X} }}", bus.name()),
+            other => write!(f, "{other:?}"),
+        }
+    }
+}
+
+/// A fault that tampers with frames on their way: on these buses, frames of this 11-bit
+/// identifier, this way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tampering<'a> {
+    /// The buses.
+    pub buses: &'a [TugBus],
+    /// The identifier.
+    pub id: u16,
+    /// What happens to the frames.
+    pub tamper: Tamper,
+}
+
+impl Fault {
+    /// The frames this fault tampers with (`None`: it does not tamper with frames).
+    pub fn tampering(&self) -> Option<Tampering<'_>> {
+        // The ADS's commands on both buses that carry them, as a faulty ADS would send them.
+        const COMMAND_BUSES: [TugBus; 2] = [TugBus::Bus1, TugBus::Bus1b];
+        let command = u16::try_from(AdsToVehicleControl::ID).unwrap_or(0x100);
+        let (buses, id, tamper): (&[TugBus], u16, Tamper) = match self {
+            Fault::CorruptCommands => (&COMMAND_BUSES, command, Tamper::FlipBit),
+            Fault::DuplicateCommands => (&COMMAND_BUSES, command, Tamper::Duplicate),
+            Fault::DelayCommands(ms) => (
+                &COMMAND_BUSES,
+                command,
+                Tamper::Delay(Duration::from_millis(*ms)),
+            ),
+            Fault::TamperFrames { bus, id, tamper } => (core::slice::from_ref(bus), *id, *tamper),
+            _ => return None,
+        };
+        Some(Tampering { buses, id, tamper })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fault_tampers_with_the_frames_it_names_and_no_others() {
+        let command = u16::try_from(AdsToVehicleControl::ID).unwrap_or(0);
+        let delay = Fault::DelayCommands(30).tampering();
+        assert_eq!(
+            delay,
+            Some(Tampering {
+                buses: &[TugBus::Bus1, TugBus::Bus1b],
+                id: command,
+                tamper: Tamper::Delay(Duration::from_millis(30)),
+            })
+        );
+        let on_bus2 = Fault::TamperFrames {
+            bus: TugBus::Bus2,
+            id: 0x211,
+            tamper: Tamper::Duplicate,
+        };
+        let tampering = on_bus2.tampering();
+        assert_eq!(
+            tampering.map(|t| (t.buses, t.id)),
+            Some((&[TugBus::Bus2][..], 0x211))
+        );
+        assert_eq!(Fault::AdsSilence.tampering(), None);
+        assert_eq!(Fault::Estop.tampering(), None);
+    }
+}
