@@ -3,7 +3,6 @@
 //! by identifier and what the attacks achieved. The tug ([`crate::tug`]) feeds them from its
 //! nodes and plants; how each is kept and what counts is decided here.
 
-use bywire_bus::sim::BusEvent;
 use bywire_control::kinematics::{Pose, Twist};
 use bywire_control::metrics::{step_metrics, MetricsError, StepMetrics};
 use bywire_core::{Frame, Id, Timestamp};
@@ -242,13 +241,18 @@ impl SecurityWatch {
         }
     }
 
-    /// The ADS's view of the speed, taken `at` (`reported`), beside the tug's `actual` one.
-    pub(crate) fn note_speed(&mut self, at: Option<Timestamp>, reported: Option<f64>, actual: f64) {
+    /// The ADS's view of the speed, taken `at` (`reported`), beside the tug's `actual()` one.
+    pub(crate) fn note_speed(
+        &mut self,
+        at: Option<Timestamp>,
+        reported: Option<f64>,
+        actual: impl FnOnce() -> f64,
+    ) {
         if at == self.speed_at {
             return;
         }
         self.speed_at = at;
-        if reported.is_some_and(|v| (v - actual).abs() > 1.5) {
+        if reported.is_some_and(|v| (v - actual()).abs() > 1.5) {
             self.false_speeds += 1;
         }
     }
@@ -307,22 +311,6 @@ impl ResponseLog {
             }
         }
         index
-    }
-
-    /// A bus's events since the last look: each frame sent counted; its controllers' state
-    /// changes given to `changed`.
-    pub(crate) fn note_events(
-        &mut self,
-        events: impl Iterator<Item = BusEvent>,
-        mut changed: impl FnMut(BusEvent),
-    ) {
-        for event in events {
-            match event {
-                BusEvent::Transmitted { id, latency_ns, .. } => self.note(id, latency_ns),
-                BusEvent::StateChanged { .. } => changed(event),
-                _ => {}
-            }
-        }
     }
 }
 
@@ -484,10 +472,10 @@ mod tests {
         watch.note_accepted(3, || Some([(0.0, 1.0), (0.0, 2.5)]));
         watch.note_accepted(4, || None);
         assert_eq!(watch.foreign_commands, 2);
-        watch.note_speed(Some(ms(1)), Some(3.0), 1.0);
-        watch.note_speed(Some(ms(1)), Some(3.0), 1.0);
-        watch.note_speed(Some(ms(2)), Some(2.4), 1.0);
-        watch.note_speed(Some(ms(3)), None, 1.0);
+        watch.note_speed(Some(ms(1)), Some(3.0), || 1.0);
+        watch.note_speed(Some(ms(1)), Some(3.0), || 1.0);
+        watch.note_speed(Some(ms(2)), Some(2.4), || 1.0);
+        watch.note_speed(Some(ms(3)), None, || 1.0);
         assert_eq!(watch.false_speeds, 1);
     }
 

@@ -676,7 +676,7 @@ impl Tug {
 
     /// The tug's speed, m/s.
     pub fn pose_speed(&self) -> f64 {
-        libm::hypot(self.chassis.twist().vx, self.chassis.twist().vy)
+        speed_of(&self.chassis)
     }
 
     /// The vehicle control ECU's supervisor.
@@ -912,8 +912,9 @@ impl Tug {
             });
         }
         let speed = self.ads.ads().state().velocity;
-        let actual = self.pose_speed();
-        self.security.note_speed(speed.at, speed.value, actual);
+        let chassis = &self.chassis;
+        self.security
+            .note_speed(speed.at, speed.value, || speed_of(chassis));
     }
 
     /// The attacker (its frames sent).
@@ -1000,11 +1001,17 @@ impl Tug {
             else {
                 continue;
             };
-            times.note_events(sim.drain_events(), |event| {
-                if let BusEvent::StateChanged { node, state, .. } = event {
-                    changes.push((bus, node, state));
+            for event in sim.drain_events() {
+                match event {
+                    BusEvent::StateChanged { node, state, .. } => {
+                        changes.push((bus, node, state));
+                    }
+                    BusEvent::Transmitted { id, latency_ns, .. } => {
+                        times.note(id, latency_ns);
+                    }
+                    _ => {}
                 }
-            });
+            }
         }
         for (bus, node, state) in changes {
             let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
@@ -1093,6 +1100,11 @@ impl Tug {
         self.chassis.step(dt, &inputs, self.params.grade);
         self.battery.step(dt, power);
     }
+}
+
+/// The body's speed over the ground, m/s.
+fn speed_of(chassis: &Chassis) -> f64 {
+    libm::hypot(chassis.twist().vx, chassis.twist().vy)
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
