@@ -81,6 +81,17 @@ pub struct SimEvent {
     pub detail: String,
 }
 
+impl SimEvent {
+    /// An event of `kind` at `t`.
+    pub fn new(t: Timestamp, kind: &str, detail: String) -> SimEvent {
+        SimEvent {
+            t,
+            kind: kind.to_string(),
+            detail,
+        }
+    }
+}
+
 /// One steering step at a standstill: the ADS's command from `from` to `to` degrees and the
 /// front-left wheel's angle every millisecond after it.
 #[derive(Debug, Clone, PartialEq)]

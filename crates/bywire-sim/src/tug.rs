@@ -638,11 +638,7 @@ impl Tug {
     }
 
     fn record(&mut self, kind: &str, detail: String) {
-        self.events.push(SimEvent {
-            t: self.now,
-            kind: kind.to_string(),
-            detail,
-        });
+        self.events.push(SimEvent::new(self.now, kind, detail));
     }
 
     /// Simulated time.
@@ -1022,11 +1018,7 @@ impl Tug {
         let degraded = supervisor.degraded();
         let (now, events) = (self.now, &mut self.events);
         self.supervisor_watch.note(seen, degraded, |kind, detail| {
-            events.push(SimEvent {
-                t: now,
-                kind: kind.to_string(),
-                detail,
-            });
+            events.push(SimEvent::new(now, kind, detail));
         });
         self.take_node_events();
     }
