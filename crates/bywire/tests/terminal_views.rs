@@ -10,40 +10,50 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-fn tmux(args: &[&str]) -> (bool, String) {
-    let out = Command::new("tmux")
-        .args(args)
-        .output()
-        .expect("tmux is installed (scripts/install-test-deps.sh)");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-    )
-}
-
-/// A session running `command`, closed when dropped.
+/// A session running `command` on a tmux server of its own, closed when dropped. Its own server
+/// (`-L`): tests run in parallel, and several clients starting the one default server at the
+/// same moment can fail to reach it.
 struct Session(String);
 
 impl Session {
     fn start(name: &str, command: &str) -> Session {
-        let name = format!("{name}-{}", std::process::id());
-        let (ok, _) = tmux(&[
+        let session = Session(format!("{name}-{}", std::process::id()));
+        let (ok, err) = session.tmux(&[
             "new-session",
             "-d",
             "-s",
-            &name,
+            &session.0,
             "-x",
             "120",
             "-y",
             "30",
             command,
         ]);
-        assert!(ok, "tmux new-session");
-        Session(name)
+        assert!(ok, "tmux new-session: {err}");
+        session
+    }
+
+    /// Runs tmux on this session's server: whether it succeeded, and its output (stdout on
+    /// success, stderr otherwise).
+    fn tmux(&self, args: &[&str]) -> (bool, String) {
+        let out = Command::new("tmux")
+            .args(["-L", &self.0])
+            .args(args)
+            .output()
+            .expect("tmux is installed (scripts/install-test-deps.sh)");
+        let text = if out.status.success() {
+            &out.stdout
+        } else {
+            &out.stderr
+        };
+        (
+            out.status.success(),
+            String::from_utf8_lossy(text).into_owned(),
+        )
     }
 
     fn screen(&self) -> String {
-        tmux(&["capture-pane", "-p", "-t", &self.0]).1
+        self.tmux(&["capture-pane", "-p", "-t", &self.0]).1
     }
 
     /// Wait until the screen contains `text`.
@@ -63,12 +73,13 @@ impl Session {
     }
 
     fn keys(&self, keys: &str) {
-        assert!(tmux(&["send-keys", "-t", &self.0, keys]).0);
+        let (ok, err) = self.tmux(&["send-keys", "-t", &self.0, keys]);
+        assert!(ok, "tmux send-keys: {err}");
     }
 
     fn wait_closed(&self) {
         let deadline = Instant::now() + Duration::from_secs(10);
-        while tmux(&["has-session", "-t", &self.0]).0 {
+        while self.tmux(&["has-session", "-t", &self.0]).0 {
             assert!(
                 Instant::now() < deadline,
                 "still running:\n{}",
@@ -81,7 +92,8 @@ impl Session {
 
 impl Drop for Session {
     fn drop(&mut self) {
-        let _ = tmux(&["kill-session", "-t", &self.0]);
+        // The server goes with its only session.
+        let _ = self.tmux(&["kill-server"]);
     }
 }
 
