@@ -62,6 +62,14 @@ fn settle(baseline: (usize, usize), slack: usize) -> (usize, usize) {
     }
 }
 
+/// Waits until `done` holds or `limit` has passed (the assertions after it say which).
+fn wait_until(limit: Duration, done: impl Fn() -> bool) {
+    let until = Instant::now() + limit;
+    while !done() && Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// A server for the in-process bus `name`, each client's endpoint holding `queue` frames.
 fn server(name: &str, limits: Limits, queue: usize) -> Server {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
@@ -273,8 +281,11 @@ fn six_hundred_idle_connections_neither_exhaust_the_server_nor_stop_a_client() {
         idle.extend((0..50).map(|_| TcpStream::connect(&address).unwrap()));
         std::thread::sleep(Duration::from_millis(20));
     }
-    std::thread::sleep(Duration::from_millis(300));
     let stats = server.stats();
+    // Every connection answered (held or refused), well before the handshake time runs out.
+    wait_until(Duration::from_millis(1500), || {
+        stats.active.load(Ordering::Relaxed) + stats.refused_clients.load(Ordering::Relaxed) >= 601
+    });
     assert_eq!(stats.active.load(Ordering::Relaxed), 64, "the limit");
     assert_eq!(stats.refused_clients.load(Ordering::Relaxed), 537);
     let mut last = BufReader::new(idle.last().unwrap().try_clone().unwrap());
@@ -292,7 +303,9 @@ fn six_hundred_idle_connections_neither_exhaust_the_server_nor_stop_a_client() {
     );
     let received_then = received.load(Ordering::Relaxed);
     // The handshake time passes: the idle sessions are closed, and a new client is served.
-    std::thread::sleep(Duration::from_millis(2200));
+    wait_until(Duration::from_secs(6), || {
+        stats.timed_out.load(Ordering::Relaxed) >= 63
+    });
     assert_eq!(stats.timed_out.load(Ordering::Relaxed), 63);
     let settled = settle(baseline, 0);
     assert!(settled.0 <= baseline.0, "{settled:?} from {baseline:?}");
