@@ -9,15 +9,19 @@
 
 mod common;
 
-use std::io::Write;
+use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
-use std::time::Duration;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-/// Run the bridge with `args`, `drive` every 25 ms for 2.5 s with an engage at 0.5 s; the
-/// state lines it wrote.
-fn drive_and_engage(args: &[&str], drive: &str) -> Vec<Value> {
+/// Run the bridge with `args`, `drive` every 25 ms with an engage every 0.5 s, for 2.5 s and
+/// on until a state line shows `reached` (20 s at most); the state lines it wrote. On, because
+/// a loaded machine can stall the bridge long enough for the vehicle's watchdog to brake, and
+/// the vehicle drives again only after its recovery, as it should.
+fn drive_until(args: &[&str], drive: &str, reached: fn(&Value) -> bool) -> Vec<Value> {
     let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args(args)
         .stdin(Stdio::piped())
@@ -26,23 +30,47 @@ fn drive_and_engage(args: &[&str], drive: &str) -> Vec<Value> {
         .spawn()
         .unwrap();
     let mut stdin = child.stdin.take().unwrap();
-    // Engage at 0.5 s, and again at 1 s and 1.5 s as an operator would if the vehicle was
-    // still recovering from its start (a loaded machine can stretch that past 0.5 s, and a
-    // refused engage is not retried by the bridge).
-    for k in 0..100 {
-        let line = if matches!(k, 20 | 40 | 60) {
+    let stdout = child.stdout.take().unwrap();
+    let seen = Arc::new(AtomicBool::new(false));
+    let reader = {
+        let seen = Arc::clone(&seen);
+        std::thread::spawn(move || {
+            let mut states = Vec::new();
+            for line in BufReader::new(stdout).lines() {
+                let state: Value = serde_json::from_str(&line.unwrap()).unwrap();
+                if state.get("mode").is_some() {
+                    if reached(&state) {
+                        seen.store(true, Ordering::Relaxed);
+                    }
+                    states.push(state);
+                }
+            }
+            states
+        })
+    };
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut k = 0;
+    while k < 100 || (!seen.load(Ordering::Relaxed) && Instant::now() < deadline) {
+        // An operator engages again while the vehicle still recovers (a refused engage is
+        // not retried by the bridge).
+        let line = if k > 0 && k % 20 == 0 {
             r#"{"engage": true}"#
         } else {
             drive
         };
         writeln!(stdin, "{line}").unwrap();
         std::thread::sleep(Duration::from_millis(25));
+        k += 1;
     }
     drop(stdin);
-    common::json_lines(child.wait_with_output().unwrap())
-        .into_iter()
-        .filter(|v| v.get("mode").is_some())
-        .collect()
+    let states = reader.join().unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    states
 }
 
 #[test]
@@ -188,7 +216,7 @@ fn bridge_refuses_bad_arguments_clearly() {
 
 #[test]
 fn bridge_drives_over_two_redundant_buses() {
-    let states = drive_and_engage(
+    let states = drive_until(
         &[
             "bridge",
             "--profile",
@@ -200,6 +228,7 @@ fn bridge_drives_over_two_redundant_buses() {
             "20",
         ],
         r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#,
+        |s| s["mode"] == "autonomous" && s["velocity"] == 1.0 && s["warning"] == false,
     );
     // Both copies agree: the vehicle drives, not degraded (no warning), and the feedback
     // that arrives twice is taken once (no counter rejections).
@@ -446,7 +475,7 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
     assert_eq!(code, 1);
     assert!(err.contains("the profile declares no [secoc]"), "{err}");
     let fresh = freshness.to_str().unwrap();
-    let states = drive_and_engage(
+    let states = drive_until(
         &[
             "bridge",
             "--profile",
@@ -461,6 +490,7 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
             fresh,
         ],
         r#"{"velocity": 1.5, "gear": "drive", "mode": "autonomous"}"#,
+        |s| s["mode"] == "autonomous" && s["velocity"] == 1.5,
     );
     // Every command authenticated by the vehicle (else it never engages), every state frame by
     // the ADS side (else no feedback).
@@ -470,7 +500,7 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
             .any(|s| s["mode"] == "autonomous" && s["velocity"] == 1.5),
         "never drove: {states:?}"
     );
-    // 2.5 s of commands at 50 Hz, reserved ahead in the store.
+    // At least 2.5 s of commands at 50 Hz, reserved ahead in the store.
     let kept: u64 = std::fs::read_to_string(&freshness)
         .unwrap()
         .trim()

@@ -40,7 +40,11 @@ fn check_sweep(report: &Value) {
     assert_eq!(steps.len(), 81, "{report}");
     for (step, target) in steps.iter().zip(-40i64..=40) {
         assert_eq!(step["target"].as_i64(), Some(target));
-        assert_eq!(step["reached"], true, "step {step}");
+        assert_eq!(
+            step["reached"], true,
+            "step {step}; the last state: {}",
+            report["last"]
+        );
         assert_eq!(
             step["mode"].as_i64(),
             Some(1),

@@ -1,7 +1,8 @@
 """An ADS written against the reference tug with python-can and cantools, sharing no code with
 bywire: it engages the vehicle on the bus, sweeps the steering from -40 to +40 degrees in steps
 of one degree, reading the actual angle back from VehicleToAds_State, and prints one JSON
-object with what it saw.
+object with what it saw. Should its commands come late (a stalled machine) and the vehicle's
+watchdog brake, it engages again, and counts the cycles spent braked.
 
     ads_sweep.py DBC INTERFACE CHANNEL [HOST PORT]   (socketcan vcan0 | socketcand shuttle H P)
 
@@ -75,12 +76,17 @@ def main():
             engaged = True
             break
     steps = []
+    braked_cycles = 0
     if engaged:
         for target in range(-40, 41):
             reached = None
             deadline = time.monotonic() + 4.0
             while time.monotonic() < deadline:
-                cycle(float(target))
+                # Braked by the watchdog (this machine stalled and a command came late): engage
+                # again while the vehicle recovers, as an operator would.
+                braked = state.get("WatchdogLevel", 0) != 0
+                braked_cycles += braked
+                cycle(float(target), engage=braked and braked_cycles % 10 == 0)
                 actual = state.get("SteeringAngleActual")
                 if actual is not None and abs(actual - target) < 0.15:
                     reached = actual
@@ -89,6 +95,7 @@ def main():
                           "reached": reached is not None, "mode": state.get("ControlMode")})
     bus.shutdown()
     print(json.dumps({"engaged": engaged, "steps": steps, "rejected_state": rejected_state,
+                      "braked_cycles": braked_cycles,
                       "last": {k: v for k, v in state.items() if k != "at"}}), flush=True)
 
 

@@ -82,6 +82,22 @@ def wait_for(condition, timeout):
     return False
 
 
+def keep_driving(condition, timeout):
+    """Waits for `condition` while driving. Should this machine stall the vehicle interface past
+    the vehicle's watchdog, the vehicle brakes, as it must, and drives again only once engaged:
+    this engages again every 2 s, as an operator would."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if wait_for(condition, min(2.0, end - time.monotonic())):
+            return True
+        call(1, timeout=1.0)
+    return False
+
+
+def moving():
+    return latest("velocity") is not None and latest("velocity").longitudinal_velocity > 1.45
+
+
 sequence = [0]
 
 
@@ -119,8 +135,7 @@ try:
     result["engaged"] = answer
     wait_for(lambda: latest("mode") is not None and latest("mode").mode == 1, 5)
     result["mode_engaged"] = latest("mode").mode
-    wait_for(lambda: latest("velocity") is not None
-             and latest("velocity").longitudinal_velocity > 1.45, 8)
+    keep_driving(moving, 8)
     # Rates over one second of driving.
     with lock:
         counts_before = {k: len(v) for k, v in seen.items()}
@@ -145,6 +160,7 @@ try:
         turn_cmd.write(TurnIndicatorsCommand(stamp=stamp(0), command=7))
         time.sleep(0.3)
         result["after_bad_code"] = latest("turn").report
+    keep_driving(moving, 8)
     v, s, g = latest("velocity"), latest("steering"), latest("gear")
     j, sm = latest("joints"), latest("steering_mode")
     result["driving"] = {"velocity": v.longitudinal_velocity, "lateral": v.lateral_velocity,
@@ -160,7 +176,7 @@ try:
         for _ in range(5):
             steering_mode_cmd.write(StringMsg(data=mode))
             time.sleep(0.05)
-        wait_for(lambda: steering_mode_is(mode), 5)
+        keep_driving(lambda: steering_mode_is(mode) and moving(), 5)
         time.sleep(1.0)
         v = latest("velocity")
         result[mode] = {"steering_mode": latest("steering_mode").data,
@@ -176,8 +192,7 @@ try:
     result["tank"] = {"steering_mode": latest("steering_mode").data,
                       "heading_rate": v.heading_rate, "longitudinal": v.longitudinal_velocity}
     publishing.set()
-    wait_for(lambda: steering_mode_is("normal")
-             and latest("velocity").longitudinal_velocity > 1.45, 10)
+    keep_driving(lambda: steering_mode_is("normal") and moving(), 10)
     # A stopped publisher: the vehicle slows within the staleness and stops.
     publishing.clear()
     stopped_at = last_command[0]
