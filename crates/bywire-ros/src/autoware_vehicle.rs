@@ -12,7 +12,7 @@
 use bywire_control::kinematics::{four_wheel, WheelState};
 use bywire_core::Timestamp;
 use bywire_vehicle::ads::{AdsCommand, VehicleState};
-use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators};
+use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
 use bywire_vehicle::profile::Limits;
 use core::time::Duration;
 
@@ -216,10 +216,19 @@ pub fn hazard_lights_code(on: bool) -> u8 {
     }
 }
 
-/// Autoware's control mode for the vehicle's reported mode (`None`: no valid feedback).
-pub fn control_mode_code(mode: Option<ControlMode>) -> u8 {
+/// Autoware's control mode for the vehicle's reported mode and watchdog level (`None`: no
+/// valid feedback; a profile without a watchdog level reports none). Autonomous with the
+/// watchdog braking (full braking, or awaiting a re-engage) is disengaged: the vehicle no
+/// longer follows the ADS and drives again only once engaged, so Autoware must not take it
+/// for autonomous. Holding or decelerating is still autonomous: the next command resumes.
+pub fn control_mode_code(mode: Option<ControlMode>, watchdog: Option<WatchdogLevel>) -> u8 {
+    let braked = matches!(
+        watchdog,
+        Some(WatchdogLevel::FullBraking | WatchdogLevel::AwaitingEngage)
+    );
     match mode {
         None | Some(ControlMode::Calibration) => control_mode::NOT_READY,
+        Some(ControlMode::Autonomous) if braked => control_mode::DISENGAGED,
         Some(ControlMode::Autonomous) => control_mode::AUTONOMOUS,
         Some(ControlMode::Manual) => control_mode::MANUAL,
         Some(ControlMode::Estop) => control_mode::DISENGAGED,
@@ -414,9 +423,22 @@ mod tests {
         for g in [Gear::Park, Gear::Reverse, Gear::Neutral, Gear::Drive] {
             assert_eq!(gear_from_code(gear_code(g)), Ok(Some(g)));
         }
-        assert_eq!(control_mode_code(None), control_mode::NOT_READY);
-        assert_eq!(control_mode_code(Some(ControlMode::Autonomous)), 1);
-        assert_eq!(control_mode_code(Some(ControlMode::Manual)), 4);
+        assert_eq!(control_mode_code(None, None), control_mode::NOT_READY);
+        assert_eq!(control_mode_code(Some(ControlMode::Autonomous), None), 1);
+        assert_eq!(control_mode_code(Some(ControlMode::Manual), None), 4);
+        assert_eq!(control_mode_code(Some(ControlMode::Estop), None), 5);
+        // Autonomous only while the vehicle follows the ADS.
+        for (level, code) in [
+            (WatchdogLevel::Normal, 1),
+            (WatchdogLevel::Holding, 1),
+            (WatchdogLevel::Decelerating, 1),
+            (WatchdogLevel::FullBraking, 5),
+            (WatchdogLevel::AwaitingEngage, 5),
+        ] {
+            let mode = Some(ControlMode::Autonomous);
+            assert_eq!(control_mode_code(mode, Some(level)), code, "{level:?}");
+            assert_eq!(control_mode_code(Some(ControlMode::Manual), Some(level)), 4);
+        }
     }
 
     #[test]

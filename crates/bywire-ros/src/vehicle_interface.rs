@@ -5,12 +5,14 @@
 //! In: `control_cmd` (`Control`), `gear_cmd`, a steering mode (`std_msgs/String`: normal,
 //! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), `turn_indicators_cmd` and
 //! `hazard_lights_cmd` where the profile's command has them, and the `ControlModeCommand`
-//! service (engage: answered once the vehicle reports autonomous, or `false` after
-//! [`VehicleInterfaceConfig::engage_timeout`]; disengage). The operator's E-stop reset is not
-//! offered: it stays a deliberate act at the vehicle.
+//! service (engage: answered once the vehicle reports autonomous with its watchdog not
+//! braking, or `false` after [`VehicleInterfaceConfig::engage_timeout`]; disengage). The
+//! operator's E-stop reset is not offered: it stays a deliberate act at the vehicle.
 //! Out, at [`VehicleInterfaceConfig::report_period`]: steering, velocity, gear and control-mode
-//! status from fresh feedback only, the wheels as `JointState` and the steering mode, and the
-//! turn-indicator and hazard-light status where the profile's state message has them.
+//! status from fresh feedback only (disengaged while the watchdog brakes: see
+//! [`crate::autoware_vehicle::control_mode_code`]), the wheels as `JointState` and the steering
+//! mode, and the turn-indicator and hazard-light status where the profile's state message has
+//! them.
 //!
 //! Safety is the node's: a command older than the profile's staleness (a stopped publisher) is
 //! replaced by a controlled stop; a lost bus degrades to the other; the end of the run (the
@@ -26,7 +28,7 @@ use bywire_core::node::Port;
 use bywire_core::time::earliest;
 use bywire_core::Timestamp;
 use bywire_secoc::store::FreshnessStore;
-use bywire_vehicle::ads::{Ads, AdsCommand};
+use bywire_vehicle::ads::{Ads, AdsCommand, VehicleState};
 use bywire_vehicle::command::{ControlMode, SteeringMode};
 use bywire_vehicle::profile::{Limits, LoadedProfile};
 use bywire_vehicle::secured::Secured;
@@ -359,8 +361,7 @@ impl VehicleInterface<'_> {
         let Some((id, _, deadline)) = self.engage else {
             return;
         };
-        let fresh = ads.state().mode.fresh(now, self.fresh);
-        if fresh == Some(ControlMode::Autonomous) {
+        if self.control_mode(ads.state(), now) == control_mode::AUTONOMOUS {
             self.engage = None;
             self.answer(id, control_mode::AUTONOMOUS, true, None);
         } else if now >= deadline {
@@ -368,6 +369,14 @@ impl VehicleInterface<'_> {
             let why = ads.blocker(now).map(|b| b.to_string());
             self.answer(id, control_mode::AUTONOMOUS, false, why);
         }
+    }
+
+    /// The control mode Autoware is told, from fresh feedback only.
+    fn control_mode(&self, state: &VehicleState, now: Timestamp) -> u8 {
+        map::control_mode_code(
+            state.mode.fresh(now, self.fresh),
+            state.watchdog_level.fresh(now, self.fresh),
+        )
     }
 
     fn publish_reports(&mut self, ads: &AdsSide, now: Timestamp) {
@@ -410,7 +419,7 @@ impl VehicleInterface<'_> {
         }
         let _ = self.outputs.control_mode.publish(ControlModeReport {
             stamp,
-            mode: map::control_mode_code(state.mode.fresh(now, self.fresh)),
+            mode: self.control_mode(state, now),
         });
         if let Some(speeds) = state.wheel_speeds.fresh(now, self.fresh) {
             let dt = self

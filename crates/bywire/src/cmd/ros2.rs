@@ -62,6 +62,8 @@ In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle
 Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,
      joint_states, steering_mode} at --rate, from fresh feedback only, and
      {turn_indicators_status, hazard_lights_status} where the profile's [state] has them.
+     control_mode is DISENGAGED (5) after an E-stop, and while the vehicle's watchdog brakes
+     (full braking, or awaiting a re-engage): engage again to drive.
 Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)
 is replaced by a controlled stop. A command beyond the profile's limits is refused, never
 clamped. The E-stop's operator reset is not offered over ROS 2. Ctrl-C brakes for a second.")]
