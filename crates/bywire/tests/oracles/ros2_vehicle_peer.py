@@ -2,7 +2,9 @@
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
 the vehicle's reports, stops publishing (the vehicle must stop), then disengages. Prints one
 JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
-lights and reads their status (a profile that has them).
+lights and reads their status (a profile that has them). Each reading waits until the vehicle
+does what it was told, engaging again should a stall of this machine have let the vehicle's
+watchdog brake.
 
 usage: ros2_vehicle_peer.py [lights]"""
 
@@ -50,9 +52,14 @@ running = True
 last_command = [0.0]
 
 
+turning_on_the_spot = threading.Event()
+
+
 def publish():
     while running:
-        if publishing.is_set():
+        if turning_on_the_spot.is_set():
+            cmd_vel.write(Twist(linear=Vector3(0.0, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.3)))
+        elif publishing.is_set():
             now = time.time_ns()
             control_cmd.write(control(0.1, 0.0, 1.5, 0.5, now))
             last_command[0] = time.monotonic()
@@ -183,15 +190,13 @@ try:
                         "lateral": v.lateral_velocity, "heading_rate": v.heading_rate,
                         "tire_angle": latest("steering").steering_tire_angle}
     # cmd_vel instead of control_cmd: a turn on the spot becomes a tank turn.
-    publishing.clear()
-    end = time.monotonic() + 3.0
-    while time.monotonic() < end:
-        cmd_vel.write(Twist(linear=Vector3(0.0, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.3)))
-        time.sleep(0.025)
+    turning_on_the_spot.set()
+    time.sleep(3.0)
+    keep_driving(lambda: latest("velocity").heading_rate > 0.25, 5)
     v = latest("velocity")
     result["tank"] = {"steering_mode": latest("steering_mode").data,
                       "heading_rate": v.heading_rate, "longitudinal": v.longitudinal_velocity}
-    publishing.set()
+    turning_on_the_spot.clear()
     keep_driving(lambda: steering_mode_is("normal") and moving(), 10)
     # A stopped publisher: the vehicle slows within the staleness and stops.
     publishing.clear()
