@@ -52,20 +52,22 @@ fn descriptors() -> usize {
 /// Wait (up to 5 s) until threads and descriptors are back within `slack` of `baseline`;
 /// returns what they are then.
 fn settle(baseline: (usize, usize), slack: usize) -> (usize, usize) {
-    let until = Instant::now() + Duration::from_secs(5);
-    loop {
-        let now = (threads(), descriptors());
-        if (now.0 <= baseline.0 + slack && now.1 <= baseline.1 + slack) || Instant::now() > until {
-            return now;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    poll_until(
+        Duration::from_secs(5),
+        || (threads(), descriptors()),
+        |now| now.0 <= baseline.0 + slack && now.1 <= baseline.1 + slack,
+    )
 }
 
-/// Waits until `done` holds or `limit` has passed (the assertions after it say which).
-fn wait_until(limit: Duration, done: impl Fn() -> bool) {
+/// Looks (`observe`) until what it sees is `done` or `limit` has passed; the last look (the
+/// assertions after it say which).
+fn poll_until<T>(limit: Duration, observe: impl Fn() -> T, done: impl Fn(&T) -> bool) -> T {
     let until = Instant::now() + limit;
-    while !done() && Instant::now() < until {
+    loop {
+        let seen = observe();
+        if done(&seen) || Instant::now() > until {
+            return seen;
+        }
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -283,9 +285,11 @@ fn six_hundred_idle_connections_neither_exhaust_the_server_nor_stop_a_client() {
     }
     let stats = server.stats();
     // Every connection answered (held or refused), well before the handshake time runs out.
-    wait_until(Duration::from_millis(1500), || {
-        stats.active.load(Ordering::Relaxed) + stats.refused_clients.load(Ordering::Relaxed) >= 601
-    });
+    poll_until(
+        Duration::from_millis(1500),
+        || stats.active.load(Ordering::Relaxed) + stats.refused_clients.load(Ordering::Relaxed),
+        |answered| *answered >= 601,
+    );
     assert_eq!(stats.active.load(Ordering::Relaxed), 64, "the limit");
     assert_eq!(stats.refused_clients.load(Ordering::Relaxed), 537);
     let mut last = BufReader::new(idle.last().unwrap().try_clone().unwrap());
@@ -303,9 +307,11 @@ fn six_hundred_idle_connections_neither_exhaust_the_server_nor_stop_a_client() {
     );
     let received_then = received.load(Ordering::Relaxed);
     // The handshake time passes: the idle sessions are closed, and a new client is served.
-    wait_until(Duration::from_secs(6), || {
-        stats.timed_out.load(Ordering::Relaxed) >= 63
-    });
+    poll_until(
+        Duration::from_secs(6),
+        || stats.timed_out.load(Ordering::Relaxed),
+        |timed_out| *timed_out >= 63,
+    );
     assert_eq!(stats.timed_out.load(Ordering::Relaxed), 63);
     let settled = settle(baseline, 0);
     assert!(settled.0 <= baseline.0, "{settled:?} from {baseline:?}");

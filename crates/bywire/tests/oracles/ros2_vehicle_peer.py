@@ -2,9 +2,9 @@
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
 the vehicle's reports, stops publishing (the vehicle must stop), then disengages. Prints one
 JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
-lights and reads their status (a profile that has them). Each reading waits until the vehicle
-does what it was told, engaging again should a stall of this machine have let the vehicle's
-watchdog brake.
+lights and reads their status (a profile that has them). Before its readings of the driving
+and the tank turn it waits until the vehicle drives (or turns) as told, engaging again should a
+stall of this machine have let the vehicle's watchdog brake.
 
 usage: ros2_vehicle_peer.py [lights]"""
 
