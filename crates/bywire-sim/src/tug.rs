@@ -309,7 +309,7 @@ impl Tug {
     pub fn new(params: TugParams) -> Result<Tug, TugError> {
         let loaded = bywire_tug::profile().map_err(|e| TugError::Profile(e.to_string()))?;
         let (ads_config, mut ecu_config) = (loaded.ads_config(), loaded.supervisor_config());
-        // Commands come on bus 1 and bus 1b: a copy lost for three cycles leaves the other bus
+        // Commands come on bus 1 and bus 1b: a copy half a cycle overdue leaves the other bus
         // alone (degraded, reported); copies that disagree are a fault.
         ecu_config.redundancy = Some(Redundancy::for_cycle(ecu_config.cycle));
         let chassis_params = ChassisParams {

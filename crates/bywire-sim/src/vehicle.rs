@@ -240,8 +240,9 @@ impl<W: VehicleWire> Node for SimulatedVehicle<W> {
 
 impl SimulatedVehicle<bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>> {
     /// The vehicle a profile describes, on one bus or (`redundant`) two: its supervisor
-    /// configured by the profile (voting on the two buses' copies, a bus lost after three
-    /// command cycles), braking at the profile's deceleration, reporting at its state period.
+    /// configured by the profile (voting on the two buses' copies, a bus lost once its copy is
+    /// half a cycle overdue), braking at the profile's deceleration, reporting at its state
+    /// period.
     pub fn from_profile(
         profile: &bywire_vehicle::profile::LoadedProfile,
         wire: bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>,

@@ -4,7 +4,9 @@
 //! [`DualVoter`] follows the reference logic: both copies fresh and equal → accept; one fresh
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
 //! or both timed out → fail (the caller goes to its safe state). Copies are compared only when
-//! they arrived within the skew window of each other; in between, the vote is pending.
+//! they arrived within the skew window of each other; in between, the vote is pending, and a
+//! copy still waiting for its partner when the other bus's last copy times out is taken in
+//! degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
 
 use core::time::Duration;
 
@@ -20,6 +22,14 @@ pub enum Channel {
 }
 
 impl Channel {
+    /// The other bus.
+    pub const fn other(self) -> Channel {
+        match self {
+            Channel::A => Channel::B,
+            Channel::B => Channel::A,
+        }
+    }
+
     /// The node port of this command bus, the same at both ends (the ADS side and the
     /// supervisor): bus A on port 0, bus B on port 1.
     pub const fn port(self) -> bywire_core::node::Port {
@@ -85,6 +95,26 @@ impl<T: Copy + PartialEq> DualVoter<T> {
             Channel::A => self.a = Some((now, value)),
             Channel::B => self.b = Some((now, value)),
         }
+    }
+
+    fn last(&self, channel: Channel) -> Option<(Timestamp, T)> {
+        match channel {
+            Channel::A => self.a,
+            Channel::B => self.b,
+        }
+    }
+
+    /// When the last copy from `channel` arrived (`None`: none yet).
+    pub fn arrived(&self, channel: Channel) -> Option<Timestamp> {
+        self.last(channel).map(|(at, _)| at)
+    }
+
+    /// When the last copy from `channel` stops counting as fresh (`None`: none yet).
+    pub fn stale_at(&self, channel: Channel) -> Option<Timestamp> {
+        self.arrived(channel).map(|at| {
+            at.saturating_add(self.timeout)
+                .saturating_add(Duration::from_nanos(1))
+        })
     }
 
     /// The vote at `now`.

@@ -71,11 +71,13 @@ pub struct Redundancy {
 }
 
 impl Redundancy {
-    /// For commands every `cycle`: a bus is lost after three cycles without a copy, and the
-    /// two copies of one command arrive within 5 ms of each other.
+    /// For commands every `cycle`: a bus is lost once its copy is half a cycle overdue (the
+    /// watchdog's tolerance), and the two copies of one command arrive within 5 ms of each
+    /// other. The other bus's copies wait for their partners until then, so a longer timeout
+    /// would hold the vehicle for as long on the loss of one bus.
     pub fn for_cycle(cycle: Duration) -> Redundancy {
         Redundancy {
-            timeout: cycle.saturating_mul(3),
+            timeout: cycle.saturating_add(cycle / 2),
             skew: Duration::from_millis(5),
         }
     }
@@ -437,6 +439,9 @@ pub struct Supervisor<W: VehicleWire> {
     counter_b: CounterChecker,
     /// Votes on the decoded command and its counter, whatever the frame's format.
     voter: Option<DualVoter<(Command, u8)>>,
+    /// The bus whose last copy waits for its partner from the other bus: taken in degraded
+    /// mode if the other bus's last copy goes stale first.
+    waiting: Option<Channel>,
     degraded: Option<Channel>,
     stats: CommandStats,
     command: Option<Command>,
@@ -476,6 +481,7 @@ impl<W: VehicleWire> Supervisor<W> {
             counter: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
             counter_b: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
             voter: config.redundancy.map(|r| DualVoter::new(r.timeout, r.skew)),
+            waiting: None,
             degraded: None,
             stats: CommandStats::default(),
             command: None,
@@ -655,8 +661,13 @@ impl<W: VehicleWire> Supervisor<W> {
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
                 Vote::Degraded { healthy, .. } => self.degraded = Some(healthy),
-                Vote::Pending | Vote::Failed(VoteFailure::BothLost) => return,
+                Vote::Pending => {
+                    self.waiting = Some(channel);
+                    return;
+                }
+                Vote::Failed(VoteFailure::BothLost) => return,
                 Vote::Failed(VoteFailure::Disagree) => {
+                    self.waiting = None;
                     self.stats.count(Rejection::Disagreement);
                     self.watchdog = self
                         .watchdog
@@ -685,6 +696,7 @@ impl<W: VehicleWire> Supervisor<W> {
         self.echo = counter;
         self.command = Some(command);
         self.last_valid = Some(now);
+        self.waiting = None;
         self.missed_reported = 0;
         self.decelerating_since = None;
         self.watchdog = self
@@ -735,7 +747,35 @@ impl<W: VehicleWire> Supervisor<W> {
                 .saturating_add(self.config.cycle / 2)
         });
         let due = tick.map_or(self.next_state_frame, |t| t.min(self.next_state_frame));
-        Some(self.estop_deadline().map_or(due, |t| t.min(due)))
+        let due = self.estop_deadline().map_or(due, |t| t.min(due));
+        Some(self.partner_deadline().map_or(due, |t| t.min(due)))
+    }
+
+    /// When a copy waiting for its partner is taken alone: the other bus's last copy stale.
+    fn partner_deadline(&self) -> Option<Timestamp> {
+        let voter = self.voter.as_ref()?;
+        voter.stale_at(self.waiting?.other())
+    }
+
+    /// Take a copy that waited for its partner in vain, in degraded mode, once the other
+    /// bus's last copy is stale; as arrived then, so the watchdog counts from its arrival.
+    fn take_waiting_copy(&mut self, now: Timestamp) {
+        let (Some(channel), Some(voter)) = (self.waiting, self.voter) else {
+            return;
+        };
+        match voter.vote(now) {
+            Vote::Pending => {}
+            Vote::Degraded {
+                value: (command, counter),
+                healthy,
+            } if healthy == channel => {
+                self.degraded = Some(healthy);
+                let arrived = voter.arrived(channel).unwrap_or(now);
+                self.accept(arrived, command, counter);
+            }
+            // Stale itself: nothing left to take.
+            _ => self.waiting = None,
+        }
     }
 
     /// When a chain heard before counts as open for want of its frames: three command cycles
@@ -747,6 +787,7 @@ impl<W: VehicleWire> Supervisor<W> {
 
     /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        self.take_waiting_copy(now);
         if let Some(last) = self.last_valid {
             let cycle = self.config.cycle.as_nanos().max(1);
             let elapsed = now.saturating_since(last).as_nanos();

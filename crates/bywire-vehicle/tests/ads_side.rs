@@ -226,6 +226,12 @@ fn dual_voter_follows_the_reference_logic() {
     // B goes silent: degraded on A once B's copy is older than the timeout.
     v.receive(Channel::A, ms(30), 8);
     assert_eq!(v.vote(ms(30)), Vote::Pending);
+    // B's copy is fresh for the whole timeout, stale a nanosecond after.
+    assert_eq!(v.arrived(Channel::B), Some(ms(12)));
+    let stale = v.stale_at(Channel::B).unwrap();
+    assert_eq!(stale, ms(72).saturating_add(Duration::from_nanos(1)));
+    assert_eq!(v.vote(ms(72)), Vote::Pending);
+    assert!(matches!(v.vote(stale), Vote::Degraded { .. }));
     assert_eq!(
         v.vote(ms(73)),
         Vote::Degraded {

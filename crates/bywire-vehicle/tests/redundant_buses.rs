@@ -199,8 +199,8 @@ fn one_bus_silent_degrades<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>
     for _ in 0..10 {
         rig.cycle(Copy::Same, Copy::Silent, false);
     }
-    // B's last copy times out after three cycles: until then A's copies wait for a partner
-    // (the watchdog holds), then A alone is accepted in degraded mode.
+    // B's last copy times out after a cycle and a half: until then A's copy waits for its
+    // partner (the watchdog holds at most), then A alone is accepted in degraded mode.
     assert_eq!(rig.supervisor.degraded(), Some(Channel::A));
     assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
     assert!(
@@ -272,6 +272,97 @@ fn disagreeing_copies_brake_at_once<W: AdsWire + VehicleWire + Clone>(vehicle: V
     ));
 }
 
+/// The supervisor alone, its command frames put in by hand at chosen instants: bus B's
+/// computer stops after `b_cycles` cycles, and from cycle 14 on bus A's copies come late by a
+/// few milliseconds (as a loaded ADS computer sends them). Returns the supervisor at the end,
+/// and the watchdog's changes with the cycle they happened in.
+fn lose_b_while_a_is_late<W: AdsWire + VehicleWire + Clone>(
+    mut vehicle: Vehicle<W>,
+    b_cycles: u64,
+    a_late_ms: &[u64],
+    cycles: u64,
+) -> (Supervisor<W>, Vec<(u64, Watchdog)>, Timestamp) {
+    let cycle = vehicle.supervisor.cycle;
+    let cycle_ms = u64::try_from(cycle.as_millis()).unwrap();
+    let config = SupervisorConfig {
+        redundancy: Some(Redundancy::for_cycle(cycle)),
+        ..vehicle.supervisor
+    };
+    let mut supervisor = Supervisor::with_wire(config, vehicle.wire.clone());
+    let mut log = Vec::new();
+    for k in 0..cycles {
+        let command = AdsCommand {
+            velocity: 2.0,
+            gear: Gear::Drive,
+            mode: ControlMode::Autonomous,
+            engage: k == 12,
+            ..AdsCommand::default()
+        };
+        let frame = vehicle.wire.command_frame(&command, k).unwrap();
+        // Within the cycle: a copy later than that would be a missed one.
+        let a_late = if k >= 14 {
+            a_late_ms[usize::try_from(k).unwrap() % a_late_ms.len()]
+        } else {
+            0
+        };
+        for ms in 0..cycle_ms {
+            let now = Timestamp::from_millis(k * cycle_ms + ms);
+            if ms == 0 && k < b_cycles {
+                supervisor.on_frame_from(now, Channel::B, &frame);
+            }
+            if ms == a_late {
+                supervisor.on_frame_from(now, Channel::A, &frame);
+            }
+            let before = supervisor.watchdog();
+            supervisor.poll(now, &mut |_| {});
+            if supervisor.watchdog() != before {
+                log.push((k, supervisor.watchdog()));
+            }
+            let act = supervisor.actuators(now);
+            let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
+            supervisor.set_feedback(speed, 0.0);
+        }
+    }
+    (supervisor, log, Timestamp::from_millis(cycles * cycle_ms))
+}
+
+/// Losing bus B costs no more than a cycle or two of holding, also while A's copies come up to
+/// 12 ms late: the vehicle never decelerates for it, let alone brakes. (A's copies used to wait
+/// for B's partner copy until B's last copy was three cycles old, so a bus loss alone held the
+/// vehicle for three cycles, and a late copy on A on top of it braked the vehicle in full.)
+fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+) {
+    for lost_at in 16..21 {
+        let (supervisor, log, end) =
+            lose_b_while_a_is_late(vehicle.clone(), lost_at, &[0, 3, 12, 8, 1], 40);
+        let after_engage: Vec<_> = log.iter().filter(|(k, _)| *k > 13).collect();
+        assert!(
+            after_engage
+                .iter()
+                .all(|(_, w)| matches!(w, Watchdog::Holding { .. } | Watchdog::Normal)),
+            "B lost after cycle {lost_at}: {after_engage:?}"
+        );
+        assert_eq!(supervisor.mode(), ControlMode::Autonomous);
+        assert_eq!(supervisor.degraded(), Some(Channel::A));
+        let act = supervisor.actuators(end);
+        assert!(
+            act.ads_in_control && act.velocity == 2.0 && act.warning,
+            "{act:?}"
+        );
+    }
+    // A's copies late by 18 ms every other cycle (39 ms apart, then 1 ms), with B lost: at most
+    // slowing, never braking.
+    let (supervisor, log, _) = lose_b_while_a_is_late(vehicle, 16, &[0, 18], 40);
+    assert!(
+        log.iter()
+            .filter(|(k, _)| *k > 13)
+            .all(|(_, w)| !matches!(w, Watchdog::FullBraking | Watchdog::Recovering { .. })),
+        "{log:?}"
+    );
+    assert_eq!(supervisor.mode(), ControlMode::Autonomous, "{log:?}");
+}
+
 /// Each scenario for each wire.
 macro_rules! for_every_wire {
     ($($scenario:ident),* $(,)?) => {
@@ -312,4 +403,5 @@ for_every_wire!(
     one_bus_silent_degrades,
     both_buses_silent_brake,
     disagreeing_copies_brake_at_once,
+    losing_one_bus_holds_at_most_while_the_other_is_late,
 );

@@ -36,6 +36,7 @@ pub mod vehicles {
     use bywire_vehicle::wire::ProfileWire;
 
     /// One vehicle under test.
+    #[derive(Clone)]
     pub struct Vehicle<W> {
         pub wire: W,
         pub supervisor: SupervisorConfig,
