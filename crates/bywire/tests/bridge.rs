@@ -9,6 +9,8 @@
 
 mod common;
 
+use common::Scratch;
+
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -443,7 +445,7 @@ fn secured_profile(dir: &std::path::Path) -> (std::path::PathBuf, std::path::Pat
 
 #[test]
 fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_without() {
-    let dir = std::env::temp_dir().join(format!("bywire-bridge-secoc-{}", std::process::id()));
+    let dir = Scratch::new("bridge-secoc");
     let (profile, keys) = secured_profile(&dir);
     let freshness = dir.join("ads.freshness");
     let (profile, keys) = (profile.to_str().unwrap(), keys.to_str().unwrap());

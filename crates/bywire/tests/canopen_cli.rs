@@ -13,6 +13,10 @@ use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
+mod common;
+
+use common::Scratch;
+
 const BIN: &str = env!("CARGO_BIN_EXE_bywire");
 
 /// A child killed when the test ends, pass or fail.
@@ -199,8 +203,7 @@ fn python_canopen_masters_an_eds_described_device_and_answers_as_a_local_node() 
         .next()
         .unwrap()
         .to_string();
-    let dir = std::env::temp_dir().join(format!("bywire-canopen-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("canopen-cli");
     // An EDS-described device: the Roboteq dictionary written out, then served from the file.
     let eds = dir.join("roboteq.eds");
     drop(device(
@@ -313,8 +316,7 @@ network.disconnect()
 
 #[test]
 fn eds_check_names_lines_and_fails_on_errors() {
-    let dir = std::env::temp_dir().join(format!("bywire-canopen-eds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("canopen-eds");
     let path = dir.join("bad.eds");
     std::fs::write(&path, "[DeviceInfo]\nVendorName=Acme\nProductName=Box\n[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=ro\n[2000]\nParameterName=Broken\nDataType=0x0042\nAccessType=rw\n").unwrap();
     let (success, stdout, stderr) = bywire(&["canopen", "eds", path.to_str().unwrap()]);

@@ -11,7 +11,7 @@ use std::process::Command;
 
 mod common;
 
-use common::corpus;
+use common::{corpus, Scratch};
 
 fn run(args: &[&str], input: &str) -> (i32, String, String) {
     common::bywire(args, input)
@@ -137,8 +137,7 @@ fn decode_of_standard_input_equals_decode_of_the_file() {
             n % 2
         ));
     }
-    let dir = std::env::temp_dir().join(format!("bywire-decode-stdin-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("decode-stdin");
     let file = dir.join("in.log");
     std::fs::write(&file, &log).unwrap();
     let (code, piped, err) = run(&["decode", &corpus(MOTOHAWK), "--json"], &log);
@@ -222,8 +221,7 @@ fn lint_reports_positions_and_fails_on_errors() {
 
 #[test]
 fn convert_dbc_to_json_and_back() {
-    let dir = std::env::temp_dir().join(format!("bywire-convert-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("convert");
     let (json, dbc) = (dir.join("m.json"), dir.join("m.dbc"));
     let (code, _, err) = run(
         &["dbc", "convert", &corpus(MOTOHAWK), json.to_str().unwrap()],
@@ -306,8 +304,7 @@ fn gen_rust_prints_a_module() {
 /// with those errors counted, and is not converted (nothing written).
 #[test]
 fn parser_errors_fail_lint_and_convert() {
-    let dir = std::env::temp_dir().join(format!("bywire-parse-errors-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("parse-errors");
     let dbc = dir.join("broken.dbc");
     std::fs::write(
         &dbc,
@@ -368,8 +365,7 @@ fn value_descriptions_match_the_raw_value_as_cantools_does() {
 /// and both values in the output (text and JSON; JSON names the second `NAME#2`).
 #[test]
 fn a_signal_name_used_twice_keeps_both_values() {
-    let dir = std::env::temp_dir().join(format!("bywire-dup-signal-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("dup-signal");
     let dbc = dir.join("dup.dbc");
     std::fs::write(
         &dbc,

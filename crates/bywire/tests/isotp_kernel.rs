@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::section;
+use common::{section, Scratch};
 
 fn pattern(len: usize) -> Vec<u8> {
     (0..len).map(|i| (i * 31 % 251) as u8).collect()
@@ -84,8 +84,7 @@ fn check_flow(dump: &str, sender: &str, bs: usize, gap_s: f64) {
 #[test]
 fn bywire_and_the_kernel_exchange_iso_tp_both_ways() {
     let bin = env!("CARGO_BIN_EXE_bywire");
-    let dir = std::env::temp_dir().join(format!("bywire-isotp-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("isotp");
     let message = pattern(4095);
     // Beyond 4095 bytes (isotpsend reads at most 5000).
     let long = pattern(4800);

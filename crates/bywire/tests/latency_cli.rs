@@ -8,6 +8,8 @@
 
 mod common;
 
+use common::Scratch;
+
 fn tug_dbc(name: &str) -> String {
     format!("{}/../bywire-tug/dbc/{name}", env!("CARGO_MANIFEST_DIR"))
 }
@@ -49,8 +51,7 @@ fn predict_reports_each_message_of_one_bus_as_json() {
 
 #[test]
 fn predict_with_strict_fails_on_a_miss_and_names_it() {
-    let dir = std::env::temp_dir().join(format!("bywire-latency-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("latency");
     let path = dir.join("overloaded.dbc");
     let mut text = String::from("BA_DEF_ BO_ \"GenMsgCycleTime\" INT 0 65535;\n");
     for i in 0..11 {
@@ -101,11 +102,10 @@ fn predict_refuses_what_it_cannot_do() {
     }
 }
 
-/// Run the simulated tug (`bywire sim --fast`) for `seconds` with `scenario` into a new folder.
-fn sim_run(name: &str, scenario: &str, seconds: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("bywire-latency-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+/// Run the simulated tug (`bywire sim --fast`) for `seconds` with `scenario` into a new folder:
+/// the scratch folder, and the run's folder in it.
+fn sim_run(name: &str, scenario: &str, seconds: &str) -> (Scratch, std::path::PathBuf) {
+    let dir = Scratch::new(&format!("latency-{name}"));
     let scenario_path = dir.join("scenario.toml");
     std::fs::write(&scenario_path, scenario).unwrap();
     let out = dir.join("run");
@@ -124,7 +124,7 @@ fn sim_run(name: &str, scenario: &str, seconds: &str) -> std::path::PathBuf {
         "",
     );
     assert_eq!(code, 0, "{err}");
-    out
+    (dir, out)
 }
 
 /// The ADS's commands delayed 15 ms on bus 1 only (a scenario's `delay_frames`): the copy on
@@ -132,7 +132,7 @@ fn sim_run(name: &str, scenario: &str, seconds: &str) -> std::path::PathBuf {
 /// frame time (an 8-byte frame at 500 kbit/s: ≤ 0.27 ms).
 #[test]
 fn logs_show_an_injected_delay_between_the_redundant_buses() {
-    let run = sim_run(
+    let (_dir, run) = sim_run(
         "delay",
         "name = \"delayed\"\nroute = \"apron-loop\"\n[[event]]\nat_s = 1.0\nfault = \"delay_frames\"\nbus = \"bus1\"\nid = 0x100\ndelay_ms = 15\n",
         "6",
@@ -183,7 +183,7 @@ fn logs_show_an_injected_delay_between_the_redundant_buses() {
 /// step at its next one), overshoot within 4 points (sensor noise on the peak).
 #[test]
 fn logged_steering_steps_agree_with_the_simulators_metrics() {
-    let run = sim_run(
+    let (_dir, run) = sim_run(
         "steps",
         "name = \"steps\"\nroute = \"apron-loop\"\nsteering_steps = [10, -10, 0]\n",
         "10",

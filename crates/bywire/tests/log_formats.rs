@@ -12,6 +12,8 @@
 
 mod common;
 
+use common::Scratch;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -31,16 +33,14 @@ const FRAMES: &str = "\
 (1700000000.823464) can1 000#0001020304050607
 ";
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("bywire-logfmt-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("logfmt-{name}"))
 }
 
 /// The test frames as a candump log and as `bywire log convert` made them into another file.
 struct Converted {
     /// The scratch folder holding both.
-    dir: PathBuf,
+    dir: Scratch,
     /// The candump log (`in.log`).
     log: PathBuf,
     /// The converted file.

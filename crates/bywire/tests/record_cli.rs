@@ -16,13 +16,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use common::{bywire, in_canvm, inside_lonet, Background};
+use common::{bywire, in_canvm, inside_lonet, Background, Scratch};
 
-fn folder(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("bywire-record-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn folder(test: &str) -> Scratch {
+    Scratch::new(&format!("record-{test}"))
 }
 
 /// The simulated tug serving its buses over socketcand for `seconds`: (process, port).

@@ -391,7 +391,7 @@ fn the_readme_python_script_drives_the_simulated_tug() {
     if !inside_lonet("the_readme_python_script_drives_the_simulated_tug") {
         return;
     }
-    let out_dir = std::env::temp_dir().join(format!("bywire-sim-ros2-{}", std::process::id()));
+    let out_dir = Scratch::new("sim-ros2");
     let sim = Background::start(&[
         "sim",
         "--ros2",
@@ -448,8 +448,7 @@ fn ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does() {
     if !inside_lonet("ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does") {
         return;
     }
-    let dir = std::env::temp_dir().join(format!("bywire-ros2-canopen-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("ros2-canopen");
     let config = dir.join("bus.toml");
     std::fs::write(
         &config,
@@ -519,8 +518,7 @@ fn ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does() {
 /// A ros2_canopen bus.yml is read (its mistakes named by key) before anything starts.
 #[test]
 fn ros2_canopen_reads_a_ros2_canopen_bus_yml_and_names_its_mistakes() {
-    let dir = std::env::temp_dir().join(format!("bywire-ros2-yml-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("ros2-yml");
     let yml = dir.join("bus.yml");
     std::fs::write(
         &yml,

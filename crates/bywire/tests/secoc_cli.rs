@@ -16,15 +16,12 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
-use common::bywire;
+use common::{bywire, Scratch};
 
 const KEY: &str = "2b7e151628aed2a6abf7158809cf4f3c";
 
-fn dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("bywire-secoc-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn dir(name: &str) -> Scratch {
+    Scratch::new(&format!("secoc-{name}"))
 }
 
 fn key_file(dir: &std::path::Path, text: &str, mode: u32) -> String {

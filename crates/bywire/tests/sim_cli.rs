@@ -10,6 +10,8 @@
 
 mod common;
 
+use common::Scratch;
+
 use std::process::Command;
 
 use serde_json::{json, Value};
@@ -70,7 +72,7 @@ const MAP: (u32, u32) = (620, 600);
 
 #[test]
 fn the_simulated_tug_completes_the_apron_loop_deterministically() {
-    let dir = std::env::temp_dir().join(format!("bywire-sim-{}", std::process::id()));
+    let dir = Scratch::new("sim");
     let (a, b, c) = (dir.join("a"), dir.join("b"), dir.join("c"));
     let metrics = sim(&a, "5");
     assert_eq!(metrics["completed"], true, "{metrics}");
@@ -190,7 +192,7 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
 /// The fault tour: every fault shows its reaction in metrics.json, at its timing.
 #[test]
 fn the_fault_tour_reacts_to_every_fault_in_time() {
-    let dir = std::env::temp_dir().join(format!("bywire-sim-tour-{}", std::process::id()));
+    let dir = Scratch::new("sim-tour");
     let metrics = sim_with(&dir, &["--scenario", "fault-tour"]);
     // Each fault marked on the map and on the four time panels (lines ~150 px high).
     let (_, counts) = plot_pixels(&dir.join("run.png"), WHOLE, &[FAULT_MAGENTA]);
@@ -225,13 +227,18 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
     assert!((first("watchdog", "decelerating", silence) - hold - 0.040).abs() < 0.0015);
     assert!((first("watchdog", "full_braking", silence) - hold - 0.080).abs() < 0.0015);
     assert!(first("watchdog", "normal", silence) < first("fault", "Estop", 0.0));
-    // Bus 1b cut: the vote waits for the late copy (the watchdog holds, the mildest
-    // reaction), then bus 1 alone is taken, degraded, within three cycles (bus 1b's
-    // timeout); the vehicle drives on, and both buses agree again once it is back.
+    // Bus 1b cut: bus 1's copy waits for its partner until bus 1b's last copy is stale (a
+    // cycle and a half), then it is taken alone, degraded, before the watchdog misses a cycle;
+    // the vehicle drives on, and both buses agree again once it is back.
     let cut_1b = first("fault", "RedundantBusLoss", 0.0);
     let degraded = first("redundancy", "bus 1 alone", cut_1b);
-    assert!(degraded - cut_1b <= 0.081, "{degraded} after {cut_1b}");
-    assert!(first("watchdog", "normal", cut_1b) <= degraded);
+    assert!(degraded - cut_1b <= 0.031, "{degraded} after {cut_1b}");
+    assert!(
+        !events
+            .iter()
+            .any(|(t, k, _)| (cut_1b..=degraded).contains(t) && k == "watchdog"),
+        "not even holding: {events:?}"
+    );
     let restored = first("redundancy", "both buses agree", degraded);
     assert!(restored < first("fault", "Estop", 0.0));
     assert!(first("fault_cleared", "RedundantBusLoss", cut_1b) <= restored);
@@ -364,8 +371,7 @@ fn the_fault_tour_reacts_to_every_fault_in_time() {
 /// `secoc = true` in a scenario file: the same forged commands are refused and counted.
 #[test]
 fn a_secured_scenario_refuses_the_attackers_commands() {
-    let dir = std::env::temp_dir().join(format!("bywire-sim-secoc-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("sim-secoc");
     let file = dir.join("attack.toml");
     std::fs::write(
         &file,
@@ -414,7 +420,7 @@ fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
         .local_addr()
         .unwrap()
         .port();
-    let dir = std::env::temp_dir().join(format!("bywire-sim-uds-{}", std::process::id()));
+    let dir = Scratch::new("sim-uds");
     let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args([
             "sim",
@@ -549,7 +555,7 @@ fn python_can_watches_and_injects_through_the_served_buses() {
         .local_addr()
         .unwrap()
         .port();
-    let dir = std::env::temp_dir().join(format!("bywire-sim-serve-{}", std::process::id()));
+    let dir = Scratch::new("sim-serve");
     let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args(["sim", "--no-view", "--max-seconds", "12", "--serve"])
         .arg(format!("127.0.0.1:{port}"))
@@ -635,7 +641,7 @@ b3.shutdown()
 fn the_served_buses_outlive_a_crowd_that_exhausts_the_descriptors() {
     use std::io::{BufRead, Read, Write};
     use std::process::Stdio;
-    let dir = std::env::temp_dir().join(format!("bywire-sim-crowd-{}", std::process::id()));
+    let dir = Scratch::new("sim-crowd");
     let mut sim = Command::new("sh")
         .arg("-c")
         .arg("ulimit -n 48 && exec \"$BYWIRE\" sim --no-view --max-seconds 6 --serve 127.0.0.1:0 --out \"$OUT\"")
@@ -697,7 +703,7 @@ fn the_example_stand_approach_scenario_runs_as_described() {
         env!("CARGO_MANIFEST_DIR"),
         "/../bywire-sim/scenarios/stand-approach.toml"
     );
-    let dir = std::env::temp_dir().join(format!("bywire-sim-stand-{}", std::process::id()));
+    let dir = Scratch::new("sim-stand");
     let metrics = sim_with(&dir, &["--scenario", file]);
     assert_eq!(metrics["scenario"], "stand-approach");
     assert_eq!(metrics["completed"], true, "{metrics}");
@@ -734,8 +740,7 @@ fn the_example_stand_approach_scenario_runs_as_described() {
 /// (runs are deterministic whatever the threads), and a summary row per run.
 #[test]
 fn a_sweep_runs_every_combination_as_single_runs_do() {
-    let dir = std::env::temp_dir().join(format!("bywire-sweep-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = Scratch::new("sweep");
     let sweep = dir.join("sweep");
     let (code, out, err) = common::bywire(
         &[
@@ -824,8 +829,7 @@ fn a_sweep_runs_every_combination_as_single_runs_do() {
 /// `bywire dataset` refuses what it cannot do, naming the option.
 #[test]
 fn dataset_refuses_bad_input_with_its_name() {
-    let dir = std::env::temp_dir().join(format!("bywire-dataset-bad-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = Scratch::new("dataset-bad");
     std::fs::create_dir_all(dir.join("full")).unwrap();
     std::fs::write(dir.join("full").join("x"), "x").unwrap();
     std::fs::create_dir_all(dir.join("empty-sweep")).unwrap();

@@ -10,6 +10,10 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+mod common;
+
+use common::Scratch;
+
 /// A session running `command` on a tmux server of its own, closed when dropped. Its own server
 /// (`-L`): tests run in parallel, and several clients starting the one default server at the
 /// same moment can fail to reach it.
@@ -97,10 +101,9 @@ impl Drop for Session {
     }
 }
 
-/// A DBC and a log of 20 s: Speed every 10 ms counting up, Gear once.
-fn fixture(dir: &str) -> (String, String) {
-    let dir = std::env::temp_dir().join(format!("{dir}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// A DBC and a log of 20 s: Speed every 10 ms counting up, Gear once; in their folder.
+fn fixture(name: &str) -> (Scratch, String, String) {
+    let dir = Scratch::new(name);
     let dbc = dir.join("views.dbc");
     std::fs::write(
         &dbc,
@@ -122,15 +125,16 @@ fn fixture(dir: &str) -> (String, String) {
     }
     let path = dir.join("views.log");
     std::fs::write(&path, fixed).unwrap();
-    (
+    let (dbc, path) = (
         dbc.to_str().unwrap().to_string(),
         path.to_str().unwrap().to_string(),
-    )
+    );
+    (dir, dbc, path)
 }
 
 #[test]
 fn monitor_in_a_terminal() {
-    let (dbc, log) = fixture("bywire-monitor");
+    let (_dir, dbc, log) = fixture("monitor");
     let bin = env!("CARGO_BIN_EXE_bywire");
     let s = Session::start("bywire-monitor", &format!("{bin} monitor {dbc} -I {log}"));
     let screen = s.wait_for("Position: Drive");
@@ -159,7 +163,7 @@ fn monitor_in_a_terminal() {
 
 #[test]
 fn sniff_in_a_terminal() {
-    let (dbc, log) = fixture("bywire-sniff");
+    let (_dir, dbc, log) = fixture("sniff");
     let bin = env!("CARGO_BIN_EXE_bywire");
     let s = Session::start("bywire-sniff", &format!("{bin} sniff --dbc {dbc} -I {log}"));
     s.wait_for("Speed(Kph:");
@@ -181,7 +185,7 @@ fn sniff_in_a_terminal() {
 #[test]
 fn sim_live_view_in_a_terminal() {
     let bin = env!("CARGO_BIN_EXE_bywire");
-    let dir = std::env::temp_dir().join(format!("bywire-sim-view-{}", std::process::id()));
+    let dir = Scratch::new("sim-view");
     let session = Session::start(
         "sim",
         &format!("{bin} sim --out {} --max-seconds 120", dir.display()),
@@ -224,7 +228,7 @@ fn sim_live_view_in_a_terminal() {
 #[test]
 fn sim_fault_keys_and_a_closed_terminal() {
     let bin = env!("CARGO_BIN_EXE_bywire");
-    let dir = std::env::temp_dir().join(format!("bywire-sim-hangup-{}", std::process::id()));
+    let dir = Scratch::new("sim-hangup");
     let session = Session::start(
         "hangup",
         &format!(
@@ -266,7 +270,7 @@ fn sim_fault_keys_and_a_closed_terminal() {
 #[test]
 fn sim_ends_cleanly_on_a_hangup_signal() {
     let bin = env!("CARGO_BIN_EXE_bywire");
-    let dir = std::env::temp_dir().join(format!("bywire-sim-sighup-{}", std::process::id()));
+    let dir = Scratch::new("sim-sighup");
     let session = Session::start(
         "sighup",
         &format!(

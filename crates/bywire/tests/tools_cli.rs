@@ -13,7 +13,7 @@ use std::process::Command;
 
 mod common;
 
-use common::{bywire, corpus};
+use common::{bywire, corpus, Scratch};
 
 const MOTOHAWK: &str = "cantools/tests__files__dbc__motohawk.dbc";
 
@@ -153,8 +153,7 @@ fn bad_input_names_the_problem() {
     fails_with(&["play", "vcan0"], "", "assignment 'vcan0'");
     fails_with(&["play", "-l", "x"], "", "-l 'x'");
     // A bad line in a file stops the replay before anything is sent, naming the line.
-    let dir = std::env::temp_dir().join(format!("bywire-play-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("play");
     let log = dir.join("bad.log");
     std::fs::write(&log, "(1.000000) can0 123#00\n(1.500000) can0 12G#01\n").unwrap();
     let (code, out, err) = bywire(&["play", "-I", log.to_str().unwrap(), "stdout=can0"], "");
@@ -217,8 +216,7 @@ fn play_to_stdout_keeps_lines_and_skips_other_text() {
          (0000000001.000300) can0 1ABCDEF0##5AA\n(0000000001.000400) can0 20000080#0000000000000000\n"
     );
     // Twice, ignoring timestamps, stopping after 5 frames (looping needs a file).
-    let dir = std::env::temp_dir().join(format!("bywire-loop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("loop");
     let log = dir.join("loop.log");
     std::fs::write(&log, input).unwrap();
     let file = log.to_str().unwrap();
@@ -452,8 +450,7 @@ fn items(line: &str) -> std::collections::BTreeSet<String> {
 
 #[test]
 fn plot_writes_png_and_svg_and_nothing_on_errors() {
-    let dir = std::env::temp_dir().join(format!("bywire-plot-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("plot");
     let dbc = dir.join("motor.dbc");
     std::fs::write(
         &dbc,
@@ -637,8 +634,7 @@ fn log_stats_of_a_file_a_pipe_and_standard_input_agree() {
             u64::from(i) * 0x9E37_79B9
         ));
     }
-    let dir = std::env::temp_dir().join(format!("bywire-stats-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("stats");
     let log = dir.join("in.log");
     std::fs::write(&log, &input).unwrap();
     let (code, from_file, err) = bywire(&["log", "stats", log.to_str().unwrap()], "");
@@ -674,8 +670,7 @@ fn log_cat_of_a_file_writes_what_standard_input_does() {
         })
         .collect();
     input.push_str("(9.000000) can0 12#00\n(9.100000) can0 123#00\n");
-    let dir = std::env::temp_dir().join(format!("bywire-cat-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("cat");
     let log = dir.join("in.log");
     std::fs::write(&log, &input).unwrap();
     let (code, from_file, err) = bywire(&["log", "cat", log.to_str().unwrap()], "");
@@ -951,8 +946,7 @@ fn serve_keeps_the_token_off_the_command_line_and_other_hosts_behind_one() {
         "",
         "--allow-remote: other hosts may reach this server only with a token",
     );
-    let dir = std::env::temp_dir().join(format!("bywire-serve-token-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("serve-token");
     let short = dir.join("short");
     std::fs::write(&short, "abc\n").unwrap();
     fails_with(
@@ -1147,8 +1141,7 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(out.matches("ExampleMessage(").count(), 2, "{out}");
     assert!(err.contains("stdin:2: skipped: 200000 bytes"), "{err}");
-    let dir = std::env::temp_dir().join(format!("bywire-long-line-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("long-line");
     let log = dir.join("long.log");
     let mut bytes = input.into_bytes();
     bytes.extend(b"(3.000000) can0 1F0#\xff\n");
@@ -1205,8 +1198,7 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         &[],
     );
     let bus = format!("socketcand:{address}/dumplog");
-    let dir = std::env::temp_dir().join(format!("bywire-dump-formats-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("dump-formats");
     let frames = ["123#DEADBEEF", "1ABCDEF0#0102", "7FF#"];
     let cases = [
         ("out.blf", true, None),

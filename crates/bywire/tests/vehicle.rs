@@ -243,5 +243,9 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     // processor for a moment (a loaded machine) can leave the last one over three cycles old
     // at a sample, which the bridge rightly reports; most samples see it alive.
     let alive = late.iter().filter(|s| s["feedback_alive"] == true).count();
-    assert!(alive * 4 >= late.len() * 3, "{alive} of {}: {late:?}", late.len());
+    assert!(
+        alive * 4 >= late.len() * 3,
+        "{alive} of {}: {late:?}",
+        late.len()
+    );
 }
