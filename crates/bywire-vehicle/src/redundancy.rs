@@ -3,10 +3,12 @@
 //!
 //! [`DualVoter`] follows the reference logic: both copies fresh and equal → accept; one fresh
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
-//! or both timed out → fail (the caller goes to its safe state). Copies are compared only when
-//! they arrived within the skew window of each other; in between, the vote is pending, and a
-//! copy still waiting for its partner when the other bus's last copy times out is taken in
-//! degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
+//! or both timed out → fail (the caller goes to its safe state). Only copies of one command are
+//! compared: with a rolling counter, those with the same counter, however far apart they came
+//! ([`DualVoter::paired_by`]); without one, those that arrived within the skew window of each
+//! other, or equal ones further apart (one command, late on one bus). Until a copy's partner
+//! comes the vote is pending, and a copy still waiting when the other bus's last copy times out
+//! is taken in degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
 
 use core::time::Duration;
 
@@ -68,14 +70,16 @@ pub enum Vote<T> {
 }
 
 /// Votes on one message received on two buses.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy)]
 pub struct DualVoter<T> {
     /// A copy older than this is lost.
     pub timeout: Duration,
-    /// Copies arriving further apart than this are not compared.
+    /// Without [`paired_by`](Self::paired_by): copies arriving further apart than this are
+    /// not compared (unless equal).
     pub skew: Duration,
     a: Option<(Timestamp, T)>,
     b: Option<(Timestamp, T)>,
+    same_command: Option<fn(&T, &T) -> bool>,
 }
 
 impl<T: Copy + PartialEq> DualVoter<T> {
@@ -86,6 +90,17 @@ impl<T: Copy + PartialEq> DualVoter<T> {
             skew,
             a: None,
             b: None,
+            same_command: None,
+        }
+    }
+
+    /// Pair copies by `same_command` (equal rolling counters) rather than by arrival time:
+    /// copies of one command are compared however far apart they came, and copies of two
+    /// commands never are (the later one waits for its partner).
+    pub fn paired_by(self, same_command: fn(&T, &T) -> bool) -> Self {
+        DualVoter {
+            same_command: Some(same_command),
+            ..self
         }
     }
 
@@ -138,12 +153,14 @@ impl<T: Copy + PartialEq> DualVoter<T> {
                 } else {
                     tb.saturating_since(ta)
                 };
-                if apart > self.skew {
-                    Vote::Pending
-                } else if va == vb {
-                    Vote::Agreed(va)
-                } else {
-                    Vote::Failed(VoteFailure::Disagree)
+                let one_command = match self.same_command {
+                    Some(same) => same(&va, &vb),
+                    None => apart <= self.skew || va == vb,
+                };
+                match (one_command, va == vb) {
+                    (false, _) => Vote::Pending,
+                    (true, true) => Vote::Agreed(va),
+                    (true, false) => Vote::Failed(VoteFailure::Disagree),
                 }
             }
         }

@@ -66,15 +66,16 @@ pub struct SupervisorConfig {
 pub struct Redundancy {
     /// A bus whose last copy is older than this is lost.
     pub timeout: Duration,
-    /// Copies further apart than this are not compared.
+    /// Without a rolling counter (which pairs the copies of one command), copies further
+    /// apart than this are not compared, unless equal.
     pub skew: Duration,
 }
 
 impl Redundancy {
     /// For commands every `cycle`: a bus is lost once its copy is half a cycle overdue (the
-    /// watchdog's tolerance), and the two copies of one command arrive within 5 ms of each
-    /// other. The other bus's copies wait for their partners until then, so a longer timeout
-    /// would hold the vehicle for as long on the loss of one bus.
+    /// watchdog's tolerance), and (without a counter) the two copies of one command arrive
+    /// within 5 ms of each other. The other bus's copies wait for their partners until then,
+    /// so a longer timeout would hold the vehicle for as long on the loss of one bus.
     pub fn for_cycle(cycle: Duration) -> Redundancy {
         Redundancy {
             timeout: cycle.saturating_add(cycle / 2),
@@ -480,7 +481,14 @@ impl<W: VehicleWire> Supervisor<W> {
             config,
             counter: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
             counter_b: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
-            voter: config.redundancy.map(|r| DualVoter::new(r.timeout, r.skew)),
+            voter: config.redundancy.map(|r| {
+                let voter = DualVoter::new(r.timeout, r.skew);
+                if bits > 0 {
+                    voter.paired_by(|a: &(Command, u8), b: &(Command, u8)| a.1 == b.1)
+                } else {
+                    voter
+                }
+            }),
             waiting: None,
             degraded: None,
             stats: CommandStats::default(),
@@ -675,11 +683,18 @@ impl<W: VehicleWire> Supervisor<W> {
                     return self.evaluate(false, false);
                 }
             }
-            // The other bus's copy of a command already taken.
-            let skew = self.config.redundancy.map_or(Duration::ZERO, |r| r.skew);
+            // The other bus's copy of a command already taken: its counter within the bus
+            // timeout (without a counter, any copy within the skew window).
+            let window = self.config.redundancy.map_or(Duration::ZERO, |r| {
+                if self.wire.command_counter_bits() > 0 {
+                    r.timeout
+                } else {
+                    r.skew
+                }
+            });
             let recent = self
                 .last_valid
-                .is_some_and(|t| now.saturating_since(t) <= skew);
+                .is_some_and(|t| now.saturating_since(t) <= window);
             if recent && self.echo == counter {
                 return;
             }

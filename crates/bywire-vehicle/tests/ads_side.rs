@@ -248,6 +248,36 @@ fn dual_voter_follows_the_reference_logic() {
 }
 
 #[test]
+fn dual_voter_pairs_the_copies_of_one_command() {
+    let (timeout, skew) = (Duration::from_millis(30), Duration::from_millis(5));
+    // By arrival time (no counter): equal copies 12 ms apart are one command late on one bus;
+    // different ones so far apart may be two commands, so the vote waits; within the window
+    // they disagree.
+    let mut v = DualVoter::new(timeout, skew);
+    v.receive(Channel::A, ms(0), 7u8);
+    v.receive(Channel::B, ms(12), 7u8);
+    assert_eq!(v.vote(ms(12)), Vote::Agreed(7));
+    v.receive(Channel::A, ms(20), 8);
+    assert_eq!(v.vote(ms(20)), Vote::Pending);
+    v.receive(Channel::B, ms(24), 9);
+    assert_eq!(v.vote(ms(24)), Vote::Failed(VoteFailure::Disagree));
+    // By counter (value, counter): the same counter is one command however far apart, and two
+    // counters are never compared, however close.
+    let mut v = DualVoter::new(timeout, skew).paired_by(|a: &(u8, u8), b: &(u8, u8)| a.1 == b.1);
+    v.receive(Channel::A, ms(0), (7, 1));
+    v.receive(Channel::B, ms(15), (7, 1));
+    assert_eq!(v.vote(ms(15)), Vote::Agreed((7, 1)));
+    v.receive(Channel::A, ms(20), (8, 2));
+    assert_eq!(
+        v.vote(ms(20)),
+        Vote::Pending,
+        "B's copy 5 ms before is the last command's"
+    );
+    v.receive(Channel::B, ms(35), (9, 2));
+    assert_eq!(v.vote(ms(35)), Vote::Failed(VoteFailure::Disagree));
+}
+
+#[test]
 fn two_of_three_outvotes_one_sensor() {
     assert_eq!(
         two_of_three([1.0, 1.01, 0.99], 0.05),

@@ -272,15 +272,36 @@ fn disagreeing_copies_brake_at_once<W: AdsWire + VehicleWire + Clone>(vehicle: V
     ));
 }
 
-/// The supervisor alone, its command frames put in by hand at chosen instants: bus B's
-/// computer stops after `b_cycles` cycles, and from cycle 14 on bus A's copies come late by a
-/// few milliseconds (as a loaded ADS computer sends them). Returns the supervisor at the end,
-/// and the watchdog's changes with the cycle they happened in.
-fn lose_b_while_a_is_late<W: AdsWire + VehicleWire + Clone>(
-    mut vehicle: Vehicle<W>,
+/// How the hand-fed copies come: 40 cycles, engaged in cycle 12; from cycle 14 on, each bus's
+/// copy late by the next of its milliseconds (in turn, within the cycle: a later copy would be
+/// a missed one), bus B silent from cycle `b_cycles`, and its speed `b_speed`.
+struct Plan<'a> {
+    a_late_ms: &'a [u64],
+    b_late_ms: &'a [u64],
     b_cycles: u64,
-    a_late_ms: &[u64],
-    cycles: u64,
+    b_speed: f64,
+}
+
+impl Plan<'_> {
+    const CYCLES: u64 = 40;
+
+    /// B lost after `b_cycles`, A's copies late by `a_late_ms` in turn.
+    fn lose_b<'a>(b_cycles: u64, a_late_ms: &'a [u64]) -> Plan<'a> {
+        Plan {
+            a_late_ms,
+            b_late_ms: &[0],
+            b_cycles,
+            b_speed: 2.0,
+        }
+    }
+}
+
+/// The supervisor alone, its command frames put in by hand at the instants `plan` says (as
+/// loaded ADS computers send them). Returns the supervisor at the end, the watchdog's changes
+/// with the cycle they happened in, and the end's time.
+fn hand_fed<W: AdsWire + VehicleWire + Clone>(
+    mut vehicle: Vehicle<W>,
+    plan: &Plan,
 ) -> (Supervisor<W>, Vec<(u64, Watchdog)>, Timestamp) {
     let cycle = vehicle.supervisor.cycle;
     let cycle_ms = u64::try_from(cycle.as_millis()).unwrap();
@@ -290,30 +311,35 @@ fn lose_b_while_a_is_late<W: AdsWire + VehicleWire + Clone>(
     };
     let mut supervisor = Supervisor::with_wire(config, vehicle.wire.clone());
     let mut log = Vec::new();
-    for k in 0..cycles {
-        let command = AdsCommand {
-            velocity: 2.0,
-            gear: Gear::Drive,
-            mode: ControlMode::Autonomous,
-            engage: k == 12,
-            ..AdsCommand::default()
-        };
-        let frame = vehicle.wire.command_frame(&command, k).unwrap();
-        // Within the cycle: a copy later than that would be a missed one.
-        let a_late = if k >= 14 {
-            a_late_ms[usize::try_from(k).unwrap() % a_late_ms.len()]
+    let late = |k: u64, table: &[u64]| {
+        if k >= 14 {
+            table[usize::try_from(k).unwrap() % table.len()]
         } else {
             0
+        }
+    };
+    for k in 0..Plan::CYCLES {
+        let mut frame = |velocity: f64| {
+            let command = AdsCommand {
+                velocity,
+                gear: Gear::Drive,
+                mode: ControlMode::Autonomous,
+                engage: k == 12,
+                ..AdsCommand::default()
+            };
+            vehicle.wire.command_frame(&command, k).unwrap()
         };
+        let (frame_a, frame_b) = (frame(2.0), frame(if k >= 14 { plan.b_speed } else { 2.0 }));
+        let (a_late, b_late) = (late(k, plan.a_late_ms), late(k, plan.b_late_ms));
         for ms in 0..cycle_ms {
             let now = Timestamp::from_millis(k * cycle_ms + ms);
-            if ms == 0 && k < b_cycles {
-                supervisor.on_frame_from(now, Channel::B, &frame);
+            let before = supervisor.watchdog();
+            if ms == b_late && k < plan.b_cycles {
+                supervisor.on_frame_from(now, Channel::B, &frame_b);
             }
             if ms == a_late {
-                supervisor.on_frame_from(now, Channel::A, &frame);
+                supervisor.on_frame_from(now, Channel::A, &frame_a);
             }
-            let before = supervisor.watchdog();
             supervisor.poll(now, &mut |_| {});
             if supervisor.watchdog() != before {
                 log.push((k, supervisor.watchdog()));
@@ -323,7 +349,11 @@ fn lose_b_while_a_is_late<W: AdsWire + VehicleWire + Clone>(
             supervisor.set_feedback(speed, 0.0);
         }
     }
-    (supervisor, log, Timestamp::from_millis(cycles * cycle_ms))
+    (
+        supervisor,
+        log,
+        Timestamp::from_millis(Plan::CYCLES * cycle_ms),
+    )
 }
 
 /// Losing bus B costs no more than a cycle or two of holding, also while A's copies come up to
@@ -335,7 +365,7 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
 ) {
     for lost_at in 16..21 {
         let (supervisor, log, end) =
-            lose_b_while_a_is_late(vehicle.clone(), lost_at, &[0, 3, 12, 8, 1], 40);
+            hand_fed(vehicle.clone(), &Plan::lose_b(lost_at, &[0, 3, 12, 8, 1]));
         let after_engage: Vec<_> = log.iter().filter(|(k, _)| *k > 13).collect();
         assert!(
             after_engage
@@ -353,7 +383,7 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
     }
     // A's copies late by 18 ms every other cycle (39 ms apart, then 1 ms), with B lost: at most
     // slowing, never braking.
-    let (supervisor, log, _) = lose_b_while_a_is_late(vehicle, 16, &[0, 18], 40);
+    let (supervisor, log, _) = hand_fed(vehicle, &Plan::lose_b(16, &[0, 18]));
     assert!(
         log.iter()
             .filter(|(k, _)| *k > 13)
@@ -361,6 +391,49 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
         "{log:?}"
     );
     assert_eq!(supervisor.mode(), ControlMode::Autonomous, "{log:?}");
+}
+
+/// The copies of one command (one rolling counter) are compared however far apart they come:
+/// bus B's computer 8–15 ms behind A's (each command taken when its second copy comes), the copies equal → each command taken once, not
+/// degraded. (Copies were paired by arrival within 5 ms, so two computers a few milliseconds
+/// out of step braked a vehicle that either alone would have driven, and a copy 15 ms late
+/// met the other bus's next command within the window and counted as a disagreement.) The
+/// same copies at two speeds are a disagreement however far apart: full braking.
+fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+) {
+    let in_step = Plan {
+        // 8 ms late first (cycle 14), so that no command comes more than a cycle and a half
+        // after the one before (the watchdog would hold, rightly).
+        b_late_ms: &[15, 11, 8],
+        ..Plan::lose_b(u64::MAX, &[0])
+    };
+    let (supervisor, log, end) = hand_fed(vehicle.clone(), &in_step);
+    assert!(log.iter().all(|(k, _)| *k <= 13), "{log:?}");
+    assert_eq!(supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(supervisor.mode(), ControlMode::Autonomous);
+    assert_eq!(supervisor.degraded(), None);
+    let stats = supervisor.stats();
+    assert_eq!(stats.accepted, Plan::CYCLES, "{stats:?}");
+    assert_eq!(stats.rejected(), 0, "{stats:?}");
+    let act = supervisor.actuators(end);
+    assert!(
+        act.ads_in_control && act.velocity == 2.0 && !act.warning,
+        "{act:?}"
+    );
+    // B's copies as late, at another speed: the first one brakes.
+    let differing = Plan {
+        b_speed: 3.0,
+        ..in_step
+    };
+    let (supervisor, log, _) = hand_fed(vehicle, &differing);
+    assert_eq!(supervisor.watchdog(), Watchdog::FullBraking, "{log:?}");
+    assert_eq!(
+        log.iter().find(|(k, _)| *k >= 14),
+        Some(&(14, Watchdog::FullBraking))
+    );
+    assert!(supervisor.stats().disagreements > 0);
+    assert_ne!(supervisor.command().map(|c| c.velocity), Some(3.0));
 }
 
 /// Each scenario for each wire.
@@ -404,4 +477,5 @@ for_every_wire!(
     both_buses_silent_brake,
     disagreeing_copies_brake_at_once,
     losing_one_bus_holds_at_most_while_the_other_is_late,
+    copies_of_one_command_are_compared_however_far_apart,
 );
