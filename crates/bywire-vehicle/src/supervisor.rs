@@ -443,6 +443,9 @@ pub struct Supervisor<W: VehicleWire> {
     /// The bus whose last copy waits for its partner from the other bus: taken in degraded
     /// mode if the other bus's last copy goes stale first.
     waiting: Option<Channel>,
+    /// How long after a command is taken a copy with its counter is the other bus's copy of
+    /// it: the bus timeout (without a counter, any copy within the skew window).
+    copy_window: Duration,
     degraded: Option<Channel>,
     stats: CommandStats,
     command: Option<Command>,
@@ -490,6 +493,13 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }),
             waiting: None,
+            copy_window: config.redundancy.map_or(Duration::ZERO, |r| {
+                if bits > 0 {
+                    r.timeout
+                } else {
+                    r.skew
+                }
+            }),
             degraded: None,
             stats: CommandStats::default(),
             command: None,
@@ -683,18 +693,10 @@ impl<W: VehicleWire> Supervisor<W> {
                     return self.evaluate(false, false);
                 }
             }
-            // The other bus's copy of a command already taken: its counter within the bus
-            // timeout (without a counter, any copy within the skew window).
-            let window = self.config.redundancy.map_or(Duration::ZERO, |r| {
-                if self.wire.command_counter_bits() > 0 {
-                    r.timeout
-                } else {
-                    r.skew
-                }
-            });
+            // The other bus's copy of a command already taken.
             let recent = self
                 .last_valid
-                .is_some_and(|t| now.saturating_since(t) <= window);
+                .is_some_and(|t| now.saturating_since(t) <= self.copy_window);
             if recent && self.echo == counter {
                 return;
             }

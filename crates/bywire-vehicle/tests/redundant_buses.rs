@@ -285,15 +285,13 @@ struct Plan<'a> {
 impl Plan<'_> {
     const CYCLES: u64 = 40;
 
-    /// B lost after `b_cycles`, A's copies late by `a_late_ms` in turn.
-    fn lose_b<'a>(b_cycles: u64, a_late_ms: &'a [u64]) -> Plan<'a> {
-        Plan {
-            a_late_ms,
-            b_late_ms: &[0],
-            b_cycles,
-            b_speed: 2.0,
-        }
-    }
+    /// Both buses on time, carrying the same command throughout.
+    const STEADY: Plan<'static> = Plan {
+        a_late_ms: &[0],
+        b_late_ms: &[0],
+        b_cycles: u64::MAX,
+        b_speed: 2.0,
+    };
 }
 
 /// The supervisor alone, its command frames put in by hand at the instants `plan` says (as
@@ -364,8 +362,14 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
     vehicle: Vehicle<W>,
 ) {
     for lost_at in 16..21 {
-        let (supervisor, log, end) =
-            hand_fed(vehicle.clone(), &Plan::lose_b(lost_at, &[0, 3, 12, 8, 1]));
+        let (supervisor, log, end) = hand_fed(
+            vehicle.clone(),
+            &Plan {
+                b_cycles: lost_at,
+                a_late_ms: &[0, 3, 12, 8, 1],
+                ..Plan::STEADY
+            },
+        );
         let after_engage: Vec<_> = log.iter().filter(|(k, _)| *k > 13).collect();
         assert!(
             after_engage
@@ -383,7 +387,12 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
     }
     // A's copies late by 18 ms every other cycle (39 ms apart, then 1 ms), with B lost: at most
     // slowing, never braking.
-    let (supervisor, log, _) = hand_fed(vehicle, &Plan::lose_b(16, &[0, 18]));
+    let b_lost = Plan {
+        b_cycles: 16,
+        a_late_ms: &[0, 18],
+        ..Plan::STEADY
+    };
+    let (supervisor, log, _) = hand_fed(vehicle, &b_lost);
     assert!(
         log.iter()
             .filter(|(k, _)| *k > 13)
@@ -406,7 +415,7 @@ fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire
         // 8 ms late first (cycle 14), so that no command comes more than a cycle and a half
         // after the one before (the watchdog would hold, rightly).
         b_late_ms: &[15, 11, 8],
-        ..Plan::lose_b(u64::MAX, &[0])
+        ..Plan::STEADY
     };
     let (supervisor, log, end) = hand_fed(vehicle.clone(), &in_step);
     assert!(log.iter().all(|(k, _)| *k <= 13), "{log:?}");
