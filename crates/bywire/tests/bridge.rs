@@ -509,5 +509,4 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
         .parse()
         .unwrap();
     assert!(kept > 100, "{kept}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

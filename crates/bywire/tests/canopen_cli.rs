@@ -354,5 +354,4 @@ fn eds_check_names_lines_and_fails_on_errors() {
         stdout.contains("latin.eds: Müller Antriebe Motor 5°: 1 objects"),
         "{stdout}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

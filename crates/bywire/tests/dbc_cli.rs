@@ -155,7 +155,6 @@ fn decode_of_standard_input_equals_decode_of_the_file() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(piped.lines().count(), 20_000);
     assert_eq!(piped, read);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -286,7 +285,6 @@ fn convert_dbc_to_json_and_back() {
     );
     assert_eq!(code, 1);
     assert!(err.contains("m.json:2:"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -323,7 +321,6 @@ fn parser_errors_fail_lint_and_convert() {
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("not converted"), "{err}");
     assert!(!json.exists() && !dir.join("broken.partial").exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Value descriptions are looked up by the raw value, as cantools does, not by the physical
@@ -381,5 +378,4 @@ fn a_signal_name_used_twice_keeps_both_values() {
     assert_eq!(value["signals"], serde_json::json!({"S": 10, "S#2": 11}));
     let (_, out, _) = run(&["decode", dbc, "--single-line"], input);
     assert!(out.contains("M(S: 10, S: 11)"), "{out}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -187,7 +187,6 @@ echo "== end"
         ],
         &script,
     );
-    let _ = std::fs::remove_dir_all(&dir);
     let received = |name: &str| section(&out, name).trim().to_string();
     let want = hex(&message).trim().to_string();
     assert_eq!(received("to the kernel"), want, "bywire → kernel:\n{out}");

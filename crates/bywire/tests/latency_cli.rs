@@ -77,7 +77,6 @@ fn predict_with_strict_fails_on_a_miss_and_names_it() {
         err.contains("2 message(s) can miss their deadline"),
         "{err}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -173,7 +172,6 @@ fn logs_show_an_injected_delay_between_the_redundant_buses() {
     // Before the fault (the first second) the copies were a frame apart.
     assert!(latency["min_ms"].as_f64().unwrap() < 0.3, "{latency}");
     assert_eq!(json["transfers"][0]["unmatched"], 0);
-    std::fs::remove_dir_all(run.parent().unwrap()).unwrap();
 }
 
 /// The steering steps at a standstill, measured from bus 1's log (the command's setpoint
@@ -231,7 +229,6 @@ fn logged_steering_steps_agree_with_the_simulators_metrics() {
         );
         assert!(f(ours, "dead_time_s") > 0.0 && f(ours, "dead_time_s") < f(ours, "t90_s"));
     }
-    std::fs::remove_dir_all(run.parent().unwrap()).unwrap();
 }
 
 #[test]

@@ -154,9 +154,7 @@ fn written_by_python_can(writer: &str, extension: &str) -> Vec<LogRecord> {
         theirs.to_str().unwrap(),
         back.to_str().unwrap(),
     ]);
-    let got = records(&back);
-    std::fs::remove_dir_all(&dir).unwrap();
-    got
+    records(&back)
 }
 
 /// python-can compares two logs message by message (its candump reader on one side, its ASC,
@@ -190,7 +188,7 @@ print("same", len(ours))
 #[test]
 fn python_can_reads_our_asc_frame_for_frame() {
     let Converted {
-        dir,
+        dir: _dir,
         log,
         out: asc,
         said,
@@ -203,7 +201,6 @@ fn python_can_reads_our_asc_frame_for_frame() {
         python(COMPARE, &[&asc, &log, Path::new("asc")]).trim(),
         "same 9"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -300,7 +297,6 @@ fn can_utils_log2asc_and_asc2log_agree_with_us() {
         String::from_utf8_lossy(&out.stderr)
     );
     same_frames_and_spacing(&records(&theirs_back), &original());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -344,13 +340,15 @@ fn log_cat_and_stats_read_asc_and_bad_lines_name_their_place() {
     );
     assert_eq!(code, 1);
     assert!(err.contains("give --format"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn python_can_reads_our_trc_frame_for_frame() {
     let Converted {
-        dir, log, out: trc, ..
+        dir: _dir,
+        log,
+        out: trc,
+        ..
     } = converted("trc-ours", "out.trc");
     let compared = python(
         r#"
@@ -375,7 +373,6 @@ print("same", len(ours))
         &[&trc, &log],
     );
     assert_eq!(compared.trim(), "same 8");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -441,7 +438,9 @@ fn tshark_fields(capture: &Path) -> Vec<Vec<String>> {
 #[test]
 fn tshark_reads_our_pcapng_frame_for_frame() {
     let Converted {
-        dir, out: capture, ..
+        dir: _dir,
+        out: capture,
+        ..
     } = converted("pcapng-ours", "out.pcapng");
     let rows = tshark_fields(&capture);
     let wanted = original();
@@ -481,7 +480,6 @@ fn tshark_reads_our_pcapng_frame_for_frame() {
             assert_eq!(row[9], hex, "{row:?}");
         }
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -545,13 +543,15 @@ fn we_read_a_capture_text2pcap_writes() {
             format!("vcan5 {fd}"),
         ]
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn python_can_and_tshark_read_our_blf_frame_for_frame() {
     let Converted {
-        dir, log, out: blf, ..
+        dir: _dir,
+        log,
+        out: blf,
+        ..
     } = converted("blf-ours", "out.blf");
     assert_eq!(
         python(COMPARE, &[&blf, &log, Path::new("blf")]).trim(),
@@ -581,7 +581,6 @@ fn python_can_and_tshark_read_our_blf_frame_for_frame() {
             assert_eq!(row[9], hex, "{row:?}");
         }
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -608,14 +607,16 @@ fn we_read_python_cans_blf_frame_for_frame() {
 #[test]
 fn python_can_reads_our_mf4_frame_for_frame() {
     let Converted {
-        dir, log, out: mf4, ..
+        dir: _dir,
+        log,
+        out: mf4,
+        ..
     } = converted("mf4-ours", "out.mf4");
     // (python-can's MF4 reader is asammdf's: both read it.)
     assert_eq!(
         python(COMPARE, &[&mf4, &log, Path::new("mf4")]).trim(),
         "same 9"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -697,7 +698,6 @@ print("same", len(ours))
         &[&mf4, Path::new(&dbc), &ours_path],
     );
     assert_eq!(compared.trim(), "same 300");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The commands that read logs take any format: `decode -I` of a BLF gives what `decode` of the
@@ -751,7 +751,6 @@ fn decode_and_play_read_every_format() {
             .collect();
         assert_eq!(without_direction, text, "{extension}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `log convert` merges its inputs by time, keeps and renames channels, and cuts a time range.
@@ -817,7 +816,6 @@ fn convert_merges_inputs_and_selects_channels_and_time() {
     );
     assert_eq!(code, 1);
     assert!(err.contains("--to 1 is before --from 5"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// MCAP as ROS 2 records ros2_socketcan: the `mcap` and `mcap-ros2-support` packages decode
@@ -923,7 +921,6 @@ with open(sys.argv[1], "wb") as f:
         std::fs::read_to_string(&back).unwrap(),
         "(1700000000.000000) can1 123#DEADBEEF\n(1700000000.001000) can1 1ABCDEF0#0102\n(1700000000.002000) can1 456#R3\n"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -1046,7 +1043,6 @@ pq.write_table(t, sys.argv[1], compression="zstd")
         err.contains("Parquet file can only be read from a file"),
         "{err}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -1086,7 +1082,6 @@ fn decoded_parquet_agrees_with_cantools_through_pyarrow_and_polars() {
         );
         assert_ne!(code, 0);
         assert!(err.contains("exists and is not empty"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
 
@@ -1180,7 +1175,6 @@ fn parquet_pages_are_compressed_as_asked_and_pyarrow_reads_them() {
     assert_ne!(code, 0);
     assert!(err.contains("--compression is for Parquet output"), "{err}");
     assert!(!asc.exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -1225,7 +1219,6 @@ for r in t.to_pylist():
             "Message1 can1 2023-11-15 8 MULTIPLEXOR_8",
         ]
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -1248,7 +1241,6 @@ fn decoded_mcap_channels_hold_cantools_values_valid_against_their_schemas() {
             checked.contains("valid and equal to cantools"),
             "{file}: {checked}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
 
@@ -1360,7 +1352,6 @@ print(len(rows), "rows agree")
         &[&dbc, &log, &csv],
     );
     assert!(compared.contains("rows agree"), "{compared}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -1410,7 +1401,6 @@ fn the_readmes_pandas_walk_through_runs_as_written() {
             && printed.contains("2023-11-14"),
         "{printed}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A raw frames' file on which parquet-rs panics while decoding (its delta header's first
@@ -1441,7 +1431,6 @@ fn a_file_parquet_rs_panics_on_is_an_error_without_a_panic_message() {
     bytes[header + 4..header + 15].fill(0xFF);
     std::fs::write(&table, &bytes).unwrap();
     let (code, out, err) = common::bywire(&["log", "cat", table.to_str().unwrap()], "");
-    std::fs::remove_dir_all(&dir).unwrap();
     assert_eq!(code, 1, "{out}{err}");
     assert!(
         err.contains("row 0") && err.contains("malformed page"),

@@ -436,7 +436,6 @@ fn the_readme_python_script_drives_the_simulated_tug() {
     // The run's logs and metrics are written as by any other run.
     assert!(out_dir.join("metrics.json").is_file(), "{out}");
     assert!(out.contains("stopped after"), "{out}");
-    let _ = std::fs::remove_dir_all(&out_dir);
 }
 
 /// `bywire ros2 canopen` with bywire's CiA 402 drive on a shared `udp:` bus, called from
@@ -481,7 +480,6 @@ fn ros2_canopen_offers_a_cia402_drive_as_ros2_canopen_does() {
     assert!(peer.wait().unwrap().success());
     let (code, out, err) = bridge.stop();
     assert_eq!(code, 0, "{out}{err}");
-    let _ = std::fs::remove_dir_all(&dir);
 
     // init answers once the drive is in Operation enabled, NMT operational.
     assert_eq!(first["init"]["success"], true, "{first}\n{err}");
@@ -535,7 +533,6 @@ fn ros2_canopen_reads_a_ros2_canopen_bus_yml_and_names_its_mistakes() {
         ],
         "",
     );
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(code, 1);
     assert!(
         err.contains("bus.yml: nodes.wheel.node_id: 200 is not a node ID"),

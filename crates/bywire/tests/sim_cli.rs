@@ -395,7 +395,6 @@ fn a_secured_scenario_refuses_the_attackers_commands() {
         e["t_s"].as_f64().unwrap() >= 8.0 && e["kind"] == "watchdog" && e["detail"] != "normal"
     });
     assert!(!braked, "{}", metrics["events"]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The DTCs the whole fault tour leaves in the ECU: the ADS silence's cascade, bus 1b lost,
@@ -691,7 +690,6 @@ fn the_served_buses_outlive_a_crowd_that_exhausts_the_descriptors() {
         .and_then(|n| n.trim().parse().ok())
         .unwrap();
     assert!(errors > 0, "{summary}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The example scenario in the repository runs to its end with the reactions it describes: a
@@ -823,7 +821,6 @@ fn a_sweep_runs_every_combination_as_single_runs_do() {
         assert_ne!(code, 0, "{args:?}");
         assert!(err.contains(expected), "{args:?}: {err}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `bywire dataset` refuses what it cannot do, naming the option.
@@ -905,5 +902,4 @@ fn dataset_refuses_bad_input_with_its_name() {
         assert!(err.contains(expected), "{args:?}: {err}");
         assert!(!dir.join("out").join("dataset.parquet").exists());
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }

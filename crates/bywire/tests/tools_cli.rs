@@ -651,7 +651,6 @@ fn log_stats_of_a_file_a_pipe_and_standard_input_agree() {
     let (_, from_pipe_path, err) = bywire(&["log", "stats", "/dev/stdin"], &input);
     assert_eq!(from_stdin, from_file);
     assert_eq!(from_pipe_path, from_file, "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `log cat` writes files in blocks and standard input line by line: the same lines either
@@ -684,7 +683,6 @@ fn log_cat_of_a_file_writes_what_standard_input_does() {
         "{}",
         &from_file[from_file.len() - 80..]
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -997,7 +995,6 @@ fn serve_keeps_the_token_off_the_command_line_and_other_hosts_behind_one() {
         assert!(status.success());
         assert!(rest.contains("failed authentications 1"), "{rest}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// With descriptors for only a few clients, a crowd of connections makes `accept` fail with
@@ -1155,7 +1152,6 @@ fn an_overlong_or_binary_line_is_skipped_with_its_number() {
         err.contains("line 4") && err.contains("not UTF-8"),
         "{out}{err}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Each column chunk's codec in a Parquet file, its rows, and its `ts` column's type, as
@@ -1276,5 +1272,4 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
         "UNCOMPRESSED 3 timestamp[ns, tz=UTC]"
     );
     let _ = stop_serve(server);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
