@@ -616,11 +616,12 @@ mod tests {
     const START: u64 = 1_700_000_000_000_000_000;
     const MS: u64 = 1_000_000;
 
-    fn folder(test: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("bywire-rec-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    /// An empty folder for one test, removed with it.
+    fn folder(test: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("bywire-rec-{test}-"))
+            .tempdir()
+            .unwrap()
     }
 
     fn config(dir: &Path, format: Format, layout: Layout) -> Config {
@@ -667,8 +668,9 @@ mod tests {
 
     #[test]
     fn rotated_files_hold_every_frame_once_in_order_with_their_metadata() {
-        let dir = folder("rotate");
-        let mut config = config(&dir, Format::Blf, Layout::Merged);
+        let scratch = folder("rotate");
+        let dir = scratch.path();
+        let mut config = config(dir, Format::Blf, Layout::Merged);
         config.rotation.max_bytes = Some(64 * 1024);
         let mut recorder = Recorder::new(config).unwrap();
         for i in 0..60_000 {
@@ -697,8 +699,9 @@ mod tests {
 
     #[test]
     fn a_file_per_bus_holds_that_bus_and_a_span_rotates_a_quiet_bus() {
-        let dir = folder("per-bus");
-        let mut config = config(&dir, Format::Asc, Layout::PerBus);
+        let scratch = folder("per-bus");
+        let dir = scratch.path();
+        let mut config = config(dir, Format::Asc, Layout::PerBus);
         config.rotation.max_span_ns = Some(1_000 * MS);
         let mut recorder = Recorder::new(config).unwrap();
         for i in 0..500 {
@@ -721,8 +724,9 @@ mod tests {
 
     #[test]
     fn a_trigger_keeps_the_window_around_it_and_holds_no_more_than_asked() {
-        let dir = folder("window");
-        let mut config = config(&dir, Format::Mf4, Layout::Merged);
+        let scratch = folder("window");
+        let dir = scratch.path();
+        let mut config = config(dir, Format::Mf4, Layout::Merged);
         config.window = Some(Window {
             before_ns: 1_000 * MS,
             after_ns: 500 * MS,
@@ -749,7 +753,7 @@ mod tests {
         assert_eq!(meta["triggers"].as_array().unwrap().len(), 1);
         assert_eq!(meta["triggers"][0]["reason"], "bus-off");
 
-        let mut config = self::config(&dir, Format::Candump, Layout::Merged);
+        let mut config = self::config(dir, Format::Candump, Layout::Merged);
         config.name = "small".into();
         config.window = Some(Window {
             before_ns: 10_000 * MS,
@@ -770,8 +774,9 @@ mod tests {
     #[test]
     fn a_recorder_that_dies_leaves_files_read_up_to_the_last_checkpoint() {
         for format in [Format::Blf, Format::Mf4, Format::Candump, Format::Pcapng] {
-            let dir = folder(&format!("cut-{format:?}"));
-            let mut recorder = Recorder::new(config(&dir, format, Layout::Merged)).unwrap();
+            let scratch = folder(&format!("cut-{format:?}"));
+            let dir = scratch.path();
+            let mut recorder = Recorder::new(config(dir, format, Layout::Merged)).unwrap();
             for i in 0..3_000 {
                 recorder.record(record(i, 1)).unwrap();
             }
@@ -797,8 +802,9 @@ mod tests {
             if !format.survives_a_cut() || (format == Format::Mcap && !cfg!(feature = "mcap")) {
                 continue;
             }
-            let dir = folder(&format!("begun-{format:?}"));
-            let mut recorder = Recorder::new(config(&dir, format, Layout::Merged)).unwrap();
+            let scratch = folder(&format!("begun-{format:?}"));
+            let dir = scratch.path();
+            let mut recorder = Recorder::new(config(dir, format, Layout::Merged)).unwrap();
             recorder.record(record(0, 1)).unwrap();
             let path = recorder.open.values().next().unwrap().facts.path.clone();
             std::mem::forget(recorder);

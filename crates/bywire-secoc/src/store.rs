@@ -147,16 +147,19 @@ mod tests {
 
     use super::*;
 
-    fn temp(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("bywire-secoc-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join("freshness")
+    /// A store's path in an empty folder for one test, removed with the folder.
+    fn temp(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("bywire-secoc-{name}-"))
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join("freshness");
+        (dir, path)
     }
 
     #[test]
     fn a_restart_goes_on_past_every_value_used() {
-        let path = temp("restart");
+        let (_dir, path) = temp("restart");
         let (mut store, start) = FreshnessStore::open(&path, 100).unwrap();
         assert_eq!(start, 1);
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "101\n");
@@ -178,7 +181,7 @@ mod tests {
 
     #[test]
     fn a_damaged_file_is_refused_not_started_over() {
-        let path = temp("damaged");
+        let (_dir, path) = temp("damaged");
         std::fs::write(&path, "12x\n").unwrap();
         let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
         assert!(error.contains("refusing to start over"), "{error}");

@@ -726,11 +726,12 @@ mod tests {
     use arrow_schema::{DataType, Field, Schema, TimeUnit};
     use std::sync::Arc;
 
-    fn fresh_dir(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("bywire-lake-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    /// An empty folder for one test, removed with it.
+    fn fresh_dir(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("bywire-lake-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     /// Every row of a Parquet file, as parquet-rs reads it: (µs, channel, signal, value).
@@ -817,7 +818,8 @@ mod tests {
 
     #[test]
     fn parquet_rs_reads_every_row_of_every_compression() {
-        let dir = fresh_dir("compressions");
+        let scratch = fresh_dir("compressions");
+        let dir = scratch.path();
         for compression in [
             LakeCompression::Snappy,
             LakeCompression::Zstd,
@@ -863,7 +865,8 @@ mod tests {
 
     #[test]
     fn statistics_give_the_times_and_texts_present_and_the_nulls() {
-        let dir = fresh_dir("statistics");
+        let scratch = fresh_dir("statistics");
+        let dir = scratch.path();
         let path = dir.join("s.parquet");
         let mut rows = LongColumns::default();
         for (ts, channel, signal) in [(30, 1, 0), (-5, NULL_KEY, 2), (12, 1, 2)] {
@@ -963,14 +966,15 @@ mod tests {
 
     #[test]
     fn rows_go_to_their_day_folders_and_files_are_opened_again_to_append() {
-        let staging = fresh_dir("days");
+        let scratch = fresh_dir("days");
+        let staging = scratch.path();
         let day = NANOS_PER_DAY;
         let start = 20_000 * day; // 2024-10-04
         let times = [start - 1, start, start + 1_500, start + day];
         // At most one descriptor: the folders take turns, each file closed and opened again
         // to append its next row group.
         let mut files =
-            LakeFiles::new(&staging, "part-00003-job", LakeCompression::Snappy, 1, 2).unwrap();
+            LakeFiles::new(staging, "part-00003-job", LakeCompression::Snappy, 1, 2).unwrap();
         let table = decoded(&times, &["can0", "can1", "can0", "can0"]);
         files.add(Some("tug 1"), None, "Drive", &table).unwrap();
         files
@@ -985,7 +989,7 @@ mod tests {
         written.sort();
         let folder = |d: &str| format!("vehicle=tug 1/date={d}/message=Drive");
         let names: Vec<_> = written.iter().map(|(f, _)| f.clone()).collect();
-        assert_eq!(names, lake_files(&staging), "no hidden file left");
+        assert_eq!(names, lake_files(staging), "no hidden file left");
         let by_folder = |d: &str| -> Vec<&(String, u64)> {
             written
                 .iter()
@@ -1041,8 +1045,9 @@ mod tests {
 
     #[test]
     fn a_given_date_is_every_row_s_and_an_unfinished_task_leaves_nothing() {
-        let staging = fresh_dir("given");
-        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Zstd, 8, 1).unwrap();
+        let scratch = fresh_dir("given");
+        let staging = scratch.path();
+        let mut files = LakeFiles::new(staging, "p", LakeCompression::Zstd, 8, 1).unwrap();
         let day = NANOS_PER_DAY;
         files
             .add(
@@ -1062,13 +1067,15 @@ mod tests {
             )]
         );
 
-        let staging = fresh_dir("dropped");
-        let mut files = LakeFiles::new(&staging, "p", LakeCompression::Snappy, 8, 1).unwrap();
+        let scratch = fresh_dir("dropped");
+
+        let staging = scratch.path();
+        let mut files = LakeFiles::new(staging, "p", LakeCompression::Snappy, 8, 1).unwrap();
         files
             .add(None, None, "M", &decoded(&[0, 1], &["a", "b"]))
             .unwrap();
-        assert_eq!(lake_files(&staging).len(), 1, "a file being written");
+        assert_eq!(lake_files(staging).len(), 1, "a file being written");
         drop(files);
-        assert!(lake_files(&staging).is_empty());
+        assert!(lake_files(staging).is_empty());
     }
 }
