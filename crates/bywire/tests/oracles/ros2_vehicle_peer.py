@@ -101,6 +101,20 @@ def keep_driving(condition, timeout):
     return False
 
 
+def steady(read, tolerance, timeout):
+    """Waits until each value `read` returns moves by no more than `tolerance` over half a
+    second (the wheels at their angle, the tug at its speed), for at most `timeout`."""
+    end = time.monotonic() + timeout
+    before = read()
+    while time.monotonic() < end:
+        time.sleep(0.5)
+        now = read()
+        if all(abs(a - b) <= tolerance for a, b in zip(before, now)):
+            return True
+        before = now
+    return False
+
+
 def moving():
     return latest("velocity") is not None and latest("velocity").longitudinal_velocity > 1.45
 
@@ -184,7 +198,8 @@ try:
             steering_mode_cmd.write(StringMsg(data=mode))
             time.sleep(0.05)
         keep_driving(lambda: steering_mode_is(mode) and moving(), 5)
-        time.sleep(1.0)
+        steady(lambda: (latest("velocity").lateral_velocity,
+                        latest("steering").steering_tire_angle), 0.005, 5)
         v = latest("velocity")
         result[mode] = {"steering_mode": latest("steering_mode").data,
                         "lateral": v.lateral_velocity, "heading_rate": v.heading_rate,
