@@ -5,10 +5,12 @@
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
 //! or both timed out → fail (the caller goes to its safe state). Only copies of one command are
 //! compared: with a rolling counter, those with the same counter, however far apart they came
-//! ([`DualVoter::paired_by`]); without one, those that arrived within the skew window of each
-//! other, or equal ones further apart (one command, late on one bus). Until a copy's partner
-//! comes the vote is pending, and a copy still waiting when the other bus's last copy times out
-//! is taken in degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
+//! ([`DualVoter::paired_by`]; each bus's last two copies are kept, so a bus up to a timeout
+//! behind the other — more than a cycle — still has each command compared when its copy
+//! comes); without one, those that arrived within the skew window of each other, or equal ones
+//! further apart (one command, late on one bus). Until a copy's partner comes the vote is
+//! pending, and a copy still waiting when the other bus's last copy times out is taken in
+//! degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
 
 use core::time::Duration;
 
@@ -69,6 +71,20 @@ pub enum Vote<T> {
     Failed(VoteFailure),
 }
 
+/// Copies kept per bus for pairing by counter: a bus up to three cycles behind the other still
+/// finds its partners.
+const KEPT: usize = 4;
+
+/// One copy as the voter keeps it.
+#[derive(Debug, Clone, Copy)]
+struct Copy<T> {
+    value: T,
+    arrived: Timestamp,
+    /// From when it counts as fresh: its arrival, or its partner's when that came over a
+    /// timeout before (a copy that late arrives stale: its bus is late, as good as lost).
+    since: Timestamp,
+}
+
 /// Votes on one message received on two buses.
 #[derive(Debug, Clone, Copy)]
 pub struct DualVoter<T> {
@@ -77,26 +93,27 @@ pub struct DualVoter<T> {
     /// Without [`paired_by`](Self::paired_by): copies arriving further apart than this are
     /// not compared (unless equal).
     pub skew: Duration,
-    a: Option<(Timestamp, T)>,
-    b: Option<(Timestamp, T)>,
+    /// Each bus's last copies, the newest first (the last alone without `same_command`).
+    copies: [[Option<Copy<T>>; KEPT]; 2],
     same_command: Option<fn(&T, &T) -> bool>,
 }
 
-impl<T: Copy + PartialEq> DualVoter<T> {
+impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
     /// A voter with nothing received.
     pub fn new(timeout: Duration, skew: Duration) -> Self {
         DualVoter {
             timeout,
             skew,
-            a: None,
-            b: None,
+            copies: [[None; KEPT]; 2],
             same_command: None,
         }
     }
 
     /// Pair copies by `same_command` (equal rolling counters) rather than by arrival time:
-    /// copies of one command are compared however far apart they came, and copies of two
-    /// commands never are (the later one waits for its partner).
+    /// copies of one command are compared however far apart they came (a late copy that
+    /// contradicts its partner is a disagreement, and one whose partner came over a timeout
+    /// before is stale), and copies of two commands never are (the later one waits for its
+    /// partner).
     pub fn paired_by(self, same_command: fn(&T, &T) -> bool) -> Self {
         DualVoter {
             same_command: Some(same_command),
@@ -104,63 +121,111 @@ impl<T: Copy + PartialEq> DualVoter<T> {
         }
     }
 
-    /// A copy arrived on `channel`.
-    pub fn receive(&mut self, channel: Channel, now: Timestamp, value: T) {
+    fn kept(&self, channel: Channel) -> &[Option<Copy<T>>; KEPT] {
+        let [a, b] = &self.copies;
         match channel {
-            Channel::A => self.a = Some((now, value)),
-            Channel::B => self.b = Some((now, value)),
+            Channel::A => a,
+            Channel::B => b,
         }
     }
 
-    fn last(&self, channel: Channel) -> Option<(Timestamp, T)> {
-        match channel {
-            Channel::A => self.a,
-            Channel::B => self.b,
+    /// The copy of `value`'s command on `channel`, if it came within two timeouts of `now`
+    /// (older ones are another command: the counter has come round).
+    fn partner(&self, channel: Channel, value: &T, now: Timestamp) -> Option<Copy<T>> {
+        let same = self.same_command?;
+        let horizon = self.timeout.saturating_mul(2);
+        self.kept(channel)
+            .iter()
+            .flatten()
+            .find(|c| now.saturating_since(c.arrived) <= horizon && same(value, &c.value))
+            .copied()
+    }
+
+    /// A copy arrived on `channel`.
+    pub fn receive(&mut self, channel: Channel, now: Timestamp, value: T) {
+        let since = self
+            .partner(channel.other(), &value, now)
+            .filter(|p| now.saturating_since(p.arrived) > self.timeout)
+            .map_or(now, |p| p.since);
+        let copy = Copy {
+            value,
+            arrived: now,
+            since,
+        };
+        let [a, b] = &mut self.copies;
+        let kept = match channel {
+            Channel::A => a,
+            Channel::B => b,
+        };
+        kept.rotate_right(1);
+        if let Some(newest) = kept.first_mut() {
+            *newest = Some(copy);
         }
+    }
+
+    fn last(&self, channel: Channel) -> Option<Copy<T>> {
+        self.kept(channel).first().copied().flatten()
     }
 
     /// When the last copy from `channel` arrived (`None`: none yet).
     pub fn arrived(&self, channel: Channel) -> Option<Timestamp> {
-        self.last(channel).map(|(at, _)| at)
+        self.last(channel).map(|c| c.arrived)
     }
 
     /// When the last copy from `channel` stops counting as fresh (`None`: none yet).
     pub fn stale_at(&self, channel: Channel) -> Option<Timestamp> {
-        self.arrived(channel).map(|at| {
-            at.saturating_add(self.timeout)
+        self.last(channel).map(|c| {
+            c.since
+                .saturating_add(self.timeout)
                 .saturating_add(Duration::from_nanos(1))
         })
     }
 
-    /// The vote at `now`.
+    /// The vote at `now`, on the copy that came last: its partner's verdict, or pending
+    /// until the partner comes (or degraded, or failed, as the module says).
     pub fn vote(&self, now: Timestamp) -> Vote<T> {
-        let fresh = |copy: Option<(Timestamp, T)>| {
-            copy.filter(|(at, _)| now.saturating_since(*at) <= self.timeout)
+        let (a, b) = (self.last(Channel::A), self.last(Channel::B));
+        let latest = match (a, b) {
+            (Some(x), Some(y)) if y.arrived > x.arrived => Some((Channel::B, y)),
+            (Some(x), _) => Some((Channel::A, x)),
+            (None, y) => y.map(|y| (Channel::B, y)),
         };
-        match (fresh(self.a), fresh(self.b)) {
+        // Paired by counter: the copy that came last against its partner, however late
+        // (a late copy that contradicts the command taken is a fault all the same).
+        let partner = latest.and_then(|(channel, copy)| {
+            let partner = self.partner(channel.other(), &copy.value, now)?;
+            Some((copy.value, partner.value))
+        });
+        if partner.is_some_and(|(value, other)| value != other) {
+            return Vote::Failed(VoteFailure::Disagree);
+        }
+        let fresh =
+            |copy: Option<Copy<T>>| copy.filter(|c| now.saturating_since(c.since) <= self.timeout);
+        match (fresh(a), fresh(b)) {
             (None, None) => Vote::Failed(VoteFailure::BothLost),
-            (Some((_, value)), None) => Vote::Degraded {
-                value,
+            (Some(x), None) => Vote::Degraded {
+                value: x.value,
                 healthy: Channel::A,
             },
-            (None, Some((_, value))) => Vote::Degraded {
-                value,
+            (None, Some(y)) => Vote::Degraded {
+                value: y.value,
                 healthy: Channel::B,
             },
-            (Some((ta, va)), Some((tb, vb))) => {
-                let apart = if ta > tb {
-                    ta.saturating_since(tb)
+            (Some(x), Some(y)) => {
+                let paired = if self.same_command.is_some() {
+                    partner
                 } else {
-                    tb.saturating_since(ta)
+                    let apart = if x.arrived > y.arrived {
+                        x.arrived.saturating_since(y.arrived)
+                    } else {
+                        y.arrived.saturating_since(x.arrived)
+                    };
+                    (apart <= self.skew || x.value == y.value).then_some((x.value, y.value))
                 };
-                let one_command = match self.same_command {
-                    Some(same) => same(&va, &vb),
-                    None => apart <= self.skew || va == vb,
-                };
-                match (one_command, va == vb) {
-                    (false, _) => Vote::Pending,
-                    (true, true) => Vote::Agreed(va),
-                    (true, false) => Vote::Failed(VoteFailure::Disagree),
+                match paired {
+                    None => Vote::Pending,
+                    Some((value, other)) if value == other => Vote::Agreed(value),
+                    Some(_) => Vote::Failed(VoteFailure::Disagree),
                 }
             }
         }

@@ -678,7 +678,15 @@ impl<W: VehicleWire> Supervisor<W> {
             voter.receive(channel, now, (command, counter));
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
-                Vote::Degraded { healthy, .. } => self.degraded = Some(healthy),
+                Vote::Degraded { healthy, .. } if healthy == channel => {
+                    self.degraded = Some(healthy);
+                }
+                // This copy came over a timeout after its partner: its bus is late, and the
+                // other bus's copies are taken alone.
+                Vote::Degraded { healthy, .. } => {
+                    self.degraded = Some(healthy);
+                    return;
+                }
                 Vote::Pending => {
                     self.waiting = Some(channel);
                     return;
@@ -693,15 +701,26 @@ impl<W: VehicleWire> Supervisor<W> {
                     return self.evaluate(false, false);
                 }
             }
-            // The other bus's copy of a command already taken.
+            // The other bus's copy of a command already taken, or of one before it (a bus
+            // behind the other, its copy compared when it comes): nothing new to take.
             let recent = self
                 .last_valid
                 .is_some_and(|t| now.saturating_since(t) <= self.copy_window);
-            if recent && self.echo == counter {
+            if recent && self.taken_already(counter) {
                 return;
             }
         }
         self.accept(now, command, counter);
+    }
+
+    /// Whether the command with `counter` is the one in force or came before it: fewer
+    /// than half the counter's values behind the one taken last (with no counter, every
+    /// command has the same one).
+    fn taken_already(&self, counter: u8) -> bool {
+        let bits = self.wire.command_counter_bits().min(8);
+        let modulus = 1u16 << bits;
+        let behind = (u16::from(self.echo) + modulus - u16::from(counter)) % modulus;
+        behind == 0 || behind < modulus / 2
     }
 
     fn accept(&mut self, now: Timestamp, command: Command, counter: u8) {

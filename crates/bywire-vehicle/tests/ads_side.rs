@@ -278,6 +278,66 @@ fn dual_voter_pairs_the_copies_of_one_command() {
 }
 
 #[test]
+fn dual_voter_compares_a_bus_behind_by_more_than_a_cycle() {
+    let (timeout, skew) = (Duration::from_millis(30), Duration::from_millis(5));
+    let by_counter = |a: &(u8, u8), b: &(u8, u8)| a.1 == b.1;
+    // B 25 ms behind (20 ms cycle): its copy of command 1 comes after A's command 2, and is
+    // compared with A's copy of 1 all the same.
+    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    v.receive(Channel::A, ms(0), (7, 1));
+    v.receive(Channel::A, ms(20), (8, 2));
+    assert_eq!(
+        v.vote(ms(20)),
+        Vote::Degraded {
+            value: (8, 2),
+            healthy: Channel::A
+        }
+    );
+    v.receive(Channel::B, ms(25), (7, 1));
+    assert_eq!(v.vote(ms(25)), Vote::Agreed((7, 1)));
+    v.receive(Channel::A, ms(40), (9, 3));
+    assert_eq!(v.vote(ms(40)), Vote::Pending);
+    v.receive(Channel::B, ms(45), (5, 2));
+    assert_eq!(v.vote(ms(45)), Vote::Failed(VoteFailure::Disagree));
+    // B 45 ms behind: its copy comes over a timeout after A's, stale; A's last is taken alone,
+    // and a late copy that contradicts A's is a disagreement still.
+    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    v.receive(Channel::A, ms(0), (7, 1));
+    v.receive(Channel::A, ms(20), (8, 2));
+    v.receive(Channel::A, ms(40), (9, 3));
+    v.receive(Channel::B, ms(45), (7, 1));
+    assert_eq!(
+        v.vote(ms(45)),
+        Vote::Degraded {
+            value: (9, 3),
+            healthy: Channel::A
+        }
+    );
+    assert_eq!(
+        v.stale_at(Channel::B),
+        Some(ms(30).saturating_add(Duration::from_nanos(1)))
+    );
+    v.receive(Channel::B, ms(65), (6, 2));
+    assert_eq!(v.vote(ms(65)), Vote::Failed(VoteFailure::Disagree));
+    // A copy whose counter came round (an older command's, over two timeouts before) is not
+    // its partner: it counts from its own arrival.
+    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    v.receive(Channel::A, ms(0), (7, 1));
+    v.receive(Channel::B, ms(61), (7, 1));
+    assert_eq!(
+        v.stale_at(Channel::B),
+        Some(ms(91).saturating_add(Duration::from_nanos(1)))
+    );
+    assert_eq!(
+        v.vote(ms(61)),
+        Vote::Degraded {
+            value: (7, 1),
+            healthy: Channel::B
+        }
+    );
+}
+
+#[test]
 fn two_of_three_outvotes_one_sensor() {
     assert_eq!(
         two_of_three([1.0, 1.01, 0.99], 0.05),

@@ -316,36 +316,43 @@ fn hand_fed<W: AdsWire + VehicleWire + Clone>(
             0
         }
     };
-    for k in 0..Plan::CYCLES {
-        let mut frame = |velocity: f64| {
-            let command = AdsCommand {
-                velocity,
-                gear: Gear::Drive,
-                mode: ControlMode::Autonomous,
-                engage: k == 12,
-                ..AdsCommand::default()
-            };
-            vehicle.wire.command_frame(&command, k).unwrap()
+    let mut frame = |k: u64, velocity: f64| {
+        let command = AdsCommand {
+            velocity,
+            gear: Gear::Drive,
+            mode: ControlMode::Autonomous,
+            engage: k == 12,
+            ..AdsCommand::default()
         };
-        let (frame_a, frame_b) = (frame(2.0), frame(if k >= 14 { plan.b_speed } else { 2.0 }));
-        let (a_late, b_late) = (late(k, plan.a_late_ms), late(k, plan.b_late_ms));
-        for ms in 0..cycle_ms {
-            let now = Timestamp::from_millis(k * cycle_ms + ms);
-            let before = supervisor.watchdog();
-            if ms == b_late && k < plan.b_cycles {
-                supervisor.on_frame_from(now, Channel::B, &frame_b);
+        vehicle.wire.command_frame(&command, k).unwrap()
+    };
+    let frames: Vec<_> = (0..Plan::CYCLES)
+        .map(|k| {
+            let b_speed = if k >= 14 { plan.b_speed } else { 2.0 };
+            (frame(k, 2.0), frame(k, b_speed))
+        })
+        .collect();
+    // Each copy at its cycle's start plus its lateness (more than a cycle, too).
+    let arrival = |k: u64, table: &[u64]| k * cycle_ms + late(k, table);
+    for t in 0..Plan::CYCLES * cycle_ms {
+        let k = t / cycle_ms;
+        let now = Timestamp::from_millis(t);
+        let before = supervisor.watchdog();
+        for (j, (frame_a, frame_b)) in (0..).zip(&frames) {
+            if arrival(j, plan.b_late_ms) == t && j < plan.b_cycles {
+                supervisor.on_frame_from(now, Channel::B, frame_b);
             }
-            if ms == a_late {
-                supervisor.on_frame_from(now, Channel::A, &frame_a);
+            if arrival(j, plan.a_late_ms) == t {
+                supervisor.on_frame_from(now, Channel::A, frame_a);
             }
-            supervisor.poll(now, &mut |_| {});
-            if supervisor.watchdog() != before {
-                log.push((k, supervisor.watchdog()));
-            }
-            let act = supervisor.actuators(now);
-            let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
-            supervisor.set_feedback(speed, 0.0);
         }
+        supervisor.poll(now, &mut |_| {});
+        if supervisor.watchdog() != before {
+            log.push((k, supervisor.watchdog()));
+        }
+        let act = supervisor.actuators(now);
+        let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
+        supervisor.set_feedback(speed, 0.0);
     }
     (
         supervisor,
@@ -445,6 +452,65 @@ fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire
     assert_ne!(supervisor.command().map(|c| c.velocity), Some(3.0));
 }
 
+/// A bus more than a cycle behind the other (its ADS computer a cycle or two late): each of
+/// its copies comes after the other bus's next command. Within the timeout, each command is
+/// still compared, and taken when its second copy comes; over it, the late bus's copies come
+/// stale and the vehicle drives on the other bus's in degraded mode, the late copies still
+/// checked against them — copies at another speed brake. (Either way the vehicle braked in
+/// full: a copy waited for a partner that the other bus had already replaced, so no command
+/// was taken at all.)
+fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+) {
+    let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
+    let timeout_ms = cycle_ms + cycle_ms / 2;
+    let within = [cycle_ms + cycle_ms / 4];
+    let over = [timeout_ms + cycle_ms / 4];
+    for (late, degraded) in [(&within, None), (&over, Some(Channel::A))] {
+        assert!(late[0] > cycle_ms);
+        let plan = Plan {
+            b_late_ms: late,
+            ..Plan::STEADY
+        };
+        let (supervisor, log, end) = hand_fed(vehicle.clone(), &plan);
+        // At most a hold while the lateness begins (the gap it makes), then normal.
+        assert!(log.iter().all(|(k, _)| *k <= 17), "{late:?}: {log:?}");
+        assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{late:?}");
+        assert_eq!(supervisor.mode(), ControlMode::Autonomous, "{late:?}");
+        assert_eq!(supervisor.degraded(), degraded, "{late:?}");
+        let stats = supervisor.stats();
+        assert_eq!(stats.rejected(), 0, "{late:?}: {stats:?}");
+        // Compared: the last command's second copy comes after the end. Left out: each is
+        // taken as it comes.
+        let taken = if degraded.is_some() {
+            Plan::CYCLES
+        } else {
+            Plan::CYCLES - 1
+        };
+        assert_eq!(stats.accepted, taken, "{late:?}: {stats:?}");
+        let act = supervisor.actuators(end);
+        assert!(
+            act.ads_in_control && act.velocity == 2.0 && act.warning == degraded.is_some(),
+            "{late:?}: {act:?}"
+        );
+        // The late bus at another speed: a disagreement, however late its copies.
+        let (supervisor, log, _) = hand_fed(
+            vehicle.clone(),
+            &Plan {
+                b_speed: 3.0,
+                ..plan
+            },
+        );
+        assert_eq!(
+            supervisor.watchdog(),
+            Watchdog::FullBraking,
+            "{late:?}: {log:?}"
+        );
+        assert!(supervisor.stats().disagreements > 0, "{late:?}");
+        assert_ne!(supervisor.command().map(|c| c.velocity), Some(3.0));
+    }
+}
+
 /// Each scenario for each wire.
 macro_rules! for_every_wire {
     ($($scenario:ident),* $(,)?) => {
@@ -487,4 +553,5 @@ for_every_wire!(
     disagreeing_copies_brake_at_once,
     losing_one_bus_holds_at_most_while_the_other_is_late,
     copies_of_one_command_are_compared_however_far_apart,
+    a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out,
 );
