@@ -5,9 +5,9 @@
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
 //! or both timed out → fail (the caller goes to its safe state). Only copies of one command are
 //! compared: with a rolling counter, those with the same counter, however far apart they came
-//! ([`DualVoter::paired_by`]; each bus's last two copies are kept, so a bus up to a timeout
-//! behind the other — more than a cycle — still has each command compared when its copy
-//! comes); without one, those that arrived within the skew window of each other, or equal ones
+//! ([`DualVoter::paired_by`]; each bus's last four copies are kept, so a bus more than a cycle
+//! behind the other still has each command compared when its copy comes, and one over a
+//! timeout behind counts as lost, its copies stale as they come); without one, those that arrived within the skew window of each other, or equal ones
 //! further apart (one command, late on one bus). Until a copy's partner comes the vote is
 //! pending, and a copy still waiting when the other bus's last copy times out is taken in
 //! degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
@@ -77,7 +77,7 @@ const KEPT: usize = 4;
 
 /// One copy as the voter keeps it.
 #[derive(Debug, Clone, Copy)]
-struct Copy<T> {
+struct Kept<T> {
     value: T,
     arrived: Timestamp,
     /// From when it counts as fresh: its arrival, or its partner's when that came over a
@@ -93,12 +93,13 @@ pub struct DualVoter<T> {
     /// Without [`paired_by`](Self::paired_by): copies arriving further apart than this are
     /// not compared (unless equal).
     pub skew: Duration,
-    /// Each bus's last copies, the newest first (the last alone without `same_command`).
-    copies: [[Option<Copy<T>>; KEPT]; 2],
+    /// Each bus's last copies, the newest first (pairing looks past the last only with
+    /// `same_command`).
+    copies: [[Option<Kept<T>>; KEPT]; 2],
     same_command: Option<fn(&T, &T) -> bool>,
 }
 
-impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
+impl<T: Copy + PartialEq> DualVoter<T> {
     /// A voter with nothing received.
     pub fn new(timeout: Duration, skew: Duration) -> Self {
         DualVoter {
@@ -121,7 +122,7 @@ impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
         }
     }
 
-    fn kept(&self, channel: Channel) -> &[Option<Copy<T>>; KEPT] {
+    fn kept(&self, channel: Channel) -> &[Option<Kept<T>>; KEPT] {
         let [a, b] = &self.copies;
         match channel {
             Channel::A => a,
@@ -131,7 +132,7 @@ impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
 
     /// The copy of `value`'s command on `channel`, if it came within two timeouts of `now`
     /// (older ones are another command: the counter has come round).
-    fn partner(&self, channel: Channel, value: &T, now: Timestamp) -> Option<Copy<T>> {
+    fn partner(&self, channel: Channel, value: &T, now: Timestamp) -> Option<Kept<T>> {
         let same = self.same_command?;
         let horizon = self.timeout.saturating_mul(2);
         self.kept(channel)
@@ -147,7 +148,7 @@ impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
             .partner(channel.other(), &value, now)
             .filter(|p| now.saturating_since(p.arrived) > self.timeout)
             .map_or(now, |p| p.since);
-        let copy = Copy {
+        let copy = Kept {
             value,
             arrived: now,
             since,
@@ -163,7 +164,7 @@ impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
         }
     }
 
-    fn last(&self, channel: Channel) -> Option<Copy<T>> {
+    fn last(&self, channel: Channel) -> Option<Kept<T>> {
         self.kept(channel).first().copied().flatten()
     }
 
@@ -200,7 +201,7 @@ impl<T: core::marker::Copy + PartialEq> DualVoter<T> {
             return Vote::Failed(VoteFailure::Disagree);
         }
         let fresh =
-            |copy: Option<Copy<T>>| copy.filter(|c| now.saturating_since(c.since) <= self.timeout);
+            |copy: Option<Kept<T>>| copy.filter(|c| now.saturating_since(c.since) <= self.timeout);
         match (fresh(a), fresh(b)) {
             (None, None) => Vote::Failed(VoteFailure::BothLost),
             (Some(x), None) => Vote::Degraded {
