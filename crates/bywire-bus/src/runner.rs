@@ -12,6 +12,11 @@
 //! on: the node goes on running on the others, so losing a redundant bus degrades instead of
 //! silencing the healthy one. The run ends with an error only when every bus is lost.
 //!
+//! A wait that ends over 10 ms late means the process was stopped or starved (a stall): the
+//! frames that came meanwhile sit in the backends, and the receive threads hand them over at
+//! once when they run again. The runner gives them 5 ms to, and delivers what came before it
+//! polls, so a node that times its inputs (a command watchdog) does not see them as missed.
+//!
 //! The caller steers a run through [`Hooks`]: after each poll it may look at or change the
 //! node (give it inputs, print its state) and stop the run; a [`Waker`] lets another thread
 //! (say, one reading stdin) wake the runner at once instead of at its next deadline.
@@ -36,6 +41,12 @@ const RECEIVE_SLICE: Duration = Duration::from_millis(50);
 const QUEUE: usize = 4096;
 /// Frames delivered in one batch before the node is polled again.
 const BATCH: usize = 256;
+/// A wait that ends this much later than asked: the process was stopped or starved (a stall).
+const STALLED: Duration = Duration::from_millis(10);
+/// After a stall, how long the runner waits for the receive threads to hand over what came
+/// meanwhile (they read it at once) before it polls: a node that times what it receives (a
+/// watchdog) would otherwise see its inputs late that were there all along.
+const AFTER_STALL: Duration = Duration::from_millis(5);
 
 /// What to do after a poll.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -221,12 +232,16 @@ impl Runner {
             let wait = deadline
                 .map_or(MAX_WAIT, |at| at.saturating_since(self.now()))
                 .min(MAX_WAIT);
+            let waited = Instant::now();
             let mut first = match self.arrivals.recv_timeout(wait) {
                 Ok(arrival) => Some(arrival),
                 Err(RecvTimeoutError::Timeout) => None,
                 // Cannot happen while `self.sender` lives; treat as every bus gone.
                 Err(RecvTimeoutError::Disconnected) => return Err(BusError::Closed),
             };
+            if first.is_none() && waited.elapsed() > wait.saturating_add(STALLED) {
+                first = self.arrivals.recv_timeout(AFTER_STALL).ok();
+            }
             // Deliver what has arrived, in order (at most a batch), then poll again.
             let mut delivered = 0;
             while let Some(arrival) = first.take().or_else(|| {

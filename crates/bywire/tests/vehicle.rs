@@ -249,3 +249,75 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
         late.len()
     );
 }
+
+/// A vehicle process stopped for 200 ms (ten command cycles; a stall of the machine) and
+/// continued: the commands that came meanwhile are taken before it looks at its watchdog,
+/// so it goes on driving rather than braking in full for commands that were there all along.
+#[test]
+fn a_stalled_vehicle_process_takes_the_commands_that_came_meanwhile() {
+    let (server, port) = serve("virtual:stalled");
+    let bus = format!("socketcand:127.0.0.1:{port}/stalled");
+    let vehicle = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "vehicle",
+            "--profile",
+            "reference-tug",
+            &bus,
+            "--rate",
+            "10",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut bridge = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["bridge", "--profile", "reference-tug", &bus, "--rate", "20"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = bridge.stdin.take().unwrap();
+    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
+    let signal = |name: &str| {
+        let status = Command::new("kill")
+            .args([name, &vehicle.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+    };
+    for k in 0..160 {
+        let line = if matches!(k, 20 | 40 | 60) {
+            r#"{"engage": true}"#
+        } else {
+            drive
+        };
+        writeln!(stdin, "{line}").unwrap();
+        if k == 100 {
+            signal("-STOP");
+            std::thread::sleep(Duration::from_millis(200));
+            signal("-CONT");
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    drop(stdin);
+    let out = bridge.wait_with_output().unwrap();
+    stop(vehicle);
+    stop(server);
+    let lines = common::json_lines(out);
+    let states: Vec<&Value> = lines.iter().filter(|l| l.get("mode").is_some()).collect();
+    // Driving before the stall, and after it to the end: never braked in full (level 3).
+    let before = states.len() * 5 / 8;
+    assert!(
+        states[..before]
+            .iter()
+            .any(|s| s["mode"] == "autonomous" && s["watchdog_level"] == 0),
+        "{states:?}"
+    );
+    let after = &states[before..];
+    assert!(!after.is_empty());
+    for s in after {
+        assert_eq!(s["mode"], "autonomous", "{s}");
+        assert_eq!(s["watchdog_level"], 0, "{s}");
+    }
+}
