@@ -184,8 +184,9 @@ pub struct Ads<W: AdsWire> {
     recent_next: usize,
 }
 
-/// Feedback frames remembered to recognise the copy from the other bus.
-const RECENT: usize = 8;
+/// Feedback frames remembered to recognise the copy from the other bus: a feedback timeout's
+/// worth (three cycles of a state frame and two sensor frames) and more.
+const RECENT: usize = 32;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct BrakeBurst {
@@ -297,13 +298,19 @@ impl<W: AdsWire> Ads<W> {
         self.stats
     }
 
+    /// Feedback older than this is invalid.
+    fn feedback_timeout(&self) -> Duration {
+        self.config
+            .cycle
+            .saturating_mul(self.config.feedback_timeout_cycles)
+    }
+
     /// Whether the vehicle's state frame is fresh at `now`.
     pub fn feedback_alive(&self, now: Timestamp) -> bool {
-        let timeout = self
-            .config
-            .cycle
-            .saturating_mul(self.config.feedback_timeout_cycles);
-        self.state.mode.fresh(now, timeout).is_some()
+        self.state
+            .mode
+            .fresh(now, self.feedback_timeout())
+            .is_some()
     }
 
     /// The command to send at `now`: the latest, or a controlled stop if it is stale.
@@ -489,11 +496,7 @@ impl<W: AdsWire> Ads<W> {
         self.state.wheel_speeds.set(now, speeds);
         // Odometry needs fresh wheel angles; integrate over the time since the last sensors
         // frame (the wheels' twist is taken as constant in between).
-        let timeout = self
-            .config
-            .cycle
-            .saturating_mul(self.config.feedback_timeout_cycles);
-        let angles = self.state.wheel_angles.fresh(now, timeout);
+        let angles = self.state.wheel_angles.fresh(now, self.feedback_timeout());
         if let (Some(angles), Some(last)) = (angles, self.last_sensors) {
             let mut states = [WheelState::default(); 4];
             for ((state, speed), angle) in states.iter_mut().zip(speeds).zip(angles) {
@@ -518,9 +521,11 @@ impl<W: AdsWire> Ads<W> {
     /// The port of the redundant command bus B.
     pub const PORT_B: Port = crate::redundancy::Channel::B.port();
 
-    /// Whether `frame` is the other bus's copy of feedback taken within the last cycle.
+    /// Whether `frame` is the other bus's copy of feedback taken within the feedback timeout:
+    /// a bus more than a cycle behind the other brings its copies after the other bus's next
+    /// frames, and taken as new they would break the counter's sequence for both.
     fn is_copy(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
-        let window = self.config.cycle;
+        let window = self.feedback_timeout();
         let copy = self.recent.iter().flatten().any(|(from, at, seen)| {
             *from != port && seen == frame && now.saturating_since(*at) <= window
         });

@@ -437,3 +437,44 @@ fn steering_response_is_measured_from_setpoint_to_actual() {
     let response = ads.state().steering_response.value.unwrap();
     assert_eq!(response, Duration::from_millis(441 - 100));
 }
+
+/// The vehicle's state frames on two buses, bus B's a cycle and a quarter behind A's: each of
+/// B's is recognised as the copy of one already taken from A, not counted as a frame out of
+/// sequence (the feedback comes from A all the same).
+#[test]
+fn feedback_copies_a_cycle_late_on_one_bus_are_copies_not_counter_errors() {
+    let config = AdsConfig {
+        redundant: true,
+        ..AdsConfig::default()
+    };
+    let mut ads = Ads::with_wire(config, ReferenceWire);
+    let mut vcu = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
+    let mut late_on_b: Vec<(u64, Frame)> = Vec::new();
+    assert!(ads.set_command(ms(0), AdsCommand::default()));
+    for t in 0..1_000u64 {
+        let now = ms(t);
+        let mut commands = Vec::new();
+        bywire_core::node::Node::poll(&mut ads, now, &mut |port, frame| {
+            if port == Ads::<ReferenceWire>::PORT_A {
+                commands.push(frame);
+            }
+        });
+        for frame in &commands {
+            vcu.on_frame(now, frame);
+        }
+        let mut states = Vec::new();
+        vcu.poll(now, &mut |frame| states.push(frame));
+        for frame in states {
+            bywire_core::node::Node::on_frame(&mut ads, now, Ads::<ReferenceWire>::PORT_A, &frame);
+            late_on_b.push((t + 25, frame));
+        }
+        for (_, frame) in late_on_b.iter().filter(|(at, _)| *at == t) {
+            bywire_core::node::Node::on_frame(&mut ads, now, Ads::<ReferenceWire>::PORT_B, frame);
+        }
+        late_on_b.retain(|(at, _)| *at > t);
+    }
+    let stats = ads.stats();
+    assert!(stats.accepted >= 45, "{stats:?}");
+    assert_eq!(stats.counter, 0, "{stats:?}");
+    assert_eq!(stats.echo, 0, "{stats:?}");
+}
