@@ -150,41 +150,29 @@ fn a_python_can_ads_sweeps_the_vehicles_steering_on_socketcan() {
     check_sweep(&serde_json::from_str(line).unwrap());
 }
 
+/// `bywire vehicle` or `bywire bridge` for the reference tug on `buses` (the vehicle reports
+/// at 10 Hz, the bridge at 20 Hz and reads its commands from stdin).
+fn reference_tug(command: &str, buses: &[&str]) -> Child {
+    let rate = if command == "vehicle" { "10" } else { "20" };
+    Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([command, "--profile", "reference-tug"])
+        .args(buses)
+        .args(["--rate", rate])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 #[test]
 fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     let (server_a, port_a) = serve("virtual:lost-a");
     let (server_b, port_b) = serve("virtual:lost-b");
     let a = format!("socketcand:127.0.0.1:{port_a}/lost-a");
     let b = format!("socketcand:127.0.0.1:{port_b}/lost-b");
-    let vehicle = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "vehicle",
-            "--profile",
-            "reference-tug",
-            &a,
-            &b,
-            "--rate",
-            "10",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut bridge = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "bridge",
-            "--profile",
-            "reference-tug",
-            &a,
-            &b,
-            "--rate",
-            "20",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let vehicle = reference_tug("vehicle", &[&a, &b]);
+    let mut bridge = reference_tug("bridge", &[&a, &b]);
     let mut stdin = bridge.stdin.take().unwrap();
     let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
     let mut server_b = Some(server_b);
@@ -257,26 +245,8 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
 fn a_stalled_vehicle_process_takes_the_commands_that_came_meanwhile() {
     let (server, port) = serve("virtual:stalled");
     let bus = format!("socketcand:127.0.0.1:{port}/stalled");
-    let vehicle = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "vehicle",
-            "--profile",
-            "reference-tug",
-            &bus,
-            "--rate",
-            "10",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut bridge = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(["bridge", "--profile", "reference-tug", &bus, "--rate", "20"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let vehicle = reference_tug("vehicle", &[&bus]);
+    let mut bridge = reference_tug("bridge", &[&bus]);
     let mut stdin = bridge.stdin.take().unwrap();
     let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
     let signal = |name: &str| {
