@@ -600,9 +600,7 @@ impl<'a> VehicleInterface<'a> {
         };
         let mut ads_config = profile.ads_config();
         ads_config.redundant = redundant;
-        let fresh = ads_config
-            .cycle
-            .saturating_mul(ads_config.feedback_timeout_cycles);
+        let fresh = ads_config.feedback_timeout();
         let interface = VehicleInterface {
             inputs,
             outputs,

@@ -44,6 +44,13 @@ pub struct AdsConfig {
     pub redundant: bool,
 }
 
+impl AdsConfig {
+    /// Feedback older than this is invalid: `feedback_timeout_cycles` cycles.
+    pub fn feedback_timeout(&self) -> Duration {
+        self.cycle.saturating_mul(self.feedback_timeout_cycles)
+    }
+}
+
 impl Default for AdsConfig {
     fn default() -> Self {
         AdsConfig {
@@ -198,7 +205,7 @@ struct BrakeBurst {
 impl<W: AdsWire> Ads<W> {
     /// A node speaking `wire` that sends nothing until it has a command.
     pub fn with_wire(config: AdsConfig, wire: W) -> Self {
-        let timeout = config.cycle.saturating_mul(config.feedback_timeout_cycles);
+        let timeout = config.feedback_timeout();
         let (state_bits, wheel_bits) = (wire.state_counter_bits(), wire.wheel_counter_bits());
         Ads {
             wire,
@@ -298,18 +305,11 @@ impl<W: AdsWire> Ads<W> {
         self.stats
     }
 
-    /// Feedback older than this is invalid.
-    fn feedback_timeout(&self) -> Duration {
-        self.config
-            .cycle
-            .saturating_mul(self.config.feedback_timeout_cycles)
-    }
-
     /// Whether the vehicle's state frame is fresh at `now`.
     pub fn feedback_alive(&self, now: Timestamp) -> bool {
         self.state
             .mode
-            .fresh(now, self.feedback_timeout())
+            .fresh(now, self.config.feedback_timeout())
             .is_some()
     }
 
@@ -496,7 +496,10 @@ impl<W: AdsWire> Ads<W> {
         self.state.wheel_speeds.set(now, speeds);
         // Odometry needs fresh wheel angles; integrate over the time since the last sensors
         // frame (the wheels' twist is taken as constant in between).
-        let angles = self.state.wheel_angles.fresh(now, self.feedback_timeout());
+        let angles = self
+            .state
+            .wheel_angles
+            .fresh(now, self.config.feedback_timeout());
         if let (Some(angles), Some(last)) = (angles, self.last_sensors) {
             let mut states = [WheelState::default(); 4];
             for ((state, speed), angle) in states.iter_mut().zip(speeds).zip(angles) {
@@ -525,7 +528,7 @@ impl<W: AdsWire> Ads<W> {
     /// a bus more than a cycle behind the other brings its copies after the other bus's next
     /// frames, and taken as new they would break the counter's sequence for both.
     fn is_copy(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
-        let window = self.feedback_timeout();
+        let window = self.config.feedback_timeout();
         let copy = self.recent.iter().flatten().any(|(from, at, seen)| {
             *from != port && seen == frame && now.saturating_since(*at) <= window
         });

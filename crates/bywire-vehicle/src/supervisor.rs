@@ -21,7 +21,7 @@
 use core::time::Duration;
 
 use bywire_control::stages::RateLimiter;
-use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::e2e::{CounterChecker, CounterStatus, RollingCounter};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
@@ -678,14 +678,13 @@ impl<W: VehicleWire> Supervisor<W> {
             voter.receive(channel, now, (command, counter));
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
-                Vote::Degraded { healthy, .. } if healthy == channel => {
-                    self.degraded = Some(healthy);
-                }
-                // This copy came over a timeout after its partner: its bus is late, and the
-                // other bus's copies are taken alone.
                 Vote::Degraded { healthy, .. } => {
                     self.degraded = Some(healthy);
-                    return;
+                    // The other bus is the healthy one: this copy came over a timeout after
+                    // its partner, its bus is late, and the other bus's copies are taken alone.
+                    if healthy != channel {
+                        return;
+                    }
                 }
                 Vote::Pending => {
                     self.waiting = Some(channel);
@@ -715,12 +714,11 @@ impl<W: VehicleWire> Supervisor<W> {
 
     /// Whether the command with `counter` is the one in force or came before it: fewer
     /// than half the counter's values behind the one taken last (with no counter, every
-    /// command has the same one).
+    /// command has the same one, 0).
     fn taken_already(&self, counter: u8) -> bool {
-        let bits = self.wire.command_counter_bits().min(8);
-        let modulus = 1u16 << bits;
+        let modulus = RollingCounter::new(self.wire.command_counter_bits()).modulus();
         let behind = (u16::from(self.echo) + modulus - u16::from(counter)) % modulus;
-        behind == 0 || behind < modulus / 2
+        behind < modulus / 2
     }
 
     fn accept(&mut self, now: Timestamp, command: Command, counter: u8) {

@@ -165,6 +165,17 @@ fn reference_tug(command: &str, buses: &[&str]) -> Child {
         .unwrap()
 }
 
+/// The bridge's `k`-th input line, one every 25 ms: drive at 1 m/s, engaging at lines 20, 40
+/// and 60 (again, as an ADS would, should the vehicle still have been recovering from its
+/// start-up braking: a loaded machine starts the processes more slowly).
+fn bridge_input(k: usize) -> &'static str {
+    if matches!(k, 20 | 40 | 60) {
+        r#"{"engage": true}"#
+    } else {
+        r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#
+    }
+}
+
 #[test]
 fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     let (server_a, port_a) = serve("virtual:lost-a");
@@ -174,17 +185,9 @@ fn the_bridge_goes_on_commanding_on_bus_a_when_bus_b_is_lost() {
     let vehicle = reference_tug("vehicle", &[&a, &b]);
     let mut bridge = reference_tug("bridge", &[&a, &b]);
     let mut stdin = bridge.stdin.take().unwrap();
-    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
     let mut server_b = Some(server_b);
     for k in 0..200 {
-        // Engage, and again (as an ADS would) should the vehicle still have been recovering
-        // from its start-up braking: a loaded machine starts the processes more slowly.
-        let line = if matches!(k, 20 | 40 | 60) {
-            r#"{"engage": true}"#
-        } else {
-            drive
-        };
-        writeln!(stdin, "{line}").unwrap();
+        writeln!(stdin, "{}", bridge_input(k)).unwrap();
         if k == 80 {
             // Bus B's server goes away: its connections break.
             stop(server_b.take().unwrap());
@@ -248,7 +251,6 @@ fn a_stalled_vehicle_process_takes_the_commands_that_came_meanwhile() {
     let vehicle = reference_tug("vehicle", &[&bus]);
     let mut bridge = reference_tug("bridge", &[&bus]);
     let mut stdin = bridge.stdin.take().unwrap();
-    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
     let signal = |name: &str| {
         let status = Command::new("kill")
             .args([name, &vehicle.id().to_string()])
@@ -257,12 +259,7 @@ fn a_stalled_vehicle_process_takes_the_commands_that_came_meanwhile() {
         assert!(status.success());
     };
     for k in 0..160 {
-        let line = if matches!(k, 20 | 40 | 60) {
-            r#"{"engage": true}"#
-        } else {
-            drive
-        };
-        writeln!(stdin, "{line}").unwrap();
+        writeln!(stdin, "{}", bridge_input(k)).unwrap();
         if k == 100 {
             signal("-STOP");
             std::thread::sleep(Duration::from_millis(200));
