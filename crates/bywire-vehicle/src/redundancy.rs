@@ -5,12 +5,18 @@
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
 //! or both timed out → fail (the caller goes to its safe state). Only copies of one command are
 //! compared: with a rolling counter, those with the same counter, however far apart they came
-//! ([`DualVoter::paired_by`]; each bus's last four copies are kept, so a bus more than a cycle
-//! behind the other still has each command compared when its copy comes, and one over a
-//! timeout behind counts as lost, its copies stale as they come); without one, those that arrived within the skew window of each other, or equal ones
-//! further apart (one command, late on one bus). Until a copy's partner comes the vote is
-//! pending, and a copy still waiting when the other bus's last copy times out is taken in
-//! degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
+//! ([`DualVoter::paired_by`]); without one, those that arrived within the skew window of each
+//! other, or equal ones further apart (one command, late on one bus). Until a copy's partner
+//! comes the vote is pending, and a copy still waiting when the other bus's last copy times out
+//! is taken in degraded mode then ([`DualVoter::stale_at`] says when), not dropped.
+//!
+//! A bus behind the other: each bus's last eight copies are kept, so a bus more than a cycle
+//! behind still has each command compared when its copy comes; a copy that comes over a
+//! timeout after its partner arrives stale (its bus is as good as lost), and so does a copy the
+//! caller knows to be of a command already taken whose partner is no longer kept
+//! ([`DualVoter::receive_behind`]). Beyond that the counter itself cannot tell a bus half its
+//! range behind from one ahead: those copies wait for partners that never come, and the
+//! caller's safe state follows.
 
 use core::time::Duration;
 
@@ -71,9 +77,9 @@ pub enum Vote<T> {
     Failed(VoteFailure),
 }
 
-/// Copies kept per bus for pairing by counter: a bus up to three cycles behind the other still
+/// Copies kept per bus for pairing by counter: a bus up to seven cycles behind the other still
 /// finds its partners.
-const KEPT: usize = 4;
+const KEPT: usize = 8;
 
 /// One copy as the voter keeps it.
 #[derive(Debug, Clone, Copy)]
@@ -81,8 +87,11 @@ struct Kept<T> {
     value: T,
     arrived: Timestamp,
     /// From when it counts as fresh: its arrival, or its partner's when that came over a
-    /// timeout before (a copy that late arrives stale: its bus is late, as good as lost).
-    since: Timestamp,
+    /// timeout before (a copy that late arrives stale: its bus is late, as good as lost);
+    /// `None` for a copy stale as it came (of a command taken already, its partner gone).
+    since: Option<Timestamp>,
+    /// Known to be of a command taken already ([`DualVoter::receive_behind`]).
+    behind: bool,
 }
 
 /// Votes on one message received on two buses.
@@ -131,27 +140,50 @@ impl<T: Copy + PartialEq> DualVoter<T> {
     }
 
     /// The copy of `value`'s command on `channel`, if it came within two timeouts of `now`
-    /// (older ones are another command: the counter has come round).
-    fn partner(&self, channel: Channel, value: &T, now: Timestamp) -> Option<Kept<T>> {
+    /// (older ones are another command: the counter has come round) or, for a copy known to
+    /// be `behind`, if it is kept at all (a counter behind the one taken has not come round).
+    fn partner(
+        &self,
+        channel: Channel,
+        value: &T,
+        now: Timestamp,
+        behind: bool,
+    ) -> Option<Kept<T>> {
         let same = self.same_command?;
         let horizon = self.timeout.saturating_mul(2);
         self.kept(channel)
             .iter()
             .flatten()
-            .find(|c| now.saturating_since(c.arrived) <= horizon && same(value, &c.value))
+            .find(|c| {
+                (behind || now.saturating_since(c.arrived) <= horizon) && same(value, &c.value)
+            })
             .copied()
     }
 
     /// A copy arrived on `channel`.
     pub fn receive(&mut self, channel: Channel, now: Timestamp, value: T) {
-        let since = self
-            .partner(channel.other(), &value, now)
-            .filter(|p| now.saturating_since(p.arrived) > self.timeout)
-            .map_or(now, |p| p.since);
+        self.keep(channel, now, value, false);
+    }
+
+    /// A copy arrived on `channel` of a command at or before the one taken last (the caller
+    /// knows it from the counter): compared with its partner while that is kept, and stale as
+    /// it comes without one (its bus is further behind than the copies kept reach).
+    pub fn receive_behind(&mut self, channel: Channel, now: Timestamp, value: T) {
+        self.keep(channel, now, value, true);
+    }
+
+    fn keep(&mut self, channel: Channel, now: Timestamp, value: T, behind: bool) {
+        let since = match self.partner(channel.other(), &value, now, behind) {
+            Some(p) if now.saturating_since(p.arrived) > self.timeout => p.since,
+            Some(_) => Some(now),
+            None if behind && self.same_command.is_some() => None,
+            None => Some(now),
+        };
         let copy = Kept {
             value,
             arrived: now,
             since,
+            behind,
         };
         let [a, b] = &mut self.copies;
         let kept = match channel {
@@ -176,9 +208,11 @@ impl<T: Copy + PartialEq> DualVoter<T> {
     /// When the last copy from `channel` stops counting as fresh (`None`: none yet).
     pub fn stale_at(&self, channel: Channel) -> Option<Timestamp> {
         self.last(channel).map(|c| {
-            c.since
-                .saturating_add(self.timeout)
-                .saturating_add(Duration::from_nanos(1))
+            c.since.map_or(c.arrived, |since| {
+                since
+                    .saturating_add(self.timeout)
+                    .saturating_add(Duration::from_nanos(1))
+            })
         })
     }
 
@@ -194,14 +228,18 @@ impl<T: Copy + PartialEq> DualVoter<T> {
         // Paired by counter: the copy that came last against its partner, however late
         // (a late copy that contradicts the command taken is a fault all the same).
         let partner = latest.and_then(|(channel, copy)| {
-            let partner = self.partner(channel.other(), &copy.value, now)?;
+            let partner = self.partner(channel.other(), &copy.value, now, copy.behind)?;
             Some((copy.value, partner.value))
         });
         if partner.is_some_and(|(value, other)| value != other) {
             return Vote::Failed(VoteFailure::Disagree);
         }
-        let fresh =
-            |copy: Option<Kept<T>>| copy.filter(|c| now.saturating_since(c.since) <= self.timeout);
+        let fresh = |copy: Option<Kept<T>>| {
+            copy.filter(|c| {
+                c.since
+                    .is_some_and(|s| now.saturating_since(s) <= self.timeout)
+            })
+        };
         match (fresh(a), fresh(b)) {
             (None, None) => Vote::Failed(VoteFailure::BothLost),
             (Some(x), None) => Vote::Degraded {

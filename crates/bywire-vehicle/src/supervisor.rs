@@ -674,8 +674,18 @@ impl<W: VehicleWire> Supervisor<W> {
             Err(r) => return self.stats.count(r),
             Ok(valid) => valid,
         };
+        // A copy of the command in force or of one before it (the other bus's copy came
+        // first, or this bus is behind).
+        let recent = self
+            .last_valid
+            .is_some_and(|t| now.saturating_since(t) <= self.copy_window);
+        let taken = recent && self.taken_already(counter);
         if let Some(voter) = self.voter.as_mut() {
-            voter.receive(channel, now, (command, counter));
+            if taken {
+                voter.receive_behind(channel, now, (command, counter));
+            } else {
+                voter.receive(channel, now, (command, counter));
+            }
             match voter.vote(now) {
                 Vote::Agreed(_) => self.degraded = None,
                 Vote::Degraded { healthy, .. } => {
@@ -700,12 +710,8 @@ impl<W: VehicleWire> Supervisor<W> {
                     return self.evaluate(false, false);
                 }
             }
-            // The other bus's copy of a command already taken, or of one before it (a bus
-            // behind the other, its copy compared when it comes): nothing new to take.
-            let recent = self
-                .last_valid
-                .is_some_and(|t| now.saturating_since(t) <= self.copy_window);
-            if recent && self.taken_already(counter) {
+            // Compared, but nothing new to take.
+            if taken {
                 return;
             }
         }
@@ -716,9 +722,8 @@ impl<W: VehicleWire> Supervisor<W> {
     /// than half the counter's values behind the one taken last (with no counter, every
     /// command has the same one, 0).
     fn taken_already(&self, counter: u8) -> bool {
-        let modulus = RollingCounter::new(self.wire.command_counter_bits()).modulus();
-        let behind = (u16::from(self.echo) + modulus - u16::from(counter)) % modulus;
-        behind < modulus / 2
+        let rolling = RollingCounter::new(self.wire.command_counter_bits());
+        rolling.steps_from(counter, self.echo) < rolling.modulus() / 2
     }
 
     fn accept(&mut self, now: Timestamp, command: Command, counter: u8) {

@@ -452,21 +452,32 @@ fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire
     assert_ne!(supervisor.command().map(|c| c.velocity), Some(3.0));
 }
 
-/// A bus more than a cycle behind the other (its ADS computer a cycle or two late): each of
-/// its copies comes after the other bus's next command. Within the timeout, each command is
-/// still compared, and taken when its second copy comes; over it, the late bus's copies come
-/// stale and the vehicle drives on the other bus's in degraded mode, the late copies still
-/// checked against them — copies at another speed brake. (Either way the vehicle braked in
-/// full: a copy waited for a partner that the other bus had already replaced, so no command
-/// was taken at all.)
+/// A bus more than a cycle behind the other (its ADS computer a cycle or two late, or a
+/// gateway holding its frames): each of its copies comes after the other bus's next command.
+/// Within the timeout, each command is still compared, and taken when its second copy comes;
+/// over it, the late bus's copies come stale and the vehicle drives on the other bus's in
+/// degraded mode, the late copies still checked against them — copies at another speed brake.
+/// So up to seven cycles behind (the copies the voter keeps) and less than half the counter's
+/// range (past which a copy behind cannot be told from one ahead). (The vehicle braked in full:
+/// first for a bus more than a cycle behind, a copy waiting for a partner the other bus had
+/// already replaced; then for a bus three cycles behind, whose copies' partners were no longer
+/// looked for.)
 fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + VehicleWire + Clone>(
     vehicle: Vehicle<W>,
 ) {
     let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
     let timeout_ms = cycle_ms + cycle_ms / 2;
+    let half_range = 1u64 << (vehicle.wire.command_counter_bits() - 1);
     let within = [cycle_ms + cycle_ms / 4];
     let over = [timeout_ms + cycle_ms / 4];
-    for (late, degraded) in [(&within, None), (&over, Some(Channel::A))] {
+    let beyond_pairing_by_time = [3 * cycle_ms + cycle_ms / 4];
+    let furthest_kept = [(half_range - 1).min(7) * cycle_ms + cycle_ms / 4];
+    for (late, degraded) in [
+        (&within, None),
+        (&over, Some(Channel::A)),
+        (&beyond_pairing_by_time, Some(Channel::A)),
+        (&furthest_kept, Some(Channel::A)),
+    ] {
         assert!(late[0] > cycle_ms);
         let plan = Plan {
             b_late_ms: late,

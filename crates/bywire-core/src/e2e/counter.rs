@@ -28,6 +28,13 @@ impl RollingCounter {
         1u16 << self.width
     }
 
+    /// How many steps forward `to` is from `from` (0 to modulus − 1): a value fewer than
+    /// half the modulus ahead came after `from`, any other came at or before it.
+    pub fn steps_from(&self, from: u8, to: u8) -> u16 {
+        let modulus = self.modulus();
+        (u16::from(to) % modulus + modulus - u16::from(from) % modulus) % modulus
+    }
+
     /// Return the current value and advance.
     pub fn next_value(&mut self) -> u8 {
         let v = self.value;
@@ -80,8 +87,7 @@ impl CounterChecker {
 
     /// Judge `value` received at `now`.
     pub fn check(&mut self, now: Timestamp, value: u8) -> CounterStatus {
-        let modulus = self.counter.modulus();
-        let value = u8::try_from(u16::from(value) % modulus).unwrap_or(0);
+        let value = u8::try_from(u16::from(value) % self.counter.modulus()).unwrap_or(0);
         let Some((last, seen)) = self.last else {
             self.last = Some((value, now));
             return CounterStatus::Initial;
@@ -91,8 +97,7 @@ impl CounterChecker {
             self.last = Some((value, now));
             return CounterStatus::Stale;
         }
-        let delta = (u16::from(value) + modulus - u16::from(last)) % modulus;
-        let status = match delta {
+        let status = match self.counter.steps_from(last, value) {
             0 => CounterStatus::Repeated,
             1 => CounterStatus::InSequence,
             d if d - 1 <= u16::from(self.max_lost) => CounterStatus::Skipped {
@@ -124,6 +129,12 @@ mod tests {
         assert_eq!(seq, [0, 1, 2, 3, 0, 1]);
         assert_eq!(RollingCounter::new(8).modulus(), 256);
         assert_eq!(RollingCounter::new(0).modulus(), 2);
+        let four = RollingCounter::new(4);
+        assert_eq!(four.steps_from(14, 1), 3);
+        assert_eq!(four.steps_from(1, 14), 13);
+        assert_eq!(four.steps_from(5, 5), 0);
+        // Values wider than the counter are taken modulo it.
+        assert_eq!(four.steps_from(0, 17), 1);
     }
 
     #[test]
