@@ -8,7 +8,7 @@
 
 use core::time::Duration;
 
-use bywire_core::e2e::{CounterChecker, CounterStatus};
+use bywire_core::e2e::{CounterChecker, CounterStatus, RollingCounter};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
@@ -175,9 +175,9 @@ pub struct Ads<W: AdsWire> {
     next_command: Option<Timestamp>,
     brake: Option<BrakeBurst>,
     state: VehicleState,
-    state_counter: CounterChecker,
-    sensors_counter: CounterChecker,
-    angles_counter: CounterChecker,
+    state_sequence: FeedbackSequence,
+    sensors_sequence: FeedbackSequence,
+    angles_sequence: FeedbackSequence,
     stats: FeedbackStats,
     wheels: Swerve<4>,
     odometry: Odometry,
@@ -186,7 +186,8 @@ pub struct Ads<W: AdsWire> {
     steering_pending: Option<(f64, Timestamp)>,
     /// The last setpoint whose response was (or is being) measured.
     steering_reference: Option<f64>,
-    /// Feedback frames lately taken as a node, to skip the redundant bus's copies.
+    /// Feedback frames without a counter lately taken as a node, to skip the redundant bus's
+    /// copies.
     recent: [Option<(Port, Timestamp, Frame)>; RECENT],
     recent_next: usize,
 }
@@ -194,6 +195,75 @@ pub struct Ads<W: AdsWire> {
 /// Feedback frames remembered to recognise the copy from the other bus: a feedback timeout's
 /// worth (three cycles of a state frame and two sensor frames) and more.
 const RECENT: usize = 32;
+
+/// What a feedback frame's counter says of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Sequenced {
+    /// Newer than the last taken: take it.
+    New,
+    /// The last taken or one before it: the other bus's copy, or a late bus's.
+    Copy,
+    /// Out of its own bus's sequence: refuse it.
+    Broken,
+    /// The message has no counter: the frame itself tells copies apart.
+    Uncounted,
+}
+
+/// One feedback message's counter on the two buses it may come on: each bus's frames checked
+/// in their own sequence (a bus that loses or delays frames breaks no sequence but its own),
+/// and a frame taken only when its counter is ahead of the last taken from either bus.
+#[derive(Debug, Clone, Copy)]
+struct FeedbackSequence {
+    counted: bool,
+    counter: RollingCounter,
+    buses: [CounterChecker; 2],
+    timeout: Duration,
+    /// The last counter taken, and when.
+    taken: Option<(u8, Timestamp)>,
+}
+
+impl FeedbackSequence {
+    fn new(bits: u8, timeout: Duration) -> Self {
+        let checker = CounterChecker::new(bits, 0, timeout);
+        FeedbackSequence {
+            counted: bits > 0,
+            counter: RollingCounter::new(bits),
+            buses: [checker; 2],
+            timeout,
+            taken: None,
+        }
+    }
+
+    /// A frame with `value` from `bus` (0 or 1) at `now`.
+    fn judge(&mut self, now: Timestamp, bus: usize, value: u64) -> Sequenced {
+        if !self.counted {
+            return Sequenced::Uncounted;
+        }
+        let value = u8::try_from(value % u64::from(self.counter.modulus())).unwrap_or(0);
+        let Some(checker) = self.buses.get_mut(bus) else {
+            return Sequenced::Broken;
+        };
+        match checker.check(now, value) {
+            CounterStatus::Initial | CounterStatus::InSequence | CounterStatus::Stale => {}
+            CounterStatus::Repeated
+            | CounterStatus::Skipped { .. }
+            | CounterStatus::OutOfSequence => return Sequenced::Broken,
+        }
+        let fresh = self.taken.filter(|(_, at)| {
+            now.checked_since(*at)
+                .is_some_and(|age| age <= self.timeout)
+        });
+        let ahead = fresh.is_none_or(|(last, _)| {
+            let steps = self.counter.steps_from(last, value);
+            steps > 0 && steps < self.counter.modulus() / 2
+        });
+        if !ahead {
+            return Sequenced::Copy;
+        }
+        self.taken = Some((value, now));
+        Sequenced::New
+    }
+}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct BrakeBurst {
@@ -216,9 +286,9 @@ impl<W: AdsWire> Ads<W> {
             next_command: None,
             brake: None,
             state: VehicleState::default(),
-            state_counter: CounterChecker::new(state_bits, 0, timeout),
-            sensors_counter: CounterChecker::new(wheel_bits, 0, timeout),
-            angles_counter: CounterChecker::new(wheel_bits, 0, timeout),
+            state_sequence: FeedbackSequence::new(state_bits, timeout),
+            sensors_sequence: FeedbackSequence::new(wheel_bits, timeout),
+            angles_sequence: FeedbackSequence::new(wheel_bits, timeout),
             stats: FeedbackStats::default(),
             wheels: four_wheel(config.wheelbase, config.track),
             odometry: Odometry::default(),
@@ -396,28 +466,52 @@ impl<W: AdsWire> Ads<W> {
 
     /// A frame from the vehicle.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+        self.on_frame_from(now, Self::PORT_A, frame);
+    }
+
+    /// A frame from the vehicle on `port` (as a node with two buses).
+    fn on_frame_from(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        let bus = usize::from(port == Self::PORT_B);
         match self.wire.feedback(frame) {
             Feedback::Other => {}
             Feedback::Corrupt => self.stats.checksum += 1,
             Feedback::Unauthenticated => self.stats.authentication += 1,
-            Feedback::State(state) => self.on_state(now, state),
-            Feedback::WheelAngles { counter, angles } => self.on_angles(now, counter, angles),
-            Feedback::WheelSpeeds { counter, speeds } => self.on_sensors(now, counter, speeds),
+            Feedback::State(state) => {
+                let sequenced = self.state_sequence.judge(now, bus, state.counter);
+                if self.take(sequenced, now, port, frame) {
+                    self.on_state(now, state);
+                }
+            }
+            Feedback::WheelAngles { counter, angles } => {
+                let sequenced = self.angles_sequence.judge(now, bus, counter);
+                if self.take(sequenced, now, port, frame) {
+                    self.on_angles(now, angles);
+                }
+            }
+            Feedback::WheelSpeeds { counter, speeds } => {
+                let sequenced = self.sensors_sequence.judge(now, bus, counter);
+                if self.take(sequenced, now, port, frame) {
+                    self.on_sensors(now, speeds);
+                }
+            }
         }
     }
 
-    fn counter_ok(checker: &mut CounterChecker, now: Timestamp, value: u64) -> bool {
-        matches!(
-            checker.check(now, u8::try_from(value).unwrap_or(0)),
-            CounterStatus::Initial | CounterStatus::InSequence | CounterStatus::Stale
-        )
+    /// Whether a feedback frame is new, as its counter (or, without one, the frame) says;
+    /// frames out of their bus's sequence are counted.
+    fn take(&mut self, sequenced: Sequenced, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        match sequenced {
+            Sequenced::New => true,
+            Sequenced::Copy => false,
+            Sequenced::Broken => {
+                self.stats.counter += 1;
+                false
+            }
+            Sequenced::Uncounted => !(self.config.redundant && self.is_copy(now, port, frame)),
+        }
     }
 
     fn on_state(&mut self, now: Timestamp, m: StateFeedback) {
-        if !Self::counter_ok(&mut self.state_counter, now, m.counter) {
-            self.stats.counter += 1;
-            return;
-        }
         let (steering, velocity) = (m.steering, m.velocity);
         if !m.in_range {
             self.stats.range += 1;
@@ -478,20 +572,12 @@ impl<W: AdsWire> Ads<W> {
         }
     }
 
-    fn on_angles(&mut self, now: Timestamp, counter: u64, angles: [f64; 4]) {
-        if !Self::counter_ok(&mut self.angles_counter, now, counter) {
-            self.stats.counter += 1;
-            return;
-        }
+    fn on_angles(&mut self, now: Timestamp, angles: [f64; 4]) {
         self.stats.accepted += 1;
         self.state.wheel_angles.set(now, angles);
     }
 
-    fn on_sensors(&mut self, now: Timestamp, counter: u64, speeds: [f64; 4]) {
-        if !Self::counter_ok(&mut self.sensors_counter, now, counter) {
-            self.stats.counter += 1;
-            return;
-        }
+    fn on_sensors(&mut self, now: Timestamp, speeds: [f64; 4]) {
         self.stats.accepted += 1;
         self.state.wheel_speeds.set(now, speeds);
         // Odometry needs fresh wheel angles; integrate over the time since the last sensors
@@ -524,9 +610,8 @@ impl<W: AdsWire> Ads<W> {
     /// The port of the redundant command bus B.
     pub const PORT_B: Port = crate::redundancy::Channel::B.port();
 
-    /// Whether `frame` is the other bus's copy of feedback taken within the feedback timeout:
-    /// a bus more than a cycle behind the other brings its copies after the other bus's next
-    /// frames, and taken as new they would break the counter's sequence for both.
+    /// Whether `frame`, of a message without a counter, is the other bus's copy of one taken
+    /// within the feedback timeout.
     fn is_copy(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
         let window = self.config.feedback_timeout();
         let copy = self.recent.iter().flatten().any(|(from, at, seen)| {
@@ -544,13 +629,10 @@ impl<W: AdsWire> Ads<W> {
 
 /// The ADS side as a node: its frames go out on [`Ads::PORT_A`] (and [`Ads::PORT_B`] when
 /// [`AdsConfig::redundant`]); feedback is taken from either port, the second copy of a frame
-/// that came on both skipped.
+/// that came on both skipped (a bus behind the other, however far, brings only copies).
 impl<W: AdsWire> Node for Ads<W> {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
-        if self.config.redundant && self.is_copy(now, port, frame) {
-            return;
-        }
-        Ads::on_frame(self, now, frame);
+        self.on_frame_from(now, port, frame);
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {

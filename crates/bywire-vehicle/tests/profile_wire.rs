@@ -11,7 +11,10 @@
     clippy::indexing_slicing
 )]
 
+mod common;
+
 use bywire_tug::wire::ReferenceWire;
+use common::vehicles;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -605,6 +608,44 @@ fn wheel_speed_counters_are_checked_at_their_width() {
             (3, 1),
             "by role: {by_role}: {stats:?}"
         );
+    }
+}
+
+/// A wheel-speed message without a counter (profiles may leave it out): every frame is taken
+/// on one bus, and on two buses each frame once, the other bus's copy skipped. Every frame
+/// but one a feedback timeout was refused as a repeated counter before.
+#[test]
+fn wheel_speeds_without_a_counter_are_taken_every_frame() {
+    let loaded = vehicles::shuttle_with(|dbc| {
+        dbc.lines()
+            .filter(|line| !line.contains("SG_ Wheels_Counter"))
+            .map(|line| format!("{line}\n"))
+            .collect()
+    });
+    let mut vehicle = ProfileWire::new(&loaded).unwrap();
+    assert_eq!(vehicle.wheel_counter_bits(), 0);
+    for redundant in [false, true] {
+        let config = AdsConfig {
+            redundant,
+            ..loaded.ads_config()
+        };
+        let mut ads = Ads::with_wire(config, ProfileWire::new(&loaded).unwrap());
+        let ports = if redundant {
+            vec![Ads::<ProfileWire>::PORT_A, Ads::<ProfileWire>::PORT_B]
+        } else {
+            vec![Ads::<ProfileWire>::PORT_A]
+        };
+        for k in 0..40u32 {
+            let speed = f64::from(k) / 10.0;
+            let frame = vehicle.wheel_speeds_frame([speed; 4], 0).unwrap();
+            for port in &ports {
+                let at = Timestamp::from_millis(u64::from(k) * 50 + 3 * u64::from(port.0));
+                bywire_core::node::Node::on_frame(&mut ads, at, *port, &frame);
+            }
+        }
+        let stats = ads.stats();
+        assert_eq!((stats.accepted, stats.counter), (40, 0), "{stats:?}");
+        assert_eq!(ads.state().wheel_speeds.value, Some([3.9; 4]));
     }
 }
 
