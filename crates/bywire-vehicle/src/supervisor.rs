@@ -443,6 +443,10 @@ pub struct Supervisor<W: VehicleWire> {
     /// The bus whose last copy waits for its partner from the other bus: taken in degraded
     /// mode if the other bus's last copy goes stale first.
     waiting: Option<Channel>,
+    /// When the first copy still waiting since the last command was taken came: the watchdog
+    /// counts missed cycles from it (a vote pending is no missed command; copies that keep
+    /// waiting count from the first all the same).
+    pending_since: Option<Timestamp>,
     /// How long after a command is taken a copy with its counter is the other bus's copy of
     /// it: the bus timeout (without a counter, any copy within the skew window).
     copy_window: Duration,
@@ -493,6 +497,7 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }),
             waiting: None,
+            pending_since: None,
             copy_window: config.redundancy.map_or(Duration::ZERO, |r| {
                 if bits > 0 {
                     r.timeout
@@ -698,6 +703,7 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
                 Vote::Pending => {
                     self.waiting = Some(channel);
+                    self.pending_since.get_or_insert(now);
                     return;
                 }
                 Vote::Failed(VoteFailure::BothLost) => return,
@@ -736,6 +742,7 @@ impl<W: VehicleWire> Supervisor<W> {
         self.command = Some(command);
         self.last_valid = Some(now);
         self.waiting = None;
+        self.pending_since = None;
         self.missed_reported = 0;
         self.decelerating_since = None;
         self.watchdog = self
@@ -779,7 +786,7 @@ impl<W: VehicleWire> Supervisor<W> {
 
     /// When [`poll`](Self::poll) next has something to do.
     pub fn next_deadline(&self) -> Option<Timestamp> {
-        let tick = self.last_valid.map(|t| {
+        let tick = self.last_heard().map(|t| {
             // Half a cycle of tolerance for jitter: cycle k is missed at (k + ½) cycles.
             let k = u32::try_from(u64::from(self.missed_reported) + 1).unwrap_or(u32::MAX);
             t.saturating_add(self.config.cycle.saturating_mul(k))
@@ -788,6 +795,13 @@ impl<W: VehicleWire> Supervisor<W> {
         let due = tick.map_or(self.next_state_frame, |t| t.min(self.next_state_frame));
         let due = self.estop_deadline().map_or(due, |t| t.min(due));
         Some(self.partner_deadline().map_or(due, |t| t.min(due)))
+    }
+
+    /// What the watchdog counts missed cycles from: the last command taken, or the first copy
+    /// since then still waiting for its partner.
+    fn last_heard(&self) -> Option<Timestamp> {
+        let taken = self.last_valid?;
+        Some(self.pending_since.map_or(taken, |first| first.max(taken)))
     }
 
     /// When a copy waiting for its partner is taken alone: the other bus's last copy stale.
@@ -827,7 +841,7 @@ impl<W: VehicleWire> Supervisor<W> {
     /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         self.take_waiting_copy(now);
-        if let Some(last) = self.last_valid {
+        if let Some(last) = self.last_heard() {
             let cycle = self.config.cycle.as_nanos().max(1);
             let elapsed = now.saturating_since(last).as_nanos();
             let tolerance = cycle / 2;

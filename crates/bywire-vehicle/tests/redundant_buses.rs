@@ -522,6 +522,53 @@ fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + Vehi
     }
 }
 
+/// Jitter between the buses, up to more than a cycle: each command waits for its second copy
+/// (or for the other bus's last copy to go stale), and a vote pending is no missed command —
+/// the watchdog stays normal throughout. (It reported a missed cycle every cycle or two, for
+/// a millisecond, when a copy waited past a cycle and a half after the last command taken.)
+fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+) {
+    let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
+    let (quarter, five_eighths) = (cycle_ms / 4, cycle_ms * 5 / 8);
+    let patterns: [(&[u64], &[u64]); 4] = [
+        (&[0], &[quarter, cycle_ms + quarter]),
+        (&[quarter, cycle_ms + quarter], &[0]),
+        (&[0, five_eighths], &[five_eighths, 0]),
+        (&[0], &[3 * quarter, quarter, 3 * cycle_ms / 2 - 2]),
+    ];
+    for (a_late_ms, b_late_ms) in patterns {
+        let plan = Plan {
+            a_late_ms,
+            b_late_ms,
+            ..Plan::STEADY
+        };
+        let (supervisor, log, end) = hand_fed(vehicle.clone(), &plan);
+        let label = format!("A {a_late_ms:?}, B {b_late_ms:?}");
+        assert!(log.iter().all(|(k, _)| *k < 14), "{label}: {log:?}");
+        assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{label}");
+        let stats = supervisor.stats();
+        assert_eq!(stats.rejected(), 0, "{label}: {stats:?}");
+        assert!(stats.accepted >= Plan::CYCLES - 1, "{label}: {stats:?}");
+        assert!(supervisor.actuators(end).ads_in_control, "{label}");
+    }
+    // Copies that keep waiting are counted from the first: a bus half the counter's range
+    // behind or more (its copies cannot be told from copies ahead) brings copies that never
+    // pair, and the cascade runs to full braking.
+    let half_range = 1u64 << (vehicle.wire.command_counter_bits() - 1);
+    if half_range + 2 < Plan::CYCLES / 3 {
+        let far = [(half_range + 2) * cycle_ms];
+        let plan = Plan {
+            b_late_ms: &far,
+            b_speed: 3.0,
+            ..Plan::STEADY
+        };
+        let (supervisor, log, _) = hand_fed(vehicle, &plan);
+        assert_eq!(supervisor.watchdog(), Watchdog::FullBraking, "{log:?}");
+        assert_ne!(supervisor.command().map(|c| c.velocity), Some(3.0));
+    }
+}
+
 /// Each scenario for each wire.
 macro_rules! for_every_wire {
     ($($scenario:ident),* $(,)?) => {
@@ -565,4 +612,5 @@ for_every_wire!(
     losing_one_bus_holds_at_most_while_the_other_is_late,
     copies_of_one_command_are_compared_however_far_apart,
     a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out,
+    jitter_between_the_buses_is_no_missed_command,
 );
