@@ -211,15 +211,19 @@ enum Sequenced {
 
 /// One feedback message's counter on the two buses it may come on: each bus's frames checked
 /// in their own sequence (a bus that loses or delays frames breaks no sequence but its own),
-/// and a frame taken only when its counter is ahead of the last taken from either bus.
+/// and a frame taken only when its counter is ahead of the last taken from either bus — by one,
+/// or by more from the bus that frame came from (its own sequence resumed after a gap). A bus
+/// further behind than half the counter's range brings frames that look ahead by more than one:
+/// they are passed over as the copies they are (only one a whole range minus one behind looks
+/// like the next frame, and the state frame's echo check refuses that one).
 #[derive(Debug, Clone, Copy)]
 struct FeedbackSequence {
     counted: bool,
     counter: RollingCounter,
     buses: [CounterChecker; 2],
     timeout: Duration,
-    /// The last counter taken, and when.
-    taken: Option<(u8, Timestamp)>,
+    /// The last counter taken, when, and from which bus.
+    taken: Option<(u8, Timestamp, usize)>,
 }
 
 impl FeedbackSequence {
@@ -249,18 +253,18 @@ impl FeedbackSequence {
             | CounterStatus::Skipped { .. }
             | CounterStatus::OutOfSequence => return Sequenced::Broken,
         }
-        let fresh = self.taken.filter(|(_, at)| {
+        let fresh = self.taken.filter(|(_, at, _)| {
             now.checked_since(*at)
                 .is_some_and(|age| age <= self.timeout)
         });
-        let ahead = fresh.is_none_or(|(last, _)| {
+        let ahead = fresh.is_none_or(|(last, _, from)| {
             let steps = self.counter.steps_from(last, value);
-            steps > 0 && steps < self.counter.modulus() / 2
+            steps == 1 || (from == bus && steps > 0 && steps < self.counter.modulus() / 2)
         });
         if !ahead {
             return Sequenced::Copy;
         }
-        self.taken = Some((value, now));
+        self.taken = Some((value, now, bus));
         Sequenced::New
     }
 }

@@ -491,14 +491,15 @@ fn steering_response_is_measured_from_setpoint_to_actual() {
 }
 
 /// The vehicle's state and wheel-speed frames on two buses, bus B's behind A's by a cycle and
-/// a quarter up to seven and a half cycles (half a 4-bit counter's range at the 20 ms cycle):
-/// each of B's is recognised as the copy of one already taken from A, not counted as a frame
-/// out of sequence (the feedback comes from A all the same). From three cycles behind every
-/// frame but a few was refused before, as B's late copies broke the one sequence both buses
-/// fed: a single late bus cost the ADS all its feedback.
+/// a quarter up to twelve and a half cycles (past half a 4-bit counter's range at the 20 ms
+/// cycle, where B's frames look ahead of A's): each of B's is recognised as the copy of one
+/// already taken from A, not counted as a frame out of sequence, and never taken (the feedback
+/// comes from A all the same). From three cycles behind every frame but a few was refused
+/// before, as B's late copies broke the one sequence both buses fed: a single late bus cost
+/// the ADS all its feedback.
 #[test]
 fn feedback_copies_late_on_one_bus_are_copies_not_counter_errors() {
-    for late in [25, 45, 70, 150] {
+    for late in [25, 45, 70, 150, 200, 250] {
         let config = AdsConfig {
             redundant: true,
             ..AdsConfig::default()
