@@ -201,7 +201,7 @@ const RECENT: usize = 32;
 enum Sequenced {
     /// Newer than the last taken: take it.
     New,
-    /// The last taken or one before it: the other bus's copy, or a late bus's.
+    /// Not newer, as far as its counter tells: the other bus's copy, or a late bus's.
     Copy,
     /// Out of its own bus's sequence: refuse it.
     Broken,
