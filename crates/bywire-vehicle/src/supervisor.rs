@@ -679,12 +679,12 @@ impl<W: VehicleWire> Supervisor<W> {
             Err(r) => return self.stats.count(r),
             Ok(valid) => valid,
         };
-        // A copy of the command in force or of one before it (the other bus's copy came
-        // first, or this bus is behind).
+        // With two buses: a copy of the command in force or of one before it (the other
+        // bus's copy came first, or this bus is behind).
         let recent = self
             .last_valid
             .is_some_and(|t| now.saturating_since(t) <= self.copy_window);
-        let taken = recent && self.taken_already(counter);
+        let taken = self.voter.is_some() && recent && self.taken_already(counter);
         if let Some(voter) = self.voter.as_mut() {
             if taken {
                 voter.receive_behind(channel, now, (command, counter));

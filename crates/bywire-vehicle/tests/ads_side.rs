@@ -342,6 +342,7 @@ fn dual_voter_compares_a_bus_behind_by_more_than_a_cycle() {
 fn dual_voter_leaves_out_a_bus_further_behind_than_it_pairs_by_time() {
     let (timeout, skew) = (Duration::from_millis(30), Duration::from_millis(5));
     let by_counter = |a: &(u8, u8), b: &(u8, u8)| a.1 == b.1;
+    let voter = || DualVoter::new(timeout, skew).paired_by(by_counter);
     // B 65 ms behind (over two timeouts): A's commands 1–4 have come when B's copy of 1 does.
     let a_copies = |v: &mut DualVoter<(u8, u8)>| {
         for (k, value) in (0..4u8).zip([7, 8, 9, 10]) {
@@ -350,7 +351,7 @@ fn dual_voter_leaves_out_a_bus_further_behind_than_it_pairs_by_time() {
     };
     // Known to be behind (the caller took command 4): compared with A's copy of 1, however
     // long ago, and stale as it comes; A's copies are taken alone.
-    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    let mut v = voter();
     a_copies(&mut v);
     v.receive_behind(Channel::B, ms(65), (7, 1));
     assert_eq!(
@@ -364,12 +365,12 @@ fn dual_voter_leaves_out_a_bus_further_behind_than_it_pairs_by_time() {
         v.stale_at(Channel::B),
         Some(ms(30).saturating_add(Duration::from_nanos(1)))
     );
-    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    let mut v = voter();
     a_copies(&mut v);
     v.receive_behind(Channel::B, ms(65), (6, 1));
     assert_eq!(v.vote(ms(65)), Vote::Failed(VoteFailure::Disagree));
     // Its partner no longer kept (eight of A's copies came since): stale all the same.
-    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    let mut v = voter();
     for k in 0..12u8 {
         v.receive(Channel::A, ms(20 * u64::from(k)), (k, k + 1));
     }
@@ -383,7 +384,7 @@ fn dual_voter_leaves_out_a_bus_further_behind_than_it_pairs_by_time() {
         }
     );
     // Received as new, the same copy would be a command of its own, waiting for a partner.
-    let mut v = DualVoter::new(timeout, skew).paired_by(by_counter);
+    let mut v = voter();
     a_copies(&mut v);
     v.receive(Channel::B, ms(65), (7, 1));
     assert_eq!(v.vote(ms(65)), Vote::Pending);
