@@ -50,6 +50,20 @@ fn whole_ns(time: f64) -> u64 {
     time.round() as u64
 }
 
+/// Nanoseconds for `n` bits at `nominal` bit/s, exact when the bit time is a whole number of
+/// ns. In 64 bits while the product fits (a frame's few hundred bits): a 128-bit division is a
+/// library call.
+fn bits_ns(nominal: u32, n: u64) -> u64 {
+    let nominal = u64::from(nominal.max(1));
+    match n.checked_mul(1_000_000_000) {
+        Some(product) => product / nominal,
+        None => {
+            let ns = u128::from(n) * 1_000_000_000 / u128::from(nominal);
+            u64::try_from(ns).unwrap_or(u64::MAX)
+        }
+    }
+}
+
 /// Whether `node` is in `set`, a set of nodes one bit each (none past [`MAX_ROUTED`]).
 fn has_node(set: u64, node: NodeId) -> bool {
     node < MAX_ROUTED && set >> node & 1 == 1
@@ -327,6 +341,8 @@ pub struct SimBus {
     tampered: Vec<(Id, Tamper)>,
     nominal: u32,
     data: Option<u32>,
+    /// The intermission after every frame, ns (worked out once: a division a frame).
+    intermission_ns: u64,
     /// The bus is idle from here on (after the last intermission).
     idle_from: Timestamp,
     /// The earliest a queued frame may start, bus idle or not (`None` inside: no frame
@@ -368,6 +384,7 @@ impl SimBus {
             tampered: Vec::new(),
             nominal: nominal.max(1),
             data,
+            intermission_ns: bits_ns(nominal.max(1), INTERMISSION),
             idle_from: Timestamp::ZERO,
             ready: std::cell::Cell::new(None),
             now: Timestamp::ZERO,
@@ -726,16 +743,7 @@ impl SimBus {
     }
 
     fn bits(&self, n: u64) -> u64 {
-        // Nanoseconds for n nominal bits, exact when the bit time is a whole number of ns. In
-        // 64 bits while the product fits (a frame's few hundred bits): a 128-bit division is a
-        // library call, and this runs several times a frame.
-        match n.checked_mul(1_000_000_000) {
-            Some(product) => product / u64::from(self.nominal),
-            None => {
-                let ns = u128::from(n) * 1_000_000_000 / u128::from(self.nominal);
-                u64::try_from(ns).unwrap_or(u64::MAX)
-            }
-        }
+        bits_ns(self.nominal, n)
     }
 
     fn set_state(&mut self, node: NodeId, event: Event, at: Timestamp) {
@@ -1068,7 +1076,7 @@ impl SimBus {
             }
             self.tell_receivers(winner, Event::ReceiveSuccess, eof);
         }
-        self.idle_from = end.saturating_add(ns(self, INTERMISSION));
+        self.idle_from = end.saturating_add(std::time::Duration::from_nanos(self.intermission_ns));
         // The intermission counts as busy: bus load as canbusload and `bywire busload` count it.
         self.busy_ns = self.busy_ns.saturating_add(
             u64::try_from(self.idle_from.saturating_since(start).as_nanos()).unwrap_or(0),
@@ -1078,14 +1086,14 @@ impl SimBus {
             .nodes
             .get(winner)
             .is_some_and(|n| n.confinement.state() == NodeState::ErrorPassive);
-        let suspend_until = self.idle_from.saturating_add(ns(self, SUSPEND));
         self.ready.set(None);
+        let not_before = if passive {
+            self.idle_from.saturating_add(ns(self, SUSPEND))
+        } else {
+            self.idle_from
+        };
         if let Some(n) = self.nodes.get_mut(winner) {
-            n.not_before = if passive {
-                suspend_until
-            } else {
-                self.idle_from
-            };
+            n.not_before = not_before;
         }
     }
 }
