@@ -280,6 +280,12 @@ pub struct Pdos {
     /// by index, listed again whenever one is compiled (within the capacity it was made
     /// with): a device is polled many times a cycle, and most of its PDOs wait for SYNC.
     timed: alloc::vec::Vec<usize>,
+    /// The enabled PDOs with an 11-bit identifier, as (identifier, index) in PDO order: every
+    /// frame a device hears is looked for here (a PDO's compiled mapping is a kilobyte or two,
+    /// and most frames are for none of them).
+    heard: alloc::vec::Vec<(u16, usize)>,
+    /// The enabled PDOs, by index: what a SYNC goes through.
+    enabled: alloc::vec::Vec<usize>,
 }
 
 /// Something a PDO did that the device reports.
@@ -310,15 +316,26 @@ impl Pdos {
         }
         let mut pdos = Pdos {
             timed: alloc::vec::Vec::with_capacity(pdos.len()),
+            heard: alloc::vec::Vec::with_capacity(pdos.len()),
+            enabled: alloc::vec::Vec::with_capacity(pdos.len()),
             pdos,
         };
-        pdos.list_timed();
+        pdos.list();
         pdos
     }
 
-    fn list_timed(&mut self) {
+    /// List the PDOs again after one was compiled: those a poll, a frame and a SYNC look at.
+    fn list(&mut self) {
         self.timed.clear();
+        self.heard.clear();
+        self.enabled.clear();
         for (index, pdo) in self.pdos.iter().enumerate() {
+            if pdo.is_enabled() {
+                self.enabled.push(index);
+                if let Some(id) = pdo.can_id() {
+                    self.heard.push((id, index));
+                }
+            }
             let timed = pdo.is_enabled()
                 && match pdo.direction {
                     Direction::Receive => !pdo.event_timer.is_zero(),
@@ -340,7 +357,7 @@ impl Pdos {
             {
                 compile(od, pdo);
             }
-            self.list_timed();
+            self.list();
         }
     }
 
@@ -349,7 +366,7 @@ impl Pdos {
         for pdo in &mut self.pdos {
             compile(od, pdo);
         }
-        self.list_timed();
+        self.list();
     }
 
     /// Every PDO.
@@ -370,11 +387,10 @@ impl Pdos {
         let Some(id) = crate::nmt::cob_id(frame) else {
             return;
         };
-        for pdo in self
-            .pdos
-            .iter_mut()
-            .filter(|p| p.is_enabled() && p.can_id() == Some(id))
-        {
+        for &(heard, index) in &self.heard {
+            let Some(pdo) = self.pdos.get_mut(index).filter(|_| heard == id) else {
+                continue;
+            };
             match pdo.direction {
                 Direction::Receive if !frame.is_remote() => {
                     let data = frame.data();
@@ -413,7 +429,10 @@ impl Pdos {
         written: &mut dyn FnMut(u16, u8),
         out: &mut dyn FnMut(Frame),
     ) {
-        for pdo in self.pdos.iter_mut().filter(|p| p.is_enabled()) {
+        for &index in &self.enabled {
+            let Some(pdo) = self.pdos.get_mut(index) else {
+                continue;
+            };
             match pdo.direction {
                 Direction::Receive => {
                     if let Some((payload, n)) = pdo.pending.take() {
