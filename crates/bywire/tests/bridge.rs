@@ -19,11 +19,37 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-/// Run the bridge with `args`, `drive` every 25 ms with an engage every 0.5 s, for 2.5 s and
-/// on until a state line shows `reached` (20 s at most); the state lines it wrote. On, because
-/// a loaded machine can stall the bridge long enough for the vehicle's watchdog to brake, and
-/// the vehicle drives again only after its recovery, as it should.
-fn drive_until(args: &[&str], drive: &str, reached: fn(&Value) -> bool) -> Vec<Value> {
+/// What a bridge run wrote: its JSON lines (states and events) and its standard error.
+struct Run {
+    lines: Vec<Value>,
+    stderr: String,
+}
+
+impl Run {
+    /// The state lines.
+    fn states(&self) -> Vec<&Value> {
+        self.lines
+            .iter()
+            .filter(|l| l.get("mode").is_some())
+            .collect()
+    }
+}
+
+/// The engage an operator sends.
+const ENGAGE: &str = r#"{"engage": true}"#;
+
+/// Run the bridge with `args`, writing `input(k)` for k = 0, 1, … one `every`: at least
+/// `at_least` of them, and on until a state line shows `reached` (20 s at most). On, because a
+/// loaded machine can stall the bridge long enough for the vehicle's watchdog to brake, or
+/// delay its recovery past a scripted engage, which it refuses; the vehicle drives again only
+/// after its recovery and another engage, as it should. The bridge must end well.
+fn run_until(
+    args: &[&str],
+    at_least: usize,
+    every: Duration,
+    input: impl Fn(usize) -> Vec<u8>,
+    reached: impl Fn(&Value) -> bool + Send + 'static,
+) -> Run {
     let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args(args)
         .stdin(Stdio::piped())
@@ -37,48 +63,74 @@ fn drive_until(args: &[&str], drive: &str, reached: fn(&Value) -> bool) -> Vec<V
     let reader = {
         let seen = Arc::clone(&seen);
         std::thread::spawn(move || {
-            let mut states = Vec::new();
+            let mut lines = Vec::new();
             for line in BufReader::new(stdout).lines() {
-                let state: Value = serde_json::from_str(&line.unwrap()).unwrap();
-                if state.get("mode").is_some() {
-                    if reached(&state) {
-                        seen.store(true, Ordering::Relaxed);
-                    }
-                    states.push(state);
+                let line: Value = serde_json::from_str(&line.unwrap()).unwrap();
+                if line.get("mode").is_some() && reached(&line) {
+                    seen.store(true, Ordering::Relaxed);
                 }
+                lines.push(line);
             }
-            states
+            lines
         })
     };
     let deadline = Instant::now() + Duration::from_secs(20);
     let mut k = 0;
-    while k < 100 || (!seen.load(Ordering::Relaxed) && Instant::now() < deadline) {
-        // An operator engages again while the vehicle still recovers (a refused engage is
-        // not retried by the bridge).
-        let line = if k > 0 && k % 20 == 0 {
-            r#"{"engage": true}"#
-        } else {
-            drive
-        };
-        writeln!(stdin, "{line}").unwrap();
-        std::thread::sleep(Duration::from_millis(25));
+    while k < at_least || (!seen.load(Ordering::Relaxed) && Instant::now() < deadline) {
+        // A bridge that ended early says why on its standard error (asserted below).
+        if stdin.write_all(&input(k)).is_err() {
+            break;
+        }
+        std::thread::sleep(every);
         k += 1;
     }
     drop(stdin);
-    let states = reader.join().unwrap();
+    let lines = reader.join().unwrap();
     let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    states
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    Run { lines, stderr }
+}
+
+/// `drive` every 25 ms with an engage every 0.5 s, for 2.5 s and on until a state shows
+/// `reached` (see [`run_until`]); the states.
+fn drive_until(args: &[&str], drive: &str, reached: fn(&Value) -> bool) -> Vec<Value> {
+    let line = |k: usize| {
+        let line = if k > 0 && k.is_multiple_of(20) {
+            ENGAGE
+        } else {
+            drive
+        };
+        format!("{line}\n").into_bytes()
+    };
+    let run = run_until(args, 100, Duration::from_millis(25), line, reached);
+    run.states().into_iter().cloned().collect()
 }
 
 #[test]
 fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
+    // Commands must keep coming (a command older than 200 ms becomes a controlled stop).
+    // (The vehicle accelerates at 1 m/s²: 1.5 m/s within two seconds of the engage.)
+    let drive = r#"{"velocity": 1.5, "gear": "drive", "mode": "autonomous", "steering": 5.0}"#;
+    let line = |k: usize| -> Vec<u8> {
+        let line = match k {
+            20 => ENGAGE,
+            30 => "not json",
+            40 => r#"{"velocity": 1000}"#,
+            // A line that is not UTF-8 is refused, and the bridge goes on.
+            50 => {
+                let mut bytes = format!("{drive}\n").into_bytes();
+                bytes.extend_from_slice(b"{\"velocity\": \xff}\n");
+                return bytes;
+            }
+            // Past the script, the operator engages again until the vehicle drives.
+            k if k >= 120 && k.is_multiple_of(20) => ENGAGE,
+            _ => drive,
+        };
+        format!("{line}\n").into_bytes()
+    };
+    let run = run_until(
+        &[
             "bridge",
             "--profile",
             "reference-tug",
@@ -87,43 +139,19 @@ fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
             "--estop-on-eof",
             "--rate",
             "20",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    // Commands must keep coming (a command older than 200 ms becomes a controlled stop).
-    // (The vehicle accelerates at 1 m/s²: 1.5 m/s within two seconds of the engage.)
-    let drive = r#"{"velocity": 1.5, "gear": "drive", "mode": "autonomous", "steering": 5.0}"#;
-    for k in 0..120 {
-        let line = match k {
-            20 => r#"{"engage": true}"#,
-            30 => "not json",
-            40 => r#"{"velocity": 1000}"#,
-            _ => drive,
-        };
-        writeln!(stdin, "{line}").unwrap();
-        if k == 50 {
-            // A line that is not UTF-8 is refused, and the bridge goes on.
-            stdin.write_all(b"{\"velocity\": \xff}\n").unwrap();
-        }
-        std::thread::sleep(Duration::from_millis(25));
-    }
-    drop(stdin);
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        120,
+        Duration::from_millis(25),
+        line,
+        |s| {
+            s["mode"] == "autonomous"
+                && s["velocity"] == 1.5
+                && s["steering"]
+                    .as_f64()
+                    .is_some_and(|a| (a - 5.0).abs() < 0.05)
+        },
     );
-    let lines: Vec<Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
-    let states: Vec<&Value> = lines.iter().filter(|l| l.get("mode").is_some()).collect();
+    let (lines, states) = (&run.lines, run.states());
     // Manual and braked at first (the vehicle fails closed), then autonomous at the commanded
     // speed with the steering reached.
     assert!(states
@@ -160,7 +188,7 @@ fn bridge_engages_a_simulated_vehicle_and_brakes_at_end_of_input() {
     assert!(
         refused("line 31:") && refused("line 41: velocity 1000") && refused("line 52: not UTF-8")
     );
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = &run.stderr;
     assert!(
         err.contains("line 41: velocity 1000: beyond ±5 m/s"),
         "{err}"
@@ -378,16 +406,18 @@ bus.shutdown()
     );
     assert_eq!(last["rejected"]["checksum"], 0, "{last}");
     // The simulated vehicle speaks the profile too: the shuttle's supervisor engages.
-    let input: String = (0..80)
-        .map(|k| {
-            let engage = if k == 12 { r#", "engage": true"# } else { "" };
-            format!(
-                "{{\"velocity\": 1.5, \"gear\": \"drive\", \"mode\": \"autonomous\"{engage}}}\n"
-            )
-        })
-        .collect();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
+    let line = |k: usize| {
+        // Engaged at 0.5 s, and again every 0.8 s should the vehicle still recover then.
+        let engage = if k == 12 || (k > 12 && k % 20 == 12) {
+            r#", "engage": true"#
+        } else {
+            ""
+        };
+        format!("{{\"velocity\": 1.5, \"gear\": \"drive\", \"mode\": \"autonomous\"{engage}}}\n")
+            .into_bytes()
+    };
+    let run = run_until(
+        &[
             "bridge",
             "--profile",
             &format!("{data}/shuttle.toml"),
@@ -395,25 +425,13 @@ bus.shutdown()
             "--with-vehicle",
             "--rate",
             "20",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    for line in input.lines() {
-        writeln!(stdin, "{line}").unwrap();
-        std::thread::sleep(Duration::from_millis(40));
-    }
-    drop(stdin);
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success());
-    let states: Vec<Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .filter(|l: &Value| l.get("mode").is_some())
-        .collect();
+        ],
+        80,
+        Duration::from_millis(40),
+        line,
+        |s| s["mode"] == "autonomous" && s["velocity"] == 1.5,
+    );
+    let states = run.states();
     assert!(
         states
             .iter()
