@@ -257,14 +257,16 @@ echo '== end'
 }
 
 /// `bywire sim --attach`: the simulated drives' bus on vcan0, as candump sees it (every drive's
-/// heartbeat, SYNC), and a frame cansend puts on vcan1 lands on the simulated sensor bus.
+/// heartbeat, SYNC), and a frame cansend puts on vcan1 lands on the simulated sensor bus — sent
+/// once the SYNC shows the simulation running (a loaded machine's VM can take seconds to start
+/// it).
 #[test]
 fn sim_attaches_its_buses_to_vcan_for_can_utils() {
     let script = "\
 candump -L vcan0 > drives.log & P1=$!
 ready drives.log vcan0
 $B sim --no-view --max-seconds 4 --out /tmp/run --attach bus2=vcan0 --attach bus3=vcan1 > sim.out 2>&1 & S=$!
-sleep 2
+for i in $(seq 100); do grep -q ' vcan0 080#' drives.log && break; sleep 0.1; done
 cansend vcan1 7AB#01020304
 wait $S; echo \"sim exit $?\"
 kill -INT $P1; sleep 0.2
