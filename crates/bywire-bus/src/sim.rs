@@ -384,7 +384,7 @@ impl SimBus {
             tampered: Vec::new(),
             nominal: nominal.max(1),
             data,
-            intermission_ns: bits_ns(nominal.max(1), INTERMISSION),
+            intermission_ns: bits_ns(nominal, INTERMISSION),
             idle_from: Timestamp::ZERO,
             ready: std::cell::Cell::new(None),
             now: Timestamp::ZERO,

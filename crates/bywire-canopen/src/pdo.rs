@@ -329,18 +329,15 @@ impl Pdos {
         self.timed.clear();
         self.heard.clear();
         self.enabled.clear();
-        for (index, pdo) in self.pdos.iter().enumerate() {
-            if pdo.is_enabled() {
-                self.enabled.push(index);
-                if let Some(id) = pdo.can_id() {
-                    self.heard.push((id, index));
-                }
+        for (index, pdo) in self.pdos.iter().enumerate().filter(|(_, p)| p.is_enabled()) {
+            self.enabled.push(index);
+            if let Some(id) = pdo.can_id() {
+                self.heard.push((id, index));
             }
-            let timed = pdo.is_enabled()
-                && match pdo.direction {
-                    Direction::Receive => !pdo.event_timer.is_zero(),
-                    Direction::Transmit => matches!(pdo.transmission, 252..=255),
-                };
+            let timed = match pdo.direction {
+                Direction::Receive => !pdo.event_timer.is_zero(),
+                Direction::Transmit => matches!(pdo.transmission, 252..=255),
+            };
             if timed {
                 self.timed.push(index);
             }
@@ -388,7 +385,10 @@ impl Pdos {
             return;
         };
         for &(heard, index) in &self.heard {
-            let Some(pdo) = self.pdos.get_mut(index).filter(|_| heard == id) else {
+            if heard != id {
+                continue;
+            }
+            let Some(pdo) = self.pdos.get_mut(index) else {
                 continue;
             };
             match pdo.direction {
