@@ -475,14 +475,43 @@ impl Recorder {
         }
         name.push('.');
         name.push_str(extension(self.config.format));
-        let path = self.config.dir.join(name);
+        // A log appears under its name only complete with its header and with its metadata
+        // beside it: it is begun under a hidden partial name and renamed into place after the
+        // metadata is written. A kill at any moment leaves no log without its `FILE.json` (at
+        // worst a hidden `.NAME.part`, or metadata whose log was never begun).
+        let path = self.config.dir.join(&name);
+        let partial = self.config.dir.join(format!(".{name}.part"));
+        let cannot = |e: io::Error| {
+            io::Error::new(e.kind(), format!("cannot create {}: {e}", path.display()))
+        };
+        for taken in [path.clone(), sidecar(&path)] {
+            if taken.try_exists().map_err(cannot)? {
+                return Err(cannot(io::ErrorKind::AlreadyExists.into()));
+            }
+        }
         let file = File::options()
             .write(true)
             .create_new(true)
-            .open(&path)
-            .map_err(|e| {
-                io::Error::new(e.kind(), format!("cannot create {}: {e}", path.display()))
-            })?;
+            .open(&partial)
+            .map_err(cannot)?;
+        let begun = self.begin(file, path.clone(), sequence).and_then(|open| {
+            std::fs::rename(&partial, &path)?;
+            sync_dir(&self.config.dir)?;
+            Ok(open)
+        });
+        if begun.is_err() {
+            // Nothing half-made is left behind (both names were free when the file was begun).
+            let _ = std::fs::remove_file(&partial);
+            if !path.exists() {
+                let _ = std::fs::remove_file(sidecar(&path));
+            }
+        }
+        begun
+    }
+
+    /// A file begun as `file` (to be known as `path`) made a complete, empty log, synced, its
+    /// metadata written.
+    fn begin(&mut self, file: File, path: PathBuf, sequence: u32) -> io::Result<OpenFile> {
         let sync = file.try_clone()?;
         let end = Arc::new(AtomicU64::new(0));
         let counted = Counted {
@@ -498,7 +527,6 @@ impl Recorder {
         // first checkpoint leaves an empty log, not a broken one.
         writer.checkpoint()?;
         sync.sync_data()?;
-        self.progress.files += 1;
         let file = OpenFile {
             writer,
             sync,
@@ -516,7 +544,7 @@ impl Recorder {
             dirty: true,
         };
         write_metadata(&self.config, &self.drops, &file.facts, "recording")?;
-        sync_dir(&self.config.dir)?;
+        self.progress.files += 1;
         Ok(file)
     }
 
@@ -539,6 +567,13 @@ impl Recorder {
         });
         Ok(())
     }
+}
+
+/// Where a file's metadata is kept: `FILE.json` beside it.
+fn sidecar(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".json");
+    PathBuf::from(name)
 }
 
 /// `FILE.json` beside a file, written atomically (a temporary file renamed into place).
@@ -594,8 +629,7 @@ fn write_metadata(
     }
     let text =
         serde_json::to_string_pretty(&serde_json::Value::Object(meta)).map_err(io::Error::other)?;
-    let mut target = facts.path.clone().into_os_string();
-    target.push(".json");
+    let target = sidecar(&facts.path).into_os_string();
     let mut temporary = target.clone();
     temporary.push(".tmp");
     {
@@ -816,6 +850,41 @@ mod tests {
                 assert!(read.iter().all(Result::is_ok), "{format:?}: {read:?}");
             }
             assert!(read.iter().filter(|r| r.is_ok()).count() <= 1, "{format:?}");
+        }
+    }
+
+    #[test]
+    fn a_log_appears_under_its_name_only_with_its_metadata_beside_it() {
+        let scratch = folder("sidecar-first");
+        let dir = scratch.path();
+        // Its metadata cannot be written: the temporary file's name is taken by a folder.
+        std::fs::create_dir(dir.join("run-0001.blf.json.tmp")).unwrap();
+        let mut recorder = Recorder::new(config(dir, Format::Blf, Layout::Merged)).unwrap();
+        assert!(recorder.record(record(0, 1)).is_err());
+        let names: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        // Only the folder in the way: no log, no metadata, no partial file.
+        assert_eq!(names, ["run-0001.blf.json.tmp"]);
+    }
+
+    #[test]
+    fn a_file_already_there_is_neither_overwritten_nor_given_new_metadata() {
+        for taken in ["run-0001.blf", "run-0001.blf.json"] {
+            let scratch = folder("taken");
+            let dir = scratch.path();
+            std::fs::write(dir.join(taken), "kept").unwrap();
+            let mut recorder = Recorder::new(config(dir, Format::Blf, Layout::Merged)).unwrap();
+            let error = recorder.record(record(0, 1)).unwrap_err();
+            assert_eq!(error.kind(), io::ErrorKind::AlreadyExists);
+            assert!(error.to_string().contains("run-0001.blf"), "{error}");
+            assert_eq!(std::fs::read_to_string(dir.join(taken)).unwrap(), "kept");
+            let names: Vec<_> = std::fs::read_dir(dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name())
+                .collect();
+            assert_eq!(names.len(), 1, "{taken}: {names:?}");
         }
     }
 
