@@ -106,6 +106,9 @@ pub struct DualVoter<T> {
     /// `same_command`).
     copies: [[Option<Kept<T>>; KEPT]; 2],
     same_command: Option<fn(&T, &T) -> bool>,
+    /// With `same_command`: how far apart a new command's copies may come (at most two
+    /// timeouts; see [`pairing_within`](Self::pairing_within)).
+    horizon: Option<Duration>,
 }
 
 impl<T: Copy + PartialEq> DualVoter<T> {
@@ -116,6 +119,7 @@ impl<T: Copy + PartialEq> DualVoter<T> {
             skew,
             copies: [[None; KEPT]; 2],
             same_command: None,
+            horizon: None,
         }
     }
 
@@ -131,6 +135,18 @@ impl<T: Copy + PartialEq> DualVoter<T> {
         }
     }
 
+    /// With [`paired_by`](Self::paired_by): a new command's copies come within `horizon` of
+    /// each other, so an older copy with the same counter is of another command. Two timeouts
+    /// unless set shorter; a counter that comes round sooner than that (a 1-bit counter, every
+    /// second cycle) needs it shorter than its period, or each new command would be compared
+    /// with the other bus's copy of the command a period before.
+    pub fn pairing_within(self, horizon: Duration) -> Self {
+        DualVoter {
+            horizon: Some(horizon),
+            ..self
+        }
+    }
+
     fn kept(&self, channel: Channel) -> &[Option<Kept<T>>; KEPT] {
         let [a, b] = &self.copies;
         match channel {
@@ -139,9 +155,9 @@ impl<T: Copy + PartialEq> DualVoter<T> {
         }
     }
 
-    /// The copy of `value`'s command on `channel`, if it came within two timeouts of `now`
-    /// (older ones are another command: the counter has come round) or, for a copy known to
-    /// be `behind`, if it is kept at all (a counter behind the one taken has not come round).
+    /// The copy of `value`'s command on `channel`, if it came within the pairing horizon of
+    /// `now` (older ones are another command: the counter has come round) or, for a copy known
+    /// to be `behind`, if it is kept at all (a counter behind the one taken has not come round).
     fn partner(
         &self,
         channel: Channel,
@@ -150,7 +166,8 @@ impl<T: Copy + PartialEq> DualVoter<T> {
         behind: bool,
     ) -> Option<Kept<T>> {
         let same = self.same_command?;
-        let horizon = self.timeout.saturating_mul(2);
+        let two_timeouts = self.timeout.saturating_mul(2);
+        let horizon = self.horizon.map_or(two_timeouts, |h| h.min(two_timeouts));
         self.kept(channel)
             .iter()
             .flatten()

@@ -491,7 +491,13 @@ impl<W: VehicleWire> Supervisor<W> {
             voter: config.redundancy.map(|r| {
                 let voter = DualVoter::new(r.timeout, r.skew);
                 if bits > 0 {
-                    voter.paired_by(|a: &(Command, u8), b: &(Command, u8)| a.1 == b.1)
+                    // The counter comes round after its range of cycles: copies further
+                    // apart than that less half a cycle are never of one command.
+                    let range = RollingCounter::new(bits).modulus();
+                    let period = config.cycle.saturating_mul(u32::from(range));
+                    voter
+                        .paired_by(|a: &(Command, u8), b: &(Command, u8)| a.1 == b.1)
+                        .pairing_within(period.saturating_sub(config.cycle / 2))
                 } else {
                     voter
                 }

@@ -29,7 +29,7 @@ use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::LoadedProfile;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Redundancy, Supervisor, SupervisorConfig, Watchdog};
-use bywire_vehicle::wire::{AdsWire, ProfileWire, VehicleWire};
+use bywire_vehicle::wire::{AdsWire, Counters, ProfileWire, VehicleWire};
 
 /// The shuttle test vehicle with its command message replaced by `command_block`.
 fn shuttle_with(command_block: &str) -> LoadedProfile {
@@ -280,6 +280,8 @@ struct Plan<'a> {
     b_late_ms: &'a [u64],
     b_cycles: u64,
     b_speed: f64,
+    /// The command's speed changes every cycle (by bus B's `b_speed - 2.0` more on B).
+    ramp: bool,
 }
 
 impl Plan<'_> {
@@ -291,7 +293,17 @@ impl Plan<'_> {
         b_late_ms: &[0],
         b_cycles: u64::MAX,
         b_speed: 2.0,
+        ramp: false,
     };
+
+    /// The speed commanded in cycle `k` on bus A.
+    fn speed(&self, k: u64) -> f64 {
+        if self.ramp && k >= 14 {
+            1.0 + 0.25 * f64::from(u32::try_from(k % 8).unwrap())
+        } else {
+            2.0
+        }
+    }
 }
 
 /// The supervisor alone, its command frames put in by hand at the instants `plan` says (as
@@ -328,8 +340,8 @@ fn hand_fed<W: AdsWire + VehicleWire + Clone>(
     };
     let frames: Vec<_> = (0..Plan::CYCLES)
         .map(|k| {
-            let b_speed = if k >= 14 { plan.b_speed } else { 2.0 };
-            (frame(k, 2.0), frame(k, b_speed))
+            let b_more = if k >= 14 { plan.b_speed - 2.0 } else { 0.0 };
+            (frame(k, plan.speed(k)), frame(k, plan.speed(k) + b_more))
         })
         .collect();
     // Each copy at its cycle's start plus its lateness (more than a cycle, too).
@@ -569,6 +581,100 @@ fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clon
     }
 }
 
+/// A command that changes every cycle is compared with its own copy whichever bus brings it
+/// first: never with the other bus's copy of an earlier command that had the same counter. (With
+/// a 1-bit counter the counter comes round every second cycle, within the two timeouts over
+/// which copies were paired: each new command met the other bus's copy of the command two
+/// cycles before, and the vehicle braked in full at the first change of speed.)
+fn a_changing_command_is_compared_with_its_own_copy<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+) {
+    let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
+    let (early, late) = ([0], [cycle_ms / 4]);
+    for (a_late_ms, b_late_ms) in [(&early, &late), (&late, &early)] {
+        let plan = Plan {
+            a_late_ms,
+            b_late_ms,
+            ramp: true,
+            ..Plan::STEADY
+        };
+        let (supervisor, log, end) = hand_fed(vehicle.clone(), &plan);
+        let label = format!("A {a_late_ms:?}, B {b_late_ms:?}");
+        assert!(log.iter().all(|(k, _)| *k < 14), "{label}: {log:?}");
+        assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{label}");
+        let stats = supervisor.stats();
+        assert_eq!(stats.rejected(), 0, "{label}: {stats:?}");
+        assert_eq!(stats.accepted, Plan::CYCLES, "{label}: {stats:?}");
+        let act = supervisor.actuators(end);
+        assert!(act.ads_in_control, "{label}: {act:?}");
+        // The last command's speed, as its signal's resolution gives it back.
+        let taken = supervisor.command().unwrap().velocity;
+        assert!(
+            (taken - plan.speed(Plan::CYCLES - 1)).abs() < 0.03,
+            "{label}: {taken}"
+        );
+        // The same, bus B's copies faster by 0.5 m/s: the first changed command brakes.
+        let (supervisor, log, _) = hand_fed(
+            vehicle.clone(),
+            &Plan {
+                b_speed: 2.5,
+                ..plan
+            },
+        );
+        assert_eq!(
+            supervisor.watchdog(),
+            Watchdog::FullBraking,
+            "{label}: {log:?}"
+        );
+        assert_eq!(
+            log.iter().find(|(k, _)| *k >= 14),
+            Some(&(14, Watchdog::FullBraking)),
+            "{label}"
+        );
+    }
+}
+
+/// The shuttle's six-byte command with a `bits`-bit counter.
+fn six_bytes_with_counter(bits: u32) -> Vehicle<ProfileWire> {
+    let block = SIX_BYTES.replace(
+        "Cmd_Alive : 36|4@1+ (1,0) [0|15]",
+        &format!("Cmd_Alive : 36|{bits}@1+ (1,0) [0|{}]", (1 << bits) - 1),
+    );
+    let mut vehicle = by_profile(&shuttle_with(&block));
+    assert_eq!(
+        vehicle.wire.command_counter_bits(),
+        u8::try_from(bits).unwrap()
+    );
+    assert_eq!(command_len(&mut vehicle), 6);
+    vehicle
+}
+
+/// Counters that come round within a few cycles (opendbc's 2-bit counters; a 1-bit toggle):
+/// the scenarios that do not need a counter's range of several cycles.
+mod short_counters {
+    use super::*;
+
+    #[test]
+    fn two_bit_counter() {
+        let vehicle = six_bytes_with_counter(2);
+        agreeing_copies_are_taken_once(vehicle.clone());
+        one_bus_silent_degrades(vehicle.clone());
+        both_buses_silent_brake(vehicle.clone());
+        disagreeing_copies_brake_at_once(vehicle.clone());
+        a_changing_command_is_compared_with_its_own_copy(vehicle);
+    }
+
+    #[test]
+    fn one_bit_counter() {
+        let vehicle = six_bytes_with_counter(1);
+        agreeing_copies_are_taken_once(vehicle.clone());
+        one_bus_silent_degrades(vehicle.clone());
+        both_buses_silent_brake(vehicle.clone());
+        disagreeing_copies_brake_at_once(vehicle.clone());
+        a_changing_command_is_compared_with_its_own_copy(vehicle);
+    }
+}
+
 /// Each scenario for each wire.
 macro_rules! for_every_wire {
     ($($scenario:ident),* $(,)?) => {
@@ -613,4 +719,5 @@ for_every_wire!(
     copies_of_one_command_are_compared_however_far_apart,
     a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out,
     jitter_between_the_buses_is_no_missed_command,
+    a_changing_command_is_compared_with_its_own_copy,
 );
