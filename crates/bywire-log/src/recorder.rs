@@ -484,9 +484,11 @@ impl Recorder {
         let cannot = |e: io::Error| {
             io::Error::new(e.kind(), format!("cannot create {}: {e}", path.display()))
         };
-        for taken in [path.clone(), sidecar(&path)] {
+        // A partial file is left only by a recorder stopped while it began that file.
+        for taken in [path.clone(), sidecar(&path), partial.clone()] {
             if taken.try_exists().map_err(cannot)? {
-                return Err(cannot(io::ErrorKind::AlreadyExists.into()));
+                let exists = format!("{} exists", taken.display());
+                return Err(cannot(io::Error::new(io::ErrorKind::AlreadyExists, exists)));
             }
         }
         let file = File::options()
@@ -871,14 +873,15 @@ mod tests {
 
     #[test]
     fn a_file_already_there_is_neither_overwritten_nor_given_new_metadata() {
-        for taken in ["run-0001.blf", "run-0001.blf.json"] {
+        for taken in ["run-0001.blf", "run-0001.blf.json", ".run-0001.blf.part"] {
             let scratch = folder("taken");
             let dir = scratch.path();
             std::fs::write(dir.join(taken), "kept").unwrap();
             let mut recorder = Recorder::new(config(dir, Format::Blf, Layout::Merged)).unwrap();
             let error = recorder.record(record(0, 1)).unwrap_err();
             assert_eq!(error.kind(), io::ErrorKind::AlreadyExists);
-            assert!(error.to_string().contains("run-0001.blf"), "{error}");
+            let text = error.to_string();
+            assert!(text.contains(&format!("{taken} exists")), "{text}");
             assert_eq!(std::fs::read_to_string(dir.join(taken)).unwrap(), "kept");
             let names: Vec<_> = std::fs::read_dir(dir)
                 .unwrap()
