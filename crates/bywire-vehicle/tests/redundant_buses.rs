@@ -534,6 +534,22 @@ fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + Vehi
     }
 }
 
+/// `plan` hand-fed: after the engage the watchdog never changes, no command is refused, and
+/// the ADS is in control at the end. The supervisor, and the plan's label for messages.
+fn drives_on_undisturbed<W: AdsWire + VehicleWire + Clone>(
+    vehicle: Vehicle<W>,
+    plan: &Plan,
+) -> (Supervisor<W>, String) {
+    let (supervisor, log, end) = hand_fed(vehicle, plan);
+    let label = format!("A {:?}, B {:?}", plan.a_late_ms, plan.b_late_ms);
+    assert!(log.iter().all(|(k, _)| *k < 14), "{label}: {log:?}");
+    assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{label}");
+    let stats = supervisor.stats();
+    assert_eq!(stats.rejected(), 0, "{label}: {stats:?}");
+    assert!(supervisor.actuators(end).ads_in_control, "{label}");
+    (supervisor, label)
+}
+
 /// Jitter between the buses, up to more than a cycle: each command waits for its second copy
 /// (or for the other bus's last copy to go stale), and a vote pending is no missed command —
 /// the watchdog stays normal throughout. (It reported a missed cycle every cycle or two, for
@@ -555,14 +571,9 @@ fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clon
             b_late_ms,
             ..Plan::STEADY
         };
-        let (supervisor, log, end) = hand_fed(vehicle.clone(), &plan);
-        let label = format!("A {a_late_ms:?}, B {b_late_ms:?}");
-        assert!(log.iter().all(|(k, _)| *k < 14), "{label}: {log:?}");
-        assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{label}");
+        let (supervisor, label) = drives_on_undisturbed(vehicle.clone(), &plan);
         let stats = supervisor.stats();
-        assert_eq!(stats.rejected(), 0, "{label}: {stats:?}");
         assert!(stats.accepted >= Plan::CYCLES - 1, "{label}: {stats:?}");
-        assert!(supervisor.actuators(end).ads_in_control, "{label}");
     }
     // Copies that keep waiting are counted from the first: a bus half the counter's range
     // behind or more (its copies cannot be told from copies ahead) brings copies that never
@@ -598,15 +609,9 @@ fn a_changing_command_is_compared_with_its_own_copy<W: AdsWire + VehicleWire + C
             ramp: true,
             ..Plan::STEADY
         };
-        let (supervisor, log, end) = hand_fed(vehicle.clone(), &plan);
-        let label = format!("A {a_late_ms:?}, B {b_late_ms:?}");
-        assert!(log.iter().all(|(k, _)| *k < 14), "{label}: {log:?}");
-        assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{label}");
+        let (supervisor, label) = drives_on_undisturbed(vehicle.clone(), &plan);
         let stats = supervisor.stats();
-        assert_eq!(stats.rejected(), 0, "{label}: {stats:?}");
         assert_eq!(stats.accepted, Plan::CYCLES, "{label}: {stats:?}");
-        let act = supervisor.actuators(end);
-        assert!(act.ads_in_control, "{label}: {act:?}");
         // The last command's speed, as its signal's resolution gives it back.
         let taken = supervisor.command().unwrap().velocity;
         assert!(
