@@ -376,9 +376,11 @@ fn listen_only_is_set_on_a_controller_said_for_vcan_and_undone_after() {
     let script = format!(
         r#"
 for i in 0 1 2; do ip link set can$i type can bitrate 500000 && ip link set can$i up; done
+# Every bus is open once the recorder has said how it listens on the last one.
+said() {{ for i in $(seq 300); do grep -q "^$1: " $2 2>/dev/null && return; sleep 0.05; done; }}
 mkdir -p /tmp/r
 {bin} record can0 vcan0 --out /tmp/r --format candump --duration 4s --quiet > /tmp/r/out.txt 2> /tmp/r/err.txt &
-sleep 1.5
+said vcan0 /tmp/r/err.txt
 echo "during: $(ip -details link show can0 | grep -c LISTEN-ONLY)"
 for i in 1 2 3 4 5; do cansend can1 123#DEADBEEF0$i; done
 cansend vcan0 456#01
@@ -386,10 +388,11 @@ wait
 echo "after: $(ip -details link show can0 | grep -c LISTEN-ONLY)"
 echo "up: $(ip link show can0 | grep -c 'state UP')"
 cat /tmp/r/err.txt /tmp/r/*.log
-{bin} record can0 --shared --out /tmp/s --duration 1s --quiet 2>&1 >/dev/null &
-sleep 0.5
+{bin} record can0 --shared --out /tmp/s --duration 1s --quiet 2> /tmp/shared.txt > /dev/null &
+said can0 /tmp/shared.txt
 echo "shared: $(ip -details link show can0 | grep -c LISTEN-ONLY)"
 wait
+cat /tmp/shared.txt
 "#
     );
     let text = in_canvm(
