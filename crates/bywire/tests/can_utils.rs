@@ -212,11 +212,18 @@ cangen vcan0 -n 40 -g 1; cangen vcan0 -n 30 -g 1 -e
 cangen vcan0 -n 20 -g 1 -L 8 -D 0000000000000000; cangen vcan0 -n 20 -g 1 -L 8 -D FFFFFFFFFFFFFFFF -e
 sleep 0.3; kill -INT $P0; sleep 0.2
 printf '(0.000000) vcan0 123#R8\\n(0.001000) vcan0 00000456#R2\\n' > remote.log
+# Each meter listens once it has printed a report; it has counted a replay once its frames
+# add up to the log's (then one report more shows nothing after it). 10 s at most each.
+reports() { awk 'NF==5' $1 | wc -l; }
+counted() { awk 'NF==5 {f+=$2} END {print f+0}' $1; }
+listening() { for i in $(seq 100); do [ $(reports c.txt) -ge 1 ] && [ $(reports b.txt) -ge 1 ] && return; sleep 0.1; done; }
+replayed() { for i in $(seq 100); do [ $(counted c.txt) -ge $1 ] && [ $(counted b.txt) -ge $1 ] && return; sleep 0.1; done; }
 for log in traffic remote; do for m in -e -i x; do
   flag=$m; [ $m = x ] && flag=
   canbusload $flag vcan0@500000 > c.txt & P1=$!
   $B busload $flag vcan0@500000 > b.txt & P2=$!
-  sleep 2; canplayer -I $log.log; sleep 1.3
+  listening; canplayer -I $log.log
+  replayed $(grep -c '^(' $log.log); sleep 1.2
   kill $P1; kill -INT $P2; sleep 0.3
   echo \"== $log $m\"; awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' c.txt b.txt
   awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' b.txt
@@ -239,7 +246,10 @@ echo '== end'
     for mode in ["-e", "-i"] {
         let (theirs, ours) = totals(&format!("traffic {mode}"));
         assert!(theirs[0] >= 100, "{out}");
-        assert_eq!(ours, theirs, "frames, bits, payload bits with {mode}");
+        assert_eq!(
+            ours, theirs,
+            "frames, bits, payload bits with {mode}: {out}"
+        );
     }
     // Worst case: canbusload uses a closed-form bound on the stuff bits; ours is the true
     // maximum over every identifier and payload of each format and DLC, never above it.

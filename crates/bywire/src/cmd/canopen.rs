@@ -434,7 +434,9 @@ fn nmt(
         return Ok(());
     }
     master.monitor(node, wait.max(Duration::from_millis(1)));
-    // After a reset the node boots (boot-up message) and reports pre-operational.
+    // After a reset the node boots (boot-up message) and reports pre-operational: only the
+    // states its heartbeats report after the boot-up count (one from before the reset, or the
+    // boot-up's own "initialising", may come first, in a batch of its own on a loaded machine).
     let resets = command.target() == NmtState::BootUp;
     let mut booted = false;
     let mut seen = None;
@@ -448,10 +450,11 @@ fn nmt(
             while let Some(event) = m.next_event() {
                 match event {
                     MasterEvent::Heartbeat(HeartbeatEvent::BootUp { node: n }) if n == node => {
-                        booted = true
+                        booted = true;
+                        seen = None;
                     }
                     MasterEvent::Heartbeat(HeartbeatEvent::StateChanged { node: n, state })
-                        if n == node =>
+                        if n == node && (booted || !resets) && state != NmtState::BootUp =>
                     {
                         seen = Some(state)
                     }
