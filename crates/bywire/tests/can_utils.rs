@@ -221,12 +221,13 @@ replayed() { for i in $(seq 100); do [ $(counted c.txt) -ge $1 ] && [ $(counted 
 for log in traffic remote; do for m in -e -i x; do
   flag=$m; [ $m = x ] && flag=
   canbusload $flag vcan0@500000 > c.txt & P1=$!
-  $B busload $flag vcan0@500000 > b.txt & P2=$!
+  $B busload $flag vcan0@500000 > b.txt 2> b.err & P2=$!
   listening; canplayer -I $log.log
   replayed $(grep -c '^(' $log.log); sleep 1.2
   kill $P1; kill -INT $P2; sleep 0.3
   echo \"== $log $m\"; awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' c.txt b.txt
   awk 'NF==5 {f+=$2; b+=$3; p+=$4} END {print f, b, p}' b.txt
+  cat b.err
 done; done
 echo '== end'
 ";
