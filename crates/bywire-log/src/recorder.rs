@@ -697,9 +697,15 @@ mod tests {
     }
 
     fn metadata(path: &Path) -> serde_json::Value {
-        let mut name = path.as_os_str().to_owned();
-        name.push(".json");
-        serde_json::from_str(&std::fs::read_to_string(name).unwrap()).unwrap()
+        serde_json::from_str(&std::fs::read_to_string(sidecar(path)).unwrap()).unwrap()
+    }
+
+    /// The names in `dir`.
+    fn names(dir: &Path) -> Vec<std::ffi::OsString> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect()
     }
 
     #[test]
@@ -863,12 +869,8 @@ mod tests {
         std::fs::create_dir(dir.join("run-0001.blf.json.tmp")).unwrap();
         let mut recorder = Recorder::new(config(dir, Format::Blf, Layout::Merged)).unwrap();
         assert!(recorder.record(record(0, 1)).is_err());
-        let names: Vec<_> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
         // Only the folder in the way: no log, no metadata, no partial file.
-        assert_eq!(names, ["run-0001.blf.json.tmp"]);
+        assert_eq!(names(dir), ["run-0001.blf.json.tmp"]);
     }
 
     #[test]
@@ -883,11 +885,7 @@ mod tests {
             let text = error.to_string();
             assert!(text.contains(&format!("{taken} exists")), "{text}");
             assert_eq!(std::fs::read_to_string(dir.join(taken)).unwrap(), "kept");
-            let names: Vec<_> = std::fs::read_dir(dir)
-                .unwrap()
-                .map(|e| e.unwrap().file_name())
-                .collect();
-            assert_eq!(names.len(), 1, "{taken}: {names:?}");
+            assert_eq!(names(dir), [taken], "{taken}");
         }
     }
 
