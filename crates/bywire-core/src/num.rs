@@ -4,6 +4,30 @@
 /// 2^52: from here on every `f64` is a whole number.
 const WHOLE_FROM: f64 = 4_503_599_627_370_496.0;
 
+/// A number as a message shows it (an `f64` or an `f32`, printed as that type prints it):
+/// as Rust prints it while that is short, in exponent form from 10^15 or below 10^-4 (a unit
+/// mistake of 1e100 is not echoed as 101 digits).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Short<T>(pub T);
+
+macro_rules! short_display {
+    ($($float:ty),*) => {$(
+        impl core::fmt::Display for Short<$float> {
+            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                let magnitude = self.0.abs();
+                if magnitude.is_finite() && magnitude != 0.0 && !(1e-4..1e15).contains(&magnitude)
+                {
+                    write!(f, "{:e}", self.0)
+                } else {
+                    write!(f, "{}", self.0)
+                }
+            }
+        }
+    )*};
+}
+
+short_display!(f32, f64);
+
 /// `value` rounded to the nearest integer, halves away from zero, saturating at the ends of
 /// `i64` (NaN is 0): exactly `libm::round(value) as i64`. Written out because a general
 /// rounding function works on the float's bits for every magnitude (tens of instructions, a

@@ -77,3 +77,23 @@ proptest! {
         prop_assert_eq!(round_to_i32(value), reference_i32(value));
     }
 }
+
+#[test]
+fn messages_show_unit_mistakes_in_exponent_form() {
+    use bywire_core::num::Short;
+    assert_eq!(Short(1e100).to_string(), "1e100");
+    assert_eq!(Short(-3e30).to_string(), "-3e30");
+    assert_eq!(Short(1.5e-7).to_string(), "1.5e-7");
+    for (value, shown) in [
+        (0.0, "0"),
+        (-4.1, "-4.1"),
+        (172.0, "172"),
+        (f64::NAN, "NaN"),
+    ] {
+        assert_eq!(Short(value).to_string(), shown);
+    }
+    assert_eq!(Short(f64::NEG_INFINITY).to_string(), "-inf");
+    // An f32 as it was sent, not as widened (1e30f32 is 1.0000000150474662e30 as an f64).
+    assert_eq!(Short(1e30f32).to_string(), "1e30");
+    assert_eq!(Short(-2.5f32).to_string(), "-2.5");
+}

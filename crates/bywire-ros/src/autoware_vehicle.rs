@@ -7,9 +7,11 @@
 //! curvature 2 tan δf / L; the same path wants δf = atan(tan δ / 2), and the angle reported back
 //! is the bicycle's equivalent. In crab mode the angle is the direction of travel; in a tank
 //! turn there is no steering angle (the speed is the wheels' speed about the centre). Commands
-//! beyond the profile's limits are refused, never clamped.
+//! beyond the profile's limits are refused, never clamped; a brake beyond the vehicle's is its
+//! hardest.
 
 use bywire_control::kinematics::{four_wheel, WheelState};
+use bywire_core::num::Short;
 use bywire_core::Timestamp;
 use bywire_vehicle::ads::{AdsCommand, VehicleState};
 use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
@@ -64,34 +66,141 @@ pub fn brake_percent(acceleration: f64, max_deceleration: f64) -> f64 {
     }
 }
 
+/// A command mapped from an Autoware input, and what was taken as less than asked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mapped {
+    /// The command to send.
+    pub command: AdsCommand,
+    /// Set when a brake beyond the vehicle's was taken as its hardest.
+    pub warning: Option<String>,
+}
+
+/// The largest tire angle (rad) Autoware may ask for in `mode`: the profile's steering limit
+/// as a bicycle's tire angle. A tank turn takes no angle; its commands are checked as normal
+/// steering's.
+pub fn largest_tire_angle(mode: SteeringMode, g: &Geometry, limits: &Limits) -> f64 {
+    let mode = match mode {
+        SteeringMode::Tank => SteeringMode::Normal,
+        other => other,
+    };
+    tire_angle(limits.steering_deg, mode, g)
+}
+
 /// The command for an Autoware `Control`, from the previous one (gear, modes and requests
-/// kept), or why it is refused.
+/// kept), or why it is refused. Every field is checked before any conversion, in Autoware's
+/// own terms: the tire angle within the profile's limit as a tire angle (and within ±90°,
+/// beyond which the 4WS mapping's tangent would wrap to another, often reversed, angle), the
+/// rotation rate within the profile's steering rate, the velocity within its speed, the
+/// acceleration within its deceleration either way. A deceleration beyond the vehicle's is
+/// a request to brake as hard as it can: a stop at full brake, with a warning.
 pub fn from_control(
     control: &msg::Control,
     previous: AdsCommand,
     g: &Geometry,
     limits: &Limits,
-) -> Result<AdsCommand, String> {
-    let angle = f64::from(control.lateral.steering_tire_angle);
-    let velocity = f64::from(control.longitudinal.velocity);
-    let acceleration = f64::from(control.longitudinal.acceleration);
-    for (name, value) in [
-        ("steering_tire_angle", angle),
-        ("velocity", velocity),
-        ("acceleration", acceleration),
+) -> Result<Mapped, String> {
+    let lateral = &control.lateral;
+    let longitudinal = &control.longitudinal;
+    let angle = f64::from(lateral.steering_tire_angle);
+    let rate = f64::from(lateral.steering_tire_rotation_rate);
+    let velocity = f64::from(longitudinal.velocity);
+    let acceleration = f64::from(longitudinal.acceleration);
+    let jerk = f64::from(longitudinal.jerk);
+    for (name, value, defined) in [
+        ("steering_tire_angle", angle, true),
+        (
+            "steering_tire_rotation_rate",
+            rate,
+            lateral.is_defined_steering_tire_rotation_rate,
+        ),
+        ("velocity", velocity, true),
+        (
+            "acceleration",
+            acceleration,
+            longitudinal.is_defined_acceleration,
+        ),
+        ("jerk", jerk, longitudinal.is_defined_jerk),
     ] {
-        if !value.is_finite() {
+        // −∞ m/s² is the one infinity with a meaning: brake as hard as the vehicle can.
+        let braking = name == "acceleration" && value == f64::NEG_INFINITY;
+        if defined && !value.is_finite() && !braking {
             return Err(format!("{name} is not finite"));
         }
     }
+    let mode = previous.steering_mode;
+    let largest_angle = largest_tire_angle(mode, g, limits);
+    if !(angle.abs() < core::f64::consts::FRAC_PI_2 && angle.abs() <= largest_angle) {
+        return Err(format!(
+            "steering_tire_angle {} rad: beyond ±{:.4} rad (this vehicle's ±{}° in {mode} \
+             steering)",
+            Short(lateral.steering_tire_angle),
+            largest_angle,
+            limits.steering_deg
+        ));
+    }
+    // The mapping's slope is at most 2 (4WS counter-phase, near straight ahead).
+    let per_axle = if g.four_wheel_steer && mode != SteeringMode::Crab {
+        2.0
+    } else {
+        1.0
+    };
+    let largest_rate = limits.steering_rate_deg_s.to_radians() * per_axle;
+    if lateral.is_defined_steering_tire_rotation_rate && rate.abs() > largest_rate {
+        return Err(format!(
+            "steering_tire_rotation_rate {} rad/s: beyond ±{largest_rate:.4} rad/s",
+            Short(lateral.steering_tire_rotation_rate)
+        ));
+    }
+    if velocity.abs() > limits.speed_m_s {
+        return Err(format!(
+            "velocity {} m/s: beyond ±{} m/s",
+            Short(longitudinal.velocity),
+            limits.speed_m_s
+        ));
+    }
+    let acceleration = if longitudinal.is_defined_acceleration {
+        acceleration
+    } else {
+        0.0
+    };
+    if acceleration > limits.deceleration_m_s2 {
+        return Err(format!(
+            "acceleration {} m/s²: beyond this vehicle's {} m/s²",
+            Short(longitudinal.acceleration),
+            limits.deceleration_m_s2
+        ));
+    }
+    let steering = steering_command(angle, mode, g);
+    if acceleration < -limits.deceleration_m_s2 {
+        let warning = format!(
+            "acceleration {} m/s²: a deceleration beyond this vehicle's {} m/s², braking as \
+             hard as it can (a stop at full brake)",
+            Short(longitudinal.acceleration),
+            limits.deceleration_m_s2
+        );
+        let command = AdsCommand {
+            steering,
+            velocity: 0.0,
+            brake: 100.0,
+            ..previous
+        };
+        limits.check(&command)?;
+        return Ok(Mapped {
+            command,
+            warning: Some(warning),
+        });
+    }
     let command = AdsCommand {
-        steering: steering_command(angle, previous.steering_mode, g),
+        steering,
         velocity,
         brake: brake_percent(acceleration, limits.deceleration_m_s2),
         ..previous
     };
     limits.check(&command)?;
-    Ok(command)
+    Ok(Mapped {
+        command,
+        warning: None,
+    })
 }
 
 /// Below this a twist component counts as zero.
@@ -355,7 +464,9 @@ mod tests {
     #[test]
     fn control_messages_are_checked_and_refused_not_clamped() {
         let c = crate::control_output::control(0.2, 0.0, 2.0, -2.0, 0);
-        let command = from_control(&c, AdsCommand::default(), &TUG, &limits()).unwrap();
+        let command = from_control(&c, AdsCommand::default(), &TUG, &limits())
+            .unwrap()
+            .command;
         assert_eq!(command.velocity, 2.0);
         assert_eq!(command.brake, 50.0);
         let too_fast = crate::control_output::control(0.0, 0.0, 6.0, 0.0, 0);
@@ -373,6 +484,95 @@ mod tests {
         assert!(from_control(&wide, command, &TUG, &limits()).is_ok());
         let wider = crate::control_output::control(1.1, 0.0, 1.0, 0.0, 0);
         assert!(from_control(&wider, command, &TUG, &limits()).is_err());
+    }
+
+    /// Every field of a `Control`, out of range, not finite, or in the wrong unit: refused
+    /// before any conversion, or (a deceleration beyond the vehicle's) a stop at full brake.
+    #[test]
+    fn every_control_field_is_range_checked_before_conversion() {
+        use crate::control_output::control;
+        let previous = AdsCommand::default();
+        let map = |c: &msg::Control| from_control(c, previous, &TUG, &limits());
+        let refused = |c: &msg::Control, says: &str| {
+            let why = map(c).unwrap_err();
+            assert!(why.contains(says), "{why} (wanted {says})");
+        };
+        // Degrees sent as radians, or a wrapped angle: the 4WS tangent would have turned
+        // 3.0 rad into -4.1°, 2.5 rad into -20.5° and 100 rad into -16.4°.
+        for angle in [
+            3.0,
+            2.5,
+            100.0,
+            -3.0,
+            1.6,
+            core::f32::consts::FRAC_PI_2,
+            1.04,
+        ] {
+            refused(&control(angle, 0.0, 1.0, 0.0, 0), "steering_tire_angle");
+        }
+        assert!(map(&control(1.03, 0.0, 1.0, 0.0, 0)).is_ok());
+        // Front-steered, in crab and in tank mode the limit is the profile's own angle.
+        let front_steered = Geometry {
+            four_wheel_steer: false,
+            ..TUG
+        };
+        let crab = AdsCommand {
+            steering_mode: SteeringMode::Crab,
+            ..previous
+        };
+        for (g, p) in [(&front_steered, previous), (&TUG, crab)] {
+            assert!(from_control(&control(0.69, 0.0, 1.0, 0.0, 0), p, g, &limits()).is_ok());
+            assert!(from_control(&control(0.71, 0.0, 1.0, 0.0, 0), p, g, &limits()).is_err());
+        }
+        let tank = AdsCommand {
+            steering_mode: SteeringMode::Tank,
+            ..previous
+        };
+        assert!(from_control(&control(3.0, 0.0, 1.0, 0.0, 0), tank, &TUG, &limits()).is_err());
+        // 30°/s sent as 30 rad/s; the tire's rate may be twice the wheel's in counter-phase.
+        refused(
+            &control(0.0, 30.0, 1.0, 0.0, 0),
+            "steering_tire_rotation_rate 30",
+        );
+        assert!(map(&control(0.0, 1.04, 1.0, 0.0, 0)).is_ok());
+        refused(
+            &control(0.0, f32::INFINITY, 1.0, 0.0, 0),
+            "rotation_rate is not finite",
+        );
+        // 18 km/h sent for 5 m/s.
+        refused(&control(0.0, 0.0, 18.0, 0.0, 0), "velocity 18");
+        refused(
+            &control(0.0, 0.0, f32::NAN, 0.0, 0),
+            "velocity is not finite",
+        );
+        refused(
+            &control(0.0, 0.0, 1.0, 1e30, 0),
+            "acceleration 1e30 m/s²: beyond",
+        );
+        refused(&control(0.0, 0.0, 1.0, 4.5, 0), "acceleration 4.5");
+        refused(
+            &control(0.0, 0.0, 1.0, f32::NAN, 0),
+            "acceleration is not finite",
+        );
+        refused(
+            &control(0.0, 0.0, 1.0, f32::INFINITY, 0),
+            "acceleration is not finite",
+        );
+        let mut jerky = control(0.0, 0.0, 1.0, 0.0, 0);
+        jerky.longitudinal.jerk = f32::NAN;
+        assert!(map(&jerky).is_ok(), "an undefined jerk is not looked at");
+        jerky.longitudinal.is_defined_jerk = true;
+        refused(&jerky, "jerk is not finite");
+        // Braking harder than the vehicle can is braking as hard as it can: a stop, never
+        // full brake beside a speed to keep.
+        for acceleration in [f32::NEG_INFINITY, -1e30, -9.81, -4.5] {
+            let stop = map(&control(0.1, 0.0, 1.5, acceleration, 0)).unwrap();
+            assert_eq!((stop.command.velocity, stop.command.brake), (0.0, 100.0));
+            assert!(stop.warning.unwrap().contains("braking as hard as it can"));
+        }
+        let firm = map(&control(0.1, 0.0, 1.5, -4.0, 0)).unwrap();
+        assert_eq!((firm.command.velocity, firm.command.brake), (1.5, 100.0));
+        assert_eq!(firm.warning, None);
     }
 
     fn twist(vx: f64, vy: f64, wz: f64) -> Twist {

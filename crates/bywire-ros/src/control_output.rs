@@ -4,6 +4,7 @@
 //! nowhere (neither a frame nor a sample), and is reported.
 
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use bywire_bus::{Bus, BusError};
 use bywire_vehicle::autoware::{self, Output, OutputMode, Refused};
@@ -54,6 +55,10 @@ pub enum Outcome {
     Refused(Refused),
     /// The bus failed.
     BusLost(String),
+    /// Sent as a stop at the largest deceleration: it asked to brake harder (why).
+    Saturated(String),
+    /// A sample that could not be read (why); nothing of it was sent.
+    Unreadable(String),
 }
 
 /// Validity flags of a command that is sent: its steering (bit 0) and its longitudinal part
@@ -76,8 +81,15 @@ pub fn from_ros(message: &Control) -> (autoware::Control, u8, u32) {
     (control, validity, stamp_ms)
 }
 
+/// How long the end of a run commands a stop.
+pub const FINAL_BRAKING: Duration = Duration::from_secs(1);
+/// The stop's period while it lasts: Autoware's control rate.
+const FINAL_BRAKING_PERIOD: Duration = Duration::from_millis(33);
+
 /// Run until `stop`: every `Control` from `config.input` goes out as `config.mode` says;
-/// `report` hears each command's outcome. Ends with an error when the bus fails.
+/// `report` hears each command's outcome. However the run ends — `stop` (a signal), the DDS
+/// side failing — a vehicle that was commanded gets a stop at the largest deceleration for
+/// [`FINAL_BRAKING`], during which no input is taken. Ends with an error when the bus fails.
 pub fn run(
     node: &mut RosNode,
     bus: Box<dyn Bus>,
@@ -93,65 +105,196 @@ pub fn run(
             Some(node.publisher::<Control>(&config.output, &qos)?)
         }
     };
-    let (mut tx, _rx) = bus.split();
-    let mut output = Output::new(config.mode, config.limits);
+    let (tx, _rx) = bus.split();
+    let mut sink = Sink {
+        tx,
+        publisher,
+        output: Output::new(config.mode, config.limits),
+        mode_byte: config.mode_byte,
+        last: None,
+    };
     let io = |e: std::io::Error| RosError::Create(format!("polling the subscription: {e}"));
     let mut poll = mio1::Poll::new().map_err(io)?;
     poll.registry()
         .register(&mut input, mio1::Token(0), mio1::Interest::READABLE)
         .map_err(io)?;
     let mut events = mio1::Events::with_capacity(4);
-    while !stop.load(Ordering::Relaxed) {
+    let ended = loop {
+        if stop.load(Ordering::Relaxed) {
+            break Ok(());
+        }
         if let Err(e) = poll.poll(&mut events, Some(POLL_SLICE)) {
             if e.kind() != std::io::ErrorKind::Interrupted {
-                return Err(io(e));
+                break Err(SinkError::Other(io(e)));
             }
         }
-        for _ in 0..TAKE_BATCH {
-            let Ok(Some((message, _))) = input.take() else {
-                break;
-            };
-            let (control, validity, stamp_ms) = from_ros(&message);
-            let mut frames = Vec::with_capacity(3);
-            let mut republish = false;
-            let sent = output.send(
-                &control,
-                config.mode_byte,
-                validity,
-                stamp_ms,
-                &mut |frame| frames.push(frame),
-                &mut |_, _| republish = true,
+        if let Err(e) = take_batch(&input, &mut sink, report) {
+            break Err(e);
+        }
+    };
+    match ended {
+        // A failed bus takes no stop; anything else ends in one.
+        Err(SinkError::Bus(why)) => Err(RosError::Create(why)),
+        Ok(()) => sink.final_braking(),
+        Err(SinkError::Other(e)) => Err(sink.final_braking().err().unwrap_or(e)),
+    }
+}
+
+/// Where commands go, and the last one sent.
+struct Sink {
+    tx: Box<dyn bywire_bus::BusTx>,
+    publisher: Option<ros2_client::Publisher<Control>>,
+    output: Output,
+    mode_byte: u8,
+    last: Option<Control>,
+}
+
+enum SinkError {
+    /// The bus failed (why): nothing more can be sent on it.
+    Bus(String),
+    /// Anything else.
+    Other(RosError),
+}
+
+impl From<RosError> for SinkError {
+    fn from(e: RosError) -> Self {
+        SinkError::Other(e)
+    }
+}
+
+/// Take the commands waiting, at most a batch.
+fn take_batch(
+    input: &ros2_client::Subscription<Control>,
+    sink: &mut Sink,
+    report: &mut dyn FnMut(&Control, Outcome),
+) -> Result<(), SinkError> {
+    for _ in 0..TAKE_BATCH {
+        let message = match input.take() {
+            Ok(Some((message, _))) => message,
+            Ok(None) => break,
+            // The reader has moved past it; nothing of it is sent.
+            Err(e) => {
+                report(&Control::default(), Outcome::Unreadable(format!("{e:?}")));
+                continue;
+            }
+        };
+        let limits = sink.output.limits;
+        let (_, saturated) = limits.braking_at_most(from_ros(&message).0);
+        if saturated {
+            report(
+                &message,
+                Outcome::Saturated(format!(
+                    "acceleration {} m/s²: beyond the largest deceleration, braking as hard as \
+                     the vehicle can (a stop at {} m/s²)",
+                    bywire_core::num::Short(message.longitudinal.acceleration),
+                    -limits.acceleration
+                )),
             );
-            let sequence = match sent {
-                Ok(sequence) => sequence,
-                Err(refused) => {
-                    report(&message, Outcome::Refused(refused));
-                    continue;
+        }
+        // What is sent and republished is what the vehicle is asked: the stop, if it was one.
+        let message = if saturated {
+            stop_of(&message, limits.acceleration)
+        } else {
+            message
+        };
+        let (control, validity, stamp_ms) = from_ros(&message);
+        match sink.send(&control, &message, validity, stamp_ms) {
+            Ok(Ok(sequence)) => report(&message, Outcome::Sent(sequence)),
+            Ok(Err(refused)) => report(&message, Outcome::Refused(refused)),
+            Err(e) => {
+                if let SinkError::Bus(why) = &e {
+                    report(&message, Outcome::BusLost(why.clone()));
                 }
-            };
-            for frame in &frames {
-                match tx.send(frame) {
-                    Ok(()) => {}
-                    Err(BusError::Unsupported(why)) => {
-                        return Err(RosError::Create(format!("the bus cannot send {why}")))
-                    }
-                    Err(e) => {
-                        report(&message, Outcome::BusLost(e.to_string()));
-                        return Err(RosError::Create(format!("the bus failed: {e}")));
-                    }
-                }
+                return Err(e);
             }
-            if republish {
-                if let Some(publisher) = &publisher {
-                    if let Err(e) = publisher.publish(message) {
-                        return Err(RosError::Create(format!("publishing: {e:?}")));
-                    }
-                }
-            }
-            report(&message, Outcome::Sent(sequence));
         }
     }
     Ok(())
+}
+
+impl Sink {
+    /// Send one command (and republish `message` in the DDS modes): its sequence, why it was
+    /// refused, or what failed.
+    fn send(
+        &mut self,
+        control: &autoware::Control,
+        message: &Control,
+        validity: u8,
+        stamp_ms: u32,
+    ) -> Result<Result<u16, Refused>, SinkError> {
+        let mut frames = Vec::with_capacity(3);
+        let mut republish = false;
+        let sent = self.output.send(
+            control,
+            self.mode_byte,
+            validity,
+            stamp_ms,
+            &mut |frame| frames.push(frame),
+            &mut |_, _| republish = true,
+        );
+        let sequence = match sent {
+            Ok(sequence) => sequence,
+            Err(refused) => return Ok(Err(refused)),
+        };
+        for frame in &frames {
+            match self.tx.send(frame) {
+                Ok(()) => {}
+                Err(BusError::Unsupported(why)) => {
+                    return Err(SinkError::Bus(format!("the bus cannot send {why}")))
+                }
+                Err(e) => return Err(SinkError::Bus(format!("the bus failed: {e}"))),
+            }
+        }
+        if republish {
+            if let Some(publisher) = &self.publisher {
+                publisher.publish(*message).map_err(|e| {
+                    SinkError::Other(RosError::Create(format!("publishing: {e:?}")))
+                })?;
+            }
+        }
+        self.last = Some(*message);
+        Ok(Ok(sequence))
+    }
+
+    /// The end of a run: the last command's steering at zero speed and the largest
+    /// deceleration, for [`FINAL_BRAKING`] (none where nothing was ever sent).
+    fn final_braking(&mut self) -> Result<(), RosError> {
+        let Some(last) = self.last else {
+            return Ok(());
+        };
+        let start = std::time::Instant::now();
+        let stop = stop_of(&last, self.output.limits.acceleration);
+        let (control, validity, stamp_ms) = from_ros(&stop);
+        let mut failed = None;
+        // Bounded: one command a period for the braking's length.
+        let periods = FINAL_BRAKING.as_millis() / FINAL_BRAKING_PERIOD.as_millis() + 1;
+        for period in 0..periods {
+            let elapsed = u32::try_from(start.elapsed().as_millis()).unwrap_or(u32::MAX);
+            match self.send(&control, &stop, validity, stamp_ms.wrapping_add(elapsed)) {
+                Ok(_) => {}
+                Err(SinkError::Bus(why)) => return Err(RosError::Create(why)),
+                // DDS failing does not stop the stops on the bus.
+                Err(SinkError::Other(e)) => failed = failed.or(Some(e)),
+            }
+            let next =
+                FINAL_BRAKING_PERIOD.saturating_mul(u32::try_from(period + 1).unwrap_or(u32::MAX));
+            std::thread::sleep(next.saturating_sub(start.elapsed()));
+        }
+        failed.map_or(Ok(()), Err)
+    }
+}
+
+/// `message` as a stop: its steering held (at rest), velocity 0 and the largest `deceleration`.
+fn stop_of(message: &Control, deceleration: f64) -> Control {
+    let mut stop = *message;
+    stop.lateral.steering_tire_rotation_rate = 0.0;
+    stop.longitudinal.velocity = 0.0;
+    // A limit in m/s² is far inside f32's range.
+    #[allow(clippy::cast_possible_truncation)]
+    let deceleration = -deceleration as f32;
+    stop.longitudinal.acceleration = deceleration;
+    stop.longitudinal.is_defined_acceleration = true;
+    stop
 }
 
 /// A `Control` for tests and examples: these setpoints, stamped `stamp_nanos`.

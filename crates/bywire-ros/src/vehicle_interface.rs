@@ -121,6 +121,8 @@ impl Default for VehicleInterfaceConfig {
 pub enum VehicleEvent {
     /// An input was refused (the last valid command goes on aging).
     Refused(String),
+    /// A brake beyond the vehicle's was taken as its hardest.
+    Saturated(String),
     /// An engage or disengage request and its answer.
     ModeRequest {
         /// The requested Autoware mode.
@@ -204,9 +206,12 @@ impl VehicleInterface<'_> {
     }
 
     /// Take a new command (or refuse it) and hand it to the node.
-    fn command(&mut self, ads: &mut AdsSide, now: Timestamp, next: Result<AdsCommand, String>) {
+    fn command(&mut self, ads: &mut AdsSide, now: Timestamp, next: Result<map::Mapped, String>) {
         match next {
-            Ok(command) => {
+            Ok(map::Mapped { command, warning }) => {
+                if let Some(warning) = warning {
+                    (self.report)(VehicleEvent::Saturated(warning));
+                }
                 self.command = command;
                 self.commanding = true;
                 self.send(ads, now);
@@ -252,7 +257,11 @@ impl VehicleInterface<'_> {
             let Ok(Some((m, _))) = self.inputs.cmd_vel.take() else {
                 break;
             };
-            let next = map::from_twist(&m, self.command, &g, &self.limits);
+            let next =
+                map::from_twist(&m, self.command, &g, &self.limits).map(|command| map::Mapped {
+                    command,
+                    warning: None,
+                });
             self.command(ads, now, next);
         }
         for _ in 0..TAKE_BATCH {

@@ -75,6 +75,25 @@ impl Default for Limits {
     }
 }
 
+impl Limits {
+    /// A command that asks to decelerate harder than the limit allows (down to −∞) asks to
+    /// brake as hard as the vehicle can: it comes back as a stop (velocity 0) at the largest
+    /// deceleration, and `true`. Any other command comes back as it is (NaN included: the
+    /// encoder refuses it).
+    pub fn braking_at_most(&self, control: Control) -> (Control, bool) {
+        if control.acceleration < -self.acceleration {
+            let stop = Control {
+                velocity: 0.0,
+                acceleration: -self.acceleration,
+                ..control
+            };
+            (stop, true)
+        } else {
+            (control, false)
+        }
+    }
+}
+
 /// Why a command was not sent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Refused {

@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
+use bywire_core::num::Short;
 use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
@@ -243,31 +244,79 @@ impl Limits {
         if !within(c.steering, self.steering_deg) {
             return Err(format!(
                 "steering {}: beyond ±{} degrees",
-                c.steering, self.steering_deg
+                Short(c.steering),
+                self.steering_deg
             ));
         }
         if !within(c.velocity, self.speed_m_s) {
             return Err(format!(
                 "velocity {}: beyond ±{} m/s",
-                c.velocity, self.speed_m_s
+                Short(c.velocity),
+                self.speed_m_s
             ));
         }
         if !(c.brake.is_finite() && (0.0..=100.0).contains(&c.brake)) {
-            return Err(format!("brake {}: not within 0–100 %", c.brake));
+            return Err(format!("brake {}: not within 0–100 %", Short(c.brake)));
         }
         Ok(())
     }
 
-    /// Refuse an emergency-brake deceleration that is not positive or beyond the vehicle's.
-    pub fn check_deceleration(&self, deceleration: f64) -> Result<(), String> {
-        if deceleration.is_finite() && deceleration > 0.0 && deceleration <= self.deceleration_m_s2
-        {
-            Ok(())
-        } else {
-            Err(format!(
-                "emergency_brake {deceleration}: not within 0–{} m/s²",
+    /// A brake request, %: one beyond 100 % is a request to brake as hard as the vehicle can,
+    /// so it is taken as 100 % with a warning; one below 0 % or not a number is refused.
+    pub fn brake_request(&self, brake: f64) -> Result<Saturated, String> {
+        if brake.is_nan() || brake < 0.0 {
+            return Err(format!("brake {}: not within 0–100 %", Short(brake)));
+        }
+        Ok(Saturated::at_most(brake, 100.0, "brake", "%"))
+    }
+
+    /// An emergency-brake deceleration, m/s²: one beyond the vehicle's largest is a request to
+    /// brake as hard as it can, so it is taken as the largest with a warning; zero, a negative
+    /// value or not a number asks for no braking the vehicle can do, and is refused.
+    pub fn emergency_deceleration(&self, deceleration: f64) -> Result<Saturated, String> {
+        if deceleration.is_nan() || deceleration <= 0.0 {
+            return Err(format!(
+                "emergency_brake {}: a deceleration above 0 m/s² is needed (this vehicle \
+                 brakes at up to {} m/s²)",
+                Short(deceleration),
                 self.deceleration_m_s2
-            ))
+            ));
+        }
+        Ok(Saturated::at_most(
+            deceleration,
+            self.deceleration_m_s2,
+            "emergency_brake",
+            "m/s²",
+        ))
+    }
+}
+
+/// A stop or brake request as the vehicle can carry it out, and the warning to give when it
+/// asked for more.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Saturated {
+    /// The value to command.
+    pub value: f64,
+    /// Set when the request was beyond what the vehicle can do and was taken as its most.
+    pub warning: Option<String>,
+}
+
+impl Saturated {
+    fn at_most(requested: f64, most: f64, field: &str, unit: &str) -> Saturated {
+        if requested > most {
+            Saturated {
+                value: most,
+                warning: Some(format!(
+                    "{field} {}: beyond this vehicle's {most} {unit}, braking as hard as it can \
+                     ({most} {unit})",
+                    Short(requested)
+                )),
+            }
+        } else {
+            Saturated {
+                value: requested,
+                warning: None,
+            }
         }
     }
 }

@@ -197,3 +197,26 @@ for line in sys.stdin:
     assert_eq!(value("TimestampMs"), f64::from(0x0102_0304));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn braking_harder_than_the_limit_is_a_stop_at_the_largest_deceleration() {
+    let limits = Limits::default();
+    for asked in [-10.5, -1e30, f64::NEG_INFINITY] {
+        let (stop, saturated) = limits.braking_at_most(Control {
+            acceleration: asked,
+            ..control()
+        });
+        assert!(saturated, "{asked}");
+        assert_eq!((stop.velocity, stop.acceleration), (0.0, -10.0));
+        assert_eq!(stop.steering_tire_angle, control().steering_tire_angle);
+    }
+    for kept in [-10.0, -1.0, 3.0, f64::NAN] {
+        let asked = Control {
+            acceleration: kept,
+            ..control()
+        };
+        let (same, saturated) = limits.braking_at_most(asked);
+        assert!(!saturated);
+        assert_eq!(same.acceleration.to_bits(), kept.to_bits());
+    }
+}

@@ -143,3 +143,35 @@ fn toml_mistakes_are_refused_with_their_position() {
     let e = error("name = \"x\"\n");
     assert!(e.contains("missing field"), "{e}");
 }
+
+#[test]
+fn a_stop_harder_than_the_vehicle_can_is_braking_as_hard_as_it_can() {
+    let limits = bywire_tug::profile().unwrap().profile.limits;
+    let most = limits.deceleration_m_s2;
+    for asked in [most + 1.0, 9.81, 1e30, f64::INFINITY] {
+        let taken = limits.emergency_deceleration(asked).unwrap();
+        assert_eq!(taken.value, most, "{asked}");
+        let warning = taken.warning.unwrap();
+        assert!(warning.contains("braking as hard as it can"), "{warning}");
+    }
+    assert_eq!(limits.emergency_deceleration(1e100).unwrap().warning.unwrap(),
+        format!("emergency_brake 1e100: beyond this vehicle's {most} m/s², braking as hard as it can ({most} m/s²)"));
+    let within = limits.emergency_deceleration(most / 2.0).unwrap();
+    assert_eq!((within.value, within.warning), (most / 2.0, None));
+    for refused in [0.0, -1.0, f64::NAN, f64::NEG_INFINITY] {
+        let why = limits.emergency_deceleration(refused).unwrap_err();
+        assert!(
+            why.contains("a deceleration above 0 m/s² is needed"),
+            "{why}"
+        );
+    }
+    let brake = limits.brake_request(250.0).unwrap();
+    assert_eq!(brake.value, 100.0);
+    assert!(brake
+        .warning
+        .unwrap()
+        .starts_with("brake 250: beyond this vehicle's 100 %"));
+    assert_eq!(limits.brake_request(35.0).unwrap().value, 35.0);
+    assert!(limits.brake_request(-1.0).is_err());
+    assert!(limits.brake_request(f64::NAN).is_err());
+}

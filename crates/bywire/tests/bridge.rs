@@ -528,3 +528,180 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
         .unwrap();
     assert!(kept > 100, "{kept}");
 }
+
+/// What a driving bridge is made to do once the vehicle drives.
+enum Then {
+    /// Sent a signal (by `kill -SIGNAL`), its input still flowing.
+    Signal(&'static str),
+    /// Given this line, then driven on for two seconds.
+    Line(&'static str),
+}
+
+/// The reference tug driven at 1.5 m/s by a bridge with `--estop-on-eof` until it drives,
+/// then `then`, the drive lines flowing on until the bridge ends (15 s at most).
+fn drive_then(bus: &str, then: Then) -> Run {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "bridge",
+            "--profile",
+            "reference-tug",
+            bus,
+            "--with-vehicle",
+            "--estop-on-eof",
+            "--rate",
+            "20",
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let driving = Arc::new(AtomicBool::new(false));
+    let reader = {
+        let driving = Arc::clone(&driving);
+        std::thread::spawn(move || {
+            let mut lines = Vec::new();
+            for line in BufReader::new(stdout).lines() {
+                let line: Value = serde_json::from_str(&line.unwrap()).unwrap();
+                if line["mode"] == "autonomous" && line["velocity"] == 1.5 {
+                    driving.store(true, Ordering::Relaxed);
+                }
+                lines.push(line);
+            }
+            lines
+        })
+    };
+    let drive = "{\"velocity\": 1.5, \"gear\": \"drive\", \"mode\": \"autonomous\"}\n";
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut k = 0usize;
+    while !driving.load(Ordering::Relaxed) && Instant::now() < deadline {
+        let line = if k > 0 && k.is_multiple_of(20) {
+            format!("{ENGAGE}\n")
+        } else {
+            drive.to_string()
+        };
+        stdin.write_all(line.as_bytes()).unwrap();
+        std::thread::sleep(Duration::from_millis(25));
+        k += 1;
+    }
+    assert!(driving.load(Ordering::Relaxed), "the vehicle never drove");
+    let mut until = Instant::now() + Duration::from_secs(15);
+    match then {
+        Then::Signal(signal) => {
+            let killed = Command::new("kill")
+                .arg(format!("-{signal}"))
+                .arg(child.id().to_string())
+                .status()
+                .unwrap();
+            assert!(killed.success());
+        }
+        Then::Line(line) => {
+            stdin.write_all(format!("{line}\n").as_bytes()).unwrap();
+            until = Instant::now() + Duration::from_secs(2);
+        }
+    }
+    // Commands to drive on keep coming: none may override the stop.
+    while Instant::now() < until && stdin.write_all(drive.as_bytes()).is_ok() {
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    drop(stdin);
+    let lines = reader.join().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    Run { lines, stderr }
+}
+
+/// The lines from the first event of `kind` on.
+fn from_event<'a>(run: &'a Run, kind: &str) -> &'a [Value] {
+    let at = run.lines.iter().position(|l| l["event"] == kind);
+    &run.lines[at.unwrap_or_else(|| panic!("no {kind} event: {:?}", run.lines))..]
+}
+
+/// SIGINT, SIGTERM (as systemd stops a service) and SIGHUP end the bridge as the end of input
+/// does with --estop-on-eof: the braking second, the vehicle stopped, and no drive line taken
+/// meanwhile though they keep coming. (Before, a signal ended the bridge at once, the last
+/// frame on the bus commanding 1.5 m/s.)
+#[test]
+fn a_signal_ends_the_bridge_in_the_safe_stop() {
+    for (signal, bus) in [
+        ("INT", "sim:sig-int@500000"),
+        ("TERM", "sim:sig-term@500000"),
+        ("HUP", "sim:sig-hup@500000"),
+    ] {
+        let run = drive_then(bus, Then::Signal(signal));
+        let after = from_event(&run, "end_of_input");
+        assert!(
+            after[0]["detail"]
+                .as_str()
+                .unwrap()
+                .starts_with("a signal (SIGINT, SIGTERM or SIGHUP): braking for 1 s"),
+            "{:?}",
+            after[0]
+        );
+        assert!(
+            after.iter().any(|l| l["event"] == "ignored"),
+            "SIG{signal}: no drive line was refused while braking"
+        );
+        let states: Vec<&Value> = after.iter().filter(|l| l.get("mode").is_some()).collect();
+        assert_eq!(
+            states.last().unwrap()["velocity"],
+            0.0,
+            "SIG{signal}: {states:?}"
+        );
+    }
+}
+
+/// An emergency brake beyond the vehicle's deceleration is braking as hard as it can: taken at
+/// the profile's 4 m/s² with a warning, and the vehicle stops (it was refused, and the tug drove
+/// on). A setpoint refused on the same line does not cancel the brake.
+#[test]
+fn an_emergency_brake_beyond_the_vehicle_is_its_hardest() {
+    let run = drive_then(
+        "sim:ebrake-hard@500000",
+        Then::Line(r#"{"emergency_brake": 9.81, "velocity": 99}"#),
+    );
+    let after = from_event(&run, "saturated");
+    assert!(
+        after[0]["detail"].as_str().unwrap().contains(
+            "emergency_brake 9.81: beyond this vehicle's 4 m/s², braking as hard as it can"
+        ),
+        "{:?}",
+        after[0]
+    );
+    assert!(after
+        .iter()
+        .any(|l| l["event"] == "emergency_brake" && l["detail"] == "4 m/s²"));
+    assert!(after
+        .iter()
+        .any(|l| l["event"] == "bad_command"
+            && l["detail"].as_str().unwrap().contains("velocity 99")));
+    assert!(
+        run.stderr.contains("braking as hard as it can"),
+        "{}",
+        run.stderr
+    );
+    let states: Vec<&Value> = after.iter().filter(|l| l.get("mode").is_some()).collect();
+    assert!(
+        states.iter().any(|s| s["velocity"] == 0.0),
+        "never stopped: {states:?}"
+    );
+    // Zero is no deceleration: refused with what is wanted, not "not within 0–4".
+    let (code, out, err) = common::bywire(
+        &[
+            "bridge",
+            "--profile",
+            "reference-tug",
+            "virtual:ebrake-zero",
+        ],
+        "{\"emergency_brake\": 0}\n",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("emergency_brake 0: a deceleration above 0 m/s² is needed"),
+        "{err}"
+    );
+    assert!(!out.contains("\"event\":\"emergency_brake\""), "{out}");
+}

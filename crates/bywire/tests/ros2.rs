@@ -134,10 +134,11 @@ fn ros2_can_bridges_a_bus_to_cyclone_dds_both_ways() {
     assert!(out.contains("2 refused"), "{out}");
 }
 
-/// One run of `control-output` in `mode` against the Python peers; (what they saw, stdout,
-/// stderr).
-fn control_output_run(mode: &str, port: u16) -> (Value, String, String) {
+/// One run of `control-output` in `mode` against the Python peers, stopped by SIGTERM; (what
+/// they saw, stdout, stderr, the frames `bywire dump -L` saw on the bus to the end).
+fn control_output_run(mode: &str, port: u16) -> (Value, String, String, String) {
     let bus = format!("udp:239.74.163.2:{port}");
+    let dump = Background::start(&["dump", "-L", &bus]);
     let output = Background::start(&[
         "ros2",
         "control-output",
@@ -157,7 +158,8 @@ fn control_output_run(mode: &str, port: u16) -> (Value, String, String) {
     );
     let (code, out, err) = output.stop();
     assert_eq!(code, 0, "{out}{err}");
-    (seen, out, err)
+    let (_, dumped, _) = dump.stop();
+    (seen, out, err, dumped)
 }
 
 #[test]
@@ -165,18 +167,20 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
     if !inside_lonet("ros2_control_output_emits_the_autoware_frames_in_each_mode") {
         return;
     }
-    // The three accepted commands: angle, rate, velocity, acceleration, stamp (ns).
+    // The four accepted commands: angle, rate, velocity, acceleration, stamp (ns). The last
+    // asked for -1e30 m/s² at 1.5 m/s: braking as hard as the vehicle can, a stop at 10 m/s².
     let accepted = [
         (0.25, -0.5, 2.5, -1.25, 1_700_000_000_123u64),
         (-0.75, 0.125, -1.0, 0.5, 1_700_000_000_223),
         (0.5, 0.0, 3.0, 0.25, 1_700_000_000_623),
+        (0.125, 0.0, 0.0, -10.0, 1_700_000_000_723),
     ];
     for (mode, port, on_can, on_dds) in [
         ("can", 43520, true, false),
         ("dds", 43521, false, true),
         ("dds-and-can", 43522, true, true),
     ] {
-        let (seen, out, err) = control_output_run(mode, port);
+        let (seen, out, err, dumped) = control_output_run(mode, port);
         // Non-finite and out-of-range commands are refused whole, on stderr.
         assert_eq!(
             err.matches("is not finite: nothing sent").count(),
@@ -188,6 +192,10 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
             "{mode}: {err}"
         );
         assert!(out.contains("3 refused"), "{mode}: {out}");
+        assert!(
+            err.contains("acceleration -1e30 m/s²: beyond the largest deceleration, braking as hard as the vehicle can (a stop at -10 m/s²)"),
+            "{mode}: {err}"
+        );
 
         let frames = seen["frames"].as_array().unwrap();
         if !on_can {
@@ -195,7 +203,7 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
         } else {
             // As cantools decodes them with autoware-can.dbc: three frames per command, in
             // order, carrying its values; the sequence counts up by one.
-            assert_eq!(frames.len(), 9, "{mode}: {seen}");
+            assert_eq!(frames.len(), 12, "{mode}: {seen}");
             let mut sequence = None;
             for (command, set) in accepted.iter().zip(frames.chunks(3)) {
                 let (angle, rate, velocity, acceleration, stamp_ms) = *command;
@@ -217,13 +225,26 @@ fn ros2_control_output_emits_the_autoware_frames_in_each_mode() {
             }
             // Byte for byte: 0.25 rad x 1e6 = 250000, -0.5 rad/s x 1e6 = -500000 (LE int32).
             assert_eq!(frames[0]["data"], "90d00300e05ef8ff");
+            // SIGTERM ends in a second of stops (velocity 0 at -10 m/s², the last angle held):
+            // 0x101 is 0 and -10000 as LE int32; the bus's last command is one of them.
+            let velocity: Vec<&str> = dumped
+                .lines()
+                .filter_map(|l| l.split_whitespace().nth(2))
+                .filter(|f| f.starts_with("101#"))
+                .collect();
+            let stops = velocity
+                .iter()
+                .filter(|f| **f == "101#00000000F0D8FFFF")
+                .count();
+            assert!(stops >= 20, "{mode}: {stops} stops: {dumped}");
+            assert_eq!(velocity.last(), Some(&"101#00000000F0D8FFFF"), "{mode}");
         }
         let back = seen["republished"].as_array().unwrap();
         if !on_dds {
             assert!(back.is_empty(), "{mode}: {seen}");
         } else {
             let angles: Vec<f64> = back.iter().map(|s| s["angle"].as_f64().unwrap()).collect();
-            assert_eq!(angles, [0.25, -0.75, 0.5], "{mode}: {seen}");
+            assert_eq!(angles, [0.25, -0.75, 0.5, 0.125], "{mode}: {seen}");
         }
     }
 }
@@ -331,6 +352,22 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
         assert!((rate - f("velocity") / 0.25).abs() < 0.3, "{rates:?}");
     }
 
+    // Each field checked before conversion: a wrapped angle, a rate in degrees, a speed in
+    // km/h and an impossible acceleration refused by name; a deceleration beyond the vehicle's
+    // taken as a stop at full brake.
+    for refused in [
+        "refused: steering_tire_angle 3 rad: beyond ±1.0334 rad",
+        "refused: steering_tire_rotation_rate 30 rad/s",
+        "refused: velocity 18 m/s",
+        "refused: acceleration 1e30 m/s²",
+    ] {
+        assert!(err.contains(refused), "{refused}: {err}");
+    }
+    assert!(
+        err.contains("acceleration -1e30 m/s²: a deceleration beyond this vehicle's 4 m/s², braking as hard as it can"),
+        "{err}"
+    );
+    assert!(seen["braked_to"].as_f64().unwrap() < 1.3, "{seen}");
     // Crab chosen on the steering-mode topic: the same command also moves the tug sideways
     // (the tire angle is now the direction of travel), without turning; back to normal.
     let crab = &seen["crab"];

@@ -4,8 +4,9 @@
 //! commands (the latest wins), the node's frames go to every bus on its schedule, feedback from
 //! either bus feeds its validation, and the vehicle state goes to stdout as JSON lines at
 //! `--rate`, with the reason the vehicle is not following when it is not. A lost bus degrades
-//! (the other goes on); any end of input — EOF, a read error, stdout closed — ends in the safe
-//! stop with `--estop-on-eof`; a command beyond the vehicle's limits is refused, never clamped.
+//! (the other goes on); any end — EOF, a read error, stdout closed, SIGINT, SIGTERM, SIGHUP —
+//! ends in the safe stop with `--estop-on-eof`, during which no line is taken; a setpoint beyond
+//! the vehicle's limits is refused, never clamped, and a brake beyond them is its hardest.
 
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -29,7 +30,7 @@ use serde_json::json;
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
-command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"turn_indicators\": \"left\", \"hazard_lights\": true}   (where the profile has lights)\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A command beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging.\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
+command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"turn_indicators\": \"left\", \"hazard_lights\": true}   (where the profile has lights)\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²;\n   beyond the vehicle's, its hardest)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A setpoint beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging; a brake beyond the vehicle's is taken\nas its hardest (stderr and a saturated event).\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
 --with-vehicle simulates that vehicle)."
 )]
 pub struct Args {
@@ -43,8 +44,8 @@ pub struct Args {
     /// State lines per second on stdout.
     #[arg(long, default_value_t = 10.0, value_parser = crate::support::numbers::rate)]
     rate: f64,
-    /// At the end of stdin, brake (emergency-brake burst and a stop command) for one second
-    /// before exiting, instead of just stopping to send.
+    /// At any end (EOF, stdout closed, SIGINT, SIGTERM, SIGHUP), brake (emergency-brake burst
+    /// and a stop command) for one second before exiting, instead of just stopping to send.
     #[arg(long)]
     estop_on_eof: bool,
     /// Run a simulated vehicle (`bywire vehicle`: the real supervisor and a plant) on the same
@@ -73,9 +74,15 @@ struct CommandLine {
     release_brake: Option<bool>,
 }
 
+/// A command line's command, and what was taken as less than asked.
+struct Applied {
+    command: AdsCommand,
+    warnings: Vec<String>,
+}
+
 /// Apply a command line to the previous command (fields left out keep their value), refusing
-/// what the vehicle's limits do not allow.
-fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<AdsCommand> {
+/// a setpoint the vehicle's limits do not allow; a brake beyond the vehicle's is its hardest.
+fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Applied> {
     fn parsed<T: std::str::FromStr<Err = bywire_vehicle::command::UnknownName>>(
         text: Option<&str>,
         previous: T,
@@ -84,10 +91,19 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ad
             t.parse().map_err(|e| anyhow!("'{t}': {e}"))
         })
     }
+    let mut warnings = Vec::new();
+    let brake = match line.brake {
+        Some(brake) => {
+            let taken = limits.brake_request(brake).map_err(|e| anyhow!(e))?;
+            warnings.extend(taken.warning);
+            taken.value
+        }
+        None => previous.brake,
+    };
     let command = AdsCommand {
         steering: line.steering.unwrap_or(previous.steering),
         velocity: line.velocity.unwrap_or(previous.velocity),
-        brake: line.brake.unwrap_or(previous.brake),
+        brake,
         gear: parsed::<Gear>(line.gear.as_deref(), previous.gear)?,
         mode: parsed::<ControlMode>(line.mode.as_deref(), previous.mode)?,
         steering_mode: parsed::<SteeringMode>(
@@ -107,12 +123,7 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ad
         bail!("mode 'estop' is the vehicle's to report, not to request (send emergency_brake)");
     }
     limits.check(&command).map_err(|e| anyhow!(e))?;
-    if let Some(deceleration) = line.emergency_brake {
-        limits
-            .check_deceleration(deceleration)
-            .map_err(|e| anyhow!(e))?;
-    }
-    Ok(command)
+    Ok(Applied { command, warnings })
 }
 
 fn state_json(ads: &Ads<Wire>, now: Timestamp) -> serde_json::Value {
@@ -165,6 +176,8 @@ struct Bridge<'a> {
     output_lost: bool,
     /// Where the secured wire's freshness is kept.
     freshness: Option<bywire_secoc::store::FreshnessStore>,
+    /// Set by SIGINT, SIGTERM or SIGHUP: an end of input like any other.
+    interrupted: Arc<AtomicBool>,
 }
 
 impl Bridge<'_> {
@@ -198,24 +211,52 @@ impl Bridge<'_> {
             Line::Text(text) => text,
             other => return self.refuse(now, number, &other.problem().unwrap_or_default()),
         };
-        let parsed = serde_json::from_str::<CommandLine>(&text)
-            .map_err(anyhow::Error::from)
-            .and_then(|line| Ok((apply(&line, self.command, &self.limits)?, line)));
-        let (next, line) = match parsed {
-            Ok(parsed) => parsed,
+        if self.braking_until.is_some() {
+            // The end has begun: nothing overrides the safe stop.
+            return self.event(
+                now,
+                "ignored",
+                &format!("line {number}: the bridge is braking to end"),
+            );
+        }
+        let line = match serde_json::from_str::<CommandLine>(&text) {
+            Ok(line) => line,
             Err(e) => return self.refuse(now, number, &e.to_string()),
         };
+        // A stop is carried out whatever else the line asks for.
         if let Some(deceleration) = line.emergency_brake {
-            ads.emergency_brake(now, deceleration);
-            self.event(now, "emergency_brake", &format!("{deceleration} m/s²"));
+            match self.limits.emergency_deceleration(deceleration) {
+                Ok(taken) => {
+                    self.warn(now, number, taken.warning.as_deref());
+                    ads.emergency_brake(now, taken.value);
+                    self.event(now, "emergency_brake", &format!("{} m/s²", taken.value));
+                }
+                Err(why) => self.refuse(now, number, &why),
+            }
+        }
+        let applied = match apply(&line, self.command, &self.limits) {
+            Ok(applied) => applied,
+            Err(e) => return self.refuse(now, number, &e.to_string()),
+        };
+        for warning in &applied.warnings {
+            self.warn(now, number, Some(warning));
         }
         if line.release_brake == Some(true) {
             ads.release_brake();
             self.event(now, "brake_released", "");
         }
-        self.command = next;
+        self.command = applied.command;
         // Finite and within limits (checked above): the node takes it.
-        ads.set_command(now, next);
+        ads.set_command(now, applied.command);
+    }
+
+    /// A request taken as less than asked (a brake beyond the vehicle's): said on stderr and
+    /// as an event.
+    fn warn(&mut self, now: Timestamp, number: u64, warning: Option<&str>) {
+        if let Some(warning) = warning {
+            let _ = writeln!(std::io::stderr(), "bywire bridge: line {number}: {warning}");
+            self.event(now, "saturated", &format!("line {number}: {warning}"));
+        }
     }
 
     /// The end of input: brake for a second (with `--estop-on-eof`) or end now.
@@ -235,26 +276,36 @@ impl Bridge<'_> {
 
 impl Hooks<Ads<Wire>> for Bridge<'_> {
     fn after_poll(&mut self, ads: &mut Ads<Wire>, now: Timestamp) -> Flow {
-        // Bounded per pass; the rest waits for the next (the runner is woken per line).
+        // Bounded per pass; the rest waits for the next (the runner is woken per line). A
+        // signal or a closed stdout ends the input before any further line is taken.
         for _ in 0..256 {
-            match self.inputs.try_recv() {
-                Ok(Input::Line(number, line)) => self.take_line(ads, now, number, line),
-                Ok(Input::End(why)) => {
-                    if self.end_of_input(ads, now, &why) == Flow::Stop {
-                        return Flow::Stop;
-                    }
-                }
-                Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => {
-                    if self.end_of_input(ads, now, "end of input") == Flow::Stop {
-                        return Flow::Stop;
-                    }
-                    break;
+            let ended = if self.interrupted.load(Ordering::Relaxed) {
+                Some("a signal (SIGINT, SIGTERM or SIGHUP)")
+            } else if self.output_lost {
+                Some("stdout closed")
+            } else {
+                None
+            };
+            if let Some(why) = ended {
+                if self.end_of_input(ads, now, why) == Flow::Stop {
+                    return Flow::Stop;
                 }
             }
-        }
-        if self.output_lost && self.end_of_input(ads, now, "stdout closed") == Flow::Stop {
-            return Flow::Stop;
+            let why = match self.inputs.try_recv() {
+                Ok(Input::Line(number, line)) => {
+                    self.take_line(ads, now, number, line);
+                    continue;
+                }
+                Err(TryRecvError::Empty) => break,
+                Ok(Input::End(why)) => why,
+                Err(TryRecvError::Disconnected) => "end of input".to_string(),
+            };
+            if self.end_of_input(ads, now, &why) == Flow::Stop {
+                return Flow::Stop;
+            }
+            if self.braking_until.is_some() {
+                break;
+            }
         }
         if let Err(why) = keep_freshness(&mut self.freshness, ads.wire()) {
             // What is signed next could not be kept: a restart would reuse it. Brake and end.
@@ -364,8 +415,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         buses: specs.clone(),
         output_lost: false,
         freshness,
+        interrupted: crate::interrupt_flag(),
     };
-    let result = runner.run(&mut ads, &crate::interrupt_flag(), None, &mut bridge);
+    // The runner is never stopped from outside: a signal ends the input, and the bridge's
+    // hooks end the run (after the safe stop, with --estop-on-eof).
+    let result = runner.run(&mut ads, &AtomicBool::new(false), None, &mut bridge);
     vehicle_stop.store(true, Ordering::Relaxed);
     if let Some(vehicle) = vehicle {
         let _ = vehicle.join();

@@ -39,8 +39,10 @@ stderr and nothing is sent. QoS as ros2_socketcan: reliable, volatile, depth 500
   bywire ros2 control-output can0 --mode can
   bywire ros2 control-output can0 --mode dds-and-can --input /control/trajectory_follower/control_cmd
 
-A command with a non-finite or out-of-range value is refused whole: no frame and no sample.
-The frames follow `autoware-can.dbc` (bywire-vehicle/dbc): angle and rate x 1e6, velocity and
+A command with a non-finite or out-of-range value is refused whole: no frame and no sample; one
+that decelerates harder than 10 m/s² goes out as a stop at 10 m/s² (said on stderr). Any end
+(SIGINT, SIGTERM, SIGHUP, a DDS failure) sends that stop, holding the last steering, for a
+second before exiting (nothing new is taken meanwhile). The frames follow `autoware-can.dbc` (bywire-vehicle/dbc): angle and rate x 1e6, velocity and
 acceleration x 1e3 as int32, then mode, validity flags, sequence and the stamp in ms.")]
     ControlOutput(ControlOutputArgs),
     /// The Autoware vehicle interface for any profile: control_cmd, gear_cmd, cmd_vel and the
@@ -66,7 +68,10 @@ Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mod
      (full braking, or awaiting a re-engage): engage again to drive.
 Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)
 is replaced by a controlled stop. A command beyond the profile's limits is refused, never
-clamped. The E-stop's operator reset is not offered over ROS 2. Ctrl-C brakes for a second.")]
+clamped, each field checked before any conversion (a tire angle within the profile's steering
+limit as a tire angle, never beyond ±90°); a deceleration beyond the vehicle's is a stop at full
+brake (said on stderr). The E-stop's operator reset is not offered over ROS 2. Any end (SIGINT,
+SIGTERM, SIGHUP) brakes for a second, taking no input meanwhile.")]
     Vehicle(VehicleArgs),
     /// CANopen drives on ROS 2, as ros2_canopen's CiA 402 driver offers them: the master of a
     /// bus description (bywire's bus.toml or ros2_canopen's bus.yml) with services, targets
@@ -266,6 +271,10 @@ fn control(args: &ControlOutputArgs, out: &mut dyn Write) -> Result<()> {
             Outcome::Sent(_) => sent += 1,
             Outcome::Refused(why) => reporter.refusal(&why.to_string()),
             Outcome::BusLost(e) => reporter.line(&format!("bus lost: {e}")),
+            Outcome::Saturated(why) => reporter.line(&why),
+            Outcome::Unreadable(why) => {
+                reporter.refusal(&format!("a sample that cannot be read: {why}"))
+            }
         },
     )?;
     writeln!(out, "{sent} commands sent, {} refused", reporter.refused)?;
@@ -337,6 +346,7 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
         &crate::interrupt_flag(),
         &mut |event| match event {
             VehicleEvent::Refused(why) => reporter.refusal(&why),
+            VehicleEvent::Saturated(why) => reporter.line(&why),
             VehicleEvent::ModeRequest { mode, success, why } => reporter.line(&format!(
                 "control mode request {mode}: {}{}",
                 if success { "done" } else { "refused" },

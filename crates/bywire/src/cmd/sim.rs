@@ -304,6 +304,7 @@ fn run_over_ros2(
         &mut |event| {
             let text = match event {
                 VehicleEvent::Refused(why) => format!("refused: {why}"),
+                VehicleEvent::Saturated(why) => why,
                 VehicleEvent::ModeRequest { mode, success, why } => format!(
                     "control mode request {mode}: {}{}",
                     if success { "done" } else { "refused" },

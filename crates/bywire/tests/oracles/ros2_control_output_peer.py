@@ -53,12 +53,13 @@ sent = [
     (0.0, 0.0, math.inf, 0.0, 1_700_000_000_423_000_000),   # refused: not finite
     (1.5, 0.0, 1.0, 0.0, 1_700_000_000_523_000_000),        # refused: beyond the angle limit
     (0.5, 0.0, 3.0, 0.25, 1_700_000_000_623_000_000),
+    (0.125, 0.0, 1.5, -1e30, 1_700_000_000_723_000_000),     # braking harder than it can: a stop
 ]
 for command in sent:
     commands.write(control(*command))
     time.sleep(0.05)
 frames = frames_until(lambda g: False, 1.0)
-back = take_until(republished, lambda g: len(g) >= 3, timeout=1.0)
+back = take_until(republished, lambda g: len(g) >= 4, timeout=1.0)
 
 print(json.dumps({
     "frames": [{"id": m.arbitration_id, "data": m.data.hex(),

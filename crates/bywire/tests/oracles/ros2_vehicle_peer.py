@@ -189,6 +189,20 @@ try:
                          "tire_angle": s.steering_tire_angle, "gear": g.report,
                          "joints": list(j.name), "positions": list(j.position),
                          "joint_velocities": list(j.velocity), "steering_mode": sm.data}
+    # Unit mistakes and wrapped angles, one at a time between valid commands: each refused
+    # (3.0 rad would have become -4.1 degrees at the wheels). Then a deceleration beyond the
+    # vehicle's: a stop at full brake, and driving again.
+    for bad in [(3.0, 0.0, 1.5, 0.5), (0.1, 30.0, 1.5, 0.5), (0.1, 0.0, 18.0, 0.5),
+                (0.1, 0.0, 1.5, 1e30), (0.1, 0.0, 1.5, -1e30)]:
+        publishing.clear()
+        time.sleep(0.03)
+        control_cmd.write(control(*bad, time.time_ns()))
+        time.sleep(0.03)
+        publishing.set()
+        time.sleep(0.05)
+    wait_for(lambda: latest("velocity").longitudinal_velocity < 1.3, 3)
+    result["braked_to"] = latest("velocity").longitudinal_velocity
+    keep_driving(moving, 10)
     # Crab on our steering-mode topic: the same control_cmd now moves the tug sideways too.
     def steering_mode_is(mode):
         return latest("steering_mode") is not None and latest("steering_mode").data == mode
