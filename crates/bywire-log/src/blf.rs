@@ -168,10 +168,10 @@ impl<R: Read> BlfReader<R> {
                 0 => return Ok(false),
                 OBJECT_HEADER_BASE => {}
                 _ => {
-                    return Err(Self::malformed(
-                        start,
-                        "the file ends inside an object header",
-                    ))
+                    return Err(LogError::CutShort {
+                        offset: start,
+                        what: "an object header".into(),
+                    })
                 }
             }
             if base.get(..4) != Some(b"LOBJ") {
@@ -188,10 +188,10 @@ impl<R: Read> BlfReader<R> {
             let mut body = vec![0u8; size - OBJECT_HEADER_BASE + size % 4];
             let got = self.read_exact_at(&mut body)?;
             if got < size - OBJECT_HEADER_BASE {
-                return Err(Self::malformed(
-                    start,
-                    format!("the file ends inside an object of {size} bytes"),
-                ));
+                return Err(LogError::CutShort {
+                    offset: start,
+                    what: format!("an object of {size} bytes"),
+                });
             }
             body.truncate(size - OBJECT_HEADER_BASE);
             if kind != LOG_CONTAINER {
@@ -760,7 +760,10 @@ mod tests {
         let bytes = write(&records());
         let cases: Vec<(Vec<u8>, &str)> = vec![
             (b"not a blf".to_vec(), "byte 0: not a BLF file"),
-            (bytes[..bytes.len() - 5].to_vec(), "ends inside an object"),
+            (
+                bytes[..bytes.len() - 5].to_vec(),
+                "byte 144: an object of 181 bytes: the file is cut short there",
+            ),
             (
                 {
                     let mut b = bytes.clone();

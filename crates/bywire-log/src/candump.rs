@@ -92,6 +92,17 @@ pub enum LogError {
         /// What is wrong.
         what: String,
     },
+    /// A binary log ends inside a record at this byte: cut short (a kill, a full disk). What
+    /// came before it was read whole; readers that can say so call it a warning.
+    #[error(
+        "byte {offset}: {what}: the file is cut short there (read up to its last whole record)"
+    )]
+    CutShort {
+        /// Where the record cut short starts (or where the file ends).
+        offset: u64,
+        /// Which record.
+        what: String,
+    },
     /// A table (Parquet) is malformed at this row.
     #[error("row {row}: {what}")]
     Table {

@@ -488,8 +488,9 @@ mod tests {
             }
             writer.checkpoint().unwrap();
             let checkpointed = file.bytes().len();
-            // Enough more to fill BLF's containers and MF4's data blocks, never checkpointed.
-            for i in 300..12_000 {
+            // Enough more to fill BLF's containers, MF4's data blocks and a 1 MiB MCAP chunk, never
+            // checkpointed.
+            for i in 300..20_000 {
                 writer.write(&numbered(i)).unwrap();
             }
             let written = file.bytes();

@@ -343,6 +343,14 @@ impl<R: Read> Iterator for McapReader<R> {
                 None => {
                     let event = match self.reader.next_event()? {
                         Ok(event) => event,
+                        Err(::mcap::McapError::UnexpectedEof) => {
+                            // A recording killed or out of disk: every chunk before is whole.
+                            self.failed = true;
+                            return Some(Err(LogError::CutShort {
+                                offset: self.offset,
+                                what: "MCAP: a record".into(),
+                            }));
+                        }
                         Err(e) => return self.fail(format!("MCAP: {e}")),
                     };
                     match event {
@@ -395,8 +403,11 @@ fn io_error(e: ::mcap::McapError) -> std::io::Error {
 impl<W: Write + Seek> McapWriter<W> {
     /// A writer to `output`.
     pub fn new(output: W) -> std::io::Result<Self> {
+        // Chunks are buffered and written whole (no seeking back to fill in a placeholder
+        // length): a file cut at any moment holds only closed chunks, which every reader takes.
         let mut writer = ::mcap::WriteOptions::new()
             .compression(None)
+            .disable_seeking(true)
             .profile("ros2")
             .create(output)
             .map_err(io_error)?;
@@ -698,6 +709,53 @@ mod tests {
             matches!(results.as_slice(), [Err(LogError::Binary { .. })]),
             "{results:?}"
         );
+    }
+
+    /// A file cut at any byte after its first chunk closed: never a placeholder on disk, the
+    /// closed chunks' records read, and the end said as a cut at that byte.
+    #[test]
+    fn a_file_cut_anywhere_reads_its_closed_chunks() {
+        let record = |i: u64| LogRecord {
+            timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + i),
+            interface: "can0".into(),
+            frame: format!("123#{:016X}", i).parse().unwrap(),
+            direction: None,
+        };
+        let file = tempfile::NamedTempFile::new().unwrap();
+        let on_disk = || usize::try_from(file.as_file().metadata().unwrap().len()).unwrap();
+        let mut writer = McapWriter::new(file.reopen().unwrap()).unwrap();
+        for i in 0..100 {
+            writer.write(&record(i)).unwrap();
+        }
+        writer.flush().unwrap();
+        let closed = on_disk();
+        for i in 100..150 {
+            writer.write(&record(i)).unwrap();
+        }
+        // The chunk being filled is not on disk yet: nothing was written after the flush.
+        assert_eq!(on_disk(), closed);
+        writer.finish().unwrap();
+        let bytes = std::fs::read(file.path()).unwrap();
+        for cut in [
+            closed,
+            closed + 1,
+            (closed + bytes.len()) / 2,
+            bytes.len() - 1,
+        ] {
+            let results: Vec<_> = McapReader::new(&bytes[..cut]).collect();
+            let (records, errors): (Vec<_>, Vec<_>) = results.into_iter().partition(Result::is_ok);
+            assert!(records.len() >= 100, "cut at {cut}: {}", records.len());
+            for (i, r) in records.into_iter().enumerate() {
+                assert_eq!(r.unwrap(), record(u64::try_from(i).unwrap()));
+            }
+            match errors.as_slice() {
+                [] => {}
+                [Err(LogError::CutShort { offset, .. })] => {
+                    assert_eq!(*offset, u64::try_from(cut).unwrap())
+                }
+                other => panic!("cut at {cut}: {other:?}"),
+            }
+        }
     }
 
     #[test]

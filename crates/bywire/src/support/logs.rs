@@ -118,6 +118,11 @@ fn skipped(name: &str, e: &LogError, skip: Skip) -> bool {
         LogError::Syntax { kind, .. } => {
             matches!(kind, LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8)
         }
+        // What came before the cut was read whole: the end of the file, with a warning.
+        LogError::CutShort { .. } => {
+            let _ = writeln!(io::stderr(), "warning: {name}: {e}");
+            return true;
+        }
         _ => false,
     };
     if skipped {
