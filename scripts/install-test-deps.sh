@@ -51,3 +51,11 @@ fi
 # python-can and cantools for Debian's Python inside the VM (tests include the folder there): an
 # ADS written with them drives `bywire vehicle` over the kernel's vcan.
 python3 -m pip install -q --disable-pip-version-check --upgrade --target target/vm-python python-can==4.6.1 cantools==45.1.0
+# python-can's own test logs (its source release's test/data), read by our readers beside its.
+if [ ! -d target/python-can-data ]; then
+  sdist="$(mktemp -d)"
+  python3 -m pip download -q --disable-pip-version-check --no-deps --no-binary :all: python-can==4.6.1 -d "$sdist"
+  mkdir -p target/python-can-data
+  tar xzf "$sdist"/python_can-4.6.1.tar.gz -C target/python-can-data --strip-components=3 python_can-4.6.1/test/data/
+  rm -rf "$sdist"
+fi

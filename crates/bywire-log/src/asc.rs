@@ -288,7 +288,14 @@ impl<R: BufRead> AscReader<R> {
         dlc(number, text, word, self.base.radix())
     }
 
-    /// `ID Rx|Tx d DLC DATA…`, `ID Rx|Tx r [DLC]` or `ErrorFrame` (the channel taken).
+    /// A classic line's DLC word when it is a CAN FD data length beyond any DLC (over 15).
+    fn fd_length(&self, word: &str) -> Option<usize> {
+        let n = usize::from_str_radix(word, self.base.radix()).ok()?;
+        (n > 15 && Dlc::from_fd_len(n).is_some_and(|d| d.fd_len() == n)).then_some(n)
+    }
+
+    /// `ID Rx|Tx d DLC DATA…`, `ID Rx|Tx r [DLC] [Length = …]` or `ErrorFrame` (the channel
+    /// taken).
     #[allow(clippy::type_complexity)]
     fn classic_event<'t>(
         &self,
@@ -307,8 +314,19 @@ impl<R: BufRead> AscReader<R> {
                 };
                 let id = self.id(number, text, id)?;
                 let frame = match (kind.to_ascii_lowercase().as_str(), tail) {
-                    ("r", []) => Frame::remote(id, Dlc::from_nibble(0)),
-                    ("r", [dlc, ..]) => Frame::remote(id, self.dlc(number, text, dlc)?),
+                    // The DLC is optional, and CANoe may follow with `Length = … BitCount = …`.
+                    ("r", tail) => {
+                        let dlc = tail.first().and_then(|w| self.dlc(number, text, w).ok());
+                        Frame::remote(id, dlc.unwrap_or(Dlc::from_nibble(0)))
+                    }
+                    // A length beyond a DLC's (0x40 = 64 in a hex file) can only be CAN FD.
+                    ("d", [length, data @ ..]) if self.fd_length(length).is_some() => {
+                        let count = self.fd_length(length).unwrap_or(0);
+                        let bytes = self.bytes(number, text, data, count)?;
+                        FdFrame::new(id, &bytes, false, false)
+                            .map(Frame::Fd)
+                            .map_err(|e| syntax(number, column_of(text, length), e.to_string()))?
+                    }
                     ("d", [dlc, data @ ..]) => {
                         let dlc_value = self.dlc(number, text, dlc)?;
                         let count = dlc_value.fd_len().min(8);
@@ -392,10 +410,12 @@ impl<R: BufRead> AscReader<R> {
         let bytes = self.bytes(number, text, data, count)?;
         // The flags after duration and bit count say whether it was an FD frame at all (bit
         // 12, EDL); without them it is taken as one.
-        let edl = data
-            .get(count + 2)
-            .and_then(|f| u32::from_str_radix(f, 16).ok())
-            .is_none_or(|flags| flags & 0x1000 != 0);
+        // More than 8 bytes can only be FD, whatever the flags say (CANoe 9.0 leaves EDL out).
+        let edl = count > 8
+            || data
+                .get(count + 2)
+                .and_then(|f| u32::from_str_radix(f, 16).ok())
+                .is_none_or(|flags| flags & 0x1000 != 0);
         let frame = if edl {
             // A data length short of the DLC's (log2asc writes the bytes it has) is padded to
             // it, as SocketCAN pads; a longer one is an error.

@@ -296,7 +296,13 @@ impl<R: Read> BlfReader<R> {
             _ => return Ok(Some(None)),
         };
         let (channel, direction, frame) =
-            frame.map_err(|what| Self::malformed(self.container, what))?;
+            frame.map_err(|what| match what.strip_prefix(UNREPRESENTABLE) {
+                Some(what) => LogError::Unrepresentable {
+                    offset: self.container,
+                    what: what.to_string(),
+                },
+                None => Self::malformed(self.container, what),
+            })?;
         Ok(Some(Some(LogRecord {
             timestamp,
             interface: format!("can{}", channel.saturating_sub(1)),
@@ -308,13 +314,17 @@ impl<R: Read> BlfReader<R> {
 
 type Parsed = Result<(u16, Option<char>, Frame), String>;
 
+/// Prefix of the errors of records no frame can hold (passed over, not the end of the file).
+const UNREPRESENTABLE: &str = "unrepresentable: ";
+
 fn id_of(raw: u32) -> Result<Id, String> {
     if raw & CAN_MSG_EXT != 0 {
-        Id::extended(raw & 0x1FFF_FFFF)
+        Id::extended(raw & 0x1FFF_FFFF).map_err(|e| e.to_string())
     } else {
-        Id::standard(raw & 0x7FF)
+        // Never cut to 11 bits: that would be another message.
+        Id::standard(raw)
+            .map_err(|_| format!("{UNREPRESENTABLE}a standard identifier 0x{raw:X} above 0x7FF"))
     }
-    .map_err(|e| e.to_string())
 }
 
 fn direction(tx: bool) -> Option<char> {
@@ -452,6 +462,7 @@ impl<R: Read> Iterator for BlfReader<R> {
                 Ok(Some(Some(record))) => return Some(Ok(record)),
                 Ok(Some(None)) => continue,
                 Ok(None) => {}
+                Err(e @ LogError::Unrepresentable { .. }) => return Some(Err(e)),
                 Err(e) => {
                     self.failed = true;
                     return Some(Err(e));

@@ -103,6 +103,15 @@ pub enum LogError {
         /// Which record.
         what: String,
     },
+    /// A record of a binary log that no frame can hold (a standard identifier above 0x7FF):
+    /// passed over, and the reading goes on.
+    #[error("byte {offset}: {what} (passed over)")]
+    Unrepresentable {
+        /// Where its container or block starts.
+        offset: u64,
+        /// What it holds.
+        what: String,
+    },
     /// A table (Parquet) is malformed at this row.
     #[error("row {row}: {what}")]
     Table {

@@ -1438,3 +1438,95 @@ fn a_file_parquet_rs_panics_on_is_an_error_without_a_panic_message() {
     );
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// python-can's own test logs (`test/data` of its 4.6.1 source release, fetched from PyPI by
+/// `scripts/install-test-deps.sh`), each read by python-can's `LogReader` and by
+/// `bywire log cat`: the same frames in the same order, each on the same channel at the same
+/// time since the first. The departures, each for a reason:
+/// - `single_frame.asc` holds 64 data bytes on a classic line (`d 40` in a hex file):
+///   python-can keeps 8 of them with a DLC of 64; bywire reads the CAN FD frame of 64 bytes
+///   that is the only frame such a length can be.
+/// - `test_CanMessage.blf`, `test_CanMessage2.blf`, `test_CanFdMessage.blf` and
+///   `test_CanFdMessage64.blf` hold made-up identifiers (0x4444444 or 0x5555555) marked
+///   standard, which no CAN frame can carry: bywire passes over them with a warning naming the
+///   byte (it once cut them to 11 bits without a word); python-can keeps them.
+///
+/// Every other log is read as python-can reads it.
+#[test]
+fn python_cans_test_logs_read_as_python_can_reads_them() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/python-can-data");
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(&data)
+        .unwrap_or_else(|e| panic!("{}: {e} (run scripts/install-test-deps.sh)", data.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_str().unwrap();
+            [".asc", ".blf", ".trc", ".asc.gz", ".mf4", ".log"]
+                .iter()
+                .any(|e| name.ends_with(e))
+        })
+        .collect();
+    logs.sort();
+    assert!(logs.len() >= 25, "{logs:?}");
+    let mut args = vec![format!("{}/python_can_logs.py", common::oracles())];
+    args.extend(logs.iter().map(|p| p.to_str().unwrap().to_string()));
+    let out = Command::new("python3").args(&args).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let theirs: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let left_out = [
+        "test_CanMessage.blf",
+        "test_CanMessage2.blf",
+        "test_CanFdMessage.blf",
+        "test_CanFdMessage64.blf",
+    ];
+    for log in &logs {
+        let path = log.to_str().unwrap();
+        let name = log.file_name().unwrap().to_str().unwrap();
+        let (code, cat, err) = common::bywire(&["log", "cat", path], "");
+        assert_eq!(code, 0, "{name}: {err}");
+        // (channel, seconds since the first frame, frame text; error frames as ERROR).
+        let ours: Vec<(String, f64, String)> = cat
+            .lines()
+            .map(|line| {
+                let (time, rest) = line[1..].split_once(") ").unwrap();
+                let (interface, frame) = rest.split_once(' ').unwrap();
+                let id = u32::from_str_radix(frame.split('#').next().unwrap(), 16).unwrap();
+                let frame = if frame.len() > 9 && id & 0x2000_0000 != 0 {
+                    "ERROR".to_string()
+                } else {
+                    frame.to_string()
+                };
+                (interface.to_string(), time.parse::<f64>().unwrap(), frame)
+            })
+            .collect();
+        if left_out.contains(&name) {
+            assert!(ours.is_empty(), "{name}: {ours:?}");
+            assert!(err.contains("above 0x7FF (passed over)"), "{name}: {err}");
+            continue;
+        }
+        let theirs = theirs[path].as_array().unwrap();
+        assert_eq!(ours.len(), theirs.len(), "{name}: {cat}\n{theirs:?}");
+        // python-can numbers TRC buses from 1, ASC and BLF channels from 0.
+        let first_bus = u64::from(name.ends_with(".trc"));
+        for ((interface, time, frame), m) in ours.iter().zip(theirs) {
+            let channel = m["channel"].as_u64().unwrap_or(first_bus) - first_bus;
+            assert_eq!(*interface, format!("can{channel}"), "{name}: {m}");
+            let since = time - ours[0].1;
+            assert!(
+                (since - m["t"].as_f64().unwrap()).abs() < 2e-6,
+                "{name}: {since} {m}"
+            );
+            let expected = m["frame"].as_str().unwrap();
+            if name == "single_frame.asc" {
+                let all: String = (0..64u8).map(|b| format!("{b:02X}")).collect();
+                assert_eq!(*frame, format!("00000123##4{all}"), "{name}");
+                assert_eq!(expected, "00000123#0001020304050607_F", "{name}");
+            } else {
+                assert_eq!(frame, expected, "{name}");
+            }
+        }
+    }
+}

@@ -29,12 +29,26 @@ const READ_BUFFER: usize = 64 << 10;
 pub struct LogInput {
     bytes: Box<dyn BufRead>,
     file: Option<File>,
+    /// The format its name claims (a broken `.mf4` is said to be a broken MF4 file).
+    claimed: Option<Format>,
 }
 
 impl LogInput {
     /// A stream that is not a file (standard input, already opened).
     pub fn stream(bytes: Box<dyn BufRead>) -> LogInput {
-        LogInput { bytes, file: None }
+        LogInput {
+            bytes,
+            file: None,
+            claimed: None,
+        }
+    }
+
+    /// Its format, sniffed from its first bytes and its name (an input that cannot even be
+    /// peeked at is taken as candump, and fails on its first read, with its name).
+    fn format(&mut self) -> Format {
+        self.bytes.fill_buf().map_or(Format::Candump, |start| {
+            Format::sniff_claimed(start, self.claimed)
+        })
     }
 
     /// A handle on the file that shares its read position (for a progress bar).
@@ -59,18 +73,18 @@ pub fn input(path: Option<&Path>) -> Result<(String, LogInput)> {
             LogInput {
                 bytes: Box::new(BufReader::with_capacity(READ_BUFFER, io::stdin())),
                 file: None,
+                claimed: None,
             },
         )),
         Some(p) => {
-            let file = File::open(p).with_context(|| format!("cannot open {}", p.display()))?;
-            let reader = file
-                .try_clone()
+            let log = bywire_log::format::open_log(p)
                 .with_context(|| format!("cannot open {}", p.display()))?;
             Ok((
                 p.display().to_string(),
                 LogInput {
-                    bytes: Box::new(BufReader::with_capacity(READ_BUFFER, reader)),
-                    file: Some(file),
+                    bytes: log.bytes,
+                    file: log.file,
+                    claimed: log.claimed,
                 },
             ))
         }
@@ -92,12 +106,11 @@ pub enum Skip {
 /// The records of `input` (called `name` in messages); skipped lines are reported.
 pub fn records<'a>(
     name: &'a str,
-    input: LogInput,
+    mut input: LogInput,
     skip: Skip,
 ) -> impl Iterator<Item = Result<LogRecord>> + 'a {
-    let LogInput { mut bytes, file } = input;
-    // An input that cannot even be peeked at fails on its first read, with its name.
-    let format = Format::sniff_input(&mut bytes).unwrap_or(Format::Candump);
+    let format = input.format();
+    let LogInput { bytes, file, .. } = input;
     let reader = match (format, skip, file) {
         (Format::Candump, Skip::AnyBadLine | Skip::NonLogLines, _) => {
             Box::new(Reader::new(bytes).log_lines_only())
@@ -118,6 +131,7 @@ fn skipped(name: &str, e: &LogError, skip: Skip) -> bool {
         LogError::Syntax { kind, .. } => {
             matches!(kind, LogErrorKind::TooLong(_) | LogErrorKind::NotUtf8)
         }
+        LogError::Unrepresentable { .. } => true,
         // What came before the cut was read whole: the end of the file, with a warning.
         LogError::CutShort { .. } => {
             let _ = writeln!(io::stderr(), "warning: {name}: {e}");
@@ -136,17 +150,17 @@ fn skipped(name: &str, e: &LogError, skip: Skip) -> bool {
 /// ends it.
 pub fn for_each_lent(
     name: &str,
-    input: LogInput,
+    mut input: LogInput,
     skip: Skip,
     mut each: impl FnMut(&LogRecordRef<'_>) -> Result<()>,
 ) -> Result<()> {
-    let LogInput { mut bytes, file } = input;
-    if Format::sniff_input(&mut bytes).unwrap_or(Format::Candump) != Format::Candump {
-        for record in records(name, LogInput { bytes, file }, skip) {
+    if input.format() != Format::Candump {
+        for record in records(name, input, skip) {
             each(&record?.as_record_ref())?;
         }
         return Ok(());
     }
+    let LogInput { bytes, file, .. } = input;
     // A file is read again from its start through a reader of its own type, so that each
     // line's reads are inlined rather than called through `dyn`; a pipe that cannot seek is
     // read on from what was peeked at.
