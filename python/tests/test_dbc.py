@@ -162,6 +162,22 @@ def test_wrong_sizes_and_unknown_messages_fail_as_in_cantools():
         assert a.value.args == b.value.args
 
 
+def test_nan_and_infinity_raise_as_in_cantools_strict_or_not():
+    """An integer signal holds no NaN or infinity: cantools raises ValueError and OverflowError
+    as Python's int() does (bywire encoded NaN as raw 0)."""
+    theirs = cantools.database.load_file(str(TUG_DBC))
+    ours = bywire.Database.load(TUG_DBC)
+    control = {s.name: 0 for s in theirs.get_message_by_name("AdsToVehicle_Control").signals}
+    for value, kind in ((math.nan, ValueError), (math.inf, OverflowError), (-math.inf, OverflowError)):
+        for options in ({}, {"strict": False}, {"scaling": False, "strict": False}):
+            values = {**control, "VelocityCmd": value}
+            with pytest.raises(kind) as a:
+                theirs.encode_message("AdsToVehicle_Control", values, **options)
+            with pytest.raises(kind) as b:
+                ours.encode_message("AdsToVehicle_Control", values, **options)
+            assert str(a.value) == str(b.value), options
+
+
 def test_encoding_matches_cantools_values_padding_and_errors():
     theirs = cantools.database.load_file(str(TUG_DBC))
     ours = bywire.Database.load(TUG_DBC)

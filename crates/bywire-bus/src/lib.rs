@@ -137,8 +137,8 @@ pub enum BusError {
     /// The frame cannot go on this bus (an FD frame on a classic-only bus, an error frame).
     #[error("this bus cannot send {0}")]
     Unsupported(String),
-    /// An operating-system error.
-    #[error("{0}")]
+    /// An operating-system error (transparent: said once, not again as its source).
+    #[error(transparent)]
     Io(#[from] std::io::Error),
 }
 

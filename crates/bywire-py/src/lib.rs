@@ -25,7 +25,9 @@ use bywire_log::parquet::decoded::decode_frames_batch;
 use bywire_log::parquet::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_ROWS};
 use bywire_log::parquet::long::{self, LongLabels};
 use bywire_log::parquet::{raw_schema, FrameBatches};
-use pyo3::exceptions::{PyException, PyKeyError, PyOSError, PyTypeError, PyValueError};
+use pyo3::exceptions::{
+    PyException, PyKeyError, PyOSError, PyOverflowError, PyTypeError, PyValueError,
+};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyByteArray, PyBytes, PyDict, PyString, PyType};
@@ -464,6 +466,18 @@ impl Database {
                 // A name the signal's choices do not have: cantools' KeyError.
                 return Err(PyKeyError::new_err(value.str()?.unbind()));
             };
+            // An integer signal holds no NaN or infinity: cantools raises as Python's int()
+            // does, strict or not (it was encoded as raw 0, or the offset).
+            if let (ValueType::Integer { .. }, Value::Float(f)) = (signal.value_type, number) {
+                if f.is_nan() {
+                    return Err(PyValueError::new_err("cannot convert float NaN to integer"));
+                }
+                if f.is_infinite() {
+                    return Err(PyOverflowError::new_err(
+                        "cannot convert float infinity to integer",
+                    ));
+                }
+            }
             if is_choice || !scaling {
                 // A float32 signal holds the value rounded to single precision, as Python's
                 // struct packs it; an integer past i64 saturates before it is masked to width.

@@ -107,6 +107,14 @@ pub enum BridgeEvent {
         /// What failed.
         error: String,
     },
+    /// The bus works, but cannot give back the frames sent on it (socketcand's raw mode has
+    /// no echo): frames from DDS are not published back as received.
+    NoEcho {
+        /// The bus.
+        bus: String,
+        /// Why.
+        why: String,
+    },
     /// A publish failed (DDS back-pressure or a closed participant); the frame is not published.
     PublishFailed {
         /// The bus.
@@ -188,9 +196,12 @@ pub fn run(
         let classic = node.subscription::<CanFrame>(&topic(&config.topics.to_can_bus), &qos)?;
         let fd = node.subscription::<FdFrame>(&topic(&config.topics.to_can_bus_fd), &qos)?;
         if let Err(e) = bus.set_receive_own(config.loopback) {
-            report(BridgeEvent::BusLost {
+            report(BridgeEvent::NoEcho {
                 bus: name.clone(),
-                error: format!("cannot set receive-own: {e}"),
+                why: match e {
+                    bywire_bus::BusError::Unsupported(what) => format!("no {what}"),
+                    other => other.to_string(),
+                },
             });
         }
         let (tx, rx) = bus.split();

@@ -28,7 +28,7 @@ pub enum Refused {
     #[error("is_error is set: error frames are reported by controllers, not sent")]
     ErrorFrame,
     /// The identifier, DLC or length does not make a frame.
-    #[error("{0}")]
+    #[error(transparent)]
     Frame(#[from] FrameError),
     /// `len` and the data disagree in an FD message.
     #[error("len is {len} but {data} data bytes came")]

@@ -32,6 +32,15 @@ pub enum KeyFileError {
         /// Its mode bits.
         mode: u32,
     },
+    /// It belongs to another user than the one reading it.
+    Owner {
+        /// The file.
+        path: PathBuf,
+        /// Its owner's user id.
+        owner: u32,
+        /// The reading process's effective user id.
+        user: u32,
+    },
     /// A line that is not a key.
     Line {
         /// The file.
@@ -69,6 +78,14 @@ impl fmt::Display for KeyFileError {
                 mode & 0o7777,
                 path.display()
             ),
+            KeyFileError::Owner { path, owner, user } => write!(
+                f,
+                "{}: the key file belongs to user {owner}, not to this process's user {user}; \
+                 a key file must be its user's own, as ssh asks of a private key: \
+                 chown {user} {}",
+                path.display(),
+                path.display()
+            ),
             KeyFileError::Line { path, line, why } => {
                 write!(f, "{}:{line}: {why}", path.display())
             }
@@ -80,14 +97,8 @@ impl fmt::Display for KeyFileError {
     }
 }
 
-impl std::error::Error for KeyFileError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            KeyFileError::Io { source, .. } => Some(source),
-            _ => None,
-        }
-    }
-}
+// The OS error's text is in the message already: no source, or `{:#}` would say it twice.
+impl std::error::Error for KeyFileError {}
 
 /// The keys of a key file.
 #[derive(Clone)]
@@ -112,12 +123,20 @@ impl KeyFile {
         let metadata = std::fs::metadata(path).map_err(io)?;
         #[cfg(unix)]
         {
-            use std::os::unix::fs::PermissionsExt;
+            use std::os::unix::fs::{MetadataExt, PermissionsExt};
             let mode = metadata.permissions().mode();
             if mode & 0o077 != 0 {
                 return Err(KeyFileError::Permissions {
                     path: path.to_path_buf(),
                     mode,
+                });
+            }
+            let user = rustix::process::geteuid().as_raw();
+            if metadata.uid() != user {
+                return Err(KeyFileError::Owner {
+                    path: path.to_path_buf(),
+                    owner: metadata.uid(),
+                    user,
                 });
             }
         }
@@ -278,6 +297,18 @@ mod tests {
         assert!(KeyFile::load(&path).is_err());
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
         assert!(KeyFile::load(&path).unwrap().key(0).is_some());
+        // Mode 0600 but another user's (only root can give a file away: as root, the test
+        // does; otherwise it cannot make the case).
+        let me = rustix::process::geteuid().as_raw();
+        if me == 0 {
+            std::os::unix::fs::chown(&path, Some(65534), None).unwrap();
+            let error = KeyFile::load(&path).err().unwrap().to_string();
+            assert!(
+                error.contains("belongs to user 65534, not to this process's user 0")
+                    && error.contains("chown 0"),
+                "{error}"
+            );
+        }
         std::fs::remove_file(&path).unwrap();
         let error = KeyFile::load(&path).err().unwrap().to_string();
         assert!(error.contains("No such file"), "{error}");

@@ -54,14 +54,8 @@ impl fmt::Display for StoreError {
     }
 }
 
-impl std::error::Error for StoreError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            StoreError::Io { source, .. } => Some(source),
-            _ => None,
-        }
-    }
-}
+// The OS error's text is in the message already: no source, or `{:#}` would say it twice.
+impl std::error::Error for StoreError {}
 
 /// A sender's persisted freshness.
 #[derive(Debug)]

@@ -520,6 +520,11 @@ fn a_secured_profile_drives_with_its_key_keeps_its_freshness_and_is_refused_with
             .any(|s| s["mode"] == "autonomous" && s["velocity"] == 1.5),
         "never drove: {states:?}"
     );
+    // The ADS side's verifications are in its state lines: state frames accepted, none refused
+    // (an unsecured profile says null).
+    let secoc = &states.last().unwrap()["secoc"];
+    assert!(secoc["accepted"].as_u64().unwrap() > 20, "{secoc}");
+    assert_eq!(secoc["rejected"], 0, "{secoc}");
     // At least 2.5 s of commands at 50 Hz, reserved ahead in the store.
     let kept: u64 = std::fs::read_to_string(&freshness)
         .unwrap()

@@ -97,6 +97,12 @@ fn sign_equals_cantools_and_verify_refuses_a_changed_bit() {
     };
     let (code, out, err) = verify(&secured, "7");
     assert_eq!((code, out.trim()), (0, "ok"), "{err}");
+    // Every whole number is spelt as --data-id is: 0x7 is 7 (it was refused).
+    let (code, out, err) = verify(&secured, "0x7");
+    assert_eq!((code, out.trim()), (0, "ok"), "{err}");
+    let (code, _, err) = verify(&secured, "0x1Z");
+    assert_eq!(code, 2);
+    assert!(err.contains("0x1Z: not a whole number"), "{err}");
     let (code, _, err) = verify(&secured, "8");
     assert_eq!(code, 1);
     assert!(err.contains("does not verify with freshness 8"), "{err}");

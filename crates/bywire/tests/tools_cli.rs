@@ -1273,3 +1273,28 @@ fn dump_logs_to_any_format_and_finishes_the_file() {
     );
     let _ = stop_serve(server);
 }
+
+/// An operating system's error is said once: errors whose message carries it no longer give
+/// it again as their source ("No such file or directory (os error 2): No such file or
+/// directory (os error 2)").
+#[test]
+fn an_os_error_is_said_once() {
+    let (code, _, err) = bywire(
+        &[
+            "bridge",
+            "--profile",
+            "reference-tug",
+            "virtual:os-error",
+            "--key-file",
+            "/nonexistent/bywire.key",
+            "--freshness-file",
+            "/nonexistent/bywire.fv",
+        ],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
+    let (code, _, err) = bywire(&["dump", "socketcan:bywire-none0"], "");
+    assert_eq!(code, 1);
+    assert_eq!(err.matches("(os error").count(), 1, "{err}");
+}

@@ -151,6 +151,7 @@ fn state_json(ads: &Ads<Wire>, now: Timestamp) -> serde_json::Value {
             "echo": ads.stats().echo,
             "range": ads.stats().range,
         },
+        "secoc": crate::support::vehicles::secoc_counts(ads.wire()),
     })
 }
 

@@ -212,6 +212,9 @@ fn can(args: &CanArgs, out: &mut dyn Write) -> Result<()> {
                 reporter.line(&format!("bus {bus} lost: {error}; the others go on"))
             }
             BridgeEvent::PublishFailed { bus, error } => reporter.line(&format!("{bus}: {error}")),
+            BridgeEvent::NoEcho { bus, why } => reporter.line(&format!(
+                "bus {bus}: frames sent are not published back as received ({why})"
+            )),
         },
     )?;
     writeln!(

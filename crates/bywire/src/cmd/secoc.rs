@@ -11,6 +11,7 @@ use bywire_secoc::keys::KeyFile;
 use bywire_secoc::{Authenticator, Counts, Layout, Receiver};
 
 use crate::support::logs;
+use crate::support::numbers::whole;
 
 #[derive(clap::Subcommand)]
 pub enum SecocCommand {
@@ -58,10 +59,10 @@ pub struct OneFrame {
     #[arg(long, default_value_t = 0)]
     key_id: u32,
     /// The data ID (SecOCDataId; 0x for hex).
-    #[arg(long, value_name = "N")]
-    data_id: String,
-    /// The full freshness value.
-    #[arg(long, value_name = "FV")]
+    #[arg(long, value_name = "N", value_parser = whole::<u16>)]
+    data_id: u16,
+    /// The full freshness value (0x for hex).
+    #[arg(long, value_name = "FV", value_parser = whole::<u64>)]
     freshness: u64,
     #[command(flatten)]
     lengths: Lengths,
@@ -96,10 +97,10 @@ pub struct OneFrameOrLog {
     #[arg(long, default_value_t = 0, conflicts_with = "dbc")]
     key_id: u32,
     /// The data ID (SecOCDataId; 0x for hex).
-    #[arg(long, value_name = "N", required_unless_present = "dbc")]
-    data_id: Option<String>,
-    /// The full freshness value (one frame).
-    #[arg(long, value_name = "FV", required_unless_present = "dbc")]
+    #[arg(long, value_name = "N", required_unless_present = "dbc", value_parser = whole::<u16>)]
+    data_id: Option<u16>,
+    /// The full freshness value (one frame; 0x for hex).
+    #[arg(long, value_name = "FV", required_unless_present = "dbc", value_parser = whole::<u64>)]
     freshness: Option<u64>,
     #[command(flatten)]
     lengths: Lengths,
@@ -111,7 +112,7 @@ pub struct OneFrameOrLog {
     #[arg(long, value_name = "FILE")]
     dbc: Option<PathBuf>,
     /// With --dbc: the last freshness value accepted before the logs begin, per message.
-    #[arg(long, value_name = "FV", default_value_t = 0, requires = "dbc")]
+    #[arg(long, value_name = "FV", default_value_t = 0, requires = "dbc", value_parser = whole::<u64>)]
     freshness_start: u64,
     /// With --dbc: how far ahead of the last accepted value a freshness value may be.
     #[arg(long, value_name = "N", default_value_t = 16, requires = "dbc")]
@@ -129,14 +130,6 @@ pub fn run(command: &SecocCommand, out: &mut dyn Write) -> Result<()> {
         SecocCommand::Verify { one } if one.dbc.is_some() => verify_logs(one, out),
         SecocCommand::Verify { one } => verify_one(one, out),
     }
-}
-
-fn number(text: &str, what: &str) -> Result<u16> {
-    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
-        Some(hex) => u16::from_str_radix(hex, 16),
-        None => text.parse(),
-    };
-    parsed.map_err(|_| anyhow!("{what} {text}: not a number from 0 to 65535"))
 }
 
 fn key(path: &std::path::Path, id: u32) -> Result<Authenticator> {
@@ -221,7 +214,7 @@ fn with_data(original: &Frame, data: &[u8]) -> Result<Frame> {
 fn sign(one: &OneFrame, payload_length: Option<usize>, out: &mut dyn Write) -> Result<()> {
     let auth = key(&one.key, one.key_id)?;
     let frame = parse_frame(&one.frame)?;
-    let data_id = number(&one.data_id, "--data-id")?;
+    let data_id = one.data_id;
     let layout = layout(&one.lengths, data_id, |_| {
         Ok(payload_length.unwrap_or(frame.data().len()))
     })?;
@@ -246,7 +239,7 @@ fn verify_one(one: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
     };
     let auth = key(&one.key, one.key_id)?;
     let frame = parse_frame(text)?;
-    let data_id = number(one.data_id.as_deref().unwrap_or_default(), "--data-id")?;
+    let data_id = one.data_id.unwrap_or_default();
     let freshness = one.freshness.unwrap_or_default();
     let length = frame.data().len();
     let layout = layout(&one.lengths, data_id, |bits| match one.payload_length {

@@ -81,6 +81,7 @@ impl Hooks<Vehicle> for Status<'_> {
             "distance": plant.distance,
             "accepted": stats.accepted,
             "rejected": stats.rejected(),
+            "secoc": crate::support::vehicles::secoc_counts(s.wire()),
         });
         // A closed stdout ends the status lines, not the vehicle.
         if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {

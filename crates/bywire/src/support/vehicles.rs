@@ -18,6 +18,27 @@ use bywire_vehicle::wire::ProfileWire;
 
 /// A profile's wire, secured when it declares `[secoc]`.
 pub type Wire = Secured<ProfileWire>;
+
+/// What a secured wire's receivers made of the frames they verified (accepted, and each
+/// reason a frame was rejected: a wrong MAC, a stale or too-far freshness, a malformed frame)
+/// and its freshness syncs, for status lines; `null` for an unsecured profile.
+pub fn secoc_counts(wire: &Wire) -> serde_json::Value {
+    let Some(table) = wire.table() else {
+        return serde_json::Value::Null;
+    };
+    let s = table.stats();
+    serde_json::json!({
+        "accepted": s.frames.accepted,
+        "rejected": s.frames.rejected(),
+        "mac": s.frames.mac,
+        "stale": s.frames.stale,
+        "window": s.frames.window,
+        "malformed": s.frames.malformed,
+        "syncs_taken": s.syncs_taken,
+        "syncs_refused": s.syncs_refused,
+        "syncs_sent": s.syncs_sent,
+    })
+}
 type Vehicle = SimulatedVehicle<Wire>;
 
 /// Freshness values a store reserves at a time (one write per this many frames); within the
