@@ -42,7 +42,8 @@ impl fmt::Display for StoreError {
             StoreError::Io { path, source } => write!(f, "{}: {source}", path.display()),
             StoreError::Corrupt { path } => write!(
                 f,
-                "{}: not a freshness value (refusing to start over: that would be a rewind)",
+                "{}: not a whole freshness value (damaged, or a write torn short; refusing to \
+                 start over: that would be a rewind)",
                 path.display()
             ),
             StoreError::Exhausted { path } => write!(
@@ -71,10 +72,13 @@ impl FreshnessStore {
     /// the first freshness value to use (1 for a new file).
     pub fn open(path: &Path, step: u64) -> Result<(FreshnessStore, u64), StoreError> {
         let start = match std::fs::read_to_string(path) {
+            // Written whole as `DIGITS\n`: without its newline it is a torn write (`12` of
+            // `1280`), refused like any other damage.
             Ok(text) => text
-                .trim()
-                .parse::<u64>()
-                .map_err(|_| StoreError::Corrupt {
+                .strip_suffix('\n')
+                .filter(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
+                .and_then(|digits| digits.parse::<u64>().ok())
+                .ok_or_else(|| StoreError::Corrupt {
                     path: path.to_path_buf(),
                 })?,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => 1,
@@ -176,9 +180,15 @@ mod tests {
     #[test]
     fn a_damaged_file_is_refused_not_started_over() {
         let (_dir, path) = temp("damaged");
-        std::fs::write(&path, "12x\n").unwrap();
-        let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
-        assert!(error.contains("refusing to start over"), "{error}");
+        // Damaged, or torn short: "12" of "1280\n" has no newline.
+        for damaged in ["12x\n", "12", "", "\n", " 12\n", "12\0\0"] {
+            std::fs::write(&path, damaged).unwrap();
+            let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
+            assert!(
+                error.contains("refusing to start over"),
+                "{damaged:?}: {error}"
+            );
+        }
         std::fs::write(&path, format!("{}\n", u64::MAX - 5)).unwrap();
         let error = FreshnessStore::open(&path, 10).err().unwrap().to_string();
         assert!(

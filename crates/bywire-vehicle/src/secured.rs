@@ -11,10 +11,15 @@
 //!   [`Incoming::Unauthenticated`] or [`Feedback::Unauthenticated`], counted apart.
 //! - Each command bus has its own receivers: the redundant bus carries the same frames, with
 //!   the same freshness, and neither copy is a replay of the other.
-//! - Freshness sync: when an authentic frame is stale (its sender restarted without its
-//!   persisted freshness), the receiving side answers with a signed sync message carrying the
-//!   last value it accepted, at most every [`SYNC_INTERVAL`]; the sender goes on after it.
-//!   A sync only ever moves a sender forward, so a replayed one does nothing.
+//! - Freshness sync: when a frame is stale (its sender restarted without its persisted
+//!   freshness, or from a rewound one) or its MAC matches no freshness value near the last
+//!   accepted (a sender further behind than the receiver looks — after a minute of driving a
+//!   restarted sender's low bits name no value it tries —, or a forgery: the two cannot be
+//!   told apart), the receiving side answers with a signed sync message carrying the last
+//!   value it accepted, at most every [`SYNC_INTERVAL`]; the sender goes on after it. A sync
+//!   only ever moves a sender forward and the receiver still accepts only fresh values, so
+//!   neither a replayed sync nor a flood of forgeries makes anything be accepted: a forger
+//!   gains at most one sync frame every [`SYNC_INTERVAL`], signed with a key it lacks.
 //! - Signing that cannot be done (the freshness exhausted, a frame not of its declared length)
 //!   sends nothing: the receiving side's watchdog then stops the vehicle. Nothing is ever sent
 //!   unauthenticated in a secured message's place.
@@ -123,7 +128,7 @@ pub struct SecuredTable {
     window: u64,
     entries: [Option<Entry>; MAX_SECURED],
     sync: Option<SyncMessage>,
-    /// A stale frame of this entry was seen: a sync is due.
+    /// A stale or unverified frame of this entry was seen: a sync is due.
     sync_due: Option<usize>,
     last_sync: Option<Timestamp>,
     stats: SecuredStats,
@@ -172,7 +177,7 @@ impl SecuredTable {
         Ok(())
     }
 
-    /// Answer stale frames with (and take) freshness syncs on `sync`.
+    /// Answer stale and unverified frames with (and take) freshness syncs on `sync`.
     pub fn with_sync(mut self, sync: SyncMessage) -> Result<SecuredTable, TableError> {
         if self
             .entries
@@ -290,7 +295,8 @@ impl SecuredTable {
             (Ok(_), Some(payload)) => Checked::Authentic(payload),
             (Ok(_), None) => Checked::Rejected(Rejection::Malformed),
             (Err(rejection), _) => {
-                if rejection == Rejection::Stale {
+                // A sender behind, by however much, gets the value to go on after.
+                if matches!(rejection, Rejection::Stale | Rejection::Mac) {
                     self.sync_due = Some(index);
                 }
                 Checked::Rejected(rejection)
@@ -299,7 +305,7 @@ impl SecuredTable {
     }
 
     /// The freshness-sync frame due at `now`, if any: the last value accepted of the message
-    /// whose frame was stale, at most one every [`SYNC_INTERVAL`].
+    /// whose frame was stale or unverified, at most one every [`SYNC_INTERVAL`].
     pub fn sync_frame(&mut self, now: Timestamp) -> Option<Frame> {
         let sync = self.sync?;
         let index = self.sync_due?;
