@@ -56,7 +56,17 @@ impl Bench {
     }
 
     fn run(&mut self, millis: u64, tamper: &mut dyn FnMut(&Frame) -> Vec<Frame>) {
-        for _ in 0..millis {
+        self.run_in_steps(millis, 1, tamper);
+    }
+
+    /// `steps` turns `step` ms apart.
+    fn run_in_steps(
+        &mut self,
+        steps: u64,
+        step: u64,
+        tamper: &mut dyn FnMut(&Frame) -> Vec<Frame>,
+    ) {
+        for _ in 0..steps {
             let now = ms(self.now);
             self.ads.set_command(now, drive());
             let mut to_vehicle = Vec::new();
@@ -77,7 +87,7 @@ impl Bench {
             for frame in to_ads {
                 self.ads.on_frame(now, &frame);
             }
-            self.now += 1;
+            self.now += step;
         }
     }
 
@@ -87,21 +97,7 @@ impl Bench {
 
     /// Drive for `seconds` of simulated time in 10 ms steps (the command cycle is 20 ms).
     fn drive_for(&mut self, seconds: u64) {
-        for _ in 0..seconds * 100 {
-            let now = ms(self.now);
-            self.ads.set_command(now, drive());
-            let mut to_vehicle = Vec::new();
-            self.ads.poll(now, &mut |f| to_vehicle.push(f));
-            for frame in to_vehicle {
-                self.supervisor.on_frame(now, &frame);
-            }
-            let mut to_ads = Vec::new();
-            self.supervisor.poll(now, &mut |f| to_ads.push(f));
-            for frame in to_ads {
-                self.ads.on_frame(now, &frame);
-            }
-            self.now += 10;
-        }
+        self.run_in_steps(seconds * 100, 10, &mut |_| Vec::new());
     }
 }
 
@@ -248,8 +244,7 @@ fn a_restart_without_the_store_is_resynchronised_within_half_a_second_whatever_t
 fn a_sync_from_another_key_is_never_taken() {
     let mut bench = Bench::new(wire(1), wire(1));
     bench.quiet(100);
-    // A vehicle with another key refuses the ADS's frames as forged, and answers with a sync
-    // signed with its key: the real ADS refuses that sync.
+    // A vehicle with another key refuses the ADS's frames as forged.
     let mut other = Supervisor::with_wire(
         SupervisorConfig::default(),
         secured::secured(&Key::new([7; 16]), 1).unwrap(),
@@ -259,27 +254,10 @@ fn a_sync_from_another_key_is_never_taken() {
     let mut sent = Vec::new();
     other.poll(ms(100), &mut |f| sent.push(f));
     assert_eq!(other.wire().table().unwrap().stats().frames.mac, 1);
-    let answer = sent
+    // It answers with a sync, as to any frame behind: signed with its key (refused below).
+    assert!(sent
         .iter()
-        .find(|f| f.id().map(Id::as_raw) == Some(secured::SYNC_ID))
-        .unwrap();
-    let next = bench
-        .ads
-        .wire()
-        .table()
-        .unwrap()
-        .next_freshness(command_id());
-    bench.ads.on_frame(ms(100), answer);
-    assert_eq!(bench.ads.wire().table().unwrap().stats().syncs_refused, 1);
-    assert_eq!(
-        bench
-            .ads
-            .wire()
-            .table()
-            .unwrap()
-            .next_freshness(command_id()),
-        next
-    );
+        .any(|f| f.id().map(Id::as_raw) == Some(secured::SYNC_ID)));
     // A sync signed with another key, to the real ADS: refused, the freshness unmoved.
     let mut stale = Supervisor::with_wire(
         SupervisorConfig::default(),
@@ -311,7 +289,7 @@ fn a_sync_from_another_key_is_never_taken() {
         .next_freshness(command_id());
     bench.ads.on_frame(ms(100), &sync);
     let ads = bench.ads.wire().table().unwrap();
-    assert_eq!(ads.stats().syncs_refused, 2);
+    assert_eq!(ads.stats().syncs_refused, 1);
     assert_eq!(ads.next_freshness(command_id()), next);
 }
 

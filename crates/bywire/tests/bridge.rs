@@ -38,6 +38,60 @@ impl Run {
 /// The engage an operator sends.
 const ENGAGE: &str = r#"{"engage": true}"#;
 
+/// A bridge started with `args`: its stdout read as JSON lines on a thread, `seen` set once a
+/// state line shows `reached`.
+struct Started {
+    child: std::process::Child,
+    stdin: std::process::ChildStdin,
+    reader: std::thread::JoinHandle<Vec<Value>>,
+    seen: Arc<AtomicBool>,
+}
+
+impl Started {
+    fn new(args: &[&str], reached: impl Fn(&Value) -> bool + Send + 'static) -> Started {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let seen = Arc::new(AtomicBool::new(false));
+        let reader = {
+            let seen = Arc::clone(&seen);
+            std::thread::spawn(move || {
+                let mut lines = Vec::new();
+                for line in BufReader::new(stdout).lines() {
+                    let line: Value = serde_json::from_str(&line.unwrap()).unwrap();
+                    if line.get("mode").is_some() && reached(&line) {
+                        seen.store(true, Ordering::Relaxed);
+                    }
+                    lines.push(line);
+                }
+                lines
+            })
+        };
+        Started {
+            child,
+            stdin,
+            reader,
+            seen,
+        }
+    }
+
+    /// Close its input and wait for its end, which must be a success.
+    fn finish(self) -> Run {
+        drop(self.stdin);
+        let lines = self.reader.join().unwrap();
+        let out = self.child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        Run { lines, stderr }
+    }
+}
+
 /// Run the bridge with `args`, writing `input(k)` for k = 0, 1, … one `every`: at least
 /// `at_least` of them, and on until a state line shows `reached` (20 s at most). On, because a
 /// loaded machine can stall the bridge long enough for the vehicle's watchdog to brake, or
@@ -50,46 +104,18 @@ fn run_until(
     input: impl Fn(usize) -> Vec<u8>,
     reached: impl Fn(&Value) -> bool + Send + 'static,
 ) -> Run {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let seen = Arc::new(AtomicBool::new(false));
-    let reader = {
-        let seen = Arc::clone(&seen);
-        std::thread::spawn(move || {
-            let mut lines = Vec::new();
-            for line in BufReader::new(stdout).lines() {
-                let line: Value = serde_json::from_str(&line.unwrap()).unwrap();
-                if line.get("mode").is_some() && reached(&line) {
-                    seen.store(true, Ordering::Relaxed);
-                }
-                lines.push(line);
-            }
-            lines
-        })
-    };
+    let mut bridge = Started::new(args, reached);
     let deadline = Instant::now() + Duration::from_secs(20);
     let mut k = 0;
-    while k < at_least || (!seen.load(Ordering::Relaxed) && Instant::now() < deadline) {
+    while k < at_least || (!bridge.seen.load(Ordering::Relaxed) && Instant::now() < deadline) {
         // A bridge that ended early says why on its standard error (asserted below).
-        if stdin.write_all(&input(k)).is_err() {
+        if bridge.stdin.write_all(&input(k)).is_err() {
             break;
         }
         std::thread::sleep(every);
         k += 1;
     }
-    drop(stdin);
-    let lines = reader.join().unwrap();
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "{stderr}");
-    Run { lines, stderr }
+    bridge.finish()
 }
 
 /// `drive` every 25 ms with an engage every 0.5 s, for 2.5 s and on until a state shows
@@ -545,78 +571,57 @@ enum Then {
 /// The reference tug driven at 1.5 m/s by a bridge with `--estop-on-eof` until it drives,
 /// then `then`, the drive lines flowing on until the bridge ends (15 s at most).
 fn drive_then(bus: &str, then: Then) -> Run {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
-        .args([
-            "bridge",
-            "--profile",
-            "reference-tug",
-            bus,
-            "--with-vehicle",
-            "--estop-on-eof",
-            "--rate",
-            "20",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let driving = Arc::new(AtomicBool::new(false));
-    let reader = {
-        let driving = Arc::clone(&driving);
-        std::thread::spawn(move || {
-            let mut lines = Vec::new();
-            for line in BufReader::new(stdout).lines() {
-                let line: Value = serde_json::from_str(&line.unwrap()).unwrap();
-                if line["mode"] == "autonomous" && line["velocity"] == 1.5 {
-                    driving.store(true, Ordering::Relaxed);
-                }
-                lines.push(line);
-            }
-            lines
-        })
-    };
+    let args = [
+        "bridge",
+        "--profile",
+        "reference-tug",
+        bus,
+        "--with-vehicle",
+        "--estop-on-eof",
+        "--rate",
+        "20",
+    ];
+    let mut bridge = Started::new(&args, |s| s["mode"] == "autonomous" && s["velocity"] == 1.5);
     let drive = "{\"velocity\": 1.5, \"gear\": \"drive\", \"mode\": \"autonomous\"}\n";
     let deadline = Instant::now() + Duration::from_secs(20);
     let mut k = 0usize;
-    while !driving.load(Ordering::Relaxed) && Instant::now() < deadline {
+    while !bridge.seen.load(Ordering::Relaxed) && Instant::now() < deadline {
         let line = if k > 0 && k.is_multiple_of(20) {
             format!("{ENGAGE}\n")
         } else {
             drive.to_string()
         };
-        stdin.write_all(line.as_bytes()).unwrap();
+        bridge.stdin.write_all(line.as_bytes()).unwrap();
         std::thread::sleep(Duration::from_millis(25));
         k += 1;
     }
-    assert!(driving.load(Ordering::Relaxed), "the vehicle never drove");
+    assert!(
+        bridge.seen.load(Ordering::Relaxed),
+        "the vehicle never drove"
+    );
     let mut until = Instant::now() + Duration::from_secs(15);
     match then {
         Then::Signal(signal) => {
             let killed = Command::new("kill")
                 .arg(format!("-{signal}"))
-                .arg(child.id().to_string())
+                .arg(bridge.child.id().to_string())
                 .status()
                 .unwrap();
             assert!(killed.success());
         }
         Then::Line(line) => {
-            stdin.write_all(format!("{line}\n").as_bytes()).unwrap();
+            bridge
+                .stdin
+                .write_all(format!("{line}\n").as_bytes())
+                .unwrap();
             until = Instant::now() + Duration::from_secs(2);
         }
     }
     // Commands to drive on keep coming: none may override the stop.
-    while Instant::now() < until && stdin.write_all(drive.as_bytes()).is_ok() {
+    while Instant::now() < until && bridge.stdin.write_all(drive.as_bytes()).is_ok() {
         std::thread::sleep(Duration::from_millis(25));
     }
-    drop(stdin);
-    let lines = reader.join().unwrap();
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "{stderr}");
-    Run { lines, stderr }
+    bridge.finish()
 }
 
 /// The lines from the first event of `kind` on.

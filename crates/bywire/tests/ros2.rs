@@ -367,7 +367,7 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
         err.contains("acceleration -1e30 m/s²: a deceleration beyond this vehicle's 4 m/s², braking as hard as it can"),
         "{err}"
     );
-    assert!(seen["braked_to"].as_f64().unwrap() < 1.3, "{seen}");
+    assert!(seen["braked_to"].as_f64().unwrap() < 1.0, "{seen}");
     // Crab chosen on the steering-mode topic: the same command also moves the tug sideways
     // (the tire angle is now the direction of travel), without turning; back to normal.
     let crab = &seen["crab"];
