@@ -134,6 +134,85 @@ fn ros2_can_bridges_a_bus_to_cyclone_dds_both_ways() {
     assert!(out.contains("2 refused"), "{out}");
 }
 
+/// Malformed RTPS from the network (what any host on the domain can send; DDS without
+/// DDS-Security authenticates nobody): 50,000 mutated datagrams, seeded from our own and Cyclone
+/// DDS's real discovery traffic captured with tshark, leave `ros2 can` within 64 MB of the
+/// memory it started with, still bridging both ways, and ending at once on SIGTERM. Unpatched
+/// RustDDS went to gigabytes and its event loop never came back
+/// (`third_party/rustdds/PATCHES.md`; `scripts/rtps-flood.sh` runs the million).
+#[test]
+fn malformed_rtps_leaves_ros2_can_bounded_and_bridging() {
+    if !inside_lonet("malformed_rtps_leaves_ros2_can_bounded_and_bridging") {
+        return;
+    }
+    let dir = Scratch::new("rtps-flood");
+    let capture = dir.join("discovery.pcapng");
+    let bus = "udp:239.74.163.2:43530";
+    // The seeds: a real exchange between the node and Cyclone DDS, captured on loopback.
+    let mut tshark = Command::new("tshark")
+        .args(["-i", "lo", "-f", "udp", "-w"])
+        .arg(&capture)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut said = std::io::BufReader::new(tshark.stderr.take().unwrap());
+    let mut line = String::new();
+    while std::io::BufRead::read_line(&mut said, &mut line).unwrap() > 0
+        && !line.contains("Capturing on")
+    {
+        line.clear();
+    }
+    let bridge = Background::start(&["ros2", "can", bus, "--dds-interface", "lo"]);
+    python_peer("ros2_can_peer.py", &["239.74.163.2", "43530"]);
+    bridge.stop();
+    Command::new("kill")
+        .args(["-INT", &tshark.id().to_string()])
+        .status()
+        .unwrap();
+    tshark.wait().unwrap();
+    let fields = Command::new("tshark")
+        .arg("-r")
+        .arg(&capture)
+        .args(["-T", "fields", "-e", "udp.dstport", "-e", "udp.payload"])
+        .output()
+        .unwrap();
+    let seeds = dir.join("seeds.txt");
+    std::fs::write(&seeds, &fields.stdout).unwrap();
+
+    let bridge = Background::start(&["ros2", "can", bus, "--dds-interface", "lo"]);
+    let pid = bridge.id().to_string();
+    let flood = python_peer(
+        "rtps_flood.py",
+        &[&pid, "50000", "53", seeds.to_str().unwrap()],
+    );
+    let grew = flood["peak_mb"].as_f64().unwrap() - flood["start_mb"].as_f64().unwrap();
+    assert!(grew < 64.0, "grew by {grew} MB: {flood}");
+    // Still bridging: the peer's frames cross both ways as in the first test.
+    let seen = python_peer("ros2_can_peer.py", &["239.74.163.2", "43530"]);
+    assert_eq!(
+        ids(&seen["classic"]),
+        [0x123, 0x1ABC_DEF0, 0x321, 0x7FE],
+        "{seen}"
+    );
+    eprintln!("after {flood}");
+    let on_bus: Vec<u64> = seen["bus"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["id"].as_u64().unwrap())
+        .collect();
+    assert!(on_bus.contains(&0x124) && on_bus.contains(&0x457), "{seen}");
+    let stopping = std::time::Instant::now();
+    let (code, out, err) = bridge.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        stopping.elapsed() < std::time::Duration::from_secs(5),
+        "{:?}",
+        stopping.elapsed()
+    );
+}
+
 /// One run of `control-output` in `mode` against the Python peers, stopped by SIGTERM; (what
 /// they saw, stdout, stderr, the frames `bywire dump -L` saw on the bus to the end).
 fn control_output_run(mode: &str, port: u16) -> (Value, String, String, String) {

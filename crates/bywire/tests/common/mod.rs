@@ -133,6 +133,11 @@ impl Background {
         Background(Some(child))
     }
 
+    /// Its process id.
+    pub fn id(&self) -> u32 {
+        self.0.as_ref().map_or(0, std::process::Child::id)
+    }
+
     /// Stop it as Ctrl-C would and return (exit code, stdout, stderr).
     pub fn stop(mut self) -> (i32, String, String) {
         let child = self.0.take().unwrap();
