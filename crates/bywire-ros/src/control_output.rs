@@ -174,7 +174,7 @@ fn take_batch(
             Ok(None) => break,
             // The reader has moved past it; nothing of it is sent.
             Err(e) => {
-                report(&Control::default(), Outcome::Unreadable(format!("{e:?}")));
+                report(&Control::default(), Outcome::Unreadable(e.to_string()));
                 continue;
             }
         };

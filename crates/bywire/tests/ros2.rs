@@ -213,6 +213,71 @@ fn malformed_rtps_leaves_ros2_can_bounded_and_bridging() {
     );
 }
 
+/// `ros2 can` on a bus without echo (socketcand's raw mode) says so once and bridges on: it
+/// said "bus … lost: cannot set receive-own" of a bus that worked.
+#[test]
+fn ros2_can_on_a_bus_without_echo_says_so_and_bridges() {
+    if !inside_lonet("ros2_can_on_a_bus_without_echo_says_so_and_bridges") {
+        return;
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let listen = format!("127.0.0.1:{port}");
+    let server = Background::start(&["serve", "udp:239.74.163.2:43550", "--listen", &listen]);
+    // The server listens once it accepts a connection.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while std::net::TcpStream::connect(&listen).is_err() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server never listened"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let bus = format!("socketcand:{listen}/bus");
+    let bridge = Background::start(&["ros2", "can", &bus, "--dds-interface", "lo"]);
+    // Frames still cross both ways through the served bus.
+    let seen = python_peer("ros2_can_peer.py", &["239.74.163.2", "43550"]);
+    let (code, out, err) = bridge.stop();
+    server.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(!err.contains("lost"), "{err}");
+    assert_eq!(
+        err.matches("frames sent are not published back as received")
+            .count(),
+        1,
+        "{err}"
+    );
+    assert!(!seen["classic"].as_array().unwrap().is_empty(), "{seen}");
+    assert!(!seen["bus"].as_array().unwrap().is_empty(), "{seen}");
+}
+
+/// A sample `control-output` cannot read (a one-byte struct under Control's type name) is
+/// reported as unreadable, and nothing is sent for it: it was dropped without a word.
+#[test]
+fn ros2_control_output_reports_samples_it_cannot_read() {
+    if !inside_lonet("ros2_control_output_reports_samples_it_cannot_read") {
+        return;
+    }
+    let output = Background::start(&[
+        "ros2",
+        "control-output",
+        "udp:239.74.163.2:43560",
+        "--dds-interface",
+        "lo",
+    ]);
+    python_peer("ros2_short_control.py", &[]);
+    let (code, out, err) = output.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        err.contains("refused: a sample that cannot be read: ") && err.contains("Control_"),
+        "{err}"
+    );
+    assert!(out.contains("0 commands sent"), "{out}");
+}
+
 /// One run of `control-output` in `mode` against the Python peers, stopped by SIGTERM; (what
 /// they saw, stdout, stderr, the frames `bywire dump -L` saw on the bus to the end).
 fn control_output_run(mode: &str, port: u16) -> (Value, String, String, String) {
