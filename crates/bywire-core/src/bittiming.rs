@@ -388,6 +388,37 @@ pub fn max_bus_length_m(timing: &BitTiming, delays: &PropagationDelays) -> Optio
     (one_way_budget >= 0.0).then(|| one_way_budget / delays.cable_ns_per_m.max(f64::MIN_POSITIVE))
 }
 
+/// Bitrates a bus is commonly run at (CiA 301's table and the CAN FD data rates), fastest first.
+pub const COMMON_BITRATES: [u32; 13] = [
+    8_000_000, 5_000_000, 2_000_000, 1_000_000, 800_000, 500_000, 250_000, 125_000, 100_000,
+    83_333, 50_000, 20_000, 10_000,
+];
+
+/// Timings for a bus of `length_m` that the asked-for one does not fit: at `bitrate`, the
+/// earliest sample point (in steps of 0.5 %, up to 95 %) whose round trip fits; and the fastest
+/// of [`COMMON_BITRATES`] at or below `bitrate` that fits with CiA's sample point. Each `None`
+/// when there is none.
+pub fn fitting_timings(
+    clock: u32,
+    bitrate: u32,
+    sjw: Option<u32>,
+    limits: &Limits,
+    length_m: f64,
+    delays: &PropagationDelays,
+) -> (Option<BitTiming>, Option<BitTiming>) {
+    let fits = |t: &BitTiming| max_bus_length_m(t, delays).is_some_and(|m| m >= length_m);
+    let later = (cia_sample_point(bitrate)..=950)
+        .step_by(5)
+        .filter_map(|sp| calculate(clock, bitrate, Some(sp), sjw, limits).ok())
+        .find(fits);
+    let slower = COMMON_BITRATES
+        .iter()
+        .filter(|b| **b <= bitrate)
+        .filter_map(|b| calculate(clock, *b, None, sjw, limits).ok())
+        .find(fits);
+    (later, slower)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -492,6 +523,28 @@ mod tests {
             );
         }
         assert_eq!(CONTROLLERS.len(), DATASHEETS.len());
+    }
+
+    #[test]
+    fn a_bus_too_long_for_a_timing_gets_one_that_fits() {
+        let delays = PropagationDelays::default();
+        let (later, slower) = fitting_timings(40_000_000, 1_000_000, None, &MCAN, 40.0, &delays);
+        for t in [later.unwrap(), slower.unwrap()] {
+            assert!(max_bus_length_m(&t, &delays).unwrap() >= 40.0, "{t:?}");
+        }
+        assert_eq!(later.unwrap().bitrate, 1_000_000);
+        assert!(
+            later.unwrap().sample_point()
+                > calculate(40_000_000, 1_000_000, None, None, &MCAN)
+                    .unwrap()
+                    .sample_point()
+        );
+        assert!(slower.unwrap().bitrate < 1_000_000);
+        // Nothing fits a 10 km bus at 1 Mbit/s, but a slow enough rate does.
+        let (later, slower) =
+            fitting_timings(40_000_000, 1_000_000, None, &MCAN, 10_000.0, &delays);
+        assert!(later.is_none());
+        assert!(slower.is_none_or(|t| t.bitrate <= 10_000));
     }
 
     #[test]

@@ -141,6 +141,28 @@ fn bad_input_is_a_clear_error_with_exit_1() {
     ]);
     assert_eq!(code, 1);
     assert!(err.contains("does not fit"), "{err}");
+    assert!(
+        err.contains("it fits at 500000 bit/s (--bitrate 500000)"),
+        "{err}"
+    );
+    // What the error suggests fits: a later sample point, or a slower rate.
+    let ask = ["bittiming", "--clock", "40000000", "--bus-length", "40"];
+    let (code, _, err) = bywire(&[&ask[..], &["--bitrate", "1000000"]].concat());
+    assert_eq!(code, 1);
+    let suggested = |flag: &str| -> String {
+        let after = err.split(&format!("({flag} ")).nth(1).unwrap();
+        after.split(')').next().unwrap().to_string()
+    };
+    for flag in ["--sample-point", "--bitrate"] {
+        let value = suggested(flag);
+        let mut args = ask.to_vec();
+        if flag == "--sample-point" {
+            args.extend(["--bitrate", "1000000"]);
+        }
+        args.extend([flag, value.as_str()]);
+        let (code, _, err) = bywire(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+    }
     let (code, _, _) = bywire(&["wire"]);
     assert_eq!(code, 2, "usage errors exit 2");
 }

@@ -119,12 +119,36 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         json.data = Some(Box::new(to_json(&dlimits, &data)));
     }
     if let (Some(length), max) = (args.bus_length, json.max_bus_length_m) {
-        let fits = max.is_some_and(|m| length <= m);
-        anyhow::ensure!(
-            fits,
-            "a {length} m bus does not fit this timing: the round trip must end before the sample point (longest: {})",
-            max.map_or("none".to_string(), |m| format!("{m:.1} m"))
-        );
+        if !max.is_some_and(|m| length <= m) {
+            let (later, slower) = bittiming::fitting_timings(
+                args.clock,
+                args.bitrate,
+                args.sjw,
+                &limits,
+                length,
+                &PropagationDelays::default(),
+            );
+            let mut fits = Vec::new();
+            if let Some(t) = later {
+                let percent = f64::from(t.sample_point_permille) / 10.0;
+                fits.push(format!(
+                    "at {} bit/s with the sample point at {percent} % (--sample-point {percent})",
+                    t.bitrate
+                ));
+            }
+            if let Some(t) = slower {
+                fits.push(format!("at {} bit/s (--bitrate {})", t.bitrate, t.bitrate));
+            }
+            let suggestion = if fits.is_empty() {
+                "no common bitrate fits it with this clock".to_string()
+            } else {
+                format!("it fits {}", fits.join(", or "))
+            };
+            anyhow::bail!(
+                "a {length} m bus does not fit this timing: the round trip must end before the sample point (longest: {}); {suggestion}",
+                max.map_or("none".to_string(), |m| format!("{m:.1} m"))
+            );
+        }
     }
     if args.json {
         serde_json::to_writer(&mut *out, &json)?;
