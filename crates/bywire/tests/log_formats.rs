@@ -1191,7 +1191,7 @@ fn decoded_datasets_partition_by_channel_and_date_as_hive_readers_expect() {
     )
     .unwrap();
     let said = convert_decoded(&log, &dataset, &dbc, &["--partition", "channel,date"]);
-    assert!(said.contains("3 rows in 1 tables, 3 files"), "{said}");
+    assert!(said.contains("3 rows in 1 table, 3 files"), "{said}");
     let read = python(
         r#"
 import sys, pyarrow.dataset as ds

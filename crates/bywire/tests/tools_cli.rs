@@ -1298,3 +1298,51 @@ fn an_os_error_is_said_once() {
     assert_eq!(code, 1);
     assert_eq!(err.matches("(os error").count(), 1, "{err}");
 }
+
+/// `log convert --dbc` to a name with an extension no format has is refused, pointing to CSV's
+/// command: `dec.csv` silently became a folder of Parquet files.
+#[test]
+fn a_decoded_conversion_to_an_unknown_extension_is_refused() {
+    let dir = Scratch::new("convert-csv");
+    let log = dir.join("drive.log");
+    std::fs::write(&log, "(1700000000.000000) can0 123#11\n").unwrap();
+    let dbc = dir.join("v.dbc");
+    std::fs::write(
+        &dbc,
+        "VERSION \"\"\nBU_: X\nBO_ 291 M: 1 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n",
+    )
+    .unwrap();
+    let out = dir.join("dec.csv");
+    let (code, _, err) = bywire(
+        &[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--dbc",
+            dbc.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("not .csv; for CSV: bywire decode"), "{err}");
+    assert!(!out.exists());
+    // A folder name, or --format parquet, still writes the dataset.
+    let (code, said, err) = bywire(
+        &[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--dbc",
+            dbc.to_str().unwrap(),
+            "--format",
+            "parquet",
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.is_dir());
+    // Counts in words: one row, not "1 rows in 1 tables, 1 files".
+    assert!(said.contains("1 row in 1 table, 1 file"), "{said}");
+}

@@ -4,7 +4,7 @@
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use bywire_bus::Filtering;
 use bywire_log::candump::timestamp_text;
 use bywire_log::format::{Format, ParquetOptions};
@@ -204,7 +204,24 @@ fn convert(
             let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
             anyhow!("--format {name}: not a format ({})", names.join(", "))
         })?,
-        // A name without a known extension, with a DBC: the decoded dataset's directory.
+        // A name with an extension no log format has (dec.csv) is refused: it was taken as
+        // the dataset's directory and silently became a folder of Parquet files.
+        None if decoding.dbc.is_some()
+            && Format::from_path(output).is_none()
+            && output.extension().is_some() =>
+        {
+            bail!(
+                "{}: --dbc writes a Parquet dataset (a folder: a name without an extension, or \
+                 --format parquet) or MCAP (.mcap), not .{}; for CSV: bywire decode DBC -I LOG \
+                 --csv > FILE.csv",
+                output.display(),
+                output
+                    .extension()
+                    .map(|e| e.to_string_lossy())
+                    .unwrap_or_default()
+            )
+        }
+        // A name without an extension, with a DBC: the decoded dataset's directory.
         None if decoding.dbc.is_some() && Format::from_path(output).is_none() => Format::Parquet,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(

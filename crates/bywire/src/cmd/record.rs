@@ -514,9 +514,9 @@ impl Status {
         }
         let progress = recorder.progress();
         line.push_str(&format!(
-            "| {:.1} MB in {} files",
+            "| {:.1} MB in {}",
             progress.bytes_written as f64 / 1e6,
-            progress.files
+            crate::support::words::counted(progress.files, "file")
         ));
         if progress.capturing {
             line.push_str(" | capturing");

@@ -261,7 +261,9 @@ fn sweep(args: &Args, out: &mut impl Write) -> Result<()> {
     let failed = outcomes.iter().filter(|o| o.is_err()).count();
     writeln!(
         out,
-        "{total} runs on {threads} threads in {wall:.1} s ({:.1} runs per minute); {failed} failed; summary in {}",
+        "{} on {} in {wall:.1} s ({:.1} runs per minute); {failed} failed; summary in {}",
+        crate::support::words::counted(u64::try_from(total).unwrap_or(u64::MAX), "run"),
+        crate::support::words::counted(u64::try_from(threads).unwrap_or(u64::MAX), "thread"),
         total as f64 / wall.max(1e-9) * 60.0,
         path.display()
     )?;

@@ -388,10 +388,14 @@ pub fn write_dataset(
         dataset.finish().with_context(cannot_write)
     })?;
     let rows: u64 = summary.rows.values().sum();
+    let count = |n: usize, noun: &str| {
+        crate::support::words::counted(u64::try_from(n).unwrap_or(u64::MAX), noun)
+    };
     let mut notes = vec![format!(
-        "{rows} rows in {} tables, {} files",
-        summary.rows.len(),
-        summary.files.len()
+        "{} in {}, {}",
+        crate::support::words::counted(rows, "row"),
+        count(summary.rows.len(), "table"),
+        count(summary.files.len(), "file")
     )];
     if summary.unknown > 0 {
         notes.push(format!(

@@ -13,3 +13,4 @@ pub mod signals;
 pub mod sim_serve;
 pub mod uds_describe;
 pub mod vehicles;
+pub mod words;
