@@ -49,7 +49,7 @@ pub(crate) fn monotonic_unix_now() -> Timestamp {
     Timestamp::from_nanos(u64::try_from(nanos).unwrap_or(u64::MAX))
 }
 
-pub use spec::{open, open_listening, BusSpec, Listening, OpenError, SpecError};
+pub use spec::{is_in_process, open, open_listening, BusSpec, Listening, OpenError, SpecError};
 
 /// A frame as received.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -244,6 +244,15 @@ pub enum Listening {
     NoController(String),
 }
 
+/// Whether the bus a spec names lives inside this process (`virtual:`, `sim:`): what one
+/// process sends on it no other process hears.
+pub fn is_in_process(spec: &str) -> bool {
+    matches!(
+        spec.parse::<BusSpec>(),
+        Ok(BusSpec::Virtual { .. } | BusSpec::Sim { .. })
+    )
+}
+
 /// Open the bus a spec names for listening only: a SocketCAN interface's controller is put in
 /// listen-only mode where the interface allows, an SLCAN adapter is opened listen-only; what
 /// came of it is said. The bus is opened either way (a logger records what it can).

@@ -1346,3 +1346,19 @@ fn a_decoded_conversion_to_an_unknown_extension_is_refused() {
     // Counts in words: one row, not "1 rows in 1 tables, 1 files".
     assert!(said.contains("1 row in 1 table, 1 file"), "{said}");
 }
+
+/// A frame sent on a bus that lives inside the sending process is heard by nobody else: said,
+/// with the buses other processes hear (it succeeded without a word).
+#[test]
+fn sending_on_an_in_process_bus_says_nobody_else_hears_it() {
+    let (code, _, err) = bywire(&["send", "virtual:alone", "123#11"], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("virtual:alone is a bus inside this process: no other process hears it"),
+        "{err}"
+    );
+    // A bus of another process (here a server that is not there) is not said to be.
+    let (code, _, err) = bywire(&["send", "socketcand:127.0.0.1:1/bus", "123#11"], "");
+    assert_eq!(code, 1, "{err}");
+    assert!(!err.contains("inside this process"), "{err}");
+}

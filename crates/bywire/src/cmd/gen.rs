@@ -220,7 +220,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         None => None,
     };
     let mut generator = Generator::new(args)?;
-    let mut bus = busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
+    let mut bus =
+        busarg::open_to_send(&args.bus, "gen").with_context(|| format!("bus '{}'", args.bus))?;
     let stop = crate::interrupt_flag();
     let mut sent = 0u64;
     let mut emit = |frame: &Frame, out: &mut dyn Write| -> Result<bool> {

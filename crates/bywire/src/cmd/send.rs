@@ -66,7 +66,8 @@ fn frame_of(args: &Args) -> Result<Frame> {
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let frame = frame_of(args)?;
-    let mut bus = busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
+    let mut bus =
+        busarg::open_to_send(&args.bus, "send").with_context(|| format!("bus '{}'", args.bus))?;
     bus.send(&frame)
         .with_context(|| format!("bus '{}': cannot send {frame}", args.bus))?;
     if args.verbose {

@@ -2,6 +2,7 @@
 //! `virtual:test`, `sim:a@500000`, or a plain interface name such as `can0` for SocketCAN),
 //! optionally followed by candump's filters (`can0,123:7FF,1F0~7F0,#FFFFFFFF,j`).
 
+use std::io::Write;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver};
 use std::sync::Arc;
@@ -188,6 +189,21 @@ pub fn open_all(buses: &[BusArg]) -> Result<Vec<Box<dyn Bus>>> {
 /// Open a bus named by a plain spec (no filters).
 pub fn open(text: &str) -> Result<Box<dyn Bus>> {
     Ok(bywire_bus::open(&full_spec(text))?)
+}
+
+/// Open a bus a one-shot sender (send, gen) sends on, saying on standard error when it lives
+/// inside this process, where nothing outside hears what is sent.
+pub fn open_to_send(text: &str, command: &str) -> Result<Box<dyn Bus>> {
+    let spec = full_spec(text);
+    if bywire_bus::is_in_process(&spec) {
+        let _ = writeln!(
+            std::io::stderr(),
+            "bywire {command}: {spec} is a bus inside this process: no other process hears \
+             it (for others: socketcan:IFACE, udp:GROUP:PORT, or socketcand:HOST:PORT/BUS of \
+             bywire sim --serve or bywire serve)"
+        );
+    }
+    Ok(bywire_bus::open(&spec)?)
 }
 
 #[cfg(test)]
