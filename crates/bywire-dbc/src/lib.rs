@@ -36,6 +36,7 @@ mod parser;
 pub mod schedule;
 #[cfg(feature = "secoc")]
 pub mod secoc;
+pub mod select;
 mod writer;
 
 pub use model::*;

@@ -514,6 +514,23 @@ fn plot_writes_png_and_svg_and_nothing_on_errors() {
             && text.contains("Motor.Current [A]")
     );
     assert!(text.contains("time [s]"));
+    // Patterns, as cantools plot takes them: every signal of Motor, once though named twice.
+    let (code, _, err) = bywire(
+        &[
+            "plot",
+            dbc,
+            "Motor.*",
+            "*Curr?nt",
+            "--subplots",
+            "-o",
+            svg.to_str().unwrap(),
+        ],
+        &log,
+    );
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains("Motor.Rpm [rpm]") && text.contains("Motor.Current [A]"));
+    assert_eq!(text.matches("Motor.Current [A]").count(), 1, "one panel");
     // Lines that cannot be read are reported with their numbers and skipped, not silently.
     let mut dirty = log.clone().into_bytes();
     dirty.extend_from_slice(b"(1010.000000) can0 123#GG\n(1010.1) can0 123#\xff\xfe\n");
@@ -550,6 +567,11 @@ fn plot_writes_png_and_svg_and_nothing_on_errors() {
         &["plot", dbc, "Rpm", "-o", b],
         &log,
         "is in 2 messages; name one as MESSAGE.SIGNAL (Motor, Other)",
+    );
+    fails_with(
+        &["plot", dbc, "*Voltage*", "-o", b],
+        &log,
+        "no signal in the DBC matches '*Voltage*'",
     );
     fails_with(
         &["plot", dbc, "Other.Rpm", "-o", b],

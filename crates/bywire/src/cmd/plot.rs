@@ -22,14 +22,16 @@ use crate::support::signals::Dbc;
   bywire plot vehicle.dbc Speed -I drive.log -o speed.png
   candump -L can0 | bywire plot vehicle.dbc Motor.Rpm Motor.Current --subplots -o motor.svg
   bywire plot vehicle.dbc SteeringAngle --bus can0 --duration 20 -o steering.png
+  bywire plot vehicle.dbc '*Velocity*' -I drive.log --subplots -o velocities.png
 
-Signals are named SIGNAL or MESSAGE.SIGNAL. Time is in seconds from the first frame. With
+Signals are named SIGNAL or MESSAGE.SIGNAL, either part a shell pattern as cantools plot takes
+them ('*Velocity*', 'VehicleToAds_State.*'). Time is in seconds from the first frame. With
 --subplots each signal gets its own panel and axis; otherwise they share one, with a legend.
 The image is written to a temporary file and renamed, so a failed plot leaves nothing behind.")]
 pub struct Args {
     /// The DBC file.
     dbc: PathBuf,
-    /// Signals to plot: SIGNAL or MESSAGE.SIGNAL.
+    /// Signals to plot: SIGNAL or MESSAGE.SIGNAL, each part a name or a pattern (`*`, `?`).
     #[arg(required = true)]
     signals: Vec<String>,
     /// The candump log to read (standard input when not given and no --bus).
@@ -55,26 +57,19 @@ pub struct Args {
     height: u32,
 }
 
-/// Where a requested signal is: message index and signal index.
-fn locate(dbc: &Dbc, spec: &str) -> Result<(usize, usize)> {
+/// Where the signals a spec names are: (message index, signal index). A name must name one
+/// signal; a pattern (`*Velocity*`) at least one.
+fn locate(dbc: &Dbc, spec: &str) -> Result<Vec<(usize, usize)>> {
     let messages = &dbc.database().messages;
-    let (message_name, signal_name) = match spec.split_once('.') {
-        Some((m, s)) => (Some(m), s),
-        None => (None, spec),
-    };
-    let mut found = Vec::new();
-    for (mi, m) in messages.iter().enumerate() {
-        if message_name.is_some_and(|n| n != m.name && n != m.display_name()) {
-            continue;
+    let found = bywire_dbc::select::signals_matching(dbc.database(), spec);
+    if bywire_dbc::select::is_pattern(spec) {
+        if found.is_empty() {
+            return Err(anyhow!("no signal in the DBC matches '{spec}'"));
         }
-        for (si, s) in m.signals.iter().enumerate() {
-            if s.name == signal_name || s.display_name() == signal_name {
-                found.push((mi, si));
-            }
-        }
+        return Ok(found);
     }
     match found.as_slice() {
-        [one] => Ok(*one),
+        [_] => Ok(found),
         [] => Err(anyhow!("signal '{spec}' is not in the DBC")),
         many => Err(anyhow!(
             "signal '{spec}' is in {} messages; name one as MESSAGE.SIGNAL ({})",
@@ -103,11 +98,15 @@ pub fn run(args: &Args) -> Result<()> {
         return Err(anyhow!("--width/--height: 200x150 to 10000x10000 pixels"));
     }
     let dbc = Dbc::new(crate::support::dbc::load(&args.dbc, false)?);
-    let wanted: Vec<(usize, usize)> = args
-        .signals
-        .iter()
-        .map(|s| locate(&dbc, s))
-        .collect::<Result<_>>()?;
+    let mut wanted: Vec<(usize, usize)> = Vec::new();
+    for spec in &args.signals {
+        for found in locate(&dbc, spec)? {
+            // A signal two specs both name is plotted once.
+            if !wanted.contains(&found) {
+                wanted.push(found);
+            }
+        }
+    }
     let frames = if args.bus.is_empty() {
         read_log(args.input.as_deref())?
     } else {
