@@ -13,13 +13,13 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// A drive-by-wire CAN stack: wire model, bit timing and CAN tools.
 #[derive(Parser)]
 #[command(
     name = "bywire",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("BYWIRE_VERSION_DETAIL"), ")"),
     about,
     long_about = None,
     after_help = "Examples:
@@ -43,7 +43,7 @@ enum Command {
     Wire(cmd::wire::Args),
     /// Compute bit-timing registers for a bitrate and sample point on a controller.
     Bittiming(cmd::bittiming::Args),
-    /// Work with DBC files: dump.
+    /// Work with DBC files: dump, lint, convert (DBC and JSON), generate Rust.
     #[command(
         after_help = "Examples:\n  bywire dbc dump vehicle.dbc\n  bywire dbc lint vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc gen-rust vehicle.dbc > src/vehicle.rs"
     )]
@@ -79,7 +79,8 @@ enum Command {
     Monitor(cmd::monitor::Args),
     /// Plot signals from a candump log (or a live capture) to PNG or SVG, like cantools plot.
     Plot(cmd::plot::Args),
-    /// Read candump logs: print them (log or screen form, filtered) or summarise them.
+    /// Logs of any format (candump, ASC, BLF, TRC, pcapng, MF4, MCAP, Parquet): print, convert
+    /// or decode, summarise.
     #[command(
         after_help = "Examples:\n  bywire log cat --screen drive.log\n  bywire log stats drive.log"
     )]
@@ -105,7 +106,8 @@ enum Command {
         #[command(subcommand)]
         command: cmd::isotp::IsotpCommand,
     },
-    /// UDS diagnostics: a server (an ECU for testers) on any bus.
+    /// UDS diagnostics on any bus: a tester (sessions, DIDs, DTCs, routines, security access)
+    /// and a server (an ECU for testers).
     Uds {
         #[command(subcommand)]
         command: cmd::uds::UdsCommand,
@@ -120,12 +122,16 @@ enum Command {
     /// A simulated vehicle for any profile on any bus: the real supervisor and a plant.
     Vehicle(cmd::vehicle::Args),
     /// ROS 2 over DDS, without a ROS installation: ros2_socketcan's CAN topics, Autoware's
-    /// controller output.
+    /// controller output and vehicle interface, CANopen drives as ros2_canopen offers them.
     #[cfg(feature = "ros2")]
     Ros2 {
         #[command(subcommand)]
         command: cmd::ros2::Ros2Command,
     },
+    /// Print the completion script for a shell (bash, zsh, fish, elvish, powershell).
+    Completions(cmd::shell::CompletionsArgs),
+    /// Write the manual pages (bywire.1 and one per command) into a folder.
+    Man(cmd::shell::ManArgs),
 }
 
 fn main() -> ExitCode {
@@ -163,6 +169,8 @@ fn main() -> ExitCode {
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),
         #[cfg(feature = "ros2")]
         Command::Ros2 { command } => cmd::ros2::run(&command, &mut out),
+        Command::Completions(args) => cmd::shell::completions(&args, Cli::command(), &mut out),
+        Command::Man(args) => cmd::shell::man(&args, Cli::command(), &mut out),
     };
     let flushed = result.and_then(|()| out.flush().map_err(anyhow::Error::from));
     match flushed {

@@ -243,3 +243,74 @@ fn numeric_options_out_of_range_are_usage_errors_naming_the_option() {
         );
     }
 }
+
+/// Shell completions for bash, zsh and fish, generated from the command line's definition;
+/// bash completes commands and subcommands with them. Manual pages for every command.
+/// `--version` names the commit and features; the commands' summaries say what they do.
+#[test]
+fn completions_man_pages_version_and_summaries() {
+    let dir = common::Scratch::new("shell");
+    for shell in ["bash", "zsh", "fish"] {
+        let (code, out, err) = bywire(&["completions", shell]);
+        assert_eq!(code, 0, "{shell}: {err}");
+        assert!(out.contains("bywire") && out.len() > 1000, "{shell}");
+    }
+    let (_, script, _) = bywire(&["completions", "bash"]);
+    let path = dir.join("bywire.bash");
+    std::fs::write(&path, script).unwrap();
+    let complete = |words: &str| -> String {
+        let words: Vec<&str> = words.split(' ').collect();
+        let line = words.join(" ");
+        let test = format!(
+            "source {}; COMP_WORDS=({}); COMP_CWORD={}; COMP_LINE='{line}'; COMP_POINT={}; \
+             _bywire bywire {} {}; echo \"${{COMPREPLY[@]}}\"",
+            path.display(),
+            words.join(" "),
+            words.len() - 1,
+            line.len(),
+            words[words.len() - 1],
+            words[words.len() - 2],
+        );
+        let out = std::process::Command::new("bash")
+            .args(["-c", &test])
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    };
+    assert_eq!(complete("bywire lo"), "log");
+    assert_eq!(complete("bywire log c"), "cat convert");
+    // A command's options: candump's -L among dump's.
+    let options = complete("bywire dump -");
+    assert!(options.split(' ').any(|o| o == "-L"), "{options}");
+    let man = dir.join("man");
+    let (code, out, err) = bywire(&["man", man.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("pages in"), "{out}");
+    let page = std::fs::read_to_string(man.join("bywire-log-convert.1")).unwrap();
+    assert!(
+        page.contains(".SH NAME") && page.contains("bywire\\-log\\-convert"),
+        "{page}"
+    );
+    assert!(man.join("bywire.1").exists() && man.join("bywire-ros2-vehicle.1").exists());
+    let (code, version, _) = bywire(&["--version"]);
+    assert_eq!(code, 0);
+    assert!(
+        version.starts_with("bywire 0.")
+            && version.contains("commit ")
+            && version.contains("features: ros2"),
+        "{version}"
+    );
+    let (_, help, _) = bywire(&["--help"]);
+    for (command, says) in [
+        ("dbc", "dump, lint, convert"),
+        ("log", "Logs of any format"),
+        ("uds", "a tester"),
+        ("ros2", "vehicle interface, CANopen drives"),
+    ] {
+        let line = help
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{command} ")))
+            .unwrap();
+        assert!(line.contains(says), "{line}");
+    }
+}

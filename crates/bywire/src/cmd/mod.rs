@@ -21,6 +21,7 @@ pub mod ros2;
 pub mod secoc;
 pub mod send;
 pub mod serve;
+pub mod shell;
 pub mod sim;
 pub mod slcan_adapter;
 pub mod sniff;
