@@ -494,20 +494,16 @@ fn plot_writes_png_and_svg_and_nothing_on_errors() {
     let height = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
     assert_eq!((width, height), (640, 480));
     let svg = dir.join("motor.svg");
-    let (code, _, err) = bywire(
-        &[
-            "plot",
-            dbc,
-            "Motor.Rpm",
-            "Current",
-            "--subplots",
-            "-o",
-            svg.to_str().unwrap(),
-        ],
-        &log,
-    );
-    assert_eq!(code, 0, "{err}");
-    let text = std::fs::read_to_string(&svg).unwrap();
+    // Plots `signals` in panels to the SVG; its text.
+    let panels = |signals: &[&str]| {
+        let mut args = vec!["plot", dbc];
+        args.extend_from_slice(signals);
+        args.extend(["--subplots", "-o", svg.to_str().unwrap()]);
+        let (code, _, err) = bywire(&args, &log);
+        assert_eq!(code, 0, "{err}");
+        std::fs::read_to_string(&svg).unwrap()
+    };
+    let text = panels(&["Motor.Rpm", "Current"]);
     assert!(
         text.starts_with("<svg")
             && text.contains("Motor.Rpm [rpm]")
@@ -515,20 +511,7 @@ fn plot_writes_png_and_svg_and_nothing_on_errors() {
     );
     assert!(text.contains("time [s]"));
     // Patterns, as cantools plot takes them: every signal of Motor, once though named twice.
-    let (code, _, err) = bywire(
-        &[
-            "plot",
-            dbc,
-            "Motor.*",
-            "*Curr?nt",
-            "--subplots",
-            "-o",
-            svg.to_str().unwrap(),
-        ],
-        &log,
-    );
-    assert_eq!(code, 0, "{err}");
-    let text = std::fs::read_to_string(&svg).unwrap();
+    let text = panels(&["Motor.*", "*Curr?nt"]);
     assert!(text.contains("Motor.Rpm [rpm]") && text.contains("Motor.Current [A]"));
     assert_eq!(text.matches("Motor.Current [A]").count(), 1, "one panel");
     // Lines that cannot be read are reported with their numbers and skipped, not silently.
@@ -1335,34 +1318,24 @@ fn a_decoded_conversion_to_an_unknown_extension_is_refused() {
     )
     .unwrap();
     let out = dir.join("dec.csv");
-    let (code, _, err) = bywire(
-        &[
+    let convert = |extra: &[&str]| {
+        let mut args = vec![
             "log",
             "convert",
             log.to_str().unwrap(),
             out.to_str().unwrap(),
             "--dbc",
             dbc.to_str().unwrap(),
-        ],
-        "",
-    );
+        ];
+        args.extend_from_slice(extra);
+        bywire(&args, "")
+    };
+    let (code, _, err) = convert(&[]);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("not .csv; for CSV: bywire decode"), "{err}");
     assert!(!out.exists());
     // A folder name, or --format parquet, still writes the dataset.
-    let (code, said, err) = bywire(
-        &[
-            "log",
-            "convert",
-            log.to_str().unwrap(),
-            out.to_str().unwrap(),
-            "--dbc",
-            dbc.to_str().unwrap(),
-            "--format",
-            "parquet",
-        ],
-        "",
-    );
+    let (code, said, err) = convert(&["--format", "parquet"]);
     assert_eq!(code, 0, "{err}");
     assert!(out.is_dir());
     // Counts in words: one row, not "1 rows in 1 tables, 1 files".
