@@ -11,6 +11,19 @@
 //!   `vehicle_interface` (the Autoware vehicle interface for any profile).
 //! - `simulation` (feature `sim`): the simulated tug driven over ROS 2.
 //! - `canopen_bridge` (feature `canopen`): CiA 402 drives on ROS 2, as ros2_canopen offers them.
+//!
+//! Autoware steers a bicycle; the reference tug steers all four wheels in counter-phase. The
+//! same path is the front wheels at atan(tan δ / 2), and back again:
+//!
+//! ```
+//! use bywire_ros::autoware_vehicle::{steering_command, tire_angle, Geometry};
+//! use bywire_vehicle::command::SteeringMode;
+//!
+//! let tug = Geometry { wheelbase: 3.2, track: 1.8, wheel_diameter: 0.5, four_wheel_steer: true };
+//! let front_deg = steering_command(0.3, SteeringMode::Normal, &tug);
+//! assert!((front_deg - (0.3f64.tan() / 2.0).atan().to_degrees()).abs() < 1e-9);
+//! assert!((tire_angle(front_deg, SteeringMode::Normal, &tug) - 0.3).abs() < 1e-12);
+//! ```
 
 pub mod autoware_vehicle;
 pub mod frames;
