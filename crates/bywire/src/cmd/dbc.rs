@@ -140,12 +140,11 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             } else {
                 anyhow::bail!("{}: the output must end in .dbc or .json", output.display());
             };
-            let partial = output.with_extension("partial");
-            std::fs::write(&partial, text)
-                .with_context(|| format!("cannot write {}", partial.display()))?;
-            std::fs::rename(&partial, output)
-                .with_context(|| format!("cannot write {}", output.display()))?;
-            Ok(())
+            // Whole or not at all, and named by what was asked for (it said `x.partial`).
+            crate::support::files::write_atomically(output, |tmp| {
+                std::fs::write(tmp, &text)
+                    .with_context(|| format!("cannot write {}", output.display()))
+            })
         }
         DbcCommand::GenRust { file } => {
             let db = crate::support::dbc::load(file, false)?;
