@@ -319,22 +319,23 @@ impl<R: BufRead> AscReader<R> {
                         let dlc = tail.first().and_then(|w| self.dlc(number, text, w).ok());
                         Frame::remote(id, dlc.unwrap_or(Dlc::from_nibble(0)))
                     }
-                    // A length beyond a DLC's (0x40 = 64 in a hex file) can only be CAN FD.
-                    ("d", [length, data @ ..]) if self.fd_length(length).is_some() => {
-                        let count = self.fd_length(length).unwrap_or(0);
-                        let bytes = self.bytes(number, text, data, count)?;
-                        FdFrame::new(id, &bytes, false, false)
-                            .map(Frame::Fd)
-                            .map_err(|e| syntax(number, column_of(text, length), e.to_string()))?
-                    }
-                    ("d", [dlc, data @ ..]) => {
-                        let dlc_value = self.dlc(number, text, dlc)?;
-                        let count = dlc_value.fd_len().min(8);
-                        let bytes = self.bytes(number, text, data, count)?;
-                        ClassicFrame::with_dlc(id, dlc_value, &bytes)
-                            .map(Frame::Classic)
-                            .map_err(|e| syntax(number, column_of(text, dlc), e.to_string()))?
-                    }
+                    ("d", [dlc, data @ ..]) => match self.dlc(number, text, dlc) {
+                        Ok(dlc_value) => {
+                            let count = dlc_value.fd_len().min(8);
+                            let bytes = self.bytes(number, text, data, count)?;
+                            ClassicFrame::with_dlc(id, dlc_value, &bytes)
+                                .map(Frame::Classic)
+                                .map_err(|e| syntax(number, column_of(text, dlc), e.to_string()))?
+                        }
+                        // A length beyond a DLC's (0x40 = 64 in a hex file) can only be CAN FD.
+                        Err(not_a_dlc) => {
+                            let count = self.fd_length(dlc).ok_or(not_a_dlc)?;
+                            let bytes = self.bytes(number, text, data, count)?;
+                            FdFrame::new(id, &bytes, false, false)
+                                .map(Frame::Fd)
+                                .map_err(|e| syntax(number, column_of(text, dlc), e.to_string()))?
+                        }
+                    },
                     _ => {
                         return Err(syntax(
                             number,

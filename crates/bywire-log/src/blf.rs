@@ -295,14 +295,13 @@ impl<R: Read> BlfReader<R> {
             CAN_ERROR_EXT => error(body),
             _ => return Ok(Some(None)),
         };
-        let (channel, direction, frame) =
-            frame.map_err(|what| match what.strip_prefix(UNREPRESENTABLE) {
-                Some(what) => LogError::Unrepresentable {
-                    offset: self.container,
-                    what: what.to_string(),
-                },
-                None => Self::malformed(self.container, what),
-            })?;
+        let (channel, direction, frame) = frame.map_err(|bad| match bad {
+            Bad::Unrepresentable(what) => LogError::Unrepresentable {
+                offset: self.container,
+                what,
+            },
+            Bad::Malformed(what) => Self::malformed(self.container, what),
+        })?;
         Ok(Some(Some(LogRecord {
             timestamp,
             interface: format!("can{}", channel.saturating_sub(1)),
@@ -312,18 +311,36 @@ impl<R: Read> BlfReader<R> {
     }
 }
 
-type Parsed = Result<(u16, Option<char>, Frame), String>;
+/// Why an object gives no frame.
+enum Bad {
+    /// It is malformed: the reading ends here.
+    Malformed(String),
+    /// It is well formed, but no frame can hold it: passed over, the reading goes on.
+    Unrepresentable(String),
+}
 
-/// Prefix of the errors of records no frame can hold (passed over, not the end of the file).
-const UNREPRESENTABLE: &str = "unrepresentable: ";
+impl From<String> for Bad {
+    fn from(what: String) -> Self {
+        Bad::Malformed(what)
+    }
+}
 
-fn id_of(raw: u32) -> Result<Id, String> {
+impl From<&str> for Bad {
+    fn from(what: &str) -> Self {
+        Bad::Malformed(what.to_string())
+    }
+}
+
+type Parsed = Result<(u16, Option<char>, Frame), Bad>;
+
+fn id_of(raw: u32) -> Result<Id, Bad> {
     if raw & CAN_MSG_EXT != 0 {
-        Id::extended(raw & 0x1FFF_FFFF).map_err(|e| e.to_string())
+        Id::extended(raw & 0x1FFF_FFFF).map_err(|e| Bad::Malformed(e.to_string()))
     } else {
         // Never cut to 11 bits: that would be another message.
-        Id::standard(raw)
-            .map_err(|_| format!("{UNREPRESENTABLE}a standard identifier 0x{raw:X} above 0x7FF"))
+        Id::standard(raw).map_err(|_| {
+            Bad::Unrepresentable(format!("a standard identifier 0x{raw:X} above 0x7FF"))
+        })
     }
 }
 

@@ -156,12 +156,6 @@ enum SinkError {
     Other(RosError),
 }
 
-impl From<RosError> for SinkError {
-    fn from(e: RosError) -> Self {
-        SinkError::Other(e)
-    }
-}
-
 /// Take the commands waiting, at most a batch.
 fn take_batch(
     input: &ros2_client::Subscription<Control>,

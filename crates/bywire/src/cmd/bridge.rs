@@ -74,10 +74,11 @@ struct CommandLine {
     release_brake: Option<bool>,
 }
 
-/// A command line's command, and what was taken as less than asked.
+/// A command line's command, and what was taken as less than asked (a brake beyond the
+/// vehicle's).
 struct Applied {
     command: AdsCommand,
-    warnings: Vec<String>,
+    warning: Option<String>,
 }
 
 /// Apply a command line to the previous command (fields left out keep their value), refusing
@@ -91,14 +92,12 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ap
             t.parse().map_err(|e| anyhow!("'{t}': {e}"))
         })
     }
-    let mut warnings = Vec::new();
-    let brake = match line.brake {
+    let (brake, warning) = match line.brake {
         Some(brake) => {
             let taken = limits.brake_request(brake).map_err(|e| anyhow!(e))?;
-            warnings.extend(taken.warning);
-            taken.value
+            (taken.value, taken.warning)
         }
-        None => previous.brake,
+        None => (previous.brake, None),
     };
     let command = AdsCommand {
         steering: line.steering.unwrap_or(previous.steering),
@@ -123,7 +122,7 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ap
         bail!("mode 'estop' is the vehicle's to report, not to request (send emergency_brake)");
     }
     limits.check(&command).map_err(|e| anyhow!(e))?;
-    Ok(Applied { command, warnings })
+    Ok(Applied { command, warning })
 }
 
 fn state_json(ads: &Ads<Wire>, now: Timestamp) -> serde_json::Value {
@@ -239,9 +238,7 @@ impl Bridge<'_> {
             Ok(applied) => applied,
             Err(e) => return self.refuse(now, number, &e.to_string()),
         };
-        for warning in &applied.warnings {
-            self.warn(now, number, Some(warning));
-        }
+        self.warn(now, number, applied.warning.as_deref());
         if line.release_brake == Some(true) {
             ads.release_brake();
             self.event(now, "brake_released", "");

@@ -262,8 +262,8 @@ fn sweep(args: &Args, out: &mut impl Write) -> Result<()> {
     writeln!(
         out,
         "{} on {} in {wall:.1} s ({:.1} runs per minute); {failed} failed; summary in {}",
-        crate::support::words::counted(u64::try_from(total).unwrap_or(u64::MAX), "run"),
-        crate::support::words::counted(u64::try_from(threads).unwrap_or(u64::MAX), "thread"),
+        crate::support::words::counted(total, "run"),
+        crate::support::words::counted(threads, "thread"),
         total as f64 / wall.max(1e-9) * 60.0,
         path.display()
     )?;

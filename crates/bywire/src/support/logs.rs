@@ -18,12 +18,8 @@ use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 
 use crate::support::files::write_dir_atomically;
 use crate::support::progress::Progress;
-use bywire_log::format::Format;
+use bywire_log::format::{Format, READ_BUFFER};
 use bywire_log::{LogError, LogErrorKind, LogRecord, LogRecordRef, Reader};
-
-/// Bytes read from a log at a time: eight times fewer system calls than the default 8 KiB
-/// (a few per cent of `log stats`'s time on a big candump log), still well within the cache.
-const READ_BUFFER: usize = 64 << 10;
 
 /// A log to read: its bytes, and the file itself when it is one (Parquet is read by seeking).
 pub struct LogInput {
@@ -388,14 +384,12 @@ pub fn write_dataset(
         dataset.finish().with_context(cannot_write)
     })?;
     let rows: u64 = summary.rows.values().sum();
-    let count = |n: usize, noun: &str| {
-        crate::support::words::counted(u64::try_from(n).unwrap_or(u64::MAX), noun)
-    };
+    use crate::support::words::counted;
     let mut notes = vec![format!(
         "{} in {}, {}",
-        crate::support::words::counted(rows, "row"),
-        count(summary.rows.len(), "table"),
-        count(summary.files.len(), "file")
+        counted(rows, "row"),
+        counted(summary.rows.len(), "table"),
+        counted(summary.files.len(), "file")
     )];
     if summary.unknown > 0 {
         notes.push(format!(

@@ -126,28 +126,36 @@ pub fn factor(text: &str) -> Result<f64, String> {
     }
 }
 
+/// An unsigned integer type an option can hold, with its largest value (for the error).
+pub trait Whole: TryFrom<u64> {
+    /// The largest value.
+    const MAX: u64;
+}
+
+impl Whole for u16 {
+    const MAX: u64 = u16::MAX as u64;
+}
+
+impl Whole for u64 {
+    const MAX: u64 = u64::MAX;
+}
+
 /// A whole number, decimal or `0x` hex, within `T`'s range (a clap value parser: the same
 /// spelling for every whole-number option, as `--data-id 0x100` and `--freshness 0x10`).
-pub fn whole<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
+pub fn whole<T: Whole>(text: &str) -> Result<T, String> {
     let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
         Some(hex) => u64::from_str_radix(hex, 16),
         None => text.parse(),
     };
-    let largest = T::try_from(u64::MAX).map_or_else(
-        |_| {
-            // The largest value T takes: found by halving, at most 64 steps.
-            let mut bound = u64::MAX;
-            while bound > 0 && T::try_from(bound).is_err() {
-                bound /= 2;
-            }
-            bound
-        },
-        |_| u64::MAX,
-    );
     parsed
         .ok()
         .and_then(|n| T::try_from(n).ok())
-        .ok_or_else(|| format!("{text}: not a whole number from 0 to {largest} (0x for hex)"))
+        .ok_or_else(|| {
+            format!(
+                "{text}: not a whole number from 0 to {} (0x for hex)",
+                T::MAX
+            )
+        })
 }
 
 /// A CAN identifier as can-utils' ISO-TP tools read one: hex, extended when written with 8

@@ -1,8 +1,9 @@
 //! Counts in words: "1 file", "2 files".
 
 /// `n` and `noun`, the noun plural unless `n` is 1 (nouns here take an `s`).
-pub fn counted(n: impl Into<u64>, noun: &str) -> String {
-    let n = n.into();
+pub fn counted(n: impl TryInto<u64>, noun: &str) -> String {
+    // Counts of things in memory or on disk: any integer type, none beyond u64.
+    let n = n.try_into().unwrap_or(u64::MAX);
     if n == 1 {
         format!("1 {noun}")
     } else {
