@@ -6,12 +6,12 @@
 
 use std::time::Duration;
 
-use bywire_bus::network::Network;
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint};
 use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master};
 use bywire_canopen::nmt::NmtCommand;
 use bywire_canopen::Port;
+use bywire_net::network::Network;
 
 fn main() {
     const DRIVE: u8 = 2;
@@ -23,22 +23,28 @@ fn main() {
     master.add(Controlled::Drive(controller));
     master.monitor(DRIVE, Duration::from_millis(250));
     master.nmt(NmtCommand::Start, 0);
-    let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
+    let drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
 
     let mut net = Network::new();
     let bus = net.add_bus("drives", 1_000_000, None);
-    let _ = net.wire(0, Port::MAIN, bus);
-    let _ = net.wire(1, Port::MAIN, bus);
+    let (master, drive) = (net.add_node(master), net.add_node(drive));
+    let _ = net.wire(master, Port::MAIN, bus);
+    let _ = net.wire(drive, Port::MAIN, bus);
     for _ in 0..4 {
-        net.run_for(Duration::from_millis(500), &mut [&mut master, &mut drive]);
-        let state = match master.controlled(DRIVE) {
+        net.run_for(Duration::from_millis(500));
+        let state = match net
+            .node_mut(master)
+            .as_mut()
+            .and_then(|m| m.controlled(DRIVE))
+        {
             Some(Controlled::Drive(d)) => format!("{:?}, actual {:?}", d.drive_state(), d.actual()),
             _ => "not controlled".into(),
         };
+        let velocity = net.node(drive).map_or(0.0, |d| d.app().motor().velocity);
         println!(
             "{:.1} s: drive {state}; its motor at {:.0}",
             net.now().as_nanos() as f64 / 1e9,
-            drive.app().motor().velocity
+            velocity
         );
     }
 }

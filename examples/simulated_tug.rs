@@ -21,7 +21,7 @@ fn main() -> Result<(), bywire_sim::tug::TugError> {
         tug.now().as_nanos() as f64 / 1e9,
         pose.x,
         pose.y,
-        tug.remaining(),
+        tug.remaining().unwrap_or(f64::NAN),
         tug.soc() * 100.0
     );
     for event in tug.events.iter().take(10) {

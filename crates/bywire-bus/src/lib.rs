@@ -16,9 +16,7 @@
 //! ```
 
 pub mod faults;
-pub mod network;
 pub mod runner;
-pub mod sim;
 pub mod sim_endpoint;
 pub mod slcan;
 #[cfg(target_os = "linux")]
@@ -31,7 +29,6 @@ pub mod virtual_bus;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant, SystemTime};
 
-use bywire_core::filter::{ErrorMask, Filter};
 use bywire_core::{Frame, Timestamp};
 
 /// Unix time in nanoseconds from a monotonic clock: the wall clock is read once per process and
@@ -49,22 +46,12 @@ pub(crate) fn monotonic_unix_now() -> Timestamp {
     Timestamp::from_nanos(u64::try_from(nanos).unwrap_or(u64::MAX))
 }
 
-pub use spec::{is_in_process, open, open_listening, BusSpec, Listening, OpenError, SpecError};
-
-/// A frame as received.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Received {
-    /// The frame.
-    pub frame: Frame,
-    /// When it was on the bus (nanoseconds on the backend's clock).
-    pub timestamp: Timestamp,
-    /// Whether this endpoint sent it (delivered only with receive-own on). An own frame is the
-    /// transmit confirmation: its timestamp is when it left (SocketCAN echoes it after the
-    /// controller sent it; the bit-timed bus at its end of frame).
-    pub own: bool,
-    /// The controller's own timestamp, on its clock, where the backend has one.
-    pub hardware: Option<Timestamp>,
-}
+/// The in-process vocabulary every backend shares, defined with the simulated engine.
+pub use bywire_net::{Filtering, Received};
+pub use spec::{
+    is_in_process, open, open_listening, register, schemes, Backend, BusSpec, Listening, OpenError,
+    RegisterError, SpecError,
+};
 
 /// Counts an endpoint keeps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -140,40 +127,6 @@ pub enum BusError {
     /// An operating-system error (transparent: said once, not again as its source).
     #[error(transparent)]
     Io(#[from] std::io::Error),
-}
-
-/// Receive filtering: SocketCAN's filter list, error mask and join option.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Filtering {
-    /// Filters (any must match; all with `join`). Empty: no data frames.
-    pub filters: Vec<Filter>,
-    /// Error classes delivered as error frames.
-    pub error_mask: ErrorMask,
-    /// Frames must match every filter.
-    pub join: bool,
-}
-
-impl Default for Filtering {
-    /// Like a fresh SocketCAN raw socket: every data frame, no error frames.
-    fn default() -> Self {
-        Filtering {
-            filters: vec![Filter::ALL],
-            error_mask: ErrorMask::NONE,
-            join: false,
-        }
-    }
-}
-
-impl Filtering {
-    /// Whether a socket with these settings receives `frame`.
-    pub fn accepts(&self, frame: &Frame) -> bool {
-        bywire_core::FilterSet {
-            filters: &self.filters,
-            error_mask: self.error_mask,
-            join: self.join,
-        }
-        .accepts(frame)
-    }
 }
 
 /// The state both halves of a split endpoint share (behind an `Arc`): one implementation of

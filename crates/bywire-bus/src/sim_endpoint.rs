@@ -15,11 +15,11 @@ use std::time::{Duration, Instant};
 use bywire_core::confinement::NodeState;
 use bywire_core::{Frame, Timestamp};
 
-use crate::sim::{Fault, NodeId, SimBus};
 use crate::{
     Bus, BusError, BusRx, BusStatus, BusTx, ControllerState, Filtering, Received, SharedEndpoint,
     Stats,
 };
+use bywire_net::sim::{Fault, NodeId, SimBus};
 
 /// The bitrates a simulated bus runs at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,7 +1,11 @@
-//! Bus specs: one string a user can type names any bus.
+//! Bus specs: one string a user can type names any bus. Six schemes are built in; a crate
+//! outside this one adds its own backend with [`register`] (a PCAN or Kvaser adapter, a
+//! user's own transport), and from then on its specs parse, open and list like the others.
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::str::FromStr;
+use std::sync::{Arc, OnceLock, PoisonError, RwLock};
 
 use crate::sim_endpoint::Bitrates;
 use crate::Bus;
@@ -45,6 +49,83 @@ pub enum BusSpec {
         /// The multicast group and port.
         group: std::net::SocketAddr,
     },
+    /// `SCHEME:PARAMETERS` of a backend added with [`register`].
+    Registered {
+        /// Its scheme.
+        scheme: String,
+        /// What follows the scheme, as its backend checked it.
+        parameters: String,
+    },
+}
+
+/// A bus backend added from outside this crate, found by the scheme of a spec
+/// (`SCHEME:PARAMETERS`; it is given the parameters).
+pub trait Backend: Send + Sync {
+    /// Check the parameters without opening anything: why they name no bus, if they do not.
+    fn check(&self, parameters: &str) -> Result<(), String>;
+    /// Open the bus.
+    fn open(&self, parameters: &str) -> Result<Box<dyn Bus>, String>;
+    /// Open the bus for listening only. By default it is opened as for sending, and said so.
+    fn open_listening(&self, parameters: &str) -> Result<(Box<dyn Bus>, Listening), String> {
+        let how = Listening::NotListenOnly("its backend has no listen-only mode".into());
+        Ok((self.open(parameters)?, how))
+    }
+    /// Whether its buses live inside this process (what one process sends, no other hears).
+    fn in_process(&self) -> bool {
+        false
+    }
+}
+
+/// Why a backend could not be registered.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RegisterError {
+    /// The scheme is not lowercase letters, digits and '-', starting with a letter.
+    #[error("'{0}' is not a bus scheme (lowercase letters, digits and '-', from a letter)")]
+    BadScheme(String),
+    /// A built-in or registered backend has the scheme already.
+    #[error("the bus scheme '{0}' is taken")]
+    Taken(String),
+}
+
+type Registry = RwLock<BTreeMap<String, Arc<dyn Backend>>>;
+
+fn registry() -> &'static Registry {
+    static BACKENDS: OnceLock<Registry> = OnceLock::new();
+    BACKENDS.get_or_init(Registry::default)
+}
+
+/// The backend registered for `scheme`.
+fn registered(scheme: &str) -> Option<Arc<dyn Backend>> {
+    let backends = registry().read().unwrap_or_else(PoisonError::into_inner);
+    backends.get(scheme).cloned()
+}
+
+/// Add a backend for the specs `SCHEME:PARAMETERS`, for the rest of the process.
+pub fn register(scheme: &str, backend: impl Backend + 'static) -> Result<(), RegisterError> {
+    let valid = scheme.starts_with(|c: char| c.is_ascii_lowercase())
+        && scheme
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-');
+    if !valid {
+        return Err(RegisterError::BadScheme(scheme.to_string()));
+    }
+    let mut backends = registry().write().unwrap_or_else(PoisonError::into_inner);
+    if BUILT_IN.contains(&scheme) || backends.contains_key(scheme) {
+        return Err(RegisterError::Taken(scheme.to_string()));
+    }
+    backends.insert(scheme.to_string(), Arc::new(backend));
+    Ok(())
+}
+
+/// Every scheme a spec may use: the built-in ones, then the registered ones by name.
+pub fn schemes() -> Vec<String> {
+    let backends = registry().read().unwrap_or_else(PoisonError::into_inner);
+    BUILT_IN
+        .iter()
+        .map(|s| s.to_string())
+        .chain(backends.keys().cloned())
+        .collect()
 }
 
 /// A spec that parsed but whose bus cannot be opened.
@@ -74,22 +155,23 @@ pub enum SpecError {
     UnknownScheme {
         /// The scheme given.
         scheme: String,
-        /// The schemes there are.
-        known: &'static str,
+        /// The schemes there are, comma-separated.
+        known: String,
     },
     /// Parameters the scheme does not accept.
     #[error("{scheme}: {reason}")]
     Parameters {
         /// The scheme.
-        scheme: &'static str,
+        scheme: String,
         /// What is wrong.
         reason: String,
     },
 }
 
-const KNOWN: &str = "virtual, sim, socketcan, socketcand, slcan, udp";
+/// The schemes of the backends built in.
+const BUILT_IN: [&str; 6] = ["virtual", "sim", "socketcan", "socketcand", "slcan", "udp"];
 
-fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
+fn bus_name(scheme: &str, text: &str) -> Result<String, SpecError> {
     let valid = !text.is_empty()
         && text
             .chars()
@@ -98,7 +180,7 @@ fn bus_name(scheme: &'static str, text: &str) -> Result<String, SpecError> {
         Ok(text.to_string())
     } else {
         Err(SpecError::Parameters {
-            scheme,
+            scheme: scheme.to_string(),
             reason: format!("'{text}' is not a bus name (letters, digits, '-', '_', '.')"),
         })
     }
@@ -108,7 +190,7 @@ fn bitrate(text: &str) -> Result<u32, SpecError> {
     match text.parse::<u32>() {
         Ok(rate) if (1_000..=20_000_000).contains(&rate) => Ok(rate),
         _ => Err(SpecError::Parameters {
-            scheme: "sim",
+            scheme: "sim".into(),
             reason: format!("'{text}' is not a bitrate (1000 to 20000000 bit/s)"),
         }),
     }
@@ -116,7 +198,7 @@ fn bitrate(text: &str) -> Result<u32, SpecError> {
 
 fn sim_spec(rest: &str) -> Result<BusSpec, SpecError> {
     let (name, rates) = rest.split_once('@').ok_or_else(|| SpecError::Parameters {
-        scheme: "sim",
+        scheme: "sim".into(),
         reason: format!("'{rest}' lacks the bitrate: sim:NAME@BITRATE[/DATA_BITRATE]"),
     })?;
     let (nominal, data) = match rates.split_once('/') {
@@ -148,7 +230,7 @@ impl FromStr for BusSpec {
                     && !rest.contains(|c: char| c == '/' || c == ':' || c.is_whitespace());
                 if !valid {
                     return Err(SpecError::Parameters {
-                        scheme: "socketcan",
+                        scheme: "socketcan".into(),
                         reason: format!("'{rest}' is not an interface name (1 to 15 characters)"),
                     });
                 }
@@ -161,7 +243,7 @@ impl FromStr for BusSpec {
                     .rsplit_once('/')
                     .filter(|(a, b)| a.contains(':') && !b.is_empty())
                     .ok_or_else(|| SpecError::Parameters {
-                        scheme: "socketcand",
+                        scheme: "socketcand".into(),
                         reason: format!(
                             "'{rest}' is not HOST:PORT/BUS (e.g. socketcand:127.0.0.1:29536/vcan0)"
                         ),
@@ -173,7 +255,7 @@ impl FromStr for BusSpec {
             }
             "slcan" => {
                 let (port, rate) = rest.rsplit_once('@').ok_or_else(|| SpecError::Parameters {
-                    scheme: "slcan",
+                    scheme: "slcan".into(),
                     reason: format!("'{rest}' lacks the bitrate: slcan:PORT@BITRATE (e.g. slcan:/dev/ttyACM0@500000)"),
                 })?;
                 let bitrate = rate
@@ -181,12 +263,12 @@ impl FromStr for BusSpec {
                     .ok()
                     .filter(|r| crate::slcan::bitrate_command(*r).is_some())
                     .ok_or_else(|| SpecError::Parameters {
-                        scheme: "slcan",
+                        scheme: "slcan".into(),
                         reason: format!("'{rate}' is not an SLCAN bitrate (10000, 20000, 50000, 100000, 125000, 250000, 500000, 750000, 1000000)"),
                     })?;
                 if port.is_empty() {
                     return Err(SpecError::Parameters {
-                        scheme: "slcan",
+                        scheme: "slcan".into(),
                         reason: "no serial port".into(),
                     });
                 }
@@ -198,13 +280,25 @@ impl FromStr for BusSpec {
             "udp" => crate::udp::parse_spec(rest)
                 .map(|group| BusSpec::Udp { group })
                 .map_err(|reason| SpecError::Parameters {
-                    scheme: "udp",
+                    scheme: "udp".into(),
                     reason,
                 }),
-            other => Err(SpecError::UnknownScheme {
-                scheme: other.to_string(),
-                known: KNOWN,
-            }),
+            other => match registered(other) {
+                Some(backend) => match backend.check(rest) {
+                    Ok(()) => Ok(BusSpec::Registered {
+                        scheme: other.to_string(),
+                        parameters: rest.to_string(),
+                    }),
+                    Err(reason) => Err(SpecError::Parameters {
+                        scheme: other.to_string(),
+                        reason,
+                    }),
+                },
+                None => Err(SpecError::UnknownScheme {
+                    scheme: other.to_string(),
+                    known: schemes().join(", "),
+                }),
+            },
         }
     }
 }
@@ -224,6 +318,7 @@ impl fmt::Display for BusSpec {
             BusSpec::Udp { group } => write!(f, "udp:{group}"),
             BusSpec::Slcan { port, bitrate } => write!(f, "slcan:{port}@{bitrate}"),
             BusSpec::Socketcand { address, bus } => write!(f, "socketcand:{address}/{bus}"),
+            BusSpec::Registered { scheme, parameters } => write!(f, "{scheme}:{parameters}"),
         }
     }
 }
@@ -247,10 +342,13 @@ pub enum Listening {
 /// Whether the bus a spec names lives inside this process (`virtual:`, `sim:`): what one
 /// process sends on it no other process hears.
 pub fn is_in_process(spec: &str) -> bool {
-    matches!(
-        spec.parse::<BusSpec>(),
-        Ok(BusSpec::Virtual { .. } | BusSpec::Sim { .. })
-    )
+    match spec.parse::<BusSpec>() {
+        Ok(BusSpec::Virtual { .. } | BusSpec::Sim { .. }) => true,
+        Ok(BusSpec::Registered { scheme, .. }) => {
+            registered(&scheme).is_some_and(|b| b.in_process())
+        }
+        _ => false,
+    }
 }
 
 /// Open the bus a spec names for listening only: a SocketCAN interface's controller is put in
@@ -266,6 +364,18 @@ pub fn open_listening(spec: &str) -> Result<(Box<dyn Bus>, Listening), OpenError
             Listening::NoController("served over TCP: the server's controller decides".into())
         }
         BusSpec::Udp { .. } => Listening::NoController("UDP multicast has no controller".into()),
+        BusSpec::Registered { scheme, parameters } => {
+            let backend = registered(scheme).ok_or_else(|| OpenError::Refused {
+                spec: spec.to_string(),
+                reason: format!("no backend for '{scheme}'"),
+            })?;
+            return backend
+                .open_listening(parameters)
+                .map_err(|reason| OpenError::Refused {
+                    spec: spec.to_string(),
+                    reason,
+                });
+        }
         BusSpec::Slcan { port, bitrate } => {
             let bus = crate::slcan::Slcan::open(port, *bitrate, true).map_err(|e| {
                 OpenError::Refused {
@@ -307,11 +417,13 @@ pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
     };
     match spec.parse::<BusSpec>()? {
         BusSpec::Virtual { name } => Ok(Box::new(crate::virtual_bus::VirtualBus::join(&name))),
-        BusSpec::Sim { name, bitrates } => {
-            crate::sim_endpoint::SimEndpoint::join(&name, bitrates, crate::sim::DEFAULT_RX_CAPACITY)
-                .map(|bus| Box::new(bus) as Box<dyn Bus>)
-                .map_err(|e| refused(e.to_string()))
-        }
+        BusSpec::Sim { name, bitrates } => crate::sim_endpoint::SimEndpoint::join(
+            &name,
+            bitrates,
+            bywire_net::sim::DEFAULT_RX_CAPACITY,
+        )
+        .map(|bus| Box::new(bus) as Box<dyn Bus>)
+        .map_err(|e| refused(e.to_string())),
         #[cfg(target_os = "linux")]
         BusSpec::SocketCan { interface } => crate::socketcan::SocketCan::open(&interface)
             .map(|bus| Box::new(bus) as Box<dyn Bus>)
@@ -327,6 +439,10 @@ pub fn open(spec: &str) -> Result<Box<dyn Bus>, OpenError> {
         BusSpec::Udp { group } => crate::udp::UdpMulticast::open(group)
             .map(|bus| Box::new(bus) as Box<dyn Bus>)
             .map_err(|e| refused(e.to_string())),
+        BusSpec::Registered { scheme, parameters } => match registered(&scheme) {
+            Some(backend) => backend.open(&parameters).map_err(refused),
+            None => Err(refused(format!("no backend for '{scheme}'"))),
+        },
     }
 }
 

@@ -9,8 +9,6 @@
 
 use std::time::Duration;
 
-use bywire_bus::network::{BusIndex, Network};
-use bywire_bus::sim::NodeId;
 use bywire_canopen::cia402::{self, Drive, DriveController, Mode, Setpoint, State, StopReason};
 use bywire_canopen::device::Device;
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
@@ -19,33 +17,53 @@ use bywire_canopen::roboteq::{self, Mdc1460, RoboteqCommand, RoboteqMotor};
 use bywire_canopen::{Node, Port};
 use bywire_core::frame::Frame;
 use bywire_core::time::Timestamp;
+use bywire_net::network::{BusIndex, Network, NodeHandle, NodeMut};
+use bywire_net::sim::NodeId;
 
-/// The master (node 0) and one device (node 1) on a simulated 1 Mbit/s bus, run by the
+/// The master (sender 0) and one device (sender 1) on a simulated 1 Mbit/s bus, run by the
 /// network runner (bit-timed frames, each node polled at its deadline); `log` is every frame
 /// on the wire with its sender, as a tap saw it.
-struct Bus {
+struct Bus<D: Node + 'static> {
     net: Network,
     bus: BusIndex,
     tap: NodeId,
+    master: NodeHandle<Master>,
+    device: NodeHandle<D>,
     /// The device's node ID (its heartbeat tells the two senders apart).
-    device: u8,
+    device_id: u8,
     log: Vec<(Timestamp, usize, Frame)>,
 }
 
-impl Bus {
-    fn new(device: u8) -> Bus {
+impl<D: Node + 'static> Bus<D> {
+    fn new(device_id: u8, master: Master, device: D) -> Bus<D> {
         let mut net = Network::new();
         let bus = net.add_bus("can0", 1_000_000, None);
-        net.wire(0, Port::MAIN, bus);
-        net.wire(1, Port::MAIN, bus);
+        let master = net.add_node(master);
+        let device = net.add_node(device);
+        net.wire(master, Port::MAIN, bus).unwrap();
+        net.wire(device, Port::MAIN, bus).unwrap();
         let tap = net.tap(bus).unwrap();
         Bus {
             net,
             bus,
             tap,
+            master,
             device,
+            device_id,
             log: Vec::new(),
         }
+    }
+
+    fn master(&mut self) -> NodeMut<'_, Master> {
+        self.net.node_mut(self.master).unwrap()
+    }
+
+    fn device(&self) -> &D {
+        self.net.node(self.device).unwrap()
+    }
+
+    fn device_mut(&mut self) -> NodeMut<'_, D> {
+        self.net.node_mut(self.device).unwrap()
     }
 
     fn now(&self) -> Timestamp {
@@ -53,8 +71,11 @@ impl Bus {
     }
 
     /// Cut a node off the bus (nothing it sends arrives), or put it back.
-    fn silence(&mut self, node: usize, silent: bool) {
-        self.net.drop_output(node, silent);
+    fn silence(&mut self, sender: usize, silent: bool) {
+        match sender {
+            0 => self.net.drop_output(self.master, silent),
+            _ => self.net.drop_output(self.device, silent),
+        }
     }
 
     /// Who sent `frame`: CANopen's COB-IDs say it (the master sends NMT, SYNC, RPDOs, SDO
@@ -62,7 +83,7 @@ impl Bus {
     fn sender(&self, frame: &Frame) -> usize {
         let id = frame.id().map_or(0, |id| id.as_raw());
         let device = match id {
-            0x700..=0x77F => id == 0x700 + u32::from(self.device),
+            0x700..=0x77F => id == 0x700 + u32::from(self.device_id),
             0x081..=0x0FF | 0x180..=0x1FF | 0x280..=0x2FF | 0x380..=0x3FF | 0x480..=0x4FF => true,
             0x580..=0x5FF => true,
             _ => false,
@@ -70,19 +91,16 @@ impl Bus {
         usize::from(device)
     }
 
-    /// Run for `duration` (the nodes may have been changed since the last run), logging.
-    fn run(&mut self, duration: Duration, nodes: &mut [&mut dyn Node]) {
+    /// Run for `duration`, logging.
+    fn run(&mut self, duration: Duration) {
         let end = self.now().saturating_add(duration);
-        for node in 0..nodes.len() {
-            self.net.changed(node);
-        }
         // In slices, so the tap's queue never fills.
         while self.now() < end {
             let until = self
                 .now()
                 .saturating_add(Duration::from_millis(10))
                 .min(end);
-            self.net.run_until(until, nodes);
+            self.net.run_until(until);
             while let Some(r) = self.net.bus_mut(self.bus).and_then(|b| b.receive(self.tap)) {
                 self.log.push((r.timestamp, self.sender(&r.frame), r.frame));
             }
@@ -96,7 +114,7 @@ const TICK: Duration = Duration::from_millis(1);
 const CONSUMER_TIME: Duration = Duration::from_millis(250);
 
 /// A master that walks a velocity drive to Operation enabled and commands `velocity`.
-fn running_drive(velocity: i32) -> (Bus, Master, Device<Drive>) {
+fn running_drive(velocity: i32) -> Bus<Device<Drive>> {
     let mut master = Master::new(
         MASTER,
         Duration::from_millis(100),
@@ -112,15 +130,15 @@ fn running_drive(velocity: i32) -> (Bus, Master, Device<Drive>) {
     // The drive watches the master's heartbeat.
     od.set(0x1016, 1, &((u32::from(MASTER) << 16) | 300).to_le_bytes())
         .unwrap();
-    let mut drive = Device::new(DRIVE, od, Drive::new());
-    let mut bus = Bus::new(DRIVE);
-    bus.run(Duration::from_millis(20), &mut [&mut master, &mut drive]);
-    master.nmt(NmtCommand::Start, DRIVE);
-    bus.run(Duration::from_millis(1_500), &mut [&mut master, &mut drive]);
-    (bus, master, drive)
+    let drive = Device::new(DRIVE, od, Drive::new());
+    let mut bus = Bus::new(DRIVE, master, drive);
+    bus.run(Duration::from_millis(20));
+    bus.master().nmt(NmtCommand::Start, DRIVE);
+    bus.run(Duration::from_millis(1_500));
+    bus
 }
 
-fn controller(master: &mut Master) -> &mut DriveController {
+fn controller<'a>(master: &'a mut NodeMut<'_, Master>) -> &'a mut DriveController {
     match master.controlled(DRIVE) {
         Some(Controlled::Drive(drive)) => drive,
         _ => panic!("no drive"),
@@ -129,16 +147,16 @@ fn controller(master: &mut Master) -> &mut DriveController {
 
 #[test]
 fn the_master_walks_a_drive_to_operation_enabled_and_it_follows() {
-    let (bus, mut master, drive) = running_drive(1_000);
-    assert_eq!(drive.state(), NmtState::Operational);
-    assert_eq!(drive.app().state(), State::OperationEnabled);
-    assert!((drive.app().motor().velocity - 1_000.0).abs() < 1.0);
+    let mut bus = running_drive(1_000);
+    assert_eq!(bus.device().state(), NmtState::Operational);
+    assert_eq!(bus.device().app().state(), State::OperationEnabled);
+    assert!((bus.device().app().motor().velocity - 1_000.0).abs() < 1.0);
     assert_eq!(
-        controller(&mut master).drive_state(),
+        controller(&mut bus.master()).drive_state(),
         Some(State::OperationEnabled)
     );
     assert_eq!(
-        controller(&mut master).actual().1,
+        controller(&mut bus.master()).actual().1,
         1_000,
         "TPDO2 reports the velocity"
     );
@@ -169,7 +187,7 @@ fn the_master_walks_a_drive_to_operation_enabled_and_it_follows() {
 
 #[test]
 fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_once() {
-    let (mut bus, mut master, mut drive) = running_drive(1_000);
+    let mut bus = running_drive(1_000);
     // Cut the drive off: nothing it sends reaches the bus.
     bus.silence(1, true);
     let cut_at = bus.now();
@@ -180,7 +198,7 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
         .find(|(_, from, f)| *from == 1 && f.id().map(|id| id.as_raw()) == Some(0x702))
         .unwrap()
         .0;
-    bus.run(Duration::from_millis(400), &mut [&mut master, &mut drive]);
+    bus.run(Duration::from_millis(400));
     let lost_at = bus
         .log
         .iter()
@@ -215,10 +233,10 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
         0
     );
     assert_eq!(
-        controller(&mut master).stopped(),
+        controller(&mut bus.master()).stopped(),
         Some(StopReason::HeartbeatLost)
     );
-    let events: Vec<MasterEvent> = std::iter::from_fn(|| master.next_event()).collect();
+    let events: Vec<MasterEvent> = std::iter::from_fn(|| bus.master().next_event()).collect();
     assert!(
         events.contains(&MasterEvent::Heartbeat(HeartbeatEvent::Lost {
             node: DRIVE
@@ -226,18 +244,18 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
     );
     // The drive heard the quick stop and is stopping (it still receives).
     assert!(
-        drive.app().motor().velocity.abs() < 1.0,
+        bus.device().app().motor().velocity.abs() < 1.0,
         "stopped: {}",
-        drive.app().motor().velocity
+        bus.device().app().motor().velocity
     );
     // Back on the bus, the drive is held stopped until the application acknowledges.
     bus.silence(1, false);
-    bus.run(Duration::from_millis(500), &mut [&mut master, &mut drive]);
-    assert!(drive.app().motor().velocity.abs() < 1.0);
-    assert_ne!(drive.app().state(), State::OperationEnabled);
-    controller(&mut master).acknowledge();
-    bus.run(Duration::from_millis(500), &mut [&mut master, &mut drive]);
-    assert_eq!(drive.app().state(), State::OperationEnabled);
+    bus.run(Duration::from_millis(500));
+    assert!(bus.device().app().motor().velocity.abs() < 1.0);
+    assert_ne!(bus.device().app().state(), State::OperationEnabled);
+    controller(&mut bus.master()).acknowledge();
+    bus.run(Duration::from_millis(500));
+    assert_eq!(bus.device().app().state(), State::OperationEnabled);
 }
 
 /// The runner polls the master at its deadline, not at the next millisecond: the quick stop
@@ -245,7 +263,7 @@ fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_on
 /// heartbeat at its end of frame, and the quick stop takes its own frame time).
 #[test]
 fn with_the_runner_waking_at_the_deadline_detection_is_exact() {
-    let (mut bus, mut master, mut drive) = running_drive(500);
+    let mut bus = running_drive(500);
     bus.silence(1, true);
     let cut_at = bus.now();
     let last_heartbeat = bus
@@ -255,7 +273,7 @@ fn with_the_runner_waking_at_the_deadline_detection_is_exact() {
         .find(|(_, from, f)| *from == 1 && f.id().map(|id| id.as_raw()) == Some(0x702))
         .unwrap()
         .0;
-    bus.run(Duration::from_millis(400), &mut [&mut master, &mut drive]);
+    bus.run(Duration::from_millis(400));
     let quick_stop = bus
         .log
         .iter()
@@ -279,15 +297,15 @@ fn with_the_runner_waking_at_the_deadline_detection_is_exact() {
 
 #[test]
 fn a_silent_master_faults_the_drive_and_it_stops() {
-    let (mut bus, mut master, mut drive) = running_drive(2_000);
+    let mut bus = running_drive(2_000);
     bus.silence(0, true);
-    bus.run(Duration::from_millis(600), &mut [&mut master, &mut drive]);
+    bus.run(Duration::from_millis(600));
     assert_eq!(
-        drive.app().state(),
+        bus.device().app().state(),
         State::Fault,
         "abort connection option 1: fault"
     );
-    assert!(drive.app().motor().velocity.abs() < 1.0);
+    assert!(bus.device().app().motor().velocity.abs() < 1.0);
     let emcy = bus
         .log
         .iter()
@@ -305,13 +323,14 @@ fn a_silent_master_faults_the_drive_and_it_stops() {
 /// reset), and the master keeps it running: the heartbeat consumer watches the link itself.
 #[test]
 fn recovery_from_bus_off_is_reported_and_does_not_stop_the_drive() {
-    let (mut bus, mut master, mut drive) = running_drive(1_000);
+    let mut bus = running_drive(1_000);
     let restarted = bywire_core::frame::ErrorFrame::from_array(
         bywire_core::frame::ErrorClass::Restarted.bit(),
         [0; 8],
     );
-    drive.on_frame(Timestamp::ZERO, &Frame::Error(restarted));
-    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
+    bus.device_mut()
+        .on_frame(Timestamp::ZERO, &Frame::Error(restarted));
+    bus.run(Duration::from_millis(300));
     let emcys: Vec<[u8; 2]> = bus
         .log
         .iter()
@@ -319,31 +338,31 @@ fn recovery_from_bus_off_is_reported_and_does_not_stop_the_drive() {
         .map(|(_, _, f)| [f.data()[0], f.data()[1]])
         .collect();
     assert_eq!(emcys, vec![[0x40, 0x81], [0, 0]]);
-    assert_eq!(controller(&mut master).stopped(), None);
-    assert_eq!(drive.app().state(), State::OperationEnabled);
+    assert_eq!(controller(&mut bus.master()).stopped(), None);
+    assert_eq!(bus.device().app().state(), State::OperationEnabled);
 }
 
 #[test]
 fn an_emergency_stops_the_drive_until_acknowledged() {
-    let (mut bus, mut master, mut drive) = running_drive(1_000);
-    drive.app_mut().0.inject_fault(0x2310);
-    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
+    let mut bus = running_drive(1_000);
+    bus.device_mut().app_mut().0.inject_fault(0x2310);
+    bus.run(Duration::from_millis(300));
     assert_eq!(
-        controller(&mut master).stopped(),
+        controller(&mut bus.master()).stopped(),
         Some(StopReason::Emergency(0x2310))
     );
-    assert_eq!(drive.app().state(), State::Fault);
-    assert!(drive.app().motor().velocity.abs() < 1.0);
+    assert_eq!(bus.device().app().state(), State::Fault);
+    assert!(bus.device().app().motor().velocity.abs() < 1.0);
     // Acknowledged while the cause remains: the fault reset does nothing.
-    controller(&mut master).acknowledge();
-    bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
-    assert_eq!(drive.app().state(), State::Fault);
+    controller(&mut bus.master()).acknowledge();
+    bus.run(Duration::from_millis(300));
+    assert_eq!(bus.device().app().state(), State::Fault);
     // The cause gone and acknowledged again: back to Operation enabled, running.
-    drive.app_mut().0.clear_fault();
-    controller(&mut master).acknowledge();
-    bus.run(Duration::from_millis(1_000), &mut [&mut master, &mut drive]);
-    assert_eq!(drive.app().state(), State::OperationEnabled);
-    assert!((drive.app().motor().velocity - 1_000.0).abs() < 1.0);
+    bus.device_mut().app_mut().0.clear_fault();
+    controller(&mut bus.master()).acknowledge();
+    bus.run(Duration::from_millis(1_000));
+    assert_eq!(bus.device().app().state(), State::OperationEnabled);
+    assert!((bus.device().app().motor().velocity - 1_000.0).abs() < 1.0);
     let resets = bus
         .log
         .iter()
@@ -366,17 +385,17 @@ fn profile_position_reaches_its_target() {
     controller.set_enabled(true);
     controller.set_setpoint(Setpoint::Position(5_000));
     master.add(Controlled::Drive(controller));
-    let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
-    let mut bus = Bus::new(DRIVE);
-    bus.run(Duration::from_millis(10), &mut [&mut master, &mut drive]);
-    master.nmt(NmtCommand::Start, DRIVE);
-    bus.run(Duration::from_millis(5_000), &mut [&mut master, &mut drive]);
+    let drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
+    let mut bus = Bus::new(DRIVE, master, drive);
+    bus.run(Duration::from_millis(10));
+    bus.master().nmt(NmtCommand::Start, DRIVE);
+    bus.run(Duration::from_millis(5_000));
     assert!(
-        (drive.app().motor().position - 5_000.0).abs() <= 10.0,
+        (bus.device().app().motor().position - 5_000.0).abs() <= 10.0,
         "{:?}",
-        drive.app().motor()
+        bus.device().app().motor()
     );
-    let statusword = drive.od().get_unsigned(0x6041, 0).unwrap();
+    let statusword = bus.device().od().get_unsigned(0x6041, 0).unwrap();
     assert_ne!(statusword & 0x0400, 0, "target reached");
 }
 
@@ -389,39 +408,30 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
         RoboteqCommand::Velocity(0),
     )));
     master.monitor(NODE, CONSUMER_TIME);
-    let mut controller =
+    let controller =
         Device::new(NODE, roboteq::dictionary(NODE, 2), Mdc1460::default()).with_autostart();
-    let mut bus = Bus::new(NODE);
     roboteq::remap_rpdo1_to_velocity(master.sdo(), NODE, 1).unwrap();
-    bus.run(
-        Duration::from_millis(100),
-        &mut [&mut master, &mut controller],
-    );
-    let outcomes: Vec<_> = std::iter::from_fn(|| master.take_sdo_outcome()).collect();
+    let mut bus = Bus::new(NODE, master, controller);
+    bus.run(Duration::from_millis(100));
+    let outcomes: Vec<_> = std::iter::from_fn(|| bus.master().take_sdo_outcome()).collect();
     assert_eq!(outcomes.len(), 5);
     assert!(outcomes.iter().all(|o| o.result.is_ok()), "{outcomes:?}");
-    match master.controlled(NODE) {
+    match bus.master().controlled(NODE) {
         Some(Controlled::Roboteq(motor)) => motor.set(RoboteqCommand::Velocity(1200)),
         _ => panic!(),
     }
-    bus.run(
-        Duration::from_millis(1_500),
-        &mut [&mut master, &mut controller],
-    );
+    bus.run(Duration::from_millis(1_500));
     assert!(
-        (controller.app().speed(1) - 1200.0).abs() < 2.0,
+        (bus.device().app().speed(1) - 1200.0).abs() < 2.0,
         "{}",
-        controller.app().speed(1)
+        bus.device().app().speed(1)
     );
     assert!(bus.log.iter().any(|(_, from, f)| *from == 0
         && f.id().map(|id| id.as_raw()) == Some(0x201)
         && f.data() == [0xB0, 0x04, 0x00, 0x00]));
     // The controller stops reporting: the master zeroes the command.
     bus.silence(1, true);
-    bus.run(
-        Duration::from_millis(1_500),
-        &mut [&mut master, &mut controller],
-    );
+    bus.run(Duration::from_millis(1_500));
     let last = bus
         .log
         .iter()
@@ -429,7 +439,7 @@ fn a_roboteq_remapped_to_velocity_over_sdo_runs_at_1200_rpm() {
         .find(|(_, from, f)| *from == 0 && f.id().map(|id| id.as_raw()) == Some(0x201))
         .unwrap();
     assert_eq!(last.2.data(), [0, 0, 0, 0]);
-    assert!(controller.app().speed(1).abs() < 1.0);
+    assert!(bus.device().app().speed(1).abs() < 1.0);
 }
 
 #[test]
@@ -443,12 +453,16 @@ fn cyclic_synchronous_modes_follow_the_streamed_targets() {
         let mut cyclic = DriveController::new(DRIVE, mode, Duration::from_millis(500));
         cyclic.set_enabled(true);
         master.add(Controlled::Drive(cyclic));
-        let mut drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
-        let mut bus = Bus::new(DRIVE);
-        bus.run(Duration::from_millis(10), &mut [&mut master, &mut drive]);
-        master.nmt(NmtCommand::Start, DRIVE);
-        bus.run(Duration::from_millis(300), &mut [&mut master, &mut drive]);
-        assert_eq!(drive.app().state(), State::OperationEnabled, "{mode:?}");
+        let drive = Device::new(DRIVE, cia402::drive_dictionary(DRIVE), Drive::new());
+        let mut bus = Bus::new(DRIVE, master, drive);
+        bus.run(Duration::from_millis(10));
+        bus.master().nmt(NmtCommand::Start, DRIVE);
+        bus.run(Duration::from_millis(300));
+        assert_eq!(
+            bus.device().app().state(),
+            State::OperationEnabled,
+            "{mode:?}"
+        );
         // A ramp streamed every cycle: 0 → 1000 units in one second.
         for step in 0..=200 {
             let value = step * 5;
@@ -457,11 +471,11 @@ fn cyclic_synchronous_modes_follow_the_streamed_targets() {
             } else {
                 Setpoint::Position(value)
             };
-            controller(&mut master).set_setpoint(setpoint);
-            bus.run(Duration::from_millis(5), &mut [&mut master, &mut drive]);
+            controller(&mut bus.master()).set_setpoint(setpoint);
+            bus.run(Duration::from_millis(5));
         }
-        bus.run(Duration::from_millis(200), &mut [&mut master, &mut drive]);
-        let motor = drive.app().motor();
+        bus.run(Duration::from_millis(200));
+        let motor = bus.device().app().motor();
         match mode {
             Mode::CyclicSynchronousVelocity => {
                 assert!((motor.velocity - 1_000.0).abs() < 1.0, "{motor:?}")
@@ -469,7 +483,7 @@ fn cyclic_synchronous_modes_follow_the_streamed_targets() {
             _ => assert!((motor.position - 1_000.0).abs() <= 10.0, "{motor:?}"),
         }
         assert_eq!(
-            drive.od().get_signed(0x6061, 0),
+            bus.device().od().get_signed(0x6061, 0),
             Some(i64::from(mode.code())),
             "modes display"
         );

@@ -523,9 +523,9 @@ proptest! {
 /// for the bus to start it after the interframe space).
 #[test]
 fn throughput_is_within_5_percent_of_the_wire() {
-    use bywire_bus::network::Network;
     use bywire_core::busload::{frame_time_ns, Bitrates};
-    use bywire_core::node::{Node, Port};
+    use bywire_core::node::Port;
+    use bywire_net::network::Network;
     for (fd, data, confirmed) in [
         (false, None, false),
         (true, Some(4_000_000), false),
@@ -534,10 +534,7 @@ fn throughput_is_within_5_percent_of_the_wire() {
     ] {
         let mut net = Network::new();
         let bus = net.add_bus("can0", 1_000_000, data);
-        net.wire(0, Port::MAIN, bus);
-        net.wire(1, Port::MAIN, bus);
-        let tap = net.tap(bus).unwrap();
-        let (mut a, mut b) = pair(|c| {
+        let (mut a, b) = pair(|c| {
             c.padding = Some(0xCC);
             c.fd = fd;
             c.brs = fd;
@@ -547,16 +544,20 @@ fn throughput_is_within_5_percent_of_the_wire() {
             }
         });
         a.send(&message(4095)).unwrap();
+        let (a, b) = (net.add_node(a), net.add_node(b));
+        net.wire(a, Port::MAIN, bus).unwrap();
+        net.wire(b, Port::MAIN, bus).unwrap();
+        let tap = net.tap(bus).unwrap();
         let mut frames = Vec::new();
         let mut received_at = None;
         for _ in 0..20_000 {
-            net.changed(0);
             let until = net.now().saturating_add(Duration::from_micros(200));
-            net.run_until(until, &mut [&mut a as &mut dyn Node, &mut b]);
+            net.run_until(until);
             while let Some(r) = net.bus_mut(bus).and_then(|s| s.receive(tap)) {
                 frames.push(r);
             }
-            if let Some(IsoTpEvent::Received(m)) = b.next_event() {
+            let event = net.node_mut(b).unwrap().next_event();
+            if let Some(IsoTpEvent::Received(m)) = event {
                 assert_eq!(m, message(4095));
                 received_at = frames.last().map(|r| r.timestamp);
                 break;
@@ -593,18 +594,17 @@ fn throughput_is_within_5_percent_of_the_wire() {
 /// Two channels on a bit-timed 500 kbit/s bus, confirmed by the simulated runner.
 mod confirmed {
     use super::*;
-    use bywire_bus::network::Network;
     use bywire_core::busload::{frame_time_ns, Bitrates};
-    use bywire_core::node::{Node, Port};
+    use bywire_core::node::Port;
+    use bywire_net::network::{Network, NodeHandle, NodeMut};
 
     const N_A: Duration = Duration::from_millis(50);
 
     struct Bench {
         net: Network,
-        tap: bywire_bus::sim::NodeId,
+        tap: bywire_net::sim::NodeId,
         bus: usize,
-        a: IsoTp,
-        b: IsoTp,
+        ends: [NodeHandle<IsoTp>; 2],
         /// Every frame on the wire, with its end of frame.
         wire: Vec<(Timestamp, Frame)>,
         /// Each end's events with the time they were seen (within 100 µs).
@@ -615,19 +615,20 @@ mod confirmed {
         fn new(edit: impl Fn(&mut IsoTpConfig)) -> Bench {
             let mut net = Network::new();
             let bus = net.add_bus("can0", 500_000, None);
-            net.wire(0, Port::MAIN, bus);
-            net.wire(1, Port::MAIN, bus);
-            let tap = net.tap(bus).unwrap();
             let (a, b) = pair(|c| {
                 *c = c.confirmed(N_A);
                 edit(c);
             });
+            let ends = [net.add_node(a), net.add_node(b)];
+            for end in ends {
+                net.wire(end, Port::MAIN, bus).unwrap();
+            }
+            let tap = net.tap(bus).unwrap();
             Bench {
                 net,
                 tap,
                 bus,
-                a,
-                b,
+                ends,
                 wire: Vec::new(),
                 events: [Vec::new(), Vec::new()],
             }
@@ -636,21 +637,24 @@ mod confirmed {
         fn run_for(&mut self, duration: Duration) {
             let end = self.net.now().saturating_add(duration);
             while self.net.now() < end {
-                self.net.changed(0);
-                self.net.changed(1);
                 let until = self.net.now().saturating_add(Duration::from_micros(100));
-                self.net
-                    .run_until(until, &mut [&mut self.a as &mut dyn Node, &mut self.b]);
+                self.net.run_until(until);
                 let now = self.net.now();
                 while let Some(r) = self.net.bus_mut(self.bus).and_then(|s| s.receive(self.tap)) {
                     self.wire.push((r.timestamp, r.frame));
                 }
-                for (end, channel) in [&mut self.a, &mut self.b].into_iter().enumerate() {
+                for (end, events) in self.ends.into_iter().zip(&mut self.events) {
+                    let mut channel = self.net.node_mut(end).unwrap();
                     while let Some(event) = channel.next_event() {
-                        self.events[end].push((now, event));
+                        events.push((now, event));
                     }
                 }
             }
+        }
+
+        /// The sending end.
+        fn a(&mut self) -> NodeMut<'_, IsoTp> {
+            self.net.node_mut(self.ends[0]).unwrap()
         }
 
         fn failure(&self, end: usize) -> Option<(Timestamp, bool, IsoTpError)> {
@@ -666,16 +670,16 @@ mod confirmed {
     #[test]
     fn a_frame_never_confirmed_is_n_timeout_a_after_n_as() {
         let mut bench = Bench::new(|c| c.n_bs = Duration::from_millis(500));
-        bench.net.drop_output(0, true);
-        bench.a.send(&message(100)).unwrap();
+        bench.net.drop_output(bench.ends[0], true);
+        bench.a().send(&message(100)).unwrap();
         bench.run_for(Duration::from_millis(45));
         assert_eq!(bench.failure(0), None, "not before N_As");
-        assert!(bench.a.sending());
+        assert!(bench.a().sending());
         bench.run_for(Duration::from_millis(15));
         let (at, sending, error) = bench.failure(0).expect("N_As ran out");
         assert_eq!((sending, error), (true, IsoTpError::TimeoutA));
         assert!(at >= Timestamp::ZERO.saturating_add(N_A), "{at:?}");
-        assert!(!bench.a.sending());
+        assert!(!bench.a().sending());
         assert!(bench.wire.is_empty());
         assert!(bench.events[1].is_empty(), "{:?}", bench.events[1]);
     }
@@ -685,8 +689,8 @@ mod confirmed {
     #[test]
     fn a_flow_control_never_confirmed_is_n_timeout_a_after_n_ar() {
         let mut bench = Bench::new(|c| c.n_bs = Duration::from_millis(200));
-        bench.net.drop_port_output(1, Port::MAIN, true);
-        bench.a.send(&message(100)).unwrap();
+        bench.net.drop_port_output(bench.ends[1], Port::MAIN, true);
+        bench.a().send(&message(100)).unwrap();
         bench.run_for(Duration::from_millis(250));
         let first_frame_end = bench.wire.first().map(|(at, _)| *at).unwrap();
         assert_eq!(bench.wire.len(), 1, "only the first frame is on the wire");
@@ -713,7 +717,7 @@ mod confirmed {
     #[test]
     fn sent_comes_with_the_last_frame_and_st_min_runs_from_the_end_of_frame() {
         let mut bench = Bench::new(|c| c.st_min = StMin::Micros(300));
-        bench.a.send(&message(300)).unwrap();
+        bench.a().send(&message(300)).unwrap();
         bench.run_for(Duration::from_millis(50));
         let received = bench.events[1].iter().find_map(|(_, e)| match e {
             IsoTpEvent::Received(m) => Some(m.clone()),

@@ -4,7 +4,7 @@
 
 use core::time::Duration;
 
-use bywire_bus::sim::Tamper;
+use bywire_net::sim::Tamper;
 use bywire_tug::messages::AdsToVehicleControl;
 
 use crate::attacker::Attack;

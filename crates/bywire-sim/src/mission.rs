@@ -475,7 +475,12 @@ impl AdsDriver {
         self.planning = false;
     }
 
-    /// The next event, oldest first.
+    /// Whether events wait to be taken.
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    /// The oldest event not yet taken.
     pub fn next_event(&mut self) -> Option<(Timestamp, MissionEvent)> {
         self.events.pop_front()
     }

@@ -7,6 +7,7 @@ use core::time::Duration;
 
 use serde::Serialize;
 
+use crate::attacker::Attacker;
 use crate::record::{ResponseTimes, StepResponse};
 use crate::tug::Tug;
 
@@ -282,8 +283,10 @@ impl DtcRecord {
     pub fn all(tug: &Tug) -> Vec<DtcRecord> {
         let names: std::collections::BTreeMap<u32, String> =
             bywire_tug::diagnostics::dtc_names().into_iter().collect();
-        tug.vehicle_control_ecu()
-            .diagnostics()
+        let Some(ecu) = tug.vehicle_control_ecu() else {
+            return Vec::new();
+        };
+        ecu.diagnostics()
             .server()
             .dtcs()
             .map(|(dtc, status)| DtcRecord {
@@ -300,18 +303,17 @@ impl DtcRecord {
 impl SecurityCounts {
     /// The run's counts so far.
     pub fn of(tug: &Tug) -> SecurityCounts {
-        let verified = tug
-            .ecu()
-            .wire()
-            .table()
-            .map(|t| t.stats().frames)
-            .unwrap_or_default();
+        let table = tug.ecu().and_then(|e| e.wire().table());
+        let verified = table.map(|t| t.stats().frames).unwrap_or_default();
         SecurityCounts {
-            secoc: tug.ecu().wire().table().is_some(),
-            attacker_frames: tug.attacker().sent(),
+            secoc: table.is_some(),
+            attacker_frames: tug.attacker().map_or(0, Attacker::sent),
             foreign_commands: tug.security.foreign_commands,
             false_speeds: tug.security.false_speeds,
-            ads_authentication: tug.ads().ads().stats().authentication,
+            ads_authentication: tug
+                .ads()
+                .map(|a| a.ads().stats().authentication)
+                .unwrap_or_default(),
             ecu_accepted: verified.accepted,
             ecu_mac: verified.mac,
             ecu_stale: verified.stale,
@@ -369,7 +371,7 @@ impl RunReport {
                 duration_s: response.times.last().copied().unwrap_or(0.0),
             });
         let [bus1, bus2, bus3, bus1b] = tug.bus_loads();
-        let stats = tug.ecu().stats();
+        let stats = tug.ecu().map(|e| e.stats()).unwrap_or_default();
         RunReport {
             scenario: scenario.to_string(),
             seed,

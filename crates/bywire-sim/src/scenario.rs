@@ -39,7 +39,7 @@ use crate::fault::Fault;
 use crate::mission::apron_loop;
 use crate::steering::SensorFault;
 use crate::tug::{Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
-use bywire_bus::sim::Tamper;
+use bywire_net::sim::Tamper;
 
 /// A scenario.
 #[derive(Debug, Clone, PartialEq)]

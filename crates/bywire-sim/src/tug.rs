@@ -1,5 +1,5 @@
 //! The simulated tug: its nodes wired to its four bit-timed buses on the simulated runner
-//! ([`bywire_bus::network::Network`]), its plants stepped every millisecond between them.
+//! ([`bywire_net::network::Network`]), its plants stepped every millisecond between them.
 //!
 //! - bus 1 (vehicle control, 500 kbit/s): the built-in ADS ([`crate::mission::AdsDriver`]),
 //!   the vehicle control ECU ([`bywire_tug::ecu::VehicleControlEcu`]), the safety controller and
@@ -21,9 +21,6 @@
 
 use core::time::Duration;
 
-use bywire_bus::network::{BusIndex, Network, NodeIndex};
-use bywire_bus::sim::{BusEvent, NodeId};
-use bywire_bus::Filtering;
 use bywire_canopen::cia402::{self, Drive, Mode};
 use bywire_canopen::device::Device;
 use bywire_control::kinematics::{Point, Pose};
@@ -32,6 +29,9 @@ use bywire_core::filter::{ErrorMask, Filter};
 use bywire_core::frame::ErrorClass;
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_net::network::{BusIndex, Network, NodeHandle, NodeKey};
+use bywire_net::sim::{BusEvent, NodeId};
+use bywire_net::Filtering;
 use bywire_tug::diagnostics;
 use bywire_tug::ecu::{
     self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu, DRIVE_UNITS_PER_M,
@@ -54,7 +54,9 @@ use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
 use crate::fault::Fault;
 use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
-use crate::nodes::{self, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController};
+use crate::nodes::{
+    self, BatteryReading, Bms, ImuNode, IoNode, IoReading, Periodic, SafetyController,
+};
 use crate::record::{
     Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SimEvent, SteeringRecord,
     SupervisorWatch, TruthSample,
@@ -156,17 +158,28 @@ struct Corner {
     distance: f64,
 }
 
-/// The nodes' places in the network (their index in [`Tug::nodes`]' order).
-const ADS: NodeIndex = 0;
-const ECU: NodeIndex = 1;
-const SAFETY: NodeIndex = 2;
-const BMS: NodeIndex = 3;
-const IMU: NodeIndex = 4;
-const IO: NodeIndex = 5;
-/// Steering drives FL..RR at 6–9, wheel drives FL..RR at 10–13.
-const FIRST_STEER: NodeIndex = 6;
-const FIRST_DRIVE: NodeIndex = 10;
-const ATTACKER: NodeIndex = 14;
+/// The tug's nodes, as its network holds them.
+struct TugNodes {
+    ads: NodeHandle<AdsDriver>,
+    ecu: NodeHandle<VehicleControlEcu>,
+    safety: NodeHandle<Signing<SafetyController>>,
+    bms: NodeHandle<Bms>,
+    imu: NodeHandle<ImuNode>,
+    io: NodeHandle<IoNode>,
+    /// Steering drives FL..RR.
+    steer: [NodeHandle<Device<Drive>>; 4],
+    /// Wheel drives FL..RR.
+    drive: [NodeHandle<Device<Drive>>; 4],
+    attacker: NodeHandle<Attacker>,
+}
+
+/// The inputs last given to the ECU and the safety controller from the wiring: given again
+/// only when they change (a node changed between runs is asked its deadline again).
+#[derive(Clone, Copy, PartialEq)]
+struct WiringInputs {
+    takeover_torque: f64,
+    status: StatusInputs,
+}
 /// The simulated vehicle's SecOC key (a simulation's, not a secret): every node of the
 /// secured variant has it, the attacker does not.
 const SIM_KEY: [u8; 16] = *b"bywire-sim-key!!";
@@ -242,15 +255,9 @@ pub struct Tug {
     names: [Vec<(NodeId, String)>; 4],
     /// The ECU's endpoint on bus 1.
     ecu_bus1: NodeId,
-    ads: AdsDriver,
-    ecu: VehicleControlEcu,
-    safety: Signing<SafetyController>,
-    attacker: Attacker,
-    bms: Bms,
-    imu: ImuNode,
-    io: IoNode,
-    steer: Vec<Device<Drive>>,
-    drive: Vec<Device<Drive>>,
+    nodes: TugNodes,
+    /// What the wiring last told the nodes (`None`: nothing yet).
+    wiring: Option<WiringInputs>,
     corners: Vec<Corner>,
     chassis: Chassis,
     battery: Battery,
@@ -328,7 +335,39 @@ impl Tug {
             track: chassis_params.track,
         });
         let start = mission.start_pose();
+        // Every node of the secured variant starts its freshness at 1: a new key.
+        let key = bywire_secoc::Key::new(SIM_KEY);
+        let wire = || -> Result<_, TugError> {
+            Ok(if params.secoc {
+                secured::secured(&key, 1)?
+            } else {
+                secured::plain()
+            })
+        };
+        let safety_table = match params.secoc {
+            true => Some(secured::table(&key, 1)?),
+            false => None,
+        };
         let mut net = Network::new();
+        // Added in the order they are polled at one instant (the runs are reproducible in it).
+        let nodes = TugNodes {
+            ads: net.add_node(AdsDriver::new(ads_config, mission, wire()?)),
+            ecu: net.add_node(VehicleControlEcu::with_wire(
+                ecu_config,
+                EcuGeometry {
+                    wheelbase: chassis_params.wheelbase,
+                    track: chassis_params.track,
+                },
+                wire()?,
+            )),
+            safety: net.add_node(Signing::new(nodes::safety_controller(), safety_table)),
+            bms: net.add_node(nodes::bms()),
+            imu: net.add_node(nodes::imu()),
+            io: net.add_node(nodes::io_node()),
+            steer: STEERING_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfilePosition))),
+            drive: DRIVE_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfileVelocity))),
+            attacker: net.add_node(Attacker::new()),
+        };
         // The secured variant's frames are CAN FD with a faster data phase on the command buses.
         let command_data = params.secoc.then_some(secured::DATA_BITRATE);
         let buses = [
@@ -345,7 +384,7 @@ impl Tug {
             }
         }
         let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
-        let mut wire = |net: &mut Network, node: NodeIndex, port: Port, bus: usize, name: &str| {
+        let mut wire = |net: &mut Network, node: NodeKey, port: Port, bus: usize, name: &str| {
             let index = buses.get(bus).copied().unwrap_or_default();
             let endpoint = net.wire(node, port, index).unwrap_or_default();
             if let Some(list) = names.get_mut(bus) {
@@ -354,34 +393,39 @@ impl Tug {
             endpoint
         };
         let ads_ports = (Ads::<TugWire>::PORT_A, Ads::<TugWire>::PORT_B);
-        wire(&mut net, ADS, ads_ports.0, 0, "ADS");
-        wire(&mut net, ADS, ads_ports.1, 3, "ADS");
-        let ecu_bus1 = wire(&mut net, ECU, ecu::BUS1, 0, "ECU");
-        wire(&mut net, ECU, ecu::BUS1B, 3, "ECU");
-        wire(&mut net, ECU, ecu::BUS2, 1, "ECU (CANopen master)");
-        wire(&mut net, ECU, ecu::BUS3, 2, "ECU");
-        wire(&mut net, SAFETY, Port::MAIN, 0, "safety controller");
-        wire(&mut net, BMS, Port::MAIN, 0, "BMS");
-        wire(&mut net, ATTACKER, Port::MAIN, 0, "attacker");
-        wire(&mut net, IMU, Port::MAIN, 2, "IMU");
-        wire(&mut net, IO, Port::MAIN, 2, "I/O node");
-        for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
-            wire(
-                &mut net,
-                FIRST_STEER + i,
-                Port::MAIN,
-                1,
-                &format!("drive 0x{steer:02X}"),
-            );
-            wire(
-                &mut net,
-                FIRST_DRIVE + i,
-                Port::MAIN,
-                1,
-                &format!("drive 0x{drive:02X}"),
-            );
-            net.set_filtering(FIRST_STEER + i, Port::MAIN, drive_filtering(*steer));
-            net.set_filtering(FIRST_DRIVE + i, Port::MAIN, drive_filtering(drive));
+        let (ads, ecu) = (nodes.ads.key(), nodes.ecu.key());
+        wire(&mut net, ads, ads_ports.0, 0, "ADS");
+        wire(&mut net, ads, ads_ports.1, 3, "ADS");
+        let ecu_bus1 = wire(&mut net, ecu, ecu::BUS1, 0, "ECU");
+        wire(&mut net, ecu, ecu::BUS1B, 3, "ECU");
+        wire(&mut net, ecu, ecu::BUS2, 1, "ECU (CANopen master)");
+        wire(&mut net, ecu, ecu::BUS3, 2, "ECU");
+        wire(
+            &mut net,
+            nodes.safety.key(),
+            Port::MAIN,
+            0,
+            "safety controller",
+        );
+        wire(&mut net, nodes.bms.key(), Port::MAIN, 0, "BMS");
+        wire(&mut net, nodes.attacker.key(), Port::MAIN, 0, "attacker");
+        wire(&mut net, nodes.imu.key(), Port::MAIN, 2, "IMU");
+        wire(&mut net, nodes.io.key(), Port::MAIN, 2, "I/O node");
+        // Corner by corner: its steering drive, then its wheel drive.
+        let corners = STEERING_NODES.iter().zip(nodes.steer);
+        for ((steer, steer_node), (drive, drive_node)) in
+            corners.zip(DRIVE_NODES.iter().zip(nodes.drive))
+        {
+            for (id, node) in [(steer, steer_node), (drive, drive_node)] {
+                wire(
+                    &mut net,
+                    node.key(),
+                    Port::MAIN,
+                    1,
+                    &format!("drive 0x{id:02X}"),
+                );
+                net.set_filtering(node, Port::MAIN, drive_filtering(*id));
+            }
         }
         // Each node hears only what it reads: delivering is where a simulator's time goes.
         let commands = [
@@ -398,44 +442,37 @@ impl Tug {
             BatteryMessage::ID,
         ]);
         net.set_filtering(
-            ECU,
+            ecu,
             ecu::BUS1,
             Filtering {
                 error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
                 ..only(&ecu_hears)
             },
         );
-        net.set_filtering(ECU, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
-        net.set_filtering(ECU, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
+        net.set_filtering(ecu, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
+        net.set_filtering(ecu, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
         let feedback = [
             VehicleToAdsState::ID,
             VehicleToAdsSensors::ID,
             VehicleToAdsWheelAngles::ID,
             secured::SYNC_ID,
         ];
-        net.set_filtering(ADS, ads_ports.0, only(&feedback));
-        net.set_filtering(ADS, ads_ports.1, deaf());
-        for node in [SAFETY, BMS, IMU, IO] {
+        net.set_filtering(ads, ads_ports.0, only(&feedback));
+        net.set_filtering(ads, ads_ports.1, deaf());
+        let senders = [
+            nodes.safety.key(),
+            nodes.bms.key(),
+            nodes.imu.key(),
+            nodes.io.key(),
+        ];
+        for node in senders {
             net.set_filtering(node, Port::MAIN, deaf());
         }
         net.set_filtering(
-            ATTACKER,
+            nodes.attacker,
             Port::MAIN,
             only(&[AdsToVehicleControl::ID, VehicleToAdsState::ID]),
         );
-        // Every node of the secured variant starts its freshness at 1: a new key.
-        let key = bywire_secoc::Key::new(SIM_KEY);
-        let wire = || -> Result<_, TugError> {
-            Ok(if params.secoc {
-                secured::secured(&key, 1)?
-            } else {
-                secured::plain()
-            })
-        };
-        let safety_table = match params.secoc {
-            true => Some(secured::table(&key, 1)?),
-            false => None,
-        };
         let mut taps = [0; 4];
         for (tap, (bus, list)) in taps.iter_mut().zip(buses.iter().zip(names.iter_mut())) {
             *tap = net.tap(*bus).unwrap_or_default();
@@ -456,28 +493,8 @@ impl Tug {
             taps,
             names,
             ecu_bus1,
-            ads: AdsDriver::new(ads_config, mission, wire()?),
-            ecu: VehicleControlEcu::with_wire(
-                ecu_config,
-                EcuGeometry {
-                    wheelbase: chassis_params.wheelbase,
-                    track: chassis_params.track,
-                },
-                wire()?,
-            ),
-            safety: Signing::new(nodes::safety_controller(), safety_table),
-            attacker: Attacker::new(),
-            bms: nodes::bms(),
-            imu: nodes::imu(),
-            io: nodes::io_node(),
-            steer: STEERING_NODES
-                .iter()
-                .map(|n| drive_device(*n, Mode::ProfilePosition))
-                .collect(),
-            drive: DRIVE_NODES
-                .iter()
-                .map(|n| drive_device(*n, Mode::ProfileVelocity))
-                .collect(),
+            nodes,
+            wiring: None,
             corners,
             chassis: Chassis::new(chassis_params, start),
             battery: Battery::new(BatteryParams::default(), 0.8),
@@ -564,9 +581,12 @@ impl Tug {
                 // The operator presses reset: at the ADS's console (the E-stop latch's reset
                 // sequence) and at the ECU (drives the master stopped acknowledged, a steering
                 // fault whose sensor tracks agree again cleared).
-                self.ads.operator_reset();
-                self.ecu.operator_reset(now);
-                self.net.changed(ECU);
+                if let Some(mut ads) = self.net.node_mut(self.nodes.ads) {
+                    ads.operator_reset();
+                }
+                if let Some(mut ecu) = self.net.node_mut(self.nodes.ecu) {
+                    ecu.operator_reset(now);
+                }
                 self.take_node_events();
             }
             Fault::EcuBusOff => {
@@ -604,7 +624,9 @@ impl Tug {
 
     /// The steering fault the ECU's plausibility check latched, if any.
     pub fn steering_fault(&self) -> Option<bywire_tug::plausibility::SteeringFault> {
-        self.ecu.steering_fault()
+        self.net
+            .node(self.nodes.ecu)
+            .and_then(VehicleControlEcu::steering_fault)
     }
 
     /// Each bus's response times by identifier (lowest identifier first), under the bus's name.
@@ -631,10 +653,11 @@ impl Tug {
     /// The route is done: engaged, at its end (as the ADS reckons it), stopped, and the tank
     /// turn (if any) made.
     pub fn arrived(&self) -> bool {
-        self.ads.engaged_at().is_some()
-            && self.ads.mission().remaining() < 0.5
-            && self.pose_speed() < 0.01
-            && self.ads.mission().tank_done()
+        self.ads().is_some_and(|ads| {
+            ads.engaged_at().is_some()
+                && ads.mission().remaining() < 0.5
+                && ads.mission().tank_done()
+        }) && self.pose_speed() < 0.01
     }
 
     fn record(&mut self, kind: &str, detail: String) {
@@ -675,24 +698,26 @@ impl Tug {
         speed_of(&self.chassis)
     }
 
-    /// The vehicle control ECU's supervisor.
-    pub fn ecu(&self) -> &Supervisor<TugWire> {
-        self.ecu.supervisor()
+    /// The vehicle control ECU's supervisor (`None` only for a tug that lost its nodes,
+    /// which a tug never does: its network is its own).
+    pub fn ecu(&self) -> Option<&Supervisor<TugWire>> {
+        self.vehicle_control_ecu()
+            .map(VehicleControlEcu::supervisor)
     }
 
     /// The vehicle control ECU.
-    pub fn vehicle_control_ecu(&self) -> &VehicleControlEcu {
-        &self.ecu
+    pub fn vehicle_control_ecu(&self) -> Option<&VehicleControlEcu> {
+        self.net.node(self.nodes.ecu)
     }
 
     /// The route's remaining distance, as the ADS reckons it from its odometry, m.
-    pub fn remaining(&self) -> f64 {
-        self.ads.mission().remaining()
+    pub fn remaining(&self) -> Option<f64> {
+        self.ads().map(|ads| ads.mission().remaining())
     }
 
     /// When the vehicle first reported autonomous mode to the ADS.
     pub fn engaged_at(&self) -> Option<Timestamp> {
-        self.ads.engaged_at()
+        self.ads().and_then(AdsDriver::engaged_at)
     }
 
     /// The battery's state of charge.
@@ -732,58 +757,79 @@ impl Tug {
         if self.cuts_stale {
             self.cuts_stale = false;
             let silent = self.is_active(Fault::AdsSilence);
-            self.net.drop_output(ADS, silent);
+            self.net.drop_output(self.nodes.ads, silent);
             let b_lost = self.is_active(Fault::RedundantBusLoss);
             self.net
-                .drop_port_output(ADS, Ads::<TugWire>::PORT_B, b_lost);
-            for (i, (steer, drive)) in STEERING_NODES.iter().zip(DRIVE_NODES).enumerate() {
-                let steer_silent = self.is_active(Fault::DriveSilence(*steer));
-                let drive_silent = self.is_active(Fault::DriveSilence(drive));
-                self.net.drop_output(FIRST_STEER + i, steer_silent);
-                self.net.drop_output(FIRST_DRIVE + i, drive_silent);
+                .drop_port_output(self.nodes.ads, Ads::<TugWire>::PORT_B, b_lost);
+            let steering = STEERING_NODES.iter().zip(self.nodes.steer);
+            let drives = steering.chain(DRIVE_NODES.iter().zip(self.nodes.drive));
+            for (id, node) in drives {
+                let silent = self.is_active(Fault::DriveSilence(*id));
+                self.net.drop_output(node, silent);
             }
         }
-        let takeover = if self.is_active(Fault::DriverTakeover) {
+        let takeover_torque = if self.is_active(Fault::DriverTakeover) {
             8.0
         } else {
             0.0
         };
-        self.ecu.set_driver_input(takeover, 0.0);
         let estop = self.is_active(Fault::Estop);
-        self.ecu.set_status_inputs(StatusInputs {
-            estop_chain_open: estop,
-            parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
-        });
-        self.safety.node.reading = estop;
+        let wiring = WiringInputs {
+            takeover_torque,
+            status: StatusInputs {
+                estop_chain_open: estop,
+                parking_brake_applied: self.corners.iter().any(|c| c.wheel.is_parked()),
+            },
+        };
+        if self.wiring != Some(wiring) {
+            self.wiring = Some(wiring);
+            if let Some(mut ecu) = self.net.node_mut(self.nodes.ecu) {
+                ecu.set_driver_input(takeover_torque, 0.0);
+                ecu.set_status_inputs(wiring.status);
+            }
+            if let Some(mut safety) = self.net.node_mut(self.nodes.safety) {
+                safety.node.reading = estop;
+            }
+        }
         let attack = self.active.iter().find_map(|(f, _)| match f {
             Fault::Attack(a) => Some(*a),
             _ => None,
         });
-        if attack != self.attacker.attack() {
-            self.attacker.set_attack(attack);
-            self.net.changed(ATTACKER);
+        let attacker = self.net.node(self.nodes.attacker).map(Attacker::attack);
+        if attacker.is_some_and(|now| now != attack) {
+            if let Some(mut attacker) = self.net.node_mut(self.nodes.attacker) {
+                attacker.set_attack(attack);
+            }
         }
-        if self.imu.schedule.due_within(until) {
+        let due = |schedule: Option<&Periodic>| schedule.is_some_and(|s| s.due_within(until));
+        if due(self.net.node(self.nodes.imu).map(|n| &n.schedule)) {
             let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
-            self.imu.reading = (yaw_rate.to_degrees(), accel);
+            if let Some(mut imu) = self.net.node_mut(self.nodes.imu) {
+                imu.reading = (yaw_rate.to_degrees(), accel);
+            }
         }
-        if self.io.schedule.due_within(until) {
+        if due(self.net.node(self.nodes.io).map(|n| &n.schedule)) {
             let encoders = self.chassis.encoders(0.01);
             let mut second_tracks = [0.0; 4];
             for (track, corner) in second_tracks.iter_mut().zip(&self.corners) {
                 *track = corner.chain.second_track_deg(&mut self.rng);
             }
-            self.io.reading = IoReading {
-                encoders,
-                second_tracks,
-            };
+            if let Some(mut io) = self.net.node_mut(self.nodes.io) {
+                io.reading = IoReading {
+                    encoders,
+                    second_tracks,
+                };
+            }
         }
-        if self.bms.schedule.due_within(until) {
-            self.bms.reading = BatteryReading {
+        if due(self.net.node(self.nodes.bms).map(|n| &n.schedule)) {
+            let reading = BatteryReading {
                 voltage: self.battery.terminal_v(),
                 current: self.battery.current(),
                 soc: self.battery.soc(),
             };
+            if let Some(mut bms) = self.net.node_mut(self.nodes.bms) {
+                bms.reading = reading;
+            }
         }
     }
 
@@ -797,10 +843,10 @@ impl Tug {
     pub fn step_with_ads(&mut self, ads: &mut dyn Node) {
         if !self.ads_external {
             self.ads_external = true;
-            self.ads.stop_planning();
+            if let Some(mut built_in) = self.net.node_mut(self.nodes.ads) {
+                built_in.stop_planning();
+            }
         }
-        // Another node in the slot: its deadline is its own.
-        self.net.changed(ADS);
         self.step_inner(Some(ads));
     }
 
@@ -809,34 +855,10 @@ impl Tug {
         let until = now.saturating_add(TICK);
         self.expire_faults(now);
         self.set_inputs(until);
-        let [s0, s1, s2, s3] = self.steer.as_mut_slice() else {
-            return;
-        };
-        let [d0, d1, d2, d3] = self.drive.as_mut_slice() else {
-            return;
-        };
-        let ads: &mut dyn Node = match outside_ads {
-            Some(node) => node,
-            None => &mut self.ads,
-        };
-        let mut nodes: [&mut dyn Node; 15] = [
-            ads,
-            &mut self.ecu,
-            &mut self.safety,
-            &mut self.bms,
-            &mut self.imu,
-            &mut self.io,
-            s0,
-            s1,
-            s2,
-            s3,
-            d0,
-            d1,
-            d2,
-            d3,
-            &mut self.attacker,
-        ];
-        self.net.run_until(until, &mut nodes);
+        match outside_ads {
+            Some(ads) => self.net.run_until_standing_in(until, self.nodes.ads, ads),
+            None => self.net.run_until(until),
+        }
         self.run_plants(now);
         self.now = until;
         self.take_logs();
@@ -885,7 +907,9 @@ impl Tug {
                 }
             }
         }
-        let echo = self.ads.ads().state().echo_latency;
+        let Some(echo) = self.ads().map(|ads| ads.ads().state().echo_latency) else {
+            return;
+        };
         if echo.at != self.last_echo {
             self.last_echo = echo.at;
             self.echo_latencies.extend(echo.value);
@@ -895,9 +919,16 @@ impl Tug {
     /// What the attacks achieve: each command the ECU took this step compared with the ADS's
     /// own, each speed the ADS took with the tug's.
     fn watch_attacks(&mut self) {
+        let supervisor = self
+            .net
+            .node(self.nodes.ecu)
+            .map(VehicleControlEcu::supervisor);
+        let (Some(ads), Some(supervisor)) = (self.net.node(self.nodes.ads), supervisor) else {
+            return;
+        };
         if !self.ads_external {
-            let accepted = self.ecu.supervisor().stats().accepted;
-            let (ads, supervisor, now) = (self.ads.ads(), self.ecu.supervisor(), self.now);
+            let accepted = supervisor.stats().accepted;
+            let (ads, now) = (ads.ads(), self.now);
             self.security.note_accepted(accepted, || {
                 let own = ads.effective_command(now)?;
                 let taken = supervisor.command()?;
@@ -907,26 +938,26 @@ impl Tug {
                 ])
             });
         }
-        let speed = self.ads.ads().state().velocity;
+        let speed = ads.ads().state().velocity;
         let chassis = &self.chassis;
         self.security
             .note_speed(speed.at, speed.value, || speed_of(chassis));
     }
 
     /// The attacker (its frames sent).
-    pub fn attacker(&self) -> &Attacker {
-        &self.attacker
+    pub fn attacker(&self) -> Option<&Attacker> {
+        self.net.node(self.nodes.attacker)
     }
 
     /// The built-in ADS (its view of the vehicle, its counts).
-    pub fn ads(&self) -> &AdsDriver {
-        &self.ads
+    pub fn ads(&self) -> Option<&AdsDriver> {
+        self.net.node(self.nodes.ads)
     }
 
     /// The trace every 50 ms, the tracking error every 20 ms once engaged.
     fn sample(&mut self, now: Timestamp) {
         let pose = self.chassis.pose();
-        if self.ads.engaged_at().is_some() && now.as_nanos().is_multiple_of(20_000_000) {
+        if self.engaged_at().is_some() && now.as_nanos().is_multiple_of(20_000_000) {
             if let Some(path) = Path::new(&self.params.route) {
                 let here = Point {
                     x: pose.x,
@@ -948,7 +979,10 @@ impl Tug {
                         .map_or(0.0, |c| c.chain.wheel_angle_deg())
                 }),
                 wheel_speeds: self.chassis.wheel_speeds(),
-                steering_mode: self.ecu.supervisor().command().map(|c| c.steering_mode),
+                steering_mode: self
+                    .ecu()
+                    .and_then(|e| e.command())
+                    .map(|c| c.steering_mode),
             });
         }
         if now.as_nanos().is_multiple_of(50_000_000) {
@@ -960,7 +994,7 @@ impl Tug {
                 t: now,
                 pose,
                 speed: self.pose_speed(),
-                steering_command: self.ads.steering_command(),
+                steering_command: self.ads().map_or(0.0, AdsDriver::steering_command),
                 steering_actual,
                 busy_ns: self.busy_ns(),
             });
@@ -972,18 +1006,20 @@ impl Tug {
         let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) else {
             return;
         };
-        let tank = self
-            .ecu
+        let (Some(ecu), Some(ads)) = (self.net.node(self.nodes.ecu), self.net.node(self.nodes.ads))
+        else {
+            return;
+        };
+        let tank = ecu
             .supervisor()
             .command()
             .is_some_and(|c| c.steering_mode == SteeringMode::Tank);
-        let ecu = &self.ecu;
         let tank_target = || {
             ecu.wheel_targets()
                 .first()
                 .map_or(0.0, |w| w.angle.to_degrees())
         };
-        let step = self.ads.mission().active_step();
+        let step = ads.mission().active_step();
         self.steering.note(now, angle, tank, tank_target, step);
     }
 
@@ -1013,23 +1049,41 @@ impl Tug {
             let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
             self.record("bus_state", detail);
         }
-        let supervisor = self.ecu.supervisor();
-        let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
-        let degraded = supervisor.degraded();
-        let (now, events) = (self.now, &mut self.events);
-        self.supervisor_watch.note(seen, degraded, |kind, detail| {
-            events.push(SimEvent::new(now, kind, detail));
-        });
+        if let Some(supervisor) = self
+            .net
+            .node(self.nodes.ecu)
+            .map(VehicleControlEcu::supervisor)
+        {
+            let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
+            let degraded = supervisor.degraded();
+            let (now, events) = (self.now, &mut self.events);
+            self.supervisor_watch.note(seen, degraded, |kind, detail| {
+                events.push(SimEvent::new(now, kind, detail));
+            });
+        }
         self.take_node_events();
     }
 
     /// The ECU's and the ADS's events into the run's.
     fn take_node_events(&mut self) {
-        // Bounded by the nodes' event queues.
-        while let Some((_, event)) = self.ecu.next_event() {
+        // Bounded by the nodes' event queues; a node with none is not borrowed to change.
+        while self
+            .vehicle_control_ecu()
+            .is_some_and(VehicleControlEcu::has_events)
+        {
+            let event = self
+                .net
+                .node_mut(self.nodes.ecu)
+                .and_then(|mut e| e.next_event());
+            let Some((_, event)) = event else { break };
             self.record(event.kind(), event.to_string());
         }
-        while let Some((_, event)) = self.ads.next_event() {
+        while self.ads().is_some_and(AdsDriver::has_events) {
+            let event = self
+                .net
+                .node_mut(self.nodes.ads)
+                .and_then(|mut a| a.next_event());
+            let Some((_, event)) = event else { break };
             self.record(event.kind(), event.to_string());
         }
     }
@@ -1038,15 +1092,17 @@ impl Tug {
     /// actual values go back to the drive.
     fn run_plants(&mut self, now: Timestamp) {
         let dt = TICK.as_secs_f64();
-        let a = self.ecu.actuators(now);
-        let brake = self.ecu.brake_demand(now);
+        let Some(ecu) = self.vehicle_control_ecu() else {
+            return;
+        };
+        let (a, brake) = (ecu.actuators(now), ecu.brake_demand(now));
         let rolling = self.chassis.twist().vx.abs() > 0.05;
         let speeds = self.chassis.wheel_speeds();
         let soc = self.battery.soc();
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
-        let devices = self.steer.iter_mut().zip(self.drive.iter_mut());
-        for (((corner, (steer, drive)), input), speed) in self
+        let devices = self.nodes.steer.iter().zip(&self.nodes.drive);
+        for (((corner, (&steer, &drive)), input), speed) in self
             .corners
             .iter_mut()
             .zip(devices)
@@ -1058,20 +1114,30 @@ impl Tug {
             // angle grows (angle = asin(stroke / arm)), so the drive's output stage scales by
             // cos(angle) at the angle it measures: the loop keeps one gain from 0° to the tank
             // turn's 60° (without it the gain doubles there, and the wheel hunts).
+            let steering = self
+                .net
+                .node(steer)
+                .map(|s| (s.app().motor().position, s.app().demand()));
+            let driving = self.net.node(drive).map(|d| d.app().demand());
+            let (Some((position, demand)), Some(drive_demand)) = (steering, driving) else {
+                continue;
+            };
             let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
-            let measured = steer.app().motor().position / STEERING_UNITS_PER_DEG;
+            let measured = position / STEERING_UNITS_PER_DEG;
             let linkage = libm::cos(measured.clamp(-75.0, 75.0).to_radians());
-            let command = steer.app().demand() / max_rate * linkage;
+            let command = demand / max_rate * linkage;
             let before = corner.chain.wheel_angle_deg();
             corner.chain.step(dt, command, rolling);
             let reading = corner.chain.sensor_deg(&mut self.rng);
             let rate = (corner.chain.wheel_angle_deg() - before) / dt;
-            steer.app_mut().0.set_actual(
-                reading * STEERING_UNITS_PER_DEG,
-                rate * STEERING_UNITS_PER_DEG,
-            );
+            if let Some(mut device) = self.net.node_mut(steer) {
+                device.app_mut().0.set_actual(
+                    reading * STEERING_UNITS_PER_DEG,
+                    rate * STEERING_UNITS_PER_DEG,
+                );
+            }
             // Drive: the drive's velocity demand is the motor controller's setpoint.
-            let setpoint = drive.app().demand() / DRIVE_UNITS_PER_M;
+            let setpoint = drive_demand / DRIVE_UNITS_PER_M;
             let output = corner.wheel.motor(setpoint, speed, soc);
             corner
                 .wheel
@@ -1079,10 +1145,12 @@ impl Tug {
             corner.wheel.step_brake(dt, brake);
             power += output.power;
             corner.distance += speed * dt;
-            drive.app_mut().0.set_actual(
-                corner.distance * DRIVE_UNITS_PER_M,
-                speed * DRIVE_UNITS_PER_M,
-            );
+            if let Some(mut device) = self.net.node_mut(drive) {
+                device.app_mut().0.set_actual(
+                    corner.distance * DRIVE_UNITS_PER_M,
+                    speed * DRIVE_UNITS_PER_M,
+                );
+            }
             *input = WheelInput {
                 angle_deg: corner.chain.wheel_angle_deg(),
                 drive_torque: output.torque,

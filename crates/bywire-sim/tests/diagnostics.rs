@@ -9,11 +9,11 @@
     clippy::indexing_slicing
 )]
 
-use bywire_bus::sim::NodeId;
 use bywire_core::{Id, Timestamp};
 use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
 use bywire_diag::isotp::IsoTpConfig;
 use bywire_diag::uds::{nrc, status};
+use bywire_net::sim::NodeId;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Tug, TugBus, TugParams, DRIVE_NODES};
 use bywire_tug::diagnostics::{did, dtc, CALIBRATION_ROUTINE, SWEEP_TIME};
@@ -120,6 +120,7 @@ fn after_the_fault_tour_every_fault_is_a_dtc_read_over_uds_and_cleared() {
     // What UDS lists is what the run's memory holds.
     let memory: Vec<(u32, u8)> = tug
         .vehicle_control_ecu()
+        .unwrap()
         .diagnostics()
         .server()
         .dtcs()
@@ -198,7 +199,7 @@ fn cruising() -> Tug {
     while tug.now() < Timestamp::from_millis(8_000) {
         tug.step();
     }
-    assert_eq!(tug.ecu().mode(), ControlMode::Autonomous);
+    assert_eq!(tug.ecu().unwrap().mode(), ControlMode::Autonomous);
     tug
 }
 
@@ -210,7 +211,7 @@ fn ecu_reset_reboots_the_ecu_the_tug_stops_and_recovers() {
     let answer = tester.ask(&mut tug, &step, &[0x11, 0x01]).unwrap();
     assert_eq!(answer, vec![0x51, 0x01]);
     let reset_at = tug.now();
-    assert!(tug.vehicle_control_ecu().booting(reset_at));
+    assert!(tug.vehicle_control_ecu().unwrap().booting(reset_at));
     // While it boots it is silent and the spring brakes hold.
     let frames_before = tug.bus1_log.len();
     for _ in 0..BOOT_TIME.as_millis() - 10 {
@@ -221,12 +222,15 @@ fn ecu_reset_reboots_the_ecu_the_tug_stops_and_recovers() {
         .filter(|(_, f)| f.id().map(|id| id.as_raw()) == Some(0x101))
         .count();
     assert_eq!(ecu_frames, 0, "the state frame during the boot");
-    assert_eq!(tug.vehicle_control_ecu().brake_demand(tug.now()), 1.0);
+    assert_eq!(
+        tug.vehicle_control_ecu().unwrap().brake_demand(tug.now()),
+        1.0
+    );
     // Back: failed closed at first, then the ADS's commands re-engage it.
     let mut engaged_again = None;
     for _ in 0..20_000 {
         tug.step();
-        if tug.ecu().mode() == ControlMode::Autonomous {
+        if tug.ecu().unwrap().mode() == ControlMode::Autonomous {
             engaged_again = Some(tug.now());
             break;
         }
@@ -268,6 +272,7 @@ fn the_steering_calibration_sweep_runs_at_standstill_only_and_reports_offsets() 
     assert!(tug.pose_speed() < 0.05);
     assert!(
         !tug.vehicle_control_ecu()
+            .unwrap()
             .actuators(tug.now())
             .motors_enabled
     );

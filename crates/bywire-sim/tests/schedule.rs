@@ -7,12 +7,12 @@
 
 use std::time::Duration;
 
-use bywire_bus::sim::{BusEvent, SimBus};
 use bywire_core::busload::Bitrates;
 use bywire_core::frame::ClassicFrame;
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_dbc::schedule::{analyse, Options, Schedule};
 use bywire_dbc::{parse, Database, Message, Mode};
+use bywire_net::sim::{BusEvent, SimBus};
 use bywire_sim::record::ResponseTimes;
 use bywire_sim::tug::{Tug, TugParams};
 

@@ -331,7 +331,12 @@ impl VehicleControlEcu {
         }
     }
 
-    /// The next event, oldest first, with its time.
+    /// Whether events wait to be taken.
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    /// The oldest event not yet taken.
     pub fn next_event(&mut self) -> Option<(Timestamp, EcuEvent)> {
         self.events.pop_front()
     }

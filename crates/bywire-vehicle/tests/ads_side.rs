@@ -12,10 +12,10 @@ mod common;
 use bywire_tug::wire::ReferenceWire;
 use std::time::Duration;
 
-use bywire_bus::network::Network;
-use bywire_bus::sim::NodeId;
 use bywire_core::node::Port;
 use bywire_core::{Frame, Id};
+use bywire_net::network::{Network, NodeHandle};
+use bywire_net::sim::NodeId;
 use bywire_tug::messages::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
 use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, Vote, VoteFailure};
@@ -28,28 +28,29 @@ use common::{ms, sealed};
 struct Loop {
     net: Network,
     tap: NodeId,
-    ads: Ads<ReferenceWire>,
-    vcu: Supervisor<ReferenceWire>,
+    ads_node: NodeHandle<Ads<ReferenceWire>>,
+    vcu_node: NodeHandle<Supervisor<ReferenceWire>>,
     now: u64,
     ads_frames: Vec<(u64, Frame)>,
 }
-
-/// The nodes' places in the network.
-const ADS: usize = 0;
-const VCU: usize = 1;
 
 impl Loop {
     fn new() -> Loop {
         let mut net = Network::new();
         let bus = net.add_bus("bus1", 500_000, None);
-        net.wire(ADS, Port::MAIN, bus).unwrap();
-        net.wire(VCU, Port::MAIN, bus).unwrap();
+        let ads_node = net.add_node(Ads::with_wire(AdsConfig::default(), ReferenceWire));
+        let vcu_node = net.add_node(Supervisor::with_wire(
+            SupervisorConfig::default(),
+            ReferenceWire,
+        ));
+        net.wire(ads_node, Port::MAIN, bus).unwrap();
+        net.wire(vcu_node, Port::MAIN, bus).unwrap();
         let tap = net.tap(bus).unwrap();
         Loop {
             net,
             tap,
-            ads: Ads::with_wire(AdsConfig::default(), ReferenceWire),
-            vcu: Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire),
+            ads_node,
+            vcu_node,
             now: 0,
             ads_frames: Vec::new(),
         }
@@ -57,10 +58,7 @@ impl Loop {
 
     fn run_to(&mut self, until: u64) {
         while self.now < until {
-            self.net.run_for(
-                Duration::from_millis(1),
-                &mut [&mut self.ads, &mut self.vcu],
-            );
+            self.net.run_for(Duration::from_millis(1));
             self.now += 1;
             let tap = self.tap;
             while let Some(r) = self.net.bus_mut(0).unwrap().receive(tap) {
@@ -70,16 +68,28 @@ impl Loop {
                     self.ads_frames.push((at, r.frame));
                 }
             }
-            let a = self.vcu.actuators(ms(self.now));
-            self.vcu
-                .set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
-            self.net.changed(VCU);
+            let a = self.vcu().actuators(ms(self.now));
+            let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+            let mut vcu = self.net.node_mut(self.vcu_node).unwrap();
+            vcu.set_feedback(speed, a.steering);
         }
     }
 
     fn command(&mut self, c: AdsCommand) {
-        assert!(self.ads.set_command(ms(self.now), c));
-        self.net.changed(ADS);
+        let now = ms(self.now);
+        assert!(self
+            .net
+            .node_mut(self.ads_node)
+            .unwrap()
+            .set_command(now, c));
+    }
+
+    fn ads(&self) -> &Ads<ReferenceWire> {
+        self.net.node(self.ads_node).unwrap()
+    }
+
+    fn vcu(&self) -> &Supervisor<ReferenceWire> {
+        self.net.node(self.vcu_node).unwrap()
     }
 }
 
@@ -104,18 +114,18 @@ fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
     l.run_to(440);
     l.command(drive(1.5));
     l.run_to(600);
-    assert_eq!(l.vcu.watchdog(), Watchdog::Normal);
-    assert_eq!(l.vcu.mode(), ControlMode::Autonomous);
-    assert_eq!(l.vcu.stats().rejected(), 0);
+    assert_eq!(l.vcu().watchdog(), Watchdog::Normal);
+    assert_eq!(l.vcu().mode(), ControlMode::Autonomous);
+    assert_eq!(l.vcu().stats().rejected(), 0);
     let now = ms(l.now);
-    assert!(l.ads.feedback_alive(now));
-    let state = l.ads.state();
+    assert!(l.ads().feedback_alive(now));
+    let state = l.ads().state();
     assert_eq!(state.mode.value, Some(ControlMode::Autonomous));
     assert_eq!(state.velocity.value, Some(1.5));
     // The echo comes back within a cycle or two (state frames are sent every 20 ms).
     let latency = state.echo_latency.value.unwrap();
     assert!(latency <= Duration::from_millis(40), "{latency:?}");
-    assert!(l.ads.stats().accepted > 20 && l.ads.stats().echo == 0);
+    assert!(l.ads().stats().accepted > 20 && l.ads().stats().echo == 0);
     // Commands every 20 ms exactly, with counters rolling and CRCs good.
     let commands: Vec<&(u64, Frame)> = l
         .ads_frames

@@ -13,10 +13,10 @@
 
 use std::time::Duration;
 
-use bywire_bus::network::Network;
-use bywire_bus::sim::{Fault, NodeId, SimBus};
 use bywire_core::node::Port;
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_net::network::{Network, NodeHandle, NodeMut};
+use bywire_net::sim::{Fault, NodeId, SimBus};
 use bywire_tug::messages::{self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop};
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::supervisor::{EstopState, Supervisor, SupervisorConfig, Watchdog};
@@ -91,7 +91,7 @@ struct Rig {
     ads: NodeId,
     safety: NodeId,
     logger: NodeId,
-    supervisor: Supervisor<ReferenceWire>,
+    supervisor: NodeHandle<Supervisor<ReferenceWire>>,
     now: u64,
     counter: u8,
     /// Watchdog level changes: (ms, level).
@@ -107,7 +107,11 @@ impl Rig {
     fn new() -> Rig {
         let mut net = Network::new();
         let bus = net.add_bus("bus1", 500_000, None);
-        net.wire(0, Port::MAIN, bus).unwrap();
+        let supervisor = net.add_node(Supervisor::with_wire(
+            SupervisorConfig::default(),
+            ReferenceWire,
+        ));
+        net.wire(supervisor, Port::MAIN, bus).unwrap();
         let (ads, safety, logger) = (
             net.tap(bus).unwrap(),
             net.tap(bus).unwrap(),
@@ -118,7 +122,7 @@ impl Rig {
             ads,
             safety,
             logger,
-            supervisor: Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire),
+            supervisor,
             now: 0,
             counter: 0,
             watchdog_log: Vec::new(),
@@ -140,6 +144,14 @@ impl Rig {
         self.bus().submit(safety, frame, now);
     }
 
+    fn supervisor(&self) -> &Supervisor<ReferenceWire> {
+        self.net.node(self.supervisor).unwrap()
+    }
+
+    fn supervisor_mut(&mut self) -> NodeMut<'_, Supervisor<ReferenceWire>> {
+        self.net.node_mut(self.supervisor).unwrap()
+    }
+
     /// The bus, to send on and break.
     fn bus(&mut self) -> &mut SimBus {
         self.net.bus_mut(0).unwrap()
@@ -149,9 +161,8 @@ impl Rig {
     /// actuators (braking stops it).
     fn run_to(&mut self, until_ms: u64) {
         while self.now < until_ms {
-            let before = self.supervisor.watchdog();
-            self.net
-                .run_for(Duration::from_millis(1), &mut [&mut self.supervisor]);
+            let before = self.supervisor().watchdog();
+            self.net.run_for(Duration::from_millis(1));
             self.now += 1;
             let now = ms(self.now);
             let logger = self.logger;
@@ -162,13 +173,14 @@ impl Rig {
                         .push((at, r.frame.data().try_into().unwrap()));
                 }
             }
-            if self.supervisor.watchdog() != before {
-                self.watchdog_log
-                    .push((self.now, self.supervisor.watchdog()));
+            let after = self.supervisor().watchdog();
+            if after != before {
+                self.watchdog_log.push((self.now, after));
             }
-            let a = self.supervisor.actuators(now);
+            let a = self.supervisor().actuators(now);
             let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
-            self.supervisor.set_feedback(speed, a.steering);
+            let mut supervisor = self.net.node_mut(self.supervisor).unwrap();
+            supervisor.set_feedback(speed, a.steering);
         }
     }
 
@@ -206,8 +218,8 @@ impl Rig {
             },
         );
         rig.commands(2, Cmd::default());
-        assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
-        assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
+        assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
+        assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
         rig
     }
 }
@@ -216,8 +228,8 @@ impl Rig {
 fn starts_failed_closed_and_engages_only_after_a_run_and_a_request() {
     let mut rig = Rig::new();
     rig.run_to(100);
-    let a = rig.supervisor.actuators(ms(rig.now));
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
+    let a = rig.supervisor().actuators(ms(rig.now));
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
     assert!(!a.steering_enabled && a.brake == 100.0 || !a.ads_in_control);
     // Engage too early (3rd valid command): refused.
     rig.commands(2, Cmd::default());
@@ -229,10 +241,10 @@ fn starts_failed_closed_and_engages_only_after_a_run_and_a_request() {
         },
     );
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
     // Holding the bit is not a new request.
     rig.commands(
         10,
@@ -242,7 +254,7 @@ fn starts_failed_closed_and_engages_only_after_a_run_and_a_request() {
         },
     );
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
     // A fresh edge after the run engages.
@@ -254,9 +266,9 @@ fn starts_failed_closed_and_engages_only_after_a_run_and_a_request() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
-    let a = rig.supervisor.actuators(ms(rig.now));
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
+    let a = rig.supervisor().actuators(ms(rig.now));
     assert!(a.ads_in_control && a.steering_enabled && a.velocity == 2.0);
     assert!((a.motor_rpm - 2.0 * 20.0 * 60.0 / (std::f64::consts::PI * 0.5)).abs() < 1e-9);
 }
@@ -290,7 +302,7 @@ macro_rules! missed_cycles {
         #[test]
         fn $name() {
             let (rig, sent_at) = miss($k);
-            assert_eq!(rig.supervisor.watchdog(), level_after($k), "{:?}", rig.watchdog_log);
+            assert_eq!(rig.supervisor().watchdog(), level_after($k), "{:?}", rig.watchdog_log);
             // Each level came exactly when its cycle was half a cycle overdue (to the
             // millisecond the rig steps in; the command's own frame time is under 1 ms).
             for (at, level) in &rig.watchdog_log {
@@ -307,7 +319,7 @@ macro_rules! missed_cycles {
                 let due = sent_at + missed * CYCLE_MS + CYCLE_MS / 2;
                 assert!(*at == due || *at == due + 1, "{level:?} at {at} ms, due {due} ms");
             }
-            let a = rig.supervisor.actuators(ms(rig.now));
+            let a = rig.supervisor().actuators(ms(rig.now));
             match level_after($k) {
                 Watchdog::Holding { .. } => {
                     assert!(a.warning && a.velocity == 2.0 && a.steering_enabled);
@@ -344,7 +356,7 @@ fn controlled_deceleration_follows_its_rate() {
     let start = sent_at + 3 * CYCLE_MS + CYCLE_MS / 2;
     let t = start + 20;
     rig.run_to(t);
-    let a = rig.supervisor.actuators(ms(t));
+    let a = rig.supervisor().actuators(ms(t));
     let expected = 2.0 - 1.5 * (t - start) as f64 / 1000.0;
     assert!(
         (a.velocity - expected).abs() < 1.5 * 0.002,
@@ -358,10 +370,10 @@ fn full_braking_recovers_only_after_a_run_and_a_re_engage() {
     let (mut rig, _) = miss(6);
     rig.commands(20, Cmd::default());
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
-    assert_eq!(rig.supervisor.actuators(ms(rig.now)).brake, 100.0);
+    assert_eq!(rig.supervisor().actuators(ms(rig.now)).brake, 100.0);
     rig.commands(
         1,
         Cmd {
@@ -369,9 +381,9 @@ fn full_braking_recovers_only_after_a_run_and_a_re_engage() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
     // The mode fell to manual? No: autonomous stays requested, the watchdog braked it.
-    let a = rig.supervisor.actuators(ms(rig.now));
+    let a = rig.supervisor().actuators(ms(rig.now));
     assert_eq!(a.brake, 0.0);
 }
 
@@ -385,14 +397,14 @@ fn corrupted_checksum_is_rejected_and_counted() {
         data[0] ^= 0x01;
         frame = Frame::classic(f.id(), &data).unwrap();
     }
-    let before = rig.supervisor.stats();
+    let before = rig.supervisor().stats();
     rig.ads_sends(frame);
     let t = rig.now + CYCLE_MS + CYCLE_MS / 2 + 2;
     rig.run_to(t);
-    assert_eq!(rig.supervisor.stats().checksum, before.checksum + 1);
-    assert_eq!(rig.supervisor.stats().accepted, before.accepted);
+    assert_eq!(rig.supervisor().stats().checksum, before.checksum + 1);
+    assert_eq!(rig.supervisor().stats().accepted, before.accepted);
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Holding { .. }
     ));
 }
@@ -402,8 +414,8 @@ fn repeated_counter_is_rejected_and_counted() {
     let mut rig = Rig::engaged();
     rig.counter = rig.counter.wrapping_sub(1);
     rig.commands(3, Cmd::default());
-    assert_eq!(rig.supervisor.stats().repeated, 1);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().stats().repeated, 1);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
 #[test]
@@ -411,11 +423,11 @@ fn skipped_counter_is_rejected_and_counted() {
     let mut rig = Rig::engaged();
     rig.counter = rig.counter.wrapping_add(3);
     rig.commands(1, Cmd::default());
-    assert_eq!(rig.supervisor.stats().skipped, 1);
+    assert_eq!(rig.supervisor().stats().skipped, 1);
     // The next one in sequence is accepted again.
     rig.commands(1, Cmd::default());
-    assert_eq!(rig.supervisor.stats().skipped, 1);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().stats().skipped, 1);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
 #[test]
@@ -427,8 +439,8 @@ fn stale_counter_escalates_like_silence() {
         rig.counter = frozen;
         rig.commands(1, Cmd::default());
     }
-    assert_eq!(rig.supervisor.stats().repeated, 6);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
+    assert_eq!(rig.supervisor().stats().repeated, 6);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
 }
 
 #[test]
@@ -450,9 +462,9 @@ fn out_of_range_setpoints_are_rejected() {
     ] {
         rig.commands(1, bad);
     }
-    assert_eq!(rig.supervisor.stats().out_of_range, 3);
+    assert_eq!(rig.supervisor().stats().out_of_range, 3);
     // Three cycles without a valid command: decelerating, not driving a bad setpoint.
-    let a = rig.supervisor.actuators(ms(rig.now));
+    let a = rig.supervisor().actuators(ms(rig.now));
     assert!(a.steering.abs() < 1.0 && a.velocity <= 2.0);
 }
 
@@ -476,13 +488,13 @@ macro_rules! estop_in_mode {
                 }
                 _ => {}
             }
-            assert_eq!(rig.supervisor.mode(), $mode);
+            assert_eq!(rig.supervisor().mode(), $mode);
             let pressed = press_estop(&mut rig);
             // Within the frame's time on the wire (< 1 ms at 500 kbit/s) the latch has
             // disabled the motors and applied the brakes; at standstill it is stopped.
-            assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
-            assert_eq!(rig.supervisor.mode(), ControlMode::Estop);
-            let a = rig.supervisor.actuators(ms(rig.now));
+            assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
+            assert_eq!(rig.supervisor().mode(), ControlMode::Estop);
+            let a = rig.supervisor().actuators(ms(rig.now));
             assert!(!a.motors_enabled && a.brake == 100.0 && !a.steering_enabled);
             assert!(rig.now - pressed <= 2);
         }
@@ -502,7 +514,7 @@ fn estop_refuses_every_automatic_reset_path() {
     // Chain closed again: stays stopped.
     rig.safety_sends(estop_frame(false));
     rig.commands(3, Cmd::default());
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
     // Engage alone: stays stopped.
     rig.commands(
         1,
@@ -512,7 +524,7 @@ fn estop_refuses_every_automatic_reset_path() {
         },
     );
     rig.commands(1, Cmd::default());
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
     // Operator reset while the chain is open: refused.
     rig.safety_sends(estop_frame(true));
     rig.commands(
@@ -523,7 +535,7 @@ fn estop_refuses_every_automatic_reset_path() {
         },
     );
     rig.commands(1, Cmd::default());
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
     // The full sequence: chain closed, reset (→ E_STOP_RESET once verified), reset again to
     // confirm, then engage.
     rig.safety_sends(estop_frame(false));
@@ -535,10 +547,10 @@ fn estop_refuses_every_automatic_reset_path() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.estop(), EstopState::EstopReset);
+    assert_eq!(rig.supervisor().estop(), EstopState::EstopReset);
     rig.commands(1, Cmd::default());
     assert_eq!(
-        rig.supervisor.estop(),
+        rig.supervisor().estop(),
         EstopState::EstopReset,
         "no automatic confirm"
     );
@@ -549,7 +561,7 @@ fn estop_refuses_every_automatic_reset_path() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.estop(), EstopState::ResetConfirmed);
+    assert_eq!(rig.supervisor().estop(), EstopState::ResetConfirmed);
     rig.commands(1, Cmd::default());
     rig.commands(
         1,
@@ -558,9 +570,9 @@ fn estop_refuses_every_automatic_reset_path() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.estop(), EstopState::Normal);
+    assert_eq!(rig.supervisor().estop(), EstopState::Normal);
     // Out of E-stop into manual, never straight to autonomous.
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
     rig.commands(1, Cmd::default());
     rig.commands(
         1,
@@ -569,7 +581,7 @@ fn estop_refuses_every_automatic_reset_path() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
     // The state frames reported each latch stage the ADS could see.
     let reported: Vec<u8> = rig
         .state_frames
@@ -594,9 +606,9 @@ fn a_new_press_during_the_reset_sequence_starts_over() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.estop(), EstopState::EstopReset);
+    assert_eq!(rig.supervisor().estop(), EstopState::EstopReset);
     press_estop(&mut rig);
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
 }
 
 #[test]
@@ -610,9 +622,9 @@ fn driver_takeover_at_speed_drops_to_manual_at_once() {
         },
     );
     let now = ms(rig.now);
-    rig.supervisor.set_driver_input(5.0, 0.0);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
-    assert!(!rig.supervisor.actuators(now).ads_in_control);
+    rig.supervisor_mut().set_driver_input(5.0, 0.0);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
+    assert!(!rig.supervisor().actuators(now).ads_in_control);
     // Re-engage with the driver's hands still on: refused; hands off: accepted.
     rig.commands(
         1,
@@ -622,8 +634,8 @@ fn driver_takeover_at_speed_drops_to_manual_at_once() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
-    rig.supervisor.set_driver_input(0.5, 0.0);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
+    rig.supervisor_mut().set_driver_input(0.5, 0.0);
     rig.commands(1, Cmd::default());
     rig.commands(
         1,
@@ -632,12 +644,12 @@ fn driver_takeover_at_speed_drops_to_manual_at_once() {
             ..Cmd::default()
         },
     );
-    assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
     // Pedal and non-finite readings take over too.
-    rig.supervisor.set_driver_input(0.0, 0.5);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
-    rig.supervisor.set_driver_input(f64::NAN, 0.0);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
+    rig.supervisor_mut().set_driver_input(0.0, 0.5);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
+    rig.supervisor_mut().set_driver_input(f64::NAN, 0.0);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
 }
 
 #[test]
@@ -648,10 +660,10 @@ fn emergency_brake_burst_brakes_fully_while_it_lasts() {
     }
     let t = rig.now;
     rig.run_to(t + 3);
-    assert_eq!(rig.supervisor.actuators(ms(rig.now)).brake, 100.0);
+    assert_eq!(rig.supervisor().actuators(ms(rig.now)).brake, 100.0);
     // Commands continue but no more brake frames: braking ends 3 cycles after the last one.
     rig.commands(4, Cmd::default());
-    assert_eq!(rig.supervisor.actuators(ms(rig.now)).brake, 0.0);
+    assert_eq!(rig.supervisor().actuators(ms(rig.now)).brake, 0.0);
 }
 
 #[test]
@@ -669,10 +681,10 @@ fn ads_node_going_bus_off_trips_the_watchdog() {
     rig.commands(8, Cmd::default());
     let ads = rig.ads;
     let bus_off = rig.bus().take_events().into_iter().any(|e| {
-        matches!(e, bywire_bus::sim::BusEvent::StateChanged { node, state: bywire_core::confinement::NodeState::BusOff, .. } if node == ads)
+        matches!(e, bywire_net::sim::BusEvent::StateChanged { node, state: bywire_core::confinement::NodeState::BusOff, .. } if node == ads)
     });
     assert!(bus_off, "the ADS node went bus-off");
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
     let braking_at = rig
         .watchdog_log
         .iter()

@@ -17,10 +17,10 @@ use std::time::Duration;
 
 use common::vehicles::{self, by_profile, reference_wire, Vehicle};
 
-use bywire_bus::network::Network;
-use bywire_bus::sim::Tamper;
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_net::network::{Network, NodeHandle, NodeMut};
+use bywire_net::sim::Tamper;
 use bywire_tug::messages::{self, AdsToVehicleControl, EmergencyStop};
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::{Ads, AdsCommand};
@@ -86,16 +86,12 @@ fn shuttle() -> Vehicle<ProfileWire> {
     by_profile(&vehicles::shuttle_with(|dbc| dbc))
 }
 
-const ADS: usize = 0;
-const VEHICLE: usize = 1;
-const SAFETY: usize = 2;
-
 /// The ADS side, the supervisor and the safety controller on one 500 kbit/s bus.
 struct Rig<W: SuiteWire> {
     net: Network,
-    ads: Ads<W>,
-    supervisor: Supervisor<W>,
-    safety: Safety<W>,
+    ads: NodeHandle<Ads<W>>,
+    supervisor: NodeHandle<Supervisor<W>>,
+    safety: NodeHandle<Safety<W>>,
     cycle: Duration,
     command: AdsCommand,
     /// Watchdog level changes: (ms, level).
@@ -107,20 +103,26 @@ impl<W: SuiteWire> Rig<W> {
     fn new(mut vehicle: Vehicle<W>) -> Rig<W> {
         let mut net = Network::new();
         let bus = net.add_bus("bus", 500_000, None);
-        for node in [ADS, VEHICLE, SAFETY] {
+        let command_id = vehicle.wire.command_id();
+        let ads = net.add_node(Ads::with_wire(vehicle.ads, vehicle.wire.clone()));
+        let supervisor = net.add_node(Supervisor::with_wire(
+            vehicle.supervisor,
+            vehicle.wire.clone(),
+        ));
+        let safety = net.add_node(Safety {
+            wire: vehicle.wire,
+            pressed: None,
+            next: Timestamp::ZERO,
+            counter: 0,
+        });
+        for node in [ads.key(), supervisor.key(), safety.key()] {
             net.wire(node, Port::MAIN, bus).unwrap();
         }
-        let command_id = vehicle.wire.command_id();
         Rig {
             net,
-            ads: Ads::with_wire(vehicle.ads, vehicle.wire.clone()),
-            supervisor: Supervisor::with_wire(vehicle.supervisor, vehicle.wire.clone()),
-            safety: Safety {
-                wire: vehicle.wire,
-                pressed: None,
-                next: Timestamp::ZERO,
-                counter: 0,
-            },
+            ads,
+            supervisor,
+            safety,
             cycle: vehicle.supervisor.cycle,
             command: AdsCommand {
                 velocity: 2.0,
@@ -133,6 +135,22 @@ impl<W: SuiteWire> Rig<W> {
         }
     }
 
+    fn supervisor(&self) -> &Supervisor<W> {
+        self.net.node(self.supervisor).unwrap()
+    }
+
+    fn supervisor_mut(&mut self) -> NodeMut<'_, Supervisor<W>> {
+        self.net.node_mut(self.supervisor).unwrap()
+    }
+
+    fn ads_mut(&mut self) -> NodeMut<'_, Ads<W>> {
+        self.net.node_mut(self.ads).unwrap()
+    }
+
+    fn safety_mut(&mut self) -> NodeMut<'_, Safety<W>> {
+        self.net.node_mut(self.safety).unwrap()
+    }
+
     fn ms(&self) -> u64 {
         self.net.now().as_nanos() / 1_000_000
     }
@@ -141,18 +159,16 @@ impl<W: SuiteWire> Rig<W> {
     /// actuators.
     fn run(&mut self, ms: u64) {
         for _ in 0..ms {
-            let before = self.supervisor.watchdog();
-            self.net.run_for(
-                Duration::from_millis(1),
-                &mut [&mut self.ads, &mut self.supervisor, &mut self.safety],
-            );
-            if self.supervisor.watchdog() != before {
+            let before = self.supervisor().watchdog();
+            self.net.run_for(Duration::from_millis(1));
+            let after = self.supervisor().watchdog();
+            if after != before {
                 let at = self.ms();
-                self.watchdog_log.push((at, self.supervisor.watchdog()));
+                self.watchdog_log.push((at, after));
             }
-            let a = self.supervisor.actuators(self.net.now());
+            let a = self.supervisor().actuators(self.net.now());
             let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
-            self.supervisor.set_feedback(speed, a.steering);
+            self.supervisor_mut().set_feedback(speed, a.steering);
         }
     }
 
@@ -163,8 +179,8 @@ impl<W: SuiteWire> Rig<W> {
                 engage: engage && k == 0,
                 ..self.command
             };
-            self.ads.set_command(self.net.now(), command);
-            self.net.changed(ADS);
+            let now = self.net.now();
+            self.ads_mut().set_command(now, command);
             let cycle = u64::try_from(self.cycle.as_millis()).unwrap();
             self.run(cycle);
         }
@@ -175,8 +191,8 @@ impl<W: SuiteWire> Rig<W> {
         rig.commands(12, false);
         rig.commands(1, true);
         rig.commands(2, false);
-        assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
-        assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
+        assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
+        assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
         rig
     }
 
@@ -188,23 +204,23 @@ impl<W: SuiteWire> Rig<W> {
 fn starts_failed_closed_and_engages_only_after_a_run_and_a_request<W: SuiteWire>(v: Vehicle<W>) {
     let mut rig = Rig::new(v);
     rig.run(100);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
-    assert!(!rig.supervisor.actuators(rig.net.now()).ads_in_control);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
+    assert!(!rig.supervisor().actuators(rig.net.now()).ads_in_control);
     // An engage request too early (the third valid command) is refused.
     rig.commands(2, false);
     rig.commands(1, true);
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
-    assert_eq!(rig.supervisor.mode(), ControlMode::Manual);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
     // After the run, a fresh request engages.
     rig.commands(10, false);
     rig.commands(1, true);
     rig.commands(1, false);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
-    let a = rig.supervisor.actuators(rig.net.now());
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
+    let a = rig.supervisor().actuators(rig.net.now());
     assert!(
         a.ads_in_control && a.steering_enabled && a.velocity == 2.0,
         "{a:?}"
@@ -214,7 +230,7 @@ fn starts_failed_closed_and_engages_only_after_a_run_and_a_request<W: SuiteWire>
 fn silence_runs_the_watchdog_cascade<W: SuiteWire>(v: Vehicle<W>) {
     let mut rig = Rig::engaged(v);
     rig.watchdog_log.clear();
-    rig.net.drop_output(ADS, true);
+    rig.net.drop_output(rig.ads, true);
     let cycle = rig.cycle_ms();
     rig.run(cycle * 7);
     let levels: Vec<Watchdog> = rig.watchdog_log.iter().map(|(_, w)| *w).collect();
@@ -234,19 +250,19 @@ fn silence_runs_the_watchdog_cascade<W: SuiteWire>(v: Vehicle<W>) {
     for pair in rig.watchdog_log.windows(2) {
         assert!(pair[1].0 - pair[0].0 <= cycle + 1, "{:?}", rig.watchdog_log);
     }
-    let a = rig.supervisor.actuators(rig.net.now());
+    let a = rig.supervisor().actuators(rig.net.now());
     assert!(a.brake == 100.0 && !a.steering_enabled, "{a:?}");
     // Back: commands alone do not release full braking; a run and an engage do.
-    rig.net.drop_output(ADS, false);
+    rig.net.drop_output(rig.ads, false);
     rig.commands(5, false);
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
     rig.commands(8, false);
     rig.commands(1, true);
     rig.commands(1, false);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
 fn corrupted_commands_are_rejected_and_counted<W: SuiteWire>(v: Vehicle<W>) {
@@ -259,13 +275,13 @@ fn corrupted_commands_are_rejected_and_counted<W: SuiteWire>(v: Vehicle<W>) {
         .tamper(id, Some(Tamper::FlipBit));
     rig.commands(3, false);
     assert_eq!(
-        rig.supervisor.stats().checksum,
+        rig.supervisor().stats().checksum,
         3,
         "{:?}",
-        rig.supervisor.stats()
+        rig.supervisor().stats()
     );
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Holding { .. } | Watchdog::Decelerating { .. }
     ));
     rig.net.bus_mut(0).unwrap().tamper(id, None);
@@ -273,29 +289,28 @@ fn corrupted_commands_are_rejected_and_counted<W: SuiteWire>(v: Vehicle<W>) {
 
 fn out_of_range_commands_are_rejected<W: SuiteWire>(v: Vehicle<W>) {
     let mut rig = Rig::engaged(v);
-    let limit = rig.supervisor.actuators(rig.net.now());
+    let limit = rig.supervisor().actuators(rig.net.now());
     assert!(limit.ads_in_control);
     // Beyond the vehicle's speed limit (within what its signal can carry).
-    let accepted = rig.supervisor.stats().accepted;
+    let accepted = rig.supervisor().stats().accepted;
     rig.command.velocity = 5.5;
     rig.commands(2, false);
-    let stats = rig.supervisor.stats();
+    let stats = rig.supervisor().stats();
     let beyond_limit = stats.out_of_range >= 2;
     let within = stats.accepted == accepted + 2;
     // The reference tug's limit is 5 m/s, the shuttle's 6: one refuses, the other obeys.
     assert!(beyond_limit ^ within, "{stats:?}");
     if beyond_limit {
-        assert!(rig.supervisor.actuators(rig.net.now()).velocity <= 2.0);
+        assert!(rig.supervisor().actuators(rig.net.now()).velocity <= 2.0);
     }
 }
 
 fn emergency_brake_brakes_fully_at_once<W: SuiteWire>(v: Vehicle<W>) {
     let mut rig = Rig::engaged(v);
     let now = rig.net.now();
-    rig.ads.emergency_brake(now, 3.0);
-    rig.net.changed(ADS);
+    rig.ads_mut().emergency_brake(now, 3.0);
     rig.run(3);
-    assert_eq!(rig.supervisor.actuators(rig.net.now()).brake, 100.0);
+    assert_eq!(rig.supervisor().actuators(rig.net.now()).brake, 100.0);
 }
 
 fn estop_latches_until_the_operator_reset<W: SuiteWire>(mut v: Vehicle<W>) {
@@ -305,22 +320,21 @@ fn estop_latches_until_the_operator_reset<W: SuiteWire>(mut v: Vehicle<W>) {
         return;
     }
     let mut rig = Rig::engaged(v);
-    rig.safety.pressed = Some(true);
-    rig.net.changed(SAFETY);
+    rig.safety_mut().pressed = Some(true);
     rig.run(3);
     // Within the frame's time on the wire: motors off, brakes on; at standstill (by the next
     // poll, within a cycle) stopped.
-    assert!(rig.supervisor.estop().is_latched());
-    let a = rig.supervisor.actuators(rig.net.now());
+    assert!(rig.supervisor().estop().is_latched());
+    let a = rig.supervisor().actuators(rig.net.now());
     assert!(!a.motors_enabled && a.brake == 100.0, "{a:?}");
     let cycle = rig.cycle_ms();
     rig.run(cycle);
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
-    assert_eq!(rig.supervisor.mode(), ControlMode::Estop);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().mode(), ControlMode::Estop);
     // Released: still latched, whatever the ADS sends.
-    rig.safety.pressed = Some(false);
+    rig.safety_mut().pressed = Some(false);
     rig.commands(3, true);
-    assert_eq!(rig.supervisor.estop(), EstopState::Stopped);
+    assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
     // The operator's reset: a press, the check, a second press, then an engage.
     rig.command.operator_reset = true;
     rig.commands(1, false);
@@ -330,9 +344,9 @@ fn estop_latches_until_the_operator_reset<W: SuiteWire>(mut v: Vehicle<W>) {
     rig.commands(1, false);
     rig.command.operator_reset = false;
     rig.commands(1, false);
-    assert_eq!(rig.supervisor.estop(), EstopState::ResetConfirmed);
+    assert_eq!(rig.supervisor().estop(), EstopState::ResetConfirmed);
     rig.commands(1, true);
-    assert_eq!(rig.supervisor.estop(), EstopState::Normal);
+    assert_eq!(rig.supervisor().estop(), EstopState::Normal);
 }
 
 /// Each row for each wire.

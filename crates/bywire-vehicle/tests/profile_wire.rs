@@ -454,20 +454,22 @@ fn profile_wires_refuse_profiles_they_cannot_speak() {
 /// cascade brakes.
 #[test]
 fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
-    use bywire_bus::network::Network;
     use bywire_core::node::Port;
+    use bywire_net::network::Network;
     use bywire_vehicle::supervisor::{Supervisor, Watchdog};
     let loaded = shuttle();
     let mut net = Network::new();
     let bus = net.add_bus("bus", 500_000, None);
-    let (ads_node, vcu_node) = (0, 1);
-    net.wire(ads_node, Port::MAIN, bus).unwrap();
-    net.wire(vcu_node, Port::MAIN, bus).unwrap();
-    let mut ads = Ads::with_wire(loaded.ads_config(), ProfileWire::new(&loaded).unwrap());
-    let mut vcu = Supervisor::with_wire(
+    let ads = net.add_node(Ads::with_wire(
+        loaded.ads_config(),
+        ProfileWire::new(&loaded).unwrap(),
+    ));
+    let vcu = net.add_node(Supervisor::with_wire(
         loaded.supervisor_config(),
         ProfileWire::new(&loaded).unwrap(),
-    );
+    ));
+    net.wire(ads, Port::MAIN, bus).unwrap();
+    net.wire(vcu, Port::MAIN, bus).unwrap();
     let drive = AdsCommand {
         velocity: 2.0,
         steering: 5.0,
@@ -481,16 +483,17 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
     for t in 1..=20_000u64 {
         let before = Timestamp::from_millis(t - 1);
         if t == 19_000 {
-            net.drop_output(ads_node, true); // the ADS falls silent
+            net.drop_output(ads, true); // the ADS falls silent
         }
         let engage = (500..600).contains(&t);
-        ads.set_command(before, AdsCommand { engage, ..drive });
-        net.changed(ads_node);
-        net.run_for(Duration::from_millis(1), &mut [&mut ads, &mut vcu]);
+        let command = AdsCommand { engage, ..drive };
+        net.node_mut(ads).unwrap().set_command(before, command);
+        net.run_for(Duration::from_millis(1));
         let now = Timestamp::from_millis(t);
-        let a = vcu.actuators(now);
-        vcu.set_feedback(if a.brake > 0.0 { 0.0 } else { a.velocity }, a.steering);
-        net.changed(vcu_node);
+        let a = net.node(vcu).unwrap().actuators(now);
+        let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+        net.node_mut(vcu).unwrap().set_feedback(speed, a.steering);
+        let (ads, vcu) = (net.node(ads).unwrap(), net.node(vcu).unwrap());
         if t == 18_000 {
             // 360 command cycles of 50 ms: the 8-bit counters have wrapped.
             assert_eq!(vcu.mode(), ControlMode::Autonomous);
@@ -513,6 +516,7 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
         }
     }
     // A second of silence: well past the cascade's cycles, full braking.
+    let vcu = net.node(vcu).unwrap();
     assert_eq!(vcu.watchdog(), Watchdog::FullBraking);
     assert_eq!(vcu.actuators(Timestamp::from_millis(20_000)).brake, 100.0);
 }

@@ -21,9 +21,9 @@ use std::time::Duration;
 
 use common::vehicles::{self, by_profile, reference_wire, Vehicle};
 
-use bywire_bus::network::Network;
 use bywire_core::node::Port;
 use bywire_core::Timestamp;
+use bywire_net::network::{Network, NodeHandle};
 use bywire_tug::messages::{ControlMode, Gear};
 use bywire_vehicle::ads::{Ads, AdsCommand};
 use bywire_vehicle::profile::LoadedProfile;
@@ -84,8 +84,8 @@ fn command_len<W: AdsWire>(vehicle: &mut Vehicle<W>) -> usize {
 /// A network with bus A and bus B, an ADS computer on each, and the supervisor on both.
 struct Rig<W: AdsWire + VehicleWire> {
     net: Network,
-    ads: [Ads<W>; 2],
-    supervisor: Supervisor<W>,
+    ads: [NodeHandle<Ads<W>>; 2],
+    supervisor: NodeHandle<Supervisor<W>>,
     cycle: Duration,
     /// Watchdog changes, at the end of the cycle they happened in (ms).
     log: Vec<(u64, Watchdog)>,
@@ -100,26 +100,27 @@ enum Copy {
     Different,
 }
 
-impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
+impl<W: AdsWire + VehicleWire + Clone + 'static> Rig<W> {
     fn new(mut vehicle: Vehicle<W>) -> Rig<W> {
         let mut net = Network::new();
         let fd = command_len(&mut vehicle) > 8;
         let a = net.add_bus("bus A", 500_000, fd.then_some(2_000_000));
         let b = net.add_bus("bus B", 500_000, fd.then_some(2_000_000));
-        net.wire(0, Port::MAIN, a).unwrap();
-        net.wire(1, Port::MAIN, b).unwrap();
-        net.wire(2, Supervisor::<W>::PORT_A, a).unwrap();
-        net.wire(2, Supervisor::<W>::PORT_B, b).unwrap();
         let cycle = vehicle.supervisor.cycle;
         let config = SupervisorConfig {
             redundancy: Some(Redundancy::for_cycle(cycle)),
             ..vehicle.supervisor
         };
-        let ads = || Ads::with_wire(vehicle.ads, vehicle.wire.clone());
+        let ads = [(); 2].map(|()| net.add_node(Ads::with_wire(vehicle.ads, vehicle.wire.clone())));
+        let supervisor = net.add_node(Supervisor::with_wire(config, vehicle.wire.clone()));
+        net.wire(ads[0], Port::MAIN, a).unwrap();
+        net.wire(ads[1], Port::MAIN, b).unwrap();
+        net.wire(supervisor, Supervisor::<W>::PORT_A, a).unwrap();
+        net.wire(supervisor, Supervisor::<W>::PORT_B, b).unwrap();
         Rig {
             net,
-            ads: [ads(), ads()],
-            supervisor: Supervisor::with_wire(config, vehicle.wire.clone()),
+            ads,
+            supervisor,
             cycle,
             log: Vec::new(),
         }
@@ -127,6 +128,10 @@ impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
 
     fn now(&self) -> Timestamp {
         self.net.now()
+    }
+
+    fn supervisor(&self) -> &Supervisor<W> {
+        self.net.node(self.supervisor).unwrap()
     }
 
     /// One command cycle: each ADS computer is given its command (or is cut off), then the
@@ -143,26 +148,23 @@ impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
                 engage,
                 ..AdsCommand::default()
             };
-            assert!(self.ads[i].set_command(now, command));
-            self.net.changed(i);
-            self.net.drop_output(i, copy == Copy::Silent);
+            let ads = self.ads[i];
+            assert!(self.net.node_mut(ads).unwrap().set_command(now, command));
+            self.net.drop_output(ads, copy == Copy::Silent);
         }
         let steps = u32::try_from(self.cycle.as_millis()).unwrap();
         for _ in 0..steps {
-            let before = self.supervisor.watchdog();
-            let [ads_a, ads_b] = &mut self.ads;
-            self.net.run_for(
-                Duration::from_millis(1),
-                &mut [ads_a, ads_b, &mut self.supervisor],
-            );
+            let before = self.supervisor().watchdog();
+            self.net.run_for(Duration::from_millis(1));
             let now = self.now();
-            if self.supervisor.watchdog() != before {
-                self.log
-                    .push((now.as_nanos() / 1_000_000, self.supervisor.watchdog()));
+            let after = self.supervisor().watchdog();
+            if after != before {
+                self.log.push((now.as_nanos() / 1_000_000, after));
             }
-            let act = self.supervisor.actuators(now);
+            let act = self.supervisor().actuators(now);
             let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
-            self.supervisor.set_feedback(speed, 0.0);
+            let mut supervisor = self.net.node_mut(self.supervisor).unwrap();
+            supervisor.set_feedback(speed, 0.0);
         }
     }
 
@@ -174,8 +176,8 @@ impl<W: AdsWire + VehicleWire + Clone> Rig<W> {
         }
         rig.cycle(Copy::Same, Copy::Same, true);
         rig.cycle(Copy::Same, Copy::Same, false);
-        assert_eq!(rig.supervisor.mode(), ControlMode::Autonomous);
-        assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+        assert_eq!(rig.supervisor().mode(), ControlMode::Autonomous);
+        assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
         rig.log.clear();
         rig
     }
@@ -185,24 +187,24 @@ fn cycle_ms<W: AdsWire + VehicleWire>(rig: &Rig<W>) -> u64 {
     u64::try_from(rig.cycle.as_millis()).unwrap()
 }
 
-fn agreeing_copies_are_taken_once<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>) {
+fn agreeing_copies_are_taken_once<W: AdsWire + VehicleWire + Clone + 'static>(vehicle: Vehicle<W>) {
     let rig = Rig::engaged(vehicle);
-    let stats = rig.supervisor.stats();
+    let stats = rig.supervisor().stats();
     // 14 cycles, each command taken once although it came twice; none refused.
     assert_eq!(stats.accepted, 14, "{stats:?}");
     assert_eq!(stats.rejected(), 0, "{stats:?}");
-    assert_eq!(rig.supervisor.degraded(), None);
+    assert_eq!(rig.supervisor().degraded(), None);
 }
 
-fn one_bus_silent_degrades<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>) {
+fn one_bus_silent_degrades<W: AdsWire + VehicleWire + Clone + 'static>(vehicle: Vehicle<W>) {
     let mut rig = Rig::engaged(vehicle);
     for _ in 0..10 {
         rig.cycle(Copy::Same, Copy::Silent, false);
     }
     // B's last copy times out after a cycle and a half: until then A's copy waits for its
     // partner (the watchdog holds at most), then A alone is accepted in degraded mode.
-    assert_eq!(rig.supervisor.degraded(), Some(Channel::A));
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().degraded(), Some(Channel::A));
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
     assert!(
         rig.log
             .iter()
@@ -210,7 +212,7 @@ fn one_bus_silent_degrades<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>
         "{:?}",
         rig.log
     );
-    let act = rig.supervisor.actuators(rig.now());
+    let act = rig.supervisor().actuators(rig.now());
     assert!(
         act.ads_in_control && act.velocity == 2.0 && act.warning,
         "{act:?}"
@@ -219,21 +221,21 @@ fn one_bus_silent_degrades<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>
     for _ in 0..3 {
         rig.cycle(Copy::Same, Copy::Same, false);
     }
-    assert_eq!(rig.supervisor.degraded(), None);
+    assert_eq!(rig.supervisor().degraded(), None);
     // The other way round: A lost, B carries on.
     for _ in 0..10 {
         rig.cycle(Copy::Silent, Copy::Same, false);
     }
-    assert_eq!(rig.supervisor.degraded(), Some(Channel::B));
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::Normal);
+    assert_eq!(rig.supervisor().degraded(), Some(Channel::B));
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
-fn both_buses_silent_brake<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>) {
+fn both_buses_silent_brake<W: AdsWire + VehicleWire + Clone + 'static>(vehicle: Vehicle<W>) {
     let mut rig = Rig::engaged(vehicle);
     for _ in 0..7 {
         rig.cycle(Copy::Silent, Copy::Silent, false);
     }
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
     let first_brake = rig
         .log
         .iter()
@@ -243,16 +245,18 @@ fn both_buses_silent_brake<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>
     let holding = rig.log.first().unwrap().0;
     // The cascade runs as with one bus: one missed cycle holds, the fifth brakes.
     assert_eq!(first_brake - holding, 4 * cycle_ms(&rig));
-    let act = rig.supervisor.actuators(rig.now());
+    let act = rig.supervisor().actuators(rig.now());
     assert!(act.brake == 100.0 && !act.steering_enabled, "{act:?}");
 }
 
-fn disagreeing_copies_brake_at_once<W: AdsWire + VehicleWire + Clone>(vehicle: Vehicle<W>) {
+fn disagreeing_copies_brake_at_once<W: AdsWire + VehicleWire + Clone + 'static>(
+    vehicle: Vehicle<W>,
+) {
     let mut rig = Rig::engaged(vehicle);
     let start = rig.now().as_nanos() / 1_000_000;
     rig.cycle(Copy::Same, Copy::Different, false);
-    assert_eq!(rig.supervisor.watchdog(), Watchdog::FullBraking);
-    assert_eq!(rig.supervisor.stats().disagreements, 1);
+    assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
+    assert_eq!(rig.supervisor().stats().disagreements, 1);
     // Within a couple of milliseconds of the copies' arrival.
     let (at, _) = rig
         .log
@@ -260,14 +264,14 @@ fn disagreeing_copies_brake_at_once<W: AdsWire + VehicleWire + Clone>(vehicle: V
         .find(|(_, w)| *w == Watchdog::FullBraking)
         .unwrap();
     assert!(*at <= start + 2, "{at} vs {start}");
-    let act = rig.supervisor.actuators(rig.now());
+    let act = rig.supervisor().actuators(rig.now());
     assert!(act.brake == 100.0 && !act.steering_enabled, "{act:?}");
     // Latched: agreeing copies afterwards need the recovery run and a re-engage.
     for _ in 0..3 {
         rig.cycle(Copy::Same, Copy::Same, false);
     }
     assert!(matches!(
-        rig.supervisor.watchdog(),
+        rig.supervisor().watchdog(),
         Watchdog::Recovering { .. }
     ));
 }
@@ -309,7 +313,7 @@ impl Plan<'_> {
 /// The supervisor alone, its command frames put in by hand at the instants `plan` says (as
 /// loaded ADS computers send them). Returns the supervisor at the end, the watchdog's changes
 /// with the cycle they happened in, and the end's time.
-fn hand_fed<W: AdsWire + VehicleWire + Clone>(
+fn hand_fed<W: AdsWire + VehicleWire + Clone + 'static>(
     mut vehicle: Vehicle<W>,
     plan: &Plan,
 ) -> (Supervisor<W>, Vec<(u64, Watchdog)>, Timestamp) {
@@ -377,7 +381,9 @@ fn hand_fed<W: AdsWire + VehicleWire + Clone>(
 /// 12 ms late: the vehicle never decelerates for it, let alone brakes. (A's copies used to wait
 /// for B's partner copy until B's last copy was three cycles old, so a bus loss alone held the
 /// vehicle for three cycles, and a late copy on A on top of it braked the vehicle in full.)
-fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire + Clone>(
+fn losing_one_bus_holds_at_most_while_the_other_is_late<
+    W: AdsWire + VehicleWire + Clone + 'static,
+>(
     vehicle: Vehicle<W>,
 ) {
     for lost_at in 16..21 {
@@ -427,7 +433,9 @@ fn losing_one_bus_holds_at_most_while_the_other_is_late<W: AdsWire + VehicleWire
 /// out of step braked a vehicle that either alone would have driven, and a copy 15 ms late
 /// met the other bus's next command within the window and counted as a disagreement.) The
 /// same copies at two speeds are a disagreement however far apart: full braking.
-fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire + Clone>(
+fn copies_of_one_command_are_compared_however_far_apart<
+    W: AdsWire + VehicleWire + Clone + 'static,
+>(
     vehicle: Vehicle<W>,
 ) {
     let in_step = Plan {
@@ -474,7 +482,9 @@ fn copies_of_one_command_are_compared_however_far_apart<W: AdsWire + VehicleWire
 /// first for a bus more than a cycle behind, a copy waiting for a partner the other bus had
 /// already replaced; then for a bus three cycles behind, whose copies' partners were no longer
 /// looked for.)
-fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + VehicleWire + Clone>(
+fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<
+    W: AdsWire + VehicleWire + Clone + 'static,
+>(
     vehicle: Vehicle<W>,
 ) {
     let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
@@ -536,7 +546,7 @@ fn a_bus_more_than_a_cycle_behind_is_compared_late_or_left_out<W: AdsWire + Vehi
 
 /// `plan` hand-fed: after the engage the watchdog never changes, no command is refused, and
 /// the ADS is in control at the end. The supervisor, and the plan's label for messages.
-fn drives_on_undisturbed<W: AdsWire + VehicleWire + Clone>(
+fn drives_on_undisturbed<W: AdsWire + VehicleWire + Clone + 'static>(
     vehicle: Vehicle<W>,
     plan: &Plan,
 ) -> (Supervisor<W>, String) {
@@ -554,7 +564,7 @@ fn drives_on_undisturbed<W: AdsWire + VehicleWire + Clone>(
 /// (or for the other bus's last copy to go stale), and a vote pending is no missed command —
 /// the watchdog stays normal throughout. (It reported a missed cycle every cycle or two, for
 /// a millisecond, when a copy waited past a cycle and a half after the last command taken.)
-fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clone>(
+fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clone + 'static>(
     vehicle: Vehicle<W>,
 ) {
     let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();
@@ -597,7 +607,7 @@ fn jitter_between_the_buses_is_no_missed_command<W: AdsWire + VehicleWire + Clon
 /// a 1-bit counter the counter comes round every second cycle, within the two timeouts over
 /// which copies were paired: each new command met the other bus's copy of the command two
 /// cycles before, and the vehicle braked in full at the first change of speed.)
-fn a_changing_command_is_compared_with_its_own_copy<W: AdsWire + VehicleWire + Clone>(
+fn a_changing_command_is_compared_with_its_own_copy<W: AdsWire + VehicleWire + Clone + 'static>(
     vehicle: Vehicle<W>,
 ) {
     let cycle_ms = u64::try_from(vehicle.supervisor.cycle.as_millis()).unwrap();

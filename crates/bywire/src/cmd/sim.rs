@@ -371,7 +371,7 @@ fn run_plain(
         }
         if now >= next_report {
             next_report = now.saturating_add(Duration::from_secs(5));
-            let to_go = format!("{:5.1} m to go", tug.remaining());
+            let to_go = format!("{:5.1} m to go", tug.remaining().unwrap_or(f64::NAN));
             writeln!(out, "{}", progress_line(tug, &to_go))?;
             out.flush()?;
         }

@@ -10,10 +10,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
-use bywire_bus::sim::NodeId;
 use bywire_bus::socketcand::{self, Access, Config, Server};
 use bywire_bus::virtual_bus::VirtualBus;
 use bywire_bus::{Bus, BusError, BusRx, BusTx};
+use bywire_net::sim::NodeId;
 use bywire_sim::tug::{Tug, TugBus};
 
 /// One link: a port on a simulated bus and the endpoint its frames go to and come from.

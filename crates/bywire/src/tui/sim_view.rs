@@ -8,6 +8,8 @@ use anyhow::Result;
 use bywire_sim::fault::Fault;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::Tug;
+use bywire_tug::secured::TugWire;
+use bywire_vehicle::supervisor::Supervisor;
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
 use crate::support::sim_serve::Shared;
@@ -144,20 +146,34 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
             );
         });
     frame.render_widget(canvas, map);
-    let ecu = tug.ecu();
+    // "-" where the tug has no ECU to ask (never: the tug owns it).
+    let ecu_said =
+        |what: &dyn Fn(&Supervisor<TugWire>) -> String| tug.ecu().map_or("-".into(), what);
     let [fl, fr, rl, rr] = tug.wheel_angles();
     let [b1, b2, b3, b1b] = tug.bus_loads();
     let faults: Vec<String> = tug.active_faults().map(|f| f.to_string()).collect();
     let mut lines = vec![
         Line::from(format!("speed      {:5.2} m/s", tug.pose_speed())),
         Line::from(format!("position   x {:7.2}  y {:7.2}", pose.x, pose.y)),
-        Line::from(format!("to go      {:5.1} m", tug.remaining().min(9_999.0))),
+        Line::from(format!(
+            "to go      {:5.1} m",
+            tug.remaining().unwrap_or(f64::NAN).min(9_999.0)
+        )),
         Line::from(format!(
             "wheels     FL {fl:5.1}° FR {fr:5.1}° RL {rl:5.1}° RR {rr:5.1}°"
         )),
-        Line::from(format!("mode       {:?}", ecu.mode())),
-        Line::from(format!("watchdog   {:?}", ecu.watchdog())),
-        Line::from(format!("E-stop     {:?}", ecu.estop())),
+        Line::from(format!(
+            "mode       {}",
+            ecu_said(&|e| format!("{:?}", e.mode()))
+        )),
+        Line::from(format!(
+            "watchdog   {}",
+            ecu_said(&|e| format!("{:?}", e.watchdog()))
+        )),
+        Line::from(format!(
+            "E-stop     {}",
+            ecu_said(&|e| format!("{:?}", e.estop()))
+        )),
         Line::from(format!(
             "bus load   {:.1} %  {:.1} %  {:.1} %  1b {:.1} %",
             b1 * 100.0,
@@ -172,10 +188,10 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
         )),
         Line::from(format!(
             "redundancy {}",
-            match ecu.degraded() {
-                None => "both buses",
-                Some(_) => "degraded",
-            }
+            ecu_said(&|e| match e.degraded() {
+                None => "both buses".into(),
+                Some(_) => "degraded".into(),
+            })
         )),
         Line::from(format!("battery    {:.1} %", tug.soc() * 100.0)),
         Line::from(format!(

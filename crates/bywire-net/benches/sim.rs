@@ -5,8 +5,8 @@
 
 use std::time::Duration;
 
-use bywire_bus::sim::SimBus;
 use bywire_core::{Frame, Timestamp};
+use bywire_net::sim::SimBus;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn one_second() -> SimBus {

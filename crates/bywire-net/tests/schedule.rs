@@ -4,12 +4,12 @@
 //! analysis says misses its deadlines is tested against the bus in bywire-sim.)
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
-use bywire_bus::sim::{BusEvent, SimBus};
 use bywire_core::busload::Bitrates;
 use bywire_core::frame::{ClassicFrame, Dlc, StandardId};
 use bywire_core::schedule::{bit_ns, response_time, worst_frame_ns, Stream};
 use bywire_core::wire::FrameShape;
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_net::sim::{BusEvent, SimBus};
 use proptest::prelude::*;
 
 const BITRATE: u32 = 500_000;

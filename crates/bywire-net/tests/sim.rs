@@ -8,10 +8,10 @@
     clippy::indexing_slicing
 )]
 
-use bywire_bus::sim::{BusEvent, Fault, SimBus};
 use bywire_core::confinement::NodeState;
 use bywire_core::wire::{self, Field};
 use bywire_core::{Frame, Timestamp};
+use bywire_net::sim::{BusEvent, Fault, SimBus};
 
 /// 500 kbit/s: 2 µs per bit.
 const BIT_NS: u64 = 2_000;
@@ -190,7 +190,7 @@ fn repeated_corruption_leads_to_bus_off_and_recovery_at_exact_times() {
 /// or late — well formed on the wire, the other identifiers untouched; mended, it sends true.
 #[test]
 fn tampered_identifiers_are_flipped_duplicated_or_delayed() {
-    use bywire_bus::sim::Tamper;
+    use bywire_net::sim::Tamper;
     use std::time::Duration;
     let mut bus = SimBus::new(500_000, Some(2_000_000));
     let (sender, listener) = (bus.add_node(), bus.add_node());
@@ -279,8 +279,8 @@ fn a_burst_until_bus_off_gets_there_and_then_ends() {
 /// once (regression guard for those caches).
 #[test]
 fn filters_nodes_and_queued_frames_changed_between_frames_count_at_once() {
-    use bywire_bus::Filtering;
     use bywire_core::Filter;
+    use bywire_net::Filtering;
     let mut bus = SimBus::new(500_000, None);
     let (sender, listener) = (bus.add_node(), bus.add_node());
     let heard = |bus: &mut SimBus, node| {
@@ -324,8 +324,8 @@ fn filters_nodes_and_queued_frames_changed_between_frames_count_at_once() {
 /// traffic (a node corrupted to bus-off and back, a filter, own frames echoed) and returns
 /// what each node received on each: the routed copies spread out to the nodes they name.
 fn same_traffic_routed_or_not() -> [Vec<Vec<(u64, String, bool)>>; 2] {
-    use bywire_bus::Filtering;
     use bywire_core::Filter;
+    use bywire_net::Filtering;
     [false, true].map(|routed| {
         let mut bus = SimBus::new(500_000, None);
         let nodes: Vec<usize> = (0..4).map(|_| bus.add_node()).collect();
@@ -410,7 +410,7 @@ fn routed_nodes_get_what_their_own_queues_would_have_held() {
 
 #[test]
 fn routing_stops_at_max_routed_and_a_withdrawn_node_gets_nothing_queued() {
-    use bywire_bus::sim::MAX_ROUTED;
+    use bywire_net::sim::MAX_ROUTED;
     let mut bus = SimBus::new(500_000, None);
     let nodes: Vec<usize> = (0..=MAX_ROUTED).map(|_| bus.add_node()).collect();
     assert!(bus.route(nodes[0]) && bus.route(nodes[1]));
@@ -437,8 +437,8 @@ fn routing_stops_at_max_routed_and_a_withdrawn_node_gets_nothing_queued() {
 
 #[test]
 fn a_bus_of_more_than_64_nodes_delivers_to_each_filter_and_echoes_the_sender() {
-    use bywire_bus::Filtering;
     use bywire_core::Filter;
+    use bywire_net::Filtering;
     let mut bus = SimBus::new(500_000, None);
     let nodes: Vec<usize> = (0..70).map(|_| bus.add_node()).collect();
     // Odd nodes take 0x100 only; node 66 sends and hears its own frames.

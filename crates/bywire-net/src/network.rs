@@ -1,9 +1,10 @@
-//! The simulated runner: named bit-timed buses ([`SimBus`]) with nodes wired to them by port,
-//! run in simulated time by the rule in [`bywire_core::node`].
+//! The simulated runner: named bit-timed buses ([`SimBus`]) and the nodes wired to them by
+//! port, run in simulated time by the rule in [`bywire_core::node`].
 //!
-//! A [`Network`] holds the buses and the wiring, not the nodes: each call that runs it takes
-//! the nodes as a slice, in the order they were numbered when wired, so the caller keeps its
-//! concrete node types to look at between runs. The runner is event-driven: it wakes at the
+//! A [`Network`] owns its nodes: [`Network::add_node`] gives a typed [`NodeHandle`], through
+//! which the caller wires the node ([`Network::wire`]) and looks at it between runs
+//! ([`Network::node`], or [`Network::node_mut`], whose guard tells the runner that the node's
+//! deadline may have moved when it is dropped). The runner is event-driven: it wakes at the
 //! earliest of the nodes' deadlines and the buses' next changes (a delivery, a transmission's
 //! start, a bus-off recovery), delivers each frame to the ports whose filters took it at its
 //! end of frame, and polls the nodes that are due or received something.
@@ -12,9 +13,39 @@
 //! ([`Network::drop_output`]), and whatever the buses themselves inject ([`Network::bus_mut`]:
 //! tampered identifiers, destroyed frames, bus-off).
 //!
-//! It lives beside [`SimBus`] so that every crate's tests (CANopen, the vehicle interface) and
-//! the simulator run their nodes on the same runner.
+//! ```
+//! use bywire_core::node::{Node, Port};
+//! use bywire_core::{Frame, Timestamp};
+//! use bywire_net::network::Network;
+//!
+//! /// Sends one frame at start-up, counts what it hears.
+//! #[derive(Default)]
+//! struct Greeter { sent: bool, heard: usize }
+//! impl Node for Greeter {
+//!     fn on_frame(&mut self, _: Timestamp, _: Port, _: &Frame) { self.heard += 1; }
+//!     fn poll(&mut self, _: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+//!         if !self.sent {
+//!             self.sent = true;
+//!             out(Port::MAIN, "123#CAFE".parse().unwrap());
+//!         }
+//!     }
+//!     fn next_deadline(&self) -> Option<Timestamp> { None }
+//! }
+//!
+//! let mut net = Network::new();
+//! let bus = net.add_bus("can0", 500_000, None);
+//! let (a, b) = (net.add_node(Greeter::default()), net.add_node(Greeter::default()));
+//! net.wire(a, Port::MAIN, bus).unwrap();
+//! net.wire(b, Port::MAIN, bus).unwrap();
+//! net.run_until(Timestamp::from_millis(1));
+//! // Each heard the other's frame, not its own.
+//! assert_eq!(net.node(a).unwrap().heard, 1);
+//! assert_eq!(net.node(b).unwrap().heard, 1);
+//! ```
 
+use std::any::Any;
+use std::marker::PhantomData;
+use std::ops::{Deref, DerefMut};
 use std::time::Duration;
 
 use bywire_core::node::{Node, Port};
@@ -23,8 +54,116 @@ use bywire_core::Timestamp;
 use crate::sim::{NodeId, SimBus, MAX_ROUTED};
 use crate::Filtering;
 
-/// A node's index in the slice given to [`Network::run_until`].
-pub type NodeIndex = usize;
+/// A node's place in a network, whatever its type (for lists of nodes of several types).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeKey(usize);
+
+/// A node added to a network, with its type: what [`Network::node`] and
+/// [`Network::node_mut`] give back is that node, without a cast at the call site.
+pub struct NodeHandle<N> {
+    key: NodeKey,
+    node: PhantomData<fn() -> N>,
+}
+
+impl<N> NodeHandle<N> {
+    /// Its place, whatever its type.
+    pub fn key(self) -> NodeKey {
+        self.key
+    }
+}
+
+// By hand: derived, they would ask the node type for the same traits.
+impl<N> Clone for NodeHandle<N> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<N> Copy for NodeHandle<N> {}
+impl<N> PartialEq for NodeHandle<N> {
+    fn eq(&self, other: &Self) -> bool {
+        self.key == other.key
+    }
+}
+impl<N> Eq for NodeHandle<N> {}
+impl<N> std::fmt::Debug for NodeHandle<N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "NodeHandle({})", self.key.0)
+    }
+}
+
+impl<N> From<NodeHandle<N>> for NodeKey {
+    fn from(handle: NodeHandle<N>) -> NodeKey {
+        handle.key
+    }
+}
+
+/// A node the network owns: a [`Node`] it can hand back as its own type.
+trait Owned: Node + Any {
+    fn as_any(&self) -> &dyn Any;
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+}
+
+impl<N: Node + Any> Owned for N {
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+/// A node borrowed from its network to be changed: when the guard is dropped, the runner
+/// asks the node's deadline again at its next run (a new command, an operator's action may
+/// have moved it). Dereferences to the node.
+pub struct NodeMut<'a, N> {
+    node: &'a mut N,
+    changed: &'a mut bool,
+}
+
+impl<N> Deref for NodeMut<'_, N> {
+    type Target = N;
+    fn deref(&self) -> &N {
+        self.node
+    }
+}
+
+impl<N> DerefMut for NodeMut<'_, N> {
+    fn deref_mut(&mut self) -> &mut N {
+        self.node
+    }
+}
+
+impl<N> Drop for NodeMut<'_, N> {
+    fn drop(&mut self) {
+        *self.changed = true;
+    }
+}
+
+/// The nodes of one run: the network's own, one of which may have another node standing in
+/// its place (see [`Network::run_until_standing_in`]).
+struct RunNodes<'a, 'b> {
+    owned: &'a mut [Box<dyn Owned>],
+    stand_in: Option<(usize, &'b mut dyn Node)>,
+}
+
+impl RunNodes<'_, '_> {
+    fn len(&self) -> usize {
+        self.owned.len()
+    }
+
+    fn get_mut(&mut self, i: usize) -> Option<&mut dyn Node> {
+        match &mut self.stand_in {
+            Some((at, node)) if *at == i => Some(&mut **node),
+            _ => self
+                .owned
+                .get_mut(i)
+                .map(|node| &mut **node as &mut dyn Node),
+        }
+    }
+}
+
+/// A node's index among the network's nodes (inside the runner).
+type NodeIndex = usize;
 
 /// A bus's index in the network.
 pub type BusIndex = usize;
@@ -156,20 +295,22 @@ fn nanos(at: Option<Timestamp>) -> u64 {
     at.map_or(NEVER, Timestamp::as_nanos)
 }
 
-/// Named bit-timed buses and the wiring of nodes to them.
+/// Named bit-timed buses, the nodes on them and their wiring.
 pub struct Network {
     buses: Vec<NetBus>,
+    /// The nodes, in the order they were added (their [`NodeKey`]s).
+    nodes: Vec<Box<dyn Owned>>,
     wires: Vec<Wire>,
     /// Each node's wires (indices into `wires`, in the order they were made): where its
     /// frames go, found without a pass over every wire.
     wires_of: Vec<Vec<usize>>,
     /// Single ports whose output is dropped (one of a node's buses cut).
     dropped_ports: Vec<(NodeIndex, Port)>,
-    /// Per node.
+    /// Per node, in the nodes' order.
     slots: Vec<Slot>,
     now: Timestamp,
-    /// The earliest wake and the earliest due time of the first `nodes` nodes, kept until a
-    /// node's deadline changes (the runner looks for them at every pass and every instant;
+    /// The earliest wake and the earliest due time of the nodes, kept until a node's
+    /// deadline changes (the runner looks for them at every pass and every instant;
     /// they change only when a node was asked).
     earliest_wake: Option<Earliest>,
     /// The nodes given a frame at the current instant, each once: most instants are a
@@ -177,11 +318,10 @@ pub struct Network {
     receivers: Vec<NodeIndex>,
 }
 
-/// The soonest any of the first `nodes` nodes must run ([`Slot::wake`]) and is due
-/// ([`Slot::due_from`]), in nanoseconds ([`NEVER`] for never).
+/// The soonest any node must run ([`Slot::wake`]) and is due ([`Slot::due_from`]), in
+/// nanoseconds ([`NEVER`] for never).
 #[derive(Clone, Copy)]
 struct Earliest {
-    nodes: usize,
     wake: u64,
     due_from: u64,
 }
@@ -197,6 +337,7 @@ impl Network {
     pub fn new() -> Network {
         Network {
             buses: Vec::new(),
+            nodes: Vec::new(),
             wires: Vec::new(),
             wires_of: Vec::new(),
             dropped_ports: Vec::new(),
@@ -223,10 +364,37 @@ impl Network {
         self.buses.iter().position(|b| b.name == name)
     }
 
+    /// Add a node; it is polled from the next run on, and hears nothing until it is wired.
+    pub fn add_node<N: Node + 'static>(&mut self, node: N) -> NodeHandle<N> {
+        self.nodes.push(Box::new(node));
+        self.slots.push(Slot::NEW);
+        self.wires_of.push(Vec::new());
+        self.earliest_wake = None;
+        NodeHandle {
+            key: NodeKey(self.nodes.len() - 1),
+            node: PhantomData,
+        }
+    }
+
+    /// A node, to look at.
+    pub fn node<N: Node + 'static>(&self, handle: NodeHandle<N>) -> Option<&N> {
+        self.nodes.get(handle.key.0)?.as_any().downcast_ref()
+    }
+
+    /// A node, to change: the guard tells the runner to ask its deadline again.
+    pub fn node_mut<N: Node + 'static>(&mut self, handle: NodeHandle<N>) -> Option<NodeMut<'_, N>> {
+        let i = handle.key.0;
+        let node = self.nodes.get_mut(i)?.as_any_mut().downcast_mut()?;
+        let changed = &mut self.slots.get_mut(i)?.changed;
+        Some(NodeMut { node, changed })
+    }
+
     /// Wire `node`'s `port` to `bus`; the endpoint's number on that bus is returned (for the
-    /// bus's events and faults). `None` for a bus that does not exist or already has
-    /// [`MAX_ROUTED`] endpoints (taps included).
-    pub fn wire(&mut self, node: NodeIndex, port: Port, bus: BusIndex) -> Option<NodeId> {
+    /// bus's events and faults). `None` for a node or bus that is not this network's, or a bus
+    /// that already has [`MAX_ROUTED`] endpoints (taps included).
+    pub fn wire(&mut self, node: impl Into<NodeKey>, port: Port, bus: BusIndex) -> Option<NodeId> {
+        let node = node.into().0;
+        let wires = self.wires_of.get_mut(node)?;
         let net_bus = self.buses.get_mut(bus)?;
         if net_bus.sim.node_count() >= MAX_ROUTED {
             return None;
@@ -239,27 +407,14 @@ impl Network {
         net_bus.next = None;
         net_bus.wire_of.resize(endpoint, None);
         net_bus.wire_of.push(Some(self.wires.len()));
-        if self.wires_of.len() <= node {
-            self.wires_of.resize_with(node.saturating_add(1), Vec::new);
-        }
-        if let Some(wires) = self.wires_of.get_mut(node) {
-            wires.push(self.wires.len());
-        }
+        wires.push(self.wires.len());
         self.wires.push(Wire {
             node,
             port,
             bus,
             endpoint,
         });
-        self.size_for(node.saturating_add(1));
         Some(endpoint)
-    }
-
-    fn size_for(&mut self, nodes: usize) {
-        if self.slots.len() < nodes {
-            self.slots.resize(nodes, Slot::NEW);
-            self.earliest_wake = None;
-        }
     }
 
     /// A listener on `bus` that no node drives (a logger, a tap, an outside tool): read it and
@@ -270,7 +425,8 @@ impl Network {
     }
 
     /// Set what a port receives.
-    pub fn set_filtering(&mut self, node: NodeIndex, port: Port, filtering: Filtering) {
+    pub fn set_filtering(&mut self, node: impl Into<NodeKey>, port: Port, filtering: Filtering) {
+        let node = node.into().0;
         if let Some(w) = port_wire(&self.wires, &self.wires_of, node, port) {
             if let Some(b) = self.buses.get_mut(w.bus) {
                 b.sim.set_filtering(w.endpoint, filtering);
@@ -279,15 +435,16 @@ impl Network {
     }
 
     /// Drop (or again let through) everything `node` sends: a node cut off the bus.
-    pub fn drop_output(&mut self, node: NodeIndex, dropped: bool) {
-        self.size_for(node.saturating_add(1));
+    pub fn drop_output(&mut self, node: impl Into<NodeKey>, dropped: bool) {
+        let node = node.into().0;
         if let Some(slot) = self.slots.get_mut(node) {
             slot.dropped = dropped;
         }
     }
 
     /// Drop (or again let through) what `node` sends on `port` only: that one connection cut.
-    pub fn drop_port_output(&mut self, node: NodeIndex, port: Port, dropped: bool) {
+    pub fn drop_port_output(&mut self, node: impl Into<NodeKey>, port: Port, dropped: bool) {
+        let node = node.into().0;
         self.dropped_ports.retain(|p| *p != (node, port));
         if dropped {
             self.dropped_ports.push((node, port));
@@ -316,32 +473,70 @@ impl Network {
         }
     }
 
-    /// Say that the caller changed `node` between runs in a way that may move its deadline
-    /// (a new command, an operator's action): the next run asks it again. Nodes are otherwise
-    /// asked only after they were polled or given a frame.
-    pub fn changed(&mut self, node: NodeIndex) {
-        if let Some(slot) = self.slots.get_mut(node) {
+    /// Run everything that happens before `until`. What falls at `until` itself happens in
+    /// the next run, after whatever the caller changes at that time (a new command through
+    /// [`Network::node_mut`], a cut-off node).
+    pub fn run_until(&mut self, until: Timestamp) {
+        self.run(until, None);
+    }
+
+    /// Run the network for `duration` more.
+    pub fn run_for(&mut self, duration: Duration) {
+        let until = self.now.saturating_add(duration);
+        self.run_until(until);
+    }
+
+    /// As [`Network::run_until`], with `stand_in` in `node`'s place for this run: wired as
+    /// `node` is, polled and given its frames instead of it (an outside node lent for one run:
+    /// a tester in a built-in node's place). Its deadline is asked at the start of the run,
+    /// and `node`'s again at the next run without it.
+    pub fn run_until_standing_in<N>(
+        &mut self,
+        until: Timestamp,
+        node: NodeHandle<N>,
+        stand_in: &mut dyn Node,
+    ) {
+        self.run(until, Some((node.key.0, stand_in)));
+    }
+
+    fn run(&mut self, until: Timestamp, stand_in: Option<(usize, &mut dyn Node)>) {
+        // The nodes are taken out for the run (a move, not a copy) so that the runner can
+        // hand them frames while it changes its own state.
+        let mut owned = std::mem::take(&mut self.nodes);
+        let stood_in = stand_in.as_ref().map(|(at, _)| *at);
+        let mut nodes = RunNodes {
+            owned: &mut owned,
+            stand_in,
+        };
+        for i in 0..self.slots.len() {
+            let Some(slot) = self.slots.get_mut(i) else {
+                continue;
+            };
+            if !slot.changed && stood_in != Some(i) {
+                continue;
+            }
+            slot.changed = false;
+            let before = (slot.wake, slot.due_from);
+            if let Some(node) = nodes.get_mut(i) {
+                slot.set_deadline(node.next_deadline());
+            }
+            let after = (slot.wake, slot.due_from);
+            self.moved(before, after);
+        }
+        self.run_nodes(until, &mut nodes);
+        self.nodes = owned;
+        // The node stood in for is asked again when it is back.
+        if let Some(slot) = stood_in.and_then(|i| self.slots.get_mut(i)) {
             slot.changed = true;
         }
     }
 
-    /// Run everything that happens before `until`, driving `nodes` (indexed as wired). What
-    /// falls at `until` itself happens in the next run, after whatever the caller changes at
-    /// that time (a new command, a cut-off node — see [`Network::changed`]).
-    pub fn run_until(&mut self, until: Timestamp, nodes: &mut [&mut dyn Node]) {
-        self.size_for(nodes.len());
-        for (slot, node) in self.slots.iter_mut().zip(nodes.iter()) {
-            if slot.changed {
-                slot.set_deadline(node.next_deadline());
-                slot.changed = false;
-                self.earliest_wake = None;
-            }
-        }
+    fn run_nodes(&mut self, until: Timestamp, nodes: &mut RunNodes<'_, '_>) {
         // Each pass moves time forward to the next event (or ends at `until`): bounded by the
         // events between now and `until`, and by PASSES_PER_INSTANT at any one time.
         let mut passes_here = 0u32;
         loop {
-            let next = self.start_ahead(nodes.len(), until).map(|at| {
+            let next = self.start_ahead(until).map(|at| {
                 if at > self.now {
                     passes_here = 0;
                     at
@@ -366,16 +561,10 @@ impl Network {
         }
     }
 
-    /// Run the network for `duration` more.
-    pub fn run_for(&mut self, duration: Duration, nodes: &mut [&mut dyn Node]) {
-        let until = self.now.saturating_add(duration);
-        self.run_until(until, nodes);
-    }
-
-    /// Node `i`'s wake and due time moved from `before` to `after`: the earliest of all
-    /// follows without a pass over every node, unless `i` held one of them and it moved later.
-    fn moved(&mut self, i: NodeIndex, before: (u64, u64), after: (u64, u64)) {
-        let Some(e) = self.earliest_wake.as_mut().filter(|e| i < e.nodes) else {
+    /// A node's wake and due time moved from `before` to `after`: the earliest of all follows
+    /// without a pass over every node, unless the node held one of them and it moved later.
+    fn moved(&mut self, before: (u64, u64), after: (u64, u64)) {
+        let Some(e) = self.earliest_wake.as_mut() else {
             return;
         };
         let held = (before.0 == e.wake && after.0 > e.wake)
@@ -389,22 +578,14 @@ impl Network {
     }
 
     /// The earliest wake and due time of the nodes (kept until one changes).
-    fn earliest(&mut self, nodes: usize) -> Earliest {
-        if let Some(earliest) = self.earliest_wake.filter(|e| e.nodes == nodes) {
+    fn earliest(&mut self) -> Earliest {
+        if let Some(earliest) = self.earliest_wake {
             return earliest;
         }
-        let (wake, due_from) = self
-            .slots
-            .iter()
-            .take(nodes)
-            .fold((NEVER, NEVER), |(wake, due), s| {
-                (wake.min(s.wake), due.min(s.due_from))
-            });
-        let earliest = Earliest {
-            nodes,
-            wake,
-            due_from,
-        };
+        let (wake, due_from) = self.slots.iter().fold((NEVER, NEVER), |(wake, due), s| {
+            (wake.min(s.wake), due.min(s.due_from))
+        });
+        let earliest = Earliest { wake, due_from };
         self.earliest_wake = Some(earliest);
         earliest
     }
@@ -415,9 +596,9 @@ impl Network {
     /// an instant of its own, which would cost a pass over every node and bus. Its frame then
     /// arrives at its end of frame, an event like any other. Returns the earliest time
     /// something happens then: a node's deadline or a bus's next change.
-    fn start_ahead(&mut self, nodes: usize, until: Timestamp) -> Option<Timestamp> {
+    fn start_ahead(&mut self, until: Timestamp) -> Option<Timestamp> {
         let until = until.as_nanos();
-        let mut others = self.earliest(nodes).wake;
+        let mut others = self.earliest().wake;
         for b in &mut self.buses {
             others = others.min(b.next_change().arrival);
         }
@@ -442,7 +623,7 @@ impl Network {
     /// they were made: a node sees its frames of one bus in the order they arrived), the
     /// nodes that are due or received something polled, and their frames submitted (which end
     /// later: a frame takes time on the wire, so nothing more arrives at this instant).
-    fn instant(&mut self, nodes: &mut [&mut dyn Node]) {
+    fn instant(&mut self, nodes: &mut RunNodes<'_, '_>) {
         let now = self.now;
         for b in &mut self.buses {
             // A bus with nothing to do before now is left where it is (and, having nothing
@@ -493,7 +674,7 @@ impl Network {
         // The nodes due or given a frame, in node order. Polling one changes no other's
         // deadline, so who is due is settled before the first poll.
         let mut receivers = std::mem::take(&mut self.receivers);
-        if self.earliest(nodes.len()).due_from <= now.as_nanos() {
+        if self.earliest().due_from <= now.as_nanos() {
             for i in 0..nodes.len() {
                 if self.slots.get(i).is_some_and(|s| s.due(now) || s.received) {
                     self.poll(i, nodes);
@@ -515,7 +696,7 @@ impl Network {
     }
 
     /// Poll node `i` at `self.now` and submit what it sends.
-    fn poll(&mut self, i: NodeIndex, nodes: &mut [&mut dyn Node]) {
+    fn poll(&mut self, i: NodeIndex, nodes: &mut RunNodes<'_, '_>) {
         let now = self.now;
         let (Some(node), Some(slot)) = (nodes.get_mut(i), self.slots.get_mut(i)) else {
             return;
@@ -538,7 +719,7 @@ impl Network {
         let before = (slot.wake, slot.due_from);
         slot.set_polled(now, node.next_deadline());
         let after = (slot.wake, slot.due_from);
-        self.moved(i, before, after);
+        self.moved(before, after);
     }
 }
 
@@ -603,11 +784,15 @@ mod tests {
     fn frames_arrive_at_their_end_of_frame_on_the_wired_port() {
         let mut net = Network::new();
         let bus = net.add_bus("bus1", 500_000, None);
-        net.wire(0, Port::MAIN, bus).unwrap();
-        net.wire(1, Port(3), bus).unwrap();
-        let (mut a, mut b) = (ticker(0x100), ticker(0x200));
-        b.port = Port(3);
-        net.run_until(Timestamp::from_millis(35), &mut [&mut a, &mut b]);
+        let a = net.add_node(ticker(0x100));
+        let b = net.add_node(Ticker {
+            port: Port(3),
+            ..ticker(0x200)
+        });
+        net.wire(a, Port::MAIN, bus).unwrap();
+        net.wire(b, Port(3), bus).unwrap();
+        net.run_until(Timestamp::from_millis(35));
+        let (a, b) = (net.node(a).unwrap(), net.node(b).unwrap());
         // Four frames each (0, 10, 20, 30 ms); each hears the other's, on its own port.
         assert_eq!(a.heard.len(), 4);
         assert_eq!(b.heard.len(), 4);
@@ -628,13 +813,100 @@ mod tests {
     fn a_node_whose_output_is_dropped_is_not_heard() {
         let mut net = Network::new();
         let bus = net.add_bus("bus1", 500_000, None);
-        net.wire(0, Port::MAIN, bus).unwrap();
-        net.wire(1, Port::MAIN, bus).unwrap();
-        net.drop_output(1, true);
-        let (mut a, mut b) = (ticker(0x100), ticker(0x200));
-        net.run_until(Timestamp::from_millis(50), &mut [&mut a, &mut b]);
-        assert!(a.heard.is_empty());
-        assert_eq!(b.heard.len(), 5);
+        let (a, b) = (net.add_node(ticker(0x100)), net.add_node(ticker(0x200)));
+        net.wire(a, Port::MAIN, bus).unwrap();
+        net.wire(b, Port::MAIN, bus).unwrap();
+        net.drop_output(b, true);
+        net.run_until(Timestamp::from_millis(50));
+        assert!(net.node(a).unwrap().heard.is_empty());
+        assert_eq!(net.node(b).unwrap().heard.len(), 5);
+    }
+
+    /// Sends one frame when told to (`send_at`), asks for no time otherwise.
+    #[derive(Default)]
+    struct OnRequest {
+        send_at: Option<Timestamp>,
+        sent: Vec<Timestamp>,
+    }
+
+    impl Node for OnRequest {
+        fn on_frame(&mut self, _now: Timestamp, _port: Port, _frame: &Frame) {}
+        fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            if self.send_at.is_some_and(|at| now >= at) {
+                self.send_at = None;
+                self.sent.push(now);
+                out(Port::MAIN, "321#01".parse().unwrap());
+            }
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            self.send_at
+        }
+    }
+
+    #[test]
+    fn a_node_changed_through_its_guard_is_asked_its_deadline_again() {
+        let mut net = Network::new();
+        let bus = net.add_bus("bus1", 500_000, None);
+        let node = net.add_node(OnRequest::default());
+        let listener = net.add_node(ticker(0x100));
+        net.wire(node, Port::MAIN, bus).unwrap();
+        net.wire(listener, Port::MAIN, bus).unwrap();
+        net.run_until(Timestamp::from_millis(10));
+        assert!(net.node(node).unwrap().sent.is_empty());
+        // Told to send at 15 ms: the runner wakes for it although nothing else happens then.
+        net.node_mut(node).unwrap().send_at = Some(Timestamp::from_millis(15));
+        net.run_until(Timestamp::from_millis(30));
+        assert_eq!(net.node(node).unwrap().sent, [Timestamp::from_millis(15)]);
+        let heard = &net.node(listener).unwrap().heard;
+        assert!(heard.iter().any(|(_, _, id)| *id == 0x321), "{heard:?}");
+    }
+
+    #[test]
+    fn a_stand_in_takes_a_nodes_place_for_one_run_and_hands_it_back() {
+        let mut net = Network::new();
+        let bus = net.add_bus("bus1", 500_000, None);
+        let built_in = net.add_node(ticker(0x100));
+        let listener = net.add_node(ticker(0x200));
+        net.wire(built_in, Port::MAIN, bus).unwrap();
+        net.wire(listener, Port::MAIN, bus).unwrap();
+        let mut stand_in = ticker(0x300);
+        net.run_until_standing_in(Timestamp::from_millis(15), built_in, &mut stand_in);
+        // The stand-in sent at 0 and 10 ms and heard the listener; the built-in did nothing.
+        let ids = |n: &Ticker| n.heard.iter().map(|(_, _, id)| *id).collect::<Vec<_>>();
+        assert_eq!(ids(net.node(listener).unwrap()), [0x300, 0x300]);
+        assert_eq!(ids(&stand_in), [0x200, 0x200]);
+        assert!(net.node(built_in).unwrap().heard.is_empty());
+        // Back in its place, the built-in node runs from its own deadline (it never ran: at
+        // once).
+        net.run_until(Timestamp::from_millis(25));
+        let heard = &net.node(listener).unwrap().heard;
+        assert!(heard.len() > 2, "{heard:?}");
+        assert!(
+            heard[2..]
+                .iter()
+                .all(|(at, _, id)| *id == 0x100 && *at > Timestamp::from_millis(15)),
+            "{heard:?}"
+        );
+    }
+
+    #[test]
+    fn a_handle_from_another_network_finds_nothing_of_another_type() {
+        let mut first = Network::new();
+        let ticker_handle = first.add_node(ticker(0x100));
+        let mut second = Network::new();
+        second.add_node(OnRequest::default());
+        assert!(second.node(ticker_handle).is_none());
+        assert!(second.node_mut(ticker_handle).is_none());
+        assert!(second
+            .wire(
+                NodeHandle::<Ticker> {
+                    key: NodeKey(7),
+                    node: PhantomData
+                },
+                Port::MAIN,
+                0
+            )
+            .is_none());
     }
 
     /// Sends its next frame a gap after the last one's confirmation (as ISO-TP's STmin
@@ -681,26 +953,27 @@ mod tests {
 
     #[test]
     fn a_confirmation_retimes_a_node_only_when_it_says_its_deadline_moved() {
-        let run = |node: &mut Paced| {
+        let run = |node: Paced| {
             let mut net = Network::new();
             let bus = net.add_bus("bus1", 500_000, None);
-            net.wire(0, Port::MAIN, bus).unwrap();
-            net.run_until(Timestamp::from_millis(20), &mut [node]);
+            let node = net.add_node(node);
+            net.wire(node, Port::MAIN, bus).unwrap();
+            net.run_until(Timestamp::from_millis(20));
+            let node = net.node(node).unwrap();
+            (node.sent_at.clone(), node.asked.get())
         };
         // Said: each frame goes the gap after the last one's confirmation.
-        let mut retimed = paced(true);
-        run(&mut retimed);
-        assert!(retimed.sent_at.len() >= 7, "{:?}", retimed.sent_at);
-        for pair in retimed.sent_at.windows(2) {
+        let (retimed, retimed_asked) = run(paced(true));
+        assert!(retimed.len() >= 7, "{retimed:?}");
+        for pair in retimed.windows(2) {
             let between = pair[1].saturating_since(pair[0]);
             // The gap, then the frame's own time on the wire (under 300 µs).
             assert!(between > Duration::from_millis(2), "{between:?}");
             assert!(between < Duration::from_micros(2_300), "{between:?}");
         }
         // Not said: the runner does not ask; the node waits for a frame that never comes.
-        let mut silent = paced(false);
-        run(&mut silent);
-        assert_eq!(silent.sent_at.len(), 1, "{:?}", silent.sent_at);
-        assert!(silent.asked.get() < retimed.asked.get());
+        let (silent, silent_asked) = run(paced(false));
+        assert_eq!(silent.len(), 1, "{silent:?}");
+        assert!(silent_asked < retimed_asked);
     }
 }
