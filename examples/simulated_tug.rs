@@ -28,8 +28,8 @@ fn main() -> Result<(), bywire_sim::tug::TugError> {
         println!(
             "  {:>7.3} s  {:<12} {}",
             event.t.as_nanos() as f64 / 1e9,
-            event.kind,
-            event.detail
+            event.kind(),
+            event.what
         );
     }
     Ok(())

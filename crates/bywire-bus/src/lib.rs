@@ -117,6 +117,7 @@ pub struct BusStatus {
 
 /// What can go wrong on a bus.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum BusError {
     /// The bus is gone (all other ends closed, interface down).
     #[error("the bus is closed")]

@@ -130,6 +130,7 @@ pub fn schemes() -> Vec<String> {
 
 /// A spec that parsed but whose bus cannot be opened.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum OpenError {
     /// The spec names no bus.
     #[error(transparent)]
@@ -146,6 +147,7 @@ pub enum OpenError {
 
 /// A spec that names no bus, with what is wrong.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum SpecError {
     /// No `scheme:` prefix.
     #[error("'{0}' is not a bus spec: expected SCHEME:PARAMETERS, e.g. virtual:test")]

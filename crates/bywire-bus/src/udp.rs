@@ -42,6 +42,7 @@ const MAX_DATAGRAM: usize = 4096;
 
 /// Why a datagram is not a frame.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum DatagramError {
     /// Not msgpack, or not a map.
     #[error("not a msgpack map: {0}")]

@@ -33,6 +33,7 @@ use crate::roboteq::RoboteqCommand;
 
 /// Why a bus description was refused.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ConfigError {
     /// The file could not be read or is not valid TOML for this schema.
     #[error("{file}: {message}")]

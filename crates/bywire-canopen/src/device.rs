@@ -7,6 +7,7 @@
 use core::time::Duration;
 
 use bywire_core::frame::Frame;
+use bywire_core::node::{Node, Port};
 use bywire_core::time::{earliest, Timestamp};
 
 use crate::abort::Abort;
@@ -586,7 +587,7 @@ impl<A: Application> Device<A> {
     /// Take in a frame. An error frame saying the controller restarted after bus-off (the
     /// device's own controller, on SocketCAN or a simulated bus) is the event CiA 301 reports
     /// as EMCY 0x8140, followed by the error reset.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, frame: &Frame) {
         if !self.booted {
             return;
         }
@@ -722,7 +723,7 @@ impl<A: Application> Device<A> {
     }
 
     /// Boot when first polled; run the application; send heartbeats, SYNC, EMCY and TPDOs.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         if self.comm_stale {
             self.comm = Communication::read(&self.od, self.node);
             self.comm_stale = false;
@@ -836,8 +837,8 @@ impl<A: Application> Device<A> {
         self.on_sync(now, counter);
     }
 
-    /// When `poll` next has work.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    /// When [`Device::step`] next has work.
+    fn deadline(&self) -> Option<Timestamp> {
         if !self.booted || !self.outbox.is_empty() {
             return Some(Timestamp::ZERO);
         }
@@ -862,6 +863,20 @@ impl<A: Application> Device<A> {
     }
 }
 
+/// A device has one bus connection: frames from any port go in, its frames go out on the main
+/// port.
+impl<A: Application> Node for Device<A> {
+    fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+        self.receive(now, frame);
+    }
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        self.step(now, &mut |frame| out(Port::MAIN, frame));
+    }
+    fn next_deadline(&self) -> Option<Timestamp> {
+        self.deadline()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -870,7 +885,7 @@ mod tests {
 
     fn polled(device: &mut Device<Plain>, ms: u64) -> Vec<Frame> {
         let mut out = Vec::new();
-        device.poll(Timestamp::from_millis(ms), &mut |f| out.push(f));
+        device.poll(Timestamp::from_millis(ms), &mut |_, f| out.push(f));
         out
     }
 
@@ -886,13 +901,18 @@ mod tests {
         let sdo = |data: [u8; 8]| crate::nmt::classic(0x604, &data);
         device.on_frame(
             Timestamp::from_millis(1),
+            Port::MAIN,
             &sdo([0x2B, 0x00, 0x14, 0x05, 100, 0, 0, 0]),
         );
         assert_eq!(device.od().get_unsigned(0x1400, 5), Some(100));
-        device.on_frame(Timestamp::from_millis(2), &NmtCommand::Start.frame(4));
+        device.on_frame(
+            Timestamp::from_millis(2),
+            Port::MAIN,
+            &NmtCommand::Start.frame(4),
+        );
         polled(&mut device, 3);
         let rpdo = crate::nmt::classic(0x204, &[0x06, 0x00, 0x03]);
-        device.on_frame(Timestamp::from_millis(10), &rpdo);
+        device.on_frame(Timestamp::from_millis(10), Port::MAIN, &rpdo);
         let mut emergencies = Vec::new();
         for ms in 11..400 {
             let frames = polled(&mut device, ms);
@@ -924,6 +944,7 @@ mod tests {
         device.od_mut().set(0x6081, 0, &9u32.to_le_bytes()).unwrap();
         device.on_frame(
             Timestamp::from_millis(1),
+            Port::MAIN,
             &NmtCommand::ResetCommunication.frame(4),
         );
         assert_eq!(
@@ -936,7 +957,11 @@ mod tests {
             Some(9),
             "application objects kept"
         );
-        device.on_frame(Timestamp::from_millis(2), &NmtCommand::ResetNode.frame(0));
+        device.on_frame(
+            Timestamp::from_millis(2),
+            Port::MAIN,
+            &NmtCommand::ResetNode.frame(0),
+        );
         assert_eq!(
             device.od().get_unsigned(0x6081, 0),
             Some(2_000),
@@ -947,9 +972,14 @@ mod tests {
             .iter()
             .any(|f| cob_id(f) == Some(0x704) && f.data() == [0x00]));
         // Stopped: SDO is not answered.
-        device.on_frame(Timestamp::from_millis(4), &NmtCommand::Stop.frame(4));
         device.on_frame(
             Timestamp::from_millis(4),
+            Port::MAIN,
+            &NmtCommand::Stop.frame(4),
+        );
+        device.on_frame(
+            Timestamp::from_millis(4),
+            Port::MAIN,
             &classic(0x604, &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]),
         );
         assert!(!ids(&polled(&mut device, 4)).contains(&0x584));
@@ -971,7 +1001,7 @@ mod tests {
         );
         let mut answers = Vec::new();
         for ms in [10, 110] {
-            device.on_frame(Timestamp::from_millis(ms), &guard);
+            device.on_frame(Timestamp::from_millis(ms), Port::MAIN, &guard);
             answers.extend(
                 polled(&mut device, ms)
                     .into_iter()
@@ -1004,10 +1034,12 @@ mod tests {
         // The history is cleared by writing zero, and only zero.
         device.on_frame(
             Timestamp::from_millis(411),
+            Port::MAIN,
             &classic(0x604, &[0x2F, 0x03, 0x10, 0, 1, 0, 0, 0]),
         );
         device.on_frame(
             Timestamp::from_millis(411),
+            Port::MAIN,
             &classic(0x604, &[0x2F, 0x03, 0x10, 0, 0, 0, 0, 0]),
         );
         let answers: Vec<Vec<u8>> = polled(&mut device, 411)

@@ -23,14 +23,15 @@
 //! ```
 //! use bywire_canopen::cia402::{self, Drive};
 //! use bywire_canopen::device::Device;
+//! use bywire_canopen::{Node, Port};
 //! use bywire_core::{Frame, Id, Timestamp};
 //!
 //! let mut drive = Device::new(2, cia402::drive_dictionary(2), Drive::new());
-//! drive.poll(Timestamp::ZERO, &mut |_boot_up| {}); // boots into pre-operational
+//! drive.poll(Timestamp::ZERO, &mut |_, _boot_up| {}); // boots into pre-operational
 //! let request = Frame::classic(Id::standard(0x602).unwrap(), &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]).unwrap();
-//! drive.on_frame(Timestamp::ZERO, &request);
+//! drive.on_frame(Timestamp::ZERO, Port::MAIN, &request);
 //! let mut answers = Vec::new();
-//! drive.poll(Timestamp::ZERO, &mut |frame| answers.push(frame));
+//! drive.poll(Timestamp::ZERO, &mut |_, frame| answers.push(frame));
 //! let answer = answers.iter().find(|f| f.id() == Id::standard(0x582).ok()).unwrap();
 //! // An expedited upload of four bytes: a CiA 402 drive's device type, 0x00020192.
 //! assert_eq!(answer.data(), &[0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00]);
@@ -58,7 +59,3 @@ pub mod sdo;
 pub use abort::Abort;
 
 pub use bywire_core::node::{Node, Port};
-
-// The nodes of one bus connection: their inherent methods, on the main port.
-bywire_core::single_port_node!(device::Device<A> where A: device::Application);
-bywire_core::single_port_node!(master::Master);

@@ -7,6 +7,7 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use bywire_core::frame::Frame;
+use bywire_core::node::{Node, Port};
 use bywire_core::time::{earliest, Timestamp};
 
 use crate::cia402::{DriveController, StopReason};
@@ -185,7 +186,7 @@ impl Master {
     }
 
     /// Take in a frame.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, frame: &Frame) {
         self.consumer.on_frame(now, frame);
         self.sdo.on_frame(now, frame);
         if let Some((node, emergency)) = Emergency::parse(frame) {
@@ -198,7 +199,7 @@ impl Master {
 
     /// Heartbeat monitoring first (so a loss stops its drive in this very poll), then the
     /// heartbeat, SYNC, drive commands and SDO.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         self.consumer.poll(now);
         let mut stop_now = false;
         while let Some(event) = self.consumer.next_event() {
@@ -231,8 +232,8 @@ impl Master {
         self.sdo.poll(now, out);
     }
 
-    /// When `poll` next has work.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    /// When [`Master::step`] next has work.
+    fn deadline(&self) -> Option<Timestamp> {
         if !self.outbox.is_empty() {
             return Some(Timestamp::ZERO);
         }
@@ -248,6 +249,20 @@ impl Master {
             self.consumer.next_deadline(),
             self.sdo.next_deadline(),
         ])
+    }
+}
+
+/// The master has one bus connection: frames from any port go in, its frames go out on the
+/// main port.
+impl Node for Master {
+    fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
+        self.receive(now, frame);
+    }
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        self.step(now, &mut |frame| out(Port::MAIN, frame));
+    }
+    fn next_deadline(&self) -> Option<Timestamp> {
+        self.deadline()
     }
 }
 

@@ -672,6 +672,7 @@ impl RoboteqMotor {
 mod tests {
     use super::*;
     use crate::device::Device;
+    use bywire_core::node::{Node, Port};
 
     #[test]
     fn the_manuals_byte_examples() {
@@ -705,9 +706,13 @@ mod tests {
         for ms in from_ms..to_ms {
             let now = Timestamp::from_millis(ms);
             for (_, frame) in frames.iter().filter(|(at, _)| *at == ms) {
-                device.on_frame(now, frame);
+                device.on_frame(now, Port::MAIN, frame);
             }
-            device.poll(now, &mut |f| sent.push(f));
+            device.poll(now, &mut |port, f| {
+                if port == Port::MAIN {
+                    sent.push(f)
+                }
+            });
         }
         sent
     }

@@ -329,7 +329,7 @@ fn recovery_from_bus_off_is_reported_and_does_not_stop_the_drive() {
         [0; 8],
     );
     bus.device_mut()
-        .on_frame(Timestamp::ZERO, &Frame::Error(restarted));
+        .on_frame(Timestamp::ZERO, Port::MAIN, &Frame::Error(restarted));
     bus.run(Duration::from_millis(300));
     let emcys: Vec<[u8; 2]> = bus
         .log

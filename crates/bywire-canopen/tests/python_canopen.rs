@@ -344,7 +344,7 @@ struct Scripted {
 
 impl Node for Scripted {
     fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
-        self.master.on_frame(now, frame);
+        self.master.on_frame(now, Port::MAIN, frame);
     }
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         for (at, action) in &mut self.actions {
@@ -353,7 +353,8 @@ impl Node for Scripted {
                 *at = Timestamp::from_nanos(u64::MAX);
             }
         }
-        self.master.poll(now, &mut |frame| out(Port::MAIN, frame));
+        self.master
+            .poll(now, &mut |_, frame| out(Port::MAIN, frame));
     }
     fn next_deadline(&self) -> Option<Timestamp> {
         let next_action = self.actions.iter().map(|(at, _)| *at).min();

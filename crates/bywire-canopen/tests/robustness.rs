@@ -68,8 +68,8 @@ fn drive_responses(frames: &[(u64, Frame)]) -> Vec<Frame> {
     for (step, frame) in frames {
         now += step;
         let time = Timestamp::from_millis(now);
-        drive.on_frame(time, frame);
-        drive.poll(time, &mut |f| from_drive.push(f));
+        drive.on_frame(time, Port::MAIN, frame);
+        drive.poll(time, &mut |_, f| from_drive.push(f));
         for node in [&mut roboteq as &mut dyn Node, &mut plain, &mut master] {
             node.on_frame(time, Port::MAIN, frame);
             node.poll(time, &mut |_, _| {});
@@ -101,11 +101,11 @@ proptest! {
     #[test]
     fn every_request_to_an_idle_server_gets_an_answer(data in proptest::collection::vec(any::<u8>(), 0..=8)) {
         let mut drive = Device::new(2, drive_dictionary(2), Drive::new());
-        drive.poll(Timestamp::ZERO, &mut |_| {});
+        drive.poll(Timestamp::ZERO, &mut |_, _| {});
         let request = Frame::classic(Id::standard(0x602).unwrap(), &data).unwrap();
-        drive.on_frame(Timestamp::ZERO, &request);
+        drive.on_frame(Timestamp::ZERO, Port::MAIN, &request);
         let mut answers = Vec::new();
-        drive.poll(Timestamp::ZERO, &mut |f| if f.id() == Id::standard(0x582).ok() { answers.push(f) });
+        drive.poll(Timestamp::ZERO, &mut |_, f| if f.id() == Id::standard(0x582).ok() { answers.push(f) });
         let client_abort = data.len() == 8 && data[0] >> 5 == 4;
         prop_assert_eq!(answers.is_empty(), client_abort, "request {:02X?} answered by {:?}", data, answers);
         if let Some(answer) = answers.first() {
@@ -212,14 +212,15 @@ fn malformed_requests_get_their_abort_codes() {
     ];
     for (what, requests, expected) in cases {
         let mut drive = Device::new(2, drive_dictionary(2), Drive::new());
-        drive.poll(Timestamp::ZERO, &mut |_| {});
+        drive.poll(Timestamp::ZERO, &mut |_, _| {});
         let mut last = None;
         for request in &requests {
             drive.on_frame(
                 Timestamp::ZERO,
+                Port::MAIN,
                 &Frame::classic(Id::standard(0x602).unwrap(), request).unwrap(),
             );
-            drive.poll(Timestamp::ZERO, &mut |f| {
+            drive.poll(Timestamp::ZERO, &mut |_, f| {
                 if f.id() == Id::standard(0x582).ok() {
                     last = Some(f)
                 }
@@ -232,13 +233,14 @@ fn malformed_requests_get_their_abort_codes() {
     }
     // A short request (SDO frames are eight bytes).
     let mut drive = Device::new(2, drive_dictionary(2), Drive::new());
-    drive.poll(Timestamp::ZERO, &mut |_| {});
+    drive.poll(Timestamp::ZERO, &mut |_, _| {});
     drive.on_frame(
         Timestamp::ZERO,
+        Port::MAIN,
         &Frame::classic(Id::standard(0x602).unwrap(), &[0x40, 0x00, 0x10]).unwrap(),
     );
     let mut answers = Vec::new();
-    drive.poll(Timestamp::ZERO, &mut |f| answers.push(f));
+    drive.poll(Timestamp::ZERO, &mut |_, f| answers.push(f));
     assert_eq!(
         answers.last().unwrap().data(),
         [0x80, 0x00, 0x10, 0x00, 0x01, 0x00, 0x04, 0x05]

@@ -7,6 +7,7 @@
 
 /// Why a response could not be measured.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum MetricsError {
     /// Times and values differ in length.
     LengthMismatch,

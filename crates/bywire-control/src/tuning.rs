@@ -99,6 +99,7 @@ impl Rule {
 
 /// Why an experiment found nothing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum TuningError {
     /// The loop never oscillated within the gain range (raise the upper bound).
     NoOscillation,

@@ -176,6 +176,7 @@ impl BitTiming {
 
 /// Why no timing fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum BitTimingError {
     /// Zero bitrate or clock.
     #[error("bitrate and clock must be above zero")]

@@ -112,31 +112,3 @@ impl<N: Node + ?Sized> Node for &mut N {
         (**self).next_deadline()
     }
 }
-
-/// A node with a single bus connection, written with inherent single-port methods, seen as a
-/// [`Node`] on [`Port::MAIN`]: frames from any port go in, frames come out on the main port.
-#[macro_export]
-macro_rules! single_port_node {
-    ($ty:ty $(where $($gen:ident : $bound:path),*)?) => {
-        impl$(<$($gen: $bound),*>)? $crate::node::Node for $ty {
-            fn on_frame(
-                &mut self,
-                now: $crate::Timestamp,
-                _port: $crate::node::Port,
-                frame: &$crate::Frame,
-            ) {
-                <$ty>::on_frame(self, now, frame);
-            }
-            fn poll(
-                &mut self,
-                now: $crate::Timestamp,
-                out: &mut dyn FnMut($crate::node::Port, $crate::Frame),
-            ) {
-                <$ty>::poll(self, now, &mut |frame| out($crate::node::Port::MAIN, frame));
-            }
-            fn next_deadline(&self) -> Option<$crate::Timestamp> {
-                <$ty>::next_deadline(self)
-            }
-        }
-    };
-}

@@ -100,6 +100,7 @@ pub struct RangeError {
 
 /// Why [`MessageCodec::encode_checked`] wrote nothing.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum EncodeError {
     /// A value outside its signal's range (strict mode).
     #[error(transparent)]
@@ -111,6 +112,7 @@ pub enum EncodeError {
 
 /// Why a frame does not decode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum DecodeError {
     /// Fewer bytes than the message's size.
     #[error("{got} bytes, but the message has {needed}")]

@@ -89,6 +89,7 @@ pub struct Protection {
 
 /// Why a frame's protection does not check out, or cannot be applied.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum ProtectionError {
     /// The checksum in the frame differs from the computed one.
     #[error("checksum {found:#04X} does not match the computed {expected:#04X}")]

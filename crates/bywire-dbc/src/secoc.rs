@@ -31,6 +31,7 @@ pub struct Secured {
 
 /// Why a message's SecOC declaration is unusable.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum SecuredError {
     /// An attribute with a value of the wrong kind or range.
     #[error("message {message}: attribute {attribute} must be {expected}")]

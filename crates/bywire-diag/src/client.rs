@@ -52,6 +52,7 @@ impl Default for ClientTiming {
 
 /// Why a request got no positive answer.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum ClientError {
     /// A request is already in flight.
     Busy,
@@ -328,15 +329,15 @@ impl UdsClient {
     }
 
     /// Take a frame from the bus.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        self.channel.on_frame(now, frame);
+    fn receive(&mut self, now: Timestamp, frame: &Frame) {
+        self.channel.on_frame(now, Port::MAIN, frame);
         self.take_channel_events(now);
     }
 
     /// A frame the client sent is on the bus (its transmit confirmation: P2 starts at the
     /// request's).
-    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
-        self.channel.on_sent(now, frame);
+    fn confirm(&mut self, now: Timestamp, frame: &Frame) {
+        self.channel.on_sent(now, Port::MAIN, frame);
         self.take_channel_events(now);
     }
 
@@ -361,7 +362,7 @@ impl UdsClient {
     }
 
     /// Send what is due; end a request whose time is up.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+    fn send_due(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         self.step(now, Input::Tick);
         self.keep_session(now);
         self.channel.poll(now, out);
@@ -388,7 +389,7 @@ impl UdsClient {
     }
 
     /// When the client next has something to do.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    fn deadline(&self) -> Option<Timestamp> {
         let request = match self.state {
             State::Idle => None,
             State::Sending { deadline, .. } | State::Awaiting { deadline, .. } => Some(deadline),
@@ -403,20 +404,20 @@ impl UdsClient {
 
 impl Node for UdsClient {
     fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
-        UdsClient::on_frame(self, now, frame);
+        self.receive(now, frame);
     }
 
     fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) -> bool {
-        UdsClient::on_sent(self, now, frame);
+        self.confirm(now, frame);
         true
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
-        UdsClient::poll(self, now, out);
+        self.send_due(now, out);
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
-        UdsClient::next_deadline(self)
+        self.deadline()
     }
 }
 

@@ -241,6 +241,7 @@ impl IsoTpConfig {
 
 /// What went wrong, by the standard's names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
 pub enum IsoTpError {
     /// N_TIMEOUT_A: a frame was not confirmed on the bus in time (N_As sending, N_Ar for a
     /// flow-control frame while receiving).
@@ -321,6 +322,7 @@ pub enum IsoTpEvent {
 
 /// Why a message cannot be sent now.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
 pub enum SendError {
     /// A message is still being sent.
     Busy,
@@ -489,7 +491,7 @@ impl IsoTp {
     }
 
     /// Take a frame from the bus.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, frame: &Frame) {
         if frame.id() != Some(self.config.rx_id) || frame.is_remote() || frame.is_error() {
             return;
         }
@@ -731,7 +733,7 @@ impl IsoTp {
     }
 
     /// Send what is due at `now`.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         if self
             .unconfirmed_flow
             .as_ref()
@@ -905,7 +907,7 @@ impl IsoTp {
     }
 
     /// A frame this channel sent is on the bus: the timers that start at a confirmation start.
-    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
+    fn confirm(&mut self, now: Timestamp, frame: &Frame) {
         if self
             .unconfirmed_data
             .as_ref()
@@ -938,7 +940,7 @@ impl IsoTp {
     }
 
     /// When the channel next has something to do.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    fn deadline(&self) -> Option<Timestamp> {
         let tx = match self.tx {
             _ if self.unconfirmed_data.is_some() => {
                 self.unconfirmed_data.as_ref().map(|u| u.deadline)
@@ -963,23 +965,23 @@ impl IsoTp {
 impl bywire_core::node::Node for IsoTp {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         if port == self.port {
-            IsoTp::on_frame(self, now, frame);
+            self.receive(now, frame);
         }
     }
 
     fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
         if port == self.port {
-            IsoTp::on_sent(self, now, frame);
+            self.confirm(now, frame);
         }
         port == self.port
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
-        IsoTp::poll(self, now, out);
+        self.step(now, out);
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
-        IsoTp::next_deadline(self)
+        self.deadline()
     }
 }
 

@@ -739,9 +739,9 @@ impl UdsServer {
     }
 
     /// Take a frame from the bus.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, frame: &Frame) {
         if let Some(functional) = self.functional.as_mut() {
-            functional.on_frame(now, frame);
+            functional.on_frame(now, Port::MAIN, frame);
             let mut requests = Vec::new();
             while let Some(event) = functional.next_event() {
                 if let IsoTpEvent::Received(request) = event {
@@ -756,7 +756,7 @@ impl UdsServer {
                 }
             }
         }
-        self.channel.on_frame(now, frame);
+        self.channel.on_frame(now, Port::MAIN, frame);
         while let Some(event) = self.channel.next_event() {
             match event {
                 IsoTpEvent::Received(request) => {
@@ -771,12 +771,12 @@ impl UdsServer {
     }
 
     /// A frame the server sent is on the bus (its transmit confirmation).
-    pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
-        self.channel.on_sent(now, frame);
+    fn confirm(&mut self, now: Timestamp, frame: &Frame) {
+        self.channel.on_sent(now, Port::MAIN, frame);
     }
 
     /// Send what is due.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         // S3 runs only while no request is being worked on.
         if self.pending.is_some() {
             self.last_request = now;
@@ -819,7 +819,7 @@ impl UdsServer {
     }
 
     /// When the server next has something to do.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    fn deadline(&self) -> Option<Timestamp> {
         let s3 = (self.session != Session::Default)
             .then(|| self.last_request.saturating_add(self.timing.s3));
         // An answer waits for the one before it to be sent (the channel says when).
@@ -861,19 +861,19 @@ fn seed(now: Timestamp, count: u32) -> [u8; 4] {
 
 impl Node for UdsServer {
     fn on_frame(&mut self, now: Timestamp, _port: Port, frame: &Frame) {
-        UdsServer::on_frame(self, now, frame);
+        self.receive(now, frame);
     }
 
     fn on_sent(&mut self, now: Timestamp, _port: Port, frame: &Frame) -> bool {
-        UdsServer::on_sent(self, now, frame);
+        self.confirm(now, frame);
         true
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
-        UdsServer::poll(self, now, out);
+        self.step(now, out);
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
-        UdsServer::next_deadline(self)
+        self.deadline()
     }
 }

@@ -8,6 +8,7 @@
     clippy::indexing_slicing
 )]
 
+use bywire_core::node::Port;
 use core::time::Duration;
 
 use bywire_core::node::Node;
@@ -81,11 +82,11 @@ impl Bench {
         for f in &to_server {
             self.requests.push(*f);
             if !self.server_silent {
-                self.server.on_frame(self.now, f);
+                self.server.on_frame(self.now, Port::MAIN, f);
             }
         }
         for f in &to_client {
-            self.client.on_frame(self.now, f);
+            self.client.on_frame(self.now, Port::MAIN, f);
         }
         self.now = self.now.saturating_add(Duration::from_millis(1));
     }

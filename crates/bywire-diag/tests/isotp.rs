@@ -9,6 +9,7 @@
     clippy::cast_possible_truncation
 )]
 
+use bywire_core::node::{Node, Port};
 use core::time::Duration;
 
 use bywire_core::{Frame, Id, Timestamp};
@@ -42,9 +43,9 @@ fn pump(a: &mut IsoTp, b: &mut IsoTp, mut now: Timestamp, limit: Duration) -> (T
         let moved = !sent.is_empty();
         for (from, frame) in sent {
             if from == 0 {
-                b.on_frame(now, &frame);
+                b.on_frame(now, Port::MAIN, &frame);
             } else {
-                a.on_frame(now, &frame);
+                a.on_frame(now, Port::MAIN, &frame);
             }
             trace.push((now, from, frame));
         }
@@ -215,7 +216,11 @@ fn no_flow_control_is_n_timeout_bs() {
 #[test]
 fn a_missing_consecutive_frame_is_n_timeout_cr() {
     let mut b = IsoTp::new(IsoTpConfig::new(id(0x7E8), id(0x7E0)));
-    b.on_frame(Timestamp::ZERO, &"7E0#1014000102030405".parse().unwrap());
+    b.on_frame(
+        Timestamp::ZERO,
+        Port::MAIN,
+        &"7E0#1014000102030405".parse().unwrap(),
+    );
     let mut fc = Vec::new();
     b.poll(Timestamp::ZERO, &mut |_, f| fc.push(f));
     assert_eq!(fc[0].to_string(), "7E8#300000");
@@ -238,9 +243,21 @@ fn a_missing_consecutive_frame_is_n_timeout_cr() {
 #[test]
 fn a_consecutive_frame_out_of_sequence_is_n_wrong_sn() {
     let mut b = IsoTp::new(IsoTpConfig::new(id(0x7E8), id(0x7E0)));
-    b.on_frame(Timestamp::ZERO, &"7E0#1014000102030405".parse().unwrap());
-    b.on_frame(Timestamp::ZERO, &"7E0#2106070809101112".parse().unwrap());
-    b.on_frame(Timestamp::ZERO, &"7E0#2313141516171819".parse().unwrap());
+    b.on_frame(
+        Timestamp::ZERO,
+        Port::MAIN,
+        &"7E0#1014000102030405".parse().unwrap(),
+    );
+    b.on_frame(
+        Timestamp::ZERO,
+        Port::MAIN,
+        &"7E0#2106070809101112".parse().unwrap(),
+    );
+    b.on_frame(
+        Timestamp::ZERO,
+        Port::MAIN,
+        &"7E0#2313141516171819".parse().unwrap(),
+    );
     assert_eq!(
         events(&mut b),
         [IsoTpEvent::Failed {
@@ -263,14 +280,14 @@ fn wait_frames_hold_the_sender_until_their_limit() {
     let wait: Frame = "7E8#310000".parse().unwrap();
     for i in 1..=2u64 {
         let t = Timestamp::from_nanos(i * 500_000_000);
-        a.on_frame(t, &wait);
+        a.on_frame(t, Port::MAIN, &wait);
         // Each WAIT restarts N_Bs.
         assert_eq!(
             a.next_deadline(),
             Some(t.saturating_add(Duration::from_secs(1)))
         );
     }
-    a.on_frame(Timestamp::from_nanos(1_500_000_000), &wait);
+    a.on_frame(Timestamp::from_nanos(1_500_000_000), Port::MAIN, &wait);
     assert_eq!(
         events(&mut a),
         [IsoTpEvent::Failed {
@@ -282,7 +299,7 @@ fn wait_frames_hold_the_sender_until_their_limit() {
     let mut a = IsoTp::new(IsoTpConfig::new(id(0x7E0), id(0x7E8)));
     a.send(&message(20)).unwrap();
     a.poll(Timestamp::ZERO, &mut |_, _| {});
-    a.on_frame(Timestamp::ZERO, &"7E8#370000".parse().unwrap());
+    a.on_frame(Timestamp::ZERO, Port::MAIN, &"7E8#370000".parse().unwrap());
     assert_eq!(
         events(&mut a),
         [IsoTpEvent::Failed {
@@ -336,7 +353,11 @@ fn extended_and_mixed_addressing_put_their_byte_first() {
         assert_eq!(frame.data()[0], if *from == 0 { 0x10 } else { 0xF1 });
     }
     // A frame for another target is not ours.
-    b.on_frame(Timestamp::ZERO, &"7E0#11020102".parse().unwrap());
+    b.on_frame(
+        Timestamp::ZERO,
+        Port::MAIN,
+        &"7E0#11020102".parse().unwrap(),
+    );
     assert!(events(&mut b).is_empty());
     let (mut a, mut b) = pair(|c| c.addressing = Addressing::Mixed { extension: 0x42 });
     a.send(&[1, 2, 3]).unwrap();
@@ -486,7 +507,7 @@ proptest! {
                 Frame::classic(id(0x7E0), &data[..data.len().min(8)])
             };
             if let Ok(frame) = frame {
-                b.on_frame(now, &frame);
+                b.on_frame(now, Port::MAIN, &frame);
             }
             b.poll(now, &mut |_, _| {});
             now = now.saturating_add(Duration::from_millis(3));
@@ -524,7 +545,6 @@ proptest! {
 #[test]
 fn throughput_is_within_5_percent_of_the_wire() {
     use bywire_core::busload::{frame_time_ns, Bitrates};
-    use bywire_core::node::Port;
     use bywire_net::network::Network;
     for (fd, data, confirmed) in [
         (false, None, false),
@@ -595,7 +615,6 @@ fn throughput_is_within_5_percent_of_the_wire() {
 mod confirmed {
     use super::*;
     use bywire_core::busload::{frame_time_ns, Bitrates};
-    use bywire_core::node::Port;
     use bywire_net::network::{Network, NodeHandle, NodeMut};
 
     const N_A: Duration = Duration::from_millis(50);

@@ -8,6 +8,7 @@
     clippy::indexing_slicing
 )]
 
+use bywire_core::node::{Node, Port};
 use core::time::Duration;
 
 use bywire_core::{Id, Timestamp};
@@ -69,10 +70,10 @@ impl Bench {
             self.server.poll(self.now, &mut |_, f| to_tester.push(f));
             let moved = !to_server.is_empty() || !to_tester.is_empty();
             for f in &to_server {
-                self.server.on_frame(self.now, f);
+                self.server.on_frame(self.now, Port::MAIN, f);
             }
             for f in &to_tester {
-                self.tester.on_frame(self.now, f);
+                self.tester.on_frame(self.now, Port::MAIN, f);
             }
             while let Some(event) = self.tester.next_event() {
                 if let IsoTpEvent::Received(m) = event {
@@ -365,7 +366,7 @@ fn functional_requests_are_answered_physically_and_quietly_refused() {
         let mut frames = Vec::new();
         functional.poll(b.now, &mut |_, f| frames.push(f));
         for f in &frames {
-            b.server.on_frame(b.now, f);
+            b.server.on_frame(b.now, Port::MAIN, f);
         }
         b.run(Duration::from_millis(100))
     };

@@ -73,6 +73,7 @@ impl LogRecord {
 
 /// A line that is not a candump log line, with where the problem is.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum LogError {
     /// The line is malformed.
     #[error("line {line}, column {column}: {kind}")]

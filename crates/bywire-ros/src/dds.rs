@@ -28,6 +28,7 @@ impl Message for ControlModeResponse {}
 
 /// What can go wrong on the DDS side.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum RosError {
     /// A name the ROS 2 naming rules refuse.
     #[error("'{name}' is not a ROS 2 name: {why}")]

@@ -17,6 +17,7 @@ use crate::Key;
 
 /// Why a key file cannot be used.
 #[derive(Debug)]
+#[non_exhaustive]
 pub enum KeyFileError {
     /// It cannot be read.
     Io {

@@ -102,6 +102,7 @@ pub fn profile(name: &str) -> Option<&'static Profile> {
 
 /// Why lengths do not make a layout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum LayoutError {
     /// The authentic payload is longer than [`MAX_PAYLOAD`].
     Payload(usize),
@@ -286,6 +287,7 @@ impl fmt::Debug for Key {
 
 /// Why a message cannot be signed or checked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum SecOcError {
     /// The buffer is shorter than the secured message.
     Short {

@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 /// Why the freshness file cannot be used.
 #[derive(Debug)]
+#[non_exhaustive]
 pub enum StoreError {
     /// Reading or writing failed.
     Io {

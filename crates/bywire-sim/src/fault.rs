@@ -8,8 +8,8 @@ use bywire_net::sim::Tamper;
 use bywire_tug::messages::AdsToVehicleControl;
 
 use crate::attacker::Attack;
+use crate::bus::TugBus;
 use crate::steering::SensorFault;
-use crate::tug::TugBus;
 
 /// A fault (or operator action) a scenario injects.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -40,8 +40,10 @@
 
 pub mod attacker;
 pub mod battery;
+pub mod bus;
 pub mod chassis;
 pub mod drive;
+pub mod event;
 pub mod fault;
 pub mod mission;
 pub mod nodes;

@@ -11,6 +11,7 @@ use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
+use crate::event::Happening;
 use crate::mission::{ActiveStep, STEP_HOLD};
 
 /// A frame seen on a bus, with its end-of-frame time.
@@ -68,28 +69,6 @@ pub fn windowed_loads(trace: &[Sample], window: usize) -> [Vec<(Timestamp, f64)>
         }
     }
     loads
-}
-
-/// Something that happened in a run.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SimEvent {
-    /// When.
-    pub t: Timestamp,
-    /// What kind (`watchdog`, `estop`, `mode`, `fault`, `heartbeat_lost`, ...).
-    pub kind: String,
-    /// Detail (the new state, the fault).
-    pub detail: String,
-}
-
-impl SimEvent {
-    /// An event of `kind` at `t`.
-    pub fn new(t: Timestamp, kind: &str, detail: String) -> SimEvent {
-        SimEvent {
-            t,
-            kind: kind.to_string(),
-            detail,
-        }
-    }
 }
 
 /// One steering step at a standstill: the ADS's command from `from` to `to` degrees and the
@@ -348,43 +327,28 @@ impl Default for SupervisorWatch {
 
 impl SupervisorWatch {
     /// The supervisor's watchdog level, E-stop state, mode and redundancy now: each that
-    /// changed given to `record` as an event (kind, detail).
+    /// changed given to `record`.
     pub(crate) fn note(
         &mut self,
         seen: (Watchdog, EstopState, ControlMode),
         degraded: Option<Channel>,
-        mut record: impl FnMut(&str, String),
+        mut record: impl FnMut(Happening),
     ) {
         let (watchdog, estop, mode) = self.seen;
         if core::mem::discriminant(&seen.0) != core::mem::discriminant(&watchdog) {
-            record("watchdog", watchdog_name(seen.0).to_string());
+            record(Happening::Watchdog(seen.0));
         }
         if seen.1 != estop {
-            record("estop", format!("{:?}", seen.1));
+            record(Happening::Estop(seen.1));
         }
         if seen.2 != mode {
-            record("mode", format!("{:?}", seen.2));
+            record(Happening::Mode(seen.2));
         }
         self.seen = seen;
         if degraded != self.degraded {
             self.degraded = degraded;
-            let detail = match degraded {
-                Some(Channel::A) => "bus 1 alone (bus 1b lost)",
-                Some(Channel::B) => "bus 1b alone (bus 1 lost)",
-                None => "both buses agree",
-            };
-            record("redundancy", detail.to_string());
+            record(Happening::Redundancy(degraded));
         }
-    }
-}
-
-fn watchdog_name(watchdog: Watchdog) -> &'static str {
-    match watchdog {
-        Watchdog::Normal => "normal",
-        Watchdog::Holding { .. } => "holding",
-        Watchdog::Decelerating { .. } => "decelerating",
-        Watchdog::FullBraking => "full_braking",
-        Watchdog::Recovering { .. } => "recovering",
     }
 }
 
@@ -495,8 +459,8 @@ mod tests {
         let mut watch = SupervisorWatch::default();
         let mut events = Vec::new();
         let mut note = |watch: &mut SupervisorWatch, seen, degraded| {
-            watch.note(seen, degraded, |kind, detail| {
-                events.push(format!("{kind} {detail}"));
+            watch.note(seen, degraded, |what| {
+                events.push(format!("{} {what}", what.kind()));
             });
         };
         let engaged = (

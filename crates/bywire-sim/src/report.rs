@@ -347,8 +347,8 @@ impl RunReport {
             .into_iter()
             .chain(tug.events.iter().map(|e| EventRecord {
                 t_s: seconds(e.t),
-                kind: e.kind.clone(),
-                detail: e.detail.clone(),
+                kind: e.kind().into(),
+                detail: e.what.to_string(),
             }))
             .collect();
         // Stable: events of one instant keep their order.

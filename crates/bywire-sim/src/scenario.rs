@@ -55,6 +55,7 @@ pub struct Scenario {
 
 /// Why a scenario file was refused.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ScenarioError {
     /// Not readable, or not TOML of this shape.
     #[error("{file}: {message}")]

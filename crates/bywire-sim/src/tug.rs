@@ -50,16 +50,18 @@ use bywire_vehicle::supervisor::{Redundancy, Supervisor};
 
 use crate::attacker::Attacker;
 use crate::battery::{Battery, BatteryParams};
+pub use crate::bus::TugBus;
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
+use crate::event::{Happening, SimEvent};
 use crate::fault::Fault;
 use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
 use crate::nodes::{
     self, BatteryReading, Bms, ImuNode, IoNode, IoReading, Periodic, SafetyController,
 };
 use crate::record::{
-    Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SimEvent, SteeringRecord,
-    SupervisorWatch, TruthSample,
+    Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SteeringRecord, SupervisorWatch,
+    TruthSample,
 };
 use crate::rng::Rng;
 use crate::steering::{SensorFault, SteeringChain, SteeringParams};
@@ -117,39 +119,6 @@ impl Default for TugParams {
 }
 
 pub use crate::mission::STEP_HOLD;
-
-/// The tug's buses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TugBus {
-    /// Vehicle control, 500 kbit/s.
-    Bus1,
-    /// CANopen drives, 1 Mbit/s.
-    Bus2,
-    /// Sensors, 500 kbit/s.
-    Bus3,
-    /// The redundant command bus, 500 kbit/s.
-    Bus1b,
-}
-
-impl TugBus {
-    /// Every bus.
-    pub const ALL: [TugBus; 4] = [TugBus::Bus1, TugBus::Bus2, TugBus::Bus3, TugBus::Bus1b];
-
-    /// Its name, as its log file and servers call it.
-    pub fn name(self) -> &'static str {
-        match self {
-            TugBus::Bus1 => "bus1",
-            TugBus::Bus2 => "bus2",
-            TugBus::Bus3 => "bus3",
-            TugBus::Bus1b => "bus1b",
-        }
-    }
-
-    /// The bus of this name (`bus1`, `bus2`, `bus3`, `bus1b`).
-    pub fn named(name: &str) -> Option<TugBus> {
-        TugBus::ALL.into_iter().find(|b| b.name() == name)
-    }
-}
 
 /// One corner's plants: the steering chain its steering drive turns, the wheel its drive turns.
 struct Corner {
@@ -300,6 +269,7 @@ pub struct Tug {
 
 /// Why a tug could not be built.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum TugError {
     /// The tug's shipped profile did not load.
     #[error("the reference tug's profile: {0}")]
@@ -570,7 +540,7 @@ impl Tug {
     /// Inject `fault` now, for `duration` (`None`: for good).
     pub fn inject(&mut self, fault: Fault, duration: Option<Duration>) {
         let now = self.now;
-        self.record("fault", fault.to_string());
+        self.record(Happening::Fault(fault));
         match fault {
             Fault::SensorFault(corner, sensor) => {
                 if let Some(c) = self.corners.get_mut(corner) {
@@ -660,8 +630,8 @@ impl Tug {
         }) && self.pose_speed() < 0.01
     }
 
-    fn record(&mut self, kind: &str, detail: String) {
-        self.events.push(SimEvent::new(self.now, kind, detail));
+    fn record(&mut self, what: Happening) {
+        self.events.push(SimEvent { t: self.now, what });
     }
 
     /// Simulated time.
@@ -885,7 +855,7 @@ impl Tug {
                 }
                 _ => self.set_tampering(fault, false),
             }
-            self.record("fault_cleared", fault.to_string());
+            self.record(Happening::FaultCleared(fault));
         }
         self.active
             .retain(|(_, end)| end.is_none_or(|end| now < end));
@@ -1046,8 +1016,8 @@ impl Tug {
             }
         }
         for (bus, node, state) in changes {
-            let detail = format!("{} {}: {state:?}", bus.name(), self.port_name(bus, node));
-            self.record("bus_state", detail);
+            let who = self.port_name(bus, node);
+            self.record(Happening::BusState { bus, who, state });
         }
         if let Some(supervisor) = self
             .net
@@ -1057,8 +1027,8 @@ impl Tug {
             let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
             let degraded = supervisor.degraded();
             let (now, events) = (self.now, &mut self.events);
-            self.supervisor_watch.note(seen, degraded, |kind, detail| {
-                events.push(SimEvent::new(now, kind, detail));
+            self.supervisor_watch.note(seen, degraded, |what| {
+                events.push(SimEvent { t: now, what });
             });
         }
         self.take_node_events();
@@ -1076,7 +1046,7 @@ impl Tug {
                 .node_mut(self.nodes.ecu)
                 .and_then(|mut e| e.next_event());
             let Some((_, event)) = event else { break };
-            self.record(event.kind(), event.to_string());
+            self.record(Happening::Ecu(event));
         }
         while self.ads().is_some_and(AdsDriver::has_events) {
             let event = self
@@ -1084,7 +1054,7 @@ impl Tug {
                 .node_mut(self.nodes.ads)
                 .and_then(|mut a| a.next_event());
             let Some((_, event)) = event else { break };
-            self.record(event.kind(), event.to_string());
+            self.record(Happening::Mission(event));
         }
     }
 

@@ -3,10 +3,14 @@
 #![allow(clippy::unwrap_used)]
 
 use bywire_core::Timestamp;
-use bywire_sim::record::SimEvent;
+use bywire_sim::attacker::Attack;
+use bywire_sim::event::{Happening, SimEvent};
+use bywire_sim::fault::Fault;
 use bywire_sim::report::SecurityCounts;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::Tug;
+use bywire_vehicle::redundancy::Channel;
+use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
 /// The fault tour to its end, the tug plain or secured.
 fn tour(secoc: bool) -> Tug {
@@ -24,23 +28,23 @@ fn at(t: &SimEvent) -> f64 {
     t.t.as_nanos() as f64 / 1e9
 }
 
-/// The first event of `kind` starting with `detail` in [from, to).
-fn first<'a>(tug: &'a Tug, kind: &str, detail: &str, from: f64, to: f64) -> Option<&'a SimEvent> {
+/// The first event that is `what` in [from, to).
+fn first(tug: &Tug, what: impl Fn(&Happening) -> bool, from: f64, to: f64) -> Option<&SimEvent> {
     tug.events
         .iter()
-        .find(|e| (from..to).contains(&at(e)) && e.kind == kind && e.detail.starts_with(detail))
+        .find(|e| (from..to).contains(&at(e)) && what(&e.what))
 }
 
-fn attack_window(tug: &Tug, attack: &str) -> (f64, f64) {
-    let start = first(tug, "fault", &format!("Attack({attack})"), 0.0, 1e9).unwrap();
-    let end = first(
-        tug,
-        "fault_cleared",
-        &format!("Attack({attack})"),
-        at(start),
-        1e9,
-    )
-    .unwrap();
+/// Any change of the watchdog's level.
+fn watchdog(what: &Happening) -> bool {
+    matches!(what, Happening::Watchdog(_))
+}
+
+fn attack_window(tug: &Tug, attack: Attack) -> (f64, f64) {
+    let fault = Fault::Attack(attack);
+    let start = first(tug, |w| *w == Happening::Fault(fault), 0.0, 1e9).unwrap();
+    let cleared = |w: &Happening| *w == Happening::FaultCleared(fault);
+    let end = first(tug, cleared, at(start), 1e9).unwrap();
     (at(start), at(end))
 }
 
@@ -48,12 +52,14 @@ fn attack_window(tug: &Tug, attack: &str) -> (f64, f64) {
 /// E-stop chain's frames stop, and the chain counts as open — the safe state — while the
 /// commands go on over bus 1b alone.
 fn assert_flood_ends_in_the_safe_state(tug: &Tug) {
-    let (start, end) = attack_window(tug, "Flood");
-    let braking = first(tug, "estop", "BrakesApplied", start, end).unwrap();
+    let (start, end) = attack_window(tug, Attack::Flood);
+    let estop = |state| move |w: &Happening| *w == Happening::Estop(state);
+    let braking = first(tug, estop(EstopState::BrakesApplied), start, end).unwrap();
     // Three 20 ms cycles after the chain's last frame, plus the frame then on its way.
     assert!(at(braking) - start <= 0.065, "{braking:?}");
-    assert!(first(tug, "redundancy", "bus 1b alone", start, end).is_some());
-    assert!(first(tug, "estop", "Stopped", start, end + 2.0).is_some());
+    let b_alone = |w: &Happening| *w == Happening::Redundancy(Some(Channel::B));
+    assert!(first(tug, b_alone, start, end).is_some());
+    assert!(first(tug, estop(EstopState::Stopped), start, end + 2.0).is_some());
     assert!(tug.attacker().unwrap().sent() > 1_000);
 }
 
@@ -65,10 +71,11 @@ fn without_secoc_the_attacks_pass_every_check_but_the_redundant_bus() {
     // (a) Forged commands pass CRC and counter: the ADS's own are then refused as repeats.
     // Only bus 1b's copy, which the attacker cannot reach, disagrees: the voter brakes fully
     // (a vehicle without the second bus obeys them; see the wire tests). A denial of service.
-    for attack in ["ForgeCommands", "ReplayCommands"] {
+    for attack in [Attack::ForgeCommands, Attack::ReplayCommands] {
         let (start, end) = attack_window(&tug, attack);
-        let braking = first(&tug, "watchdog", "full_braking", start, end).unwrap();
-        assert!(at(braking) - start <= 0.025, "{attack}: {braking:?}");
+        let full = |w: &Happening| *w == Happening::Watchdog(Watchdog::FullBraking);
+        let braking = first(&tug, full, start, end).unwrap();
+        assert!(at(braking) - start <= 0.025, "{attack:?}: {braking:?}");
     }
     assert!(stats.disagreements >= 80, "{stats:?}");
     assert!(stats.repeated >= 80, "{stats:?}");
@@ -78,8 +85,8 @@ fn without_secoc_the_attacks_pass_every_check_but_the_redundant_bus() {
     // tell it from the vehicle's.
     assert!(security.false_speeds >= 45, "{security:?}");
     assert_eq!(security.ads_authentication, 0);
-    let (start, end) = attack_window(&tug, "ForgeState");
-    assert!(first(&tug, "watchdog", "", start, end).is_none());
+    let (start, end) = attack_window(&tug, Attack::ForgeState);
+    assert!(first(&tug, watchdog, start, end).is_none());
     assert_flood_ends_in_the_safe_state(&tug);
 }
 
@@ -91,11 +98,15 @@ fn with_secoc_forgeries_and_replays_are_refused_and_counted_and_the_tug_drives_o
     assert!(security.secoc);
     // (a), (b): every forged and replayed command refused by its MAC or its freshness; the
     // watchdog never notices, the vehicle drives on.
-    for attack in ["ForgeCommands", "ReplayCommands", "ForgeState"] {
+    for attack in [
+        Attack::ForgeCommands,
+        Attack::ReplayCommands,
+        Attack::ForgeState,
+    ] {
         let (start, end) = attack_window(&tug, attack);
         assert!(
-            first(&tug, "watchdog", "", start, end + 0.1).is_none(),
-            "{attack}: {:?}",
+            first(&tug, watchdog, start, end + 0.1).is_none(),
+            "{attack:?}: {:?}",
             tug.events
         );
     }
@@ -116,8 +127,6 @@ fn with_secoc_forgeries_and_replays_are_refused_and_counted_and_the_tug_drives_o
 /// The apron loop with bus 1b lost from 5 s, and forged commands on bus 1 from 10 s for a
 /// second: with one bus left there is no copy to disagree with.
 fn forging_on_one_bus(secoc: bool) -> Tug {
-    use bywire_sim::attacker::Attack;
-    use bywire_sim::fault::Fault;
     use std::time::Duration;
     let mut scenario = Scenario::builtin("apron-loop").unwrap();
     scenario.tug.secoc = secoc;
@@ -152,8 +161,8 @@ fn on_one_bus_the_plain_tug_obeys_forged_commands_and_the_secured_one_refuses_th
     let security = SecurityCounts::of(&secured);
     assert_eq!(security.foreign_commands, 0, "{security:?}");
     assert!(secured.ecu().unwrap().stats().authentication >= 45);
-    let (start, end) = attack_window(&secured, "ForgeCommands");
-    assert!(first(&secured, "watchdog", "", start, end + 0.1).is_none());
+    let (start, end) = attack_window(&secured, Attack::ForgeCommands);
+    assert!(first(&secured, watchdog, start, end + 0.1).is_none());
 }
 
 /// The apron loop's first 20 s, the tug plain or secured: bus 1's load as the simulation

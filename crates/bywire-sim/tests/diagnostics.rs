@@ -9,6 +9,7 @@
     clippy::indexing_slicing
 )]
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Id, Timestamp};
 use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
 use bywire_diag::isotp::IsoTpConfig;
@@ -59,7 +60,7 @@ impl Tester {
             step(tug);
             let now = tug.now();
             while let Some((_, frame)) = tug.receive(TugBus::Bus1, self.port) {
-                self.client.on_frame(now, &frame);
+                self.client.on_frame(now, Port::MAIN, &frame);
             }
             let mut out = Vec::new();
             self.client.poll(now, &mut |_, f| out.push(f));

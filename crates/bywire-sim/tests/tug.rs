@@ -9,7 +9,7 @@
 )]
 
 use bywire_control::kinematics::Point;
-use bywire_sim::tug::{Tug, TugParams};
+use bywire_sim::tug::{Tug, TugBus, TugParams};
 use bywire_tug::messages::ControlMode;
 
 fn route() -> Vec<Point> {
@@ -101,8 +101,13 @@ fn the_same_seed_gives_the_same_frames() {
 
 use std::time::Duration;
 
+use bywire_core::confinement::NodeState;
+use bywire_sim::event::{Happening, SimEvent};
 use bywire_sim::fault::Fault;
-use bywire_sim::record::SimEvent;
+use bywire_sim::mission::MissionEvent;
+use bywire_tug::ecu::EcuEvent;
+use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
 fn cruising() -> Tug {
     let mut tug = Tug::new(TugParams {
@@ -125,18 +130,12 @@ fn run_for(tug: &mut Tug, millis: u64) {
     }
 }
 
-/// Events after `from`, as (ms after it, kind, detail).
-fn after(tug: &Tug, from: u64) -> Vec<(u64, String, String)> {
+/// Events after `from`, as (ms after it, what).
+fn after(tug: &Tug, from: u64) -> Vec<(u64, Happening)> {
     tug.events
         .iter()
         .filter(|e: &&SimEvent| e.t.as_nanos() >= from)
-        .map(|e| {
-            (
-                (e.t.as_nanos() - from) / 1_000_000,
-                e.kind.clone(),
-                e.detail.clone(),
-            )
-        })
+        .map(|e| ((e.t.as_nanos() - from) / 1_000_000, e.what.clone()))
         .collect()
 }
 
@@ -155,19 +154,19 @@ fn a_silent_ads_walks_the_watchdog_cascade_and_the_tug_stops() {
         .0
         .as_nanos();
     let events = after(&tug, from);
-    let at = |detail: &str| {
+    let at = |level: fn(&Watchdog) -> bool| {
         events
             .iter()
-            .find(|(_, kind, d)| kind == "watchdog" && d == detail)
-            .map(|(t, _, _)| *t)
+            .find(|(_, what)| matches!(what, Happening::Watchdog(w) if level(w)))
+            .map(|(t, _)| *t)
     };
     // Commands every 20 ms, a cycle counting as missed half a cycle after it was due: hold at
     // the first missed (30 ms), decelerate at the third (70 ms), full braking at the fifth
     // (110 ms), each within the millisecond the runner steps by.
     let (hold, decelerate, brake) = (
-        at("holding").unwrap(),
-        at("decelerating").unwrap(),
-        at("full_braking").unwrap(),
+        at(|w| matches!(w, Watchdog::Holding { .. })).unwrap(),
+        at(|w| matches!(w, Watchdog::Decelerating { .. })).unwrap(),
+        at(|w| *w == Watchdog::FullBraking).unwrap(),
     );
     assert!((30..=31).contains(&hold), "{events:?}");
     assert!((70..=71).contains(&decelerate), "{events:?}");
@@ -183,17 +182,19 @@ fn an_estop_latches_until_the_operator_resets_it() {
     run_for(&mut tug, 6_000);
     assert!(tug.pose_speed() < 0.05);
     // (The latch passes E-stop requested and motors disabled within one evaluation.)
-    let estop = |tug: &Tug| -> Vec<(u64, String)> {
+    let estop = |tug: &Tug| -> Vec<(u64, EstopState)> {
         after(tug, from)
             .into_iter()
-            .filter(|(_, k, _)| k == "estop")
-            .map(|(t, _, d)| (t, d))
+            .filter_map(|(t, what)| match what {
+                Happening::Estop(state) => Some((t, state)),
+                _ => None,
+            })
             .collect()
     };
     let states = estop(&tug);
     assert_eq!(
-        states.iter().map(|(_, d)| d.as_str()).collect::<Vec<_>>(),
-        ["BrakesApplied", "Stopped"],
+        states.iter().map(|(_, state)| *state).collect::<Vec<_>>(),
+        [EstopState::BrakesApplied, EstopState::Stopped],
         "latched, no automatic reset: {states:?}"
     );
     assert!(
@@ -208,7 +209,7 @@ fn an_estop_latches_until_the_operator_resets_it() {
         states[2..].iter().all(|(t, _)| t * 1_000_000 >= reset_at),
         "{states:?}"
     );
-    assert_eq!(states.last().unwrap().1, "Normal", "{states:?}");
+    assert_eq!(states.last().unwrap().1, EstopState::Normal, "{states:?}");
     assert_eq!(
         tug.ecu().unwrap().mode(),
         ControlMode::Autonomous,
@@ -226,8 +227,8 @@ fn a_silent_drive_is_lost_within_its_consumer_time_and_the_tug_brakes() {
     let events = after(&tug, from);
     let lost = events
         .iter()
-        .find(|(_, k, d)| k == "heartbeat_lost" && d == "node 0x21")
-        .map(|(t, _, _)| *t)
+        .find(|(_, what)| *what == Happening::Ecu(EcuEvent::HeartbeatLost(0x21)))
+        .map(|(t, _)| *t)
         .unwrap();
     // Heartbeats every 100 ms, consumer time 250 ms: lost 150–251 ms after the cut.
     assert!((150..=251).contains(&lost), "{events:?}");
@@ -275,7 +276,7 @@ fn a_crab_approach_moves_sideways_with_the_heading_held() {
     assert!(
         tug.events
             .iter()
-            .any(|e| e.kind == "steering_mode" && e.detail == "Crab"),
+            .any(|e| e.what == Happening::Mission(MissionEvent::SteeringMode(SteeringMode::Crab))),
         "the ADS asked for crab"
     );
     assert!(!crab_angles.is_empty());
@@ -328,13 +329,15 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
         (end.x - start.x).hypot(end.y - start.y) < 0.3,
         "in place: {start:?} → {end:?}"
     );
-    let modes: Vec<&str> = tug
+    let modes: Vec<SteeringMode> = tug
         .events
         .iter()
-        .filter(|e| e.kind == "steering_mode")
-        .map(|e| e.detail.as_str())
+        .filter_map(|e| match e.what {
+            Happening::Mission(MissionEvent::SteeringMode(mode)) => Some(mode),
+            _ => None,
+        })
         .collect();
-    assert_eq!(modes, ["Tank", "Normal"]);
+    assert_eq!(modes, [SteeringMode::Tank, SteeringMode::Normal]);
     // The front-left wheel goes to its tank angle and holds it (it used to hunt ±2° around
     // −60° for the whole turn: the linkage doubles the loop's gain there).
     let (_, turn) = tug
@@ -438,14 +441,15 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
         fastest_slow_part < 1.15,
         "1 m/s from 20 m on: {fastest_slow_part}"
     );
-    let at = |kind: &str| {
+    let at = |which: fn(&MissionEvent) -> bool| {
         tug.events
             .iter()
-            .find(|e| e.kind == kind)
-            .unwrap_or_else(|| panic!("no {kind}: {:?}", tug.events))
+            .find(|e| matches!(&e.what, Happening::Mission(m) if which(m)))
+            .unwrap_or_else(|| panic!("{:?}", tug.events))
             .t
     };
-    let (stopped, departed) = (at("stop"), at("depart"));
+    let stopped = at(|m| matches!(m, MissionEvent::Stop { .. }));
+    let departed = at(|m| matches!(m, MissionEvent::Depart { .. }));
     let dwell = departed.saturating_since(stopped);
     assert!(
         dwell >= Duration::from_secs(3) && dwell < Duration::from_millis(3_100),
@@ -456,7 +460,6 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
 #[test]
 fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
     use bywire_net::sim::Tamper;
-    use bywire_sim::tug::TugBus;
     // Drive 0x21's heartbeats on bus 2 (every 100 ms), 300 ms late for a second: the gap
     // trips the ECU's 250 ms heartbeat consumer 250 ms after the last one on time, and the
     // heartbeat comes back.
@@ -474,16 +477,16 @@ fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
     let events = after(&tug, from);
     let lost = events
         .iter()
-        .find(|(_, kind, detail)| kind == "heartbeat_lost" && detail == "node 0x21")
+        .find(|(_, what)| *what == Happening::Ecu(EcuEvent::HeartbeatLost(0x21)))
         .unwrap_or_else(|| panic!("{events:?}"));
     assert!(
         (150..=251).contains(&lost.0),
         "lost {} ms after the delay began",
         lost.0
     );
-    assert!(events.iter().any(|(t, kind, detail)| *t > lost.0
-        && kind == "heartbeat_recovered"
-        && detail == "node 0x21"));
+    assert!(events.iter().any(
+        |(t, what)| *t > lost.0 && *what == Happening::Ecu(EcuEvent::HeartbeatRecovered(0x21))
+    ));
     // The ADS's commands (0x100 on bus 1), a bit flipped for 100 ms: every one fails its
     // checksum (the CAN CRC, computed over the flipped data, passes).
     let mut tug = cruising();
@@ -508,7 +511,6 @@ fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
 /// goes bus-off at its next heartbeat and, alone, recovers after 128 × 11 recessive bits.
 #[test]
 fn the_sender_of_a_chosen_identifier_goes_bus_off_and_recovers() {
-    use bywire_sim::tug::TugBus;
     let mut tug = cruising();
     let from = tug.now().as_nanos();
     tug.inject(
@@ -520,28 +522,32 @@ fn the_sender_of_a_chosen_identifier_goes_bus_off_and_recovers() {
     );
     run_for(&mut tug, 500);
     let events = after(&tug, from);
-    let states: Vec<&(u64, String, String)> = events
+    let states: Vec<(u64, TugBus, &str, NodeState)> = events
         .iter()
-        .filter(|(_, kind, _)| kind == "bus_state")
+        .filter_map(|(t, what)| match what {
+            Happening::BusState { bus, who, state } => Some((*t, *bus, who.as_str(), *state)),
+            _ => None,
+        })
         .collect();
     let off = states
         .iter()
-        .find(|(_, _, detail)| detail.ends_with(": BusOff"))
+        .find(|(.., state)| *state == NodeState::BusOff)
         .unwrap_or_else(|| panic!("{events:?}"));
     // Within a heartbeat period (100 ms).
     assert!(off.0 <= 101, "bus-off {} ms after the fault", off.0);
-    let node = off.2.trim_end_matches(": BusOff");
-    assert_eq!(node, "bus2 drive 0x23");
+    assert_eq!((off.1, off.2), (TugBus::Bus2, "drive 0x23"));
     let back = states
         .iter()
-        .find(|(t, _, detail)| *t >= off.0 && *detail == format!("{node}: ErrorActive"))
+        .find(|(t, bus, who, state)| {
+            *t >= off.0 && (*bus, *who, *state) == (off.1, off.2, NodeState::ErrorActive)
+        })
         .unwrap_or_else(|| panic!("{events:?}"));
     // 1408 bit times at 1 Mbit/s, within the step that follows.
     assert!(back.0 - off.0 <= 2, "recovered {} ms after", back.0 - off.0);
     assert_eq!(
         states
             .iter()
-            .filter(|(_, _, detail)| detail.ends_with(": BusOff"))
+            .filter(|(.., state)| *state == NodeState::BusOff)
             .count(),
         1,
         "only that node: {states:?}"

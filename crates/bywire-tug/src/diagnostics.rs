@@ -8,6 +8,7 @@
 //! engineer what happened (confirmed, failed since the last clear) and what still is
 //! (testFailed). After a ClearDiagnosticInformation every monitor reports afresh.
 
+use bywire_core::node::{Node, Port};
 use core::time::Duration;
 
 use bywire_core::{Frame, Id, Timestamp};
@@ -374,13 +375,13 @@ impl Diagnostics {
 
     /// A frame on bus 1: requests to the ECU go to its server.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        self.server.on_frame(now, frame);
+        self.server.on_frame(now, Port::MAIN, frame);
         self.take_events();
     }
 
     /// One of the server's answers is on the bus.
     pub fn on_sent(&mut self, now: Timestamp, frame: &Frame) {
-        self.server.on_sent(now, frame);
+        self.server.on_sent(now, Port::MAIN, frame);
     }
 
     /// The server's answers, and what the tester asked of the ECU.

@@ -703,13 +703,10 @@ impl Node for VehicleControlEcu {
         }
         match port {
             BUS1 => self.on_bus1_frame(now, frame),
-            BUS1B => Node::on_frame(
-                &mut self.supervisor,
-                now,
-                Supervisor::<TugWire>::PORT_B,
-                frame,
-            ),
-            BUS2 => self.master.on_frame(now, frame),
+            BUS1B => self
+                .supervisor
+                .on_frame(now, Supervisor::<TugWire>::PORT_B, frame),
+            BUS2 => self.master.on_frame(now, Port::MAIN, frame),
             BUS3 => self.on_sensor_frame(now, frame),
             _ => {}
         }
@@ -732,13 +729,17 @@ impl Node for VehicleControlEcu {
             None => {}
         }
         // The state frame goes on bus 1 only: the ADS reads it there.
-        self.supervisor.poll(now, &mut |frame| out(BUS1, frame));
+        self.supervisor.poll(now, &mut |port, frame| {
+            if port == Supervisor::<TugWire>::PORT_A {
+                out(BUS1, frame);
+            }
+        });
         let actuators = self.supervisor.actuators(now);
         // The drives' actual values change only with their frames: read once a poll (the
         // speeds after the master's poll, which may stop a drive).
         let first_tracks = self.first_tracks();
         self.command_drives(now, &actuators, first_tracks);
-        self.master.poll(now, &mut |frame| out(BUS2, frame));
+        self.master.poll(now, &mut |_, frame| out(BUS2, frame));
         self.take_master_events(now);
         let speeds = self.wheel_speeds();
         self.feed_back(first_tracks, speeds);

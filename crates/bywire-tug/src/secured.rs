@@ -66,6 +66,7 @@ fn standard(id: u32) -> Id {
 /// Why the secured table could not be built (the lengths above are wrong: a build that
 /// asked for the secured variant must not fall back to the plain one).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum SecuredError {
     /// A message's lengths do not fit a frame.
     Layout(LayoutError),

@@ -3,6 +3,7 @@
 //! resynchronisation, and a restart from a persisted freshness.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_secoc::store::FreshnessStore;
 use bywire_secoc::Key;
@@ -70,7 +71,11 @@ impl Bench {
             let now = ms(self.now);
             self.ads.set_command(now, drive());
             let mut to_vehicle = Vec::new();
-            self.ads.poll(now, &mut |f| to_vehicle.push(f));
+            self.ads.poll(now, &mut |port, f| {
+                if port == Port::MAIN {
+                    to_vehicle.push(f)
+                }
+            });
             for frame in to_vehicle {
                 let added = if frame.id() == Some(command_id()) {
                     self.commands.push(frame);
@@ -79,13 +84,17 @@ impl Bench {
                     Vec::new()
                 };
                 for f in std::iter::once(frame).chain(added) {
-                    self.supervisor.on_frame(now, &f);
+                    self.supervisor.on_frame(now, Port::MAIN, &f);
                 }
             }
             let mut to_ads = Vec::new();
-            self.supervisor.poll(now, &mut |f| to_ads.push(f));
+            self.supervisor.poll(now, &mut |port, f| {
+                if port == Port::MAIN {
+                    to_ads.push(f)
+                }
+            });
             for frame in to_ads {
-                self.ads.on_frame(now, &frame);
+                self.ads.on_frame(now, Port::MAIN, &frame);
             }
             self.now += step;
         }
@@ -250,9 +259,13 @@ fn a_sync_from_another_key_is_never_taken() {
         secured::secured(&Key::new([7; 16]), 1).unwrap(),
     );
     let old = bench.commands[0];
-    other.on_frame(ms(100), &old);
+    other.on_frame(ms(100), Port::MAIN, &old);
     let mut sent = Vec::new();
-    other.poll(ms(100), &mut |f| sent.push(f));
+    other.poll(ms(100), &mut |port, f| {
+        if port == Port::MAIN {
+            sent.push(f)
+        }
+    });
     assert_eq!(other.wire().table().unwrap().stats().frames.mac, 1);
     // It answers with a sync, as to any frame behind: signed with its key (refused below).
     assert!(sent
@@ -270,13 +283,21 @@ fn a_sync_from_another_key_is_never_taken() {
     let mut frames = Vec::new();
     for t in 0..100 {
         liar_ads.set_command(ms(t), drive());
-        liar_ads.poll(ms(t), &mut |f| frames.push(f));
+        liar_ads.poll(ms(t), &mut |port, f| {
+            if port == Port::MAIN {
+                frames.push(f)
+            }
+        });
     }
     for f in frames.iter().chain(frames.iter()) {
-        stale.on_frame(ms(100), f);
+        stale.on_frame(ms(100), Port::MAIN, f);
     }
     let mut sync = Vec::new();
-    stale.poll(ms(100), &mut |f| sync.push(f));
+    stale.poll(ms(100), &mut |port, f| {
+        if port == Port::MAIN {
+            sync.push(f)
+        }
+    });
     let sync = sync
         .into_iter()
         .find(|f| f.id().map(Id::as_raw) == Some(secured::SYNC_ID))
@@ -287,7 +308,7 @@ fn a_sync_from_another_key_is_never_taken() {
         .table()
         .unwrap()
         .next_freshness(command_id());
-    bench.ads.on_frame(ms(100), &sync);
+    bench.ads.on_frame(ms(100), Port::MAIN, &sync);
     let ads = bench.ads.wire().table().unwrap();
     assert_eq!(ads.stats().syncs_refused, 1);
     assert_eq!(ads.next_freshness(command_id()), next);
@@ -339,7 +360,7 @@ fn a_secured_estop_forged_classic_is_refused_and_not_read() {
     let mut m = EmergencyStop::default();
     m.set_estop_request_raw(0);
     let forged = messages::sealed_frame(EmergencyStop::ID, m.0);
-    bench.supervisor.on_frame(ms(100), &forged);
+    bench.supervisor.on_frame(ms(100), Port::MAIN, &forged);
     assert_eq!(bench.supervisor.stats().unauthenticated, 1);
     assert!(SECURED.contains(&EmergencyStop::ID));
 }
@@ -350,7 +371,7 @@ fn an_estop_chain_heard_once_and_then_silent_is_open() {
     let mut m = EmergencyStop::default();
     m.set_estop_request_raw(0);
     let closed = messages::sealed_frame(EmergencyStop::ID, m.0);
-    bench.supervisor.on_frame(ms(0), &closed);
+    bench.supervisor.on_frame(ms(0), Port::MAIN, &closed);
     // Three cycles of 20 ms without the chain's frame: it counts as open.
     bench.quiet(59);
     assert_eq!(bench.supervisor.estop(), EstopState::Normal);
@@ -400,12 +421,16 @@ fn a_profile_declaring_secoc_makes_the_same_frames_as_the_built_in_variant() {
     for t in 0..200 {
         ads.set_command(ms(t), drive());
         let mut frames = Vec::new();
-        ads.poll(ms(t), &mut |f| frames.push(f));
+        ads.poll(ms(t), &mut |port, f| {
+            if port == Port::MAIN {
+                frames.push(f)
+            }
+        });
         for f in frames {
-            supervisor.on_frame(ms(t), &f);
-            supervisor.on_frame(ms(t), &forged_after(&f));
+            supervisor.on_frame(ms(t), Port::MAIN, &f);
+            supervisor.on_frame(ms(t), Port::MAIN, &forged_after(&f));
         }
-        supervisor.poll(ms(t), &mut |_| {});
+        supervisor.poll(ms(t), &mut |_, _| {});
     }
     let stats = supervisor.stats();
     assert_eq!(
@@ -470,10 +495,10 @@ fn forged_commands_alone_are_no_commands_the_watchdog_cascade_follows() {
     let mut forged = forged_after(&last);
     for t in 200..400u64 {
         if t % 20 == 0 {
-            bench.supervisor.on_frame(ms(t), &forged);
+            bench.supervisor.on_frame(ms(t), Port::MAIN, &forged);
             forged = forged_after(&forged);
         }
-        bench.supervisor.poll(ms(t), &mut |_| {});
+        bench.supervisor.poll(ms(t), &mut |_, _| {});
     }
     let stats = bench.supervisor.stats();
     assert_eq!(stats.authentication, 10, "{stats:?}");

@@ -421,8 +421,8 @@ impl<W: AdsWire> Ads<W> {
         frame
     }
 
-    /// When [`poll`](Self::poll) next has something to send.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    /// When [`Ads::step`] next has something to send.
+    fn deadline(&self) -> Option<Timestamp> {
         match (self.next_command, self.brake.map(|b| b.next)) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
@@ -430,8 +430,9 @@ impl<W: AdsWire> Ads<W> {
     }
 
     /// Send what is due at `now`: the emergency-brake frame first (it has the highest
-    /// priority on the bus too), then the command.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    /// priority on the bus too), then the command (given once; [`Node::poll`] sends it on
+    /// each command bus).
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         if let Some(mut burst) = self.brake {
             if now >= burst.next {
                 if let Some(frame) = self
@@ -468,13 +469,8 @@ impl<W: AdsWire> Ads<W> {
         }
     }
 
-    /// A frame from the vehicle.
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        self.on_frame_from(now, Self::PORT_A, frame);
-    }
-
     /// A frame from the vehicle on `port` (as a node with two buses).
-    fn on_frame_from(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         let bus = usize::from(port == Self::PORT_B);
         match self.wire.feedback(frame) {
             Feedback::Other => {}
@@ -636,12 +632,12 @@ impl<W: AdsWire> Ads<W> {
 /// that came on both skipped (a bus behind the other, however far, brings only copies).
 impl<W: AdsWire> Node for Ads<W> {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
-        self.on_frame_from(now, port, frame);
+        self.receive(now, port, frame);
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         let redundant = self.config.redundant;
-        Ads::poll(self, now, &mut |frame| {
+        self.step(now, &mut |frame| {
             out(Self::PORT_A, frame);
             if redundant {
                 out(Self::PORT_B, frame);
@@ -650,7 +646,7 @@ impl<W: AdsWire> Node for Ads<W> {
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
-        Ads::next_deadline(self)
+        self.deadline()
     }
 }
 

@@ -18,6 +18,7 @@ use crate::supervisor::{Cascade, SupervisorConfig};
 
 /// Why a profile did not load.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ProfileError {
     /// Not TOML, or not the profile's shape (the message has the line, column and key).
     #[error("{file}: {message}")]

@@ -63,6 +63,7 @@ pub struct SyncMessage {
 
 /// Why a table refused a message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum TableError {
     /// More than [`MAX_SECURED`] messages.
     Full,

@@ -649,13 +649,8 @@ impl<W: VehicleWire> Supervisor<W> {
         Ok((command, counter))
     }
 
-    /// A frame from the bus (bus A when redundant).
-    pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
-        self.on_frame_from(now, Channel::A, frame);
-    }
-
     /// A frame from one of the two buses.
-    pub fn on_frame_from(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
+    fn receive(&mut self, now: Timestamp, channel: Channel, frame: &Frame) {
         match self.wire.incoming_from(channel, frame) {
             Incoming::Command(read) => self.on_command(now, channel, read),
             Incoming::Estop(requested) => {
@@ -790,8 +785,8 @@ impl<W: VehicleWire> Supervisor<W> {
         );
     }
 
-    /// When [`poll`](Self::poll) next has something to do.
-    pub fn next_deadline(&self) -> Option<Timestamp> {
+    /// When [`Supervisor::step`] next has something to do.
+    fn deadline(&self) -> Option<Timestamp> {
         let tick = self.last_heard().map(|t| {
             // Half a cycle of tolerance for jitter: cycle k is missed at (k + ½) cycles.
             let k = u32::try_from(u64::from(self.missed_reported) + 1).unwrap_or(u32::MAX);
@@ -844,8 +839,9 @@ impl<W: VehicleWire> Supervisor<W> {
         Some(heard.saturating_add(self.config.cycle.saturating_mul(ESTOP_TIMEOUT_CYCLES)))
     }
 
-    /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due.
-    pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+    /// Advance to `now`: watchdog ticks, the latch at standstill, the state frame when due
+    /// (given once; [`Node::poll`] sends it on each command bus).
+    fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         self.take_waiting_copy(now);
         if let Some(last) = self.last_heard() {
             let cycle = self.config.cycle.as_nanos().max(1);
@@ -1018,15 +1014,15 @@ impl<W: VehicleWire> Supervisor<W> {
 impl<W: VehicleWire> Node for Supervisor<W> {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         match port {
-            Self::PORT_A => self.on_frame_from(now, Channel::A, frame),
-            Self::PORT_B if self.voter.is_some() => self.on_frame_from(now, Channel::B, frame),
+            Self::PORT_A => self.receive(now, Channel::A, frame),
+            Self::PORT_B if self.voter.is_some() => self.receive(now, Channel::B, frame),
             _ => {}
         }
     }
 
     fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
         let redundant = self.voter.is_some();
-        Supervisor::poll(self, now, &mut |frame| {
+        self.step(now, &mut |frame| {
             out(Self::PORT_A, frame);
             if redundant {
                 out(Self::PORT_B, frame);
@@ -1035,6 +1031,6 @@ impl<W: VehicleWire> Node for Supervisor<W> {
     }
 
     fn next_deadline(&self) -> Option<Timestamp> {
-        Supervisor::next_deadline(self)
+        self.deadline()
     }
 }

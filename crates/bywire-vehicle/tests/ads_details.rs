@@ -9,6 +9,7 @@
 
 mod common;
 
+use bywire_core::node::{Node, Port};
 use bywire_tug::messages::{
     ControlMode, EmergencyBrake, Gear, SteeringMode, VehicleToAdsSensors, VehicleToAdsState,
     VehicleToAdsWheelAngles,
@@ -44,7 +45,7 @@ fn sent(n: u64) -> Ads<ReferenceWire> {
     let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(0.0));
     for t in 0..n {
-        ads.poll(ms(20 * t), &mut |_| {});
+        ads.poll(ms(20 * t), &mut |_, _| {});
     }
     ads
 }
@@ -65,11 +66,11 @@ fn deadlines_and_a_late_poll() {
     assert_eq!(ads.next_deadline(), None);
     ads.set_command(ms(5), drive(0.0));
     assert_eq!(ads.next_deadline(), Some(ms(5)));
-    ads.poll(ms(5), &mut |_| {});
+    ads.poll(ms(5), &mut |_, _| {});
     assert_eq!(ads.next_deadline(), Some(ms(25)));
     // Polled 100 ms late: one frame, and the schedule restarts from now.
     let mut n = 0;
-    ads.poll(ms(125), &mut |_| n += 1);
+    ads.poll(ms(125), &mut |_, _| n += 1);
     assert_eq!(n, 1);
     assert_eq!(ads.next_deadline(), Some(ms(145)));
     ads.emergency_brake(ms(130), 3.0);
@@ -82,7 +83,11 @@ fn the_burst_counts_and_spaces_its_frames() {
     ads.emergency_brake(ms(0), 3.0);
     let mut frames = Vec::new();
     for t in 0..1000 {
-        ads.poll(ms(t), &mut |f| frames.push((t, f)));
+        ads.poll(ms(t), &mut |port, f| {
+            if port == Port::MAIN {
+                frames.push((t, f))
+            }
+        });
     }
     let counters: Vec<u64> = frames
         .iter()
@@ -99,31 +104,42 @@ fn the_burst_counts_and_spaces_its_frames() {
 #[test]
 fn each_feedback_check_counts() {
     let mut ads = sent(6); // commands 0..=5 sent; the echo window holds 5, 4, 3
-    ads.on_frame(ms(101), &state(0, 5, |_| {}));
+    ads.on_frame(ms(101), Port::MAIN, &state(0, 5, |_| {}));
     assert_eq!(ads.stats().accepted, 1);
     // Out of range: steering, velocity, watchdog level.
     ads.on_frame(
         ms(102),
+        Port::MAIN,
         &state(1, 5, |m| m.set_steering_angle_actual_raw(460)),
     );
-    ads.on_frame(ms(103), &state(2, 5, |m| m.set_velocity_actual_raw(900)));
-    ads.on_frame(ms(104), &state(3, 5, |m| m.set_watchdog_level_raw(5)));
+    ads.on_frame(
+        ms(103),
+        Port::MAIN,
+        &state(2, 5, |m| m.set_velocity_actual_raw(900)),
+    );
+    ads.on_frame(
+        ms(104),
+        Port::MAIN,
+        &state(3, 5, |m| m.set_watchdog_level_raw(5)),
+    );
     assert_eq!(ads.stats().range, 3);
     // Exactly 45° is still in range.
     ads.on_frame(
         ms(104),
+        Port::MAIN,
         &state(4, 5, |m| m.set_steering_angle_actual_raw(450)),
     );
     assert_eq!((ads.stats().range, ads.stats().accepted), (3, 2));
     // An echo of a command sent, but too long ago.
-    ads.on_frame(ms(105), &state(5, 1, |_| {}));
+    ads.on_frame(ms(105), Port::MAIN, &state(5, 1, |_| {}));
     assert_eq!(ads.stats().echo, 1);
     // The oldest in the window is still fine.
-    ads.on_frame(ms(106), &state(6, 3, |_| {}));
+    ads.on_frame(ms(106), Port::MAIN, &state(6, 3, |_| {}));
     assert_eq!(ads.stats().accepted, 3);
     // Flags come through.
     ads.on_frame(
         ms(107),
+        Port::MAIN,
         &state(7, 5, |m| {
             m.set_warning_flag_raw(1);
             m.set_driver_override_raw(1);
@@ -140,7 +156,7 @@ fn each_feedback_check_counts() {
         (s.gear.value, s.steering_mode.value),
         (Some(Gear::Reverse), Some(SteeringMode::Tank))
     );
-    ads.on_frame(ms(108), &state(8, 5, |_| {}));
+    ads.on_frame(ms(108), Port::MAIN, &state(8, 5, |_| {}));
     let s = ads.state();
     assert_eq!(
         (s.warning.value, s.driver_override.value),
@@ -165,14 +181,14 @@ fn wheel_frames_count_and_check_their_counters() {
             m.0
         })
     };
-    ads.on_frame(ms(0), &angles(0));
-    ads.on_frame(ms(0), &speeds(0));
+    ads.on_frame(ms(0), Port::MAIN, &angles(0));
+    ads.on_frame(ms(0), Port::MAIN, &speeds(0));
     assert_eq!(ads.stats().accepted, 2);
-    ads.on_frame(ms(20), &angles(0));
-    ads.on_frame(ms(20), &speeds(5));
+    ads.on_frame(ms(20), Port::MAIN, &angles(0));
+    ads.on_frame(ms(20), Port::MAIN, &speeds(5));
     assert_eq!((ads.stats().counter, ads.stats().accepted), (2, 2));
-    ads.on_frame(ms(40), &angles(1));
-    ads.on_frame(ms(40), &speeds(6));
+    ads.on_frame(ms(40), Port::MAIN, &angles(1));
+    ads.on_frame(ms(40), Port::MAIN, &speeds(6));
     assert_eq!((ads.stats().counter, ads.stats().accepted), (2, 4));
 }
 
@@ -180,19 +196,23 @@ fn wheel_frames_count_and_check_their_counters() {
 fn a_change_within_the_tolerance_is_not_a_new_setpoint() {
     let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(0.0));
-    ads.poll(ms(0), &mut |_| {});
-    ads.on_frame(ms(10), &state(0, 0, |_| {}));
+    ads.poll(ms(0), &mut |_, _| {});
+    ads.on_frame(ms(10), Port::MAIN, &state(0, 0, |_| {}));
     let first = ads.state().steering_response;
     assert_eq!(first.value, Some(std::time::Duration::from_millis(10)));
     // 0.5° is the tolerance: not a new setpoint, so no new measurement.
     ads.set_command(ms(20), drive(0.5));
-    ads.poll(ms(20), &mut |_| {});
-    ads.on_frame(ms(30), &state(1, 1, |_| {}));
+    ads.poll(ms(20), &mut |_, _| {});
+    ads.on_frame(ms(30), Port::MAIN, &state(1, 1, |_| {}));
     assert_eq!(ads.state().steering_response, first);
     // 0.6° is.
     ads.set_command(ms(40), drive(0.6));
-    ads.poll(ms(40), &mut |_| {});
-    ads.on_frame(ms(45), &state(2, 2, |m| m.set_steering_angle_actual_raw(6)));
+    ads.poll(ms(40), &mut |_, _| {});
+    ads.on_frame(
+        ms(45),
+        Port::MAIN,
+        &state(2, 2, |m| m.set_steering_angle_actual_raw(6)),
+    );
     assert_eq!(
         ads.state().steering_response.value,
         Some(std::time::Duration::from_millis(5))
@@ -216,7 +236,11 @@ fn the_safe_stop_brakes_at_once_and_holds_the_steering() {
         (0.0, 100.0, 5.0, false)
     );
     let mut frames = Vec::new();
-    ads.poll(ms(10), &mut |f| frames.push(f));
+    ads.poll(ms(10), &mut |port, f| {
+        if port == Port::MAIN {
+            frames.push(f)
+        }
+    });
     // The emergency-brake frame goes first, then the stop command.
     let ids: Vec<u32> = frames
         .iter()

@@ -9,6 +9,7 @@
 
 mod common;
 
+use bywire_core::node::Node;
 use bywire_tug::wire::ReferenceWire;
 use std::time::Duration;
 
@@ -162,7 +163,11 @@ fn emergency_brake_burst_is_three_frames_in_10_ms_then_20_hz() {
     ads.emergency_brake(ms(100), 4.0);
     let mut sent = Vec::new();
     for t in 100..=300 {
-        ads.poll(ms(t), &mut |f| sent.push((t, f)));
+        ads.poll(ms(t), &mut |port, f| {
+            if port == Port::MAIN {
+                sent.push((t, f))
+            }
+        });
     }
     let times: Vec<u64> = sent.iter().map(|(t, _)| *t).collect();
     assert_eq!(&times[..3], &[100, 104, 108]);
@@ -175,7 +180,7 @@ fn emergency_brake_burst_is_three_frames_in_10_ms_then_20_hz() {
     ads.release_brake();
     let mut after = 0;
     for t in 301..400 {
-        ads.poll(ms(t), &mut |_| after += 1);
+        ads.poll(ms(t), &mut |_, _| after += 1);
     }
     assert_eq!(after, 0);
 }
@@ -196,10 +201,14 @@ fn feedback_is_validated_and_times_out() {
     let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
     ads.set_command(ms(0), drive(1.0));
     for t in 0..=40 {
-        ads.poll(ms(t), &mut |_| {});
+        ads.poll(ms(t), &mut |_, _| {});
     }
     // Commands 0, 1, 2 were sent at 0, 20, 40 ms.
-    ads.on_frame(ms(41), &state_frame(0, 2, ControlMode::Autonomous));
+    ads.on_frame(
+        ms(41),
+        Port::MAIN,
+        &state_frame(0, 2, ControlMode::Autonomous),
+    );
     assert_eq!(ads.stats().accepted, 1);
     assert_eq!(
         ads.state().echo_latency.value,
@@ -212,9 +221,17 @@ fn feedback_is_validated_and_times_out() {
         d[2] ^= 1;
         bad = Frame::classic(f.id(), &d).unwrap();
     }
-    ads.on_frame(ms(42), &bad);
-    ads.on_frame(ms(43), &state_frame(0, 2, ControlMode::Autonomous));
-    ads.on_frame(ms(44), &state_frame(1, 9, ControlMode::Autonomous));
+    ads.on_frame(ms(42), Port::MAIN, &bad);
+    ads.on_frame(
+        ms(43),
+        Port::MAIN,
+        &state_frame(0, 2, ControlMode::Autonomous),
+    );
+    ads.on_frame(
+        ms(44),
+        Port::MAIN,
+        &state_frame(1, 9, ControlMode::Autonomous),
+    );
     let s = ads.stats();
     assert_eq!((s.checksum, s.counter, s.echo, s.accepted), (1, 1, 1, 1));
     // Fresh for 3 cycles, then not.
@@ -436,14 +453,14 @@ fn odometry_after(angles: [f64; 4], speeds: [f64; 4]) -> bywire_control::kinemat
         a.set_wheel_angle_rl(angles[2]).unwrap();
         a.set_wheel_angle_rr(angles[3]).unwrap();
         a.set_counter_raw(k % 16);
-        ads.on_frame(now, &sealed(VehicleToAdsWheelAngles::ID, a.0));
+        ads.on_frame(now, Port::MAIN, &sealed(VehicleToAdsWheelAngles::ID, a.0));
         let mut s = VehicleToAdsSensors::default();
         s.set_wheel_speed_fl(speeds[0]).unwrap();
         s.set_wheel_speed_fr(speeds[1]).unwrap();
         s.set_wheel_speed_rl(speeds[2]).unwrap();
         s.set_wheel_speed_rr(speeds[3]).unwrap();
         s.set_counter_raw(k % 16);
-        ads.on_frame(now, &sealed(VehicleToAdsSensors::ID, s.0));
+        ads.on_frame(now, Port::MAIN, &sealed(VehicleToAdsSensors::ID, s.0));
     }
     ads.state().odometry.value.unwrap()
 }
@@ -486,7 +503,7 @@ fn steering_response_is_measured_from_setpoint_to_actual() {
             };
             ads.set_command(now, steer);
         }
-        ads.poll(now, &mut |_| {});
+        ads.poll(now, &mut |_, _| {});
         // The vehicle steers at 30°/s from 120 ms on.
         let actual = (f64::from(t.saturating_sub(120)) * 0.03).min(10.0);
         let mut m = VehicleToAdsState::default();
@@ -494,7 +511,11 @@ fn steering_response_is_measured_from_setpoint_to_actual() {
         m.set_counter_raw(u64::from(t / 20 % 16));
         // Echo the command just sent.
         m.set_heartbeat_echo_raw(u64::from((t / 20) % 16));
-        ads.on_frame(ms(u64::from(t) + 1), &sealed(VehicleToAdsState::ID, m.0));
+        ads.on_frame(
+            ms(u64::from(t) + 1),
+            Port::MAIN,
+            &sealed(VehicleToAdsState::ID, m.0),
+        );
     }
     // 9.5° (within 0.5° of 10°) is reached at 120 + 9.5/0.03 ≈ 437 → the 441 ms frame.
     let response = ads.state().steering_response.value.unwrap();
@@ -529,10 +550,14 @@ fn feedback_copies_late_on_one_bus_are_copies_not_counter_errors() {
                 }
             });
             for frame in &commands {
-                vcu.on_frame(now, frame);
+                vcu.on_frame(now, Port::MAIN, frame);
             }
             let mut feedback = Vec::new();
-            vcu.poll(now, &mut |frame| feedback.push(frame));
+            vcu.poll(now, &mut |port, frame| {
+                if port == Port::MAIN {
+                    feedback.push(frame)
+                }
+            });
             if t % 20 == 10 {
                 let speed = f64::from(u32::try_from(t).unwrap()) / 1_000.0;
                 feedback.extend(wheels.wheel_speeds_frame([speed; 4], t / 20));

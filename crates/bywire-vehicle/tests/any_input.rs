@@ -8,6 +8,7 @@
     clippy::indexing_slicing
 )]
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::{Ads, AdsConfig};
@@ -59,12 +60,12 @@ proptest! {
         for (frame, gap, torque, speed) in frames {
             t += gap;
             let now = Timestamp::from_millis(t);
-            supervisor.on_frame(now, &frame);
+            supervisor.on_frame(now, Port::MAIN, &frame);
             supervisor.set_driver_input(torque, 0.0);
             supervisor.set_feedback(speed, speed);
-            supervisor.poll(now, &mut |_| {});
-            ads.on_frame(now, &frame);
-            ads.poll(now, &mut |_| {});
+            supervisor.poll(now, &mut |_, _| {});
+            ads.on_frame(now, Port::MAIN, &frame);
+            ads.poll(now, &mut |_, _| {});
             let a = supervisor.actuators(now);
             // Random bytes never pass the CRC: the vehicle is never engaged.
             prop_assert!(!a.ads_in_control && !a.steering_enabled);

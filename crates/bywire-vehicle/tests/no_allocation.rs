@@ -9,6 +9,7 @@
 
 mod common;
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 use bywire_tug::messages::{AdsToVehicleControl, EmergencyStop};
 use bywire_tug::wire::ReferenceWire;
@@ -58,15 +59,15 @@ fn supervisor_never_allocates<W: bywire_vehicle::wire::VehicleWire>(mut supervis
     let counted = allocation_counter::measure(|| {
         for (k, frame) in commands.iter().enumerate() {
             let now = Timestamp::from_millis(20 * k as u64);
-            supervisor.on_frame(now, frame);
+            supervisor.on_frame(now, Port::MAIN, frame);
             if k == 150 {
-                supervisor.on_frame(now, &open);
+                supervisor.on_frame(now, Port::MAIN, &open);
             }
             if k == 160 {
-                supervisor.on_frame(now, &closed);
+                supervisor.on_frame(now, Port::MAIN, &closed);
             }
             supervisor.set_driver_input(0.0, 0.0);
-            supervisor.poll(now, &mut |_| frames_out += 1);
+            supervisor.poll(now, &mut |_, _| frames_out += 1);
             let a = supervisor.actuators(now);
             supervisor.set_feedback(a.velocity, a.steering);
             checksum += a.motor_rpm + a.brake;
@@ -119,9 +120,10 @@ fn ads_never_allocates<W: bywire_vehicle::wire::AdsWire>(mut ads: bywire_vehicle
             if k == 50 {
                 ads.emergency_brake(now, 3.0);
             }
-            ads.poll(now, &mut |_| sent += 1);
+            ads.poll(now, &mut |_, _| sent += 1);
             ads.on_frame(
                 now.saturating_add(std::time::Duration::from_millis(1)),
+                Port::MAIN,
                 state,
             );
         }

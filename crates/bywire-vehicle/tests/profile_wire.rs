@@ -19,6 +19,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_tug::messages::{
     self, AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, Gear, SteeringMode,
@@ -251,16 +252,18 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
         let now = Timestamp::from_millis(50 * k);
         let command = commands[usize::try_from(k % 3).unwrap()];
         ads.set_command(now, command);
-        ads.poll(now, &mut |f| {
-            lines.push_str(&format!(
-                "{} {}\n",
-                f.id().unwrap().as_raw(),
-                f.data()
-                    .iter()
-                    .map(|b| format!("{b:02x}"))
-                    .collect::<String>()
-            ));
-            sent.push((k, command));
+        ads.poll(now, &mut |port, f| {
+            if port == Port::MAIN {
+                lines.push_str(&format!(
+                    "{} {}\n",
+                    f.id().unwrap().as_raw(),
+                    f.data()
+                        .iter()
+                        .map(|b| format!("{b:02x}"))
+                        .collect::<String>()
+                ));
+                sent.push((k, command));
+            }
         });
     }
     assert_eq!(sent.len(), 300);
@@ -318,8 +321,8 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
     // The emergency brake on the shuttle's own message.
     ads.emergency_brake(Timestamp::from_millis(20_000), 2.5);
     let mut brake = String::new();
-    ads.poll(Timestamp::from_millis(20_000), &mut |f| {
-        if f.id().unwrap().as_raw() == 1279 {
+    ads.poll(Timestamp::from_millis(20_000), &mut |port, f| {
+        if port == Port::MAIN && f.id().unwrap().as_raw() == 1279 {
             brake = format!(
                 "1279 {}\n",
                 f.data()
@@ -375,7 +378,7 @@ fn the_shuttles_feedback_from_cantools_is_validated_by_role() {
                 ..AdsCommand::default()
             },
         );
-        ads.poll(now, &mut |_| {});
+        ads.poll(now, &mut |_, _| {});
     }
     let requests = [
         r#"{"id": 1281, "signals": {"St_Steer": -7.5, "St_Speed": 1.95, "St_Mode": 2, "St_SteerMode": 2, "St_Echo": 2, "St_Alive": 200, "St_Xor": 0}}"#,
@@ -395,7 +398,7 @@ fn the_shuttles_feedback_from_cantools_is_validated_by_role() {
         })
         .collect();
     let now = Timestamp::from_millis(120);
-    ads.on_frame(now, &frames[0]);
+    ads.on_frame(now, Port::MAIN, &frames[0]);
     let state = *ads.state();
     assert_eq!(state.steering.value, Some(-7.5));
     assert_eq!(state.velocity.value, Some(1.95));
@@ -408,20 +411,20 @@ fn the_shuttles_feedback_from_cantools_is_validated_by_role() {
         state.watchdog_level.value, None,
         "the shuttle does not report it"
     );
-    ads.on_frame(now, &frames[1]);
+    ads.on_frame(now, Port::MAIN, &frames[1]);
     let speeds = ads.state().wheel_speeds.value.unwrap();
     for (got, want) in speeds.iter().zip([1.9, 2.0, 1.95, 2.05]) {
         assert!((got - want).abs() < 1e-9, "{speeds:?}");
     }
-    ads.on_frame(now, &frames[2]);
+    ads.on_frame(now, Port::MAIN, &frames[2]);
     assert_eq!(ads.stats().checksum, 1, "a wrong XOR is refused");
-    ads.on_frame(now, &frames[3]);
+    ads.on_frame(now, Port::MAIN, &frames[3]);
     assert_eq!(
         ads.state().steering.value,
         Some(1.0),
         "201 follows 200 on the 8-bit counter"
     );
-    ads.on_frame(now, &frames[4]);
+    ads.on_frame(now, Port::MAIN, &frames[4]);
     assert_eq!(ads.stats().echo, 1, "echo 200 matches no recent command");
     assert_eq!(ads.stats().accepted, 3);
 }
@@ -454,7 +457,6 @@ fn profile_wires_refuse_profiles_they_cannot_speak() {
 /// cascade brakes.
 #[test]
 fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
-    use bywire_core::node::Port;
     use bywire_net::network::Network;
     use bywire_vehicle::supervisor::{Supervisor, Watchdog};
     let loaded = shuttle();
@@ -544,8 +546,9 @@ fn state_frames_count_through_the_whole_counter() {
     use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
     for by_role in [false, true] {
         let mut counters = Vec::new();
-        let mut take = |f: Frame| {
-            if f.id().unwrap().as_raw() == VehicleToAdsState::ID {
+        // The state frame as bus A carries it (the supervisor is not redundant here).
+        let mut take = |port: Port, f: Frame| {
+            if port == Port::MAIN && f.id().unwrap().as_raw() == VehicleToAdsState::ID {
                 counters.push(f.data()[6] >> 4);
             }
         };
@@ -596,13 +599,13 @@ fn wheel_speed_counters_are_checked_at_their_width() {
             let mut ads = Ads::with_wire(AdsConfig::default(), ProfileWire::new(&loaded).unwrap());
             frames
                 .iter()
-                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));
+                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), Port::MAIN, f));
             ads.stats()
         } else {
             let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
             frames
                 .iter()
-                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), f));
+                .for_each(|f| ads.on_frame(Timestamp::from_millis(1), Port::MAIN, f));
             ads.stats()
         };
         // 0, 1 in sequence; 1 → 4 skips two (a 4-bit counter sees it, a 1-bit one would not);
@@ -761,7 +764,6 @@ fn lights_go_out_in_the_profiles_numbering_and_read_back() {
 /// lights are on; commanded, its lights are as commanded.
 #[test]
 fn the_vehicle_shows_its_hazard_lights_while_it_stops_on_its_own() {
-    use bywire_core::node::Node;
     use bywire_vehicle::supervisor::Supervisor;
     let loaded = Profile::load(
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/tug-with-lights.toml"),

@@ -17,6 +17,7 @@
 
 mod common;
 
+use bywire_core::node::Node;
 use std::time::Duration;
 
 use common::vehicles::{self, by_profile, reference_wire, Vehicle};
@@ -356,13 +357,13 @@ fn hand_fed<W: AdsWire + VehicleWire + Clone + 'static>(
         let before = supervisor.watchdog();
         for (j, (frame_a, frame_b)) in (0..).zip(&frames) {
             if arrival(j, plan.b_late_ms) == t && j < plan.b_cycles {
-                supervisor.on_frame_from(now, Channel::B, frame_b);
+                supervisor.on_frame(now, Channel::B.port(), frame_b);
             }
             if arrival(j, plan.a_late_ms) == t {
-                supervisor.on_frame_from(now, Channel::A, frame_a);
+                supervisor.on_frame(now, Channel::A.port(), frame_a);
             }
         }
-        supervisor.poll(now, &mut |_| {});
+        supervisor.poll(now, &mut |_, _| {});
         if supervisor.watchdog() != before {
             log.push((k, supervisor.watchdog()));
         }

@@ -10,6 +10,7 @@
 
 mod common;
 
+use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Id};
 use bywire_tug::messages::{
     AdsToVehicleControl, ControlMode, EmergencyBrake, EmergencyStop, VehicleToAdsState,
@@ -26,12 +27,16 @@ fn engaged() -> (Supervisor<ReferenceWire>, u8, u64) {
     let mut s = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
     let mut t = 0;
     for k in 0..12u8 {
-        s.on_frame(ms(t), &command(k, |_| {}));
-        s.poll(ms(t), &mut |_| {});
+        s.on_frame(ms(t), Port::MAIN, &command(k, |_| {}));
+        s.poll(ms(t), &mut |_, _| {});
         t += 20;
     }
-    s.on_frame(ms(t), &command(12, |m| m.set_engage_request_raw(1)));
-    s.poll(ms(t), &mut |_| {});
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &command(12, |m| m.set_engage_request_raw(1)),
+    );
+    s.poll(ms(t), &mut |_, _| {});
     assert_eq!(s.mode(), ControlMode::Autonomous);
     (s, 13, t + 20)
 }
@@ -39,7 +44,11 @@ fn engaged() -> (Supervisor<ReferenceWire>, u8, u64) {
 fn state_frame(s: &mut Supervisor<ReferenceWire>, now: u64) -> VehicleToAdsState {
     let mut frames = Vec::new();
     // Force the next state frame due: poll well after the last one.
-    s.poll(ms(now), &mut |f| frames.push(f));
+    s.poll(ms(now), &mut |port, f| {
+        if port == Port::MAIN {
+            frames.push(f)
+        }
+    });
     let f = frames.last().expect("a state frame is due");
     VehicleToAdsState(f.data().try_into().unwrap())
 }
@@ -161,7 +170,7 @@ fn stats_add_up_and_rpm_needs_a_wheel() {
 fn limits_hold_at_their_boundaries() {
     let (mut s, mut k, mut t) = engaged();
     let mut send = |s: &mut Supervisor<ReferenceWire>, edit: &dyn Fn(&mut AdsToVehicleControl)| {
-        s.on_frame(ms(t), &command(k, edit));
+        s.on_frame(ms(t), Port::MAIN, &command(k, edit));
         k = k.wrapping_add(1);
         t += 20;
     };
@@ -193,7 +202,7 @@ fn extended_frames_with_the_same_numbers_are_ignored() {
             _ => sealed(EmergencyBrake::ID, [1, 40, 0, 0, 0, 0, 0, 0]),
         };
         let extended = Frame::classic(Id::extended(id).unwrap(), standard.data()).unwrap();
-        s.on_frame(ms(t), &extended);
+        s.on_frame(ms(t), Port::MAIN, &extended);
     }
     assert_eq!(s.stats(), before);
     assert_eq!(s.estop(), EstopState::Normal);
@@ -205,10 +214,10 @@ fn a_restart_after_silence_is_accepted_but_not_the_frozen_value() {
     let (mut s, k, t) = engaged();
     // 200 ms of silence, then the stream restarts at another value: accepted.
     let accepted = s.stats().accepted;
-    s.on_frame(ms(t + 200), &command(k + 5, |_| {}));
+    s.on_frame(ms(t + 200), Port::MAIN, &command(k + 5, |_| {}));
     assert_eq!(s.stats().accepted, accepted + 1);
     // Silence again, then the same value as the last accepted: the sender is frozen.
-    s.on_frame(ms(t + 400), &command(k + 5, |_| {}));
+    s.on_frame(ms(t + 400), Port::MAIN, &command(k + 5, |_| {}));
     assert_eq!(s.stats().repeated, 1);
 }
 
@@ -231,10 +240,14 @@ fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
     // Standstill is strictly below 0.05 m/s: at 0.05 the E-stop waits with brakes applied.
     let (mut s, _, t) = engaged();
     s.set_feedback(0.05, 0.0);
-    s.on_frame(ms(t), &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]));
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]),
+    );
     assert_eq!(s.estop(), EstopState::BrakesApplied);
     s.set_feedback(0.0, 0.0);
-    s.poll(ms(t + 1), &mut |_| {});
+    s.poll(ms(t + 1), &mut |_, _| {});
     assert_eq!(s.estop(), EstopState::Stopped);
 }
 
@@ -242,16 +255,16 @@ fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
 fn deadlines_follow_the_last_command_and_the_state_frame() {
     let mut s = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
     assert_eq!(s.next_deadline(), Some(ms(0)), "the first state frame");
-    s.poll(ms(0), &mut |_| {});
+    s.poll(ms(0), &mut |_, _| {});
     assert_eq!(s.next_deadline(), Some(ms(20)));
-    s.on_frame(ms(5), &command(0, |_| {}));
+    s.on_frame(ms(5), Port::MAIN, &command(0, |_| {}));
     // Missed-cycle tick at 5 + 20 + 10 = 35 ms; the state frame at 20 ms comes first.
     assert_eq!(s.next_deadline(), Some(ms(20)));
-    s.poll(ms(20), &mut |_| {});
+    s.poll(ms(20), &mut |_, _| {});
     assert_eq!(s.next_deadline(), Some(ms(35)));
-    s.poll(ms(35), &mut |_| {});
+    s.poll(ms(35), &mut |_, _| {});
     assert_eq!(s.next_deadline(), Some(ms(40)));
-    s.poll(ms(40), &mut |_| {});
+    s.poll(ms(40), &mut |_, _| {});
     assert_eq!(s.next_deadline(), Some(ms(55)), "the second tick");
 }
 
@@ -262,7 +275,7 @@ fn controlled_deceleration_keeps_falling_across_cycles() {
     let last = t - 20;
     let mut samples = Vec::new();
     for now in (last..last + 100).step_by(5) {
-        s.poll(ms(now), &mut |_| {});
+        s.poll(ms(now), &mut |_, _| {});
         if matches!(s.watchdog(), Watchdog::Decelerating { .. }) {
             samples.push(s.actuators(ms(now)).velocity);
         }
@@ -277,9 +290,10 @@ fn steering_moves_at_its_rate_towards_the_command() {
     for _ in 0..5 {
         s.on_frame(
             ms(t),
+            Port::MAIN,
             &command(k, |m| m.set_steering_angle_cmd(10.0).unwrap()),
         );
-        s.poll(ms(t), &mut |_| {});
+        s.poll(ms(t), &mut |_, _| {});
         k += 1;
         t += 20;
     }
@@ -293,17 +307,25 @@ fn steering_moves_at_its_rate_towards_the_command() {
 fn actuators_in_each_situation() {
     // Full braking while autonomous: the ADS is still the one in control.
     let (mut s, _, t) = engaged();
-    s.poll(ms(t + 200), &mut |_| {});
+    s.poll(ms(t + 200), &mut |_, _| {});
     let a = s.actuators(ms(t + 200));
     assert_eq!(s.watchdog(), Watchdog::FullBraking);
     assert!(a.ads_in_control && a.brake == 100.0);
     // E-stop: not the ADS.
     let (mut s, _, t) = engaged();
-    s.on_frame(ms(t), &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]));
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]),
+    );
     assert!(!s.actuators(ms(t)).ads_in_control);
     // Manual with a normal watchdog: no warning; at start (full braking): warning.
     let (mut s, k, t) = engaged();
-    s.on_frame(ms(t), &command(k, |m| m.set_control_mode_cmd_raw(0)));
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &command(k, |m| m.set_control_mode_cmd_raw(0)),
+    );
     assert_eq!(s.mode(), ControlMode::Manual);
     assert!(!s.actuators(ms(t)).warning);
     let fresh = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
@@ -312,6 +334,7 @@ fn actuators_in_each_situation() {
     let (mut s, _, t) = engaged();
     s.on_frame(
         ms(t),
+        Port::MAIN,
         &sealed(EmergencyBrake::ID, [1, 40, 0, 0, 0, 0, 0, 0]),
     );
     assert_eq!(s.actuators(ms(t + 59)).brake, 100.0);
@@ -333,12 +356,20 @@ fn state_frame_bits() {
     assert_eq!((f.warning_flag_raw(), f.steering_enabled_raw()), (1, 0));
     // Manual: steering not the ADS's.
     let (mut s, _, t) = engaged();
-    s.on_frame(ms(t), &command(k, |m| m.set_control_mode_cmd_raw(0)));
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &command(k, |m| m.set_control_mode_cmd_raw(0)),
+    );
     let f = state_frame(&mut s, t);
     assert_eq!(f.steering_enabled_raw(), 0);
     // E-stop latched while autonomous-requested: disabled.
     let (mut s, _, t) = engaged();
-    s.on_frame(ms(t), &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]));
+    s.on_frame(
+        ms(t),
+        Port::MAIN,
+        &sealed(EmergencyStop::ID, [1, 0, 0, 0, 0, 0, 0, 0]),
+    );
     let f = state_frame(&mut s, t);
     assert_eq!((f.steering_enabled_raw(), f.estop_state_raw()), (0, 4));
 }

@@ -10,8 +10,6 @@ mod tui;
 
 use std::io::{self, Write};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
 
 use clap::{CommandFactory, Parser, Subcommand};
 
@@ -183,19 +181,6 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-/// Set when the user presses Ctrl-C (SIGINT) or the process gets SIGTERM: long-running
-/// commands stop at the next frame, flush their output and exit 0, as can-utils do.
-pub fn interrupt_flag() -> Arc<AtomicBool> {
-    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
-    Arc::clone(FLAG.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
-        let set = Arc::clone(&flag);
-        // Without a handler (e.g. one is already installed) Ctrl-C simply ends the process.
-        let _ = ctrlc::set_handler(move || set.store(true, Ordering::Relaxed));
-        flag
-    }))
 }
 
 fn is_broken_pipe(e: &anyhow::Error) -> bool {

@@ -19,6 +19,7 @@ const CANFD_FDF: u8 = 0x04;
 
 /// A structure the kernel should never hand us.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum LayoutError {
     /// Neither a `can_frame` nor a `canfd_frame`.
     #[error("a read of {0} bytes is no CAN frame structure (16 or 72 bytes)")]

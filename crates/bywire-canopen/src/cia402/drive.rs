@@ -610,6 +610,7 @@ mod tests {
     use crate::device::Device;
     use crate::nmt::classic;
     use bywire_core::frame::Frame;
+    use bywire_core::node::{Node, Port};
 
     fn statusword(device: &Device<Drive>) -> u16 {
         u16::try_from(device.od().get_unsigned(object::STATUSWORD, 0).unwrap()).unwrap()
@@ -628,38 +629,38 @@ mod tests {
     fn target_reached_follows_a_new_target_with_the_motor_unchanged() {
         let at = Timestamp::from_millis;
         let mut device = Device::new(1, drive_dictionary(1), Drive::new().with_external_motor());
-        let mut sent = |_: Frame| {};
+        let mut sent = |_: Port, _: Frame| {};
         device.poll(at(0), &mut sent);
-        device.on_frame(at(1), &classic(0x000, &[0x01, 1]));
+        device.on_frame(at(1), Port::MAIN, &classic(0x000, &[0x01, 1]));
         // Profile velocity, walked to Operation enabled.
         for controlword in [0x06u16, 0x07, 0x0F] {
             let [lo, hi] = controlword.to_le_bytes();
-            device.on_frame(at(2), &classic(0x201, &[lo, hi, 3]));
+            device.on_frame(at(2), Port::MAIN, &classic(0x201, &[lo, hi, 3]));
             device.poll(at(2), &mut sent);
         }
-        device.on_frame(at(3), &targets(0, 500));
+        device.on_frame(at(3), Port::MAIN, &targets(0, 500));
         device.app_mut().0.set_actual(0.0, 500.0);
         device.poll(at(4), &mut sent);
         assert_eq!(device.app().state(), State::OperationEnabled);
         assert_ne!(statusword(&device) & 0x0400, 0, "at its target velocity");
-        device.on_frame(at(4), &targets(0, 800));
+        device.on_frame(at(4), Port::MAIN, &targets(0, 800));
         assert_eq!(statusword(&device) & 0x0400, 0, "a new target velocity");
-        device.on_frame(at(4), &targets(0, 500));
+        device.on_frame(at(4), Port::MAIN, &targets(0, 500));
         assert_ne!(
             statusword(&device) & 0x0400,
             0,
             "back to the one it runs at"
         );
         // Profile position, the motor still: a new set point is a target not yet reached.
-        device.on_frame(at(5), &classic(0x201, &[0x0F, 0, 1]));
-        device.on_frame(at(5), &targets(0, 0));
+        device.on_frame(at(5), Port::MAIN, &classic(0x201, &[0x0F, 0, 1]));
+        device.on_frame(at(5), Port::MAIN, &targets(0, 0));
         device.app_mut().0.set_actual(0.0, 0.0);
-        device.on_frame(at(5), &classic(0x201, &[0x1F, 0, 1]));
+        device.on_frame(at(5), Port::MAIN, &classic(0x201, &[0x1F, 0, 1]));
         device.poll(at(5), &mut sent);
         assert_ne!(statusword(&device) & 0x0400, 0, "at its set point");
-        device.on_frame(at(6), &classic(0x201, &[0x0F, 0, 1]));
-        device.on_frame(at(6), &targets(1_000, 0));
-        device.on_frame(at(6), &classic(0x201, &[0x1F, 0, 1]));
+        device.on_frame(at(6), Port::MAIN, &classic(0x201, &[0x0F, 0, 1]));
+        device.on_frame(at(6), Port::MAIN, &targets(1_000, 0));
+        device.on_frame(at(6), Port::MAIN, &classic(0x201, &[0x1F, 0, 1]));
         assert_eq!(statusword(&device) & 0x0400, 0, "a new set point");
     }
 }

@@ -30,6 +30,7 @@ pub enum TransferMode {
 
 /// Why a client transfer failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum SdoError {
     /// The server aborted.
     #[error("the server aborted: {0}")]
@@ -295,66 +296,18 @@ impl SdoClient {
         }
     }
 
+    /// The server's `response` to the transfer in `phase`: the one transition function of a
+    /// transfer, a method per phase and direction.
     fn advance(
         &mut self,
         request: &Request,
         phase: ClientPhase,
         response: [u8; 8],
     ) -> Result<(), Abort> {
-        let command = response[0];
         let node = request.node;
         match (phase, &request.data) {
-            (ClientPhase::Initiated, None) => match command >> 5 {
-                2 => {
-                    Self::check_target(request, &response)?;
-                    if command & 0x02 != 0 {
-                        let size = if command & 0x01 != 0 {
-                            4 - usize::from((command >> 2) & 0x03)
-                        } else {
-                            4
-                        };
-                        let data = response.get(4..4 + size).unwrap_or(&[]).to_vec();
-                        self.finish(Ok(data));
-                    } else {
-                        self.send(node, [0x60, 0, 0, 0, 0, 0, 0, 0]);
-                        self.set_phase(ClientPhase::Segment { toggle: false });
-                    }
-                    Ok(())
-                }
-                6 if request.mode == TransferMode::Block && command & 0x01 == 0 => {
-                    Self::check_target(request, &response)?;
-                    let size = (command & 0x02 != 0)
-                        .then(|| usize::try_from(u32_at4(&response)).unwrap_or(usize::MAX));
-                    self.send(node, [0xA3, 0, 0, 0, 0, 0, 0, 0]);
-                    self.set_phase(ClientPhase::UploadBlock {
-                        expected: 1,
-                        crc: command & 0x04 != 0,
-                        size,
-                        complete: false,
-                    });
-                    Ok(())
-                }
-                _ => Err(Abort::InvalidCommand),
-            },
-            (ClientPhase::Segment { toggle }, None) => {
-                if command >> 5 != 0 {
-                    return Err(Abort::InvalidCommand);
-                }
-                if (command & 0x10 != 0) != toggle {
-                    return Err(Abort::ToggleNotAlternated);
-                }
-                let unused = usize::from((command >> 1) & 0x07);
-                self.buffer
-                    .extend_from_slice(response.get(1..8 - unused).unwrap_or(&[]));
-                if command & 0x01 != 0 {
-                    let data = core::mem::take(&mut self.buffer);
-                    self.finish(Ok(data));
-                } else {
-                    self.send(node, [0x60 | (u8::from(!toggle) << 4), 0, 0, 0, 0, 0, 0, 0]);
-                    self.set_phase(ClientPhase::Segment { toggle: !toggle });
-                }
-                Ok(())
-            }
+            (ClientPhase::Initiated, None) => self.upload_initiated(request, response),
+            (ClientPhase::Segment { toggle }, None) => self.upload_segment(node, toggle, response),
             (
                 ClientPhase::UploadBlock {
                     expected,
@@ -364,39 +317,7 @@ impl SdoClient {
                 },
                 None,
             ) => {
-                let sequence = command & 0x7F;
-                let last = command & 0x80 != 0;
-                let in_order = sequence == expected;
-                if in_order {
-                    self.buffer
-                        .extend_from_slice(response.get(1..).unwrap_or(&[]));
-                }
-                if sequence == MAX_BLOCK || (last && in_order) {
-                    let acked = if in_order { sequence } else { expected - 1 };
-                    self.send(node, [0xA2, acked, MAX_BLOCK, 0, 0, 0, 0, 0]);
-                    self.set_phase(ClientPhase::UploadBlock {
-                        expected: 1,
-                        crc,
-                        size,
-                        complete: last && in_order,
-                    });
-                } else if in_order {
-                    self.set_phase(ClientPhase::UploadBlock {
-                        expected: expected + 1,
-                        crc,
-                        size,
-                        complete: false,
-                    });
-                } else if last {
-                    // The block ended with gaps: acknowledge what arrived in order.
-                    self.send(node, [0xA2, expected - 1, MAX_BLOCK, 0, 0, 0, 0, 0]);
-                    self.set_phase(ClientPhase::UploadBlock {
-                        expected: 1,
-                        crc,
-                        size,
-                        complete: false,
-                    });
-                }
+                self.upload_block_segment(node, expected, (crc, size), response);
                 Ok(())
             }
             (
@@ -407,67 +328,12 @@ impl SdoClient {
                     ..
                 },
                 None,
-            ) => {
-                if command & 0xE3 != 0xC1 {
-                    return Err(Abort::InvalidCommand);
-                }
-                let unused = usize::from((command >> 2) & 0x07);
-                let len = self.buffer.len().saturating_sub(unused);
-                self.buffer.truncate(len);
-                if size.is_some_and(|size| size != len) {
-                    return Err(Abort::LengthMismatch);
-                }
-                if crc && crc16(0, &self.buffer) != u16::from_le_bytes([response[1], response[2]]) {
-                    return Err(Abort::CrcError);
-                }
-                self.send(node, [0xA1, 0, 0, 0, 0, 0, 0, 0]);
-                let data = core::mem::take(&mut self.buffer);
-                self.finish(Ok(data));
-                Ok(())
+            ) => self.upload_block_end(node, crc, size, response),
+            (ClientPhase::Initiated, Some(data)) => {
+                self.download_initiated(request, data, response)
             }
-            (ClientPhase::Initiated, Some(data)) => match (command >> 5, request.mode) {
-                (3, mode) if mode != TransferMode::Block => {
-                    Self::check_target(request, &response)?;
-                    let expedited =
-                        request.mode == TransferMode::Auto && (1..=4).contains(&data.len());
-                    if expedited {
-                        self.finish(Ok(Vec::new()));
-                    } else {
-                        self.send_download_segment(node, data, false);
-                    }
-                    Ok(())
-                }
-                (5, TransferMode::Block) if command & 0x03 == 0 => {
-                    Self::check_target(request, &response)?;
-                    let block_size = response[4];
-                    if block_size == 0 || block_size > MAX_BLOCK {
-                        return Err(Abort::InvalidBlockSize);
-                    }
-                    let crc = command & 0x04 != 0;
-                    let sent = self.send_download_block(node, data, 0, block_size);
-                    self.set_phase(ClientPhase::DownloadBlock {
-                        block_start: 0,
-                        sent,
-                        block_size,
-                        crc,
-                    });
-                    Ok(())
-                }
-                _ => Err(Abort::InvalidCommand),
-            },
             (ClientPhase::Segment { toggle }, Some(data)) => {
-                if command & 0xE0 != 0x20 {
-                    return Err(Abort::InvalidCommand);
-                }
-                if (command & 0x10 != 0) != toggle {
-                    return Err(Abort::ToggleNotAlternated);
-                }
-                if self.offset >= data.len() {
-                    self.finish(Ok(Vec::new()));
-                } else {
-                    self.send_download_segment(node, data, !toggle);
-                }
-                Ok(())
+                self.download_segment(node, data, toggle, response)
             }
             (
                 ClientPhase::DownloadBlock {
@@ -477,49 +343,9 @@ impl SdoClient {
                     ..
                 },
                 Some(data),
-            ) => {
-                if command != 0xA2 {
-                    return Err(Abort::InvalidCommand);
-                }
-                let acked = response[1];
-                let block_size = response[2];
-                if acked > sent {
-                    return Err(Abort::InvalidSequence);
-                }
-                if block_size == 0 || block_size > MAX_BLOCK {
-                    return Err(Abort::InvalidBlockSize);
-                }
-                let next = block_start + 7 * usize::from(acked);
-                if next >= data.len() && acked == sent {
-                    let check = if crc { crc16(0, data) } else { 0 };
-                    let [lo, hi] = check.to_le_bytes();
-                    self.send(
-                        node,
-                        [
-                            0xC1 | (unused_in_last(data.len()) << 2),
-                            lo,
-                            hi,
-                            0,
-                            0,
-                            0,
-                            0,
-                            0,
-                        ],
-                    );
-                    self.set_phase(ClientPhase::DownloadBlockEnd);
-                } else {
-                    let sent = self.send_download_block(node, data, next, block_size);
-                    self.set_phase(ClientPhase::DownloadBlock {
-                        block_start: next,
-                        sent,
-                        block_size,
-                        crc,
-                    });
-                }
-                Ok(())
-            }
+            ) => self.download_block_acknowledged(node, data, (block_start, sent, crc), response),
             (ClientPhase::DownloadBlockEnd, Some(_)) => {
-                if command & 0xE3 != 0xA1 {
+                if response[0] & 0xE3 != 0xA1 {
                     return Err(Abort::InvalidCommand);
                 }
                 self.finish(Ok(Vec::new()));
@@ -528,6 +354,250 @@ impl SdoClient {
             (ClientPhase::DownloadBlock { .. } | ClientPhase::DownloadBlockEnd, None)
             | (ClientPhase::UploadBlock { .. }, Some(_)) => Err(Abort::General),
         }
+    }
+
+    /// An upload's initiate response: expedited data, the first segment asked for, or a
+    /// block upload started.
+    fn upload_initiated(&mut self, request: &Request, response: [u8; 8]) -> Result<(), Abort> {
+        let (command, node) = (response[0], request.node);
+        match command >> 5 {
+            2 => {
+                Self::check_target(request, &response)?;
+                if command & 0x02 != 0 {
+                    let size = if command & 0x01 != 0 {
+                        4 - usize::from((command >> 2) & 0x03)
+                    } else {
+                        4
+                    };
+                    let data = response.get(4..4 + size).unwrap_or(&[]).to_vec();
+                    self.finish(Ok(data));
+                } else {
+                    self.send(node, [0x60, 0, 0, 0, 0, 0, 0, 0]);
+                    self.set_phase(ClientPhase::Segment { toggle: false });
+                }
+                Ok(())
+            }
+            6 if request.mode == TransferMode::Block && command & 0x01 == 0 => {
+                Self::check_target(request, &response)?;
+                let size = (command & 0x02 != 0)
+                    .then(|| usize::try_from(u32_at4(&response)).unwrap_or(usize::MAX));
+                self.send(node, [0xA3, 0, 0, 0, 0, 0, 0, 0]);
+                self.set_phase(ClientPhase::UploadBlock {
+                    expected: 1,
+                    crc: command & 0x04 != 0,
+                    size,
+                    complete: false,
+                });
+                Ok(())
+            }
+            _ => Err(Abort::InvalidCommand),
+        }
+    }
+
+    /// An upload's segment.
+    fn upload_segment(&mut self, node: u8, toggle: bool, response: [u8; 8]) -> Result<(), Abort> {
+        let command = response[0];
+        if command >> 5 != 0 {
+            return Err(Abort::InvalidCommand);
+        }
+        if (command & 0x10 != 0) != toggle {
+            return Err(Abort::ToggleNotAlternated);
+        }
+        let unused = usize::from((command >> 1) & 0x07);
+        self.buffer
+            .extend_from_slice(response.get(1..8 - unused).unwrap_or(&[]));
+        if command & 0x01 != 0 {
+            let data = core::mem::take(&mut self.buffer);
+            self.finish(Ok(data));
+        } else {
+            self.send(node, [0x60 | (u8::from(!toggle) << 4), 0, 0, 0, 0, 0, 0, 0]);
+            self.set_phase(ClientPhase::Segment { toggle: !toggle });
+        }
+        Ok(())
+    }
+
+    /// A segment of a block upload: acknowledged at the block's end or at a gap.
+    fn upload_block_segment(
+        &mut self,
+        node: u8,
+        expected: u8,
+        (crc, size): (bool, Option<usize>),
+        response: [u8; 8],
+    ) {
+        let command = response[0];
+        let sequence = command & 0x7F;
+        let last = command & 0x80 != 0;
+        let in_order = sequence == expected;
+        if in_order {
+            self.buffer
+                .extend_from_slice(response.get(1..).unwrap_or(&[]));
+        }
+        if sequence == MAX_BLOCK || (last && in_order) {
+            let acked = if in_order { sequence } else { expected - 1 };
+            self.send(node, [0xA2, acked, MAX_BLOCK, 0, 0, 0, 0, 0]);
+            self.set_phase(ClientPhase::UploadBlock {
+                expected: 1,
+                crc,
+                size,
+                complete: last && in_order,
+            });
+        } else if in_order {
+            self.set_phase(ClientPhase::UploadBlock {
+                expected: expected + 1,
+                crc,
+                size,
+                complete: false,
+            });
+        } else if last {
+            // The block ended with gaps: acknowledge what arrived in order.
+            self.send(node, [0xA2, expected - 1, MAX_BLOCK, 0, 0, 0, 0, 0]);
+            self.set_phase(ClientPhase::UploadBlock {
+                expected: 1,
+                crc,
+                size,
+                complete: false,
+            });
+        }
+    }
+
+    /// A block upload's end: its length and CRC checked.
+    fn upload_block_end(
+        &mut self,
+        node: u8,
+        crc: bool,
+        size: Option<usize>,
+        response: [u8; 8],
+    ) -> Result<(), Abort> {
+        let command = response[0];
+        if command & 0xE3 != 0xC1 {
+            return Err(Abort::InvalidCommand);
+        }
+        let unused = usize::from((command >> 2) & 0x07);
+        let len = self.buffer.len().saturating_sub(unused);
+        self.buffer.truncate(len);
+        if size.is_some_and(|size| size != len) {
+            return Err(Abort::LengthMismatch);
+        }
+        if crc && crc16(0, &self.buffer) != u16::from_le_bytes([response[1], response[2]]) {
+            return Err(Abort::CrcError);
+        }
+        self.send(node, [0xA1, 0, 0, 0, 0, 0, 0, 0]);
+        let data = core::mem::take(&mut self.buffer);
+        self.finish(Ok(data));
+        Ok(())
+    }
+
+    /// A download's initiate response: done (expedited), the first segment, or the first
+    /// block.
+    fn download_initiated(
+        &mut self,
+        request: &Request,
+        data: &[u8],
+        response: [u8; 8],
+    ) -> Result<(), Abort> {
+        let (command, node) = (response[0], request.node);
+        match (command >> 5, request.mode) {
+            (3, mode) if mode != TransferMode::Block => {
+                Self::check_target(request, &response)?;
+                let expedited = request.mode == TransferMode::Auto && (1..=4).contains(&data.len());
+                if expedited {
+                    self.finish(Ok(Vec::new()));
+                } else {
+                    self.send_download_segment(node, data, false);
+                }
+                Ok(())
+            }
+            (5, TransferMode::Block) if command & 0x03 == 0 => {
+                Self::check_target(request, &response)?;
+                let block_size = response[4];
+                if block_size == 0 || block_size > MAX_BLOCK {
+                    return Err(Abort::InvalidBlockSize);
+                }
+                let crc = command & 0x04 != 0;
+                let sent = self.send_download_block(node, data, 0, block_size);
+                self.set_phase(ClientPhase::DownloadBlock {
+                    block_start: 0,
+                    sent,
+                    block_size,
+                    crc,
+                });
+                Ok(())
+            }
+            _ => Err(Abort::InvalidCommand),
+        }
+    }
+
+    /// A download segment's response.
+    fn download_segment(
+        &mut self,
+        node: u8,
+        data: &[u8],
+        toggle: bool,
+        response: [u8; 8],
+    ) -> Result<(), Abort> {
+        let command = response[0];
+        if command & 0xE0 != 0x20 {
+            return Err(Abort::InvalidCommand);
+        }
+        if (command & 0x10 != 0) != toggle {
+            return Err(Abort::ToggleNotAlternated);
+        }
+        if self.offset >= data.len() {
+            self.finish(Ok(Vec::new()));
+        } else {
+            self.send_download_segment(node, data, !toggle);
+        }
+        Ok(())
+    }
+
+    /// A downloaded block's acknowledgement: the next block, or the end.
+    fn download_block_acknowledged(
+        &mut self,
+        node: u8,
+        data: &[u8],
+        (block_start, sent, crc): (usize, u8, bool),
+        response: [u8; 8],
+    ) -> Result<(), Abort> {
+        let command = response[0];
+        if command != 0xA2 {
+            return Err(Abort::InvalidCommand);
+        }
+        let acked = response[1];
+        let block_size = response[2];
+        if acked > sent {
+            return Err(Abort::InvalidSequence);
+        }
+        if block_size == 0 || block_size > MAX_BLOCK {
+            return Err(Abort::InvalidBlockSize);
+        }
+        let next = block_start + 7 * usize::from(acked);
+        if next >= data.len() && acked == sent {
+            let check = if crc { crc16(0, data) } else { 0 };
+            let [lo, hi] = check.to_le_bytes();
+            self.send(
+                node,
+                [
+                    0xC1 | (unused_in_last(data.len()) << 2),
+                    lo,
+                    hi,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                ],
+            );
+            self.set_phase(ClientPhase::DownloadBlockEnd);
+        } else {
+            let sent = self.send_download_block(node, data, next, block_size);
+            self.set_phase(ClientPhase::DownloadBlock {
+                block_start: next,
+                sent,
+                block_size,
+                crc,
+            });
+        }
+        Ok(())
     }
 
     fn send_download_segment(&mut self, node: u8, data: &[u8], toggle: bool) {

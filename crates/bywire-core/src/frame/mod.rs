@@ -24,6 +24,7 @@ pub const EFF_MASK: u32 = 0x1FFF_FFFF;
 
 /// Why a frame could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum FrameError {
     /// A standard identifier above 0x7FF.
     #[error("standard identifier {0:#X} is above 0x7FF")]

@@ -17,6 +17,7 @@ pub struct BitSeq {
 
 /// A bit sequence longer than [`MAX_FRAME_BITS`], or text that is not 0s and 1s.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum BitSeqError {
     /// More bits than a frame can have.
     #[error("more than {MAX_FRAME_BITS} bits")]

@@ -127,6 +127,7 @@ pub struct Span {
 
 /// Why a frame has no bit sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum EncodeError {
     /// Error frames are controller reports, not frames sent on the bus.
     #[error("an error frame is a controller report and has no bit sequence of its own")]

@@ -14,6 +14,7 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::support::interrupt::interrupt_flag;
 use crate::support::vehicles::{keep_freshness, SecOcArgs, Wire};
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
@@ -413,7 +414,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         buses: specs.clone(),
         output_lost: false,
         freshness,
-        interrupted: crate::interrupt_flag(),
+        interrupted: interrupt_flag(),
     };
     // The runner is never stopped from outside: a signal ends the input, and the bridge's
     // hooks end the run (after the safe stop, with --estop-on-eof).

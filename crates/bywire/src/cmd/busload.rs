@@ -16,6 +16,7 @@ use bywire_core::{Frame, Timestamp};
 use bywire_dbc::codec::EncodeMode;
 
 use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::interrupt::interrupt_flag;
 use crate::support::signals::Dbc;
 
 #[derive(clap::Args)]
@@ -118,7 +119,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     let args_only: Vec<BusArg> = meters.iter().map(|m| m.arg.clone()).collect();
     let readers = Readers::start(busarg::open_all(&args_only)?);
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     if args.redraw {
         write!(out, "\x1b[2J")?;
     }

@@ -21,6 +21,7 @@ use bywire_core::frame::{Frame, Id};
 use bywire_core::time::Timestamp;
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 
 #[derive(clap::Subcommand)]
 pub enum CanopenCommand {
@@ -343,7 +344,7 @@ fn type_for(
 /// Run a master until its one SDO transfer ends.
 fn transfer(bus_text: &str, master: &mut Master, timeout: Duration) -> Result<SdoOutcome> {
     let bus = open_bus(bus_text)?;
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let mut outcome = None;
     runner::run_until(
         bus,
@@ -426,7 +427,7 @@ fn nmt(
         runner::run_until(
             bus,
             &mut master,
-            &crate::interrupt_flag(),
+            &interrupt_flag(),
             Some(Duration::from_millis(50)),
             |_| false,
         )?;
@@ -441,33 +442,27 @@ fn nmt(
     let mut booted = false;
     let mut seen = None;
     let bus = open_bus(bus_text)?;
-    runner::run_until(
-        bus,
-        &mut master,
-        &crate::interrupt_flag(),
-        Some(wait),
-        |m| {
-            while let Some(event) = m.next_event() {
-                match event {
-                    MasterEvent::Heartbeat(HeartbeatEvent::BootUp { node: n }) if n == node => {
-                        booted = true;
-                        seen = None;
-                    }
-                    MasterEvent::Heartbeat(HeartbeatEvent::StateChanged { node: n, state })
-                        if n == node && (booted || !resets) && state != NmtState::BootUp =>
-                    {
-                        seen = Some(state)
-                    }
-                    _ => {}
+    runner::run_until(bus, &mut master, &interrupt_flag(), Some(wait), |m| {
+        while let Some(event) = m.next_event() {
+            match event {
+                MasterEvent::Heartbeat(HeartbeatEvent::BootUp { node: n }) if n == node => {
+                    booted = true;
+                    seen = None;
                 }
+                MasterEvent::Heartbeat(HeartbeatEvent::StateChanged { node: n, state })
+                    if n == node && (booted || !resets) && state != NmtState::BootUp =>
+                {
+                    seen = Some(state)
+                }
+                _ => {}
             }
-            match (resets, seen) {
-                (true, Some(_)) => booted,
-                (false, Some(state)) => state == command.target(),
-                (_, None) => false,
-            }
-        },
-    )?;
+        }
+        match (resets, seen) {
+            (true, Some(_)) => booted,
+            (false, Some(state)) => state == command.target(),
+            (_, None) => false,
+        }
+    })?;
     let name = command_name(command);
     match (seen, booted) {
         (Some(state), true) => writeln!(out, "node {node}: boot-up, {}", state.name())?,
@@ -530,13 +525,7 @@ impl Node for Scanner {
 fn scan(bus_text: &str, wait: Duration, out: &mut impl Write) -> Result<()> {
     let bus = open_bus(bus_text)?;
     let mut scanner = Scanner::default();
-    runner::run_until(
-        bus,
-        &mut scanner,
-        &crate::interrupt_flag(),
-        Some(wait),
-        |_| false,
-    )?;
+    runner::run_until(bus, &mut scanner, &interrupt_flag(), Some(wait), |_| false)?;
     if scanner.found.is_empty() {
         writeln!(out, "no nodes answered within {} ms", wait.as_millis())?;
         return Ok(());
@@ -604,7 +593,7 @@ fn run_device<A: Application>(
     runner::run_until(
         bus,
         &mut device,
-        &crate::interrupt_flag(),
+        &interrupt_flag(),
         options.duration,
         |device| {
             while let Some(event) = device.next_event() {

@@ -12,6 +12,8 @@ use bywire_sim::tug::{OnBothCommandBuses, Tug, TugParams};
 use bywire_vehicle::acceptance::{CheckConfig, Checker};
 use bywire_vehicle::profile::Profile;
 
+use crate::support::interrupt::interrupt_flag;
+
 #[derive(clap::Args)]
 #[command(
     after_help = "Examples:\n  bywire check --profile reference-tug tug                      (the simulated tug)\n  bywire check --profile reference-tug tug --tug-fault stuck-sensor\n  bywire check --profile ./my-tug.toml socketcan:can0              (a real vehicle, in real time)\n\nChecks, in order: engage, feedback rate, steering sweep (±40° in 1° steps, each within\n2.0° after 0.6 s), speed steps (1.0 and 2.5 m/s within 10 % after 6 s), watchdog (commands\nstop: holding and full braking at their cycle counts), re-engage, and with an EmergencyStop\nmessage: E-stop reaction, latch, and the operator's reset. Exit 1 when any check fails.\nOn a real vehicle the tug moves: run it where it may."
@@ -71,7 +73,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         runner::run_until(
             bus,
             &mut checker,
-            &crate::interrupt_flag(),
+            &interrupt_flag(),
             Some(Duration::from_secs(600)),
             |c| c.is_done(),
         )

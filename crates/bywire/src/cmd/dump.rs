@@ -15,6 +15,7 @@ use bywire_log::format::{Format, ParquetOptions, RecordWriter};
 use bywire_log::{FrameView, LogRecord, Precision, View};
 
 use crate::support::busarg::{self, BusArg, Event, Readers};
+use crate::support::interrupt::interrupt_flag;
 use crate::support::logs::{CompressionArg, TimeUnitArg};
 use crate::support::signals::Dbc;
 use crate::support::signals::FrameText;
@@ -123,7 +124,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         Some(path) => Some(create_log(path, log_format, parquet)?),
         None => None,
     };
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let readers = Readers::start(opened);
     let result = print_frames(
         args,

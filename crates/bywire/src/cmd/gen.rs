@@ -10,6 +10,7 @@ use anyhow::{anyhow, Context, Result};
 use bywire_core::{ClassicFrame, Dlc, FdFrame, Frame, Id};
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::signals::Dbc;
 use bywire_dbc::codec::EncodeMode;
 
@@ -222,7 +223,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let mut generator = Generator::new(args)?;
     let mut bus =
         busarg::open_to_send(&args.bus, "gen").with_context(|| format!("bus '{}'", args.bus))?;
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let mut sent = 0u64;
     let mut emit = |frame: &Frame, out: &mut dyn Write| -> Result<bool> {
         bus.send(frame)

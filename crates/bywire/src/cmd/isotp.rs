@@ -9,6 +9,7 @@ use bywire_core::{Id, Timestamp};
 use bywire_diag::isotp::{IsoTp, IsoTpConfig, IsoTpEvent, StMin};
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::numbers::{can_id, extended_addressing, hex_u8};
 
 /// The most hex input `send` reads (an ISO-TP message of up to 4 GiB is not typed by hand).
@@ -493,7 +494,7 @@ fn dump(
     let arg = busarg::parse(bus.map(String::as_str).unwrap_or_default())?;
     let opened = busarg::open_all(std::slice::from_ref(&arg))?;
     let readers = busarg::Readers::start(opened);
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         match readers.events.recv_timeout(Duration::from_millis(100)) {
             Ok((_, Ok(received))) => {
@@ -516,7 +517,7 @@ fn drive(
 ) -> Result<Option<Result<()>>> {
     let bus_handle = busarg::open(bus).with_context(|| format!("bus {bus}"))?;
     let mut outcome = None;
-    bywire_bus::runner::run_until(bus_handle, node, &crate::interrupt_flag(), None, |node| {
+    bywire_bus::runner::run_until(bus_handle, node, &interrupt_flag(), None, |node| {
         outcome = done(node);
         outcome.is_some()
     })

@@ -11,6 +11,7 @@ use bywire_bus::Bus;
 use bywire_log::LogRecord;
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::logs::{self, Skip};
 
 #[derive(clap::Args)]
@@ -99,7 +100,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }
     }
     let mut targets: HashMap<String, Option<Target>> = HashMap::new();
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let mut sent = 0u64;
     let mut pass = 0u64;
     while loops.is_none_or(|n| pass < n) {

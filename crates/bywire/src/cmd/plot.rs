@@ -11,6 +11,7 @@ use bywire_core::{Frame, Timestamp};
 use plotters::prelude::*;
 
 use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::interrupt::interrupt_flag;
 use crate::support::logs;
 use crate::support::signals::Dbc;
 
@@ -155,7 +156,7 @@ fn capture(buses: &[String], seconds: f64) -> Result<Vec<(Timestamp, Frame)>> {
         .collect::<Result<_>>()?;
     let readers = Readers::start(busarg::open_all(&args)?);
     let end = Instant::now() + Duration::from_secs_f64(seconds);
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let mut frames = Vec::new();
     while Instant::now() < end && !stop.load(std::sync::atomic::Ordering::Relaxed) {
         if let Ok((index, event)) = readers.events.recv_timeout(

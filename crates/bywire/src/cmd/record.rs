@@ -20,6 +20,7 @@ use bywire_log::LogRecord;
 use serde_json::json;
 
 use crate::support::busarg::{self, BusArg, Readers};
+use crate::support::interrupt::interrupt_flag;
 use crate::support::logs::CompressionArg;
 use crate::support::numbers;
 
@@ -382,7 +383,7 @@ fn record(
     decoder: Option<&Decoder>,
     recorder: &mut Recorder,
 ) -> Result<()> {
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let began = Instant::now();
     let end = args.duration.map(Duration::from_secs_f64);
     let mut status = Status::new(buses.len(), !args.quiet);

@@ -10,6 +10,7 @@ use bywire_ros::vehicle_interface::{self, VehicleEvent, VehicleInterfaceConfig};
 use bywire_vehicle::autoware::OutputMode;
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::ros2::NodeArgs;
 
 /// Refusals printed before the rest are only counted.
@@ -201,22 +202,25 @@ fn can(args: &CanArgs, out: &mut dyn Write) -> Result<()> {
         refused: 0,
     };
     reporter.line(&format!("node {} bridging", node.fully_qualified_name()));
-    let stats = can_bridge::run(
-        &mut node,
-        buses,
-        &config,
-        &crate::interrupt_flag(),
-        &mut |event| match event {
-            BridgeEvent::Refused { bus, why } => reporter.refusal(&format!("{bus}: {why}")),
-            BridgeEvent::BusLost { bus, error } => {
-                reporter.line(&format!("bus {bus} lost: {error}; the others go on"))
-            }
-            BridgeEvent::PublishFailed { bus, error } => reporter.line(&format!("{bus}: {error}")),
-            BridgeEvent::NoEcho { bus, why } => reporter.line(&format!(
-                "bus {bus}: frames sent are not published back as received ({why})"
-            )),
-        },
-    )?;
+    let stats =
+        can_bridge::run(
+            &mut node,
+            buses,
+            &config,
+            &interrupt_flag(),
+            &mut |event| match event {
+                BridgeEvent::Refused { bus, why } => reporter.refusal(&format!("{bus}: {why}")),
+                BridgeEvent::BusLost { bus, error } => {
+                    reporter.line(&format!("bus {bus} lost: {error}; the others go on"))
+                }
+                BridgeEvent::PublishFailed { bus, error } => {
+                    reporter.line(&format!("{bus}: {error}"))
+                }
+                BridgeEvent::NoEcho { bus, why } => reporter.line(&format!(
+                    "bus {bus}: frames sent are not published back as received ({why})"
+                )),
+            },
+        )?;
     writeln!(
         out,
         "{} frames published, {} sent, {} refused",
@@ -269,7 +273,7 @@ fn control(args: &ControlOutputArgs, out: &mut dyn Write) -> Result<()> {
         &mut node,
         bus,
         &config,
-        &crate::interrupt_flag(),
+        &interrupt_flag(),
         &mut |_, outcome| match outcome {
             Outcome::Sent(_) => sent += 1,
             Outcome::Refused(why) => reporter.refusal(&why.to_string()),
@@ -346,7 +350,7 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
         (wire, freshness),
         buses,
         &config,
-        &crate::interrupt_flag(),
+        &interrupt_flag(),
         &mut |event| match event {
             VehicleEvent::Refused(why) => reporter.refusal(&why),
             VehicleEvent::Saturated(why) => reporter.line(&why),
@@ -424,7 +428,7 @@ fn canopen(args: &CanopenArgs, out: &mut dyn Write) -> Result<()> {
         &config,
         bus,
         std::time::Duration::from_secs_f64(1.0 / args.rate),
-        &crate::interrupt_flag(),
+        &interrupt_flag(),
         &mut |event| match event {
             CanopenEvent::Called {
                 drive,

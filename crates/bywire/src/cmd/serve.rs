@@ -11,6 +11,7 @@ use std::time::Duration;
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::socketcand::{self, Limits, Server};
 
+use crate::support::interrupt::interrupt_flag;
 use crate::support::{busarg, numbers};
 
 /// The environment variable a token may come from (a command line is visible to every user of
@@ -179,7 +180,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             .start_beacon(xml, to)
             .context("cannot send the beacon")?;
     }
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     while !stop.load(Ordering::Relaxed) && server.is_running() {
         std::thread::sleep(Duration::from_millis(50));
     }

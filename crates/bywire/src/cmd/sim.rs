@@ -11,6 +11,7 @@ use bywire_sim::report::RunReport;
 use bywire_sim::scenario::Scenario;
 use bywire_sim::tug::{Tug, TugBus};
 
+use crate::support::interrupt::interrupt_flag;
 use crate::support::sim_serve::Shared;
 
 #[derive(clap::Args)]
@@ -302,7 +303,7 @@ fn run_over_ros2(
         tug,
         scenario,
         &config,
-        &crate::interrupt_flag(),
+        &interrupt_flag(),
         &mut |event| {
             let text = match event {
                 VehicleEvent::Refused(why) => format!("refused: {why}"),
@@ -357,7 +358,7 @@ fn run_plain(
     shared: &mut Shared,
     out: &mut impl Write,
 ) -> Result<bool> {
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let mut next_report = Timestamp::ZERO;
     let completed = loop {
         scenario.step(tug);

@@ -7,6 +7,7 @@ use std::sync::atomic::Ordering;
 use anyhow::{Context, Result};
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -23,7 +24,7 @@ pub struct Args {
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let bus = busarg::open(&args.bus).with_context(|| format!("bus '{}'", args.bus))?;
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let (path, handle) = bywire_bus::slcan::emulate(bus, std::sync::Arc::clone(&stop))?;
     writeln!(out, "{path}")?;
     out.flush()?;

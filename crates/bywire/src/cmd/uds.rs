@@ -17,6 +17,7 @@ use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 use serde_json::{json, Value};
 
 use crate::support::busarg;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::numbers::{can_id, extended_addressing, hex_u8};
 
 /// How the tester reaches the ECU, and what it does first.
@@ -365,7 +366,7 @@ pub fn run(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         Flow::Continue
     };
     runner
-        .run(&mut server, &crate::interrupt_flag(), None, &mut hooks)
+        .run(&mut server, &interrupt_flag(), None, &mut hooks)
         .map_err(|e| anyhow!("bus {bus}: {e}"))?;
     match write_error {
         Some(e) => Err(e.into()),
@@ -747,7 +748,7 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         Flow::Continue
     };
     let ended = runner
-        .run(&mut client, &crate::interrupt_flag(), None, &mut hooks)
+        .run(&mut client, &interrupt_flag(), None, &mut hooks)
         .map_err(|e| anyhow!("bus {}: {e}", tester.bus))?;
     if let Some(e) = failure {
         return Err(e);

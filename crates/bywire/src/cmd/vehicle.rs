@@ -5,6 +5,7 @@
 use std::io::Write;
 use std::time::Duration;
 
+use crate::support::interrupt::interrupt_flag;
 use crate::support::vehicles::{keep_freshness, SecOcArgs, Wire};
 use anyhow::{anyhow, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
@@ -121,7 +122,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> Result<()> {
         next: Timestamp::ZERO,
         freshness,
     };
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     let result = runner.run(&mut vehicle, &stop, limit, &mut status);
     result.map_err(|e| anyhow!("every bus lost (last: {e})"))?;
     Ok(())

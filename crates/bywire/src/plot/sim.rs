@@ -7,6 +7,8 @@ use std::path::Path;
 
 use anyhow::Result;
 use bywire_core::Timestamp;
+use bywire_sim::event::Happening;
+use bywire_sim::mission::MissionEvent;
 use bywire_sim::record::{windowed_loads, Sample};
 use bywire_sim::tug::Tug;
 use plotters::coord::Shift;
@@ -102,18 +104,18 @@ fn markers(tug: &Tug) -> Vec<Marker> {
     let mut faults = 0;
     tug.events
         .iter()
-        .filter_map(|event| match event.kind.as_str() {
-            "fault" => {
+        .filter_map(|event| match &event.what {
+            Happening::Fault(fault) => {
                 faults += 1;
                 Some(Marker {
                     t: seconds(event.t),
-                    label: format!("{faults} {}", short_name(&event.detail)),
+                    label: format!("{faults} {}", short_name(&fault.to_string())),
                     color: FAULT_COLOR,
                 })
             }
-            "steering_mode" => Some(Marker {
+            Happening::Mission(MissionEvent::SteeringMode(mode)) => Some(Marker {
                 t: seconds(event.t),
-                label: event.detail.clone(),
+                label: format!("{mode:?}"),
                 color: MODE_COLOR,
             }),
             _ => None,

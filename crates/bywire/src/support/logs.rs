@@ -17,6 +17,7 @@ use bywire_log::format::ParquetCompression;
 use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 
 use crate::support::files::write_dir_atomically;
+use crate::support::interrupt::interrupt_flag;
 use crate::support::progress::Progress;
 use bywire_log::format::{Format, READ_BUFFER};
 use bywire_log::{LogError, LogErrorKind, LogRecord, LogRecordRef, Reader};
@@ -201,7 +202,7 @@ pub fn for_each_merged(files: &[PathBuf], mut each: impl FnMut(LogRecord)) -> Re
         .zip(inputs)
         .map(|(name, input)| records(name, input, Skip::Unreadable))
         .collect();
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     for record in bywire_log::merge::merge(readers) {
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(anyhow!("interrupted"));
@@ -315,7 +316,7 @@ impl<'a> Pump<'a> {
         records: impl Iterator<Item = Result<LogRecord>>,
         mut write: impl FnMut(&LogRecord) -> Result<()>,
     ) -> Result<()> {
-        let stop = crate::interrupt_flag();
+        let stop = interrupt_flag();
         for record in records {
             let record = record?;
             let since_first = self.next(&stop, record.timestamp)?;
@@ -338,7 +339,7 @@ impl<'a> Pump<'a> {
         skip: Skip,
         mut write: impl FnMut(&LogRecordRef<'_>) -> Result<()>,
     ) -> Result<()> {
-        let stop = crate::interrupt_flag();
+        let stop = interrupt_flag();
         for_each_lent(name, input, skip, |record| {
             let since_first = self.next(&stop, record.timestamp)?;
             let Some(record) = self.selection.keep_lent(record, since_first) else {

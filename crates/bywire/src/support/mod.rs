@@ -1,9 +1,10 @@
 //! What the commands share: bus arguments, DBC and profile loading with diagnostics, numeric
-//! options, files written atomically, the simulator's servers, ROS 2 nodes. No command imports another.
+//! options, files written atomically, the interrupt flag, the simulator's servers, ROS 2 nodes. No command imports another.
 
 pub mod busarg;
 pub mod dbc;
 pub mod files;
+pub mod interrupt;
 pub mod logs;
 pub mod numbers;
 pub mod progress;

@@ -12,6 +12,7 @@ use bywire_tug::secured::TugWire;
 use bywire_vehicle::supervisor::Supervisor;
 use ratatui::crossterm::event::{Event, KeyCode, KeyEventKind};
 
+use crate::support::interrupt::interrupt_flag;
 use crate::support::sim_serve::Shared;
 use crate::tui::Input;
 use ratatui::layout::{Constraint, Layout};
@@ -53,7 +54,7 @@ fn event_loop(
 ) -> Result<Ending> {
     let mut paused = false;
     let mut last = Instant::now();
-    let stop = crate::interrupt_flag();
+    let stop = interrupt_flag();
     loop {
         // Simulated time follows the wall clock, a millisecond a step.
         let elapsed = last.elapsed();
@@ -225,8 +226,8 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
             Line::from(format!(
                 "{:8.3} s  {:<16} {}",
                 e.t.as_nanos() as f64 / 1e9,
-                e.kind,
-                e.detail
+                e.kind(),
+                e.what
             ))
         })
         .collect();
