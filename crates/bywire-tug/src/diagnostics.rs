@@ -18,7 +18,7 @@ use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{CommandStats, EstopState, Watchdog};
 
-use crate::ecu::{DRIVE_NODES, STEERING_NODES};
+use crate::drives::{DRIVE_NODES, STEERING_NODES};
 
 /// Physical requests come on this identifier.
 pub const REQUEST_ID: u32 = 0x7E0;

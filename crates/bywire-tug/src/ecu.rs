@@ -53,16 +53,9 @@ pub const BUS2: Port = Port(2);
 /// Bus 3, the sensors.
 pub const BUS3: Port = Port(3);
 
-/// The ECU's node ID on the drives bus.
-pub const MASTER_NODE: u8 = 1;
-/// Steering drives FL, FR, RL, RR.
-pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
-/// Wheel drives FL, FR, RL, RR.
-pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
-/// Steering drives count in 0.01°.
-pub const STEERING_UNITS_PER_DEG: f64 = 100.0;
-/// Wheel drives count in mm/s and mm.
-pub const DRIVE_UNITS_PER_M: f64 = 1000.0;
+pub use crate::drives::{
+    DRIVE_NODES, DRIVE_UNITS_PER_M, MASTER_NODE, STEERING_NODES, STEERING_UNITS_PER_DEG,
+};
 
 /// How often the ECU reports wheel speeds, angles and status on bus 1.
 const REPORT_PERIOD: Duration = Duration::from_millis(20);

@@ -29,6 +29,7 @@
 //! ```
 
 pub mod diagnostics;
+pub mod drives;
 pub mod ecu;
 pub mod messages;
 pub mod plausibility;

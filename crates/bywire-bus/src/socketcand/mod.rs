@@ -23,11 +23,13 @@
 
 pub mod beacon;
 pub mod client;
+pub mod config;
 pub mod protocol;
 pub mod server;
 pub mod session;
 
 pub use beacon::beacon_xml;
 pub use client::Client;
+pub use config::{Access, Config, Limits, ServerStats};
 pub use protocol::{format_frame, parse_command, parse_frame, Command};
-pub use server::{Access, Config, Limits, OpenBus, Server, ServerStats, CLIENT_QUEUE};
+pub use server::{OpenBus, Server, CLIENT_QUEUE};

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 
 use bywire_core::{Frame, Id};
 
+use super::config::{Config, ServerStats};
 use super::protocol::Command;
-use super::server::{Config, ServerStats};
 
 /// Where a session is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -503,7 +503,7 @@ fn equal_in_constant_time(a: &[u8], b: &[u8]) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::super::server::Limits;
+    use super::super::config::Limits;
     use super::super::Access;
     use super::*;
 

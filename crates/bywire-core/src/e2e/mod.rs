@@ -9,9 +9,11 @@
 //!   data, a 4-bit counter), protect and check with the profiles' status outcomes.
 
 mod counter;
+mod error;
 pub mod profile1;
 pub mod profile2;
 mod sequence;
 
 pub use counter::{CounterChecker, CounterStatus, RollingCounter};
+pub use error::E2eError;
 pub use sequence::{CheckStatus, Checker, Profile, SequenceConfig};

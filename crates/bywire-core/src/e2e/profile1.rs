@@ -4,6 +4,7 @@
 //! in the low nibble of byte 1 (bit offset 8); in `Nibble` mode the high nibble of byte 1 carries
 //! the data ID's high nibble.
 
+use super::error::E2eError;
 use super::sequence::{self, Profile};
 use super::SequenceConfig;
 use crate::crc::crc8_sae_j1850_continue;
@@ -32,19 +33,6 @@ pub struct Config {
     pub length: usize,
     /// Receiver sequence settings.
     pub sequence: SequenceConfig,
-}
-
-/// Why data cannot be protected or checked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum E2eError {
-    /// The buffer is shorter than the configured length, or the length is below 2.
-    #[error("protected data needs {needed} bytes, buffer has {actual}")]
-    Length {
-        /// Bytes needed.
-        needed: usize,
-        /// Bytes there.
-        actual: usize,
-    },
 }
 
 const CRC_BYTE: usize = 0;

@@ -1,7 +1,7 @@
 //! AUTOSAR E2E Profile 2: CRC-8H2F over the data and a data ID chosen by the counter from a list
 //! of 16, a 4-bit counter 0–15 in the low nibble of byte 1, the CRC in byte 0.
 
-use super::profile1::E2eError;
+use super::error::E2eError;
 use super::sequence::{self, Profile};
 use super::SequenceConfig;
 use crate::crc::crc8_h2f;

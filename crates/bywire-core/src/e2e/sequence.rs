@@ -156,10 +156,7 @@ pub trait Profile {
     /// The receiver sequence settings within `config`.
     fn sequence(config: &Self::Config) -> &SequenceConfig;
     /// The counter of `data` when its CRC (and data ID) check out, `Err(())` when not.
-    fn read(
-        config: &Self::Config,
-        data: &[u8],
-    ) -> Result<Result<u8, ()>, super::profile1::E2eError>;
+    fn read(config: &Self::Config, data: &[u8]) -> Result<Result<u8, ()>, super::error::E2eError>;
 }
 
 /// The receiver of a profile: waits for its first data, then judges each reception.
@@ -189,7 +186,7 @@ impl<P: Profile> Checker<P> {
         &mut self,
         config: &P::Config,
         data: Option<&[u8]>,
-    ) -> Result<CheckStatus, super::profile1::E2eError> {
+    ) -> Result<CheckStatus, super::error::E2eError> {
         self.state
             .check_data(P::sequence(config), data, |d| P::read(config, d))
     }

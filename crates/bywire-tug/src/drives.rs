@@ -1,0 +1,13 @@
+//! The tug's drives bus as both its ECU and its diagnostics see it: the CANopen node IDs and
+//! the drives' units.
+
+/// The ECU's node ID on the drives bus.
+pub const MASTER_NODE: u8 = 1;
+/// Steering drives FL, FR, RL, RR.
+pub const STEERING_NODES: [u8; 4] = [0x11, 0x12, 0x13, 0x14];
+/// Wheel drives FL, FR, RL, RR.
+pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
+/// Steering drives count in 0.01°.
+pub const STEERING_UNITS_PER_DEG: f64 = 100.0;
+/// Wheel drives count in mm/s and mm.
+pub const DRIVE_UNITS_PER_M: f64 = 1000.0;
