@@ -2,10 +2,10 @@
 //! (the session's decisions are its state machine's, in [`super::session`]).
 //!
 //! Every resource a client can make the server spend is bounded: connections
-//! ([`Limits::max_clients`]; further ones are told the server is full and closed), threads
+//! ([`Limits::max_clients`](super::config::Limits::max_clients); further ones are told the server is full and closed), threads
 //! (three per connection, none per cyclic job: a session's jobs run on its forwarding
-//! thread), time without opening a bus ([`Limits::handshake_timeout`]), a client that stops
-//! reading ([`Limits::write_timeout`]), cyclic jobs and their rate, subscriptions, and the
+//! thread), time without opening a bus ([`Limits::handshake_timeout`](super::config::Limits::handshake_timeout)), a client that stops
+//! reading ([`Limits::write_timeout`](super::config::Limits::write_timeout)), cyclic jobs and their rate, subscriptions, and the
 //! frames queued for a client ([`CLIENT_QUEUE`]). What a limit refuses or a slow client loses
 //! is counted in [`ServerStats`]. A connection that ends in any way — closed, reset, timed
 //! out — ends its threads and frees its endpoint and jobs.
