@@ -3,7 +3,7 @@
 
 /// Days from 1970-01-01 to a civil date (proleptic Gregorian), as in Howard Hinnant's
 /// `days_from_civil`.
-pub(crate) fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
+pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
     let year = if month <= 2 { year - 1 } else { year };
     let era = year.div_euclid(400);
     let year_of_era = year - era * 400;
@@ -14,7 +14,7 @@ pub(crate) fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
 }
 
 /// The civil date (year, month 1–12, day 1–31) of a day counted from 1970-01-01.
-pub(crate) fn civil_from_days(days: i64) -> (i64, u32, u32) {
+pub fn civil_from_days(days: i64) -> (i64, u32, u32) {
     let z = days + 719_468;
     let era = z.div_euclid(146_097);
     let day_of_era = z - era * 146_097;
@@ -29,7 +29,7 @@ pub(crate) fn civil_from_days(days: i64) -> (i64, u32, u32) {
 }
 
 /// `2026-12-03T22:17:00.123456Z` for a time in nanoseconds since the Unix epoch.
-pub(crate) fn utc_text(nanos: u64) -> String {
+pub fn utc_text(nanos: u64) -> String {
     let seconds = nanos / 1_000_000_000;
     let days = i64::try_from(seconds / 86_400).unwrap_or(i64::MAX);
     let (year, month, day) = civil_from_days(days);

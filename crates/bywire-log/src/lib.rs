@@ -34,8 +34,10 @@
 //! ```
 
 pub mod asc;
+#[cfg(feature = "parquet")]
+pub mod batches;
 pub mod blf;
-mod calendar;
+pub mod calendar;
 pub mod candump;
 mod fields;
 pub mod format;
@@ -44,6 +46,7 @@ pub mod lines;
 pub mod mcap;
 pub mod merge;
 pub mod mf4;
+pub mod options;
 pub mod pacing;
 #[cfg(feature = "parquet")]
 pub mod parquet;

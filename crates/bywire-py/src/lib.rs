@@ -17,14 +17,15 @@ use std::sync::Arc;
 use arrow_array::RecordBatch;
 use arrow_pyarrow::PyArrowType;
 use bywire_core::Timestamp;
+use bywire_data::decoded::decode_frames_batch;
+use bywire_data::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_ROWS};
+use bywire_data::long::{self, LongLabels};
 use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
+use bywire_log::batches::FrameBatches;
 use bywire_log::format::Format;
-use bywire_log::parquet::decoded::decode_frames_batch;
-use bywire_log::parquet::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_ROWS};
-use bywire_log::parquet::long::{self, LongLabels};
-use bywire_log::parquet::{raw_schema, FrameBatches};
+use bywire_log::parquet::raw_schema;
 use pyo3::exceptions::{
     PyException, PyKeyError, PyOSError, PyOverflowError, PyTypeError, PyValueError,
 };

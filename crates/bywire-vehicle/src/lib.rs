@@ -54,10 +54,6 @@ pub mod ads;
 pub mod autoware;
 pub mod command;
 #[cfg(feature = "std")]
-pub mod dataset;
-#[cfg(feature = "std")]
-pub mod latency;
-#[cfg(feature = "std")]
 pub mod profile;
 #[cfg(feature = "std")]
 mod profile_wire;

@@ -1,5 +1,6 @@
-//! Parquet (feature `parquet`): raw frames read and written as one table, and — with a DBC —
-//! decoded tables, one per message ([`decoded`]).
+//! Parquet (feature `parquet`): raw frames read and written as one table. The decoded tables,
+//! one per message, and the data lake are `bywire-data`'s, built from the columns and records
+//! this module reads.
 //!
 //! The raw table has one row a frame, zstd-compressed unless asked otherwise
 //! ([`ParquetCompression`]), in row groups of [`ROW_GROUP_ROWS`]:
@@ -19,16 +20,7 @@
 //! group's encoded columns at most, and [`ParquetWriter::finish`] writes the footer (a file
 //! without one is not a Parquet file, which is why conversions write to a temporary name).
 
-mod batch_file;
-pub mod decoded;
-mod encode;
 mod footer;
-pub mod lake;
-pub mod long;
-pub mod table;
-#[cfg(test)]
-mod test_support;
-mod thrift;
 
 use std::collections::{HashMap, VecDeque};
 use std::fs::File;
@@ -54,7 +46,7 @@ use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::candump::{LogError, LogRecord, Precision};
-pub use crate::format::{ParquetCompression, ParquetOptions};
+pub use crate::options::{ParquetCompression, ParquetOptions};
 
 /// Rows a row group holds (about 20–40 MB of frames before compression).
 pub const ROW_GROUP_ROWS: usize = 1 << 20;
@@ -66,7 +58,7 @@ pub const LAYOUT_KEY: &str = "bywire.layout";
 pub const RAW_LAYOUT: &str = "can-frames/1";
 
 /// A `ts` column's type in `precision` (UTC).
-pub(crate) fn timestamp_type_in(precision: Precision) -> DataType {
+pub fn timestamp_type_in(precision: Precision) -> DataType {
     let unit = match precision {
         Precision::Nanos => TimeUnit::Nanosecond,
         Precision::Micros => TimeUnit::Microsecond,
@@ -76,7 +68,7 @@ pub(crate) fn timestamp_type_in(precision: Precision) -> DataType {
 
 /// A `ts` column from nanoseconds, in `precision` (microseconds floored: a time never moves
 /// past the next frame's).
-pub(crate) fn time_array(mut nanos: Vec<i64>, precision: Precision) -> ArrayRef {
+pub fn time_array(mut nanos: Vec<i64>, precision: Precision) -> ArrayRef {
     match precision {
         Precision::Nanos => {
             Arc::new(TimestampNanosecondArray::new(nanos.into(), None).with_timezone("UTC"))
@@ -89,7 +81,7 @@ pub(crate) fn time_array(mut nanos: Vec<i64>, precision: Precision) -> ArrayRef 
 }
 
 /// A dictionary-encoded string column's type (what pandas opens as a category).
-pub(crate) fn dictionary_type() -> DataType {
+pub fn dictionary_type() -> DataType {
     DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8))
 }
 
@@ -120,7 +112,7 @@ pub fn raw_schema_in(precision: Precision) -> SchemaRef {
 /// parquet-rs's writer properties (the raw frames' files and numeric tables): pages
 /// compressed as asked, row groups of [`ROW_GROUP_ROWS`], the layout in the metadata,
 /// dictionary pages when asked.
-pub(crate) fn properties(
+pub fn properties(
     layout: &str,
     dictionary_pages: bool,
     compression: ParquetCompression,
@@ -131,7 +123,7 @@ pub(crate) fn properties(
 /// As [`properties`], with dictionary pages for the columns named in `dictionaries` whatever
 /// `dictionary_pages` says, and the integer columns named in `deltas` delta-encoded
 /// (`DELTA_BINARY_PACKED`).
-pub(crate) fn properties_with_dictionaries(
+pub fn properties_with_dictionaries(
     layout: &str,
     dictionary_pages: bool,
     dictionaries: &[&str],
@@ -165,19 +157,19 @@ pub(crate) fn properties_with_dictionaries(
 }
 
 /// A Parquet error as an I/O error (what the writers return).
-pub(crate) fn io_error(e: impl std::fmt::Display) -> std::io::Error {
+pub fn io_error(e: impl std::fmt::Display) -> std::io::Error {
     std::io::Error::other(format!("Parquet: {e}"))
 }
 
 /// The timestamp as Parquet's signed nanoseconds (a time past 2262 saturates).
-pub(crate) fn nanos(timestamp: Timestamp) -> i64 {
+pub fn nanos(timestamp: Timestamp) -> i64 {
     i64::try_from(timestamp.as_nanos()).unwrap_or(i64::MAX)
 }
 
 /// A dictionary-string column whose strings are known or few: keys built directly into a list
 /// of values, with no hashing per row (profiled: hashing each row's string in arrow's
 /// dictionary builder took 40 % of the time).
-pub(crate) struct Labels {
+pub struct Labels {
     /// Keys as plain vectors, not an Arrow builder: a push is a store (the builder's
     /// bookkeeping cost several times that on every row).
     keys: Vec<i32>,
@@ -201,7 +193,7 @@ const LABELS_SCANNED: usize = 16;
 
 impl Labels {
     /// Labels from `values` (more are added as texts come), room for `rows` keys.
-    pub(crate) fn new(values: Vec<String>, rows: usize) -> Self {
+    pub fn new(values: Vec<String>, rows: usize) -> Self {
         Labels {
             keys: Vec::with_capacity(rows),
             valid: None,
@@ -215,7 +207,7 @@ impl Labels {
     /// As [`Labels::push_text`], for a row's channel: a dictionary-encoded input's keys are
     /// matched once each (texts compared on a key's first row, not on every row).
     #[inline(always)]
-    pub(crate) fn push_channel(&mut self, channel: ChannelRef<'_>) {
+    pub fn push_channel(&mut self, channel: ChannelRef<'_>) {
         let ChannelRef::Key(input, _) = channel else {
             return self.push_text(channel.text());
         };
@@ -234,7 +226,7 @@ impl Labels {
     }
 
     /// The key of `text`, added to the values if new.
-    pub(crate) fn push_text(&mut self, text: &str) {
+    pub fn push_text(&mut self, text: &str) {
         if let Some(key) = self.last {
             if self.values.get(key).is_some_and(|v| v == text) {
                 return self.push_key(Some(key));
@@ -255,7 +247,7 @@ impl Labels {
     }
 
     /// Add keys already found (indexes into the values; a null key, no value).
-    pub(crate) fn append_keys(&mut self, keys: &arrow_array::Int32Array) {
+    pub fn append_keys(&mut self, keys: &arrow_array::Int32Array) {
         let before = self.keys.len();
         self.keys.extend_from_slice(keys.values());
         match (keys.nulls(), &mut self.valid) {
@@ -267,8 +259,9 @@ impl Labels {
         }
     }
 
+    /// Append a row with this key (`None`: null).
     #[inline(always)]
-    pub(crate) fn push_key(&mut self, key: Option<usize>) {
+    pub fn push_key(&mut self, key: Option<usize>) {
         match key.and_then(|k| i32::try_from(k).ok()) {
             Some(key) => {
                 self.keys.push(key);
@@ -286,7 +279,8 @@ impl Labels {
         }
     }
 
-    pub(crate) fn finish(&mut self) -> std::io::Result<ArrayRef> {
+    /// The column so far, as a dictionary array (emptied for the next).
+    pub fn finish(&mut self) -> std::io::Result<ArrayRef> {
         let values = arrow_array::StringArray::from_iter_values(&self.values);
         let keys = arrow_array::Int32Array::new(
             std::mem::take(&mut self.keys).into(),
@@ -295,63 +289,6 @@ impl Labels {
         let array = arrow_array::DictionaryArray::<Int32Type>::try_new(keys, Arc::new(values))
             .map_err(io_error)?;
         Ok(Arc::new(array))
-    }
-}
-
-/// A log's frames as [`raw_schema`] batches of at most `batch_rows` rows, read as they are
-/// asked for (what the Python module and a lake's tasks read logs through).
-pub struct FrameBatches {
-    records: crate::format::Records<'static>,
-    columns: FrameColumns,
-    batch_rows: usize,
-    done: bool,
-}
-
-impl FrameBatches {
-    /// Open the log at `path` (its format sniffed from its content); with `byte_range`
-    /// `(start, end)`, only the lines starting in it (a share of a split candump log).
-    pub fn open(
-        path: &std::path::Path,
-        byte_range: Option<(u64, u64)>,
-        batch_rows: usize,
-    ) -> std::io::Result<(crate::format::Format, Self)> {
-        use crate::format::Format;
-        let (format, records) = match byte_range {
-            None => Format::open_file(path)?,
-            Some((start, end)) => (Format::Candump, Format::open_file_range(path, start, end)?),
-        };
-        let batches = FrameBatches {
-            records,
-            columns: FrameColumns::new(),
-            batch_rows: batch_rows.max(1),
-            done: false,
-        };
-        Ok((format, batches))
-    }
-}
-
-impl Iterator for FrameBatches {
-    /// A batch, or why the log could not be read (`InvalidData`, naming the line or offset).
-    type Item = std::io::Result<RecordBatch>;
-
-    fn next(&mut self) -> Option<Self::Item> {
-        let invalid = |e: &dyn std::fmt::Display| {
-            std::io::Error::new(std::io::ErrorKind::InvalidData, e.to_string())
-        };
-        while !self.done && self.columns.rows() < self.batch_rows {
-            match self.records.next() {
-                Some(Ok(record)) => self.columns.push(&record),
-                Some(Err(e)) => {
-                    self.done = true;
-                    return Some(Err(invalid(&e)));
-                }
-                None => self.done = true,
-            }
-        }
-        if self.columns.rows() == 0 {
-            return None;
-        }
-        Some(self.columns.finish(&raw_schema()).map_err(|e| invalid(&e)))
     }
 }
 
@@ -625,8 +562,8 @@ pub fn records_of_batch(
 }
 
 /// A raw frames batch's columns, found and type-checked once: what [`records_of_batch`] and
-/// the columnar decoder ([`decoded::decode_frames_batch`]) read.
-pub(crate) struct FrameColumnsRef<'a> {
+/// the columnar decoder (`bywire_data::decoded::decode_frames_batch`) read.
+pub struct FrameColumnsRef<'a> {
     ts: Times<'a>,
     channel: Strings<'a>,
     id: &'a arrow_array::PrimitiveArray<UInt32Type>,
@@ -643,7 +580,7 @@ pub(crate) struct FrameColumnsRef<'a> {
 
 impl<'a> FrameColumnsRef<'a> {
     /// The columns of `batch` (a missing or mistyped column is an error at its first row).
-    pub(crate) fn of(batch: &'a RecordBatch) -> Result<Self, LogError> {
+    pub fn of(batch: &'a RecordBatch) -> Result<Self, LogError> {
         Self::with_rows_from(batch, 0)
     }
 
@@ -721,7 +658,7 @@ impl<'a> FrameColumnsRef<'a> {
 
     /// The identifier of row `i` and whether it is extended; `None` for an error frame or a
     /// row without one.
-    pub(crate) fn id(&self, i: usize) -> Option<(u32, bool)> {
+    pub fn id(&self, i: usize) -> Option<(u32, bool)> {
         if Self::set(self.error, i) || !self.id.is_valid(i) {
             return None;
         }
@@ -731,7 +668,7 @@ impl<'a> FrameColumnsRef<'a> {
     /// What decoding needs of row `i` (whose identifier [`FrameColumnsRef::id`] gave): time
     /// (ns), channel, and the data (none for a remote frame). `None` for a row without them.
     #[inline]
-    pub(crate) fn row(&self, i: usize) -> Option<FrameRow<'a>> {
+    pub fn row(&self, i: usize) -> Option<FrameRow<'a>> {
         let ts = self.ts.get(i)?;
         let channel = self.channel.channel(i)?;
         let data = if Self::set(self.remote, i) || !self.data.is_valid(i) {
@@ -744,24 +681,28 @@ impl<'a> FrameColumnsRef<'a> {
 }
 
 /// A row of a raw frames batch, as decoding reads it.
-pub(crate) struct FrameRow<'a> {
+pub struct FrameRow<'a> {
     /// Time, ns since the epoch.
-    pub(crate) ts: i64,
-    pub(crate) channel: ChannelRef<'a>,
-    pub(crate) data: &'a [u8],
+    pub ts: i64,
+    /// Its channel.
+    pub channel: ChannelRef<'a>,
+    /// Its data bytes.
+    pub data: &'a [u8],
 }
 
 /// A row's channel: its text, or (a dictionary-encoded column) its key in the column's values,
 /// so that its text is read only when the key is new.
 #[derive(Clone, Copy)]
-pub(crate) enum ChannelRef<'a> {
+pub enum ChannelRef<'a> {
+    /// The text itself.
     Text(&'a str),
-    /// A key [`Strings::channel`] found within `values`.
+    /// A key `Strings::channel` found within `values`.
     Key(usize, &'a arrow_array::StringArray),
 }
 
 impl<'a> ChannelRef<'a> {
-    pub(crate) fn text(self) -> &'a str {
+    /// Its text.
+    pub fn text(self) -> &'a str {
         match self {
             ChannelRef::Text(text) => text,
             ChannelRef::Key(key, values) if key < values.len() => values.value(key),

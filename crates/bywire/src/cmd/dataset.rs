@@ -1,15 +1,15 @@
-//! `bywire dataset`: logs → a training dataset (`bywire_vehicle::dataset` on a grid, written by
-//! `bywire_log::parquet::table`), with its card (JSON and Markdown) and, for simulator runs,
+//! `bywire dataset`: logs → a training dataset (`bywire_data::dataset` on a grid, written by
+//! `bywire_data::table`), with its card (JSON and Markdown) and, for simulator runs,
 //! the ground truth (`truth.csv`) joined on the grid.
 
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, ensure, Context, Result};
+use bywire_data::dataset::{Builder, Column, Config, Role, Row, Summary};
+use bywire_data::latency::SignalRef;
+use bywire_data::table::{TableColumn, TableWriter};
 use bywire_dbc::decoder::Decoder;
-use bywire_log::parquet::table::{TableColumn, TableWriter};
-use bywire_vehicle::dataset::{Builder, Column, Config, Role, Row, Summary};
-use bywire_vehicle::latency::SignalRef;
 use serde_json::json;
 
 use crate::support::logs;

@@ -440,7 +440,7 @@ fn decode_records(
     let everything = Selection::everything();
     let mut pump = Pump::new(&everything, progress);
     if let Some(dir) = &args.parquet {
-        let partitioning = bywire_log::parquet::decoded::Partitioning {
+        let partitioning = bywire_data::decoded::Partitioning {
             channel: args.partition.contains(&logs::PartitionBy::Channel),
             date: args.partition.contains(&logs::PartitionBy::Date),
         };

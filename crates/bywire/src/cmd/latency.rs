@@ -1,4 +1,4 @@
-//! `bywire latency`: latency of a drive-by-wire chain — from logs (`bywire_vehicle::latency`),
+//! `bywire latency`: latency of a drive-by-wire chain — from logs (`bywire_data::latency`),
 //! or, with `--predict`, the worst case from a DBC alone (`bywire_dbc::schedule`).
 
 use std::io::Write;

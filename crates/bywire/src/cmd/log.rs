@@ -19,8 +19,8 @@ use crate::support::logs::{
     Skip, TableOptions, TimeUnitArg,
 };
 use crate::support::progress::Progress;
+use bywire_data::decoded::Partitioning;
 use bywire_log::mcap::DecodedMcapWriter;
-use bywire_log::parquet::decoded::Partitioning;
 
 #[derive(clap::Subcommand)]
 pub enum LogCommand {

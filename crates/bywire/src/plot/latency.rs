@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
-use bywire_vehicle::latency::{Distribution, Report};
+use bywire_data::latency::{Distribution, Report};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 

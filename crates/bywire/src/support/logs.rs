@@ -12,9 +12,9 @@ use std::time::Duration;
 
 use anyhow::{anyhow, Context, Result};
 use bywire_core::Timestamp;
+use bywire_data::decoded::{DecodedDataset, Partitioning};
 use bywire_dbc::decoder::Decoder;
 use bywire_log::format::ParquetCompression;
-use bywire_log::parquet::decoded::{DecodedDataset, Partitioning};
 
 use crate::support::files::write_dir_atomically;
 use crate::support::interrupt::interrupt_flag;

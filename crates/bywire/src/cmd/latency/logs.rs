@@ -1,11 +1,11 @@
-//! `bywire latency LOG...`: the figures of `bywire_vehicle::latency`, as text or JSON.
+//! `bywire latency LOG...`: the figures of `bywire_data::latency`, as text or JSON.
 
 use std::io::Write;
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
+use bywire_data::latency::{Analyzer, Config, Distribution, Report, SignalRef};
 use bywire_dbc::decoder::Decoder;
-use bywire_vehicle::latency::{Analyzer, Config, Distribution, Report, SignalRef};
 use serde_json::{json, Value};
 
 use super::Args;

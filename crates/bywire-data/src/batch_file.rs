@@ -1,7 +1,7 @@
 //! A Parquet file written from Arrow batches of flat columns: times and 64-bit integers as
 //! `DELTA_BINARY_PACKED` (they change by little from row to row: a few bits a row before
 //! compression), doubles plain, and dictionary texts as their keys behind a dictionary page.
-//! The decoded tables are written so ([`super::decoded`]); see [`super::encode`] for why the
+//! The decoded tables are written so ([`crate::decoded`]); see [`crate::encode`] for why the
 //! encoding is ours.
 //!
 //! Each batch becomes a page a column (a longer batch, pages of [`PAGE_ROWS`]), held
@@ -21,13 +21,13 @@ use arrow_array::{Array, RecordBatch};
 use arrow_buffer::NullBuffer;
 use arrow_schema::{DataType, SchemaRef, TimeUnit as ArrowTimeUnit};
 
-use super::encode::{
+use crate::encode::LakeCompression;
+use crate::encode::{
     delta_binary_packed, dictionary_keys, float_range, int_range, levels, plain_texts, texts_range,
     uint_range, Chunk, Column, FileLayout, Logical, Pages, Physical, TimeUnit, DELTA_BINARY_PACKED,
     PLAIN, PLAIN_DICTIONARY,
 };
-use super::lake::LakeCompression;
-use super::ROW_GROUP_ROWS;
+use bywire_log::parquet::ROW_GROUP_ROWS;
 
 /// Rows a page holds at most (parquet-rs's default too).
 pub(crate) const PAGE_ROWS: usize = 20_000;
@@ -430,8 +430,8 @@ mod tests {
     use bytes::Bytes;
     use proptest::prelude::*;
 
-    use super::super::test_support::{row_texts, xorshift};
     use super::*;
+    use crate::test_support::{row_texts, xorshift};
 
     fn schema() -> SchemaRef {
         let texts = DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8));

@@ -1,5 +1,5 @@
 //! A data lake's files: decoded signals in long form (`ts, channel, signal, value`, see
-//! [`super::long`]), partitioned into `vehicle=/date=/message=` folders as Spark's
+//! [`crate::long`]), partitioned into `vehicle=/date=/message=` folders as Spark's
 //! `partitionBy("vehicle", "date", "message")` lays them out, written straight from the
 //! decoded tables.
 //!
@@ -27,13 +27,14 @@ use std::path::{Path, PathBuf};
 use arrow_array::{Array, RecordBatch};
 use bywire_dbc::decoder::Decoder;
 
-use super::encode::{
+pub use crate::encode::LakeCompression;
+use crate::encode::{
     dictionary_keys, float_range, int_range, levels, plain_texts, texts_range, too_big, Chunk,
     Column, FileLayout, Logical, Pages, Physical, Range, TimeUnit, PLAIN, PLAIN_DICTIONARY,
 };
-use super::long::Wide;
-use super::FrameBatches;
-use crate::calendar;
+use crate::long::Wide;
+use bywire_log::batches::FrameBatches;
+use bywire_log::calendar;
 
 /// Rows a folder holds back before writing them as a row group (and all of a task's folders
 /// hold at most 8 times as many: then every folder writes what it holds).
@@ -45,62 +46,6 @@ pub const NULL_PARTITION: &str = "__HIVE_DEFAULT_PARTITION__";
 const NANOS_PER_DAY: i64 = 86_400_000_000_000;
 /// A row whose channel is null.
 const NULL_KEY: u32 = u32::MAX;
-
-/// How a lake's pages are compressed (Spark's `compression` option's names).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LakeCompression {
-    /// Spark's and pyarrow's default.
-    Snappy,
-    /// Zstandard at level 1.
-    Zstd,
-    /// gzip.
-    Gzip,
-    /// No compression.
-    Uncompressed,
-}
-
-impl LakeCompression {
-    /// `snappy`, `zstd`, `gzip` or `none` (`uncompressed`).
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name.to_ascii_lowercase().as_str() {
-            "snappy" => Some(Self::Snappy),
-            "zstd" => Some(Self::Zstd),
-            "gzip" => Some(Self::Gzip),
-            "none" | "uncompressed" => Some(Self::Uncompressed),
-            _ => None,
-        }
-    }
-
-    /// What Spark puts in a file's name before `.parquet`.
-    pub(crate) fn extension(self) -> &'static str {
-        match self {
-            Self::Snappy => ".snappy",
-            Self::Zstd => ".zstd",
-            Self::Gzip => ".gz",
-            Self::Uncompressed => "",
-        }
-    }
-
-    /// Parquet's `CompressionCodec`.
-    pub(crate) fn codec(self) -> i32 {
-        match self {
-            Self::Uncompressed => 0,
-            Self::Snappy => 1,
-            Self::Gzip => 2,
-            Self::Zstd => 6,
-        }
-    }
-}
-
-impl From<super::ParquetCompression> for LakeCompression {
-    fn from(compression: super::ParquetCompression) -> Self {
-        match compression {
-            super::ParquetCompression::Zstd => Self::Zstd,
-            super::ParquetCompression::Snappy => Self::Snappy,
-            super::ParquetCompression::Uncompressed => Self::Uncompressed,
-        }
-    }
-}
 
 /// `column=value` as Spark names a partition's folder: a null or empty value is
 /// [`NULL_PARTITION`], and the characters Spark escapes are `%XX`.
@@ -405,7 +350,7 @@ impl LakeFiles {
         key
     }
 
-    /// Add a decoded table of `message` (what [`super::decoded::decode_frames_batch`]
+    /// Add a decoded table of `message` (what [`crate::decoded::decode_frames_batch`]
     /// gives) to the folders of `vehicle` and `date` (none: each row's UTC day).
     pub fn add(
         &mut self,
@@ -691,7 +636,7 @@ pub fn write_parts(
             FrameBatches::open(&part.path, part.byte_range, batch_rows).map_err(named)?;
         for batch in batches {
             let batch = batch.map_err(named)?;
-            let (tables, _) = super::decoded::decode_frames_batch(decoder, &batch)
+            let (tables, _) = crate::decoded::decode_frames_batch(decoder, &batch)
                 .map_err(|e| named(io::Error::new(io::ErrorKind::InvalidData, e.to_string())))?;
             for (message, table) in &tables {
                 files.add(
@@ -774,7 +719,7 @@ mod tests {
     /// Rows with keys of many shapes: runs (longer and shorter than 8), cycles, null
     /// channels, so that every branch of the hybrid encoding is read back.
     fn columns(rows: usize, channels: usize, signals: usize, seed: u64) -> LongColumns {
-        let mut next = super::super::test_support::xorshift(seed);
+        let mut next = crate::test_support::xorshift(seed);
         let mut out = LongColumns::default();
         let mut channel = 0u32;
         for row in 0..rows {

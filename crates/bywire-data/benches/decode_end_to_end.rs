@@ -6,8 +6,8 @@
 
 use std::ops::ControlFlow;
 
+use bywire_data::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
 use bywire_dbc::decoder::Decoder;
-use bywire_log::parquet::decoded::{decode_frames_batch, DecodedDataset, Partitioning};
 use bywire_log::parquet::{raw_schema, FrameColumns, ParquetCompression};
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 
@@ -117,8 +117,8 @@ fn end_to_end(c: &mut Criterion) {
 /// `ArrowWriter` given the same rows as Arrow (`signals_long`), dictionaries for the texts,
 /// into the same folders. The previous run's lake is removed untimed.
 fn lake(c: &mut Criterion, decoder: &Decoder, batches: &[arrow_array::RecordBatch]) {
-    use bywire_log::parquet::lake::{LakeCompression, LakeFiles, LAKE_GROUP_ROWS};
-    use bywire_log::parquet::long::signals_long;
+    use bywire_data::lake::{LakeCompression, LakeFiles, LAKE_GROUP_ROWS};
+    use bywire_data::long::signals_long;
     use parquet::arrow::ArrowWriter;
     use parquet::file::properties::{EnabledStatistics, WriterProperties};
     use parquet::schema::types::ColumnPath;

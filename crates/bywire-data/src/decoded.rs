@@ -41,13 +41,13 @@ use bywire_dbc::codec::{whole_scaling, DecodeError, Decoded, MessageCodec, Paylo
 use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
 use bywire_dbc::{Message, Signal, ValueType};
 
-use super::batch_file::BatchFile;
-use super::{
+use crate::batch_file::BatchFile;
+use bywire_log::calendar;
+use bywire_log::candump::{LogError, LogRecord, LogRecordRef, Precision};
+use bywire_log::parquet::{
     dictionary_type, io_error, nanos, time_array, timestamp_type_in, ChannelRef, FrameColumnsRef,
     Labels, ParquetCompression, LAYOUT_KEY,
 };
-use crate::calendar;
-use crate::candump::{LogError, LogRecord, LogRecordRef, Precision};
 
 /// Rows a table builds up before they are encoded (fewer when many tables are open).
 pub const TABLE_BATCH: usize = 16_384;
@@ -566,7 +566,7 @@ impl<'a> DecodedDataset<'a> {
     /// [`DecodedDataset::write`] for a record lent by a reader ([`Reader::for_each_ref`]): no
     /// copy of its interface name is made unless the dataset is partitioned by channel.
     ///
-    /// [`Reader::for_each_ref`]: crate::Reader::for_each_ref
+    /// [`Reader::for_each_ref`]: bywire_log::Reader::for_each_ref
     pub fn write_lent(&mut self, record: &LogRecordRef<'_>) -> std::io::Result<()> {
         let decoder = self.decoder;
         let Some((index, message, codec, data)) = decoder.message_of(&record.frame) else {
@@ -741,8 +741,8 @@ impl<'a> DecodedDataset<'a> {
 /// A row of no message (in [`decode_frames_batch`]'s rows' messages).
 const NO_MESSAGE: u32 = u32::MAX;
 
-/// A batch of raw frames (the layout [`super::raw_schema`] gives, or any batch
-/// [`super::records_of_batch`] reads) decoded straight from its columns into one batch per
+/// A batch of raw frames (the layout [`bywire_log::parquet::raw_schema`] gives, or any batch
+/// [`bywire_log::parquet::records_of_batch`] reads) decoded straight from its columns into one batch per
 /// message with the columns a dataset's table has (`channel` always), in the database's order,
 /// and the counts ([`DatasetSummary::files`] empty). For callers that take Arrow in memory (the
 /// Python package): no record is built per frame.
@@ -853,8 +853,8 @@ fn path_value(value: &str) -> String {
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
-    use super::super::test_support::{cell, row_texts};
     use super::*;
+    use crate::test_support::{cell, row_texts};
 
     #[test]
     fn partition_values_cannot_climb_out_of_the_dataset() {
@@ -1061,11 +1061,11 @@ mod tests {
         };
         let expected = expected_of(&records);
         assert_eq!(expected.len(), 4, "every kind of message has rows");
-        let mut columns = super::super::FrameColumns::new();
+        let mut columns = bywire_log::parquet::FrameColumns::new();
         for record in &records {
             columns.push(record);
         }
-        let dictionary = columns.finish(&super::super::raw_schema()).unwrap();
+        let dictionary = columns.finish(&bywire_log::parquet::raw_schema()).unwrap();
         // The same frames with the channel as plain strings (as Spark and pandas give them).
         let plain = {
             let at = dictionary.schema().index_of("channel").unwrap();

@@ -1,5 +1,5 @@
 //! Thrift's compact protocol, writing only: what a Parquet footer and page headers are made of
-//! (Parquet's `parquet.thrift`), for [`super::encode`]'s files.
+//! (Parquet's `parquet.thrift`), for [`crate::encode`]'s files.
 //!
 //! Each `write_*` writes one field of the struct being written, by its field id; fields go in
 //! increasing id order, as the protocol's deltas expect.

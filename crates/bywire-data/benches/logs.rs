@@ -8,10 +8,10 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 use bywire_core::frame::{ClassicFrame, StandardId};
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_data::dataset::{Builder, Config};
+use bywire_data::latency::{Analyzer, Config as LatencyConfig};
 use bywire_dbc::codec::{MessageCodec, Value};
 use bywire_dbc::decoder::Decoder;
-use bywire_vehicle::dataset::{Builder, Config};
-use bywire_vehicle::latency::{Analyzer, Config as LatencyConfig};
 
 /// Ten minutes of bus 1: every message of the tug's DBC with a cycle time, at that cycle.
 fn traffic() -> (

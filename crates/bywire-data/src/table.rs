@@ -14,7 +14,7 @@ use ::parquet::arrow::ArrowWriter;
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
 
-use super::{io_error as parquet_error, properties, ParquetCompression};
+use bywire_log::parquet::{io_error as parquet_error, properties, ParquetCompression};
 
 /// One value column: its name and unit.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -20,8 +20,8 @@ use bywire_dbc::decoder::Decoder;
 
 pub use crate::latency::ConfigError;
 use crate::latency::{locate, Located, SignalRef};
-use crate::profile::Profile;
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
+use bywire_vehicle::profile::Profile;
 
 /// Whether a column is something the driver did or something the vehicle showed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

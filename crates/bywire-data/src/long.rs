@@ -1,4 +1,4 @@
-//! A decoded table (one row a frame, one column a signal: what [`super::decoded`] builds) in
+//! A decoded table (one row a frame, one column a signal: what [`crate::decoded`] builds) in
 //! long form: one row a signal value, in the frames' order and, within a frame, the signals'.
 //! This is the layout data lakes partition by message and query by signal:
 //!
@@ -31,8 +31,8 @@ use arrow_array::{
 };
 use arrow_schema::{DataType, Field, Schema, SchemaRef, TimeUnit};
 
-use crate::calendar;
-use crate::candump::LogError;
+use bywire_log::calendar;
+use bywire_log::candump::LogError;
 
 /// What labels a long table's rows carry besides the decoded table's own columns.
 #[derive(Debug, Clone, Copy)]
@@ -53,7 +53,7 @@ pub fn long_schema(labelled: bool) -> SchemaRef {
         if labelled {
             text(name)
         } else {
-            Field::new(name, super::dictionary_type(), true)
+            Field::new(name, bywire_log::parquet::dictionary_type(), true)
         }
     };
     let mut fields = vec![Field::new(
@@ -75,7 +75,7 @@ pub fn long_schema(labelled: bool) -> SchemaRef {
     Arc::new(Schema::new(fields))
 }
 
-/// A decoded table's columns, read where they are (also what [`super::lake`] writes from).
+/// A decoded table's columns, read where they are (also what [`crate::lake`] writes from).
 pub(crate) struct Wide<'a> {
     pub(crate) ts: &'a arrow_array::PrimitiveArray<TimestampNanosecondType>,
     pub(crate) channel: Channels<'a>,

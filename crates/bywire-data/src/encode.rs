@@ -1,6 +1,6 @@
 //! Parquet written here rather than through parquet-rs, for the files whose columns bywire
-//! knows: a data lake's long files ([`super::lake`]) and the decoded tables
-//! ([`super::batch_file`]). Their texts (channels, signal names, value descriptions) are
+//! knows: a data lake's long files ([`crate::lake`]) and the decoded tables
+//! ([`crate::batch_file`]). Their texts (channels, signal names, value descriptions) are
 //! dictionary keys before they are written, and parquet-rs and pyarrow hash each row's text
 //! again to find its key (profiled: a third of writing the lake's files, a sixth of decoding a
 //! log to Parquet). Here the keys are written as they are.
@@ -13,8 +13,7 @@
 
 use std::io::{self, Write};
 
-use super::lake::LakeCompression;
-use super::thrift::{varint, Kind, Thrift};
+use crate::thrift::{varint, Kind, Thrift};
 
 // Parquet's numbers (parquet.thrift).
 const INT64: i32 = 2;
@@ -751,4 +750,60 @@ fn chunk_metadata(
     meta.end();
     meta.end();
     meta.end();
+}
+
+/// How a lake's pages are compressed (Spark's `compression` option's names).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LakeCompression {
+    /// Spark's and pyarrow's default.
+    Snappy,
+    /// Zstandard at level 1.
+    Zstd,
+    /// gzip.
+    Gzip,
+    /// No compression.
+    Uncompressed,
+}
+
+impl LakeCompression {
+    /// `snappy`, `zstd`, `gzip` or `none` (`uncompressed`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name.to_ascii_lowercase().as_str() {
+            "snappy" => Some(Self::Snappy),
+            "zstd" => Some(Self::Zstd),
+            "gzip" => Some(Self::Gzip),
+            "none" | "uncompressed" => Some(Self::Uncompressed),
+            _ => None,
+        }
+    }
+
+    /// What Spark puts in a file's name before `.parquet`.
+    pub(crate) fn extension(self) -> &'static str {
+        match self {
+            Self::Snappy => ".snappy",
+            Self::Zstd => ".zstd",
+            Self::Gzip => ".gz",
+            Self::Uncompressed => "",
+        }
+    }
+
+    /// Parquet's `CompressionCodec`.
+    pub(crate) fn codec(self) -> i32 {
+        match self {
+            Self::Uncompressed => 0,
+            Self::Snappy => 1,
+            Self::Gzip => 2,
+            Self::Zstd => 6,
+        }
+    }
+}
+
+impl From<bywire_log::parquet::ParquetCompression> for LakeCompression {
+    fn from(compression: bywire_log::parquet::ParquetCompression) -> Self {
+        match compression {
+            bywire_log::parquet::ParquetCompression::Zstd => Self::Zstd,
+            bywire_log::parquet::ParquetCompression::Snappy => Self::Snappy,
+            bywire_log::parquet::ParquetCompression::Uncompressed => Self::Uncompressed,
+        }
+    }
 }

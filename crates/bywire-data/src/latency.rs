@@ -16,7 +16,7 @@ use bywire_core::{Frame, Timestamp};
 use bywire_dbc::codec::Decoded;
 use bywire_dbc::decoder::Decoder;
 
-use crate::profile::Profile;
+use bywire_vehicle::profile::Profile;
 
 /// Histogram bins: 10 µs each, up to 10 s; longer figures land in the last bin.
 const BIN_NS: u64 = 10_000;
