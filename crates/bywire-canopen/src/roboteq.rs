@@ -475,7 +475,9 @@ impl Application for Mdc1460 {
         self.drive.max_velocity = max_rpm;
         self.drive.set_velocity_units(cpr / 60.0);
         let first = self.channels.first().map(|c| c.motor).unwrap_or_default();
-        self.drive
+        // (Its deadline is asked after this poll anyway.)
+        let _ = self
+            .drive
             .set_actual(first.position / 60.0 * cpr, first.velocity);
         self.drive.step(now, od, emcy);
         let drive_demand = self.drive.state().is_powered().then(|| self.drive.demand());

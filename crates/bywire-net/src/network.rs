@@ -389,6 +389,31 @@ impl Network {
         Some(NodeMut { node, changed })
     }
 
+    /// Give a node an input through `input`, which says whether the node's deadline may have
+    /// moved (as [`Node::on_sent`] does): only then is it asked again. For inputs a node takes
+    /// often (a plant's readings every millisecond) whose effect on its timing the node itself
+    /// reports; anything else goes through [`Network::node_mut`]. Returns whether the node is
+    /// this network's.
+    pub fn feed<N: Node + 'static>(
+        &mut self,
+        handle: NodeHandle<N>,
+        input: impl FnOnce(&mut N) -> bool,
+    ) -> bool {
+        let i = handle.key.0;
+        let Some(node) = self
+            .nodes
+            .get_mut(i)
+            .and_then(|n| n.as_any_mut().downcast_mut::<N>())
+        else {
+            return false;
+        };
+        let moved = input(node);
+        if let Some(slot) = self.slots.get_mut(i) {
+            slot.changed |= moved;
+        }
+        true
+    }
+
     /// Wire `node`'s `port` to `bus`; the endpoint's number on that bus is returned (for the
     /// bus's events and faults). `None` for a node or bus that is not this network's, or a bus
     /// that already has [`MAX_ROUTED`] endpoints (taps included).
@@ -859,6 +884,26 @@ mod tests {
         assert_eq!(net.node(node).unwrap().sent, [Timestamp::from_millis(15)]);
         let heard = &net.node(listener).unwrap().heard;
         assert!(heard.iter().any(|(_, _, id)| *id == 0x321), "{heard:?}");
+    }
+
+    #[test]
+    fn a_fed_input_re_asks_the_deadline_only_when_the_node_says_it_moved() {
+        let run = |moved: bool| {
+            let mut net = Network::new();
+            let bus = net.add_bus("bus1", 500_000, None);
+            let node = net.add_node(OnRequest::default());
+            net.wire(node, Port::MAIN, bus).unwrap();
+            net.run_until(Timestamp::from_millis(10));
+            assert!(net.feed(node, |n: &mut OnRequest| {
+                n.send_at = Some(Timestamp::from_millis(15));
+                moved
+            }));
+            net.run_until(Timestamp::from_millis(30));
+            net.node(node).unwrap().sent.clone()
+        };
+        assert_eq!(run(true), [Timestamp::from_millis(15)]);
+        // Not said: nothing wakes it (the caller's word is the node's to give).
+        assert!(run(false).is_empty());
     }
 
     #[test]

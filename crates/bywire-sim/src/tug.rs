@@ -43,10 +43,10 @@ use bywire_tug::messages::{
     SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::secured::{self, TugWire};
-use bywire_vehicle::ads::Ads;
+use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::secured::Signing;
-use bywire_vehicle::supervisor::{Redundancy, Supervisor};
+use bywire_vehicle::supervisor::{Redundancy, Supervisor, SupervisorConfig};
 
 use crate::attacker::Attacker;
 use crate::battery::{Battery, BatteryParams};
@@ -212,6 +212,158 @@ impl<N: Node> Node for OnBothCommandBuses<N> {
     }
 }
 
+/// The tug's four buses (1, 2, 3, 1b, in [`TugBus::ALL`]'s order), arbitration unreported.
+fn add_buses(net: &mut Network, secoc: bool) -> [BusIndex; 4] {
+    // The secured variant's frames are CAN FD with a faster data phase on the command buses.
+    let command_data = secoc.then_some(secured::DATA_BITRATE);
+    let buses = [
+        net.add_bus("bus1", 500_000, command_data),
+        net.add_bus("bus2", 1_000_000, None),
+        net.add_bus("bus3", 500_000, None),
+        net.add_bus("bus1b", 500_000, command_data),
+    ];
+    // The run reports what was sent and the controllers' states, not who lost arbitration.
+    for bus in buses {
+        if let Some(sim) = net.bus_mut(bus) {
+            sim.report_arbitration(false);
+        }
+    }
+    buses
+}
+
+impl TugNodes {
+    /// Every node of the tug, added in the order they are polled at one instant (the runs are
+    /// reproducible in it).
+    fn add(
+        net: &mut Network,
+        params: &TugParams,
+        mission: Mission,
+        (ads_config, ecu_config): (AdsConfig, SupervisorConfig),
+        geometry: EcuGeometry,
+    ) -> Result<TugNodes, TugError> {
+        // Every node of the secured variant starts its freshness at 1: a new key.
+        let key = bywire_secoc::Key::new(SIM_KEY);
+        let wire = || -> Result<_, TugError> {
+            Ok(if params.secoc {
+                secured::secured(&key, 1)?
+            } else {
+                secured::plain()
+            })
+        };
+        let safety_table = match params.secoc {
+            true => Some(secured::table(&key, 1)?),
+            false => None,
+        };
+        Ok(TugNodes {
+            ads: net.add_node(AdsDriver::new(ads_config, mission, wire()?)),
+            ecu: net.add_node(VehicleControlEcu::with_wire(ecu_config, geometry, wire()?)),
+            safety: net.add_node(Signing::new(nodes::safety_controller(), safety_table)),
+            bms: net.add_node(nodes::bms()),
+            imu: net.add_node(nodes::imu()),
+            io: net.add_node(nodes::io_node()),
+            steer: STEERING_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfilePosition))),
+            drive: DRIVE_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfileVelocity))),
+            attacker: net.add_node(Attacker::new()),
+        })
+    }
+
+    /// Each node's ports on `buses` (1, 2, 3, 1b); who is at each endpoint of each bus, and
+    /// the ECU's endpoint on bus 1.
+    fn wire(
+        &self,
+        net: &mut Network,
+        buses: [BusIndex; 4],
+    ) -> ([Vec<(NodeId, String)>; 4], NodeId) {
+        let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
+        let mut wire = |net: &mut Network, node: NodeKey, port: Port, bus: usize, name: &str| {
+            let index = buses.get(bus).copied().unwrap_or_default();
+            let endpoint = net.wire(node, port, index).unwrap_or_default();
+            if let Some(list) = names.get_mut(bus) {
+                list.push((endpoint, name.to_string()));
+            }
+            endpoint
+        };
+        let (ads, ecu) = (self.ads.key(), self.ecu.key());
+        wire(net, ads, Ads::<TugWire>::PORT_A, 0, "ADS");
+        wire(net, ads, Ads::<TugWire>::PORT_B, 3, "ADS");
+        let ecu_bus1 = wire(net, ecu, ecu::BUS1, 0, "ECU");
+        wire(net, ecu, ecu::BUS1B, 3, "ECU");
+        wire(net, ecu, ecu::BUS2, 1, "ECU (CANopen master)");
+        wire(net, ecu, ecu::BUS3, 2, "ECU");
+        wire(net, self.safety.key(), Port::MAIN, 0, "safety controller");
+        wire(net, self.bms.key(), Port::MAIN, 0, "BMS");
+        wire(net, self.attacker.key(), Port::MAIN, 0, "attacker");
+        wire(net, self.imu.key(), Port::MAIN, 2, "IMU");
+        wire(net, self.io.key(), Port::MAIN, 2, "I/O node");
+        // Corner by corner: its steering drive, then its wheel drive.
+        let corners = STEERING_NODES.iter().zip(self.steer);
+        for ((steer, steer_node), (drive, drive_node)) in
+            corners.zip(DRIVE_NODES.iter().zip(self.drive))
+        {
+            for (id, node) in [(steer, steer_node), (drive, drive_node)] {
+                wire(net, node.key(), Port::MAIN, 1, &format!("drive 0x{id:02X}"));
+            }
+        }
+        (names, ecu_bus1)
+    }
+
+    /// Each node hears only what it reads: delivering is where a simulator's time goes.
+    fn filter(&self, net: &mut Network) {
+        for (id, node) in STEERING_NODES.iter().zip(self.steer) {
+            net.set_filtering(node, Port::MAIN, drive_filtering(*id));
+        }
+        for (id, node) in DRIVE_NODES.iter().zip(self.drive) {
+            net.set_filtering(node, Port::MAIN, drive_filtering(*id));
+        }
+        let commands = [
+            EmergencyBrake::ID,
+            EmergencyStop::ID,
+            AdsToVehicleControl::ID,
+        ];
+        // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state.
+        let mut ecu_hears = commands.to_vec();
+        ecu_hears.extend([
+            secured::SYNC_ID,
+            diagnostics::REQUEST_ID,
+            diagnostics::FUNCTIONAL_ID,
+            BatteryMessage::ID,
+        ]);
+        let ecu = self.ecu.key();
+        net.set_filtering(
+            ecu,
+            ecu::BUS1,
+            Filtering {
+                error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
+                ..only(&ecu_hears)
+            },
+        );
+        net.set_filtering(ecu, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
+        net.set_filtering(ecu, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
+        let feedback = [
+            VehicleToAdsState::ID,
+            VehicleToAdsSensors::ID,
+            VehicleToAdsWheelAngles::ID,
+            secured::SYNC_ID,
+        ];
+        net.set_filtering(self.ads, Ads::<TugWire>::PORT_A, only(&feedback));
+        net.set_filtering(self.ads, Ads::<TugWire>::PORT_B, deaf());
+        let senders = [
+            self.safety.key(),
+            self.bms.key(),
+            self.imu.key(),
+            self.io.key(),
+        ];
+        for node in senders {
+            net.set_filtering(node, Port::MAIN, deaf());
+        }
+        net.set_filtering(
+            self.attacker,
+            Port::MAIN,
+            only(&[AdsToVehicleControl::ID, VehicleToAdsState::ID]),
+        );
+    }
+}
+
 /// The simulated tug.
 pub struct Tug {
     now: Timestamp,
@@ -305,150 +457,26 @@ impl Tug {
             track: chassis_params.track,
         });
         let start = mission.start_pose();
-        // Every node of the secured variant starts its freshness at 1: a new key.
-        let key = bywire_secoc::Key::new(SIM_KEY);
-        let wire = || -> Result<_, TugError> {
-            Ok(if params.secoc {
-                secured::secured(&key, 1)?
-            } else {
-                secured::plain()
-            })
-        };
-        let safety_table = match params.secoc {
-            true => Some(secured::table(&key, 1)?),
-            false => None,
-        };
         let mut net = Network::new();
-        // Added in the order they are polled at one instant (the runs are reproducible in it).
-        let nodes = TugNodes {
-            ads: net.add_node(AdsDriver::new(ads_config, mission, wire()?)),
-            ecu: net.add_node(VehicleControlEcu::with_wire(
-                ecu_config,
-                EcuGeometry {
-                    wheelbase: chassis_params.wheelbase,
-                    track: chassis_params.track,
-                },
-                wire()?,
-            )),
-            safety: net.add_node(Signing::new(nodes::safety_controller(), safety_table)),
-            bms: net.add_node(nodes::bms()),
-            imu: net.add_node(nodes::imu()),
-            io: net.add_node(nodes::io_node()),
-            steer: STEERING_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfilePosition))),
-            drive: DRIVE_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfileVelocity))),
-            attacker: net.add_node(Attacker::new()),
+        let geometry = EcuGeometry {
+            wheelbase: chassis_params.wheelbase,
+            track: chassis_params.track,
         };
-        // The secured variant's frames are CAN FD with a faster data phase on the command buses.
-        let command_data = params.secoc.then_some(secured::DATA_BITRATE);
-        let buses = [
-            net.add_bus("bus1", 500_000, command_data),
-            net.add_bus("bus2", 1_000_000, None),
-            net.add_bus("bus3", 500_000, None),
-            net.add_bus("bus1b", 500_000, command_data),
-        ];
-        let [bus1, bus2, bus3, bus1b] = buses;
-        // The run reports what was sent and the controllers' states, not who lost arbitration.
-        for bus in buses {
-            if let Some(sim) = net.bus_mut(bus) {
-                sim.report_arbitration(false);
-            }
-        }
-        let mut names: [Vec<(NodeId, String)>; 4] = Default::default();
-        let mut wire = |net: &mut Network, node: NodeKey, port: Port, bus: usize, name: &str| {
-            let index = buses.get(bus).copied().unwrap_or_default();
-            let endpoint = net.wire(node, port, index).unwrap_or_default();
-            if let Some(list) = names.get_mut(bus) {
-                list.push((endpoint, name.to_string()));
-            }
-            endpoint
-        };
-        let ads_ports = (Ads::<TugWire>::PORT_A, Ads::<TugWire>::PORT_B);
-        let (ads, ecu) = (nodes.ads.key(), nodes.ecu.key());
-        wire(&mut net, ads, ads_ports.0, 0, "ADS");
-        wire(&mut net, ads, ads_ports.1, 3, "ADS");
-        let ecu_bus1 = wire(&mut net, ecu, ecu::BUS1, 0, "ECU");
-        wire(&mut net, ecu, ecu::BUS1B, 3, "ECU");
-        wire(&mut net, ecu, ecu::BUS2, 1, "ECU (CANopen master)");
-        wire(&mut net, ecu, ecu::BUS3, 2, "ECU");
-        wire(
+        let nodes = TugNodes::add(
             &mut net,
-            nodes.safety.key(),
-            Port::MAIN,
-            0,
-            "safety controller",
-        );
-        wire(&mut net, nodes.bms.key(), Port::MAIN, 0, "BMS");
-        wire(&mut net, nodes.attacker.key(), Port::MAIN, 0, "attacker");
-        wire(&mut net, nodes.imu.key(), Port::MAIN, 2, "IMU");
-        wire(&mut net, nodes.io.key(), Port::MAIN, 2, "I/O node");
-        // Corner by corner: its steering drive, then its wheel drive.
-        let corners = STEERING_NODES.iter().zip(nodes.steer);
-        for ((steer, steer_node), (drive, drive_node)) in
-            corners.zip(DRIVE_NODES.iter().zip(nodes.drive))
-        {
-            for (id, node) in [(steer, steer_node), (drive, drive_node)] {
-                wire(
-                    &mut net,
-                    node.key(),
-                    Port::MAIN,
-                    1,
-                    &format!("drive 0x{id:02X}"),
-                );
-                net.set_filtering(node, Port::MAIN, drive_filtering(*id));
-            }
-        }
-        // Each node hears only what it reads: delivering is where a simulator's time goes.
-        let commands = [
-            EmergencyBrake::ID,
-            EmergencyStop::ID,
-            AdsToVehicleControl::ID,
-        ];
-        // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state.
-        let mut ecu_hears = commands.to_vec();
-        ecu_hears.extend([
-            secured::SYNC_ID,
-            diagnostics::REQUEST_ID,
-            diagnostics::FUNCTIONAL_ID,
-            BatteryMessage::ID,
-        ]);
-        net.set_filtering(
-            ecu,
-            ecu::BUS1,
-            Filtering {
-                error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
-                ..only(&ecu_hears)
-            },
-        );
-        net.set_filtering(ecu, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
-        net.set_filtering(ecu, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
-        let feedback = [
-            VehicleToAdsState::ID,
-            VehicleToAdsSensors::ID,
-            VehicleToAdsWheelAngles::ID,
-            secured::SYNC_ID,
-        ];
-        net.set_filtering(ads, ads_ports.0, only(&feedback));
-        net.set_filtering(ads, ads_ports.1, deaf());
-        let senders = [
-            nodes.safety.key(),
-            nodes.bms.key(),
-            nodes.imu.key(),
-            nodes.io.key(),
-        ];
-        for node in senders {
-            net.set_filtering(node, Port::MAIN, deaf());
-        }
-        net.set_filtering(
-            nodes.attacker,
-            Port::MAIN,
-            only(&[AdsToVehicleControl::ID, VehicleToAdsState::ID]),
-        );
+            &params,
+            mission,
+            (ads_config, ecu_config),
+            geometry,
+        )?;
+        let buses = add_buses(&mut net, params.secoc);
+        let (mut names, ecu_bus1) = nodes.wire(&mut net, buses);
+        nodes.filter(&mut net);
         let mut taps = [0; 4];
         for (tap, (bus, list)) in taps.iter_mut().zip(buses.iter().zip(names.iter_mut())) {
             *tap = net.tap(*bus).unwrap_or_default();
             list.push((*tap, "logger".to_string()));
         }
-        let _ = (bus1, bus2, bus3, bus1b);
         let corners = (0..4)
             .map(|_| Corner {
                 chain: SteeringChain::new(SteeringParams::default()),
@@ -1100,12 +1128,14 @@ impl Tug {
             corner.chain.step(dt, command, rolling);
             let reading = corner.chain.sensor_deg(&mut self.rng);
             let rate = (corner.chain.wheel_angle_deg() - before) / dt;
-            if let Some(mut device) = self.net.node_mut(steer) {
+            // The drive says when the plant's values move its deadline (its motor starts or
+            // stops): asked every millisecond, that was a tenth of the simulator's time.
+            self.net.feed(steer, |device: &mut Device<Drive>| {
                 device.app_mut().0.set_actual(
                     reading * STEERING_UNITS_PER_DEG,
                     rate * STEERING_UNITS_PER_DEG,
-                );
-            }
+                )
+            });
             // Drive: the drive's velocity demand is the motor controller's setpoint.
             let setpoint = drive_demand / DRIVE_UNITS_PER_M;
             let output = corner.wheel.motor(setpoint, speed, soc);
@@ -1115,12 +1145,12 @@ impl Tug {
             corner.wheel.step_brake(dt, brake);
             power += output.power;
             corner.distance += speed * dt;
-            if let Some(mut device) = self.net.node_mut(drive) {
+            self.net.feed(drive, |device: &mut Device<Drive>| {
                 device.app_mut().0.set_actual(
                     corner.distance * DRIVE_UNITS_PER_M,
                     speed * DRIVE_UNITS_PER_M,
-                );
-            }
+                )
+            });
             *input = WheelInput {
                 angle_deg: corner.chain.wheel_angle_deg(),
                 drive_torque: output.torque,

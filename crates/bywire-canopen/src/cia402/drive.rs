@@ -205,11 +205,21 @@ impl Drive {
         self.demand
     }
 
-    /// The plant's actual position (units) and velocity (units/s).
-    pub fn set_actual(&mut self, position: f64, velocity: f64) {
-        if self.external {
-            self.motor = Motor { position, velocity };
+    /// The plant's actual position (units) and velocity (units/s). Returns whether the drive's
+    /// deadline may have moved: it asks for motor steps only while something moves, so a
+    /// motor that starts or stops moving changes it (what a simulated runner's `feed` asks).
+    pub fn set_actual(&mut self, position: f64, velocity: f64) -> bool {
+        if !self.external {
+            return false;
         }
+        let was_moving = self.moving();
+        self.motor = Motor { position, velocity };
+        self.moving() != was_moving
+    }
+
+    /// Whether it asks for motor steps: the motor turns or the power stage is on.
+    fn moving(&self) -> bool {
+        self.motor.velocity.abs() >= f64::EPSILON || self.state.is_powered()
     }
 
     /// Drive the motor toward `target` within `rate`: the internal model moves, or the external
@@ -582,8 +592,7 @@ impl Application for Drive {
 
     fn next_deadline(&self) -> Option<Timestamp> {
         // The motor model wants a step every few milliseconds while anything moves.
-        let moving = self.motor.velocity.abs() >= f64::EPSILON || self.state.is_powered();
-        moving.then(|| {
+        self.moving().then(|| {
             self.last_step.map_or(Timestamp::ZERO, |t| {
                 t.saturating_add(Duration::from_millis(5))
             })
@@ -623,6 +632,22 @@ mod tests {
         classic(0x301, &data)
     }
 
+    /// The plant's values move an unpowered drive's deadline only when its motor starts or
+    /// stops turning (it asks for motor steps while anything moves), and say so.
+    #[test]
+    fn actual_values_say_when_they_move_the_deadline() {
+        let mut drive = Drive::new().with_external_motor();
+        assert_eq!(drive.next_deadline(), None);
+        assert!(!drive.set_actual(10.0, 0.0), "still");
+        assert!(drive.set_actual(10.0, 50.0), "starts turning");
+        assert!(drive.next_deadline().is_some());
+        assert!(!drive.set_actual(11.0, 60.0), "turning on");
+        assert!(drive.set_actual(11.0, 0.0), "stops");
+        assert_eq!(drive.next_deadline(), None);
+        // Its own model's values are not the plant's: nothing to say.
+        assert!(!Drive::new().set_actual(0.0, 100.0));
+    }
+
     /// A new target written between two steps of the motor (nothing else changed) changes
     /// the published statusword at once: what the values are worked out from includes it.
     #[test]
@@ -639,7 +664,7 @@ mod tests {
             device.poll(at(2), &mut sent);
         }
         device.on_frame(at(3), Port::MAIN, &targets(0, 500));
-        device.app_mut().0.set_actual(0.0, 500.0);
+        let _ = device.app_mut().0.set_actual(0.0, 500.0);
         device.poll(at(4), &mut sent);
         assert_eq!(device.app().state(), State::OperationEnabled);
         assert_ne!(statusword(&device) & 0x0400, 0, "at its target velocity");
@@ -654,7 +679,7 @@ mod tests {
         // Profile position, the motor still: a new set point is a target not yet reached.
         device.on_frame(at(5), Port::MAIN, &classic(0x201, &[0x0F, 0, 1]));
         device.on_frame(at(5), Port::MAIN, &targets(0, 0));
-        device.app_mut().0.set_actual(0.0, 0.0);
+        let _ = device.app_mut().0.set_actual(0.0, 0.0);
         device.on_frame(at(5), Port::MAIN, &classic(0x201, &[0x1F, 0, 1]));
         device.poll(at(5), &mut sent);
         assert_ne!(statusword(&device) & 0x0400, 0, "at its set point");
