@@ -72,12 +72,21 @@ class DecodedLog(dict):
 
 
 class Database:
-    """A DBC database. The common calls of cantools' ``Database`` with the same arguments,
+    r"""A DBC database. The common calls of cantools' ``Database`` with the same arguments,
     values and errors (``decode_message``, ``encode_message``, ``get_message_by_name``...),
     and Arrow decoding (``decode_arrow``, ``decode_log``).
 
     Where two messages share a frame identifier or a name, the lookups here find the last, as
     cantools does (bywire's command line decodes with the first and says so when loading).
+
+    >>> db = Database.load_string('''
+    ... BO_ 256 Speed: 2 ECU
+    ...  SG_ Kph : 0|16@1+ (0.01,0) [0|655.35] "km/h" Vector__XXX
+    ... ''')
+    >>> db.encode_message("Speed", {"Kph": 12.5})
+    b'\xe2\x04'
+    >>> db.decode_message(256, b'\xe2\x04')
+    {'Kph': 12.5}
     """
 
     def __init__(self, native: _native.Database) -> None:

@@ -235,3 +235,11 @@ def test_a_dbc_that_cannot_load_names_its_file_and_line(tmp_path):
     assert lenient.diagnostics and lenient.diagnostics[0].startswith(f"{bad}:4:")
     with pytest.raises(OSError, match="missing.dbc"):
         bywire.Database.load(tmp_path / "missing.dbc")
+
+
+def test_the_packages_docstring_examples_run():
+    import doctest
+
+    failures, attempted = doctest.testmod(bywire, verbose=False)
+    assert attempted > 0
+    assert failures == 0

@@ -118,6 +118,7 @@ impl<N: Node + Any> Owned for N {
 pub struct NodeMut<'a, N> {
     node: &'a mut N,
     changed: &'a mut bool,
+    any_changed: &'a mut bool,
 }
 
 impl<N> Deref for NodeMut<'_, N> {
@@ -136,6 +137,7 @@ impl<N> DerefMut for NodeMut<'_, N> {
 impl<N> Drop for NodeMut<'_, N> {
     fn drop(&mut self) {
         *self.changed = true;
+        *self.any_changed = true;
     }
 }
 
@@ -308,6 +310,8 @@ pub struct Network {
     dropped_ports: Vec<(NodeIndex, Port)>,
     /// Per node, in the nodes' order.
     slots: Vec<Slot>,
+    /// Some slot is marked changed (most runs have none to ask again).
+    any_changed: bool,
     now: Timestamp,
     /// The earliest wake and the earliest due time of the nodes, kept until a node's
     /// deadline changes (the runner looks for them at every pass and every instant;
@@ -342,6 +346,7 @@ impl Network {
             wires_of: Vec::new(),
             dropped_ports: Vec::new(),
             slots: Vec::new(),
+            any_changed: false,
             now: Timestamp::ZERO,
             earliest_wake: None,
             receivers: Vec::new(),
@@ -368,6 +373,7 @@ impl Network {
     pub fn add_node<N: Node + 'static>(&mut self, node: N) -> NodeHandle<N> {
         self.nodes.push(Box::new(node));
         self.slots.push(Slot::NEW);
+        self.any_changed = true;
         self.wires_of.push(Vec::new());
         self.earliest_wake = None;
         NodeHandle {
@@ -386,7 +392,11 @@ impl Network {
         let i = handle.key.0;
         let node = self.nodes.get_mut(i)?.as_any_mut().downcast_mut()?;
         let changed = &mut self.slots.get_mut(i)?.changed;
-        Some(NodeMut { node, changed })
+        Some(NodeMut {
+            node,
+            changed,
+            any_changed: &mut self.any_changed,
+        })
     }
 
     /// Give a node an input through `input`, which says whether the node's deadline may have
@@ -407,9 +417,11 @@ impl Network {
         else {
             return false;
         };
-        let moved = input(node);
-        if let Some(slot) = self.slots.get_mut(i) {
-            slot.changed |= moved;
+        if input(node) {
+            if let Some(slot) = self.slots.get_mut(i) {
+                slot.changed = true;
+                self.any_changed = true;
+            }
         }
         true
     }
@@ -533,7 +545,9 @@ impl Network {
             owned: &mut owned,
             stand_in,
         };
-        for i in 0..self.slots.len() {
+        // The nodes changed since the last run, and the stand-in, are asked their deadlines.
+        let ask = std::mem::take(&mut self.any_changed) || stood_in.is_some();
+        for i in (0..self.slots.len()).filter(|_| ask) {
             let Some(slot) = self.slots.get_mut(i) else {
                 continue;
             };
@@ -553,6 +567,7 @@ impl Network {
         // The node stood in for is asked again when it is back.
         if let Some(slot) = stood_in.and_then(|i| self.slots.get_mut(i)) {
             slot.changed = true;
+            self.any_changed = true;
         }
     }
 

@@ -39,14 +39,15 @@ use bywire_tug::ecu::{
 };
 pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
 use bywire_tug::messages::{
-    AdsToVehicleControl, Battery as BatteryMessage, EmergencyBrake, EmergencyStop,
+    AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
     SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::secured::Signing;
-use bywire_vehicle::supervisor::{Redundancy, Supervisor, SupervisorConfig};
+use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, SupervisorConfig, Watchdog};
 
 use crate::attacker::Attacker;
 use crate::battery::{Battery, BatteryParams};
@@ -56,9 +57,7 @@ use crate::drive::{DriveParams, WheelDrive};
 use crate::event::{Happening, SimEvent};
 use crate::fault::Fault;
 use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
-use crate::nodes::{
-    self, BatteryReading, Bms, ImuNode, IoNode, IoReading, Periodic, SafetyController,
-};
+use crate::nodes::{self, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController};
 use crate::record::{
     Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SteeringRecord, SupervisorWatch,
     TruthSample,
@@ -404,8 +403,8 @@ pub struct Tug {
     pub truth: Vec<TruthSample>,
     /// Faults active until their end time (`None`: for good).
     active: Vec<(Fault, Option<Timestamp>)>,
-    /// The faults changed since the network's cut connections were last set from them.
-    cuts_stale: bool,
+    /// The faults changed since the cut connections and the attack were last set from them.
+    faults_changed: bool,
     supervisor_watch: SupervisorWatch,
     ads_external: bool,
     /// The steering's responses: the step test's steps and the tank turn.
@@ -508,7 +507,7 @@ impl Tug {
             trace: Vec::new(),
             truth: Vec::new(),
             active: Vec::new(),
-            cuts_stale: true,
+            faults_changed: true,
             supervisor_watch: SupervisorWatch::default(),
             ads_external: false,
             steering: SteeringRecord::default(),
@@ -613,7 +612,7 @@ impl Tug {
         }
         self.active
             .push((fault, duration.map(|d| now.saturating_add(d))));
-        self.cuts_stale = true;
+        self.faults_changed = true;
     }
 
     fn is_active(&self, fault: Fault) -> bool {
@@ -750,10 +749,20 @@ impl Tug {
     /// faults at the edges (outputs dropped, a hand on the wheel, the E-stop chain), and the
     /// sensor nodes' readings when they send within this millisecond.
     fn set_inputs(&mut self, until: Timestamp) {
-        // The cut connections change only with the faults (every step costs a pass over the
-        // nodes otherwise).
-        if self.cuts_stale {
-            self.cuts_stale = false;
+        // The cut connections and the attack change only with the faults (every step costs a
+        // pass over the nodes otherwise).
+        if self.faults_changed {
+            self.faults_changed = false;
+            let attack = self.active.iter().find_map(|(f, _)| match f {
+                Fault::Attack(a) => Some(*a),
+                _ => None,
+            });
+            let attacker = self.net.node(self.nodes.attacker).map(Attacker::attack);
+            if attacker.is_some_and(|now| now != attack) {
+                if let Some(mut attacker) = self.net.node_mut(self.nodes.attacker) {
+                    attacker.set_attack(attack);
+                }
+            }
             let silent = self.is_active(Fault::AdsSilence);
             self.net.drop_output(self.nodes.ads, silent);
             let b_lost = self.is_active(Fault::RedundantBusLoss);
@@ -789,46 +798,41 @@ impl Tug {
                 safety.node.reading = estop;
             }
         }
-        let attack = self.active.iter().find_map(|(f, _)| match f {
-            Fault::Attack(a) => Some(*a),
-            _ => None,
-        });
-        let attacker = self.net.node(self.nodes.attacker).map(Attacker::attack);
-        if attacker.is_some_and(|now| now != attack) {
-            if let Some(mut attacker) = self.net.node_mut(self.nodes.attacker) {
-                attacker.set_attack(attack);
-            }
-        }
-        let due = |schedule: Option<&Periodic>| schedule.is_some_and(|s| s.due_within(until));
-        if due(self.net.node(self.nodes.imu).map(|n| &n.schedule)) {
-            let (yaw_rate, accel) = self.chassis.imu(TICK.as_secs_f64(), &mut self.rng);
-            if let Some(mut imu) = self.net.node_mut(self.nodes.imu) {
+        // A reading is taken only for a send within this millisecond (the IMU's and the
+        // angle sensors' noise draws come in the order the nodes send); it leaves the send's
+        // time where it is, so the runner is not asked to look at the node again.
+        let (chassis, corners, rng) = (&self.chassis, &self.corners, &mut self.rng);
+        self.net.feed(self.nodes.imu, |imu| {
+            if imu.schedule.due_within(until) {
+                let (yaw_rate, accel) = chassis.imu(TICK.as_secs_f64(), rng);
                 imu.reading = (yaw_rate.to_degrees(), accel);
             }
-        }
-        if due(self.net.node(self.nodes.io).map(|n| &n.schedule)) {
-            let encoders = self.chassis.encoders(0.01);
-            let mut second_tracks = [0.0; 4];
-            for (track, corner) in second_tracks.iter_mut().zip(&self.corners) {
-                *track = corner.chain.second_track_deg(&mut self.rng);
-            }
-            if let Some(mut io) = self.net.node_mut(self.nodes.io) {
+            false
+        });
+        self.net.feed(self.nodes.io, |io| {
+            if io.schedule.due_within(until) {
+                let mut second_tracks = [0.0; 4];
+                for (track, corner) in second_tracks.iter_mut().zip(corners) {
+                    *track = corner.chain.second_track_deg(rng);
+                }
                 io.reading = IoReading {
-                    encoders,
+                    encoders: chassis.encoders(0.01),
                     second_tracks,
                 };
             }
-        }
-        if due(self.net.node(self.nodes.bms).map(|n| &n.schedule)) {
-            let reading = BatteryReading {
-                voltage: self.battery.terminal_v(),
-                current: self.battery.current(),
-                soc: self.battery.soc(),
-            };
-            if let Some(mut bms) = self.net.node_mut(self.nodes.bms) {
-                bms.reading = reading;
+            false
+        });
+        let battery = &self.battery;
+        self.net.feed(self.nodes.bms, |bms| {
+            if bms.schedule.due_within(until) {
+                bms.reading = BatteryReading {
+                    voltage: battery.terminal_v(),
+                    current: battery.current(),
+                    soc: battery.soc(),
+                };
             }
-        }
+            false
+        });
     }
 
     /// One millisecond: the inputs set, the network run over it, the plants stepped over it.
@@ -860,9 +864,18 @@ impl Tug {
         self.run_plants(now);
         self.now = until;
         self.take_logs();
-        self.watch_attacks();
-        self.record_steering(until);
-        self.note_changes();
+        let seen = self.watch_nodes(until);
+        self.note_bus_changes();
+        if let Some(seen) = seen {
+            let (now, events) = (self.now, &mut self.events);
+            self.supervisor_watch
+                .note(seen.supervisor, seen.degraded, |what| {
+                    events.push(SimEvent { t: now, what });
+                });
+            if seen.events_waiting {
+                self.take_node_events();
+            }
+        }
         self.sample(until);
     }
 
@@ -887,7 +900,7 @@ impl Tug {
         }
         self.active
             .retain(|(_, end)| end.is_none_or(|end| now < end));
-        self.cuts_stale |= expired_any;
+        self.faults_changed |= expired_any;
     }
 
     /// The loggers' frames into the logs.
@@ -905,30 +918,27 @@ impl Tug {
                 }
             }
         }
-        let Some(echo) = self.ads().map(|ads| ads.ads().state().echo_latency) else {
-            return;
+    }
+
+    /// What the ECU and the ADS show after a millisecond, both looked up once (the step's
+    /// cost): the ADS's echo latencies; what the attacks achieve (each command the ECU took
+    /// compared with the ADS's own, each speed the ADS took with the tug's); the step test's
+    /// and the tank turn's records. Returns what is recorded after the buses' changes.
+    fn watch_nodes(&mut self, now: Timestamp) -> Option<NodesSeen> {
+        let (Some(ecu), Some(ads)) = (self.net.node(self.nodes.ecu), self.net.node(self.nodes.ads))
+        else {
+            return None;
         };
+        let echo = ads.ads().state().echo_latency;
         if echo.at != self.last_echo {
             self.last_echo = echo.at;
             self.echo_latencies.extend(echo.value);
         }
-    }
-
-    /// What the attacks achieve: each command the ECU took this step compared with the ADS's
-    /// own, each speed the ADS took with the tug's.
-    fn watch_attacks(&mut self) {
-        let supervisor = self
-            .net
-            .node(self.nodes.ecu)
-            .map(VehicleControlEcu::supervisor);
-        let (Some(ads), Some(supervisor)) = (self.net.node(self.nodes.ads), supervisor) else {
-            return;
-        };
+        let supervisor = ecu.supervisor();
         if !self.ads_external {
             let accepted = supervisor.stats().accepted;
-            let (ads, now) = (ads.ads(), self.now);
             self.security.note_accepted(accepted, || {
-                let own = ads.effective_command(now)?;
+                let own = ads.ads().effective_command(now)?;
                 let taken = supervisor.command()?;
                 Some([
                     (own.steering, own.velocity),
@@ -940,6 +950,24 @@ impl Tug {
         let chassis = &self.chassis;
         self.security
             .note_speed(speed.at, speed.value, || speed_of(chassis));
+        // The front-left wheel every millisecond.
+        if let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) {
+            let tank = supervisor
+                .command()
+                .is_some_and(|c| c.steering_mode == SteeringMode::Tank);
+            let tank_target = || {
+                ecu.wheel_targets()
+                    .first()
+                    .map_or(0.0, |w| w.angle.to_degrees())
+            };
+            let step = ads.mission().active_step();
+            self.steering.note(now, angle, tank, tank_target, step);
+        }
+        Some(NodesSeen {
+            supervisor: (supervisor.watchdog(), supervisor.estop(), supervisor.mode()),
+            degraded: supervisor.degraded(),
+            events_waiting: ecu.has_events() || ads.has_events(),
+        })
     }
 
     /// The attacker (its frames sent).
@@ -999,30 +1027,8 @@ impl Tug {
         }
     }
 
-    /// The step test's and the tank turn's records: the front-left wheel every millisecond.
-    fn record_steering(&mut self, now: Timestamp) {
-        let Some(angle) = self.corners.first().map(|c| c.chain.wheel_angle_deg()) else {
-            return;
-        };
-        let (Some(ecu), Some(ads)) = (self.net.node(self.nodes.ecu), self.net.node(self.nodes.ads))
-        else {
-            return;
-        };
-        let tank = ecu
-            .supervisor()
-            .command()
-            .is_some_and(|c| c.steering_mode == SteeringMode::Tank);
-        let tank_target = || {
-            ecu.wheel_targets()
-                .first()
-                .map_or(0.0, |w| w.angle.to_degrees())
-        };
-        let step = ads.mission().active_step();
-        self.steering.note(now, angle, tank, tank_target, step);
-    }
-
-    /// Record the supervisor's state changes, bus state changes and the nodes' events.
-    fn note_changes(&mut self) {
+    /// Record the buses' state changes and the response times of what they carried.
+    fn note_bus_changes(&mut self) {
         let mut changes = Vec::new();
         for (i, bus) in TugBus::ALL.into_iter().enumerate() {
             let index = self.buses.get(i).copied().unwrap_or(0);
@@ -1047,19 +1053,6 @@ impl Tug {
             let who = self.port_name(bus, node);
             self.record(Happening::BusState { bus, who, state });
         }
-        if let Some(supervisor) = self
-            .net
-            .node(self.nodes.ecu)
-            .map(VehicleControlEcu::supervisor)
-        {
-            let seen = (supervisor.watchdog(), supervisor.estop(), supervisor.mode());
-            let degraded = supervisor.degraded();
-            let (now, events) = (self.now, &mut self.events);
-            self.supervisor_watch.note(seen, degraded, |what| {
-                events.push(SimEvent { t: now, what });
-            });
-        }
-        self.take_node_events();
     }
 
     /// The ECU's and the ADS's events into the run's.
@@ -1111,55 +1104,59 @@ impl Tug {
             // speed command. The linkage turns the wheel faster per millimetre of stroke as the
             // angle grows (angle = asin(stroke / arm)), so the drive's output stage scales by
             // cos(angle) at the angle it measures: the loop keeps one gain from 0° to the tank
-            // turn's 60° (without it the gain doubles there, and the wheel hunts).
-            let steering = self
-                .net
-                .node(steer)
-                .map(|s| (s.app().motor().position, s.app().demand()));
-            let driving = self.net.node(drive).map(|d| d.app().demand());
-            let (Some((position, demand)), Some(drive_demand)) = (steering, driving) else {
-                continue;
-            };
-            let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
-            let measured = position / STEERING_UNITS_PER_DEG;
-            let linkage = libm::cos(measured.clamp(-75.0, 75.0).to_radians());
-            let command = demand / max_rate * linkage;
-            let before = corner.chain.wheel_angle_deg();
-            corner.chain.step(dt, command, rolling);
-            let reading = corner.chain.sensor_deg(&mut self.rng);
-            let rate = (corner.chain.wheel_angle_deg() - before) / dt;
-            // The drive says when the plant's values move its deadline (its motor starts or
-            // stops): asked every millisecond, that was a tenth of the simulator's time.
+            // turn's 60° (without it the gain doubles there, and the wheel hunts). Each drive is
+            // reached once a millisecond: its demand read, its plant stepped, its actual values
+            // given back, saying when they move its deadline (its motor starts or stops).
+            let (rng, mut drive_torque) = (&mut self.rng, 0.0);
             self.net.feed(steer, |device: &mut Device<Drive>| {
-                device.app_mut().0.set_actual(
+                let drive = &mut device.app_mut().0;
+                let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
+                let measured = drive.motor().position / STEERING_UNITS_PER_DEG;
+                let linkage = libm::cos(measured.clamp(-75.0, 75.0).to_radians());
+                let command = drive.demand() / max_rate * linkage;
+                let before = corner.chain.wheel_angle_deg();
+                corner.chain.step(dt, command, rolling);
+                let reading = corner.chain.sensor_deg(rng);
+                let rate = (corner.chain.wheel_angle_deg() - before) / dt;
+                drive.set_actual(
                     reading * STEERING_UNITS_PER_DEG,
                     rate * STEERING_UNITS_PER_DEG,
                 )
             });
             // Drive: the drive's velocity demand is the motor controller's setpoint.
-            let setpoint = drive_demand / DRIVE_UNITS_PER_M;
-            let output = corner.wheel.motor(setpoint, speed, soc);
-            corner
-                .wheel
-                .set_parked(!a.motors_enabled && speed.abs() < 0.05);
-            corner.wheel.step_brake(dt, brake);
-            power += output.power;
-            corner.distance += speed * dt;
             self.net.feed(drive, |device: &mut Device<Drive>| {
-                device.app_mut().0.set_actual(
+                let drive = &mut device.app_mut().0;
+                let setpoint = drive.demand() / DRIVE_UNITS_PER_M;
+                let output = corner.wheel.motor(setpoint, speed, soc);
+                corner
+                    .wheel
+                    .set_parked(!a.motors_enabled && speed.abs() < 0.05);
+                corner.wheel.step_brake(dt, brake);
+                power += output.power;
+                corner.distance += speed * dt;
+                drive_torque = output.torque;
+                drive.set_actual(
                     corner.distance * DRIVE_UNITS_PER_M,
                     speed * DRIVE_UNITS_PER_M,
                 )
             });
             *input = WheelInput {
                 angle_deg: corner.chain.wheel_angle_deg(),
-                drive_torque: output.torque,
+                drive_torque,
                 brake_torque: corner.wheel.holding_torque(),
             };
         }
         self.chassis.step(dt, &inputs, self.params.grade);
         self.battery.step(dt, power);
     }
+}
+
+/// What the supervisor shows after a millisecond, and whether the ECU or the ADS has events
+/// waiting.
+struct NodesSeen {
+    supervisor: (Watchdog, EstopState, ControlMode),
+    degraded: Option<Channel>,
+    events_waiting: bool,
 }
 
 /// The body's speed over the ground, m/s.

@@ -21,6 +21,11 @@ pub struct Motor {
 }
 
 impl Motor {
+    /// Whether it turns (a velocity above rounding).
+    fn turning(&self) -> bool {
+        self.velocity.abs() >= f64::EPSILON
+    }
+
     /// Move the velocity toward `target` by at most `rate * dt`, then integrate.
     pub fn step_velocity(&mut self, target: f64, rate: f64, dt: f64) {
         let change = (target - self.velocity).clamp(-rate * dt, rate * dt);
@@ -212,14 +217,15 @@ impl Drive {
         if !self.external {
             return false;
         }
-        let was_moving = self.moving();
+        // The power stage is as it was: only the motor's turning can change `moving`.
+        let was_turning = self.motor.turning();
         self.motor = Motor { position, velocity };
-        self.moving() != was_moving
+        self.motor.turning() != was_turning && !self.state.is_powered()
     }
 
     /// Whether it asks for motor steps: the motor turns or the power stage is on.
     fn moving(&self) -> bool {
-        self.motor.velocity.abs() >= f64::EPSILON || self.state.is_powered()
+        self.motor.turning() || self.state.is_powered()
     }
 
     /// Drive the motor toward `target` within `rate`: the internal model moves, or the external

@@ -274,11 +274,12 @@ fn report(
 /// start values.
 fn predict(dbc: &Dbc, rates: Bitrates, stuffing: Stuffing) -> f64 {
     let messages: Vec<PeriodicMessage> = dbc
+        .decoder()
         .database()
         .messages
         .iter()
         .filter_map(|m| {
-            let period = dbc.cycle_time(m)?;
+            let period = dbc.decoder().cycle_time(m)?;
             let frame = dbc.encode(m, &[], 0, EncodeMode::Clamp).ok()?;
             Some(PeriodicMessage {
                 period,

@@ -22,6 +22,7 @@ use bywire_core::time::Timestamp;
 
 use crate::support::busarg;
 use crate::support::interrupt::interrupt_flag;
+use crate::support::numbers::hex;
 
 #[derive(clap::Subcommand)]
 pub enum CanopenCommand {
@@ -273,16 +274,12 @@ fn open_bus(text: &str) -> Result<Box<dyn Bus>> {
 /// `INDEX[:SUB]` in hex (with or without 0x) — how CANopen tools write objects.
 fn parse_object(text: &str) -> Result<(u16, u8)> {
     let (index, sub) = text.split_once(':').unwrap_or((text, "0"));
-    let hex = |t: &str| {
-        t.trim()
-            .trim_start_matches("0x")
-            .trim_start_matches("0X")
-            .to_string()
-    };
-    let index = u16::from_str_radix(&hex(index), 16)
-        .map_err(|_| anyhow!("object '{text}': index '{index}' is not a hex number up to FFFF"))?;
-    let sub = u8::from_str_radix(&hex(sub), 16)
-        .map_err(|_| anyhow!("object '{text}': sub-index '{sub}' is not a hex number up to FF"))?;
+    let index = hex::<u16>(index.trim()).ok_or_else(|| {
+        anyhow!("object '{text}': index '{index}' is not a hex number up to FFFF")
+    })?;
+    let sub = hex::<u8>(sub.trim()).ok_or_else(|| {
+        anyhow!("object '{text}': sub-index '{sub}' is not a hex number up to FF")
+    })?;
     Ok((index, sub))
 }
 

@@ -396,7 +396,7 @@ fn write_decoded(
             .id()
             .map(|id| (id.as_raw(), id.is_extended()))
             .unwrap_or_default();
-        let decoded = decoder.decode(frame);
+        let decoded = decoder.decoder().decode(frame);
         let o = match &decoded {
             None => {
                 json!({"id": id, "extended": extended, "name": null, "signals": {}, "error": "unknown message"})
@@ -413,7 +413,7 @@ fn write_decoded(
         return Ok(());
     }
     let choices = !args.no_decode_choices;
-    match decoder.decode(frame) {
+    match decoder.decoder().decode(frame) {
         None => writeln!(out, "{text}")?,
         Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
         Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,
@@ -449,7 +449,7 @@ fn decode_records(
             times: args.time_unit,
         };
         // One input: its records lent, not copied, on their way to the tables.
-        let notes = logs::write_dataset(dir, decoder, partitioning, tables, |sink| {
+        let notes = logs::write_dataset(dir, decoder.decoder(), partitioning, tables, |sink| {
             pump.run_lent(&name, input, Skip::NonLogLines, sink)
         })?;
         pump.progress.finish();
@@ -466,7 +466,7 @@ fn decode_records(
     writeln!(out, "ts,channel,message,signal,value,choice,unit")?;
     let choices = !args.no_decode_choices;
     pump.run(records, |record| {
-        let Some(decoded) = decoder.decode(&record.frame) else {
+        let Some(decoded) = decoder.decoder().decode(&record.frame) else {
             return Ok(());
         };
         let ts =

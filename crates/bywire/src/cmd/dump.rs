@@ -349,7 +349,7 @@ impl Printer<'_> {
 
 /// The decoded lines printed under a frame with `--dbc`.
 fn decode_for_screen(decoder: &Dbc, frame: &Frame) -> Option<String> {
-    let decoded = decoder.decode(frame)?;
+    let decoded = decoder.decoder().decode(frame)?;
     let indent = "      ";
     Some(match &decoded.error {
         Some(e) => format!("{indent}{}: {e}\n", decoded.message.display_name()),

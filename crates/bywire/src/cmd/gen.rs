@@ -11,6 +11,7 @@ use bywire_core::{ClassicFrame, Dlc, FdFrame, Frame, Id};
 
 use crate::support::busarg;
 use crate::support::interrupt::interrupt_flag;
+use crate::support::numbers::{hex, hex_pairs};
 use crate::support::signals::Dbc;
 use bywire_dbc::codec::EncodeMode;
 
@@ -110,22 +111,12 @@ struct Generator {
 
 impl Generator {
     fn new(args: &Args) -> Result<Generator> {
-        let hex_u32 = |s: &str| u32::from_str_radix(s, 16).ok();
-        let ids = mode('I', &args.id_mode, hex_u32)?;
+        let ids = mode('I', &args.id_mode, hex::<u32>)?;
         let lens = mode('L', &args.len_mode, |s| {
-            usize::from_str_radix(s, 16).ok().filter(|l| *l <= 64)
+            hex::<u8>(s).filter(|l| *l <= 64).map(usize::from)
         })?;
         let data = mode('D', &args.data_mode, |s| {
-            (s.len() % 2 == 0 && s.len() <= 128)
-                .then(|| {
-                    (0..s.len() / 2)
-                        .map(|i| {
-                            s.get(2 * i..2 * i + 2)
-                                .and_then(|b| u8::from_str_radix(b, 16).ok())
-                        })
-                        .collect::<Option<Vec<u8>>>()
-                })
-                .flatten()
+            hex_pairs(s).ok().filter(|bytes| bytes.len() <= 64)
         })?;
         if let Mode::Fixed(id) = ids {
             let limit = if args.extended { 0x1FFF_FFFF } else { 0x7FF };
@@ -258,10 +249,11 @@ fn run_dbc(
     out: &mut dyn Write,
 ) -> Result<()> {
     let messages: Vec<_> = dbc
+        .decoder()
         .database()
         .messages
         .iter()
-        .filter_map(|m| dbc.cycle_time(m).map(|c| (m, c)))
+        .filter_map(|m| dbc.decoder().cycle_time(m).map(|c| (m, c)))
         .collect();
     if messages.is_empty() {
         return Err(anyhow!("the DBC has no message with a GenMsgCycleTime"));

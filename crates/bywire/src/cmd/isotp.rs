@@ -10,7 +10,7 @@ use bywire_diag::isotp::{IsoTp, IsoTpConfig, IsoTpEvent, StMin};
 
 use crate::support::busarg;
 use crate::support::interrupt::interrupt_flag;
-use crate::support::numbers::{can_id, extended_addressing, hex_u8};
+use crate::support::numbers::{can_id, extended_addressing, hex, hex_u8};
 
 /// The most hex input `send` reads (an ISO-TP message of up to 4 GiB is not typed by hand).
 const MAX_INPUT: u64 = 64 << 20;
@@ -203,8 +203,7 @@ fn parse_hex(text: &str) -> Result<Vec<u8>> {
     text.split_whitespace()
         .enumerate()
         .map(|(i, t)| {
-            u8::from_str_radix(t, 16)
-                .map_err(|_| anyhow!("stdin: item {} '{t}' is not a hex byte", i + 1))
+            hex::<u8>(t).ok_or_else(|| anyhow!("stdin: item {} '{t}' is not a hex byte", i + 1))
         })
         .collect()
 }

@@ -160,7 +160,7 @@ fn run_predict(args: &Args, predict: &Path, bitrate: u32, out: &mut impl Write) 
     let wanted_ids: Vec<Option<u32>> = args
         .messages
         .iter()
-        .map(|name| u32::from_str_radix(name.trim_start_matches("0x"), 16).ok())
+        .map(|name| numbers::hex::<u32>(name))
         .collect();
     for (name, id) in args.messages.iter().zip(&wanted_ids) {
         ensure!(

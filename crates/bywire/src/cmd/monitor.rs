@@ -84,7 +84,7 @@ impl View for Monitor {
         if self.paused || received.frame.is_error() {
             return;
         }
-        let Some(decoded) = self.dbc.decode(&received.frame) else {
+        let Some(decoded) = self.dbc.decoder().decode(&received.frame) else {
             *self
                 .unknown
                 .entry(received.frame.socketcan_id())

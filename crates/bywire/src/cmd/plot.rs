@@ -61,8 +61,8 @@ pub struct Args {
 /// Where the signals a spec names are: (message index, signal index). A name must name one
 /// signal; a pattern (`*Velocity*`) at least one.
 fn locate(dbc: &Dbc, spec: &str) -> Result<Vec<(usize, usize)>> {
-    let messages = &dbc.database().messages;
-    let found = bywire_dbc::select::signals_matching(dbc.database(), spec);
+    let messages = &dbc.decoder().database().messages;
+    let found = bywire_dbc::select::signals_matching(dbc.decoder().database(), spec);
     if bywire_dbc::select::is_pattern(spec) {
         if found.is_empty() {
             return Err(anyhow!("no signal in the DBC matches '{spec}'"));
@@ -171,7 +171,7 @@ fn capture(buses: &[String], seconds: f64) -> Result<Vec<(Timestamp, Frame)>> {
 }
 
 fn collect(dbc: &Dbc, wanted: &[(usize, usize)], frames: &[(Timestamp, Frame)]) -> Vec<Series> {
-    let messages = &dbc.database().messages;
+    let messages = &dbc.decoder().database().messages;
     let mut series: Vec<Series> = wanted
         .iter()
         .map(|(m, s)| {
@@ -192,7 +192,7 @@ fn collect(dbc: &Dbc, wanted: &[(usize, usize)], frames: &[(Timestamp, Frame)]) 
         return series;
     };
     for (timestamp, frame) in frames {
-        let Some(decoded) = dbc.decode(frame) else {
+        let Some(decoded) = dbc.decoder().decode(frame) else {
             continue;
         };
         let seconds = timestamp.saturating_since(start).as_secs_f64();

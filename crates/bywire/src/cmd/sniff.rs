@@ -193,7 +193,11 @@ impl Sniffer {
             })
             .collect();
         spans.push(Span::raw(format!(" {ascii}")));
-        if let Some(decoded) = self.dbc.as_ref().and_then(|d| d.decode(&row.frame)) {
+        if let Some(decoded) = self
+            .dbc
+            .as_ref()
+            .and_then(|d| d.decoder().decode(&row.frame))
+        {
             spans.push(Span::styled(
                 format!("  {}", decoded.single_line(true)),
                 Style::new().fg(Color::Cyan),

@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 
 use crate::support::busarg;
 use crate::support::interrupt::interrupt_flag;
-use crate::support::numbers::{can_id, extended_addressing, hex_u8};
+use crate::support::numbers::{can_id, extended_addressing, hex, hex_pairs};
 
 /// How the tester reaches the ECU, and what it does first.
 #[derive(clap::Args)]
@@ -228,15 +228,14 @@ fn parse_did(text: &str) -> Result<(u16, Did)> {
     let (id, rest) = text
         .split_once('=')
         .ok_or_else(|| anyhow!("--did {text}: expected ID=VALUE"))?;
-    let id = u16::from_str_radix(id, 16)
-        .map_err(|_| anyhow!("--did {text}: '{id}' is not a hex DID"))?;
+    let id = hex::<u16>(id).ok_or_else(|| anyhow!("--did {text}: '{id}' is not a hex DID"))?;
     let (value, writable, secured) = match (rest.strip_suffix(":rws"), rest.strip_suffix(":rw")) {
         (Some(v), _) => (v, true, true),
         (None, Some(v)) => (v, true, false),
         (None, None) => (rest, false, false),
     };
     let value = match value.strip_prefix("hex:") {
-        Some(hex) => hex_bytes(hex).map_err(|e| anyhow!("--did {text}: {e}"))?,
+        Some(digits) => hex_pairs(digits).map_err(|e| anyhow!("--did {text}: {e}"))?,
         None => value.as_bytes().to_vec(),
     };
     let writable_in = if writable {
@@ -254,30 +253,16 @@ fn parse_did(text: &str) -> Result<(u16, Did)> {
     ))
 }
 
-fn hex_bytes(hex: &str) -> Result<Vec<u8>> {
-    if !hex.len().is_multiple_of(2) {
-        return Err(anyhow!("an odd number of hex digits"));
-    }
-    (0..hex.len())
-        .step_by(2)
-        .map(|i| {
-            hex.get(i..i + 2)
-                .and_then(|b| u8::from_str_radix(b, 16).ok())
-                .ok_or_else(|| anyhow!("'{hex}' is not hex"))
-        })
-        .collect()
-}
-
 fn parse_routine(text: &str) -> Result<(u16, Routine)> {
     let (id, rest) = text
         .split_once('=')
         .ok_or_else(|| anyhow!("--routine {text}: expected ID=MS"))?;
-    let id = u16::from_str_radix(id, 16)
-        .map_err(|_| anyhow!("--routine {text}: '{id}' is not a hex routine"))?;
+    let id =
+        hex::<u16>(id).ok_or_else(|| anyhow!("--routine {text}: '{id}' is not a hex routine"))?;
     let (ms, result) = match rest.split_once(":hex:") {
-        Some((ms, hex)) => (
+        Some((ms, digits)) => (
             ms,
-            hex_bytes(hex).map_err(|e| anyhow!("--routine {text}: {e}"))?,
+            hex_pairs(digits).map_err(|e| anyhow!("--routine {text}: {e}"))?,
         ),
         None => (rest, Vec::new()),
     };
@@ -299,8 +284,7 @@ fn parse_dtc(text: &str) -> Result<(u32, bool)> {
         Some(c) => (c, true),
         None => (text, false),
     };
-    let dtc = u32::from_str_radix(code, 16)
-        .ok()
+    let dtc = hex::<u32>(code)
         .filter(|d| *d <= 0xFF_FFFF)
         .ok_or_else(|| anyhow!("--dtc {text}: not a 24-bit hex DTC"))?;
     Ok((dtc, passed))
@@ -435,7 +419,7 @@ impl Tester {
             return Ok(bywire_diag::uds::demo_key(level, seed));
         }
         if let Some(hex) = spec.strip_prefix("xor:") {
-            let mask = hex_bytes(hex).map_err(|e| anyhow!("--key-fn {spec}: {e}"))?;
+            let mask = hex_pairs(hex).map_err(|e| anyhow!("--key-fn {spec}: {e}"))?;
             if mask.is_empty() {
                 bail!("--key-fn {spec}: no bytes to XOR with");
             }
@@ -456,7 +440,7 @@ impl Tester {
             }
             let text = String::from_utf8_lossy(&output.stdout);
             let digits: String = text.split_whitespace().collect();
-            return hex_bytes(&digits).map_err(|e| anyhow!("--key-fn {spec}: its key: {e}"));
+            return hex_pairs(&digits).map_err(|e| anyhow!("--key-fn {spec}: its key: {e}"));
         }
         bail!("--key-fn {spec}: demo, xor:HEX or exec:PROGRAM")
     }
@@ -464,13 +448,12 @@ impl Tester {
 
 /// A 16-bit hex number named by `what`.
 fn hex_u16(text: &str, what: &str) -> Result<u16> {
-    u16::from_str_radix(text.trim_start_matches("0x"), 16)
-        .map_err(|_| anyhow!("{what} {text}: not a 16-bit hex number"))
+    hex(text).ok_or_else(|| anyhow!("{what} {text}: not a 16-bit hex number"))
 }
 
 /// A hex byte (0x allowed) named by `what`.
 fn hex_byte(text: &str, what: &str) -> Result<u8> {
-    hex_u8(text.trim_start_matches("0x")).map_err(|e| anyhow!("{what} {text}: {e}"))
+    hex(text).ok_or_else(|| anyhow!("{what} {text}: not a hex byte"))
 }
 
 /// What the tester does: its requests, each chosen once the answer to the one before is in.
@@ -589,7 +572,7 @@ impl Script<'_> {
                     "extended" => 3,
                     other => other
                         .strip_prefix("0x")
-                        .map_or_else(|| other.parse().ok(), |h| u8::from_str_radix(h, 16).ok())
+                        .map_or_else(|| other.parse().ok(), |_| hex::<u8>(other))
                         .ok_or_else(|| anyhow!("session {other}: 1, 2, 3, a name or 0xNN"))?,
                 };
                 vec![0x10, code]
@@ -605,8 +588,8 @@ impl Script<'_> {
                 let mut request = vec![0x2E];
                 request.extend(hex_u16(did, "DID")?.to_be_bytes());
                 match value.strip_prefix("hex:") {
-                    Some(hex) => {
-                        request.extend(hex_bytes(hex).map_err(|e| anyhow!("{value}: {e}"))?)
+                    Some(digits) => {
+                        request.extend(hex_pairs(digits).map_err(|e| anyhow!("{value}: {e}"))?)
                     }
                     None => request.extend(value.as_bytes()),
                 }
@@ -620,8 +603,7 @@ impl Script<'_> {
                 ]
             }
             UdsCommand::ClearDtc { group, .. } => {
-                let group = u32::from_str_radix(group, 16)
-                    .ok()
+                let group = hex::<u32>(group)
                     .filter(|g| *g <= 0xFF_FFFF)
                     .ok_or_else(|| anyhow!("group {group}: not a 24-bit hex DTC group"))?;
                 let [_, a, b, c] = group.to_be_bytes();
@@ -641,7 +623,7 @@ impl Script<'_> {
                 let mut request = vec![0x31, sub];
                 request.extend(hex_u16(routine, "routine")?.to_be_bytes());
                 if let Some(data) = data {
-                    request.extend(hex_bytes(data).map_err(|e| anyhow!("{data}: {e}"))?);
+                    request.extend(hex_pairs(data).map_err(|e| anyhow!("{data}: {e}"))?);
                 }
                 request
             }
@@ -671,7 +653,7 @@ impl Script<'_> {
             } => vec![0x28, *control, *communication],
             UdsCommand::Raw { request, .. } => {
                 let digits: String = request.concat().split_whitespace().collect();
-                let bytes = hex_bytes(&digits).map_err(|e| anyhow!("raw: {e}"))?;
+                let bytes = hex_pairs(&digits).map_err(|e| anyhow!("raw: {e}"))?;
                 if bytes.is_empty() {
                     bail!("raw: no request");
                 }

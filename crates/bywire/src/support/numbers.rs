@@ -132,8 +132,16 @@ pub trait Whole: TryFrom<u64> {
     const MAX: u64;
 }
 
+impl Whole for u8 {
+    const MAX: u64 = u8::MAX as u64;
+}
+
 impl Whole for u16 {
     const MAX: u64 = u16::MAX as u64;
+}
+
+impl Whole for u32 {
+    const MAX: u64 = u32::MAX as u64;
 }
 
 impl Whole for u64 {
@@ -158,11 +166,42 @@ pub fn whole<T: Whole>(text: &str) -> Result<T, String> {
         })
 }
 
+/// A hex number within `T`'s range, `0x` optional: the one spelling of identifiers, DIDs,
+/// DTCs and object indices. Hex digits only (no sign, no spaces: `from_str_radix` alone
+/// takes `+1F`).
+pub fn hex<T: Whole>(text: &str) -> Option<T> {
+    let digits = text
+        .strip_prefix("0x")
+        .or_else(|| text.strip_prefix("0X"))
+        .unwrap_or(text);
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return None;
+    }
+    u64::from_str_radix(digits, 16)
+        .ok()
+        .and_then(|n| T::try_from(n).ok())
+}
+
+/// Bytes written as pairs of hex digits (`0A1B2C`), as can-utils and UDS tools write data.
+pub fn hex_pairs(text: &str) -> Result<Vec<u8>, String> {
+    if !text.len().is_multiple_of(2) {
+        return Err(format!("'{text}': an odd number of hex digits"));
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| {
+            text.get(i..i + 2)
+                .and_then(hex::<u8>)
+                .ok_or_else(|| format!("'{text}' is not hex"))
+        })
+        .collect()
+}
+
 /// A CAN identifier as can-utils' ISO-TP tools read one: hex, extended when written with 8
 /// digits or above 0x7FF; `option` names it in the error.
 pub fn can_id(text: &str, option: &str) -> anyhow::Result<bywire_core::Id> {
-    let raw = u32::from_str_radix(text, 16)
-        .map_err(|_| anyhow::anyhow!("{option} {text}: not a hex identifier"))?;
+    let raw =
+        hex::<u32>(text).ok_or_else(|| anyhow::anyhow!("{option} {text}: not a hex identifier"))?;
     let id = if text.len() == 8 || raw > 0x7FF {
         bywire_core::Id::extended(raw)
     } else {
@@ -173,7 +212,7 @@ pub fn can_id(text: &str, option: &str) -> anyhow::Result<bywire_core::Id> {
 
 /// A hex byte, as can-utils reads one (a clap value parser too).
 pub fn hex_u8(text: &str) -> Result<u8, String> {
-    u8::from_str_radix(text, 16).map_err(|_| format!("'{text}' is not a hex byte"))
+    hex(text).ok_or_else(|| format!("'{text}' is not a hex byte"))
 }
 
 /// can-utils' `-x ADDR[:RXADDR]`: extended addressing with the address byte sent and, if
@@ -204,6 +243,21 @@ mod tests {
         assert!(rate("1e-300").is_err() && rate("1001").is_err() && rate("20").is_ok());
         assert_eq!(rate_or_off("0"), Ok(0.0));
         assert!(factor("1e-300").is_err() && factor("2").is_ok());
+    }
+
+    #[test]
+    fn hex_takes_digits_with_an_optional_0x_and_nothing_else() {
+        assert_eq!(hex::<u16>("7E0"), Some(0x7E0));
+        assert_eq!(hex::<u16>("0xF190"), Some(0xF190));
+        assert_eq!(hex::<u8>("0XfF"), Some(0xFF));
+        for bad in ["", "0x", "+1F", "-1", " 1F", "1F ", "G1", "10000"] {
+            assert_eq!(hex::<u16>(bad), None, "{bad}");
+        }
+        assert_eq!(hex_pairs("0A1b"), Ok(vec![0x0A, 0x1B]));
+        assert_eq!(hex_pairs(""), Ok(vec![]));
+        for bad in ["0A1", "+1", "zz", "0x12"] {
+            assert!(hex_pairs(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

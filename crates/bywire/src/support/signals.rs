@@ -40,16 +40,10 @@ fn push_value_text(line: &mut String, value: &SignalValue<'_>, choices: bool) {
     }
 }
 
-/// A database compiled for decoding, with what the commands add: messages found by name with
-/// an error naming the known ones, and messages encoded from `SIGNAL=VALUE` text.
+/// A database compiled for decoding ([`Decoder`], which does the work), with what the commands
+/// add: messages found by name with an error naming the known ones, and messages encoded from
+/// `SIGNAL=VALUE` text.
 pub struct Dbc(Decoder);
-
-impl std::ops::Deref for Dbc {
-    type Target = Decoder;
-    fn deref(&self) -> &Decoder {
-        &self.0
-    }
-}
 
 impl Dbc {
     /// Compile every message of `db`.
@@ -57,10 +51,15 @@ impl Dbc {
         Dbc(Decoder::new(db))
     }
 
+    /// The compiled database.
+    pub fn decoder(&self) -> &Decoder {
+        &self.0
+    }
+
     /// The message named `name` (or with identifier `name` in hex, `0x` optional).
     pub fn find(&self, name: &str) -> Result<&Message> {
-        self.message_named(name).ok_or_else(|| {
-            let messages = &self.database().messages;
+        self.0.message_named(name).ok_or_else(|| {
+            let messages = &self.0.database().messages;
             let known: Vec<&str> = messages.iter().take(8).map(|m| m.name.as_str()).collect();
             anyhow!(
                 "no message '{name}' in the DBC (it has: {}{})",
@@ -86,6 +85,7 @@ impl Dbc {
         range: EncodeMode,
     ) -> Result<Frame> {
         let codec = self
+            .0
             .codec(message)
             .ok_or_else(|| anyhow!("message {} is not in the DBC", message.name))?;
         let mut values: Vec<Option<Value>> = message.signals.iter().map(start_value).collect();
@@ -146,7 +146,7 @@ impl Dbc {
             Id::standard(message.id)
         }
         .map_err(|e| anyhow!("message {}: {e}", message.name))?;
-        let (fd, brs) = self.fd_format(message);
+        let (fd, brs) = self.0.fd_format(message);
         let frame = if fd {
             Frame::Fd(FdFrame::padded(id, data, brs, false)?)
         } else {
@@ -275,6 +275,7 @@ impl<'a> JsonLines<'a> {
     pub fn new(dbc: &'a Dbc) -> Self {
         let quoted = |text: &str| serde_json::to_string(text).unwrap_or_default();
         let messages = dbc
+            .decoder()
             .database()
             .messages
             .iter()
@@ -310,7 +311,8 @@ impl<'a> JsonLines<'a> {
             .id()
             .map(|id| (id.as_raw(), id.is_extended()))
             .unwrap_or_default();
-        let Some((index, _, decoded)) = self.dbc.decode_into(frame, &mut self.values) else {
+        let Some((index, _, decoded)) = self.dbc.decoder().decode_into(frame, &mut self.values)
+        else {
             writeln!(
                 out,
                 r#"{{"error":"unknown message","extended":{extended},"id":{id},"name":null,"signals":{{}}}}"#
@@ -453,7 +455,7 @@ mod tests {
         let dbc = Dbc::new(db);
         let mut state = 0x2545_F491_4F6C_DD1Du64;
         let mut frames = Vec::new();
-        for message in &dbc.database().messages {
+        for message in &dbc.decoder().database().messages {
             let id = if message.extended {
                 Id::extended(message.id).unwrap()
             } else {
@@ -475,7 +477,7 @@ mod tests {
         let mut lines = JsonLines::new(&dbc);
         for frame in &frames {
             let id = frame.id().unwrap();
-            let decoded = dbc.decode(frame);
+            let decoded = dbc.decoder().decode(frame);
             let mut line = Vec::new();
             let written = lines.write(&mut line, frame).unwrap();
             assert!(written, "{frame}");

@@ -24,6 +24,8 @@ use std::collections::BTreeMap;
 
 use anyhow::{anyhow, bail, Context, Result};
 use bywire_diag::describe::{Description, DidInfo, ValueKind};
+
+use crate::support::numbers::hex;
 use serde::Deserialize;
 
 #[derive(Deserialize)]
@@ -75,8 +77,8 @@ fn parse(text: &str) -> Result<Description> {
         toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
     let mut d = Description::default();
     for (id, did) in raw.did {
-        let key = u16::from_str_radix(&id, 16)
-            .map_err(|_| anyhow!("[did.{id}]: not a hex data identifier"))?;
+        let key =
+            hex::<u16>(&id).ok_or_else(|| anyhow!("[did.{id}]: not a hex data identifier"))?;
         let kind = match did.kind.as_str() {
             "ascii" => ValueKind::Ascii,
             "bytes" => ValueKind::Bytes,
@@ -114,8 +116,7 @@ fn parse(text: &str) -> Result<Description> {
         );
     }
     for (code, name) in raw.dtc {
-        let dtc = u32::from_str_radix(&code, 16)
-            .ok()
+        let dtc = hex::<u32>(&code)
             .filter(|d| *d <= 0xFF_FFFF)
             .ok_or_else(|| anyhow!("[dtc] {code}: not a 24-bit hex DTC"))?;
         d.dtcs.insert(dtc, name);
