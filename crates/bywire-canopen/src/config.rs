@@ -31,29 +31,9 @@ use crate::eds::{self, Severity};
 use crate::od::ObjectDictionary;
 use crate::roboteq::RoboteqCommand;
 
-/// Why a bus description was refused.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ConfigError {
-    /// The file could not be read or is not valid TOML for this schema.
-    #[error("{file}: {message}")]
-    Syntax {
-        /// The file.
-        file: String,
-        /// What, with line and column.
-        message: String,
-    },
-    /// A value is out of range or inconsistent.
-    #[error("{file}: {key}: {reason}")]
-    Invalid {
-        /// The file.
-        file: String,
-        /// The key, e.g. `node.steer.mode`.
-        key: String,
-        /// Why.
-        reason: String,
-    },
-}
+/// Why a bus description was refused: the file, and what its reader said or the key whose
+/// value is wrong (e.g. `node.steer.mode`), as every configuration file says it.
+pub type ConfigError = bywire_core::FileError;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -21,7 +21,9 @@
 //! - [`busload`]: bus load from timestamped frames, and predicted load of periodic messages;
 //! - [`e2e`]: rolling counters, checksums and AUTOSAR E2E profiles 1 and 2;
 //! - [`text`]: Windows-1252 text, as legacy DBC and EDS files are written;
-//! - [`time`]: [`Timestamp`], the only notion of time here, always passed in.
+//! - [`time`]: [`Timestamp`], the only notion of time here, always passed in;
+//! - `file_error` (with the `alloc` feature): `FileError`, how every configuration file
+//!   (bus descriptions, vehicle profiles, scenarios, ECU descriptions) names its problems.
 //!
 //! ```
 //! use bywire_core::{Frame, wire};
@@ -34,11 +36,16 @@
 #![no_std]
 #![cfg_attr(docsrs, feature(doc_auto_cfg))]
 
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
 pub mod bittiming;
 pub mod busload;
 pub mod confinement;
 pub mod crc;
 pub mod e2e;
+#[cfg(feature = "alloc")]
+pub mod file_error;
 pub mod filter;
 pub mod frame;
 pub mod node;
@@ -48,6 +55,8 @@ pub mod text;
 pub mod time;
 pub mod wire;
 
+#[cfg(feature = "alloc")]
+pub use file_error::FileError;
 pub use filter::{ErrorMask, Filter, FilterSet};
 pub use frame::{
     ClassicFrame, Dlc, ErrorClass, ErrorFrame, ExtendedId, FdFrame, Frame, FrameError, Id,

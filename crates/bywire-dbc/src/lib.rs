@@ -32,6 +32,7 @@ pub mod e2e;
 mod lexer;
 pub mod lint;
 pub mod model;
+pub mod named;
 mod parser;
 pub mod schedule;
 #[cfg(feature = "secoc")]

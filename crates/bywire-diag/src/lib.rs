@@ -3,7 +3,10 @@
 //! - [`isotp`]: ISO-TP (ISO 15765-2), one channel between two addresses, classic and CAN FD.
 //! - [`uds`]: a UDS (ISO 14229-1) server's request handling over an ISO-TP channel.
 //! - [`client`]: a UDS client (the tester) over an ISO-TP channel, P2/P2* and S3 timed.
-//! - [`describe`]: an ECU's DIDs and DTCs as a tester names them; J2012 DTC codes.
+//! - [`describe`]: an ECU's DIDs and DTCs as a tester names them; J2012 DTC codes (read from
+//!   a TOML file with the `toml` feature);
+//! - [`tester`]: a tester's script: a session, an unlock, then one service, each request
+//!   chosen once the answer to the one before is in.
 //!
 //! Two ISO-TP channels, a tester's and an ECU's, carry a 20-byte message across a first frame,
 //! a flow control and consecutive frames, driven as a runner drives any node (each frame
@@ -44,5 +47,8 @@ extern crate alloc;
 
 pub mod client;
 pub mod describe;
+#[cfg(feature = "toml")]
+pub mod describe_file;
 pub mod isotp;
+pub mod tester;
 pub mod uds;

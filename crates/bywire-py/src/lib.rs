@@ -22,6 +22,9 @@ use bywire_data::lake::{self, LakeCompression, LakeFiles, LakePart, LAKE_GROUP_R
 use bywire_data::long::{self, LongLabels};
 use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
+use bywire_dbc::named::{
+    encode_named, selected_by, selector_values, Encoding, Given, Named, NamedError,
+};
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
 use bywire_log::batches::FrameBatches;
 use bywire_log::format::Format;
@@ -120,35 +123,6 @@ fn past_available(signal: &Signal, bytes: usize) -> bool {
         > (bytes as u64).saturating_mul(8)
 }
 
-/// The multiplexor values cantools accepts for `switch` (sorted, as it lists them): those that
-/// select a signal, and those its value descriptions name (a branch with no signals).
-fn selector_values(message: &Message, codec: &MessageCodec, switch: usize) -> Vec<i128> {
-    let mut values: Vec<i128> = message
-        .signals
-        .get(switch)
-        .map(|s| s.value_descriptions.iter().map(|(k, _)| *k).collect())
-        .unwrap_or_default();
-    for (i, signal) in message.signals.iter().enumerate() {
-        if codec.switch_of(i) != Some(switch) {
-            continue;
-        }
-        if let Some(condition) = &signal.mux_condition {
-            for (low, high) in &condition.ranges {
-                if high.saturating_sub(*low) < 256 {
-                    values.extend((*low..=*high).map(i128::from));
-                }
-            }
-        } else if let Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) =
-            signal.multiplexing
-        {
-            values.push(i128::from(v));
-        }
-    }
-    values.sort_unstable();
-    values.dedup();
-    values
-}
-
 /// The multiplexor cantools reports when a frame's multiplexing does not decode: the first in
 /// its order (by start bit in network order) that is in effect and whose value selects nothing — its index, its
 /// value and the values it accepts.
@@ -174,22 +148,6 @@ fn failing_multiplexor(
         (in_effect && !accepted.is_empty() && !accepted.contains(&number))
             .then_some((i, number, accepted))
     })
-}
-
-/// Whether `signal` is selected when its multiplexor's raw value is `value`.
-fn selected_by(signal: &Signal, value: i128) -> bool {
-    if let Some(condition) = &signal.mux_condition {
-        return condition
-            .ranges
-            .iter()
-            .any(|(low, high)| i128::from(*low) <= value && value <= i128::from(*high));
-    }
-    match signal.multiplexing {
-        Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v) => {
-            i128::from(v) == value
-        }
-        _ => true,
-    }
 }
 
 /// A DBC database: cantools' `Database` for the common calls, and Arrow decoding.
@@ -363,6 +321,9 @@ impl Database {
         Ok(dict)
     }
 
+    /// cantools' `encode_message` for one message, by [`encode_named`]: each value taken as
+    /// Python gives it (a number, a choice's name or a `NamedSignalValue`), each error raised
+    /// as cantools raises it.
     fn encode_with(
         &self,
         message: &Message,
@@ -373,266 +334,80 @@ impl Database {
         strict: bool,
     ) -> PyResult<Vec<u8>> {
         let named = NAMED_VALUE.import(data.py(), "bywire._values", "NamedSignalValue")?;
-        // The signals the encoding needs: every signal not multiplexed, and those the given
-        // multiplexor values select (cantools' gather_signals).
-        let given = |signal: &Signal| data.get_item(signal.display_name()).ok().flatten();
-        let mut needed = vec![false; message.signals.len()];
-        for (i, signal) in message.signals.iter().enumerate() {
-            let Some(switch) = codec.switch_of(i) else {
-                if let Some(slot) = needed.get_mut(i) {
-                    *slot = true;
-                }
-                continue;
-            };
-            let Some(switch_signal) = message.signals.get(switch) else {
-                continue;
-            };
-            let Some(selector) = given(switch_signal) else {
-                continue;
-            };
-            let selector = self.raw_choice_or_number(switch_signal, &selector, named)?;
-            if let Some(Value::Int(v)) = selector.map(|(raw, _)| raw) {
-                if let Some(slot) = needed.get_mut(i) {
-                    *slot = selected_by(signal, i128::from(v));
-                }
-            }
-        }
-        // A needed multiplexor whose value selects nothing.
-        for (i, signal) in message.signals.iter().enumerate() {
-            let is_switch = matches!(
-                signal.multiplexing,
-                Multiplexing::Multiplexor | Multiplexing::MultiplexedMultiplexor(_)
-            );
-            if !is_switch || !needed.get(i).copied().unwrap_or(false) {
-                continue;
-            }
-            let choices = selector_values(message, codec, i);
-            if choices.is_empty() {
-                continue;
-            }
-            let value = given(signal);
-            let selector = match &value {
-                Some(v) => self.raw_choice_or_number(signal, v, named)?,
-                None => None,
-            };
-            let selects =
-                matches!(selector, Some((Value::Int(v), _)) if choices.contains(&i128::from(v)));
-            if let (Some(value), false) = (value, selects) {
-                let listed: Vec<String> = choices.iter().map(i128::to_string).collect();
-                return Err(EncodeError::new_err(format!(
-                    "A valid value for the multiplexer selector signal \"{}\" is required: Expected one of {{{}}}, but got {}",
-                    signal.display_name(),
-                    format_or(&listed),
-                    value.str()?
-                )));
-            }
-        }
-        for (signal, needed) in message.signals.iter().zip(&needed) {
-            if *needed && given(signal).is_none() {
-                return Err(EncodeError::new_err(format!(
-                    "The signal \"{}\" is required for encoding.",
-                    signal.display_name()
-                )));
-            }
-        }
-        if strict {
-            let mut unknown: Vec<String> = Vec::new();
-            for key in data.keys() {
-                let name: String = key.extract()?;
-                let used = message
-                    .signals
-                    .iter()
-                    .zip(&needed)
-                    .any(|(s, n)| *n && s.display_name() == name);
-                if !used {
-                    unknown.push(format!("'{name}'"));
-                }
-            }
-            if !unknown.is_empty() {
-                return Err(EncodeError::new_err(format!(
-                    "The following signals were specified but are not required to encode the message:{{{}}}",
-                    unknown.join(", ")
-                )));
-            }
-        }
-        // Physical values for the codec; choices and unscaled values written raw after it.
-        let mut physical: Vec<Option<Value>> = vec![None; message.signals.len()];
-        let mut raw: Vec<Option<u64>> = vec![None; message.signals.len()];
-        for (i, (signal, needed)) in message.signals.iter().zip(&needed).enumerate() {
-            let Some(value) = given(signal).filter(|_| *needed) else {
-                continue;
-            };
-            let Some((number, is_choice)) = self.raw_choice_or_number(signal, &value, named)?
-            else {
-                // A name the signal's choices do not have: cantools' KeyError.
-                return Err(PyKeyError::new_err(value.str()?.unbind()));
-            };
-            // An integer signal holds no NaN or infinity: cantools raises as Python's int()
-            // does, strict or not (it was encoded as raw 0, or the offset).
-            if let (ValueType::Integer { .. }, Value::Float(f)) = (signal.value_type, number) {
-                if f.is_nan() {
-                    return Err(PyValueError::new_err("cannot convert float NaN to integer"));
-                }
-                if f.is_infinite() {
-                    return Err(PyOverflowError::new_err(
-                        "cannot convert float infinity to integer",
-                    ));
-                }
-            }
-            if is_choice || !scaling {
-                // A float32 signal holds the value rounded to single precision, as Python's
-                // struct packs it; an integer past i64 saturates before it is masked to width.
-                #[allow(clippy::cast_possible_truncation)]
-                let bits = match (signal.value_type, number) {
-                    (ValueType::Float32, v) => u64::from((v.as_f64() as f32).to_bits()),
-                    (ValueType::Float64, v) => v.as_f64().to_bits(),
-                    (_, Value::Int(v)) => u64::from_ne_bytes(v.to_ne_bytes()),
-                    (_, Value::UInt(v)) => v,
-                    (_, Value::Float(f)) => {
-                        let rounded = round_half_even(f);
-                        if !rounded.is_finite() {
-                            return Err(EncodeError::new_err(format!(
-                                "signal \"{}\": {f} is not a number that encodes",
-                                signal.display_name()
-                            )));
-                        }
-                        u64::from_ne_bytes((rounded as i64).to_ne_bytes())
-                    }
-                };
-                if let Some(slot) = raw.get_mut(i) {
-                    *slot = Some(bits);
-                }
-                if strict && !is_choice {
-                    let scaled = number.as_f64() * signal.factor.as_f64() + signal.offset.as_f64();
-                    let shown = value.str()?.to_string();
-                    check_range(message, signal, scaled, number.as_i128(), &shown)?;
-                }
+        // Each value with its name, its choice name if it is one, and its text and type as
+        // Python shows them (the errors quote them).
+        let mut items = Vec::with_capacity(data.len());
+        for (key, value) in data.iter() {
+            let name: String = key.extract()?;
+            let choice = if value.is_instance(named)? {
+                Some(value.getattr("name")?.extract::<String>()?)
+            } else if let Ok(text) = value.cast::<PyString>() {
+                Some(text.to_str()?.to_string())
             } else {
-                if strict {
-                    // The raw value the physical one encodes to, for the choices.
-                    let raw_key =
-                        (number.as_f64() - signal.offset.as_f64()) / signal.factor.as_f64();
-                    let raw_key = round_half_even(raw_key);
-                    // Whole and within ±1e18 (checked), so the conversion is exact.
-                    #[allow(clippy::cast_possible_truncation)]
-                    let raw_key =
-                        (raw_key.is_finite() && raw_key.abs() < 1e18).then_some(raw_key as i128);
-                    let shown = value.str()?.to_string();
-                    check_range(message, signal, number.as_f64(), raw_key, &shown)?;
-                }
-                if let Some(slot) = physical.get_mut(i) {
-                    *slot = Some(number);
-                }
-            }
+                None
+            };
+            let number = if choice.is_some() {
+                None
+            } else if let Ok(i) = value.extract::<i64>() {
+                Some(Value::Int(i))
+            } else if let Ok(u) = value.extract::<u64>() {
+                Some(Value::UInt(u))
+            } else {
+                value.extract::<f64>().ok().map(Value::Float)
+            };
+            let shown = value.str()?.to_string();
+            let type_name = value.get_type().name()?.to_string();
+            items.push((name, choice, number, shown, type_name));
         }
-        let mut payload = vec![0u8; codec.size()];
-        codec
-            .encode(&physical, &mut payload)
-            .map_err(|e| EncodeError::new_err(e.to_string()))?;
-        for (i, bits) in raw.iter().enumerate() {
-            if let Some(bits) = bits {
-                codec.write_raw(i, *bits, &mut payload);
-            }
-        }
-        if padding {
-            // Bits no encoded signal covers are ones.
-            let mut covered = vec![0u8; codec.size()];
-            for (i, needed) in needed.iter().enumerate() {
-                if *needed {
-                    codec.write_raw(i, u64::MAX, &mut covered);
-                }
-            }
-            for (byte, cover) in payload.iter_mut().zip(&covered) {
-                *byte |= !cover;
-            }
-        }
-        Ok(payload)
-    }
-
-    /// A value as a number, and whether it was a choice (a name, or a `NamedSignalValue`,
-    /// given as the raw value it names). `None`: a name the signal does not have.
-    fn raw_choice_or_number(
-        &self,
-        signal: &Signal,
-        value: &Bound<'_, PyAny>,
-        named: &Bound<'_, PyType>,
-    ) -> PyResult<Option<(Value, bool)>> {
-        let name = if value.is_instance(named)? {
-            Some(value.getattr("name")?.extract::<String>()?)
-        } else if let Ok(text) = value.cast::<PyString>() {
-            Some(text.to_str()?.to_string())
-        } else {
-            None
+        let values: Vec<Named<'_>> = items
+            .iter()
+            .map(|(name, choice, number, shown, _)| Named {
+                signal: name,
+                value: match (choice, number) {
+                    (Some(choice), _) => Given::Choice(choice),
+                    (None, Some(number)) => Given::Number(*number),
+                    (None, None) => Given::Unusable,
+                },
+                shown,
+            })
+            .collect();
+        let encoding = Encoding {
+            scaling,
+            padding,
+            ..Encoding::cantools(strict)
         };
-        if let Some(name) = name {
-            let key = signal
-                .value_descriptions
-                .iter()
-                .find(|(_, n)| *n == name)
-                .and_then(|(k, _)| i64::try_from(*k).ok());
-            return Ok(key.map(|k| (Value::Int(k), true)));
-        }
-        if let Ok(i) = value.extract::<i64>() {
-            return Ok(Some((Value::Int(i), false)));
-        }
-        if let Ok(u) = value.extract::<u64>() {
-            return Ok(Some((Value::UInt(u), false)));
-        }
-        let f: f64 = value.extract().map_err(|_| {
-            PyTypeError::new_err(format!(
-                "Unable to encode signal '{}' with type '{}'.",
-                signal.display_name(),
-                value
-                    .get_type()
-                    .name()
-                    .map(|n| n.to_string())
-                    .unwrap_or_default()
-            ))
-        })?;
-        Ok(Some((Value::Float(f), false)))
+        encode_named(message, codec, &values, encoding).map_err(|error| match error {
+            NamedError::Unused { names, .. } => {
+                let quoted: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
+                EncodeError::new_err(format!(
+                    "The following signals were specified but are not required to encode the message:{{{}}}",
+                    quoted.join(", ")
+                ))
+            }
+            NamedError::UnknownChoice { name, .. } => PyKeyError::new_err(name),
+            NamedError::Unusable { signal } => {
+                let type_name = items
+                    .iter()
+                    .find(|item| item.0 == signal)
+                    .map_or("object", |item| item.4.as_str());
+                PyTypeError::new_err(format!(
+                    "Unable to encode signal '{signal}' with type '{type_name}'."
+                ))
+            }
+            // An integer signal holds no NaN or infinity: cantools raises as Python's int()
+            // does, strict or not.
+            NamedError::NotFinite {
+                integer: true,
+                value,
+                ..
+            } if value.is_nan() => PyValueError::new_err("cannot convert float NaN to integer"),
+            NamedError::NotFinite { integer: true, .. } => {
+                PyOverflowError::new_err("cannot convert float infinity to integer")
+            }
+            NamedError::Codec { error, .. } => EncodeError::new_err(error.to_string()),
+            other => EncodeError::new_err(other.to_string()),
+        })
     }
-}
-
-/// Python's `round`: half to even.
-fn round_half_even(f: f64) -> f64 {
-    let rounded = f.round();
-    if (f - f.trunc()).abs() == 0.5 {
-        2.0 * (f / 2.0).round()
-    } else {
-        rounded
-    }
-}
-
-/// cantools' range check: `scaled` against the signal's declared range (none when the DBC
-/// says `[0|0]`), with a millionth of the scale's tolerance; a raw value the signal's choices
-/// name passes. `shown` is the value as the caller gave it (for the message).
-fn check_range(
-    message: &Message,
-    signal: &Signal,
-    scaled: f64,
-    raw_key: Option<i128>,
-    shown: &str,
-) -> PyResult<()> {
-    if raw_key.is_some_and(|k| signal.value_descriptions.iter().any(|(key, _)| *key == k)) {
-        return Ok(());
-    }
-    let (min, max) = (signal.minimum, signal.maximum);
-    if min.as_f64() == 0.0 && max.as_f64() == 0.0 {
-        return Ok(());
-    }
-    let tolerance = signal.factor.as_f64().abs() * 1e-6;
-    let (side, bound) = if scaled < min.as_f64() - tolerance {
-        ("greater than", min)
-    } else if scaled > max.as_f64() + tolerance {
-        ("smaller than", max)
-    } else {
-        return Ok(());
-    };
-    Err(EncodeError::new_err(format!(
-        "Expected signal \"{}\" value {side} or equal to {bound} in message \"{}\", but got {shown}.",
-        signal.display_name(),
-        message.display_name(),
-    )))
 }
 
 #[pymethods]

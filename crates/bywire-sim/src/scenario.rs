@@ -53,29 +53,9 @@ pub struct Scenario {
     pub events: Vec<(Duration, Fault, Option<Duration>)>,
 }
 
-/// Why a scenario file was refused.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ScenarioError {
-    /// Not readable, or not TOML of this shape.
-    #[error("{file}: {message}")]
-    Syntax {
-        /// The file.
-        file: String,
-        /// What, with line and column.
-        message: String,
-    },
-    /// A value is wrong.
-    #[error("{file}: {key}: {reason}")]
-    Invalid {
-        /// The file.
-        file: String,
-        /// The key.
-        key: String,
-        /// Why.
-        reason: String,
-    },
-}
+/// Why a scenario file was refused: the file, and what its reader said or the key whose value
+/// is wrong, as every configuration file says it.
+pub type ScenarioError = bywire_core::FileError;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -9,6 +9,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use bywire_core::num::Short;
+use bywire_core::FileError;
 use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
@@ -20,24 +21,10 @@ use crate::supervisor::{Cascade, SupervisorConfig};
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ProfileError {
-    /// Not TOML, or not the profile's shape (the message has the line, column and key).
-    #[error("{file}: {message}")]
-    Syntax {
-        /// The profile.
-        file: String,
-        /// What the TOML reader said.
-        message: String,
-    },
-    /// A key's value is wrong.
-    #[error("{file}: {key}: {reason}")]
-    Invalid {
-        /// The profile.
-        file: String,
-        /// The key, dotted (`command.steering`).
-        key: String,
-        /// What is wrong.
-        reason: String,
-    },
+    /// Not TOML, or not the profile's shape (the message has the line, column and key), or a
+    /// key's value is wrong (the key dotted: `command.steering`).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// The DBC could not be read or parsed.
     #[error("{file}: dbc: {reason}")]
     Dbc {
@@ -499,10 +486,7 @@ impl Profile {
     /// A profile file; its DBC is read relative to it.
     pub fn load(path: &Path) -> Result<LoadedProfile, ProfileError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ProfileError::Syntax {
-            file: file.clone(),
-            message: e.to_string(),
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| FileError::syntax(&file, e))?;
         let dir = path.parent().unwrap_or(Path::new("."));
         Self::parse(&file, &text, |dbc| {
             std::fs::read_to_string(dir.join(dbc)).map_err(|e| format!("{dbc}: {e}"))
@@ -515,10 +499,8 @@ impl Profile {
         text: &str,
         read_dbc: impl FnOnce(&str) -> Result<String, String>,
     ) -> Result<LoadedProfile, ProfileError> {
-        let profile: Profile = toml::from_str(text).map_err(|e| ProfileError::Syntax {
-            file: file.to_string(),
-            message: e.to_string().trim_end().replace('\n', " "),
-        })?;
+        let profile: Profile = toml::from_str(text)
+            .map_err(|e| FileError::syntax(file, e.to_string().trim_end().replace('\n', " ")))?;
         let dbc_error = |reason: String| ProfileError::Dbc {
             file: file.to_string(),
             reason,
@@ -542,11 +524,7 @@ struct Checker<'a> {
 
 impl Checker<'_> {
     fn invalid(&self, key: &str, reason: impl Into<String>) -> ProfileError {
-        ProfileError::Invalid {
-            file: self.file.to_string(),
-            key: key.to_string(),
-            reason: reason.into(),
-        }
+        FileError::invalid(self.file, key, reason.into()).into()
     }
 
     fn message(&self, key: &str, name: &str) -> Result<&Message, ProfileError> {
@@ -852,10 +830,8 @@ impl LoadedProfile {
         keys: Option<&bywire_secoc::keys::KeyFile>,
         next: u64,
     ) -> Result<crate::secured::Secured<crate::wire::ProfileWire>, ProfileError> {
-        let invalid = |reason: &str| ProfileError::Invalid {
-            file: self.profile.name.clone(),
-            key: "secoc".to_string(),
-            reason: reason.to_string(),
+        let invalid = |reason: &str| {
+            ProfileError::from(FileError::invalid(&self.profile.name, "secoc", reason))
         };
         match (keys, &self.profile.secoc) {
             (Some(keys), Some(_)) => self.secured_wire(keys, next),

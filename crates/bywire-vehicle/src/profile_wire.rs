@@ -3,7 +3,7 @@
 
 use alloc::vec::Vec;
 
-use bywire_core::{Frame, Id};
+use bywire_core::{FileError, Frame, Id};
 use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::{Database, Message};
@@ -240,10 +240,8 @@ struct EnumMap<T: 'static>(Vec<(T, u64)>);
 
 impl<T: Vocabulary> EnumMap<T> {
     fn new(profile: &LoadedProfile, role: &str) -> Result<EnumMap<T>, ProfileError> {
-        let invalid = |key: String, reason: &str| ProfileError::Invalid {
-            file: profile.profile.name.clone(),
-            key,
-            reason: reason.to_string(),
+        let invalid = |key: String, reason: &str| {
+            ProfileError::from(FileError::invalid(&profile.profile.name, key, reason))
         };
         let Some(table) = profile.profile.enums.get(role) else {
             return Ok(EnumMap(T::ALL.iter().map(|v| (*v, v.raw())).collect()));
@@ -337,11 +335,12 @@ impl ProfileWire {
     /// (`LoadedProfile::secured_wire`, feature `secoc`), never the messages unauthenticated.
     pub fn new(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
         if loaded.profile.secoc.is_some() {
-            return Err(ProfileError::Invalid {
-                file: loaded.profile.name.clone(),
-                key: "secoc".to_string(),
-                reason: "the profile secures its messages: give it its key file".to_string(),
-            });
+            return Err(FileError::invalid(
+                &loaded.profile.name,
+                "secoc",
+                "the profile secures its messages: give it its key file",
+            )
+            .into());
         }
         Self::unsecured(loaded)
     }
@@ -350,10 +349,8 @@ impl ProfileWire {
     pub(crate) fn unsecured(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
         let p = &loaded.profile;
         let db = &loaded.database;
-        let invalid = |key: &str, reason: String| ProfileError::Invalid {
-            file: p.name.clone(),
-            key: key.to_string(),
-            reason,
+        let invalid = |key: &str, reason: String| {
+            ProfileError::from(FileError::invalid(&p.name, key, reason))
         };
         let c = p
             .command
@@ -433,7 +430,7 @@ impl ProfileWire {
             hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
         };
         let wheels = |role: &str, w: &Option<crate::profile::WheelSignals>| match w {
-            None => Ok(None),
+            None => Ok::<_, ProfileError>(None),
             Some(w) => {
                 let message = RoleMessage::declared(
                     db,

@@ -13,6 +13,7 @@ use bywire_core::Timestamp;
 use bywire_diag::client::{self, ClientError, ClientTiming, UdsClient};
 use bywire_diag::describe::{self, Description};
 use bywire_diag::isotp::{IsoTpConfig, DEFAULT_TIMEOUT};
+use bywire_diag::tester::{Plan, RoutineControl, Script, ScriptError, Service};
 use bywire_diag::uds::{Did, Routine, Session, UdsEvent, UdsServer, UdsTiming};
 use serde_json::{json, Value};
 
@@ -400,18 +401,6 @@ impl Tester {
         }
     }
 
-    /// The key request for a seed answer at `level`; `None` when the seed is zero (already
-    /// unlocked).
-    fn key_request(&self, level: u8, answer: &[u8]) -> Result<Option<Vec<u8>>> {
-        let seed = answer.get(2..).unwrap_or(&[]);
-        if seed.iter().all(|b| *b == 0) {
-            return Ok(None);
-        }
-        let mut request = vec![0x27, level.wrapping_add(1)];
-        request.extend(self.key(level, seed)?);
-        Ok(Some(request))
-    }
-
     /// The key for `seed` at `level`.
     fn key(&self, level: u8, seed: &[u8]) -> Result<Vec<u8>> {
         let spec = &self.key_fn;
@@ -456,211 +445,98 @@ fn hex_byte(text: &str, what: &str) -> Result<u8> {
     hex(text).ok_or_else(|| anyhow!("{what} {text}: not a hex byte"))
 }
 
-/// What the tester does: its requests, each chosen once the answer to the one before is in.
-struct Script<'a> {
-    tester: &'a Tester,
-    command: &'a UdsCommand,
-    description: Description,
-    /// Steps done so far (session, security, then the command's own).
-    step: Step,
-    /// The command's answers, for the report.
-    answers: Vec<Vec<u8>>,
-    /// DTCs to read snapshots of (with --snapshots), and which is next.
-    dtcs: Vec<(u32, u8)>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Step {
-    Start,
-    Session,
-    Seed,
-    Key,
-    Main,
-    /// `security`'s own key, after its seed.
-    MainKey,
-    /// With --snapshots: snapshot (false) or extended data (true) of the i-th DTC.
-    Detail(usize, bool),
-}
-
-impl Script<'_> {
-    /// The next request after `answer` (to the last one), or `None`: done.
-    fn next(&mut self, answer: Option<Vec<u8>>) -> Result<Option<Vec<u8>>> {
-        let t = self.tester;
-        // Where the last request leaves us.
-        let mut step = self.step;
-        if let Some(answer) = answer {
-            match step {
-                Step::Seed => {
-                    if let Some(request) = t.key_request(t.security.unwrap_or(1), &answer)? {
-                        self.step = Step::Key;
-                        return Ok(Some(request));
-                    }
-                }
-                Step::Main => {
-                    if let UdsCommand::Security { level, .. } = self.command {
-                        if let Some(request) = t.key_request(*level, &answer)? {
-                            self.step = Step::MainKey;
-                            return Ok(Some(request));
-                        }
-                    }
-                    if let (
-                        UdsCommand::ReadDtc {
-                            snapshots: true, ..
-                        },
-                        Ok((_, dtcs)),
-                    ) = (self.command, client::dtc_list(&answer))
-                    {
-                        self.dtcs = dtcs;
-                    }
-                    self.answers.push(answer);
-                }
-                Step::MainKey | Step::Detail(..) => self.answers.push(answer),
-                Step::Start | Step::Session | Step::Key => {}
-            }
-        }
-        // The next step with something to ask.
-        loop {
-            step = match step {
-                Step::Start => Step::Session,
-                Step::Session => Step::Seed,
-                Step::Seed | Step::Key => Step::Main,
-                Step::Main | Step::MainKey => Step::Detail(0, false),
-                Step::Detail(i, false) => Step::Detail(i, true),
-                Step::Detail(i, true) => Step::Detail(i + 1, false),
-            };
-            self.step = step;
-            let request = match step {
-                Step::Start => None,
-                Step::Session => t.session.map(|s| vec![0x10, s]),
-                Step::Seed => match t.security {
-                    Some(level) if level % 2 == 1 => Some(vec![0x27, level]),
-                    Some(level) => {
-                        bail!("--security {level}: a level is odd (its key is level + 1)")
-                    }
-                    None => None,
-                },
-                Step::Key | Step::MainKey => None,
-                Step::Main => Some(self.main_request()?),
-                Step::Detail(i, extended) => {
-                    let Some((dtc, _)) = self.dtcs.get(i) else {
-                        return Ok(None);
-                    };
-                    let [_, a, b, c] = dtc.to_be_bytes();
-                    Some(vec![
-                        0x19,
-                        if extended { 0x06 } else { 0x04 },
-                        a,
-                        b,
-                        c,
-                        0xFF,
-                    ])
-                }
-            };
-            if request.is_some() {
-                return Ok(request);
-            }
-        }
-    }
-
-    fn main_request(&self) -> Result<Vec<u8>> {
-        Ok(match self.command {
+impl UdsCommand {
+    /// What the tester does: the tester's session and unlock, then the command's service.
+    fn plan(&self, tester: &Tester) -> Result<Plan> {
+        let service = match self {
             UdsCommand::Serve { .. } => bail!("not a tester command"),
-            UdsCommand::Session { code, .. } => {
-                let code = match code.as_str() {
-                    "default" => 1,
-                    "programming" => 2,
-                    "extended" => 3,
-                    other => other
-                        .strip_prefix("0x")
-                        .map_or_else(|| other.parse().ok(), |_| hex::<u8>(other))
-                        .ok_or_else(|| anyhow!("session {other}: 1, 2, 3, a name or 0xNN"))?,
-                };
-                vec![0x10, code]
-            }
-            UdsCommand::ReadDid { dids, .. } => {
-                let mut request = vec![0x22];
-                for did in dids {
-                    request.extend(hex_u16(did, "DID")?.to_be_bytes());
-                }
-                request
-            }
-            UdsCommand::WriteDid { did, value, .. } => {
-                let mut request = vec![0x2E];
-                request.extend(hex_u16(did, "DID")?.to_be_bytes());
-                match value.strip_prefix("hex:") {
-                    Some(digits) => {
-                        request.extend(hex_pairs(digits).map_err(|e| anyhow!("{value}: {e}"))?)
-                    }
-                    None => request.extend(value.as_bytes()),
-                }
-                request
-            }
-            UdsCommand::ReadDtc { status, count, .. } => {
-                vec![
-                    0x19,
-                    if *count { 0x01 } else { 0x02 },
-                    hex_byte(status, "--status")?,
-                ]
-            }
-            UdsCommand::ClearDtc { group, .. } => {
-                let group = hex::<u32>(group)
+            UdsCommand::Session { code, .. } => Service::Session(match code.as_str() {
+                "default" => 1,
+                "programming" => 2,
+                "extended" => 3,
+                other => other
+                    .strip_prefix("0x")
+                    .map_or_else(|| other.parse().ok(), |_| hex::<u8>(other))
+                    .ok_or_else(|| anyhow!("session {other}: 1, 2, 3, a name or 0xNN"))?,
+            }),
+            UdsCommand::ReadDid { dids, .. } => Service::ReadDids(
+                dids.iter()
+                    .map(|did| hex_u16(did, "DID"))
+                    .collect::<Result<_>>()?,
+            ),
+            UdsCommand::WriteDid { did, value, .. } => Service::WriteDid {
+                did: hex_u16(did, "DID")?,
+                value: match value.strip_prefix("hex:") {
+                    Some(digits) => hex_pairs(digits).map_err(|e| anyhow!("{value}: {e}"))?,
+                    None => value.as_bytes().to_vec(),
+                },
+            },
+            UdsCommand::ReadDtc {
+                status,
+                count,
+                snapshots,
+                ..
+            } => Service::ReadDtcs {
+                status: hex_byte(status, "--status")?,
+                count_only: *count,
+                details: *snapshots,
+            },
+            UdsCommand::ClearDtc { group, .. } => Service::ClearDtcs(
+                hex::<u32>(group)
                     .filter(|g| *g <= 0xFF_FFFF)
-                    .ok_or_else(|| anyhow!("group {group}: not a 24-bit hex DTC group"))?;
-                let [_, a, b, c] = group.to_be_bytes();
-                vec![0x14, a, b, c]
-            }
+                    .ok_or_else(|| anyhow!("group {group}: not a 24-bit hex DTC group"))?,
+            ),
             UdsCommand::Routine {
                 action,
                 routine,
                 data,
                 ..
-            } => {
-                let sub = match action.as_str() {
-                    "start" => 1,
-                    "stop" => 2,
-                    _ => 3,
-                };
-                let mut request = vec![0x31, sub];
-                request.extend(hex_u16(routine, "routine")?.to_be_bytes());
-                if let Some(data) = data {
-                    request.extend(hex_pairs(data).map_err(|e| anyhow!("{data}: {e}"))?);
-                }
-                request
-            }
-            UdsCommand::Reset { kind, .. } => {
-                let sub = match kind.as_str() {
-                    "hard" => 1,
-                    "keyoffon" => 2,
-                    "soft" => 3,
-                    other => hex_byte(other, "reset")?,
-                };
-                vec![0x11, sub]
-            }
-            UdsCommand::Security { level, .. } => {
-                if level % 2 == 0 {
-                    bail!("security {level}: a level is odd (its key is level + 1)");
-                }
-                vec![0x27, *level]
-            }
-            UdsCommand::TesterPresent { .. } => vec![0x3E, 0x00],
-            UdsCommand::DtcSetting { setting, .. } => {
-                vec![0x85, if setting == "on" { 0x01 } else { 0x02 }]
-            }
+            } => Service::Routine {
+                control: match action.as_str() {
+                    "start" => RoutineControl::Start,
+                    "stop" => RoutineControl::Stop,
+                    _ => RoutineControl::Results,
+                },
+                id: hex_u16(routine, "routine")?,
+                record: match data {
+                    Some(data) => hex_pairs(data).map_err(|e| anyhow!("{data}: {e}"))?,
+                    None => Vec::new(),
+                },
+            },
+            UdsCommand::Reset { kind, .. } => Service::Reset(match kind.as_str() {
+                "hard" => 1,
+                "keyoffon" => 2,
+                "soft" => 3,
+                other => hex_byte(other, "reset")?,
+            }),
+            UdsCommand::Security { level, .. } => Service::Unlock(*level),
+            UdsCommand::TesterPresent { .. } => Service::TesterPresent,
+            UdsCommand::DtcSetting { setting, .. } => Service::DtcSetting(setting == "on"),
             UdsCommand::CommControl {
                 control,
                 communication,
                 ..
-            } => vec![0x28, *control, *communication],
+            } => Service::CommControl(*control, *communication),
             UdsCommand::Raw { request, .. } => {
                 let digits: String = request.concat().split_whitespace().collect();
-                let bytes = hex_pairs(&digits).map_err(|e| anyhow!("raw: {e}"))?;
-                if bytes.is_empty() {
-                    bail!("raw: no request");
-                }
-                bytes
+                Service::Raw(hex_pairs(&digits).map_err(|e| anyhow!("raw: {e}"))?)
             }
+        };
+        Ok(Plan {
+            session: tester.session,
+            unlock: tester.security,
+            service,
         })
     }
+}
+
+/// The ECU description `spec` names: `tug` (the reference tug's), or a TOML file.
+fn description(spec: &str) -> Result<Description> {
+    if spec == "tug" {
+        return Ok(bywire_tug::diagnostics::description());
+    }
+    let text = std::fs::read_to_string(spec).with_context(|| format!("--describe {spec}"))?;
+    Description::from_toml(&text, spec).map_err(|e| anyhow!("--describe {e}"))
 }
 
 fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
@@ -668,17 +544,12 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
         .tester()
         .ok_or_else(|| anyhow!("not a tester command"))?;
     let description = match &tester.describe {
-        Some(spec) => crate::support::uds_describe::load(spec)?,
+        Some(spec) => description(spec)?,
         None => Description::iso14229(),
     };
-    let mut script = Script {
-        tester,
-        command,
-        description,
-        step: Step::Start,
-        answers: Vec::new(),
-        dtcs: Vec::new(),
-    };
+    let mut script = Script::new(command.plan(tester)?, |level: u8, seed: &[u8]| {
+        tester.key(level, seed)
+    });
     let mut client = UdsClient::new(tester.channel()?, tester.timing());
     let endpoint = busarg::open(&tester.bus).with_context(|| format!("bus {}", tester.bus))?;
     let mut runner = Runner::new(vec![(Port::MAIN, endpoint)]);
@@ -692,7 +563,7 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
             match script.next(None) {
                 Ok(next) => queued = next,
                 Err(e) => {
-                    failure = Some(e);
+                    failure = Some(script_error(e));
                     return Flow::Stop;
                 }
             }
@@ -707,7 +578,7 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
             match script.next(Some(answer)) {
                 Ok(next) => queued = next,
                 Err(e) => {
-                    failure = Some(e);
+                    failure = Some(script_error(e));
                     return Flow::Stop;
                 }
             }
@@ -738,18 +609,31 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
     if ended != bywire_bus::runner::Ended::ByHooks {
         bail!("interrupted");
     }
-    report(&script, out)
+    report(command, tester, &description, script.answers(), out)
+}
+
+/// A script's error as the command line says it: a key function's own error as it is.
+fn script_error(error: ScriptError<anyhow::Error>) -> anyhow::Error {
+    match error {
+        ScriptError::Key(e) => e,
+        other => anyhow!("{other}"),
+    }
 }
 
 fn request_error(request: &[u8], error: &ClientError) -> anyhow::Error {
     anyhow!("request {}: {error}", describe::hex(request))
 }
 
-/// The command's answers, as text or JSON.
-fn report(script: &Script, out: &mut dyn Write) -> Result<()> {
-    let d = &script.description;
-    let answer = script.answers.first().cloned().unwrap_or_default();
-    let (text, value): (String, Value) = match script.command {
+/// The command's answers (the service's, then its details), as text or JSON.
+fn report(
+    command: &UdsCommand,
+    tester: &Tester,
+    d: &Description,
+    answers: &[Vec<u8>],
+    out: &mut dyn Write,
+) -> Result<()> {
+    let answer = answers.first().cloned().unwrap_or_default();
+    let (text, value): (String, Value) = match command {
         UdsCommand::Session { .. } => match answer.as_slice() {
             [0x50, session, a, b, c, e] => {
                 let p2 = u16::from_be_bytes([*a, *b]);
@@ -791,7 +675,7 @@ fn report(script: &Script, out: &mut dyn Write) -> Result<()> {
             let count = client::dtc_count(&answer).map_err(|e| anyhow!("{e}"))?;
             (format!("{count} DTCs"), json!({"count": count}))
         }
-        UdsCommand::ReadDtc { .. } => dtc_report(script, &answer)?,
+        UdsCommand::ReadDtc { .. } => dtc_report(d, answers, &answer)?,
         UdsCommand::Routine {
             action, routine, ..
         } => {
@@ -829,7 +713,7 @@ fn report(script: &Script, out: &mut dyn Write) -> Result<()> {
             json!({"answer": describe::hex(&answer)}),
         ),
     };
-    if script.tester.json {
+    if tester.json {
         writeln!(out, "{value}")?;
     } else if !text.is_empty() {
         writeln!(out, "{text}")?;
@@ -838,8 +722,7 @@ fn report(script: &Script, out: &mut dyn Write) -> Result<()> {
 }
 
 /// DTCs with their names and status bits; with --snapshots their records.
-fn dtc_report(script: &Script, answer: &[u8]) -> Result<(String, Value)> {
-    let d = &script.description;
+fn dtc_report(d: &Description, answers: &[Vec<u8>], answer: &[u8]) -> Result<(String, Value)> {
     let (_, dtcs) = client::dtc_list(answer).map_err(|e| anyhow!("{e}"))?;
     let mut lines = Vec::new();
     let mut list = Vec::new();
@@ -860,9 +743,7 @@ fn dtc_report(script: &Script, answer: &[u8]) -> Result<(String, Value)> {
             "status_bits": bits,
         });
         // The details follow the list: snapshot then extended data for each DTC.
-        if let (Some(snapshot), Some(extended)) =
-            (script.answers.get(1 + 2 * i), script.answers.get(2 + 2 * i))
-        {
+        if let (Some(snapshot), Some(extended)) = (answers.get(1 + 2 * i), answers.get(2 + 2 * i)) {
             let (_, _, records) =
                 client::snapshots(snapshot, &|id| d.did_length(id)).map_err(|e| {
                     anyhow!("{dtc:06X}: {e} (give the snapshot DIDs' lengths with --describe)")

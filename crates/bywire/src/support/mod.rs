@@ -12,6 +12,5 @@ pub mod progress;
 pub mod ros2;
 pub mod signals;
 pub mod sim_serve;
-pub mod uds_describe;
 pub mod vehicles;
 pub mod words;

@@ -4,9 +4,9 @@
 
 use anyhow::{anyhow, Result};
 use bywire_core::{FdFrame, Frame, Id};
-use bywire_dbc::codec::{EncodeError, EncodeMode, Value};
-use bywire_dbc::e2e::Protection;
-use bywire_dbc::{AttrValue, Database, Message, Signal};
+use bywire_dbc::codec::{EncodeMode, Value};
+use bywire_dbc::named::{encode_named, Encoding, Given, Named};
+use bywire_dbc::{Database, Message, Signal};
 use serde_json::json;
 
 pub use bywire_dbc::decoder::{DecodedFrame, Decoder, SignalValue};
@@ -73,10 +73,11 @@ impl Dbc {
         })
     }
 
-    /// Encode a message from `SIGNAL=VALUE` assignments (numbers, or value-description names).
-    /// Signals not given take their `GenSigStartValue` or 0 bits; values outside a signal's
-    /// range are refused naming the signal (or clamped, with `EncodeMode::Clamp`). The counter and checksum, when the message has
-    /// them, are filled in with `counter`.
+    /// Encode a message from `SIGNAL=VALUE` assignments (numbers, or value-description names)
+    /// by [`encode_named`]: signals not given take their `GenSigStartValue` or 0 bits; values
+    /// outside a signal's range are refused naming the signal (or clamped, with
+    /// `EncodeMode::Clamp`); the counter and checksum, when the message has them, are filled
+    /// in with `counter`.
     pub fn encode(
         &self,
         message: &Message,
@@ -88,58 +89,20 @@ impl Dbc {
             .0
             .codec(message)
             .ok_or_else(|| anyhow!("message {} is not in the DBC", message.name))?;
-        let mut values: Vec<Option<Value>> = message.signals.iter().map(start_value).collect();
-        for assignment in assignments {
-            let (name, text) = assignment
-                .split_once('=')
-                .ok_or_else(|| anyhow!("'{assignment}' is not SIGNAL=VALUE"))?;
-            let position = message
-                .signals
-                .iter()
-                .position(|s| s.name == name || s.display_name() == name)
-                .ok_or_else(|| {
-                    let names: Vec<&str> =
-                        message.signals.iter().map(|s| s.name.as_str()).collect();
-                    anyhow!(
-                        "message {} has no signal '{name}' (it has: {})",
-                        message.name,
-                        names.join(", ")
-                    )
-                })?;
-            let signal = message
-                .signals
-                .get(position)
-                .ok_or_else(|| anyhow!("no signal"))?;
-            let value = parse_value(signal, text).ok_or_else(|| {
-                anyhow!("signal {name}: '{text}' is not a number or one of its value names")
-            })?;
-            if let Some(slot) = values.get_mut(position) {
-                *slot = Some(value);
-            }
-        }
-        let mut payload = [0u8; 64];
-        let size = codec
-            .encode_checked(&values, &mut payload, range)
-            .map_err(|e| match e {
-                EncodeError::Range(r) => anyhow!(
-                    "message {}: signal {}: value {} is outside [{}, {}]",
-                    message.name,
-                    message
-                        .signals
-                        .get(r.signal)
-                        .map_or("?", |s| s.display_name()),
-                    r.value,
-                    r.min,
-                    r.max
-                ),
-                other => anyhow!("message {}: {other}", message.name),
-            })?;
-        if let Some(protection) = Protection::of(message) {
-            protection
-                .fill(codec, counter, &mut payload)
-                .map_err(|e| anyhow!("message {}: {e}", message.name))?;
-        }
-        let data = payload.get(..size).unwrap_or(&[]);
+        let values = assignments
+            .iter()
+            .map(|assignment| {
+                let (signal, text) = assignment
+                    .split_once('=')
+                    .ok_or_else(|| anyhow!("'{assignment}' is not SIGNAL=VALUE"))?;
+                Ok(Named {
+                    signal,
+                    value: given(text),
+                    shown: text,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let payload = encode_named(message, codec, &values, Encoding::frame(range, counter))?;
         let id = if message.extended {
             Id::extended(message.id)
         } else {
@@ -148,40 +111,23 @@ impl Dbc {
         .map_err(|e| anyhow!("message {}: {e}", message.name))?;
         let (fd, brs) = self.0.fd_format(message);
         let frame = if fd {
-            Frame::Fd(FdFrame::padded(id, data, brs, false)?)
+            Frame::Fd(FdFrame::padded(id, &payload, brs, false)?)
         } else {
-            Frame::classic(id, data)?
+            Frame::classic(id, &payload)?
         };
         Ok(frame)
     }
 }
 
-/// A signal's `GenSigStartValue` (a raw value) as a physical one.
-fn start_value(signal: &Signal) -> Option<Value> {
-    let raw = signal.attributes.iter().find_map(|(n, v)| match v {
-        AttrValue::Number(n2) if n == "GenSigStartValue" => Some(n2.as_f64()),
-        _ => None,
-    })?;
-    Some(Value::Float(
-        raw * signal.factor.as_f64() + signal.offset.as_f64(),
-    ))
-}
-
-/// A number, or the name of one of the signal's value descriptions.
-fn parse_value(signal: &Signal, text: &str) -> Option<Value> {
-    if let Some((raw, _)) = signal.value_descriptions.iter().find(|(_, n)| n == text) {
-        let raw = f64::from(i32::try_from(*raw).ok()?);
-        return Some(Value::Float(
-            raw * signal.factor.as_f64() + signal.offset.as_f64(),
-        ));
-    }
+/// A value as written: a whole number, a finite number, or else a value description's name.
+fn given(text: &str) -> Given<'_> {
     if let Ok(i) = text.parse::<i64>() {
-        return Some(Value::Int(i));
+        return Given::Number(Value::Int(i));
     }
-    text.parse::<f64>()
-        .ok()
-        .filter(|f| f.is_finite())
-        .map(Value::Float)
+    match text.parse::<f64>() {
+        Ok(f) if f.is_finite() => Given::Number(Value::Float(f)),
+        _ => Given::Choice(text),
+    }
 }
 
 /// How cantools shows a decoded frame.
