@@ -52,6 +52,8 @@ extern crate alloc;
 pub mod acceptance;
 pub mod ads;
 pub mod autoware;
+#[cfg(feature = "std")]
+pub mod bindings;
 pub mod command;
 #[cfg(feature = "std")]
 pub mod profile;

@@ -14,6 +14,7 @@ use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
 use crate::ads::AdsConfig;
+use crate::bindings::{Bindings, CommandBindings};
 use crate::command::ControlCommand;
 use crate::supervisor::{Cascade, SupervisorConfig};
 
@@ -463,6 +464,8 @@ pub struct LoadedProfile {
     pub profile: Profile,
     /// Its DBC.
     pub database: Database,
+    /// Its roles, found in its DBC.
+    pub bindings: Bindings,
 }
 
 /// The profiles this crate ships, with their DBCs (a vehicle's crate ships its own: the
@@ -508,12 +511,17 @@ impl Profile {
         let dbc_text = read_dbc(&profile.dbc).map_err(dbc_error)?;
         let (database, _) = bywire_dbc::parse_str(&dbc_text, bywire_dbc::Mode::Lenient)
             .map_err(|e| dbc_error(format!("{}: {e}", profile.dbc)))?;
+        let bindings = crate::bindings::bind(&profile, &database, file)?;
         Checker {
             file,
             db: &database,
         }
-        .check(&profile)?;
-        Ok(LoadedProfile { profile, database })
+        .check(&profile, &bindings)?;
+        Ok(LoadedProfile {
+            profile,
+            database,
+            bindings,
+        })
     }
 }
 
@@ -535,20 +543,6 @@ impl Checker<'_> {
             .ok_or_else(|| self.invalid(key, format!("no message '{name}' in the DBC")))
     }
 
-    fn signal(&self, message: &Message, key: &str, name: &str) -> Result<u32, ProfileError> {
-        message
-            .signals
-            .iter()
-            .find(|s| s.name == name)
-            .map(|s| s.length)
-            .ok_or_else(|| {
-                self.invalid(
-                    key,
-                    format!("no signal '{name}' in message '{}'", message.name),
-                )
-            })
-    }
-
     fn positive(&self, key: &str, value: f64) -> Result<(), ProfileError> {
         if value > 0.0 && value.is_finite() {
             Ok(())
@@ -557,7 +551,9 @@ impl Checker<'_> {
         }
     }
 
-    fn check(&self, p: &Profile) -> Result<(), ProfileError> {
+    /// What the names found (`bindings`) do not settle: numbers, periods, the checksum
+    /// algorithm, enum values that fit their signals, the SecOC layouts.
+    fn check(&self, p: &Profile, bindings: &Bindings) -> Result<(), ProfileError> {
         if p.bitrate == 0 || p.bitrate > 1_000_000 {
             return Err(self.invalid("bitrate", format!("{} is not a CAN bitrate", p.bitrate)));
         }
@@ -569,88 +565,10 @@ impl Checker<'_> {
         self.positive("limits.steering_rate_deg_s", l.steering_rate_deg_s)?;
         self.positive("limits.speed_m_s", l.speed_m_s)?;
         self.positive("limits.deceleration_m_s2", l.deceleration_m_s2)?;
-        if let Some(c) = &p.command {
-            let m = self.message("command.message", &c.message)?;
-            if c.period_ms == 0 {
-                return Err(self.invalid("command.period_ms", "must be at least 1"));
-            }
-            let mut widths = BTreeMap::new();
-            for (key, name) in [
-                ("steering", &c.steering),
-                ("velocity", &c.velocity),
-                ("brake", &c.brake),
-                ("gear", &c.gear),
-                ("control_mode", &c.control_mode),
-                ("steering_mode", &c.steering_mode),
-                ("engage", &c.engage),
-                ("operator_reset", &c.operator_reset),
-                ("counter", &c.counter),
-                ("checksum", &c.checksum),
-            ] {
-                let width = self.signal(m, &format!("command.{key}"), name)?;
-                widths.insert(key, width);
-            }
-            if let Some(name) = &c.turn_indicators {
-                let width = self.signal(m, "command.turn_indicators", name)?;
-                widths.insert("turn_indicators", width);
-            }
-            if let Some(name) = &c.hazard_lights {
-                self.signal(m, "command.hazard_lights", name)?;
-            }
-            if bywire_dbc::e2e::ChecksumAlgorithm::from_name(&c.checksum_algorithm).is_none() {
-                return Err(self.invalid(
-                    "command.checksum_algorithm",
-                    format!(
-                        "'{}' is not one of crc8_sae_j1850, crc8_h2f, xor8, sum8",
-                        c.checksum_algorithm
-                    ),
-                ));
-            }
-            // Enum values must fit the signals they go into.
-            for (role, values) in &p.enums {
-                let Some(width) = widths.get(role.as_str()) else {
-                    return Err(self.invalid(
-                        &format!("enums.{role}"),
-                        "not a command role (gear, control_mode, steering_mode, turn_indicators)",
-                    ));
-                };
-                for (name, value) in values {
-                    if *width < 64 && *value >> width != 0 {
-                        return Err(self.invalid(
-                            &format!("enums.{role}.{name}"),
-                            format!("{value} does not fit the {width}-bit signal"),
-                        ));
-                    }
-                }
-            }
+        if let (Some(c), Some(b)) = (&p.command, &bindings.command) {
+            self.command(p, c, b)?;
         }
         if let Some(s) = &p.state {
-            let m = self.message("state.message", &s.message)?;
-            for (key, name) in [
-                ("steering", &s.steering),
-                ("velocity", &s.velocity),
-                ("control_mode", &s.control_mode),
-                ("steering_mode", &s.steering_mode),
-                ("heartbeat_echo", &s.heartbeat_echo),
-                ("counter", &s.counter),
-                ("checksum", &s.checksum),
-            ] {
-                self.signal(m, &format!("state.{key}"), name)?;
-            }
-            for (key, name) in [
-                ("watchdog_level", &s.watchdog_level),
-                ("estop_state", &s.estop_state),
-                ("warning", &s.warning),
-                ("driver_override", &s.driver_override),
-                ("gear", &s.gear),
-                ("steering_enabled", &s.steering_enabled),
-                ("turn_indicators", &s.turn_indicators),
-                ("hazard_lights", &s.hazard_lights),
-            ] {
-                if let Some(name) = name {
-                    self.signal(m, &format!("state.{key}"), name)?;
-                }
-            }
             if s.period_ms == 0 || s.timeout_cycles == 0 {
                 return Err(self.invalid(
                     "state.timeout_cycles",
@@ -658,47 +576,7 @@ impl Checker<'_> {
                 ));
             }
         }
-        for (role, wheels) in [
-            ("wheel_speeds", &p.wheel_speeds),
-            ("wheel_angles", &p.wheel_angles),
-        ] {
-            let Some(w) = wheels else { continue };
-            let m = self.message(&format!("{role}.message"), &w.message)?;
-            if w.signals.len() != 4 {
-                return Err(
-                    self.invalid(&format!("{role}.signals"), "four signals: FL, FR, RL, RR")
-                );
-            }
-            for (i, name) in w.signals.iter().enumerate() {
-                self.signal(m, &format!("{role}.signals[{i}]"), name)?;
-            }
-        }
-        if let Some(imu) = &p.imu {
-            let m = self.message("imu.message", &imu.message)?;
-            self.signal(m, "imu.yaw_rate", &imu.yaw_rate)?;
-            for (key, name) in [("accel_x", &imu.accel_x), ("accel_y", &imu.accel_y)] {
-                if let Some(name) = name {
-                    self.signal(m, &format!("imu.{key}"), name)?;
-                }
-            }
-        }
-        if let Some(b) = &p.battery {
-            let m = self.message("battery.message", &b.message)?;
-            self.signal(m, "battery.voltage", &b.voltage)?;
-            for (key, name) in [("current", &b.current), ("soc", &b.soc)] {
-                if let Some(name) = name {
-                    self.signal(m, &format!("battery.{key}"), name)?;
-                }
-            }
-        }
-        if let Some(e) = &p.estop {
-            let m = self.message("estop.message", &e.message)?;
-            self.signal(m, "estop.request", &e.request)?;
-        }
         if let Some(b) = &p.emergency_brake {
-            let m = self.message("emergency_brake.message", &b.message)?;
-            self.signal(m, "emergency_brake.request", &b.request)?;
-            self.signal(m, "emergency_brake.deceleration", &b.deceleration)?;
             if b.burst_frames == 0 || b.repeat_ms == 0 {
                 return Err(self.invalid(
                     "emergency_brake.burst_frames",
@@ -706,6 +584,78 @@ impl Checker<'_> {
                 ));
             }
         }
+        self.vehicle(p)?;
+        if let Some(a) = &p.autoware {
+            self.message("autoware.steering", &a.steering)?;
+            self.message("autoware.velocity", &a.velocity)?;
+            self.message("autoware.status", &a.status)?;
+            a.output
+                .parse::<crate::autoware::OutputMode>()
+                .map_err(|e| self.invalid("autoware.output", e))?;
+        }
+        if let Some(secoc) = &p.secoc {
+            self.secured_layouts(secoc)?;
+        }
+        Ok(())
+    }
+
+    /// The command's period, checksum algorithm, and enum values that fit their signals.
+    fn command(
+        &self,
+        p: &Profile,
+        c: &CommandRoles,
+        b: &CommandBindings,
+    ) -> Result<(), ProfileError> {
+        if c.period_ms == 0 {
+            return Err(self.invalid("command.period_ms", "must be at least 1"));
+        }
+        if bywire_dbc::e2e::ChecksumAlgorithm::from_name(&c.checksum_algorithm).is_none() {
+            return Err(self.invalid(
+                "command.checksum_algorithm",
+                format!(
+                    "'{}' is not one of crc8_sae_j1850, crc8_h2f, xor8, sum8",
+                    c.checksum_algorithm
+                ),
+            ));
+        }
+        let message = self.db.messages.get(b.message);
+        let width = |signal: Option<usize>| {
+            signal
+                .and_then(|i| message?.signals.get(i))
+                .map(|s| s.length)
+        };
+        for (role, values) in &p.enums {
+            let signal =
+                match role.as_str() {
+                    "gear" => Some(b.gear),
+                    "control_mode" => Some(b.control_mode),
+                    "steering_mode" => Some(b.steering_mode),
+                    "turn_indicators" => b.turn_indicators,
+                    _ => return Err(self.invalid(
+                        &format!("enums.{role}"),
+                        "not a command role (gear, control_mode, steering_mode, turn_indicators)",
+                    )),
+                };
+            let Some(width) = width(signal) else {
+                return Err(self.invalid(
+                    &format!("enums.{role}"),
+                    format!("not a command role: [command] names no {role} signal"),
+                ));
+            };
+            for (name, value) in values {
+                if width < 64 && *value >> width != 0 {
+                    return Err(self.invalid(
+                        &format!("enums.{role}.{name}"),
+                        format!("{value} does not fit the {width}-bit signal"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The watchdog cascade and the vehicle's geometry.
+    fn vehicle(&self, p: &Profile) -> Result<(), ProfileError> {
         if let Some(w) = &p.watchdog {
             if w.hold_cycles == 0 || w.decelerate_cycles < w.hold_cycles {
                 return Err(self.invalid(
@@ -726,17 +676,6 @@ impl Checker<'_> {
             self.positive("vehicle.gear_ratio", v.gear_ratio)?;
             self.positive("vehicle.wheelbase_m", v.wheelbase_m)?;
             self.positive("vehicle.track_m", v.track_m)?;
-        }
-        if let Some(a) = &p.autoware {
-            self.message("autoware.steering", &a.steering)?;
-            self.message("autoware.velocity", &a.velocity)?;
-            self.message("autoware.status", &a.status)?;
-            a.output
-                .parse::<crate::autoware::OutputMode>()
-                .map_err(|e| self.invalid("autoware.output", e))?;
-        }
-        if let Some(secoc) = &p.secoc {
-            self.secured_layouts(secoc)?;
         }
         Ok(())
     }

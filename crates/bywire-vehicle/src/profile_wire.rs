@@ -6,8 +6,9 @@ use alloc::vec::Vec;
 use bywire_core::{FileError, Frame, Id};
 use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
-use bywire_dbc::{Database, Message};
+use bywire_dbc::Message;
 
+use crate::bindings::{CommandBindings, StateBindings, WheelBindings};
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
 use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
@@ -31,26 +32,26 @@ struct RoleMessage {
 }
 
 impl RoleMessage {
+    /// `message`, its counter and checksum at these places (found when the profile loaded).
     fn new(
-        db: &Database,
-        name: &str,
-        counter: Option<&str>,
-        checksum: Option<&str>,
+        message: &Message,
+        counter: Option<usize>,
+        checksum: Option<usize>,
         algorithm: ChecksumAlgorithm,
         key: &str,
         invalid: &dyn Fn(&str, String) -> ProfileError,
     ) -> Result<RoleMessage, ProfileError> {
-        let message = find_message(db, name, key, invalid)?;
         let counter = match counter {
             None => None,
-            Some(counter) => {
-                let index = index_of(message, counter)
-                    .ok_or_else(|| invalid(key, format!("no counter signal '{counter}'")))?;
-                let bits = message.signals.get(index).map_or(0, |s| s.length);
+            Some(index) => {
+                let (name, bits) = message
+                    .signals
+                    .get(index)
+                    .map_or(("?", 0), |s| (s.name.as_str(), s.length));
                 if !(1..=8).contains(&bits) {
                     return Err(invalid(
                         key,
-                        format!("counter '{counter}' is {bits} bits; 1 to 8 are supported"),
+                        format!("counter '{name}' is {bits} bits; 1 to 8 are supported"),
                     ));
                 }
                 Some((index, bits))
@@ -58,9 +59,7 @@ impl RoleMessage {
         };
         let declared = Protection::of(message);
         let checksum = match checksum {
-            Some(name) => {
-                let index = index_of(message, name)
-                    .ok_or_else(|| invalid(key, format!("no checksum signal '{name}'")))?;
+            Some(index) => {
                 // An algorithm the DBC declares on the signal wins over the profile's.
                 let algorithm = declared
                     .and_then(|p| p.checksum)
@@ -97,33 +96,18 @@ impl RoleMessage {
         })
     }
 
-    /// The message a profile names, with the counter and checksum its DBC declares (or
-    /// opendbc's naming implies).
+    /// `message` with the counter and checksum its DBC declares (or opendbc's naming
+    /// implies).
     fn declared(
-        db: &Database,
-        name: &str,
+        message: &Message,
         algorithm: ChecksumAlgorithm,
         key: &str,
         invalid: &dyn Fn(&str, String) -> ProfileError,
     ) -> Result<RoleMessage, ProfileError> {
-        let message = find_message(db, name, key, invalid)?;
         let protection = Protection::of(message);
-        let name_at = |index: Option<usize>| {
-            index
-                .and_then(|i| message.signals.get(i))
-                .map(|s| s.name.clone())
-        };
-        let counter = name_at(protection.and_then(|p| p.counter).map(|(i, _)| i));
-        let checksum = name_at(protection.and_then(|p| p.checksum).map(|(i, _)| i));
-        RoleMessage::new(
-            db,
-            name,
-            counter.as_deref(),
-            checksum.as_deref(),
-            algorithm,
-            key,
-            invalid,
-        )
+        let counter = protection.and_then(|p| p.counter).map(|(i, _)| i);
+        let checksum = protection.and_then(|p| p.checksum).map(|(i, _)| i);
+        RoleMessage::new(message, counter, checksum, algorithm, key, invalid)
     }
 
     /// Check a frame of this message: its counter (0 without one), or why not (a remote frame
@@ -217,22 +201,6 @@ impl RoleMessage {
     }
 }
 
-fn find_message<'a>(
-    db: &'a Database,
-    name: &str,
-    key: &str,
-    invalid: &dyn Fn(&str, String) -> ProfileError,
-) -> Result<&'a Message, ProfileError> {
-    db.messages
-        .iter()
-        .find(|m| m.name == name)
-        .ok_or_else(|| invalid(key, format!("no message '{name}' in the DBC")))
-}
-
-fn index_of(message: &Message, name: &str) -> Option<usize> {
-    message.signals.iter().position(|s| s.name == name)
-}
-
 /// One vocabulary enum's raw numbers on this vehicle, resolved once from the profile's
 /// `[enums.ROLE]` table (the reference numbering where the profile has none).
 #[derive(Debug, Clone)]
@@ -278,47 +246,14 @@ impl<T: Vocabulary> EnumMap<T> {
     }
 }
 
-/// Signal indices of the command roles.
-#[derive(Debug, Clone, Copy)]
-struct CommandSignals {
-    steering: usize,
-    velocity: usize,
-    brake: usize,
-    gear: usize,
-    control_mode: usize,
-    steering_mode: usize,
-    engage: usize,
-    operator_reset: usize,
-    turn_indicators: Option<usize>,
-    hazard_lights: Option<usize>,
-}
-
-/// Signal indices of the state roles.
-#[derive(Debug, Clone, Copy)]
-struct StateSignals {
-    steering: usize,
-    velocity: usize,
-    control_mode: usize,
-    heartbeat_echo: usize,
-    steering_mode: usize,
-    watchdog_level: Option<usize>,
-    estop_state: Option<usize>,
-    warning: Option<usize>,
-    driver_override: Option<usize>,
-    gear: Option<usize>,
-    steering_enabled: Option<usize>,
-    turn_indicators: Option<usize>,
-    hazard_lights: Option<usize>,
-}
-
 /// Any vehicle a profile describes, by role, through the runtime codec. Buffers are sized
 /// when it is made: no allocation per frame.
 #[derive(Debug, Clone)]
 pub struct ProfileWire {
     command: RoleMessage,
-    command_signals: CommandSignals,
+    command_signals: CommandBindings,
     state: RoleMessage,
-    state_signals: StateSignals,
+    state_signals: StateBindings,
     wheel_speeds: Option<(RoleMessage, [usize; 4])>,
     wheel_angles: Option<(RoleMessage, [usize; 4])>,
     brake: Option<(RoleMessage, usize, usize)>,
@@ -347,131 +282,73 @@ impl ProfileWire {
 
     /// The wire without the profile's SecOC, for [`crate::secured::Secured`] to wrap.
     pub(crate) fn unsecured(loaded: &LoadedProfile) -> Result<ProfileWire, ProfileError> {
-        let p = &loaded.profile;
-        let db = &loaded.database;
+        let (p, db, b) = (&loaded.profile, &loaded.database, &loaded.bindings);
         let invalid = |key: &str, reason: String| {
             ProfileError::from(FileError::invalid(&p.name, key, reason))
         };
-        let c = p
-            .command
-            .as_ref()
-            .ok_or_else(|| invalid("command", "a vehicle interface needs [command]".to_string()))?;
-        let s = p
-            .state
-            .as_ref()
-            .ok_or_else(|| invalid("state", "a vehicle interface needs [state]".to_string()))?;
+        let (Some(c), Some(command_signals)) = (&p.command, b.command) else {
+            return Err(invalid(
+                "command",
+                "a vehicle interface needs [command]".to_string(),
+            ));
+        };
+        let (Some(_), Some(state_signals)) = (&p.state, b.state) else {
+            return Err(invalid(
+                "state",
+                "a vehicle interface needs [state]".to_string(),
+            ));
+        };
         let algorithm = ChecksumAlgorithm::from_name(&c.checksum_algorithm).ok_or_else(|| {
             invalid(
                 "command.checksum_algorithm",
                 format!("'{}' is not a checksum algorithm", c.checksum_algorithm),
             )
         })?;
+        // The places were found in this database when the profile loaded.
+        let message = |index: usize, key: &str| {
+            db.messages
+                .get(index)
+                .ok_or_else(|| invalid(key, "not in the DBC".to_string()))
+        };
         let command = RoleMessage::new(
-            db,
-            &c.message,
-            Some(&c.counter),
-            Some(&c.checksum),
+            message(command_signals.message, "command.message")?,
+            Some(command_signals.counter),
+            Some(command_signals.checksum),
             algorithm,
             "command",
             &invalid,
         )?;
-        let message = |name: &str| db.messages.iter().find(|m| m.name == name);
-        let signal = |message_name: &str, key: &str, name: &str| -> Result<usize, ProfileError> {
-            message(message_name)
-                .and_then(|m| index_of(m, name))
-                .ok_or_else(|| invalid(key, format!("no signal '{name}' in '{message_name}'")))
-        };
-        let optional_command =
-            |role: &str, name: &Option<String>| -> Result<Option<usize>, ProfileError> {
-                name.as_deref()
-                    .map(|n| signal(&c.message, &format!("command.{role}"), n))
-                    .transpose()
-            };
-        let command_signals = CommandSignals {
-            steering: signal(&c.message, "command.steering", &c.steering)?,
-            velocity: signal(&c.message, "command.velocity", &c.velocity)?,
-            brake: signal(&c.message, "command.brake", &c.brake)?,
-            gear: signal(&c.message, "command.gear", &c.gear)?,
-            control_mode: signal(&c.message, "command.control_mode", &c.control_mode)?,
-            steering_mode: signal(&c.message, "command.steering_mode", &c.steering_mode)?,
-            engage: signal(&c.message, "command.engage", &c.engage)?,
-            operator_reset: signal(&c.message, "command.operator_reset", &c.operator_reset)?,
-            turn_indicators: optional_command("turn_indicators", &c.turn_indicators)?,
-            hazard_lights: optional_command("hazard_lights", &c.hazard_lights)?,
-        };
         let state = RoleMessage::new(
-            db,
-            &s.message,
-            Some(&s.counter),
-            Some(&s.checksum),
+            message(state_signals.message, "state.message")?,
+            Some(state_signals.counter),
+            Some(state_signals.checksum),
             algorithm,
             "state",
             &invalid,
         )?;
-        // Roles a state message may leave out.
-        let optional = |role: &str, name: &Option<String>| -> Result<Option<usize>, ProfileError> {
-            name.as_deref()
-                .map(|n| signal(&s.message, &format!("state.{role}"), n))
-                .transpose()
+        let declared = |index: usize, key: &str| {
+            RoleMessage::declared(message(index, key)?, algorithm, key, &invalid)
         };
-        let state_signals = StateSignals {
-            steering: signal(&s.message, "state.steering", &s.steering)?,
-            velocity: signal(&s.message, "state.velocity", &s.velocity)?,
-            control_mode: signal(&s.message, "state.control_mode", &s.control_mode)?,
-            heartbeat_echo: signal(&s.message, "state.heartbeat_echo", &s.heartbeat_echo)?,
-            steering_mode: signal(&s.message, "state.steering_mode", &s.steering_mode)?,
-            gear: optional("gear", &s.gear)?,
-            steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
-            watchdog_level: optional("watchdog_level", &s.watchdog_level)?,
-            estop_state: optional("estop_state", &s.estop_state)?,
-            warning: optional("warning", &s.warning)?,
-            driver_override: optional("driver_override", &s.driver_override)?,
-            turn_indicators: optional("turn_indicators", &s.turn_indicators)?,
-            hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
+        let wheels = |role: &str, w: Option<WheelBindings>| {
+            w.map(|w| {
+                let role = declared(w.message, &format!("{role}.message"))?;
+                Ok::<_, ProfileError>((role, w.signals))
+            })
+            .transpose()
         };
-        let wheels = |role: &str, w: &Option<crate::profile::WheelSignals>| match w {
-            None => Ok::<_, ProfileError>(None),
-            Some(w) => {
-                let message = RoleMessage::declared(
-                    db,
-                    &w.message,
-                    algorithm,
-                    &format!("{role}.message"),
-                    &invalid,
-                )?;
-                let mut indices = [0usize; 4];
-                for (slot, (i, name)) in indices.iter_mut().zip(w.signals.iter().enumerate()) {
-                    *slot = signal(&w.message, &format!("{role}.signals[{i}]"), name)?;
-                }
-                Ok(Some((message, indices)))
-            }
-        };
-        let wheel_speeds = wheels("wheel_speeds", &p.wheel_speeds)?;
-        let wheel_angles = wheels("wheel_angles", &p.wheel_angles)?;
-        let brake = match &p.emergency_brake {
-            None => None,
-            Some(b) => {
-                let role = RoleMessage::declared(
-                    db,
-                    &b.message,
-                    algorithm,
-                    "emergency_brake.message",
-                    &invalid,
-                )?;
-                let request = signal(&b.message, "emergency_brake.request", &b.request)?;
-                let deceleration =
-                    signal(&b.message, "emergency_brake.deceleration", &b.deceleration)?;
-                Some((role, request, deceleration))
-            }
-        };
-        let estop = match &p.estop {
-            None => None,
-            Some(e) => {
-                let role =
-                    RoleMessage::declared(db, &e.message, algorithm, "estop.message", &invalid)?;
-                Some((role, signal(&e.message, "estop.request", &e.request)?))
-            }
-        };
+        let wheel_speeds = wheels("wheel_speeds", b.wheel_speeds)?;
+        let wheel_angles = wheels("wheel_angles", b.wheel_angles)?;
+        let brake = b
+            .emergency_brake
+            .map(|e| {
+                let role = declared(e.message, "emergency_brake.message")?;
+                Ok::<_, ProfileError>((role, e.request, e.deceleration))
+            })
+            .transpose()?;
+        let estop = b
+            .estop
+            .map(|e| Ok::<_, ProfileError>((declared(e.message, "estop.message")?, e.request)))
+            .transpose()?;
         Ok(ProfileWire {
             estop,
             command,
