@@ -29,17 +29,24 @@ fn contains_any(name: &str, words: &[&str]) -> bool {
     words.iter().any(|w| upper.contains(w))
 }
 
-/// Run every check.
-pub fn lint(db: &Database) -> Vec<Finding> {
-    let mut out = Vec::new();
-    let mut push = |severity, code, position, text: String| {
-        out.push(Finding {
+/// The findings so far.
+#[derive(Default)]
+struct Findings(Vec<Finding>);
+
+impl Findings {
+    fn push(&mut self, severity: Severity, code: &'static str, position: Position, text: String) {
+        self.0.push(Finding {
             severity,
             code,
             position,
             text,
-        })
-    };
+        });
+    }
+}
+
+/// Run every check.
+pub fn lint(db: &Database) -> Vec<Finding> {
+    let mut out = Findings::default();
     let (mut little, mut big) = (None, None);
     // Names seen so far: a duplicate found in constant time (a search made lint quadratic).
     let mut names = std::collections::HashSet::new();
@@ -47,51 +54,11 @@ pub fn lint(db: &Database) -> Vec<Finding> {
         if m.name == crate::INDEPENDENT_SIGNALS {
             continue;
         }
-        let limit = if m.extended { 0x1FFF_FFFF } else { 0x7FF };
-        if m.id > limit {
-            push(
-                Severity::Error,
-                "id-format",
-                m.position,
-                format!(
-                    "message {} has id {:#X}, outside the {} range",
-                    m.name,
-                    m.id,
-                    if m.extended { "29-bit" } else { "11-bit" }
-                ),
-            );
-        }
-        if !names.insert(m.name.as_str()) {
-            push(
-                Severity::Error,
-                "duplicate-name",
-                m.position,
-                format!("message name {} is used twice", m.name),
-            );
-        }
-        let send_type = db
-            .message_attribute_text(m, "GenMsgSendType")
-            .unwrap_or_default()
-            .to_ascii_lowercase();
-        let cycle = db
-            .message_attribute_text(m, "GenMsgCycleTime")
-            .and_then(|c| c.parse::<f64>().ok())
-            .unwrap_or(0.0);
-        if send_type.contains("cyclic") && !send_type.contains("no") && cycle <= 0.0 {
-            push(
-                Severity::Warning,
-                "no-cycle-time",
-                m.position,
-                format!(
-                    "message {} is sent cyclically but has no GenMsgCycleTime",
-                    m.name
-                ),
-            );
-        }
+        message_findings(db, m, &mut names, &mut out);
         let mut used: Vec<(&Signal, [u64; 8])> = Vec::new();
         for (j, s) in m.signals.iter().enumerate() {
             if m.signals.iter().take(j).any(|o| o.name == s.name) {
-                push(
+                out.push(
                     Severity::Error,
                     "duplicate-name",
                     s.position,
@@ -102,103 +69,12 @@ pub fn lint(db: &Database) -> Vec<Finding> {
                 ByteOrder::LittleEndian => little = little.or(Some(s.position)),
                 ByteOrder::BigEndian => big = big.or(Some(s.position)),
             }
-            if let Some((bits, last_byte)) = signal_bits(s) {
-                if last_byte >= m.size {
-                    push(
-                        Severity::Error,
-                        "past-end",
-                        s.position,
-                        format!(
-                            "signal {} runs past the {} bytes of message {}",
-                            s.name, m.size, m.name
-                        ),
-                    );
-                }
-                if let Some((other, _)) = used.iter().find(|(o, ob)| {
-                    may_coexist(o, s) && ob.iter().zip(&bits).any(|(a, b)| a & b != 0)
-                }) {
-                    push(
-                        Severity::Error,
-                        "overlap",
-                        s.position,
-                        format!(
-                            "signals {} and {} of message {} share bits",
-                            other.name, s.name, m.name
-                        ),
-                    );
-                }
-                used.push((s, bits));
-            }
-            let aligned = match s.byte_order {
-                ByteOrder::LittleEndian => s.start_bit % 8 == 0,
-                ByteOrder::BigEndian => s.start_bit % 8 == 7,
-            };
-            if s.length % 8 == 0 && !aligned {
-                push(
-                    Severity::Info,
-                    "unaligned",
-                    s.position,
-                    format!(
-                        "signal {} is {} whole bytes long but does not start on a byte boundary",
-                        s.name,
-                        s.length / 8
-                    ),
-                );
-            }
-            let (factor, offset) = (s.factor.as_f64(), s.offset.as_f64());
-            if factor == 0.0 {
-                push(
-                    Severity::Error,
-                    "zero-scale",
-                    s.position,
-                    format!(
-                        "signal {} has scale 0: every raw value means the same",
-                        s.name
-                    ),
-                );
-            } else if let Some((phys_lo, phys_hi)) = s.reachable_range() {
-                let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
-                let declared = !(min == 0.0 && max == 0.0);
-                // Half a step of slack: limits are often written rounded.
-                let slack = factor.abs() / 2.0;
-                if declared && (min < phys_lo - slack || max > phys_hi + slack) {
-                    push(Severity::Warning, "range", s.position, format!("signal {} declares [{min}, {max}] but its {} raw bits with scale {factor} and offset {offset} reach only [{phys_lo}, {phys_hi}]", s.name, s.length));
-                }
-                if declared && min > max {
-                    push(
-                        Severity::Warning,
-                        "range",
-                        s.position,
-                        format!("signal {} has minimum {min} above maximum {max}", s.name),
-                    );
-                }
-            }
+            signal_findings(m, s, &mut used, &mut out);
         }
-        let command = contains_any(&m.name, COMMAND_NAMES)
-            || m.comment
-                .as_deref()
-                .is_some_and(|c| contains_any(c, &["COMMAND"]));
-        if command && !m.signals.is_empty() {
-            let counter = m
-                .signals
-                .iter()
-                .any(|s| contains_any(&s.name, COUNTER_NAMES));
-            let checksum = m
-                .signals
-                .iter()
-                .any(|s| contains_any(&s.name, CHECKSUM_NAMES));
-            if !counter || !checksum {
-                let missing = match (counter, checksum) {
-                    (false, false) => "rolling counter and no checksum",
-                    (false, true) => "rolling counter",
-                    _ => "checksum",
-                };
-                push(Severity::Warning, "unprotected-command", m.position, format!("command message {} has no {missing}: a stale or corrupted command cannot be detected", m.name));
-            }
-        }
+        command_protection(m, &mut out);
     }
     if let (Some(_), Some(at)) = (little, big) {
-        push(
+        out.push(
             Severity::Info,
             "mixed-byte-order",
             at,
@@ -207,7 +83,7 @@ pub fn lint(db: &Database) -> Vec<Finding> {
     }
     for (i, n) in db.nodes.iter().enumerate() {
         if db.nodes.iter().take(i).any(|o| o.name == n.name) {
-            push(
+            out.push(
                 Severity::Error,
                 "duplicate-name",
                 Position::default(),
@@ -215,7 +91,165 @@ pub fn lint(db: &Database) -> Vec<Finding> {
             );
         }
     }
-    out
+    out.0
+}
+
+/// A message's identifier, name (against `names`, those seen so far) and cycle time.
+fn message_findings<'a>(
+    db: &Database,
+    m: &'a Message,
+    names: &mut std::collections::HashSet<&'a str>,
+    out: &mut Findings,
+) {
+    let limit = if m.extended { 0x1FFF_FFFF } else { 0x7FF };
+    if m.id > limit {
+        out.push(
+            Severity::Error,
+            "id-format",
+            m.position,
+            format!(
+                "message {} has id {:#X}, outside the {} range",
+                m.name,
+                m.id,
+                if m.extended { "29-bit" } else { "11-bit" }
+            ),
+        );
+    }
+    if !names.insert(m.name.as_str()) {
+        out.push(
+            Severity::Error,
+            "duplicate-name",
+            m.position,
+            format!("message name {} is used twice", m.name),
+        );
+    }
+    let send_type = db
+        .message_attribute_text(m, "GenMsgSendType")
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    let cycle = db
+        .message_attribute_text(m, "GenMsgCycleTime")
+        .and_then(|c| c.parse::<f64>().ok())
+        .unwrap_or(0.0);
+    if send_type.contains("cyclic") && !send_type.contains("no") && cycle <= 0.0 {
+        out.push(
+            Severity::Warning,
+            "no-cycle-time",
+            m.position,
+            format!(
+                "message {} is sent cyclically but has no GenMsgCycleTime",
+                m.name
+            ),
+        );
+    }
+}
+
+/// A signal's place in its message (past the end, overlapping another), alignment, scale and
+/// range.
+fn signal_findings<'a>(
+    m: &Message,
+    s: &'a Signal,
+    used: &mut Vec<(&'a Signal, [u64; 8])>,
+    out: &mut Findings,
+) {
+    if let Some((bits, last_byte)) = signal_bits(s) {
+        if last_byte >= m.size {
+            out.push(
+                Severity::Error,
+                "past-end",
+                s.position,
+                format!(
+                    "signal {} runs past the {} bytes of message {}",
+                    s.name, m.size, m.name
+                ),
+            );
+        }
+        if let Some((other, _)) = used
+            .iter()
+            .find(|(o, ob)| may_coexist(o, s) && ob.iter().zip(&bits).any(|(a, b)| a & b != 0))
+        {
+            out.push(
+                Severity::Error,
+                "overlap",
+                s.position,
+                format!(
+                    "signals {} and {} of message {} share bits",
+                    other.name, s.name, m.name
+                ),
+            );
+        }
+        used.push((s, bits));
+    }
+    let aligned = match s.byte_order {
+        ByteOrder::LittleEndian => s.start_bit.is_multiple_of(8),
+        ByteOrder::BigEndian => s.start_bit % 8 == 7,
+    };
+    if s.length.is_multiple_of(8) && !aligned {
+        out.push(
+            Severity::Info,
+            "unaligned",
+            s.position,
+            format!(
+                "signal {} is {} whole bytes long but does not start on a byte boundary",
+                s.name,
+                s.length / 8
+            ),
+        );
+    }
+    let (factor, offset) = (s.factor.as_f64(), s.offset.as_f64());
+    if factor == 0.0 {
+        out.push(
+            Severity::Error,
+            "zero-scale",
+            s.position,
+            format!(
+                "signal {} has scale 0: every raw value means the same",
+                s.name
+            ),
+        );
+    } else if let Some((phys_lo, phys_hi)) = s.reachable_range() {
+        let (min, max) = (s.minimum.as_f64(), s.maximum.as_f64());
+        let declared = !(min == 0.0 && max == 0.0);
+        // Half a step of slack: limits are often written rounded.
+        let slack = factor.abs() / 2.0;
+        if declared && (min < phys_lo - slack || max > phys_hi + slack) {
+            out.push(Severity::Warning, "range", s.position, format!("signal {} declares [{min}, {max}] but its {} raw bits with scale {factor} and offset {offset} reach only [{phys_lo}, {phys_hi}]", s.name, s.length));
+        }
+        if declared && min > max {
+            out.push(
+                Severity::Warning,
+                "range",
+                s.position,
+                format!("signal {} has minimum {min} above maximum {max}", s.name),
+            );
+        }
+    }
+}
+
+/// A command message without a rolling counter or a checksum.
+fn command_protection(m: &Message, out: &mut Findings) {
+    let command = contains_any(&m.name, COMMAND_NAMES)
+        || m.comment
+            .as_deref()
+            .is_some_and(|c| contains_any(c, &["COMMAND"]));
+    if command && !m.signals.is_empty() {
+        let counter = m
+            .signals
+            .iter()
+            .any(|s| contains_any(&s.name, COUNTER_NAMES));
+        let checksum = m
+            .signals
+            .iter()
+            .any(|s| contains_any(&s.name, CHECKSUM_NAMES));
+        if !counter || !checksum {
+            let missing = match (counter, checksum) {
+                (false, false) => "rolling counter and no checksum",
+                (false, true) => "rolling counter",
+                _ => "checksum",
+            };
+            out.push(Severity::Warning, "unprotected-command", m.position, format!("command message {} has no {missing}: a stale or corrupted command cannot be detected", m.name));
+        }
+    }
 }
 
 #[cfg(test)]

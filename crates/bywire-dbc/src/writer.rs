@@ -40,6 +40,21 @@ pub fn write(db: &Database) -> String {
 }
 
 fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
+    header(db, o)?;
+    messages(db, o)?;
+    comments(db, o)?;
+    attributes(db, o)?;
+    value_descriptions_and_extras(db, o)?;
+    // Statements kept verbatim go last: one whose string runs to the end of the file (which is
+    // how it was read) would otherwise swallow whatever followed it.
+    for u in &db.unknown {
+        writeln!(o, "{u}")?;
+    }
+    Ok(())
+}
+
+/// `VERSION`, `NS_`, `BS_`, `BU_` and the value tables.
+fn header(db: &Database, o: &mut String) -> std::fmt::Result {
     writeln!(o, "VERSION {}\n", quoted(&db.version))?;
     writeln!(o, "NS_ :")?;
     for s in &db.new_symbols {
@@ -51,6 +66,11 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
     for (name, values) in &db.value_tables {
         writeln!(o, "VAL_TABLE_ {name}{};", pairs(values))?;
     }
+    Ok(())
+}
+
+/// `BO_` with their `SG_`, then `BO_TX_BU_` and `EV_`.
+fn messages(db: &Database, o: &mut String) -> std::fmt::Result {
     for m in &db.messages {
         writeln!(
             o,
@@ -97,6 +117,11 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
     for e in &db.env_vars {
         writeln!(o, "EV_ {}: {};", e.name, e.definition)?;
     }
+    Ok(())
+}
+
+/// `CM_`: the network's, then nodes', messages' and signals', environment variables'.
+fn comments(db: &Database, o: &mut String) -> std::fmt::Result {
     if let Some(c) = &db.comment {
         writeln!(o, "CM_ {};", quoted(c))?;
     }
@@ -120,6 +145,11 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
             writeln!(o, "CM_ EV_ {} {};", e.name, quoted(c))?;
         }
     }
+    Ok(())
+}
+
+/// `BA_DEF_`, `BA_DEF_DEF_` and `BA_` for every object.
+fn attributes(db: &Database, o: &mut String) -> std::fmt::Result {
     for d in &db.attribute_defs {
         let scope = match d.scope {
             AttrScope::Network => "",
@@ -175,6 +205,11 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
             writeln!(o, "BA_ {} EV_ {} {};", quoted(name), e.name, attr(v))?;
         }
     }
+    Ok(())
+}
+
+/// `VAL_`, `SIG_GROUP_`, `SIG_VALTYPE_` and `SG_MUL_VAL_`.
+fn value_descriptions_and_extras(db: &Database, o: &mut String) -> std::fmt::Result {
     for m in &db.messages {
         for s in m
             .signals
@@ -232,11 +267,6 @@ fn write_into(db: &Database, o: &mut String) -> std::fmt::Result {
                 )?;
             }
         }
-    }
-    // Statements kept verbatim go last: one whose string runs to the end of the file (which is
-    // how it was read) would otherwise swallow whatever followed it.
-    for u in &db.unknown {
-        writeln!(o, "{u}")?;
     }
     Ok(())
 }

@@ -31,7 +31,7 @@
 use core::time::Duration;
 
 use bywire_control::kinematics::Point;
-use bywire_core::Timestamp;
+use bywire_core::{FileError, Timestamp};
 use serde::Deserialize;
 
 use crate::attacker::Attack;
@@ -172,70 +172,9 @@ impl Scenario {
             file: file.to_string(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        let invalid = |key: &str, reason: String| ScenarioError::Invalid {
-            file: file.to_string(),
-            key: key.to_string(),
-            reason,
-        };
-        let route = match (raw.route.as_deref(), &raw.waypoints) {
-            (Some(_), Some(_)) => {
-                return Err(invalid(
-                    "waypoints",
-                    "give route or waypoints, not both".to_string(),
-                ))
-            }
-            (Some("apron-loop") | None, None) => apron_loop(),
-            (Some(other), None) => {
-                return Err(invalid(
-                    "route",
-                    format!("'{other}' is not a built-in route (apron-loop)"),
-                ))
-            }
-            (None, Some(points)) => {
-                if points.len() < 2 || points.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(invalid(
-                        "waypoints",
-                        "at least two points of finite coordinates".to_string(),
-                    ));
-                }
-                points.iter().map(|[x, y]| Point { x: *x, y: *y }).collect()
-            }
-        };
-        if !(raw.speed > 0.0 && raw.speed <= 8.0) {
-            return Err(invalid(
-                "speed",
-                format!("{} is not a speed the tug drives (0–8 m/s)", raw.speed),
-            ));
-        }
-        if !(0.0..=1_000.0).contains(&raw.crab_final_m) {
-            return Err(invalid(
-                "crab_final_m",
-                format!("{} is not a length of route (0–1000 m)", raw.crab_final_m),
-            ));
-        }
-        if !(-720.0..=720.0).contains(&raw.tank_turn_deg) {
-            return Err(invalid(
-                "tank_turn_deg",
-                format!(
-                    "{} is not a turn of at most two rounds (±720°)",
-                    raw.tank_turn_deg
-                ),
-            ));
-        }
-        if let Some((i, angle)) = raw
-            .steering_steps
-            .iter()
-            .enumerate()
-            .find(|(_, a)| !(-40.0..=40.0).contains(*a))
-        {
-            return Err(invalid(
-                &format!("steering_steps[{i}]"),
-                format!("{angle} is not a wheel angle (−40° … 40°)"),
-            ));
-        }
-        if raw.steering_steps.len() > 100 {
-            return Err(invalid("steering_steps", "at most 100 steps".to_string()));
-        }
+        let invalid = |key: &str, reason: String| FileError::invalid(file, key, reason);
+        let route = route(&raw, &invalid)?;
+        check_numbers(&raw, &invalid)?;
         let length: f64 = route
             .windows(2)
             .map(|w| match w {
@@ -243,38 +182,21 @@ impl Scenario {
                 _ => 0.0,
             })
             .sum();
-        let along = |key: &str, pairs: &[[f64; 2]], valid: &dyn Fn(f64) -> bool, what: &str| {
-            let mut last = f64::NEG_INFINITY;
-            for (i, [at, value]) in pairs.iter().enumerate() {
-                if !(0.0..=length).contains(at) || *at <= last {
-                    return Err(invalid(
-                        &format!("{key}[{i}]"),
-                        format!(
-                            "{at} m is not on the route (0–{length:.1} m) after the one before"
-                        ),
-                    ));
-                }
-                if !valid(*value) {
-                    return Err(invalid(
-                        &format!("{key}[{i}]"),
-                        format!("{value} is not {what}"),
-                    ));
-                }
-                last = *at;
-            }
-            Ok(())
-        };
         along(
             "speeds",
             &raw.speeds,
+            length,
             &|v| v > 0.0 && v <= 8.0,
             "a speed the tug drives (0–8 m/s)",
+            &invalid,
         )?;
         along(
             "stops",
             &raw.stops,
+            length,
             &|s| s > 0.0 && s <= 3_600.0,
             "a stop's length (0–3600 s)",
+            &invalid,
         )?;
         let speeds = raw.speeds.iter().map(|[at, v]| (*at, *v)).collect();
         let stops = raw
@@ -282,99 +204,12 @@ impl Scenario {
             .iter()
             .map(|[at, s]| (*at, Duration::from_secs_f64(*s)))
             .collect();
-        if !(0.0..=4_500.0).contains(&raw.payload) {
-            return Err(invalid(
-                "payload",
-                format!("{} kg is not 0–4500 kg", raw.payload),
-            ));
-        }
-        if !(-0.2..=0.2).contains(&raw.grade) {
-            return Err(invalid(
-                "grade",
-                format!("{} is not a grade (−0.2 … 0.2)", raw.grade),
-            ));
-        }
-        let mut events = Vec::new();
-        for (i, e) in raw.event.iter().enumerate() {
-            let key = |field: &str| format!("event[{i}].{field}");
-            if !(e.at_s >= 0.0 && e.at_s < 86_400.0) {
-                return Err(invalid(
-                    &key("at_s"),
-                    format!("{} is not a time in a run", e.at_s),
-                ));
-            }
-            let duration = match e.duration_s {
-                Some(d) if d > 0.0 && d < 86_400.0 => Some(Duration::from_secs_f64(d)),
-                Some(d) => {
-                    return Err(invalid(
-                        &key("duration_s"),
-                        format!("{d} is not a duration"),
-                    ))
-                }
-                None => None,
-            };
-            // The frames a fault aims at: a bus and an identifier sent on it.
-            let bus_and_id = |kind: &str| -> Result<(TugBus, u16), ScenarioError> {
-                let bus = e.bus.as_deref().and_then(TugBus::named).ok_or_else(|| {
-                    invalid(
-                        &key("bus"),
-                        format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\""),
-                    )
-                })?;
-                let id = e.id.filter(|id| *id <= 0x7FF).ok_or_else(|| {
-                    invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier"))
-                })?;
-                Ok((bus, id))
-            };
-            let fault = match e.fault.as_str() {
-                "ads_silence" => Fault::AdsSilence,
-                "estop" => Fault::Estop,
-                "operator_reset" => Fault::OperatorReset,
-                "drive_silence" => {
-                    let node = e.node.ok_or_else(|| invalid(&key("node"), "drive_silence needs the node ID".to_string()))?;
-                    if !DRIVE_NODES.contains(&node) && !STEERING_NODES.contains(&node) {
-                        return Err(invalid(&key("node"), format!("0x{node:02X} is not a drive (steering 0x11–0x14, wheels 0x21–0x24)")));
-                    }
-                    Fault::DriveSilence(node)
-                }
-                "sensor_fault" => {
-                    let corner = e.corner.filter(|c| *c < 4).ok_or_else(|| invalid(&key("corner"), "sensor_fault needs corner 0 (FL) … 3 (RR)".to_string()))?;
-                    let value = e.value.unwrap_or(0.0);
-                    let sensor = match e.sensor.as_deref() {
-                        Some("stuck") => SensorFault::Stuck(value),
-                        Some("drift") => SensorFault::Drift(value),
-                        Some("open") => SensorFault::OpenCircuit,
-                        other => return Err(invalid(&key("sensor"), format!("{other:?} is not stuck, drift or open"))),
-                    };
-                    Fault::SensorFault(corner, sensor)
-                }
-                "corrupt_commands" => Fault::CorruptCommands,
-                "duplicate_commands" => Fault::DuplicateCommands,
-                "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
-                "driver_takeover" => Fault::DriverTakeover,
-                "ecu_bus_off" => Fault::EcuBusOff,
-                "bus_off" => {
-                    let (bus, id) = bus_and_id("bus_off")?;
-                    Fault::BusOff { bus, id }
-                }
-                "redundant_bus_loss" => Fault::RedundantBusLoss,
-                "forge_commands" => Fault::Attack(Attack::ForgeCommands),
-                "replay_commands" => Fault::Attack(Attack::ReplayCommands),
-                "forge_state" => Fault::Attack(Attack::ForgeState),
-                "flood" => Fault::Attack(Attack::Flood),
-                kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
-                    let (bus, id) = bus_and_id(kind)?;
-                    let tamper = match kind {
-                        "corrupt_frames" => Tamper::FlipBit,
-                        "duplicate_frames" => Tamper::Duplicate,
-                        _ => Tamper::Delay(Duration::from_millis(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_frames needs delay_ms".to_string()))?)),
-                    };
-                    Fault::TamperFrames { bus, id, tamper }
-                }
-                other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood)"))),
-            };
-            events.push((Duration::from_secs_f64(e.at_s), fault, duration));
-        }
+        let events = raw
+            .event
+            .iter()
+            .enumerate()
+            .map(|(i, e)| event(i, e, &invalid))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Scenario {
             name: raw.name.unwrap_or_else(|| file.to_string()),
             tug: TugParams {
@@ -444,6 +279,206 @@ impl Scenario {
             }
         }
     }
+}
+
+/// A key's value is wrong: the error, the file named by the caller.
+type Invalid<'a> = dyn Fn(&str, String) -> ScenarioError + 'a;
+
+/// The route: the built-in one, or the waypoints given.
+fn route(raw: &RawScenario, invalid: &Invalid<'_>) -> Result<Vec<Point>, ScenarioError> {
+    Ok(match (raw.route.as_deref(), &raw.waypoints) {
+        (Some(_), Some(_)) => {
+            return Err(invalid(
+                "waypoints",
+                "give route or waypoints, not both".to_string(),
+            ))
+        }
+        (Some("apron-loop") | None, None) => apron_loop(),
+        (Some(other), None) => {
+            return Err(invalid(
+                "route",
+                format!("'{other}' is not a built-in route (apron-loop)"),
+            ))
+        }
+        (None, Some(points)) => {
+            if points.len() < 2 || points.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(invalid(
+                    "waypoints",
+                    "at least two points of finite coordinates".to_string(),
+                ));
+            }
+            points.iter().map(|[x, y]| Point { x: *x, y: *y }).collect()
+        }
+    })
+}
+
+/// The numbers that have ranges: speed, the crab and tank turn, the steering steps, payload
+/// and grade.
+fn check_numbers(raw: &RawScenario, invalid: &Invalid<'_>) -> Result<(), ScenarioError> {
+    if !(raw.speed > 0.0 && raw.speed <= 8.0) {
+        return Err(invalid(
+            "speed",
+            format!("{} is not a speed the tug drives (0–8 m/s)", raw.speed),
+        ));
+    }
+    if !(0.0..=1_000.0).contains(&raw.crab_final_m) {
+        return Err(invalid(
+            "crab_final_m",
+            format!("{} is not a length of route (0–1000 m)", raw.crab_final_m),
+        ));
+    }
+    if !(-720.0..=720.0).contains(&raw.tank_turn_deg) {
+        return Err(invalid(
+            "tank_turn_deg",
+            format!(
+                "{} is not a turn of at most two rounds (±720°)",
+                raw.tank_turn_deg
+            ),
+        ));
+    }
+    if let Some((i, angle)) = raw
+        .steering_steps
+        .iter()
+        .enumerate()
+        .find(|(_, a)| !(-40.0..=40.0).contains(*a))
+    {
+        return Err(invalid(
+            &format!("steering_steps[{i}]"),
+            format!("{angle} is not a wheel angle (−40° … 40°)"),
+        ));
+    }
+    if raw.steering_steps.len() > 100 {
+        return Err(invalid("steering_steps", "at most 100 steps".to_string()));
+    }
+    if !(0.0..=4_500.0).contains(&raw.payload) {
+        return Err(invalid(
+            "payload",
+            format!("{} kg is not 0–4500 kg", raw.payload),
+        ));
+    }
+    if !(-0.2..=0.2).contains(&raw.grade) {
+        return Err(invalid(
+            "grade",
+            format!("{} is not a grade (−0.2 … 0.2)", raw.grade),
+        ));
+    }
+    Ok(())
+}
+
+/// Pairs of (distance along the route, value): each on the route, after the one before, its
+/// value `valid` (else `what` it must be).
+fn along(
+    key: &str,
+    pairs: &[[f64; 2]],
+    length: f64,
+    valid: &dyn Fn(f64) -> bool,
+    what: &str,
+    invalid: &Invalid<'_>,
+) -> Result<(), ScenarioError> {
+    let mut last = f64::NEG_INFINITY;
+    for (i, [at, value]) in pairs.iter().enumerate() {
+        if !(0.0..=length).contains(at) || *at <= last {
+            return Err(invalid(
+                &format!("{key}[{i}]"),
+                format!("{at} m is not on the route (0–{length:.1} m) after the one before"),
+            ));
+        }
+        if !valid(*value) {
+            return Err(invalid(
+                &format!("{key}[{i}]"),
+                format!("{value} is not {what}"),
+            ));
+        }
+        last = *at;
+    }
+    Ok(())
+}
+
+/// An `[[event]]`: when, which fault, for how long.
+fn event(
+    i: usize,
+    e: &RawEvent,
+    invalid: &Invalid<'_>,
+) -> Result<(Duration, Fault, Option<Duration>), ScenarioError> {
+    let key = |field: &str| format!("event[{i}].{field}");
+    if !(e.at_s >= 0.0 && e.at_s < 86_400.0) {
+        return Err(invalid(
+            &key("at_s"),
+            format!("{} is not a time in a run", e.at_s),
+        ));
+    }
+    let duration = match e.duration_s {
+        Some(d) if d > 0.0 && d < 86_400.0 => Some(Duration::from_secs_f64(d)),
+        Some(d) => {
+            return Err(invalid(
+                &key("duration_s"),
+                format!("{d} is not a duration"),
+            ))
+        }
+        None => None,
+    };
+    // The frames a fault aims at: a bus and an identifier sent on it.
+    let bus_and_id = |kind: &str| -> Result<(TugBus, u16), ScenarioError> {
+        let bus = e.bus.as_deref().and_then(TugBus::named).ok_or_else(|| {
+            invalid(
+                &key("bus"),
+                format!("{kind} needs bus = \"bus1\", \"bus2\", \"bus3\" or \"bus1b\""),
+            )
+        })?;
+        let id = e
+            .id
+            .filter(|id| *id <= 0x7FF)
+            .ok_or_else(|| invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier")))?;
+        Ok((bus, id))
+    };
+    let fault = match e.fault.as_str() {
+        "ads_silence" => Fault::AdsSilence,
+        "estop" => Fault::Estop,
+        "operator_reset" => Fault::OperatorReset,
+        "drive_silence" => {
+            let node = e.node.ok_or_else(|| invalid(&key("node"), "drive_silence needs the node ID".to_string()))?;
+            if !DRIVE_NODES.contains(&node) && !STEERING_NODES.contains(&node) {
+                return Err(invalid(&key("node"), format!("0x{node:02X} is not a drive (steering 0x11–0x14, wheels 0x21–0x24)")));
+            }
+            Fault::DriveSilence(node)
+        }
+        "sensor_fault" => {
+            let corner = e.corner.filter(|c| *c < 4).ok_or_else(|| invalid(&key("corner"), "sensor_fault needs corner 0 (FL) … 3 (RR)".to_string()))?;
+            let value = e.value.unwrap_or(0.0);
+            let sensor = match e.sensor.as_deref() {
+                Some("stuck") => SensorFault::Stuck(value),
+                Some("drift") => SensorFault::Drift(value),
+                Some("open") => SensorFault::OpenCircuit,
+                other => return Err(invalid(&key("sensor"), format!("{other:?} is not stuck, drift or open"))),
+            };
+            Fault::SensorFault(corner, sensor)
+        }
+        "corrupt_commands" => Fault::CorruptCommands,
+        "duplicate_commands" => Fault::DuplicateCommands,
+        "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
+        "driver_takeover" => Fault::DriverTakeover,
+        "ecu_bus_off" => Fault::EcuBusOff,
+        "bus_off" => {
+            let (bus, id) = bus_and_id("bus_off")?;
+            Fault::BusOff { bus, id }
+        }
+        "redundant_bus_loss" => Fault::RedundantBusLoss,
+        "forge_commands" => Fault::Attack(Attack::ForgeCommands),
+        "replay_commands" => Fault::Attack(Attack::ReplayCommands),
+        "forge_state" => Fault::Attack(Attack::ForgeState),
+        "flood" => Fault::Attack(Attack::Flood),
+        kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
+            let (bus, id) = bus_and_id(kind)?;
+            let tamper = match kind {
+                "corrupt_frames" => Tamper::FlipBit,
+                "duplicate_frames" => Tamper::Duplicate,
+                _ => Tamper::Delay(Duration::from_millis(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_frames needs delay_ms".to_string()))?)),
+            };
+            Fault::TamperFrames { bus, id, tamper }
+        }
+        other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood)"))),
+    };
+    Ok((Duration::from_secs_f64(e.at_s), fault, duration))
 }
 
 #[cfg(test)]
