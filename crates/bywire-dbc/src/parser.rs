@@ -369,66 +369,9 @@ impl Parser<'_> {
                 self.db.version = self.string()?;
                 Ok(())
             }
-            "NS_" => {
-                self.eat_punct(':');
-                while let Some(t) = self.peek() {
-                    if t.line_start && t.col == 1 {
-                        break;
-                    }
-                    if let Tok::Ident { text, .. } = &t.tok {
-                        let s = text.clone();
-                        self.db.new_symbols.push(s);
-                    }
-                    self.pos += 1;
-                }
-                Ok(())
-            }
-            "BS_" => {
-                self.eat_punct(':');
-                let start = self.peek().map(|t| t.start);
-                let mut has_string = false;
-                while let Some(t) = self.peek().filter(|t| !t.line_start) {
-                    has_string |= matches!(t.tok, Tok::Str(_));
-                    self.pos += 1;
-                }
-                let end = self.toks.get(self.pos.saturating_sub(1)).map(|t| t.end);
-                let (Some(s), Some(e)) = (start, end) else {
-                    return Ok(());
-                };
-                let content = self.text.get(s..e).unwrap_or("").trim();
-                // BS_ holds a baudrate and BTR values: numbers on one line. Anything else would
-                // not survive being written back, so it is reported and dropped.
-                if has_string || content.contains('\n') {
-                    return Err(self.error_at(
-                        at,
-                        "BS_ holds text other than a baudrate and BTR values",
-                        "BS_ content dropped",
-                    ));
-                }
-                if e > s {
-                    self.db.bit_timing = content.to_string();
-                }
-                Ok(())
-            }
-            "BU_" => {
-                self.eat_punct(':');
-                // Names on the line, and on indented lines after it (some files list one node
-                // a line); a keyword, or a word at the start of a line, begins the next statement.
-                let continues = |t: &Token| {
-                    !t.line_start
-                        || (t.col > 1
-                            && matches!(&t.tok, Tok::Ident { text, .. } if !KEYWORDS.contains(&text.as_str())))
-                };
-                while self.peek().is_some_and(continues) {
-                    let name = self.name()?;
-                    self.db.nodes.push(Node {
-                        name,
-                        comment: None,
-                        attributes: Vec::new(),
-                    });
-                }
-                Ok(())
-            }
+            "NS_" => self.new_symbols(),
+            "BS_" => self.bit_timing(at),
+            "BU_" => self.nodes(),
             "VAL_TABLE_" => {
                 let name = self.name()?;
                 let pairs = self.value_pairs()?;
@@ -448,25 +391,7 @@ impl Parser<'_> {
                 self.pending.senders.push((id, senders, at.clone()));
                 Ok(())
             }
-            "EV_" => {
-                let name = self.name()?;
-                self.punct(':')?;
-                let start = self.here().start;
-                while !self.eat_punct(';') {
-                    if self.next().is_none() {
-                        return Err(self.expected("';'"));
-                    }
-                }
-                let end = self.toks.get(self.pos - 1).map_or(start, |t| t.start);
-                self.db.env_vars.push(EnvVar {
-                    name,
-                    definition: self.text.get(start..end).unwrap_or("").trim().to_string(),
-                    comment: None,
-                    attributes: Vec::new(),
-                    value_descriptions: Vec::new(),
-                });
-                Ok(())
-            }
+            "EV_" => self.env_var(),
             "CM_" => self.comment(at),
             "BA_DEF_" => self.attribute_def(),
             "BA_DEF_DEF_" => {
@@ -506,33 +431,7 @@ impl Parser<'_> {
                 self.pending.values.push((target, pairs, at.clone()));
                 Ok(())
             }
-            "SIG_GROUP_" => {
-                let message_raw_id = self.unsigned("message id")?;
-                let name = self.name()?;
-                let repetitions = self.unsigned("repetitions")?;
-                self.punct(':')?;
-                let mut signals = Vec::new();
-                while !self.eat_punct(';') {
-                    if self.peek().is_none_or(|t| t.line_start) {
-                        let t = self.here();
-                        self.warn(
-                            &t,
-                            "missing ';' at the end of the statement",
-                            "statement ended at the line end",
-                        );
-                        break;
-                    }
-                    self.eat_punct(',');
-                    signals.push(self.name()?);
-                }
-                self.db.signal_groups.push(SignalGroup {
-                    message_raw_id,
-                    name,
-                    repetitions,
-                    signals,
-                });
-                Ok(())
-            }
+            "SIG_GROUP_" => self.signal_group(),
             "SIG_VALTYPE_" => {
                 let id = self.unsigned("message id")?;
                 let name = self.name()?;
@@ -544,43 +443,162 @@ impl Parser<'_> {
                 self.pending.valtypes.push((id, name, kind, t));
                 Ok(())
             }
-            "SG_MUL_VAL_" => {
-                let id = self.unsigned("message id")?;
-                let name = self.name()?;
-                let switch = self.name()?;
-                let mut ranges = Vec::new();
-                loop {
-                    let lo = self.range_bound()?;
-                    let hi = if self.eat_punct('-') {
-                        self.range_bound()?
-                    } else {
-                        // "0-3" lexes as 0 and -3
-                        let t = self.here();
-                        match self.number()? {
-                            Num::Int(n) if n <= 0 => u64::try_from(-n)
-                                .map_err(|_| self.error_at(&t, "bad range", "statement skipped"))?,
-                            _ => {
-                                return Err(self.error_at(
-                                    &t,
-                                    "expected a range such as 2-5",
-                                    "statement skipped",
-                                ))
-                            }
-                        }
-                    };
-                    ranges.push((lo, hi));
-                    if !self.eat_punct(',') {
-                        break;
-                    }
-                }
-                self.end()?;
-                self.pending
-                    .mux_vals
-                    .push((id, name, MuxCondition { switch, ranges }, at.clone()));
-                Ok(())
-            }
+            "SG_MUL_VAL_" => self.mux_values(at),
             _ => self.unknown(kw, at),
         }
+    }
+
+    /// `NS_`: the new symbols, up to the next statement.
+    fn new_symbols(&mut self) -> Step<()> {
+        self.eat_punct(':');
+        while let Some(t) = self.peek() {
+            if t.line_start && t.col == 1 {
+                break;
+            }
+            if let Tok::Ident { text, .. } = &t.tok {
+                let s = text.clone();
+                self.db.new_symbols.push(s);
+            }
+            self.pos += 1;
+        }
+        Ok(())
+    }
+
+    /// `BS_`: the baudrate and BTR values, kept as written.
+    fn bit_timing(&mut self, at: &Token) -> Step<()> {
+        self.eat_punct(':');
+        let start = self.peek().map(|t| t.start);
+        let mut has_string = false;
+        while let Some(t) = self.peek().filter(|t| !t.line_start) {
+            has_string |= matches!(t.tok, Tok::Str(_));
+            self.pos += 1;
+        }
+        let end = self.toks.get(self.pos.saturating_sub(1)).map(|t| t.end);
+        let (Some(s), Some(e)) = (start, end) else {
+            return Ok(());
+        };
+        let content = self.text.get(s..e).unwrap_or("").trim();
+        // BS_ holds a baudrate and BTR values: numbers on one line. Anything else would
+        // not survive being written back, so it is reported and dropped.
+        if has_string || content.contains('\n') {
+            return Err(self.error_at(
+                at,
+                "BS_ holds text other than a baudrate and BTR values",
+                "BS_ content dropped",
+            ));
+        }
+        if e > s {
+            self.db.bit_timing = content.to_string();
+        }
+        Ok(())
+    }
+
+    /// `BU_`: the nodes.
+    fn nodes(&mut self) -> Step<()> {
+        self.eat_punct(':');
+        // Names on the line, and on indented lines after it (some files list one node
+        // a line); a keyword, or a word at the start of a line, begins the next statement.
+        let continues = |t: &Token| {
+            !t.line_start
+                || (t.col > 1
+                    && matches!(&t.tok, Tok::Ident { text, .. } if !KEYWORDS.contains(&text.as_str())))
+        };
+        while self.peek().is_some_and(continues) {
+            let name = self.name()?;
+            self.db.nodes.push(Node {
+                name,
+                comment: None,
+                attributes: Vec::new(),
+            });
+        }
+        Ok(())
+    }
+
+    /// `EV_`: an environment variable, its definition kept as written.
+    fn env_var(&mut self) -> Step<()> {
+        let name = self.name()?;
+        self.punct(':')?;
+        let start = self.here().start;
+        while !self.eat_punct(';') {
+            if self.next().is_none() {
+                return Err(self.expected("';'"));
+            }
+        }
+        let end = self.toks.get(self.pos - 1).map_or(start, |t| t.start);
+        self.db.env_vars.push(EnvVar {
+            name,
+            definition: self.text.get(start..end).unwrap_or("").trim().to_string(),
+            comment: None,
+            attributes: Vec::new(),
+            value_descriptions: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// `SIG_GROUP_`: a signal group.
+    fn signal_group(&mut self) -> Step<()> {
+        let message_raw_id = self.unsigned("message id")?;
+        let name = self.name()?;
+        let repetitions = self.unsigned("repetitions")?;
+        self.punct(':')?;
+        let mut signals = Vec::new();
+        while !self.eat_punct(';') {
+            if self.peek().is_none_or(|t| t.line_start) {
+                let t = self.here();
+                self.warn(
+                    &t,
+                    "missing ';' at the end of the statement",
+                    "statement ended at the line end",
+                );
+                break;
+            }
+            self.eat_punct(',');
+            signals.push(self.name()?);
+        }
+        self.db.signal_groups.push(SignalGroup {
+            message_raw_id,
+            name,
+            repetitions,
+            signals,
+        });
+        Ok(())
+    }
+
+    /// `SG_MUL_VAL_`: the multiplexor values that select a signal.
+    fn mux_values(&mut self, at: &Token) -> Step<()> {
+        let id = self.unsigned("message id")?;
+        let name = self.name()?;
+        let switch = self.name()?;
+        let mut ranges = Vec::new();
+        loop {
+            let lo = self.range_bound()?;
+            let hi = if self.eat_punct('-') {
+                self.range_bound()?
+            } else {
+                // "0-3" lexes as 0 and -3
+                let t = self.here();
+                match self.number()? {
+                    Num::Int(n) if n <= 0 => u64::try_from(-n)
+                        .map_err(|_| self.error_at(&t, "bad range", "statement skipped"))?,
+                    _ => {
+                        return Err(self.error_at(
+                            &t,
+                            "expected a range such as 2-5",
+                            "statement skipped",
+                        ))
+                    }
+                }
+            };
+            ranges.push((lo, hi));
+            if !self.eat_punct(',') {
+                break;
+            }
+        }
+        self.end()?;
+        self.pending
+            .mux_vals
+            .push((id, name, MuxCondition { switch, ranges }, at.clone()));
+        Ok(())
     }
 
     fn range_bound(&mut self) -> Step<u64> {

@@ -191,22 +191,17 @@ struct Decoding<'a> {
     time_unit: Option<TimeUnitArg>,
 }
 
-fn convert(
-    inputs: &[PathBuf],
-    output: &Path,
-    format: Option<&str>,
-    selection: &Selection,
-    decoding: &Decoding<'_>,
-    out: &mut impl Write,
-) -> Result<()> {
-    let format = match format {
+/// The output's format: the one --format names, else the one its name says; with a DBC, a
+/// name without an extension is the decoded dataset's folder.
+fn output_format(output: &Path, format: Option<&str>, decoded: bool) -> Result<Format> {
+    Ok(match format {
         Some(name) => Format::named(name).ok_or_else(|| {
             let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
             anyhow!("--format {name}: not a format ({})", names.join(", "))
         })?,
         // A name with an extension no log format has (dec.csv) is refused: it was taken as
         // the dataset's directory and silently became a folder of Parquet files.
-        None if decoding.dbc.is_some()
+        None if decoded
             && Format::from_path(output).is_none()
             && output.extension().is_some() =>
         {
@@ -222,14 +217,25 @@ fn convert(
             )
         }
         // A name without an extension, with a DBC: the decoded dataset's directory.
-        None if decoding.dbc.is_some() && Format::from_path(output).is_none() => Format::Parquet,
+        None if decoded && Format::from_path(output).is_none() => Format::Parquet,
         None => Format::from_path(output).ok_or_else(|| {
             anyhow!(
                 "{}: the output's format is not known from its name (.log, .asc, .blf, .trc, .pcapng, .mf4, .mcap, .parquet); give --format",
                 output.display()
             )
         })?,
-    };
+    })
+}
+
+fn convert(
+    inputs: &[PathBuf],
+    output: &Path,
+    format: Option<&str>,
+    selection: &Selection,
+    decoding: &Decoding<'_>,
+    out: &mut impl Write,
+) -> Result<()> {
+    let format = output_format(output, format, decoding.dbc.is_some())?;
     let compression =
         CompressionArg::for_output(decoding.compression, format, &output.display().to_string())?;
     let times = TimeUnitArg::for_output(decoding.time_unit, format, &output.display().to_string())?;
@@ -319,25 +325,39 @@ fn convert(
         })?,
     }
     pump.progress.finish();
-    let frames = pump.frames - unsupported;
+    let left_out = pump.left_out;
+    report(
+        out,
+        output,
+        pump.frames - unsupported,
+        unsupported,
+        decoder.is_some(),
+        left_out,
+        &notes,
+    )
+}
+
+/// What `convert` wrote: the frames, the CAN FD frames a ROS message cannot hold, what the
+/// selection left out, and the notes.
+fn report(
+    out: &mut impl Write,
+    output: &Path,
+    frames: u64,
+    unsupported: u64,
+    decoded: bool,
+    left_out: u64,
+    notes: &[String],
+) -> Result<()> {
     write!(out, "{frames} frames written to {}", output.display())?;
     if unsupported > 0 {
-        let raw = if decoder.is_some() {
-            " raw channel"
-        } else {
-            ""
-        };
+        let raw = if decoded { " raw channel" } else { "" };
         write!(
             out,
             " ({unsupported} CAN FD frames left out of the{raw}: can_msgs/msg/Frame has no CAN FD)"
         )?;
     }
-    if pump.left_out > 0 {
-        write!(
-            out,
-            " ({} left out by --channel, --from or --to)",
-            pump.left_out
-        )?;
+    if left_out > 0 {
+        write!(out, " ({left_out} left out by --channel, --from or --to)")?;
     }
     for note in notes {
         write!(out, "; {note}")?;

@@ -175,17 +175,8 @@ impl Drop for ListenOnlyGuard {
     }
 }
 
-pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    // Everything is checked before a bus is touched.
-    let format = Format::named(&args.format).ok_or_else(|| {
-        let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
-        anyhow!("--format {}: one of {}", args.format, names.join(", "))
-    })?;
-    let compression = CompressionArg::for_output(
-        args.compression,
-        format,
-        &format!("--format {}", args.format),
-    )?;
+/// The windows kept around triggers, if --pre or --post asks for them.
+fn window(args: &Args) -> Result<Option<Window>> {
     let window = match (args.pre, args.post) {
         (None, None) => None,
         (pre, post) => Some(Window {
@@ -197,8 +188,16 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if window.is_some() && args.triggers.is_empty() {
         bail!("--pre and --post keep the windows around triggers: give at least one --trigger");
     }
-    let mut metadata = serde_json::Map::new();
-    let decoder = match (&args.dbc, &args.profile) {
+    Ok(window)
+}
+
+/// The database triggers decode with (--dbc, or a profile's), and what the recording's
+/// metadata says of it.
+fn decoder(
+    args: &Args,
+    metadata: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<Option<Decoder>> {
+    Ok(match (&args.dbc, &args.profile) {
         (Some(path), _) => {
             let database = crate::support::dbc::load(path, false)?;
             metadata.insert(
@@ -220,12 +219,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             Some(Decoder::new(loaded.database))
         }
         (None, None) => None,
-    };
-    let triggers: Vec<Trigger> = args
-        .triggers
-        .iter()
-        .map(|t| Trigger::parse(t, decoder.as_ref()))
-        .collect::<Result<_>>()?;
+    })
+}
+
+/// The buses' bitrates as --bitrate gives them (BUS=BITRATE).
+fn bitrates(args: &Args) -> Result<serde_json::Map<String, serde_json::Value>> {
     let mut bitrates = serde_json::Map::new();
     for entry in &args.bitrate {
         let (bus, rate) = entry
@@ -238,15 +236,18 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             .ok_or_else(|| anyhow!("--bitrate {entry}: a bitrate from 1000 to 16000000"))?;
         bitrates.insert(bus.to_string(), json!(rate));
     }
-    let buses: Vec<BusArg> = args
-        .buses
-        .iter()
-        .map(|b| busarg::parse(b))
-        .collect::<Result<_>>()?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    Ok(bitrates)
+}
 
-    // Open every bus (all before recording starts), each as quiet as it can be made.
+/// Every bus opened (all before recording starts), each as quiet as it can be made: the
+/// endpoints, the interfaces switched to listen-only (switched back when the guard goes), and
+/// what each bus is (said on stderr too). A SocketCAN interface's bitrate is read where
+/// --bitrate did not give it.
+fn open_quietly(
+    args: &Args,
+    buses: &[BusArg],
+    bitrates: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<Opened> {
     let everything = Filtering {
         error_mask: ErrorMask::ALL,
         ..Filtering::default()
@@ -254,7 +255,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let mut opened = Vec::new();
     let mut switched = ListenOnlyGuard(Vec::new());
     let mut listening = serde_json::Map::new();
-    for bus in &buses {
+    for bus in buses {
         let (endpoint, state) = if args.shared {
             let endpoint = bus
                 .open_filtered(Some(everything.clone()))
@@ -287,6 +288,55 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }
         opened.push(endpoint);
     }
+    Ok(Opened {
+        endpoints: opened,
+        switched,
+        listening,
+    })
+}
+
+/// The buses opened for a recording.
+struct Opened {
+    endpoints: Vec<Box<dyn bywire_bus::Bus>>,
+    /// The interfaces switched to listen-only, switched back when it goes.
+    switched: ListenOnlyGuard,
+    /// What each bus is: listen-only or why not.
+    listening: serde_json::Map<String, serde_json::Value>,
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    // Everything is checked before a bus is touched.
+    let format = Format::named(&args.format).ok_or_else(|| {
+        let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
+        anyhow!("--format {}: one of {}", args.format, names.join(", "))
+    })?;
+    let compression = CompressionArg::for_output(
+        args.compression,
+        format,
+        &format!("--format {}", args.format),
+    )?;
+    let window = window(args)?;
+    let mut metadata = serde_json::Map::new();
+    let decoder = decoder(args, &mut metadata)?;
+    let triggers: Vec<Trigger> = args
+        .triggers
+        .iter()
+        .map(|t| Trigger::parse(t, decoder.as_ref()))
+        .collect::<Result<_>>()?;
+    let mut bitrates = bitrates(args)?;
+    let buses: Vec<BusArg> = args
+        .buses
+        .iter()
+        .map(|b| busarg::parse(b))
+        .collect::<Result<_>>()?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+
+    let Opened {
+        endpoints: opened,
+        switched,
+        listening,
+    } = open_quietly(args, &buses, &mut bitrates)?;
 
     let started = now_ns();
     let name = args.name.clone().unwrap_or_else(|| compact_utc(started));
