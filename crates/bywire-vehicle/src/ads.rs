@@ -34,14 +34,22 @@ pub struct AdsConfig {
     pub brake_burst_spacing: Duration,
     /// Repeat period after the burst (20 Hz).
     pub brake_repeat: Duration,
-    /// Wheelbase and track, m, for odometry from the four wheels.
-    pub wheelbase: f64,
-    /// Track, m.
-    pub track: f64,
+    /// The vehicle's four wheels, for odometry from their speeds and angles: a vehicle's own
+    /// (a profile's `[vehicle]`); without them, no odometry.
+    pub wheels: Option<WheelGeometry>,
     /// Steering within this of its setpoint counts as reached, degrees.
     pub steering_tolerance: f64,
     /// As a node, send every frame on both command buses ([`Ads::PORT_A`], [`Ads::PORT_B`]).
     pub redundant: bool,
+}
+
+/// Where a four-wheel-steered vehicle's wheels are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WheelGeometry {
+    /// Wheelbase, m.
+    pub wheelbase: f64,
+    /// Track, m.
+    pub track: f64,
 }
 
 impl AdsConfig {
@@ -61,8 +69,7 @@ impl Default for AdsConfig {
             echo_window: 3,
             brake_burst_spacing: Duration::from_millis(4),
             brake_repeat: Duration::from_millis(50),
-            wheelbase: 3.2,
-            track: 1.8,
+            wheels: None,
             steering_tolerance: 0.5,
             redundant: false,
         }
@@ -179,7 +186,8 @@ pub struct Ads<W: AdsWire> {
     sensors_sequence: FeedbackSequence,
     angles_sequence: FeedbackSequence,
     stats: FeedbackStats,
-    wheels: Swerve<4>,
+    /// The wheels' kinematics, where the vehicle's geometry is known.
+    wheels: Option<Swerve<4>>,
     odometry: Odometry,
     last_sensors: Option<Timestamp>,
     /// A steering setpoint not yet reached: (setpoint, since).
@@ -294,7 +302,7 @@ impl<W: AdsWire> Ads<W> {
             sensors_sequence: FeedbackSequence::new(wheel_bits, timeout),
             angles_sequence: FeedbackSequence::new(wheel_bits, timeout),
             stats: FeedbackStats::default(),
-            wheels: four_wheel(config.wheelbase, config.track),
+            wheels: config.wheels.map(|w| four_wheel(w.wheelbase, w.track)),
             odometry: Odometry::default(),
             last_sensors: None,
             steering_pending: None,
@@ -586,7 +594,8 @@ impl<W: AdsWire> Ads<W> {
             .state
             .wheel_angles
             .fresh(now, self.config.feedback_timeout());
-        if let (Some(angles), Some(last)) = (angles, self.last_sensors) {
+        if let (Some(angles), Some(last), Some(wheels)) = (angles, self.last_sensors, &self.wheels)
+        {
             let mut states = [WheelState::default(); 4];
             for ((state, speed), angle) in states.iter_mut().zip(speeds).zip(angles) {
                 *state = WheelState {
@@ -594,7 +603,7 @@ impl<W: AdsWire> Ads<W> {
                     speed,
                 };
             }
-            if let Some(twist) = self.wheels.forward(&states) {
+            if let Some(twist) = wheels.forward(&states) {
                 let dt = now.saturating_since(last).as_secs_f64();
                 let pose = self.odometry.update(dt, twist);
                 self.state.odometry.set(now, pose);

@@ -13,7 +13,7 @@ use bywire_core::FileError;
 use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
-use crate::ads::AdsConfig;
+use crate::ads::{AdsConfig, WheelGeometry};
 use crate::bindings::{Bindings, CommandBindings};
 use crate::command::ControlCommand;
 use crate::supervisor::{Cascade, SupervisorConfig};
@@ -894,10 +894,10 @@ impl LoadedProfile {
             c.brake_burst_spacing = Duration::from_millis(b.burst_spacing_ms);
             c.brake_repeat = Duration::from_millis(b.repeat_ms);
         }
-        if let Some(v) = &p.vehicle {
-            c.wheelbase = v.wheelbase_m;
-            c.track = v.track_m;
-        }
+        c.wheels = p.vehicle.as_ref().map(|v| WheelGeometry {
+            wheelbase: v.wheelbase_m,
+            track: v.track_m,
+        });
         c
     }
 }

@@ -440,11 +440,30 @@ fn two_of_three_outvotes_one_sensor() {
     assert_eq!(two_of_three([1.0, 2.0, 3.0], 0.05), TwoOfThree::Failed);
 }
 
+/// The reference tug's wheels.
+const TUG_WHEELS: bywire_vehicle::ads::WheelGeometry = bywire_vehicle::ads::WheelGeometry {
+    wheelbase: 3.2,
+    track: 1.8,
+};
+
 /// Feed the ADS 2 s of wheel feedback at 50 Hz: every wheel at `angles` (degrees) and
 /// `speeds` (m/s); the odometry pose at the end.
 fn odometry_after(angles: [f64; 4], speeds: [f64; 4]) -> bywire_control::kinematics::Pose {
+    odometry_with(Some(TUG_WHEELS), angles, speeds).unwrap()
+}
+
+/// As `odometry_after`, with `wheels` as the ADS knows them (or not).
+fn odometry_with(
+    wheels: Option<bywire_vehicle::ads::WheelGeometry>,
+    angles: [f64; 4],
+    speeds: [f64; 4],
+) -> Option<bywire_control::kinematics::Pose> {
     use bywire_tug::messages::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
-    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
+    let config = AdsConfig {
+        wheels,
+        ..AdsConfig::default()
+    };
+    let mut ads = Ads::with_wire(config, ReferenceWire);
     for k in 0..=100u64 {
         let now = ms(20 * k);
         let mut a = VehicleToAdsWheelAngles::default();
@@ -462,7 +481,14 @@ fn odometry_after(angles: [f64; 4], speeds: [f64; 4]) -> bywire_control::kinemat
         s.set_counter_raw(k % 16);
         ads.on_frame(now, Port::MAIN, &sealed(VehicleToAdsSensors::ID, s.0));
     }
-    ads.state().odometry.value.unwrap()
+    ads.state().odometry.value
+}
+
+/// A vehicle whose geometry the ADS was not given has no odometry (no wheelbase is assumed).
+#[test]
+fn without_the_vehicles_geometry_there_is_no_odometry() {
+    assert!(odometry_with(Some(TUG_WHEELS), [0.0; 4], [1.0; 4]).is_some());
+    assert!(odometry_with(None, [0.0; 4], [1.0; 4]).is_none());
 }
 
 #[test]
