@@ -54,6 +54,7 @@ pub mod od;
 pub mod pdo;
 pub mod queue;
 pub mod roboteq;
+pub mod scan;
 pub mod sdo;
 
 pub use abort::Abort;

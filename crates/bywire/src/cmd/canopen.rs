@@ -12,13 +12,11 @@ use bywire_canopen::cia402::Drive;
 use bywire_canopen::device::{Application, Device, DeviceEvent, Plain};
 use bywire_canopen::eds::{self, Severity};
 use bywire_canopen::master::{Master, MasterEvent};
-use bywire_canopen::nmt::{parse_heartbeat, HeartbeatEvent, NmtCommand, NmtState};
+use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand, NmtState};
 use bywire_canopen::od::{DataType, ObjectDictionary};
 use bywire_canopen::roboteq::Mdc1460;
+use bywire_canopen::scan::Scanner;
 use bywire_canopen::sdo::{SdoOutcome, TransferMode};
-use bywire_canopen::{Node, Port};
-use bywire_core::frame::{Frame, Id};
-use bywire_core::time::Timestamp;
 
 use crate::support::busarg;
 use crate::support::interrupt::interrupt_flag;
@@ -484,46 +482,11 @@ fn command_name(command: NmtCommand) -> &'static str {
     }
 }
 
-/// Who answered a scan.
-#[derive(Default)]
-struct Scanner {
-    asked: bool,
-    found: std::collections::BTreeMap<u8, Option<NmtState>>,
-}
-
-impl Node for Scanner {
-    fn on_frame(&mut self, _now: Timestamp, _port: Port, frame: &Frame) {
-        if let Some((node, state)) = parse_heartbeat(frame) {
-            self.found.insert(node, Some(state));
-        } else if let Some(Id::Standard(id)) = frame.id() {
-            if (0x581..=0x5FF).contains(&id.as_raw()) && !frame.is_remote() {
-                let node = u8::try_from(id.as_raw() - 0x580).unwrap_or(0);
-                self.found.entry(node).or_insert(None);
-            }
-        }
-    }
-    fn poll(&mut self, _now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
-        if !self.asked {
-            self.asked = true;
-            for node in 1..=127u16 {
-                let id = Id::standard(0x600 + u32::from(node))
-                    .unwrap_or(Id::Standard(bywire_core::frame::StandardId::ZERO));
-                if let Ok(frame) = Frame::classic(id, &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]) {
-                    out(Port::MAIN, frame);
-                }
-            }
-        }
-    }
-    fn next_deadline(&self) -> Option<Timestamp> {
-        None
-    }
-}
-
 fn scan(bus_text: &str, wait: Duration, out: &mut impl Write) -> Result<()> {
     let bus = open_bus(bus_text)?;
     let mut scanner = Scanner::default();
     runner::run_until(bus, &mut scanner, &interrupt_flag(), Some(wait), |_| false)?;
-    if scanner.found.is_empty() {
+    if scanner.found().is_empty() {
         writeln!(out, "no nodes answered within {} ms", wait.as_millis())?;
         return Ok(());
     }
@@ -531,7 +494,7 @@ fn scan(bus_text: &str, wait: Duration, out: &mut impl Write) -> Result<()> {
         out,
         "node  state            device type  vendor      product     revision    serial      name"
     )?;
-    for (node, state) in &scanner.found {
+    for (node, state) in scanner.found() {
         let read = |index: u16, sub: u8| -> Result<Option<Vec<u8>>> {
             let mut master = Master::new(0, Duration::ZERO, Duration::from_millis(100))
                 .with_sdo_timeout(Duration::from_millis(300));
