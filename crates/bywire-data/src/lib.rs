@@ -11,7 +11,8 @@
 //! - [`table`]: a table of named columns written as Parquet (the dataset command's);
 //! - [`dataset`]: a vehicle's log as rows at a fixed rate by role (commands, feedback,
 //!   odometry), from its profile;
-//! - [`latency`]: command-to-actuator latency and step metrics from a log, by role.
+//! - [`latency`]: command-to-actuator latency and step metrics from a log, by role;
+//! - [`truth`]: a simulator run's ground truth, looked up by time for a dataset's grid.
 //!
 //! ```
 //! use bywire_data::lake::LakeCompression;
@@ -30,3 +31,4 @@ pub mod table;
 #[cfg(test)]
 mod test_support;
 mod thrift;
+pub mod truth;

@@ -2,13 +2,14 @@
 //! `bywire_data::table`), with its card (JSON and Markdown) and, for simulator runs,
 //! the ground truth (`truth.csv`) joined on the grid.
 
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, ensure, Context, Result};
+use anyhow::{anyhow, ensure, Context, Result};
 use bywire_data::dataset::{Builder, Column, Config, Role, Row, Summary};
 use bywire_data::latency::SignalRef;
 use bywire_data::table::{TableColumn, TableWriter};
+use bywire_data::truth::Truth;
 use bywire_dbc::decoder::Decoder;
 use serde_json::json;
 
@@ -59,99 +60,6 @@ pub struct Args {
     /// The folder to write.
     #[arg(long)]
     out: PathBuf,
-}
-
-/// A truth.csv's lines after its header.
-type TruthLines = std::io::Lines<std::io::BufReader<std::fs::File>>;
-
-/// A simulator run's truth table, read whole (a run's truth is small: 100 rows a second).
-struct Truth {
-    columns: Vec<String>,
-    rows: Vec<(f64, Vec<f64>)>,
-    next: usize,
-}
-
-impl Truth {
-    /// The header: the file's lines after it, the truth_* column names, and which CSV
-    /// columns they are (the numeric ones; the steering mode is text).
-    fn header(path: &Path) -> Result<(TruthLines, Vec<String>, Vec<usize>)> {
-        let file =
-            std::fs::File::open(path).with_context(|| format!("--truth {}", path.display()))?;
-        let mut lines = std::io::BufReader::new(file).lines();
-        let header = lines
-            .next()
-            .transpose()?
-            .ok_or_else(|| anyhow!("--truth {}: empty", path.display()))?;
-        let names: Vec<&str> = header.split(',').collect();
-        ensure!(
-            names.first() == Some(&"t_s"),
-            "--truth {}: not a truth.csv (its first column is not t_s)",
-            path.display()
-        );
-        let numeric: Vec<usize> = (1..names.len())
-            .filter(|&i| names[i] != "steering_mode")
-            .collect();
-        let columns = numeric
-            .iter()
-            .map(|&i| format!("truth_{}", names[i]))
-            .collect();
-        Ok((lines, columns, numeric))
-    }
-
-    fn read(path: &Path) -> Result<Truth> {
-        let (lines, columns, numeric) = Truth::header(path)?;
-        let mut rows = Vec::new();
-        for (n, line) in lines.enumerate() {
-            let line = line?;
-            let cells: Vec<&str> = line.split(',').collect();
-            let number = |i: usize| -> Result<f64> {
-                cells
-                    .get(i)
-                    .and_then(|c| c.parse::<f64>().ok())
-                    .ok_or_else(|| {
-                        anyhow!(
-                            "--truth {}: line {}: column {} is not a number",
-                            path.display(),
-                            n + 2,
-                            i + 1
-                        )
-                    })
-            };
-            let t = number(0)?;
-            let values = numeric.iter().map(|&i| number(i)).collect::<Result<_>>()?;
-            if rows
-                .last()
-                .is_some_and(|(last, _): &(f64, Vec<f64>)| t < *last)
-            {
-                bail!(
-                    "--truth {}: line {}: time goes backwards",
-                    path.display(),
-                    n + 2
-                );
-            }
-            rows.push((t, values));
-        }
-        Ok(Truth {
-            columns,
-            rows,
-            next: 0,
-        })
-    }
-
-    /// The last row at or before `t` (s), or NaNs before the first.
-    fn at(&mut self, t: f64) -> Vec<f64> {
-        while self
-            .rows
-            .get(self.next)
-            .is_some_and(|(rt, _)| *rt <= t + 1e-9)
-        {
-            self.next += 1;
-        }
-        match self.next.checked_sub(1).and_then(|i| self.rows.get(i)) {
-            Some((_, values)) => values.clone(),
-            None => vec![f64::NAN; self.columns.len()],
-        }
-    }
 }
 
 /// One run's inputs: its logs, its truth, its name in the `run` column.
@@ -228,7 +136,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let columns = Builder::new(&decoder, config.clone())?.columns().to_vec();
     // The first run's truth header names the truth columns (each run's rows are read in turn).
     let truth_columns = match sources.iter().find_map(|s| s.truth.as_deref()) {
-        Some(path) => Truth::header(path)?.1,
+        Some(path) => Truth::columns_of(path)?,
         None => Vec::new(),
     };
     let mut table_columns: Vec<TableColumn> = columns
@@ -247,7 +155,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     for name in &truth_columns {
         table_columns.push(TableColumn {
             name: name.clone(),
-            unit: truth_unit(name).into(),
+            unit: Truth::unit(name).into(),
         });
     }
     let folder = &args.out;
@@ -266,7 +174,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         let truth = source.truth.as_deref().map(Truth::read).transpose()?;
         if let Some(t) = &truth {
             ensure!(
-                t.columns == truth_columns,
+                t.columns() == truth_columns,
                 "{}: its columns differ from the first run's truth",
                 source.truth.as_deref().unwrap_or(Path::new("")).display()
             );
@@ -374,20 +282,6 @@ fn build(
         return Err(e).context("writing dataset.parquet");
     }
     Ok(summary)
-}
-
-/// The unit a truth.csv column's name carries.
-fn truth_unit(name: &str) -> &'static str {
-    [
-        ("_m_s", "m/s"),
-        ("_rad_s", "rad/s"),
-        ("_deg", "deg"),
-        ("_rad", "rad"),
-        ("_m", "m"),
-    ]
-    .iter()
-    .find(|(suffix, _)| name.ends_with(suffix))
-    .map_or("", |(_, unit)| unit)
 }
 
 fn card(
