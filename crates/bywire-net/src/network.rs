@@ -97,20 +97,11 @@ impl<N> From<NodeHandle<N>> for NodeKey {
     }
 }
 
-/// A node the network owns: a [`Node`] it can hand back as its own type.
-trait Owned: Node + Any {
-    fn as_any(&self) -> &dyn Any;
-    fn as_any_mut(&mut self) -> &mut dyn Any;
-}
+/// A node the network owns: a [`Node`] it can hand back as its own type (seen as `dyn Any`
+/// by trait upcasting: one virtual call, the type's, per lookup).
+trait Owned: Node + Any {}
 
-impl<N: Node + Any> Owned for N {
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
-    }
-}
+impl<N: Node + Any> Owned for N {}
 
 /// A node borrowed from its network to be changed: when the guard is dropped, the runner
 /// asks the node's deadline again at its next run (a new command, an operator's action may
@@ -384,13 +375,15 @@ impl Network {
 
     /// A node, to look at.
     pub fn node<N: Node + 'static>(&self, handle: NodeHandle<N>) -> Option<&N> {
-        self.nodes.get(handle.key.0)?.as_any().downcast_ref()
+        let node: &dyn Any = &**self.nodes.get(handle.key.0)?;
+        node.downcast_ref()
     }
 
     /// A node, to change: the guard tells the runner to ask its deadline again.
     pub fn node_mut<N: Node + 'static>(&mut self, handle: NodeHandle<N>) -> Option<NodeMut<'_, N>> {
         let i = handle.key.0;
-        let node = self.nodes.get_mut(i)?.as_any_mut().downcast_mut()?;
+        let node: &mut dyn Any = &mut **self.nodes.get_mut(i)?;
+        let node = node.downcast_mut()?;
         let changed = &mut self.slots.get_mut(i)?.changed;
         Some(NodeMut {
             node,
@@ -413,7 +406,7 @@ impl Network {
         let Some(node) = self
             .nodes
             .get_mut(i)
-            .and_then(|n| n.as_any_mut().downcast_mut::<N>())
+            .and_then(|n| (&mut **n as &mut dyn Any).downcast_mut::<N>())
         else {
             return false;
         };
