@@ -70,7 +70,7 @@ impl Loop {
                 }
             }
             let a = self.vcu().actuators(ms(self.now));
-            let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+            let speed = common::plant_speed(&a);
             let mut vcu = self.net.node_mut(self.vcu_node).unwrap();
             vcu.set_feedback(speed, a.steering);
         }

@@ -11,6 +11,8 @@
     clippy::indexing_slicing
 )]
 
+mod common;
+
 use std::time::Duration;
 
 use bywire_core::node::Port;
@@ -178,7 +180,7 @@ impl Rig {
                 self.watchdog_log.push((self.now, after));
             }
             let a = self.supervisor().actuators(now);
-            let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+            let speed = common::plant_speed(&a);
             let mut supervisor = self.net.node_mut(self.supervisor).unwrap();
             supervisor.set_feedback(speed, a.steering);
         }

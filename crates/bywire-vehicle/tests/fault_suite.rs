@@ -167,7 +167,7 @@ impl<W: SuiteWire> Rig<W> {
                 self.watchdog_log.push((at, after));
             }
             let a = self.supervisor().actuators(self.net.now());
-            let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+            let speed = common::plant_speed(&a);
             self.supervisor_mut().set_feedback(speed, a.steering);
         }
     }

@@ -493,7 +493,7 @@ fn the_shuttle_runs_closed_loop_by_profile_on_the_bit_timed_bus() {
         net.run_for(Duration::from_millis(1));
         let now = Timestamp::from_millis(t);
         let a = net.node(vcu).unwrap().actuators(now);
-        let speed = if a.brake > 0.0 { 0.0 } else { a.velocity };
+        let speed = common::plant_speed(&a);
         net.node_mut(vcu).unwrap().set_feedback(speed, a.steering);
         let (ads, vcu) = (net.node(ads).unwrap(), net.node(vcu).unwrap());
         if t == 18_000 {

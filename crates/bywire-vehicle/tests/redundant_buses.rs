@@ -163,7 +163,7 @@ impl<W: AdsWire + VehicleWire + Clone + 'static> Rig<W> {
                 self.log.push((now.as_nanos() / 1_000_000, after));
             }
             let act = self.supervisor().actuators(now);
-            let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
+            let speed = common::plant_speed(&act);
             let mut supervisor = self.net.node_mut(self.supervisor).unwrap();
             supervisor.set_feedback(speed, 0.0);
         }
@@ -368,7 +368,7 @@ fn hand_fed<W: AdsWire + VehicleWire + Clone + 'static>(
             log.push((k, supervisor.watchdog()));
         }
         let act = supervisor.actuators(now);
-        let speed = if act.brake > 0.0 { 0.0 } else { act.velocity };
+        let speed = common::plant_speed(&act);
         supervisor.set_feedback(speed, 0.0);
     }
     (

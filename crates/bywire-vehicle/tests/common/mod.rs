@@ -4,6 +4,16 @@
 use bywire_core::{Frame, Id, Timestamp};
 use bywire_tug::messages::{self, AdsToVehicleControl, ControlMode};
 
+/// The rigs' plant, the same in every suite: the vehicle's speed is its speed setpoint, 0
+/// while it brakes (its steering, where a rig feeds it back, is at its setpoint).
+pub fn plant_speed(a: &bywire_vehicle::supervisor::Actuators) -> f64 {
+    if a.brake > 0.0 {
+        0.0
+    } else {
+        a.velocity
+    }
+}
+
 pub fn ms(t: u64) -> Timestamp {
     Timestamp::from_millis(t)
 }
