@@ -14,7 +14,10 @@ use bywire_dbc::{Database, Message};
 use serde::Deserialize;
 
 use crate::ads::{AdsConfig, WheelGeometry};
-use crate::bindings::{Bindings, CommandBindings};
+use crate::bindings::{
+    BatteryBindings, Bindings, CommandBindings, EmergencyBrakeBindings, ImuBindings,
+    RequestBindings, StateBindings, WheelBindings,
+};
 use crate::command::ControlCommand;
 use crate::supervisor::{Cascade, SupervisorConfig};
 
@@ -511,7 +514,7 @@ impl Profile {
         let dbc_text = read_dbc(&profile.dbc).map_err(dbc_error)?;
         let (database, _) = bywire_dbc::parse_str(&dbc_text, bywire_dbc::Mode::Lenient)
             .map_err(|e| dbc_error(format!("{}: {e}", profile.dbc)))?;
-        let bindings = crate::bindings::bind(&profile, &database, file)?;
+        let bindings = bind(&profile, &database, file)?;
         Checker {
             file,
             db: &database,
@@ -523,6 +526,197 @@ impl Profile {
             bindings,
         })
     }
+}
+
+/// Finds a profile's names in its DBC, each error naming the profile's key.
+struct Finder<'a> {
+    file: &'a str,
+    db: &'a Database,
+}
+
+impl Finder<'_> {
+    fn invalid(&self, key: &str, reason: String) -> ProfileError {
+        FileError::invalid(self.file, key, reason).into()
+    }
+
+    fn message(&self, key: &str, name: &str) -> Result<(usize, &Message), ProfileError> {
+        self.db
+            .messages
+            .iter()
+            .enumerate()
+            .find(|(_, m)| m.name == name)
+            .ok_or_else(|| self.invalid(key, format!("no message '{name}' in the DBC")))
+    }
+
+    fn signal(&self, message: &Message, key: &str, name: &str) -> Result<usize, ProfileError> {
+        message
+            .signals
+            .iter()
+            .position(|s| s.name == name)
+            .ok_or_else(|| {
+                self.invalid(
+                    key,
+                    format!("no signal '{name}' in message '{}'", message.name),
+                )
+            })
+    }
+
+    fn optional(
+        &self,
+        message: &Message,
+        key: &str,
+        name: &Option<String>,
+    ) -> Result<Option<usize>, ProfileError> {
+        name.as_deref()
+            .map(|n| self.signal(message, key, n))
+            .transpose()
+    }
+
+    fn command(&self, p: &Profile) -> Result<Option<CommandBindings>, ProfileError> {
+        let Some(c) = &p.command else {
+            return Ok(None);
+        };
+        let (index, m) = self.message("command.message", &c.message)?;
+        let signal = |role: &str, name: &str| self.signal(m, &format!("command.{role}"), name);
+        let optional =
+            |role: &str, name: &Option<String>| self.optional(m, &format!("command.{role}"), name);
+        Ok(Some(CommandBindings {
+            message: index,
+            steering: signal("steering", &c.steering)?,
+            velocity: signal("velocity", &c.velocity)?,
+            brake: signal("brake", &c.brake)?,
+            gear: signal("gear", &c.gear)?,
+            control_mode: signal("control_mode", &c.control_mode)?,
+            steering_mode: signal("steering_mode", &c.steering_mode)?,
+            engage: signal("engage", &c.engage)?,
+            operator_reset: signal("operator_reset", &c.operator_reset)?,
+            counter: signal("counter", &c.counter)?,
+            checksum: signal("checksum", &c.checksum)?,
+            turn_indicators: optional("turn_indicators", &c.turn_indicators)?,
+            hazard_lights: optional("hazard_lights", &c.hazard_lights)?,
+        }))
+    }
+
+    fn state(&self, p: &Profile) -> Result<Option<StateBindings>, ProfileError> {
+        let Some(s) = &p.state else {
+            return Ok(None);
+        };
+        let (index, m) = self.message("state.message", &s.message)?;
+        let signal = |role: &str, name: &str| self.signal(m, &format!("state.{role}"), name);
+        let optional =
+            |role: &str, name: &Option<String>| self.optional(m, &format!("state.{role}"), name);
+        Ok(Some(StateBindings {
+            message: index,
+            steering: signal("steering", &s.steering)?,
+            velocity: signal("velocity", &s.velocity)?,
+            control_mode: signal("control_mode", &s.control_mode)?,
+            steering_mode: signal("steering_mode", &s.steering_mode)?,
+            heartbeat_echo: signal("heartbeat_echo", &s.heartbeat_echo)?,
+            counter: signal("counter", &s.counter)?,
+            checksum: signal("checksum", &s.checksum)?,
+            watchdog_level: optional("watchdog_level", &s.watchdog_level)?,
+            estop_state: optional("estop_state", &s.estop_state)?,
+            warning: optional("warning", &s.warning)?,
+            driver_override: optional("driver_override", &s.driver_override)?,
+            gear: optional("gear", &s.gear)?,
+            steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
+            turn_indicators: optional("turn_indicators", &s.turn_indicators)?,
+            hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
+        }))
+    }
+
+    fn wheels(
+        &self,
+        role: &str,
+        wheels: &Option<WheelSignals>,
+    ) -> Result<Option<WheelBindings>, ProfileError> {
+        let Some(w) = wheels else {
+            return Ok(None);
+        };
+        let (index, m) = self.message(&format!("{role}.message"), &w.message)?;
+        let [fl, fr, rl, rr] = w.signals.as_slice() else {
+            return Err(self.invalid(
+                &format!("{role}.signals"),
+                "four signals: FL, FR, RL, RR".into(),
+            ));
+        };
+        let mut signals = [0; 4];
+        for (i, (slot, name)) in signals.iter_mut().zip([fl, fr, rl, rr]).enumerate() {
+            *slot = self.signal(m, &format!("{role}.signals[{i}]"), name)?;
+        }
+        Ok(Some(WheelBindings {
+            message: index,
+            signals,
+        }))
+    }
+
+    fn bind(&self, p: &Profile) -> Result<Bindings, ProfileError> {
+        let imu = match &p.imu {
+            None => None,
+            Some(imu) => {
+                let (index, m) = self.message("imu.message", &imu.message)?;
+                Some(ImuBindings {
+                    message: index,
+                    yaw_rate: self.signal(m, "imu.yaw_rate", &imu.yaw_rate)?,
+                    accel_x: self.optional(m, "imu.accel_x", &imu.accel_x)?,
+                    accel_y: self.optional(m, "imu.accel_y", &imu.accel_y)?,
+                })
+            }
+        };
+        let battery = match &p.battery {
+            None => None,
+            Some(b) => {
+                let (index, m) = self.message("battery.message", &b.message)?;
+                Some(BatteryBindings {
+                    message: index,
+                    voltage: self.signal(m, "battery.voltage", &b.voltage)?,
+                    current: self.optional(m, "battery.current", &b.current)?,
+                    soc: self.optional(m, "battery.soc", &b.soc)?,
+                })
+            }
+        };
+        let estop = match &p.estop {
+            None => None,
+            Some(e) => {
+                let (index, m) = self.message("estop.message", &e.message)?;
+                Some(RequestBindings {
+                    message: index,
+                    request: self.signal(m, "estop.request", &e.request)?,
+                })
+            }
+        };
+        let emergency_brake = match &p.emergency_brake {
+            None => None,
+            Some(b) => {
+                let (index, m) = self.message("emergency_brake.message", &b.message)?;
+                Some(EmergencyBrakeBindings {
+                    message: index,
+                    request: self.signal(m, "emergency_brake.request", &b.request)?,
+                    deceleration: self.signal(
+                        m,
+                        "emergency_brake.deceleration",
+                        &b.deceleration,
+                    )?,
+                })
+            }
+        };
+        Ok(Bindings {
+            command: self.command(p)?,
+            state: self.state(p)?,
+            wheel_speeds: self.wheels("wheel_speeds", &p.wheel_speeds)?,
+            wheel_angles: self.wheels("wheel_angles", &p.wheel_angles)?,
+            imu,
+            battery,
+            estop,
+            emergency_brake,
+        })
+    }
+}
+
+/// Every role of `profile` (the file `file`) found in `db`; the first name it does not have is
+/// refused, naming the key (`command.steering`) and what is missing.
+fn bind(profile: &Profile, db: &Database, file: &str) -> Result<Bindings, ProfileError> {
+    Finder { file, db }.bind(profile)
 }
 
 struct Checker<'a> {
