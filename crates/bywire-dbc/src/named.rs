@@ -309,16 +309,6 @@ fn start_raw(signal: &Signal) -> Option<f64> {
     })
 }
 
-/// Python's `round`: half to even.
-pub fn round_half_even(f: f64) -> f64 {
-    let rounded = f.round();
-    if (f - f.trunc()).abs() == 0.5 {
-        2.0 * (f / 2.0).round()
-    } else {
-        rounded
-    }
-}
-
 /// A value resolved for its signal: the number, and whether a description named it.
 #[derive(Clone, Copy)]
 struct Resolved {
@@ -359,15 +349,19 @@ pub fn encode_named(
     encoding: Encoding,
 ) -> Result<Vec<u8>, NamedError> {
     let signals = &message.signals;
-    let position = |name: &str| {
-        signals
-            .iter()
-            .position(|s| s.display_name() == name || s.name == name)
-    };
+    // Each value's signal, found once.
+    let positions: Vec<Option<usize>> = values
+        .iter()
+        .map(|named| {
+            signals
+                .iter()
+                .position(|s| s.display_name() == named.signal || s.name == named.signal)
+        })
+        .collect();
     // Each signal's value (the last given for it wins, as in a dict).
     let mut given: Vec<Option<&Named<'_>>> = vec![None; signals.len()];
-    for named in values {
-        if let Some(slot) = position(named.signal).and_then(|i| given.get_mut(i)) {
+    for (named, position) in values.iter().zip(&positions) {
+        if let Some(slot) = position.and_then(|i| given.get_mut(i)) {
             *slot = Some(named);
         }
     }
@@ -376,8 +370,9 @@ pub fn encode_named(
     if encoding.refuse_unused {
         let unused: Vec<String> = values
             .iter()
-            .filter(|n| position(n.signal).is_none_or(|i| needed.get(i) != Some(&true)))
-            .map(|n| n.signal.to_string())
+            .zip(&positions)
+            .filter(|(_, at)| at.is_none_or(|i| needed.get(i) != Some(&true)))
+            .map(|(n, _)| n.signal.to_string())
             .collect();
         if !unused.is_empty() {
             return Err(NamedError::Unused {
@@ -428,7 +423,7 @@ pub fn encode_named(
         } else {
             if encoding.range == RangeCheck::Declared {
                 // The raw value the physical one encodes to, for the descriptions.
-                let raw_key = round_half_even(
+                let raw_key = f64::round_ties_even(
                     (value.number.as_f64() - signal.offset.as_f64()) / signal.factor.as_f64(),
                 );
                 // Whole and within ±1e18 (checked), so the conversion is exact.
@@ -604,7 +599,7 @@ fn raw_bits(signal: &Signal, number: Value) -> Result<u64, NamedError> {
         (_, Value::Int(v)) => u64::from_ne_bytes(v.to_ne_bytes()),
         (_, Value::UInt(v)) => v,
         (_, Value::Float(f)) => {
-            let rounded = round_half_even(f);
+            let rounded = f64::round_ties_even(f);
             if !rounded.is_finite() {
                 return Err(NamedError::NotFinite {
                     signal: signal.display_name().to_string(),

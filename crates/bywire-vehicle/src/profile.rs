@@ -529,17 +529,9 @@ impl Profile {
 }
 
 /// Finds a profile's names in its DBC, each error naming the profile's key.
-struct Finder<'a> {
-    file: &'a str,
-    db: &'a Database,
-}
-
-impl Finder<'_> {
-    fn invalid(&self, key: &str, reason: String) -> ProfileError {
-        FileError::invalid(self.file, key, reason).into()
-    }
-
-    fn message(&self, key: &str, name: &str) -> Result<(usize, &Message), ProfileError> {
+/// The finding of a profile's names in its DBC: each name's place, each error naming the key.
+impl Checker<'_> {
+    fn message_at(&self, key: &str, name: &str) -> Result<(usize, &Message), ProfileError> {
         self.db
             .messages
             .iter()
@@ -572,11 +564,11 @@ impl Finder<'_> {
             .transpose()
     }
 
-    fn command(&self, p: &Profile) -> Result<Option<CommandBindings>, ProfileError> {
+    fn bind_command(&self, p: &Profile) -> Result<Option<CommandBindings>, ProfileError> {
         let Some(c) = &p.command else {
             return Ok(None);
         };
-        let (index, m) = self.message("command.message", &c.message)?;
+        let (index, m) = self.message_at("command.message", &c.message)?;
         let signal = |role: &str, name: &str| self.signal(m, &format!("command.{role}"), name);
         let optional =
             |role: &str, name: &Option<String>| self.optional(m, &format!("command.{role}"), name);
@@ -597,11 +589,11 @@ impl Finder<'_> {
         }))
     }
 
-    fn state(&self, p: &Profile) -> Result<Option<StateBindings>, ProfileError> {
+    fn bind_state(&self, p: &Profile) -> Result<Option<StateBindings>, ProfileError> {
         let Some(s) = &p.state else {
             return Ok(None);
         };
-        let (index, m) = self.message("state.message", &s.message)?;
+        let (index, m) = self.message_at("state.message", &s.message)?;
         let signal = |role: &str, name: &str| self.signal(m, &format!("state.{role}"), name);
         let optional =
             |role: &str, name: &Option<String>| self.optional(m, &format!("state.{role}"), name);
@@ -625,7 +617,7 @@ impl Finder<'_> {
         }))
     }
 
-    fn wheels(
+    fn bind_wheels(
         &self,
         role: &str,
         wheels: &Option<WheelSignals>,
@@ -633,12 +625,9 @@ impl Finder<'_> {
         let Some(w) = wheels else {
             return Ok(None);
         };
-        let (index, m) = self.message(&format!("{role}.message"), &w.message)?;
+        let (index, m) = self.message_at(&format!("{role}.message"), &w.message)?;
         let [fl, fr, rl, rr] = w.signals.as_slice() else {
-            return Err(self.invalid(
-                &format!("{role}.signals"),
-                "four signals: FL, FR, RL, RR".into(),
-            ));
+            return Err(self.invalid(&format!("{role}.signals"), "four signals: FL, FR, RL, RR"));
         };
         let mut signals = [0; 4];
         for (i, (slot, name)) in signals.iter_mut().zip([fl, fr, rl, rr]).enumerate() {
@@ -654,7 +643,7 @@ impl Finder<'_> {
         let imu = match &p.imu {
             None => None,
             Some(imu) => {
-                let (index, m) = self.message("imu.message", &imu.message)?;
+                let (index, m) = self.message_at("imu.message", &imu.message)?;
                 Some(ImuBindings {
                     message: index,
                     yaw_rate: self.signal(m, "imu.yaw_rate", &imu.yaw_rate)?,
@@ -666,7 +655,7 @@ impl Finder<'_> {
         let battery = match &p.battery {
             None => None,
             Some(b) => {
-                let (index, m) = self.message("battery.message", &b.message)?;
+                let (index, m) = self.message_at("battery.message", &b.message)?;
                 Some(BatteryBindings {
                     message: index,
                     voltage: self.signal(m, "battery.voltage", &b.voltage)?,
@@ -678,7 +667,7 @@ impl Finder<'_> {
         let estop = match &p.estop {
             None => None,
             Some(e) => {
-                let (index, m) = self.message("estop.message", &e.message)?;
+                let (index, m) = self.message_at("estop.message", &e.message)?;
                 Some(RequestBindings {
                     message: index,
                     request: self.signal(m, "estop.request", &e.request)?,
@@ -688,7 +677,7 @@ impl Finder<'_> {
         let emergency_brake = match &p.emergency_brake {
             None => None,
             Some(b) => {
-                let (index, m) = self.message("emergency_brake.message", &b.message)?;
+                let (index, m) = self.message_at("emergency_brake.message", &b.message)?;
                 Some(EmergencyBrakeBindings {
                     message: index,
                     request: self.signal(m, "emergency_brake.request", &b.request)?,
@@ -701,10 +690,10 @@ impl Finder<'_> {
             }
         };
         Ok(Bindings {
-            command: self.command(p)?,
-            state: self.state(p)?,
-            wheel_speeds: self.wheels("wheel_speeds", &p.wheel_speeds)?,
-            wheel_angles: self.wheels("wheel_angles", &p.wheel_angles)?,
+            command: self.bind_command(p)?,
+            state: self.bind_state(p)?,
+            wheel_speeds: self.bind_wheels("wheel_speeds", &p.wheel_speeds)?,
+            wheel_angles: self.bind_wheels("wheel_angles", &p.wheel_angles)?,
             imu,
             battery,
             estop,
@@ -716,9 +705,10 @@ impl Finder<'_> {
 /// Every role of `profile` (the file `file`) found in `db`; the first name it does not have is
 /// refused, naming the key (`command.steering`) and what is missing.
 fn bind(profile: &Profile, db: &Database, file: &str) -> Result<Bindings, ProfileError> {
-    Finder { file, db }.bind(profile)
+    Checker { file, db }.bind(profile)
 }
 
+/// Checks a profile against its DBC, each error naming the profile's key.
 struct Checker<'a> {
     file: &'a str,
     db: &'a Database,
@@ -730,11 +720,7 @@ impl Checker<'_> {
     }
 
     fn message(&self, key: &str, name: &str) -> Result<&Message, ProfileError> {
-        self.db
-            .messages
-            .iter()
-            .find(|m| m.name == name)
-            .ok_or_else(|| self.invalid(key, format!("no message '{name}' in the DBC")))
+        self.message_at(key, name).map(|(_, m)| m)
     }
 
     fn positive(&self, key: &str, value: f64) -> Result<(), ProfileError> {
