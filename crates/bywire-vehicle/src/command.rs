@@ -291,6 +291,40 @@ impl EstopCode {
     }
 }
 
+vocabulary!(
+    /// How far a fail-operational vehicle has degraded, as it reports it (ordered: a later
+    /// level is a worse one).
+    DegradationLevel, "degradation level", default Nominal, [
+        /// Every layer of redundancy in place.
+        Nominal = 0, "nominal";
+        /// One layer lost: reduced limits, the mission carries on.
+        Degraded = 1, "degraded";
+        /// Drive on at reduced limits to the next safe stop point and stop there.
+        MinimalRisk = 2, "minimal-risk" | "minimal risk";
+        /// Brake where it stands.
+        SafeStop = 3, "safe-stop" | "safe stop";
+    ]
+);
+
+vocabulary!(
+    /// What a fail-operational mechanism found, as the vehicle reports the reason for its
+    /// degradation level.
+    FaultClass, "fault class", default SensorChannelOut, [
+        /// One channel of a 2-out-of-3 sensor latched out: two left.
+        SensorChannelOut = 1, "sensor-channel-out";
+        /// A voted sensor has no value to trust.
+        SensorLost = 2, "sensor-lost";
+        /// The standby control ECU took over.
+        ControlTakeover = 3, "control-takeover";
+        /// The standby control ECU is out: no one left to take over.
+        StandbyLost = 4, "standby-lost";
+        /// The backup actuator took over from the primary.
+        ActuatorBackup = 5, "actuator-backup";
+        /// The backup actuator failed too.
+        ActuatorLost = 6, "actuator-lost";
+    ]
+);
+
 /// The setpoints and requests of one command (without the wire's counter and checksum): what
 /// the ADS side sends and what the supervisor takes.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -10,6 +10,10 @@
 //!   command becomes a controlled stop), the emergency-brake burst, and feedback validated into
 //!   a [`ads::VehicleState`] whose fields carry their age.
 //! - [`redundancy`]: the two-bus voter and a 2-out-of-3 sensor voter.
+//! - Fail-operational layers: [`arbitration`] (an A/B pair of control ECUs, one active, one
+//!   in hot standby, takeover without split brain), [`backup`] (a primary actuator and its
+//!   backup, switched on a failed feedback check) and [`degradation`] (levels from nominal to
+//!   safe stop, the rule per fault class, the latch).
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
@@ -51,10 +55,13 @@ extern crate alloc;
 #[cfg(feature = "std")]
 pub mod acceptance;
 pub mod ads;
+pub mod arbitration;
 pub mod autoware;
+pub mod backup;
 #[cfg(feature = "std")]
 pub mod bindings;
 pub mod command;
+pub mod degradation;
 #[cfg(feature = "std")]
 pub mod profile;
 #[cfg(feature = "std")]

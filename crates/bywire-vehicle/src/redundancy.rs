@@ -1,5 +1,5 @@
-//! Redundancy: the same command sent on two buses and voted on at the receiver, and a
-//! 2-out-of-3 voter for triplicated sensors.
+//! Redundancy: the same command sent on two buses and voted on at the receiver
+//! ([`DualVoter`]), and a 2-out-of-3 voter for a triplicated sensor ([`TripleVoter`]).
 //!
 //! [`DualVoter`] follows the reference logic: both copies fresh and equal → accept; one fresh
 //! and the other timed out → accept the fresh one in degraded mode; both fresh but different,
@@ -288,43 +288,197 @@ impl<T: Copy + PartialEq> DualVoter<T> {
     }
 }
 
-/// The outcome of a 2-out-of-3 vote.
+/// Tuning of a [`TripleVoter`] for one signal role.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum TwoOfThree {
-    /// All three agree: their median.
-    Agreed(f64),
-    /// Two agree: their mean, and the index of the one outvoted.
-    Outvoted {
-        /// The voted value.
-        value: f64,
-        /// The sensor that disagreed (or was not finite).
-        outlier: usize,
-    },
-    /// No two agree.
-    Failed,
+pub struct TripleConfig {
+    /// Two readings agree when they differ by at most this (the role's unit).
+    pub tolerance: f64,
+    /// A channel outvoted this long without a break is latched out.
+    pub persistence: Duration,
+    /// A channel with no reading for this long is silent, and latched out.
+    pub timeout: Duration,
 }
 
-/// Vote on three readings of one quantity: two agree when within `tolerance` of each other.
-pub fn two_of_three(readings: [f64; 3], tolerance: f64) -> TwoOfThree {
-    let agree = |x: f64, y: f64| x.is_finite() && y.is_finite() && (x - y).abs() <= tolerance;
-    let [a, b, c] = readings;
-    match (agree(a, b), agree(a, c), agree(b, c)) {
-        (true, true, true) => {
-            let median = a.max(b).min(a.min(b).max(c));
-            TwoOfThree::Agreed(median)
+/// Why a channel was latched out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ChannelFault {
+    /// It disagreed with the other two, which agreed, for the persistence.
+    Deviating,
+    /// No reading within the timeout.
+    Silent,
+}
+
+/// One channel's health, as the voter last judged it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ChannelHealth {
+    /// Counted in the vote.
+    Healthy,
+    /// Outvoted since `since`, not yet for the persistence: still counted, its reading not used.
+    Suspect {
+        /// When the disagreement began.
+        since: Timestamp,
+    },
+    /// Out of the vote until [`TripleVoter::reset`].
+    Out(ChannelFault),
+}
+
+/// Why a 2-out-of-3 vote has no value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TripleFailure {
+    /// Three channels in, no two of them agree.
+    NoMajority,
+    /// Two channels left (one latched out) and they disagree: which is right cannot be told.
+    Disagree,
+    /// Fewer than two channels left.
+    TooFew,
+}
+
+/// The outcome of a 2-out-of-3 vote.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TripleVote {
+    /// Three channels in: the median when all agree, else the mean of the two that do.
+    Triple(f64),
+    /// Two channels left, agreeing: their mean. A second loss leaves no majority.
+    Duplex(f64),
+    /// No value to trust: the caller goes to its safe state.
+    Failed(TripleFailure),
+}
+
+impl TripleVote {
+    /// The voted value, if there is one.
+    pub fn value(self) -> Option<f64> {
+        match self {
+            TripleVote::Triple(v) | TripleVote::Duplex(v) => Some(v),
+            TripleVote::Failed(_) => None,
         }
-        (true, _, _) => TwoOfThree::Outvoted {
-            value: (a + b) / 2.0,
-            outlier: 2,
-        },
-        (_, true, _) => TwoOfThree::Outvoted {
-            value: (a + c) / 2.0,
-            outlier: 1,
-        },
-        (_, _, true) => TwoOfThree::Outvoted {
-            value: (b + c) / 2.0,
-            outlier: 0,
-        },
-        _ => TwoOfThree::Failed,
+    }
+}
+
+/// A 2-out-of-3 voter over three channels of one quantity (three steering-angle sensors, say).
+///
+/// Readings come in with [`receive`](Self::receive); [`vote`](Self::vote) is the one
+/// transition. With three channels in, a channel that disagrees with the other two while they
+/// agree is outvoted (its reading is not used) and, once that has lasted the persistence,
+/// latched out; a channel silent for the timeout is latched out at once; a reading that is
+/// not finite agrees with nothing. With two left the vote is 2-out-of-2: a disagreement fails
+/// it, since nothing says which is right. Latched-out channels stay out until
+/// [`reset`](Self::reset), which the caller keeps for a standstill and an operator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TripleVoter {
+    config: TripleConfig,
+    /// Each channel's last reading and when it came.
+    readings: [Option<(f64, Timestamp)>; 3],
+    health: [ChannelHealth; 3],
+    /// When the voter started: a channel that never speaks is silent a timeout after.
+    started: Timestamp,
+}
+
+impl TripleVoter {
+    /// A voter started at `now` with no readings and every channel healthy.
+    pub fn new(config: TripleConfig, now: Timestamp) -> Self {
+        TripleVoter {
+            config,
+            readings: [None; 3],
+            health: [ChannelHealth::Healthy; 3],
+            started: now,
+        }
+    }
+
+    /// The tuning.
+    pub fn config(&self) -> TripleConfig {
+        self.config
+    }
+
+    /// A reading from `channel` (0, 1 or 2; others are ignored).
+    pub fn receive(&mut self, channel: usize, now: Timestamp, value: f64) {
+        if let Some(slot) = self.readings.get_mut(channel) {
+            *slot = Some((value, now));
+        }
+    }
+
+    /// Each channel's health after the last vote.
+    pub fn health(&self) -> [ChannelHealth; 3] {
+        self.health
+    }
+
+    /// Every channel back in, as at start (for the caller's standstill reset).
+    pub fn reset(&mut self, now: Timestamp) {
+        self.health = [ChannelHealth::Healthy; 3];
+        self.readings = [None; 3];
+        self.started = now;
+    }
+
+    /// The vote at `now`, judging each channel's health on the way.
+    pub fn vote(&mut self, now: Timestamp) -> TripleVote {
+        let config = self.config;
+        let started = self.started;
+        // Silence first: a silent channel is out before the others are compared.
+        for (health, reading) in self.health.iter_mut().zip(self.readings) {
+            let heard = reading.map_or(started, |(_, at)| at);
+            if !matches!(health, ChannelHealth::Out(_))
+                && now.saturating_since(heard) > config.timeout
+            {
+                *health = ChannelHealth::Out(ChannelFault::Silent);
+            }
+        }
+        let value = |i: usize| match (self.health.get(i), self.readings.get(i)) {
+            (Some(ChannelHealth::Out(_)), _) | (None, _) | (_, None | Some(None)) => None,
+            (_, Some(Some((v, _)))) => Some(*v),
+        };
+        let agree =
+            |x: f64, y: f64| x.is_finite() && y.is_finite() && (x - y).abs() <= config.tolerance;
+        match (value(0), value(1), value(2)) {
+            (Some(a), Some(b), Some(c)) => {
+                let (ab, ac, bc) = (agree(a, b), agree(a, c), agree(b, c));
+                // The channel that agrees with neither of two that agree, if any.
+                let outlier = match (ab, ac, bc) {
+                    (true, false, false) => Some(2),
+                    (false, true, false) => Some(1),
+                    (false, false, true) => Some(0),
+                    _ => None,
+                };
+                if !(ab || ac || bc) {
+                    return TripleVote::Failed(TripleFailure::NoMajority);
+                }
+                for (i, health) in self.health.iter_mut().enumerate() {
+                    *health = match (*health, outlier == Some(i)) {
+                        (ChannelHealth::Suspect { since }, true)
+                            if now.saturating_since(since) >= config.persistence =>
+                        {
+                            ChannelHealth::Out(ChannelFault::Deviating)
+                        }
+                        (ChannelHealth::Suspect { since }, true) => {
+                            ChannelHealth::Suspect { since }
+                        }
+                        (ChannelHealth::Healthy, true) if config.persistence.is_zero() => {
+                            ChannelHealth::Out(ChannelFault::Deviating)
+                        }
+                        (ChannelHealth::Healthy, true) => ChannelHealth::Suspect { since: now },
+                        (ChannelHealth::Out(fault), _) => ChannelHealth::Out(fault),
+                        (_, false) => ChannelHealth::Healthy,
+                    };
+                }
+                TripleVote::Triple(match outlier {
+                    Some(0) => (b + c) / 2.0,
+                    Some(1) => (a + c) / 2.0,
+                    Some(_) => (a + b) / 2.0,
+                    // All agree, or the middle one agrees with both ends: the median.
+                    None => a.max(b).min(a.min(b).max(c)),
+                })
+            }
+            (Some(x), Some(y), None) | (Some(x), None, Some(y)) | (None, Some(x), Some(y)) => {
+                if agree(x, y) {
+                    for health in &mut self.health {
+                        if let ChannelHealth::Suspect { .. } = health {
+                            *health = ChannelHealth::Healthy;
+                        }
+                    }
+                    TripleVote::Duplex((x + y) / 2.0)
+                } else {
+                    TripleVote::Failed(TripleFailure::Disagree)
+                }
+            }
+            _ => TripleVote::Failed(TripleFailure::TooFew),
+        }
     }
 }

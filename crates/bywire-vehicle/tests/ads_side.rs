@@ -19,7 +19,7 @@ use bywire_net::network::{Network, NodeHandle};
 use bywire_net::sim::NodeId;
 use bywire_tug::messages::{self, ControlMode, Gear, VehicleToAdsState};
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::redundancy::{two_of_three, Channel, DualVoter, TwoOfThree, Vote, VoteFailure};
+use bywire_vehicle::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
 use bywire_vehicle::wire::VehicleWire;
 use common::{ms, sealed};
@@ -415,29 +415,6 @@ fn dual_voter_leaves_out_a_bus_further_behind_than_it_pairs_by_time() {
     a_copies(&mut v);
     v.receive(Channel::B, ms(65), (7, 1));
     assert_eq!(v.vote(ms(65)), Vote::Pending);
-}
-
-#[test]
-fn two_of_three_outvotes_one_sensor() {
-    assert_eq!(
-        two_of_three([1.0, 1.01, 0.99], 0.05),
-        TwoOfThree::Agreed(1.0)
-    );
-    assert_eq!(
-        two_of_three([1.0, 5.0, 1.02], 0.05),
-        TwoOfThree::Outvoted {
-            value: 1.01,
-            outlier: 1
-        }
-    );
-    assert_eq!(
-        two_of_three([f64::NAN, 2.0, 2.0], 0.05),
-        TwoOfThree::Outvoted {
-            value: 2.0,
-            outlier: 0
-        }
-    );
-    assert_eq!(two_of_three([1.0, 2.0, 3.0], 0.05), TwoOfThree::Failed);
 }
 
 /// The reference tug's wheels.

@@ -1,0 +1,815 @@
+//! The fail-operational mechanisms checked over their whole (bounded) state spaces: the
+//! 2-out-of-3 voter against an independent statement of its rules, the A/B arbitration over
+//! every interleaving of two sides, lost heartbeats and single faults, the actuator pair and
+//! the degradation latch over every short sequence of what they can be told.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    missing_docs
+)]
+
+use std::collections::HashSet;
+use std::time::Duration;
+
+use bywire_core::Timestamp;
+use bywire_vehicle::arbitration::{
+    Arbiter, ArbiterConfig, ArbiterInputs, Heartbeat, OutReason, Role, Side, TakeoverReason,
+};
+use bywire_vehicle::backup::{ActuatorFault, ActuatorPair, Feedback, FeedbackCheck, InCharge};
+use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
+use bywire_vehicle::degradation::{Degradation, DegradationPolicy, Fault};
+use bywire_vehicle::redundancy::{
+    ChannelFault, ChannelHealth, TripleConfig, TripleFailure, TripleVote, TripleVoter,
+};
+
+fn ms(t: u64) -> Timestamp {
+    Timestamp::from_millis(t)
+}
+
+// ---------------------------------------------------------------- the 2-out-of-3 voter
+
+/// What one channel does in one step of the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Reading {
+    /// The true value.
+    Good,
+    /// Far from it (stuck, drifted, or a second agreeing pair elsewhere).
+    Off,
+    /// Nothing this step.
+    Silent,
+}
+
+const GOOD: f64 = 10.0;
+const OFF: f64 = 12.0;
+const TRIPLE: TripleConfig = TripleConfig {
+    tolerance: 0.5,
+    persistence: Duration::from_millis(20),
+    timeout: Duration::from_millis(25),
+};
+const TRIPLE_STEP: u64 = 10;
+
+/// The model's own account of one channel: its last reading and when, and whether it is in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Channel {
+    last: Option<(f64, Timestamp)>,
+    out: Option<ChannelFault>,
+    /// Since when it has been the lone dissenter from an agreeing pair.
+    dissenting_since: Option<Timestamp>,
+}
+
+/// The rules of `TripleVoter`'s documentation, stated again from scratch: one step of the
+/// reference model, returning the vote it expects.
+fn reference_vote(channels: &mut [Channel; 3], now: Timestamp, started: Timestamp) -> TripleVote {
+    for c in channels.iter_mut() {
+        let heard = c.last.map_or(started, |(_, at)| at);
+        if c.out.is_none() && now.saturating_since(heard) > TRIPLE.timeout {
+            c.out = Some(ChannelFault::Silent);
+        }
+    }
+    let agree =
+        |x: f64, y: f64| x.is_finite() && y.is_finite() && (x - y).abs() <= TRIPLE.tolerance;
+    let live: Vec<(usize, f64)> = channels
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.out.is_none())
+        .filter_map(|(i, c)| c.last.map(|(v, _)| (i, v)))
+        .collect();
+    match live.len() {
+        3 => {
+            let v = [live[0].1, live[1].1, live[2].1];
+            let agrees_with = |i: usize| (0..3).filter(|&j| j != i && agree(v[i], v[j])).count();
+            if (0..3).all(|i| agrees_with(i) == 0) {
+                return TripleVote::Failed(TripleFailure::NoMajority);
+            }
+            let dissenter = (0..3).find(|&i| {
+                agrees_with(i) == 0 && (0..3).filter(|&j| j != i).all(|j| agrees_with(j) == 1)
+            });
+            for (i, c) in channels.iter_mut().enumerate() {
+                if dissenter == Some(i) {
+                    let since = *c.dissenting_since.get_or_insert(now);
+                    if now.saturating_since(since) >= TRIPLE.persistence {
+                        c.out = Some(ChannelFault::Deviating);
+                        c.dissenting_since = None;
+                    }
+                } else {
+                    c.dissenting_since = None;
+                }
+            }
+            match dissenter {
+                Some(d) => {
+                    let pair: Vec<f64> = (0..3).filter(|&i| i != d).map(|i| v[i]).collect();
+                    TripleVote::Triple((pair[0] + pair[1]) / 2.0)
+                }
+                None => {
+                    let mut sorted = v;
+                    sorted.sort_by(f64::total_cmp);
+                    TripleVote::Triple(sorted[1])
+                }
+            }
+        }
+        2 => {
+            for c in channels.iter_mut() {
+                c.dissenting_since = None;
+            }
+            let (x, y) = (live[0].1, live[1].1);
+            if agree(x, y) {
+                TripleVote::Duplex((x + y) / 2.0)
+            } else {
+                TripleVote::Failed(TripleFailure::Disagree)
+            }
+        }
+        _ => TripleVote::Failed(TripleFailure::TooFew),
+    }
+}
+
+fn same_vote(a: TripleVote, b: TripleVote) -> bool {
+    match (a, b) {
+        (TripleVote::Triple(x), TripleVote::Triple(y))
+        | (TripleVote::Duplex(x), TripleVote::Duplex(y)) => (x - y).abs() < 1e-12,
+        (x, y) => x == y,
+    }
+}
+
+#[test]
+fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
+    // A reading that is not a number disagrees with everything, as `Off` does with `Good`;
+    // the test below has one.
+    const ALPHABET: [Reading; 3] = [Reading::Good, Reading::Off, Reading::Silent];
+    const DEPTH: u64 = 7;
+    let started = ms(0);
+    let mut level = vec![(
+        TripleVoter::new(TRIPLE, started),
+        [Channel {
+            last: None,
+            out: None,
+            dissenting_since: None,
+        }; 3],
+    )];
+    let mut checked = 0u64;
+    for depth in 1..=DEPTH {
+        let now = ms(depth * TRIPLE_STEP);
+        let mut next = Vec::new();
+        let mut seen = HashSet::new();
+        for (voter, model) in &level {
+            for inputs in 0..ALPHABET.len().pow(3) {
+                let mut voter = *voter;
+                let mut model = *model;
+                let readings = [inputs % 3, (inputs / 3) % 3, inputs / 9].map(|i| ALPHABET[i]);
+                for (i, reading) in readings.iter().enumerate() {
+                    let value = match reading {
+                        Reading::Good => GOOD,
+                        Reading::Off => OFF,
+                        Reading::Silent => continue,
+                    };
+                    voter.receive(i, now, value);
+                    model[i].last = Some((value, now));
+                }
+                let before = voter.health();
+                let vote = voter.vote(now);
+                let expected = reference_vote(&mut model, now, started);
+                assert!(
+                    same_vote(vote, expected),
+                    "at {now:?} after {readings:?}: voted {vote:?}, the rules say {expected:?}"
+                );
+                for (i, (was, is)) in before.iter().zip(voter.health()).enumerate() {
+                    // Out is for good; in or out agrees with the model.
+                    if let ChannelHealth::Out(fault) = was {
+                        assert_eq!(is, ChannelHealth::Out(*fault));
+                    }
+                    assert_eq!(
+                        matches!(is, ChannelHealth::Out(_))
+                            .then(|| model[i].out)
+                            .flatten(),
+                        match is {
+                            ChannelHealth::Out(f) => Some(f),
+                            _ => None,
+                        }
+                    );
+                    assert_eq!(model[i].out.is_some(), matches!(is, ChannelHealth::Out(_)));
+                }
+                // The value, when there is one, is the reading of two channels still in.
+                if let Some(v) = vote.value() {
+                    let backing = (0..3)
+                        .filter(|&i| model[i].out.is_none())
+                        .filter(|&i| {
+                            model[i]
+                                .last
+                                .is_some_and(|(r, _)| (r - v).abs() <= TRIPLE.tolerance)
+                        })
+                        .count();
+                    assert!(backing >= 2, "{v} backed by {backing} channels");
+                }
+                checked += 1;
+                if seen.insert(format!("{voter:?}{model:?}")) {
+                    next.push((voter, model));
+                }
+            }
+        }
+        eprintln!("depth {depth}: {} states", next.len());
+        level = next;
+    }
+    assert!(checked > 100_000, "only {checked} transitions");
+}
+
+#[test]
+fn a_channel_that_dissents_for_the_persistence_is_latched_out_and_a_silent_one_at_once() {
+    let mut voter = TripleVoter::new(TRIPLE, ms(0));
+    for t in (0..=20).step_by(10) {
+        let expected = if t == 0 {
+            ChannelHealth::Healthy
+        } else {
+            ChannelHealth::Suspect { since: ms(0) }
+        };
+        assert_eq!(voter.health()[2], expected);
+        voter.receive(0, ms(t), 10.0);
+        voter.receive(1, ms(t), 10.1);
+        voter.receive(2, ms(t), 14.0);
+        let vote = voter.vote(ms(t));
+        assert!(same_vote(vote, TripleVote::Triple(10.05)), "{vote:?}");
+    }
+    assert_eq!(
+        voter.health()[2],
+        ChannelHealth::Out(ChannelFault::Deviating)
+    );
+    // Back in agreement, it stays out; two left vote 2-out-of-2.
+    voter.receive(2, ms(50), 10.0);
+    voter.receive(0, ms(50), 10.0);
+    voter.receive(1, ms(50), 10.0);
+    assert_eq!(voter.vote(ms(50)), TripleVote::Duplex(10.0));
+    // Channel 1 goes quiet: after the timeout it is out and one channel is too few.
+    voter.receive(0, ms(80), 10.0);
+    assert_eq!(
+        voter.vote(ms(80)),
+        TripleVote::Failed(TripleFailure::TooFew)
+    );
+    assert_eq!(voter.health()[1], ChannelHealth::Out(ChannelFault::Silent));
+    voter.reset(ms(100));
+    assert_eq!(voter.health(), [ChannelHealth::Healthy; 3]);
+    // A reading that is not a number is outvoted like any other dissenter.
+    for (i, value) in [10.0, 10.2, f64::NAN].into_iter().enumerate() {
+        voter.receive(i, ms(110), value);
+    }
+    assert_eq!(voter.vote(ms(110)), TripleVote::Triple(10.1));
+    assert_eq!(voter.health()[2], ChannelHealth::Suspect { since: ms(110) });
+    voter.receive(2, ms(110), f64::INFINITY);
+    voter.receive(1, ms(110), f64::NAN);
+    assert_eq!(
+        voter.vote(ms(110)),
+        TripleVote::Failed(TripleFailure::NoMajority)
+    );
+}
+
+// ---------------------------------------------------------------- A/B arbitration
+
+/// One tick of the arbitration model: both sides step once, heartbeats every tick.
+const TICK: u64 = 5;
+const ARBITER: ArbiterConfig = ArbiterConfig {
+    silence: Duration::from_millis(20),
+    disagreement: Duration::from_millis(15),
+};
+/// Heartbeats lost in a row that must never cause a takeover (silence covers four ticks).
+const TOLERATED_LOSSES: u8 = 3;
+/// The longest time with neither side in control under one fault (and up to the tolerated
+/// losses): the silence timeout and three ticks, as the model finds it. The worst case: A's
+/// receiver fails just after a frame, A steps out a timeout and a tick later, and B takes
+/// over one to two ticks after that, as the steps fall.
+const TAKEOVER_BOUND: Duration = Duration::from_millis(20 + 3 * TICK);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum SingleFault {
+    /// A stops: no heartbeat, no outputs.
+    ACrash,
+    /// A's self-test fails.
+    ASelfTest,
+    /// A computes a wrong output (B's comparison disagrees from then on).
+    AWrongOutput,
+    /// A's receiver fails: A hears neither B nor anything else.
+    ADeaf,
+    /// B stops.
+    BCrash,
+    /// B's self-test fails.
+    BSelfTest,
+    /// B's receiver fails: B hears neither A nor anything else.
+    BDeaf,
+}
+
+const FAULTS: [SingleFault; 7] = [
+    SingleFault::ACrash,
+    SingleFault::ASelfTest,
+    SingleFault::AWrongOutput,
+    SingleFault::ADeaf,
+    SingleFault::BCrash,
+    SingleFault::BSelfTest,
+    SingleFault::BDeaf,
+];
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct World {
+    a: Arbiter,
+    b: Arbiter,
+    /// A's last heartbeat as B received it, and B's as A received it.
+    a_heard_by_b: Option<Heartbeat>,
+    b_heard_by_a: Option<Heartbeat>,
+    /// When each side last received anything (the ADS's commands come every tick).
+    traffic_at_a: Option<Timestamp>,
+    traffic_at_b: Option<Timestamp>,
+    fault: Option<(SingleFault, Timestamp)>,
+    /// A's heartbeats lost in a row on the way to B (counted up to one past the tolerance).
+    losses: u8,
+    /// More were lost in a row than the tolerance at some point.
+    lossy: bool,
+    /// Since when neither side's outputs reach the actuators.
+    neither_since: Option<Timestamp>,
+}
+
+impl World {
+    fn new() -> World {
+        World {
+            a: Arbiter::new(Side::A, ARBITER, ms(0)),
+            b: Arbiter::new(Side::B, ARBITER, ms(0)),
+            a_heard_by_b: None,
+            b_heard_by_a: None,
+            traffic_at_a: None,
+            traffic_at_b: None,
+            fault: None,
+            losses: 0,
+            lossy: false,
+            neither_since: None,
+        }
+    }
+
+    fn has(&self, fault: SingleFault) -> bool {
+        self.fault.is_some_and(|(f, _)| f == fault)
+    }
+
+    fn alive(&self, side: Side) -> bool {
+        !self.has(match side {
+            Side::A => SingleFault::ACrash,
+            Side::B => SingleFault::BCrash,
+        })
+    }
+
+    /// Whose outputs reach the actuators: a side's own role, cut by its partner's fence.
+    fn transmitting(&self) -> (bool, bool) {
+        (
+            self.alive(Side::A) && self.a.transmits(self.b.fences_partner()),
+            self.alive(Side::B) && self.b.transmits(self.a.fences_partner()),
+        )
+    }
+
+    /// Who is in control: transmitting, and hearing the commands it acts on.
+    fn in_control(&self) -> (bool, bool) {
+        let (a, b) = self.transmitting();
+        (
+            a && !self.has(SingleFault::ADeaf),
+            b && !self.has(SingleFault::BDeaf),
+        )
+    }
+
+    fn step_a(&mut self, now: Timestamp, lost: bool) {
+        if !self.alive(Side::A) {
+            return;
+        }
+        if !self.has(SingleFault::ADeaf) {
+            self.traffic_at_a = Some(now);
+        }
+        let role = self.a.step(
+            now,
+            ArbiterInputs {
+                self_test_ok: !self.has(SingleFault::ASelfTest),
+                partner: self.b_heard_by_a,
+                traffic_at: self.traffic_at_a,
+                outputs_agree: None,
+                fenced: self.b.fences_partner(),
+            },
+        );
+        if lost {
+            self.losses = (self.losses + 1).min(TOLERATED_LOSSES + 1);
+            self.lossy |= self.losses > TOLERATED_LOSSES;
+        } else if !self.has(SingleFault::BDeaf) {
+            self.losses = 0;
+            self.a_heard_by_b = Some(Heartbeat { role, at: now });
+        }
+    }
+
+    fn step_b(&mut self, now: Timestamp) {
+        if !self.alive(Side::B) {
+            return;
+        }
+        let deaf = self.has(SingleFault::BDeaf);
+        if !deaf {
+            self.traffic_at_b = Some(now);
+        }
+        let a_transmits = self.transmitting().0;
+        let role = self.b.step(
+            now,
+            ArbiterInputs {
+                self_test_ok: !self.has(SingleFault::BSelfTest),
+                partner: self.a_heard_by_b,
+                traffic_at: self.traffic_at_b,
+                outputs_agree: (a_transmits && !deaf).then(|| !self.has(SingleFault::AWrongOutput)),
+                fenced: self.a.fences_partner(),
+            },
+        );
+        if !self.has(SingleFault::ADeaf) {
+            self.b_heard_by_a = Some(Heartbeat { role, at: now });
+        }
+    }
+}
+
+#[test]
+fn never_both_in_control_never_neither_too_long_over_every_interleaving() {
+    const DEPTH: u64 = 28;
+    let mut level: HashSet<World> = HashSet::from([World::new()]);
+    let mut transitions = 0u64;
+    let mut takeovers = HashSet::new();
+    let mut longest = Duration::ZERO;
+    for tick in 1..=DEPTH {
+        let now = ms(tick * TICK);
+        let mut next = HashSet::new();
+        for world in &level {
+            let faults: Vec<Option<SingleFault>> = match world.fault {
+                Some(_) => vec![None],
+                None => std::iter::once(None).chain(FAULTS.map(Some)).collect(),
+            };
+            for fault in faults {
+                for a_first in [true, false] {
+                    for lost in [false, true] {
+                        let mut w = *world;
+                        if let Some(f) = fault {
+                            w.fault = Some((f, now));
+                        }
+                        if a_first {
+                            w.step_a(now, lost);
+                            w.step_b(now);
+                        } else {
+                            w.step_b(now);
+                            w.step_a(now, lost);
+                        }
+                        let (a, b) = w.transmitting();
+                        assert!(!(a && b), "both transmitting at {now:?}: {w:?}");
+                        let (a, b) = w.in_control();
+                        w.neither_since = match (a || b, w.neither_since) {
+                            (true, _) => None,
+                            (false, since) => Some(since.unwrap_or(now)),
+                        };
+                        // Lost heartbeats beyond the tolerance are a fault of their own:
+                        // with another on top, neither may be left (the actuators' safe stop).
+                        let single = !(w.lossy && w.fault.is_some());
+                        if let Some(since) = w.neither_since.filter(|_| single) {
+                            longest = longest.max(now.saturating_since(since));
+                            assert!(
+                                now.saturating_since(since) <= TAKEOVER_BOUND,
+                                "neither in control since {since:?} at {now:?}: {w:?}"
+                            );
+                        }
+                        // Without a fault and with no more than the tolerated losses in a row,
+                        // A stays in control and B stands by.
+                        if w.fault.is_none() && !w.lossy {
+                            assert_eq!(
+                                (w.a.role(), w.b.role()),
+                                (Role::Active, Role::Standby),
+                                "{w:?}"
+                            );
+                        }
+                        // A wrong output is taken over from within the disagreement time.
+                        if let Some((SingleFault::AWrongOutput, at)) = w.fault {
+                            if now.saturating_since(at)
+                                > ARBITER.disagreement + Duration::from_millis(TICK)
+                            {
+                                assert!(b && !a, "B has not taken over from a wrong A: {w:?}");
+                            }
+                        }
+                        if let Some(reason) = w.b.took_over() {
+                            takeovers.insert((w.fault.map(|(f, _)| f), reason));
+                        }
+                        transitions += 1;
+                        next.insert(w);
+                    }
+                }
+            }
+        }
+        level = next;
+    }
+    // The model reaches every kind of takeover, and a deaf standby steps out.
+    for reason in [
+        TakeoverReason::PartnerSilent,
+        TakeoverReason::PartnerReportedOut,
+        TakeoverReason::OutputsDisagree,
+    ] {
+        assert!(
+            takeovers.iter().any(|&(_, r)| r == reason),
+            "{reason:?} never reached"
+        );
+    }
+    assert!(takeovers.contains(&(Some(SingleFault::ACrash), TakeoverReason::PartnerSilent)));
+    assert!(level
+        .iter()
+        .any(|w| w.b.role() == Role::Out(OutReason::Deaf) && w.a.role() == Role::Active));
+    assert_eq!(longest, TAKEOVER_BOUND, "the bound is not tight");
+    assert!(transitions > 100_000, "only {transitions} transitions");
+}
+
+#[test]
+fn the_taken_over_side_is_fenced_and_stays_out() {
+    let mut a = Arbiter::new(Side::A, ARBITER, ms(0));
+    let mut b = Arbiter::new(Side::B, ARBITER, ms(0));
+    let beat = |role, at| Some(Heartbeat { role, at });
+    let quiet = ArbiterInputs {
+        self_test_ok: true,
+        partner: None,
+        traffic_at: None,
+        outputs_agree: None,
+        fenced: false,
+    };
+    assert_eq!(
+        b.step(
+            ms(10),
+            ArbiterInputs {
+                partner: beat(Role::Out(OutReason::SelfTest), ms(10)),
+                traffic_at: Some(ms(10)),
+                ..quiet
+            }
+        ),
+        Role::Active
+    );
+    assert!(b.fences_partner());
+    assert_eq!(
+        a.step(
+            ms(12),
+            ArbiterInputs {
+                fenced: true,
+                ..quiet
+            }
+        ),
+        Role::Out(OutReason::Fenced)
+    );
+    assert_eq!(a.step(ms(14), quiet), Role::Out(OutReason::Fenced));
+    assert!(!a.transmits(false));
+    a.reset(ms(20));
+    assert_eq!(a.role(), Role::Active);
+}
+
+// ---------------------------------------------------------------- primary and backup actuator
+
+const CHECK: FeedbackCheck = FeedbackCheck {
+    still: 1.0,
+    overrun: 5.0,
+    persistence: Duration::from_millis(30),
+    heartbeat_timeout: Duration::from_millis(50),
+};
+const ACTUATOR_STEP: u64 = 10;
+
+/// What the actuator in charge does in one step of the model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Behaviour {
+    Follows,
+    Stuck,
+    Reversed,
+    RunsAway,
+    ReportsFault,
+    Mute,
+}
+
+const BEHAVIOURS: [Behaviour; 6] = [
+    Behaviour::Follows,
+    Behaviour::Stuck,
+    Behaviour::Reversed,
+    Behaviour::RunsAway,
+    Behaviour::ReportsFault,
+    Behaviour::Mute,
+];
+
+fn feedback(
+    behaviour: Behaviour,
+    demanded: f64,
+    now: Timestamp,
+    heartbeat: Option<Timestamp>,
+) -> Feedback {
+    let measured = match behaviour {
+        Behaviour::Follows | Behaviour::ReportsFault | Behaviour::Mute => demanded,
+        Behaviour::Stuck => 0.0,
+        Behaviour::Reversed => -demanded,
+        Behaviour::RunsAway => demanded + 20.0,
+    };
+    Feedback {
+        demanded,
+        measured,
+        drive_fault: behaviour == Behaviour::ReportsFault,
+        heartbeat_at: if behaviour == Behaviour::Mute {
+            heartbeat
+        } else {
+            Some(now)
+        },
+    }
+}
+
+#[test]
+fn the_actuator_pair_switches_exactly_when_a_fault_has_lasted_its_bound() {
+    // State: the pair, the heartbeat last heard, and since when the actuator in charge has
+    // misbehaved (and how); every sequence of behaviours over 9 steps.
+    type State = (u64, ActuatorPair, Option<Timestamp>, Option<Timestamp>);
+    let mut level: Vec<State> = vec![(0, ActuatorPair::new(CHECK, ms(0)), Some(ms(0)), None)];
+    let mut seen_switches = HashSet::new();
+    for depth in 1..=9u64 {
+        let now = ms(depth * ACTUATOR_STEP);
+        let mut next: Vec<State> = Vec::new();
+        let mut seen = HashSet::new();
+        for &(_, pair, heartbeat, misbehaving_since) in &level {
+            for &behaviour in &BEHAVIOURS {
+                for demanded in [0.0, 10.0] {
+                    let mut pair = pair;
+                    let before = pair.in_charge();
+                    let fb = feedback(behaviour, demanded, now, heartbeat);
+                    let after = pair.step(now, fb);
+                    // Which fault this step shows, stated independently.
+                    let shows = match behaviour {
+                        Behaviour::Follows => None,
+                        Behaviour::Stuck if demanded == 0.0 => None,
+                        Behaviour::Reversed if demanded == 0.0 => None,
+                        Behaviour::Stuck => Some(ActuatorFault::NoMotion),
+                        Behaviour::Reversed => Some(ActuatorFault::WrongDirection),
+                        Behaviour::RunsAway => Some(ActuatorFault::Runaway),
+                        Behaviour::ReportsFault => Some(ActuatorFault::DriveFault),
+                        Behaviour::Mute => heartbeat
+                            .filter(|h| now.saturating_since(*h) > CHECK.heartbeat_timeout)
+                            .map(|_| ActuatorFault::HeartbeatLost),
+                    };
+                    let since = shows.map(|_| misbehaving_since.unwrap_or(now));
+                    let due = match shows {
+                        Some(f @ (ActuatorFault::DriveFault | ActuatorFault::HeartbeatLost)) => {
+                            Some(f)
+                        }
+                        Some(f)
+                            if since
+                                .is_some_and(|s| now.saturating_since(s) >= CHECK.persistence) =>
+                        {
+                            Some(f)
+                        }
+                        _ => None,
+                    };
+                    let expected = match (before, due) {
+                        (InCharge::Primary, Some(_)) => InCharge::Backup,
+                        (InCharge::Backup, Some(_)) => InCharge::Neither,
+                        (in_charge, _) => in_charge,
+                    };
+                    assert_eq!(
+                        after, expected,
+                        "{behaviour:?} demanding {demanded} at {now:?} from {pair:?}"
+                    );
+                    if before != after {
+                        seen_switches.insert((before, due));
+                    }
+                    let heartbeat = if behaviour == Behaviour::Mute && before == after {
+                        heartbeat
+                    } else {
+                        Some(now)
+                    };
+                    let since = if before == after { since } else { None };
+                    let state = (depth, pair, heartbeat, since);
+                    if seen.insert(format!("{state:?}")) {
+                        next.push(state);
+                    }
+                }
+            }
+        }
+        level = next;
+    }
+    for fault in [
+        ActuatorFault::NoMotion,
+        ActuatorFault::WrongDirection,
+        ActuatorFault::Runaway,
+        ActuatorFault::DriveFault,
+        ActuatorFault::HeartbeatLost,
+    ] {
+        assert!(
+            seen_switches.contains(&(InCharge::Primary, Some(fault))),
+            "{fault:?}"
+        );
+        assert!(
+            seen_switches.contains(&(InCharge::Backup, Some(fault))),
+            "{fault:?}"
+        );
+    }
+}
+
+#[test]
+fn a_backup_that_fails_too_leaves_neither_in_charge_until_reset() {
+    let mut pair = ActuatorPair::new(CHECK, ms(0));
+    let stuck = |now| feedback(Behaviour::Stuck, 10.0, now, Some(now));
+    for t in (0..=30).step_by(10) {
+        pair.step(ms(t), stuck(ms(t)));
+    }
+    assert_eq!(pair.in_charge(), InCharge::Backup);
+    assert_eq!(
+        pair.primary_failed(),
+        Some((ActuatorFault::NoMotion, ms(30)))
+    );
+    assert_eq!(
+        pair.step(
+            ms(40),
+            feedback(Behaviour::ReportsFault, 0.0, ms(40), Some(ms(40)))
+        ),
+        InCharge::Neither
+    );
+    assert_eq!(
+        pair.step(
+            ms(50),
+            feedback(Behaviour::Follows, 10.0, ms(50), Some(ms(50)))
+        ),
+        InCharge::Neither
+    );
+    pair.reset(ms(60));
+    assert_eq!(pair.in_charge(), InCharge::Primary);
+}
+
+// ---------------------------------------------------------------- degradation
+
+#[test]
+fn the_degradation_latch_rises_by_rule_and_a_second_fault_is_a_safe_stop() {
+    let policy = DegradationPolicy::default();
+    let faults: Vec<(FaultClass, u8)> = FaultClass::ALL
+        .iter()
+        .flat_map(|&class| [(class, 0), (class, 1)])
+        .collect();
+    // Every sequence of up to three reports.
+    let mut sequences: Vec<Vec<(FaultClass, u8)>> = vec![vec![]];
+    for _ in 0..3 {
+        sequences = sequences
+            .iter()
+            .flat_map(|s| faults.iter().map(move |&f| [s.clone(), vec![f]].concat()))
+            .collect();
+        for sequence in &sequences {
+            let mut latch = Degradation::new(policy);
+            let mut distinct: Vec<(FaultClass, u8)> = Vec::new();
+            let mut previous = DegradationLevel::Nominal;
+            for (i, &(class, source)) in sequence.iter().enumerate() {
+                let level = latch.report(Fault {
+                    class,
+                    source,
+                    at: ms(i as u64),
+                });
+                if !distinct.contains(&(class, source))
+                    && policy.rule(class) != DegradationLevel::Nominal
+                {
+                    distinct.push((class, source));
+                }
+                let expected = match distinct.as_slice() {
+                    [] => DegradationLevel::Nominal,
+                    [(first, _)] => policy.rule(*first),
+                    _ => DegradationLevel::SafeStop,
+                };
+                assert_eq!(level, expected, "{sequence:?}");
+                assert!(level >= previous, "the level fell: {sequence:?}");
+                previous = level;
+            }
+            assert_eq!(
+                latch.first().map(|f| (f.class, f.source)),
+                distinct.first().copied()
+            );
+            assert!(!latch.reset(false) || latch.level() == DegradationLevel::Nominal);
+            assert_eq!(latch.level(), previous);
+            latch.reset(true);
+            assert_eq!(latch.level(), DegradationLevel::Nominal);
+        }
+    }
+}
+
+#[test]
+fn each_level_sets_its_limits() {
+    let mut policy = DegradationPolicy::default();
+    policy.set_rule(FaultClass::StandbyLost, DegradationLevel::Nominal);
+    let mut latch = Degradation::new(policy);
+    assert_eq!(latch.limits(), None);
+    let fault = |class| Fault {
+        class,
+        source: 0,
+        at: ms(0),
+    };
+    // A notice only: still nominal.
+    assert_eq!(
+        latch.report(fault(FaultClass::StandbyLost)),
+        DegradationLevel::Nominal
+    );
+    assert_eq!(
+        latch.report(fault(FaultClass::ActuatorBackup)),
+        DegradationLevel::MinimalRisk
+    );
+    let limits = latch.limits().unwrap();
+    assert!(limits.steering_modes.allows(SteeringMode::Normal));
+    assert!(!limits.steering_modes.allows(SteeringMode::Tank));
+    assert_eq!(
+        latch.reason().map(|f| f.class),
+        Some(FaultClass::ActuatorBackup)
+    );
+    assert_eq!(
+        latch.report(fault(FaultClass::SensorChannelOut)),
+        DegradationLevel::SafeStop
+    );
+    assert_eq!(
+        latch.reason().map(|f| f.class),
+        Some(FaultClass::SensorChannelOut)
+    );
+    assert_eq!(latch.limits(), None);
+}
