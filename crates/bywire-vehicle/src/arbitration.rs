@@ -44,6 +44,32 @@ pub enum Role {
     Out(OutReason),
 }
 
+impl Role {
+    /// The role as a status message carries it: 0 active, 1 standby, 2 out for its
+    /// self-test, 3 fenced, 4 deaf.
+    pub fn raw(self) -> u8 {
+        match self {
+            Role::Active => 0,
+            Role::Standby => 1,
+            Role::Out(OutReason::SelfTest) => 2,
+            Role::Out(OutReason::Fenced) => 3,
+            Role::Out(OutReason::Deaf) => 4,
+        }
+    }
+
+    /// The role a status message carries; a number no role has reads as out for its
+    /// self-test (a sender that says nothing sensible is not fit to be in control).
+    pub fn from_raw(raw: u64) -> Role {
+        match raw {
+            0 => Role::Active,
+            1 => Role::Standby,
+            3 => Role::Out(OutReason::Fenced),
+            4 => Role::Out(OutReason::Deaf),
+            _ => Role::Out(OutReason::SelfTest),
+        }
+    }
+}
+
 /// Why a side stepped out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum OutReason {

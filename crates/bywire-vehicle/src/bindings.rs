@@ -127,8 +127,55 @@ pub struct EmergencyBrakeBindings {
     pub deceleration: usize,
 }
 
+/// One signal of one message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SignalBinding {
+    /// The message.
+    pub message: usize,
+    /// The signal.
+    pub signal: usize,
+}
+
+/// A status message whose arrival is a heartbeat, with an optional signal in it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StatusBinding {
+    /// The message.
+    pub message: usize,
+    /// The signal (a control ECU's role; an actuator's fault flag).
+    pub signal: Option<usize>,
+}
+
+/// A quantity's three sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VotedBindings {
+    /// The channels.
+    pub channels: [SignalBinding; 3],
+}
+
+/// An actuator and its backup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ActuatorPairBindings {
+    /// The primary's status.
+    pub primary: StatusBinding,
+    /// The backup's status.
+    pub backup: StatusBinding,
+    /// The measured rate.
+    pub measured: SignalBinding,
+}
+
+/// The `[fail_operational]` section's roles, in the section's order.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct FailOperationalBindings {
+    /// Each voted quantity.
+    pub voted: Vec<VotedBindings>,
+    /// The two control ECUs' status messages (their role signals always bound), A then B.
+    pub control: Option<[StatusBinding; 2]>,
+    /// Each actuator pair.
+    pub actuators: Vec<ActuatorPairBindings>,
+}
+
 /// Every role a profile names, found in its DBC.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Bindings {
     /// `[command]`.
     pub command: Option<CommandBindings>,
@@ -146,4 +193,6 @@ pub struct Bindings {
     pub estop: Option<RequestBindings>,
     /// `[emergency_brake]`.
     pub emergency_brake: Option<EmergencyBrakeBindings>,
+    /// `[fail_operational]`.
+    pub fail_operational: Option<FailOperationalBindings>,
 }

@@ -13,7 +13,8 @@
 //! - Fail-operational layers: [`arbitration`] (an A/B pair of control ECUs, one active, one
 //!   in hot standby, takeover without split brain), [`backup`] (a primary actuator and its
 //!   backup, switched on a failed feedback check) and [`degradation`] (levels from nominal to
-//!   safe stop, the rule per fault class, the latch).
+//!   safe stop, the rule per fault class, the latch); a profile's [`fail_operational`]
+//!   section (with `std`) declares which of them a vehicle carries.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
@@ -62,6 +63,8 @@ pub mod backup;
 pub mod bindings;
 pub mod command;
 pub mod degradation;
+#[cfg(feature = "std")]
+pub mod fail_operational;
 #[cfg(feature = "std")]
 pub mod profile;
 #[cfg(feature = "std")]

@@ -15,10 +15,12 @@ use serde::Deserialize;
 
 use crate::ads::{AdsConfig, WheelGeometry};
 use crate::bindings::{
-    BatteryBindings, Bindings, CommandBindings, EmergencyBrakeBindings, ImuBindings,
-    RequestBindings, StateBindings, WheelBindings,
+    ActuatorPairBindings, BatteryBindings, Bindings, CommandBindings, EmergencyBrakeBindings,
+    FailOperationalBindings, ImuBindings, RequestBindings, SignalBinding, StateBindings,
+    StatusBinding, VotedBindings, WheelBindings,
 };
 use crate::command::ControlCommand;
+use crate::fail_operational::{FailOperationalRoles, SignalRef};
 use crate::supervisor::{Cascade, SupervisorConfig};
 
 /// Why a profile did not load.
@@ -458,6 +460,9 @@ pub struct Profile {
     /// Authenticated messages.
     #[serde(default)]
     pub secoc: Option<SecOcRoles>,
+    /// Redundancy and degradation levels (none: fail-safe only).
+    #[serde(default)]
+    pub fail_operational: Option<FailOperationalRoles>,
 }
 
 /// A profile checked against its DBC.
@@ -528,7 +533,6 @@ impl Profile {
     }
 }
 
-/// Finds a profile's names in its DBC, each error naming the profile's key.
 /// The finding of a profile's names in its DBC: each name's place, each error naming the key.
 impl Checker<'_> {
     fn message_at(&self, key: &str, name: &str) -> Result<(usize, &Message), ProfileError> {
@@ -639,6 +643,94 @@ impl Checker<'_> {
         }))
     }
 
+    fn signal_ref(&self, key: &str, r: &SignalRef) -> Result<SignalBinding, ProfileError> {
+        let (message, m) = self.message_at(&format!("{key}.message"), &r.message)?;
+        Ok(SignalBinding {
+            message,
+            signal: self.signal(m, &format!("{key}.signal"), &r.signal)?,
+        })
+    }
+
+    fn status(
+        &self,
+        key: &str,
+        message: &str,
+        signal: Option<(&str, &str)>,
+    ) -> Result<StatusBinding, ProfileError> {
+        let (index, m) = self.message_at(&format!("{key}.message"), message)?;
+        let signal = signal
+            .map(|(role, name)| self.signal(m, &format!("{key}.{role}"), name))
+            .transpose()?;
+        Ok(StatusBinding {
+            message: index,
+            signal,
+        })
+    }
+
+    /// `[fail_operational]`: every name found, every number sensible.
+    fn bind_fail_operational(
+        &self,
+        p: &Profile,
+    ) -> Result<Option<FailOperationalBindings>, ProfileError> {
+        let Some(f) = &p.fail_operational else {
+            return Ok(None);
+        };
+        f.policy()
+            .map_err(|(key, reason)| self.invalid(&key, reason))?;
+        let mut bindings = FailOperationalBindings::default();
+        for (i, v) in f.voted.iter().enumerate() {
+            let key = format!("fail_operational.voted[{i}]");
+            let [a, b, c] = v.channels.as_slice() else {
+                return Err(self.invalid(&format!("{key}.channels"), "three channels"));
+            };
+            if !(v.tolerance.is_finite() && v.tolerance >= 0.0) {
+                return Err(self.invalid(&format!("{key}.tolerance"), "a tolerance of 0 or more"));
+            }
+            if v.timeout_ms == 0 {
+                return Err(self.invalid(&format!("{key}.timeout_ms"), "a timeout over 0 ms"));
+            }
+            let mut channels = [SignalBinding {
+                message: 0,
+                signal: 0,
+            }; 3];
+            for (n, (slot, r)) in channels.iter_mut().zip([a, b, c]).enumerate() {
+                *slot = self.signal_ref(&format!("{key}.channels[{n}]"), r)?;
+            }
+            bindings.voted.push(VotedBindings { channels });
+        }
+        if let Some(c) = &f.control {
+            let key = "fail_operational.control";
+            if c.silence_ms == 0 || !(c.output_tolerance.is_finite() && c.output_tolerance >= 0.0) {
+                return Err(self.invalid(key, "silence_ms over 0 and output_tolerance 0 or more"));
+            }
+            bindings.control = Some([
+                self.status(&format!("{key}.a"), &c.a.message, Some(("role", &c.a.role)))?,
+                self.status(&format!("{key}.b"), &c.b.message, Some(("role", &c.b.role)))?,
+            ]);
+        }
+        for (i, a) in f.actuators.iter().enumerate() {
+            let key = format!("fail_operational.actuators[{i}]");
+            if !(a.still.is_finite() && a.still > 0.0 && a.overrun.is_finite() && a.overrun >= 0.0)
+            {
+                return Err(self.invalid(&key, "still over 0 and overrun 0 or more"));
+            }
+            bindings.actuators.push(ActuatorPairBindings {
+                primary: self.status(
+                    &format!("{key}.primary"),
+                    &a.primary.message,
+                    a.primary.fault.as_deref().map(|f| ("fault", f)),
+                )?,
+                backup: self.status(
+                    &format!("{key}.backup"),
+                    &a.backup.message,
+                    a.backup.fault.as_deref().map(|f| ("fault", f)),
+                )?,
+                measured: self.signal_ref(&format!("{key}.measured"), &a.measured)?,
+            });
+        }
+        Ok(Some(bindings))
+    }
+
     fn bind(&self, p: &Profile) -> Result<Bindings, ProfileError> {
         let imu = match &p.imu {
             None => None,
@@ -690,6 +782,7 @@ impl Checker<'_> {
             }
         };
         Ok(Bindings {
+            fail_operational: self.bind_fail_operational(p)?,
             command: self.bind_command(p)?,
             state: self.bind_state(p)?,
             wheel_speeds: self.bind_wheels("wheel_speeds", &p.wheel_speeds)?,

@@ -813,3 +813,251 @@ fn each_level_sets_its_limits() {
     );
     assert_eq!(latch.limits(), None);
 }
+
+// ---------------------------------------------------------------- a profile's section
+
+mod shuttle {
+    //! The shuttle (not the tug) declares its redundancy in its profile; each mechanism runs
+    //! on frames its DBC encodes, read back through the profile's bindings.
+
+    use super::*;
+    use bywire_core::{Frame, Id};
+    use bywire_dbc::codec::{Decoded, Value};
+    use bywire_dbc::decoder::Decoder;
+    use bywire_vehicle::bindings::{SignalBinding, StatusBinding};
+    use bywire_vehicle::profile::{LoadedProfile, Profile};
+
+    fn shuttle() -> LoadedProfile {
+        Profile::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
+        )
+        .unwrap()
+    }
+
+    /// The message at `message` with its signal `signal` at `value` (the others 0).
+    fn frame(decoder: &Decoder, message: usize, signal: usize, value: f64) -> Frame {
+        let (m, codec) = decoder.message_at(message).unwrap();
+        let mut values = vec![Some(Value::Int(0)); codec.signal_count()];
+        values[signal] = Some(Value::Float(value));
+        let mut payload = [0u8; 8];
+        let size = codec.encode(&values, &mut payload).unwrap();
+        Frame::classic(Id::standard(m.id).unwrap(), &payload[..size]).unwrap()
+    }
+
+    /// The signal `signal` of message `message` in `frame`, if the frame is that message.
+    fn read(decoder: &Decoder, message: usize, signal: usize, frame: &Frame) -> Option<Decoded> {
+        let mut values = Vec::new();
+        let (index, _, decoded) = decoder.decode_into(frame, &mut values)?;
+        decoded.ok()?;
+        (index == message).then(|| values[signal])?
+    }
+
+    fn at(decoder: &Decoder, b: SignalBinding, frame: &Frame) -> Option<f64> {
+        read(decoder, b.message, b.signal, frame).map(|d| d.physical.as_f64())
+    }
+
+    fn status(decoder: &Decoder, b: StatusBinding, value: f64) -> Frame {
+        frame(decoder, b.message, b.signal.unwrap(), value)
+    }
+
+    #[test]
+    fn its_section_loads_with_its_own_rules_and_limits() {
+        let loaded = shuttle();
+        let section = loaded.profile.fail_operational.as_ref().unwrap();
+        let policy = section.policy().unwrap();
+        assert_eq!(
+            policy.rule(FaultClass::StandbyLost),
+            DegradationLevel::Nominal
+        );
+        assert_eq!(
+            policy.rule(FaultClass::ControlTakeover),
+            DegradationLevel::MinimalRisk
+        );
+        assert_eq!(policy.degraded.speed_limit, 3.0);
+        assert!(!policy.degraded.steering_modes.allows(SteeringMode::Crab));
+        let bindings = loaded.bindings.fail_operational.as_ref().unwrap();
+        assert_eq!(bindings.voted.len(), 1);
+        assert_eq!(bindings.actuators.len(), 1);
+        assert!(bindings.control.is_some());
+        // A profile without the section has no redundancy.
+        assert!(Profile::builtin("autoware-can")
+            .unwrap()
+            .bindings
+            .fail_operational
+            .is_none());
+    }
+
+    #[test]
+    fn a_wrong_name_or_number_in_the_section_is_refused_naming_its_key() {
+        let (toml, dbc) = (
+            std::fs::read_to_string(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/data/shuttle.toml"
+            ))
+            .unwrap(),
+            std::fs::read_to_string(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/data/shuttle.dbc"
+            ))
+            .unwrap(),
+        );
+        for (from, to, expected) in [
+            (
+                "signal = \"Angle2\"",
+                "signal = \"Angle9\"",
+                "fail_operational.voted[0].channels[1].signal: no signal 'Angle9'",
+            ),
+            (
+                "role = \"VcuB_Role\"",
+                "role = \"Role\"",
+                "fail_operational.control.b.role: no signal 'Role'",
+            ),
+            (
+                "standby-lost = \"nominal\"",
+                "standby-lost = \"fine\"",
+                "fail_operational.rules.standby-lost: not a degradation level",
+            ),
+            (
+                "standby-lost = \"nominal\"",
+                "sensor-gone = \"nominal\"",
+                "fail_operational.rules.sensor-gone: not a fault class",
+            ),
+            (
+                "steering_modes = [\"normal\"]\n\n[fail_operational.minimal_risk]",
+                "steering_modes = [\"sideways\"]\n\n[fail_operational.minimal_risk]",
+                "fail_operational.degraded.steering_modes: not a steering mode",
+            ),
+            (
+                "tolerance = 0.5",
+                "tolerance = -0.5",
+                "fail_operational.voted[0].tolerance",
+            ),
+            (
+                "    { message = \"Shuttle_SteerAngle3\", signal = \"Angle3\" },\n",
+                "",
+                "fail_operational.voted[0].channels: three channels",
+            ),
+            (
+                "message = \"SteerMotorB_Status\"",
+                "message = \"SteerMotorC_Status\"",
+                "fail_operational.actuators[0].backup.message: no message",
+            ),
+        ] {
+            assert!(toml.contains(from), "{from}");
+            let edited = toml.replacen(from, to, 1);
+            let err = Profile::parse("shuttle.toml", &edited, |_| Ok(dbc.clone()))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(expected), "{err} lacks {expected}");
+        }
+    }
+
+    #[test]
+    fn each_mechanism_runs_on_its_frames() {
+        let loaded = shuttle();
+        let decoder = Decoder::new(loaded.database.clone());
+        let section = loaded.profile.fail_operational.clone().unwrap();
+        let bindings = loaded.bindings.fail_operational.clone().unwrap();
+        let mut latch = Degradation::new(section.policy().unwrap());
+
+        // The angle sensors: the third drifts off; after the persistence it is out, the
+        // vehicle degraded, and the vote carries on 2-out-of-2.
+        let voted = bindings.voted[0];
+        let mut voter = TripleVoter::new(section.voted[0].config(), ms(0));
+        for t in (0..=60).step_by(10) {
+            let readings = [5.0, 5.1, if t >= 10 { 9.0 } else { 5.0 }];
+            for (channel, (b, value)) in voted.channels.iter().zip(readings).enumerate() {
+                let f = frame(&decoder, b.message, b.signal, value);
+                voter.receive(channel, ms(t), at(&decoder, *b, &f).unwrap());
+            }
+            voter.vote(ms(t));
+        }
+        assert_eq!(
+            voter.health()[2],
+            ChannelHealth::Out(ChannelFault::Deviating)
+        );
+        assert_eq!(
+            latch.report(Fault {
+                class: FaultClass::SensorChannelOut,
+                source: 0,
+                at: ms(50)
+            }),
+            DegradationLevel::Degraded
+        );
+
+        // The VCUs: A's status stops; B, hearing other traffic, takes over and fences A.
+        let [a_status, b_status] = bindings.control.unwrap();
+        let mut b = Arbiter::new(Side::B, section.control.as_ref().unwrap().config(), ms(0));
+        let mut heard = None;
+        for t in (0..=100).step_by(10) {
+            if t <= 40 {
+                let f = status(&decoder, a_status, f64::from(Role::Active.raw()));
+                let role = read(&decoder, a_status.message, a_status.signal.unwrap(), &f).unwrap();
+                heard = Some(Heartbeat {
+                    role: Role::from_raw(role.raw),
+                    at: ms(t),
+                });
+            }
+            let inputs = ArbiterInputs {
+                self_test_ok: true,
+                partner: heard,
+                traffic_at: Some(ms(t)),
+                outputs_agree: Some(true),
+                fenced: false,
+            };
+            if b.step(ms(t), inputs) == Role::Active {
+                assert_eq!(t, 80, "silence is 30 ms after the last status at 40 ms");
+                break;
+            }
+        }
+        assert!(b.fences_partner());
+        let echoed = status(&decoder, b_status, f64::from(b.role().raw()));
+        assert_eq!(
+            read(
+                &decoder,
+                b_status.message,
+                b_status.signal.unwrap(),
+                &echoed
+            )
+            .map(|d| Role::from_raw(d.raw)),
+            Some(Role::Active)
+        );
+
+        // The steering motor: demanded 10°/s, measured 0 (stuck) for the persistence: the
+        // backup winding takes over; a second fault on top is a safe stop.
+        let pair_roles = &section.actuators[0];
+        let pair_bindings = bindings.actuators[0];
+        let mut pair = ActuatorPair::new(pair_roles.check(), ms(0));
+        for t in (0..=40).step_by(10) {
+            let f = frame(
+                &decoder,
+                pair_bindings.measured.message,
+                pair_bindings.measured.signal,
+                0.0,
+            );
+            let measured = at(&decoder, pair_bindings.measured, &f).unwrap();
+            pair.step(
+                ms(t),
+                Feedback {
+                    demanded: 10.0,
+                    measured,
+                    drive_fault: false,
+                    heartbeat_at: Some(ms(t)),
+                },
+            );
+        }
+        assert_eq!(pair.in_charge(), InCharge::Backup);
+        assert_eq!(
+            latch.report(Fault {
+                class: FaultClass::ActuatorBackup,
+                source: 0,
+                at: ms(40)
+            }),
+            DegradationLevel::SafeStop
+        );
+        assert_eq!(
+            latch.first().map(|f| f.class),
+            Some(FaultClass::SensorChannelOut)
+        );
+    }
+}
