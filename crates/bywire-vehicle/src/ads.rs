@@ -14,7 +14,10 @@ use bywire_core::{Frame, Timestamp};
 
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
 
-use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
+use crate::command::{
+    ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode, TurnIndicators,
+    WatchdogLevel,
+};
 use crate::wire::{AdsWire, Feedback, StateFeedback};
 
 /// Tuning of the ADS side.
@@ -157,6 +160,10 @@ pub struct VehicleState {
     pub turn_indicators: Field<TurnIndicators>,
     /// The hazard lights are on.
     pub hazard_lights: Field<bool>,
+    /// The degradation level of a fail-operational vehicle.
+    pub degradation: Field<DegradationLevel>,
+    /// The fault class it is degraded for (`None`: nominal).
+    pub degradation_reason: Field<Option<FaultClass>>,
     /// Wheel speeds FL, FR, RL, RR, m/s.
     pub wheel_speeds: Field<[f64; 4]>,
     /// Time from sending a command to seeing its heartbeat echoed.
@@ -568,6 +575,10 @@ impl<W: AdsWire> Ads<W> {
         }
         if let Some(on) = m.hazard_lights {
             s.hazard_lights.set(now, on);
+        }
+        if let Some(level) = m.degradation {
+            s.degradation.set(now, level);
+            s.degradation_reason.set(now, m.degradation_reason);
         }
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));

@@ -70,6 +70,10 @@ pub struct StateBindings {
     pub turn_indicators: Option<usize>,
     /// Hazard lights.
     pub hazard_lights: Option<usize>,
+    /// Degradation level.
+    pub degradation_level: Option<usize>,
+    /// The fault class the level is reported with.
+    pub degradation_reason: Option<usize>,
 }
 
 /// Four wheels' signals (FL, FR, RL, RR) in one message.

@@ -134,6 +134,12 @@ pub struct StateRoles {
     /// Hazard lights as they are (optional).
     #[serde(default)]
     pub hazard_lights: Option<String>,
+    /// Degradation level (optional; fail-operational vehicles).
+    #[serde(default)]
+    pub degradation_level: Option<String>,
+    /// The fault class the level is reported with (optional; 0 for none).
+    #[serde(default)]
+    pub degradation_reason: Option<String>,
 }
 
 /// Per-wheel feedback: wheel speeds (m/s) or wheel angles (degrees).
@@ -618,6 +624,8 @@ impl Checker<'_> {
             steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
             turn_indicators: optional("turn_indicators", &s.turn_indicators)?,
             hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
+            degradation_level: optional("degradation_level", &s.degradation_level)?,
+            degradation_reason: optional("degradation_reason", &s.degradation_reason)?,
         }))
     }
 
@@ -1148,6 +1156,8 @@ impl LoadedProfile {
             c.gear_ratio = v.gear_ratio;
             c.wheel_diameter = v.wheel_diameter_m;
         }
+        // Checked when the profile loaded, so it is there whenever the section is.
+        c.degradation = p.fail_operational.as_ref().and_then(|f| f.policy().ok());
         c
     }
 

@@ -10,7 +10,7 @@ use bywire_dbc::Message;
 
 use crate::bindings::{CommandBindings, StateBindings, WheelBindings};
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
-use crate::command::{EstopCode, WatchdogLevel};
+use crate::command::{DegradationLevel, EstopCode, FaultClass, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::wire::{
     AdsWire, Counters, Feedback, Incoming, Rejected, StateFeedback, StateReport, VehicleWire,
@@ -431,8 +431,12 @@ impl AdsWire for ProfileWire {
             // A level or latch state that names nothing is out of range, not unreported.
             let level = s.watchdog_level.and_then(|i| m.raw(i));
             let estop = s.estop_state.and_then(|i| m.raw(i));
+            let degradation = s.degradation_level.and_then(|i| m.raw(i));
+            let reason = s.degradation_reason.and_then(|i| m.raw(i));
             let known = level.is_none_or(|raw| WatchdogLevel::from_raw(raw).is_some())
-                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some());
+                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some())
+                && degradation.is_none_or(|raw| DegradationLevel::from_raw(raw).is_some())
+                && reason.is_none_or(|raw| raw == 0 || FaultClass::from_raw(raw).is_some());
             let level = level.and_then(WatchdogLevel::from_raw);
             let estop = estop.and_then(EstopCode::from_raw);
             // A value the profile does not name: the ADS is not in control.
@@ -461,6 +465,8 @@ impl AdsWire for ProfileWire {
                     .and_then(|i| m.raw(i))
                     .and_then(|raw| self.turn_indicators.value(raw)),
                 hazard_lights: s.hazard_lights.and_then(|i| m.raw(i)).map(|raw| raw == 1),
+                degradation: degradation.and_then(DegradationLevel::from_raw),
+                degradation_reason: reason.and_then(FaultClass::from_raw),
                 heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
                 in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
                     .into_iter()
@@ -589,6 +595,11 @@ impl VehicleWire for ProfileWire {
                 self.turn_indicators.raw(r.turn_indicators),
             ),
             (s.hazard_lights, u64::from(r.hazard_lights)),
+            (s.degradation_level, r.degradation.raw()),
+            (
+                s.degradation_reason,
+                r.degradation_reason.map_or(0, FaultClass::raw),
+            ),
         ];
         let m = &mut self.state;
         m.set(s.steering, r.steering);

@@ -25,7 +25,11 @@ use bywire_core::e2e::{CounterChecker, CounterStatus, RollingCounter};
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
-use crate::command::{ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
+use crate::command::{
+    ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode, TurnIndicators,
+    WatchdogLevel,
+};
+use crate::degradation::{Degradation, DegradationPolicy, Fault};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::wire::{Incoming, Rejected, StateReport, VehicleWire};
 
@@ -59,6 +63,9 @@ pub struct SupervisorConfig {
     pub standstill: f64,
     /// Commands arrive on two buses and are voted on (`None`: one bus).
     pub redundancy: Option<Redundancy>,
+    /// Degradation levels of a fail-operational vehicle (`None`: fail-safe only, every
+    /// fault a mechanism reports is the safe state).
+    pub degradation: Option<DegradationPolicy>,
 }
 
 /// Voting on commands received on two buses (see [`crate::redundancy::DualVoter`]).
@@ -100,6 +107,7 @@ impl Default for SupervisorConfig {
             wheel_diameter: 0.5,
             standstill: 0.05,
             redundancy: None,
+            degradation: None,
         }
     }
 }
@@ -451,6 +459,9 @@ pub struct Supervisor<W: VehicleWire> {
     /// it: the bus timeout (without a counter, any copy within the skew window).
     copy_window: Duration,
     degraded: Option<Channel>,
+    /// The degradation latch (a fail-safe vehicle's stays nominal until its first fault,
+    /// which is a safe stop).
+    degradation: Degradation,
     stats: CommandStats,
     command: Option<Command>,
     last_valid: Option<Timestamp>,
@@ -512,6 +523,13 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }),
             degraded: None,
+            degradation: Degradation::new(config.degradation.unwrap_or_else(|| {
+                let mut fail_safe = DegradationPolicy::default();
+                for &class in FaultClass::ALL {
+                    fail_safe.set_rule(class, DegradationLevel::SafeStop);
+                }
+                fail_safe
+            })),
             stats: CommandStats::default(),
             command: None,
             last_valid: None,
@@ -604,6 +622,25 @@ impl<W: VehicleWire> Supervisor<W> {
     /// Which bus delivers alone, when redundancy is degraded.
     pub fn degraded(&self) -> Option<Channel> {
         self.degraded
+    }
+
+    /// The degradation latch: the level and the faults behind it.
+    pub fn degradation(&self) -> &Degradation {
+        &self.degradation
+    }
+
+    /// A fault a fail-operational mechanism found (reported once, at its edge): the level
+    /// from now on, whose limits [`Supervisor::actuators`] applies. At
+    /// [`DegradationLevel::SafeStop`] the vehicle brakes fully, as for a lost command stream.
+    pub fn report_fault(&mut self, fault: Fault) -> DegradationLevel {
+        self.degradation.report(fault)
+    }
+
+    /// Back to nominal after the faults are repaired: only at a standstill (whether it was
+    /// reset).
+    pub fn reset_degradation(&mut self) -> bool {
+        let standstill = self.standstill();
+        self.degradation.reset(standstill)
     }
 
     /// Validate a command frame from `channel`.
@@ -897,11 +934,23 @@ impl<W: VehicleWire> Supervisor<W> {
         }
     }
 
+    /// The steering mode in force: the command's, unless the degradation level forbids it
+    /// (then normal steering).
+    fn steering_mode(&self) -> SteeringMode {
+        let commanded = self
+            .command
+            .map_or(SteeringMode::Normal, |c| c.steering_mode);
+        match self.degradation.limits() {
+            Some(limits) if !limits.steering_modes.allows(commanded) => SteeringMode::Normal,
+            _ => commanded,
+        }
+    }
+
     /// What the actuators must do now.
     pub fn actuators(&self, now: Timestamp) -> Actuators {
         let c = self.config;
         let command = self.command;
-        let steering_mode = command.map_or(SteeringMode::Normal, |c| c.steering_mode);
+        let steering_mode = self.steering_mode();
         let gear = command.map_or(Gear::Park, |c| c.gear);
         let full_brake = Actuators {
             ads_in_control: self.mode == ControlMode::Autonomous,
@@ -935,7 +984,9 @@ impl<W: VehicleWire> Supervisor<W> {
                 warning: self.watchdog != Watchdog::Normal,
             };
         }
-        if self.emergency_brake_until.is_some_and(|until| now < until) {
+        if self.emergency_brake_until.is_some_and(|until| now < until)
+            || self.degradation.level() == DegradationLevel::SafeStop
+        {
             return full_brake;
         }
         let steering = self.steering.value().unwrap_or(self.steering_actual);
@@ -949,6 +1000,14 @@ impl<W: VehicleWire> Supervisor<W> {
                 (v, 0.0, true)
             }
             _ => return full_brake,
+        };
+        // Degraded: no faster than the level allows.
+        let (velocity, warning) = match self.degradation.limits() {
+            Some(limits) => (
+                velocity.clamp(-limits.speed_limit, limits.speed_limit),
+                true,
+            ),
+            None => (velocity, warning),
         };
         Actuators {
             ads_in_control: true,
@@ -976,13 +1035,13 @@ impl<W: VehicleWire> Supervisor<W> {
             steering: self.steering_actual,
             velocity: self.speed,
             mode: self.mode,
-            steering_mode: self
-                .command
-                .map_or(SteeringMode::Normal, |c| c.steering_mode),
+            steering_mode: self.steering_mode(),
             gear: self.command.map_or(Gear::Park, |c| c.gear),
             watchdog_level: self.watchdog.level(),
             estop_state: self.estop.code(),
-            warning: self.watchdog != Watchdog::Normal || self.degraded.is_some(),
+            warning: self.watchdog != Watchdog::Normal
+                || self.degraded.is_some()
+                || self.degradation.level() != DegradationLevel::Nominal,
             driver_override: self.driver_input,
             steering_enabled,
             turn_indicators: self
@@ -992,6 +1051,8 @@ impl<W: VehicleWire> Supervisor<W> {
             hazard_lights: self.command.is_some_and(|c| c.hazard_lights)
                 || self.watchdog == Watchdog::FullBraking
                 || self.estop.is_latched(),
+            degradation: self.degradation.level(),
+            degradation_reason: self.degradation.reason().map(|f| f.class),
             heartbeat_echo: u64::from(self.echo),
         };
         let frame = self.wire.state_frame(&report, self.state_counter);

@@ -8,7 +8,8 @@
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::command::{
-    ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel,
+    ControlCommand, ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode,
+    TurnIndicators, WatchdogLevel,
 };
 use crate::redundancy::Channel;
 
@@ -42,6 +43,10 @@ pub struct StateFeedback {
     pub turn_indicators: Option<TurnIndicators>,
     /// The hazard lights, where reported.
     pub hazard_lights: Option<bool>,
+    /// The degradation level, where a fail-operational vehicle reports it.
+    pub degradation: Option<DegradationLevel>,
+    /// Why it is degraded, where reported (`None` also when nothing is wrong).
+    pub degradation_reason: Option<FaultClass>,
     /// The command counter the vehicle echoes.
     pub heartbeat_echo: u64,
     /// Every value within its declared range.
@@ -155,6 +160,10 @@ pub struct StateReport {
     pub turn_indicators: TurnIndicators,
     /// The hazard lights are on.
     pub hazard_lights: bool,
+    /// The degradation level.
+    pub degradation: DegradationLevel,
+    /// The fault the level is reported with (`None`: nominal).
+    pub degradation_reason: Option<FaultClass>,
     /// The last accepted command counter, echoed.
     pub heartbeat_echo: u64,
 }

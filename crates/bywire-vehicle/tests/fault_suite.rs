@@ -24,7 +24,8 @@ use bywire_net::sim::Tamper;
 use bywire_tug::messages::{self, AdsToVehicleControl, EmergencyStop};
 use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::ads::{Ads, AdsCommand};
-use bywire_vehicle::command::{ControlMode, Gear};
+use bywire_vehicle::command::{ControlMode, DegradationLevel, FaultClass, Gear};
+use bywire_vehicle::degradation::Fault;
 use bywire_vehicle::supervisor::{EstopState, Supervisor, Watchdog};
 use bywire_vehicle::wire::{AdsWire, ProfileWire, VehicleWire};
 
@@ -349,6 +350,58 @@ fn estop_latches_until_the_operator_reset<W: SuiteWire>(mut v: Vehicle<W>) {
     assert_eq!(rig.supervisor().estop(), EstopState::Normal);
 }
 
+/// A fault a fail-operational mechanism reports: the level the profile's rule gives (a
+/// profile without the section is fail-safe: a safe stop), its speed limit applied and shown
+/// to the ADS where the state message carries it; a second fault is a safe stop, and only a
+/// standstill resets.
+fn a_reported_fault_degrades_by_the_profiles_rule<W: SuiteWire>(v: Vehicle<W>) {
+    let mut rig = Rig::engaged(v);
+    rig.command.velocity = 4.0;
+    rig.commands(3, false);
+    let policy = *rig.supervisor().degradation().policy();
+    let now = rig.net.now();
+    let first = Fault {
+        class: FaultClass::SensorChannelOut,
+        source: 0,
+        at: now,
+    };
+    let level = rig.supervisor_mut().report_fault(first);
+    assert_eq!(level, policy.rule(FaultClass::SensorChannelOut));
+    rig.commands(3, false);
+    let a = rig.supervisor().actuators(rig.net.now());
+    match policy.limits(level) {
+        Some(limits) => {
+            assert_eq!(a.velocity, 4.0_f64.min(limits.speed_limit), "{a:?}");
+            assert!(a.warning && a.brake == 0.0, "{a:?}");
+        }
+        None => assert!(a.brake == 100.0 && !a.motors_enabled, "{a:?}"),
+    }
+    // The vehicle that declares its levels reports them (the shuttle); the fail-safe tug's
+    // state message has no place for one.
+    let ads = rig.net.node(rig.ads).unwrap().state();
+    let declared = policy.limits(level).is_some();
+    assert_eq!(ads.degradation.value, declared.then_some(level));
+    assert!(ads.warning.value.is_none_or(|w| w));
+    // A second fault on top stops the vehicle where it is.
+    let second = Fault {
+        class: FaultClass::ActuatorBackup,
+        ..first
+    };
+    assert_eq!(
+        rig.supervisor_mut().report_fault(second),
+        DegradationLevel::SafeStop
+    );
+    rig.commands(1, false);
+    let a = rig.supervisor().actuators(rig.net.now());
+    assert!(a.brake == 100.0 && !a.motors_enabled, "{a:?}");
+    rig.commands(40, false);
+    assert!(rig.supervisor_mut().reset_degradation());
+    assert_eq!(
+        rig.supervisor().degradation().level(),
+        DegradationLevel::Nominal
+    );
+}
+
 /// Each row for each wire.
 macro_rules! for_every_wire {
     ($($row:ident),* $(,)?) => {
@@ -374,4 +427,5 @@ for_every_wire!(
     out_of_range_commands_are_rejected,
     emergency_brake_brakes_fully_at_once,
     estop_latches_until_the_operator_reset,
+    a_reported_fault_degrades_by_the_profiles_rule,
 );

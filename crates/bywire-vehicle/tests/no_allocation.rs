@@ -135,3 +135,79 @@ fn ads_never_allocates<W: bywire_vehicle::wire::AdsWire>(mut ads: bywire_vehicle
     );
     assert_eq!(counted.count_total, 0, "allocations on the ADS side");
 }
+
+#[test]
+fn the_fail_operational_mechanisms_never_allocate() {
+    use bywire_vehicle::arbitration::{Arbiter, ArbiterConfig, ArbiterInputs, Heartbeat, Side};
+    use bywire_vehicle::backup::{ActuatorPair, Feedback, FeedbackCheck};
+    use bywire_vehicle::command::FaultClass;
+    use bywire_vehicle::degradation::{Degradation, DegradationPolicy, Fault};
+    use bywire_vehicle::redundancy::{TripleConfig, TripleVoter};
+    use std::time::Duration;
+
+    let ms = Duration::from_millis;
+    let mut voter = TripleVoter::new(
+        TripleConfig {
+            tolerance: 0.5,
+            persistence: ms(20),
+            timeout: ms(50),
+        },
+        Timestamp::ZERO,
+    );
+    let config = ArbiterConfig {
+        silence: ms(30),
+        disagreement: ms(30),
+    };
+    let mut b = Arbiter::new(Side::B, config, Timestamp::ZERO);
+    let mut pair = ActuatorPair::new(
+        FeedbackCheck {
+            still: 0.5,
+            overrun: 5.0,
+            persistence: ms(40),
+            heartbeat_timeout: ms(50),
+        },
+        Timestamp::ZERO,
+    );
+    let mut latch = Degradation::new(DegradationPolicy::default());
+    let mut voted = 0.0;
+    let counted = allocation_counter::measure(|| {
+        for k in 0..500u64 {
+            let now = Timestamp::from_millis(k);
+            for channel in 0..3 {
+                let drift = if channel == 2 { k as f64 / 100.0 } else { 0.0 };
+                voter.receive(channel, now, 10.0 + drift);
+            }
+            voted += voter.vote(now).value().unwrap_or(0.0);
+            b.step(
+                now,
+                ArbiterInputs {
+                    self_test_ok: true,
+                    partner: (k < 200).then_some(Heartbeat {
+                        role: bywire_vehicle::arbitration::Role::Active,
+                        at: now,
+                    }),
+                    traffic_at: Some(now),
+                    outputs_agree: Some(true),
+                    fenced: false,
+                },
+            );
+            pair.step(
+                now,
+                Feedback {
+                    demanded: 10.0,
+                    measured: if k < 300 { 10.0 } else { 0.0 },
+                    drive_fault: false,
+                    heartbeat_at: Some(now),
+                },
+            );
+            latch.report(Fault {
+                class: FaultClass::ALL[(k % 6) as usize],
+                source: 0,
+                at: now,
+            });
+        }
+    });
+    assert!(voted > 0.0);
+    assert!(b.took_over().is_some());
+    assert_eq!(counted.count_total, 0, "allocations in the mechanisms");
+}
