@@ -82,9 +82,6 @@ impl AdsWire for ReferenceWire {
                     // The tug's state message has no lights.
                     turn_indicators: None,
                     hazard_lights: None,
-                    // Nor a degradation level: this tug is fail-safe only.
-                    degradation: None,
-                    degradation_reason: None,
                     heartbeat_echo: m.heartbeat_echo_raw(),
                     in_range: steering.abs() <= 45.0
                         && (-5.0..=8.0).contains(&velocity)

@@ -503,6 +503,12 @@ impl<W: AdsWire> Ads<W> {
                     self.on_angles(now, angles);
                 }
             }
+            // Taken as it comes: a report that shows a level the vehicle has left is
+            // corrected by the next, every state period.
+            Feedback::Degradation(report) => {
+                self.state.degradation.set(now, report.level);
+                self.state.degradation_reason.set(now, report.reason);
+            }
             Feedback::WheelSpeeds { counter, speeds } => {
                 let sequenced = self.sensors_sequence.judge(now, bus, counter);
                 if self.take(sequenced, now, port, frame) {
@@ -576,10 +582,7 @@ impl<W: AdsWire> Ads<W> {
         if let Some(on) = m.hazard_lights {
             s.hazard_lights.set(now, on);
         }
-        if let Some(level) = m.degradation {
-            s.degradation.set(now, level);
-            s.degradation_reason.set(now, m.degradation_reason);
-        }
+
         if let Some(sent) = sent {
             s.echo_latency.set(now, now.saturating_since(sent));
         }

@@ -70,10 +70,6 @@ pub struct StateBindings {
     pub turn_indicators: Option<usize>,
     /// Hazard lights.
     pub hazard_lights: Option<usize>,
-    /// Degradation level.
-    pub degradation_level: Option<usize>,
-    /// The fault class the level is reported with.
-    pub degradation_reason: Option<usize>,
 }
 
 /// Four wheels' signals (FL, FR, RL, RR) in one message.
@@ -167,6 +163,17 @@ pub struct ActuatorPairBindings {
     pub measured: SignalBinding,
 }
 
+/// The degradation report's roles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReportBindings {
+    /// The message.
+    pub message: usize,
+    /// The level.
+    pub level: usize,
+    /// The fault class it is reported with.
+    pub reason: Option<usize>,
+}
+
 /// The `[fail_operational]` section's roles, in the section's order.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct FailOperationalBindings {
@@ -176,6 +183,8 @@ pub struct FailOperationalBindings {
     pub control: Option<[StatusBinding; 2]>,
     /// Each actuator pair.
     pub actuators: Vec<ActuatorPairBindings>,
+    /// The degradation report.
+    pub report: Option<ReportBindings>,
 }
 
 /// Every role a profile names, found in its DBC.

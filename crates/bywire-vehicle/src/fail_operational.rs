@@ -28,6 +28,11 @@
 //! disagreement_ms = 30
 //! output_tolerance = 2.0
 //!
+//! [fail_operational.report]         # the level and reason, for the ADS side
+//! message = "VcuDegradation"
+//! level = "Level"
+//! reason = "Reason"
+//!
 //! [[fail_operational.actuators]]    # an actuator and its backup
 //! name = "steering"
 //! primary = { message = "SteerP_Status", fault = "Fault" }
@@ -150,6 +155,18 @@ pub struct ActuatorPairRoles {
     pub heartbeat_timeout_ms: u64,
 }
 
+/// The degradation report the vehicle sends beside its state message.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReportRoles {
+    /// The message (its counter and checksum as its DBC declares them).
+    pub message: String,
+    /// The level (`DegradationLevel::raw`'s numbering).
+    pub level: String,
+    /// The fault class it is reported with (`FaultClass::raw`'s numbering, 0 for none).
+    pub reason: Option<String>,
+}
+
 /// The `[fail_operational]` section.
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -169,6 +186,8 @@ pub struct FailOperationalRoles {
     /// Actuators with a backup.
     #[serde(default)]
     pub actuators: Vec<ActuatorPairRoles>,
+    /// The degradation report (none: the ADS side is not told).
+    pub report: Option<ReportRoles>,
 }
 
 /// A key of the section and why its value is wrong.

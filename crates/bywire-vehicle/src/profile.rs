@@ -16,8 +16,8 @@ use serde::Deserialize;
 use crate::ads::{AdsConfig, WheelGeometry};
 use crate::bindings::{
     ActuatorPairBindings, BatteryBindings, Bindings, CommandBindings, EmergencyBrakeBindings,
-    FailOperationalBindings, ImuBindings, RequestBindings, SignalBinding, StateBindings,
-    StatusBinding, VotedBindings, WheelBindings,
+    FailOperationalBindings, ImuBindings, ReportBindings, RequestBindings, SignalBinding,
+    StateBindings, StatusBinding, VotedBindings, WheelBindings,
 };
 use crate::command::ControlCommand;
 use crate::fail_operational::{FailOperationalRoles, SignalRef};
@@ -134,12 +134,6 @@ pub struct StateRoles {
     /// Hazard lights as they are (optional).
     #[serde(default)]
     pub hazard_lights: Option<String>,
-    /// Degradation level (optional; fail-operational vehicles).
-    #[serde(default)]
-    pub degradation_level: Option<String>,
-    /// The fault class the level is reported with (optional; 0 for none).
-    #[serde(default)]
-    pub degradation_reason: Option<String>,
 }
 
 /// Per-wheel feedback: wheel speeds (m/s) or wheel angles (degrees).
@@ -624,8 +618,6 @@ impl Checker<'_> {
             steering_enabled: optional("steering_enabled", &s.steering_enabled)?,
             turn_indicators: optional("turn_indicators", &s.turn_indicators)?,
             hazard_lights: optional("hazard_lights", &s.hazard_lights)?,
-            degradation_level: optional("degradation_level", &s.degradation_level)?,
-            degradation_reason: optional("degradation_reason", &s.degradation_reason)?,
         }))
     }
 
@@ -734,6 +726,15 @@ impl Checker<'_> {
                     a.backup.fault.as_deref().map(|f| ("fault", f)),
                 )?,
                 measured: self.signal_ref(&format!("{key}.measured"), &a.measured)?,
+            });
+        }
+        if let Some(r) = &f.report {
+            let key = "fail_operational.report";
+            let (message, m) = self.message_at(&format!("{key}.message"), &r.message)?;
+            bindings.report = Some(ReportBindings {
+                message,
+                level: self.signal(m, &format!("{key}.level"), &r.level)?,
+                reason: self.optional(m, &format!("{key}.reason"), &r.reason)?,
             });
         }
         Ok(Some(bindings))

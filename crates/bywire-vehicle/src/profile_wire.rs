@@ -8,12 +8,13 @@ use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::Message;
 
-use crate::bindings::{CommandBindings, StateBindings, WheelBindings};
+use crate::bindings::{CommandBindings, ReportBindings, StateBindings, WheelBindings};
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
 use crate::command::{DegradationLevel, EstopCode, FaultClass, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::wire::{
-    AdsWire, Counters, Feedback, Incoming, Rejected, StateFeedback, StateReport, VehicleWire,
+    AdsWire, Counters, DegradationReport, Feedback, Incoming, Rejected, StateFeedback, StateReport,
+    VehicleWire,
 };
 
 /// One message spoken by role: its codec, protection, and the signal index of each role.
@@ -258,6 +259,7 @@ pub struct ProfileWire {
     wheel_angles: Option<(RoleMessage, [usize; 4])>,
     brake: Option<(RoleMessage, usize, usize)>,
     estop: Option<(RoleMessage, usize)>,
+    degradation: Option<(RoleMessage, ReportBindings)>,
     gears: EnumMap<Gear>,
     modes: EnumMap<ControlMode>,
     steering_modes: EnumMap<SteeringMode>,
@@ -349,8 +351,18 @@ impl ProfileWire {
             .estop
             .map(|e| Ok::<_, ProfileError>((declared(e.message, "estop.message")?, e.request)))
             .transpose()?;
+        let degradation = b
+            .fail_operational
+            .as_ref()
+            .and_then(|f| f.report)
+            .map(|r| {
+                let role = declared(r.message, "fail_operational.report.message")?;
+                Ok::<_, ProfileError>((role, r))
+            })
+            .transpose()?;
         Ok(ProfileWire {
             estop,
+            degradation,
             command,
             command_signals,
             state,
@@ -431,12 +443,8 @@ impl AdsWire for ProfileWire {
             // A level or latch state that names nothing is out of range, not unreported.
             let level = s.watchdog_level.and_then(|i| m.raw(i));
             let estop = s.estop_state.and_then(|i| m.raw(i));
-            let degradation = s.degradation_level.and_then(|i| m.raw(i));
-            let reason = s.degradation_reason.and_then(|i| m.raw(i));
             let known = level.is_none_or(|raw| WatchdogLevel::from_raw(raw).is_some())
-                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some())
-                && degradation.is_none_or(|raw| DegradationLevel::from_raw(raw).is_some())
-                && reason.is_none_or(|raw| raw == 0 || FaultClass::from_raw(raw).is_some());
+                && estop.is_none_or(|raw| EstopCode::from_raw(raw).is_some());
             let level = level.and_then(WatchdogLevel::from_raw);
             let estop = estop.and_then(EstopCode::from_raw);
             // A value the profile does not name: the ADS is not in control.
@@ -465,8 +473,6 @@ impl AdsWire for ProfileWire {
                     .and_then(|i| m.raw(i))
                     .and_then(|raw| self.turn_indicators.value(raw)),
                 hazard_lights: s.hazard_lights.and_then(|i| m.raw(i)).map(|raw| raw == 1),
-                degradation: degradation.and_then(DegradationLevel::from_raw),
-                degradation_reason: reason.and_then(FaultClass::from_raw),
                 heartbeat_echo: m.raw(s.heartbeat_echo).unwrap_or(u64::MAX),
                 in_range: [Some(s.steering), Some(s.velocity), s.watchdog_level]
                     .into_iter()
@@ -491,6 +497,31 @@ impl AdsWire for ProfileWire {
                 };
                 let angles = indices.map(|i| m.physical(i).unwrap_or(f64::NAN));
                 return Feedback::WheelAngles { counter, angles };
+            }
+        }
+        if let Some((m, b)) = self.degradation.as_mut() {
+            if m.is(frame) {
+                // A level or reason that names nothing is a report not to be read.
+                let level = m.read(frame).and(m.raw(b.level));
+                let reason = b.reason.map(|i| m.raw(i));
+                let report = match (level.and_then(DegradationLevel::from_raw), reason) {
+                    (Some(level), None) => Some(DegradationReport {
+                        level,
+                        reason: None,
+                    }),
+                    (Some(level), Some(Some(0))) => Some(DegradationReport {
+                        level,
+                        reason: None,
+                    }),
+                    (Some(level), Some(Some(raw))) => {
+                        FaultClass::from_raw(raw).map(|class| DegradationReport {
+                            level,
+                            reason: Some(class),
+                        })
+                    }
+                    _ => None,
+                };
+                return report.map_or(Feedback::Corrupt, Feedback::Degradation);
             }
         }
         Feedback::Other
@@ -595,11 +626,6 @@ impl VehicleWire for ProfileWire {
                 self.turn_indicators.raw(r.turn_indicators),
             ),
             (s.hazard_lights, u64::from(r.hazard_lights)),
-            (s.degradation_level, r.degradation.raw()),
-            (
-                s.degradation_reason,
-                r.degradation_reason.map_or(0, FaultClass::raw),
-            ),
         ];
         let m = &mut self.state;
         m.set(s.steering, r.steering);
@@ -624,6 +650,15 @@ impl VehicleWire for ProfileWire {
         let (m, indices) = self.wheel_angles.as_mut()?;
         for (index, angle) in indices.iter().zip(angles) {
             m.set(*index, angle);
+        }
+        m.frame(counter)
+    }
+
+    fn degradation_frame(&mut self, report: &DegradationReport, counter: u64) -> Option<Frame> {
+        let (m, b) = self.degradation.as_mut()?;
+        m.set_raw(b.level, report.level.raw());
+        if let Some(reason) = b.reason {
+            m.set_raw(reason, report.reason.map_or(0, FaultClass::raw));
         }
         m.frame(counter)
     }

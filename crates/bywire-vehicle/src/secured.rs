@@ -35,7 +35,9 @@ use bywire_secoc::{Authenticator, Counts, Key, Layout, Receiver, Rejection, Send
 
 use crate::command::ControlCommand;
 use crate::redundancy::Channel;
-use crate::wire::{AdsWire, Counters, Feedback, Incoming, Rejected, StateReport, VehicleWire};
+use crate::wire::{
+    AdsWire, Counters, DegradationReport, Feedback, Incoming, Rejected, StateReport, VehicleWire,
+};
 
 /// The most messages one table secures.
 pub const MAX_SECURED: usize = 8;
@@ -513,6 +515,11 @@ impl<W: VehicleWire> VehicleWire for Secured<W> {
 
     fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame> {
         let frame = self.inner.wheel_angles_frame(angles, counter);
+        self.protect(frame)
+    }
+
+    fn degradation_frame(&mut self, report: &DegradationReport, counter: u64) -> Option<Frame> {
+        let frame = self.inner.degradation_frame(report, counter);
         self.protect(frame)
     }
 

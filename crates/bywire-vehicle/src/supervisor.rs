@@ -31,7 +31,7 @@ use crate::command::{
 };
 use crate::degradation::{Degradation, DegradationPolicy, Fault};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
-use crate::wire::{Incoming, Rejected, StateReport, VehicleWire};
+use crate::wire::{DegradationReport, Incoming, Rejected, StateReport, VehicleWire};
 
 /// Command cycles without an E-stop frame, once one has come, after which the chain is open.
 pub const ESTOP_TIMEOUT_CYCLES: u32 = 3;
@@ -918,6 +918,14 @@ impl<W: VehicleWire> Supervisor<W> {
             if let Some(frame) = self.state_frame() {
                 out(frame);
             }
+            // Beside it, on a vehicle whose wire has one, the degradation report.
+            let report = DegradationReport {
+                level: self.degradation.level(),
+                reason: self.degradation.reason().map(|f| f.class),
+            };
+            if let Some(frame) = self.wire.degradation_frame(&report, self.state_counter) {
+                out(frame);
+            }
         }
         if let Some(frame) = self.wire.pending_frame(now) {
             out(frame);
@@ -1051,8 +1059,6 @@ impl<W: VehicleWire> Supervisor<W> {
             hazard_lights: self.command.is_some_and(|c| c.hazard_lights)
                 || self.watchdog == Watchdog::FullBraking
                 || self.estop.is_latched(),
-            degradation: self.degradation.level(),
-            degradation_reason: self.degradation.reason().map(|f| f.class),
             heartbeat_echo: u64::from(self.echo),
         };
         let frame = self.wire.state_frame(&report, self.state_counter);

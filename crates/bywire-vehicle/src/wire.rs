@@ -43,10 +43,6 @@ pub struct StateFeedback {
     pub turn_indicators: Option<TurnIndicators>,
     /// The hazard lights, where reported.
     pub hazard_lights: Option<bool>,
-    /// The degradation level, where a fail-operational vehicle reports it.
-    pub degradation: Option<DegradationLevel>,
-    /// Why it is degraded, where reported (`None` also when nothing is wrong).
-    pub degradation_reason: Option<FaultClass>,
     /// The command counter the vehicle echoes.
     pub heartbeat_echo: u64,
     /// Every value within its declared range.
@@ -79,6 +75,18 @@ pub enum Feedback {
         /// Speeds.
         speeds: [f64; 4],
     },
+    /// A fail-operational vehicle's degradation report.
+    Degradation(DegradationReport),
+}
+
+/// How far a fail-operational vehicle has degraded and why, as its degradation report
+/// (a message of its own, beside the state message) carries it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DegradationReport {
+    /// The level.
+    pub level: DegradationLevel,
+    /// The fault it is reported with (`None`: nominal, or the message has no reason).
+    pub reason: Option<FaultClass>,
 }
 
 /// The widths of the rolling counters both sides check.
@@ -160,10 +168,6 @@ pub struct StateReport {
     pub turn_indicators: TurnIndicators,
     /// The hazard lights are on.
     pub hazard_lights: bool,
-    /// The degradation level.
-    pub degradation: DegradationLevel,
-    /// The fault the level is reported with (`None`: nominal).
-    pub degradation_reason: Option<FaultClass>,
     /// The last accepted command counter, echoed.
     pub heartbeat_echo: u64,
 }
@@ -193,4 +197,9 @@ pub trait VehicleWire: Counters {
     /// The wheel-angle frame (FL, FR, RL, RR in degrees) with `counter` and its checksum,
     /// where the vehicle has one.
     fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame>;
+    /// The degradation report with `counter`, where the vehicle is fail-operational and has
+    /// the message.
+    fn degradation_frame(&mut self, _report: &DegradationReport, _counter: u64) -> Option<Frame> {
+        None
+    }
 }

@@ -953,6 +953,52 @@ mod shuttle {
     }
 
     #[test]
+    fn its_degradation_report_goes_both_ways_and_a_level_that_names_nothing_is_refused() {
+        use bywire_vehicle::wire::{
+            AdsWire, DegradationReport, Feedback, ProfileWire, VehicleWire,
+        };
+        let loaded = shuttle();
+        let mut wire = ProfileWire::new(&loaded).unwrap();
+        for &level in DegradationLevel::ALL {
+            for reason in std::iter::once(None).chain(FaultClass::ALL.iter().copied().map(Some)) {
+                let report = DegradationReport { level, reason };
+                let frame = wire.degradation_frame(&report, 0).unwrap();
+                assert_eq!(wire.feedback(&frame), Feedback::Degradation(report));
+            }
+        }
+        // Reason 7 is no fault class.
+        let report = bywire_vehicle::bindings::SignalBinding {
+            message: loaded
+                .bindings
+                .fail_operational
+                .as_ref()
+                .unwrap()
+                .report
+                .unwrap()
+                .message,
+            signal: loaded
+                .bindings
+                .fail_operational
+                .as_ref()
+                .unwrap()
+                .report
+                .unwrap()
+                .reason
+                .unwrap(),
+        };
+        let decoder = Decoder::new(loaded.database.clone());
+        let bad = frame(&decoder, report.message, report.signal, 7.0);
+        assert_eq!(wire.feedback(&bad), Feedback::Corrupt);
+        // A vehicle without the report sends none.
+        let mut tug = ProfileWire::new(&bywire_tug::profile().unwrap()).unwrap();
+        let nominal = DegradationReport {
+            level: DegradationLevel::Nominal,
+            reason: None,
+        };
+        assert_eq!(tug.degradation_frame(&nominal, 0), None);
+    }
+
+    #[test]
     fn each_mechanism_runs_on_its_frames() {
         let loaded = shuttle();
         let decoder = Decoder::new(loaded.database.clone());

@@ -26,9 +26,7 @@ use bywire_tug::messages::{
     VehicleToAdsSensors, VehicleToAdsState,
 };
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::command::{
-    DegradationLevel, EstopCode, FaultClass, TurnIndicators, WatchdogLevel,
-};
+use bywire_vehicle::command::{EstopCode, TurnIndicators, WatchdogLevel};
 use bywire_vehicle::profile::Profile;
 use bywire_vehicle::wire::{
     AdsWire, Counters, Feedback, Incoming, ProfileWire, StateReport, VehicleWire,
@@ -136,9 +134,6 @@ proptest! {
             // The tug's state message has no lights: both wires leave them out.
             turn_indicators: TurnIndicators::Left,
             hazard_lights: true,
-            // Nor a degradation level.
-            degradation: DegradationLevel::MinimalRisk,
-            degradation_reason: Some(FaultClass::ControlTakeover),
             heartbeat_echo: echo,
         };
         prop_assert_eq!(VehicleWire::state_frame(&mut by_role, &report, counter), VehicleWire::state_frame(&mut ReferenceWire, &report, counter));
@@ -682,8 +677,6 @@ fn lit_report(turn: TurnIndicators, hazard: bool, echo: u64) -> StateReport {
         steering_enabled: true,
         turn_indicators: turn,
         hazard_lights: hazard,
-        degradation: DegradationLevel::Nominal,
-        degradation_reason: None,
         heartbeat_echo: echo,
     }
 }
