@@ -22,7 +22,11 @@
 
 use core::time::Duration;
 
-use bywire_core::Timestamp;
+use bywire_core::node::{Node, Port};
+use bywire_core::time::earliest;
+use bywire_core::{Frame, Timestamp};
+
+use crate::command::FaultClass;
 
 /// Which of the two ECUs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -77,7 +81,7 @@ pub enum OutReason {
     SelfTest,
     /// The partner took over and fenced it.
     Fenced,
-    /// It heard nothing at all on the bus for the silence timeout: its receiver has failed
+    /// It heard nothing at all on the bus for the deafness timeout: its receiver has failed
     /// (in control it would act on stale commands; as standby it would take the silence for
     /// the partner's).
     Deaf,
@@ -114,6 +118,9 @@ pub struct ArbiterConfig {
     /// The active side's outputs may differ from the standby's own computation for this long
     /// before the standby takes over.
     pub disagreement: Duration,
+    /// No frame at all for this long is this side's receiver failed (longer than the longest
+    /// gap between the frames it hears, the partner's status included).
+    pub deaf: Duration,
 }
 
 /// What one side sees at a step.
@@ -197,9 +204,8 @@ impl Arbiter {
 
     /// The one transition: this side's role after seeing `inputs` at `now`.
     pub fn step(&mut self, now: Timestamp, inputs: ArbiterInputs) -> Role {
-        let silent_since = |heard: Option<Timestamp>| {
-            now.saturating_since(heard.unwrap_or(self.started)) > self.config.silence
-        };
+        let deaf =
+            now.saturating_since(inputs.traffic_at.unwrap_or(self.started)) > self.config.deaf;
         // The partner is silent only if this side heard other frames after the partner had
         // been quiet for the whole timeout: a receiver that fails silences everything at once,
         // and must not pass for a silent partner on the way to being found deaf.
@@ -230,7 +236,7 @@ impl Arbiter {
             (Role::Out(reason), _, _) => Role::Out(reason),
             (_, false, _) => Role::Out(OutReason::SelfTest),
             (_, true, true) => Role::Out(OutReason::Fenced),
-            (_, true, false) if silent_since(inputs.traffic_at) => Role::Out(OutReason::Deaf),
+            (_, true, false) if deaf => Role::Out(OutReason::Deaf),
             (Role::Active, true, false) => Role::Active,
             (Role::Standby, true, false) => match takeover {
                 Some(reason) => {
@@ -247,5 +253,376 @@ impl Arbiter {
         };
         self.role = role;
         role
+    }
+}
+
+/// What one half of a duplicated ECU needs of its vehicle's messages.
+pub trait DuplexWire {
+    /// The port the halves' status frames go out and come in on.
+    fn status_port(&self) -> Port;
+    /// How often a half sends its status (its heartbeat).
+    fn status_period(&self) -> Duration;
+    /// `side`'s status frame with its `role` and rolling `counter`.
+    fn status_frame(&mut self, side: Side, role: Role, counter: u8) -> Option<Frame>;
+    /// The role in `frame`, if it is the status of `side`'s partner and reads as sound.
+    fn partner_status(&mut self, side: Side, frame: &Frame) -> Option<Role>;
+    /// Whether `theirs`, a frame the partner sent on `port`, agrees with `mine`, the frame
+    /// this half made with its identifier; `None` for a frame that is no output to compare.
+    fn agree(&self, port: Port, mine: &Frame, theirs: &Frame) -> Option<bool>;
+}
+
+/// A node that keeps a degradation latch (a vehicle control ECU's supervisor): a half tells
+/// it of its takeover, or of its standby lost.
+pub trait Degrades {
+    /// A fault found (reported once).
+    fn report_fault(&mut self, fault: crate::degradation::Fault);
+}
+
+/// Own outputs kept for the comparison: one per identifier and port.
+const OWN_KEPT: usize = 24;
+
+/// One half of a duplicated ECU: its node, computing in either role, and its [`Arbiter`].
+///
+/// Both halves receive the same buses and run the same node in step ("hot standby"). What a
+/// half's node sends reaches the bus only while the half is in control and not fenced;
+/// otherwise it is kept, one frame per identifier, and compared with what the half in control
+/// sends under that identifier (a frame with an identifier this half sends is the partner's:
+/// two senders of one identifier never share a bus, so it is not given to the node, which
+/// never sees its own frames either). The node is polled when its own deadline or a frame
+/// calls for it, as it would be alone, so both halves' nodes see the same calls. Each half
+/// sends its status every [`DuplexWire::status_period`] unless fenced.
+///
+/// The fence is an input ([`Duplex::set_fenced`]): the partner's output line, which a
+/// vehicle wires in hardware and a simulation sets from the partner's
+/// [`Arbiter::fences_partner`].
+#[derive(Debug, Clone)]
+pub struct Duplex<N, W> {
+    node: N,
+    wire: W,
+    arbiter: Arbiter,
+    fenced: bool,
+    self_test_ok: bool,
+    partner: Option<Heartbeat>,
+    traffic_at: Option<Timestamp>,
+    outputs_agree: Option<bool>,
+    own: [Option<(Port, Frame)>; OWN_KEPT],
+    /// The node has frames it has not been polled after.
+    node_due: bool,
+    /// Its node was told its standby is lost.
+    standby_lost_reported: bool,
+    next_status: Timestamp,
+    status_counter: u8,
+}
+
+impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
+    /// `side`'s half running `node` from `now`.
+    pub fn new(side: Side, config: ArbiterConfig, node: N, wire: W, now: Timestamp) -> Self {
+        Duplex {
+            node,
+            wire,
+            arbiter: Arbiter::new(side, config, now),
+            fenced: false,
+            self_test_ok: true,
+            partner: None,
+            traffic_at: None,
+            outputs_agree: None,
+            own: [None; OWN_KEPT],
+            node_due: true,
+            standby_lost_reported: false,
+            next_status: now,
+            status_counter: 0,
+        }
+    }
+
+    /// The node.
+    pub fn node(&self) -> &N {
+        &self.node
+    }
+
+    /// The node, to change (its deadline is asked again by the runner's guard).
+    pub fn node_mut(&mut self) -> &mut N {
+        self.node_due = true;
+        &mut self.node
+    }
+
+    /// The arbitration.
+    pub fn arbiter(&self) -> &Arbiter {
+        &self.arbiter
+    }
+
+    /// Whether this half's outputs reach the bus now.
+    pub fn transmits(&self) -> bool {
+        self.arbiter.transmits(self.fenced)
+    }
+
+    /// The partner's fence on this half (the hardware line).
+    pub fn set_fenced(&mut self, fenced: bool) {
+        self.fenced = fenced;
+    }
+
+    /// This half's self-test result.
+    pub fn set_self_test(&mut self, ok: bool) {
+        self.self_test_ok = ok;
+    }
+
+    /// Back to the power-on roles, partner and comparison forgotten (a reset at standstill).
+    pub fn reset(&mut self, now: Timestamp) {
+        self.arbiter.reset(now);
+        self.partner = None;
+        self.outputs_agree = None;
+        self.standby_lost_reported = false;
+        self.next_status = now;
+    }
+
+    /// No status from the partner for the silence timeout (the active side's view: only
+    /// the standby takes over on it).
+    fn partner_silent(&self, now: Timestamp) -> bool {
+        let heard = self.partner.map_or(self.arbiter.started, |h| h.at);
+        now.saturating_since(heard) > self.arbiter.config.silence
+    }
+
+    fn keep(&mut self, port: Port, frame: Frame) {
+        let id = frame.id();
+        let slot = self
+            .own
+            .iter()
+            .position(|o| o.is_some_and(|(p, f)| p == port && f.id() == id))
+            .or_else(|| self.own.iter().position(Option::is_none));
+        if let Some(slot) = slot.and_then(|i| self.own.get_mut(i)) {
+            *slot = Some((port, frame));
+        }
+    }
+
+    fn mine(&self, port: Port, frame: &Frame) -> Option<Frame> {
+        let id = frame.id()?;
+        self.own
+            .iter()
+            .flatten()
+            .find(|(p, f)| *p == port && f.id() == Some(id))
+            .map(|(_, f)| *f)
+    }
+}
+
+impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        self.traffic_at = Some(now);
+        if port == self.wire.status_port() {
+            if let Some(role) = self.wire.partner_status(self.arbiter.side(), frame) {
+                self.partner = Some(Heartbeat { role, at: now });
+                return;
+            }
+        }
+        if let Some(mine) = self.mine(port, frame) {
+            if let Some(agree) = self.wire.agree(port, &mine, frame) {
+                // The worst since the last step: one disagreement counts.
+                self.outputs_agree = Some(self.outputs_agree.unwrap_or(true) && agree);
+            }
+            return;
+        }
+        self.node_due = true;
+        self.node.on_frame(now, port, frame);
+    }
+
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        self.node.on_sent(now, port, frame)
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        let inputs = ArbiterInputs {
+            self_test_ok: self.self_test_ok,
+            partner: self.partner,
+            traffic_at: self.traffic_at,
+            outputs_agree: self.outputs_agree.take(),
+            fenced: self.fenced,
+        };
+        let before = self.arbiter.role();
+        let role = self.arbiter.step(now, inputs);
+        // Its own node learns of a takeover, or (in control from the start) of its standby
+        // lost; the standby that took over does not report its partner lost too.
+        let partner_out = self.partner.is_some_and(|h| matches!(h.role, Role::Out(_)));
+        let fault = match (before, role) {
+            (Role::Standby, Role::Active) => Some(FaultClass::ControlTakeover),
+            (Role::Active, Role::Active)
+                if self.arbiter.took_over().is_none()
+                    && !self.standby_lost_reported
+                    && (partner_out || self.partner_silent(now)) =>
+            {
+                self.standby_lost_reported = true;
+                Some(FaultClass::StandbyLost)
+            }
+            _ => None,
+        };
+        if let Some(class) = fault {
+            self.node_due = true;
+            self.node.report_fault(crate::degradation::Fault {
+                class,
+                source: 0,
+                at: now,
+            });
+        }
+        let transmits = self.transmits();
+        if self.node_due || self.node.next_deadline().is_some_and(|d| d <= now) {
+            self.node_due = false;
+            let mut kept = [None; OWN_KEPT];
+            let mut count = 0;
+            self.node.poll(now, &mut |port, frame| {
+                if transmits {
+                    out(port, frame);
+                }
+                if let Some(slot) = kept.get_mut(count) {
+                    *slot = Some((port, frame));
+                    count += 1;
+                }
+            });
+            for (port, frame) in kept.into_iter().flatten() {
+                self.keep(port, frame);
+            }
+        }
+        if now >= self.next_status && !self.fenced {
+            self.next_status = now.saturating_add(self.wire.status_period());
+            let side = self.arbiter.side();
+            if let Some(frame) = self.wire.status_frame(side, role, self.status_counter) {
+                out(self.wire.status_port(), frame);
+            }
+            self.status_counter = self.status_counter.wrapping_add(1);
+        }
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        // A standby looks again when the partner would count as silent.
+        let silence = match (self.arbiter.role(), self.partner) {
+            (Role::Standby, Some(h)) => Some(
+                h.at.saturating_add(self.arbiter.config.silence)
+                    .saturating_add(Duration::from_nanos(1)),
+            ),
+            _ => None,
+        };
+        let status = (!self.fenced).then_some(self.next_status);
+        earliest([self.node.next_deadline(), status, silence])
+    }
+}
+
+/// Both halves of a duplicated ECU and the fence line between them, as one node for a
+/// simulated runner (on a vehicle the halves are two boxes and the line is a wire). A's
+/// ports are its node's; B's are its node's plus [`FencedPair::B_PORTS`]. Each half's fence
+/// follows the other's [`Arbiter::fences_partner`] the moment the other steps: a half fenced
+/// hands nothing more to the bus (a frame it handed over before, still queued behind
+/// arbitration, may yet go out, as from a transceiver cut a frame late).
+#[derive(Debug, Clone)]
+pub struct FencedPair<N, W> {
+    a: Duplex<N, W>,
+    b: Duplex<N, W>,
+    /// A half powered off: nothing in or out.
+    off: [bool; 2],
+}
+
+impl<N: Node + Degrades, W: DuplexWire> FencedPair<N, W> {
+    /// Added to a node's port number for B's.
+    pub const B_PORTS: u8 = 8;
+
+    /// The pair: A in control, B in hot standby.
+    pub fn new(a: Duplex<N, W>, b: Duplex<N, W>) -> Self {
+        FencedPair {
+            a,
+            b,
+            off: [false; 2],
+        }
+    }
+
+    /// B's port for its node's `port`.
+    pub fn b_port(port: Port) -> Port {
+        Port(port.0.saturating_add(Self::B_PORTS))
+    }
+
+    /// One half.
+    pub fn half(&self, side: Side) -> &Duplex<N, W> {
+        match side {
+            Side::A => &self.a,
+            Side::B => &self.b,
+        }
+    }
+
+    /// One half, to change.
+    pub fn half_mut(&mut self, side: Side) -> &mut Duplex<N, W> {
+        match side {
+            Side::A => &mut self.a,
+            Side::B => &mut self.b,
+        }
+    }
+
+    /// The half whose outputs reach the bus (`None`: neither, the actuators' safe stop).
+    pub fn in_control(&self) -> Option<Side> {
+        [Side::A, Side::B]
+            .into_iter()
+            .find(|&side| !self.is_off(side) && self.half(side).transmits())
+    }
+
+    /// Power a half off (a crash: silent, deaf) or on again.
+    pub fn power(&mut self, side: Side, on: bool) {
+        if let Some(off) = self.off.get_mut(usize::from(side == Side::B)) {
+            *off = !on;
+        }
+    }
+
+    /// Whether a half is powered off.
+    pub fn is_off(&self, side: Side) -> bool {
+        self.off
+            .get(usize::from(side == Side::B))
+            .copied()
+            .unwrap_or(true)
+    }
+
+    /// The half a pair port belongs to, and the port on that half's node.
+    fn route(port: Port) -> (Side, Port) {
+        match port.0.checked_sub(Self::B_PORTS) {
+            Some(p) => (Side::B, Port(p)),
+            None => (Side::A, port),
+        }
+    }
+
+    fn fence(&mut self) {
+        // A half powered off drives no line: its partner is free.
+        let a_fences = !self.is_off(Side::A) && self.a.arbiter().fences_partner();
+        let b_fences = !self.is_off(Side::B) && self.b.arbiter().fences_partner();
+        self.a.set_fenced(b_fences);
+        self.b.set_fenced(a_fences);
+    }
+}
+
+impl<N: Node + Degrades, W: DuplexWire> Node for FencedPair<N, W> {
+    fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
+        let (side, port) = Self::route(port);
+        if !self.is_off(side) {
+            self.half_mut(side).on_frame(now, port, frame);
+        }
+    }
+
+    fn on_sent(&mut self, now: Timestamp, port: Port, frame: &Frame) -> bool {
+        let (side, port) = Self::route(port);
+        !self.is_off(side) && self.half_mut(side).on_sent(now, port, frame)
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+        self.fence();
+        if !self.is_off(Side::A) {
+            self.a.poll(now, out);
+        }
+        self.fence();
+        if !self.is_off(Side::B) {
+            self.b
+                .poll(now, &mut |port, frame| out(Self::b_port(port), frame));
+        }
+        self.fence();
+    }
+
+    fn next_deadline(&self) -> Option<Timestamp> {
+        let deadline = |side: Side| {
+            if self.is_off(side) {
+                None
+            } else {
+                self.half(side).next_deadline()
+            }
+        };
+        earliest([deadline(Side::A), deadline(Side::B)])
     }
 }

@@ -121,6 +121,21 @@ pub struct ControlRoles {
     /// How far the active side's outputs may be from the standby's own before they disagree
     /// (the command's units).
     pub output_tolerance: f64,
+    /// How often each sends its status, ms.
+    #[serde(default = "default_status_period")]
+    pub status_period_ms: u64,
+    /// No frame at all for this long is a half's own receiver failed, ms (longer than the
+    /// longest gap between the frames it hears).
+    #[serde(default = "default_deaf")]
+    pub deaf_ms: u64,
+}
+
+fn default_deaf() -> u64 {
+    100
+}
+
+fn default_status_period() -> u64 {
+    10
 }
 
 /// One actuator's status message.
@@ -257,6 +272,7 @@ impl ControlRoles {
         ArbiterConfig {
             silence: Duration::from_millis(self.silence_ms),
             disagreement: Duration::from_millis(self.disagreement_ms),
+            deaf: Duration::from_millis(self.deaf_ms),
         }
     }
 }

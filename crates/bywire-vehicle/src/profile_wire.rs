@@ -2,12 +2,15 @@
 //! codec (needs `std`: profiles and their DBC are loaded from files).
 
 use alloc::vec::Vec;
+use core::time::Duration;
 
+use bywire_core::node::Port;
 use bywire_core::{FileError, Frame, Id};
 use bywire_dbc::codec::{Decoded, MessageCodec, Value};
 use bywire_dbc::e2e::{ChecksumAlgorithm, Protection};
 use bywire_dbc::Message;
 
+use crate::arbitration::{DuplexWire, Role, Side};
 use crate::bindings::{CommandBindings, ReportBindings, StateBindings, WheelBindings};
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
 use crate::command::{DegradationLevel, EstopCode, FaultClass, WatchdogLevel};
@@ -661,5 +664,104 @@ impl VehicleWire for ProfileWire {
             m.set_raw(reason, report.reason.map_or(0, FaultClass::raw));
         }
         m.frame(counter)
+    }
+}
+
+/// The two halves' status messages of a duplicated control ECU, as a profile's
+/// `[fail_operational.control]` names them: the halves' [`DuplexWire`] for any vehicle.
+/// The halves compute in step, so an output of the one in control agrees with the standby's
+/// when its bytes are the same.
+#[derive(Debug, Clone)]
+pub struct ProfileDuplexWire {
+    /// A's and B's status messages and their role signals.
+    status: [(RoleMessage, usize); 2],
+    period: Duration,
+}
+
+impl ProfileDuplexWire {
+    /// The status messages of `loaded`'s control ECUs (`None`: it declares none).
+    pub fn new(loaded: &LoadedProfile) -> Result<Option<ProfileDuplexWire>, ProfileError> {
+        let (Some(roles), Some(bindings)) = (
+            loaded
+                .profile
+                .fail_operational
+                .as_ref()
+                .and_then(|f| f.control.as_ref()),
+            loaded
+                .bindings
+                .fail_operational
+                .as_ref()
+                .and_then(|f| f.control),
+        ) else {
+            return Ok(None);
+        };
+        let invalid = |key: &str, reason: String| {
+            ProfileError::from(FileError::invalid(&loaded.profile.name, key, reason))
+        };
+        let [a, b] = bindings;
+        // A checksum the DBC declares without its algorithm takes the command's.
+        let algorithm = loaded
+            .profile
+            .command
+            .as_ref()
+            .and_then(|c| ChecksumAlgorithm::from_name(&c.checksum_algorithm))
+            .unwrap_or(ChecksumAlgorithm::Crc8SaeJ1850);
+        let half = |binding: crate::bindings::StatusBinding, key: &str| {
+            let message = loaded
+                .database
+                .messages
+                .get(binding.message)
+                .ok_or_else(|| invalid(key, "not in the DBC".to_string()))?;
+            let role = RoleMessage::declared(message, algorithm, key, &invalid)?;
+            Ok::<_, ProfileError>((role, binding.signal.unwrap_or(0)))
+        };
+        Ok(Some(ProfileDuplexWire {
+            status: [
+                half(a, "fail_operational.control.a")?,
+                half(b, "fail_operational.control.b")?,
+            ],
+            period: Duration::from_millis(roles.status_period_ms.max(1)),
+        }))
+    }
+
+    fn of(&mut self, side: Side) -> &mut (RoleMessage, usize) {
+        let [a, b] = &mut self.status;
+        match side {
+            Side::A => a,
+            Side::B => b,
+        }
+    }
+}
+
+impl DuplexWire for ProfileDuplexWire {
+    fn status_port(&self) -> Port {
+        crate::redundancy::Channel::A.port()
+    }
+
+    fn status_period(&self) -> Duration {
+        self.period
+    }
+
+    fn status_frame(&mut self, side: Side, role: Role, counter: u8) -> Option<Frame> {
+        let (message, signal) = self.of(side);
+        message.set_raw(*signal, u64::from(role.raw()));
+        message.frame(u64::from(counter))
+    }
+
+    fn partner_status(&mut self, side: Side, frame: &Frame) -> Option<Role> {
+        let partner = match side {
+            Side::A => Side::B,
+            Side::B => Side::A,
+        };
+        let (message, signal) = self.of(partner);
+        if !message.is(frame) {
+            return None;
+        }
+        message.read(frame)?;
+        message.raw(*signal).map(Role::from_raw)
+    }
+
+    fn agree(&self, _port: Port, mine: &Frame, theirs: &Frame) -> Option<bool> {
+        Some(mine.data() == theirs.data())
     }
 }

@@ -918,12 +918,17 @@ impl<W: VehicleWire> Supervisor<W> {
             if let Some(frame) = self.state_frame() {
                 out(frame);
             }
-            // Beside it, on a vehicle whose wire has one, the degradation report.
+            // Beside it, on a fail-operational vehicle whose wire has one, the degradation
+            // report (a fail-safe vehicle's frames stay as they are).
             let report = DegradationReport {
                 level: self.degradation.level(),
                 reason: self.degradation.reason().map(|f| f.class),
             };
-            if let Some(frame) = self.wire.degradation_frame(&report, self.state_counter) {
+            let frame = self
+                .config
+                .degradation
+                .and_then(|_| self.wire.degradation_frame(&report, self.state_counter));
+            if let Some(frame) = frame {
                 out(frame);
             }
         }
@@ -1065,6 +1070,12 @@ impl<W: VehicleWire> Supervisor<W> {
         let mask = (1u64 << self.wire.state_counter_bits().clamp(1, 8)) - 1;
         self.state_counter = (self.state_counter + 1) & mask;
         frame
+    }
+}
+
+impl<W: VehicleWire> crate::arbitration::Degrades for Supervisor<W> {
+    fn report_fault(&mut self, fault: Fault) {
+        Supervisor::report_fault(self, fault);
     }
 }
 

@@ -14,7 +14,7 @@ use crate::command::{
 use crate::redundancy::Channel;
 
 #[cfg(feature = "std")]
-pub use crate::profile_wire::ProfileWire;
+pub use crate::profile_wire::{ProfileDuplexWire, ProfileWire};
 
 /// A state (feedback) message, read by role.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -267,6 +267,7 @@ const TICK: u64 = 5;
 const ARBITER: ArbiterConfig = ArbiterConfig {
     silence: Duration::from_millis(20),
     disagreement: Duration::from_millis(15),
+    deaf: Duration::from_millis(20),
 };
 /// Heartbeats lost in a row that must never cause a takeover (silence covers four ticks).
 const TOLERATED_LOSSES: u8 = 3;
@@ -1105,5 +1106,266 @@ mod shuttle {
             latch.first().map(|f| f.class),
             Some(FaultClass::SensorChannelOut)
         );
+    }
+}
+
+// ---------------------------------------------------------------- a duplicated supervisor
+
+mod duplex {
+    //! The shuttle's supervisor duplicated (A in control, B in hot standby) on its bus with
+    //! the ADS side: B takes over from a crashed or self-failing A without the vehicle
+    //! braking, the ADS sees the level, and the halves' outputs never share the bus.
+
+    use super::*;
+    use bywire_core::node::Port;
+    use bywire_net::network::{Network, NodeHandle};
+    use bywire_net::sim::BusEvent;
+    use bywire_vehicle::ads::{Ads, AdsCommand};
+    use bywire_vehicle::arbitration::{Duplex, FencedPair};
+    use bywire_vehicle::command::{ControlMode, Gear};
+    use bywire_vehicle::profile::Profile;
+    use bywire_vehicle::supervisor::{Supervisor, Watchdog};
+    use bywire_vehicle::wire::{ProfileDuplexWire, ProfileWire};
+
+    type Pair = FencedPair<Supervisor<ProfileWire>, ProfileDuplexWire>;
+
+    struct Rig {
+        net: Network,
+        ads: NodeHandle<Ads<ProfileWire>>,
+        pair: NodeHandle<Pair>,
+        /// Each half's bus endpoint.
+        endpoints: [bywire_net::sim::NodeId; 2],
+        /// Non-status frames on the bus by sender: (ms, from B).
+        sent: Vec<(u64, bool)>,
+        command: AdsCommand,
+    }
+
+    impl Rig {
+        fn new() -> Rig {
+            let loaded = Profile::load(
+                &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
+            )
+            .unwrap();
+            let wire = ProfileWire::new(&loaded).unwrap();
+            let duplex = ProfileDuplexWire::new(&loaded).unwrap().unwrap();
+            let config = loaded.supervisor_config();
+            let arbiter = loaded
+                .profile
+                .fail_operational
+                .as_ref()
+                .unwrap()
+                .control
+                .as_ref()
+                .unwrap()
+                .config();
+            let half = |side| {
+                Duplex::new(
+                    side,
+                    arbiter,
+                    Supervisor::with_wire(config, wire.clone()),
+                    duplex.clone(),
+                    ms(0),
+                )
+            };
+            let mut net = Network::new();
+            let bus = net.add_bus("bus", 500_000, None);
+            let ads = net.add_node(Ads::with_wire(loaded.ads_config(), wire.clone()));
+            let pair = net.add_node(FencedPair::new(half(Side::A), half(Side::B)));
+            net.wire(ads.key(), Port::MAIN, bus).unwrap();
+            let a = net.wire(pair.key(), Port::MAIN, bus).unwrap();
+            let b = net.wire(pair.key(), Pair::b_port(Port::MAIN), bus).unwrap();
+            Rig {
+                net,
+                ads,
+                pair,
+                endpoints: [a, b],
+                sent: Vec::new(),
+                command: AdsCommand {
+                    velocity: 4.0,
+                    gear: Gear::Drive,
+                    mode: ControlMode::Autonomous,
+                    ..AdsCommand::default()
+                },
+            }
+        }
+
+        fn pair(&self) -> &Pair {
+            self.net.node(self.pair).unwrap()
+        }
+
+        fn in_control(&self) -> Option<Side> {
+            self.pair().in_control()
+        }
+
+        /// `n` 50 ms command cycles (`engage` on the first), the plant following whichever
+        /// half is in control (neither: the brakes).
+        fn cycles(&mut self, n: u32, engage: bool) {
+            for k in 0..n {
+                let now = self.net.now();
+                let command = AdsCommand {
+                    engage: engage && k == 0,
+                    ..self.command
+                };
+                self.net
+                    .node_mut(self.ads)
+                    .unwrap()
+                    .set_command(now, command);
+                for _ in 0..50 {
+                    self.net.run_for(Duration::from_millis(1));
+                    let t = self.net.now();
+                    let (status_a, status_b) = (0x520, 0x521);
+                    let bus = self.net.bus_mut(0).unwrap();
+                    for event in bus.drain_events() {
+                        if let BusEvent::Transmitted { node, id, end, .. } = event {
+                            let status = [status_a, status_b].contains(&id.as_raw());
+                            if !status && self.endpoints.contains(&node) {
+                                self.sent
+                                    .push((end.as_nanos() / 1_000_000, node == self.endpoints[1]));
+                            }
+                        }
+                    }
+                    let speed = {
+                        let pair = self.pair();
+                        match pair.in_control() {
+                            Some(side) => common_plant(&pair.half(side).node().actuators(t)),
+                            None => 0.0,
+                        }
+                    };
+                    let mut pair = self.net.node_mut(self.pair).unwrap();
+                    for side in [Side::A, Side::B] {
+                        let a = pair.half(side).node().actuators(t);
+                        pair.half_mut(side)
+                            .node_mut()
+                            .set_feedback(speed, a.steering);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The vehicle reaches its setpoint within a cycle (the suites' instant plant).
+    fn common_plant(a: &bywire_vehicle::supervisor::Actuators) -> f64 {
+        if a.motors_enabled && a.brake == 0.0 {
+            a.velocity
+        } else {
+            0.0
+        }
+    }
+
+    fn engaged() -> Rig {
+        let mut rig = Rig::new();
+        rig.cycles(12, false);
+        rig.cycles(1, true);
+        rig.cycles(2, false);
+        for side in [Side::A, Side::B] {
+            let supervisor = rig.pair().half(side).node();
+            assert_eq!(supervisor.watchdog(), Watchdog::Normal, "{side:?}");
+            assert_eq!(supervisor.mode(), ControlMode::Autonomous, "{side:?}");
+        }
+        assert_eq!(
+            rig.in_control(),
+            Some(Side::A),
+            "{:?} {:?}",
+            rig.pair().half(Side::A).arbiter(),
+            rig.pair().half(Side::B).arbiter()
+        );
+        rig
+    }
+
+    /// The halves' outputs (other than their status) never both on the bus: B's first comes
+    /// after A's last.
+    fn never_both(rig: &Rig) {
+        let first_b = rig.sent.iter().find(|(_, b)| *b).map(|(t, _)| *t);
+        let last_a = rig.sent.iter().rev().find(|(_, b)| !*b).map(|(t, _)| *t);
+        if let (Some(first_b), Some(last_a)) = (first_b, last_a) {
+            assert!(
+                last_a <= first_b,
+                "A sent at {last_a} ms, B from {first_b} ms"
+            );
+        }
+    }
+
+    #[test]
+    fn b_takes_over_from_a_crashed_a_and_the_vehicle_drives_on_degraded() {
+        let mut rig = engaged();
+        let crashed = rig.net.now();
+        rig.net.node_mut(rig.pair).unwrap().power(Side::A, false);
+        // Over the silence, the next command, and B's next state period.
+        rig.cycles(3, false);
+        assert_eq!(rig.in_control(), Some(Side::B));
+        let b = rig.pair().half(Side::B);
+        assert_eq!(
+            b.arbiter().took_over(),
+            Some(bywire_vehicle::arbitration::TakeoverReason::PartnerSilent)
+        );
+        let supervisor = b.node();
+        assert_eq!(supervisor.watchdog(), Watchdog::Normal);
+        assert_eq!(
+            supervisor.degradation().level(),
+            DegradationLevel::MinimalRisk
+        );
+        let taken_at = supervisor.degradation().first().unwrap().at;
+        // The shuttle's silence is 30 ms; B takes over with the next frame it hears after it
+        // (the ADS's commands come every 50 ms on this bus, nothing else does).
+        let took = taken_at.saturating_since(crashed);
+        assert!(took <= Duration::from_millis(30 + 50), "{took:?}");
+        // Driving on at the level's limit, and the ADS told.
+        let a = supervisor.actuators(rig.net.now());
+        assert!(
+            a.motors_enabled && a.brake == 0.0 && a.velocity == 1.5,
+            "{a:?}"
+        );
+        let ads = rig.net.node(rig.ads).unwrap().state();
+        assert_eq!(ads.degradation.value, Some(DegradationLevel::MinimalRisk));
+        assert_eq!(
+            ads.degradation_reason.value,
+            Some(Some(FaultClass::ControlTakeover))
+        );
+        never_both(&rig);
+        // B lost too: neither is in control, the vehicle stops.
+        rig.net.node_mut(rig.pair).unwrap().power(Side::B, false);
+        rig.cycles(1, false);
+        assert_eq!(rig.in_control(), None);
+    }
+
+    #[test]
+    fn a_failing_its_self_test_hands_over_at_its_next_status() {
+        let mut rig = engaged();
+        let failed = rig.net.now();
+        rig.net
+            .node_mut(rig.pair)
+            .unwrap()
+            .half_mut(Side::A)
+            .set_self_test(false);
+        rig.cycles(1, false);
+        assert_eq!(rig.in_control(), Some(Side::B));
+        let b = rig.pair().half(Side::B);
+        assert_eq!(
+            b.arbiter().took_over(),
+            Some(bywire_vehicle::arbitration::TakeoverReason::PartnerReportedOut)
+        );
+        let taken_at = b.node().degradation().first().unwrap().at;
+        assert!(
+            taken_at.saturating_since(failed) <= Duration::from_millis(15),
+            "{taken_at:?}"
+        );
+        assert_eq!(
+            rig.pair().half(Side::A).arbiter().role(),
+            Role::Out(OutReason::SelfTest)
+        );
+        never_both(&rig);
+    }
+
+    #[test]
+    fn a_standby_lost_degrades_by_the_profiles_rule_and_a_keeps_control() {
+        let mut rig = engaged();
+        rig.net.node_mut(rig.pair).unwrap().power(Side::B, false);
+        rig.cycles(2, false);
+        assert_eq!(rig.in_control(), Some(Side::A));
+        let supervisor = rig.pair().half(Side::A).node();
+        // The shuttle's rule for a lost standby is nominal: a notice only.
+        assert_eq!(supervisor.degradation().level(), DegradationLevel::Nominal);
+        let a = supervisor.actuators(rig.net.now());
+        assert_eq!(a.velocity, 4.0);
     }
 }

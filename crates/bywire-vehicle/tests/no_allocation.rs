@@ -157,6 +157,7 @@ fn the_fail_operational_mechanisms_never_allocate() {
     let config = ArbiterConfig {
         silence: ms(30),
         disagreement: ms(30),
+        deaf: ms(100),
     };
     let mut b = Arbiter::new(Side::B, config, Timestamp::ZERO);
     let mut pair = ActuatorPair::new(
