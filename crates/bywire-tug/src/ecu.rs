@@ -32,7 +32,8 @@ use bywire_core::node::{Node, Port};
 use bywire_core::num::round_to_i32;
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::command::{DegradationLevel, SteeringMode};
+use bywire_vehicle::degradation::Fault;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
@@ -261,9 +262,28 @@ impl VehicleControlEcu {
         *self = fresh;
     }
 
-    /// The supervisor (watchdog, latch, mode, counts, degraded bus).
+    /// The supervisor (watchdog, latch, mode, counts, degraded bus, degradation level).
     pub fn supervisor(&self) -> &Supervisor<TugWire> {
         &self.supervisor
+    }
+
+    /// A fault a fail-operational mechanism found: the degradation level from now on.
+    pub fn report_fault(&mut self, fault: Fault) -> DegradationLevel {
+        self.supervisor.report_fault(fault)
+    }
+
+    /// Back to nominal after a repair, only at a standstill (whether it was reset).
+    pub fn reset_degradation(&mut self) -> bool {
+        self.supervisor.reset_degradation()
+    }
+
+    /// A fault of this ECU's own, as a test bench injects it: a corner's steering trim
+    /// corrupted in its memory by `deg` (its setpoints for that corner off by as much).
+    pub fn corrupt_trim(&mut self, corner: usize, deg: f64) {
+        if let Some(offset) = self.offsets.get_mut(corner) {
+            *offset += deg;
+        }
+        self.last_commands = None;
     }
 
     /// The CANopen master (its drive controllers' states). Whatever is changed through it,

@@ -6,7 +6,9 @@
 //! - [`messages`]: its bus-1 DBC (`dbc/reference-tug.dbc`) as structs generated at build time,
 //!   with the E2E protection every message carries (4-bit counter, CRC-8 with data ID);
 //! - [`wire`]: [`wire::ReferenceWire`], both ends of the wire through those structs (`no_std`);
-//! - [`profile`]: its vehicle profile (`profiles/reference-tug.toml`) for the runtime codec;
+//! - [`profile`]: its vehicle profile (`profiles/reference-tug.toml`) for the runtime codec,
+//!   and [`redundant_profile`], the same with its fail-operational layers;
+//! - [`duplex`]: the two control ECUs' status and the comparison of their setpoints;
 //! - [`secured`]: its secured variant — the command path authenticated (SecOC profile 1) in
 //!   CAN FD frames, with the figures that chose FD over a companion frame;
 //! - [`plausibility`]: the ECU's check of each corner's two steering-sensor tracks;
@@ -30,6 +32,7 @@
 
 pub mod diagnostics;
 pub mod drives;
+pub mod duplex;
 pub mod ecu;
 pub mod messages;
 pub mod plausibility;
@@ -52,12 +55,30 @@ pub fn profile() -> Result<LoadedProfile, ProfileError> {
     Profile::parse("reference-tug", PROFILE, |_| Ok(messages::DBC.to_string()))
 }
 
-/// A shipped profile by name: `reference-tug`, or one the vehicle crate ships
-/// (`autoware-can`).
+/// The redundant tug's fail-operational sections, which `reference-tug-redundant` adds to
+/// the tug's profile.
+pub const REDUNDANCY: &str = include_str!("../profiles/redundancy.toml");
+
+/// The redundant tug's profile: the tug's, with its fail-operational layers declared (two
+/// control ECUs, the degradation levels and their report).
+pub fn redundant_profile() -> Result<LoadedProfile, ProfileError> {
+    let plain = PROFILE.replacen(
+        "name = \"reference-tug\"",
+        "name = \"reference-tug-redundant\"",
+        1,
+    );
+    let text = format!("{plain}\n{REDUNDANCY}");
+    Profile::parse("reference-tug-redundant", &text, |_| {
+        Ok(messages::DBC.to_string())
+    })
+}
+
+/// A shipped profile by name: `reference-tug`, `reference-tug-redundant`, or one the vehicle
+/// crate ships (`autoware-can`).
 pub fn builtin(name: &str) -> Result<LoadedProfile, ProfileError> {
-    if name == "reference-tug" {
-        profile()
-    } else {
-        Profile::builtin(name)
+    match name {
+        "reference-tug" => profile(),
+        "reference-tug-redundant" => redundant_profile(),
+        _ => Profile::builtin(name),
     }
 }

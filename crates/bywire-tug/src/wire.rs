@@ -4,15 +4,17 @@
 
 use bywire_core::{Frame, Id};
 use bywire_vehicle::command::{
-    ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel,
+    ControlCommand, ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode,
+    WatchdogLevel,
 };
 use bywire_vehicle::wire::{
-    AdsWire, Counters, Feedback, Incoming, Rejected, StateFeedback, StateReport, VehicleWire,
+    AdsWire, Counters, DegradationReport, Feedback, Incoming, Rejected, StateFeedback, StateReport,
+    VehicleWire,
 };
 
 use crate::messages::{
-    self, AdsToVehicleControl, EmergencyBrake, EmergencyStop, VehicleToAdsSensors,
-    VehicleToAdsState, VehicleToAdsWheelAngles,
+    self, AdsToVehicleControl, EmergencyBrake, EmergencyStop, VehicleToAdsDegradation,
+    VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 
 /// The reference tug, through its generated structs.
@@ -56,6 +58,7 @@ impl AdsWire for ReferenceWire {
             VehicleToAdsState::ID,
             VehicleToAdsSensors::ID,
             VehicleToAdsWheelAngles::ID,
+            VehicleToAdsDegradation::ID,
         ]
         .contains(&id)
         {
@@ -98,6 +101,21 @@ impl AdsWire for ReferenceWire {
                         m.wheel_angle_rl(),
                         m.wheel_angle_rr(),
                     ],
+                }
+            }
+            VehicleToAdsDegradation::ID => {
+                let m = VehicleToAdsDegradation(payload);
+                let level = DegradationLevel::from_raw(m.degradation_level_raw());
+                let reason = match m.degradation_reason_raw() {
+                    0 => Some(None),
+                    raw => FaultClass::from_raw(raw).map(Some),
+                };
+                match (level, reason) {
+                    (Some(level), Some(reason)) => {
+                        Feedback::Degradation(DegradationReport { level, reason })
+                    }
+                    // A level or reason that names nothing: not to be read.
+                    _ => Feedback::Corrupt,
                 }
             }
             _ => {
@@ -190,5 +208,13 @@ impl VehicleWire for ReferenceWire {
         );
         m.set_counter_raw(counter & 0x0F);
         Some(messages::sealed_frame(VehicleToAdsWheelAngles::ID, m.0))
+    }
+
+    fn degradation_frame(&mut self, report: &DegradationReport, counter: u64) -> Option<Frame> {
+        let mut m = VehicleToAdsDegradation::default();
+        m.set_degradation_level_raw(report.level.raw());
+        m.set_degradation_reason_raw(report.reason.map_or(0, FaultClass::raw));
+        m.set_counter_raw(counter & 0x0F);
+        Some(messages::sealed_frame(VehicleToAdsDegradation::ID, m.0))
     }
 }

@@ -40,7 +40,7 @@ pub enum ProfileError {
         reason: String,
     },
     /// No such built-in profile.
-    #[error("no built-in profile '{0}' (reference-tug, autoware-can)")]
+    #[error("no built-in profile '{0}' (reference-tug, reference-tug-redundant, autoware-can)")]
     UnknownBuiltin(String),
 }
 

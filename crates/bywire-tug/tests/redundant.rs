@@ -1,0 +1,110 @@
+//! The redundant tug's messages: its profile's degradation report the same bytes through the
+//! generated structs as through the profile, read back by both; the two ECUs' status and the
+//! comparison of their setpoints.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use bywire_core::node::Port;
+use bywire_core::{Frame, Id};
+use bywire_tug::duplex::TugDuplexWire;
+use bywire_tug::ecu::{BUS1, BUS2};
+use bywire_tug::wire::ReferenceWire;
+use bywire_vehicle::arbitration::{DuplexWire, OutReason, Role, Side};
+use bywire_vehicle::command::{DegradationLevel, FaultClass};
+use bywire_vehicle::wire::{AdsWire, DegradationReport, Feedback, ProfileWire, VehicleWire};
+
+#[test]
+fn both_wires_make_and_read_the_same_degradation_report() {
+    let loaded = bywire_tug::redundant_profile().unwrap();
+    assert!(loaded.supervisor_config().degradation.is_some());
+    let mut by_role = ProfileWire::new(&loaded).unwrap();
+    for &level in DegradationLevel::ALL {
+        for reason in std::iter::once(None).chain(FaultClass::ALL.iter().copied().map(Some)) {
+            let report = DegradationReport { level, reason };
+            for counter in [0, 7, 15] {
+                let generated = ReferenceWire.degradation_frame(&report, counter).unwrap();
+                let profiled = by_role.degradation_frame(&report, counter).unwrap();
+                assert_eq!(generated, profiled, "{report:?} {counter}");
+                assert_eq!(
+                    ReferenceWire.feedback(&generated),
+                    Feedback::Degradation(report)
+                );
+                assert_eq!(by_role.feedback(&generated), Feedback::Degradation(report));
+            }
+        }
+    }
+    // The plain tug's profile has no report: its vehicle sends none.
+    let plain = bywire_tug::profile().unwrap();
+    assert!(plain.supervisor_config().degradation.is_none());
+    assert_eq!(
+        bywire_tug::builtin("reference-tug-redundant")
+            .unwrap()
+            .profile
+            .name,
+        "reference-tug-redundant"
+    );
+}
+
+#[test]
+fn a_report_with_a_corrupt_crc_or_an_unknown_reason_is_not_read() {
+    let report = DegradationReport {
+        level: DegradationLevel::MinimalRisk,
+        reason: Some(FaultClass::ControlTakeover),
+    };
+    let frame = ReferenceWire.degradation_frame(&report, 3).unwrap();
+    let mut bytes: [u8; 8] = frame.data().try_into().unwrap();
+    bytes[7] ^= 1;
+    let corrupt = Frame::classic(frame.id().unwrap(), &bytes).unwrap();
+    assert_eq!(ReferenceWire.feedback(&corrupt), Feedback::Corrupt);
+    let mut m = bywire_tug::messages::VehicleToAdsDegradation::default();
+    m.set_degradation_reason_raw(7);
+    let unknown =
+        bywire_tug::messages::sealed_frame(bywire_tug::messages::VehicleToAdsDegradation::ID, m.0);
+    assert_eq!(ReferenceWire.feedback(&unknown), Feedback::Corrupt);
+}
+
+#[test]
+fn each_ecu_reads_the_others_status_and_not_its_own() {
+    let mut wire = TugDuplexWire::default();
+    for role in [
+        Role::Active,
+        Role::Standby,
+        Role::Out(OutReason::SelfTest),
+        Role::Out(OutReason::Fenced),
+        Role::Out(OutReason::Deaf),
+    ] {
+        let from_a = wire.status_frame(Side::A, role, 5).unwrap();
+        assert_eq!(wire.partner_status(Side::B, &from_a), Some(role));
+        assert_eq!(wire.partner_status(Side::A, &from_a), None);
+        let from_b = wire.status_frame(Side::B, role, 5).unwrap();
+        assert_eq!(wire.partner_status(Side::A, &from_b), Some(role));
+    }
+    assert_eq!(wire.status_port(), BUS1);
+}
+
+#[test]
+fn setpoints_agree_within_the_tolerance_and_other_frames_are_not_compared() {
+    let wire = TugDuplexWire::default();
+    let rpdo2 = |node: u32, position: i32, velocity: i32| {
+        let mut data = [0u8; 8];
+        data[..4].copy_from_slice(&position.to_le_bytes());
+        data[4..].copy_from_slice(&velocity.to_le_bytes());
+        Frame::classic(Id::standard(0x300 + node).unwrap(), &data).unwrap()
+    };
+    let units = bywire_tug::ecu::STEERING_UNITS_PER_DEG;
+    let steer = |deg: f64| rpdo2(0x11, bywire_core::num::round_to_i32(deg * units), 0);
+    assert_eq!(wire.agree(BUS2, &steer(10.0), &steer(10.5)), Some(true));
+    assert_eq!(wire.agree(BUS2, &steer(10.0), &steer(12.0)), Some(false));
+    let speed = |v: f64| {
+        rpdo2(
+            0x21,
+            0,
+            bywire_core::num::round_to_i32(v * bywire_tug::ecu::DRIVE_UNITS_PER_M),
+        )
+    };
+    assert_eq!(wire.agree(BUS2, &speed(2.0), &speed(2.05)), Some(true));
+    assert_eq!(wire.agree(BUS2, &speed(2.0), &speed(2.5)), Some(false));
+    // SYNC, a heartbeat, or anything on bus 1: not compared.
+    let sync = Frame::classic(Id::standard(0x080).unwrap(), &[]).unwrap();
+    assert_eq!(wire.agree(BUS2, &sync, &sync), None);
+    assert_eq!(wire.agree(Port(0), &steer(10.0), &steer(30.0)), None);
+}
