@@ -13,6 +13,8 @@
 //! payload = 2000                # kg, 0–4500
 //! grade = 0.02                  # rise over run
 //! secoc = true                  # the secured variant: commands authenticated, CAN FD
+//! redundant = true              # the redundant tug: two control ECUs, degradation levels
+//! safe_stops = [55, 120]        # safe stop points, m along the route (minimal-risk stops)
 //!
 //! [[event]]
 //! at_s = 8.0
@@ -81,6 +83,10 @@ struct RawScenario {
     grade: f64,
     #[serde(default)]
     secoc: bool,
+    #[serde(default)]
+    redundant: bool,
+    #[serde(default)]
+    safe_stops: Vec<f64>,
     #[serde(default)]
     event: Vec<RawEvent>,
 }
@@ -204,6 +210,17 @@ impl Scenario {
             .iter()
             .map(|[at, s]| (*at, Duration::from_secs_f64(*s)))
             .collect();
+        let mut safe_stops = raw.safe_stops.clone();
+        if let Some(i) = safe_stops
+            .iter()
+            .position(|at| !(at.is_finite() && *at >= 0.0 && *at <= length))
+        {
+            return Err(invalid(
+                &format!("safe_stops[{i}]"),
+                format!("a point along the route (0–{length:.1} m)"),
+            ));
+        }
+        safe_stops.sort_by(f64::total_cmp);
         let events = raw
             .event
             .iter()
@@ -224,6 +241,8 @@ impl Scenario {
                 speeds,
                 stops,
                 secoc: raw.secoc,
+                redundant: raw.redundant,
+                safe_stops,
             },
             events,
         })

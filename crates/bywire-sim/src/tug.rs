@@ -33,6 +33,7 @@ use bywire_net::network::{BusIndex, Network, NodeHandle, NodeKey};
 use bywire_net::sim::{BusEvent, NodeId};
 use bywire_net::Filtering;
 use bywire_tug::diagnostics;
+use bywire_tug::duplex::TugDuplexWire;
 use bywire_tug::ecu::{
     self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu, DRIVE_UNITS_PER_M,
     STEERING_UNITS_PER_DEG,
@@ -40,10 +41,12 @@ use bywire_tug::ecu::{
 pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
 use bywire_tug::messages::{
     AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
-    SteeringAngleSensors, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
+    SteeringAngleSensors, VcuAStatus, VcuBStatus, VehicleToAdsDegradation, VehicleToAdsSensors,
+    VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::{Ads, AdsConfig};
+use bywire_vehicle::arbitration::{ArbiterConfig, Duplex, FencedPair, Side};
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::secured::Signing;
@@ -96,6 +99,11 @@ pub struct TugParams {
     /// The secured variant: the command path authenticated, CAN FD on bus 1 and 1b
     /// ([`bywire_tug::secured`]).
     pub secoc: bool,
+    /// The redundant tug: two vehicle control ECUs (A in control, B in hot standby) and the
+    /// degradation levels of the `reference-tug-redundant` profile.
+    pub redundant: bool,
+    /// Safe stop points along the route, m by distance: where a minimal-risk manoeuvre ends.
+    pub safe_stops: Vec<f64>,
 }
 
 /// The plain run: the apron loop at 3 m/s with 2 t of bags, level, nothing else asked for.
@@ -113,6 +121,8 @@ impl Default for TugParams {
             speeds: Vec::new(),
             stops: Vec::new(),
             secoc: false,
+            redundant: false,
+            safe_stops: Vec::new(),
         }
     }
 }
@@ -126,10 +136,50 @@ struct Corner {
     distance: f64,
 }
 
+/// The redundant tug's two vehicle control ECUs and the fence line between them.
+pub type EcuPair = FencedPair<VehicleControlEcu, TugDuplexWire>;
+
+/// The vehicle control ECU: one, or the redundant tug's pair.
+#[derive(Clone, Copy)]
+enum Ecus {
+    One(NodeHandle<VehicleControlEcu>),
+    Two(NodeHandle<EcuPair>),
+}
+
+impl Ecus {
+    /// The ECU (of two, the one in control; A when neither is).
+    fn in_control(self, net: &Network) -> Option<&VehicleControlEcu> {
+        match self {
+            Ecus::One(ecu) => net.node(ecu),
+            Ecus::Two(pair) => {
+                let pair = net.node(pair)?;
+                let side = pair.in_control().unwrap_or(Side::A);
+                Some(pair.half(side).node())
+            }
+        }
+    }
+
+    fn key(self) -> NodeKey {
+        match self {
+            Ecus::One(ecu) => ecu.key(),
+            Ecus::Two(pair) => pair.key(),
+        }
+    }
+
+    /// The node's ports for each ECU: (its name, the port on bus 1, 1b, 2 and 3).
+    fn halves(self) -> Vec<(&'static str, [Port; 4])> {
+        let ports = [ecu::BUS1, ecu::BUS1B, ecu::BUS2, ecu::BUS3];
+        match self {
+            Ecus::One(_) => vec![("ECU", ports)],
+            Ecus::Two(_) => vec![("ECU A", ports), ("ECU B", ports.map(EcuPair::b_port))],
+        }
+    }
+}
+
 /// The tug's nodes, as its network holds them.
 struct TugNodes {
     ads: NodeHandle<AdsDriver>,
-    ecu: NodeHandle<VehicleControlEcu>,
+    ecu: Ecus,
     safety: NodeHandle<Signing<SafetyController>>,
     bms: NodeHandle<Bms>,
     imu: NodeHandle<ImuNode>,
@@ -239,6 +289,7 @@ impl TugNodes {
         mission: Mission,
         (ads_config, ecu_config): (AdsConfig, SupervisorConfig),
         geometry: EcuGeometry,
+        arbitration: Option<ArbiterConfig>,
     ) -> Result<TugNodes, TugError> {
         // Every node of the secured variant starts its freshness at 1: a new key.
         let key = bywire_secoc::Key::new(SIM_KEY);
@@ -253,9 +304,24 @@ impl TugNodes {
             true => Some(secured::table(&key, 1)?),
             false => None,
         };
+        let ads = net.add_node(AdsDriver::new(ads_config, mission, wire()?));
+        let ecu = match arbitration {
+            None => {
+                Ecus::One(net.add_node(VehicleControlEcu::with_wire(ecu_config, geometry, wire()?)))
+            }
+            Some(config) => {
+                let half = |side| -> Result<_, TugError> {
+                    let node = VehicleControlEcu::with_wire(ecu_config, geometry, wire()?);
+                    let duplex = TugDuplexWire::default();
+                    Ok(Duplex::new(side, config, node, duplex, Timestamp::ZERO))
+                };
+                let pair = FencedPair::new(half(Side::A)?, half(Side::B)?);
+                Ecus::Two(net.add_node(pair))
+            }
+        };
         Ok(TugNodes {
-            ads: net.add_node(AdsDriver::new(ads_config, mission, wire()?)),
-            ecu: net.add_node(VehicleControlEcu::with_wire(ecu_config, geometry, wire()?)),
+            ads,
+            ecu,
             safety: net.add_node(Signing::new(nodes::safety_controller(), safety_table)),
             bms: net.add_node(nodes::bms()),
             imu: net.add_node(nodes::imu()),
@@ -285,10 +351,15 @@ impl TugNodes {
         let (ads, ecu) = (self.ads.key(), self.ecu.key());
         wire(net, ads, Ads::<TugWire>::PORT_A, 0, "ADS");
         wire(net, ads, Ads::<TugWire>::PORT_B, 3, "ADS");
-        let ecu_bus1 = wire(net, ecu, ecu::BUS1, 0, "ECU");
-        wire(net, ecu, ecu::BUS1B, 3, "ECU");
-        wire(net, ecu, ecu::BUS2, 1, "ECU (CANopen master)");
-        wire(net, ecu, ecu::BUS3, 2, "ECU");
+        let mut ecu_bus1 = None;
+        for (name, [bus1, bus1b, bus2, bus3]) in self.ecu.halves() {
+            let endpoint = wire(net, ecu, bus1, 0, name);
+            ecu_bus1.get_or_insert(endpoint);
+            wire(net, ecu, bus1b, 3, name);
+            wire(net, ecu, bus2, 1, &format!("{name} (CANopen master)"));
+            wire(net, ecu, bus3, 2, name);
+        }
+        let ecu_bus1 = ecu_bus1.unwrap_or_default();
         wire(net, self.safety.key(), Port::MAIN, 0, "safety controller");
         wire(net, self.bms.key(), Port::MAIN, 0, "BMS");
         wire(net, self.attacker.key(), Port::MAIN, 0, "attacker");
@@ -319,7 +390,8 @@ impl TugNodes {
             EmergencyStop::ID,
             AdsToVehicleControl::ID,
         ];
-        // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state.
+        // And on bus 1: its diagnostic requests, the BMS's reading, its controller's state
+        // (and the redundant tug's ECUs each other's status).
         let mut ecu_hears = commands.to_vec();
         ecu_hears.extend([
             secured::SYNC_ID,
@@ -327,23 +399,31 @@ impl TugNodes {
             diagnostics::FUNCTIONAL_ID,
             BatteryMessage::ID,
         ]);
+        if matches!(self.ecu, Ecus::Two(_)) {
+            ecu_hears.extend([VcuAStatus::ID, VcuBStatus::ID]);
+        }
         let ecu = self.ecu.key();
-        net.set_filtering(
-            ecu,
-            ecu::BUS1,
-            Filtering {
-                error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
-                ..only(&ecu_hears)
-            },
-        );
-        net.set_filtering(ecu, ecu::BUS1B, only(&[AdsToVehicleControl::ID]));
-        net.set_filtering(ecu, ecu::BUS3, only(&[SteeringAngleSensors::ID]));
-        let feedback = [
+        for (_, [bus1, bus1b, _, bus3]) in self.ecu.halves() {
+            net.set_filtering(
+                ecu,
+                bus1,
+                Filtering {
+                    error_mask: ErrorMask(ErrorClass::BusOff.bit() | ErrorClass::Restarted.bit()),
+                    ..only(&ecu_hears)
+                },
+            );
+            net.set_filtering(ecu, bus1b, only(&[AdsToVehicleControl::ID]));
+            net.set_filtering(ecu, bus3, only(&[SteeringAngleSensors::ID]));
+        }
+        let mut feedback = vec![
             VehicleToAdsState::ID,
             VehicleToAdsSensors::ID,
             VehicleToAdsWheelAngles::ID,
             secured::SYNC_ID,
         ];
+        if matches!(self.ecu, Ecus::Two(_)) {
+            feedback.push(VehicleToAdsDegradation::ID);
+        }
         net.set_filtering(self.ads, Ads::<TugWire>::PORT_A, only(&feedback));
         net.set_filtering(self.ads, Ads::<TugWire>::PORT_B, deaf());
         let senders = [
@@ -435,7 +515,18 @@ impl Tug {
     /// tug's own profile or secured table does not build: a run never falls back to other
     /// settings than the ones asked for.
     pub fn new(params: TugParams) -> Result<Tug, TugError> {
-        let loaded = bywire_tug::profile().map_err(|e| TugError::Profile(e.to_string()))?;
+        let loaded = if params.redundant {
+            bywire_tug::redundant_profile()
+        } else {
+            bywire_tug::profile()
+        }
+        .map_err(|e| TugError::Profile(e.to_string()))?;
+        let arbitration = loaded
+            .profile
+            .fail_operational
+            .as_ref()
+            .and_then(|f| f.control.as_ref())
+            .map(|c| c.config());
         let (ads_config, mut ecu_config) = (loaded.ads_config(), loaded.supervisor_config());
         // Commands come on bus 1 and bus 1b: a copy half a cycle overdue leaves the other bus
         // alone (degraded, reported); copies that disagree are a fault.
@@ -467,6 +558,7 @@ impl Tug {
             mission,
             (ads_config, ecu_config),
             geometry,
+            arbitration,
         )?;
         let buses = add_buses(&mut net, params.secoc);
         let (mut names, ecu_bus1) = nodes.wire(&mut net, buses);
@@ -581,9 +673,7 @@ impl Tug {
                 if let Some(mut ads) = self.net.node_mut(self.nodes.ads) {
                     ads.operator_reset();
                 }
-                if let Some(mut ecu) = self.net.node_mut(self.nodes.ecu) {
-                    ecu.operator_reset(now);
-                }
+                self.each_ecu(|ecu| ecu.operator_reset(now));
                 self.take_node_events();
             }
             Fault::EcuBusOff => {
@@ -621,9 +711,39 @@ impl Tug {
 
     /// The steering fault the ECU's plausibility check latched, if any.
     pub fn steering_fault(&self) -> Option<bywire_tug::plausibility::SteeringFault> {
-        self.net
-            .node(self.nodes.ecu)
+        self.vehicle_control_ecu()
             .and_then(VehicleControlEcu::steering_fault)
+    }
+
+    /// Do `f` to each vehicle control ECU (both of the redundant tug's).
+    fn each_ecu(&mut self, mut f: impl FnMut(&mut VehicleControlEcu)) {
+        match self.nodes.ecu {
+            Ecus::One(ecu) => {
+                if let Some(mut ecu) = self.net.node_mut(ecu) {
+                    f(&mut ecu);
+                }
+            }
+            Ecus::Two(pair) => {
+                if let Some(mut pair) = self.net.node_mut(pair) {
+                    for side in [Side::A, Side::B] {
+                        f(pair.half_mut(side).node_mut());
+                    }
+                }
+            }
+        }
+    }
+
+    /// The redundant tug's two ECUs (`None`: the tug has one).
+    pub fn ecu_pair(&self) -> Option<&EcuPair> {
+        match self.nodes.ecu {
+            Ecus::One(_) => None,
+            Ecus::Two(pair) => self.net.node(pair),
+        }
+    }
+
+    /// Which of the redundant tug's ECUs is in control (`None`: neither, or the tug has one).
+    pub fn ecu_in_control(&self) -> Option<Side> {
+        self.ecu_pair().and_then(EcuPair::in_control)
     }
 
     /// Each bus's response times by identifier (lowest identifier first), under the bus's name.
@@ -702,9 +822,10 @@ impl Tug {
             .map(VehicleControlEcu::supervisor)
     }
 
-    /// The vehicle control ECU.
+    /// The vehicle control ECU: of the redundant tug's, the one in control (A when neither
+    /// is).
     pub fn vehicle_control_ecu(&self) -> Option<&VehicleControlEcu> {
-        self.net.node(self.nodes.ecu)
+        self.nodes.ecu.in_control(&self.net)
     }
 
     /// The route's remaining distance, as the ADS reckons it from its odometry, m.
@@ -790,10 +911,10 @@ impl Tug {
         };
         if self.wiring != Some(wiring) {
             self.wiring = Some(wiring);
-            if let Some(mut ecu) = self.net.node_mut(self.nodes.ecu) {
+            self.each_ecu(|ecu| {
                 ecu.set_driver_input(takeover_torque, 0.0);
                 ecu.set_status_inputs(wiring.status);
-            }
+            });
             if let Some(mut safety) = self.net.node_mut(self.nodes.safety) {
                 safety.node.reading = estop;
             }
@@ -925,8 +1046,10 @@ impl Tug {
     /// compared with the ADS's own, each speed the ADS took with the tug's); the step test's
     /// and the tank turn's records. Returns what is recorded after the buses' changes.
     fn watch_nodes(&mut self, now: Timestamp) -> Option<NodesSeen> {
-        let (Some(ecu), Some(ads)) = (self.net.node(self.nodes.ecu), self.net.node(self.nodes.ads))
-        else {
+        let (Some(ecu), Some(ads)) = (
+            self.nodes.ecu.in_control(&self.net),
+            self.net.node(self.nodes.ads),
+        ) else {
             return None;
         };
         let echo = ads.ads().state().echo_latency;
@@ -1058,16 +1181,35 @@ impl Tug {
     /// The ECU's and the ADS's events into the run's.
     fn take_node_events(&mut self) {
         // Bounded by the nodes' event queues; a node with none is not borrowed to change.
-        while self
-            .vehicle_control_ecu()
-            .is_some_and(VehicleControlEcu::has_events)
-        {
-            let event = self
-                .net
-                .node_mut(self.nodes.ecu)
-                .and_then(|mut e| e.next_event());
-            let Some((_, event)) = event else { break };
-            self.record(Happening::Ecu(event));
+        match self.nodes.ecu {
+            Ecus::One(handle) => {
+                while self
+                    .vehicle_control_ecu()
+                    .is_some_and(VehicleControlEcu::has_events)
+                {
+                    let event = self.net.node_mut(handle).and_then(|mut e| e.next_event());
+                    let Some((_, event)) = event else { break };
+                    self.record(Happening::Ecu(event));
+                }
+            }
+            Ecus::Two(handle) => {
+                // The ECU in control speaks for the tug; the standby's copies are dropped.
+                let in_control = self.ecu_in_control().unwrap_or(Side::A);
+                let mut taken = Vec::new();
+                if let Some(mut pair) = self.net.node_mut(handle) {
+                    for side in [Side::A, Side::B] {
+                        let ecu = pair.half_mut(side).node_mut();
+                        while let Some((_, event)) = ecu.next_event() {
+                            if side == in_control {
+                                taken.push(event);
+                            }
+                        }
+                    }
+                }
+                for event in taken {
+                    self.record(Happening::Ecu(event));
+                }
+            }
         }
         while self.ads().is_some_and(AdsDriver::has_events) {
             let event = self
@@ -1086,7 +1228,13 @@ impl Tug {
         let Some(ecu) = self.vehicle_control_ecu() else {
             return;
         };
-        let (a, brake) = (ecu.actuators(now), ecu.brake_demand(now));
+        let (mut a, mut brake) = (ecu.actuators(now), ecu.brake_demand(now));
+        // Neither of the redundant tug's ECUs in control: nothing drives the motors, and the
+        // spring brakes apply.
+        if matches!(self.nodes.ecu, Ecus::Two(_)) && self.ecu_in_control().is_none() {
+            a.motors_enabled = false;
+            brake = 1.0;
+        }
         let rolling = self.chassis.twist().vx.abs() > 0.05;
         let speeds = self.chassis.wheel_speeds();
         let soc = self.battery.soc();
