@@ -6,6 +6,8 @@ use bywire_core::confinement::NodeState;
 use bywire_core::Timestamp;
 use bywire_tug::ecu::EcuEvent;
 use bywire_tug::messages::ControlMode;
+use bywire_vehicle::arbitration::Side;
+use bywire_vehicle::command::{DegradationLevel, FaultClass};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
 
@@ -41,6 +43,10 @@ pub enum Happening {
     Ecu(EcuEvent),
     /// The built-in ADS said so.
     Mission(MissionEvent),
+    /// Which of the redundant tug's ECUs is in control changed (`None`: neither is).
+    Control(Option<Side>),
+    /// The degradation level changed, with the fault it is reported with.
+    Degradation(DegradationLevel, Option<FaultClass>),
 }
 
 impl Happening {
@@ -56,6 +62,8 @@ impl Happening {
             Happening::Redundancy(_) => "redundancy",
             Happening::Ecu(event) => event.kind(),
             Happening::Mission(event) => event.kind(),
+            Happening::Control(_) => "control",
+            Happening::Degradation(..) => "degradation",
         }
     }
 }
@@ -76,6 +84,10 @@ impl core::fmt::Display for Happening {
             Happening::Redundancy(None) => f.write_str("both buses agree"),
             Happening::Ecu(event) => write!(f, "{event}"),
             Happening::Mission(event) => write!(f, "{event}"),
+            Happening::Control(Some(side)) => write!(f, "ECU {side:?} in control"),
+            Happening::Control(None) => f.write_str("neither ECU in control"),
+            Happening::Degradation(level, Some(reason)) => write!(f, "{level} ({reason})"),
+            Happening::Degradation(level, None) => write!(f, "{level}"),
         }
     }
 }

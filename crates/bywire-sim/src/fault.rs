@@ -7,6 +7,8 @@ use core::time::Duration;
 use bywire_net::sim::Tamper;
 use bywire_tug::messages::AdsToVehicleControl;
 
+use bywire_vehicle::arbitration::Side;
+
 use crate::attacker::Attack;
 use crate::bus::TugBus;
 use crate::steering::SensorFault;
@@ -47,6 +49,18 @@ pub enum Fault {
     RedundantBusLoss,
     /// A node on bus 1 without the key attacks ([`crate::attacker`]).
     Attack(Attack),
+    /// One of the redundant tug's vehicle control ECUs falls silent (its communication
+    /// stack hangs, its transceiver fails): nothing it sends reaches any bus.
+    EcuSilent(Side),
+    /// One of the redundant tug's ECUs computes wrongly: a steering trim corrupted in its
+    /// memory puts its front-left setpoint 5 degrees off.
+    EcuWrongOutput(Side),
+    /// One of the redundant tug's ECUs babbles: silent for its own messages, it floods bus 1
+    /// with identifier 0x000 until its partner's fence cuts its transceiver.
+    EcuBabble(Side),
+    /// At a standstill, the redundant tug's faults are repaired: both ECUs back to their
+    /// power-on roles (A in control), the degradation level back to nominal.
+    Repair,
     /// Whichever node sends frames with this identifier on this bus sends them corrupted
     /// (a bit flipped), twice, or late (one such fault an identifier: the latest holds).
     TamperFrames {

@@ -23,11 +23,14 @@
 //!                               # delay_commands, driver_takeover, ecu_bus_off, bus_off,
 //!                               # redundant_bus_loss, corrupt_frames, duplicate_frames,
 //!                               # delay_frames, forge_commands, replay_commands,
-//!                               # forge_state, flood (an attacker on bus 1)
+//!                               # forge_state, flood (an attacker on bus 1),
+//!                               # ecu_silent, ecu_wrong_output, ecu_babble, repair
+//!                               # (the redundant tug's)
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
 //! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15;
 //! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms);
-//! # bus_off (of the node sending id on bus): bus = "bus2", id = 0x723
+//! # bus_off (of the node sending id on bus): bus = "bus2", id = 0x723;
+//! # ecu_silent, ecu_wrong_output, ecu_babble: ecu = "A" or "B"
 //! ```
 
 use core::time::Duration;
@@ -35,6 +38,8 @@ use core::time::Duration;
 use bywire_control::kinematics::Point;
 use bywire_core::{FileError, Timestamp};
 use serde::Deserialize;
+
+use bywire_vehicle::arbitration::Side;
 
 use crate::attacker::Attack;
 use crate::fault::Fault;
@@ -108,6 +113,7 @@ struct RawEvent {
     delay_ms: Option<u64>,
     bus: Option<String>,
     id: Option<u16>,
+    ecu: Option<String>,
 }
 
 impl Scenario {
@@ -486,6 +492,19 @@ fn event(
         "replay_commands" => Fault::Attack(Attack::ReplayCommands),
         "forge_state" => Fault::Attack(Attack::ForgeState),
         "flood" => Fault::Attack(Attack::Flood),
+        kind @ ("ecu_silent" | "ecu_wrong_output" | "ecu_babble") => {
+            let side = match e.ecu.as_deref() {
+                Some("A" | "a") => Side::A,
+                Some("B" | "b") => Side::B,
+                _ => return Err(invalid(&key("ecu"), format!("{kind} needs ecu = \"A\" or \"B\" (the redundant tug's)"))),
+            };
+            match kind {
+                "ecu_silent" => Fault::EcuSilent(side),
+                "ecu_wrong_output" => Fault::EcuWrongOutput(side),
+                _ => Fault::EcuBabble(side),
+            }
+        }
+        "repair" => Fault::Repair,
         kind @ ("corrupt_frames" | "duplicate_frames" | "delay_frames") => {
             let (bus, id) = bus_and_id(kind)?;
             let tamper = match kind {
@@ -495,7 +514,7 @@ fn event(
             };
             Fault::TamperFrames { bus, id, tamper }
         }
-        other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood)"))),
+        other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood, ecu_silent, ecu_wrong_output, ecu_babble, repair)"))),
     };
     Ok((Duration::from_secs_f64(e.at_s), fault, duration))
 }

@@ -48,11 +48,12 @@ use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::arbitration::{ArbiterConfig, Duplex, FencedPair, Side};
 use bywire_vehicle::command::SteeringMode;
+use bywire_vehicle::command::{DegradationLevel, FaultClass};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::secured::Signing;
 use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, SupervisorConfig, Watchdog};
 
-use crate::attacker::Attacker;
+use crate::attacker::{Attack, Attacker};
 use crate::battery::{Battery, BatteryParams};
 pub use crate::bus::TugBus;
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
@@ -70,6 +71,28 @@ use crate::steering::{SensorFault, SteeringChain, SteeringParams};
 
 /// One simulated millisecond.
 pub const TICK: Duration = Duration::from_millis(1);
+
+/// How far off an ECU that computes wrongly puts its front-left setpoint, degrees.
+const WRONG_TRIM_DEG: f64 = 5.0;
+
+/// What the redundant tug last showed: who is in control, the degradation level and its
+/// reason, and which ECU fences the other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FailOperationalSeen {
+    control: Option<Side>,
+    level: (DegradationLevel, Option<FaultClass>),
+    fenced: [bool; 2],
+}
+
+impl Default for FailOperationalSeen {
+    fn default() -> Self {
+        FailOperationalSeen {
+            control: Some(Side::A),
+            level: (DegradationLevel::Nominal, None),
+            fenced: [false; 2],
+        }
+    }
+}
 
 /// What a run is given.
 #[derive(Debug, Clone, PartialEq)]
@@ -496,6 +519,8 @@ pub struct Tug {
     pub security: SecurityWatch,
     /// Each bus's response times by identifier, in [`TugBus::ALL`]'s order.
     response_times: [ResponseLog; 4],
+    /// The redundant tug's control and level as last recorded.
+    fail_operational: FailOperationalSeen,
 }
 
 /// Why a tug could not be built.
@@ -607,6 +632,7 @@ impl Tug {
             last_echo: None,
             security: SecurityWatch::default(),
             response_times: Default::default(),
+            fail_operational: FailOperationalSeen::default(),
         })
     }
 
@@ -693,12 +719,18 @@ impl Tug {
             | Fault::DuplicateCommands
             | Fault::DelayCommands(_)
             | Fault::TamperFrames { .. } => self.set_tampering(fault, true),
+            Fault::EcuWrongOutput(side) => {
+                self.with_ecu(side, |ecu| ecu.corrupt_trim(0, WRONG_TRIM_DEG));
+            }
+            Fault::Repair => self.repair(now),
             Fault::AdsSilence
             | Fault::Estop
             | Fault::DriveSilence(_)
             | Fault::RedundantBusLoss
             | Fault::DriverTakeover
-            | Fault::Attack(_) => {}
+            | Fault::Attack(_)
+            | Fault::EcuSilent(_)
+            | Fault::EcuBabble(_) => {}
         }
         self.active
             .push((fault, duration.map(|d| now.saturating_add(d))));
@@ -707,6 +739,71 @@ impl Tug {
 
     fn is_active(&self, fault: Fault) -> bool {
         self.active.iter().any(|(f, _)| *f == fault)
+    }
+
+    /// Do `f` to one of the redundant tug's ECUs (nothing on the tug with one).
+    fn with_ecu(&mut self, side: Side, f: impl FnOnce(&mut VehicleControlEcu)) {
+        if let Ecus::Two(pair) = self.nodes.ecu {
+            if let Some(mut pair) = self.net.node_mut(pair) {
+                f(pair.half_mut(side).node_mut());
+            }
+        }
+    }
+
+    /// The redundant tug's repair at a standstill: both ECUs back to their power-on roles,
+    /// the degradation level back to nominal (refused while it moves).
+    fn repair(&mut self, now: Timestamp) {
+        let Ecus::Two(handle) = self.nodes.ecu else {
+            return;
+        };
+        if self.pose_speed() >= 0.05 {
+            return;
+        }
+        if let Some(mut pair) = self.net.node_mut(handle) {
+            for side in [Side::A, Side::B] {
+                let half = pair.half_mut(side);
+                half.reset(now);
+                half.node_mut().reset_degradation();
+            }
+        }
+    }
+
+    /// The redundant tug's changes of control and of degradation level into the run's
+    /// events; a babbling ECU's flood kept up until its partner's fence cuts it.
+    fn note_fail_operational(&mut self) {
+        let control = self.ecu_in_control();
+        let Some(pair) = self.ecu_pair() else {
+            return;
+        };
+        let latch = pair
+            .half(control.unwrap_or(Side::A))
+            .node()
+            .supervisor()
+            .degradation();
+        let level = (latch.level(), latch.reason().map(|f| f.class));
+        let fenced = [Side::A, Side::B].map(|side| pair.half(side).arbiter().fences_partner());
+        if control != self.fail_operational.control {
+            self.fail_operational.control = control;
+            self.record(Happening::Control(control));
+        }
+        if level != self.fail_operational.level {
+            self.fail_operational.level = level;
+            self.record(Happening::Degradation(level.0, level.1));
+        }
+        if fenced != self.fail_operational.fenced {
+            self.fail_operational.fenced = fenced;
+            self.faults_changed = true;
+        }
+    }
+
+    /// Whether `side`'s babble reaches bus 1: it babbles and its partner has not fenced it.
+    fn babbling(&self, side: Side) -> bool {
+        let [a_fences, b_fences] = self.fail_operational.fenced;
+        let fenced = match side {
+            Side::A => b_fences,
+            Side::B => a_fences,
+        };
+        self.is_active(Fault::EcuBabble(side)) && !fenced
     }
 
     /// The steering fault the ECU's plausibility check latched, if any.
@@ -741,9 +838,14 @@ impl Tug {
         }
     }
 
-    /// Which of the redundant tug's ECUs is in control (`None`: neither, or the tug has one).
+    /// Which of the redundant tug's ECUs is in control: its outputs on the buses, neither
+    /// fenced nor silenced by a fault (`None`: neither, or the tug has one).
     pub fn ecu_in_control(&self) -> Option<Side> {
-        self.ecu_pair().and_then(EcuPair::in_control)
+        self.ecu_pair()
+            .and_then(EcuPair::in_control)
+            .filter(|&side| {
+                !self.is_active(Fault::EcuSilent(side)) && !self.is_active(Fault::EcuBabble(side))
+            })
     }
 
     /// Each bus's response times by identifier (lowest identifier first), under the bus's name.
@@ -874,10 +976,17 @@ impl Tug {
         // pass over the nodes otherwise).
         if self.faults_changed {
             self.faults_changed = false;
-            let attack = self.active.iter().find_map(|(f, _)| match f {
-                Fault::Attack(a) => Some(*a),
-                _ => None,
-            });
+            // A babbling ECU's flood comes from the attacker's port, standing in for its
+            // transceiver: cut when its partner fences it.
+            let babble = self.babbling(Side::A) || self.babbling(Side::B);
+            let attack = self
+                .active
+                .iter()
+                .find_map(|(f, _)| match f {
+                    Fault::Attack(a) => Some(*a),
+                    _ => None,
+                })
+                .or(babble.then_some(Attack::Flood));
             let attacker = self.net.node(self.nodes.attacker).map(Attacker::attack);
             if attacker.is_some_and(|now| now != attack) {
                 if let Some(mut attacker) = self.net.node_mut(self.nodes.attacker) {
@@ -886,6 +995,17 @@ impl Tug {
             }
             let silent = self.is_active(Fault::AdsSilence);
             self.net.drop_output(self.nodes.ads, silent);
+            if let Ecus::Two(pair) = self.nodes.ecu {
+                for (side, (_, ports)) in
+                    [Side::A, Side::B].into_iter().zip(self.nodes.ecu.halves())
+                {
+                    let silent = self.is_active(Fault::EcuSilent(side))
+                        || self.is_active(Fault::EcuBabble(side));
+                    for port in ports {
+                        self.net.drop_port_output(pair, port, silent);
+                    }
+                }
+            }
             let b_lost = self.is_active(Fault::RedundantBusLoss);
             self.net
                 .drop_port_output(self.nodes.ads, Ads::<TugWire>::PORT_B, b_lost);
@@ -987,6 +1107,9 @@ impl Tug {
         self.take_logs();
         let seen = self.watch_nodes(until);
         self.note_bus_changes();
+        if matches!(self.nodes.ecu, Ecus::Two(_)) {
+            self.note_fail_operational();
+        }
         if let Some(seen) = seen {
             let (now, events) = (self.now, &mut self.events);
             self.supervisor_watch
@@ -1014,6 +1137,9 @@ impl Tug {
                     if let Some(c) = self.corners.get_mut(corner) {
                         c.chain.set_fault(SensorFault::None);
                     }
+                }
+                Fault::EcuWrongOutput(side) => {
+                    self.with_ecu(side, |ecu| ecu.corrupt_trim(0, -WRONG_TRIM_DEG));
                 }
                 _ => self.set_tampering(fault, false),
             }

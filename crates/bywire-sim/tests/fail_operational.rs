@@ -37,15 +37,107 @@ fn the_redundant_tug_drives_with_a_in_control_and_b_in_step() {
     assert_eq!(tug.ecu_in_control(), Some(Side::A));
     let pair = tug.ecu_pair().unwrap();
     assert_eq!(pair.half(Side::B).arbiter().took_over(), None);
-    let ids = |id: u32| tug.bus1_log.iter().filter(|(_, f)| f.id().map(|i| i.as_raw()) == Some(id)).count();
+    let ids = |id: u32| {
+        tug.bus1_log
+            .iter()
+            .filter(|(_, f)| f.id().map(|i| i.as_raw()) == Some(id))
+            .count()
+    };
     // Each ECU's status every 10 ms, the report every 20 ms.
-    assert!(ids(VcuAStatus::ID) > 1_900 && ids(VcuBStatus::ID) > 1_900, "{} {}", ids(VcuAStatus::ID), ids(VcuBStatus::ID));
+    assert!(
+        ids(VcuAStatus::ID) > 1_900 && ids(VcuBStatus::ID) > 1_900,
+        "{} {}",
+        ids(VcuAStatus::ID),
+        ids(VcuBStatus::ID)
+    );
     assert!(ids(VehicleToAdsDegradation::ID) > 900);
     // Both ECUs see the tug the same: engaged, nominal.
     for side in [Side::A, Side::B] {
         let supervisor = pair.half(side).node().supervisor();
-        assert_eq!(supervisor.mode(), bywire_tug::messages::ControlMode::Autonomous, "{side:?}");
-        assert_eq!(supervisor.degradation().level(), bywire_vehicle::command::DegradationLevel::Nominal);
+        assert_eq!(
+            supervisor.mode(),
+            bywire_tug::messages::ControlMode::Autonomous,
+            "{side:?}"
+        );
+        assert_eq!(
+            supervisor.degradation().level(),
+            bywire_vehicle::command::DegradationLevel::Nominal
+        );
     }
     let _ = Timestamp::ZERO;
+}
+
+use bywire_sim::event::Happening;
+use bywire_sim::fault::Fault;
+use bywire_vehicle::command::DegradationLevel;
+
+/// When `what` first happened after `from`.
+fn first_after(tug: &Tug, from: Timestamp, what: impl Fn(&Happening) -> bool) -> Option<Timestamp> {
+    tug.events
+        .iter()
+        .find(|e| e.t >= from && what(&e.what))
+        .map(|e| e.t)
+}
+
+/// A's `fault` 20 s into the redundant apron loop, 2 s on: when B took control.
+fn takeover(fault: Fault) -> (Tug, Timestamp, Timestamp) {
+    let mut tug = redundant();
+    run_for(&mut tug, 20_000);
+    let at = tug.now();
+    tug.inject(fault, None);
+    run_for(&mut tug, 2_000);
+    let took =
+        first_after(&tug, at, |h| *h == Happening::Control(Some(Side::B))).unwrap_or_else(|| {
+            panic!(
+                "B never took control after {fault:?}: {:?}",
+                &tug.events[tug.events.len().saturating_sub(10)..]
+            )
+        });
+    (tug, at, took)
+}
+
+fn ms_between(from: Timestamp, to: Timestamp) -> f64 {
+    to.saturating_since(from).as_secs_f64() * 1e3
+}
+
+#[test]
+fn b_takes_over_each_fault_of_a_within_50_ms_and_the_tug_drives_on_at_the_minimal_risk_limit() {
+    for fault in [
+        Fault::EcuSilent(Side::A),
+        Fault::EcuWrongOutput(Side::A),
+        Fault::EcuBabble(Side::A),
+    ] {
+        let (tug, at, took) = takeover(fault);
+        let ms = ms_between(at, took);
+        assert!(ms <= 50.0, "{fault:?}: B took control {ms} ms after");
+        assert_eq!(tug.ecu_in_control(), Some(Side::B), "{fault:?}");
+        let level = first_after(&tug, at, |h| {
+            matches!(h, Happening::Degradation(DegradationLevel::MinimalRisk, _))
+        });
+        assert!(
+            level.is_some(),
+            "{fault:?}: {:?}",
+            tug.events.iter().rev().take(8).collect::<Vec<_>>()
+        );
+        let ads = tug.ads().unwrap().ads().state();
+        assert_eq!(
+            ads.degradation.value,
+            Some(DegradationLevel::MinimalRisk),
+            "{fault:?}"
+        );
+        // Still driving, at most at the level's 1.5 m/s.
+        let speed = tug.pose_speed();
+        assert!(speed > 0.3 && speed <= 1.6, "{fault:?}: {speed} m/s");
+    }
+}
+
+#[test]
+fn a_second_ecu_fault_stops_the_tug_where_it_is() {
+    let (mut tug, _, _) = takeover(Fault::EcuSilent(Side::A));
+    let at = tug.now();
+    tug.inject(Fault::EcuSilent(Side::B), None);
+    run_for(&mut tug, 4_000);
+    assert_eq!(tug.ecu_in_control(), None);
+    assert!(first_after(&tug, at, |h| *h == Happening::Control(None)).is_some());
+    assert!(tug.pose_speed() < 0.05, "{} m/s", tug.pose_speed());
 }

@@ -278,17 +278,29 @@ pub trait Degrades {
     fn report_fault(&mut self, fault: crate::degradation::Fault);
 }
 
+/// One output this half's node made, kept for the comparison.
+#[derive(Debug, Clone, Copy)]
+struct Kept {
+    port: Port,
+    frame: Frame,
+    /// The partner's last frame under its identifier disagreed with it.
+    disagrees: bool,
+}
+
 /// Own outputs kept for the comparison: one per identifier and port.
-const OWN_KEPT: usize = 24;
+const OWN_KEPT: usize = 16;
+
+/// A half's node's frames handed over in one poll, at most (more are sent, not compared).
+const POLL_KEPT: usize = 32;
 
 /// One half of a duplicated ECU: its node, computing in either role, and its [`Arbiter`].
 ///
 /// Both halves receive the same buses and run the same node in step ("hot standby"). What a
-/// half's node sends reaches the bus only while the half is in control and not fenced;
-/// otherwise it is kept, one frame per identifier, and compared with what the half in control
-/// sends under that identifier (a frame with an identifier this half sends is the partner's:
-/// two senders of one identifier never share a bus, so it is not given to the node, which
-/// never sees its own frames either). The node is polled when its own deadline or a frame
+/// half's node sends reaches the bus only while the half is in control and not fenced. The
+/// outputs the wire compares ([`DuplexWire::agree`]) are kept, one frame per identifier, and
+/// compared with what the partner sends under that identifier; the partner's frames with such
+/// an identifier are not given to the node (two senders of one identifier never share a bus,
+/// and a node never sees its own frames either). The node is polled when its own deadline or a frame
 /// calls for it, as it would be alone, so both halves' nodes see the same calls. Each half
 /// sends its status every [`DuplexWire::status_period`] unless fenced.
 ///
@@ -304,8 +316,9 @@ pub struct Duplex<N, W> {
     self_test_ok: bool,
     partner: Option<Heartbeat>,
     traffic_at: Option<Timestamp>,
-    outputs_agree: Option<bool>,
-    own: [Option<(Port, Frame)>; OWN_KEPT],
+    /// Whether the partner's outputs have been compared since the last reset.
+    compared: bool,
+    own: [Option<Kept>; OWN_KEPT],
     /// The node has frames it has not been polled after.
     node_due: bool,
     /// Its node was told its standby is lost.
@@ -325,7 +338,7 @@ impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
             self_test_ok: true,
             partner: None,
             traffic_at: None,
-            outputs_agree: None,
+            compared: false,
             own: [None; OWN_KEPT],
             node_due: true,
             standby_lost_reported: false,
@@ -369,7 +382,10 @@ impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
     pub fn reset(&mut self, now: Timestamp) {
         self.arbiter.reset(now);
         self.partner = None;
-        self.outputs_agree = None;
+        self.compared = false;
+        for kept in self.own.iter_mut().flatten() {
+            kept.disagrees = false;
+        }
         self.standby_lost_reported = false;
         self.next_status = now;
     }
@@ -381,25 +397,32 @@ impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
         now.saturating_since(heard) > self.arbiter.config.silence
     }
 
+    /// Keep an output to compare, with whether the partner's last under its identifier
+    /// disagreed.
     fn keep(&mut self, port: Port, frame: Frame) {
         let id = frame.id();
         let slot = self
             .own
             .iter()
-            .position(|o| o.is_some_and(|(p, f)| p == port && f.id() == id))
+            .position(|o| o.is_some_and(|o| o.port == port && o.frame.id() == id))
             .or_else(|| self.own.iter().position(Option::is_none));
         if let Some(slot) = slot.and_then(|i| self.own.get_mut(i)) {
-            *slot = Some((port, frame));
+            let disagrees = slot.is_some_and(|o| o.disagrees);
+            *slot = Some(Kept {
+                port,
+                frame,
+                disagrees,
+            });
         }
     }
 
-    fn mine(&self, port: Port, frame: &Frame) -> Option<Frame> {
+    /// The kept output with `frame`'s identifier on `port`.
+    fn mine(&mut self, port: Port, frame: &Frame) -> Option<&mut Kept> {
         let id = frame.id()?;
         self.own
-            .iter()
+            .iter_mut()
             .flatten()
-            .find(|(p, f)| *p == port && f.id() == Some(id))
-            .map(|(_, f)| *f)
+            .find(|o| o.port == port && o.frame.id() == Some(id))
     }
 }
 
@@ -412,10 +435,14 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
                 return;
             }
         }
-        if let Some(mine) = self.mine(port, frame) {
+        if let Some(mine) = self.mine(port, frame).map(|kept| kept.frame) {
             if let Some(agree) = self.wire.agree(port, &mine, frame) {
-                // The worst since the last step: one disagreement counts.
-                self.outputs_agree = Some(self.outputs_agree.unwrap_or(true) && agree);
+                // Each output disagrees until the partner's next under its identifier
+                // agrees: agreement on one does not clear another's disagreement.
+                if let Some(kept) = self.mine(port, frame) {
+                    kept.disagrees = !agree;
+                }
+                self.compared = true;
             }
             return;
         }
@@ -432,7 +459,9 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
             self_test_ok: self.self_test_ok,
             partner: self.partner,
             traffic_at: self.traffic_at,
-            outputs_agree: self.outputs_agree.take(),
+            outputs_agree: self
+                .compared
+                .then(|| !self.own.iter().flatten().any(|o| o.disagrees)),
             fenced: self.fenced,
         };
         let before = self.arbiter.role();
@@ -463,7 +492,7 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
         let transmits = self.transmits();
         if self.node_due || self.node.next_deadline().is_some_and(|d| d <= now) {
             self.node_due = false;
-            let mut kept = [None; OWN_KEPT];
+            let mut kept = [None; POLL_KEPT];
             let mut count = 0;
             self.node.poll(now, &mut |port, frame| {
                 if transmits {
@@ -474,8 +503,11 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
                     count += 1;
                 }
             });
+            // Only the outputs the wire compares are kept.
             for (port, frame) in kept.into_iter().flatten() {
-                self.keep(port, frame);
+                if self.wire.agree(port, &frame, &frame).is_some() {
+                    self.keep(port, frame);
+                }
             }
         }
         if now >= self.next_status && !self.fenced {
