@@ -15,7 +15,9 @@ use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
 use bywire_tug::secured::TugWire;
 use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
-use bywire_vehicle::command::{ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel};
+use bywire_vehicle::command::{
+    ControlMode, DegradationLevel, EstopCode, Gear, SteeringMode, WatchdogLevel,
+};
 
 /// How long each steering step of the step test is held.
 pub const STEP_HOLD: Duration = Duration::from_secs(3);
@@ -46,6 +48,11 @@ pub struct MissionParams {
     pub wheelbase: f64,
     /// Track, m.
     pub track: f64,
+    /// Safe stop points along the route, m by distance: where a minimal-risk manoeuvre ends.
+    pub safe_stops: Vec<f64>,
+    /// The speed limits of the degraded and minimal-risk levels, m/s (a fail-safe tug
+    /// reports no level and never uses them).
+    pub degraded_speeds: (f64, f64),
 }
 
 /// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service
@@ -94,6 +101,19 @@ pub enum MissionEvent {
         /// Where, m along the route.
         at: f64,
     },
+    /// The vehicle reported a minimal-risk level: it drives on at the level's limit to this
+    /// safe stop point (m along the route; `None`: none ahead, it stops as soon as it can).
+    MinimalRisk {
+        /// The safe stop point.
+        stop_at: Option<f64>,
+    },
+    /// It stopped at the end of a minimal-risk manoeuvre, here (m along the route).
+    MinimalRiskStop {
+        /// Where, as the ADS reckons it.
+        at: f64,
+    },
+    /// The vehicle reported nominal again (after a repair): the mission resumes.
+    Resume,
 }
 
 impl MissionEvent {
@@ -103,6 +123,9 @@ impl MissionEvent {
             MissionEvent::SteeringMode(_) => "steering_mode",
             MissionEvent::Stop { .. } => "stop",
             MissionEvent::Depart { .. } => "depart",
+            MissionEvent::MinimalRisk { .. } => "minimal_risk",
+            MissionEvent::MinimalRiskStop { .. } => "minimal_risk_stop",
+            MissionEvent::Resume => "resume",
         }
     }
 }
@@ -115,6 +138,14 @@ impl core::fmt::Display for MissionEvent {
                 write!(f, "at {at:.1} m for {:.1} s", dwell.as_secs_f64())
             }
             MissionEvent::Depart { at } => write!(f, "from the stop at {at:.1} m"),
+            MissionEvent::MinimalRisk { stop_at: Some(at) } => {
+                write!(f, "to the safe stop point at {at:.1} m")
+            }
+            MissionEvent::MinimalRisk { stop_at: None } => {
+                f.write_str("no safe stop point ahead: stopping as soon as it can")
+            }
+            MissionEvent::MinimalRiskStop { at } => write!(f, "stopped at {at:.1} m"),
+            MissionEvent::Resume => f.write_str("nominal again: the mission resumes"),
         }
     }
 }
@@ -149,6 +180,23 @@ pub struct Mission {
     tank_done: bool,
     remaining: f64,
     steering_mode: SteeringMode,
+    /// A minimal-risk manoeuvre under way: where it ends (m along the route; the station
+    /// where it began plus the braking distance when no safe stop point is ahead), and
+    /// whether it has ended there.
+    minimal_risk: Option<(f64, bool)>,
+}
+
+/// What the ADS knows of the vehicle when it plans.
+#[derive(Debug, Clone, Copy)]
+struct Known {
+    /// Its pose estimate.
+    pose: Pose,
+    /// The speed the vehicle reports, m/s.
+    speed: f64,
+    /// The wheel angles it reports, degrees.
+    angles: Option<[f64; 4]>,
+    /// The degradation level it reports (a fail-operational vehicle).
+    level: Option<DegradationLevel>,
 }
 
 /// One plan: the command's steering, speed and steering mode.
@@ -188,6 +236,66 @@ impl Mission {
             tank_done: false,
             remaining: f64::INFINITY,
             steering_mode: SteeringMode::Normal,
+            minimal_risk: None,
+        }
+    }
+
+    /// The safe stop point a minimal-risk manoeuvre begun at `station` at `speed` ends at:
+    /// the first one it can reach braking gently (0.5 m/s²), or as soon as it can.
+    fn safe_stop_ahead(&self, station: f64, speed: f64) -> (f64, bool) {
+        let braking = speed * speed / (2.0 * 0.5);
+        match self
+            .params
+            .safe_stops
+            .iter()
+            .find(|&&at| at >= station + braking)
+        {
+            Some(&at) => (at, true),
+            None => (station + braking, false),
+        }
+    }
+
+    /// The degradation level the vehicle reports, applied: the speed cap it sets, and a
+    /// minimal-risk manoeuvre begun, ended or (nominal again) given up. Returns the cap.
+    fn degrade(
+        &mut self,
+        level: Option<DegradationLevel>,
+        station: f64,
+        speed: f64,
+        events: &mut dyn FnMut(MissionEvent),
+    ) -> f64 {
+        let (degraded, minimal) = self.params.degraded_speeds;
+        match level {
+            None | Some(DegradationLevel::Nominal) => {
+                if self.minimal_risk.take().is_some() {
+                    events(MissionEvent::Resume);
+                }
+                f64::INFINITY
+            }
+            Some(DegradationLevel::Degraded) => degraded,
+            Some(DegradationLevel::MinimalRisk) => {
+                let (stop_at, ended) = match self.minimal_risk {
+                    Some(manoeuvre) => manoeuvre,
+                    None => {
+                        let (at, safe) = self.safe_stop_ahead(station, speed);
+                        events(MissionEvent::MinimalRisk {
+                            stop_at: safe.then_some(at),
+                        });
+                        (at, false)
+                    }
+                };
+                let ended = ended || (stop_at - station < 0.3 && speed.abs() < 0.05);
+                if ended && self.minimal_risk.is_some_and(|(_, was)| !was) {
+                    events(MissionEvent::MinimalRiskStop { at: station });
+                }
+                self.minimal_risk = Some((stop_at, ended));
+                if ended {
+                    0.0
+                } else {
+                    minimal.min(libm::sqrt(2.0 * 0.5 * (stop_at - station).max(0.0)))
+                }
+            }
+            Some(DegradationLevel::SafeStop) => 0.0,
         }
     }
 
@@ -330,17 +438,21 @@ impl Mission {
         Some(libm::copysign(rate * radius, left))
     }
 
-    /// The command from the ADS's pose estimate, the speed the vehicle reports and the wheel
-    /// angles it reports; `engaged` is when the vehicle first followed.
+    /// The command from what the ADS knows of the vehicle; `engaged` is when the vehicle
+    /// first followed.
     fn plan(
         &mut self,
         now: Timestamp,
-        pose: Pose,
-        speed: f64,
-        angles: Option<[f64; 4]>,
+        known: &Known,
         engaged: Option<Timestamp>,
         events: &mut dyn FnMut(MissionEvent),
     ) -> Plan {
+        let Known {
+            pose,
+            speed,
+            angles,
+            level,
+        } = *known;
         let crab = self.remaining < self.params.crab_final_m;
         let (steering, remaining, station) = match Path::new(&self.params.route) {
             Some(path) => {
@@ -374,7 +486,11 @@ impl Mission {
             None => (0.0, 0.0, 0.0),
         };
         self.remaining = remaining;
-        let target = self.speed_target(now, station, remaining, speed, events);
+        let cap = self.degrade(level, station, speed, events);
+        let target = self
+            .speed_target(now, station, remaining, speed, events)
+            .min(cap);
+        let degraded = cap.is_finite();
         let velocity = if remaining < 0.3 || engaged.is_none() {
             0.0
         } else {
@@ -383,7 +499,8 @@ impl Mission {
         // The step test comes first, the tank turn last; after it the tug stands in normal
         // mode.
         let step = engaged.and_then(|at| self.step_target(now, at));
-        let tank = if engaged.is_some() {
+        // Degraded, the special manoeuvres wait: normal steering, no tank turn.
+        let tank = if engaged.is_some() && !degraded {
             self.tank_turn(remaining, pose.yaw, speed, angles)
         } else {
             None
@@ -391,7 +508,9 @@ impl Mission {
         let (steering, velocity, mode) = match (step, tank) {
             (Some(angle), _) => (angle, 0.0, SteeringMode::Normal),
             (None, Some(wheel_speed)) => (0.0, wheel_speed, SteeringMode::Tank),
-            (None, None) if crab && !self.tank_done => (steering, velocity, SteeringMode::Crab),
+            (None, None) if crab && !self.tank_done && !degraded => {
+                (steering, velocity, SteeringMode::Crab)
+            }
             (None, None) => (steering, velocity, SteeringMode::Normal),
         };
         if mode != self.steering_mode {
@@ -499,9 +618,13 @@ impl AdsDriver {
                 events.push_back((now, event));
             }
         };
-        let plan = self
-            .mission
-            .plan(now, pose, speed, angles, self.engaged_at, &mut record);
+        let known = Known {
+            pose,
+            speed,
+            angles,
+            level: state.degradation.value,
+        };
+        let plan = self.mission.plan(now, &known, self.engaged_at, &mut record);
         // Engage is an edge, taken once the vehicle's recovery run is complete: request it
         // every tenth cycle until the vehicle reports autonomous mode (or, awaiting re-engage
         // after full braking, again).

@@ -570,6 +570,11 @@ impl Tug {
             steering_steps: params.steering_steps.clone(),
             wheelbase: chassis_params.wheelbase,
             track: chassis_params.track,
+            safe_stops: params.safe_stops.clone(),
+            degraded_speeds: {
+                let policy = ecu_config.degradation.unwrap_or_default();
+                (policy.degraded.speed_limit, policy.minimal_risk.speed_limit)
+            },
         });
         let start = mission.start_pose();
         let mut net = Network::new();

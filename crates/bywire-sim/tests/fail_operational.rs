@@ -141,3 +141,47 @@ fn a_second_ecu_fault_stops_the_tug_where_it_is() {
     assert!(first_after(&tug, at, |h| *h == Happening::Control(None)).is_some());
     assert!(tug.pose_speed() < 0.05, "{} m/s", tug.pose_speed());
 }
+
+#[test]
+fn after_a_takeover_the_tug_drives_on_to_the_next_safe_stop_point_and_stops_there() {
+    use bywire_control::kinematics::Point;
+    use bywire_control::path::Path;
+    use bywire_sim::mission::MissionEvent;
+    let scenario = Scenario::builtin("apron-loop").unwrap();
+    let mut tug = Tug::new(TugParams {
+        redundant: true,
+        safe_stops: vec![25.0, 50.0, 75.0, 100.0],
+        ..scenario.params(1, 2_000.0)
+    })
+    .unwrap();
+    run_for(&mut tug, 20_000);
+    let at = tug.now();
+    tug.inject(Fault::EcuSilent(Side::A), None);
+    run_for(&mut tug, 40_000);
+    let stop_at = tug
+        .events
+        .iter()
+        .find_map(|e| match e.what {
+            Happening::Mission(MissionEvent::MinimalRisk { stop_at }) if e.t >= at => Some(stop_at),
+            _ => None,
+        })
+        .expect("a minimal-risk manoeuvre")
+        .expect("a safe stop point ahead");
+    assert!(tug.events.iter().any(|e| matches!(
+        e.what,
+        Happening::Mission(MissionEvent::MinimalRiskStop { .. })
+    )));
+    assert!(tug.pose_speed() < 0.05);
+    let path = Path::new(tug.route()).unwrap();
+    let pose = tug.pose();
+    let station = path
+        .project(Point {
+            x: pose.x,
+            y: pose.y,
+        })
+        .station;
+    assert!(
+        (station - stop_at).abs() < 1.0,
+        "stopped at {station:.2} m for the point at {stop_at} m"
+    );
+}
