@@ -44,6 +44,7 @@ pub mod bus;
 pub mod chassis;
 pub mod drive;
 pub mod event;
+pub mod fail_operational;
 pub mod fault;
 pub mod mission;
 pub mod nodes;

@@ -8,6 +8,7 @@ use core::time::Duration;
 use serde::Serialize;
 
 use crate::attacker::Attacker;
+use crate::fail_operational::FailOperationalRecord;
 use crate::record::{ResponseTimes, StepResponse};
 use crate::tug::Tug;
 
@@ -229,6 +230,9 @@ pub struct RunReport {
     pub security: SecurityCounts,
     /// The DTCs the vehicle control ECU holds at the end, as a tester reads them.
     pub dtcs: Vec<DtcRecord>,
+    /// The redundant tug's ECU faults and fault pairs, one record each (none on the tug with
+    /// one ECU).
+    pub fail_operational: Vec<FailOperationalRecord>,
     /// Wall-clock time the run took, s.
     pub wall_seconds: f64,
 }
@@ -417,6 +421,7 @@ impl RunReport {
             },
             security: SecurityCounts::of(tug),
             dtcs: DtcRecord::all(tug),
+            fail_operational: FailOperationalRecord::all(&tug.events, &tug.truth, tug.route()),
             wall_seconds: wall.as_secs_f64(),
         }
     }

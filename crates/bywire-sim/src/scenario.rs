@@ -1,5 +1,6 @@
 //! Scenarios: a route, the tug's load and road, and what happens on the way — built in
-//! (`apron-loop`, `fault-tour`) or read from a TOML file with errors naming the key:
+//! (`apron-loop`, `fault-tour`, `fail-operational`) or read from a TOML file with errors
+//! naming the key:
 //!
 //! ```toml
 //! name = "stand-approach"
@@ -43,7 +44,7 @@ use bywire_vehicle::arbitration::Side;
 
 use crate::attacker::Attack;
 use crate::fault::Fault;
-use crate::mission::apron_loop;
+use crate::mission::{apron_loop, service_loop};
 use crate::steering::SensorFault;
 use crate::tug::{Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
 use bywire_net::sim::Tamper;
@@ -121,12 +122,16 @@ impl Scenario {
     /// (the route with an ADS silence, an E-stop and its reset, a drive cut off and the reset,
     /// bus 1b lost, a stuck steering sensor, corrupted, duplicated and delayed commands, a
     /// driver's takeover, the ECU's controller going bus-off, and an attacker on bus 1:
-    /// forged commands, replayed commands, a forged speed, a flood of 0x000).
+    /// forged commands, replayed commands, a forged speed, a flood of 0x000) or
+    /// `fail-operational` (the redundant tug on the service loop, safe stop points every
+    /// 20 m: ECU A silent, computing a wrong setpoint and babbling, each alone and then with
+    /// ECU B falling silent on top, a repair at a standstill after each).
     pub fn builtin(name: &str) -> Option<Scenario> {
         let s = Duration::from_secs;
         let ms = Duration::from_millis;
         let events = match name {
             "apron-loop" => Vec::new(),
+            "fail-operational" => fail_operational_events(),
             "fault-tour" => vec![
                 (s(8), Fault::AdsSilence, Some(s(1))),
                 (s(12), Fault::RedundantBusLoss, Some(s(1))),
@@ -162,6 +167,19 @@ impl Scenario {
             _ => return None,
         };
         let apron_loop = name == "apron-loop";
+        if name == "fail-operational" {
+            return Some(Scenario {
+                name: name.to_string(),
+                tug: TugParams {
+                    route: service_loop(),
+                    redundant: true,
+                    // Stands and kerbs along the service road, every 20 m.
+                    safe_stops: (1..14).map(|k| f64::from(k) * 20.0).collect(),
+                    ..TugParams::default()
+                },
+                events,
+            });
+        }
         Some(Scenario {
             name: name.to_string(),
             tug: TugParams {
@@ -304,6 +322,39 @@ impl Scenario {
             }
         }
     }
+}
+
+/// The `fail-operational` scenario's faults: each fault of ECU A alone (silent, a wrong
+/// setpoint, babbling), then each with ECU B falling silent on top 3 s later, a repair at a
+/// standstill after each.
+fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
+    let ms = Duration::from_millis;
+    let mut events = Vec::new();
+    let mut at = ms(5_000);
+    for fault in [
+        Fault::EcuSilent(Side::A),
+        Fault::EcuWrongOutput(Side::A),
+        Fault::EcuBabble(Side::A),
+    ] {
+        // Single: time to reach the next safe stop point at the minimal-risk speed.
+        events.push((at, fault, Some(ms(18_000))));
+        events.push((at + ms(18_000), Fault::Repair, None));
+        at += ms(21_000);
+    }
+    for fault in [
+        Fault::EcuSilent(Side::A),
+        Fault::EcuWrongOutput(Side::A),
+        Fault::EcuBabble(Side::A),
+    ] {
+        events.push((at, fault, Some(ms(10_000))));
+        events.push((at + ms(3_000), Fault::EcuSilent(Side::B), Some(ms(7_000))));
+        events.push((at + ms(10_000), Fault::Repair, None));
+        // The drives the master stopped when neither ECU was in control: acknowledged
+        // again once their faults have cleared.
+        events.push((at + ms(11_000), Fault::OperatorReset, None));
+        at += ms(14_000);
+    }
+    events
 }
 
 /// A key's value is wrong: the error, the file named by the caller.

@@ -768,7 +768,10 @@ impl Tug {
             for side in [Side::A, Side::B] {
                 let half = pair.half_mut(side);
                 half.reset(now);
-                half.node_mut().reset_degradation();
+                let ecu = half.node_mut();
+                ecu.reset_degradation();
+                // Drives that stopped when neither ECU was in control are acknowledged.
+                ecu.operator_reset(now);
             }
         }
     }
@@ -791,7 +794,8 @@ impl Tug {
             self.fail_operational.control = control;
             self.record(Happening::Control(control));
         }
-        if level != self.fail_operational.level {
+        // With neither in control, no ECU reports a level: the last one stands.
+        if control.is_some() && level != self.fail_operational.level {
             self.fail_operational.level = level;
             self.record(Happening::Degradation(level.0, level.1));
         }

@@ -185,3 +185,59 @@ fn after_a_takeover_the_tug_drives_on_to_the_next_safe_stop_point_and_stops_ther
         "stopped at {station:.2} m for the point at {stop_at} m"
     );
 }
+
+/// The contract scripts rely on: `fail-operational` runs every ECU fault alone and with a
+/// second on top, on the redundant tug, and reports each as a `fail_operational` record.
+#[test]
+fn the_fail_operational_scenario_reports_every_single_and_double_fault() {
+    use bywire_sim::report::RunReport;
+    let scenario = Scenario::builtin("fail-operational").unwrap();
+    let mut tug = Tug::new(scenario.params(1, 2_000.0)).unwrap();
+    let completed = scenario.run_fast(&mut tug, Timestamp::from_millis(400_000));
+    assert!(
+        completed,
+        "the route was not completed: {:?}",
+        tug.remaining()
+    );
+    let report = RunReport::of(
+        &tug,
+        "fail-operational",
+        1,
+        completed,
+        std::time::Duration::ZERO,
+    );
+    let records = &report.fail_operational;
+    assert_eq!(records.len(), 6, "{records:#?}");
+    for r in records {
+        assert!(r.stopped, "{r:?}");
+        if r.double {
+            assert_eq!(r.level, "safe-stop", "{r:?}");
+            assert_eq!(r.takeover_s, None);
+            assert_eq!(r.stop_distance_to_safe_point_m, None);
+            // Stopped where it was: within the drives' heartbeat timeout and a quick stop.
+            assert!(r.stop_speed_reached_s.unwrap() < 1.0, "{r:?}");
+        } else {
+            assert_eq!(r.level, "minimal-risk", "{r:?}");
+            let takeover = r.takeover_s.unwrap();
+            assert!(takeover <= 0.050, "{r:?}");
+            assert!(r.detected_s.unwrap() <= takeover);
+            assert!(r.max_cross_track_m < 0.1, "{r:?}");
+            assert!(r.stop_distance_to_safe_point_m.unwrap() < 0.5, "{r:?}");
+        }
+    }
+    let json = serde_json::to_value(&report).unwrap();
+    let first = &json["fail_operational"][0];
+    for key in [
+        "fault",
+        "double",
+        "detected_s",
+        "takeover_s",
+        "level",
+        "max_cross_track_m",
+        "stopped",
+        "stop_distance_to_safe_point_m",
+        "stop_speed_reached_s",
+    ] {
+        assert!(first.get(key).is_some(), "{key} missing");
+    }
+}

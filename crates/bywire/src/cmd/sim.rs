@@ -16,7 +16,8 @@ use crate::support::sim_serve::Shared;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused, response times per identifier),
+    after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused, response times per identifier,
+fail_operational: the redundant tug's ECU faults, one record each),
 truth.csv (the plant's true pose, motion, wheel angles and speeds and steering mode every
 10 ms, on the logs' clock) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
 )]
@@ -27,7 +28,7 @@ pub struct Args {
     /// Seed of every noise source.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Scenario: built in (apron-loop, fault-tour) or a TOML file.
+    /// Scenario: built in (apron-loop, fault-tour, fail-operational) or a TOML file.
     #[arg(long, default_value = "apron-loop")]
     scenario: String,
     /// Folder for the logs and metrics.
@@ -107,7 +108,7 @@ fn load_scenario(name: &str, option: &str) -> Result<Scenario> {
             Ok(Scenario::parse(&text, name)?)
         }
         None => {
-            bail!("{option} {name}: not a built-in scenario (apron-loop, fault-tour) nor a file")
+            bail!("{option} {name}: not a built-in scenario (apron-loop, fault-tour, fail-operational) nor a file")
         }
     }
 }
