@@ -66,6 +66,7 @@ fn plot_pixels(
 /// The colours of sim_plot.rs: the path driven, and the faults.
 const PATH_BLUE: [u8; 3] = [31, 119, 180];
 const FAULT_MAGENTA: [u8; 3] = [190, 0, 110];
+const FAIL_OPERATIONAL_ORANGE: [u8; 3] = [220, 120, 0];
 /// The whole picture, and its map (top left; the speed below is drawn in the path's blue).
 const WHOLE: (u32, u32) = (u32::MAX, u32::MAX);
 const MAP: (u32, u32) = (620, 600);
@@ -902,4 +903,42 @@ fn dataset_refuses_bad_input_with_its_name() {
         assert!(err.contains(expected), "{args:?}: {err}");
         assert!(!dir.join("out").join("dataset.parquet").exists());
     }
+}
+
+/// The contract a user's CI relies on: `--scenario fail-operational` completes on the
+/// redundant tug, its metrics list a `fail_operational` record per fault and pair with the
+/// named fields, and run.png marks the changes of control and level.
+#[test]
+fn the_fail_operational_scenario_keeps_its_contract() {
+    let dir = Scratch::new("sim-fail-operational");
+    let metrics = sim_with(&dir, &["--scenario", "fail-operational"]);
+    assert_eq!(metrics["completed"], true);
+    let records = metrics["fail_operational"].as_array().unwrap();
+    assert_eq!(records.len(), 6);
+    for record in records {
+        for key in [
+            "fault",
+            "double",
+            "detected_s",
+            "takeover_s",
+            "level",
+            "max_cross_track_m",
+            "stopped",
+            "stop_distance_to_safe_point_m",
+            "stop_speed_reached_s",
+        ] {
+            assert!(record.get(key).is_some(), "{key} missing in {record}");
+        }
+        let double = record["double"].as_bool().unwrap();
+        let level = record["level"].as_str().unwrap();
+        assert_eq!(
+            level,
+            if double { "safe-stop" } else { "minimal-risk" },
+            "{record}"
+        );
+        assert_eq!(record["takeover_s"].is_null(), double, "{record}");
+    }
+    // Orange: the ECU in control and the level, marked on the time panels.
+    let (_, counts) = plot_pixels(&dir.join("run.png"), WHOLE, &[FAIL_OPERATIONAL_ORANGE]);
+    assert!(counts[0] > 4 * 100, "{counts:?}");
 }

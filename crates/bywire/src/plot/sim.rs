@@ -21,6 +21,8 @@ use crate::support::files::write_atomically;
 pub const FAULT_COLOR: RGBColor = RGBColor(190, 0, 110);
 /// Steering-mode changes (crab, tank turn) on the time panels.
 const MODE_COLOR: RGBColor = RGBColor(110, 110, 110);
+/// The redundant tug's changes of control and degradation level.
+const FAIL_OPERATIONAL_COLOR: RGBColor = RGBColor(220, 120, 0);
 /// The route on the map, and the path driven.
 const ROUTE_COLOR: RGBColor = RGBColor(170, 170, 170);
 /// The path driven on the map.
@@ -117,6 +119,17 @@ fn markers(tug: &Tug) -> Vec<Marker> {
                 t: seconds(event.t),
                 label: format!("{mode:?}"),
                 color: MODE_COLOR,
+            }),
+            // The redundant tug: the ECU in control and the degradation level.
+            Happening::Control(side) => Some(Marker {
+                t: seconds(event.t),
+                label: side.map_or("neither ECU".to_string(), |s| format!("ECU {s:?}")),
+                color: FAIL_OPERATIONAL_COLOR,
+            }),
+            Happening::Degradation(level, _) => Some(Marker {
+                t: seconds(event.t),
+                label: level.to_string(),
+                color: FAIL_OPERATIONAL_COLOR,
             }),
             _ => None,
         })

@@ -195,15 +195,33 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
             })
         )),
         Line::from(format!("battery    {:.1} %", tug.soc() * 100.0)),
-        Line::from(format!(
-            "faults     {}",
-            if faults.is_empty() {
-                "none".to_string()
-            } else {
-                faults.join(", ")
-            }
-        )),
     ];
+    // The redundant tug: who is in control and how far it has degraded.
+    if tug.ecu_pair().is_some() {
+        lines.push(Line::from(format!(
+            "control    {}",
+            tug.ecu_in_control()
+                .map_or("neither ECU".to_string(), |side| format!("ECU {side:?}"))
+        )));
+        lines.push(Line::from(format!(
+            "level      {}",
+            ecu_said(&|e| {
+                let latch = e.degradation();
+                match latch.reason() {
+                    Some(fault) => format!("{} ({})", latch.level(), fault.class),
+                    None => latch.level().to_string(),
+                }
+            })
+        )));
+    }
+    lines.push(Line::from(format!(
+        "faults     {}",
+        if faults.is_empty() {
+            "none".to_string()
+        } else {
+            faults.join(", ")
+        }
+    )));
     // The keys that inject the scenario's faults by hand.
     lines.extend(
         scenario
