@@ -715,3 +715,26 @@ fn an_emergency_brake_beyond_the_vehicle_is_its_hardest() {
     );
     assert!(!out.contains("\"event\":\"emergency_brake\""), "{out}");
 }
+
+/// A fail-operational vehicle (the redundant tug's profile, simulated) reports its
+/// degradation level, and each state line shows it.
+#[test]
+fn bridge_shows_a_fail_operational_vehicles_degradation_level() {
+    let drive = r#"{"velocity": 1.0, "gear": "drive", "mode": "autonomous"}"#;
+    let states = drive_until(
+        &[
+            "bridge",
+            "--profile",
+            "reference-tug-redundant",
+            "sim:bridge-redundant@500000",
+            "--with-vehicle",
+            "--rate",
+            "20",
+        ],
+        drive,
+        |s| s["degradation"]["level"] == "nominal",
+    );
+    let last = states.last().unwrap();
+    assert_eq!(last["degradation"]["level"], "nominal", "{last}");
+    assert!(last["degradation"]["reason"].is_null(), "{last}");
+}

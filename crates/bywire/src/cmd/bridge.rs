@@ -139,6 +139,11 @@ fn state_json(ads: &Ads<Wire>, now: Timestamp) -> serde_json::Value {
         "estop_state": s.estop_state.value.map(|c| c.raw()),
         "warning": s.warning.value,
         "driver_override": s.driver_override.value,
+        // A fail-operational vehicle's degradation level and the fault behind it.
+        "degradation": s.degradation.value.map(|level| json!({
+            "level": level.to_string(),
+            "reason": s.degradation_reason.value.flatten().map(|f| f.to_string()),
+        })),
         "wheel_speeds": s.wheel_speeds.value,
         "echo_latency_ms": s.echo_latency.value.map(|d| d.as_secs_f64() * 1e3),
         "steering_response_ms": s.steering_response.value.map(|d| d.as_secs_f64() * 1e3),
