@@ -225,19 +225,4 @@ fn the_fail_operational_scenario_reports_every_single_and_double_fault() {
             assert!(r.stop_distance_to_safe_point_m.unwrap() < 0.5, "{r:?}");
         }
     }
-    let json = serde_json::to_value(&report).unwrap();
-    let first = &json["fail_operational"][0];
-    for key in [
-        "fault",
-        "double",
-        "detected_s",
-        "takeover_s",
-        "level",
-        "max_cross_track_m",
-        "stopped",
-        "stop_distance_to_safe_point_m",
-        "stop_speed_reached_s",
-    ] {
-        assert!(first.get(key).is_some(), "{key} missing");
-    }
 }

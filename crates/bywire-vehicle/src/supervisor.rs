@@ -953,6 +953,9 @@ impl<W: VehicleWire> Supervisor<W> {
         let commanded = self
             .command
             .map_or(SteeringMode::Normal, |c| c.steering_mode);
+        if self.degradation.level() == DegradationLevel::Nominal {
+            return commanded;
+        }
         match self.degradation.limits() {
             Some(limits) if !limits.steering_modes.allows(commanded) => SteeringMode::Normal,
             _ => commanded,
@@ -1015,7 +1018,11 @@ impl<W: VehicleWire> Supervisor<W> {
             _ => return full_brake,
         };
         // Degraded: no faster than the level allows.
-        let (velocity, warning) = match self.degradation.limits() {
+        let limits = match self.degradation.level() {
+            DegradationLevel::Nominal => None,
+            _ => self.degradation.limits(),
+        };
+        let (velocity, warning) = match limits {
             Some(limits) => (
                 velocity.clamp(-limits.speed_limit, limits.speed_limit),
                 true,
