@@ -4,7 +4,7 @@
 //!
 //! ```toml
 //! name = "stand-approach"
-//! route = "apron-loop"          # or: waypoints = [[0, 0], [40, 0], [40, 30]]
+//! route = "apron-loop"          # or "service-loop", or: waypoints = [[0, 0], [40, 0]]
 //! speed = 3.0                   # m/s
 //! crab_final_m = 10.0           # the last metres in crab, heading held (a stand approach)
 //! tank_turn_deg = 180           # at the end, a tank turn in place (+ left)
@@ -370,10 +370,11 @@ fn route(raw: &RawScenario, invalid: &Invalid<'_>) -> Result<Vec<Point>, Scenari
             ))
         }
         (Some("apron-loop") | None, None) => apron_loop(),
+        (Some("service-loop"), None) => service_loop(),
         (Some(other), None) => {
             return Err(invalid(
                 "route",
-                format!("'{other}' is not a built-in route (apron-loop)"),
+                format!("'{other}' is not a built-in route (apron-loop, service-loop)"),
             ))
         }
         (None, Some(points)) => {
@@ -573,6 +574,29 @@ fn event(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_redundant_scenario_reads_its_safe_stops_and_ecu_faults_and_mistakes_name_the_key() {
+        let text = "route = \"service-loop\"\nredundant = true\nsafe_stops = [60, 20]\n\n[[event]]\nat_s = 5\nfault = \"ecu_wrong_output\"\necu = \"A\"\n\n[[event]]\nat_s = 9\nfault = \"repair\"\n";
+        let scenario = Scenario::parse(text, "r.toml").unwrap();
+        assert!(scenario.tug.redundant);
+        assert_eq!(scenario.tug.safe_stops, [20.0, 60.0]);
+        assert_eq!(scenario.tug.route, service_loop());
+        assert_eq!(scenario.events[0].1, Fault::EcuWrongOutput(Side::A));
+        assert_eq!(scenario.events[1].1, Fault::Repair);
+        for (bad, expected) in [
+            ("safe_stops = [60, 20]", "safe_stops = [60, 900]"),
+            ("ecu = \"A\"", "ecu = \"C\""),
+        ] {
+            let err = Scenario::parse(&text.replace(bad, expected), "r.toml").unwrap_err();
+            let key = if bad.starts_with("safe") {
+                "safe_stops[1]"
+            } else {
+                "event[0].ecu"
+            };
+            assert!(err.to_string().contains(&format!("r.toml: {key}")), "{err}");
+        }
+    }
 
     #[test]
     fn a_scenario_file_reads_with_its_events_and_mistakes_name_the_key() {
