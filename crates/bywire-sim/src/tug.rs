@@ -1363,7 +1363,8 @@ impl Tug {
         let Some(ecu) = self.vehicle_control_ecu() else {
             return;
         };
-        let (mut a, mut brake) = (ecu.actuators(now), ecu.brake_demand(now));
+        let mut a = ecu.actuators(now);
+        let mut brake = ecu.brake_demand_of(&a);
         // Neither of the redundant tug's ECUs in control: nothing drives the motors, and the
         // spring brakes apply.
         if matches!(self.nodes.ecu, Ecus::Two(_)) && self.ecu_in_control().is_none() {

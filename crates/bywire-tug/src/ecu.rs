@@ -337,10 +337,16 @@ impl VehicleControlEcu {
 
     /// The friction brakes' demand now, 0–1: the supervisor's, or full when the ECU stops.
     pub fn brake_demand(&self, now: Timestamp) -> f64 {
+        self.brake_demand_of(&self.supervisor.actuators(now))
+    }
+
+    /// The friction brakes' demand for actuators `a` the supervisor asked for now (a caller
+    /// that has them already asks once).
+    pub fn brake_demand_of(&self, a: &Actuators) -> f64 {
         if self.stops() {
             1.0
         } else {
-            self.supervisor.actuators(now).brake / 100.0
+            a.brake / 100.0
         }
     }
 
