@@ -212,3 +212,68 @@ fn the_fail_operational_mechanisms_never_allocate() {
     assert!(b.took_over().is_some());
     assert_eq!(counted.count_total, 0, "allocations in the mechanisms");
 }
+
+#[test]
+fn a_duplicated_supervisor_never_allocates() {
+    use bywire_vehicle::arbitration::{Duplex, FencedPair, Side};
+    use bywire_vehicle::wire::{ProfileDuplexWire, ProfileWire};
+    let loaded = bywire_vehicle::profile::Profile::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
+    )
+    .unwrap();
+    let wire = ProfileWire::new(&loaded).unwrap();
+    let duplex = ProfileDuplexWire::new(&loaded).unwrap().unwrap();
+    let config = loaded.supervisor_config();
+    let arbiter = loaded
+        .profile
+        .fail_operational
+        .as_ref()
+        .unwrap()
+        .control
+        .as_ref()
+        .unwrap()
+        .config();
+    let half = |side| {
+        Duplex::new(
+            side,
+            arbiter,
+            Supervisor::with_wire(config, wire.clone()),
+            duplex.clone(),
+            Timestamp::ZERO,
+        )
+    };
+    let mut pair = FencedPair::new(half(Side::A), half(Side::B));
+    // Each half's status, prepared before counting: the pair hears its own halves.
+    let mut statuses = Vec::new();
+    pair.poll(Timestamp::ZERO, &mut |port, frame| {
+        statuses.push((port, frame))
+    });
+    let mut sent = 0;
+    // Other traffic both halves hear (a silent partner is told from a deaf receiver by it).
+    let other = Frame::classic(bywire_core::Id::standard(0x7FF).unwrap(), &[0]).unwrap();
+    let counted = allocation_counter::measure(|| {
+        for k in 1..300u64 {
+            let now = Timestamp::from_millis(10 * k);
+            pair.on_frame(now, bywire_core::node::Port(0), &other);
+            pair.on_frame(now, bywire_core::node::Port(8), &other);
+            // B's port hears A's status and A's hears B's; after 2 s A falls silent.
+            for (port, frame) in &statuses {
+                let to = if port.0 < 8 {
+                    bywire_core::node::Port(port.0 + 8)
+                } else {
+                    bywire_core::node::Port(port.0 - 8)
+                };
+                if k < 200 || port.0 >= 8 {
+                    pair.on_frame(now, to, frame);
+                }
+            }
+            pair.poll(now, &mut |_, _| sent += 1);
+        }
+    });
+    assert!(sent > 300);
+    assert_eq!(pair.in_control(), Some(Side::B));
+    assert_eq!(
+        counted.count_total, 0,
+        "allocations in the duplicated supervisor"
+    );
+}
