@@ -1,4 +1,5 @@
-//! The redundant tug's record of each injected ECU fault or fault pair, as `metrics.json`
+//! The redundant tug's record of each injected fault or fault pair (of its ECUs and its
+//! voted angle sensors), as `metrics.json`
 //! lists them under `fail_operational`: when the fault was found and taken over, the level
 //! the vehicle reached, how well it kept to the route while degraded, and where it stopped
 //! against the safe stop point it aimed for. Read from the run's events and true states.
@@ -46,11 +47,14 @@ pub struct FailOperationalRecord {
     pub stop_speed_reached_s: Option<f64>,
 }
 
-/// The faults of the redundant tug's ECUs.
-fn is_ecu_fault(fault: &Fault) -> bool {
+/// The faults the redundant tug's layers answer: of its ECUs and its voted angle sensors.
+fn is_layer_fault(fault: &Fault) -> bool {
     matches!(
         fault,
-        Fault::EcuSilent(_) | Fault::EcuWrongOutput(_) | Fault::EcuBabble(_)
+        Fault::EcuSilent(_)
+            | Fault::EcuWrongOutput(_)
+            | Fault::EcuBabble(_)
+            | Fault::AngleSensor { .. }
     )
 }
 
@@ -76,7 +80,7 @@ impl FailOperationalRecord {
         let mut case: Option<Case<'_>> = None;
         for event in events {
             match &event.what {
-                Happening::Fault(fault) if is_ecu_fault(fault) => {
+                Happening::Fault(fault) if is_layer_fault(fault) => {
                     case.get_or_insert_with(|| Case {
                         faults: Vec::new(),
                         events: Vec::new(),
@@ -178,8 +182,9 @@ impl FailOperationalRecord {
                 .station
             })
         };
-        let stop_distance_to_safe_point_m = match (stop, aimed, neither) {
-            (Some(stop), Some(aimed), None) => station(stop).map(|at| (at - aimed).abs()),
+        // A pair stops where it is: no safe stop point to measure against.
+        let stop_distance_to_safe_point_m = match (stop, aimed, double) {
+            (Some(stop), Some(aimed), false) => station(stop).map(|at| (at - aimed).abs()),
             _ => None,
         };
         FailOperationalRecord {

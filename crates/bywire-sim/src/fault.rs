@@ -58,6 +58,17 @@ pub enum Fault {
     /// One of the redundant tug's ECUs babbles: silent for its own messages, it floods bus 1
     /// with identifier 0x000 until its partner's fence cuts its transceiver.
     EcuBabble(Side),
+    /// One of the redundant tug's further angle sensors fails: `corner`'s (0 FL … 3 RR) in
+    /// module `module` (0: B, 1: C), as `fault` says (`Silent`: the module reports no
+    /// reading).
+    AngleSensor {
+        /// The corner.
+        corner: usize,
+        /// The module.
+        module: usize,
+        /// How it fails.
+        fault: SensorFault,
+    },
     /// At a standstill, the redundant tug's faults are repaired: both ECUs back to their
     /// power-on roles (A in control), the degradation level back to nominal.
     Repair,
@@ -82,6 +93,18 @@ impl core::fmt::Display for Fault {
                 write!(f, "TamperFrames {{ {} 0x{id:03X} {tamper:?} }}", bus.name())
             }
             Fault::BusOff { bus, id } => write!(f, "BusOff {{ {} 0x{id:03X} }}", bus.name()),
+            Fault::AngleSensor {
+                corner,
+                module,
+                fault,
+            } => {
+                let corner = ["FL", "FR", "RL", "RR"]
+                    .get(*corner)
+                    .copied()
+                    .unwrap_or("?");
+                let module = if *module == 0 { "B" } else { "C" };
+                write!(f, "AngleSensor({corner} {module} {fault:?})")
+            }
             other => write!(f, "{other:?}"),
         }
     }

@@ -84,10 +84,10 @@ pub fn apron_loop() -> Vec<Point> {
     points
 }
 
-/// The built-in `service-loop` route: 120 m out along a service road, a 15 m turn, and
-/// 120 m back (about 287 m), for runs that stop and start again along the way.
+/// The built-in `service-loop` route: 160 m out along a service road, a 15 m turn, and
+/// 160 m back (about 367 m), for runs that stop and start again along the way.
 pub fn service_loop() -> Vec<Point> {
-    let mut points: Vec<Point> = (0..=120)
+    let mut points: Vec<Point> = (0..=160)
         .step_by(2)
         .map(|x| Point {
             x: f64::from(x),
@@ -97,11 +97,11 @@ pub fn service_loop() -> Vec<Point> {
     for k in 1..=24 {
         let a = -core::f64::consts::FRAC_PI_2 + f64::from(k) / 24.0 * core::f64::consts::PI;
         points.push(Point {
-            x: 120.0 + 15.0 * libm::cos(a),
+            x: 160.0 + 15.0 * libm::cos(a),
             y: 15.0 + 15.0 * libm::sin(a),
         });
     }
-    for x in (0..120).rev().step_by(2) {
+    for x in (0..160).rev().step_by(2) {
         points.push(Point {
             x: f64::from(x),
             y: 30.0,

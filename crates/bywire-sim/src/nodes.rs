@@ -9,7 +9,8 @@ use core::time::Duration;
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 use bywire_tug::messages::{
-    self, Battery as BatteryMessage, EmergencyStop, Imu, SteeringAngleSensors, WheelEncoders,
+    self, Battery as BatteryMessage, EmergencyStop, Imu, SteeringAngleSensors, SteeringAnglesB,
+    SteeringAnglesC, WheelEncoders,
 };
 
 /// A fixed send period and the 4-bit rolling counter every reference-tug message carries.
@@ -143,6 +144,43 @@ pub fn imu() -> ImuNode {
             out(messages::sealed_frame(Imu::ID, m.0));
         },
     )
+}
+
+/// What an angle-sensor module measures: each corner's angle (degrees), FL, FR, RL, RR
+/// (`None`: no reading).
+pub type AngleReading = [Option<f64>; 4];
+
+/// One of the redundant tug's angle-sensor modules (B or C) on bus 3, every 10 ms.
+pub type AngleModule = Sender<AngleReading>;
+
+/// The raw value a module sends for a corner without a reading (the signal's minimum).
+const NO_READING: u64 = 0x800;
+
+/// Module `B` (0) or `C` (1), nothing measured yet.
+pub fn angle_module(module: usize) -> AngleModule {
+    fn encode<const ID: u32>(r: &AngleReading, counter: u64, out: &mut dyn FnMut(Frame)) {
+        let mut m = SteeringAnglesB::default();
+        let [fl, fr, rl, rr] = *r;
+        let raw = |angle: Option<f64>| {
+            angle.map_or(NO_READING, |a| {
+                // 0.1 degree a count, 12 bits, two's complement.
+                let counts = bywire_core::num::round_to_i32(a.clamp(-204.7, 204.7) * 10.0);
+                u64::from(counts.cast_unsigned()) & 0xFFF
+            })
+        };
+        m.set_angle_fl_raw(raw(fl));
+        m.set_angle_fr_raw(raw(fr));
+        m.set_angle_rl_raw(raw(rl));
+        m.set_angle_rr_raw(raw(rr));
+        m.set_counter_raw(counter);
+        out(messages::sealed_frame(ID, m.0));
+    }
+    let encode = if module == 0 {
+        encode::<{ SteeringAnglesB::ID }>
+    } else {
+        encode::<{ SteeringAnglesC::ID }>
+    };
+    Sender::new(Duration::from_millis(10), [None; 4], encode)
 }
 
 /// What the I/O node measures: the hub encoders' speeds (m/s) and the steering sensors'

@@ -174,7 +174,7 @@ impl Scenario {
                     route: service_loop(),
                     redundant: true,
                     // Stands and kerbs along the service road, every 20 m.
-                    safe_stops: (1..14).map(|k| f64::from(k) * 20.0).collect(),
+                    safe_stops: (1..19).map(|k| f64::from(k) * 20.0).collect(),
                     ..TugParams::default()
                 },
                 events,
@@ -324,35 +324,59 @@ impl Scenario {
     }
 }
 
-/// The `fail-operational` scenario's faults: each fault of ECU A alone (silent, a wrong
-/// setpoint, babbling), then each with ECU B falling silent on top 3 s later, a repair at a
-/// standstill after each.
+/// The `fail-operational` scenario's faults, each alone: ECU A silent, computing a wrong
+/// setpoint, babbling; an angle sensor stuck, drifting, silent. Then each again with a second
+/// on top 3 s later: ECU B falling silent, or a second sensor of the corner stuck the other
+/// way. A repair at a standstill after each.
 fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
     let ms = Duration::from_millis;
+    let sensor = |corner, module, fault| Fault::AngleSensor {
+        corner,
+        module,
+        fault,
+    };
+    let sensors = [
+        sensor(0, 1, SensorFault::Stuck(8.0)),
+        sensor(1, 0, SensorFault::Drift(2.0)),
+        sensor(2, 1, SensorFault::Silent),
+    ];
+    // The second sensor of the same corner, stuck the other way.
+    let second = |fault: Fault| match fault {
+        Fault::AngleSensor { corner, module, .. } => {
+            sensor(corner, 1 - module, SensorFault::Stuck(-8.0))
+        }
+        other => other,
+    };
+    let singles = [
+        Fault::EcuSilent(Side::A),
+        Fault::EcuWrongOutput(Side::A),
+        Fault::EcuBabble(Side::A),
+    ];
     let mut events = Vec::new();
     let mut at = ms(5_000);
-    for fault in [
-        Fault::EcuSilent(Side::A),
-        Fault::EcuWrongOutput(Side::A),
-        Fault::EcuBabble(Side::A),
-    ] {
-        // Single: time to reach the next safe stop point at the minimal-risk speed.
-        events.push((at, fault, Some(ms(18_000))));
-        events.push((at + ms(18_000), Fault::Repair, None));
-        at += ms(21_000);
+    let single = |events: &mut Vec<_>, at: &mut Duration, fault| {
+        // Time to reach the next safe stop point at the minimal-risk speed.
+        events.push((*at, fault, Some(ms(18_000))));
+        events.push((*at + ms(18_000), Fault::Repair, None));
+        *at += ms(21_000);
+    };
+    for fault in singles.into_iter().chain(sensors) {
+        single(&mut events, &mut at, fault);
     }
-    for fault in [
-        Fault::EcuSilent(Side::A),
-        Fault::EcuWrongOutput(Side::A),
-        Fault::EcuBabble(Side::A),
-    ] {
-        events.push((at, fault, Some(ms(10_000))));
-        events.push((at + ms(3_000), Fault::EcuSilent(Side::B), Some(ms(7_000))));
-        events.push((at + ms(10_000), Fault::Repair, None));
+    let double = |events: &mut Vec<_>, at: &mut Duration, first, second| {
+        events.push((*at, first, Some(ms(10_000))));
+        events.push((*at + ms(3_000), second, Some(ms(7_000))));
+        events.push((*at + ms(10_000), Fault::Repair, None));
         // The drives the master stopped when neither ECU was in control: acknowledged
         // again once their faults have cleared.
-        events.push((at + ms(11_000), Fault::OperatorReset, None));
-        at += ms(14_000);
+        events.push((*at + ms(11_000), Fault::OperatorReset, None));
+        *at += ms(14_000);
+    };
+    for fault in singles {
+        double(&mut events, &mut at, fault, Fault::EcuSilent(Side::B));
+    }
+    for fault in sensors {
+        double(&mut events, &mut at, fault, second(fault));
     }
     events
 }

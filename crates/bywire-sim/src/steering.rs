@@ -78,6 +78,9 @@ pub enum SensorFault {
     Drift(f64),
     /// The wiper lost contact: reads the upper rail.
     OpenCircuit,
+    /// No reading at all: a sensor module reports the channel missing (the potentiometer's
+    /// track, which has no such report, reads the upper rail).
+    Silent,
 }
 
 /// The state of one corner's steering chain.
@@ -94,6 +97,11 @@ pub struct SteeringChain {
     angle_from: [u64; 2],
     drift: f64,
     fault: SensorFault,
+    /// The redundant tug's two further angle sensors (modules B and C): their faults and
+    /// drifts.
+    module_faults: [(SensorFault, f64); 2],
+    /// A module's fault is set (the drifts need stepping).
+    modules_faulted: bool,
 }
 
 impl SteeringChain {
@@ -107,6 +115,8 @@ impl SteeringChain {
             angle_from: [0.0f64.to_bits(), params.arm.to_bits()],
             drift: 0.0,
             fault: SensorFault::None,
+            module_faults: [(SensorFault::None, 0.0); 2],
+            modules_faulted: false,
         }
     }
 
@@ -156,6 +166,13 @@ impl SteeringChain {
         if let SensorFault::Drift(rate) = self.fault {
             self.drift += rate * dt;
         }
+        if self.modules_faulted {
+            for (fault, drift) in &mut self.module_faults {
+                if let SensorFault::Drift(rate) = *fault {
+                    *drift += rate * dt;
+                }
+            }
+        }
     }
 
     /// The wheel's angle, degrees (the linkage: the piston turns the arm).
@@ -174,6 +191,30 @@ impl SteeringChain {
         self.drift = 0.0;
     }
 
+    /// Set (or clear) a fault of the further angle sensor of `module` (0: B, 1: C).
+    pub fn set_module_fault(&mut self, module: usize, fault: SensorFault) {
+        if let Some(slot) = self.module_faults.get_mut(module) {
+            *slot = (fault, 0.0);
+        }
+        self.modules_faulted = self
+            .module_faults
+            .iter()
+            .any(|(f, _)| *f != SensorFault::None);
+    }
+
+    /// What the further angle sensor of `module` (0: B, 1: C) reads (`None`: no reading).
+    pub fn module_deg(&self, module: usize, rng: &mut Rng) -> Option<f64> {
+        let (fault, drift) = self.module_faults.get(module).copied()?;
+        let truth = match fault {
+            SensorFault::None => self.wheel_angle_deg(),
+            SensorFault::Stuck(angle) => angle,
+            SensorFault::Drift(_) => self.wheel_angle_deg() + drift,
+            SensorFault::OpenCircuit => return Some(self.params.sensor_range_deg),
+            SensorFault::Silent => return None,
+        };
+        Some(self.quantised(truth, rng))
+    }
+
     /// What the potentiometer reads: the angle with noise, quantised to its resolution,
     /// clipped to its range — or what a fault makes of it.
     pub fn sensor_deg(&self, rng: &mut Rng) -> f64 {
@@ -182,7 +223,7 @@ impl SteeringChain {
             SensorFault::None => self.wheel_angle_deg(),
             SensorFault::Stuck(angle) => angle,
             SensorFault::Drift(_) => self.wheel_angle_deg() + self.drift,
-            SensorFault::OpenCircuit => return p.sensor_range_deg,
+            SensorFault::OpenCircuit | SensorFault::Silent => return p.sensor_range_deg,
         };
         self.quantised(truth, rng)
     }

@@ -41,15 +41,17 @@ use bywire_tug::ecu::{
 pub use bywire_tug::ecu::{DRIVE_NODES, MASTER_NODE, STEERING_NODES};
 use bywire_tug::messages::{
     AdsToVehicleControl, Battery as BatteryMessage, ControlMode, EmergencyBrake, EmergencyStop,
-    SteeringAngleSensors, VcuAStatus, VcuBStatus, VehicleToAdsDegradation, VehicleToAdsSensors,
-    VehicleToAdsState, VehicleToAdsWheelAngles,
+    SteeringAngleSensors, SteeringAnglesB, SteeringAnglesC, VcuAStatus, VcuBStatus,
+    VehicleToAdsDegradation, VehicleToAdsSensors, VehicleToAdsState, VehicleToAdsWheelAngles,
 };
 use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::arbitration::{ArbiterConfig, Duplex, FencedPair, Side};
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::command::{DegradationLevel, FaultClass};
+use bywire_vehicle::fail_operational::VotedRoles;
 use bywire_vehicle::redundancy::Channel;
+use bywire_vehicle::redundancy::TripleConfig;
 use bywire_vehicle::secured::Signing;
 use bywire_vehicle::supervisor::{EstopState, Redundancy, Supervisor, SupervisorConfig, Watchdog};
 
@@ -61,7 +63,9 @@ use crate::drive::{DriveParams, WheelDrive};
 use crate::event::{Happening, SimEvent};
 use crate::fault::Fault;
 use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
-use crate::nodes::{self, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController};
+use crate::nodes::{
+    self, AngleModule, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController,
+};
 use crate::record::{
     Logged, ResponseLog, ResponseTimes, Sample, SecurityWatch, SteeringRecord, SupervisorWatch,
     TruthSample,
@@ -207,6 +211,8 @@ struct TugNodes {
     bms: NodeHandle<Bms>,
     imu: NodeHandle<ImuNode>,
     io: NodeHandle<IoNode>,
+    /// The redundant tug's angle-sensor modules B and C.
+    angle_modules: Option<[NodeHandle<AngleModule>; 2]>,
     /// Steering drives FL..RR.
     steer: [NodeHandle<Device<Drive>>; 4],
     /// Wheel drives FL..RR.
@@ -312,7 +318,7 @@ impl TugNodes {
         mission: Mission,
         (ads_config, ecu_config): (AdsConfig, SupervisorConfig),
         geometry: EcuGeometry,
-        arbitration: Option<ArbiterConfig>,
+        redundancy: Option<(ArbiterConfig, Option<[TripleConfig; 4]>)>,
     ) -> Result<TugNodes, TugError> {
         // Every node of the secured variant starts its freshness at 1: a new key.
         let key = bywire_secoc::Key::new(SIM_KEY);
@@ -328,13 +334,16 @@ impl TugNodes {
             false => None,
         };
         let ads = net.add_node(AdsDriver::new(ads_config, mission, wire()?));
-        let ecu = match arbitration {
+        let ecu = match redundancy {
             None => {
                 Ecus::One(net.add_node(VehicleControlEcu::with_wire(ecu_config, geometry, wire()?)))
             }
-            Some(config) => {
+            Some((config, voted)) => {
                 let half = |side| -> Result<_, TugError> {
-                    let node = VehicleControlEcu::with_wire(ecu_config, geometry, wire()?);
+                    let mut node = VehicleControlEcu::with_wire(ecu_config, geometry, wire()?);
+                    if let Some(voted) = voted {
+                        node = node.with_voted_angles(voted);
+                    }
                     let duplex = TugDuplexWire::default();
                     Ok(Duplex::new(side, config, node, duplex, Timestamp::ZERO))
                 };
@@ -349,6 +358,7 @@ impl TugNodes {
             bms: net.add_node(nodes::bms()),
             imu: net.add_node(nodes::imu()),
             io: net.add_node(nodes::io_node()),
+            angle_modules: redundancy.map(|_| [0, 1].map(|m| net.add_node(nodes::angle_module(m)))),
             steer: STEERING_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfilePosition))),
             drive: DRIVE_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfileVelocity))),
             attacker: net.add_node(Attacker::new()),
@@ -388,6 +398,14 @@ impl TugNodes {
         wire(net, self.attacker.key(), Port::MAIN, 0, "attacker");
         wire(net, self.imu.key(), Port::MAIN, 2, "IMU");
         wire(net, self.io.key(), Port::MAIN, 2, "I/O node");
+        for (module, name) in self
+            .angle_modules
+            .iter()
+            .flatten()
+            .zip(["angle module B", "angle module C"])
+        {
+            wire(net, module.key(), Port::MAIN, 2, name);
+        }
         // Corner by corner: its steering drive, then its wheel drive.
         let corners = STEERING_NODES.iter().zip(self.steer);
         for ((steer, steer_node), (drive, drive_node)) in
@@ -422,8 +440,10 @@ impl TugNodes {
             diagnostics::FUNCTIONAL_ID,
             BatteryMessage::ID,
         ]);
+        let mut sensors = vec![SteeringAngleSensors::ID];
         if matches!(self.ecu, Ecus::Two(_)) {
             ecu_hears.extend([VcuAStatus::ID, VcuBStatus::ID]);
+            sensors.extend([SteeringAnglesB::ID, SteeringAnglesC::ID]);
         }
         let ecu = self.ecu.key();
         for (_, [bus1, bus1b, _, bus3]) in self.ecu.halves() {
@@ -436,7 +456,7 @@ impl TugNodes {
                 },
             );
             net.set_filtering(ecu, bus1b, only(&[AdsToVehicleControl::ID]));
-            net.set_filtering(ecu, bus3, only(&[SteeringAngleSensors::ID]));
+            net.set_filtering(ecu, bus3, only(&sensors));
         }
         let mut feedback = vec![
             VehicleToAdsState::ID,
@@ -457,6 +477,9 @@ impl TugNodes {
         ];
         for node in senders {
             net.set_filtering(node, Port::MAIN, deaf());
+        }
+        for module in self.angle_modules.iter().flatten() {
+            net.set_filtering(*module, Port::MAIN, deaf());
         }
         net.set_filtering(
             self.attacker,
@@ -546,12 +569,18 @@ impl Tug {
             bywire_tug::profile()
         }
         .map_err(|e| TugError::Profile(e.to_string()))?;
-        let arbitration = loaded
-            .profile
-            .fail_operational
-            .as_ref()
-            .and_then(|f| f.control.as_ref())
-            .map(|c| c.config());
+        // The redundant tug: its ECUs' arbitration, and each corner's angle voted when the
+        // profile declares the four.
+        let redundancy = loaded.profile.fail_operational.as_ref().and_then(|f| {
+            let voted: Option<[TripleConfig; 4]> = f
+                .voted
+                .iter()
+                .map(VotedRoles::config)
+                .collect::<Vec<_>>()
+                .try_into()
+                .ok();
+            f.control.as_ref().map(|c| (c.config(), voted))
+        });
         let (ads_config, mut ecu_config) = (loaded.ads_config(), loaded.supervisor_config());
         // Commands come on bus 1 and bus 1b: a copy half a cycle overdue leaves the other bus
         // alone (degraded, reported); copies that disagree are a fault.
@@ -588,7 +617,7 @@ impl Tug {
             mission,
             (ads_config, ecu_config),
             geometry,
-            arbitration,
+            redundancy,
         )?;
         let buses = add_buses(&mut net, params.secoc);
         let (mut names, ecu_bus1) = nodes.wire(&mut net, buses);
@@ -697,6 +726,15 @@ impl Tug {
                     c.chain.set_fault(sensor);
                 }
             }
+            Fault::AngleSensor {
+                corner,
+                module,
+                fault,
+            } => {
+                if let Some(c) = self.corners.get_mut(corner) {
+                    c.chain.set_module_fault(module, fault);
+                }
+            }
             Fault::OperatorReset => {
                 // The operator presses reset: at the ADS's console (the E-stop latch's reset
                 // sequence) and at the ECU (drives the master stopped acknowledged, a steering
@@ -769,7 +807,7 @@ impl Tug {
                 let half = pair.half_mut(side);
                 half.reset(now);
                 let ecu = half.node_mut();
-                ecu.reset_degradation();
+                ecu.reset_degradation(now);
                 // Drives that stopped when neither ECU was in control are acknowledged.
                 ecu.operator_reset(now);
             }
@@ -1072,6 +1110,16 @@ impl Tug {
             }
             false
         });
+        for (module, handle) in self.nodes.angle_modules.iter().flatten().enumerate() {
+            self.net.feed(*handle, |node| {
+                if node.schedule.due_within(until) {
+                    for (reading, corner) in node.reading.iter_mut().zip(corners) {
+                        *reading = corner.chain.module_deg(module, rng);
+                    }
+                }
+                false
+            });
+        }
         let battery = &self.battery;
         self.net.feed(self.nodes.bms, |bms| {
             if bms.schedule.due_within(until) {
@@ -1145,6 +1193,11 @@ impl Tug {
                 Fault::SensorFault(corner, _) => {
                     if let Some(c) = self.corners.get_mut(corner) {
                         c.chain.set_fault(SensorFault::None);
+                    }
+                }
+                Fault::AngleSensor { corner, module, .. } => {
+                    if let Some(c) = self.corners.get_mut(corner) {
+                        c.chain.set_module_fault(module, SensorFault::None);
                     }
                 }
                 Fault::EcuWrongOutput(side) => {

@@ -32,16 +32,22 @@ use bywire_core::node::{Node, Port};
 use bywire_core::num::round_to_i32;
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_vehicle::command::{DegradationLevel, SteeringMode};
+use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
 use bywire_vehicle::degradation::Fault;
 use bywire_vehicle::redundancy::Channel;
+use bywire_vehicle::redundancy::{
+    ChannelHealth, TripleConfig, TripleFailure, TripleVote, TripleVoter,
+};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
 
 use bywire_core::frame::ErrorClass;
 
 use crate::diagnostics::{self, DiagnosticRequest, Diagnostics, Observation};
-use crate::messages::{self, Battery as BatteryMessage, SteeringAngleSensors, VehicleStatus};
+use crate::messages::{
+    self, Battery as BatteryMessage, SteeringAngleSensors, SteeringAnglesB, SteeringAnglesC,
+    VehicleStatus,
+};
 use crate::plausibility::{SteeringFault, SteeringPlausibility};
 use crate::secured::{self, TugWire};
 
@@ -178,7 +184,23 @@ pub struct VehicleControlEcu {
     calibration: Option<(Timestamp, [f64; 4], u32)>,
     /// After an ECUReset: silent until then.
     booting_until: Option<Timestamp>,
+    /// The redundant tug: each corner's angle voted 2-out-of-3 (the potentiometer's second
+    /// track, modules B and C).
+    voted: Option<VotedAngles>,
 }
+
+/// Each corner's three angle channels voted, and what has been reported of them.
+#[derive(Debug, Clone, Copy)]
+struct VotedAngles {
+    voters: [TripleVoter; 4],
+    /// The channels already reported out, per corner.
+    out: [[bool; 3]; 4],
+    /// The corners whose vote failed, reported.
+    lost: [bool; 4],
+}
+
+/// The raw value modules B and C send for a corner without a reading.
+const NO_READING: u64 = 0x800;
 
 impl VehicleControlEcu {
     /// An ECU with its supervisor configured by `config` (the tug's profile, with redundancy on
@@ -229,7 +251,82 @@ impl VehicleControlEcu {
             second_tracks: [0.0; 4],
             calibration: None,
             booting_until: None,
+            voted: None,
         }
+    }
+
+    /// The same ECU voting each corner's angle 2-out-of-3 with `configs` (FL, FR, RL, RR):
+    /// the potentiometer's second track and modules B and C on bus 3. A channel voted out
+    /// and a corner whose vote fails are reported to the supervisor's degradation latch; the
+    /// plausibility check compares the drive's track with the voted angle.
+    pub fn with_voted_angles(mut self, configs: [TripleConfig; 4]) -> Self {
+        self.voted = Some(VotedAngles {
+            voters: configs.map(|c| TripleVoter::new(c, Timestamp::ZERO)),
+            out: [[false; 3]; 4],
+            lost: [false; 4],
+        });
+        self
+    }
+
+    /// Each corner's voted angle now (`None`: the tug votes none, or the vote has no value).
+    fn vote_angles(&mut self, now: Timestamp) -> Option<[Option<f64>; 4]> {
+        let voted = self.voted.as_mut()?;
+        let mut angles = [None; 4];
+        let mut faults = [None; 8];
+        let mut found = 0;
+        for (corner, (voter, (out, lost))) in voted
+            .voters
+            .iter_mut()
+            .zip(voted.out.iter_mut().zip(voted.lost.iter_mut()))
+            .enumerate()
+        {
+            let vote = voter.vote(now);
+            if let Some(slot) = angles.get_mut(corner) {
+                *slot = vote.value();
+            }
+            let source = u8::try_from(corner).unwrap_or(0);
+            for (channel, (health, reported)) in
+                voter.health().iter().zip(out.iter_mut()).enumerate()
+            {
+                if matches!(health, ChannelHealth::Out(_)) && !*reported {
+                    *reported = true;
+                    let channel = u8::try_from(channel).unwrap_or(0);
+                    if let Some(slot) = faults.get_mut(found) {
+                        *slot = Some((FaultClass::SensorChannelOut, source * 3 + channel));
+                        found += 1;
+                    }
+                }
+            }
+            // Too few channels is a fault once they are out, not while they have yet to speak
+            // (at start).
+            let failed = match vote {
+                TripleVote::Failed(TripleFailure::TooFew) => {
+                    voter
+                        .health()
+                        .iter()
+                        .filter(|h| matches!(h, ChannelHealth::Out(_)))
+                        .count()
+                        >= 2
+                }
+                TripleVote::Failed(_) => true,
+                TripleVote::Triple(_) | TripleVote::Duplex(_) => false,
+            };
+            if failed && !*lost {
+                *lost = true;
+                if let Some(slot) = faults.get_mut(found) {
+                    *slot = Some((FaultClass::SensorLost, source));
+                    found += 1;
+                }
+            }
+        }
+        for (class, source) in faults.into_iter().flatten() {
+            self.supervisor.report_fault(Fault {
+                class,
+                source,
+                at: now,
+            });
+        }
+        Some(angles)
     }
 
     /// The diagnostics: the UDS server with the DTC memory.
@@ -258,6 +355,11 @@ impl VehicleControlEcu {
         fresh.events = core::mem::take(&mut self.events);
         fresh.events_dropped = self.events_dropped;
         fresh.booting_until = Some(now.saturating_add(BOOT_TIME));
+        fresh.voted = self.voted.map(|v| VotedAngles {
+            voters: v.voters.map(|voter| TripleVoter::new(voter.config(), now)),
+            out: [[false; 3]; 4],
+            lost: [false; 4],
+        });
         fresh.next_report = now.saturating_add(BOOT_TIME);
         *self = fresh;
     }
@@ -272,9 +374,18 @@ impl VehicleControlEcu {
         self.supervisor.report_fault(fault)
     }
 
-    /// Back to nominal after a repair, only at a standstill (whether it was reset).
-    pub fn reset_degradation(&mut self) -> bool {
-        self.supervisor.reset_degradation()
+    /// Back to nominal after a repair, only at a standstill (whether it was reset): the
+    /// degradation level, and every angle channel voted in again.
+    pub fn reset_degradation(&mut self, now: Timestamp) -> bool {
+        let reset = self.supervisor.reset_degradation();
+        if let (true, Some(voted)) = (reset, self.voted.as_mut()) {
+            for voter in &mut voted.voters {
+                voter.reset(now);
+            }
+            voted.out = [[false; 3]; 4];
+            voted.lost = [false; 4];
+        }
+        reset
     }
 
     /// A fault of this ECU's own, as a test bench injects it: a corner's steering trim
@@ -419,6 +530,30 @@ impl VehicleControlEcu {
 
     /// The second tracks from the I/O node on bus 3.
     fn on_sensor_frame(&mut self, now: Timestamp, frame: &Frame) {
+        if let Some(voted) = self.voted.as_mut() {
+            for (channel, id) in [(1, SteeringAnglesB::ID), (2, SteeringAnglesC::ID)] {
+                if frame.id() != Id::standard(id).ok() {
+                    continue;
+                }
+                let sealed = messages::payload(frame).filter(|p| messages::is_sealed(id, p));
+                if let Some(payload) = sealed {
+                    // Both modules' messages have one layout.
+                    let m = SteeringAnglesB(payload);
+                    let readings = [
+                        (m.angle_fl_raw(), m.angle_fl()),
+                        (m.angle_fr_raw(), m.angle_fr()),
+                        (m.angle_rl_raw(), m.angle_rl()),
+                        (m.angle_rr_raw(), m.angle_rr()),
+                    ];
+                    for (voter, (raw, angle)) in voted.voters.iter_mut().zip(readings) {
+                        if raw != NO_READING {
+                            voter.receive(channel, now, angle);
+                        }
+                    }
+                }
+                return;
+            }
+        }
         let is_tracks = frame.id() == Id::standard(SteeringAngleSensors::ID).ok();
         let Some(payload) = messages::payload(frame).filter(|_| is_tracks) else {
             return;
@@ -431,7 +566,16 @@ impl VehicleControlEcu {
                 m.second_angle_rl(),
                 m.second_angle_rr(),
             ];
-            self.plausibility.second_tracks(now, self.second_tracks);
+            match self.voted.as_mut() {
+                // Voted, the track is one channel of three; the plausibility check is given
+                // the voted angle.
+                Some(voted) => {
+                    for (voter, angle) in voted.voters.iter_mut().zip(self.second_tracks) {
+                        voter.receive(0, now, angle);
+                    }
+                }
+                None => self.plausibility.second_tracks(now, self.second_tracks),
+            }
         }
     }
 
@@ -753,6 +897,12 @@ impl Node for VehicleControlEcu {
                 out(BUS1, frame);
             }
         });
+        // The voted angles (the redundant tug): faults to the latch before the actuators are
+        // asked, the plausibility check given them.
+        if let Some(angles) = self.vote_angles(now) {
+            self.plausibility
+                .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
+        }
         let actuators = self.supervisor.actuators(now);
         // The drives' actual values change only with their frames: read once a poll (the
         // speeds after the master's poll, which may stop a drive).
