@@ -97,11 +97,6 @@ pub struct SteeringChain {
     angle_from: [u64; 2],
     drift: f64,
     fault: SensorFault,
-    /// The redundant tug's two further angle sensors (modules B and C): their faults and
-    /// drifts.
-    module_faults: [(SensorFault, f64); 2],
-    /// A module's fault is set (the drifts need stepping).
-    modules_faulted: bool,
 }
 
 impl SteeringChain {
@@ -115,8 +110,6 @@ impl SteeringChain {
             angle_from: [0.0f64.to_bits(), params.arm.to_bits()],
             drift: 0.0,
             fault: SensorFault::None,
-            module_faults: [(SensorFault::None, 0.0); 2],
-            modules_faulted: false,
         }
     }
 
@@ -166,13 +159,6 @@ impl SteeringChain {
         if let SensorFault::Drift(rate) = self.fault {
             self.drift += rate * dt;
         }
-        if self.modules_faulted {
-            for (fault, drift) in &mut self.module_faults {
-                if let SensorFault::Drift(rate) = *fault {
-                    *drift += rate * dt;
-                }
-            }
-        }
     }
 
     /// The wheel's angle, degrees (the linkage: the piston turns the arm).
@@ -191,20 +177,10 @@ impl SteeringChain {
         self.drift = 0.0;
     }
 
-    /// Set (or clear) a fault of the further angle sensor of `module` (0: B, 1: C).
-    pub fn set_module_fault(&mut self, module: usize, fault: SensorFault) {
-        if let Some(slot) = self.module_faults.get_mut(module) {
-            *slot = (fault, 0.0);
-        }
-        self.modules_faulted = self
-            .module_faults
-            .iter()
-            .any(|(f, _)| *f != SensorFault::None);
-    }
-
-    /// What the further angle sensor of `module` (0: B, 1: C) reads (`None`: no reading).
-    pub fn module_deg(&self, module: usize, rng: &mut Rng) -> Option<f64> {
-        let (fault, drift) = self.module_faults.get(module).copied()?;
+    /// What one of the redundant tug's further angle sensors reads with `fault` (a drift's
+    /// error so far: `drift` degrees; `None`: no reading). Their faults are the caller's:
+    /// the plain tug has none to step.
+    pub fn further_sensor_deg(&self, fault: SensorFault, drift: f64, rng: &mut Rng) -> Option<f64> {
         let truth = match fault {
             SensorFault::None => self.wheel_angle_deg(),
             SensorFault::Stuck(angle) => angle,

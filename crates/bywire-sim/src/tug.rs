@@ -76,6 +76,10 @@ use crate::steering::{SensorFault, SteeringChain, SteeringParams};
 /// One simulated millisecond.
 pub const TICK: Duration = Duration::from_millis(1);
 
+/// The redundant tug's further angle sensors' faults, corner by corner (modules B and C), and
+/// since when each holds.
+type AngleFaults = [[(SensorFault, Timestamp); 2]; 4];
+
 /// How far off an ECU that computes wrongly puts its front-left setpoint, degrees.
 const WRONG_TRIM_DEG: f64 = 5.0;
 
@@ -544,6 +548,9 @@ pub struct Tug {
     response_times: [ResponseLog; 4],
     /// The redundant tug's control and level as last recorded.
     fail_operational: FailOperationalSeen,
+    /// The redundant tug's further angle sensors' faults (corner by corner, modules B and C)
+    /// and since when.
+    angle_faults: AngleFaults,
 }
 
 /// Why a tug could not be built.
@@ -667,6 +674,7 @@ impl Tug {
             security: SecurityWatch::default(),
             response_times: Default::default(),
             fail_operational: FailOperationalSeen::default(),
+            angle_faults: [[(SensorFault::None, Timestamp::ZERO); 2]; 4],
         })
     }
 
@@ -731,8 +739,12 @@ impl Tug {
                 module,
                 fault,
             } => {
-                if let Some(c) = self.corners.get_mut(corner) {
-                    c.chain.set_module_fault(module, fault);
+                if let Some(slot) = self
+                    .angle_faults
+                    .get_mut(corner)
+                    .and_then(|c| c.get_mut(module))
+                {
+                    *slot = (fault, now);
                 }
             }
             Fault::OperatorReset => {
@@ -1110,15 +1122,9 @@ impl Tug {
             }
             false
         });
-        for (module, handle) in self.nodes.angle_modules.iter().flatten().enumerate() {
-            self.net.feed(*handle, |node| {
-                if node.schedule.due_within(until) {
-                    for (reading, corner) in node.reading.iter_mut().zip(corners) {
-                        *reading = corner.chain.module_deg(module, rng);
-                    }
-                }
-                false
-            });
+        if let Some(modules) = self.nodes.angle_modules {
+            let faults = &self.angle_faults;
+            feed_angle_modules(&mut self.net, modules, (corners, faults), rng, until);
         }
         let battery = &self.battery;
         self.net.feed(self.nodes.bms, |bms| {
@@ -1196,8 +1202,12 @@ impl Tug {
                     }
                 }
                 Fault::AngleSensor { corner, module, .. } => {
-                    if let Some(c) = self.corners.get_mut(corner) {
-                        c.chain.set_module_fault(module, SensorFault::None);
+                    if let Some(slot) = self
+                        .angle_faults
+                        .get_mut(corner)
+                        .and_then(|c| c.get_mut(module))
+                    {
+                        *slot = (SensorFault::None, now);
                     }
                 }
                 Fault::EcuWrongOutput(side) => {
@@ -1494,6 +1504,39 @@ struct NodesSeen {
     supervisor: (Watchdog, EstopState, ControlMode),
     degraded: Option<Channel>,
     events_waiting: bool,
+}
+
+/// The redundant tug's angle modules' readings, when they send within this millisecond (out
+/// of the step's line: the plain tug has none).
+#[inline(never)]
+fn feed_angle_modules(
+    net: &mut Network,
+    modules: [NodeHandle<AngleModule>; 2],
+    (corners, faults): (&[Corner], &AngleFaults),
+    rng: &mut Rng,
+    until: Timestamp,
+) {
+    for (module, handle) in modules.into_iter().enumerate() {
+        net.feed(handle, |node| {
+            if node.schedule.due_within(until) {
+                for ((reading, corner), faults) in node.reading.iter_mut().zip(corners).zip(faults)
+                {
+                    let (fault, since) = faults
+                        .get(module)
+                        .copied()
+                        .unwrap_or((SensorFault::None, until));
+                    let drift = match fault {
+                        SensorFault::Drift(rate) => {
+                            rate * until.saturating_since(since).as_secs_f64()
+                        }
+                        _ => 0.0,
+                    };
+                    *reading = corner.chain.further_sensor_deg(fault, drift, rng);
+                }
+            }
+            false
+        });
+    }
 }
 
 /// The body's speed over the ground, m/s.

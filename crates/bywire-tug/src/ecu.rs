@@ -268,9 +268,14 @@ impl VehicleControlEcu {
         self
     }
 
-    /// Each corner's voted angle now (`None`: the tug votes none, or the vote has no value).
-    fn vote_angles(&mut self, now: Timestamp) -> Option<[Option<f64>; 4]> {
-        let voted = self.voted.as_mut()?;
+    /// Vote each corner's angle now: faults to the latch, the plausibility check given the
+    /// voted angles (NaN where a vote has no value). Out of the poll's line: the plain tug
+    /// votes none.
+    #[inline(never)]
+    fn vote_angles(&mut self, now: Timestamp) {
+        let Some(voted) = self.voted.as_mut() else {
+            return;
+        };
         let mut angles = [None; 4];
         let mut faults = [None; 8];
         let mut found = 0;
@@ -326,7 +331,8 @@ impl VehicleControlEcu {
                 at: now,
             });
         }
-        Some(angles)
+        self.plausibility
+            .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
     }
 
     /// The diagnostics: the UDS server with the DTC memory.
@@ -899,9 +905,8 @@ impl Node for VehicleControlEcu {
         });
         // The voted angles (the redundant tug): faults to the latch before the actuators are
         // asked, the plausibility check given them.
-        if let Some(angles) = self.vote_angles(now) {
-            self.plausibility
-                .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
+        if self.voted.is_some() {
+            self.vote_angles(now);
         }
         let actuators = self.supervisor.actuators(now);
         // The drives' actual values change only with their frames: read once a poll (the
