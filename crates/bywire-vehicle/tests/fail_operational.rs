@@ -9,6 +9,8 @@
     missing_docs
 )]
 
+mod common;
+
 use std::collections::HashSet;
 use std::time::Duration;
 
@@ -1121,9 +1123,8 @@ mod duplex {
     use bywire_net::network::{Network, NodeHandle};
     use bywire_net::sim::BusEvent;
     use bywire_vehicle::ads::{Ads, AdsCommand};
-    use bywire_vehicle::arbitration::{Duplex, FencedPair};
+    use bywire_vehicle::arbitration::FencedPair;
     use bywire_vehicle::command::{ControlMode, Gear};
-    use bywire_vehicle::profile::Profile;
     use bywire_vehicle::supervisor::{Supervisor, Watchdog};
     use bywire_vehicle::wire::{ProfileDuplexWire, ProfileWire};
 
@@ -1142,35 +1143,12 @@ mod duplex {
 
     impl Rig {
         fn new() -> Rig {
-            let loaded = Profile::load(
-                &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
-            )
-            .unwrap();
+            let (pair, loaded) = common::vehicles::duplicated_shuttle();
             let wire = ProfileWire::new(&loaded).unwrap();
-            let duplex = ProfileDuplexWire::new(&loaded).unwrap().unwrap();
-            let config = loaded.supervisor_config();
-            let arbiter = loaded
-                .profile
-                .fail_operational
-                .as_ref()
-                .unwrap()
-                .control
-                .as_ref()
-                .unwrap()
-                .config();
-            let half = |side| {
-                Duplex::new(
-                    side,
-                    arbiter,
-                    Supervisor::with_wire(config, wire.clone()),
-                    duplex.clone(),
-                    ms(0),
-                )
-            };
             let mut net = Network::new();
             let bus = net.add_bus("bus", 500_000, None);
             let ads = net.add_node(Ads::with_wire(loaded.ads_config(), wire.clone()));
-            let pair = net.add_node(FencedPair::new(half(Side::A), half(Side::B)));
+            let pair = net.add_node(pair);
             net.wire(ads.key(), Port::MAIN, bus).unwrap();
             let a = net.wire(pair.key(), Port::MAIN, bus).unwrap();
             let b = net.wire(pair.key(), Pair::b_port(Port::MAIN), bus).unwrap();

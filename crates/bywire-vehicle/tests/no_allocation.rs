@@ -215,34 +215,8 @@ fn the_fail_operational_mechanisms_never_allocate() {
 
 #[test]
 fn a_duplicated_supervisor_never_allocates() {
-    use bywire_vehicle::arbitration::{Duplex, FencedPair, Side};
-    use bywire_vehicle::wire::{ProfileDuplexWire, ProfileWire};
-    let loaded = bywire_vehicle::profile::Profile::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
-    )
-    .unwrap();
-    let wire = ProfileWire::new(&loaded).unwrap();
-    let duplex = ProfileDuplexWire::new(&loaded).unwrap().unwrap();
-    let config = loaded.supervisor_config();
-    let arbiter = loaded
-        .profile
-        .fail_operational
-        .as_ref()
-        .unwrap()
-        .control
-        .as_ref()
-        .unwrap()
-        .config();
-    let half = |side| {
-        Duplex::new(
-            side,
-            arbiter,
-            Supervisor::with_wire(config, wire.clone()),
-            duplex.clone(),
-            Timestamp::ZERO,
-        )
-    };
-    let mut pair = FencedPair::new(half(Side::A), half(Side::B));
+    use bywire_vehicle::arbitration::Side;
+    let (mut pair, _) = common::vehicles::duplicated_shuttle();
     // Each half's status, prepared before counting: the pair hears its own halves.
     let mut statuses = Vec::new();
     pair.poll(Timestamp::ZERO, &mut |port, frame| {

@@ -86,4 +86,36 @@ pub mod vehicles {
         let dbc = edit(dbc);
         Profile::parse("shuttle", &toml, |_| Ok(dbc.clone())).unwrap()
     }
+
+    /// The shuttle's supervisor duplicated as its profile declares (A in control, B in hot
+    /// standby, the fence between them), both started at zero; and its profile.
+    pub fn duplicated_shuttle() -> (
+        bywire_vehicle::arbitration::FencedPair<
+            bywire_vehicle::supervisor::Supervisor<ProfileWire>,
+            bywire_vehicle::wire::ProfileDuplexWire,
+        >,
+        LoadedProfile,
+    ) {
+        use bywire_vehicle::arbitration::{Duplex, FencedPair, Side};
+        let loaded = shuttle_with(|dbc| dbc);
+        let wire = ProfileWire::new(&loaded).unwrap();
+        let duplex = bywire_vehicle::wire::ProfileDuplexWire::new(&loaded)
+            .unwrap()
+            .unwrap();
+        let config = loaded.supervisor_config();
+        let fail_operational = loaded.profile.fail_operational.as_ref().unwrap();
+        let arbiter = fail_operational.control.as_ref().unwrap().config();
+        let half = |side| {
+            let supervisor =
+                bywire_vehicle::supervisor::Supervisor::with_wire(config, wire.clone());
+            Duplex::new(
+                side,
+                arbiter,
+                supervisor,
+                duplex.clone(),
+                bywire_core::Timestamp::ZERO,
+            )
+        };
+        (FencedPair::new(half(Side::A), half(Side::B)), loaded)
+    }
 }
