@@ -700,8 +700,14 @@ impl Checker<'_> {
         }
         if let Some(c) = &f.control {
             let key = "fail_operational.control";
-            if c.silence_ms == 0 || !(c.output_tolerance.is_finite() && c.output_tolerance >= 0.0) {
-                return Err(self.invalid(key, "silence_ms over 0 and output_tolerance 0 or more"));
+            if c.silence_ms == 0
+                || c.deaf_ms == 0
+                || !(c.output_tolerance.is_finite() && c.output_tolerance >= 0.0)
+            {
+                return Err(self.invalid(
+                    key,
+                    "silence_ms and deaf_ms over 0, output_tolerance 0 or more",
+                ));
             }
             bindings.control = Some([
                 self.status(&format!("{key}.a"), &c.a.message, Some(("role", &c.a.role)))?,
@@ -711,8 +717,12 @@ impl Checker<'_> {
         for (i, a) in f.actuators.iter().enumerate() {
             let key = format!("fail_operational.actuators[{i}]");
             if !(a.still.is_finite() && a.still > 0.0 && a.overrun.is_finite() && a.overrun >= 0.0)
+                || a.heartbeat_timeout_ms == 0
             {
-                return Err(self.invalid(&key, "still over 0 and overrun 0 or more"));
+                return Err(self.invalid(
+                    &key,
+                    "still over 0, overrun 0 or more, heartbeat_timeout_ms over 0",
+                ));
             }
             bindings.actuators.push(ActuatorPairBindings {
                 primary: self.status(

@@ -936,6 +936,16 @@ mod shuttle {
                 "fail_operational.voted[0].tolerance",
             ),
             (
+                "silence_ms = 30",
+                "silence_ms = 30\ndeaf_ms = 0",
+                "fail_operational.control: silence_ms and deaf_ms over 0",
+            ),
+            (
+                "heartbeat_timeout_ms = 50",
+                "heartbeat_timeout_ms = 0",
+                "fail_operational.actuators[0]: still over 0",
+            ),
+            (
                 "    { message = \"Shuttle_SteerAngle3\", signal = \"Angle3\" },\n",
                 "",
                 "fail_operational.voted[0].channels: three channels",
