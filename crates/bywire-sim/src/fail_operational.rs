@@ -15,6 +15,7 @@ use crate::event::{Happening, SimEvent};
 use crate::fault::Fault;
 use crate::mission::MissionEvent;
 use crate::record::TruthSample;
+use crate::report::seconds;
 
 /// Below this speed the tug counts as stopped, m/s.
 const STOPPED: f64 = 0.02;
@@ -56,10 +57,6 @@ fn is_layer_fault(fault: &Fault) -> bool {
             | Fault::EcuBabble(_)
             | Fault::AngleSensor { .. }
     )
-}
-
-fn seconds(t: Timestamp) -> f64 {
-    t.as_nanos() as f64 / 1e9
 }
 
 fn since(from: Timestamp, to: Timestamp) -> f64 {
@@ -160,31 +157,21 @@ impl FailOperationalRecord {
             .iter()
             .filter(|s| s.t > injected && s.t <= end)
             .find(|s| libm::hypot(s.twist.vx, s.twist.vy) < STOPPED);
-        let max_cross_track_m = path.as_ref().map_or(0.0, |path| {
-            during
-                .take_while(|s| stop.is_none_or(|stop| s.t <= stop.t))
-                .map(|s| {
-                    path.project(Point {
-                        x: s.pose.x,
-                        y: s.pose.y,
-                    })
-                    .offset
-                    .abs()
-                })
-                .fold(0.0, f64::max)
-        });
-        let station = |s: &TruthSample| {
-            path.as_ref().map(|path| {
-                path.project(Point {
-                    x: s.pose.x,
-                    y: s.pose.y,
-                })
-                .station
-            })
+        // Where a true pose lies against the route.
+        let on_route = |s: &TruthSample| {
+            let here = Point {
+                x: s.pose.x,
+                y: s.pose.y,
+            };
+            path.as_ref().map(|path| path.project(here))
         };
+        let max_cross_track_m = during
+            .take_while(|s| stop.is_none_or(|stop| s.t <= stop.t))
+            .filter_map(|s| on_route(s).map(|p| p.offset.abs()))
+            .fold(0.0, f64::max);
         // A pair stops where it is: no safe stop point to measure against.
         let stop_distance_to_safe_point_m = match (stop, aimed, double) {
-            (Some(stop), Some(aimed), false) => station(stop).map(|at| (at - aimed).abs()),
+            (Some(stop), Some(aimed), false) => on_route(stop).map(|p| (p.station - aimed).abs()),
             _ => None,
         };
         FailOperationalRecord {

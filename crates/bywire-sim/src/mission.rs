@@ -26,6 +26,15 @@ const PLAN_PERIOD: Duration = Duration::from_millis(20);
 /// Events kept for the caller; more are dropped.
 const EVENT_CAPACITY: usize = 64;
 
+/// The mission's gentle deceleration toward a stop or a lower speed, m/s².
+const GENTLE: f64 = 0.5;
+
+/// The speed from which braking at [`GENTLE`] over `distance` (m) ends at `v_next` (m/s):
+/// v² = v_next² + 2·a·d.
+fn approach(v_next: f64, distance: f64) -> f64 {
+    libm::sqrt(v_next * v_next + 2.0 * GENTLE * distance.max(0.0))
+}
+
 /// What the mission asks for.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MissionParams {
@@ -267,9 +276,9 @@ impl Mission {
     }
 
     /// The safe stop point a minimal-risk manoeuvre begun at `station` at `speed` ends at:
-    /// the first one it can reach braking gently (0.5 m/s²), or as soon as it can.
+    /// the first one it can reach braking gently ([`GENTLE`]), or as soon as it can.
     fn safe_stop_ahead(&self, station: f64, speed: f64) -> (f64, bool) {
-        let braking = speed * speed / (2.0 * 0.5);
+        let braking = speed * speed / (2.0 * GENTLE);
         match self
             .params
             .safe_stops
@@ -318,7 +327,7 @@ impl Mission {
                 if ended {
                     0.0
                 } else {
-                    minimal.min(libm::sqrt(2.0 * 0.5 * (stop_at - station).max(0.0)))
+                    minimal.min(approach(0.0, stop_at - station))
                 }
             }
             Some(DegradationLevel::SafeStop) => 0.0,
@@ -354,7 +363,7 @@ impl Mission {
 
     /// The ADS's speed at `station` (`remaining` to go): the speed of the route there,
     /// slowing in time for lower speeds ahead, for the next stop and for the end
-    /// (v² = v_next² + 2·a·d with a gentle 0.5 m/s²); nothing while it dwells at a stop.
+    /// ([`approach`]); nothing while it dwells at a stop.
     fn speed_target(
         &mut self,
         now: Timestamp,
@@ -363,9 +372,6 @@ impl Mission {
         speed: f64,
         events: &mut dyn FnMut(MissionEvent),
     ) -> f64 {
-        let approach = |v_next: f64, distance: f64| {
-            libm::sqrt(v_next * v_next + 2.0 * 0.5 * distance.max(0.0))
-        };
         let speeds = &self.params.speeds;
         let here = speeds
             .iter()

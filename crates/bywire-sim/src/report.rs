@@ -327,7 +327,8 @@ impl SecurityCounts {
     }
 }
 
-fn seconds(t: bywire_core::Timestamp) -> f64 {
+/// A run's time in seconds, as reports write it.
+pub(crate) fn seconds(t: bywire_core::Timestamp) -> f64 {
     t.as_nanos() as f64 / 1e9
 }
 

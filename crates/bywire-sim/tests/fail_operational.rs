@@ -64,7 +64,6 @@ fn the_redundant_tug_drives_with_a_in_control_and_b_in_step() {
             bywire_vehicle::command::DegradationLevel::Nominal
         );
     }
-    let _ = Timestamp::ZERO;
 }
 
 use bywire_sim::event::Happening;

@@ -7,6 +7,7 @@
 
 use core::time::Duration;
 
+use bywire_canopen::cia402::rpdo2_targets;
 use bywire_core::node::Port;
 use bywire_core::{Frame, Id};
 use bywire_vehicle::arbitration::{Degrades, DuplexWire, Role, Side};
@@ -38,15 +39,12 @@ impl Default for TugDuplexWire {
     }
 }
 
-/// RPDO2 (target position, target velocity) of CANopen node `node`.
-fn rpdo2(node: u8) -> u32 {
-    0x300 + u32::from(node)
-}
-
-/// A little-endian i32 at `at` in `data`.
-fn i32_at(data: &[u8], at: usize) -> Option<i32> {
-    let bytes: [u8; 4] = data.get(at..at + 4)?.try_into().ok()?;
-    Some(i32::from_le_bytes(bytes))
+/// `side`'s status message.
+fn status_id(side: Side) -> u32 {
+    match side {
+        Side::A => VcuAStatus::ID,
+        Side::B => VcuBStatus::ID,
+    }
 }
 
 impl DuplexWire for TugDuplexWire {
@@ -59,23 +57,16 @@ impl DuplexWire for TugDuplexWire {
     }
 
     fn status_frame(&mut self, side: Side, role: Role, counter: u8) -> Option<Frame> {
-        let (id, mut payload) = match side {
-            Side::A => (VcuAStatus::ID, VcuAStatus::default().0),
-            Side::B => (VcuBStatus::ID, VcuBStatus::default().0),
-        };
-        // Both have the role in bits 0–2 and the counter in bits 48–51.
-        let mut m = VcuAStatus(payload);
+        // Both ECUs' status messages have one layout: the role in bits 0–2, the counter in
+        // bits 48–51.
+        let mut m = VcuAStatus::default();
         m.set_role_raw(u64::from(role.raw()));
         m.set_counter_raw(u64::from(counter & 0x0F));
-        payload = m.0;
-        Some(messages::sealed_frame(id, payload))
+        Some(messages::sealed_frame(status_id(side), m.0))
     }
 
     fn partner_status(&mut self, side: Side, frame: &Frame) -> Option<Role> {
-        let id = match side {
-            Side::A => VcuBStatus::ID,
-            Side::B => VcuAStatus::ID,
-        };
+        let id = status_id(side.other());
         if frame.id() != Id::standard(id).ok() {
             return None;
         }
@@ -87,13 +78,13 @@ impl DuplexWire for TugDuplexWire {
         if port != BUS2 {
             return None;
         }
-        let id = theirs.id().filter(|id| !id.is_extended())?.as_raw();
-        let (ours, other) = (mine.data(), theirs.data());
-        if STEERING_NODES.iter().any(|&n| rpdo2(n) == id) {
-            let apart = i32_at(ours, 0)?.abs_diff(i32_at(other, 0)?);
+        let (node, position, velocity) = rpdo2_targets(theirs)?;
+        let (_, my_position, my_velocity) = rpdo2_targets(mine)?;
+        if STEERING_NODES.contains(&node) {
+            let apart = position.abs_diff(my_position);
             Some(f64::from(apart) <= self.steering_tolerance_deg * STEERING_UNITS_PER_DEG)
-        } else if DRIVE_NODES.iter().any(|&n| rpdo2(n) == id) {
-            let apart = i32_at(ours, 4)?.abs_diff(i32_at(other, 4)?);
+        } else if DRIVE_NODES.contains(&node) {
+            let apart = velocity.abs_diff(my_velocity);
             Some(f64::from(apart) <= self.speed_tolerance * DRIVE_UNITS_PER_M)
         } else {
             None

@@ -35,9 +35,7 @@ use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
 use bywire_vehicle::degradation::Fault;
 use bywire_vehicle::redundancy::Channel;
-use bywire_vehicle::redundancy::{
-    ChannelHealth, TripleConfig, TripleFailure, TripleVote, TripleVoter,
-};
+use bywire_vehicle::redundancy::{ChannelHealth, TripleConfig, TripleVoter};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
 
@@ -186,17 +184,7 @@ pub struct VehicleControlEcu {
     booting_until: Option<Timestamp>,
     /// The redundant tug: each corner's angle voted 2-out-of-3 (the potentiometer's second
     /// track, modules B and C).
-    voted: Option<VotedAngles>,
-}
-
-/// Each corner's three angle channels voted, and what has been reported of them.
-#[derive(Debug, Clone, Copy)]
-struct VotedAngles {
-    voters: [TripleVoter; 4],
-    /// The channels already reported out, per corner.
-    out: [[bool; 3]; 4],
-    /// The corners whose vote failed, reported.
-    lost: [bool; 4],
+    voted: Option<[TripleVoter; 4]>,
 }
 
 /// The raw value modules B and C send for a corner without a reading.
@@ -260,76 +248,39 @@ impl VehicleControlEcu {
     /// and a corner whose vote fails are reported to the supervisor's degradation latch; the
     /// plausibility check compares the drive's track with the voted angle.
     pub fn with_voted_angles(mut self, configs: [TripleConfig; 4]) -> Self {
-        self.voted = Some(VotedAngles {
-            voters: configs.map(|c| TripleVoter::new(c, Timestamp::ZERO)),
-            out: [[false; 3]; 4],
-            lost: [false; 4],
-        });
+        self.voted = Some(configs.map(|c| TripleVoter::new(c, Timestamp::ZERO)));
         self
     }
 
-    /// Vote each corner's angle now: faults to the latch, the plausibility check given the
-    /// voted angles (NaN where a vote has no value). Out of the poll's line: the plain tug
-    /// votes none.
+    /// Vote each corner's angle now: faults to the latch (each channel out, each corner
+    /// lost; the latch takes a fault it has once), the plausibility check given the voted
+    /// angles (NaN where a vote has no value). Out of the poll's line: the plain tug votes
+    /// none.
     #[inline(never)]
     fn vote_angles(&mut self, now: Timestamp) {
-        let Some(voted) = self.voted.as_mut() else {
+        let Some(voters) = self.voted.as_mut() else {
             return;
         };
         let mut angles = [None; 4];
-        let mut faults = [None; 8];
-        let mut found = 0;
-        for (corner, (voter, (out, lost))) in voted
-            .voters
-            .iter_mut()
-            .zip(voted.out.iter_mut().zip(voted.lost.iter_mut()))
-            .enumerate()
-        {
+        for (corner, (voter, angle)) in voters.iter_mut().zip(angles.iter_mut()).enumerate() {
             let vote = voter.vote(now);
-            if let Some(slot) = angles.get_mut(corner) {
-                *slot = vote.value();
-            }
+            *angle = vote.value();
             let source = u8::try_from(corner).unwrap_or(0);
-            for (channel, (health, reported)) in
-                voter.health().iter().zip(out.iter_mut()).enumerate()
-            {
-                if matches!(health, ChannelHealth::Out(_)) && !*reported {
-                    *reported = true;
-                    let channel = u8::try_from(channel).unwrap_or(0);
-                    if let Some(slot) = faults.get_mut(found) {
-                        *slot = Some((FaultClass::SensorChannelOut, source * 3 + channel));
-                        found += 1;
-                    }
-                }
-            }
-            // Too few channels is a fault once they are out, not while they have yet to speak
-            // (at start).
-            let failed = match vote {
-                TripleVote::Failed(TripleFailure::TooFew) => {
-                    voter
-                        .health()
-                        .iter()
-                        .filter(|h| matches!(h, ChannelHealth::Out(_)))
-                        .count()
-                        >= 2
-                }
-                TripleVote::Failed(_) => true,
-                TripleVote::Triple(_) | TripleVote::Duplex(_) => false,
+            let mut report = |class, source| {
+                self.supervisor.report_fault(Fault {
+                    class,
+                    source,
+                    at: now,
+                })
             };
-            if failed && !*lost {
-                *lost = true;
-                if let Some(slot) = faults.get_mut(found) {
-                    *slot = Some((FaultClass::SensorLost, source));
-                    found += 1;
+            for (channel, health) in (0u8..).zip(voter.health()) {
+                if matches!(health, ChannelHealth::Out(_)) {
+                    report(FaultClass::SensorChannelOut, source * 3 + channel);
                 }
             }
-        }
-        for (class, source) in faults.into_iter().flatten() {
-            self.supervisor.report_fault(Fault {
-                class,
-                source,
-                at: now,
-            });
+            if voter.lost(vote) {
+                report(FaultClass::SensorLost, source);
+            }
         }
         self.plausibility
             .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
@@ -361,11 +312,9 @@ impl VehicleControlEcu {
         fresh.events = core::mem::take(&mut self.events);
         fresh.events_dropped = self.events_dropped;
         fresh.booting_until = Some(now.saturating_add(BOOT_TIME));
-        fresh.voted = self.voted.map(|v| VotedAngles {
-            voters: v.voters.map(|voter| TripleVoter::new(voter.config(), now)),
-            out: [[false; 3]; 4],
-            lost: [false; 4],
-        });
+        fresh.voted = self
+            .voted
+            .map(|voters| voters.map(|voter| TripleVoter::new(voter.config(), now)));
         fresh.next_report = now.saturating_add(BOOT_TIME);
         *self = fresh;
     }
@@ -384,12 +333,10 @@ impl VehicleControlEcu {
     /// degradation level, and every angle channel voted in again.
     pub fn reset_degradation(&mut self, now: Timestamp) -> bool {
         let reset = self.supervisor.reset_degradation();
-        if let (true, Some(voted)) = (reset, self.voted.as_mut()) {
-            for voter in &mut voted.voters {
+        if let (true, Some(voters)) = (reset, self.voted.as_mut()) {
+            for voter in voters {
                 voter.reset(now);
             }
-            voted.out = [[false; 3]; 4];
-            voted.lost = [false; 4];
         }
         reset
     }
@@ -536,7 +483,7 @@ impl VehicleControlEcu {
 
     /// The second tracks from the I/O node on bus 3.
     fn on_sensor_frame(&mut self, now: Timestamp, frame: &Frame) {
-        if let Some(voted) = self.voted.as_mut() {
+        if let Some(voters) = self.voted.as_mut() {
             for (channel, id) in [(1, SteeringAnglesB::ID), (2, SteeringAnglesC::ID)] {
                 if frame.id() != Id::standard(id).ok() {
                     continue;
@@ -551,7 +498,7 @@ impl VehicleControlEcu {
                         (m.angle_rl_raw(), m.angle_rl()),
                         (m.angle_rr_raw(), m.angle_rr()),
                     ];
-                    for (voter, (raw, angle)) in voted.voters.iter_mut().zip(readings) {
+                    for (voter, (raw, angle)) in voters.iter_mut().zip(readings) {
                         if raw != NO_READING {
                             voter.receive(channel, now, angle);
                         }
@@ -575,8 +522,8 @@ impl VehicleControlEcu {
             match self.voted.as_mut() {
                 // Voted, the track is one channel of three; the plausibility check is given
                 // the voted angle.
-                Some(voted) => {
-                    for (voter, angle) in voted.voters.iter_mut().zip(self.second_tracks) {
+                Some(voters) => {
+                    for (voter, angle) in voters.iter_mut().zip(self.second_tracks) {
                         voter.receive(0, now, angle);
                     }
                 }

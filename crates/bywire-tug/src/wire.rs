@@ -4,8 +4,7 @@
 
 use bywire_core::{Frame, Id};
 use bywire_vehicle::command::{
-    ControlCommand, ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode,
-    WatchdogLevel,
+    ControlCommand, ControlMode, EstopCode, Gear, SteeringMode, WatchdogLevel,
 };
 use bywire_vehicle::wire::{
     AdsWire, Counters, DegradationReport, Feedback, Incoming, Rejected, StateFeedback, StateReport,
@@ -105,18 +104,9 @@ impl AdsWire for ReferenceWire {
             }
             VehicleToAdsDegradation::ID => {
                 let m = VehicleToAdsDegradation(payload);
-                let level = DegradationLevel::from_raw(m.degradation_level_raw());
-                let reason = match m.degradation_reason_raw() {
-                    0 => Some(None),
-                    raw => FaultClass::from_raw(raw).map(Some),
-                };
-                match (level, reason) {
-                    (Some(level), Some(reason)) => {
-                        Feedback::Degradation(DegradationReport { level, reason })
-                    }
-                    // A level or reason that names nothing: not to be read.
-                    _ => Feedback::Corrupt,
-                }
+                // A level or reason that names nothing: not to be read.
+                DegradationReport::from_raw(m.degradation_level_raw(), m.degradation_reason_raw())
+                    .map_or(Feedback::Corrupt, Feedback::Degradation)
             }
             _ => {
                 let m = VehicleToAdsSensors(payload);
@@ -213,7 +203,7 @@ impl VehicleWire for ReferenceWire {
     fn degradation_frame(&mut self, report: &DegradationReport, counter: u64) -> Option<Frame> {
         let mut m = VehicleToAdsDegradation::default();
         m.set_degradation_level_raw(report.level.raw());
-        m.set_degradation_reason_raw(report.reason.map_or(0, FaultClass::raw));
+        m.set_degradation_reason_raw(report.reason_raw());
         m.set_counter_raw(counter & 0x0F);
         Some(messages::sealed_frame(VehicleToAdsDegradation::ID, m.0))
     }

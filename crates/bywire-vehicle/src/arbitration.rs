@@ -37,6 +37,16 @@ pub enum Side {
     B,
 }
 
+impl Side {
+    /// The partner.
+    pub const fn other(self) -> Side {
+        match self {
+            Side::A => Side::B,
+            Side::B => Side::A,
+        }
+    }
+}
+
 /// A side's role.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Role {
@@ -202,17 +212,24 @@ impl Arbiter {
         *self = Arbiter::new(self.side, self.config, now);
     }
 
+    /// Whether the partner, last heard as `partner`, is silent: this side heard other frames
+    /// (`traffic_at`, the latest) after the partner had been quiet for the whole timeout. A
+    /// receiver that fails silences everything at once, and must not pass for a silent
+    /// partner on the way to being found deaf.
+    pub fn partner_silent(
+        &self,
+        partner: Option<Heartbeat>,
+        traffic_at: Option<Timestamp>,
+    ) -> bool {
+        let partner_heard = partner.map_or(self.started, |h| h.at);
+        traffic_at.is_some_and(|heard| heard.saturating_since(partner_heard) > self.config.silence)
+    }
+
     /// The one transition: this side's role after seeing `inputs` at `now`.
     pub fn step(&mut self, now: Timestamp, inputs: ArbiterInputs) -> Role {
         let deaf =
             now.saturating_since(inputs.traffic_at.unwrap_or(self.started)) > self.config.deaf;
-        // The partner is silent only if this side heard other frames after the partner had
-        // been quiet for the whole timeout: a receiver that fails silences everything at once,
-        // and must not pass for a silent partner on the way to being found deaf.
-        let partner_heard = inputs.partner.map_or(self.started, |h| h.at);
-        let partner_silent = inputs
-            .traffic_at
-            .is_some_and(|heard| heard.saturating_since(partner_heard) > self.config.silence);
+        let partner_silent = self.partner_silent(inputs.partner, inputs.traffic_at);
         let disagree_since = match (self.role, inputs.outputs_agree) {
             (Role::Standby, Some(false)) => Some(self.disagree_since.unwrap_or(now)),
             (Role::Standby, None) => self.disagree_since,
@@ -390,13 +407,6 @@ impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
         self.next_status = now;
     }
 
-    /// No status from the partner for the silence timeout (the active side's view: only
-    /// the standby takes over on it).
-    fn partner_silent(&self, now: Timestamp) -> bool {
-        let heard = self.partner.map_or(self.arbiter.started, |h| h.at);
-        now.saturating_since(heard) > self.arbiter.config.silence
-    }
-
     /// Keep an output to compare, with whether the partner's last under its identifier
     /// disagreed.
     fn keep(&mut self, port: Port, frame: Frame) {
@@ -417,10 +427,9 @@ impl<N: Node + Degrades, W: DuplexWire> Duplex<N, W> {
     }
 
     /// The kept output with `frame`'s identifier on `port`.
-    fn mine(&mut self, port: Port, frame: &Frame) -> Option<&mut Kept> {
+    fn mine<'a>(own: &'a mut [Option<Kept>], port: Port, frame: &Frame) -> Option<&'a mut Kept> {
         let id = frame.id()?;
-        self.own
-            .iter_mut()
+        own.iter_mut()
             .flatten()
             .find(|o| o.port == port && o.frame.id() == Some(id))
     }
@@ -435,13 +444,12 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
                 return;
             }
         }
-        if let Some(mine) = self.mine(port, frame).map(|kept| kept.frame) {
-            if let Some(agree) = self.wire.agree(port, &mine, frame) {
+        let wire = &self.wire;
+        if let Some(kept) = Self::mine(&mut self.own, port, frame) {
+            if let Some(agree) = wire.agree(port, &kept.frame, frame) {
                 // Each output disagrees until the partner's next under its identifier
                 // agrees: agreement on one does not clear another's disagreement.
-                if let Some(kept) = self.mine(port, frame) {
-                    kept.disagrees = !agree;
-                }
+                kept.disagrees = !agree;
                 self.compared = true;
             }
             return;
@@ -474,7 +482,8 @@ impl<N: Node + Degrades, W: DuplexWire> Node for Duplex<N, W> {
             (Role::Active, Role::Active)
                 if self.arbiter.took_over().is_none()
                     && !self.standby_lost_reported
-                    && (partner_out || self.partner_silent(now)) =>
+                    && (partner_out
+                        || self.arbiter.partner_silent(self.partner, self.traffic_at)) =>
             {
                 self.standby_lost_reported = true;
                 Some(FaultClass::StandbyLost)

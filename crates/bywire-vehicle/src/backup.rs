@@ -31,11 +31,19 @@ impl FeedbackCheck {
     /// The longest time from a fault's start to the switch, before the caller's step period.
     pub fn bound(&self, fault: ActuatorFault) -> Duration {
         match fault {
-            ActuatorFault::DriveFault => Duration::ZERO,
             ActuatorFault::HeartbeatLost => self.heartbeat_timeout,
+            other => self.persistence_of(other),
+        }
+    }
+
+    /// How long `fault` must last, once seen, to count: the persistence for a tracking
+    /// fault, nothing for one the actuator reports or a heartbeat already overdue.
+    fn persistence_of(&self, fault: ActuatorFault) -> Duration {
+        match fault {
             ActuatorFault::NoMotion | ActuatorFault::WrongDirection | ActuatorFault::Runaway => {
                 self.persistence
             }
+            ActuatorFault::DriveFault | ActuatorFault::HeartbeatLost => Duration::ZERO,
         }
     }
 
@@ -178,11 +186,7 @@ impl ActuatorPair {
             None => (fault, now),
         });
         let failed = suspect.filter(|&(fault, began)| {
-            now.saturating_since(began) >= self.check.bound(fault)
-                || matches!(
-                    fault,
-                    ActuatorFault::DriveFault | ActuatorFault::HeartbeatLost
-                )
+            now.saturating_since(began) >= self.check.persistence_of(fault)
         });
         let (in_charge, suspect) = match (self.in_charge, failed) {
             (InCharge::Primary, Some((fault, _))) => {

@@ -78,6 +78,14 @@ impl Default for DegradationPolicy {
 }
 
 impl DegradationPolicy {
+    /// A fail-safe vehicle's: every fault class is a safe stop.
+    pub fn fail_safe() -> Self {
+        DegradationPolicy {
+            rules: [DegradationLevel::SafeStop; FaultClass::ALL.len()],
+            ..DegradationPolicy::default()
+        }
+    }
+
     fn index(class: FaultClass) -> usize {
         FaultClass::ALL
             .iter()

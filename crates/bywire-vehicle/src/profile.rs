@@ -84,6 +84,14 @@ pub struct CommandRoles {
     pub hazard_lights: Option<String>,
 }
 
+impl CommandRoles {
+    /// The checksum algorithm named (`None`: a name no algorithm has; a loaded profile's
+    /// names one).
+    pub fn algorithm(&self) -> Option<bywire_dbc::e2e::ChecksumAlgorithm> {
+        bywire_dbc::e2e::ChecksumAlgorithm::from_name(&self.checksum_algorithm)
+    }
+}
+
 /// The state (feedback) message's roles.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -901,7 +909,7 @@ impl Checker<'_> {
         if c.period_ms == 0 {
             return Err(self.invalid("command.period_ms", "must be at least 1"));
         }
-        if bywire_dbc::e2e::ChecksumAlgorithm::from_name(&c.checksum_algorithm).is_none() {
+        if c.algorithm().is_none() {
             return Err(self.invalid(
                 "command.checksum_algorithm",
                 format!(

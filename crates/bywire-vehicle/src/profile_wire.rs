@@ -13,7 +13,7 @@ use bywire_dbc::Message;
 use crate::arbitration::{DuplexWire, Role, Side};
 use crate::bindings::{CommandBindings, ReportBindings, StateBindings, WheelBindings};
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators, Vocabulary};
-use crate::command::{DegradationLevel, EstopCode, FaultClass, WatchdogLevel};
+use crate::command::{EstopCode, WatchdogLevel};
 use crate::profile::{LoadedProfile, ProfileError};
 use crate::wire::{
     AdsWire, Counters, DegradationReport, Feedback, Incoming, Rejected, StateFeedback, StateReport,
@@ -303,7 +303,7 @@ impl ProfileWire {
                 "a vehicle interface needs [state]".to_string(),
             ));
         };
-        let algorithm = ChecksumAlgorithm::from_name(&c.checksum_algorithm).ok_or_else(|| {
+        let algorithm = c.algorithm().ok_or_else(|| {
             invalid(
                 "command.checksum_algorithm",
                 format!("'{}' is not a checksum algorithm", c.checksum_algorithm),
@@ -505,25 +505,13 @@ impl AdsWire for ProfileWire {
         if let Some((m, b)) = self.degradation.as_mut() {
             if m.is(frame) {
                 // A level or reason that names nothing is a report not to be read.
-                let level = m.read(frame).and(m.raw(b.level));
-                let reason = b.reason.map(|i| m.raw(i));
-                let report = match (level.and_then(DegradationLevel::from_raw), reason) {
-                    (Some(level), None) => Some(DegradationReport {
-                        level,
-                        reason: None,
-                    }),
-                    (Some(level), Some(Some(0))) => Some(DegradationReport {
-                        level,
-                        reason: None,
-                    }),
-                    (Some(level), Some(Some(raw))) => {
-                        FaultClass::from_raw(raw).map(|class| DegradationReport {
-                            level,
-                            reason: Some(class),
-                        })
-                    }
-                    _ => None,
-                };
+                let report = m.read(frame).and_then(|_| {
+                    let reason = match b.reason {
+                        Some(i) => m.raw(i)?,
+                        None => 0,
+                    };
+                    DegradationReport::from_raw(m.raw(b.level)?, reason)
+                });
                 return report.map_or(Feedback::Corrupt, Feedback::Degradation);
             }
         }
@@ -661,7 +649,7 @@ impl VehicleWire for ProfileWire {
         let (m, b) = self.degradation.as_mut()?;
         m.set_raw(b.level, report.level.raw());
         if let Some(reason) = b.reason {
-            m.set_raw(reason, report.reason.map_or(0, FaultClass::raw));
+            m.set_raw(reason, report.reason_raw());
         }
         m.frame(counter)
     }
@@ -699,12 +687,13 @@ impl ProfileDuplexWire {
             ProfileError::from(FileError::invalid(&loaded.profile.name, key, reason))
         };
         let [a, b] = bindings;
-        // A checksum the DBC declares without its algorithm takes the command's.
+        // A checksum the DBC declares without its algorithm takes the command's (checked
+        // when the profile loaded), or CRC-8 SAE J1850 on a profile without one.
         let algorithm = loaded
             .profile
             .command
             .as_ref()
-            .and_then(|c| ChecksumAlgorithm::from_name(&c.checksum_algorithm))
+            .and_then(crate::profile::CommandRoles::algorithm)
             .unwrap_or(ChecksumAlgorithm::Crc8SaeJ1850);
         let half = |binding: crate::bindings::StatusBinding, key: &str| {
             let message = loaded
@@ -749,11 +738,7 @@ impl DuplexWire for ProfileDuplexWire {
     }
 
     fn partner_status(&mut self, side: Side, frame: &Frame) -> Option<Role> {
-        let partner = match side {
-            Side::A => Side::B,
-            Side::B => Side::A,
-        };
-        let (message, signal) = self.of(partner);
+        let (message, signal) = self.of(side.other());
         if !message.is(frame) {
             return None;
         }

@@ -401,6 +401,22 @@ impl TripleVoter {
         self.health
     }
 
+    /// Whether `vote`, this voter's last, is a loss: no value because channels disagree or
+    /// are out, not because they have yet to speak since start or reset.
+    pub fn lost(&self, vote: TripleVote) -> bool {
+        match vote {
+            TripleVote::Failed(TripleFailure::TooFew) => {
+                self.health
+                    .iter()
+                    .filter(|h| matches!(h, ChannelHealth::Out(_)))
+                    .count()
+                    >= 2
+            }
+            TripleVote::Failed(_) => true,
+            TripleVote::Triple(_) | TripleVote::Duplex(_) => false,
+        }
+    }
+
     /// Every channel back in, as at start (for the caller's standstill reset).
     pub fn reset(&mut self, now: Timestamp) {
         self.health = [ChannelHealth::Healthy; 3];

@@ -26,8 +26,7 @@ use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
 use crate::command::{
-    ControlMode, DegradationLevel, EstopCode, FaultClass, Gear, SteeringMode, TurnIndicators,
-    WatchdogLevel,
+    ControlMode, DegradationLevel, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel,
 };
 use crate::degradation::{Degradation, DegradationPolicy, Fault};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
@@ -523,13 +522,11 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }),
             degraded: None,
-            degradation: Degradation::new(config.degradation.unwrap_or_else(|| {
-                let mut fail_safe = DegradationPolicy::default();
-                for &class in FaultClass::ALL {
-                    fail_safe.set_rule(class, DegradationLevel::SafeStop);
-                }
-                fail_safe
-            })),
+            degradation: Degradation::new(
+                config
+                    .degradation
+                    .unwrap_or_else(DegradationPolicy::fail_safe),
+            ),
             stats: CommandStats::default(),
             command: None,
             last_valid: None,
@@ -953,9 +950,6 @@ impl<W: VehicleWire> Supervisor<W> {
         let commanded = self
             .command
             .map_or(SteeringMode::Normal, |c| c.steering_mode);
-        if self.degradation.level() == DegradationLevel::Nominal {
-            return commanded;
-        }
         match self.degradation.limits() {
             Some(limits) if !limits.steering_modes.allows(commanded) => SteeringMode::Normal,
             _ => commanded,
@@ -1018,11 +1012,7 @@ impl<W: VehicleWire> Supervisor<W> {
             _ => return full_brake,
         };
         // Degraded: no faster than the level allows.
-        let limits = match self.degradation.level() {
-            DegradationLevel::Nominal => None,
-            _ => self.degradation.limits(),
-        };
-        let (velocity, warning) = match limits {
+        let (velocity, warning) = match self.degradation.limits() {
             Some(limits) => (
                 velocity.clamp(-limits.speed_limit, limits.speed_limit),
                 true,

@@ -89,6 +89,25 @@ pub struct DegradationReport {
     pub reason: Option<FaultClass>,
 }
 
+impl DegradationReport {
+    /// The report from its raw level and reason (reason 0: none); `None` if either names
+    /// nothing.
+    pub fn from_raw(level: u64, reason: u64) -> Option<DegradationReport> {
+        Some(DegradationReport {
+            level: DegradationLevel::from_raw(level)?,
+            reason: match reason {
+                0 => None,
+                raw => Some(FaultClass::from_raw(raw)?),
+            },
+        })
+    }
+
+    /// The reason as the report carries it (0: none).
+    pub fn reason_raw(&self) -> u64 {
+        self.reason.map_or(0, FaultClass::raw)
+    }
+}
+
 /// The widths of the rolling counters both sides check.
 pub trait Counters {
     /// Bits of the command's rolling counter.

@@ -279,6 +279,24 @@ impl DriveController {
         ));
         let [p0, p1, p2, p3] = position.to_le_bytes();
         let [v0, v1, v2, v3] = velocity.to_le_bytes();
-        out(classic(0x300 + node, &[p0, p1, p2, p3, v0, v1, v2, v3]));
+        out(classic(RPDO2 + node, &[p0, p1, p2, p3, v0, v1, v2, v3]));
     }
+}
+
+/// RPDO2's base identifier: a controller's targets go on `RPDO2 + node`.
+const RPDO2: u16 = 0x300;
+
+/// The targets a [`DriveController`] sent in `frame`: its node, target position and target
+/// velocity (`None`: not a controller's RPDO2).
+pub fn rpdo2_targets(frame: &Frame) -> Option<(u8, i32, i32)> {
+    let node = cob_id(frame)?
+        .checked_sub(RPDO2)
+        .filter(|n| (1..=127).contains(n))?;
+    let data: [u8; 8] = frame.data().try_into().ok()?;
+    let [p0, p1, p2, p3, v0, v1, v2, v3] = data;
+    Some((
+        u8::try_from(node).ok()?,
+        i32::from_le_bytes([p0, p1, p2, p3]),
+        i32::from_le_bytes([v0, v1, v2, v3]),
+    ))
 }
