@@ -152,15 +152,33 @@ pub struct VotedBindings {
     pub channels: [SignalBinding; 3],
 }
 
+/// Where an actuator's status comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ActuatorStatusBinding {
+    /// A status message of the profile's DBC.
+    Message(StatusBinding),
+    /// A CiA 402 drive at this node ID.
+    CanOpen(u8),
+}
+
+/// What measures an actuator pair's rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeasuredBinding {
+    /// A signal carrying it.
+    Signal(SignalBinding),
+    /// The rate of change of the voted quantity at this index of `voted`.
+    VotedRate(usize),
+}
+
 /// An actuator and its backup.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ActuatorPairBindings {
     /// The primary's status.
-    pub primary: StatusBinding,
+    pub primary: ActuatorStatusBinding,
     /// The backup's status.
-    pub backup: StatusBinding,
+    pub backup: ActuatorStatusBinding,
     /// The measured rate.
-    pub measured: SignalBinding,
+    pub measured: MeasuredBinding,
 }
 
 /// The degradation report's roles.

@@ -42,6 +42,16 @@
 //! overrun = 10.0
 //! persistence_ms = 40
 //! heartbeat_timeout_ms = 50
+//!
+//! [[fail_operational.actuators]]    # CiA 402 drives, judged by a voted angle's rate
+//! name = "front-steering"
+//! primary = { canopen = 0x21 }
+//! backup = { canopen = 0x31 }
+//! measured = { voted = "front-axle-angle" }
+//! still = 2.0
+//! overrun = 8.0
+//! persistence_ms = 80
+//! heartbeat_timeout_ms = 30
 //! ```
 //!
 //! [`TripleVoter`]: crate::redundancy::TripleVoter
@@ -138,14 +148,33 @@ fn default_status_period() -> u64 {
     10
 }
 
-/// One actuator's status message.
+/// Where one actuator's status comes from: a message of the profile's DBC, or a CiA 402
+/// drive on a CANopen bus. Give `message` or `canopen`, not both.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ActuatorRoles {
     /// The message (its arrival is the actuator's heartbeat).
-    pub message: String,
+    pub message: Option<String>,
     /// The signal that reports a fault of the actuator's own (non-zero: a fault).
     pub fault: Option<String>,
+    /// A CiA 402 drive's node ID: its process data are its heartbeat, its Fault state and
+    /// emergencies its faults.
+    pub canopen: Option<u8>,
+}
+
+/// What measures the rate the actuator pair is judged by: a signal, or the rate of change
+/// of a quantity the section votes (`{ voted = "angle-fl" }`), an independent measurement
+/// by construction.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(untagged)]
+pub enum MeasuredRoles {
+    /// A signal carrying the rate.
+    Signal(SignalRef),
+    /// The rate of a voted quantity.
+    Voted {
+        /// The voted quantity's name.
+        voted: String,
+    },
 }
 
 /// An actuator and its backup.
@@ -159,7 +188,7 @@ pub struct ActuatorPairRoles {
     /// The backup's status.
     pub backup: ActuatorRoles,
     /// The rate an independent sensor measures.
-    pub measured: SignalRef,
+    pub measured: MeasuredRoles,
     /// Rates below this are no motion.
     pub still: f64,
     /// Faster than demanded by more than this is a runaway.

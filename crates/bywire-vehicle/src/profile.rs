@@ -15,12 +15,12 @@ use serde::Deserialize;
 
 use crate::ads::{AdsConfig, WheelGeometry};
 use crate::bindings::{
-    ActuatorPairBindings, BatteryBindings, Bindings, CommandBindings, EmergencyBrakeBindings,
-    FailOperationalBindings, ImuBindings, ReportBindings, RequestBindings, SignalBinding,
-    StateBindings, StatusBinding, VotedBindings, WheelBindings,
+    ActuatorPairBindings, ActuatorStatusBinding, BatteryBindings, Bindings, CommandBindings,
+    EmergencyBrakeBindings, FailOperationalBindings, ImuBindings, MeasuredBinding, ReportBindings,
+    RequestBindings, SignalBinding, StateBindings, StatusBinding, VotedBindings, WheelBindings,
 };
 use crate::command::ControlCommand;
-use crate::fail_operational::{FailOperationalRoles, SignalRef};
+use crate::fail_operational::{ActuatorRoles, FailOperationalRoles, MeasuredRoles, SignalRef};
 use crate::supervisor::{Cascade, SupervisorConfig};
 
 /// Why a profile did not load.
@@ -675,6 +675,33 @@ impl Checker<'_> {
         })
     }
 
+    /// An actuator's status: its message (and fault signal) found, or its CANopen node ID
+    /// in range; one of the two.
+    fn actuator_status(
+        &self,
+        key: &str,
+        roles: &ActuatorRoles,
+    ) -> Result<ActuatorStatusBinding, ProfileError> {
+        match (&roles.message, roles.canopen, &roles.fault) {
+            (Some(message), None, fault) => Ok(ActuatorStatusBinding::Message(self.status(
+                key,
+                message,
+                fault.as_deref().map(|f| ("fault", f)),
+            )?)),
+            (None, Some(node), None) if (1..=127).contains(&node) => {
+                Ok(ActuatorStatusBinding::CanOpen(node))
+            }
+            (None, Some(_), None) => {
+                Err(self.invalid(&format!("{key}.canopen"), "a CANopen node ID from 1 to 127"))
+            }
+            (None, Some(_), Some(_)) => Err(self.invalid(
+                &format!("{key}.fault"),
+                "a CANopen drive reports its faults itself: give no fault signal",
+            )),
+            _ => Err(self.invalid(key, "give message (and fault) or canopen, one of them")),
+        }
+    }
+
     /// `[fail_operational]`: every name found, every number sensible.
     fn bind_fail_operational(
         &self,
@@ -732,18 +759,26 @@ impl Checker<'_> {
                     "still over 0, overrun 0 or more, heartbeat_timeout_ms over 0",
                 ));
             }
+            let measured = match &a.measured {
+                MeasuredRoles::Signal(r) => {
+                    MeasuredBinding::Signal(self.signal_ref(&format!("{key}.measured"), r)?)
+                }
+                MeasuredRoles::Voted { voted } => MeasuredBinding::VotedRate(
+                    f.voted
+                        .iter()
+                        .position(|v| &v.name == voted)
+                        .ok_or_else(|| {
+                            self.invalid(
+                                &format!("{key}.measured.voted"),
+                                format!("no voted quantity named '{voted}'"),
+                            )
+                        })?,
+                ),
+            };
             bindings.actuators.push(ActuatorPairBindings {
-                primary: self.status(
-                    &format!("{key}.primary"),
-                    &a.primary.message,
-                    a.primary.fault.as_deref().map(|f| ("fault", f)),
-                )?,
-                backup: self.status(
-                    &format!("{key}.backup"),
-                    &a.backup.message,
-                    a.backup.fault.as_deref().map(|f| ("fault", f)),
-                )?,
-                measured: self.signal_ref(&format!("{key}.measured"), &a.measured)?,
+                primary: self.actuator_status(&format!("{key}.primary"), &a.primary)?,
+                backup: self.actuator_status(&format!("{key}.backup"), &a.backup)?,
+                measured,
             });
         }
         if let Some(r) = &f.report {

@@ -828,7 +828,7 @@ mod shuttle {
     use bywire_core::{Frame, Id};
     use bywire_dbc::codec::{Decoded, Value};
     use bywire_dbc::decoder::Decoder;
-    use bywire_vehicle::bindings::{SignalBinding, StatusBinding};
+    use bywire_vehicle::bindings::{MeasuredBinding, SignalBinding, StatusBinding};
     use bywire_vehicle::profile::{LoadedProfile, Profile};
 
     fn shuttle() -> LoadedProfile {
@@ -955,6 +955,26 @@ mod shuttle {
                 "message = \"SteerMotorB_Status\"",
                 "message = \"SteerMotorC_Status\"",
                 "fail_operational.actuators[0].backup.message: no message",
+            ),
+            (
+                "backup = { message = \"SteerMotorB_Status\", fault = \"SteerB_Fault\" }",
+                "backup = { canopen = 0 }",
+                "fail_operational.actuators[0].backup.canopen: a CANopen node ID from 1 to 127",
+            ),
+            (
+                "backup = { message = \"SteerMotorB_Status\", fault = \"SteerB_Fault\" }",
+                "backup = { canopen = 0x31, fault = \"SteerB_Fault\" }",
+                "fail_operational.actuators[0].backup.fault: a CANopen drive reports",
+            ),
+            (
+                "backup = { message = \"SteerMotorB_Status\", fault = \"SteerB_Fault\" }",
+                "backup = { message = \"SteerMotorB_Status\", canopen = 0x31 }",
+                "fail_operational.actuators[0].backup: give message (and fault) or canopen",
+            ),
+            (
+                "measured = { message = \"Shuttle_SteerRate\", signal = \"SteerRate\" }",
+                "measured = { voted = \"rear-angle\" }",
+                "fail_operational.actuators[0].measured.voted: no voted quantity named 'rear-angle'",
             ),
         ] {
             assert!(toml.contains(from), "{from}");
@@ -1086,16 +1106,13 @@ mod shuttle {
         // The steering motor: demanded 10°/s, measured 0 (stuck) for the persistence: the
         // backup winding takes over; a second fault on top is a safe stop.
         let pair_roles = &section.actuators[0];
-        let pair_bindings = bindings.actuators[0];
+        let MeasuredBinding::Signal(rate) = bindings.actuators[0].measured else {
+            panic!("the shuttle's rate is a signal");
+        };
         let mut pair = ActuatorPair::new(pair_roles.check(), ms(0));
         for t in (0..=40).step_by(10) {
-            let f = frame(
-                &decoder,
-                pair_bindings.measured.message,
-                pair_bindings.measured.signal,
-                0.0,
-            );
-            let measured = at(&decoder, pair_bindings.measured, &f).unwrap();
+            let f = frame(&decoder, rate.message, rate.signal, 0.0);
+            let measured = at(&decoder, rate, &f).unwrap();
             pair.step(
                 ms(t),
                 Feedback {
