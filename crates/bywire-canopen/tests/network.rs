@@ -186,6 +186,28 @@ fn the_master_walks_a_drive_to_operation_enabled_and_it_follows() {
 }
 
 #[test]
+fn the_controller_knows_when_the_drives_process_data_last_came() {
+    let mut bus = running_drive(1_000);
+    let last_tpdo = |bus: &Bus<Device<Drive>>| {
+        bus.log
+            .iter()
+            .rev()
+            .find(|(_, from, frame)| {
+                *from == 1 && matches!(frame.id().map(|id| id.as_raw()), Some(0x182 | 0x282))
+            })
+            .map(|(at, ..)| *at)
+    };
+    let heard = controller(&mut bus.master()).last_heard();
+    assert!(heard.is_some());
+    assert_eq!(heard, last_tpdo(&bus));
+    // Cut off: the time stays at its last process data while the master runs on.
+    bus.silence(1, true);
+    bus.run(Duration::from_millis(50));
+    assert_eq!(controller(&mut bus.master()).last_heard(), heard);
+    assert!(bus.now().saturating_since(heard.unwrap()) >= Duration::from_millis(50));
+}
+
+#[test]
 fn a_lost_drive_heartbeat_is_detected_within_the_consumer_time_and_stopped_at_once() {
     let mut bus = running_drive(1_000);
     // Cut the drive off: nothing it sends reaches the bus.
@@ -353,10 +375,17 @@ fn an_emergency_stops_the_drive_until_acknowledged() {
     );
     assert_eq!(bus.device().app().state(), State::Fault);
     assert!(bus.device().app().motor().velocity.abs() < 1.0);
-    // Acknowledged while the cause remains: the fault reset does nothing.
+    // Acknowledged while the cause remains: the fault reset does nothing; the controller
+    // gives it the status timeout (500 ms) before it stops the drive again.
     controller(&mut bus.master()).acknowledge();
     bus.run(Duration::from_millis(300));
     assert_eq!(bus.device().app().state(), State::Fault);
+    assert_eq!(controller(&mut bus.master()).stopped(), None);
+    bus.run(Duration::from_millis(300));
+    assert_eq!(
+        controller(&mut bus.master()).stopped(),
+        Some(StopReason::Fault)
+    );
     // The cause gone and acknowledged again: back to Operation enabled, running.
     bus.device_mut().app_mut().0.clear_fault();
     controller(&mut bus.master()).acknowledge();

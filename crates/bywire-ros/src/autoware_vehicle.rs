@@ -14,7 +14,9 @@ use bywire_control::kinematics::{four_wheel, WheelState};
 use bywire_core::num::Short;
 use bywire_core::Timestamp;
 use bywire_vehicle::ads::{AdsCommand, VehicleState};
-use bywire_vehicle::command::{ControlMode, Gear, SteeringMode, TurnIndicators, WatchdogLevel};
+use bywire_vehicle::command::{
+    ControlMode, DegradationLevel, FaultClass, Gear, SteeringMode, TurnIndicators, WatchdogLevel,
+};
 use bywire_vehicle::profile::Limits;
 use core::time::Duration;
 
@@ -325,6 +327,15 @@ pub fn hazard_lights_code(on: bool) -> u8 {
     }
 }
 
+/// A degradation level as the vehicle interface shows it: its name, with the fault it is
+/// reported with (`minimal-risk (actuator-backup)`).
+pub fn degradation_text(level: DegradationLevel, reason: Option<FaultClass>) -> String {
+    match reason {
+        Some(reason) => format!("{level} ({reason})"),
+        None => level.to_string(),
+    }
+}
+
 /// Autoware's control mode for the vehicle's reported mode and watchdog level (`None`: no
 /// valid feedback; a profile without a watchdog level reports none). Autonomous with the
 /// watchdog braking (full braking, or awaiting a re-engage) is disengaged: the vehicle no
@@ -421,6 +432,18 @@ pub fn joint_state(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_degradation_level_shows_with_its_reason() {
+        assert_eq!(degradation_text(DegradationLevel::Nominal, None), "nominal");
+        assert_eq!(
+            degradation_text(
+                DegradationLevel::MinimalRisk,
+                Some(FaultClass::ActuatorBackup)
+            ),
+            "minimal-risk (actuator-backup)"
+        );
+    }
 
     const TUG: Geometry = Geometry {
         wheelbase: 3.2,

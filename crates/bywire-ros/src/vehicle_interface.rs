@@ -86,6 +86,9 @@ pub struct VehicleInterfaceConfig {
     pub turn_indicators_status: String,
     /// `HazardLightsReport` out.
     pub hazard_lights_status: String,
+    /// The degradation level and its reason out (`std_msgs/String`: `nominal`,
+    /// `minimal-risk (actuator-backup)`), where the profile declares the report.
+    pub degradation_status: String,
     /// Time between reports.
     pub report_period: Duration,
     /// How long an engage request waits for the vehicle to report autonomous.
@@ -110,6 +113,7 @@ impl Default for VehicleInterfaceConfig {
             steering_mode_status: "/vehicle/status/steering_mode".into(),
             turn_indicators_status: "/vehicle/status/turn_indicators_status".into(),
             hazard_lights_status: "/vehicle/status/hazard_lights_status".into(),
+            degradation_status: "/vehicle/status/degradation".into(),
             report_period: Duration::from_millis(33),
             engage_timeout: Duration::from_secs(2),
         }
@@ -163,6 +167,8 @@ struct Outputs {
     turn_indicators: Option<Publisher<TurnIndicatorsReport>>,
     /// Where the profile's state message has hazard lights.
     hazard_lights: Option<Publisher<HazardLightsReport>>,
+    /// Where the profile declares a fail-operational report.
+    degradation: Option<Publisher<StringMsg>>,
 }
 
 /// The interface's side of a run: the hooks of the real-time runner (`run`), or stepped by a
@@ -471,6 +477,15 @@ impl VehicleInterface<'_> {
                 report: map::hazard_lights_code(on),
             });
         }
+        if let (Some(out), Some(level)) = (
+            &self.outputs.degradation,
+            state.degradation.fresh(now, self.fresh),
+        ) {
+            let reason = state.degradation_reason.fresh(now, self.fresh).flatten();
+            let _ = out.publish(StringMsg {
+                data: map::degradation_text(level, reason),
+            });
+        }
         self.last_report = Some(now);
     }
 
@@ -604,6 +619,15 @@ impl<'a> VehicleInterface<'a> {
             },
             hazard_lights: match state_roles.and_then(|s| s.hazard_lights.as_ref()) {
                 Some(_) => Some(node.publisher(&config.hazard_lights_status, &one)?),
+                None => None,
+            },
+            degradation: match profile
+                .profile
+                .fail_operational
+                .as_ref()
+                .and_then(|f| f.report.as_ref())
+            {
+                Some(_) => Some(node.publisher(&config.degradation_status, &one)?),
                 None => None,
             },
         };

@@ -7,6 +7,7 @@ use bywire_core::Timestamp;
 use bywire_tug::ecu::EcuEvent;
 use bywire_tug::messages::ControlMode;
 use bywire_vehicle::arbitration::Side;
+use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::{DegradationLevel, FaultClass};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::supervisor::{EstopState, Watchdog};
@@ -47,6 +48,13 @@ pub enum Happening {
     Control(Option<Side>),
     /// The degradation level changed, with the fault it is reported with.
     Degradation(DegradationLevel, Option<FaultClass>),
+    /// Another of the redundant tug's actuators steers a corner.
+    Steering {
+        /// The corner (0 FL … 3 RR).
+        corner: usize,
+        /// The actuator now steering it.
+        in_charge: InCharge,
+    },
 }
 
 impl Happening {
@@ -64,6 +72,7 @@ impl Happening {
             Happening::Mission(event) => event.kind(),
             Happening::Control(_) => "control",
             Happening::Degradation(..) => "degradation",
+            Happening::Steering { .. } => "steering",
         }
     }
 }
@@ -88,6 +97,18 @@ impl core::fmt::Display for Happening {
             Happening::Control(None) => f.write_str("neither ECU in control"),
             Happening::Degradation(level, Some(reason)) => write!(f, "{level} ({reason})"),
             Happening::Degradation(level, None) => write!(f, "{level}"),
+            Happening::Steering { corner, in_charge } => {
+                let corner = ["FL", "FR", "RL", "RR"]
+                    .get(*corner)
+                    .copied()
+                    .unwrap_or("?");
+                let by = match in_charge {
+                    InCharge::Primary => "its primary",
+                    InCharge::Backup => "its backup valve",
+                    InCharge::Neither => "nothing",
+                };
+                write!(f, "{corner} steered by {by}")
+            }
         }
     }
 }

@@ -1,5 +1,5 @@
-//! The redundant tug's record of each injected fault or fault pair (of its ECUs and its
-//! voted angle sensors), as `metrics.json`
+//! The redundant tug's record of each injected fault or fault pair (of its ECUs, its voted
+//! angle sensors and its steering actuators), as `metrics.json`
 //! lists them under `fail_operational`: when the fault was found and taken over, the level
 //! the vehicle reached, how well it kept to the route while degraded, and where it stopped
 //! against the safe stop point it aimed for. Read from the run's events and true states.
@@ -8,6 +8,7 @@ use bywire_control::kinematics::Point;
 use bywire_control::path::Path;
 use bywire_core::Timestamp;
 use bywire_vehicle::arbitration::Side;
+use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::DegradationLevel;
 use serde::Serialize;
 
@@ -32,7 +33,8 @@ pub struct FailOperationalRecord {
     /// From the fault to the vehicle's reaction: its level raised, or (a pair) neither ECU
     /// left in control, s.
     pub detected_s: Option<f64>,
-    /// From the fault to the standby ECU in control, s (`None`: nothing took over).
+    /// From the fault to the standby ECU in control, or the backup valve steering, s
+    /// (`None`: nothing took over).
     pub takeover_s: Option<f64>,
     /// The level reached, by name: a pair leaves neither ECU in control, the drives' own
     /// safe stop.
@@ -48,7 +50,8 @@ pub struct FailOperationalRecord {
     pub stop_speed_reached_s: Option<f64>,
 }
 
-/// The faults the redundant tug's layers answer: of its ECUs and its voted angle sensors.
+/// The faults the redundant tug's layers answer: of its ECUs, its voted angle sensors and
+/// its steering actuators.
 fn is_layer_fault(fault: &Fault) -> bool {
     matches!(
         fault,
@@ -56,6 +59,7 @@ fn is_layer_fault(fault: &Fault) -> bool {
             | Fault::EcuWrongOutput(_)
             | Fault::EcuBabble(_)
             | Fault::AngleSensor { .. }
+            | Fault::SteeringActuator { .. }
     )
 }
 
@@ -112,9 +116,19 @@ impl FailOperationalRecord {
                 .find(|e| after(e.t) && what(&e.what))
                 .map(|e| e.t)
         };
-        // Neither in control is the pair's end; a single fault's takeover gap is not.
+        // Neither ECU in control, or a corner steered by nothing, is the pair's end; a single
+        // fault's takeover gap is not.
         let neither = if double {
-            first(&|h| *h == Happening::Control(None))
+            first(&|h| {
+                matches!(
+                    h,
+                    Happening::Control(None)
+                        | Happening::Steering {
+                            in_charge: InCharge::Neither,
+                            ..
+                        }
+                )
+            })
         } else {
             None
         };
@@ -124,7 +138,16 @@ impl FailOperationalRecord {
         let takeover = if double {
             None
         } else {
-            first(&|h| *h == Happening::Control(Some(Side::B)))
+            first(&|h| {
+                matches!(
+                    h,
+                    Happening::Control(Some(Side::B))
+                        | Happening::Steering {
+                            in_charge: InCharge::Backup,
+                            ..
+                        }
+                )
+            })
         };
         // A single fault is found when the standby takes over or the level rises.
         let detected = match (neither, takeover, raised) {
@@ -153,10 +176,14 @@ impl FailOperationalRecord {
         let during = truth
             .iter()
             .filter(|s| s.t >= case.faults.first().map_or(end, |(t, _)| *t) && s.t <= end);
-        let stop = truth
-            .iter()
-            .filter(|s| s.t > injected && s.t <= end)
-            .find(|s| libm::hypot(s.twist.vx, s.twist.vy) < STOPPED);
+        // The stop the fault led to: the first standstill once the tug moved after it (a fault
+        // injected at a standstill), or at once if it never moved.
+        let speed = |s: &TruthSample| libm::hypot(s.twist.vx, s.twist.vy);
+        let after = truth.iter().filter(|s| s.t > injected && s.t <= end);
+        let moved = after.clone().find(|s| speed(s) >= STOPPED).map(|s| s.t);
+        let stop = after
+            .filter(|s| moved.is_none_or(|moved| s.t > moved))
+            .find(|s| speed(s) < STOPPED);
         // Where a true pose lies against the route.
         let on_route = |s: &TruthSample| {
             let here = Point {

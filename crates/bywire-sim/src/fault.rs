@@ -69,6 +69,16 @@ pub enum Fault {
         /// How it fails.
         fault: SensorFault,
     },
+    /// A corner's steering actuator fails: the primary (the drive turning the orbital
+    /// valve's input) or, `backup`, the redundant tug's backup valve.
+    SteeringActuator {
+        /// The corner (0 FL … 3 RR).
+        corner: usize,
+        /// The backup valve, not the primary.
+        backup: bool,
+        /// How it fails.
+        failure: ActuatorFailure,
+    },
     /// At a standstill, the redundant tug's faults are repaired: both ECUs back to their
     /// power-on roles (A in control), the degradation level back to nominal.
     Repair,
@@ -82,6 +92,21 @@ pub enum Fault {
         /// What happens to them.
         tamper: Tamper,
     },
+}
+
+/// The corners' names, 0 … 3.
+const CORNERS: [&str; 4] = ["FL", "FR", "RL", "RR"];
+
+/// How a steering actuator fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ActuatorFailure {
+    /// It sticks: the primary's valve input seizes, the backup's spool stays closed.
+    Stuck,
+    /// It runs away: the primary's output stage drives full one way while powered (a failed
+    /// bridge or feedback), the backup's spool sticks open.
+    Runaway,
+    /// Its drive loses its supply: silent on the bus, its motor or valve unpowered.
+    DriveLost,
 }
 
 /// As in events and the live view: the variant's name, identifiers and node IDs in hex.
@@ -98,12 +123,18 @@ impl core::fmt::Display for Fault {
                 module,
                 fault,
             } => {
-                let corner = ["FL", "FR", "RL", "RR"]
-                    .get(*corner)
-                    .copied()
-                    .unwrap_or("?");
+                let corner = CORNERS.get(*corner).copied().unwrap_or("?");
                 let module = if *module == 0 { "B" } else { "C" };
                 write!(f, "AngleSensor({corner} {module} {fault:?})")
+            }
+            Fault::SteeringActuator {
+                corner,
+                backup,
+                failure,
+            } => {
+                let corner = CORNERS.get(*corner).copied().unwrap_or("?");
+                let which = if *backup { "backup" } else { "primary" };
+                write!(f, "SteeringActuator({corner} {which} {failure:?})")
             }
             other => write!(f, "{other:?}"),
         }
@@ -123,6 +154,20 @@ pub struct Tampering<'a> {
 }
 
 impl Fault {
+    /// Whether it is a fault of a layer only the redundant tug has (its second ECU, its
+    /// further angle sensors, its backup steering valves) or of their repair.
+    pub fn needs_redundancy(&self) -> bool {
+        matches!(
+            self,
+            Fault::EcuSilent(_)
+                | Fault::EcuWrongOutput(_)
+                | Fault::EcuBabble(_)
+                | Fault::AngleSensor { .. }
+                | Fault::SteeringActuator { backup: true, .. }
+                | Fault::Repair
+        )
+    }
+
     /// The frames this fault tampers with (`None`: it does not tamper with frames).
     pub fn tampering(&self) -> Option<Tampering<'_>> {
         // The ADS's commands on both buses that carry them, as a faulty ADS would send them.

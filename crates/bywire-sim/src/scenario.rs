@@ -25,13 +25,17 @@
 //!                               # redundant_bus_loss, corrupt_frames, duplicate_frames,
 //!                               # delay_frames, forge_commands, replay_commands,
 //!                               # forge_state, flood (an attacker on bus 1),
-//!                               # ecu_silent, ecu_wrong_output, ecu_babble, repair
-//!                               # (the redundant tug's)
+//!                               # ecu_silent, ecu_wrong_output, ecu_babble,
+//!                               # angle_sensor, repair (the redundant tug's),
+//!                               # steering_stuck, steering_runaway, steering_drive_lost
 //! # drive_silence: node = 0x22; sensor_fault: corner = 0..3, sensor = "stuck" | "drift" |
 //! # "open", value = angle (stuck) or rate (drift); delay_commands: delay_ms = 15;
 //! # corrupt_frames, duplicate_frames, delay_frames: bus = "bus2", id = 0x721 (and delay_ms);
 //! # bus_off (of the node sending id on bus): bus = "bus2", id = 0x723;
-//! # ecu_silent, ecu_wrong_output, ecu_babble: ecu = "A" or "B"
+//! # ecu_silent, ecu_wrong_output, ecu_babble: ecu = "A" or "B"; angle_sensor: corner,
+//! # module = "B" | "C", sensor = "stuck" | "drift" | "open" | "silent", value;
+//! # steering_stuck, steering_runaway, steering_drive_lost: corner (the primary's), and
+//! # backup = true for the redundant tug's backup valve
 //! ```
 
 use core::time::Duration;
@@ -43,7 +47,7 @@ use serde::Deserialize;
 use bywire_vehicle::arbitration::Side;
 
 use crate::attacker::Attack;
-use crate::fault::Fault;
+use crate::fault::{ActuatorFailure, Fault};
 use crate::mission::{apron_loop, service_loop};
 use crate::steering::SensorFault;
 use crate::tug::{Tug, TugBus, TugParams, DRIVE_NODES, STEERING_NODES};
@@ -115,6 +119,8 @@ struct RawEvent {
     bus: Option<String>,
     id: Option<u16>,
     ecu: Option<String>,
+    module: Option<String>,
+    backup: Option<bool>,
 }
 
 impl Scenario {
@@ -251,6 +257,15 @@ impl Scenario {
             .enumerate()
             .map(|(i, e)| event(i, e, &invalid))
             .collect::<Result<Vec<_>, _>>()?;
+        // A fault of a layer the plain tug does not have would change nothing: refused.
+        if !raw.redundant {
+            if let Some(i) = events.iter().position(|(_, f, _)| f.needs_redundancy()) {
+                return Err(invalid(
+                    &format!("event[{i}].fault"),
+                    "a fault of the redundant tug's: give redundant = true".to_string(),
+                ));
+            }
+        }
         Ok(Scenario {
             name: raw.name.unwrap_or_else(|| file.to_string()),
             tug: TugParams {
@@ -325,9 +340,13 @@ impl Scenario {
 }
 
 /// The `fail-operational` scenario's faults, each alone: ECU A silent, computing a wrong
-/// setpoint, babbling; an angle sensor stuck, drifting, silent. Then each again with a second
-/// on top 3 s later: ECU B falling silent, or a second sensor of the corner stuck the other
-/// way. A repair at a standstill after each.
+/// setpoint, babbling; an angle sensor stuck, drifting, silent; a primary steering actuator
+/// running away, its drive lost, stuck. Then each again with a second on top 3 s later: ECU B
+/// falling silent, a second sensor of the corner stuck the other way, or the corner's backup
+/// valve's driver lost. A repair at a standstill after each. A stuck actuator shows only when
+/// its wheel is asked to turn: it seizes while the tug stands, at the safe stop point before
+/// the bend (160 m: each case before it ends at the next point, 20 m on) and at the stop in
+/// the bend.
 fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
     let ms = Duration::from_millis;
     let sensor = |corner, module, fault| Fault::AngleSensor {
@@ -352,31 +371,74 @@ fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
         Fault::EcuWrongOutput(Side::A),
         Fault::EcuBabble(Side::A),
     ];
-    let mut events = Vec::new();
-    let mut at = ms(5_000);
-    let single = |events: &mut Vec<_>, at: &mut Duration, fault| {
-        // Time to reach the next safe stop point at the minimal-risk speed.
-        events.push((*at, fault, Some(ms(18_000))));
-        events.push((*at + ms(18_000), Fault::Repair, None));
-        *at += ms(21_000);
+    let actuator = |corner, backup, failure| Fault::SteeringActuator {
+        corner,
+        backup,
+        failure,
     };
-    for fault in singles.into_iter().chain(sensors) {
-        single(&mut events, &mut at, fault);
+    // The stuck primary last: it shows only when its wheel is asked to turn, so it seizes
+    // while the tug stands at the safe stop point before the bend (160 m: each case before
+    // it ends at the next point, 20 m on), and the bend asks at once.
+    let actuators = [
+        actuator(1, false, ActuatorFailure::Runaway),
+        actuator(2, false, ActuatorFailure::DriveLost),
+        actuator(0, false, ActuatorFailure::Stuck),
+    ];
+    // The same corner's backup valve driver lost.
+    let backup_lost = |fault: Fault| match fault {
+        Fault::SteeringActuator { corner, .. } => {
+            actuator(corner, true, ActuatorFailure::DriveLost)
+        }
+        other => other,
+    };
+    // A stuck actuator seizes at a standstill, when the tug stands after the last repair:
+    // the others come 3 s into the drive.
+    let stuck = |fault: &Fault| {
+        matches!(
+            fault,
+            Fault::SteeringActuator {
+                failure: ActuatorFailure::Stuck,
+                ..
+            }
+        )
+    };
+    let mut events = Vec::new();
+    // The next case's start, and the standstill before it.
+    let (mut at, mut standing) = (ms(5_000), ms(10));
+    let mut single = |events: &mut Vec<_>, fault: Fault| {
+        let injected = if stuck(&fault) { standing } else { at };
+        // Time to reach the next safe stop point at the minimal-risk speed; the part mended
+        // just before its repair.
+        events.push((injected, fault, Some(ms(17_500))));
+        events.push((injected + ms(18_000), Fault::Repair, None));
+        standing = injected + ms(18_010);
+        at = injected + ms(21_000);
+    };
+    let [runaway, drive_lost, stuck_primary] = actuators;
+    for fault in singles.into_iter().chain(sensors).chain(actuators) {
+        single(&mut events, fault);
     }
-    let double = |events: &mut Vec<_>, at: &mut Duration, first, second| {
-        events.push((*at, first, Some(ms(10_000))));
-        events.push((*at + ms(3_000), second, Some(ms(7_000))));
-        events.push((*at + ms(10_000), Fault::Repair, None));
+    let mut double = |events: &mut Vec<_>, first: Fault, second| {
+        let injected = if stuck(&first) { standing } else { at };
+        events.push((injected, first, Some(ms(9_500))));
+        events.push((injected + ms(3_000), second, Some(ms(6_500))));
+        events.push((injected + ms(10_000), Fault::Repair, None));
         // The drives the master stopped when neither ECU was in control: acknowledged
         // again once their faults have cleared.
-        events.push((*at + ms(11_000), Fault::OperatorReset, None));
-        *at += ms(14_000);
+        events.push((injected + ms(11_000), Fault::OperatorReset, None));
+        standing = injected + ms(11_010);
+        at = injected + ms(14_000);
     };
+    // The stuck primary first: it shows in the bend it stands in.
+    double(&mut events, stuck_primary, backup_lost(stuck_primary));
     for fault in singles {
-        double(&mut events, &mut at, fault, Fault::EcuSilent(Side::B));
+        double(&mut events, fault, Fault::EcuSilent(Side::B));
     }
     for fault in sensors {
-        double(&mut events, &mut at, fault, second(fault));
+        double(&mut events, fault, second(fault));
+    }
+    for fault in [runaway, drive_lost] {
+        double(&mut events, fault, backup_lost(fault));
     }
     events
 }
@@ -532,6 +594,14 @@ fn event(
             .ok_or_else(|| invalid(&key("id"), format!("{kind} needs id, an 11-bit identifier")))?;
         Ok((bus, id))
     };
+    let corner = |kind: &str| {
+        e.corner.filter(|c| *c < 4).ok_or_else(|| {
+            invalid(
+                &key("corner"),
+                format!("{kind} needs corner 0 (FL) … 3 (RR)"),
+            )
+        })
+    };
     let fault = match e.fault.as_str() {
         "ads_silence" => Fault::AdsSilence,
         "estop" => Fault::Estop,
@@ -544,7 +614,7 @@ fn event(
             Fault::DriveSilence(node)
         }
         "sensor_fault" => {
-            let corner = e.corner.filter(|c| *c < 4).ok_or_else(|| invalid(&key("corner"), "sensor_fault needs corner 0 (FL) … 3 (RR)".to_string()))?;
+            let corner = corner("sensor_fault")?;
             let value = e.value.unwrap_or(0.0);
             let sensor = match e.sensor.as_deref() {
                 Some("stuck") => SensorFault::Stuck(value),
@@ -554,6 +624,32 @@ fn event(
             };
             Fault::SensorFault(corner, sensor)
         }
+        "angle_sensor" => {
+            let corner = corner("angle_sensor")?;
+            let module = match e.module.as_deref() {
+                Some("B" | "b") => 0,
+                Some("C" | "c") => 1,
+                _ => return Err(invalid(&key("module"), "angle_sensor needs module = \"B\" or \"C\" (the redundant tug's)".to_string())),
+            };
+            let value = e.value.unwrap_or(0.0);
+            let fault = match e.sensor.as_deref() {
+                Some("stuck") => SensorFault::Stuck(value),
+                Some("drift") => SensorFault::Drift(value),
+                Some("open") => SensorFault::OpenCircuit,
+                Some("silent") => SensorFault::Silent,
+                other => return Err(invalid(&key("sensor"), format!("{other:?} is not stuck, drift, open or silent"))),
+            };
+            Fault::AngleSensor { corner, module, fault }
+        }
+        kind @ ("steering_stuck" | "steering_runaway" | "steering_drive_lost") => Fault::SteeringActuator {
+            corner: corner(kind)?,
+            backup: e.backup.unwrap_or(false),
+            failure: match kind {
+                "steering_stuck" => ActuatorFailure::Stuck,
+                "steering_runaway" => ActuatorFailure::Runaway,
+                _ => ActuatorFailure::DriveLost,
+            },
+        },
         "corrupt_commands" => Fault::CorruptCommands,
         "duplicate_commands" => Fault::DuplicateCommands,
         "delay_commands" => Fault::DelayCommands(e.delay_ms.ok_or_else(|| invalid(&key("delay_ms"), "delay_commands needs delay_ms".to_string()))?),
@@ -590,7 +686,7 @@ fn event(
             };
             Fault::TamperFrames { bus, id, tamper }
         }
-        other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood, ecu_silent, ecu_wrong_output, ecu_babble, repair)"))),
+        other => return Err(invalid(&key("fault"), format!("'{other}' is not a fault (ads_silence, estop, operator_reset, drive_silence, sensor_fault, corrupt_commands, duplicate_commands, delay_commands, driver_takeover, ecu_bus_off, bus_off, redundant_bus_loss, corrupt_frames, duplicate_frames, delay_frames, forge_commands, replay_commands, forge_state, flood, ecu_silent, ecu_wrong_output, ecu_babble, angle_sensor, steering_stuck, steering_runaway, steering_drive_lost, repair)"))),
     };
     Ok((Duration::from_secs_f64(e.at_s), fault, duration))
 }
@@ -601,13 +697,36 @@ mod tests {
 
     #[test]
     fn a_redundant_scenario_reads_its_safe_stops_and_ecu_faults_and_mistakes_name_the_key() {
-        let text = "route = \"service-loop\"\nredundant = true\nsafe_stops = [60, 20]\n\n[[event]]\nat_s = 5\nfault = \"ecu_wrong_output\"\necu = \"A\"\n\n[[event]]\nat_s = 9\nfault = \"repair\"\n";
+        let text = "route = \"service-loop\"\nredundant = true\nsafe_stops = [60, 20]\n\n[[event]]\nat_s = 5\nfault = \"ecu_wrong_output\"\necu = \"A\"\n\n[[event]]\nat_s = 9\nfault = \"repair\"\n\n[[event]]\nat_s = 10\nfault = \"steering_runaway\"\ncorner = 2\nbackup = true\n\n[[event]]\nat_s = 11\nfault = \"angle_sensor\"\ncorner = 1\nmodule = \"C\"\nsensor = \"silent\"\n";
         let scenario = Scenario::parse(text, "r.toml").unwrap();
         assert!(scenario.tug.redundant);
         assert_eq!(scenario.tug.safe_stops, [20.0, 60.0]);
         assert_eq!(scenario.tug.route, service_loop());
         assert_eq!(scenario.events[0].1, Fault::EcuWrongOutput(Side::A));
         assert_eq!(scenario.events[1].1, Fault::Repair);
+        assert_eq!(
+            scenario.events[2].1,
+            Fault::SteeringActuator {
+                corner: 2,
+                backup: true,
+                failure: ActuatorFailure::Runaway
+            }
+        );
+        assert_eq!(
+            scenario.events[3].1,
+            Fault::AngleSensor {
+                corner: 1,
+                module: 1,
+                fault: SensorFault::Silent
+            }
+        );
+        let plain = Scenario::parse(&text.replace("redundant = true", ""), "r.toml").unwrap_err();
+        assert!(
+            plain
+                .to_string()
+                .contains("event[0].fault: a fault of the redundant tug's"),
+            "{plain}"
+        );
         for (bad, expected) in [
             ("safe_stops = [60, 20]", "safe_stops = [60, 900]"),
             ("ecu = \"A\"", "ecu = \"C\""),

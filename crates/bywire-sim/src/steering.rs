@@ -116,6 +116,12 @@ impl SteeringChain {
     /// Advance by `dt` seconds with the motor command (−1 … 1, the controller's output) while
     /// the tug rolls or not.
     pub fn step(&mut self, dt: f64, command: f64, rolling: bool) {
+        self.step_with_backup(dt, command, rolling, 0.0);
+    }
+
+    /// The same with the redundant tug's backup valve, in parallel with the orbital valve,
+    /// metering oil for `backup_rate` degrees per second of the wheel (its driver's demand).
+    pub fn step_with_backup(&mut self, dt: f64, command: f64, rolling: bool, backup_rate: f64) {
         let p = &self.params;
         let command = if command.is_finite() {
             command.clamp(-1.0, 1.0)
@@ -148,7 +154,11 @@ impl SteeringChain {
         } else {
             p.rod_area
         };
-        let speed = flow / area * self.shaft_rpm.signum();
+        let mut speed = flow / area * self.shaft_rpm.signum();
+        if backup_rate != 0.0 && backup_rate.is_finite() && p.supply_bar > load {
+            // The wheel's rate through the linkage: stroke = arm × sin(angle).
+            speed += p.arm * libm::cos(self.angle_deg.to_radians()) * backup_rate.to_radians();
+        }
         self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
         // A piston at rest (the valve closed, as it mostly is) leaves the angle as it was.
         let angle_from = [self.piston.to_bits(), p.arm.to_bits()];
@@ -159,6 +169,12 @@ impl SteeringChain {
         if let SensorFault::Drift(rate) = self.fault {
             self.drift += rate * dt;
         }
+    }
+
+    /// The valve's input shaft seizes (its motor or the valve jammed): it stands whatever
+    /// the motor is told, and the orbital valve stays closed. Held while called every step.
+    pub fn seize(&mut self) {
+        self.shaft_rpm = 0.0;
     }
 
     /// The wheel's angle, degrees (the linkage: the piston turns the arm).
@@ -258,6 +274,29 @@ mod tests {
         let mut left = SteeringChain::new(p);
         run(&mut left, 1000, -0.5, true);
         assert!(left.wheel_angle_deg() < 0.0 && left.wheel_angle_deg().abs() > before.abs());
+    }
+
+    #[test]
+    fn the_backup_valve_turns_the_wheel_at_its_rate_past_a_seized_shaft() {
+        let mut chain = SteeringChain::new(SteeringParams::default());
+        for _ in 0..1000 {
+            chain.seize();
+            chain.step_with_backup(0.001, 1.0, true, 5.0);
+        }
+        assert_eq!(chain.shaft_rpm(), 0.0);
+        // 5°/s for a second, near 0° where the linkage is nearly linear.
+        assert!(
+            (chain.wheel_angle_deg() - 5.0).abs() < 0.05,
+            "{}",
+            chain.wheel_angle_deg()
+        );
+        // Without it, the seized shaft holds the wheel.
+        let held = chain.wheel_angle_deg();
+        for _ in 0..500 {
+            chain.seize();
+            chain.step(0.001, 1.0, true);
+        }
+        assert_eq!(chain.wheel_angle_deg(), held);
     }
 
     #[test]

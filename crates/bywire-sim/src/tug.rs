@@ -8,10 +8,11 @@
 //!   the ECU;
 //! - bus 2 (drives, CANopen, 1 Mbit/s): the ECU as NMT master of four steering drives and four
 //!   wheel drives (CiA 402 devices whose motors are the plants), with their controllers'
-//!   acceptance filters;
+//!   acceptance filters; on the redundant tug, four backup steering valve drivers too;
 //! - bus 3 (sensors, 500 kbit/s): the IMU and the I/O node (hub encoders, the steering
 //!   sensors' second tracks);
-//! - the plants: steering chains, wheel drives and brakes, battery, chassis.
+//! - the plants: steering chains (on the redundant tug with a backup valve in parallel),
+//!   wheel drives and brakes, battery, chassis.
 //!
 //! This file is wiring: nodes, plants and faults applied at the edges (a node's output
 //! dropped, a bus's frames tampered with, a plant or input value changed). Every node is the
@@ -21,7 +22,7 @@
 
 use core::time::Duration;
 
-use bywire_canopen::cia402::{self, Drive, Mode};
+use bywire_canopen::cia402::{self, Drive, Mode, State};
 use bywire_canopen::device::Device;
 use bywire_control::kinematics::{Point, Pose};
 use bywire_control::path::Path;
@@ -32,7 +33,9 @@ use bywire_core::{Frame, Id, Timestamp};
 use bywire_net::network::{BusIndex, Network, NodeHandle, NodeKey};
 use bywire_net::sim::{BusEvent, NodeId};
 use bywire_net::Filtering;
+use bywire_tug::backup_steering::{self, SteeringPair};
 use bywire_tug::diagnostics;
+use bywire_tug::drives::BACKUP_STEERING_NODES;
 use bywire_tug::duplex::TugDuplexWire;
 use bywire_tug::ecu::{
     self, Geometry as EcuGeometry, StatusInputs, VehicleControlEcu, DRIVE_UNITS_PER_M,
@@ -47,6 +50,7 @@ use bywire_tug::messages::{
 use bywire_tug::secured::{self, TugWire};
 use bywire_vehicle::ads::{Ads, AdsConfig};
 use bywire_vehicle::arbitration::{ArbiterConfig, Duplex, FencedPair, Side};
+use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::SteeringMode;
 use bywire_vehicle::command::{DegradationLevel, FaultClass};
 use bywire_vehicle::fail_operational::VotedRoles;
@@ -61,7 +65,7 @@ pub use crate::bus::TugBus;
 use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
 use crate::event::{Happening, SimEvent};
-use crate::fault::Fault;
+use crate::fault::{ActuatorFailure, Fault};
 use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
 use crate::nodes::{
     self, AngleModule, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController,
@@ -90,6 +94,8 @@ struct FailOperationalSeen {
     control: Option<Side>,
     level: (DegradationLevel, Option<FaultClass>),
     fenced: [bool; 2],
+    /// Which actuator steers each corner.
+    steering: [InCharge; 4],
 }
 
 impl Default for FailOperationalSeen {
@@ -98,6 +104,7 @@ impl Default for FailOperationalSeen {
             control: Some(Side::A),
             level: (DegradationLevel::Nominal, None),
             fenced: [false; 2],
+            steering: [InCharge::Primary; 4],
         }
     }
 }
@@ -165,6 +172,8 @@ struct Corner {
     chain: SteeringChain,
     wheel: WheelDrive,
     distance: f64,
+    /// Its steering actuators' failures: the primary's, the backup valve's.
+    actuator: [Option<ActuatorFailure>; 2],
 }
 
 /// The redundant tug's two vehicle control ECUs and the fence line between them.
@@ -207,6 +216,15 @@ impl Ecus {
     }
 }
 
+/// What the redundant tug's profile declares: its ECUs' arbitration, its voted angles, its
+/// backup steering.
+#[derive(Clone, Copy)]
+struct Redundant {
+    arbitration: ArbiterConfig,
+    voted: Option<[TripleConfig; 4]>,
+    steering: Option<[SteeringPair; 4]>,
+}
+
 /// The tug's nodes, as its network holds them.
 struct TugNodes {
     ads: NodeHandle<AdsDriver>,
@@ -221,6 +239,8 @@ struct TugNodes {
     steer: [NodeHandle<Device<Drive>>; 4],
     /// Wheel drives FL..RR.
     drive: [NodeHandle<Device<Drive>>; 4],
+    /// The redundant tug's backup steering valve drivers FL..RR.
+    steer_backup: Option<[NodeHandle<Device<Drive>>; 4]>,
     attacker: NodeHandle<Attacker>,
 }
 
@@ -322,7 +342,7 @@ impl TugNodes {
         mission: Mission,
         (ads_config, ecu_config): (AdsConfig, SupervisorConfig),
         geometry: EcuGeometry,
-        redundancy: Option<(ArbiterConfig, Option<[TripleConfig; 4]>)>,
+        redundancy: Option<Redundant>,
     ) -> Result<TugNodes, TugError> {
         // Every node of the secured variant starts its freshness at 1: a new key.
         let key = bywire_secoc::Key::new(SIM_KEY);
@@ -342,11 +362,18 @@ impl TugNodes {
             None => {
                 Ecus::One(net.add_node(VehicleControlEcu::with_wire(ecu_config, geometry, wire()?)))
             }
-            Some((config, voted)) => {
+            Some(Redundant {
+                arbitration: config,
+                voted,
+                steering,
+            }) => {
                 let half = |side| -> Result<_, TugError> {
                     let mut node = VehicleControlEcu::with_wire(ecu_config, geometry, wire()?);
                     if let Some(voted) = voted {
                         node = node.with_voted_angles(voted);
+                    }
+                    if let Some(pairs) = steering {
+                        node = node.with_backup_steering(pairs);
                     }
                     let duplex = TugDuplexWire::default();
                     Ok(Duplex::new(side, config, node, duplex, Timestamp::ZERO))
@@ -365,6 +392,9 @@ impl TugNodes {
             angle_modules: redundancy.map(|_| [0, 1].map(|m| net.add_node(nodes::angle_module(m)))),
             steer: STEERING_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfilePosition))),
             drive: DRIVE_NODES.map(|n| net.add_node(drive_device(n, Mode::ProfileVelocity))),
+            steer_backup: redundancy
+                .and_then(|r| r.steering)
+                .map(|pairs| pairs.map(|p| net.add_node(valve_driver(p.backup)))),
             attacker: net.add_node(Attacker::new()),
         })
     }
@@ -419,6 +449,18 @@ impl TugNodes {
                 wire(net, node.key(), Port::MAIN, 1, &format!("drive 0x{id:02X}"));
             }
         }
+        for (id, node) in BACKUP_STEERING_NODES
+            .iter()
+            .zip(self.steer_backup.iter().flatten())
+        {
+            wire(
+                net,
+                node.key(),
+                Port::MAIN,
+                1,
+                &format!("valve driver 0x{id:02X}"),
+            );
+        }
         (names, ecu_bus1)
     }
 
@@ -429,6 +471,12 @@ impl TugNodes {
         }
         for (id, node) in DRIVE_NODES.iter().zip(self.drive) {
             net.set_filtering(node, Port::MAIN, drive_filtering(*id));
+        }
+        for (id, node) in BACKUP_STEERING_NODES
+            .iter()
+            .zip(self.steer_backup.iter().flatten())
+        {
+            net.set_filtering(*node, Port::MAIN, drive_filtering(*id));
         }
         let commands = [
             EmergencyBrake::ID,
@@ -578,6 +626,7 @@ impl Tug {
         .map_err(|e| TugError::Profile(e.to_string()))?;
         // The redundant tug: its ECUs' arbitration, and each corner's angle voted when the
         // profile declares the four.
+        let steering = backup_steering::pairs_of(&loaded).map_err(TugError::Profile)?;
         let redundancy = loaded.profile.fail_operational.as_ref().and_then(|f| {
             let voted: Option<[TripleConfig; 4]> = f
                 .voted
@@ -586,7 +635,11 @@ impl Tug {
                 .collect::<Vec<_>>()
                 .try_into()
                 .ok();
-            f.control.as_ref().map(|c| (c.config(), voted))
+            f.control.as_ref().map(|c| Redundant {
+                arbitration: c.config(),
+                voted,
+                steering,
+            })
         });
         let (ads_config, mut ecu_config) = (loaded.ads_config(), loaded.supervisor_config());
         // Commands come on bus 1 and bus 1b: a copy half a cycle overdue leaves the other bus
@@ -639,6 +692,7 @@ impl Tug {
                 chain: SteeringChain::new(SteeringParams::default()),
                 wheel: WheelDrive::new(DriveParams::default()),
                 distance: 0.0,
+                actuator: [None; 2],
             })
             .collect();
         Ok(Tug {
@@ -777,6 +831,19 @@ impl Tug {
             Fault::EcuWrongOutput(side) => {
                 self.with_ecu(side, |ecu| ecu.corrupt_trim(0, WRONG_TRIM_DEG));
             }
+            Fault::SteeringActuator {
+                corner,
+                backup,
+                failure,
+            } => {
+                if let Some(slot) = self
+                    .corners
+                    .get_mut(corner)
+                    .and_then(|c| c.actuator.get_mut(usize::from(backup)))
+                {
+                    *slot = Some(failure);
+                }
+            }
             Fault::Repair => self.repair(now),
             Fault::AdsSilence
             | Fault::Estop
@@ -840,9 +907,25 @@ impl Tug {
             .degradation();
         let level = (latch.level(), latch.reason().map(|f| f.class));
         let fenced = [Side::A, Side::B].map(|side| pair.half(side).arbiter().fences_partner());
+        let steering = pair
+            .half(control.unwrap_or(Side::A))
+            .node()
+            .steering_in_charge();
         if control != self.fail_operational.control {
             self.fail_operational.control = control;
             self.record(Happening::Control(control));
+        }
+        // With neither in control, neither ECU's actuators are commanded: nothing to show.
+        if control.is_some() && steering != self.fail_operational.steering {
+            let before = core::mem::replace(&mut self.fail_operational.steering, steering);
+            for (corner, (now, was)) in steering.into_iter().zip(before).enumerate() {
+                if now != was {
+                    self.record(Happening::Steering {
+                        corner,
+                        in_charge: now,
+                    });
+                }
+            }
         }
         // With neither in control, no ECU reports a level: the last one stands.
         if control.is_some() && level != self.fail_operational.level {
@@ -1074,6 +1157,24 @@ impl Tug {
                 let silent = self.is_active(Fault::DriveSilence(*id));
                 self.net.drop_output(node, silent);
             }
+            // A steering actuator's drive that lost its supply is silent too.
+            let backups = self.nodes.steer_backup.iter().flatten();
+            let actuators = self
+                .nodes
+                .steer
+                .iter()
+                .zip(backups.map(Some).chain([None; 4]));
+            for (corner, (primary, backup)) in self.corners.iter().zip(actuators) {
+                let [p, b] = corner
+                    .actuator
+                    .map(|f| f == Some(ActuatorFailure::DriveLost));
+                if p {
+                    self.net.drop_output(*primary, true);
+                }
+                if let Some(backup) = backup {
+                    self.net.drop_output(*backup, b);
+                }
+            }
         }
         let takeover_torque = if self.is_active(Fault::DriverTakeover) {
             8.0
@@ -1212,6 +1313,15 @@ impl Tug {
                 }
                 Fault::EcuWrongOutput(side) => {
                     self.with_ecu(side, |ecu| ecu.corrupt_trim(0, -WRONG_TRIM_DEG));
+                }
+                Fault::SteeringActuator { corner, backup, .. } => {
+                    if let Some(slot) = self
+                        .corners
+                        .get_mut(corner)
+                        .and_then(|c| c.actuator.get_mut(usize::from(backup)))
+                    {
+                        *slot = None;
+                    }
                 }
                 _ => self.set_tampering(fault, false),
             }
@@ -1440,13 +1550,21 @@ impl Tug {
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
         let devices = self.nodes.steer.iter().zip(&self.nodes.drive);
-        for (((corner, (&steer, &drive)), input), speed) in self
+        let backups = self.nodes.steer_backup;
+        for ((((index, corner), (&steer, &drive)), input), speed) in self
             .corners
             .iter_mut()
+            .enumerate()
             .zip(devices)
             .zip(inputs.iter_mut())
             .zip(speeds)
         {
+            // The backup valve's rate, from its driver's demand (the plain tug has none).
+            let backup = backups.and_then(|b| b.get(index).copied());
+            let backup_rate = match backup {
+                Some(valve) => backup_valve_rate(&mut self.net, valve, corner.actuator[1]),
+                None => 0.0,
+            };
             // Steering: the drive's velocity demand (a wheel rate) becomes the valve shaft's
             // speed command. The linkage turns the wheel faster per millimetre of stroke as the
             // angle grows (angle = asin(stroke / arm)), so the drive's output stage scales by
@@ -1460,9 +1578,22 @@ impl Tug {
                 let max_rate = 19.0 * STEERING_UNITS_PER_DEG;
                 let measured = drive.motor().position / STEERING_UNITS_PER_DEG;
                 let linkage = libm::cos(measured.clamp(-75.0, 75.0).to_radians());
-                let command = drive.demand() / max_rate * linkage;
+                let mut command = drive.demand() / max_rate * linkage;
+                if let Some(failure) = corner.actuator[0] {
+                    command = match failure {
+                        ActuatorFailure::Stuck => {
+                            corner.chain.seize();
+                            0.0
+                        }
+                        // Full one way while its power stage is on.
+                        ActuatorFailure::Runaway if drive.state() == State::OperationEnabled => 1.0,
+                        ActuatorFailure::Runaway | ActuatorFailure::DriveLost => 0.0,
+                    };
+                }
                 let before = corner.chain.wheel_angle_deg();
-                corner.chain.step(dt, command, rolling);
+                corner
+                    .chain
+                    .step_with_backup(dt, command, rolling, backup_rate);
                 let reading = corner.chain.sensor_deg(rng);
                 let rate = (corner.chain.wheel_angle_deg() - before) / dt;
                 drive.set_actual(
@@ -1539,9 +1670,45 @@ fn feed_angle_modules(
     }
 }
 
+/// A backup valve's rate, °/s: its driver's demand, or what a failure makes of it (the
+/// spool stuck closed or open, its driver unpowered); the driver told the rate it meters.
+fn backup_valve_rate(
+    net: &mut Network,
+    valve: NodeHandle<Device<Drive>>,
+    failure: Option<ActuatorFailure>,
+) -> f64 {
+    let mut rate = 0.0;
+    net.feed(valve, |device: &mut Device<Drive>| {
+        let driver = &mut device.app_mut().0;
+        let demand = driver.demand();
+        rate = match failure {
+            None => demand / STEERING_UNITS_PER_DEG,
+            Some(ActuatorFailure::Runaway) => VALVE_MAX_RATE,
+            Some(ActuatorFailure::Stuck | ActuatorFailure::DriveLost) => 0.0,
+        };
+        driver.set_actual(0.0, rate * STEERING_UNITS_PER_DEG)
+    });
+    rate
+}
+
 /// The body's speed over the ground, m/s.
 fn speed_of(chassis: &Chassis) -> f64 {
     libm::hypot(chassis.twist().vx, chassis.twist().vy)
+}
+
+/// The backup valve's largest rate, °/s (its spool wide open).
+const VALVE_MAX_RATE: f64 = 20.0;
+
+/// A backup steering valve driver: a drive in profile velocity whose velocity is the wheel
+/// rate its valve meters (up to 20°/s, reached in 0.1 s).
+fn valve_driver(node: u8) -> Device<Drive> {
+    let mut device = drive_device(node, Mode::ProfileVelocity);
+    let od = device.od_mut();
+    let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, 2_000);
+    let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, 20_000);
+    let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, 20_000);
+    let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, 40_000);
+    device
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {

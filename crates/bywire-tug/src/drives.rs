@@ -11,3 +11,6 @@ pub const DRIVE_NODES: [u8; 4] = [0x21, 0x22, 0x23, 0x24];
 pub const STEERING_UNITS_PER_DEG: f64 = 100.0;
 /// Wheel drives count in mm/s and mm.
 pub const DRIVE_UNITS_PER_M: f64 = 1000.0;
+/// The redundant tug's backup steering valve drivers FL, FR, RL, RR (counting wheel rates in
+/// the steering drives' units).
+pub const BACKUP_STEERING_NODES: [u8; 4] = [0x31, 0x32, 0x33, 0x34];

@@ -32,6 +32,7 @@ use bywire_core::node::{Node, Port};
 use bywire_core::num::round_to_i32;
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Id, Timestamp};
+use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
 use bywire_vehicle::degradation::Fault;
 use bywire_vehicle::redundancy::Channel;
@@ -41,6 +42,7 @@ use bywire_vehicle::wire::VehicleWire;
 
 use bywire_core::frame::ErrorClass;
 
+use crate::backup_steering::{BackupSteering, PairChange, SteeringPair};
 use crate::diagnostics::{self, DiagnosticRequest, Diagnostics, Observation};
 use crate::messages::{
     self, Battery as BatteryMessage, SteeringAngleSensors, SteeringAnglesB, SteeringAnglesC,
@@ -185,7 +187,15 @@ pub struct VehicleControlEcu {
     /// The redundant tug: each corner's angle voted 2-out-of-3 (the potentiometer's second
     /// track, modules B and C).
     voted: Option<[TripleVoter; 4]>,
+    /// ... and the values of the last vote (`None`: no vote, or none to trust).
+    voted_angles: [Option<f64>; 4],
+    /// The redundant tug: each corner's backup steering valve and its judge.
+    backup: Option<BackupSteering>,
 }
+
+/// The degradation latch's source numbers of the backup steering's faults: this plus the
+/// corner (an ECU's own standby loss is source 0).
+const BACKUP_SOURCE: u8 = 0x10;
 
 /// The raw value modules B and C send for a corner without a reading.
 const NO_READING: u64 = 0x800;
@@ -240,6 +250,8 @@ impl VehicleControlEcu {
             calibration: None,
             booting_until: None,
             voted: None,
+            voted_angles: [None; 4],
+            backup: None,
         }
     }
 
@@ -250,6 +262,24 @@ impl VehicleControlEcu {
     pub fn with_voted_angles(mut self, configs: [TripleConfig; 4]) -> Self {
         self.voted = Some(configs.map(|c| TripleVoter::new(c, Timestamp::ZERO)));
         self
+    }
+
+    /// The same ECU with a backup steering valve at each corner (FL, FR, RL, RR), judged by
+    /// the voted angles' rate (give [`Self::with_voted_angles`] too: without a vote no pair is
+    /// judged, and a lost primary stops the tug as on the plain tug).
+    pub fn with_backup_steering(mut self, pairs: [SteeringPair; 4]) -> Self {
+        let backup = BackupSteering::new(pairs, Timestamp::ZERO);
+        backup.add_drivers(&mut self.master);
+        self.backup = Some(backup);
+        self
+    }
+
+    /// Which actuator steers each corner (the plain tug: always the primary).
+    pub fn steering_in_charge(&self) -> [InCharge; 4] {
+        match &self.backup {
+            Some(backup) => [0, 1, 2, 3].map(|corner| backup.in_charge(corner)),
+            None => [InCharge::Primary; 4],
+        }
     }
 
     /// Vote each corner's angle now: faults to the latch (each channel out, each corner
@@ -284,6 +314,42 @@ impl VehicleControlEcu {
         }
         self.plausibility
             .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
+        self.voted_angles = angles;
+        if let Some(backup) = self.backup.as_mut() {
+            backup.sample(now, angles);
+        }
+    }
+
+    /// The backup steering's step (the redundant tug): each corner's pair judged and
+    /// commanded, a change reported to the degradation latch — the backup taking over, the
+    /// backup failing too, an idle backup lost. Out of the poll's line: the plain tug has none.
+    #[inline(never)]
+    fn steer_backup(&mut self, now: Timestamp, a: &Actuators) {
+        let Some(backup) = self.backup.as_mut() else {
+            return;
+        };
+        let targets = self.wheel_targets.map(|w| w.angle.to_degrees());
+        let steering_on = a.steering_enabled || a.motors_enabled;
+        let changes = backup.step(
+            now,
+            &mut self.master,
+            (targets, self.voted_angles),
+            steering_on,
+        );
+        for (corner, change) in (0u8..).zip(changes) {
+            let class = match change {
+                Some(PairChange::InCharge(InCharge::Backup)) => FaultClass::ActuatorBackup,
+                Some(PairChange::InCharge(InCharge::Neither)) => FaultClass::ActuatorLost,
+                Some(PairChange::BackupLost) => FaultClass::StandbyLost,
+                Some(PairChange::InCharge(InCharge::Primary)) | None => continue,
+            };
+            self.supervisor.report_fault(Fault {
+                class,
+                // The ECU standby's own loss is source 0.
+                source: BACKUP_SOURCE + corner,
+                at: now,
+            });
+        }
     }
 
     /// The diagnostics: the UDS server with the DTC memory.
@@ -315,6 +381,12 @@ impl VehicleControlEcu {
         fresh.voted = self
             .voted
             .map(|voters| voters.map(|voter| TripleVoter::new(voter.config(), now)));
+        if let Some(backup) = &self.backup {
+            let mut backup = backup.clone();
+            backup.reset(now);
+            backup.add_drivers(&mut fresh.master);
+            fresh.backup = Some(backup);
+        }
         fresh.next_report = now.saturating_add(BOOT_TIME);
         *self = fresh;
     }
@@ -337,6 +409,11 @@ impl VehicleControlEcu {
             for voter in voters {
                 voter.reset(now);
             }
+        }
+        if let (true, Some(backup)) = (reset, self.backup.as_mut()) {
+            backup.reset(now);
+            // The primaries enabled again with the next commands.
+            self.last_commands = None;
         }
         reset
     }
@@ -376,7 +453,11 @@ impl VehicleControlEcu {
             let accepted = self.plausibility.reset(now, first);
             self.push(now, EcuEvent::SteeringReset { accepted });
         }
-        for node in DRIVE_NODES.iter().chain(&STEERING_NODES) {
+        let backups = self
+            .backup
+            .as_ref()
+            .map_or([0; 4], BackupSteering::backup_nodes);
+        for node in DRIVE_NODES.iter().chain(&STEERING_NODES).chain(&backups) {
             if let Some(Controlled::Drive(d)) = self.master.controlled(*node) {
                 d.acknowledge();
             }
@@ -450,11 +531,23 @@ impl VehicleControlEcu {
     }
 
     /// The steering sensors' first tracks, as the steering drives report them, degrees.
+    /// A corner the backup steers reads its voted angle in the first track's place (its
+    /// drive, off or lost, reports nothing current), the trim added as the track has it.
     pub fn first_tracks(&mut self) -> [f64; 4] {
         let mut angles = [0.0; 4];
-        for (angle, steer) in angles.iter_mut().zip(STEERING_NODES) {
-            if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
-                *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+        for (corner, (angle, steer)) in angles.iter_mut().zip(STEERING_NODES).enumerate() {
+            let backup = self.backup.as_ref();
+            let voted = self.voted_angles.get(corner).copied().flatten();
+            let offset = self.offsets.get(corner).copied().unwrap_or(0.0);
+            match (backup.map(|b| b.in_charge(corner)), voted) {
+                (Some(InCharge::Backup | InCharge::Neither), Some(voted)) => {
+                    *angle = voted + offset;
+                }
+                _ => {
+                    if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
+                        *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
+                    }
+                }
             }
         }
         angles
@@ -535,8 +628,12 @@ impl VehicleControlEcu {
     /// The drives' stop and the plausibility check, then the eight setpoints from the
     /// actuators through the 4WS kinematics.
     fn command_drives(&mut self, now: Timestamp, a: &Actuators, first_tracks: [f64; 4]) {
+        // A drive the backup steering answers for is its to judge.
+        let backup = self.backup.as_ref();
         let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).copied().find(|node| {
-            matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+            let answered = backup.is_some_and(|b| b.answers_for(*node));
+            !answered
+                && matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
         });
         if stopped.is_some() != self.drives_lost {
             self.drives_lost = stopped.is_some();
@@ -860,6 +957,9 @@ impl Node for VehicleControlEcu {
         // speeds after the master's poll, which may stop a drive).
         let first_tracks = self.first_tracks();
         self.command_drives(now, &actuators, first_tracks);
+        if self.backup.is_some() {
+            self.steer_backup(now, &actuators);
+        }
         self.master.poll(now, &mut |_, frame| out(BUS2, frame));
         self.take_master_events(now);
         let speeds = self.wheel_speeds();

@@ -12,6 +12,7 @@
 //! - [`secured`]: its secured variant — the command path authenticated (SecOC profile 1) in
 //!   CAN FD frames, with the figures that chose FD over a companion frame;
 //! - [`plausibility`]: the ECU's check of each corner's two steering-sensor tracks;
+//! - [`backup_steering`]: the redundant tug's backup steering valves and their judge;
 //! - [`ecu`]: the vehicle control ECU as one node on its four buses — the supervisor, the
 //!   CANopen master of the eight drives, the plausibility check, the 4WS mapping, its reports;
 //! - [`diagnostics`]: the ECU's UDS server — its faults as DTCs with snapshots, its DIDs, the
@@ -30,6 +31,7 @@
 //! assert_eq!(messages::command_of(&AdsToVehicleControl(payload)), Some(command));
 //! ```
 
+pub mod backup_steering;
 pub mod diagnostics;
 pub mod drives;
 pub mod duplex;

@@ -108,3 +108,38 @@ fn setpoints_agree_within_the_tolerance_and_other_frames_are_not_compared() {
     assert_eq!(wire.agree(BUS2, &sync, &sync), None);
     assert_eq!(wire.agree(Port(0), &steer(10.0), &steer(30.0)), None);
 }
+
+#[test]
+fn the_profile_declares_a_backup_valve_at_each_corner_and_a_wrong_pairing_is_refused() {
+    let loaded = bywire_tug::redundant_profile().unwrap();
+    let pairs = bywire_tug::backup_steering::pairs_of(&loaded)
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        pairs.map(|p| (p.primary, p.backup)),
+        [(0x11, 0x31), (0x12, 0x32), (0x13, 0x33), (0x14, 0x34)]
+    );
+    assert_eq!(
+        pairs[0].check.heartbeat_timeout,
+        std::time::Duration::from_millis(60)
+    );
+    // The plain tug declares none.
+    let plain = bywire_tug::profile().unwrap();
+    assert_eq!(bywire_tug::backup_steering::pairs_of(&plain).unwrap(), None);
+    // A corner judged by another corner's angle is not the tug's pairing.
+    let text = format!(
+        "{}\n{}",
+        bywire_tug::PROFILE,
+        bywire_tug::REDUNDANCY.replacen(
+            "measured = { voted = \"angle-fr\" }",
+            "measured = { voted = \"angle-rr\" }",
+            1
+        )
+    );
+    let crossed = bywire_vehicle::profile::Profile::parse("crossed", &text, |_| {
+        Ok(bywire_tug::messages::DBC.to_string())
+    })
+    .unwrap();
+    let err = bywire_tug::backup_steering::pairs_of(&crossed).unwrap_err();
+    assert!(err.starts_with("fail_operational.actuators[1]:"), "{err}");
+}

@@ -425,6 +425,22 @@ fn ros2_vehicle_commands_and_reports_the_lights() {
     assert!(per_second["turn"].as_u64() >= Some(20), "{per_second}");
 }
 
+/// The same drive with the redundant tug's profile: its degradation report reaches the ROS
+/// side as `/vehicle/status/degradation`, at the reports' rate, nominal while nothing fails.
+#[test]
+fn ros2_vehicle_reports_the_degradation_level() {
+    if !inside_lonet("ros2_vehicle_reports_the_degradation_level") {
+        return;
+    }
+    let (seen, _) = drive_over_cyclone_dds("reference-tug-redundant", &["degradation"]);
+    assert_eq!(seen["degradation"], "nominal", "{seen}");
+    let per_second = &seen["per_second"];
+    assert!(
+        per_second["degradation"].as_u64() >= Some(20),
+        "{per_second}"
+    );
+}
+
 /// `bywire ros2 vehicle --profile PROFILE` with its simulated vehicle, driven by
 /// `ros2_vehicle_peer.py PEER_ARGS`, checked as above; what the peer saw and stderr.
 fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) {

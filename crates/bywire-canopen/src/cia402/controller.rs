@@ -91,10 +91,16 @@ pub struct DriveController {
     stopped: StopLatch,
     statusword: Option<u16>,
     last_status: Option<Timestamp>,
+    /// When its process data (either TPDO) last came.
+    last_heard: Option<Timestamp>,
     status_timeout: Duration,
     position_actual: i32,
     velocity_actual: i32,
     fault_reset_phase: bool,
+    /// Acknowledged while the drive reports Fault: since when (its first poll after) its
+    /// fault is being reset. A Fault statusword stops the drive again only once the reset has
+    /// had the status timeout to take.
+    resetting: Option<Option<Timestamp>>,
     set_point_toggle: bool,
 }
 
@@ -110,10 +116,12 @@ impl DriveController {
             stopped: StopLatch::default(),
             statusword: None,
             last_status: None,
+            last_heard: None,
             status_timeout,
             position_actual: 0,
             velocity_actual: 0,
             fault_reset_phase: false,
+            resetting: None,
             set_point_toggle: false,
         }
     }
@@ -162,9 +170,16 @@ impl DriveController {
         self.stopped.reason()
     }
 
-    /// Release a stop: the drive may be walked back to Operation enabled (faults are reset).
+    /// Release a stop: the drive may be walked back to Operation enabled (faults are reset;
+    /// the statuswords that still report the fault meanwhile do not stop it again, for up to
+    /// the status timeout).
     pub fn acknowledge(&mut self) {
         self.stopped.acknowledge();
+        let faulted = matches!(
+            self.drive_state(),
+            Some(State::Fault | State::FaultReactionActive)
+        );
+        self.resetting = faulted.then_some(None);
     }
 
     /// The drive state its last statusword reported.
@@ -177,6 +192,12 @@ impl DriveController {
         (self.position_actual, self.velocity_actual)
     }
 
+    /// When the drive's process data last came (`None`: never): a liveness finer than its
+    /// heartbeat when its actual values come at every SYNC.
+    pub fn last_heard(&self) -> Option<Timestamp> {
+        self.last_heard
+    }
+
     /// Take in a frame: the drive's TPDOs and emergencies.
     pub fn on_frame(&mut self, now: Timestamp, frame: &Frame) {
         let node = u16::from(self.node);
@@ -185,16 +206,27 @@ impl DriveController {
                 let statusword = u16::from_le_bytes([*lo, *hi]);
                 self.statusword = Some(statusword);
                 self.last_status = Some(now);
-                if matches!(
+                self.last_heard = Some(now);
+                let faulted = matches!(
                     State::from_statusword(statusword),
                     Some(State::Fault | State::FaultReactionActive)
-                ) {
+                );
+                let reset_takes = match self.resetting {
+                    Some(Some(since)) => now < since.saturating_add(self.status_timeout),
+                    Some(None) => true,
+                    None => false,
+                };
+                if !faulted {
+                    self.resetting = None;
+                } else if !reset_takes {
+                    self.resetting = None;
                     self.stop(StopReason::Fault);
                 }
             }
             (Some(id), [a, b, c, d, e, f, g, h]) if id == 0x280 + node => {
                 self.position_actual = i32::from_le_bytes([*a, *b, *c, *d]);
                 self.velocity_actual = i32::from_le_bytes([*e, *f, *g, *h]);
+                self.last_heard = Some(now);
             }
             _ => self.stopped.on_emergency(self.node, frame),
         }
@@ -255,6 +287,9 @@ impl DriveController {
 
     /// One control cycle: check the statusword's age, then send RPDO1 and RPDO2.
     pub fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
+        if self.resetting == Some(None) {
+            self.resetting = Some(Some(now));
+        }
         if self.enable
             && self
                 .last_status

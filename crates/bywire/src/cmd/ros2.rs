@@ -64,7 +64,9 @@ In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle
      autonomous; 4 disengages).
 Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,
      joint_states, steering_mode} at --rate, from fresh feedback only, and
-     {turn_indicators_status, hazard_lights_status} where the profile's [state] has them.
+     {turn_indicators_status, hazard_lights_status} where the profile's [state] has them,
+     and degradation (std_msgs/String: the level and its reason, e.g. \"minimal-risk
+     (actuator-backup)\") where the profile declares [fail_operational.report].
      control_mode is DISENGAGED (5) after an E-stop, and while the vehicle's watchdog brakes
      (full braking, or awaiting a re-engage): engage again to drive.
 Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)

@@ -42,7 +42,7 @@ pub struct Args {
     #[arg(long)]
     secoc: bool,
     /// Stop after this many simulated seconds at most.
-    #[arg(long, default_value_t = 300.0, value_parser = crate::support::numbers::positive_seconds)]
+    #[arg(long, default_value_t = 600.0, value_parser = crate::support::numbers::positive_seconds)]
     max_seconds: f64,
     /// No live view, even in a terminal.
     #[arg(long)]

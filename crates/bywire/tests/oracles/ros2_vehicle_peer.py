@@ -20,6 +20,7 @@ from ros2_types import (Control, ControlModeCommandRequest, ControlModeCommandRe
                         VelocityReport, control, participant, reader, stamp, writer)
 
 lights = sys.argv[1:] == ["lights"]
+degradation = sys.argv[1:] == ["degradation"]
 
 dp = participant()
 control_cmd = writer(dp, "rt/control/command/control_cmd", Control, depth=1)
@@ -43,6 +44,8 @@ if lights:
                         depth=1)
     topics["turn"] = ("rt/vehicle/status/turn_indicators_status", TurnIndicatorsReport)
     topics["hazard"] = ("rt/vehicle/status/hazard_lights_status", HazardLightsReport)
+if degradation:
+    topics["degradation"] = ("rt/vehicle/status/degradation", StringMsg)
 readers = {k: reader(dp, name, kind, depth=100) for k, (name, kind) in topics.items()}
 seen = {k: [] for k in topics}  # (time, sample)
 lock = threading.Lock()
@@ -181,6 +184,8 @@ try:
         turn_cmd.write(TurnIndicatorsCommand(stamp=stamp(0), command=7))
         time.sleep(0.3)
         result["after_bad_code"] = latest("turn").report
+    if degradation:
+        result["degradation"] = latest("degradation").data
     keep_driving(moving, 8)
     v, s, g = latest("velocity"), latest("steering"), latest("gear")
     j, sm = latest("joints"), latest("steering_mode")
