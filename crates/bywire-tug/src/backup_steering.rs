@@ -29,6 +29,9 @@ use crate::drives::STEERING_UNITS_PER_DEG;
 /// How far a wheel may be from its target before its actuator must move it, degrees: the
 /// position loop's rest band, wider than the sensors' noise.
 const REST_BAND_DEG: f64 = 0.5;
+/// How far past its target a wheel may swing on a step before moving on away from it is
+/// wrong, degrees (the drives overshoot a 20° step by up to 1.7°: their motor's lag).
+const OVERSHOOT_DEG: f64 = 2.5;
 /// The steering drives' profile: 20°/s at most, decelerating at 60°/s² (their dictionary's
 /// profile velocity and deceleration).
 const PRIMARY_PROFILE: (f64, f64) = (20.0, 60.0);
@@ -37,11 +40,12 @@ const PRIMARY_PROFILE: (f64, f64) = (20.0, 60.0);
 const BACKUP_PROFILE: (f64, f64) = (18.0, 60.0);
 /// The voted angles are sampled this often for the rate...
 const SAMPLE_PERIOD: Duration = Duration::from_millis(10);
-/// ... and the rate is taken over at least this long (a 10 ms difference of sensors with
-/// 0.05° of noise would be ±7°/s of noise).
-const RATE_WINDOW: Duration = Duration::from_millis(40);
+/// ... and the rate is taken over at least this long: the voted angle moves in steps of
+/// 0.1° (the angle modules' resolution), 1°/s over this window, below the check's "still"
+/// (over 40 ms a step would be 2.5°/s, and a stuck wheel would seem to move).
+const RATE_WINDOW: Duration = Duration::from_millis(100);
 /// Samples kept: the window and one period more.
-const SAMPLES: usize = 6;
+const SAMPLES: usize = 12;
 
 /// One corner's actuators as the profile declares them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,11 +132,13 @@ pub struct BackupSteering {
 }
 
 /// The rate toward the target for a wheel `error` degrees from it under the profile
-/// `(fastest, deceleration)`: the speed that deceleration stops from within the error beyond
-/// the rest band (none inside it).
+/// `(fastest, deceleration)`: the speed that deceleration stops from within the error (none
+/// inside the rest band).
 fn profile_rate(error: f64, (fastest, deceleration): (f64, f64)) -> f64 {
-    let beyond = (error.abs() - REST_BAND_DEG).max(0.0);
-    libm::sqrt(2.0 * deceleration * beyond)
+    if error.abs() <= REST_BAND_DEG {
+        return 0.0;
+    }
+    libm::sqrt(2.0 * deceleration * error.abs())
         .min(fastest)
         .copysign(error)
 }
@@ -252,6 +258,13 @@ impl BackupSteering {
                 InCharge::Backup | InCharge::Neither => BACKUP_PROFILE,
             };
             let asked = match (steering_on, angle) {
+                // Swinging past the target, within the overshoot, nothing is asked yet.
+                (true, Some(angle))
+                    if rate.is_some_and(|r| r * (target - angle) < 0.0)
+                        && (target - angle).abs() <= OVERSHOOT_DEG =>
+                {
+                    0.0
+                }
                 (true, Some(angle)) => profile_rate(target - angle, profile),
                 _ => 0.0,
             };
@@ -328,9 +341,9 @@ mod tests {
         let profile = (20.0, 60.0);
         assert_eq!(profile_rate(0.4, profile), 0.0);
         assert_eq!(profile_rate(-0.5, profile), 0.0);
-        // 1° beyond the band at 60°/s²: √120 °/s, which 60°/s² stops within that degree.
-        assert!((profile_rate(1.5, profile) - 120f64.sqrt()).abs() < 1e-12);
-        assert!((profile_rate(-1.5, profile) + 120f64.sqrt()).abs() < 1e-12);
+        // 1° off at 60°/s²: √120 °/s, which 60°/s² stops within that degree.
+        assert!((profile_rate(1.0, profile) - 120f64.sqrt()).abs() < 1e-12);
+        assert!((profile_rate(-1.0, profile) + 120f64.sqrt()).abs() < 1e-12);
         assert_eq!(profile_rate(30.0, profile), 20.0);
         assert_eq!(profile_rate(-30.0, profile), -20.0);
     }
@@ -351,17 +364,17 @@ mod tests {
         let mut steering = BackupSteering::new([pair; 4], Timestamp::ZERO);
         // 10°/s at the front left, still elsewhere, no vote at the rear right; samples every
         // 5 ms are taken every 10 ms.
-        for ms in (0u32..=30).step_by(5) {
+        for ms in (0u32..=90).step_by(5) {
             let t = f64::from(ms) / 1000.0;
             steering.sample(
                 Timestamp::from_millis(u64::from(ms)),
                 [Some(10.0 * t), Some(2.0), Some(-1.0), None],
             );
         }
-        assert_eq!(steering.rates(), [None; 4], "30 ms is short of the window");
+        assert_eq!(steering.rates(), [None; 4], "90 ms is short of the window");
         steering.sample(
-            Timestamp::from_millis(40),
-            [Some(0.4), Some(2.0), Some(-1.0), None],
+            Timestamp::from_millis(100),
+            [Some(1.0), Some(2.0), Some(-1.0), None],
         );
         let [fl, fr, rl, rr] = steering.rates();
         assert!((fl.unwrap() - 10.0).abs() < 1e-9, "{fl:?}");
