@@ -116,12 +116,6 @@ impl SteeringChain {
     /// Advance by `dt` seconds with the motor command (−1 … 1, the controller's output) while
     /// the tug rolls or not.
     pub fn step(&mut self, dt: f64, command: f64, rolling: bool) {
-        self.step_with_backup(dt, command, rolling, 0.0);
-    }
-
-    /// The same with the redundant tug's backup valve, in parallel with the orbital valve,
-    /// metering oil for `backup_rate` degrees per second of the wheel (its driver's demand).
-    pub fn step_with_backup(&mut self, dt: f64, command: f64, rolling: bool, backup_rate: f64) {
         let p = &self.params;
         let command = if command.is_finite() {
             command.clamp(-1.0, 1.0)
@@ -154,20 +148,41 @@ impl SteeringChain {
         } else {
             p.rod_area
         };
-        let mut speed = flow / area * self.shaft_rpm.signum();
-        if backup_rate != 0.0 && backup_rate.is_finite() && p.supply_bar > load {
-            // The wheel's rate through the linkage: stroke = arm × sin(angle).
-            speed += p.arm * libm::cos(self.angle_deg.to_radians()) * backup_rate.to_radians();
-        }
+        let speed = flow / area * self.shaft_rpm.signum();
         self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
+        self.update_angle();
+        if let SensorFault::Drift(rate) = self.fault {
+            self.drift += rate * dt;
+        }
+    }
+
+    /// The redundant tug's backup valve, in parallel with the orbital valve, over the same
+    /// `dt` after [`Self::step`]: it meters oil for `rate` degrees per second of the wheel
+    /// (its driver's demand), if the supply can overcome the load.
+    pub fn backup_flow(&mut self, dt: f64, rate: f64, rolling: bool) {
+        let p = &self.params;
+        let load = if rolling {
+            p.load_rolling_bar
+        } else {
+            p.load_standstill_bar
+        };
+        if !rate.is_finite() || p.supply_bar <= load {
+            return;
+        }
+        // The wheel's rate through the linkage: stroke = arm × sin(angle).
+        let speed = p.arm * libm::cos(self.angle_deg.to_radians()) * rate.to_radians();
+        self.piston = (self.piston + speed * dt).clamp(-p.half_stroke, p.half_stroke);
+        self.update_angle();
+    }
+
+    /// The wheel's angle from the piston, worked out again if the piston moved.
+    fn update_angle(&mut self) {
+        let p = &self.params;
         // A piston at rest (the valve closed, as it mostly is) leaves the angle as it was.
         let angle_from = [self.piston.to_bits(), p.arm.to_bits()];
         if angle_from != self.angle_from {
             self.angle_from = angle_from;
             self.angle_deg = libm::asin((self.piston / p.arm).clamp(-1.0, 1.0)).to_degrees();
-        }
-        if let SensorFault::Drift(rate) = self.fault {
-            self.drift += rate * dt;
         }
     }
 
@@ -282,7 +297,8 @@ mod tests {
         let mut chain = SteeringChain::new(SteeringParams::default());
         for _ in 0..1000 {
             chain.seize();
-            chain.step_with_backup(0.001, 0.0, true, 5.0);
+            chain.step(0.001, 0.0, true);
+            chain.backup_flow(0.001, 5.0, true);
         }
         assert_eq!(chain.shaft_rpm(), 0.0);
         // 5°/s for a second, near 0° where the linkage is nearly linear.

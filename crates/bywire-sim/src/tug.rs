@@ -1550,21 +1550,18 @@ impl Tug {
         let mut inputs = [WheelInput::default(); 4];
         let mut power = 0.0;
         let devices = self.nodes.steer.iter().zip(&self.nodes.drive);
-        let backups = self.nodes.steer_backup;
-        for ((((index, corner), (&steer, &drive)), input), speed) in self
+        // The redundant tug's backup valves first: their oil, from their drivers' demands,
+        // moves the wheels with the primaries'.
+        if let Some(valves) = self.nodes.steer_backup {
+            backup_valves(&mut self.net, valves, &mut self.corners, (dt, rolling));
+        }
+        for (((corner, (&steer, &drive)), input), speed) in self
             .corners
             .iter_mut()
-            .enumerate()
             .zip(devices)
             .zip(inputs.iter_mut())
             .zip(speeds)
         {
-            // The backup valve's rate, from its driver's demand (the plain tug has none).
-            let backup = backups.and_then(|b| b.get(index).copied());
-            let backup_rate = match backup {
-                Some(valve) => backup_valve_rate(&mut self.net, valve, corner.actuator[1]),
-                None => 0.0,
-            };
             // Steering: the drive's velocity demand (a wheel rate) becomes the valve shaft's
             // speed command. The linkage turns the wheel faster per millimetre of stroke as the
             // angle grows (angle = asin(stroke / arm)), so the drive's output stage scales by
@@ -1591,9 +1588,7 @@ impl Tug {
                     };
                 }
                 let before = corner.chain.wheel_angle_deg();
-                corner
-                    .chain
-                    .step_with_backup(dt, command, rolling, backup_rate);
+                corner.chain.step(dt, command, rolling);
                 let reading = corner.chain.sensor_deg(rng);
                 let rate = (corner.chain.wheel_angle_deg() - before) / dt;
                 drive.set_actual(
@@ -1670,25 +1665,34 @@ fn feed_angle_modules(
     }
 }
 
-/// A backup valve's rate, °/s: its driver's demand, or what a failure makes of it (the
-/// spool stuck closed or open, its driver unpowered); the driver told the rate it meters.
-fn backup_valve_rate(
+/// The backup valves over the millisecond `dt`: each meters oil for its driver's demand, or
+/// what a failure makes of it (the spool stuck closed or open, its driver unpowered), into
+/// its corner's cylinder; each driver told the rate it meters. Out of the step's line: the
+/// plain tug has no backup valves.
+#[inline(never)]
+fn backup_valves(
     net: &mut Network,
-    valve: NodeHandle<Device<Drive>>,
-    failure: Option<ActuatorFailure>,
-) -> f64 {
-    let mut rate = 0.0;
-    net.feed(valve, |device: &mut Device<Drive>| {
-        let driver = &mut device.app_mut().0;
-        let demand = driver.demand();
-        rate = match failure {
-            None => demand / STEERING_UNITS_PER_DEG,
-            Some(ActuatorFailure::Runaway) => VALVE_MAX_RATE,
-            Some(ActuatorFailure::Stuck | ActuatorFailure::DriveLost) => 0.0,
-        };
-        driver.set_actual(0.0, rate * STEERING_UNITS_PER_DEG)
-    });
-    rate
+    valves: [NodeHandle<Device<Drive>>; 4],
+    corners: &mut [Corner],
+    (dt, rolling): (f64, bool),
+) {
+    for (valve, corner) in valves.into_iter().zip(corners) {
+        let failure = corner.actuator[1];
+        let mut rate = 0.0;
+        net.feed(valve, |device: &mut Device<Drive>| {
+            let driver = &mut device.app_mut().0;
+            let demand = driver.demand();
+            rate = match failure {
+                None => demand / STEERING_UNITS_PER_DEG,
+                Some(ActuatorFailure::Runaway) => VALVE_MAX_RATE,
+                Some(ActuatorFailure::Stuck | ActuatorFailure::DriveLost) => 0.0,
+            };
+            driver.set_actual(0.0, rate * STEERING_UNITS_PER_DEG)
+        });
+        if rate != 0.0 {
+            corner.chain.backup_flow(dt, rate, rolling);
+        }
+    }
 }
 
 /// The body's speed over the ground, m/s.

@@ -535,22 +535,36 @@ impl VehicleControlEcu {
     /// drive, off or lost, reports nothing current), the trim added as the track has it.
     pub fn first_tracks(&mut self) -> [f64; 4] {
         let mut angles = [0.0; 4];
-        for (corner, (angle, steer)) in angles.iter_mut().zip(STEERING_NODES).enumerate() {
-            let backup = self.backup.as_ref();
-            let voted = self.voted_angles.get(corner).copied().flatten();
-            let offset = self.offsets.get(corner).copied().unwrap_or(0.0);
-            match (backup.map(|b| b.in_charge(corner)), voted) {
-                (Some(InCharge::Backup | InCharge::Neither), Some(voted)) => {
-                    *angle = voted + offset;
-                }
-                _ => {
-                    if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
-                        *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
-                    }
-                }
+        for (angle, steer) in angles.iter_mut().zip(STEERING_NODES) {
+            if let Some(Controlled::Drive(d)) = self.master.controlled(steer) {
+                *angle = f64::from(d.actual().0) / STEERING_UNITS_PER_DEG;
             }
         }
+        if self.backup.is_some() {
+            self.voted_in_place_of_tracks(&mut angles);
+        }
         angles
+    }
+
+    /// The voted angles where the backup steers (out of the poll's line: the plain tug has
+    /// no backup).
+    #[inline(never)]
+    fn voted_in_place_of_tracks(&self, angles: &mut [f64; 4]) {
+        let Some(backup) = &self.backup else {
+            return;
+        };
+        for (corner, ((angle, voted), offset)) in angles
+            .iter_mut()
+            .zip(self.voted_angles)
+            .zip(self.offsets)
+            .enumerate()
+        {
+            if let (InCharge::Backup | InCharge::Neither, Some(voted)) =
+                (backup.in_charge(corner), voted)
+            {
+                *angle = voted + offset;
+            }
+        }
     }
 
     /// The wheels' speeds as the wheel drives report them, m/s. A drive the master has
@@ -631,9 +645,8 @@ impl VehicleControlEcu {
         // A drive the backup steering answers for is its to judge.
         let backup = self.backup.as_ref();
         let stopped = DRIVE_NODES.iter().chain(&STEERING_NODES).copied().find(|node| {
-            let answered = backup.is_some_and(|b| b.answers_for(*node));
-            !answered
-                && matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+            matches!(self.master.controlled(*node), Some(Controlled::Drive(d)) if d.stopped().is_some())
+                && !backup.is_some_and(|b| b.answers_for(*node))
         });
         if stopped.is_some() != self.drives_lost {
             self.drives_lost = stopped.is_some();

@@ -207,20 +207,21 @@ impl DriveController {
                 self.statusword = Some(statusword);
                 self.last_status = Some(now);
                 self.last_heard = Some(now);
-                let faulted = matches!(
+                if matches!(
                     State::from_statusword(statusword),
                     Some(State::Fault | State::FaultReactionActive)
-                );
-                let reset_takes = match self.resetting {
-                    Some(Some(since)) => now < since.saturating_add(self.status_timeout),
-                    Some(None) => true,
-                    None => false,
-                };
-                if !faulted {
+                ) {
+                    let reset_takes = match self.resetting {
+                        Some(Some(since)) => now < since.saturating_add(self.status_timeout),
+                        Some(None) => true,
+                        None => false,
+                    };
+                    if !reset_takes {
+                        self.resetting = None;
+                        self.stop(StopReason::Fault);
+                    }
+                } else if self.resetting.is_some() {
                     self.resetting = None;
-                } else if !reset_takes {
-                    self.resetting = None;
-                    self.stop(StopReason::Fault);
                 }
             }
             (Some(id), [a, b, c, d, e, f, g, h]) if id == 0x280 + node => {
