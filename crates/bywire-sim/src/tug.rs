@@ -1704,43 +1704,52 @@ fn speed_of(chassis: &Chassis) -> f64 {
 const VALVE_MAX_RATE: f64 = 20.0;
 
 /// A backup steering valve driver: a drive in profile velocity whose velocity is the wheel
-/// rate its valve meters (up to 20°/s, reached in 0.1 s).
+/// rate its valve meters (up to 20°/s, reached in 0.1 s). Its statusword at most every
+/// 10 ms and its emergencies every 100 ms (its state changes seldom): the drives bus carries
+/// twelve nodes on the redundant tug (the drives DBC declares these inhibit times).
 fn valve_driver(node: u8) -> Device<Drive> {
-    let mut device = drive_device(node, Mode::ProfileVelocity);
-    let od = device.od_mut();
-    let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, 2_000);
-    let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, 20_000);
-    let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, 20_000);
-    let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, 40_000);
-    device
+    let od = drive_dictionary(node, Mode::ProfileVelocity, (2_000, 20_000), (100, 1_000));
+    Device::new(node, od, Drive::new().with_external_motor())
 }
 
 fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
-    let mut od = cia402::drive_dictionary(node);
-    let (velocity, acceleration) = match mode {
+    let profile = match mode {
         // Steering: 20°/s, 60°/s².
         Mode::ProfilePosition | Mode::CyclicSynchronousPosition => (2_000, 6_000),
         // Wheels: 8 m/s, 1.5 m/s².
         Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => (8_000, 1_500),
     };
+    // The statusword (TPDO1) at most every 2 ms, emergencies at most every 10 ms (inhibit
+    // times, in 100 µs): what bounds the drives bus's worst-case response times
+    // (`dbc/reference-tug-drives.dbc` in bywire-tug declares them).
+    let od = drive_dictionary(node, mode, profile, (20, 100));
+    Device::new(node, od, Drive::new().with_external_motor())
+}
+
+/// A drive's dictionary: `mode` with its profile `(velocity, acceleration)`, its statusword's
+/// and emergencies' inhibit times (100 µs).
+fn drive_dictionary(
+    node: u8,
+    mode: Mode,
+    (velocity, acceleration): (i64, i64),
+    (status_inhibit, emergency_inhibit): (u16, u16),
+) -> bywire_canopen::od::ObjectDictionary {
+    let mut od = cia402::drive_dictionary(node);
     let _ = od.set_int(cia402::object::MODES, 0, i64::from(mode.code()));
     let _ = od.set_int(cia402::object::PROFILE_VELOCITY, 0, velocity);
     let _ = od.set_int(cia402::object::PROFILE_ACCELERATION, 0, acceleration);
     let _ = od.set_int(cia402::object::PROFILE_DECELERATION, 0, acceleration);
     let _ = od.set_int(cia402::object::QUICK_STOP_DECELERATION, 0, acceleration * 2);
-    // The actual values (TPDO2) sampled at every SYNC, so the master sees all eight drives
-    // at one instant each cycle.
+    // The actual values (TPDO2) sampled at every SYNC, so the master sees all the drives at
+    // one instant each cycle.
     let _ = od.set(0x1801, 2, &[1]);
-    // The statusword (TPDO1) at most every 2 ms, emergencies at most every 10 ms (inhibit
-    // times, in 100 µs): what bounds the drives bus's worst-case response times
-    // (`dbc/reference-tug-drives.dbc` in bywire-tug declares them).
-    let _ = od.set(0x1800, 3, &20u16.to_le_bytes());
-    let _ = od.set(0x1015, 0, &100u16.to_le_bytes());
+    let _ = od.set(0x1800, 3, &status_inhibit.to_le_bytes());
+    let _ = od.set(0x1015, 0, &emergency_inhibit.to_le_bytes());
     // Each drive watches the ECU's heartbeat: silence faults it.
     let _ = od.set(
         0x1016,
         1,
         &((u32::from(MASTER_NODE) << 16) | 300).to_le_bytes(),
     );
-    Device::new(node, od, Drive::new().with_external_motor())
+    od
 }

@@ -74,7 +74,9 @@ fn every_bus_stays_within_its_predicted_worst_case() {
     let bus1 = schedule(&vehicle, 500_000, sent_by(&["ADS", "VCU", "BMS", "SAFETY"]));
     let bus1b = schedule(&vehicle, 500_000, |m| m.name == "AdsToVehicle_Control");
     let bus3 = schedule(&vehicle, 500_000, sent_by(&["IMU", "IO"]));
-    let bus2 = schedule(&drives, 1_000_000, |_| true);
+    // The plain tug's drives: the redundant tug's backup valve drivers (SteerB1..4) are not
+    // on its bus.
+    let bus2 = schedule(&drives, 1_000_000, |m| !m.name.contains("SteerB"));
     for ((name, measured), schedule) in buses.iter().zip([&bus1, &bus2, &bus3, &bus1b]) {
         assert!(!measured.is_empty(), "{name} carried nothing");
         check(name, schedule, measured);
