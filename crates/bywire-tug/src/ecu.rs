@@ -189,6 +189,9 @@ pub struct VehicleControlEcu {
     voted: Option<[TripleVoter; 4]>,
     /// ... and the values of the last vote (`None`: no vote, or none to trust).
     voted_angles: [Option<f64>; 4],
+    /// The I/O node's angles came since the last vote: the backup steering samples the vote
+    /// then, so both ECUs of a pair sample at the same instants whenever they poll.
+    angles_arrived: bool,
     /// The redundant tug: each corner's backup steering valve and its judge.
     backup: Option<BackupSteering>,
 }
@@ -251,6 +254,7 @@ impl VehicleControlEcu {
             booting_until: None,
             voted: None,
             voted_angles: [None; 4],
+            angles_arrived: false,
             backup: None,
         }
     }
@@ -315,9 +319,10 @@ impl VehicleControlEcu {
         self.plausibility
             .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
         self.voted_angles = angles;
-        if let Some(backup) = self.backup.as_mut() {
+        if let (Some(backup), true) = (self.backup.as_mut(), self.angles_arrived) {
             backup.sample(now, angles);
         }
+        self.angles_arrived = false;
     }
 
     /// The backup steering's step (the redundant tug): each corner's pair judged and
@@ -633,6 +638,7 @@ impl VehicleControlEcu {
                     for (voter, angle) in voters.iter_mut().zip(self.second_tracks) {
                         voter.receive(0, now, angle);
                     }
+                    self.angles_arrived = true;
                 }
                 None => self.plausibility.second_tracks(now, self.second_tracks),
             }
