@@ -53,14 +53,8 @@ pub struct FailOperationalRecord {
 /// The faults the redundant tug's layers answer: of its ECUs, its voted angle sensors and
 /// its steering actuators.
 fn is_layer_fault(fault: &Fault) -> bool {
-    matches!(
-        fault,
-        Fault::EcuSilent(_)
-            | Fault::EcuWrongOutput(_)
-            | Fault::EcuBabble(_)
-            | Fault::AngleSensor { .. }
-            | Fault::SteeringActuator { .. }
-    )
+    matches!(fault, Fault::SteeringActuator { .. })
+        || (fault.needs_redundancy() && *fault != Fault::Repair)
 }
 
 fn since(from: Timestamp, to: Timestamp) -> f64 {
