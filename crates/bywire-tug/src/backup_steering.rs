@@ -169,14 +169,7 @@ impl BackupSteering {
     /// their heartbeats watched.
     pub fn add_drivers(&self, master: &mut Master) {
         for corner in &self.corners {
-            let mut controller = DriveController::new(
-                corner.backup,
-                Mode::ProfileVelocity,
-                Duration::from_millis(500),
-            );
-            controller.set_enabled(true);
-            master.add(Controlled::Drive(controller));
-            master.monitor(corner.backup, Duration::from_millis(250));
+            crate::drives::add_drive(master, corner.backup, Mode::ProfileVelocity);
         }
     }
 
@@ -294,18 +287,19 @@ impl BackupSteering {
             if after != before {
                 *change = Some(PairChange::InCharge(after));
             }
-            let backup_asked = match (steering_on, angle) {
-                (true, Some(angle)) => profile_rate(target - angle, BACKUP_PROFILE),
-                _ => 0.0,
-            };
-            let (primary_on, backup_rate) = match after {
-                InCharge::Primary => (steering_on, Some(0.0)),
-                InCharge::Backup => (false, Some(backup_asked)),
-                InCharge::Neither => (false, None),
+            // The backup closes the loop on the voted angle; a primary out of charge is off
+            // (in charge, the ECU's own commands enable it).
+            let backup_rate = match after {
+                InCharge::Primary => Some(0.0),
+                InCharge::Backup => Some(match (steering_on, angle) {
+                    (true, Some(angle)) => profile_rate(target - angle, BACKUP_PROFILE),
+                    _ => 0.0,
+                }),
+                InCharge::Neither => None,
             };
             if after != InCharge::Primary {
                 if let Some(d) = drive(master, corner.primary) {
-                    d.set_enabled(primary_on);
+                    d.set_enabled(false);
                 }
             }
             if let Some(d) = drive(master, corner.backup) {

@@ -24,7 +24,7 @@
 use core::time::Duration;
 use std::collections::VecDeque;
 
-use bywire_canopen::cia402::{DriveController, Mode, Setpoint};
+use bywire_canopen::cia402::{Mode, Setpoint};
 use bywire_canopen::master::{Controlled, Master, MasterEvent};
 use bywire_canopen::nmt::{HeartbeatEvent, NmtCommand};
 use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
@@ -223,10 +223,7 @@ impl VehicleControlEcu {
             (DRIVE_NODES, Mode::ProfileVelocity),
         ] {
             for node in nodes {
-                let mut controller = DriveController::new(node, mode, Duration::from_millis(500));
-                controller.set_enabled(true);
-                master.add(Controlled::Drive(controller));
-                master.monitor(node, Duration::from_millis(250));
+                crate::drives::add_drive(&mut master, node, mode);
             }
         }
         master.nmt(NmtCommand::Start, 0);
