@@ -1719,10 +1719,11 @@ fn drive_device(node: u8, mode: Mode) -> Device<Drive> {
         // Wheels: 8 m/s, 1.5 m/s².
         Mode::ProfileVelocity | Mode::CyclicSynchronousVelocity => (8_000, 1_500),
     };
-    // The statusword (TPDO1) at most every 2 ms, emergencies at most every 10 ms (inhibit
-    // times, in 100 µs): what bounds the drives bus's worst-case response times
-    // (`dbc/reference-tug-drives.dbc` in bywire-tug declares them).
-    let od = drive_dictionary(node, mode, profile, (20, 100));
+    // The statusword (TPDO1) and emergencies at most every 10 ms, once a control cycle
+    // (inhibit times, in 100 µs): what bounds the drives bus's worst-case response times
+    // with the redundant tug's twelve nodes on it (`dbc/reference-tug-drives.dbc` in
+    // bywire-tug declares them).
+    let od = drive_dictionary(node, mode, profile, (100, 100));
     Device::new(node, od, Drive::new().with_external_motor())
 }
 

@@ -189,8 +189,12 @@ pub struct VehicleControlEcu {
     voted: Option<[TripleVoter; 4]>,
     /// ... and the values of the last vote (`None`: no vote, or none to trust).
     voted_angles: [Option<f64>; 4],
+    /// A reading came since the last vote. The vote is taken when readings arrive and at
+    /// the voters' own deadlines, never on a poll for something else, so both ECUs of a pair
+    /// latch a channel out at the same instant whatever else each is polled for.
+    vote_due: bool,
     /// The I/O node's angles came since the last vote: the backup steering samples the vote
-    /// then, so both ECUs of a pair sample at the same instants whenever they poll.
+    /// then, so both ECUs of a pair sample at the same instants.
     angles_arrived: bool,
     /// The redundant tug: each corner's backup steering valve and its judge.
     backup: Option<BackupSteering>,
@@ -251,6 +255,7 @@ impl VehicleControlEcu {
             booting_until: None,
             voted: None,
             voted_angles: [None; 4],
+            vote_due: false,
             angles_arrived: false,
             backup: None,
         }
@@ -283,12 +288,16 @@ impl VehicleControlEcu {
         }
     }
 
-    /// Vote each corner's angle now: faults to the latch (each channel out, each corner
-    /// lost; the latch takes a fault it has once), the plausibility check given the voted
-    /// angles (NaN where a vote has no value). Out of the poll's line: the plain tug votes
-    /// none.
+    /// Vote each corner's angle, if a reading came or a voter's deadline has passed: faults
+    /// to the latch (each channel out, each corner lost; the latch takes a fault it has
+    /// once), the plausibility check given the voted angles (NaN where a vote has no value).
+    /// Out of the poll's line: the plain tug votes none.
     #[inline(never)]
     fn vote_angles(&mut self, now: Timestamp) {
+        if !self.vote_due && self.vote_deadline().is_none_or(|at| now < at) {
+            return;
+        }
+        self.vote_due = false;
         let Some(voters) = self.voted.as_mut() else {
             return;
         };
@@ -320,6 +329,13 @@ impl VehicleControlEcu {
             backup.sample(now, angles);
         }
         self.angles_arrived = false;
+    }
+
+    /// When a voter next judges on time alone (a channel silent, a suspect's persistence
+    /// over).
+    fn vote_deadline(&self) -> Option<Timestamp> {
+        let voters = self.voted.as_ref()?;
+        voters.iter().filter_map(TripleVoter::next_deadline).min()
     }
 
     /// The backup steering's step (the redundant tug): each corner's pair judged and
@@ -612,6 +628,7 @@ impl VehicleControlEcu {
                             voter.receive(channel, now, angle);
                         }
                     }
+                    self.vote_due = true;
                 }
                 return;
             }
@@ -636,6 +653,7 @@ impl VehicleControlEcu {
                         voter.receive(0, now, angle);
                     }
                     self.angles_arrived = true;
+                    self.vote_due = true;
                 }
                 None => self.plausibility.second_tracks(now, self.second_tracks),
             }
@@ -993,6 +1011,7 @@ impl Node for VehicleControlEcu {
             self.master.next_deadline(),
             Some(self.next_report),
             self.diagnostics.next_deadline(),
+            self.vote_deadline(),
         ])
     }
 }

@@ -143,3 +143,118 @@ fn the_profile_declares_a_backup_valve_at_each_corner_and_a_wrong_pairing_is_ref
     let err = bywire_tug::backup_steering::pairs_of(&crossed).unwrap_err();
     assert!(err.starts_with("fail_operational.actuators[1]:"), "{err}");
 }
+
+/// Two ECUs given the same sensor frames at the same instants latch the same channel out at
+/// the same instant, however often each is polled besides (an A/B pair's halves are polled
+/// for different frames of their own): a latch that followed the polls would set the halves'
+/// setpoints apart and make the standby take over from a healthy ECU.
+#[test]
+fn the_voted_angles_latch_on_the_readings_not_on_the_polls() {
+    use bywire_core::node::Node;
+    use bywire_core::Timestamp;
+    use bywire_tug::ecu::{Geometry, VehicleControlEcu, BUS3};
+    use bywire_tug::messages::{self, SteeringAngleSensors, SteeringAnglesB, SteeringAnglesC};
+    use bywire_vehicle::fail_operational::VotedRoles;
+
+    let loaded = bywire_tug::redundant_profile().unwrap();
+    let voted: [_; 4] = loaded
+        .profile
+        .fail_operational
+        .as_ref()
+        .unwrap()
+        .voted
+        .iter()
+        .map(VotedRoles::config)
+        .collect::<Vec<_>>()
+        .try_into()
+        .unwrap();
+    let tolerance = voted[1].tolerance;
+    let ecu = || {
+        let geometry = Geometry {
+            wheelbase: 2.0,
+            track: 1.2,
+        };
+        VehicleControlEcu::new(loaded.supervisor_config(), geometry).with_voted_angles(voted)
+    };
+    // A cheap, fixed noise in thousandths: each run sees the same readings.
+    let mut state = 0x2545_F491_u32;
+    let mut noise = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state % 1000
+    };
+    let mut checked = 0;
+    for extra_poll_us in [3, 7, 11, 29] {
+        let (mut quiet, mut busy) = (ecu(), ecu());
+        let mut frames = Vec::new();
+        // Every 10 ms the three modules' frames; module B's front-right reading creeps
+        // across the tolerance, noisily.
+        for cycle in 0..150u64 {
+            let base = cycle * 10_000 + 3_000;
+            let drift = tolerance * (0.5 + f64::from(u32::try_from(cycle).unwrap()) / 100.0);
+            let mut a = SteeringAngleSensors::default();
+            let mut b = SteeringAnglesB::default();
+            let mut c = SteeringAnglesC::default();
+            // Every other reading at zero: the two healthy channels agree exactly.
+            let _ = (a.set_second_angle_fr(0.0), c.set_angle_fr(0.0));
+            let _ = b.set_angle_fr(drift + (f64::from(noise()) / 1000.0 - 0.5) * tolerance);
+            let mut at = base;
+            for frame in [
+                messages::sealed_frame(SteeringAngleSensors::ID, a.0),
+                messages::sealed_frame(SteeringAnglesB::ID, b.0),
+                messages::sealed_frame(SteeringAnglesC::ID, c.0),
+            ] {
+                // Up to 80 µs later as stuffing and arbitration fall.
+                at += 120 + u64::from(noise()) * 80 / 1000;
+                frames.push((Timestamp::from_micros(at), frame));
+            }
+        }
+        let end = Timestamp::from_millis(1_510);
+        let drive = |ecu: &mut VehicleControlEcu, extra: Option<u64>| {
+            let mut next_extra = extra.map(Timestamp::from_micros);
+            let mut pending = frames.iter().peekable();
+            let mut now = Timestamp::ZERO;
+            // Bounded: every step moves time forward to the next frame, deadline or extra poll.
+            for _ in 0..2_000_000 {
+                let next_frame = pending.peek().map(|(t, _)| *t);
+                let Some(next) = [next_frame, ecu.next_deadline(), next_extra]
+                    .into_iter()
+                    .flatten()
+                    .min()
+                else {
+                    break;
+                };
+                if next > end {
+                    break;
+                }
+                now = next.max(now);
+                while let Some((_, frame)) = pending.next_if(|(t, _)| *t <= now) {
+                    ecu.on_frame(now, BUS3, frame);
+                }
+                if next_extra.is_some_and(|t| t <= now) {
+                    next_extra =
+                        extra.map(|us| now.saturating_add(core::time::Duration::from_micros(us)));
+                }
+                ecu.poll(now, &mut |_, _| {});
+            }
+            ecu.supervisor().degradation().first()
+        };
+        let latched_quiet = drive(&mut quiet, None);
+        let latched_busy = drive(&mut busy, Some(extra_poll_us));
+        let latched = latched_quiet.expect("the drifting channel is never voted out");
+        // Front right (corner 1), module B (channel 1): source 1 × 3 + 1.
+        assert_eq!(
+            (latched.class, latched.source),
+            (FaultClass::SensorChannelOut, 4),
+            "{latched:?}"
+        );
+        assert_eq!(
+            latched_busy,
+            Some(latched),
+            "polled every {extra_poll_us} µs besides"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 4);
+}

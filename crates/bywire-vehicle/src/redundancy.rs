@@ -417,6 +417,38 @@ impl TripleVoter {
         }
     }
 
+    /// When the voter next judges on time alone, not on a reading: the earliest instant a
+    /// channel still in would be silent, or a suspect channel's persistence ends. A caller
+    /// votes when a reading arrives and at this instant, never on a poll of its own, so that
+    /// two voters given the same readings (an A/B pair's) latch the same channel at the same
+    /// instant whatever else each is polled for.
+    pub fn next_deadline(&self) -> Option<Timestamp> {
+        let one_ns = Duration::from_nanos(1);
+        // Persistence counts only with all three in: two left vote 2-out-of-2.
+        let three_in = !self
+            .health
+            .iter()
+            .any(|h| matches!(h, ChannelHealth::Out(_)));
+        self.health
+            .iter()
+            .zip(self.readings)
+            .filter_map(|(health, reading)| {
+                let heard = reading.map_or(self.started, |(_, at)| at);
+                let silent = heard
+                    .saturating_add(self.config.timeout)
+                    .saturating_add(one_ns);
+                match health {
+                    ChannelHealth::Out(_) => None,
+                    ChannelHealth::Healthy => Some(silent),
+                    ChannelHealth::Suspect { since } if three_in => {
+                        Some(silent.min(since.saturating_add(self.config.persistence)))
+                    }
+                    ChannelHealth::Suspect { .. } => Some(silent),
+                }
+            })
+            .min()
+    }
+
     /// Every channel back in, as at start (for the caller's standstill reset).
     pub fn reset(&mut self, now: Timestamp) {
         self.health = [ChannelHealth::Healthy; 3];

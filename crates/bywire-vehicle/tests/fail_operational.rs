@@ -202,6 +202,27 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
                         .count();
                     assert!(backing >= 2, "{v} backed by {backing} channels");
                 }
+                // Without a new reading the health holds until the voter's deadline and
+                // changes at it: a voter polled for nothing else latches exactly then.
+                if let Some(deadline) = voter.next_deadline() {
+                    assert!(deadline > now, "{deadline:?} not after {now:?}");
+                    let just_before = Timestamp::from_nanos(deadline.as_nanos() - 1);
+                    let mut early = voter;
+                    early.vote(just_before);
+                    assert_eq!(
+                        early.health(),
+                        voter.health(),
+                        "changed before {deadline:?}"
+                    );
+                    let mut due = voter;
+                    due.vote(deadline);
+                    assert_ne!(due.health(), voter.health(), "nothing at {deadline:?}");
+                } else {
+                    assert!(voter
+                        .health()
+                        .iter()
+                        .all(|h| matches!(h, ChannelHealth::Out(_))));
+                }
                 checked += 1;
                 if seen.insert(format!("{voter:?}{model:?}")) {
                     next.push((voter, model));

@@ -907,11 +907,12 @@ fn dataset_refuses_bad_input_with_its_name() {
 
 /// The contract a user's CI relies on: `--scenario fail-operational` completes on the
 /// redundant tug, its metrics list a `fail_operational` record per fault and pair with the
-/// named fields, and run.png marks the changes of control and level.
+/// named fields, and run.png marks the changes of control and level. Seed 6: the one of
+/// seeds 1–10 with the longest stuck-actuator detection, and once a spurious takeover.
 #[test]
 fn the_fail_operational_scenario_keeps_its_contract() {
     let dir = Scratch::new("sim-fail-operational");
-    let metrics = sim_with(&dir, &["--scenario", "fail-operational"]);
+    let metrics = sim_with(&dir, &["--scenario", "fail-operational", "--seed", "6"]);
     assert_eq!(metrics["completed"], true);
     let records = metrics["fail_operational"].as_array().unwrap();
     // Nine faults alone (three of ECU A, three of an angle sensor, three of a primary steering
@@ -975,8 +976,8 @@ fn the_fail_operational_scenario_keeps_its_contract() {
             let detected = record["detected_s"].as_f64().unwrap();
             assert!(detected < 1.5 && stop - detected < 1.2, "{record}");
         } else {
-            // On the route (a stuck wheel pulls the tug off it until the backup has it), to
-            // the safe stop point.
+            // On the route (a stuck wheel pulls the tug off it until the backup has it:
+            // 0.15–0.37 m over seeds 1–10), to the safe stop point.
             let cross_track = if actuator { 0.45 } else { 0.1 };
             assert!(
                 record["max_cross_track_m"].as_f64().unwrap() < cross_track,
