@@ -17,11 +17,10 @@ use bywire_dbc::decoder::Decoder;
 fn traffic() -> (
     Decoder,
     Vec<(Timestamp, Frame)>,
-    bywire_vehicle::profile::Profile,
+    bywire_vehicle::profile::LoadedProfile,
 ) {
     let loaded = bywire_tug::profile().unwrap();
-    let profile = loaded.profile.clone();
-    let db = loaded.database;
+    let db = loaded.database.clone();
     let mut frames = Vec::new();
     for message in &db.messages {
         let Some(cycle) = db.cycle_time(message) else {
@@ -58,7 +57,7 @@ fn traffic() -> (
         }
     }
     frames.sort_by_key(|(t, _)| *t);
-    (Decoder::new(db), frames, profile)
+    (Decoder::new(db), frames, loaded)
 }
 
 fn throughput(c: &mut Criterion) {

@@ -19,9 +19,9 @@ use bywire_dbc::codec::Decoded;
 use bywire_dbc::decoder::Decoder;
 
 pub use crate::latency::ConfigError;
-use crate::latency::{locate, Located, SignalRef};
+use crate::latency::{bound, locate, Located, SignalRef};
 use bywire_control::kinematics::{four_wheel, Odometry, Pose, Swerve, WheelState};
-use bywire_vehicle::profile::Profile;
+use bywire_vehicle::profile::LoadedProfile;
 
 /// Whether a column is something the driver did or something the vehicle showed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,97 +96,79 @@ pub struct Config {
 }
 
 impl Config {
-    /// The actions and observations a vehicle profile names, on a grid of `rate` Hz.
-    pub fn from_profile(profile: &Profile, rate: f64) -> Config {
+    /// The actions and observations a loaded vehicle profile binds, on a grid of `rate` Hz:
+    /// its roles as they were found in its DBC when it loaded, not looked up again by name.
+    pub fn from_profile(loaded: &LoadedProfile, rate: f64) -> Config {
+        let (profile, b, db) = (&loaded.profile, &loaded.bindings, &loaded.database);
         let mut columns = Vec::new();
-        let mut add = |name: &str, role: Role, message: &str, signal: &str, cuts: bool| {
-            if !signal.is_empty() {
+        let mut add = |name: &str, role: Role, message: usize, signal: Option<usize>, cuts| {
+            if let Some(source) = signal.and_then(|signal| bound(db, message, signal)) {
                 columns.push(Column {
                     name: name.to_string(),
                     role,
-                    source: SignalRef {
-                        message: message.to_string(),
-                        signal: signal.to_string(),
-                    },
+                    source,
                     unit: String::new(),
                     cuts_episodes: cuts,
                 });
             }
         };
-        if let Some(c) = &profile.command {
+        if let Some(c) = &b.command {
             for (name, signal) in [
-                ("action_steering", &c.steering),
-                ("action_velocity", &c.velocity),
-                ("action_brake", &c.brake),
-                ("action_gear", &c.gear),
-                ("action_steering_mode", &c.steering_mode),
-                ("action_control_mode", &c.control_mode),
+                ("action_steering", c.steering),
+                ("action_velocity", c.velocity),
+                ("action_brake", c.brake),
+                ("action_gear", c.gear),
+                ("action_steering_mode", c.steering_mode),
+                ("action_control_mode", c.control_mode),
             ] {
-                add(name, Role::Action, &c.message, signal, false);
+                add(name, Role::Action, c.message, Some(signal), false);
             }
         }
-        if let Some(s) = &profile.state {
-            let optional = |o: &Option<String>| o.clone().unwrap_or_default();
+        if let Some(s) = &b.state {
             for (name, signal, cuts) in [
-                ("obs_steering", s.steering.clone(), false),
-                ("obs_velocity", s.velocity.clone(), false),
-                ("obs_gear", optional(&s.gear), false),
-                ("obs_control_mode", s.control_mode.clone(), true),
-                ("obs_steering_mode", s.steering_mode.clone(), true),
-                ("obs_estop_state", optional(&s.estop_state), true),
-                ("obs_watchdog_level", optional(&s.watchdog_level), false),
-                ("obs_driver_override", optional(&s.driver_override), false),
+                ("obs_steering", Some(s.steering), false),
+                ("obs_velocity", Some(s.velocity), false),
+                ("obs_gear", s.gear, false),
+                ("obs_control_mode", Some(s.control_mode), true),
+                ("obs_steering_mode", Some(s.steering_mode), true),
+                ("obs_estop_state", s.estop_state, true),
+                ("obs_watchdog_level", s.watchdog_level, false),
+                ("obs_driver_override", s.driver_override, false),
             ] {
-                add(name, Role::Observation, &s.message, &signal, cuts);
+                add(name, Role::Observation, s.message, signal, cuts);
             }
         }
         for (prefix, wheels) in [
-            ("obs_wheel_speed", &profile.wheel_speeds),
-            ("obs_wheel_angle", &profile.wheel_angles),
+            ("obs_wheel_speed", &b.wheel_speeds),
+            ("obs_wheel_angle", &b.wheel_angles),
         ] {
             if let Some(w) = wheels {
-                for (corner, signal) in ["fl", "fr", "rl", "rr"].iter().zip(&w.signals) {
-                    add(
-                        &format!("{prefix}_{corner}"),
-                        Role::Observation,
-                        &w.message,
-                        signal,
-                        false,
-                    );
+                for (corner, signal) in ["fl", "fr", "rl", "rr"].iter().zip(w.signals) {
+                    let name = format!("{prefix}_{corner}");
+                    add(&name, Role::Observation, w.message, Some(signal), false);
                 }
             }
         }
-        // Sensors by role: (column, message, signal) where the profile names them.
-        let mut sensors: Vec<(&str, &str, Option<&String>)> = Vec::new();
-        if let Some(imu) = &profile.imu {
-            sensors.extend([
-                (
-                    "obs_imu_yaw_rate",
-                    imu.message.as_str(),
-                    Some(&imu.yaw_rate),
-                ),
-                ("obs_imu_accel_x", &imu.message, imu.accel_x.as_ref()),
-                ("obs_imu_accel_y", &imu.message, imu.accel_y.as_ref()),
-            ]);
+        if let Some(imu) = &b.imu {
+            for (name, signal) in [
+                ("obs_imu_yaw_rate", Some(imu.yaw_rate)),
+                ("obs_imu_accel_x", imu.accel_x),
+                ("obs_imu_accel_y", imu.accel_y),
+            ] {
+                add(name, Role::Observation, imu.message, signal, false);
+            }
         }
-        if let Some(b) = &profile.battery {
-            sensors.extend([
-                ("obs_battery_voltage", b.message.as_str(), Some(&b.voltage)),
-                ("obs_battery_current", &b.message, b.current.as_ref()),
-                ("obs_battery_soc", &b.message, b.soc.as_ref()),
-            ]);
-        }
-        for (name, message, signal) in sensors {
-            if let Some(signal) = signal {
-                add(name, Role::Observation, message, signal, false);
+        if let Some(battery) = &b.battery {
+            for (name, signal) in [
+                ("obs_battery_voltage", Some(battery.voltage)),
+                ("obs_battery_current", battery.current),
+                ("obs_battery_soc", battery.soc),
+            ] {
+                add(name, Role::Observation, battery.message, signal, false);
             }
         }
         let period = profile.command.as_ref().map_or(20, |c| c.period_ms.max(1));
-        let pose = match (
-            &profile.vehicle,
-            &profile.wheel_speeds,
-            &profile.wheel_angles,
-        ) {
+        let pose = match (&profile.vehicle, &b.wheel_speeds, &b.wheel_angles) {
             (Some(v), Some(_), Some(_)) => Some(PoseConfig {
                 wheelbase_m: v.wheelbase_m,
                 track_m: v.track_m,
@@ -198,7 +180,10 @@ impl Config {
             step: Duration::from_secs_f64(1.0 / rate),
             gap: Duration::from_millis(period.saturating_mul(5)),
             pose,
-            command: profile.command.as_ref().map(|c| c.message.clone()),
+            command: b
+                .command
+                .and_then(|c| db.messages.get(c.message))
+                .map(|m| m.name.clone()),
             validation: 0.2,
             seed: 0,
         }

@@ -16,7 +16,8 @@ use bywire_core::{Frame, Timestamp};
 use bywire_dbc::codec::Decoded;
 use bywire_dbc::decoder::Decoder;
 
-use bywire_vehicle::profile::Profile;
+use bywire_dbc::model::Database;
+use bywire_vehicle::profile::LoadedProfile;
 
 /// Histogram bins: 10 µs each, up to 10 s; longer figures land in the last bin.
 const BIN_NS: u64 = 10_000;
@@ -72,39 +73,41 @@ pub struct Config {
 }
 
 impl Config {
-    /// The echo and the steering and speed responses a vehicle profile names.
-    pub fn from_profile(profile: &Profile) -> Config {
+    /// The echo and the steering and speed responses a loaded vehicle profile binds: its
+    /// roles as they were found in its DBC when it loaded, not looked up again by name.
+    pub fn from_profile(loaded: &LoadedProfile) -> Config {
         let mut config = Config {
             step_min: 0.5,
             window: Duration::from_secs(1),
             step_window: Duration::from_secs(5),
             ..Config::default()
         };
-        let (Some(command), Some(state)) = (&profile.command, &profile.state) else {
+        let (Some(command), Some(state)) = (&loaded.bindings.command, &loaded.bindings.state)
+        else {
             return config;
         };
-        let signal = |message: &str, signal: &str| SignalRef {
-            message: message.to_string(),
-            signal: signal.to_string(),
-        };
-        if !state.heartbeat_echo.is_empty() {
-            config.echo = Some((
-                signal(&command.message, &command.counter),
-                signal(&state.message, &state.heartbeat_echo),
-            ));
-        }
-        config.responses = vec![
-            (
-                signal(&command.message, &command.steering),
-                signal(&state.message, &state.steering),
-            ),
-            (
-                signal(&command.message, &command.velocity),
-                signal(&state.message, &state.velocity),
-            ),
-        ];
+        let db = &loaded.database;
+        let pair = |(m1, s1), (m2, s2)| Some((bound(db, m1, s1)?, bound(db, m2, s2)?));
+        let (c, s) = (command.message, state.message);
+        config.echo = pair((c, command.counter), (s, state.heartbeat_echo));
+        config.responses = [
+            pair((c, command.steering), (s, state.steering)),
+            pair((c, command.velocity), (s, state.velocity)),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
         config
     }
+}
+
+/// The message and signal at these places of `db` (a binding's), by name.
+pub(crate) fn bound(db: &Database, message: usize, signal: usize) -> Option<SignalRef> {
+    let m = db.messages.get(message)?;
+    Some(SignalRef {
+        message: m.name.clone(),
+        signal: m.signals.get(signal)?.name.clone(),
+    })
 }
 
 /// Why a configuration does not fit a DBC.

@@ -114,7 +114,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }],
     };
     let loaded = vehicles::load_profile(&args.profile)?;
-    let mut config = Config::from_profile(&loaded.profile, args.rate);
+    let mut config = Config::from_profile(&loaded, args.rate);
     config.validation = args.validation;
     config.seed = args.seed;
     for text in &args.signal {

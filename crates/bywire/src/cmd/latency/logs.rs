@@ -23,7 +23,7 @@ fn config(args: &Args) -> Result<(Decoder, Config)> {
     let (database, mut config) = match (&args.profile, &args.dbc) {
         (Some(name), _) => {
             let loaded = vehicles::load_profile(name)?;
-            let config = Config::from_profile(&loaded.profile);
+            let config = Config::from_profile(&loaded);
             (loaded.database, config)
         }
         (None, Some(path)) => (dbc::load(path, false)?, Config::default()),
