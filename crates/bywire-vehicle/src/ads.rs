@@ -55,6 +55,47 @@ pub struct WheelGeometry {
     pub track: f64,
 }
 
+/// What turns the four wheels' speeds and angles into a pose: the ADS side's dead reckoning.
+/// [`WheelOdometer`], the default, fits the body's twist to the four wheels by least squares
+/// from where they are, which holds for four-wheel steering, front steering and skid steering
+/// alike; a vehicle with other means (a fused estimate, another chassis) brings its own.
+pub trait Odometer {
+    /// The pose after `dt` seconds with the wheels at `wheels` (angles in radians, speeds in
+    /// m/s); `None` when the wheels give no motion to integrate.
+    fn update(&mut self, dt: f64, wheels: &[WheelState; 4]) -> Option<Pose>;
+    /// Start over at `pose`.
+    fn reset(&mut self, pose: Pose);
+}
+
+/// Odometry from the four wheels' speeds and angles where their positions are known (a
+/// profile's `[vehicle]`); without them, none.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WheelOdometer {
+    wheels: Option<Swerve<4>>,
+    odometry: Odometry,
+}
+
+impl WheelOdometer {
+    /// An odometer for wheels at `geometry`, from the origin.
+    pub fn new(geometry: Option<WheelGeometry>) -> Self {
+        WheelOdometer {
+            wheels: geometry.map(|w| four_wheel(w.wheelbase, w.track)),
+            odometry: Odometry::default(),
+        }
+    }
+}
+
+impl Odometer for WheelOdometer {
+    fn update(&mut self, dt: f64, wheels: &[WheelState; 4]) -> Option<Pose> {
+        let twist = self.wheels.as_ref()?.forward(wheels)?;
+        Some(self.odometry.update(dt, twist))
+    }
+
+    fn reset(&mut self, pose: Pose) {
+        self.odometry = Odometry::new(pose);
+    }
+}
+
 impl AdsConfig {
     /// Feedback older than this is invalid: `feedback_timeout_cycles` cycles.
     pub fn feedback_timeout(&self) -> Duration {
@@ -179,7 +220,7 @@ pub struct VehicleState {
 /// The ADS-side node, speaking a vehicle's messages through its wire
 /// ([`crate::wire::ProfileWire`] for any vehicle a profile describes).
 #[derive(Debug, Clone)]
-pub struct Ads<W: AdsWire> {
+pub struct Ads<W: AdsWire, O: Odometer = WheelOdometer> {
     wire: W,
     config: AdsConfig,
     command: Option<(Timestamp, AdsCommand)>,
@@ -193,9 +234,8 @@ pub struct Ads<W: AdsWire> {
     sensors_sequence: FeedbackSequence,
     angles_sequence: FeedbackSequence,
     stats: FeedbackStats,
-    /// The wheels' kinematics, where the vehicle's geometry is known.
-    wheels: Option<Swerve<4>>,
-    odometry: Odometry,
+    /// The dead reckoning from the wheels.
+    odometer: O,
     last_sensors: Option<Timestamp>,
     /// A steering setpoint not yet reached: (setpoint, since).
     steering_pending: Option<(f64, Timestamp)>,
@@ -292,8 +332,17 @@ struct BrakeBurst {
 }
 
 impl<W: AdsWire> Ads<W> {
-    /// A node speaking `wire` that sends nothing until it has a command.
+    /// A node speaking `wire` that sends nothing until it has a command, with odometry from
+    /// the wheels at `config.wheels`.
     pub fn with_wire(config: AdsConfig, wire: W) -> Self {
+        Ads::with_odometer(config, wire, WheelOdometer::new(config.wheels))
+    }
+}
+
+impl<W: AdsWire, O: Odometer> Ads<W, O> {
+    /// A node speaking `wire` that sends nothing until it has a command, reckoning its pose
+    /// with `odometer`.
+    pub fn with_odometer(config: AdsConfig, wire: W, odometer: O) -> Self {
         let timeout = config.feedback_timeout();
         let (state_bits, wheel_bits) = (wire.state_counter_bits(), wire.wheel_counter_bits());
         Ads {
@@ -309,8 +358,7 @@ impl<W: AdsWire> Ads<W> {
             sensors_sequence: FeedbackSequence::new(wheel_bits, timeout),
             angles_sequence: FeedbackSequence::new(wheel_bits, timeout),
             stats: FeedbackStats::default(),
-            wheels: config.wheels.map(|w| four_wheel(w.wheelbase, w.track)),
-            odometry: Odometry::default(),
+            odometer,
             last_sensors: None,
             steering_pending: None,
             steering_reference: None,
@@ -322,6 +370,11 @@ impl<W: AdsWire> Ads<W> {
     /// The wire it speaks through.
     pub fn wire(&self) -> &W {
         &self.wire
+    }
+
+    /// Its dead reckoning.
+    pub fn odometer(&self) -> &O {
+        &self.odometer
     }
 
     /// The latest command (latest wins); non-finite values are refused and the previous
@@ -380,7 +433,7 @@ impl<W: AdsWire> Ads<W> {
 
     /// Start the odometry over at `pose` (where the vehicle is known to be).
     pub fn reset_odometry(&mut self, pose: Pose) {
-        self.odometry = Odometry::new(pose);
+        self.odometer.reset(pose);
         self.state.odometry = Field::default();
     }
 
@@ -608,8 +661,7 @@ impl<W: AdsWire> Ads<W> {
             .state
             .wheel_angles
             .fresh(now, self.config.feedback_timeout());
-        if let (Some(angles), Some(last), Some(wheels)) = (angles, self.last_sensors, &self.wheels)
-        {
+        if let (Some(angles), Some(last)) = (angles, self.last_sensors) {
             let mut states = [WheelState::default(); 4];
             for ((state, speed), angle) in states.iter_mut().zip(speeds).zip(angles) {
                 *state = WheelState {
@@ -617,9 +669,8 @@ impl<W: AdsWire> Ads<W> {
                     speed,
                 };
             }
-            if let Some(twist) = wheels.forward(&states) {
-                let dt = now.saturating_since(last).as_secs_f64();
-                let pose = self.odometry.update(dt, twist);
+            let dt = now.saturating_since(last).as_secs_f64();
+            if let Some(pose) = self.odometer.update(dt, &states) {
                 self.state.odometry.set(now, pose);
             }
         }
@@ -627,7 +678,7 @@ impl<W: AdsWire> Ads<W> {
     }
 }
 
-impl<W: AdsWire> Ads<W> {
+impl<W: AdsWire, O: Odometer> Ads<W, O> {
     /// The port of the command bus A.
     pub const PORT_A: Port = crate::redundancy::Channel::A.port();
     /// The port of the redundant command bus B.
@@ -653,7 +704,7 @@ impl<W: AdsWire> Ads<W> {
 /// The ADS side as a node: its frames go out on [`Ads::PORT_A`] (and [`Ads::PORT_B`] when
 /// [`AdsConfig::redundant`]); feedback is taken from either port, the second copy of a frame
 /// that came on both skipped (a bus behind the other, however far, brings only copies).
-impl<W: AdsWire> Node for Ads<W> {
+impl<W: AdsWire, O: Odometer> Node for Ads<W, O> {
     fn on_frame(&mut self, now: Timestamp, port: Port, frame: &Frame) {
         self.receive(now, port, frame);
     }
@@ -723,7 +774,7 @@ impl core::fmt::Display for Blocker {
     }
 }
 
-impl<W: AdsWire> Ads<W> {
+impl<W: AdsWire, O: Odometer> Ads<W, O> {
     /// Why the vehicle is not following the commands now (`None`: it is, by its feedback).
     /// The first reason that holds, in the order a user has to clear them.
     pub fn blocker(&self, now: Timestamp) -> Option<Blocker> {

@@ -435,14 +435,26 @@ fn odometry_with(
     angles: [f64; 4],
     speeds: [f64; 4],
 ) -> Option<bywire_control::kinematics::Pose> {
-    use bywire_tug::messages::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
     let config = AdsConfig {
         wheels,
         ..AdsConfig::default()
     };
     let mut ads = Ads::with_wire(config, ReferenceWire);
+    feed_wheels(&mut ads, 0, angles, speeds);
+    ads.state().odometry.value
+}
+
+/// 2 s of wheel feedback at 50 Hz to `ads` from `from_ms`: every wheel at `angles` (degrees)
+/// and `speeds`.
+fn feed_wheels<O: bywire_vehicle::ads::Odometer>(
+    ads: &mut Ads<ReferenceWire, O>,
+    from_ms: u64,
+    angles: [f64; 4],
+    speeds: [f64; 4],
+) {
+    use bywire_tug::messages::{VehicleToAdsSensors, VehicleToAdsWheelAngles};
     for k in 0..=100u64 {
-        let now = ms(20 * k);
+        let now = ms(from_ms + 20 * k);
         let mut a = VehicleToAdsWheelAngles::default();
         a.set_wheel_angle_fl(angles[0]).unwrap();
         a.set_wheel_angle_fr(angles[1]).unwrap();
@@ -458,7 +470,49 @@ fn odometry_with(
         s.set_counter_raw(k % 16);
         ads.on_frame(now, Port::MAIN, &sealed(VehicleToAdsSensors::ID, s.0));
     }
-    ads.state().odometry.value
+}
+
+/// A vehicle brings its own dead reckoning: the ADS side hands it each interval and the
+/// wheels, and reports what it says (here a model that ignores the steering angles).
+#[test]
+fn a_vehicle_brings_its_own_odometer() {
+    use bywire_control::kinematics::{Pose, WheelState};
+    use bywire_vehicle::ads::Odometer;
+    #[derive(Debug, Clone, Default)]
+    struct StraightAhead {
+        pose: Pose,
+        intervals: Vec<f64>,
+    }
+    impl Odometer for StraightAhead {
+        fn update(&mut self, dt: f64, wheels: &[WheelState; 4]) -> Option<Pose> {
+            self.intervals.push(dt);
+            self.pose.x += dt * wheels.iter().map(|w| w.speed).sum::<f64>() / 4.0;
+            Some(self.pose)
+        }
+        fn reset(&mut self, pose: Pose) {
+            self.pose = pose;
+        }
+    }
+    let mut ads = Ads::with_odometer(
+        AdsConfig::default(),
+        ReferenceWire,
+        StraightAhead::default(),
+    );
+    feed_wheels(&mut ads, 0, [30.0; 4], [1.0; 4]);
+    let pose = ads.state().odometry.value.unwrap();
+    assert!((pose.x - 2.0).abs() < 1e-9 && pose.y == 0.0, "{pose:?}");
+    // Each interval since the last sensors frame, the first frame having none before it.
+    let intervals = &ads.odometer().intervals;
+    assert_eq!(intervals.len(), 100);
+    assert!(intervals.iter().all(|dt| (dt - 0.02).abs() < 1e-12));
+    ads.reset_odometry(Pose {
+        x: 5.0,
+        ..Pose::default()
+    });
+    assert_eq!(ads.state().odometry.value, None);
+    feed_wheels(&mut ads, 2_020, [0.0; 4], [0.5; 4]);
+    let pose = ads.state().odometry.value.unwrap();
+    assert!((pose.x - 6.01).abs() < 1e-9, "{pose:?}");
 }
 
 /// A vehicle whose geometry the ADS was not given has no odometry (no wheelbase is assumed).
