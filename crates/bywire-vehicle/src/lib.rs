@@ -17,6 +17,7 @@
 //!   section (with `std`) declares which of them a vehicle carries.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
+//! - [`replay`]: a recorded session fed to a supervisor, its decisions as a trace to compare.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
 //!   timing) as a node on the command bus, for any profile's vehicle.
 //! - `secured` (feature `secoc`): any wire with its messages authenticated (AUTOSAR SecOC:
@@ -70,6 +71,8 @@ pub mod profile;
 #[cfg(feature = "std")]
 mod profile_wire;
 pub mod redundancy;
+#[cfg(feature = "std")]
+pub mod replay;
 #[cfg(feature = "secoc")]
 pub mod secured;
 pub mod supervisor;

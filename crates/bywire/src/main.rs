@@ -71,6 +71,9 @@ enum Command {
     /// A training dataset from logs: actions and observations on a time grid, ages, episodes,
     /// a split, the simulator's ground truth, and a dataset card.
     Dataset(cmd::dataset::Args),
+    /// Replay a recorded session through a profile's supervisor: its decisions as a trace,
+    /// compared with a stored one (regression).
+    Replay(cmd::replay::Args),
     /// Watch identifiers like cansniffer: changing bytes highlighted, rates, DBC values.
     Sniff(cmd::sniff::Args),
     /// A live table of decoded messages and signals, like cantools monitor.
@@ -162,6 +165,7 @@ fn main() -> ExitCode {
         Command::Busload(args) => cmd::busload::run(&args, &mut out),
         Command::Latency(args) => cmd::latency::run(&args, &mut out),
         Command::Dataset(args) => cmd::dataset::run(&args, &mut out),
+        Command::Replay(args) => cmd::replay::run(&args, &mut out),
         Command::Uds { command } => cmd::uds::run(&command, &mut out),
         Command::Secoc { command } => cmd::secoc::run(&command, &mut out),
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),

@@ -16,6 +16,7 @@ pub mod monitor;
 pub mod play;
 pub mod plot;
 pub mod record;
+pub mod replay;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod secoc;
