@@ -87,7 +87,7 @@ impl Attacker {
         let mut command = messages::command_of(&m)?;
         command.steering = FORGED_STEERING;
         let counter = u8::try_from((m.heartbeat_counter_raw() + 1) & 0x0F).ok()?;
-        let forged = messages::command_message(&command, counter);
+        let forged = messages::command_message(&command, counter)?;
         let frame = messages::sealed_frame(AdsToVehicleControl::ID, forged.0);
         Some(in_shape_of(genuine, &frame))
     }

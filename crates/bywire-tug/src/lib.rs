@@ -25,7 +25,8 @@
 //! use bywire_vehicle::command::{ControlCommand, ControlMode};
 //!
 //! let command = ControlCommand { velocity: 1.5, mode: ControlMode::Autonomous, ..Default::default() };
-//! let frame = messages::sealed_frame(AdsToVehicleControl::ID, messages::command_message(&command, 3).0);
+//! let message = messages::command_message(&command, 3).unwrap();
+//! let frame = messages::sealed_frame(AdsToVehicleControl::ID, message.0);
 //! let payload = messages::payload(&frame).unwrap();
 //! assert!(messages::is_sealed(AdsToVehicleControl::ID, &payload));
 //! assert_eq!(messages::command_of(&AdsToVehicleControl(payload)), Some(command));

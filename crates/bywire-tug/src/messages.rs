@@ -57,20 +57,20 @@ pub fn payload(frame: &Frame) -> Option<[u8; 8]> {
     }
 }
 
-/// The message with `command` and `counter` (CRC not yet set). Values beyond the DBC's ranges
-/// are clamped to them: the vehicle side refuses what its own, narrower limits do.
-pub fn command_message(command: &ControlCommand, counter: u8) -> AdsToVehicleControl {
+/// The message with `command` and `counter` (CRC not yet set); `None` for a setpoint beyond
+/// its signal's range (or not a number), which the message would carry as another value.
+pub fn command_message(command: &ControlCommand, counter: u8) -> Option<AdsToVehicleControl> {
     let mut m = AdsToVehicleControl::default();
-    let _ = m.set_steering_angle_cmd(command.steering.clamp(-45.0, 45.0));
-    let _ = m.set_velocity_cmd(command.velocity.clamp(-5.0, 8.0));
-    let _ = m.set_brake_cmd(command.brake.clamp(0.0, 100.0));
+    m.set_steering_angle_cmd(command.steering).ok()?;
+    m.set_velocity_cmd(command.velocity).ok()?;
+    m.set_brake_cmd(command.brake).ok()?;
     m.set_gear_cmd_raw(command.gear.raw());
     m.set_control_mode_cmd_raw(command.mode.raw());
     m.set_steering_mode_cmd_raw(command.steering_mode.raw());
     m.set_engage_request_raw(u64::from(command.engage));
     m.set_operator_reset_raw(u64::from(command.operator_reset));
     m.set_heartbeat_counter_raw(u64::from(counter));
-    m
+    Some(m)
 }
 
 /// The command a message carries; `None` for an undefined steering mode.

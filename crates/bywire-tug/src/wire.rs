@@ -36,7 +36,7 @@ impl AdsWire for ReferenceWire {
     }
 
     fn command_frame(&mut self, command: &ControlCommand, counter: u64) -> Option<Frame> {
-        let m = messages::command_message(command, u8::try_from(counter & 0x0F).unwrap_or(0));
+        let m = messages::command_message(command, u8::try_from(counter & 0x0F).unwrap_or(0))?;
         Some(messages::sealed_frame(AdsToVehicleControl::ID, m.0))
     }
 

@@ -119,7 +119,7 @@ fn forged_after(genuine: &Frame) -> Frame {
     let counter = u8::try_from((m.heartbeat_counter_raw() + 1) & 0x0F).unwrap();
     messages::sealed_frame(
         AdsToVehicleControl::ID,
-        messages::command_message(&command, counter).0,
+        messages::command_message(&command, counter).unwrap().0,
     )
 }
 

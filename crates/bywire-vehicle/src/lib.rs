@@ -17,7 +17,8 @@
 //!   section (with `std`) declares which of them a vehicle carries.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
-//! - [`replay`]: a recorded session fed to a supervisor, its decisions as a trace to compare.
+//! - [`replay`]: a recorded session fed to a supervisor, its decisions as a trace to compare;
+//!   [`fuzz`]: random commands judged by the ADS side's checks and the vehicle's, compared.
 //! - [`acceptance`]: vehicle acceptance checks (steering sweep, speed steps, watchdog and E-stop
 //!   timing) as a node on the command bus, for any profile's vehicle.
 //! - `secured` (feature `secoc`): any wire with its messages authenticated (AUTOSAR SecOC:
@@ -66,6 +67,8 @@ pub mod command;
 pub mod degradation;
 #[cfg(feature = "std")]
 pub mod fail_operational;
+#[cfg(feature = "std")]
+pub mod fuzz;
 #[cfg(feature = "std")]
 pub mod profile;
 #[cfg(feature = "std")]

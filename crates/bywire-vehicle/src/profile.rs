@@ -19,7 +19,7 @@ use crate::bindings::{
     EmergencyBrakeBindings, FailOperationalBindings, ImuBindings, MeasuredBinding, ReportBindings,
     RequestBindings, SignalBinding, StateBindings, StatusBinding, VotedBindings, WheelBindings,
 };
-use crate::command::ControlCommand;
+use crate::command::{ControlCommand, ControlMode};
 use crate::fail_operational::{ActuatorRoles, FailOperationalRoles, MeasuredRoles, SignalRef};
 use crate::supervisor::{Cascade, SupervisorConfig};
 
@@ -261,6 +261,28 @@ impl Limits {
             return Err(format!("brake {}: not within 0–100 %", Short(c.brake)));
         }
         Ok(())
+    }
+
+    /// What the ADS side sends for `command`, or why it sends nothing: a brake beyond 100 %
+    /// taken as 100 % (with the warning), the E-stop mode refused (the vehicle reports it; a
+    /// stop is asked for with the emergency brake), every setpoint within the limits.
+    pub fn admit(
+        &self,
+        command: ControlCommand,
+    ) -> Result<(ControlCommand, Option<String>), String> {
+        let brake = self.brake_request(command.brake)?;
+        if command.mode == ControlMode::Estop {
+            return Err(
+                "mode 'estop' is the vehicle's to report, not to request (send emergency_brake)"
+                    .to_string(),
+            );
+        }
+        let taken = ControlCommand {
+            brake: brake.value,
+            ..command
+        };
+        self.check(&taken)?;
+        Ok((taken, brake.warning))
     }
 
     /// A brake request, %: one beyond 100 % is a request to brake as hard as the vehicle can,

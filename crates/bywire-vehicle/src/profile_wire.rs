@@ -159,8 +159,23 @@ impl RoleMessage {
         }
     }
 
-    /// Set a role's value, clamped to the signal's declared range.
-    fn set(&mut self, index: usize, value: f64) {
+    /// Set a role's value exactly, or refuse it (`false`): a value beyond the signal's
+    /// declared range (or not a number) would reach the vehicle as another.
+    fn set_exact(&mut self, index: usize, value: f64) -> bool {
+        let within = match self.ranges.get(index).copied().flatten() {
+            Some((min, max)) => (min..=max).contains(&value),
+            None => value.is_finite(),
+        };
+        if within {
+            self.set_clamped(index, value);
+        }
+        within
+    }
+
+    /// Set a role's value, clamped to the signal's declared range (a report of the vehicle's
+    /// own state; an emergency brake beyond the signal's range, which is a request for the
+    /// hardest braking it carries).
+    fn set_clamped(&mut self, index: usize, value: f64) {
         let value = match self.ranges.get(index).copied().flatten() {
             Some((min, max)) => value.clamp(min, max),
             None => value,
@@ -408,9 +423,14 @@ impl AdsWire for ProfileWire {
             (s.operator_reset, u64::from(c.operator_reset)),
         ];
         let m = &mut self.command;
-        m.set(s.steering, c.steering);
-        m.set(s.velocity, c.velocity);
-        m.set(s.brake, c.brake);
+        // A setpoint the signal cannot carry is not sent as another: no frame (the vehicle's
+        // watchdog counts a missed cycle).
+        let carried = m.set_exact(s.steering, c.steering)
+            & m.set_exact(s.velocity, c.velocity)
+            & m.set_exact(s.brake, c.brake);
+        if !carried {
+            return None;
+        }
         for (index, raw) in raws {
             m.set_raw(index, raw);
         }
@@ -432,7 +452,7 @@ impl AdsWire for ProfileWire {
     fn emergency_brake_frame(&mut self, deceleration: f64, counter: u64) -> Option<Frame> {
         let (m, request, decel) = self.brake.as_mut()?;
         m.set_raw(*request, 1);
-        m.set(*decel, deceleration);
+        m.set_clamped(*decel, deceleration);
         m.frame(counter)
     }
 
@@ -619,8 +639,8 @@ impl VehicleWire for ProfileWire {
             (s.hazard_lights, u64::from(r.hazard_lights)),
         ];
         let m = &mut self.state;
-        m.set(s.steering, r.steering);
-        m.set(s.velocity, r.velocity);
+        m.set_clamped(s.steering, r.steering);
+        m.set_clamped(s.velocity, r.velocity);
         for (index, raw) in raws {
             if let Some(index) = index {
                 m.set_raw(index, raw);
@@ -632,7 +652,7 @@ impl VehicleWire for ProfileWire {
     fn wheel_speeds_frame(&mut self, speeds: [f64; 4], counter: u64) -> Option<Frame> {
         let (m, indices) = self.wheel_speeds.as_mut()?;
         for (index, speed) in indices.iter().zip(speeds) {
-            m.set(*index, speed);
+            m.set_clamped(*index, speed);
         }
         m.frame(counter)
     }
@@ -640,7 +660,7 @@ impl VehicleWire for ProfileWire {
     fn wheel_angles_frame(&mut self, angles: [f64; 4], counter: u64) -> Option<Frame> {
         let (m, indices) = self.wheel_angles.as_mut()?;
         for (index, angle) in indices.iter().zip(angles) {
-            m.set(*index, angle);
+            m.set_clamped(*index, angle);
         }
         m.frame(counter)
     }

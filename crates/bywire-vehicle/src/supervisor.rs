@@ -673,10 +673,14 @@ impl<W: VehicleWire> Supervisor<W> {
         }
         let c = self.config;
         let command = command.ok_or(Rejection::OutOfRange)?;
-        // Written so that a NaN (a float signal can carry one) fails every comparison.
+        // Written so that a NaN (a float signal can carry one) fails every comparison. The
+        // E-stop mode is the vehicle's to report: a command cannot request it (a stop is asked
+        // for on the E-stop and emergency-brake messages), so one that does is refused, as the
+        // ADS side refuses to send it (`profile::Limits::admit`).
         let within = command.steering.abs() <= c.steering_range
             && command.velocity.abs() <= c.speed_limit
-            && (0.0..=100.0).contains(&command.brake);
+            && (0.0..=100.0).contains(&command.brake)
+            && command.mode != ControlMode::Estop;
         if !within {
             return Err(Rejection::OutOfRange);
         }

@@ -136,3 +136,29 @@ fn a_replayed_session_gives_one_trace_and_a_changed_limit_shows_where_it_decides
         "{err}"
     );
 }
+
+#[test]
+fn the_fuzzer_finds_the_ads_side_and_the_vehicle_agreed_and_says_so() {
+    let out = bywire(&["replay", "--fuzz", "2000", "--profile", "reference-tug"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.starts_with("reference-tug: 2000 commands (seed 1), ")
+            && text.contains(", 0 disagreements"),
+        "{text}"
+    );
+    // A log and --fuzz are one or the other.
+    let both = bywire(&[
+        "replay",
+        "x.log",
+        "--fuzz",
+        "10",
+        "--profile",
+        "reference-tug",
+    ]);
+    assert_eq!(both.status.code(), Some(2));
+}

@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use crate::support::interrupt::interrupt_flag;
 use crate::support::vehicles::{keep_freshness, SecOcArgs, Wire};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, Context, Result};
 use bywire_bus::runner::{Flow, Hooks, Runner};
 use bywire_bus::BusError;
 use bywire_core::node::Port;
@@ -93,17 +93,10 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ap
             t.parse().map_err(|e| anyhow!("'{t}': {e}"))
         })
     }
-    let (brake, warning) = match line.brake {
-        Some(brake) => {
-            let taken = limits.brake_request(brake).map_err(|e| anyhow!(e))?;
-            (taken.value, taken.warning)
-        }
-        None => (previous.brake, None),
-    };
     let command = AdsCommand {
         steering: line.steering.unwrap_or(previous.steering),
         velocity: line.velocity.unwrap_or(previous.velocity),
-        brake,
+        brake: line.brake.unwrap_or(previous.brake),
         gear: parsed::<Gear>(line.gear.as_deref(), previous.gear)?,
         mode: parsed::<ControlMode>(line.mode.as_deref(), previous.mode)?,
         steering_mode: parsed::<SteeringMode>(
@@ -119,10 +112,7 @@ fn apply(line: &CommandLine, previous: AdsCommand, limits: &Limits) -> Result<Ap
         )?,
         hazard_lights: line.hazard_lights.unwrap_or(previous.hazard_lights),
     };
-    if command.mode == ControlMode::Estop {
-        bail!("mode 'estop' is the vehicle's to report, not to request (send emergency_brake)");
-    }
-    limits.check(&command).map_err(|e| anyhow!(e))?;
+    let (command, warning) = limits.admit(command).map_err(|e| anyhow!(e))?;
     Ok(Applied { command, warning })
 }
 

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use bywire_core::Timestamp;
+use bywire_vehicle::profile::LoadedProfile;
 use bywire_vehicle::replay::Replay;
 use bywire_vehicle::supervisor::Supervisor;
 
@@ -18,6 +19,7 @@ use crate::support::vehicles::{self, SecOcArgs, Wire};
   bywire replay run/bus1.log --profile reference-tug > run.trace
   bywire replay run/bus1.log run/bus1b.log --bus-b bus1b --profile reference-tug-redundant --out run.trace
   bywire replay drive.blf --profile reference-tug --expect run.trace
+  bywire replay --fuzz 10000 --profile reference-tug
 
 Every frame of the logs (any format; several are merged in time order) goes to the profile's
 supervisor at its own time, on the second command bus when its channel is --bus-b and on the
@@ -25,11 +27,22 @@ first otherwise; between frames the supervisor is polled at each deadline it ask
 trace has one line per decision: 'T command accepted', 'T command refused: REASON', 'T watchdog
 LEVEL', 'T estop STATE', 'T mode MODE', 'T sent PORT ID DATA' (T in seconds from the log's
 start). It depends only on the frames and the profile: the same on every run. With --expect,
-exit 1 at the first line that differs from the stored trace, naming it.")]
+exit 1 at the first line that differs from the stored trace, naming it.
+
+--fuzz N sends N random commands (within the profile's limits, at them, just beyond, far beyond,
+not numbers, every gear and mode) through the ADS side's checks (those of `bywire bridge`) and
+the supervisor's, and lists every command one side takes and the other refuses (exit 1 if any):
+the two ends of the wire configured apart.")]
 pub struct Args {
     /// Logs of the ADS side's frames (the vehicle's own feedback in them is ignored).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "fuzz", conflicts_with = "fuzz")]
     logs: Vec<PathBuf>,
+    /// Fuzz the ADS side's command checks against the vehicle's with this many commands.
+    #[arg(long, value_name = "N", conflicts_with_all = ["expect", "out", "bus_b"])]
+    fuzz: Option<u64>,
+    /// The fuzzer's seed.
+    #[arg(long, default_value_t = 1, requires = "fuzz")]
+    seed: u64,
     /// The vehicle profile (built in, e.g. reference-tug, or a TOML file).
     #[arg(long)]
     profile: String,
@@ -48,6 +61,9 @@ pub struct Args {
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let loaded = vehicles::load_profile(&args.profile)?;
+    if let Some(n) = args.fuzz {
+        return fuzz(args, &loaded, n, out);
+    }
     let (wire, _): (Wire, _) = args.secoc.wire(&loaded)?;
     let supervisor = Supervisor::with_wire(loaded.supervisor_config(), wire);
     let mut replay = Replay::new(supervisor);
@@ -131,6 +147,49 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     if let (Some(path), Some(difference)) = (&args.expect, difference) {
         bail!("{}: {difference}", path.display());
+    }
+    Ok(())
+}
+
+/// `--fuzz N`: the report, one line per disagreement kept; exit 1 on any.
+fn fuzz(args: &Args, loaded: &LoadedProfile, n: u64, out: &mut impl Write) -> Result<()> {
+    let (ads_wire, _) = args.secoc.wire(loaded)?;
+    let (vehicle_wire, _) = args.secoc.wire(loaded)?;
+    let report = bywire_vehicle::fuzz::fuzz(
+        &loaded.profile.limits,
+        (ads_wire, vehicle_wire),
+        loaded.supervisor_config(),
+        n,
+        args.seed,
+    );
+    writeln!(
+        out,
+        "{}: {} commands (seed {}), {} sent by the ADS side, {} the wire cannot carry, {} disagreements",
+        loaded.profile.name,
+        report.commands,
+        args.seed,
+        report.sent,
+        report.unencodable,
+        report.disagreements
+    )?;
+    for d in &report.kept {
+        let side = |verdict: &Result<(), String>| match verdict {
+            Ok(()) => "takes it".to_string(),
+            Err(why) => format!("refuses it ({why})"),
+        };
+        writeln!(
+            out,
+            "  {:?}: the ADS side {}, the vehicle {}",
+            d.command,
+            side(&d.ads),
+            side(&d.vehicle)
+        )?;
+    }
+    if report.disagreements > 0 {
+        bail!(
+            "{} commands judged differently by the ADS side and the vehicle",
+            report.disagreements
+        );
     }
     Ok(())
 }
