@@ -130,6 +130,7 @@ fn b_takes_over_each_fault_of_a_within_50_ms_and_the_tug_drives_on_at_the_minima
     }
 }
 
+/// Verifies: REQ-FO-2.
 #[test]
 fn a_second_ecu_fault_stops_the_tug_where_it_is() {
     let (mut tug, _, _) = takeover(Fault::EcuSilent(Side::A));
@@ -141,6 +142,7 @@ fn a_second_ecu_fault_stops_the_tug_where_it_is() {
     assert!(tug.pose_speed() < 0.05, "{} m/s", tug.pose_speed());
 }
 
+/// Verifies: REQ-FO-2.
 #[test]
 fn after_a_takeover_the_tug_drives_on_to_the_next_safe_stop_point_and_stops_there() {
     use bywire_control::kinematics::Point;

@@ -139,6 +139,7 @@ fn after(tug: &Tug, from: u64) -> Vec<(u64, Happening)> {
         .collect()
 }
 
+/// Verifies: REQ-TO-1, REQ-FI-1.
 #[test]
 fn a_silent_ads_walks_the_watchdog_cascade_and_the_tug_stops() {
     let mut tug = cruising();
@@ -174,6 +175,7 @@ fn a_silent_ads_walks_the_watchdog_cascade_and_the_tug_stops() {
     assert!(tug.pose_speed() < 0.05, "stopped: {}", tug.pose_speed());
 }
 
+/// Verifies: REQ-ES-1.
 #[test]
 fn an_estop_latches_until_the_operator_resets_it() {
     let mut tug = cruising();
@@ -218,6 +220,7 @@ fn an_estop_latches_until_the_operator_resets_it() {
     assert!(tug.pose_speed() > 1.0, "driving again");
 }
 
+/// Verifies: REQ-FI-1.
 #[test]
 fn a_silent_drive_is_lost_within_its_consumer_time_and_the_tug_brakes() {
     let mut tug = cruising();
@@ -457,6 +460,7 @@ fn speeds_along_the_route_and_a_stop_are_kept() {
     );
 }
 
+/// Verifies: REQ-FI-1.
 #[test]
 fn frames_of_a_chosen_identifier_are_delayed_or_corrupted() {
     use bywire_net::sim::Tamper;

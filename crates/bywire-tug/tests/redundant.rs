@@ -148,6 +148,7 @@ fn the_profile_declares_a_backup_valve_at_each_corner_and_a_wrong_pairing_is_ref
 /// the same instant, however often each is polled besides (an A/B pair's halves are polled
 /// for different frames of their own): a latch that followed the polls would set the halves'
 /// setpoints apart and make the standby take over from a healthy ECU.
+/// Verifies: REQ-VOT-2.
 #[test]
 fn the_voted_angles_latch_on_the_readings_not_on_the_polls() {
     use bywire_core::node::Node;

@@ -136,6 +136,7 @@ fn without_secoc_a_forged_command_with_valid_crc_and_counter_is_obeyed() {
     assert!(stats.repeated >= 9, "{stats:?}");
 }
 
+/// Verifies: REQ-SEC-1.
 #[test]
 fn with_secoc_forged_commands_are_refused_and_counted_and_the_genuine_ones_obeyed() {
     let mut bench = Bench::new(wire(1), wire(1));
@@ -164,6 +165,7 @@ fn with_secoc_forged_commands_are_refused_and_counted_and_the_genuine_ones_obeye
     assert_eq!((verified.mac, verified.malformed), (cycles, cycles));
 }
 
+/// Verifies: REQ-SEC-1.
 #[test]
 fn with_secoc_a_replayed_command_is_refused_as_stale() {
     let mut bench = Bench::new(wire(1), wire(1));

@@ -219,6 +219,7 @@ fn a_change_within_the_tolerance_is_not_a_new_setpoint() {
     );
 }
 
+/// Verifies: REQ-SS-1.
 #[test]
 fn the_safe_stop_brakes_at_once_and_holds_the_steering() {
     let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);

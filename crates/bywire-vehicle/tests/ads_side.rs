@@ -143,6 +143,7 @@ fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
     }
 }
 
+/// Verifies: REQ-SS-1.
 #[test]
 fn a_stale_command_becomes_a_controlled_stop() {
     let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
@@ -243,6 +244,7 @@ fn feedback_is_validated_and_times_out() {
     );
 }
 
+/// Verifies: REQ-RED-1.
 #[test]
 fn dual_voter_follows_the_reference_logic() {
     let timeout = Duration::from_millis(60);
@@ -275,6 +277,7 @@ fn dual_voter_follows_the_reference_logic() {
     assert_eq!(v.vote(ms(101)), Vote::Failed(VoteFailure::Disagree));
 }
 
+/// Verifies: REQ-RED-1.
 #[test]
 fn dual_voter_pairs_the_copies_of_one_command() {
     let (timeout, skew) = (Duration::from_millis(30), Duration::from_millis(5));
@@ -305,6 +308,7 @@ fn dual_voter_pairs_the_copies_of_one_command() {
     assert_eq!(v.vote(ms(35)), Vote::Failed(VoteFailure::Disagree));
 }
 
+/// Verifies: REQ-RED-1.
 #[test]
 fn dual_voter_compares_a_bus_behind_by_more_than_a_cycle() {
     let (timeout, skew) = (Duration::from_millis(30), Duration::from_millis(5));

@@ -50,6 +50,7 @@ fn any_frame() -> impl Strategy<Value = Frame> {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
+    /// Verifies: REQ-IN-1.
     #[test]
     fn random_traffic_is_harmless(
         frames in proptest::collection::vec((any_frame(), 0u64..50, any::<f64>(), any::<f64>()), 1..200)

@@ -198,6 +198,7 @@ for line in sys.stdin:
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Verifies: REQ-SS-2.
 #[test]
 fn braking_harder_than_the_limit_is_a_stop_at_the_largest_deceleration() {
     let limits = Limits::default();

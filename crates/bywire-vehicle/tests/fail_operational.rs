@@ -133,6 +133,7 @@ fn same_vote(a: TripleVote, b: TripleVote) -> bool {
     }
 }
 
+/// Verifies: REQ-VOT-1.
 #[test]
 fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
     // A reading that is not a number disagrees with everything, as `Off` does with `Good`;
@@ -235,6 +236,7 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
     assert!(checked > 100_000, "only {checked} transitions");
 }
 
+/// Verifies: REQ-VOT-1.
 #[test]
 fn a_channel_that_dissents_for_the_persistence_is_latched_out_and_a_silent_one_at_once() {
     let mut voter = TripleVoter::new(TRIPLE, ms(0));
@@ -442,6 +444,7 @@ impl World {
     }
 }
 
+/// Verifies: REQ-AB-1.
 #[test]
 fn never_both_in_control_never_neither_too_long_over_every_interleaving() {
     const DEPTH: u64 = 28;
@@ -535,6 +538,7 @@ fn never_both_in_control_never_neither_too_long_over_every_interleaving() {
     assert!(transitions > 100_000, "only {transitions} transitions");
 }
 
+/// Verifies: REQ-AB-1.
 #[test]
 fn the_taken_over_side_is_fenced_and_stays_out() {
     let mut a = Arbiter::new(Side::A, ARBITER, ms(0));
@@ -629,6 +633,7 @@ fn feedback(
     }
 }
 
+/// Verifies: REQ-ACT-1.
 #[test]
 fn the_actuator_pair_switches_exactly_when_a_fault_has_lasted_its_bound() {
     // State: the pair, the heartbeat last heard, and since when the actuator in charge has
@@ -718,6 +723,7 @@ fn the_actuator_pair_switches_exactly_when_a_fault_has_lasted_its_bound() {
     }
 }
 
+/// Verifies: REQ-ACT-1.
 #[test]
 fn a_backup_that_fails_too_leaves_neither_in_charge_until_reset() {
     let mut pair = ActuatorPair::new(CHECK, ms(0));
@@ -750,6 +756,7 @@ fn a_backup_that_fails_too_leaves_neither_in_charge_until_reset() {
 
 // ---------------------------------------------------------------- degradation
 
+/// Verifies: REQ-FO-1.
 #[test]
 fn the_degradation_latch_rises_by_rule_and_a_second_fault_is_a_safe_stop() {
     let policy = DegradationPolicy::default();
@@ -801,6 +808,7 @@ fn the_degradation_latch_rises_by_rule_and_a_second_fault_is_a_safe_stop() {
     }
 }
 
+/// Verifies: REQ-FO-1.
 #[test]
 fn each_level_sets_its_limits() {
     let mut policy = DegradationPolicy::default();
@@ -1312,6 +1320,7 @@ mod duplex {
         }
     }
 
+    /// Verifies: REQ-AB-1.
     #[test]
     fn b_takes_over_from_a_crashed_a_and_the_vehicle_drives_on_degraded() {
         let mut rig = engaged();
@@ -1355,6 +1364,7 @@ mod duplex {
         assert_eq!(rig.in_control(), None);
     }
 
+    /// Verifies: REQ-AB-1.
     #[test]
     fn a_failing_its_self_test_hands_over_at_its_next_status() {
         let mut rig = engaged();

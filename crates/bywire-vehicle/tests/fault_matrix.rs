@@ -226,6 +226,7 @@ impl Rig {
     }
 }
 
+/// Verifies: REQ-TO-2.
 #[test]
 fn starts_failed_closed_and_engages_only_after_a_run_and_a_request() {
     let mut rig = Rig::new();
@@ -351,6 +352,7 @@ missed_cycles! {
     missed_10_cycles_brake_fully: 10,
 }
 
+/// Verifies: REQ-TO-1.
 #[test]
 fn controlled_deceleration_follows_its_rate() {
     let (mut rig, sent_at) = miss(3);
@@ -367,6 +369,7 @@ fn controlled_deceleration_follows_its_rate() {
     );
 }
 
+/// Verifies: REQ-TO-2.
 #[test]
 fn full_braking_recovers_only_after_a_run_and_a_re_engage() {
     let (mut rig, _) = miss(6);
@@ -389,6 +392,7 @@ fn full_braking_recovers_only_after_a_run_and_a_re_engage() {
     assert_eq!(a.brake, 0.0);
 }
 
+/// Verifies: REQ-E2E-1.
 #[test]
 fn corrupted_checksum_is_rejected_and_counted() {
     let mut rig = Rig::engaged();
@@ -411,6 +415,7 @@ fn corrupted_checksum_is_rejected_and_counted() {
     ));
 }
 
+/// Verifies: REQ-E2E-2.
 #[test]
 fn repeated_counter_is_rejected_and_counted() {
     let mut rig = Rig::engaged();
@@ -420,6 +425,7 @@ fn repeated_counter_is_rejected_and_counted() {
     assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
+/// Verifies: REQ-E2E-2.
 #[test]
 fn skipped_counter_is_rejected_and_counted() {
     let mut rig = Rig::engaged();
@@ -432,6 +438,7 @@ fn skipped_counter_is_rejected_and_counted() {
     assert_eq!(rig.supervisor().watchdog(), Watchdog::Normal);
 }
 
+/// Verifies: REQ-TO-1.
 #[test]
 fn stale_counter_escalates_like_silence() {
     // A frozen ADS repeats its last frame: nothing new, so the watchdog escalates.
@@ -445,6 +452,7 @@ fn stale_counter_escalates_like_silence() {
     assert_eq!(rig.supervisor().watchdog(), Watchdog::FullBraking);
 }
 
+/// Verifies: REQ-RNG-1.
 #[test]
 fn out_of_range_setpoints_are_rejected() {
     let mut rig = Rig::engaged();
@@ -509,6 +517,7 @@ estop_in_mode! {
     estop_in_calibration_mode_latches: ControlMode::Calibration,
 }
 
+/// Verifies: REQ-ES-1.
 #[test]
 fn estop_refuses_every_automatic_reset_path() {
     let mut rig = Rig::engaged();
@@ -595,6 +604,7 @@ fn estop_refuses_every_automatic_reset_path() {
     }
 }
 
+/// Verifies: REQ-ES-1.
 #[test]
 fn a_new_press_during_the_reset_sequence_starts_over() {
     let mut rig = Rig::engaged();
@@ -613,6 +623,7 @@ fn a_new_press_during_the_reset_sequence_starts_over() {
     assert_eq!(rig.supervisor().estop(), EstopState::Stopped);
 }
 
+/// Verifies: REQ-TK-1.
 #[test]
 fn driver_takeover_at_speed_drops_to_manual_at_once() {
     let mut rig = Rig::engaged();
@@ -654,6 +665,7 @@ fn driver_takeover_at_speed_drops_to_manual_at_once() {
     assert_eq!(rig.supervisor().mode(), ControlMode::Manual);
 }
 
+/// Verifies: REQ-SS-2.
 #[test]
 fn emergency_brake_burst_brakes_fully_while_it_lasts() {
     let mut rig = Rig::engaged();
@@ -668,6 +680,7 @@ fn emergency_brake_burst_brakes_fully_while_it_lasts() {
     assert_eq!(rig.supervisor().actuators(ms(rig.now)).brake, 0.0);
 }
 
+/// Verifies: REQ-TO-1, REQ-FI-1.
 #[test]
 fn ads_node_going_bus_off_trips_the_watchdog() {
     let mut rig = Rig::engaged();

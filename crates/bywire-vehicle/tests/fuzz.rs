@@ -19,6 +19,7 @@ fn wires(loaded: &LoadedProfile) -> (ProfileWire, ProfileWire) {
     )
 }
 
+/// Verifies: REQ-RNG-1, REQ-RNG-2.
 #[test]
 fn the_ads_side_and_the_vehicle_judge_every_command_alike() {
     for loaded in [bywire_tug::profile().unwrap(), shuttle()] {
@@ -51,6 +52,7 @@ fn the_ads_side_and_the_vehicle_judge_every_command_alike() {
     assert_eq!(report.disagreements, 0, "{:#?}", report.kept);
 }
 
+/// Verifies: REQ-RNG-2.
 #[test]
 fn a_limit_set_apart_is_found_on_either_side() {
     let loaded = bywire_tug::profile().unwrap();

@@ -16,6 +16,7 @@ use bywire_tug::wire::ReferenceWire;
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig};
 use common::sealed;
 
+/// Verifies: REQ-MEM-1.
 #[test]
 fn the_supervisor_never_allocates() {
     supervisor_never_allocates(Supervisor::with_wire(
@@ -79,6 +80,7 @@ fn supervisor_never_allocates<W: bywire_vehicle::wire::VehicleWire>(mut supervis
     assert_eq!(counted.count_total, 0, "allocations in the supervisor");
 }
 
+/// Verifies: REQ-MEM-1.
 #[test]
 fn the_ads_side_never_allocates() {
     ads_never_allocates(bywire_vehicle::ads::Ads::with_wire(
@@ -136,6 +138,7 @@ fn ads_never_allocates<W: bywire_vehicle::wire::AdsWire>(mut ads: bywire_vehicle
     assert_eq!(counted.count_total, 0, "allocations on the ADS side");
 }
 
+/// Verifies: REQ-MEM-1.
 #[test]
 fn the_fail_operational_mechanisms_never_allocate() {
     use bywire_vehicle::arbitration::{Arbiter, ArbiterConfig, ArbiterInputs, Heartbeat, Side};

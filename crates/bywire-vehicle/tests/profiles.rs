@@ -144,6 +144,7 @@ fn toml_mistakes_are_refused_with_their_position() {
     assert!(e.contains("missing field"), "{e}");
 }
 
+/// Verifies: REQ-SS-2.
 #[test]
 fn a_stop_harder_than_the_vehicle_can_is_braking_as_hard_as_it_can() {
     let limits = bywire_tug::profile().unwrap().profile.limits;

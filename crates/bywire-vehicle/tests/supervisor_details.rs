@@ -53,6 +53,7 @@ fn state_frame(s: &mut Supervisor<ReferenceWire>, now: u64) -> VehicleToAdsState
     VehicleToAdsState(f.data().try_into().unwrap())
 }
 
+/// Verifies: REQ-TO-1.
 #[test]
 fn watchdog_table() {
     let c = Cascade::default();
@@ -95,6 +96,7 @@ fn watchdog_table() {
     assert_eq!(levels, [0, 1, 2, 3, 4]);
 }
 
+/// Verifies: REQ-ES-1.
 #[test]
 fn estop_and_mode_tables() {
     let held = EstopInputs {
@@ -166,6 +168,7 @@ fn stats_add_up_and_rpm_needs_a_wheel() {
     assert!((motor_rpm(1.0, 20.0, 0.5) - 2400.0 / std::f64::consts::PI).abs() < 1e-9);
 }
 
+/// Verifies: REQ-RNG-1.
 #[test]
 fn limits_hold_at_their_boundaries() {
     let (mut s, mut k, mut t) = engaged();
@@ -209,6 +212,7 @@ fn extended_frames_with_the_same_numbers_are_ignored() {
     assert_eq!(s.actuators(ms(t)).brake, 0.0);
 }
 
+/// Verifies: REQ-E2E-2.
 #[test]
 fn a_restart_after_silence_is_accepted_but_not_the_frozen_value() {
     let (mut s, k, t) = engaged();
@@ -221,6 +225,7 @@ fn a_restart_after_silence_is_accepted_but_not_the_frozen_value() {
     assert_eq!(s.stats().repeated, 1);
 }
 
+/// Verifies: REQ-TK-1.
 #[test]
 fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
     let (mut s, _, _) = engaged();

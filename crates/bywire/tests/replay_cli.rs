@@ -21,6 +21,7 @@ fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Verifies: REQ-REP-1.
 #[test]
 fn a_replayed_session_gives_one_trace_and_a_changed_limit_shows_where_it_decides_otherwise() {
     let dir = Scratch::new("replay");

@@ -191,6 +191,7 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
 }
 
 /// The fault tour: every fault shows its reaction in metrics.json, at its timing.
+/// Verifies: REQ-FI-1.
 #[test]
 fn the_fault_tour_reacts_to_every_fault_in_time() {
     let dir = Scratch::new("sim-tour");
@@ -909,6 +910,7 @@ fn dataset_refuses_bad_input_with_its_name() {
 /// redundant tug, its metrics list a `fail_operational` record per fault and pair with the
 /// named fields, and run.png marks the changes of control and level. Seed 6: the one of
 /// seeds 1–10 with the longest stuck-actuator detection, and once a spurious takeover.
+/// Verifies: REQ-FO-2, REQ-AB-1, REQ-ACT-1.
 #[test]
 fn the_fail_operational_scenario_keeps_its_contract() {
     let dir = Scratch::new("sim-fail-operational");
