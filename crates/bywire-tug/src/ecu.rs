@@ -156,6 +156,12 @@ pub struct VehicleControlEcu {
     supervisor: Supervisor<TugWire>,
     master: Master,
     plausibility: SteeringPlausibility,
+    /// A track arrived (or the check was reset) since the plausibility check last ran, and
+    /// the first tracks it last saw (bits): it runs when its tracks arrive and at its own
+    /// deadline, never on a poll for something else, so two ECUs given the same frames latch
+    /// at the same instant.
+    plausibility_due: bool,
+    plausibility_seen: Option<[u64; 4]>,
     swerve: Swerve<4>,
     wheel_targets: [WheelState; 4],
     /// What the wheel targets were last worked out from (the command and the targets before
@@ -235,6 +241,8 @@ impl VehicleControlEcu {
             supervisor: Supervisor::with_wire(config, wire),
             master,
             plausibility: SteeringPlausibility::default(),
+            plausibility_due: true,
+            plausibility_seen: None,
             swerve: four_wheel(geometry.wheelbase, geometry.track),
             wheel_targets: [WheelState::default(); 4],
             last_wheel_states: None,
@@ -324,6 +332,7 @@ impl VehicleControlEcu {
         }
         self.plausibility
             .second_tracks(now, angles.map(|a| a.unwrap_or(f64::NAN)));
+        self.plausibility_due = true;
         self.voted_angles = angles;
         if let (Some(backup), true) = (self.backup.as_mut(), self.angles_arrived) {
             backup.sample(now, angles);
@@ -469,6 +478,7 @@ impl VehicleControlEcu {
         if self.plausibility.faulted().is_some() {
             let first = self.first_tracks();
             let accepted = self.plausibility.reset(now, first);
+            self.plausibility_due = true;
             self.push(now, EcuEvent::SteeringReset { accepted });
         }
         let backups = self
@@ -655,7 +665,10 @@ impl VehicleControlEcu {
                     self.angles_arrived = true;
                     self.vote_due = true;
                 }
-                None => self.plausibility.second_tracks(now, self.second_tracks),
+                None => {
+                    self.plausibility.second_tracks(now, self.second_tracks);
+                    self.plausibility_due = true;
+                }
             }
         }
     }
@@ -673,8 +686,19 @@ impl VehicleControlEcu {
             self.drives_lost = stopped.is_some();
             self.push(now, EcuEvent::DrivesStopped(stopped));
         }
-        if let Some(fault) = self.plausibility.check(now, first_tracks) {
-            self.push(now, EcuEvent::SteeringFault(fault));
+        let seen = first_tracks.map(f64::to_bits);
+        let due = self.plausibility_due
+            || self.plausibility_seen != Some(seen)
+            || self
+                .plausibility
+                .next_deadline()
+                .is_some_and(|at| at <= now);
+        if due {
+            self.plausibility_due = false;
+            self.plausibility_seen = Some(seen);
+            if let Some(fault) = self.plausibility.check(now, first_tracks) {
+                self.push(now, EcuEvent::SteeringFault(fault));
+            }
         }
         let speed = if a.motors_enabled && !self.stops() {
             a.velocity
@@ -1012,6 +1036,7 @@ impl Node for VehicleControlEcu {
             Some(self.next_report),
             self.diagnostics.next_deadline(),
             self.vote_deadline(),
+            self.plausibility.next_deadline(),
         ])
     }
 }

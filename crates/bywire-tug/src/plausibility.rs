@@ -130,6 +130,30 @@ impl SteeringPlausibility {
         None
     }
 
+    /// When the check next changes on time alone, with the same tracks: a disagreement's
+    /// debounce over, or the second tracks' report growing silent. A caller checks when
+    /// either track arrives and at this instant, never on a poll for something else, so that
+    /// two ECUs given the same frames latch at the same instant.
+    pub fn next_deadline(&self) -> Option<Timestamp> {
+        if self.faulted.is_some() {
+            return None;
+        }
+        let debounced = self
+            .bad_since
+            .iter()
+            .flatten()
+            .map(|since| since.saturating_add(self.debounce))
+            .min();
+        let silent = self.second.map(|(at, _)| {
+            at.saturating_add(self.silence)
+                .saturating_add(Duration::from_nanos(1))
+        });
+        match (debounced, silent) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
     /// The operator's reset: clears the latch when every corner's tracks agree now (and the
     /// second tracks are fresh). Returns whether the latch is clear.
     pub fn reset(&mut self, now: Timestamp, first: [f64; 4]) -> bool {
@@ -176,6 +200,63 @@ mod tests {
             }
         }
         None
+    }
+
+    /// Checked only when a track arrives and at the check's own deadline, it latches the
+    /// same fault at the same instant as checked every 100 µs, over tracks that wander in and
+    /// out of the tolerance and second-track reports that pause.
+    #[test]
+    fn checking_at_arrivals_and_deadlines_is_checking_all_the_time() {
+        let mut state = 0x9E37_79B9_u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        let mut latched = 0;
+        for _ in 0..200 {
+            let (mut always, mut gated) = (
+                SteeringPlausibility::default(),
+                SteeringPlausibility::default(),
+            );
+            let mut first = [0.0; 4];
+            let (mut fault_always, mut fault_gated) = (None, None);
+            // Checked once at the start, as at an ECU's first poll: silence counts from it.
+            let mut arrived = true;
+            // Each run's offset between the tracks: from well within the tolerance to well
+            // beyond it, the noise taking it across.
+            let offset = 2.0 + f64::from(next() % 30) / 10.0;
+            for tick in 0..20_000u64 {
+                let now = Timestamp::from_nanos(tick * 100_000);
+                // A drive's position every 1 ms, the I/O node's report every 10 ms (but for
+                // pauses), each wandering around the tolerance.
+                if tick % 10 == 3 {
+                    let noise = f64::from(next() % 100) / 100.0 - 0.5;
+                    first = [0.0, offset + noise, 0.0, 0.0];
+                    arrived = true;
+                }
+                if tick % 100 == 7 && next() % 16 != 0 {
+                    let second = [0.0, f64::from(next() % 100) / 100.0 - 0.5, 0.0, 0.0];
+                    always.second_tracks(now, second);
+                    gated.second_tracks(now, second);
+                    arrived = true;
+                }
+                if let Some(f) = always.check(now, first) {
+                    fault_always.get_or_insert((tick, f));
+                }
+                let due = gated.next_deadline().is_some_and(|d| d <= now);
+                if arrived || due {
+                    arrived = false;
+                    if let Some(f) = gated.check(now, first) {
+                        fault_gated.get_or_insert((tick, f));
+                    }
+                }
+            }
+            assert_eq!(fault_gated, fault_always);
+            latched += usize::from(fault_always.is_some());
+        }
+        assert!(latched > 20, "only {latched} runs latched");
     }
 
     #[test]
