@@ -68,6 +68,9 @@ pub struct SteeringPlausibility {
     second: Option<(Timestamp, [f64; 4])>,
     bad_since: [Option<Timestamp>; 4],
     faulted: Option<SteeringFault>,
+    /// [`Self::next_deadline`], worked out when the state changes (a runner asks for it far
+    /// more often).
+    deadline: Option<Timestamp>,
 }
 
 impl Default for SteeringPlausibility {
@@ -80,6 +83,7 @@ impl Default for SteeringPlausibility {
             second: None,
             bad_since: [None; 4],
             faulted: None,
+            deadline: None,
         }
     }
 }
@@ -88,6 +92,7 @@ impl SteeringPlausibility {
     /// The I/O node's report of the second tracks arrived.
     pub fn second_tracks(&mut self, now: Timestamp, angles: [f64; 4]) {
         self.second = Some((now, angles));
+        self.deadline = self.work_out_deadline();
     }
 
     /// The latched fault, if any.
@@ -98,6 +103,13 @@ impl SteeringPlausibility {
     /// Compare the first tracks (from the drives) with the second; returns the fault the
     /// moment it latches.
     pub fn check(&mut self, now: Timestamp, first: [f64; 4]) -> Option<SteeringFault> {
+        let fault = self.judge(now, first);
+        self.deadline = self.work_out_deadline();
+        fault
+    }
+
+    /// [`Self::check`]'s transition.
+    fn judge(&mut self, now: Timestamp, first: [f64; 4]) -> Option<SteeringFault> {
         if self.faulted.is_some() {
             return None;
         }
@@ -135,6 +147,10 @@ impl SteeringPlausibility {
     /// either track arrives and at this instant, never on a poll for something else, so that
     /// two ECUs given the same frames latch at the same instant.
     pub fn next_deadline(&self) -> Option<Timestamp> {
+        self.deadline
+    }
+
+    fn work_out_deadline(&self) -> Option<Timestamp> {
         if self.faulted.is_some() {
             return None;
         }
@@ -169,6 +185,7 @@ impl SteeringPlausibility {
         if agree {
             self.faulted = None;
             self.bad_since = [None; 4];
+            self.deadline = self.work_out_deadline();
         }
         self.faulted.is_none()
     }
