@@ -72,6 +72,35 @@ fn a_replayed_session_gives_one_trace_and_a_changed_limit_shows_where_it_decides
     // Its state frame every 20 ms.
     assert!(count(" sent 0 101 ") > 2_500);
 
+    // Both command buses: each command's copy on bus 1b voted with its original (--bus-b),
+    // none refused; given as one bus, every copy is a repeated counter.
+    let bus1b = run.join("bus1b.log");
+    let both = |bus_b: &[&str]| {
+        let mut args = vec![
+            "replay",
+            path(&log),
+            path(&bus1b),
+            "--profile",
+            "reference-tug",
+        ];
+        args.extend_from_slice(bus_b);
+        let out = bywire(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8(out.stdout).unwrap();
+        let count = |what: &str| text.lines().filter(|l| l.contains(what)).count();
+        (
+            count(" command accepted"),
+            count(" command refused: repeated counter"),
+        )
+    };
+    let accepted = count(" command accepted");
+    assert_eq!(both(&["--bus-b", "bus1b"]), (accepted, 0));
+    assert_eq!(both(&[]), (accepted, accepted));
+
     // The stored trace matches: nothing printed, exit 0.
     let same = bywire(&[
         "replay",
