@@ -170,7 +170,9 @@ pub struct FeedbackStats {
     pub counter: u64,
     /// Physical values outside their ranges.
     pub range: u64,
-    /// State frames whose heartbeat echo matched none of the recent commands.
+    /// State frames whose heartbeat echo matched none of the recent commands (their values
+    /// are used all the same: the vehicle does not answer these commands, but it is what it
+    /// reports).
     pub echo: u64,
     /// Secured frames that failed verification (forged, replayed, another key's).
     pub authentication: u64,
@@ -447,10 +449,11 @@ impl<W: AdsWire, O: Odometer> Ads<W, O> {
         self.stats
     }
 
-    /// Whether the vehicle's state frame is fresh at `now`.
+    /// Whether the vehicle answers this side's commands at `now`: a state frame echoing one
+    /// of them is fresh.
     pub fn feedback_alive(&self, now: Timestamp) -> bool {
         self.state
-            .mode
+            .echo_latency
             .fresh(now, self.config.feedback_timeout())
             .is_some()
     }
@@ -601,9 +604,12 @@ impl<W: AdsWire, O: Odometer> Ads<W, O> {
             .and_then(|i| self.sent_at.get(i))
             .copied()
             .flatten();
-        if !recent || sent.is_none() {
+        // An echo of none of them: the vehicle does not answer these commands (none sent yet,
+        // or it hears none), counted; what it reports of itself is taken all the same (its
+        // CRC and counter are checked), so a vehicle is seen before it is commanded.
+        let echoed = recent && sent.is_some();
+        if !echoed {
             self.stats.echo += 1;
-            return;
         }
         self.stats.accepted += 1;
         let s = &mut self.state;
@@ -636,8 +642,9 @@ impl<W: AdsWire, O: Odometer> Ads<W, O> {
             s.hazard_lights.set(now, on);
         }
 
-        if let Some(sent) = sent {
-            s.echo_latency.set(now, now.saturating_since(sent));
+        match sent {
+            Some(sent) if echoed => s.echo_latency.set(now, now.saturating_since(sent)),
+            _ => return,
         }
         if let Some((setpoint, since)) = self.steering_pending {
             if (steering - setpoint).abs() <= self.config.steering_tolerance {

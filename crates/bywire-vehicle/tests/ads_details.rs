@@ -130,12 +130,20 @@ fn each_feedback_check_counts() {
         &state(4, 5, |m| m.set_steering_angle_actual_raw(450)),
     );
     assert_eq!((ads.stats().range, ads.stats().accepted), (3, 2));
-    // An echo of a command sent, but too long ago.
-    ads.on_frame(ms(105), Port::MAIN, &state(5, 1, |_| {}));
-    assert_eq!(ads.stats().echo, 1);
+    // An echo of a command sent, but too long ago: counted; what the vehicle reports of
+    // itself is used all the same, its echo is not.
+    let echoed = ads.state().echo_latency;
+    ads.on_frame(
+        ms(105),
+        Port::MAIN,
+        &state(5, 1, |m| m.set_steering_angle_actual_raw(123)),
+    );
+    assert_eq!((ads.stats().echo, ads.stats().accepted), (1, 3));
+    assert_eq!(ads.state().steering.value, Some(12.3));
+    assert_eq!(ads.state().echo_latency, echoed);
     // The oldest in the window is still fine.
     ads.on_frame(ms(106), Port::MAIN, &state(6, 3, |_| {}));
-    assert_eq!(ads.stats().accepted, 3);
+    assert_eq!(ads.stats().accepted, 4);
     // Flags come through.
     ads.on_frame(
         ms(107),

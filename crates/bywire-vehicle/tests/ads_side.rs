@@ -233,14 +233,16 @@ fn feedback_is_validated_and_times_out() {
         Port::MAIN,
         &state_frame(1, 9, ControlMode::Autonomous),
     );
+    // The last is counted as no echo, but what the vehicle says of itself is taken.
     let s = ads.stats();
-    assert_eq!((s.checksum, s.counter, s.echo, s.accepted), (1, 1, 1, 1));
-    // Fresh for 3 cycles, then not.
+    assert_eq!((s.checksum, s.counter, s.echo, s.accepted), (1, 1, 1, 2));
+    // Alive (answering these commands) for 3 cycles after the last echo, then not, though
+    // its state is fresher.
     assert!(ads.feedback_alive(ms(41 + 60)));
     assert!(!ads.feedback_alive(ms(41 + 61)));
     assert_eq!(
         ads.state().mode.age(ms(141)),
-        Some(Duration::from_millis(100))
+        Some(Duration::from_millis(97))
     );
 }
 

@@ -458,6 +458,15 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
     let (code, out, err) = vehicle.stop();
     assert_eq!(code, 0, "{out}{err}");
 
+    // At bring-up, before any command, every report flows: the steering angle and the gear
+    // too (they waited for the first command once).
+    for (topic, count) in seen["before_commands_per_second"].as_object().unwrap() {
+        let count = count.as_u64().unwrap();
+        assert!(
+            (20..=40).contains(&count),
+            "before commands, {topic}: {count} per second"
+        );
+    }
     // Manual until engaged; the service answers once the vehicle reports autonomous.
     assert_eq!(seen["mode_before"], 4, "{seen}");
     assert_eq!(seen["engaged"], true, "{seen}\n{err}");

@@ -1,6 +1,7 @@
 """An Autoware stand-in for `bywire ros2 vehicle`, on Cyclone DDS: publishes control_cmd at
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
-the vehicle's reports, stops publishing (the vehicle must stop), then disengages. Prints one
+the vehicle's reports (first for a second before any command), stops publishing (the vehicle
+must stop), then disengages. Prints one
 JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
 lights and reads their status (a profile that has them). Before its readings of the driving
 and the tank turn it waits until the vehicle drives (or turns) as told, engaging again should a
@@ -49,8 +50,7 @@ if degradation:
 readers = {k: reader(dp, name, kind, depth=100) for k, (name, kind) in topics.items()}
 seen = {k: [] for k in topics}  # (time, sample)
 lock = threading.Lock()
-publishing = threading.Event()
-publishing.set()
+publishing = threading.Event()  # set once the reports before any command are counted
 running = True
 last_command = [0.0]
 
@@ -146,6 +146,15 @@ result = {}
 try:
     if not wait_for(lambda: latest("mode") is not None, 15):
         sys.exit("no control_mode report")
+    # At bring-up, before any command: every report already flows (Autoware's controller
+    # wants the steering angle before it commands anything).
+    with lock:
+        counts_before = {k: len(v) for k, v in seen.items()}
+    time.sleep(1.0)
+    with lock:
+        result["before_commands_per_second"] = {k: len(v) - counts_before[k]
+                                                for k, v in seen.items()}
+    publishing.set()
     for _ in range(5):
         gear_cmd.write(GearCommand(stamp=stamp(0), command=2))
         time.sleep(0.05)
