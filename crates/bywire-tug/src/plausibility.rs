@@ -7,6 +7,7 @@
 
 use core::time::Duration;
 
+use bywire_core::time::earliest;
 use bywire_core::Timestamp;
 
 /// The corners' names, in the order of the arrays here.
@@ -164,10 +165,7 @@ impl SteeringPlausibility {
             at.saturating_add(self.silence)
                 .saturating_add(Duration::from_nanos(1))
         });
-        match (debounced, silent) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        earliest([debounced, silent])
     }
 
     /// The operator's reset: clears the latch when every corner's tracks agree now (and the

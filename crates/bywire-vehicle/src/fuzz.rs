@@ -13,7 +13,7 @@ use bywire_core::Timestamp;
 
 use crate::command::{ControlCommand, ControlMode, Gear, SteeringMode, TurnIndicators};
 use crate::profile::Limits;
-use crate::supervisor::{CommandStats, Supervisor, SupervisorConfig};
+use crate::supervisor::{Supervisor, SupervisorConfig};
 use crate::wire::{AdsWire, VehicleWire};
 
 /// Disagreements kept in a report (all are counted).
@@ -88,25 +88,6 @@ impl SplitMix {
     }
 }
 
-/// The rejection a supervisor counted between `before` and `after`, by name.
-fn refusal(before: &CommandStats, after: &CommandStats) -> Option<&'static str> {
-    [
-        (before.malformed, after.malformed, "malformed"),
-        (before.checksum, after.checksum, "checksum"),
-        (before.repeated, after.repeated, "repeated counter"),
-        (before.skipped, after.skipped, "skipped counter"),
-        (before.out_of_range, after.out_of_range, "out of range"),
-        (
-            before.authentication,
-            after.authentication,
-            "not authenticated",
-        ),
-    ]
-    .into_iter()
-    .find(|(was, is, _)| is > was)
-    .map(|(_, _, why)| why)
-}
-
 /// `n` random commands from `seed` through the ADS side (`limits`, then `ads_wire`) and a
 /// supervisor (`config`, reading `vehicle_wire`), one command cycle apart with the counter in
 /// sequence, so only the values decide.
@@ -157,8 +138,8 @@ pub fn fuzz<A: AdsWire, V: VehicleWire>(
         supervisor.on_frame(now, Supervisor::<V>::PORT_A, &frame);
         supervisor.poll(now, &mut |_, _| {});
         let after = supervisor.stats();
-        let vehicle = match refusal(&before, &after) {
-            Some(why) => Err(why.to_string()),
+        let vehicle = match after.rejected_since(before).next() {
+            Some(why) => Err(why.name().to_string()),
             None if after.accepted > before.accepted => Ok(()),
             None => Err("not taken as a command".to_string()),
         };

@@ -167,7 +167,7 @@ impl RoleMessage {
             None => value.is_finite(),
         };
         if within {
-            self.set_clamped(index, value);
+            self.store(index, value);
         }
         within
     }
@@ -180,6 +180,10 @@ impl RoleMessage {
             Some((min, max)) => value.clamp(min, max),
             None => value,
         };
+        self.store(index, value);
+    }
+
+    fn store(&mut self, index: usize, value: f64) {
         if let Some(slot) = self.values.get_mut(index) {
             *slot = Some(Value::Float(value));
         }

@@ -13,40 +13,21 @@ use core::fmt::Write as _;
 use bywire_core::node::{Node, Port};
 use bywire_core::{Frame, Timestamp};
 
-use crate::supervisor::{CommandStats, Supervisor};
+use crate::command::{ControlMode, EstopCode, WatchdogLevel};
+use crate::supervisor::Supervisor;
 use crate::wire::VehicleWire;
 
 /// Polls made between two frames at most: a supervisor asks for one every few milliseconds,
 /// so a gap of hours fits; a deadline that does not move ends the catching up.
 const MAX_POLLS_BETWEEN_FRAMES: usize = 10_000_000;
 
-/// What a trace line can change from: the states reported when they change.
-#[derive(Debug, Clone, PartialEq)]
-struct Seen {
-    watchdog: String,
-    estop: String,
-    mode: String,
-}
-
 /// A supervisor fed a recorded session, writing its decisions.
 #[derive(Debug)]
 pub struct Replay<W: VehicleWire> {
     supervisor: Supervisor<W>,
     now: Timestamp,
-    seen: Option<Seen>,
-}
-
-/// Each rejection count with the reason a trace names.
-fn rejections(s: &CommandStats) -> [(u64, &'static str); 7] {
-    [
-        (s.malformed, "malformed"),
-        (s.checksum, "checksum"),
-        (s.repeated, "repeated counter"),
-        (s.skipped, "skipped counter"),
-        (s.out_of_range, "out of range"),
-        (s.disagreements, "the two buses disagree"),
-        (s.authentication, "not authenticated"),
-    ]
+    /// The states last reported, to report each change.
+    seen: Option<(WatchdogLevel, EstopCode, ControlMode)>,
 }
 
 /// `t` as seconds with microseconds, the trace's time column.
@@ -81,17 +62,11 @@ impl<W: VehicleWire> Replay<W> {
         self.supervisor.on_frame(at, port, frame);
         self.poll(at, emit);
         let after = self.supervisor.stats();
-        let mut line = String::new();
         if after.accepted > before.accepted {
-            let _ = write!(line, "{} command accepted", seconds(at));
-            emit(&line);
+            emit(&format!("{} command accepted", seconds(at)));
         }
-        for ((was, _), (is, why)) in rejections(&before).iter().zip(rejections(&after)) {
-            if is > *was {
-                line.clear();
-                let _ = write!(line, "{} command refused: {why}", seconds(at));
-                emit(&line);
-            }
+        for why in after.rejected_since(before) {
+            emit(&format!("{} command refused: {}", seconds(at), why.name()));
         }
     }
 
@@ -119,10 +94,7 @@ impl<W: VehicleWire> Replay<W> {
 
     /// One poll: the frames it sent and the states that changed.
     fn poll(&mut self, at: Timestamp, emit: &mut dyn FnMut(&str)) {
-        let mut sent = Vec::new();
-        self.supervisor
-            .poll(at, &mut |port, frame| sent.push((port, frame)));
-        for (port, frame) in sent {
+        self.supervisor.poll(at, &mut |port, frame| {
             let mut line = format!("{} sent {} ", seconds(at), port.0);
             match frame.id() {
                 Some(id) if id.is_extended() => {
@@ -138,25 +110,21 @@ impl<W: VehicleWire> Replay<W> {
                 let _ = write!(line, "{byte:02X}");
             }
             emit(&line);
+        });
+        let now = (
+            self.supervisor.watchdog().level(),
+            self.supervisor.estop().code(),
+            self.supervisor.mode(),
+        );
+        let before = self.seen.replace(now);
+        if before.map(|b| b.0) != Some(now.0) {
+            emit(&format!("{} watchdog {:?}", seconds(at), now.0));
         }
-        let now = Seen {
-            watchdog: format!("{:?}", self.supervisor.watchdog().level()),
-            estop: format!("{:?}", self.supervisor.estop().code()),
-            mode: format!("{:?}", self.supervisor.mode()),
-        };
-        let before = self.seen.replace(now.clone());
-        for (what, was, is) in [
-            (
-                "watchdog",
-                before.as_ref().map(|s| &s.watchdog),
-                &now.watchdog,
-            ),
-            ("estop", before.as_ref().map(|s| &s.estop), &now.estop),
-            ("mode", before.as_ref().map(|s| &s.mode), &now.mode),
-        ] {
-            if was != Some(is) {
-                emit(&format!("{} {what} {is}", seconds(at)));
-            }
+        if before.map(|b| b.1) != Some(now.1) {
+            emit(&format!("{} estop {:?}", seconds(at), now.1));
+        }
+        if before.map(|b| b.2) != Some(now.2) {
+            emit(&format!("{} mode {:?}", seconds(at), now.2));
         }
     }
 }

@@ -374,7 +374,53 @@ pub struct CommandStats {
     pub unauthenticated: u64,
 }
 
+impl Rejection {
+    /// Every reason, in the order a report lists them.
+    pub const ALL: [Rejection; 7] = [
+        Rejection::Malformed,
+        Rejection::Checksum,
+        Rejection::RepeatedCounter,
+        Rejection::SkippedCounter,
+        Rejection::OutOfRange,
+        Rejection::Disagreement,
+        Rejection::Authentication,
+    ];
+
+    /// Its name in a report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rejection::Malformed => "malformed",
+            Rejection::Checksum => "checksum",
+            Rejection::RepeatedCounter => "repeated counter",
+            Rejection::SkippedCounter => "skipped counter",
+            Rejection::OutOfRange => "out of range",
+            Rejection::Disagreement => "the two buses disagree",
+            Rejection::Authentication => "not authenticated",
+        }
+    }
+}
+
 impl CommandStats {
+    /// The commands rejected for `r`.
+    pub fn rejected_for(&self, r: Rejection) -> u64 {
+        match r {
+            Rejection::Malformed => self.malformed,
+            Rejection::Checksum => self.checksum,
+            Rejection::RepeatedCounter => self.repeated,
+            Rejection::SkippedCounter => self.skipped,
+            Rejection::OutOfRange => self.out_of_range,
+            Rejection::Disagreement => self.disagreements,
+            Rejection::Authentication => self.authentication,
+        }
+    }
+
+    /// The reasons counted in `self` and not yet in `before`.
+    pub fn rejected_since(self, before: CommandStats) -> impl Iterator<Item = Rejection> {
+        Rejection::ALL
+            .into_iter()
+            .filter(move |r| self.rejected_for(*r) > before.rejected_for(*r))
+    }
+
     fn count(&mut self, r: Rejection) {
         let slot = match r {
             Rejection::Malformed => &mut self.malformed,
