@@ -138,6 +138,7 @@ impl SimEndpoint {
             node: Some(self.member.node),
             id: None,
             count,
+            kind: Default::default(),
         });
     }
 

@@ -223,6 +223,49 @@ pub struct Fault {
     pub id: Option<Id>,
     /// How many more transmissions to destroy.
     pub count: u32,
+    /// Which error the disturbance causes, and so where the error frame starts.
+    pub kind: Corruption,
+}
+
+/// The error a disturbance on the wire causes (ISO 11898-1's error kinds a frame's content
+/// can cause), placed in the frame's data: it decides which node finds the error and at which
+/// bit, and so when the error frame starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Corruption {
+    /// A bit flipped in the data without breaking the stuffing: the receivers find the CRC
+    /// wrong at the CRC delimiter.
+    #[default]
+    Crc,
+    /// The transmitter reads back another level than it sent at the first data bit (the
+    /// DLC's first without data) and signals at once.
+    Bit,
+    /// A stuff bit overwritten, so receivers read six equal levels: found at the frame's
+    /// first stuff bit (five bits into the data when the frame has none).
+    Stuff,
+}
+
+impl Corruption {
+    /// Bits the frame is read for before the error is found (the error flag starts after
+    /// them); `None` for [`Corruption::Crc`], whose point the bus keeps cached per frame.
+    fn detected_after(self, frame: &Frame) -> Option<usize> {
+        if self == Corruption::Crc {
+            return None;
+        }
+        let bits = wire::encode(frame).ok()?;
+        let data = bits
+            .spans()
+            .iter()
+            .find(|s| s.field == Field::Data)
+            .or_else(|| bits.spans().iter().find(|s| s.field == Field::Dlc))
+            .map(|s| s.start)?;
+        let at = match self {
+            Corruption::Bit => data,
+            _ => (0..bits.len())
+                .find(|i| bits.is_stuff_bit(*i))
+                .unwrap_or(data + 5),
+        };
+        Some(at + 1)
+    }
 }
 
 /// What a faulty sender does to frames of one identifier (see [`SimBus::tamper`]).
@@ -235,6 +278,8 @@ pub enum Tamper {
     Duplicate,
     /// Sent this much later.
     Delay(std::time::Duration),
+    /// Never sent (the sender's software loses it).
+    Drop,
 }
 
 /// `frame` with the lowest bit of its first data byte flipped (as it is without data).
@@ -519,6 +564,7 @@ impl SimBus {
             Some(Tamper::FlipBit) => (flipped(frame), at, 1),
             Some(Tamper::Duplicate) => (frame, at, 2),
             Some(Tamper::Delay(delay)) => (frame, at.saturating_add(delay), 1),
+            Some(Tamper::Drop) => return,
         };
         // A tampered identifier is the one that goes out.
         let (Some(id), Some(n)) = (frame.id(), self.nodes.get_mut(node)) else {
@@ -595,6 +641,7 @@ impl SimBus {
             node,
             id,
             count: u32::MAX,
+            kind: Corruption::Crc,
         };
         self.faults.push((fault, true));
     }
@@ -981,6 +1028,7 @@ impl SimBus {
         let end;
         if let Some((fault, _)) = fault {
             fault.count -= 1;
+            let detected = fault.kind.detected_after(&frame).unwrap_or(detected);
             let error_end =
                 start.saturating_add(ns(self, u64::try_from(detected).unwrap_or(0) + ERROR_FRAME));
             end = error_end;

@@ -11,7 +11,8 @@
 use bywire_core::confinement::NodeState;
 use bywire_core::wire::{self, Field};
 use bywire_core::{Frame, Timestamp};
-use bywire_net::sim::{BusEvent, Fault, SimBus};
+use bywire_net::sim::{BusEvent, Corruption, Fault, SimBus, Tamper};
+use std::time::Duration;
 
 /// 500 kbit/s: 2 µs per bit.
 const BIT_NS: u64 = 2_000;
@@ -106,6 +107,7 @@ fn repeated_corruption_leads_to_bus_off_and_recovery_at_exact_times() {
         node: Some(sender),
         id: None,
         count: 32,
+        kind: Default::default(),
     });
     bus.submit(sender, f, Timestamp::ZERO);
     bus.advance(Timestamp::from_millis(100));
@@ -190,8 +192,6 @@ fn repeated_corruption_leads_to_bus_off_and_recovery_at_exact_times() {
 /// or late — well formed on the wire, the other identifiers untouched; mended, it sends true.
 #[test]
 fn tampered_identifiers_are_flipped_duplicated_or_delayed() {
-    use bywire_net::sim::Tamper;
-    use std::time::Duration;
     let mut bus = SimBus::new(500_000, Some(2_000_000));
     let (sender, listener) = (bus.add_node(), bus.add_node());
     let id = |raw: u32| frame(&format!("{raw:03X}#00")).id().unwrap();
@@ -354,6 +354,7 @@ fn same_traffic_routed_or_not() -> [Vec<Vec<(u64, String, bool)>>; 2] {
             node: Some(nodes[1]),
             id: None,
             count: 40,
+            kind: Default::default(),
         });
         let mut heard = vec![Vec::new(); nodes.len()];
         for step in 0..400u64 {
@@ -543,4 +544,69 @@ proptest::proptest! {
         proptest::prop_assert_eq!(sent, submitted.len());
         proptest::prop_assert!(waiting.is_empty());
     }
+}
+
+#[test]
+fn each_kind_of_corruption_starts_its_error_frame_where_that_error_is_found() {
+    let f = frame("123#DEADBEEF00FF0000");
+    let encoded = wire::encode(&f).unwrap();
+    let start_of = |field| {
+        encoded
+            .spans()
+            .iter()
+            .find(|s| s.field == field)
+            .unwrap()
+            .start
+    };
+    let first_stuff = (0..encoded.len())
+        .find(|i| encoded.is_stuff_bit(*i))
+        .unwrap();
+    let cases = [
+        (Corruption::Crc, start_of(Field::CrcDelimiter) + 1),
+        (Corruption::Bit, start_of(Field::Data) + 1),
+        (Corruption::Stuff, first_stuff + 1),
+    ];
+    for (kind, detected) in cases {
+        let mut bus = SimBus::new(500_000, None);
+        let sender = bus.add_node();
+        bus.add_node();
+        bus.corrupt(Fault {
+            node: Some(sender),
+            id: None,
+            count: 1,
+            kind,
+        });
+        bus.submit(sender, f, Timestamp::ZERO);
+        bus.advance(Timestamp::from_millis(10));
+        let destroyed: Vec<_> = bus
+            .take_events()
+            .into_iter()
+            .filter_map(|e| match e {
+                BusEvent::Destroyed { start, end, .. } => Some(end.saturating_since(start)),
+                _ => None,
+            })
+            .collect();
+        // The error flag and delimiter: 14 bits of 2 µs after the bit where it was found.
+        let bits = u64::try_from(detected).unwrap() + 14;
+        assert_eq!(destroyed, vec![Duration::from_micros(2 * bits)], "{kind:?}");
+    }
+}
+
+#[test]
+fn a_dropped_frame_never_reaches_the_bus_and_the_others_do() {
+    let mut bus = SimBus::new(500_000, None);
+    let sender = bus.add_node();
+    let receiver = bus.add_node();
+    let id = |raw: u32| frame(&format!("{raw:03X}#00")).id().unwrap();
+    bus.tamper(id(0x100), Some(Tamper::Drop));
+    bus.submit(sender, frame("100#01"), Timestamp::ZERO);
+    bus.submit(sender, frame("101#02"), Timestamp::ZERO);
+    bus.advance(Timestamp::from_millis(10));
+    let got = bus.receive(receiver).unwrap();
+    assert_eq!(got.frame, frame("101#02"));
+    assert!(bus.receive(receiver).is_none());
+    bus.tamper(id(0x100), None);
+    bus.submit(sender, frame("100#03"), Timestamp::from_millis(10));
+    bus.advance(Timestamp::from_millis(20));
+    assert_eq!(bus.receive(receiver).unwrap().frame, frame("100#03"));
 }

@@ -21,6 +21,8 @@
 //! - [`report`]: a run's report (what `metrics.json` holds), with serde;
 //! - [`truth`]: the plant's true state every 10 ms as CSV (`truth.csv`);
 //! - [`output`]: a run's files (bus logs, truth, metrics); [`sweep`]: many runs on all cores;
+//! - [`campaign`]: fault-injection campaigns over any profile's vehicle, judged cell by cell
+//!   against the mechanism and reaction expected, reported as a coverage matrix;
 //! - [`vehicle`]: a simulated vehicle for any profile — the real supervisor in front of a
 //!   simple plant, as one node (`bywire vehicle`).
 
@@ -41,6 +43,7 @@
 pub mod attacker;
 pub mod battery;
 pub mod bus;
+pub mod campaign;
 pub mod chassis;
 pub mod drive;
 pub mod event;

@@ -18,6 +18,7 @@ use bywire_control::kinematics::{four_wheel, Swerve, WheelState};
 use bywire_core::node::{Node, Port};
 use bywire_core::time::earliest;
 use bywire_core::{Frame, Timestamp};
+use bywire_vehicle::mechanism::Mechanisms;
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
 use bywire_vehicle::wire::VehicleWire;
 
@@ -248,7 +249,19 @@ impl SimulatedVehicle<bywire_vehicle::secured::Secured<bywire_vehicle::wire::Pro
         wire: bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>,
         redundant: bool,
     ) -> Self {
+        Self::from_profile_without(profile, wire, redundant, Mechanisms::NONE)
+    }
+
+    /// The same vehicle with the mechanisms `disabled` switched off in its supervisor: a
+    /// fault-injection campaign's proof that its cells would notice one missing.
+    pub fn from_profile_without(
+        profile: &bywire_vehicle::profile::LoadedProfile,
+        wire: bywire_vehicle::secured::Secured<bywire_vehicle::wire::ProfileWire>,
+        redundant: bool,
+        disabled: Mechanisms,
+    ) -> Self {
         let mut config = profile.supervisor_config();
+        config.disabled = disabled;
         if redundant {
             config.redundancy = Some(bywire_vehicle::supervisor::Redundancy::for_cycle(
                 config.cycle,

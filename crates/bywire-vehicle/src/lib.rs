@@ -15,6 +15,8 @@
 //!   backup, switched on a failed feedback check) and [`degradation`] (levels from nominal to
 //!   safe stop, the rule per fault class, the latch); a profile's [`fail_operational`]
 //!   section (with `std`) declares which of them a vehicle carries.
+//! - [`mechanism`]: the safety mechanisms by name, and the set a fault-injection campaign
+//!   switches off to show its cells would notice one missing.
 //! - [`autoware`]: the `autoware-can` output (one `Control` as three frames, all or nothing)
 //!   and its decoder.
 //! - [`replay`]: a recorded session fed to a supervisor, its decisions as a trace to compare;
@@ -26,7 +28,7 @@
 //! - [`wire`]: a vehicle's messages on the wire, behind the traits the nodes speak through;
 //!   [`wire::ProfileWire`] speaks any vehicle a profile describes, by role, through the runtime
 //!   codec (a vehicle crate may add a wire over generated structs: `bywire-tug` does).
-//! - [`profile`]: TOML vehicle profiles checked against their DBC; `autoware-can` ships here,
+//! - [`profile`]: TOML vehicle profiles checked against their DBC; `autoware-can` and `shuttle` ship here,
 //!   each vehicle's own with its crate.
 //!
 //! Nothing here names a particular vehicle.
@@ -69,6 +71,7 @@ pub mod degradation;
 pub mod fail_operational;
 #[cfg(feature = "std")]
 pub mod fuzz;
+pub mod mechanism;
 #[cfg(feature = "std")]
 pub mod profile;
 #[cfg(feature = "std")]

@@ -2,7 +2,7 @@
 //! which role, with the rates, timeouts, limits, enum values and watchdog cascade. Loading
 //! checks everything against the DBC and names the key at fault.
 //!
-//! `autoware-can` ships here ([`Profile::builtin`]); a vehicle's crate ships its own profile.
+//! `autoware-can` and `shuttle` (another vehicle's layout) ship here ([`Profile::builtin`]); a vehicle's crate ships its own profile.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -40,7 +40,9 @@ pub enum ProfileError {
         reason: String,
     },
     /// No such built-in profile.
-    #[error("no built-in profile '{0}' (reference-tug, reference-tug-redundant, autoware-can)")]
+    #[error(
+        "no built-in profile '{0}' (reference-tug, reference-tug-redundant, autoware-can, shuttle)"
+    )]
     UnknownBuiltin(String),
 }
 
@@ -508,11 +510,21 @@ pub struct LoadedProfile {
 
 /// The profiles this crate ships, with their DBCs (a vehicle's crate ships its own: the
 /// reference tug's is `bywire_tug::builtin`).
-const BUILTIN: [(&str, &str, &str); 1] = [(
-    "autoware-can",
-    include_str!("../profiles/autoware-can.toml"),
-    crate::autoware::DBC,
-)];
+const BUILTIN: [(&str, &str, &str); 2] = [
+    (
+        "autoware-can",
+        include_str!("../profiles/autoware-can.toml"),
+        crate::autoware::DBC,
+    ),
+    // Not the reference tug: another vehicle's layout (big-endian setpoints, 8-bit counters,
+    // XOR checksums, its own enum numbers, a single steered axis with fail-operational
+    // steering), for campaigns and fuzzing over a second profile.
+    (
+        "shuttle",
+        include_str!("../profiles/shuttle.toml"),
+        include_str!("../profiles/shuttle.dbc"),
+    ),
+];
 
 impl Profile {
     /// A shipped profile by name, with its shipped DBC.

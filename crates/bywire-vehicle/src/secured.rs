@@ -398,6 +398,9 @@ fn payload_frame(id: Id, payload: &[u8]) -> Option<Frame> {
 pub struct Secured<W> {
     inner: W,
     table: Option<SecuredTable>,
+    /// Whether a frame that fails verification is refused (only a campaign's proof turns
+    /// it off: then its payload is read as if it were authentic).
+    verified: bool,
 }
 
 impl<W> Secured<W> {
@@ -406,12 +409,17 @@ impl<W> Secured<W> {
         Secured {
             inner,
             table: Some(table),
+            verified: true,
         }
     }
 
     /// `inner` as it is: nothing secured.
     pub fn plain(inner: W) -> Secured<W> {
-        Secured { inner, table: None }
+        Secured {
+            inner,
+            table: None,
+            verified: true,
+        }
     }
 
     /// The table, when secured.
@@ -429,6 +437,13 @@ impl<W> Secured<W> {
             Some(table) => frame.and_then(|f| table.protect(f)),
             None => frame,
         }
+    }
+
+    /// A secured frame's payload, unverified: what a receiver without SecOC would read.
+    fn unverified_payload(&self, frame: &Frame) -> Option<Frame> {
+        let id = frame.id()?;
+        let layout = self.table.as_ref()?.layout(id)?;
+        payload_frame(id, frame.data().get(..layout.payload_length)?)
     }
 
     fn check(&mut self, channel: Channel, frame: &Frame) -> Checked {
@@ -491,6 +506,10 @@ impl<W: VehicleWire> VehicleWire for Secured<W> {
         match self.check(channel, frame) {
             Checked::Unsecured => self.inner.incoming(frame),
             Checked::Authentic(payload) => self.inner.incoming(&payload),
+            Checked::Rejected(_) if !self.verified => match self.unverified_payload(frame) {
+                Some(payload) => self.inner.incoming_from(channel, &payload),
+                None => Incoming::Other,
+            },
             // Known by its identifier alone (its bytes are not to be read): a command is a
             // rejected command, anything else unauthenticated.
             Checked::Rejected(_) => match frame.id() {
@@ -525,6 +544,11 @@ impl<W: VehicleWire> VehicleWire for Secured<W> {
 
     fn pending_frame(&mut self, now: Timestamp) -> Option<Frame> {
         self.table.as_mut().and_then(|t| t.sync_frame(now))
+    }
+
+    fn switch_off(&mut self, off: crate::mechanism::Mechanisms) {
+        self.verified = !off.contains(crate::mechanism::Mechanism::Secoc);
+        self.inner.switch_off(off);
     }
 }
 

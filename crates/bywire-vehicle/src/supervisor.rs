@@ -29,6 +29,7 @@ use crate::command::{
     ControlMode, DegradationLevel, EstopCode, Gear, SteeringMode, TurnIndicators, WatchdogLevel,
 };
 use crate::degradation::{Degradation, DegradationPolicy, Fault};
+use crate::mechanism::{Mechanism, Mechanisms};
 use crate::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use crate::wire::{DegradationReport, Incoming, Rejected, StateReport, VehicleWire};
 
@@ -65,6 +66,9 @@ pub struct SupervisorConfig {
     /// Degradation levels of a fail-operational vehicle (`None`: fail-safe only, every
     /// fault a mechanism reports is the safe state).
     pub degradation: Option<DegradationPolicy>,
+    /// Mechanisms switched off, for a fault-injection campaign's proof that it would notice
+    /// (see [`crate::mechanism`]); empty on every vehicle.
+    pub disabled: Mechanisms,
 }
 
 /// Voting on commands received on two buses (see [`crate::redundancy::DualVoter`]).
@@ -107,6 +111,7 @@ impl Default for SupervisorConfig {
             standstill: 0.05,
             redundancy: None,
             degradation: None,
+            disabled: Mechanisms::NONE,
         }
     }
 }
@@ -520,6 +525,8 @@ pub struct Supervisor<W: VehicleWire> {
     estop_active: bool,
     /// When the last E-stop frame came (`None`: the vehicle has sent none yet).
     estop_heard: Option<Timestamp>,
+    /// The chain counts as open for want of its frames (until the next one comes).
+    estop_chain_lost: bool,
     emergency_brake_until: Option<Timestamp>,
     mode: ControlMode,
     driver_input: bool,
@@ -535,16 +542,21 @@ pub struct Supervisor<W: VehicleWire> {
 impl<W: VehicleWire> Supervisor<W> {
     /// A supervisor reading `wire`, failed closed: full braking until commands arrive and it
     /// is engaged.
-    pub fn with_wire(config: SupervisorConfig, wire: W) -> Self {
+    pub fn with_wire(config: SupervisorConfig, mut wire: W) -> Self {
         let mut steering = RateLimiter::new(config.steering_rate, config.steering_rate);
         steering.reset(0.0);
         let bits = wire.command_counter_bits();
+        wire.switch_off(config.disabled);
+        // Without its vote, each bus's copy is taken as it comes.
+        let redundancy = config
+            .redundancy
+            .filter(|_| !config.disabled.contains(Mechanism::Redundancy));
         Supervisor {
             wire,
             config,
             counter: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
             counter_b: CounterChecker::new(bits, 0, config.cycle.saturating_mul(5)),
-            voter: config.redundancy.map(|r| {
+            voter: redundancy.map(|r| {
                 let voter = DualVoter::new(r.timeout, r.skew);
                 if bits > 0 {
                     // The counter comes round after its range of cycles: copies further
@@ -584,6 +596,7 @@ impl<W: VehicleWire> Supervisor<W> {
             estop: EstopState::Normal,
             estop_active: false,
             estop_heard: None,
+            estop_chain_lost: false,
             emergency_brake_until: None,
             mode: ControlMode::Manual,
             driver_input: false,
@@ -615,6 +628,12 @@ impl<W: VehicleWire> Supervisor<W> {
     /// The E-stop latch's state.
     pub fn estop(&self) -> EstopState {
         self.estop
+    }
+
+    /// Whether the E-stop chain counts as open because its frames stopped coming (not
+    /// because one asked for the E-stop), until the next one comes.
+    pub fn estop_chain_lost(&self) -> bool {
+        self.estop_chain_lost
     }
 
     /// The control mode.
@@ -704,7 +723,11 @@ impl<W: VehicleWire> Supervisor<W> {
             Channel::A => &mut self.counter,
             Channel::B => &mut self.counter_b,
         };
-        match checker.check(now, counter) {
+        let status = match self.config.disabled.contains(Mechanism::E2e) {
+            true => CounterStatus::InSequence,
+            false => checker.check(now, counter),
+        };
+        match status {
             CounterStatus::Initial | CounterStatus::InSequence => {}
             // After a silence the stream may restart anywhere, but not with the value it
             // froze on: a frozen sender must not get a frame through every timeout.
@@ -727,7 +750,7 @@ impl<W: VehicleWire> Supervisor<W> {
             && command.velocity.abs() <= c.speed_limit
             && (0.0..=100.0).contains(&command.brake)
             && command.mode != ControlMode::Estop;
-        if !within {
+        if !within && !c.disabled.contains(Mechanism::Range) {
             return Err(Rejection::OutOfRange);
         }
         Ok((command, counter))
@@ -739,6 +762,7 @@ impl<W: VehicleWire> Supervisor<W> {
             Incoming::Command(read) => self.on_command(now, channel, read),
             Incoming::Estop(requested) => {
                 self.estop_heard = Some(now);
+                self.estop_chain_lost = false;
                 self.estop_active = requested;
                 self.evaluate(false, false);
             }
@@ -927,7 +951,8 @@ impl<W: VehicleWire> Supervisor<W> {
     /// (given once; [`Node::poll`] sends it on each command bus).
     fn step(&mut self, now: Timestamp, out: &mut dyn FnMut(Frame)) {
         self.take_waiting_copy(now);
-        if let Some(last) = self.last_heard() {
+        let timeouts = !self.config.disabled.contains(Mechanism::Timeout);
+        if let Some(last) = self.last_heard().filter(|_| timeouts) {
             let cycle = self.config.cycle.as_nanos().max(1);
             let elapsed = now.saturating_since(last).as_nanos();
             let tolerance = cycle / 2;
@@ -947,8 +972,9 @@ impl<W: VehicleWire> Supervisor<W> {
                 }
             }
         }
-        if self.estop_deadline().is_some_and(|t| now >= t) {
+        if timeouts && self.estop_deadline().is_some_and(|t| now >= t) {
             self.estop_active = true;
+            self.estop_chain_lost = true;
         }
         if self.emergency_brake_until.is_some_and(|until| now >= until) {
             self.emergency_brake_until = None;
@@ -1008,6 +1034,27 @@ impl<W: VehicleWire> Supervisor<W> {
 
     /// What the actuators must do now.
     pub fn actuators(&self, now: Timestamp) -> Actuators {
+        let actuators = self.outputs(now);
+        // Switched off, nothing ever brakes on its own (not even a latched E-stop): the last
+        // command goes on as it was.
+        if self.config.disabled.contains(Mechanism::SafeState) && !actuators.motors_enabled {
+            if let Some(command) = self.command {
+                let c = self.config;
+                return Actuators {
+                    steering_enabled: true,
+                    steering: command.steering,
+                    motors_enabled: true,
+                    velocity: command.velocity,
+                    motor_rpm: motor_rpm(command.velocity, c.gear_ratio, c.wheel_diameter),
+                    brake: command.brake,
+                    ..actuators
+                };
+            }
+        }
+        actuators
+    }
+
+    fn outputs(&self, now: Timestamp) -> Actuators {
         let c = self.config;
         let command = self.command;
         let steering_mode = self.steering_mode();

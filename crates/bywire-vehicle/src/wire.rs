@@ -208,6 +208,13 @@ pub trait VehicleWire: Counters {
     fn pending_frame(&mut self, _now: Timestamp) -> Option<Frame> {
         None
     }
+    /// Stop checking what `off` names of the frames it reads (the command's checksum for
+    /// [`Mechanism::E2e`], authentication for [`Mechanism::Secoc`]): a fault-injection
+    /// campaign's proof that it would notice (see [`crate::mechanism`]).
+    ///
+    /// [`Mechanism::E2e`]: crate::mechanism::Mechanism::E2e
+    /// [`Mechanism::Secoc`]: crate::mechanism::Mechanism::Secoc
+    fn switch_off(&mut self, _off: crate::mechanism::Mechanisms) {}
     /// The state frame with `counter` and its checksum.
     fn state_frame(&mut self, report: &StateReport, counter: u64) -> Option<Frame>;
     /// The wheel-speed frame (FL, FR, RL, RR in m/s) with `counter` and its checksum, where

@@ -862,7 +862,7 @@ mod shuttle {
 
     fn shuttle() -> LoadedProfile {
         Profile::load(
-            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml"),
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("profiles/shuttle.toml"),
         )
         .unwrap()
     }
@@ -925,14 +925,11 @@ mod shuttle {
         let (toml, dbc) = (
             std::fs::read_to_string(concat!(
                 env!("CARGO_MANIFEST_DIR"),
-                "/tests/data/shuttle.toml"
+                "/profiles/shuttle.toml"
             ))
             .unwrap(),
-            std::fs::read_to_string(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/tests/data/shuttle.dbc"
-            ))
-            .unwrap(),
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/profiles/shuttle.dbc"))
+                .unwrap(),
         );
         for (from, to, expected) in [
             (

@@ -691,6 +691,7 @@ fn ads_node_going_bus_off_trips_the_watchdog() {
         node: Some(rig.ads),
         id: None,
         count: u32::MAX,
+        kind: Default::default(),
     });
     let last_ok = rig.now;
     rig.commands(8, Cmd::default());

@@ -9,7 +9,7 @@ use bywire_vehicle::profile::{LoadedProfile, Profile};
 use bywire_vehicle::wire::ProfileWire;
 
 fn shuttle() -> LoadedProfile {
-    Profile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml")).unwrap()
+    Profile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("profiles/shuttle.toml")).unwrap()
 }
 
 fn wires(loaded: &LoadedProfile) -> (ProfileWire, ProfileWire) {

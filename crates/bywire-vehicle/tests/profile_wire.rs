@@ -1,7 +1,7 @@
 //! Vehicles driven by role through the runtime codec ([`ProfileWire`]):
 //! - for the reference tug it makes the same bytes as the generated structs, and reads
 //!   feedback the same way (a differential test of two implementations);
-//! - for a vehicle with another layout (tests/data/shuttle: big-endian setpoints, 8-bit
+//! - for a vehicle with another layout (profiles/shuttle: big-endian setpoints, 8-bit
 //!   counters, XOR checksums, its own enum numbering) cantools decodes what the ADS side sends
 //!   as the profile says, and the ADS side validates what cantools encodes.
 #![allow(
@@ -34,7 +34,7 @@ use bywire_vehicle::wire::{
 use proptest::prelude::*;
 
 fn shuttle() -> bywire_vehicle::profile::LoadedProfile {
-    Profile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/shuttle.toml")).unwrap()
+    Profile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("profiles/shuttle.toml")).unwrap()
 }
 
 fn command_strategy() -> impl Strategy<Value = AdsCommand> {
@@ -140,12 +140,10 @@ proptest! {
     }
 }
 
-/// cantools, given `dbc` (in tests/data), decodes `lines` ("ID HEX") into JSON objects, or
+/// cantools, given `dbc` (relative to the crate), decodes `lines` ("ID HEX") into JSON objects, or
 /// encodes `{"id": .., "signals": {..}}` lines into "ID HEX".
 fn cantools(dbc: &str, script: &str, input: &str) -> Vec<String> {
-    let dbc = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(dbc);
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join(dbc);
     let mut child = Command::new("python3")
         .args(["-c", script])
         .arg(&dbc)
@@ -270,7 +268,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
     // Each third command cannot be carried: 200 frames.
     assert_eq!(sent.len(), 200);
     assert!(sent.iter().all(|(k, _)| k % 3 != 2));
-    let decoded = cantools("shuttle.dbc", DECODE, &lines);
+    let decoded = cantools("profiles/shuttle.dbc", DECODE, &lines);
     let gear = |g: Gear| match g {
         Gear::Park => 4.0,
         Gear::Reverse => 2.0,
@@ -331,7 +329,7 @@ fn the_shuttles_commands_are_what_cantools_reads_by_role() {
             );
         }
     });
-    let line = &cantools("shuttle.dbc", DECODE, &brake)[0];
+    let line = &cantools("profiles/shuttle.dbc", DECODE, &brake)[0];
     assert_eq!(
         (
             field(line, "EB_Request"),
@@ -386,16 +384,20 @@ fn the_shuttles_feedback_from_cantools_is_validated_by_role() {
         r#"{"id": 1281, "signals": {"St_Steer": 1.0, "St_Speed": 1.0, "St_Mode": 2, "St_SteerMode": 0, "St_Echo": 2, "St_Alive": 201, "St_Xor": 0}}"#,
         r#"{"id": 1281, "signals": {"St_Steer": 1.0, "St_Speed": 1.0, "St_Mode": 2, "St_SteerMode": 0, "St_Echo": 200, "St_Alive": 202, "St_Xor": 0}}"#,
     ];
-    let frames: Vec<Frame> = cantools("shuttle.dbc", ENCODE, &(requests.join("\n") + "\n"))
-        .iter()
-        .map(|line| {
-            let (id, hex) = line.split_once(' ').unwrap();
-            let bytes: Vec<u8> = (0..hex.len() / 2)
-                .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
-                .collect();
-            Frame::classic(Id::standard(id.parse().unwrap()).unwrap(), &bytes).unwrap()
-        })
-        .collect();
+    let frames: Vec<Frame> = cantools(
+        "profiles/shuttle.dbc",
+        ENCODE,
+        &(requests.join("\n") + "\n"),
+    )
+    .iter()
+    .map(|line| {
+        let (id, hex) = line.split_once(' ').unwrap();
+        let bytes: Vec<u8> = (0..hex.len() / 2)
+            .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+            .collect();
+        Frame::classic(Id::standard(id.parse().unwrap()).unwrap(), &bytes).unwrap()
+    })
+    .collect();
     let now = Timestamp::from_millis(120);
     ads.on_frame(now, Port::MAIN, &frames[0]);
     let state = *ads.state();
@@ -730,7 +732,7 @@ fn lights_go_out_in_the_profiles_numbering_and_read_back() {
         lines.push_str(&id_and_hex(&frame));
         lines.push_str(&id_and_hex(&state));
     }
-    let decoded = cantools("tug-with-lights.dbc", DECODE, &lines);
+    let decoded = cantools("tests/data/tug-with-lights.dbc", DECODE, &lines);
     assert_eq!(decoded.len(), 2 * cases.len());
     for (pair, (turn, hazard)) in decoded.chunks(2).zip(cases) {
         let on = f64::from(u8::from(hazard));

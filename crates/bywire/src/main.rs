@@ -74,6 +74,9 @@ enum Command {
     /// Replay a recorded session through a profile's supervisor: its decisions as a trace,
     /// compared with a stored one (regression).
     Replay(cmd::replay::Args),
+    /// Run a fault-injection campaign: every fault × operating state × profile in the
+    /// simulator, judged against the mechanism and reaction expected, as a coverage matrix.
+    Campaign(cmd::campaign::Args),
     /// Watch identifiers like cansniffer: changing bytes highlighted, rates, DBC values.
     Sniff(cmd::sniff::Args),
     /// A live table of decoded messages and signals, like cantools monitor.
@@ -166,6 +169,7 @@ fn main() -> ExitCode {
         Command::Latency(args) => cmd::latency::run(&args, &mut out),
         Command::Dataset(args) => cmd::dataset::run(&args, &mut out),
         Command::Replay(args) => cmd::replay::run(&args, &mut out),
+        Command::Campaign(args) => cmd::campaign::run(&args, &mut out),
         Command::Uds { command } => cmd::uds::run(&command, &mut out),
         Command::Secoc { command } => cmd::secoc::run(&command, &mut out),
         Command::Isotp { command } => cmd::isotp::run(&command, &mut io::stdin().lock(), &mut out),

@@ -297,16 +297,13 @@ fn bridge_drives_over_two_redundant_buses() {
     assert_eq!(states.last().unwrap()["rejected"]["counter"], 0);
 }
 
-/// Another vehicle's profile (tests/data/shuttle of bywire-vehicle: its own identifiers,
+/// Another vehicle's profile (profiles/shuttle of bywire-vehicle: its own identifiers,
 /// big-endian setpoints, 8-bit counters, XOR checksums, its own enum numbers) drives that
 /// vehicle's messages: python-can on the same socketcand-served bus plays the shuttle, with
 /// cantools encoding its status (echoing the command counter) and decoding our commands.
 #[test]
 fn bridge_drives_another_vehicle_by_its_profile() {
-    let data = format!(
-        "{}/../bywire-vehicle/tests/data",
-        env!("CARGO_MANIFEST_DIR")
-    );
+    let data = format!("{}/../bywire-vehicle/profiles", env!("CARGO_MANIFEST_DIR"));
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()

@@ -1,6 +1,7 @@
 //! Traceability: every requirement in `requirements/requirements.toml` is verified by at least
-//! one test that names it (`/// Verifies: REQ-…` on the test), every id a test names is a
-//! requirement, and the matrix (requirement → its tests) is written to
+//! one test that names it (`/// Verifies: REQ-…` on the test) or a campaign cell (a fault of
+//! `campaigns/*.toml` naming it), every id a test or a fault names is a requirement, and the
+//! matrix (requirement → its tests and cells, the cells' results of this run) is written to
 //! `target/traceability.md` for each run to keep.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -101,9 +102,18 @@ fn every_requirement_is_verified_by_a_test_that_names_it() {
                 .push(test.clone());
         }
     }
+    for (ids, cells) in campaign_cells(&root) {
+        for id in ids {
+            matrix
+                .get_mut(id.as_str())
+                .unwrap_or_else(|| panic!("{cells} verifies {id}, which is no requirement"))
+                .push(cells.clone());
+        }
+    }
     let mut report = String::from(
         "# Traceability\n\nEach requirement of `requirements/requirements.toml` and the tests \
-         that verify it (they name it in their documentation).\n\n\
+         that verify it (they name it in their documentation), and the campaign cells that do \
+         (their faults name it) with this run's results.\n\n\
          | requirement | source | method | verified by |\n|---|---|---|---|\n",
     );
     for r in &file.requirement {
@@ -117,7 +127,10 @@ fn every_requirement_is_verified_by_a_test_that_names_it() {
             r.method,
             tests
                 .iter()
-                .map(|t| format!("`{t}`"))
+                .map(|t| match t.starts_with("campaign ") {
+                    true => t.clone(),
+                    false => format!("`{t}`"),
+                })
                 .collect::<Vec<_>>()
                 .join("<br>")
         );
@@ -132,4 +145,41 @@ fn every_requirement_is_verified_by_a_test_that_names_it() {
         .collect();
     assert!(unverified.is_empty(), "verified by nothing: {unverified:?}");
     assert!(file.requirement.len() >= 20);
+}
+
+/// Each campaign's faults that name requirements, run: (their ids, "campaign NAME: fault F,
+/// P/E cells passed").
+fn campaign_cells(root: &Path) -> Vec<(Vec<String>, String)> {
+    use bywire_sim::campaign::{self, Campaign, Verdict};
+    let mut files: Vec<PathBuf> = std::fs::read_dir(root.join("campaigns"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    let mut found = Vec::new();
+    for file in files {
+        let c = Campaign::load(&file).unwrap();
+        let results = campaign::run(&c, 2, Default::default(), &|_| {}).unwrap();
+        for f in &c.faults {
+            let cells: Vec<_> = results.iter().filter(|r| r.fault == f.name()).collect();
+            let executed = cells
+                .iter()
+                .filter(|r| r.verdict != Verdict::NotApplicable)
+                .count();
+            let passed = cells.iter().filter(|r| r.verdict == Verdict::Pass).count();
+            if executed == 0 {
+                continue;
+            }
+            let name = file.file_name().unwrap().to_string_lossy();
+            found.push((
+                f.requirements.clone(),
+                format!(
+                    "campaign {name}: {} ({passed}/{executed} cells passed)",
+                    f.name()
+                ),
+            ));
+        }
+    }
+    found
 }

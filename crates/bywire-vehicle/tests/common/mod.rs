@@ -71,9 +71,9 @@ pub mod vehicles {
         }
     }
 
-    /// The shuttle test vehicle's profile and DBC text (tests/data).
+    /// The shuttle's profile and DBC text (as the crate ships them).
     pub fn shuttle_texts() -> (String, String) {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("profiles");
         (
             std::fs::read_to_string(dir.join("shuttle.toml")).unwrap(),
             std::fs::read_to_string(dir.join("shuttle.dbc")).unwrap(),

@@ -3,6 +3,7 @@
 pub mod bittiming;
 pub mod bridge;
 pub mod busload;
+pub mod campaign;
 pub mod canopen;
 pub mod check;
 pub mod dataset;
