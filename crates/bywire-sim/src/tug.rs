@@ -980,6 +980,25 @@ impl Tug {
         }
     }
 
+    /// Switch off the ECUs' own mechanisms that `off` names (the 2-out-of-3 voter): a
+    /// fault-injection campaign's proof that its cells would notice.
+    pub fn switch_off(&mut self, off: bywire_vehicle::mechanism::Mechanisms) {
+        match self.nodes.ecu {
+            Ecus::One(ecu) => {
+                if let Some(mut ecu) = self.net.node_mut(ecu) {
+                    ecu.switch_off(off);
+                }
+            }
+            Ecus::Two(pair) => {
+                if let Some(mut pair) = self.net.node_mut(pair) {
+                    for side in [Side::A, Side::B] {
+                        pair.half_mut(side).node_mut().switch_off(off);
+                    }
+                }
+            }
+        }
+    }
+
     /// Which of the redundant tug's ECUs is in control: its outputs on the buses, neither
     /// fenced nor silenced by a fault (`None`: neither, or the tug has one).
     pub fn ecu_in_control(&self) -> Option<Side> {

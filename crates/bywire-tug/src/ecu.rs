@@ -35,6 +35,7 @@ use bywire_core::{Frame, Id, Timestamp};
 use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
 use bywire_vehicle::degradation::Fault;
+use bywire_vehicle::mechanism::{Mechanism, Mechanisms};
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::redundancy::{ChannelHealth, TripleConfig, TripleVoter};
 use bywire_vehicle::supervisor::{Actuators, Supervisor, SupervisorConfig};
@@ -204,6 +205,10 @@ pub struct VehicleControlEcu {
     angles_arrived: bool,
     /// The redundant tug: each corner's backup steering valve and its judge.
     backup: Option<BackupSteering>,
+    /// Mechanisms of its own switched off (a campaign's proof, see
+    /// `bywire_vehicle::mechanism`): without the voter, each corner's angle is its first
+    /// channel's, unjudged.
+    disabled: Mechanisms,
 }
 
 /// The degradation latch's source numbers of the backup steering's faults: this plus the
@@ -266,7 +271,15 @@ impl VehicleControlEcu {
             vote_due: false,
             angles_arrived: false,
             backup: None,
+            disabled: Mechanisms::NONE,
         }
+    }
+
+    /// Switch off its own mechanisms that `off` names (the 2-out-of-3 voter): a
+    /// fault-injection campaign's proof that its cells would notice. The supervisor's are
+    /// its configuration's (`SupervisorConfig::disabled`).
+    pub fn switch_off(&mut self, off: Mechanisms) {
+        self.disabled = off;
     }
 
     /// The same ECU voting each corner's angle 2-out-of-3 with `configs` (FL, FR, RL, RR):
@@ -310,7 +323,12 @@ impl VehicleControlEcu {
             return;
         };
         let mut angles = [None; 4];
+        let unvoted = self.disabled.contains(Mechanism::Voter);
         for (corner, (voter, angle)) in voters.iter_mut().zip(angles.iter_mut()).enumerate() {
+            if unvoted {
+                *angle = voter.reading(0);
+                continue;
+            }
             let vote = voter.vote(now);
             *angle = vote.value();
             let source = u8::try_from(corner).unwrap_or(0);

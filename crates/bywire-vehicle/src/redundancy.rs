@@ -396,6 +396,15 @@ impl TripleVoter {
         }
     }
 
+    /// The last reading from `channel` (0, 1 or 2), voted or not.
+    pub fn reading(&self, channel: usize) -> Option<f64> {
+        self.readings
+            .get(channel)
+            .copied()
+            .flatten()
+            .map(|(value, _)| value)
+    }
+
     /// Each channel's health after the last vote.
     pub fn health(&self) -> [ChannelHealth; 3] {
         self.health

@@ -1037,7 +1037,7 @@ impl<W: VehicleWire> Supervisor<W> {
         let actuators = self.outputs(now);
         // Switched off, nothing ever brakes on its own (not even a latched E-stop): the last
         // command goes on as it was.
-        if self.config.disabled.contains(Mechanism::SafeState) && !actuators.motors_enabled {
+        if !actuators.motors_enabled && self.config.disabled.contains(Mechanism::SafeState) {
             if let Some(command) = self.command {
                 let c = self.config;
                 return Actuators {

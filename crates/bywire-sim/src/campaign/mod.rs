@@ -39,6 +39,7 @@
 
 pub mod report;
 pub mod rig;
+mod tug_cell;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -105,6 +106,24 @@ pub struct ProfileEntry {
     /// test key (`test_key`, 32 hex digits) in place of a key file.
     #[serde(default)]
     pub secoc: Option<toml::Table>,
+    /// What runs behind the supervisor.
+    #[serde(default)]
+    pub model: Model,
+}
+
+/// What a profile's cells run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// The profile's supervisor in front of the simple plant, with a fault-injecting ADS:
+    /// any profile, every operating state.
+    #[default]
+    Plant,
+    /// The whole simulated tug (`reference-tug` or `reference-tug-redundant`): its ECU or
+    /// ECU pair, CANopen drives, electrohydraulic steering and its own ADS driving the
+    /// service road; for the faults of its layers (sensors, ECUs, steering actuators), while
+    /// cruising.
+    Tug,
 }
 
 fn one() -> u8 {
@@ -205,11 +224,23 @@ pub enum FaultClass {
     Estop,
     /// A driver turns the steering wheel.
     DriverTakeover,
+    /// One of the redundant tug's further angle sensors fails (`corner`, `module` B or C,
+    /// `sensor`: stuck, drift or silent, with `value`).
+    AngleSensor,
+    /// One of the redundant tug's control ECUs (`side` A or B) falls silent.
+    EcuSilent,
+    /// One computes wrongly (a steering setpoint 5° off).
+    EcuWrongOutput,
+    /// One floods bus 1 until its partner fences it.
+    EcuBabble,
+    /// A corner's steering actuator (`corner`; `backup` for the backup valve) fails as
+    /// `failure` says: stuck, runaway or drive-lost.
+    SteeringActuator,
 }
 
 impl FaultClass {
     /// Every class, in report order.
-    pub const ALL: [FaultClass; 21] = [
+    pub const ALL: [FaultClass; 26] = [
         FaultClass::BitError,
         FaultClass::StuffError,
         FaultClass::CrcError,
@@ -231,6 +262,11 @@ impl FaultClass {
         FaultClass::Forged,
         FaultClass::Estop,
         FaultClass::DriverTakeover,
+        FaultClass::AngleSensor,
+        FaultClass::EcuSilent,
+        FaultClass::EcuWrongOutput,
+        FaultClass::EcuBabble,
+        FaultClass::SteeringActuator,
     ];
 
     /// Its name in files and reports.
@@ -257,6 +293,11 @@ impl FaultClass {
             FaultClass::Forged => "forged",
             FaultClass::Estop => "estop",
             FaultClass::DriverTakeover => "driver-takeover",
+            FaultClass::AngleSensor => "angle-sensor",
+            FaultClass::EcuSilent => "ecu-silent",
+            FaultClass::EcuWrongOutput => "ecu-wrong-output",
+            FaultClass::EcuBabble => "ecu-babble",
+            FaultClass::SteeringActuator => "steering-actuator",
         }
     }
 }
@@ -270,6 +311,8 @@ pub enum Reaction {
     None,
     /// The ADS drives on with less redundancy or tighter limits.
     Degraded,
+    /// The minimal-risk manoeuvre: on at the tightest limits to the next safe stop point.
+    MinimalRisk,
     /// The watchdog holds the last command.
     Hold,
     /// The watchdog decelerates under control.
@@ -288,6 +331,7 @@ impl Reaction {
         match self {
             Reaction::None => "none",
             Reaction::Degraded => "degraded",
+            Reaction::MinimalRisk => "minimal-risk",
             Reaction::Hold => "hold",
             Reaction::Decelerate => "decelerate",
             Reaction::Manual => "manual",
@@ -302,10 +346,11 @@ impl Reaction {
         match self {
             Reaction::None => 0,
             Reaction::Degraded => 1,
-            Reaction::Hold => 2,
-            Reaction::Decelerate => 3,
-            Reaction::Manual | Reaction::SafeStop => 4,
-            Reaction::Estop => 5,
+            Reaction::MinimalRisk => 2,
+            Reaction::Hold => 3,
+            Reaction::Decelerate => 4,
+            Reaction::Manual | Reaction::SafeStop => 5,
+            Reaction::Estop => 6,
         }
     }
 }
@@ -343,6 +388,27 @@ pub struct FaultEntry {
     /// A babbling node's identifier.
     #[serde(default)]
     pub id: Option<u16>,
+    /// The corner a sensor or actuator fault hits: 0 FL … 3 RR.
+    #[serde(default)]
+    pub corner: Option<usize>,
+    /// The sensor module: "B" or "C".
+    #[serde(default)]
+    pub module: Option<String>,
+    /// How a sensor fails: "stuck", "drift" or "silent".
+    #[serde(default)]
+    pub sensor: Option<String>,
+    /// The stuck angle (degrees) or drift rate (degrees per second).
+    #[serde(default)]
+    pub value: Option<f64>,
+    /// The control ECU: "A" or "B".
+    #[serde(default)]
+    pub side: Option<String>,
+    /// The backup actuator, not the primary.
+    #[serde(default)]
+    pub backup: bool,
+    /// How an actuator fails: "stuck", "runaway" or "drive-lost".
+    #[serde(default)]
+    pub failure: Option<String>,
     /// How long this fault's cells are watched after the injection, ms.
     #[serde(default)]
     pub observe_ms: Option<u64>,

@@ -27,8 +27,8 @@ use bywire_vehicle::supervisor::{Actuators, CommandStats, EstopState, Supervisor
 use bywire_vehicle::wire::{AdsWire, ProfileWire};
 
 use super::{
-    cell_name, Campaign, CampaignError, Cell, CellResult, Detection, FaultClass, ProfileEntry,
-    Reaction, State, Verdict,
+    cell_name, Campaign, CampaignError, Cell, CellResult, Detection, FaultClass, Model,
+    ProfileEntry, Reaction, State, Verdict,
 };
 use crate::rng::Rng;
 use crate::vehicle::SimulatedVehicle;
@@ -38,13 +38,17 @@ type VehicleNode = SimulatedVehicle<Wire>;
 
 /// A campaign's vehicle, loaded once and shared by its cells.
 pub struct Vehicle {
-    label: String,
+    pub(super) label: String,
+    /// What its cells run.
+    pub(super) model: Model,
+    /// The tug model: the redundant tug.
+    pub(super) redundant: bool,
     profile: LoadedProfile,
     /// The profile without `[secoc]`: what the ADS and the intruder encode with.
     plain: LoadedProfile,
     keys: Option<KeyFile>,
     buses: u8,
-    disabled: Mechanisms,
+    pub(super) disabled: Mechanisms,
 }
 
 /// A key the intruder signs with: not the vehicle's.
@@ -90,8 +94,17 @@ impl Vehicle {
                 Some(keys)
             }
         };
+        let redundant = entry.name == "reference-tug-redundant";
+        if entry.model == Model::Tug && !(redundant || entry.name == "reference-tug") {
+            return Err(fail(
+                "model = \"tug\" is the reference tug's: reference-tug or reference-tug-redundant"
+                    .into(),
+            ));
+        }
         let vehicle = Vehicle {
             label: entry.label().to_string(),
+            model: entry.model,
+            redundant,
             profile,
             plain,
             keys,
@@ -143,6 +156,17 @@ impl Vehicle {
 
     fn secured(&self) -> bool {
         self.keys.is_some()
+    }
+
+    /// The vehicle's steering (degrees) and speed (m/s) limits.
+    pub(super) fn limits(&self) -> (f64, f64) {
+        let c = self.profile.supervisor_config();
+        (c.steering_range, c.speed_limit)
+    }
+
+    /// Its command cycle.
+    pub(super) fn cycle(&self) -> Duration {
+        self.profile.supervisor_config().cycle
     }
 }
 
@@ -366,7 +390,7 @@ struct Rig {
 
 /// What the detectors read, taken at the injection and compared at every millisecond.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Snapshot {
+pub(super) struct Snapshot {
     stats: CommandStats,
     watchdog: Watchdog,
     degraded: bool,
@@ -376,6 +400,23 @@ struct Snapshot {
     driver: bool,
     tec: u16,
     level: DegradationLevel,
+}
+
+impl Snapshot {
+    /// A supervisor's state, with the error counter of the ADS's controller.
+    pub(super) fn of<W: bywire_vehicle::wire::VehicleWire>(s: &Supervisor<W>, tec: u16) -> Self {
+        Snapshot {
+            stats: s.stats(),
+            watchdog: s.watchdog(),
+            degraded: s.degraded().is_some(),
+            latched: s.estop() != EstopState::Normal,
+            chain_lost: s.estop_chain_lost(),
+            autonomous: s.mode() == ControlMode::Autonomous,
+            driver: s.driver_input(),
+            tec,
+            level: s.degradation().level(),
+        }
+    }
 }
 
 impl Rig {
@@ -508,28 +549,16 @@ impl Rig {
     }
 
     fn snapshot(&self) -> Option<Snapshot> {
-        let v = self.vehicle()?;
-        let s = v.supervisor();
         let tec = self
             .ads_endpoint
             .and_then(|e| self.net.bus(0)?.confinement(e))
             .map_or(0, |c| c.tec());
-        Some(Snapshot {
-            stats: s.stats(),
-            watchdog: s.watchdog(),
-            degraded: s.degraded().is_some(),
-            latched: s.estop() != EstopState::Normal,
-            chain_lost: s.estop_chain_lost(),
-            autonomous: s.mode() == ControlMode::Autonomous,
-            driver: s.driver_input(),
-            tec,
-            level: s.degradation().level(),
-        })
+        Some(Snapshot::of(self.vehicle()?.supervisor(), tec))
     }
 }
 
 /// The reaction the vehicle's outputs and state show.
-fn reaction_of(s: &Snapshot, a: &Actuators) -> Reaction {
+pub(super) fn reaction_of(s: &Snapshot, a: &Actuators) -> Reaction {
     if s.latched && !a.motors_enabled {
         return Reaction::Estop;
     }
@@ -539,16 +568,17 @@ fn reaction_of(s: &Snapshot, a: &Actuators) -> Reaction {
     if !a.motors_enabled && a.brake >= 100.0 {
         return Reaction::SafeStop;
     }
-    match s.watchdog {
-        Watchdog::Decelerating { .. } => Reaction::Decelerate,
-        Watchdog::Holding { .. } => Reaction::Hold,
-        _ if s.degraded || s.level != DegradationLevel::Nominal => Reaction::Degraded,
-        _ => Reaction::None,
+    match (s.watchdog, s.level) {
+        (Watchdog::Decelerating { .. }, _) => Reaction::Decelerate,
+        (Watchdog::Holding { .. }, _) => Reaction::Hold,
+        (_, DegradationLevel::MinimalRisk) => Reaction::MinimalRisk,
+        (_, DegradationLevel::Nominal) if !s.degraded => Reaction::None,
+        _ => Reaction::Degraded,
     }
 }
 
 /// The mechanisms that have noticed something since `before`.
-fn detectors(before: &Snapshot, now: &Snapshot) -> Mechanisms {
+pub(super) fn detectors(before: &Snapshot, now: &Snapshot) -> Mechanisms {
     let (b, n) = (before.stats, now.stats);
     let mut found = Mechanisms::NONE;
     let e2e = n.checksum + n.repeated + n.skipped + n.malformed;
@@ -587,6 +617,14 @@ fn detectors(before: &Snapshot, now: &Snapshot) -> Mechanisms {
 fn not_applicable(vehicle: &Vehicle, rig: &Rig, class: FaultClass, state: State) -> Option<String> {
     let has_estop = rig.safety.is_some();
     match class {
+        FaultClass::AngleSensor
+        | FaultClass::EcuSilent
+        | FaultClass::EcuWrongOutput
+        | FaultClass::EcuBabble
+        | FaultClass::SteeringActuator => Some(
+            "a fault of the whole tug's layers (sensors, ECUs, steering actuators): its cells run on model = \"tug\""
+                .into(),
+        ),
         FaultClass::RedundantBusLost if vehicle.buses < 2 => {
             Some("the command runs on one bus: no redundant bus to lose".into())
         }
@@ -665,7 +703,10 @@ pub fn run_cell(campaign: &Campaign, vehicle: &Vehicle, cell: &Cell) -> CellResu
     let outcome = match (entry, &cell.skip) {
         (_, Some(reason)) => Err(reason.clone()),
         (None, _) => Err("no such fault".to_string()),
-        (Some(entry), None) => drive(campaign, vehicle, cell, entry, &mut result),
+        (Some(entry), None) => match vehicle.model {
+            Model::Plant => drive(campaign, vehicle, cell, entry, &mut result),
+            Model::Tug => super::tug_cell::drive(campaign, vehicle, cell, entry, &mut result),
+        },
     };
     match outcome {
         Ok(failures) if failures.is_empty() => result.verdict = Verdict::Pass,
@@ -898,7 +939,12 @@ fn inject_fault(
                 });
             }
         }
-        FaultClass::NonFinite => {}
+        FaultClass::NonFinite
+        | FaultClass::AngleSensor
+        | FaultClass::EcuSilent
+        | FaultClass::EcuWrongOutput
+        | FaultClass::EcuBabble
+        | FaultClass::SteeringActuator => {}
         FaultClass::Forged => rig.intrude(Intrusion::Forge),
         FaultClass::Estop => rig.estop(true),
         FaultClass::DriverTakeover => rig.driver(takeover_torque),
@@ -924,7 +970,7 @@ fn clear_fault(rig: &mut Rig, entry: &super::FaultEntry) {
 }
 
 /// The cell's verdict from what was seen.
-fn judge(cell: &Cell, cycle: Duration, result: &CellResult, failures: &mut Vec<String>) {
+pub(super) fn judge(cell: &Cell, cycle: Duration, result: &CellResult, failures: &mut Vec<String>) {
     let e = cell.expect;
     let (detect, react) = (e.detect_bound(cycle), e.react_bound(cycle));
     if let Some(m) = e.mechanism {
