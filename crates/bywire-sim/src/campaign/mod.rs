@@ -7,7 +7,8 @@
 //!
 //! A cell is one profile's vehicle — its real supervisor reading its wire, in front of the
 //! simple plant of [`crate::vehicle`] — with a fault-injecting ADS, the vehicle's safety
-//! controller and an intruder on one or two bit-timed buses ([`rig`]). It is brought to its
+//! controller and an intruder on one or two bit-timed buses ([`rig`]); or (`model = "tug"`)
+//! the whole simulated tug, for the faults of its fail-operational layers. It is brought to its
 //! operating state, the fault is injected, and for the observation window every millisecond
 //! says which mechanisms have noticed something and what the vehicle does. A cell passes when
 //! the expected mechanism detects the fault in time, the vehicle's most severe reaction is the

@@ -633,9 +633,12 @@ fn not_applicable(vehicle: &Vehicle, rig: &Rig, class: FaultClass, state: State)
                 .into(),
         ),
         FaultClass::Estop if !has_estop => Some("the profile has no E-stop message".into()),
-        FaultClass::NonFinite => Some(
+        FaultClass::NonFinite if !float_setpoints(vehicle) => Some(
             "its setpoint signals are integers: no frame can carry a value that is not a number"
                 .into(),
+        ),
+        FaultClass::NonFinite => Some(
+            "a float setpoint: injecting a value that is not a number is not supported yet".into(),
         ),
         _ => match state {
             State::EstopLatched if !has_estop => {
@@ -648,6 +651,19 @@ fn not_applicable(vehicle: &Vehicle, rig: &Rig, class: FaultClass, state: State)
             _ => None,
         },
     }
+}
+
+/// Whether the command's steering or speed setpoint is an IEEE float signal.
+fn float_setpoints(vehicle: &Vehicle) -> bool {
+    let Some(b) = vehicle.plain.bindings.command else {
+        return false;
+    };
+    let message = vehicle.plain.database.messages.get(b.message);
+    [b.steering, b.velocity].iter().any(|i| {
+        message
+            .and_then(|m| m.signals.get(*i))
+            .is_some_and(|s| !matches!(s.value_type, bywire_dbc::ValueType::Integer { .. }))
+    })
 }
 
 /// A fault class the vehicle's degradation rules make the degraded level.
