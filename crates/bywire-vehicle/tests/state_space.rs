@@ -606,3 +606,189 @@ fn the_counter_check_takes_only_the_next_value_of_a_live_stream() {
     let found = explore_counter(planted).unwrap_err();
     assert!(found.why.contains("jumped"), "{found:#?}");
 }
+
+// --- The A/B arbitration ----------------------------------------------------------------
+
+use bywire_vehicle::arbitration::{Arbiter, ArbiterConfig, ArbiterInputs, Heartbeat, Role, Side};
+
+/// Two arbiters wired as a vehicle wires them (each one's fence line cuts the other's
+/// outputs; a fenced side sends no status), the faults so far, and when each side was last
+/// heard. Faults persist once they come.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct Pair {
+    a: Arbiter,
+    b: Arbiter,
+    step: u32,
+    /// Faults per side: [self-test failed, silent (its transceiver), deaf (its receiver)].
+    faults: [[bool; 3]; 2],
+    /// The active side's outputs disagree with the standby's own.
+    disagree: bool,
+    /// Each side's last status sent, and when each last heard any traffic (ms).
+    status_at: [Option<u32>; 2],
+    traffic_at: [Option<u32>; 2],
+    /// Steps in a row with neither side's outputs reaching the actuators.
+    neither: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum PairFault {
+    Nothing,
+    SelfTest(Side),
+    Silent(Side),
+    Deaf(Side),
+    Disagree,
+}
+
+/// The redundant tug's timing, and the status period the step stands for.
+const ARBITER: ArbiterConfig = ArbiterConfig {
+    silence: Duration::from_millis(30),
+    disagreement: Duration::from_millis(30),
+    deaf: Duration::from_millis(30),
+};
+const PAIR_STEP_MS: u32 = 10;
+/// Steps explored: 100 ms, past the longest takeover (silence, then disagreement) with room.
+const PAIR_DEPTH: usize = 10;
+
+fn index(side: Side) -> usize {
+    match side {
+        Side::A => 0,
+        Side::B => 1,
+    }
+}
+
+fn explore_pair(
+    transmits: impl Fn(&Arbiter, bool) -> bool,
+    fence_of: impl Fn(&Arbiter) -> bool,
+    depth: usize,
+) -> Result<Explored, Counterexample> {
+    let at = |ms: u32| Timestamp::from_millis(u64::from(ms));
+    let initial = Pair {
+        a: Arbiter::new(Side::A, ARBITER, Timestamp::ZERO),
+        b: Arbiter::new(Side::B, ARBITER, Timestamp::ZERO),
+        step: 0,
+        faults: [[false; 3]; 2],
+        disagree: false,
+        status_at: [None; 2],
+        traffic_at: [None; 2],
+        neither: 0,
+    };
+    let alphabet = [
+        PairFault::Nothing,
+        PairFault::SelfTest(Side::A),
+        PairFault::SelfTest(Side::B),
+        PairFault::Silent(Side::A),
+        PairFault::Silent(Side::B),
+        PairFault::Deaf(Side::A),
+        PairFault::Deaf(Side::B),
+        PairFault::Disagree,
+    ];
+    let faulty = |p: &Pair, side: Side| p.faults[index(side)].iter().any(|f| *f);
+    explore(
+        &[initial],
+        &alphabet,
+        depth,
+        |p, fault| {
+            let mut p = p.clone();
+            match fault {
+                PairFault::Nothing => {}
+                PairFault::SelfTest(s) => p.faults[index(*s)][0] = true,
+                PairFault::Silent(s) => p.faults[index(*s)][1] = true,
+                PairFault::Deaf(s) => p.faults[index(*s)][2] = true,
+                PairFault::Disagree => p.disagree = true,
+            }
+            p.step += 1;
+            let now = p.step * PAIR_STEP_MS;
+            // What each side sees, from the step before: the partner's last status, traffic
+            // (the ADS's and the drives' frames keep coming unless its receiver is deaf).
+            let sides = [(Side::A, p.a), (Side::B, p.b)];
+            let fenced = [fence_of(&p.b), fence_of(&p.a)];
+            for (side, arbiter) in sides {
+                let me = index(side);
+                let other = 1 - me;
+                let deaf = p.faults[me][2];
+                if !deaf {
+                    p.traffic_at[me] = Some(now);
+                }
+                let partner = sides[other].1;
+                let heard = if deaf { None } else { p.status_at[other] };
+                let inputs = ArbiterInputs {
+                    self_test_ok: !p.faults[me][0],
+                    partner: heard.map(|t| Heartbeat {
+                        role: partner.role(),
+                        at: at(t),
+                    }),
+                    traffic_at: p.traffic_at[me].map(at),
+                    outputs_agree: (partner.role() == Role::Active && !deaf).then_some(!p.disagree),
+                    fenced: fenced[me],
+                };
+                let mut arbiter = arbiter;
+                arbiter.step(at(now), inputs);
+                match side {
+                    Side::A => p.a = arbiter,
+                    Side::B => p.b = arbiter,
+                }
+            }
+            // Each side's status goes out unless it is fenced or its transceiver is silent.
+            let fenced = [fence_of(&p.b), fence_of(&p.a)];
+            for ((sent, fenced), faults) in p.status_at.iter_mut().zip(fenced).zip(p.faults) {
+                if !fenced && !faults[1] {
+                    *sent = Some(now);
+                }
+            }
+            let driving = [
+                transmits(&p.a, fenced[0]) && !p.faults[0][1],
+                transmits(&p.b, fenced[1]) && !p.faults[1][1],
+            ];
+            p.neither = if driving.iter().any(|d| *d) {
+                0
+            } else {
+                (p.neither + 1).min(50)
+            };
+            p
+        },
+        |_, _, to| {
+            let fenced = [fence_of(&to.b), fence_of(&to.a)];
+            if transmits(&to.a, fenced[0]) && transmits(&to.b, fenced[1]) {
+                return Err("both sides' outputs reach the actuators".into());
+            }
+            // One fault (a side's self-test, transceiver or receiver, or the active side's
+            // outputs wrong): the other side drives within the takeover bound.
+            let faults = usize::from(faulty(to, Side::A))
+                + usize::from(faulty(to, Side::B))
+                + usize::from(to.disagree);
+            let bound = u32::try_from((ARBITER.silence + ARBITER.disagreement).as_millis())
+                .unwrap()
+                / PAIR_STEP_MS
+                + 2;
+            if faults == 1 && to.neither > bound {
+                return Err(format!(
+                    "neither side drove for {} steps after one fault",
+                    to.neither
+                ));
+            }
+            Ok(())
+        },
+    )
+}
+
+/// Verifies: REQ-AB-1.
+#[test]
+fn two_control_ecus_never_both_drive_and_one_fault_leaves_one_driving() {
+    let started = Instant::now();
+    let explored = explore_pair(
+        |a, fenced| a.transmits(fenced),
+        Arbiter::fences_partner,
+        PAIR_DEPTH,
+    )
+    .unwrap_or_else(|c| panic!("{c:#?}"));
+    assert!(explored.states > 1_000, "{explored:?}");
+    record(
+        "ab-arbitration",
+        &["REQ-AB-1"],
+        &explored,
+        started.elapsed(),
+    );
+    // A planted defect: the fence line not wired (a side that took over cuts nobody off).
+    let found = explore_pair(|a, fenced| a.transmits(fenced), |_| false, PAIR_DEPTH).unwrap_err();
+    assert!(found.why.contains("both sides"), "{found:#?}");
+}
