@@ -2,7 +2,11 @@
 //! every input of an abstract alphabet in every reachable state, to a fixed point (these
 //! machines are finite once their counters are capped), each property checked on every
 //! transition of the real transition function (`EstopState::next`, `Watchdog::next`,
-//! `next_mode`, `CounterChecker::check`), and a planted defect in each found.
+//! `next_mode`, `CounterChecker::check`, `Arbiter::step`, SecOC's `Receiver::accept`), and a
+//! planted defect in each found. The A/B pair and the freshness receiver keep absolute time
+//! and freshness in their state, so they are explored to a stated depth (100 ms of faults;
+//! four messages from five starting points around a wrap of the sent bits), the others to a
+//! fixed point.
 //!
 //! The explorer is a breadth-first search of our own (a few dozen lines) rather than a model
 //! checker crate: the machines are small, closed and pure, so a search that keeps each state's
@@ -791,4 +795,119 @@ fn two_control_ecus_never_both_drive_and_one_fault_leaves_one_driving() {
     // A planted defect: the fence line not wired (a side that took over cuts nobody off).
     let found = explore_pair(|a, fenced| a.transmits(fenced), |_| false, PAIR_DEPTH).unwrap_err();
     assert!(found.why.contains("both sides"), "{found:#?}");
+}
+
+// --- The SecOC freshness receiver -----------------------------------------------------
+
+/// The receiver's last accepted freshness (the state the verdicts depend on; its counts are
+/// not), checked against what was truly signed.
+#[cfg(feature = "secoc")]
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct Fresh {
+    last: u64,
+}
+
+/// A message signed with the freshness `delta` past the receiver's last (negative: older),
+/// with the vehicle's key or (`forged`) another.
+#[cfg(feature = "secoc")]
+#[derive(Debug, Clone, Copy)]
+struct SignedWith {
+    delta: i64,
+    forged: bool,
+}
+
+#[cfg(feature = "secoc")]
+fn explore_freshness(
+    accept: impl Fn(&mut bywire_secoc::Receiver, &[u8]) -> Result<u64, bywire_secoc::Rejection>,
+) -> Result<Explored, Counterexample> {
+    use bywire_secoc::{Authenticator, Key, Receiver};
+    // 4 of 64 freshness bits sent (wraps every 16), a window of 20.
+    const WINDOW: u64 = 20;
+    let layout = layout();
+    let auth = auth();
+    let forger = Authenticator::new(&Key::new([8; 16]));
+    let alphabet: Vec<SignedWith> = [-17i64, -16, -1, 0, 1, 2, 15, 16, 17, 20, 21, 40]
+        .into_iter()
+        .flat_map(|delta| [false, true].map(|forged| SignedWith { delta, forged }))
+        .collect();
+    let signed = |fv: u64, forged: bool| {
+        let mut data = vec![0u8; layout.secured_length()];
+        data[..4].copy_from_slice(&[1, 2, 3, 4]);
+        let signer = if forged { &forger } else { &auth };
+        signer.sign(&layout, fv, &mut data).unwrap();
+        data
+    };
+    // Around a wrap of the sent bits, and far from zero.
+    let initial = [0u64, 14, 15, 16, 1_000].map(|last| Fresh { last });
+    explore(
+        &initial,
+        &alphabet,
+        4,
+        |f, s| {
+            let fv = f.last.saturating_add_signed(s.delta);
+            let mut r = Receiver::new(f.last, WINDOW);
+            match accept(&mut r, &signed(fv, s.forged)) {
+                Ok(accepted) => Fresh { last: accepted },
+                Err(_) => f.clone(),
+            }
+        },
+        |from, s, to| {
+            let fv = from.last.saturating_add_signed(s.delta);
+            if to.last == from.last {
+                // Refused: rightly, unless it was genuine, newer and within the window.
+                let due = !s.forged && fv > from.last && fv - from.last <= WINDOW;
+                return if due {
+                    Err("a genuine, newer message within the window was refused".into())
+                } else {
+                    Ok(())
+                };
+            }
+            if s.forged {
+                return Err("a forged message was accepted".into());
+            }
+            if to.last <= from.last {
+                return Err("a freshness value not newer than the last was accepted".into());
+            }
+            if to.last != fv {
+                return Err(format!("accepted as {} what was signed with {fv}", to.last));
+            }
+            Ok(())
+        },
+    )
+}
+
+/// Verifies: REQ-SEC-1.
+#[cfg(feature = "secoc")]
+#[test]
+fn secoc_freshness_accepts_only_genuine_newer_values_within_the_window() {
+    let started = Instant::now();
+    let (auth, layout) = (auth(), layout());
+    let explored = explore_freshness(|r, data| r.accept(&auth, &layout, data))
+        .unwrap_or_else(|c| panic!("{c:#?}"));
+    record(
+        "secoc-freshness",
+        &["REQ-SEC-1"],
+        &explored,
+        started.elapsed(),
+    );
+    // A planted defect: a replayed (stale) message accepted as the next value.
+    let moved = |r: &mut bywire_secoc::Receiver, data: &[u8]| {
+        let last = r.last();
+        match r.accept(&auth, &layout, data) {
+            Err(bywire_secoc::Rejection::Stale) => Ok(last + 1),
+            other => other,
+        }
+    };
+    let found = explore_freshness(moved).unwrap_err();
+    assert!(found.why.contains("accepted as"), "{found:#?}");
+}
+
+#[cfg(feature = "secoc")]
+fn auth() -> bywire_secoc::Authenticator {
+    bywire_secoc::Authenticator::new(&bywire_secoc::Key::new([7; 16]))
+}
+
+#[cfg(feature = "secoc")]
+fn layout() -> bywire_secoc::Layout {
+    bywire_secoc::Layout::new(0x100, 4, 64, 4, 28).unwrap()
 }
