@@ -2,7 +2,8 @@
 //! every input of an abstract alphabet in every reachable state, to a fixed point (these
 //! machines are finite once their counters are capped), each property checked on every
 //! transition of the real transition function (`EstopState::next`, `Watchdog::next`,
-//! `next_mode`, `CounterChecker::check`, `Arbiter::step`, SecOC's `Receiver::accept`), and a
+//! `next_mode`, `CounterChecker::check`, `Arbiter::step`, SecOC's `Receiver::accept`,
+//! `DualVoter::vote`), and a
 //! planted defect in each found. The A/B pair and the freshness receiver keep absolute time
 //! and freshness in their state, so they are explored to a stated depth (100 ms of faults;
 //! four messages from five starting points around a wrap of the sent bits), the others to a
@@ -910,4 +911,134 @@ fn auth() -> bywire_secoc::Authenticator {
 #[cfg(feature = "secoc")]
 fn layout() -> bywire_secoc::Layout {
     bywire_secoc::Layout::new(0x100, 4, 64, 4, 28).unwrap()
+}
+
+// --- The two-bus command voter --------------------------------------------------------
+
+use bywire_vehicle::redundancy::{Channel, DualVoter, Vote, VoteFailure};
+
+/// A command's copy: its value and rolling counter (2 bits).
+type Copy2 = (u8, u8);
+
+/// The voter (known by its debug form: it keeps no hashable state of its own), the step, and
+/// the last copy each bus delivered with when.
+#[derive(Debug, Clone)]
+struct Buses {
+    voter: DualVoter<Copy2>,
+    key: String,
+    step: u32,
+    last: [Option<(Copy2, u32)>; 2],
+}
+
+impl PartialEq for Buses {
+    fn eq(&self, other: &Self) -> bool {
+        self.key == other.key && self.step == other.step && self.last == other.last
+    }
+}
+impl Eq for Buses {}
+impl Hash for Buses {
+    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
+        (&self.key, self.step, self.last).hash(h);
+    }
+}
+
+/// What each bus carries this step: nothing, the command's copy, or a corrupted copy (the
+/// same counter, another value).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Carried {
+    Nothing,
+    Copy,
+    Corrupted,
+}
+
+const VOTE_STEP_MS: u32 = 10;
+const VOTE_TIMEOUT_MS: u32 = 30;
+
+fn explore_voter(
+    vote: impl Fn(&DualVoter<Copy2>, Timestamp) -> Vote<Copy2>,
+) -> Result<Explored, Counterexample> {
+    let carried = [Carried::Nothing, Carried::Copy, Carried::Corrupted];
+    let alphabet: Vec<[Carried; 2]> = carried
+        .iter()
+        .flat_map(|a| carried.map(|b| [*a, b]))
+        .collect();
+    let voter = DualVoter::new(
+        Duration::from_millis(u64::from(VOTE_TIMEOUT_MS)),
+        Duration::from_millis(5),
+    )
+    .paired_by(|a: &Copy2, b: &Copy2| a.1 == b.1);
+    let at = |step: u32| Timestamp::from_millis(u64::from(step * VOTE_STEP_MS));
+    explore(
+        &[Buses {
+            key: format!("{voter:?}"),
+            voter,
+            step: 0,
+            last: [None; 2],
+        }],
+        &alphabet,
+        5,
+        |b, input| {
+            let mut b = b.clone();
+            b.step += 1;
+            // The sender's command this step: value 0, the counter counting.
+            let counter = u8::try_from(b.step % 4).unwrap();
+            for (channel, what) in [(Channel::A, input[0]), (Channel::B, input[1])] {
+                let copy = match what {
+                    Carried::Nothing => continue,
+                    Carried::Copy => (0, counter),
+                    Carried::Corrupted => (1, counter),
+                };
+                b.voter.receive(channel, at(b.step), copy);
+                b.last[usize::from(channel == Channel::B)] = Some((copy, b.step));
+            }
+            b.key = format!("{:?}", b.voter);
+            b
+        },
+        |_, _, to| {
+            let now = at(to.step);
+            let fresh = |i: usize| {
+                to.last[i].filter(|(_, step)| (to.step - step) * VOTE_STEP_MS <= VOTE_TIMEOUT_MS)
+            };
+            let verdict = vote(&to.voter, now);
+            // Never a command its two buses' copies disagree on.
+            if let (Some((a, _)), Some((b, _))) = (fresh(0), fresh(1)) {
+                if a.1 == b.1 && a != b && !matches!(verdict, Vote::Failed(VoteFailure::Disagree)) {
+                    return Err(format!(
+                        "copies {a:?} and {b:?} disagree, voted {verdict:?}"
+                    ));
+                }
+            }
+            // Agreed: both buses carried that very copy.
+            if let Vote::Agreed(v) = verdict {
+                let carried = |i: usize| to.last[i].is_some_and(|(c, _)| c == v);
+                if !(carried(0) && carried(1)) {
+                    return Err(format!("agreed on {v:?}, which not both buses carried"));
+                }
+            }
+            Ok(())
+        },
+    )
+}
+
+/// Verifies: REQ-RED-1.
+#[test]
+fn the_two_bus_voter_never_passes_copies_that_disagree() {
+    let started = Instant::now();
+    let explored = explore_voter(|v, now| v.vote(now)).unwrap_or_else(|c| panic!("{c:#?}"));
+    record(
+        "two-bus-voter",
+        &["REQ-RED-1"],
+        &explored,
+        started.elapsed(),
+    );
+    // A planted defect: a disagreement passed as the first bus's copy.
+    let planted = |v: &DualVoter<Copy2>, now: Timestamp| match v.vote(now) {
+        Vote::Failed(VoteFailure::Disagree) => Vote::Degraded {
+            value: (1, 0),
+            healthy: Channel::A,
+        },
+        other => other,
+    };
+    let found = explore_voter(planted).unwrap_err();
+    assert!(found.why.contains("disagree"), "{found:#?}");
 }
