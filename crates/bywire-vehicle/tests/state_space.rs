@@ -1,13 +1,12 @@
 //! Exhaustive state-space checks of the supervisor's state machines: from the initial state,
-//! every input of an abstract alphabet in every reachable state, to a fixed point (these
-//! machines are finite once their counters are capped), each property checked on every
-//! transition of the real transition function (`EstopState::next`, `Watchdog::next`,
+//! every input of an abstract alphabet in every reachable state, each property checked on
+//! every transition of the real transition function (`EstopState::next`, `Watchdog::next`,
 //! `next_mode`, `CounterChecker::check`, `Arbiter::step`, SecOC's `Receiver::accept`,
-//! `DualVoter::vote`), and a
-//! planted defect in each found. The A/B pair and the freshness receiver keep absolute time
-//! and freshness in their state, so they are explored to a stated depth (100 ms of faults;
-//! four messages from five starting points around a wrap of the sent bits), the others to a
-//! fixed point.
+//! `DualVoter::vote`), and a planted defect in each found. The latch, the watchdog, the mode
+//! and the counter check are finite once their counters are capped and are explored to a fixed
+//! point; the A/B pair, the freshness receiver and the two-bus voter keep absolute time or
+//! freshness in their state and are explored to a stated depth (100 ms of faults; four
+//! messages from five starting points around a wrap of the sent bits; 50 ms of copies).
 //!
 //! The explorer is a breadth-first search of our own (a few dozen lines) rather than a model
 //! checker crate: the machines are small, closed and pure, so a search that keeps each state's
