@@ -73,13 +73,14 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let t = report::Tally::of(&results);
     writeln!(
         out,
-        "{}: {} cells, {} executed, {} passed, {} failed, {} not applicable in {wall:.1} s ({jobs} jobs); reports in {}",
+        "{}: {} cells, {} executed, {} passed, {} failed, {} not applicable in {wall:.1} s ({jobs} job{}); reports in {}",
         campaign.name,
         results.len(),
         t.executed,
         t.passed,
         t.failed,
         t.not_applicable,
+        if jobs == 1 { "" } else { "s" },
         args.out.display()
     )?;
     // A mechanism whose removal fails no cell is one this campaign does not test.
