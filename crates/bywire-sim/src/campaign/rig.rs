@@ -785,12 +785,7 @@ fn drive(
     };
     let until = duration.map_or(u64::MAX, |d| inject + d);
     let mut before = None;
-    let mut baseline = Reaction::None;
-    let mut failures = Vec::new();
-    let mut found = Mechanisms::NONE;
-    let mut reaction = (Reaction::None, None);
-    let limit_steering = config.steering_range + 1e-6;
-    let limit_speed = config.speed_limit + 1e-6;
+    let mut observer = Observer::new(vehicle.limits());
     for t in 1..=end {
         // The operating state, scripted.
         if t == engage_ms {
@@ -833,7 +828,7 @@ fn drive(
             before = rig.snapshot();
             let actuators = rig.vehicle().map(|v| v.supervisor().actuators(at(t)));
             if let (Some(s), Some(a)) = (&before, actuators) {
-                baseline = reaction_of(s, &a);
+                observer.baseline = reaction_of(s, &a);
             }
             inject_fault(
                 &mut rig,
@@ -853,39 +848,99 @@ fn drive(
         let now = rig.net.now();
         let a = v.supervisor().actuators(now);
         if t >= engage_ms {
-            let within = a.steering.is_finite()
-                && a.velocity.is_finite()
-                && a.steering.abs() <= limit_steering
-                && a.velocity.abs() <= limit_speed
-                && (0.0..=100.0).contains(&a.brake);
-            if !within && failures.is_empty() {
-                failures.push(format!(
-                    "at {t} ms the actuators were sent steering {:.2} deg, velocity {:.2} m/s, brake {:.0} %: beyond the vehicle's limits",
-                    a.steering, a.velocity, a.brake
-                ));
-            }
+            observer.limits(&format!("at {t} ms"), &a);
         }
         let Some(before) = before else { continue };
         let Some(snap) = rig.snapshot() else { continue };
         let since = (t - inject) as f64;
-        for m in detectors(&before, &snap).iter() {
-            if !found.contains(m) {
-                found = found.with(m);
+        observer.observe(
+            since,
+            detectors(&before, &snap),
+            reaction_of(&snap, &a),
+            result,
+        );
+    }
+    Ok(observer.judge(cell, cycle, result))
+}
+
+/// What a cell's run has seen since the injection: the mechanisms that noticed the fault (the
+/// first time each), the most severe reaction beyond the state's own, and the actuators' limits
+/// kept.
+pub(super) struct Observer {
+    /// The reaction the operating state already had at the injection.
+    pub(super) baseline: Reaction,
+    found: Mechanisms,
+    reaction: (Reaction, Option<f64>),
+    failures: Vec<String>,
+    /// The vehicle's steering (degrees) and speed (m/s) limits.
+    limits: (f64, f64),
+}
+
+impl Observer {
+    pub(super) fn new(limits: (f64, f64)) -> Self {
+        Observer {
+            baseline: Reaction::None,
+            found: Mechanisms::NONE,
+            reaction: (Reaction::None, None),
+            failures: Vec::new(),
+            limits,
+        }
+    }
+
+    /// The actuators at `when` must stay within the vehicle's limits (the first breach is the
+    /// failure).
+    pub(super) fn limits(&mut self, when: &str, a: &Actuators) {
+        let (steering, speed) = (self.limits.0 + 1e-6, self.limits.1 + 1e-6);
+        let within = a.steering.is_finite()
+            && a.velocity.is_finite()
+            && a.steering.abs() <= steering
+            && a.velocity.abs() <= speed
+            && (0.0..=100.0).contains(&a.brake);
+        if !within && self.failures.is_empty() {
+            self.failures.push(format!(
+                "{when} the actuators were sent steering {:.2} deg, velocity {:.2} m/s, brake {:.0} %: beyond the vehicle's limits",
+                a.steering, a.velocity, a.brake
+            ));
+        }
+    }
+
+    /// One millisecond, `since` the injection: the mechanisms that noticed something, the
+    /// reaction shown.
+    pub(super) fn observe(
+        &mut self,
+        since: f64,
+        noticed: Mechanisms,
+        shown: Reaction,
+        result: &mut CellResult,
+    ) {
+        for m in noticed.iter() {
+            if !self.found.contains(m) {
+                self.found = self.found.with(m);
                 result.detected_by.push(Detection {
                     mechanism: Some(m),
                     ms: since,
                 });
             }
         }
-        let r = reaction_of(&snap, &a);
-        if r.severity() > baseline.severity() && r.severity() > reaction.0.severity() {
-            reaction = (r, Some(since));
+        let worse = shown.severity() > self.baseline.severity()
+            && shown.severity() > self.reaction.0.severity();
+        if worse {
+            self.reaction = (shown, Some(since));
         }
     }
-    result.reaction = reaction.0;
-    result.reaction_ms = reaction.1;
-    judge(cell, cycle, result, &mut failures);
-    Ok(failures)
+
+    /// The cell's failures, with the reaction written into `result`.
+    pub(super) fn judge(
+        mut self,
+        cell: &Cell,
+        cycle: Duration,
+        result: &mut CellResult,
+    ) -> Vec<String> {
+        result.reaction = self.reaction.0;
+        result.reaction_ms = self.reaction.1;
+        judge(cell, cycle, result, &mut self.failures);
+        self.failures
+    }
 }
 
 fn inject_fault(
@@ -986,7 +1041,7 @@ fn clear_fault(rig: &mut Rig, entry: &super::FaultEntry) {
 }
 
 /// The cell's verdict from what was seen.
-pub(super) fn judge(cell: &Cell, cycle: Duration, result: &CellResult, failures: &mut Vec<String>) {
+fn judge(cell: &Cell, cycle: Duration, result: &CellResult, failures: &mut Vec<String>) {
     let e = cell.expect;
     let (detect, react) = (e.detect_bound(cycle), e.react_bound(cycle));
     if let Some(m) = e.mechanism {

@@ -12,8 +12,8 @@ use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::FaultClass as LayerFault;
 use bywire_vehicle::mechanism::{Mechanism, Mechanisms};
 
-use super::rig::{detectors, judge, reaction_of, Snapshot, Vehicle};
-use super::{Campaign, Cell, CellResult, Detection, FaultClass, FaultEntry, Reaction, State};
+use super::rig::{detectors, reaction_of, Observer, Snapshot, Vehicle};
+use super::{Campaign, Cell, CellResult, FaultClass, FaultEntry, State};
 use crate::fault::{ActuatorFailure, Fault};
 use crate::scenario::Scenario;
 use crate::steering::SensorFault;
@@ -150,7 +150,6 @@ pub(super) fn drive(
     for _ in 0..inject {
         tug.step();
     }
-    let (steering_limit, speed_limit) = vehicle.limits();
     let snapshot = |tug: &Tug| {
         let ecu = tug.ecu()?;
         Some((Snapshot::of(ecu, 0), ecu.actuators(tug.now())))
@@ -159,46 +158,20 @@ pub(super) fn drive(
         return Err("the tug has no ECU".into());
     };
     let layers_before = Layers::of(&tug);
-    let baseline = reaction_of(&before, &actuators);
+    let mut observer = Observer::new(vehicle.limits());
+    observer.baseline = reaction_of(&before, &actuators);
     tug.inject(fault, entry.duration_ms.map(Duration::from_millis));
-    let mut failures = Vec::new();
-    let mut found = Mechanisms::NONE;
-    let mut reaction = (Reaction::None, None);
     for t in 1..=observe {
         tug.step();
         let Some((now, a)) = snapshot(&tug) else {
             return Err("the tug lost its ECU".into());
         };
-        let within = a.steering.is_finite()
-            && a.velocity.is_finite()
-            && a.steering.abs() <= steering_limit + 1e-6
-            && a.velocity.abs() <= speed_limit + 1e-6;
-        if !within && failures.is_empty() {
-            failures.push(format!(
-                "{t} ms after the fault the actuators were sent steering {:.2} deg, velocity {:.2} m/s: beyond the vehicle's limits",
-                a.steering, a.velocity
-            ));
-        }
-        let since = t as f64;
-        let noticed = detectors(&before, &now)
+        observer.limits(&format!("{t} ms after the fault"), &a);
+        let noticed: Mechanisms = detectors(&before, &now)
             .iter()
-            .chain(Layers::of(&tug).detectors(&layers_before).iter());
-        for m in noticed {
-            if !found.contains(m) {
-                found = found.with(m);
-                result.detected_by.push(Detection {
-                    mechanism: Some(m),
-                    ms: since,
-                });
-            }
-        }
-        let r = reaction_of(&now, &a);
-        if r.severity() > baseline.severity() && r.severity() > reaction.0.severity() {
-            reaction = (r, Some(since));
-        }
+            .chain(Layers::of(&tug).detectors(&layers_before).iter())
+            .collect();
+        observer.observe(t as f64, noticed, reaction_of(&now, &a), result);
     }
-    result.reaction = reaction.0;
-    result.reaction_ms = reaction.1;
-    judge(cell, vehicle.cycle(), result, &mut failures);
-    Ok(failures)
+    Ok(observer.judge(cell, vehicle.cycle(), result))
 }
