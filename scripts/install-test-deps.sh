@@ -25,6 +25,8 @@ fi
 python3 -m pip install -q --disable-pip-version-check python-can==4.6.1 msgpack pyserial canopen==2.4.1
 # mcap + mcap-ros2-support: the MCAP peer (ROS 2 can_msgs/msg/Frame in CDR).
 python3 -m pip install -q --disable-pip-version-check mcap==1.6.0 mcap-ros2-support==0.6.0 jsonschema==4.26.0
+# rosbag2 folders (metadata.yaml + MCAP) as ROS 2's own tools read and write them.
+python3 -m pip install -q --disable-pip-version-check rosbags==0.11.9
 # asammdf: the MF4 peer (python-can's MF4 reader and writer are asammdf's; its bus logging
 # extraction decodes our files with a DBC).
 python3 -m pip install -q --disable-pip-version-check asammdf==8.6.10

@@ -288,8 +288,20 @@ pub struct OpenedLog {
 pub const READ_BUFFER: usize = 64 << 10;
 
 /// Open the log at `path`: a name ending in `.gz` is read through gzip (as python-can's
-/// `LogReader` reads `FILE.asc.gz`), its format claimed by the name without it.
+/// `LogReader` reads `FILE.asc.gz`), its format claimed by the name without it; a rosbag2
+/// folder (with the `mcap` feature) is read as its MCAP file.
 pub fn open_log(path: &Path) -> io::Result<OpenedLog> {
+    // A rosbag2 folder: its MCAP file.
+    #[cfg(feature = "mcap")]
+    if path.is_dir() && path.join(crate::rosbag2::METADATA).is_file() {
+        let mcap = crate::rosbag2::mcap_file(path).map_err(io::Error::other)?;
+        let file = std::fs::File::open(&mcap)?;
+        return Ok(OpenedLog {
+            bytes: Box::new(io::BufReader::with_capacity(READ_BUFFER, file.try_clone()?)),
+            file: Some(file),
+            claimed: Some(Format::Mcap),
+        });
+    }
     let file = std::fs::File::open(path)?;
     let gzipped = path
         .extension()

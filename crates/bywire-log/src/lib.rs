@@ -52,6 +52,8 @@ pub mod pacing;
 pub mod parquet;
 pub mod pcapng;
 pub mod recorder;
+#[cfg(feature = "mcap")]
+pub mod rosbag2;
 pub mod screen;
 pub mod stats;
 pub mod trc;

@@ -1530,3 +1530,150 @@ fn python_cans_test_logs_read_as_python_can_reads_them() {
         }
     }
 }
+
+/// rosbag2 folders as `ros2 bag` writes and reads them: the `rosbags` package reads the bag we
+/// write (metadata and every message, deserialized by its own CDR reader), and we read the bag
+/// it writes (its MCAP storage).
+#[test]
+fn rosbags_reads_our_rosbag2_folder_and_we_read_its() {
+    let dir = scratch("rosbag2");
+    let (log, bag) = (dir.join("in.log"), dir.join("drive"));
+    std::fs::write(&log, FRAMES).unwrap();
+    let said = bywire(&[
+        "log",
+        "convert",
+        log.to_str().unwrap(),
+        bag.to_str().unwrap(),
+        "--format",
+        "rosbag2",
+    ]);
+    assert!(said.contains("7 frames written"), "{said}");
+    let read = python(
+        r#"
+import sys
+from pathlib import Path
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+store = get_typestore(Stores.ROS2_HUMBLE)
+with Reader(Path(sys.argv[1])) as r:
+    (c,) = r.connections
+    print(r.message_count, c.topic, c.msgtype, c.msgcount, r.start_time, r.end_time)
+    store.register(get_types_from_msg("std_msgs/Header header\nuint32 id\nbool is_rtr\nbool is_extended\nbool is_error\nuint8 dlc\nuint8[8] data\n", "can_msgs/msg/Frame"))
+    for conn, t, raw in r.messages():
+        f = store.deserialize_cdr(raw, conn.msgtype)
+        print(t, f.header.stamp.sec * 10**9 + f.header.stamp.nanosec, f.header.frame_id, f.id,
+              int(f.is_rtr), int(f.is_extended), int(f.is_error), f.dlc, bytes(f.data).hex())
+"#,
+        &[&bag],
+    );
+    let wanted: Vec<LogRecord> = original()
+        .into_iter()
+        .filter(|r| !r.frame.is_fd())
+        .collect();
+    let mut lines = read.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(' ').collect();
+    let (first, last) = (
+        wanted[0].timestamp.as_nanos(),
+        wanted.last().unwrap().timestamp.as_nanos(),
+    );
+    assert_eq!(
+        head,
+        [
+            "7",
+            "/from_can_bus",
+            "can_msgs/msg/Frame",
+            "7",
+            &first.to_string(),
+            &(last + 1).to_string()
+        ],
+        "{read}"
+    );
+    for (line, w) in lines.zip(&wanted) {
+        let f: Vec<&str> = line.split(' ').collect();
+        let nanos = w.timestamp.as_nanos().to_string();
+        assert_eq!(
+            (f[0], f[1], f[2]),
+            (nanos.as_str(), nanos.as_str(), w.interface.as_str())
+        );
+        if !w.frame.is_error() {
+            let id = w.frame.id().unwrap();
+            assert_eq!(f[3], id.as_raw().to_string(), "{line}");
+            let mut data = [0u8; 8];
+            for (slot, b) in data.iter_mut().zip(w.frame.data()) {
+                *slot = *b;
+            }
+            let hex: String = data.iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(f[8], hex, "{line}");
+        }
+    }
+    // Our bag reads back as a log; an existing folder is not overwritten.
+    let back = dir.join("back.log");
+    bywire(&[
+        "log",
+        "convert",
+        bag.to_str().unwrap(),
+        back.to_str().unwrap(),
+    ]);
+    let direct = dir.join("direct.log");
+    bywire(&[
+        "log",
+        "convert",
+        dir.join("drive/drive_0.mcap").to_str().unwrap(),
+        direct.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        std::fs::read_to_string(&back).unwrap(),
+        std::fs::read_to_string(&direct).unwrap()
+    );
+    let (code, _, err) = common::bywire(
+        &[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            bag.to_str().unwrap(),
+            "--format",
+            "rosbag2",
+        ],
+        "",
+    );
+    assert!(
+        code != 0 && err.contains("exists and is not empty"),
+        "{err}"
+    );
+    // rosbags writes a bag (MCAP storage, its latest metadata version); we read it.
+    let theirs = dir.join("theirs");
+    python(
+        r#"
+import sys
+from pathlib import Path
+from rosbags.rosbag2 import Writer, StoragePlugin
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+store = get_typestore(Stores.ROS2_HUMBLE)
+store.register(get_types_from_msg("std_msgs/Header header\nuint32 id\nbool is_rtr\nbool is_extended\nbool is_error\nuint8 dlc\nuint8[8] data\n", "can_msgs/msg/Frame"))
+Frame = store.types["can_msgs/msg/Frame"]
+Header = store.types["std_msgs/msg/Header"]
+Time = store.types["builtin_interfaces/msg/Time"]
+import numpy as np
+with Writer(Path(sys.argv[1]), version=9, storage_plugin=StoragePlugin.MCAP) as w:
+    conn = w.add_connection("/from_can_bus", "can_msgs/msg/Frame", typestore=store)
+    for i, (can_id, ext, data) in enumerate([(0x123, False, b"\xde\xad\xbe\xef"), (0x1abcdef0, True, b"\x01\x02")]):
+        t = 1700000000_000000000 + i * 1_000_000
+        msg = Frame(header=Header(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="can1"),
+                    id=can_id, is_rtr=False, is_extended=ext, is_error=False, dlc=len(data),
+                    data=np.frombuffer(data.ljust(8, b"\0"), dtype=np.uint8))
+        w.write(conn, t, store.serialize_cdr(msg, "can_msgs/msg/Frame"))
+"#,
+        &[&theirs],
+    );
+    let from_theirs = dir.join("from-theirs.log");
+    bywire(&[
+        "log",
+        "convert",
+        theirs.to_str().unwrap(),
+        from_theirs.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        std::fs::read_to_string(&from_theirs).unwrap(),
+        "(1700000000.000000) can1 123#DEADBEEF\n(1700000000.001000) can1 1ABCDEF0#0102\n"
+    );
+}

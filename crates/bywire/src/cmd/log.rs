@@ -13,7 +13,7 @@ use bywire_log::LogRecord;
 use bywire_log::{FrameView, Precision, View};
 
 use crate::support::busarg;
-use crate::support::files::write_atomically;
+use crate::support::files::{write_atomically, write_dir_atomically};
 use crate::support::logs::{
     for_each_lent, inputs, records, write_dataset, CompressionArg, PartitionBy, Pump, Selection,
     Skip, TableOptions, TimeUnitArg,
@@ -55,6 +55,8 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert vector.blf drive.log
   bywire log convert vector.blf drive.mf4         (ASAM MDF 4 bus logging: asammdf, CANape)
   bywire log convert drive.log drive.mcap         (ROS 2's can_msgs/msg/Frame on /from_can_bus)
+  bywire log convert drive.log drive_bag --format rosbag2   (then: ros2 bag info drive_bag; a bag
+                                                  folder reads back as an input too)
   bywire log convert vector.blf frames.parquet    (one row per frame: ts, channel, id, flags, data)
   bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
                                                   (a Parquet table per message, typed signals)
@@ -80,8 +82,9 @@ conversion leaves no half-written file.")]
         /// The logs to read, merged by time (`-`: standard input), and last the file to write.
         #[arg(required = true, num_args = 2.., value_name = "FILE")]
         files: Vec<PathBuf>,
-        /// The output format: candump, asc, blf, trc, pcapng, mf4, mcap or parquet (default:
-        /// from the output's extension).
+        /// The output format: candump, asc, blf, trc, pcapng, mf4, mcap, parquet, or rosbag2 (a
+        /// folder `ros2 bag` reads: metadata.yaml and the MCAP file) (default: from the output's
+        /// extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
         /// Keep only these channels (interfaces), renamed where given as FROM=TO.
@@ -193,6 +196,9 @@ struct Decoding<'a> {
 
 /// The output's format: the one --format names, else the one its name says; with a DBC, a
 /// name without an extension is the decoded dataset's folder.
+/// The `--format` of a rosbag2 folder.
+const ROSBAG2: &str = "rosbag2";
+
 fn output_format(output: &Path, format: Option<&str>, decoded: bool) -> Result<Format> {
     Ok(match format {
         Some(name) => Format::named(name).ok_or_else(|| {
@@ -235,7 +241,15 @@ fn convert(
     decoding: &Decoding<'_>,
     out: &mut impl Write,
 ) -> Result<()> {
-    let format = output_format(output, format, decoding.dbc.is_some())?;
+    // A rosbag2 folder: an MCAP file and the metadata `ros2 bag` reads.
+    let bag = format.is_some_and(|f| f.eq_ignore_ascii_case(ROSBAG2));
+    if bag && decoding.dbc.is_some() {
+        bail!("--format rosbag2 carries the frames (can_msgs/msg/Frame); decode into MCAP (.mcap) or Parquet instead");
+    }
+    let format = match bag {
+        true => Format::Mcap,
+        false => output_format(output, format, decoding.dbc.is_some())?,
+    };
     let compression =
         CompressionArg::for_output(decoding.compression, format, &output.display().to_string())?;
     let times = TimeUnitArg::for_output(decoding.time_unit, format, &output.display().to_string())?;
@@ -303,6 +317,34 @@ fn convert(
                 ));
             }
             writer.finish().with_context(cannot_write)?;
+            Ok(())
+        })?,
+        (None, _) if bag => write_dir_atomically(output, |dir| {
+            std::fs::create_dir(dir).with_context(cannot_write)?;
+            let name = bywire_log::rosbag2::mcap_file_name(output);
+            let file = std::fs::File::create(dir.join(&name)).with_context(cannot_write)?;
+            let mut writer = format
+                .writer_with(std::io::BufWriter::new(file), ParquetOptions::default())
+                .with_context(cannot_write)?;
+            let mut summary = bywire_log::rosbag2::Summary::default();
+            pump.run(bywire_log::merge::merge(readers), |r| {
+                let before = writer.left_out();
+                writer.write(r).with_context(cannot_write)?;
+                if writer.left_out() == before {
+                    let ns = r.timestamp.as_nanos();
+                    if summary.messages == 0 {
+                        summary.first_ns = ns;
+                    }
+                    summary.last_ns = summary.last_ns.max(ns);
+                    summary.messages += 1;
+                }
+                Ok(())
+            })?;
+            unsupported = writer.left_out();
+            writer.finish().with_context(cannot_write)?;
+            let metadata = bywire_log::rosbag2::metadata(&name, &summary);
+            std::fs::write(dir.join(bywire_log::rosbag2::METADATA), metadata)
+                .with_context(cannot_write)?;
             Ok(())
         })?,
         (None, _) => write_atomically(output, |tmp| {
