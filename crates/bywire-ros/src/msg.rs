@@ -512,3 +512,50 @@ mod tests {
         );
     }
 }
+
+/// `diagnostic_msgs/msg/KeyValue`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct KeyValue {
+    /// What is reported.
+    pub key: String,
+    /// Its value.
+    pub value: String,
+}
+ros_type!(KeyValue, "diagnostic_msgs", "KeyValue");
+
+/// `diagnostic_msgs/msg/DiagnosticStatus`: one component's level and state.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct DiagnosticStatus {
+    /// [`DiagnosticStatus::OK`], `WARN`, `ERROR` or `STALE`.
+    pub level: u8,
+    /// The component (`diagnostic_aggregator` groups by its prefix).
+    pub name: String,
+    /// What is wrong, or the state in a few words.
+    pub message: String,
+    /// The hardware it is about.
+    pub hardware_id: String,
+    /// Details.
+    pub values: Vec<KeyValue>,
+}
+ros_type!(DiagnosticStatus, "diagnostic_msgs", "DiagnosticStatus");
+
+impl DiagnosticStatus {
+    /// Working.
+    pub const OK: u8 = 0;
+    /// Working with a warning.
+    pub const WARN: u8 = 1;
+    /// Not working.
+    pub const ERROR: u8 = 2;
+    /// Nothing heard from it.
+    pub const STALE: u8 = 3;
+}
+
+/// `diagnostic_msgs/msg/DiagnosticArray`, as `/diagnostics` carries it.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct DiagnosticArray {
+    /// When.
+    pub header: Header,
+    /// One status per component.
+    pub status: Vec<DiagnosticStatus>,
+}
+ros_type!(DiagnosticArray, "diagnostic_msgs", "DiagnosticArray");

@@ -40,9 +40,10 @@ use crate::dds::{
     mio1, reliable, wake_on_readiness, Publisher, RosError, RosNode, Server, Subscription,
 };
 use crate::msg::{
-    control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, GearCommand,
-    GearReport, HazardLightsCommand, HazardLightsReport, Header, JointState, SteeringReport,
-    StringMsg, Time, TurnIndicatorsCommand, TurnIndicatorsReport, Twist, VelocityReport,
+    control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, DiagnosticArray,
+    DiagnosticStatus, GearCommand, GearReport, HazardLightsCommand, HazardLightsReport, Header,
+    JointState, KeyValue, SteeringReport, StringMsg, Time, TurnIndicatorsCommand,
+    TurnIndicatorsReport, Twist, VelocityReport,
 };
 
 /// The ADS side over a profile's wire, secured when the profile declares `[secoc]`.
@@ -89,6 +90,9 @@ pub struct VehicleInterfaceConfig {
     /// The degradation level and its reason out (`std_msgs/String`: `nominal`,
     /// `minimal-risk (actuator-backup)`), where the profile declares the report.
     pub degradation_status: String,
+    /// `diagnostic_msgs/DiagnosticArray` out: the vehicle's state and each bus, every second
+    /// and on every change.
+    pub diagnostics: String,
     /// Time between reports.
     pub report_period: Duration,
     /// How long an engage request waits for the vehicle to report autonomous.
@@ -114,6 +118,7 @@ impl Default for VehicleInterfaceConfig {
             turn_indicators_status: "/vehicle/status/turn_indicators_status".into(),
             hazard_lights_status: "/vehicle/status/hazard_lights_status".into(),
             degradation_status: "/vehicle/status/degradation".into(),
+            diagnostics: "/diagnostics".into(),
             report_period: Duration::from_millis(33),
             engage_timeout: Duration::from_secs(2),
         }
@@ -169,6 +174,7 @@ struct Outputs {
     hazard_lights: Option<Publisher<HazardLightsReport>>,
     /// Where the profile declares a fail-operational report.
     degradation: Option<Publisher<StringMsg>>,
+    diagnostics: Publisher<DiagnosticArray>,
 }
 
 /// The interface's side of a run: the hooks of the real-time runner (`run`), or stepped by a
@@ -199,6 +205,12 @@ pub struct VehicleInterface<'a> {
     report: &'a mut dyn FnMut(VehicleEvent),
     /// Where the secured wire's freshness is kept across restarts.
     freshness: Option<FreshnessStore>,
+    /// The buses lost, each with its error.
+    lost: Vec<(Port, String)>,
+    /// The vehicle's name in the diagnostics.
+    hardware_id: String,
+    /// When the diagnostics last went out, and their levels and messages then.
+    last_diagnostics: Option<(Timestamp, Vec<(u8, String)>)>,
 }
 
 impl VehicleInterface<'_> {
@@ -394,6 +406,40 @@ impl VehicleInterface<'_> {
         )
     }
 
+    /// `/diagnostics`: every second, and at once when a level or message changes.
+    fn publish_diagnostics(&mut self, ads: &AdsSide, now: Timestamp) {
+        let status = diagnostics(
+            ads.state(),
+            now,
+            self.fresh,
+            &self.hardware_id,
+            &self.buses,
+            &self.lost,
+        );
+        let summary: Vec<(u8, String)> = status
+            .iter()
+            .map(|s| (s.level, s.message.clone()))
+            .collect();
+        let due = match &self.last_diagnostics {
+            None => true,
+            Some((at, last)) => *last != summary || now.saturating_since(*at) >= DIAGNOSTICS_PERIOD,
+        };
+        if !due {
+            return;
+        }
+        let array = DiagnosticArray {
+            header: Header {
+                stamp: Time::now(),
+                frame_id: String::new(),
+            },
+            status,
+        };
+        // Publishing fails only when DDS is gone; the next report tries again.
+        if self.outputs.diagnostics.publish(array).is_ok() {
+            self.last_diagnostics = Some((now, summary));
+        }
+    }
+
     fn publish_reports(&mut self, ads: &AdsSide, now: Timestamp) {
         let stamp = Time::now();
         let state = ads.state();
@@ -532,6 +578,7 @@ impl Hooks<AdsSide> for VehicleInterface<'_> {
         self.watch_engage(ads, now);
         if now >= self.next_report {
             self.publish_reports(ads, now);
+            self.publish_diagnostics(ads, now);
             self.next_report = self
                 .next_report
                 .saturating_add(self.config.report_period)
@@ -552,7 +599,104 @@ impl Hooks<AdsSide> for VehicleInterface<'_> {
             .find(|(p, _)| *p == port)
             .map_or("?".to_string(), |(_, n)| n.clone());
         (self.report)(VehicleEvent::BusLost(format!("{name}: {error}")));
+        if !self.lost.iter().any(|(p, _)| *p == port) {
+            self.lost.push((port, error.to_string()));
+        }
     }
+}
+
+/// How often `/diagnostics` goes out when nothing changes.
+const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
+
+/// The diagnostics of the vehicle (its state as reported: stale when it reports nothing) and
+/// of each bus (lost with its error, or up).
+fn diagnostics(
+    state: &VehicleState,
+    now: Timestamp,
+    fresh: Duration,
+    hardware_id: &str,
+    buses: &[(Port, String)],
+    lost: &[(Port, String)],
+) -> Vec<DiagnosticStatus> {
+    use bywire_vehicle::command::{DegradationLevel, EstopCode, WatchdogLevel};
+    let value = |key: &str, value: String| KeyValue {
+        key: key.into(),
+        value,
+    };
+    let mode = state.mode.fresh(now, fresh);
+    let watchdog = state.watchdog_level.fresh(now, fresh);
+    let estop = state.estop_state.fresh(now, fresh);
+    let degradation = state.degradation.fresh(now, fresh);
+    let reason = state.degradation_reason.fresh(now, fresh).flatten();
+    let driver = state.driver_override.fresh(now, fresh);
+    let autonomous = mode == Some(ControlMode::Autonomous);
+    let (level, message) = match (mode, watchdog, estop) {
+        (None, _, _) => (
+            DiagnosticStatus::STALE,
+            "no state from the vehicle".to_string(),
+        ),
+        (_, _, Some(e)) if e != EstopCode::Normal => {
+            (DiagnosticStatus::ERROR, format!("E-stop: {e}"))
+        }
+        _ if degradation == Some(DegradationLevel::SafeStop) => (
+            DiagnosticStatus::ERROR,
+            "degradation: safe stop".to_string(),
+        ),
+        (_, Some(WatchdogLevel::FullBraking), _) if autonomous => (
+            DiagnosticStatus::ERROR,
+            "watchdog: full braking".to_string(),
+        ),
+        (_, Some(w @ (WatchdogLevel::Holding | WatchdogLevel::Decelerating)), _) => {
+            (DiagnosticStatus::WARN, format!("watchdog: {w}"))
+        }
+        _ if matches!(
+            degradation,
+            Some(DegradationLevel::Degraded | DegradationLevel::MinimalRisk)
+        ) =>
+        {
+            let level = degradation.map_or(String::new(), |d| d.to_string());
+            (DiagnosticStatus::WARN, format!("degradation: {level}"))
+        }
+        _ if driver == Some(true) => (DiagnosticStatus::WARN, "driver override".to_string()),
+        (Some(m), _, _) => (DiagnosticStatus::OK, format!("mode: {m}")),
+    };
+    let or_unknown = |n: Option<String>| n.unwrap_or_else(|| "unknown".into());
+    let mut values = vec![
+        value("mode", or_unknown(mode.map(|m| m.to_string()))),
+        value("watchdog", or_unknown(watchdog.map(|w| w.to_string()))),
+        value("estop", or_unknown(estop.map(|e| e.to_string()))),
+    ];
+    if let Some(d) = degradation {
+        values.push(value("degradation", d.to_string()));
+        values.push(value(
+            "degradation reason",
+            reason.map_or("none".to_string(), |r| r.to_string()),
+        ));
+    }
+    if let Some(driver) = driver {
+        values.push(value("driver override", driver.to_string()));
+    }
+    let mut status = vec![DiagnosticStatus {
+        level,
+        name: "bywire: vehicle".into(),
+        message,
+        hardware_id: hardware_id.into(),
+        values,
+    }];
+    for (port, name) in buses {
+        let (level, message) = match lost.iter().find(|(p, _)| p == port) {
+            Some((_, error)) => (DiagnosticStatus::ERROR, format!("lost: {error}")),
+            None => (DiagnosticStatus::OK, "up".to_string()),
+        };
+        status.push(DiagnosticStatus {
+            level,
+            name: format!("bywire: bus {name}"),
+            message,
+            hardware_id: name.clone(),
+            values: Vec::new(),
+        });
+    }
+    status
 }
 
 /// The geometry a profile gives (`None`: the profile has no `[vehicle]`).
@@ -630,6 +774,7 @@ impl<'a> VehicleInterface<'a> {
                 Some(_) => Some(node.publisher(&config.degradation_status, &one)?),
                 None => None,
             },
+            diagnostics: node.publisher(&config.diagnostics, &reliable(10))?,
         };
         let mut ads_config = profile.ads_config();
         ads_config.redundant = redundant;
@@ -654,6 +799,9 @@ impl<'a> VehicleInterface<'a> {
             buses: Vec::new(),
             report,
             freshness: None,
+            lost: Vec::new(),
+            hardware_id: profile.profile.name.clone(),
+            last_diagnostics: None,
         };
         Ok((interface, Ads::with_wire(ads_config, wire)))
     }
@@ -723,4 +871,92 @@ pub fn run(
     result
         .map(|_| ())
         .map_err(|e| RosError::Create(format!("every bus is lost (last: {e})")))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+    use super::*;
+    use bywire_vehicle::ads::Field;
+    use bywire_vehicle::command::{DegradationLevel, EstopCode, FaultClass, WatchdogLevel};
+
+    fn at<T>(value: T) -> Field<T> {
+        Field {
+            value: Some(value),
+            at: Some(Timestamp::from_millis(1_000)),
+        }
+    }
+
+    fn vehicle(
+        state: &VehicleState,
+        now_ms: u64,
+        lost: &[(Port, String)],
+    ) -> Vec<DiagnosticStatus> {
+        let buses = [(Port(0), "can0".to_string()), (Port(1), "can1".to_string())];
+        diagnostics(
+            state,
+            Timestamp::from_millis(now_ms),
+            Duration::from_millis(100),
+            "tug",
+            &buses,
+            lost,
+        )
+    }
+
+    #[test]
+    fn diagnostics_say_stale_ok_warn_and_error_as_the_vehicle_reports() {
+        let mut state = VehicleState::default();
+        let s = vehicle(&state, 1_000, &[]);
+        assert_eq!(s[0].level, DiagnosticStatus::STALE);
+        assert_eq!(
+            (s[1].level, s[1].name.as_str()),
+            (DiagnosticStatus::OK, "bywire: bus can0")
+        );
+        state.mode = at(ControlMode::Autonomous);
+        state.watchdog_level = at(WatchdogLevel::Normal);
+        state.estop_state = at(EstopCode::Normal);
+        let s = vehicle(&state, 1_050, &[]);
+        assert_eq!(
+            (s[0].level, s[0].message.as_str()),
+            (DiagnosticStatus::OK, "mode: autonomous")
+        );
+        assert!(s[0].values.contains(&KeyValue {
+            key: "watchdog".into(),
+            value: "normal".into()
+        }));
+        // Old news is no news.
+        assert_eq!(
+            vehicle(&state, 1_200, &[])[0].level,
+            DiagnosticStatus::STALE
+        );
+        state.watchdog_level = at(WatchdogLevel::Decelerating);
+        assert_eq!(
+            vehicle(&state, 1_050, &[])[0].message,
+            "watchdog: decelerating"
+        );
+        state.watchdog_level = at(WatchdogLevel::FullBraking);
+        assert_eq!(
+            vehicle(&state, 1_050, &[])[0].level,
+            DiagnosticStatus::ERROR
+        );
+        state.watchdog_level = at(WatchdogLevel::Normal);
+        state.degradation = at(DegradationLevel::MinimalRisk);
+        state.degradation_reason = at(Some(FaultClass::ActuatorBackup));
+        let s = vehicle(&state, 1_050, &[]);
+        assert_eq!(
+            (s[0].level, s[0].message.as_str()),
+            (DiagnosticStatus::WARN, "degradation: minimal-risk")
+        );
+        assert!(s[0].values.iter().any(|v| v.value == "actuator-backup"));
+        state.estop_state = at(EstopCode::Stopped);
+        assert_eq!(vehicle(&state, 1_050, &[])[0].message, "E-stop: stopped");
+        // A bus lost: its status says why; the other is up.
+        let s = vehicle(&state, 1_050, &[(Port(1), "bus-off".into())]);
+        assert_eq!(
+            (s[2].level, s[2].message.as_str()),
+            (DiagnosticStatus::ERROR, "lost: bus-off")
+        );
+        assert_eq!(s[1].level, DiagnosticStatus::OK);
+    }
 }

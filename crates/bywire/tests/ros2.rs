@@ -441,6 +441,53 @@ fn ros2_vehicle_reports_the_degradation_level() {
     );
 }
 
+/// `/diagnostics` as `diagnostic_aggregator` reads it, before any command: the vehicle's status
+/// (manual, its watchdog and E-stop as it reports them) and the bus's, once a second.
+#[test]
+fn ros2_vehicle_publishes_diagnostics() {
+    if !inside_lonet("ros2_vehicle_publishes_diagnostics") {
+        return;
+    }
+    let vehicle = Background::start(&[
+        "ros2",
+        "vehicle",
+        "--profile",
+        "reference-tug",
+        "sim:ros2-diagnostics@500000",
+        "--with-vehicle",
+        "--dds-interface",
+        "lo",
+    ]);
+    let seen = python_peer("ros2_diagnostics_peer.py", &["3.5"]);
+    let (code, out, err) = vehicle.stop();
+    assert_eq!(code, 0, "{out}{err}");
+    // Once a second (and on a change): 3.5 s hold 3 to 6 arrays.
+    let count = seen["count"].as_u64().unwrap();
+    assert!((3..=6).contains(&count), "{seen}");
+    let last = seen["last"].as_array().unwrap();
+    let vehicle = &last[0];
+    assert_eq!(vehicle["name"], "bywire: vehicle", "{seen}");
+    assert_eq!(vehicle["hardware_id"], "reference-tug");
+    assert_eq!(
+        (vehicle["level"].as_u64(), vehicle["message"].as_str()),
+        (Some(0), Some("mode: manual")),
+        "{seen}"
+    );
+    // Failed closed until commanded: the watchdog as the vehicle reports it.
+    assert_eq!(vehicle["values"]["watchdog"], "full braking", "{seen}");
+    assert_eq!(vehicle["values"]["estop"], "normal", "{seen}");
+    let bus = &last[1];
+    assert_eq!(
+        (bus["level"].as_u64(), bus["message"].as_str()),
+        (Some(0), Some("up")),
+        "{seen}"
+    );
+    assert!(
+        bus["name"].as_str().unwrap().starts_with("bywire: bus "),
+        "{seen}"
+    );
+}
+
 /// `bywire ros2 vehicle --profile PROFILE` with its simulated vehicle, driven by
 /// `ros2_vehicle_peer.py PEER_ARGS`, checked as above; what the peer saw and stderr.
 fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) {

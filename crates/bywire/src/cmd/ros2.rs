@@ -66,7 +66,12 @@ Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mod
      joint_states, steering_mode} at --rate, from fresh feedback only, and
      {turn_indicators_status, hazard_lights_status} where the profile's [state] has them,
      and degradation (std_msgs/String: the level and its reason, e.g. \"minimal-risk
-     (actuator-backup)\") where the profile declares [fail_operational.report].
+     (actuator-backup)\") where the profile declares [fail_operational.report];
+     /diagnostics (diagnostic_msgs/DiagnosticArray, as diagnostic_aggregator reads it) once a
+     second and on every change: the vehicle (OK, WARN for a watchdog holding or decelerating,
+     a degraded level or a driver's override, ERROR for an E-stop, a safe stop or full braking
+     while engaged, STALE without its state) with its watchdog, E-stop and mode, and each bus
+     (up, or lost with its error).
      control_mode is DISENGAGED (5) after an E-stop, and while the vehicle's watchdog brakes
      (full braking, or awaiting a re-engage): engage again to drive.
 Keep publishing control_cmd: one older than the profile's staleness (200 ms for reference-tug)

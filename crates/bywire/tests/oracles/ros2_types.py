@@ -168,6 +168,27 @@ class StringMsg(IdlStruct, typename="std_msgs::msg::dds_::String_"):
     data: str
 
 
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
+    key: str
+    value: str
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+    level: uint8
+    name: str
+    message: str
+    hardware_id: str
+    values: sequence[KeyValue]
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+    header: Header
+    status: sequence[DiagnosticStatus]
+
+
 # rmw_cyclonedds puts a request header (the client's GUID as a number, a sequence number) in
 # front of a service's request and response.
 @dataclass
