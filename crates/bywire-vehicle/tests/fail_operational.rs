@@ -150,6 +150,7 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
         }; 3],
     )];
     let mut checked = 0u64;
+    let (mut states, started_at) = (1usize, std::time::Instant::now());
     for depth in 1..=DEPTH {
         let now = ms(depth * TRIPLE_STEP);
         let mut next = Vec::new();
@@ -231,9 +232,17 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
             }
         }
         eprintln!("depth {depth}: {} states", next.len());
+        states += next.len();
         level = next;
     }
     assert!(checked > 100_000, "only {checked} transitions");
+    let depth = usize::try_from(DEPTH).unwrap();
+    common::record_state_space(
+        "2oo3-voter",
+        &["REQ-VOT-1"],
+        (states, checked, depth, false),
+        started_at.elapsed(),
+    );
 }
 
 /// Verifies: REQ-VOT-1.

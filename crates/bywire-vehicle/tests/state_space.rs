@@ -19,6 +19,8 @@
     clippy::indexing_slicing
 )]
 
+mod common;
+
 use std::collections::HashMap;
 use std::fmt::Debug;
 use std::hash::Hash;
@@ -118,19 +120,13 @@ where
 
 /// Keep a check's figures for the evidence report.
 fn record(machine: &str, requirements: &[&str], explored: &Explored, took: Duration) {
-    let dir =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/evidence/state-space");
-    std::fs::create_dir_all(&dir).unwrap();
-    let json = format!(
-        "{{\"machine\":\"{machine}\",\"requirements\":{requirements:?},\"states\":{},\"transitions\":{},\"depth\":{},\"fixed_point\":{},\"seconds\":{}}}\n",
-        explored.states,
-        explored.transitions,
-        explored.depth,
-        explored.fixed_point,
-        took.as_secs_f64()
+    let e = explored;
+    common::record_state_space(
+        machine,
+        requirements,
+        (e.states, e.transitions, e.depth, e.fixed_point),
+        took,
     );
-    std::fs::write(dir.join(format!("{machine}.json")), json).unwrap();
-    eprintln!("{machine}: {explored:?} in {took:?}");
 }
 
 fn bools() -> [bool; 2] {
