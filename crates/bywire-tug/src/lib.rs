@@ -76,8 +76,19 @@ pub fn redundant_profile() -> Result<LoadedProfile, ProfileError> {
     })
 }
 
+/// A profile named as a user names one: the file at that path (relative to `base`) when there
+/// is one, else a shipped profile ([`builtin`]).
+pub fn named_or_file(name: &str, base: &std::path::Path) -> Result<LoadedProfile, ProfileError> {
+    let path = base.join(name);
+    if path.exists() {
+        Profile::load(&path)
+    } else {
+        builtin(name)
+    }
+}
+
 /// A shipped profile by name: `reference-tug`, `reference-tug-redundant`, or one the vehicle
-/// crate ships (`autoware-can`).
+/// crate ships (`autoware-can`, `shuttle`).
 pub fn builtin(name: &str) -> Result<LoadedProfile, ProfileError> {
     match name {
         "reference-tug" => profile(),

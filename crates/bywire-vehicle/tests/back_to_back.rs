@@ -229,17 +229,11 @@ impl Implementation {
                 m.set_control_mode_cmd_raw(mode as u64);
             })),
             Sent::BadChecksum => {
-                let mut data = command(counter, |_| {}).data().to_vec();
-                data[7] ^= 0x5A;
                 let mut payload = [0u8; 8];
-                payload.copy_from_slice(&data);
-                Some(
-                    bywire_core::Frame::classic(
-                        bywire_core::Id::standard(AdsToVehicleControl::ID).unwrap(),
-                        &payload,
-                    )
-                    .unwrap(),
-                )
+                payload.copy_from_slice(command(counter, |_| {}).data());
+                payload[7] ^= 0x5A;
+                let id = bywire_core::Id::standard(AdsToVehicleControl::ID).unwrap();
+                Some(bywire_core::Frame::classic(id, &payload).unwrap())
             }
             Sent::OutOfRange => {
                 let mut m = AdsToVehicleControl::default();

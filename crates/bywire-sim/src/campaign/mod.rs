@@ -433,6 +433,16 @@ impl FaultEntry {
     pub fn name(&self) -> &str {
         self.label.as_deref().unwrap_or(self.class.name())
     }
+
+    /// How long it lasts on a vehicle commanding every `cycle` (`None`: the whole
+    /// observation).
+    pub fn duration(&self, cycle: core::time::Duration) -> Option<core::time::Duration> {
+        match (self.duration_ms, self.cycles) {
+            (Some(ms), _) => Some(core::time::Duration::from_millis(ms)),
+            (None, Some(cycles)) => Some(cycle.saturating_mul(cycles)),
+            (None, None) => None,
+        }
+    }
 }
 
 /// What a fault's cells expect. A bound is given in ms or in the profile's command cycles

@@ -46,15 +46,18 @@ impl Tally {
 /// The mechanisms of `disabled` whose removal no cell noticed: a failed cell that expected
 /// it. (With several switched off at once, a failure is credited to the one it expected.)
 pub fn unnoticed(results: &[CellResult], disabled: Mechanisms) -> Vec<Mechanism> {
+    let alone = disabled.iter().count() == 1;
     disabled
         .iter()
         .filter(|m| {
-            !results.iter().any(|c| {
-                c.verdict == Verdict::Fail
-                    && (c.expected.mechanism == Some(*m) || disabled.iter().count() == 1)
-            })
+            !with_verdict(results, Verdict::Fail).any(|c| alone || c.expected.mechanism == Some(*m))
         })
         .collect()
+}
+
+/// The cells with `verdict`.
+fn with_verdict(results: &[CellResult], verdict: Verdict) -> impl Iterator<Item = &CellResult> {
+    results.iter().filter(move |c| c.verdict == verdict)
 }
 
 /// Write the four files into `dir` (created if need be); each is written whole to a
@@ -213,12 +216,7 @@ fn matrix(campaign: &Campaign, results: &[CellResult]) -> Vec<(String, Vec<Row>)
         .collect()
 }
 
-fn summary_lines(
-    campaign: &Campaign,
-    results: &[CellResult],
-    disabled: Mechanisms,
-    wall_seconds: f64,
-) -> Vec<String> {
+fn summary_lines(results: &[CellResult], disabled: Mechanisms, wall_seconds: f64) -> Vec<String> {
     let t = Tally::of(results);
     let mut lines = vec![format!(
         "{} cells: {} executed, {} passed, {} failed, {} not applicable; {wall_seconds:.1} s",
@@ -241,7 +239,6 @@ fn summary_lines(
             ));
         }
     }
-    let _ = campaign;
     lines
 }
 
@@ -253,7 +250,7 @@ pub fn markdown(
     wall_seconds: f64,
 ) -> String {
     let mut out = format!("# Campaign {}\n\n", campaign.name);
-    for line in summary_lines(campaign, results, disabled, wall_seconds) {
+    for line in summary_lines(results, disabled, wall_seconds) {
         let _ = writeln!(out, "{line}\n");
     }
     out.push_str(
@@ -278,27 +275,20 @@ pub fn markdown(
             let _ = writeln!(out, "| {fault} | {} |", cells.join(" | "));
         }
     }
-    let failed: Vec<&CellResult> = results
-        .iter()
-        .filter(|c| c.verdict == Verdict::Fail)
-        .collect();
+    let failed: Vec<&CellResult> = with_verdict(results, Verdict::Fail).collect();
     if !failed.is_empty() {
         out.push_str("\n## Failed cells\n\n");
         for c in failed {
             let _ = writeln!(out, "- `{}`: {}", c.name, c.why);
         }
     }
-    let na: Vec<&CellResult> = results
-        .iter()
-        .filter(|c| c.verdict == Verdict::NotApplicable)
-        .collect();
-    if !na.is_empty() {
-        out.push_str("\n## Not applicable\n\n");
-        let mut reasons: Vec<(String, &str)> = na
-            .iter()
+    // Each profile's fault and reason once (the states of one fault share theirs).
+    let reasons: std::collections::BTreeSet<(String, &str)> =
+        with_verdict(results, Verdict::NotApplicable)
             .map(|c| (format!("{}/{}", c.profile, c.fault), c.why.as_str()))
             .collect();
-        reasons.dedup();
+    if !reasons.is_empty() {
+        out.push_str("\n## Not applicable\n\n");
         for (what, why) in reasons {
             let _ = writeln!(out, "- {what}: {why}");
         }
@@ -317,7 +307,7 @@ pub fn html(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Campaign {0}</title>\n<style>\nbody{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse;margin-bottom:2em}}th,td{{border:1px solid #999;padding:.25em .5em;text-align:center}}td:first-child{{text-align:left}}.pass{{background:#c8f0c8}}.fail{{background:#f4b4b4}}.na{{background:#e8e8e8}}.also{{background:#eef6ff}}\n</style></head><body>\n<h1>Campaign {0}</h1>\n",
         xml_escape(&campaign.name)
     );
-    for line in summary_lines(campaign, results, disabled, wall_seconds) {
+    for line in summary_lines(results, disabled, wall_seconds) {
         let _ = writeln!(out, "<p>{}</p>", xml_escape(&line));
     }
     for (profile, rows) in matrix(campaign, results) {
@@ -339,10 +329,7 @@ pub fn html(
         }
         out.push_str("</table>\n");
     }
-    let failed: Vec<&CellResult> = results
-        .iter()
-        .filter(|c| c.verdict == Verdict::Fail)
-        .collect();
+    let failed: Vec<&CellResult> = with_verdict(results, Verdict::Fail).collect();
     if !failed.is_empty() {
         out.push_str("<h2>Failed cells</h2>\n<ul>\n");
         for c in failed {

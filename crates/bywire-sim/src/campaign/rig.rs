@@ -51,6 +51,11 @@ pub struct Vehicle {
     pub(super) disabled: Mechanisms,
 }
 
+/// A key file holding `key` (32 hex digits) as `id`, in memory (`name` for its errors).
+fn key_file(id: u32, key: &str, name: &str) -> Result<KeyFile, String> {
+    KeyFile::parse(Path::new(name), format!("{id} {key}\n").as_bytes()).map_err(|e| e.to_string())
+}
+
 /// A key the intruder signs with: not the vehicle's.
 const INTRUDER_KEY: &str = "000102030405060708090a0b0c0d0e0f";
 
@@ -66,14 +71,8 @@ impl Vehicle {
             name: entry.name.clone(),
             reason,
         };
-        let mut profile = match bywire_tug::builtin(&entry.name) {
-            Ok(profile) => profile,
-            Err(_) if entry.name.ends_with(".toml") => {
-                bywire_vehicle::profile::Profile::load(&dir.join(&entry.name))
-                    .map_err(|e| fail(e.to_string()))?
-            }
-            Err(e) => return Err(fail(e.to_string())),
-        };
+        let mut profile =
+            bywire_tug::named_or_file(&entry.name, dir).map_err(|e| fail(e.to_string()))?;
         let mut plain = profile.clone();
         plain.profile.secoc = None;
         let keys = match &entry.secoc {
@@ -87,9 +86,7 @@ impl Vehicle {
                 let roles: SecOcRoles = toml::Value::Table(table)
                     .try_into()
                     .map_err(|e| fail(format!("[profile.secoc]: {e}")))?;
-                let text = format!("{} {key}\n", roles.key_id);
-                let keys = KeyFile::parse(Path::new("test_key"), text.as_bytes())
-                    .map_err(|e| fail(e.to_string()))?;
+                let keys = key_file(roles.key_id, &key, "test_key").map_err(fail)?;
                 profile.profile.secoc = Some(roles);
                 Some(keys)
             }
@@ -139,9 +136,7 @@ impl Vehicle {
         let keys = match key {
             None => keys,
             Some(key) => {
-                let text = format!("{} {key}\n", roles.key_id);
-                other = KeyFile::parse(Path::new("intruder"), text.as_bytes())
-                    .map_err(|e| self.fail(e.to_string()))?;
+                other = key_file(roles.key_id, key, "intruder").map_err(|e| self.fail(e))?;
                 &other
             }
         };
@@ -167,6 +162,14 @@ impl Vehicle {
     /// Its command cycle.
     pub(super) fn cycle(&self) -> Duration {
         self.profile.supervisor_config().cycle
+    }
+}
+
+/// `frame` as a sender with `table` puts it on the wire: signed where the profile secures it.
+fn signed(table: &mut Option<SecuredTable>, frame: Option<Frame>) -> Option<Frame> {
+    match table.as_mut() {
+        Some(table) => frame.and_then(|f| table.protect(f)),
+        None => frame,
     }
 }
 
@@ -208,10 +211,7 @@ impl TestAds {
             }
             _ => frame,
         };
-        match self.table.as_mut() {
-            Some(table) => table.protect(frame),
-            None => Some(frame),
-        }
+        signed(&mut self.table, Some(frame))
     }
 }
 
@@ -267,11 +267,10 @@ impl Node for SafetyController {
             return;
         }
         self.next = now.saturating_add(self.cycle);
-        let frame = self.wire.estop_frame(self.pressed, self.counter);
-        let frame = match self.table.as_mut() {
-            Some(table) => frame.and_then(|f| table.protect(f)),
-            None => frame,
-        };
+        let frame = signed(
+            &mut self.table,
+            self.wire.estop_frame(self.pressed, self.counter),
+        );
         if let Some(frame) = frame {
             out(Port::MAIN, frame);
         }
@@ -358,11 +357,10 @@ impl Node for Intruder {
                     ..AdsCommand::default()
                 };
                 self.counter = self.counter.wrapping_add(1);
-                let frame = self.wire.command_frame(&command, self.counter);
-                let frame = match self.table.as_mut() {
-                    Some(table) => frame.and_then(|f| table.protect(f)),
-                    None => frame,
-                };
+                let frame = signed(
+                    &mut self.table,
+                    self.wire.command_frame(&command, self.counter),
+                );
                 if let Some(frame) = frame {
                     out(Port::MAIN, frame);
                 }
@@ -614,8 +612,8 @@ pub(super) fn detectors(before: &Snapshot, now: &Snapshot) -> Mechanisms {
 }
 
 /// Why `fault` cannot be injected into this vehicle in `state` (`None`: it can).
-fn not_applicable(vehicle: &Vehicle, rig: &Rig, class: FaultClass, state: State) -> Option<String> {
-    let has_estop = rig.safety.is_some();
+fn not_applicable(vehicle: &Vehicle, class: FaultClass, state: State) -> Option<String> {
+    let has_estop = vehicle.plain.bindings.estop.is_some();
     match class {
         FaultClass::AngleSensor
         | FaultClass::EcuSilent
@@ -748,10 +746,10 @@ fn drive(
     result: &mut CellResult,
 ) -> Result<Vec<String>, String> {
     let seed = campaign.seed ^ (cell.fault as u64) << 16 ^ (cell.state as u64) << 8;
-    let mut rig = Rig::build(vehicle, seed).map_err(|e| e.to_string())?;
-    if let Some(reason) = not_applicable(vehicle, &rig, entry.class, cell.state) {
+    if let Some(reason) = not_applicable(vehicle, entry.class, cell.state) {
         return Err(reason);
     }
+    let mut rig = Rig::build(vehicle, seed).map_err(|e| e.to_string())?;
     let config = vehicle.profile.supervisor_config();
     let cycle = config.cycle;
     let out_of_range = match entry.class {
@@ -777,13 +775,9 @@ fn drive(
     let inject = campaign.inject_at_ms.max(engage_ms + 800);
     let observe = entry.observe_ms.unwrap_or(campaign.observe_ms);
     let end = inject + observe;
-    let cycle_ms = u64::try_from(cycle.as_millis()).unwrap_or(20);
-    let duration = match (entry.duration_ms, entry.cycles) {
-        (Some(ms), _) => Some(ms),
-        (None, Some(cycles)) => Some(u64::from(cycles) * cycle_ms),
-        (None, None) => None,
-    };
-    let until = duration.map_or(u64::MAX, |d| inject + d);
+    let until = entry.duration(cycle).map_or(u64::MAX, |d| {
+        inject.saturating_add(u64::try_from(d.as_millis()).unwrap_or(u64::MAX))
+    });
     let mut before = None;
     let mut observer = Observer::new(vehicle.limits());
     for t in 1..=end {
@@ -848,7 +842,7 @@ fn drive(
         let now = rig.net.now();
         let a = v.supervisor().actuators(now);
         if t >= engage_ms {
-            observer.limits(&format!("at {t} ms"), &a);
+            observer.limits(&a, || format!("at {t} ms"));
         }
         let Some(before) = before else { continue };
         let Some(snap) = rig.snapshot() else { continue };
@@ -887,9 +881,9 @@ impl Observer {
         }
     }
 
-    /// The actuators at `when` must stay within the vehicle's limits (the first breach is the
-    /// failure).
-    pub(super) fn limits(&mut self, when: &str, a: &Actuators) {
+    /// The actuators must stay within the vehicle's limits (the first breach, `when` it came,
+    /// is the failure).
+    pub(super) fn limits(&mut self, a: &Actuators, when: impl FnOnce() -> String) {
         let (steering, speed) = (self.limits.0 + 1e-6, self.limits.1 + 1e-6);
         let within = a.steering.is_finite()
             && a.velocity.is_finite()
@@ -897,6 +891,7 @@ impl Observer {
             && a.velocity.abs() <= speed
             && (0.0..=100.0).contains(&a.brake);
         if !within && self.failures.is_empty() {
+            let when = when();
             self.failures.push(format!(
                 "{when} the actuators were sent steering {:.2} deg, velocity {:.2} m/s, brake {:.0} %: beyond the vehicle's limits",
                 a.steering, a.velocity, a.brake

@@ -5,8 +5,6 @@
 //! whole tug has: the 2-out-of-3 angle voters (their faults reported to the degradation
 //! latch), the A/B takeover and the backup steering valves.
 
-use core::time::Duration;
-
 use bywire_vehicle::arbitration::Side;
 use bywire_vehicle::backup::InCharge;
 use bywire_vehicle::command::FaultClass as LayerFault;
@@ -160,13 +158,13 @@ pub(super) fn drive(
     let layers_before = Layers::of(&tug);
     let mut observer = Observer::new(vehicle.limits());
     observer.baseline = reaction_of(&before, &actuators);
-    tug.inject(fault, entry.duration_ms.map(Duration::from_millis));
+    tug.inject(fault, entry.duration(vehicle.cycle()));
     for t in 1..=observe {
         tug.step();
         let Some((now, a)) = snapshot(&tug) else {
             return Err("the tug lost its ECU".into());
         };
-        observer.limits(&format!("{t} ms after the fault"), &a);
+        observer.limits(&a, || format!("{t} ms after the fault"));
         let noticed: Mechanisms = detectors(&before, &now)
             .iter()
             .chain(Layers::of(&tug).detectors(&layers_before).iter())

@@ -55,8 +55,9 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert vector.blf drive.log
   bywire log convert vector.blf drive.mf4         (ASAM MDF 4 bus logging: asammdf, CANape)
   bywire log convert drive.log drive.mcap         (ROS 2's can_msgs/msg/Frame on /from_can_bus)
-  bywire log convert drive.log drive_bag --format rosbag2   (then: ros2 bag info drive_bag; a bag
-                                                  folder reads back as an input too)
+  bywire log convert drive.log drive_bag --format rosbag2
+                                                  (metadata.yaml and the MCAP file; a bag folder
+                                                  reads back as an input too)
   bywire log convert vector.blf frames.parquet    (one row per frame: ts, channel, id, flags, data)
   bywire log convert vector.blf lake --dbc vehicle.dbc --partition channel,date
                                                   (a Parquet table per message, typed signals)
@@ -83,7 +84,7 @@ conversion leaves no half-written file.")]
         #[arg(required = true, num_args = 2.., value_name = "FILE")]
         files: Vec<PathBuf>,
         /// The output format: candump, asc, blf, trc, pcapng, mf4, mcap, parquet, or rosbag2 (a
-        /// folder `ros2 bag` reads: metadata.yaml and the MCAP file) (default: from the output's
+        /// folder in rosbag2's layout: metadata.yaml and the MCAP file) (default: from the output's
         /// extension).
         #[arg(long, value_name = "FORMAT")]
         format: Option<String>,
@@ -241,7 +242,7 @@ fn convert(
     decoding: &Decoding<'_>,
     out: &mut impl Write,
 ) -> Result<()> {
-    // A rosbag2 folder: an MCAP file and the metadata `ros2 bag` reads.
+    // A rosbag2 folder: an MCAP file and its metadata.
     let bag = format.is_some_and(|f| f.eq_ignore_ascii_case(ROSBAG2));
     if bag && decoding.dbc.is_some() {
         bail!("--format rosbag2 carries the frames (can_msgs/msg/Frame); decode into MCAP (.mcap) or Parquet instead");
@@ -323,25 +324,17 @@ fn convert(
             std::fs::create_dir(dir).with_context(cannot_write)?;
             let name = bywire_log::rosbag2::mcap_file_name(output);
             let file = std::fs::File::create(dir.join(&name)).with_context(cannot_write)?;
-            let mut writer = format
-                .writer_with(std::io::BufWriter::new(file), ParquetOptions::default())
-                .with_context(cannot_write)?;
             let mut summary = bywire_log::rosbag2::Summary::default();
-            pump.run(bywire_log::merge::merge(readers), |r| {
-                let before = writer.left_out();
-                writer.write(r).with_context(cannot_write)?;
-                if writer.left_out() == before {
-                    let ns = r.timestamp.as_nanos();
-                    if summary.messages == 0 {
-                        summary.first_ns = ns;
-                    }
-                    summary.last_ns = summary.last_ns.max(ns);
-                    summary.messages += 1;
+            let records = bywire_log::merge::merge(readers);
+            let options = ParquetOptions::default();
+            unsupported = write_frames(file, format, options, &mut pump, records, output, |r| {
+                let ns = r.timestamp.as_nanos();
+                if summary.messages == 0 {
+                    summary.first_ns = ns;
                 }
-                Ok(())
+                summary.last_ns = summary.last_ns.max(ns);
+                summary.messages += 1;
             })?;
-            unsupported = writer.left_out();
-            writer.finish().with_context(cannot_write)?;
             let metadata = bywire_log::rosbag2::metadata(&name, &summary);
             std::fs::write(dir.join(bywire_log::rosbag2::METADATA), metadata)
                 .with_context(cannot_write)?;
@@ -349,20 +342,12 @@ fn convert(
         })?,
         (None, _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
-            let mut writer = format
-                .writer_with(
-                    std::io::BufWriter::new(file),
-                    ParquetOptions {
-                        compression,
-                        times: times.into(),
-                    },
-                )
-                .with_context(cannot_write)?;
-            pump.run(bywire_log::merge::merge(readers), |r| {
-                writer.write(r).with_context(cannot_write)
-            })?;
-            unsupported = writer.left_out();
-            writer.finish().with_context(cannot_write)?;
+            let options = ParquetOptions {
+                compression,
+                times: times.into(),
+            };
+            let records = bywire_log::merge::merge(readers);
+            unsupported = write_frames(file, format, options, &mut pump, records, output, |_| {})?;
             Ok(())
         })?,
     }
@@ -377,6 +362,34 @@ fn convert(
         left_out,
         &notes,
     )
+}
+
+/// Write `records` (through the pump's selection and progress) into `file` as `format`;
+/// `written` hears each record the format took. The frames it left out (CAN FD in MCAP).
+fn write_frames(
+    file: std::fs::File,
+    format: Format,
+    options: ParquetOptions,
+    pump: &mut Pump<'_>,
+    records: impl Iterator<Item = Result<LogRecord>>,
+    output: &Path,
+    mut written: impl FnMut(&LogRecord),
+) -> Result<u64> {
+    let cannot_write = || format!("cannot write {}", output.display());
+    let mut writer = format
+        .writer_with(std::io::BufWriter::new(file), options)
+        .with_context(cannot_write)?;
+    pump.run(records, |r| {
+        let before = writer.left_out();
+        writer.write(r).with_context(cannot_write)?;
+        if writer.left_out() == before {
+            written(r);
+        }
+        Ok(())
+    })?;
+    let left_out = writer.left_out();
+    writer.finish().with_context(cannot_write)?;
+    Ok(left_out)
 }
 
 /// What `convert` wrote: the frames, the CAN FD frames a ROS message cannot hold, what the

@@ -11,7 +11,7 @@ use bywire_core::node::Port;
 use bywire_secoc::keys::KeyFile;
 use bywire_secoc::store::FreshnessStore;
 use bywire_sim::vehicle::SimulatedVehicle;
-use bywire_vehicle::profile::{LoadedProfile, Profile};
+use bywire_vehicle::profile::LoadedProfile;
 use bywire_vehicle::redundancy::Channel;
 use bywire_vehicle::secured::Secured;
 use bywire_vehicle::wire::ProfileWire;
@@ -103,11 +103,7 @@ pub fn command_buses(bus: &str, bus2: Option<&String>) -> Vec<(Port, String)> {
 
 /// A shipped profile by name, or a profile file; it must describe a vehicle to command.
 pub fn load_profile(name: &str) -> Result<LoadedProfile> {
-    let loaded = if std::path::Path::new(name).exists() {
-        Profile::load(std::path::Path::new(name))?
-    } else {
-        bywire_tug::builtin(name)?
-    };
+    let loaded = bywire_tug::named_or_file(name, std::path::Path::new(""))?;
     if loaded.profile.command.is_none() || loaded.profile.state.is_none() {
         bail!("--profile {name}: no [command] section (the autoware-can profile is an output format, not a vehicle to bridge)");
     }
