@@ -12,6 +12,7 @@
 //! - [`pdo`]: PDO parameters, mapping and transmission types.
 //! - [`device`]: a device (NMT slave) with EMCY, SYNC and heartbeat, running an
 //!   [`device::Application`].
+//! - [`emcy`]: emergency messages and the error register.
 //! - [`master`]: the NMT master: commands, heartbeat monitoring, SDO client, SYNC, EMCY.
 //! - [`cia402`]: the CiA 402 drive state machine, a drive with a motor model, and the
 //!   master-side driver that enables, commands and safely stops a drive.
@@ -38,6 +39,7 @@
 //! ```
 #![cfg_attr(not(feature = "std"), no_std)]
 
+#[cfg(feature = "alloc")]
 extern crate alloc;
 
 pub mod abort;
@@ -46,15 +48,24 @@ pub mod cia402;
 pub mod config;
 #[cfg(feature = "yaml")]
 mod config_yaml;
+#[cfg(feature = "alloc")]
 pub mod device;
+#[cfg(feature = "alloc")]
 pub mod eds;
+pub mod emcy;
+#[cfg(feature = "alloc")]
 pub mod master;
 pub mod nmt;
+#[cfg(feature = "alloc")]
 pub mod od;
+#[cfg(feature = "alloc")]
 pub mod pdo;
 pub mod queue;
+#[cfg(feature = "alloc")]
 pub mod roboteq;
+#[cfg(feature = "alloc")]
 pub mod scan;
+#[cfg(feature = "alloc")]
 pub mod sdo;
 
 pub use abort::Abort;

@@ -10,9 +10,7 @@
 //! same layout for tools. Output goes to the sinks [`OutputMode`] chooses (`bywire-ros` gives the
 //! DDS one: `bywire ros2 control-output`).
 
-use alloc::format;
-use alloc::string::String;
-
+use crate::command::UnknownName;
 use bywire_core::{Frame, Id, StandardId};
 
 /// Identifiers of the three frames.
@@ -252,15 +250,16 @@ pub enum OutputMode {
 }
 
 impl core::str::FromStr for OutputMode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, UnknownName> {
         match s {
             "dds-only" | "dds" => Ok(OutputMode::DdsOnly),
             "can-only" | "can" => Ok(OutputMode::CanOnly),
             "dds-and-can" => Ok(OutputMode::DdsAndCan),
-            other => Err(format!(
-                "'{other}' is not an output mode (dds, can, dds-and-can)"
-            )),
+            _ => Err(UnknownName {
+                kind: "control-output mode",
+                expected: &["dds", "can", "dds-and-can"],
+            }),
         }
     }
 }

@@ -20,14 +20,18 @@ pub struct UnknownName {
 
 impl fmt::Display for UnknownName {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "not a {}: expected {}",
-            self.kind,
-            self.expected.join(", ")
-        )
+        write!(f, "not a {}: expected ", self.kind)?;
+        for (i, name) in self.expected.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            f.write_str(name)?;
+        }
+        Ok(())
     }
 }
+
+impl core::error::Error for UnknownName {}
 
 /// What every vocabulary enum offers, for code generic over them (a profile's number maps).
 pub trait Vocabulary: Copy + PartialEq + 'static {
@@ -117,8 +121,8 @@ macro_rules! vocabulary {
         impl FromStr for $name {
             type Err = UnknownName;
             fn from_str(text: &str) -> Result<Self, UnknownName> {
-                let lower = text.trim().to_ascii_lowercase();
-                $(if lower == $text $(|| lower == $alias)* {
+                let text = text.trim();
+                $(if text.eq_ignore_ascii_case($text) $(|| text.eq_ignore_ascii_case($alias))* {
                     return Ok($name::$variant);
                 })+
                 Err(UnknownName {

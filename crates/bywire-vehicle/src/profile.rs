@@ -960,7 +960,7 @@ impl Checker<'_> {
             self.message("autoware.status", &a.status)?;
             a.output
                 .parse::<crate::autoware::OutputMode>()
-                .map_err(|e| self.invalid("autoware.output", e))?;
+                .map_err(|e| self.invalid("autoware.output", e.to_string()))?;
         }
         if let Some(secoc) = &p.secoc {
             self.secured_layouts(secoc)?;

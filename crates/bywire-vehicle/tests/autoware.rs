@@ -128,6 +128,7 @@ fn output_modes_select_the_sinks() {
     assert!("both"
         .parse::<OutputMode>()
         .unwrap_err()
+        .to_string()
         .contains("dds-and-can"));
 }
 

@@ -51,7 +51,7 @@ impl StopLatch {
     /// communication they report is watched by the heartbeat consumer, which stops the drive
     /// if it is really lost, and a drive that lost its master faults on its own.
     pub fn on_emergency(&mut self, node: u8, frame: &Frame) {
-        if let Some((from, emergency)) = crate::device::Emergency::parse(frame) {
+        if let Some((from, emergency)) = crate::emcy::Emergency::parse(frame) {
             let communication_warning = emergency.code & 0xFF00 == 0x8100;
             if from == node && emergency.code != 0 && !communication_warning {
                 self.stop(StopReason::Emergency(emergency.code));

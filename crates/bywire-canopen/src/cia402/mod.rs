@@ -42,12 +42,16 @@ pub mod object {
 }
 
 mod controller;
+#[cfg(feature = "alloc")]
 mod dictionary;
+#[cfg(feature = "alloc")]
 mod drive;
 mod state;
 
 pub use controller::*;
+#[cfg(feature = "alloc")]
 pub use dictionary::*;
+#[cfg(feature = "alloc")]
 pub use drive::*;
 pub use state::*;
 
