@@ -916,6 +916,103 @@ mod tests {
         );
     }
 
+    #[test]
+    fn errors_say_what_is_wrong_and_keys_never_print() {
+        let said = [
+            (LayoutError::Payload(65).to_string(), "65 bytes"),
+            (LayoutError::Freshness(70).to_string(), "70 bits"),
+            (
+                LayoutError::FreshnessTx { tx: 9, length: 8 }.to_string(),
+                "9 freshness bits sent of a freshness value of 8",
+            ),
+            (LayoutError::Mac(0).to_string(), "MAC of 0 bits"),
+            (LayoutError::Secured(77).to_string(), "77 bytes"),
+            (
+                SecOcError::Short {
+                    needed: 8,
+                    given: 3,
+                }
+                .to_string(),
+                "3 bytes where the secured message needs 8",
+            ),
+            (SecOcError::FreshnessExhausted.to_string(), "new key"),
+            (Rejection::Malformed.to_string(), "shorter"),
+            (Rejection::Mac.to_string(), "MAC does not match"),
+            (Rejection::Stale.to_string(), "not fresh"),
+            (Rejection::Window.to_string(), "window"),
+        ];
+        for (text, expected) in said {
+            assert!(text.contains(expected), "{text:?} lacks {expected:?}");
+        }
+        let key = Key::new([0xA5; 16]);
+        for shown in [
+            format!("{key:?}"),
+            format!("{:?}", Authenticator::new(&key)),
+        ] {
+            assert!(shown.contains("redacted"), "{shown}");
+            assert!(
+                !shown.contains("165") && !shown.to_lowercase().contains("a5"),
+                "{shown}"
+            );
+        }
+    }
+
+    #[test]
+    fn short_buffers_are_refused_never_read_or_written_past() {
+        let (auth, layout) = profile1();
+        let mut short = [1u8, 2, 3];
+        assert_eq!(
+            auth.sign(&layout, 1, &mut short),
+            Err(SecOcError::Short {
+                needed: 8,
+                given: 3
+            })
+        );
+        assert_eq!(short, [1, 2, 3], "nothing written");
+        assert_eq!(
+            auth.mac(&layout, &short, 1),
+            Err(SecOcError::Short {
+                needed: 4,
+                given: 3
+            })
+        );
+        let good = signed(&auth, &layout, 1, 9);
+        assert!(!auth.mac_matches(&layout, 1, &good[..7]));
+        assert!(auth.mac_matches(&layout, 1, &good));
+        assert!(!auth.mac_matches(&layout, layout.freshness_max() + 1, &good));
+    }
+
+    #[test]
+    fn a_sender_past_the_largest_freshness_signs_nothing_more() {
+        let auth = Authenticator::new(&Key::new([3; 16]));
+        // An 8-bit freshness value: 255 is the last one a key may sign.
+        let layout = Layout::new(5, 2, 8, 8, 24).unwrap();
+        let mut sender = Sender::new(255);
+        let mut data = [1u8, 2, 0, 0, 0, 0];
+        assert_eq!(sender.sign(&auth, &layout, &mut data), Ok(255));
+        let mut again = [1u8, 2, 0, 0, 0, 0];
+        assert_eq!(
+            sender.sign(&auth, &layout, &mut again),
+            Err(SecOcError::FreshnessExhausted)
+        );
+        assert_eq!(again, [1, 2, 0, 0, 0, 0], "nothing signed");
+        // A 64-bit value: the last one is signed once, and the sender never wraps to zero.
+        let layout = Layout::new(5, 0, 64, 64, 32).unwrap();
+        let mut sender = Sender::new(u64::MAX);
+        let mut data = [0u8; 12];
+        assert_eq!(sender.sign(&auth, &layout, &mut data), Ok(u64::MAX));
+        assert_eq!(
+            sender.sign(&auth, &layout, &mut data),
+            Err(SecOcError::FreshnessExhausted)
+        );
+        let mut resynced = Sender::new(1);
+        resynced.resync(u64::MAX);
+        assert_eq!(
+            resynced.sign(&auth, &layout, &mut data),
+            Err(SecOcError::FreshnessExhausted)
+        );
+    }
+
     proptest::proptest! {
         /// Whatever the lengths and the sender's steps (within the window), every message is
         /// accepted with the value it was signed with, and none twice.

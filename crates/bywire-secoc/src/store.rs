@@ -197,4 +197,27 @@ mod tests {
             "{error}"
         );
     }
+
+    #[test]
+    fn a_store_that_cannot_be_read_or_written_names_its_file_and_why() {
+        let (dir, path) = temp("unwritable");
+        // A folder where the file should be: it cannot be read as one.
+        std::fs::create_dir(&path).unwrap();
+        let error = FreshnessStore::open(&path, 10).err().unwrap();
+        assert!(matches!(error, StoreError::Io { .. }), "{error:?}");
+        assert!(
+            error.to_string().starts_with(&path.display().to_string()),
+            "{error}"
+        );
+        // A store whose folder went away: the next reservation cannot be written, and the
+        // values it would have covered are not used.
+        let path = dir.path().join("sub").join("freshness");
+        std::fs::create_dir(path.parent().unwrap()).unwrap();
+        let (mut store, start) = FreshnessStore::open(&path, 2).unwrap();
+        store.before_signing(start + 1).unwrap();
+        std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
+        let error = store.before_signing(start + 2).err().unwrap();
+        assert!(matches!(error, StoreError::Io { .. }), "{error:?}");
+        assert!(error.to_string().contains("freshness"), "{error}");
+    }
 }

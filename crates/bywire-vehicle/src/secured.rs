@@ -594,3 +594,181 @@ impl<N: Node> Node for Signing<N> {
         self.node.next_deadline()
     }
 }
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use alloc::vec::Vec;
+
+    fn id(raw: u32) -> Id {
+        Id::standard(raw).unwrap()
+    }
+
+    fn layout(data_id: u16) -> Layout {
+        Layout::new(data_id, 4, 32, 8, 24).unwrap()
+    }
+
+    fn table() -> SecuredTable {
+        let mut table = SecuredTable::new(&Key::new([9; 16]), 1 << 10);
+        table.secure(id(0x100), layout(1), 1).unwrap();
+        table
+    }
+
+    #[test]
+    fn a_table_refuses_a_message_or_data_id_twice_and_a_ninth_message() {
+        let mut t = table();
+        assert_eq!(
+            t.secure(id(0x100), layout(2), 1),
+            Err(TableError::Duplicate(id(0x100)))
+        );
+        assert_eq!(
+            t.secure(id(0x101), layout(1), 1),
+            Err(TableError::DuplicateDataId(1))
+        );
+        let sync = SyncMessage {
+            id: id(0x7F0),
+            data_id: 1,
+        };
+        assert_eq!(
+            t.clone().with_sync(sync).map(|_| ()),
+            Err(TableError::DuplicateDataId(1))
+        );
+        let mut t = t
+            .with_sync(SyncMessage {
+                id: id(0x7F0),
+                data_id: 99,
+            })
+            .unwrap();
+        assert_eq!(
+            t.secure(id(0x101), layout(99), 1),
+            Err(TableError::DuplicateDataId(99)),
+            "the sync's data ID is taken too"
+        );
+        for n in 2..=8u16 {
+            t.secure(id(0x100 + u32::from(n)), layout(n), 1).unwrap();
+        }
+        assert_eq!(t.secure(id(0x200), layout(50), 1), Err(TableError::Full));
+        for (error, says) in [
+            (TableError::Full, "at most 8"),
+            (TableError::Duplicate(id(0x1AB)), "0x1AB is secured twice"),
+            (TableError::DuplicateDataId(7), "data ID 7 is used twice"),
+        ] {
+            assert!(error.to_string().contains(says), "{error}");
+        }
+    }
+
+    #[test]
+    fn nothing_unauthenticated_is_ever_sent_in_a_secured_messages_place() {
+        let mut t = table();
+        let other = Frame::classic(id(0x300), &[1, 2]).unwrap();
+        assert_eq!(
+            t.protect(other),
+            Some(other),
+            "an unlisted frame passes as it is"
+        );
+        let signed = t.protect(Frame::classic(id(0x100), &[1, 2, 3, 4]).unwrap());
+        assert!(matches!(signed, Some(Frame::Fd(_))), "{signed:?}");
+        assert_eq!(t.next_freshness(id(0x100)), Some(2));
+        let wrong_length = Frame::classic(id(0x100), &[1, 2, 3]).unwrap();
+        let remote = Frame::remote(id(0x100), bywire_core::frame::Dlc::new(4).unwrap());
+        assert_eq!(t.protect(wrong_length), None);
+        assert_eq!(t.protect(remote), None);
+        assert_eq!(t.stats().unsigned, 2);
+        assert_eq!(t.next_freshness(id(0x100)), Some(2), "no value used up");
+        // The freshness used up: nothing more is signed, and nothing is sent in its place.
+        let mut spent = SecuredTable::new(&Key::new([9; 16]), 4);
+        spent
+            .secure(id(0x100), Layout::new(1, 4, 8, 8, 24).unwrap(), 256)
+            .unwrap();
+        assert_eq!(
+            spent.protect(Frame::classic(id(0x100), &[1, 2, 3, 4]).unwrap()),
+            None
+        );
+        assert_eq!(spent.stats().unsigned, 1);
+    }
+
+    #[test]
+    fn a_remote_or_short_frame_of_a_secured_message_is_rejected_as_malformed() {
+        let mut t = table();
+        let remote = Frame::remote(id(0x100), bywire_core::frame::Dlc::new(8).unwrap());
+        let short = Frame::classic(id(0x100), &[1, 2]).unwrap();
+        for frame in [remote, short] {
+            assert_eq!(
+                t.check(Channel::A, &frame),
+                Checked::Rejected(Rejection::Malformed)
+            );
+        }
+        assert_eq!(t.stats().frames.malformed, 2);
+        assert_eq!(
+            t.check(Channel::B, &Frame::classic(id(0x5), &[]).unwrap()),
+            Checked::Unsecured
+        );
+    }
+
+    #[test]
+    fn a_node_reserves_every_value_its_next_poll_may_sign_before_it_signs() {
+        let mut t = table();
+        t.secure(id(0x101), layout(2), 500).unwrap();
+        assert_eq!(t.next_freshness_max(), 500);
+        let path = std::env::temp_dir().join(format!("bywire-reserve-{}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let (mut store, start) = bywire_secoc::store::FreshnessStore::open(&path, 1).unwrap();
+        assert_eq!(start, 1);
+        t.reserve_in(&mut store).unwrap();
+        let reserved = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let reserved: u64 = reserved.trim().parse().unwrap();
+        assert!(reserved > 500 + RESERVE_MARGIN, "{reserved}");
+    }
+
+    /// Sends one frame of the secured message (of the given length) and one other, each poll.
+    struct Talker(usize);
+
+    impl Node for Talker {
+        fn on_frame(&mut self, _: Timestamp, _: Port, _: &Frame) {}
+        fn poll(&mut self, _: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            let data = [7u8; 8];
+            out(
+                Port::MAIN,
+                Frame::classic(id(0x100), &data[..self.0]).unwrap(),
+            );
+            out(Port::MAIN, Frame::classic(id(0x300), &[1]).unwrap());
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            Some(Timestamp::ZERO)
+        }
+    }
+
+    fn polled(node: &mut Signing<Talker>) -> Vec<Frame> {
+        let mut sent = Vec::new();
+        node.poll(Timestamp::ZERO, &mut |_, f| sent.push(f));
+        sent
+    }
+
+    #[test]
+    fn a_signing_node_signs_what_its_node_sends_and_drops_what_it_cannot_sign() {
+        let mut signing = Signing::new(Talker(4), Some(table()));
+        let sent = polled(&mut signing);
+        assert_eq!(sent.len(), 2);
+        assert!(matches!(sent[0], Frame::Fd(_)) && sent[0].data().len() >= 8);
+        assert_eq!(sent[1], Frame::classic(id(0x300), &[1]).unwrap());
+        let mut verifier = table();
+        assert!(matches!(
+            verifier.check(Channel::A, &sent[0]),
+            Checked::Authentic(_)
+        ));
+        assert_eq!(signing.next_deadline(), Some(Timestamp::ZERO));
+        signing.node.0 = 3;
+        let sent = polled(&mut signing);
+        assert_eq!(
+            sent,
+            [Frame::classic(id(0x300), &[1]).unwrap()],
+            "the unsignable frame is dropped"
+        );
+        let mut plain = Signing::new(Talker(4), None);
+        assert_eq!(
+            polled(&mut plain)[0],
+            Frame::classic(id(0x100), &[7; 4]).unwrap()
+        );
+    }
+}

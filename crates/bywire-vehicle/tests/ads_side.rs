@@ -18,7 +18,8 @@ use bywire_core::{Frame, Id};
 use bywire_net::network::{Network, NodeHandle};
 use bywire_net::sim::NodeId;
 use bywire_tug::messages::{self, ControlMode, Gear, VehicleToAdsState};
-use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig};
+use bywire_vehicle::ads::{Ads, AdsCommand, AdsConfig, Blocker};
+use bywire_vehicle::command::{EstopCode, WatchdogLevel};
 use bywire_vehicle::redundancy::{Channel, DualVoter, Vote, VoteFailure};
 use bywire_vehicle::supervisor::{Supervisor, SupervisorConfig, Watchdog};
 use bywire_vehicle::wire::VehicleWire;
@@ -140,6 +141,122 @@ fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
         let p: [u8; 8] = f.data().try_into().unwrap();
         assert!(messages::is_sealed(0x100, &p));
         assert_eq!(usize::from(p[6] & 0x0F), k % 16);
+    }
+}
+
+/// A state frame that fails verification is counted as such and never read.
+#[cfg(feature = "secoc")]
+#[test]
+fn an_unauthenticated_state_frame_is_counted_and_not_read() {
+    use bywire_secoc::{Key, Layout};
+    use bywire_vehicle::secured::{Secured, SecuredTable};
+    let state_id = Id::standard(VehicleToAdsState::ID).unwrap();
+    let table = || {
+        let mut table = SecuredTable::new(&Key::new([4; 16]), 1 << 10);
+        table
+            .secure(state_id, Layout::new(0x42, 8, 32, 8, 24).unwrap(), 1)
+            .unwrap();
+        table
+    };
+    let mut ads = Ads::with_wire(AdsConfig::default(), Secured::new(ReferenceWire, table()));
+    ads.set_command(ms(0), drive(1.0));
+    for t in 0..=40 {
+        ads.poll(ms(t), &mut |_, _| {});
+    }
+    // The plain frame, and one signed with another key.
+    ads.on_frame(
+        ms(41),
+        Port::MAIN,
+        &state_frame(0, 2, ControlMode::Autonomous),
+    );
+    let mut forger = SecuredTable::new(&Key::new([5; 16]), 1 << 10);
+    forger
+        .secure(state_id, Layout::new(0x42, 8, 32, 8, 24).unwrap(), 1)
+        .unwrap();
+    let forged = forger
+        .protect(state_frame(0, 2, ControlMode::Autonomous))
+        .unwrap();
+    ads.on_frame(ms(42), Port::MAIN, &forged);
+    assert_eq!((ads.stats().authentication, ads.stats().accepted), (2, 0));
+    assert_eq!(ads.state().mode.value, None, "nothing read");
+    // Signed with the right key, it is read.
+    let signed = table()
+        .protect(state_frame(0, 2, ControlMode::Autonomous))
+        .unwrap();
+    ads.on_frame(ms(43), Port::MAIN, &signed);
+    assert_eq!((ads.stats().authentication, ads.stats().accepted), (2, 1));
+    assert_eq!(ads.state().mode.value, Some(ControlMode::Autonomous));
+}
+
+/// What keeps the vehicle from following, in the order a user clears it, and what to do.
+#[test]
+fn the_blocker_names_what_keeps_the_vehicle_from_following() {
+    let mut l = Loop::new();
+    assert_eq!(l.ads().blocker(ms(0)), Some(Blocker::NoFeedback));
+    l.command(drive(1.5));
+    l.run_to(100);
+    // Answering, but still braking after start-up: it wants valid commands, then engage.
+    let blocker = l.ads().blocker(ms(l.now));
+    assert!(matches!(blocker, Some(Blocker::Watchdog(_))), "{blocker:?}");
+    l.run_to(400);
+    assert_eq!(
+        l.ads().blocker(ms(l.now)),
+        Some(Blocker::Watchdog(WatchdogLevel::AwaitingEngage))
+    );
+    l.command(AdsCommand {
+        engage: true,
+        ..drive(1.5)
+    });
+    l.run_to(440);
+    l.command(drive(1.5));
+    l.run_to(600);
+    assert_eq!(l.ads().blocker(ms(l.now)), None);
+    l.command(AdsCommand {
+        mode: ControlMode::Manual,
+        ..drive(0.0)
+    });
+    l.run_to(700);
+    assert_eq!(
+        l.ads().blocker(ms(l.now)),
+        Some(Blocker::NotEngaged(ControlMode::Manual))
+    );
+    // Silence from the vehicle: back to no feedback.
+    l.net.drop_output(l.vcu_node, true);
+    l.run_to(800);
+    assert_eq!(l.ads().blocker(ms(l.now)), Some(Blocker::NoFeedback));
+    // Each says what to do next.
+    for (blocker, says) in [
+        (Blocker::NoFeedback, "does the profile match"),
+        (
+            Blocker::Estop(EstopCode::Stopped),
+            "operator_reset again to confirm",
+        ),
+        (
+            Blocker::Estop(EstopCode::EstopReset),
+            "send operator_reset again",
+        ),
+        (Blocker::Estop(EstopCode::ResetConfirmed), "send engage"),
+        (Blocker::Estop(EstopCode::Requested), "E-stop: requested"),
+        (Blocker::DriverOverride, "hands and feet off"),
+        (
+            Blocker::Watchdog(WatchdogLevel::FullBraking),
+            "keep sending valid commands, then engage",
+        ),
+        (
+            Blocker::Watchdog(WatchdogLevel::AwaitingEngage),
+            "keep sending valid commands and engage",
+        ),
+        (
+            Blocker::Watchdog(WatchdogLevel::Decelerating),
+            "commands late",
+        ),
+        (
+            Blocker::NotEngaged(ControlMode::Manual),
+            "mode autonomous with engage: true",
+        ),
+    ] {
+        let text = blocker.to_string();
+        assert!(text.contains(says), "{text:?} lacks {says:?}");
     }
 }
 

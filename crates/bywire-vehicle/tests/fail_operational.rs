@@ -133,13 +133,18 @@ fn same_vote(a: TripleVote, b: TripleVote) -> bool {
     }
 }
 
-/// Verifies: REQ-VOT-1.
-#[test]
-fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
+/// How many steps the 2-out-of-3 voter is explored to.
+const DEPTH_2OO3: u64 = 7;
+
+/// Every sequence of `DEPTH` steps (each channel good, off or silent at each) voted by
+/// `vote` and checked against the rules: the states (voter and model) and transitions
+/// explored, or the first violation.
+fn explore_2oo3(
+    vote_with: impl Fn(&mut TripleVoter, Timestamp) -> TripleVote,
+) -> Result<(usize, u64), String> {
     // A reading that is not a number disagrees with everything, as `Off` does with `Good`;
     // the test below has one.
     const ALPHABET: [Reading; 3] = [Reading::Good, Reading::Off, Reading::Silent];
-    const DEPTH: u64 = 7;
     let started = ms(0);
     let mut level = vec![(
         TripleVoter::new(TRIPLE, started),
@@ -150,8 +155,8 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
         }; 3],
     )];
     let mut checked = 0u64;
-    let (mut states, started_at) = (1usize, std::time::Instant::now());
-    for depth in 1..=DEPTH {
+    let mut states = 1usize;
+    for depth in 1..=DEPTH_2OO3 {
         let now = ms(depth * TRIPLE_STEP);
         let mut next = Vec::new();
         let mut seen = HashSet::new();
@@ -170,12 +175,13 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
                     model[i].last = Some((value, now));
                 }
                 let before = voter.health();
-                let vote = voter.vote(now);
+                let vote = vote_with(&mut voter, now);
                 let expected = reference_vote(&mut model, now, started);
-                assert!(
-                    same_vote(vote, expected),
-                    "at {now:?} after {readings:?}: voted {vote:?}, the rules say {expected:?}"
-                );
+                if !same_vote(vote, expected) {
+                    return Err(format!(
+                        "at {now:?} after {readings:?}: voted {vote:?}, the rules say {expected:?}"
+                    ));
+                }
                 for (i, (was, is)) in before.iter().zip(voter.health()).enumerate() {
                     // Out is for good; in or out agrees with the model.
                     if let ChannelHealth::Out(fault) = was {
@@ -202,7 +208,9 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
                                 .is_some_and(|(r, _)| (r - v).abs() <= TRIPLE.tolerance)
                         })
                         .count();
-                    assert!(backing >= 2, "{v} backed by {backing} channels");
+                    if backing < 2 {
+                        return Err(format!("{v} backed by {backing} channels"));
+                    }
                 }
                 // Without a new reading the health holds until the voter's deadline and
                 // changes at it: a voter polled for nothing else latches exactly then.
@@ -231,18 +239,42 @@ fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
                 }
             }
         }
-        eprintln!("depth {depth}: {} states", next.len());
         states += next.len();
         level = next;
     }
+    Ok((states, checked))
+}
+
+/// Verifies: REQ-VOT-1.
+#[test]
+fn the_2oo3_voter_follows_its_rules_over_every_sequence_of_seven_steps() {
+    let started_at = std::time::Instant::now();
+    let (states, checked) = explore_2oo3(|voter, now| voter.vote(now)).unwrap();
     assert!(checked > 100_000, "only {checked} transitions");
-    let depth = usize::try_from(DEPTH).unwrap();
     common::record_state_space(
         "2oo3-voter",
         &["REQ-VOT-1"],
-        (states, checked, depth, false),
+        (states, checked, usize::try_from(DEPTH_2OO3).unwrap(), false),
         started_at.elapsed(),
     );
+}
+
+/// Verifies: REQ-VOT-1.
+#[test]
+fn a_planted_defect_in_the_2oo3_voter_is_found() {
+    // A planted defect: two channels left and disagreeing, the first one's reading is trusted.
+    let found = explore_2oo3(|voter, now| match voter.vote(now) {
+        TripleVote::Failed(TripleFailure::Disagree) => {
+            let first_in = (0..3).find(|&i| !matches!(voter.health()[i], ChannelHealth::Out(_)));
+            match first_in.and_then(|i| voter.reading(i)) {
+                Some(reading) => TripleVote::Duplex(reading),
+                None => TripleVote::Failed(TripleFailure::Disagree),
+            }
+        }
+        vote => vote,
+    })
+    .unwrap_err();
+    assert!(found.contains("the rules say Failed(Disagree)"), "{found}");
 }
 
 /// Verifies: REQ-VOT-1.

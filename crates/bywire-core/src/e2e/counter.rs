@@ -127,6 +127,7 @@ mod tests {
         let mut c = RollingCounter::new(2);
         let seq: [u8; 6] = core::array::from_fn(|_| c.next_value());
         assert_eq!(seq, [0, 1, 2, 3, 0, 1]);
+        assert_eq!(c.value(), 2, "the value the next call gives");
         assert_eq!(RollingCounter::new(8).modulus(), 256);
         assert_eq!(RollingCounter::new(0).modulus(), 2);
         let four = RollingCounter::new(4);
@@ -156,5 +157,13 @@ mod tests {
         assert_eq!(c.check(ms(1), 9), CounterStatus::Stale);
         c.reset();
         assert_eq!(c.check(ms(2), 3), CounterStatus::Initial);
+        // A full byte: values high in the range are themselves, a wider one taken modulo.
+        let mut byte = CounterChecker::new(8, 2, Duration::from_millis(50));
+        assert_eq!(byte.check(ms(0), 254), CounterStatus::Initial);
+        assert_eq!(byte.check(ms(10), 255), CounterStatus::InSequence);
+        assert_eq!(byte.check(ms(20), 0), CounterStatus::InSequence);
+        let mut nibble = CounterChecker::new(4, 2, Duration::from_millis(50));
+        assert_eq!(nibble.check(ms(0), 0x13), CounterStatus::Initial);
+        assert_eq!(nibble.check(ms(10), 4), CounterStatus::InSequence);
     }
 }

@@ -147,6 +147,62 @@ mod tests {
         }
     }
 
+    /// DATAIDMODE_ALT: the data ID's low byte in the CRC on even counters, its high byte on odd.
+    #[test]
+    fn the_alternating_data_id_takes_the_low_byte_on_even_counters_the_high_on_odd() {
+        let with = |mode, data_id| Config {
+            data_id,
+            ..config(mode)
+        };
+        for counter in 0..16u8 {
+            let mut data = [0x5A; 8];
+            data[COUNTER_BYTE] = counter;
+            let alternating = crc(&with(DataIdMode::Alt, 0x1234), &data).unwrap();
+            let byte_used = if counter % 2 == 0 { 0x34 } else { 0x12 };
+            assert_eq!(
+                alternating,
+                crc(&with(DataIdMode::Low, byte_used), &data).unwrap(),
+                "counter {counter}"
+            );
+        }
+    }
+
+    /// Two bytes, the CRC and the counter, are the least a protected message can be.
+    #[test]
+    fn two_bytes_are_protected_and_one_is_refused() {
+        let two = Config {
+            length: 2,
+            ..config(DataIdMode::Both)
+        };
+        let mut data = [0u8; 2];
+        Protector::new().protect(&two, &mut data).unwrap();
+        assert_eq!(
+            Checker::new().check(&two, Some(&data)),
+            Ok(CheckStatus::Initial)
+        );
+        let one = Config { length: 1, ..two };
+        assert_eq!(
+            crc(&one, &data),
+            Err(E2eError::Length {
+                needed: 2,
+                actual: 2
+            })
+        );
+    }
+
+    #[test]
+    fn outside_nibble_mode_the_counter_bytes_high_nibble_is_the_senders() {
+        let mut data = [0u8; 8];
+        data[COUNTER_BYTE] = 0xA0;
+        let mut protector = Protector::new();
+        for counter in 0..3u8 {
+            protector
+                .protect(&config(DataIdMode::Low), &mut data)
+                .unwrap();
+            assert_eq!(data[COUNTER_BYTE], 0xA0 | counter);
+        }
+    }
+
     #[test]
     fn protect_then_check_through_the_statuses() {
         let cfg = config(DataIdMode::Both);

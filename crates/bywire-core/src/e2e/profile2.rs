@@ -97,6 +97,36 @@ mod tests {
     use crate::e2e::CheckStatus;
 
     #[test]
+    fn a_length_too_short_for_counter_and_crc_or_for_the_data_is_refused() {
+        let cfg = |length| Config {
+            data_id_list: [0; 16],
+            length,
+            sequence: SequenceConfig::default(),
+        };
+        assert_eq!(
+            crc(&cfg(1), &[0; 8]),
+            Err(E2eError::Length {
+                needed: 2,
+                actual: 8
+            })
+        );
+        assert_eq!(
+            crc(&cfg(8), &[0; 7]),
+            Err(E2eError::Length {
+                needed: 8,
+                actual: 7
+            })
+        );
+        assert_eq!(
+            Protector::new().protect(&cfg(8), &mut [0; 4]),
+            Err(E2eError::Length {
+                needed: 8,
+                actual: 4
+            })
+        );
+    }
+
+    #[test]
     fn protect_then_check() {
         let cfg = Config {
             data_id_list: core::array::from_fn(|i| u8::try_from(i * 17).unwrap()),

@@ -191,3 +191,100 @@ impl<P: Profile> Checker<P> {
             .check_data(P::sequence(config), data, |d| P::read(config, d))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// AUTOSAR's defaults: one step ahead per call, no missed call tolerated, no resynchronisation.
+    #[test]
+    fn the_default_allows_one_step_and_no_repeats() {
+        let config = SequenceConfig::default();
+        assert_eq!(
+            (
+                config.max_delta_counter_init,
+                config.max_no_new_or_repeated_data,
+                config.sync_counter_init
+            ),
+            (1, 0, 0)
+        );
+        let mut state = SequenceState::new(16);
+        // Each check call widens the step allowed by one (a call may have found nothing new).
+        let statuses =
+            [Some(Ok(0)), Some(Ok(1)), Some(Ok(3)), Some(Ok(6))].map(|r| state.check(&config, r));
+        assert_eq!(
+            statuses,
+            [
+                CheckStatus::Initial,
+                CheckStatus::Ok,
+                CheckStatus::OkSomeLost,
+                CheckStatus::WrongSequence
+            ]
+        );
+        assert_eq!(state.lost_data, 1, "one value lost between 1 and 3");
+    }
+
+    /// After more calls without new data than allowed, the data are held back until
+    /// `sync_counter_init` more correct receptions have come.
+    #[test]
+    fn too_many_calls_without_new_data_resynchronise_before_data_is_used_again() {
+        let config = SequenceConfig {
+            max_delta_counter_init: 1,
+            max_no_new_or_repeated_data: 0,
+            sync_counter_init: 2,
+        };
+        let mut state = SequenceState::new(16);
+        let receptions = [
+            Some(Ok(0)),
+            None,
+            Some(Ok(1)),
+            Some(Ok(2)),
+            Some(Ok(3)),
+            Some(Ok(4)),
+        ];
+        let statuses = receptions.map(|r| state.check(&config, r));
+        assert_eq!(
+            statuses,
+            [
+                CheckStatus::Initial,
+                CheckStatus::NoNewData,
+                CheckStatus::Sync,
+                CheckStatus::Sync,
+                CheckStatus::Sync,
+                CheckStatus::Ok
+            ]
+        );
+    }
+
+    /// The count of calls without new data saturates below the modulus: a tolerance of that
+    /// many lets any run of them through.
+    #[test]
+    fn calls_without_new_data_are_counted_up_to_the_modulus_less_one() {
+        let config = SequenceConfig {
+            max_delta_counter_init: 15,
+            max_no_new_or_repeated_data: 15,
+            sync_counter_init: 3,
+        };
+        let mut state = SequenceState::new(16);
+        assert_eq!(state.check(&config, Some(Ok(0))), CheckStatus::Initial);
+        for _ in 0..40 {
+            assert_eq!(state.check(&config, Some(Ok(0))), CheckStatus::Repeated);
+        }
+        assert_eq!(state.no_new_or_repeated_data_counter, 15);
+        assert_eq!(state.check(&config, Some(Ok(1))), CheckStatus::Ok);
+        for _ in 0..40 {
+            assert_eq!(state.check(&config, None), CheckStatus::NoNewData);
+        }
+        assert_eq!(state.check(&config, Some(Ok(2))), CheckStatus::Ok);
+    }
+
+    /// A counter read beyond the modulus is taken modulo it, without overflow.
+    #[test]
+    fn a_counter_beyond_the_modulus_is_taken_modulo_it() {
+        let config = SequenceConfig::default();
+        let mut state = SequenceState::new(16);
+        assert_eq!(state.check(&config, Some(Ok(250))), CheckStatus::Initial);
+        assert_eq!(state.last_valid_counter, 10);
+        assert_eq!(state.check(&config, Some(Ok(11))), CheckStatus::Ok);
+    }
+}
