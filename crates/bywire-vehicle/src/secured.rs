@@ -597,6 +597,8 @@ impl<N: Node> Node for Signing<N> {
 
 #[cfg(all(test, feature = "std"))]
 mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
     use super::*;
     use alloc::vec::Vec;
 
