@@ -1238,7 +1238,11 @@ mod duplex {
 
     impl Rig {
         fn new() -> Rig {
-            let (pair, loaded) = common::vehicles::duplicated_shuttle();
+            Rig::with(|_| {})
+        }
+
+        fn with(adjust: impl Fn(&mut bywire_vehicle::supervisor::SupervisorConfig)) -> Rig {
+            let (pair, loaded) = common::vehicles::duplicated_shuttle_with(adjust);
             let wire = ProfileWire::new(&loaded).unwrap();
             let mut net = Network::new();
             let bus = net.add_bus("bus", 500_000, None);
@@ -1326,7 +1330,10 @@ mod duplex {
     }
 
     fn engaged() -> Rig {
-        let mut rig = Rig::new();
+        engaged_with(Rig::new())
+    }
+
+    fn engaged_with(mut rig: Rig) -> Rig {
         rig.cycles(12, false);
         rig.cycles(1, true);
         rig.cycles(2, false);
@@ -1404,6 +1411,33 @@ mod duplex {
 
     /// Verifies: REQ-AB-1.
     #[test]
+    fn the_half_in_control_reports_its_standby_lost_once_and_drives_on() {
+        // The shuttle takes a lost standby as a notice; here its latch records it.
+        let mut rig = engaged_with(Rig::with(|config| {
+            if let Some(policy) = config.degradation.as_mut() {
+                policy.set_rule(FaultClass::StandbyLost, DegradationLevel::Degraded);
+            }
+        }));
+        rig.net.node_mut(rig.pair).unwrap().power(Side::B, false);
+        rig.cycles(4, false);
+        assert_eq!(rig.in_control(), Some(Side::A));
+        let a = rig.pair().half(Side::A);
+        assert_eq!(a.arbiter().took_over(), None);
+        let degradation = a.node().degradation();
+        assert_eq!(
+            degradation.first().map(|f| f.class),
+            Some(FaultClass::StandbyLost)
+        );
+        assert_eq!(degradation.second(), None, "reported once");
+        let actuators = a.node().actuators(rig.net.now());
+        assert!(
+            actuators.motors_enabled && actuators.brake == 0.0,
+            "{actuators:?}"
+        );
+    }
+
+    /// Verifies: REQ-AB-1.
+    #[test]
     fn a_failing_its_self_test_hands_over_at_its_next_status() {
         let mut rig = engaged();
         let failed = rig.net.now();
@@ -1442,5 +1476,111 @@ mod duplex {
         assert_eq!(supervisor.degradation().level(), DegradationLevel::Nominal);
         let a = supervisor.actuators(rig.net.now());
         assert_eq!(a.velocity, 4.0);
+    }
+}
+
+/// The halves' output comparison on a bare pair: two outputs per poll, each compared under
+/// its own identifier.
+mod output_comparison {
+    use super::*;
+    use bywire_core::node::{Node, Port};
+    use bywire_core::{Frame, Id};
+    use bywire_net::network::Network;
+    use bywire_vehicle::arbitration::{Degrades, Duplex, DuplexWire, FencedPair, TakeoverReason};
+
+    /// Sends two outputs every 10 ms: 0x10 with its own byte, 0x11 always the same.
+    #[derive(Debug, Clone)]
+    struct Emitter {
+        first: u8,
+        next: Timestamp,
+    }
+
+    impl Node for Emitter {
+        fn on_frame(&mut self, _: Timestamp, _: Port, _: &Frame) {}
+        fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
+            if now >= self.next {
+                self.next = now.saturating_add(Duration::from_millis(10));
+                out(Port::MAIN, frame(0x10, self.first));
+                out(Port::MAIN, frame(0x11, 7));
+            }
+        }
+        fn next_deadline(&self) -> Option<Timestamp> {
+            Some(self.next)
+        }
+    }
+
+    impl Degrades for Emitter {
+        fn report_fault(&mut self, _: Fault) {}
+    }
+
+    fn frame(id: u32, byte: u8) -> Frame {
+        Frame::classic(Id::standard(id).unwrap(), &[byte]).unwrap()
+    }
+
+    /// Status frames 0x500 (A) and 0x501 (B) carrying the role; outputs 0x10 and 0x11 compared.
+    #[derive(Debug, Clone, Copy)]
+    struct BareWire;
+
+    impl DuplexWire for BareWire {
+        fn status_port(&self) -> Port {
+            Port::MAIN
+        }
+        fn status_period(&self) -> Duration {
+            Duration::from_millis(10)
+        }
+        fn status_frame(&mut self, side: Side, role: Role, _: u8) -> Option<Frame> {
+            Some(frame(0x500 + u32::from(side == Side::B), role.raw()))
+        }
+        fn partner_status(&mut self, side: Side, frame: &Frame) -> Option<Role> {
+            let partner = 0x500 + u32::from(side == Side::A);
+            (frame.id()?.as_raw() == partner).then(|| Role::from_raw(u64::from(frame.data()[0])))
+        }
+        fn agree(&self, _: Port, mine: &Frame, theirs: &Frame) -> Option<bool> {
+            matches!(mine.id()?.as_raw(), 0x10 | 0x11).then(|| mine.data() == theirs.data())
+        }
+    }
+
+    fn run(a_first: u8) -> FencedPair<Emitter, BareWire> {
+        let config = ArbiterConfig {
+            silence: Duration::from_millis(30),
+            disagreement: Duration::from_millis(30),
+            // Nothing but the halves on this bus: the half in control hears no one.
+            deaf: Duration::from_secs(1),
+        };
+        let half = |side, first| {
+            let node = Emitter {
+                first,
+                next: Timestamp::ZERO,
+            };
+            Duplex::new(side, config, node, BareWire, Timestamp::ZERO)
+        };
+        let mut net = Network::new();
+        let bus = net.add_bus("bus", 500_000, None);
+        let pair = net.add_node(FencedPair::new(half(Side::A, a_first), half(Side::B, 1)));
+        net.wire(pair.key(), Port::MAIN, bus).unwrap();
+        let b_port = FencedPair::<Emitter, BareWire>::b_port(Port::MAIN);
+        net.wire(pair.key(), b_port, bus).unwrap();
+        net.run_for(Duration::from_millis(200));
+        net.node(pair).unwrap().clone()
+    }
+
+    /// Verifies: REQ-AB-1.
+    #[test]
+    fn a_standby_takes_over_when_the_first_of_two_outputs_disagrees() {
+        let agreeing = run(1);
+        assert_eq!(agreeing.in_control(), Some(Side::A));
+        assert_eq!(agreeing.half(Side::B).arbiter().took_over(), None);
+        let disagreeing = run(2);
+        eprintln!(
+            "{:?}\n{:?} {}",
+            disagreeing.half(Side::A).arbiter(),
+            disagreeing.half(Side::B).arbiter(),
+            disagreeing.is_off(Side::B)
+        );
+        assert_eq!(disagreeing.in_control(), Some(Side::B));
+        assert_eq!(
+            disagreeing.half(Side::B).arbiter().took_over(),
+            Some(TakeoverReason::OutputsDisagree)
+        );
     }
 }

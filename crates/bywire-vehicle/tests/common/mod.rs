@@ -115,13 +115,27 @@ pub mod vehicles {
         >,
         LoadedProfile,
     ) {
+        duplicated_shuttle_with(|_| {})
+    }
+
+    /// The same, each half's supervisor configured as `adjust` leaves the profile's.
+    pub fn duplicated_shuttle_with(
+        adjust: impl Fn(&mut bywire_vehicle::supervisor::SupervisorConfig),
+    ) -> (
+        bywire_vehicle::arbitration::FencedPair<
+            bywire_vehicle::supervisor::Supervisor<ProfileWire>,
+            bywire_vehicle::wire::ProfileDuplexWire,
+        >,
+        LoadedProfile,
+    ) {
         use bywire_vehicle::arbitration::{Duplex, FencedPair, Side};
         let loaded = shuttle_with(|dbc| dbc);
         let wire = ProfileWire::new(&loaded).unwrap();
         let duplex = bywire_vehicle::wire::ProfileDuplexWire::new(&loaded)
             .unwrap()
             .unwrap();
-        let config = loaded.supervisor_config();
+        let mut config = loaded.supervisor_config();
+        adjust(&mut config);
         let fail_operational = loaded.profile.fail_operational.as_ref().unwrap();
         let arbiter = fail_operational.control.as_ref().unwrap().config();
         let half = |side| {
