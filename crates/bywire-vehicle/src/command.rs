@@ -361,6 +361,55 @@ mod tests {
 
     use super::*;
 
+    /// At a standstill: normal mode turns front and rear in counter-phase, crab all alike, a
+    /// tank turn each wheel across its radius from the centre.
+    #[test]
+    fn each_mode_sets_the_four_wheels_as_it_says_at_a_standstill() {
+        use bywire_control::kinematics::{four_wheel, WheelState};
+        let wheels = four_wheel(2.5, 1.5);
+        let current = [WheelState::default(); 4];
+        let delta = 0.2;
+        for (mode, expected) in [
+            (SteeringMode::Normal, [delta, delta, -delta, -delta]),
+            (SteeringMode::Crab, [delta; 4]),
+        ] {
+            assert_eq!(mode.wheel_angles(delta, &wheels), expected, "{mode:?}");
+            let states = mode.wheel_states(0.0, delta, &wheels, &current);
+            assert_eq!(states.map(|w| w.angle), expected, "{mode:?}");
+            assert_eq!(states.map(|w| w.speed), [0.0; 4], "{mode:?}");
+        }
+        let tank = SteeringMode::Tank.wheel_angles(delta, &wheels);
+        for (angle, wheel) in tank.iter().zip(wheels.wheels) {
+            // Rolling across the radius: the wheel's direction is perpendicular to it.
+            let along_radius = libm::cos(*angle) * wheel.x + libm::sin(*angle) * wheel.y;
+            assert!(along_radius.abs() < 1e-9, "{angle} at {wheel:?}");
+        }
+    }
+
+    /// Moving in normal mode, the path's curvature is 2 tan δ / wheelbase: the axles' middles
+    /// steer by δ, front and rear in counter-phase.
+    #[test]
+    fn normal_mode_moving_steers_the_axles_by_the_commanded_angle() {
+        use bywire_control::kinematics::{four_wheel, WheelState};
+        let wheels = four_wheel(2.5, 1.5);
+        let delta: f64 = 0.15;
+        let states =
+            SteeringMode::Normal.wheel_states(2.0, delta, &wheels, &[WheelState::default(); 4]);
+        let axle = |a: f64, b: f64| libm::atan((libm::tan(a) + libm::tan(b)) / 2.0);
+        let (front, rear) = (
+            axle(states[0].angle, states[1].angle),
+            axle(states[2].angle, states[3].angle),
+        );
+        // The inner and outer wheels differ (Ackermann); their mean tangent is the axle's,
+        // within the track's small second-order effect.
+        assert!((front - delta).abs() < 0.01, "front {front}");
+        assert!((rear + delta).abs() < 0.01, "rear {rear}");
+        assert!(
+            states.iter().all(|w| (1.5..2.5).contains(&w.speed)),
+            "{states:?}"
+        );
+    }
+
     #[test]
     fn names_text_and_numbers_go_both_ways() {
         for &gear in Gear::ALL {

@@ -20,7 +20,7 @@ use bywire_vehicle::arbitration::{
 };
 use bywire_vehicle::backup::{ActuatorFault, ActuatorPair, Feedback, FeedbackCheck, InCharge};
 use bywire_vehicle::command::{DegradationLevel, FaultClass, SteeringMode};
-use bywire_vehicle::degradation::{Degradation, DegradationPolicy, Fault};
+use bywire_vehicle::degradation::{Degradation, DegradationPolicy, Fault, SteeringModes};
 use bywire_vehicle::redundancy::{
     ChannelFault, ChannelHealth, TripleConfig, TripleFailure, TripleVote, TripleVoter,
 };
@@ -629,6 +629,44 @@ const CHECK: FeedbackCheck = FeedbackCheck {
     heartbeat_timeout: Duration::from_millis(50),
 };
 const ACTUATOR_STEP: u64 = 10;
+
+/// Faster than demanded by exactly the overrun is still tracking; beyond it, a runaway.
+#[test]
+fn an_actuator_at_the_overrun_tracks_and_one_past_it_runs_away() {
+    for (excess, switches) in [(CHECK.overrun, false), (CHECK.overrun + 0.01, true)] {
+        let mut pair = ActuatorPair::new(CHECK, ms(0));
+        for t in (0..=100).step_by(10) {
+            pair.step(
+                ms(t),
+                Feedback {
+                    demanded: 10.0,
+                    measured: 10.0 + excess,
+                    drive_fault: false,
+                    heartbeat_at: Some(ms(t)),
+                },
+            );
+        }
+        assert_eq!(
+            pair.primary_failed().map(|(fault, _)| fault),
+            switches.then_some(ActuatorFault::Runaway),
+            "{excess}"
+        );
+        assert_eq!(pair.check(), CHECK);
+    }
+    assert_eq!(
+        CHECK.bound(ActuatorFault::HeartbeatLost),
+        CHECK.heartbeat_timeout
+    );
+    assert_eq!(CHECK.bound(ActuatorFault::Runaway), CHECK.persistence);
+}
+
+/// A mode named twice in a profile's list is allowed once, not toggled off.
+#[test]
+fn a_steering_mode_listed_twice_is_still_allowed() {
+    let modes = SteeringModes::only(&[SteeringMode::Normal, SteeringMode::Normal]);
+    assert!(modes.allows(SteeringMode::Normal));
+    assert!(!modes.allows(SteeringMode::Crab));
+}
 
 /// What the actuator in charge does in one step of the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -1497,6 +1535,10 @@ mod output_comparison {
 
     impl Node for Emitter {
         fn on_frame(&mut self, _: Timestamp, _: Port, _: &Frame) {}
+        /// Times its own transmissions (as the ADS's emergency burst does).
+        fn on_sent(&mut self, _: Timestamp, _: Port, _: &Frame) -> bool {
+            true
+        }
         fn poll(&mut self, now: Timestamp, out: &mut dyn FnMut(Port, Frame)) {
             if now >= self.next {
                 self.next = now.saturating_add(Duration::from_millis(10));
@@ -1567,8 +1609,12 @@ mod output_comparison {
     /// Verifies: REQ-AB-1.
     #[test]
     fn a_standby_takes_over_when_the_first_of_two_outputs_disagrees() {
-        let agreeing = run(1);
+        let mut agreeing = run(1);
         assert_eq!(agreeing.in_control(), Some(Side::A));
+        // The pair asks to be polled when a half needs it, not at once; a transmit
+        // confirmation reaches the half's node.
+        assert!(agreeing.next_deadline().is_some_and(|d| d >= ms(200)));
+        assert!(agreeing.on_sent(ms(200), Port::MAIN, &frame(0x10, 1)));
         assert_eq!(agreeing.half(Side::B).arbiter().took_over(), None);
         let disagreeing = run(2);
         eprintln!(
@@ -1582,5 +1628,16 @@ mod output_comparison {
             disagreeing.half(Side::B).arbiter().took_over(),
             Some(TakeoverReason::OutputsDisagree)
         );
+        // Repaired and reset at a standstill: the power-on roles, the comparison forgotten.
+        let mut reset = disagreeing;
+        for side in [Side::A, Side::B] {
+            reset.half_mut(side).reset(ms(300));
+        }
+        assert_eq!(reset.half(Side::A).arbiter().role(), Role::Active);
+        assert_eq!(reset.half(Side::B).arbiter().role(), Role::Standby);
+        assert_eq!(reset.half(Side::B).arbiter().took_over(), None);
+        // B no longer fences A from the next poll on.
+        reset.poll(ms(300), &mut |_, _| {});
+        assert_eq!(reset.in_control(), Some(Side::A));
     }
 }

@@ -24,7 +24,11 @@ use common::{command, ms, sealed};
 
 /// A supervisor driven to autonomous at 2 m/s; returns it, the next counter and the time.
 fn engaged() -> (Supervisor<ReferenceWire>, u8, u64) {
-    let mut s = Supervisor::with_wire(SupervisorConfig::default(), ReferenceWire);
+    engaged_with(SupervisorConfig::default())
+}
+
+fn engaged_with(config: SupervisorConfig) -> (Supervisor<ReferenceWire>, u8, u64) {
+    let mut s = Supervisor::with_wire(config, ReferenceWire);
     let mut t = 0;
     for k in 0..12u8 {
         s.on_frame(ms(t), Port::MAIN, &command(k, |_| {}));
@@ -271,6 +275,38 @@ fn deadlines_follow_the_last_command_and_the_state_frame() {
     assert_eq!(s.next_deadline(), Some(ms(40)));
     s.poll(ms(40), &mut |_, _| {});
     assert_eq!(s.next_deadline(), Some(ms(55)), "the second tick");
+}
+
+/// A campaign's proof that a cell would notice the safe state missing: switched off, the
+/// commands lost leave the last one in force; switched on, the same loss brakes.
+#[test]
+fn with_the_safe_state_switched_off_the_last_command_goes_on() {
+    use bywire_vehicle::mechanism::Mechanism;
+    let off = SupervisorConfig {
+        disabled: [Mechanism::SafeState].into_iter().collect(),
+        ..SupervisorConfig::default()
+    };
+    for (config, keeps_driving) in [(SupervisorConfig::default(), false), (off, true)] {
+        let (mut s, _, t) = engaged_with(config);
+        let driving = s.actuators(ms(t));
+        assert!(
+            driving.motors_enabled && driving.velocity > 0.0,
+            "{driving:?}"
+        );
+        let later = t + 500;
+        s.poll(ms(later), &mut |_, _| {});
+        assert_eq!(s.watchdog(), Watchdog::FullBraking);
+        let a = s.actuators(ms(later));
+        assert_eq!(
+            (
+                a.motors_enabled,
+                a.velocity == driving.velocity,
+                a.brake == 0.0
+            ),
+            (keeps_driving, keeps_driving, keeps_driving),
+            "{a:?}"
+        );
+    }
 }
 
 #[test]
