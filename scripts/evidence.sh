@@ -6,7 +6,9 @@
 #     sequences, a million by default, in release),
 #  3. line and branch coverage with its gate (scripts/coverage.sh),
 #  4. mutation testing: the outcome of the last scripts/mutants.sh run (in target/mutants, or
-#     MUTANTS_OUT), survivors each with why it is equivalent (requirements/equivalent-mutants.toml);
+#     MUTANTS_OUT; or MUTANTS_RUNS, mutants.out folders separated by colons, a later run's outcome
+#     for a mutant replacing an earlier one's), survivors each with why it is equivalent
+#     (requirements/equivalent-mutants.toml);
 #     EVIDENCE_MUTANTS=sample runs a fifth of the mutants first (~1 h), =all every one (~6 h),
 #  5. the core-only build (no std, no allocator),
 #  6. the lint table.
@@ -30,5 +32,6 @@ case "${EVIDENCE_MUTANTS:-}" in
     all) MUTANTS_OUT=$mutants_out scripts/mutants.sh || true ;;
 esac
 mkdir -p evidence
-BACK_TO_BACK_SECONDS=$back_to_back_seconds CORE_ONLY=$core_only MUTANTS=$mutants_out/mutants.out \
+BACK_TO_BACK_SECONDS=$back_to_back_seconds CORE_ONLY=$core_only \
+    MUTANTS=${MUTANTS_RUNS:-$mutants_out/mutants.out} \
     python3 scripts/evidence_report.py

@@ -14,29 +14,40 @@ equivalent = {
 }
 
 mutation = None
-outcomes_path = os.path.join(os.environ["MUTANTS"], "outcomes.json")
-if os.path.exists(outcomes_path):
-    outcomes = json.load(open(outcomes_path))
+# One or more runs (colon-separated; a later run's outcome for a mutant replaces an earlier
+# one's: a re-run of the survivors after tests were added).
+runs = [d for d in os.environ["MUTANTS"].split(":") if os.path.exists(os.path.join(d, "outcomes.json"))]
+if runs:
+    outcome_of = {}
+    totals, finished = 0, True
+    for run in runs:
+        outcomes = json.load(open(os.path.join(run, "outcomes.json")))
+        if run == runs[0]:
+            totals = outcomes["total_mutants"]
+            finished = outcomes.get("end_time") is not None
+        for kind in ("caught", "missed", "timeout", "unviable"):
+            for line in open(os.path.join(run, f"{kind}.txt")):
+                outcome_of[line.strip()] = kind
     names = {
-        kind: [line.strip() for line in open(os.path.join(os.environ["MUTANTS"], f"{kind}.txt"))]
+        kind: sorted(m for m, k in outcome_of.items() if k == kind)
         for kind in ("caught", "missed", "timeout", "unviable")
     }
     killed = len(names["caught"]) + len(names["timeout"])
     viable = killed + len(names["missed"])
+    explained = sum(1 for m in names["missed"] if m in equivalent)
     mutation = {
-        "mutants": outcomes["total_mutants"],
+        "runs": runs,
+        "mutants": totals,
         "caught": len(names["caught"]),
         "timeout": len(names["timeout"]),
         "unviable": len(names["unviable"]),
         "missed": len(names["missed"]),
         "kill_percent": round(100.0 * killed / viable, 1) if viable else None,
-        "kill_percent_equivalent_excluded": round(
-            100.0 * killed / (viable - sum(1 for m in names["missed"] if m in equivalent)), 1
-        )
-        if viable
+        "kill_percent_equivalent_excluded": round(100.0 * killed / (viable - explained), 1)
+        if viable > explained
         else None,
         "survivors": [{"mutant": m, "equivalent": equivalent.get(m)} for m in names["missed"]],
-        "finished": outcomes.get("end_time") is not None,
+        "finished": finished,
     }
 
 report = {
