@@ -314,6 +314,20 @@ ros_type!(
     "HazardLightsCommand"
 );
 
+/// `tier4_vehicle_msgs/msg/VehicleEmergencyStamped`: Autoware's emergency (`emergency_cmd`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct VehicleEmergencyStamped {
+    /// When.
+    pub stamp: Time,
+    /// Stop as hard as the vehicle can.
+    pub emergency: bool,
+}
+ros_type!(
+    VehicleEmergencyStamped,
+    "tier4_vehicle_msgs",
+    "VehicleEmergencyStamped"
+);
+
 /// `autoware_vehicle_msgs/msg/HazardLightsReport`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct HazardLightsReport {

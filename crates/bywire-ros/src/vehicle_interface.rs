@@ -4,7 +4,10 @@
 //!
 //! In: `control_cmd` (`Control`), `gear_cmd`, a steering mode (`std_msgs/String`: normal,
 //! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), `turn_indicators_cmd` and
-//! `hazard_lights_cmd` where the profile's command has them, and the `ControlModeCommand`
+//! `hazard_lights_cmd` where the profile's command has them, `emergency_cmd`
+//! (`VehicleEmergencyStamped`: the emergency brake at the vehicle's hardest deceleration, the
+//! vehicle's E-stop latched; clearing it releases the ADS's brake, not the latch), and the
+//! `ControlModeCommand`
 //! service (engage: answered once the vehicle reports autonomous with its watchdog not
 //! braking, or `false` after [`VehicleInterfaceConfig::engage_timeout`]; disengage). The
 //! operator's E-stop reset is not offered: it stays a deliberate act at the vehicle.
@@ -43,7 +46,7 @@ use crate::msg::{
     control_mode, ControlModeReport, ControlModeRequest, ControlModeResponse, DiagnosticArray,
     DiagnosticStatus, GearCommand, GearReport, HazardLightsCommand, HazardLightsReport, Header,
     JointState, KeyValue, SteeringReport, StringMsg, Time, TurnIndicatorsCommand,
-    TurnIndicatorsReport, Twist, VelocityReport,
+    TurnIndicatorsReport, Twist, VehicleEmergencyStamped, VelocityReport,
 };
 
 /// The ADS side over a profile's wire, secured when the profile declares `[secoc]`.
@@ -69,6 +72,8 @@ pub struct VehicleInterfaceConfig {
     pub turn_indicators_cmd: String,
     /// `HazardLightsCommand` in.
     pub hazard_lights_cmd: String,
+    /// `VehicleEmergencyStamped` in.
+    pub emergency_cmd: String,
     /// The `ControlModeCommand` service.
     pub control_mode_request: String,
     /// `SteeringReport` out.
@@ -108,6 +113,7 @@ impl Default for VehicleInterfaceConfig {
             cmd_vel: "/cmd_vel".into(),
             turn_indicators_cmd: "/control/command/turn_indicators_cmd".into(),
             hazard_lights_cmd: "/control/command/hazard_lights_cmd".into(),
+            emergency_cmd: "/control/command/emergency_cmd".into(),
             control_mode_request: "/control/control_mode_request".into(),
             steering_status: "/vehicle/status/steering_status".into(),
             velocity_status: "/vehicle/status/velocity_status".into(),
@@ -145,8 +151,38 @@ pub enum VehicleEvent {
     BusLost(String),
     /// The run is ending: braking.
     Stopping,
+    /// Autoware's emergency began (the emergency brake) or ended (the brake released; the
+    /// vehicle's E-stop stays latched until an operator resets it).
+    Emergency(bool),
     /// The freshness store cannot keep what is signed next: braking, then the end.
     Freshness(String),
+}
+
+/// The line a user reads.
+impl std::fmt::Display for VehicleEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            VehicleEvent::Refused(why) => write!(f, "refused: {why}"),
+            VehicleEvent::Saturated(why) => f.write_str(why),
+            VehicleEvent::ModeRequest { mode, success, why } => {
+                let answer = if *success { "done" } else { "refused" };
+                write!(f, "control mode request {mode}: {answer}")?;
+                match why {
+                    Some(why) => write!(f, " ({why})"),
+                    None => Ok(()),
+                }
+            }
+            VehicleEvent::BusLost(what) => write!(f, "bus {what}; commanding on the other"),
+            VehicleEvent::Stopping => f.write_str("stopping: braking for 1 s"),
+            VehicleEvent::Freshness(why) => {
+                write!(f, "freshness store: {why}; braking for 1 s")
+            }
+            VehicleEvent::Emergency(true) => f.write_str("emergency_cmd: emergency brake"),
+            VehicleEvent::Emergency(false) => f.write_str(
+                "emergency_cmd cleared: brake released; the vehicle stays stopped until an operator resets its E-stop",
+            ),
+        }
+    }
 }
 
 struct Inputs {
@@ -159,6 +195,7 @@ struct Inputs {
     turn_indicators: Option<Subscription<TurnIndicatorsCommand>>,
     /// Where the profile's command has hazard lights.
     hazard_lights: Option<Subscription<HazardLightsCommand>>,
+    emergency: Subscription<VehicleEmergencyStamped>,
 }
 
 struct Outputs {
@@ -209,6 +246,8 @@ pub struct VehicleInterface<'a> {
     lost: Vec<(Port, String)>,
     /// The vehicle's name in the diagnostics.
     hardware_id: String,
+    /// Autoware's emergency is on: the emergency brake goes on until it ends.
+    emergency: bool,
     /// When the diagnostics last went out, and their levels and messages then.
     last_diagnostics: Option<(Timestamp, Vec<(u8, String)>)>,
 }
@@ -311,6 +350,12 @@ impl VehicleInterface<'_> {
             }
         }
         self.take_lights();
+        for _ in 0..TAKE_BATCH {
+            let Ok(Some((m, _))) = self.inputs.emergency.take() else {
+                break;
+            };
+            self.set_emergency(ads, now, m.emergency);
+        }
         for _ in 0..TAKE_BATCH {
             let Ok(Some((id, request))) = self.inputs.mode_request.receive_request() else {
                 break;
@@ -535,6 +580,22 @@ impl VehicleInterface<'_> {
         self.last_report = Some(now);
     }
 
+    /// Autoware's emergency: the emergency brake at the hardest the vehicle may brake (which
+    /// latches its E-stop), sent until the emergency ends; then released on the ADS's side
+    /// only (the vehicle stays stopped until an operator resets it).
+    fn set_emergency(&mut self, ads: &mut AdsSide, now: Timestamp, emergency: bool) {
+        if emergency == self.emergency {
+            return;
+        }
+        self.emergency = emergency;
+        if emergency {
+            ads.emergency_brake(now, self.limits.deceleration_m_s2);
+        } else {
+            ads.release_brake();
+        }
+        (self.report)(VehicleEvent::Emergency(emergency));
+    }
+
     fn begin_braking(&mut self, ads: &mut AdsSide, now: Timestamp) {
         (self.report)(VehicleEvent::Stopping);
         ads.safe_stop(now, self.limits.deceleration_m_s2);
@@ -749,6 +810,7 @@ impl<'a> VehicleInterface<'a> {
                 Some(_) => Some(node.subscription(&config.hazard_lights_cmd, &one)?),
                 None => None,
             },
+            emergency: node.subscription(&config.emergency_cmd, &one)?,
         };
         let outputs = Outputs {
             steering: node.publisher(&config.steering_status, &one)?,
@@ -802,6 +864,7 @@ impl<'a> VehicleInterface<'a> {
             lost: Vec::new(),
             hardware_id: profile.profile.name.clone(),
             last_diagnostics: None,
+            emergency: false,
         };
         Ok((interface, Ads::with_wire(ads_config, wire)))
     }
@@ -838,6 +901,9 @@ impl<'a> VehicleInterface<'a> {
                 .register(lights, mio1::Token(6), readable)
                 .map_err(io)?;
         }
+        registry
+            .register(&mut i.emergency, mio1::Token(7), readable)
+            .map_err(io)?;
         Ok(poll)
     }
 }

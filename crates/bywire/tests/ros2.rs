@@ -633,6 +633,16 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
     assert_eq!(seen["mode_after"], 4);
     assert_eq!(seen["refused_mode"], false);
     assert!(err.contains("mode 2: this interface engages"), "{err}");
+
+    // Autoware's emergency: the emergency brake latches the E-stop, which Autoware sees as
+    // disengaged (a report period and DDS on a shared machine: well within a second), and
+    // the emergency's end releases the ADS's brake, never the vehicle's latch.
+    assert_eq!(seen["emergency_mode"], 5, "{seen}");
+    let took = seen["emergency_seconds"].as_f64().unwrap();
+    assert!(took < 1.0, "E-stop shown after {took} s");
+    assert_eq!(seen["mode_after_emergency"], 5, "{seen}");
+    assert!(err.contains("emergency_cmd: emergency brake"), "{err}");
+    assert!(err.contains("emergency_cmd cleared"), "{err}");
     (seen, err)
 }
 

@@ -360,19 +360,7 @@ fn vehicle(args: &VehicleArgs, out: &mut dyn Write) -> Result<()> {
         &interrupt_flag(),
         &mut |event| match event {
             VehicleEvent::Refused(why) => reporter.refusal(&why),
-            VehicleEvent::Saturated(why) => reporter.line(&why),
-            VehicleEvent::ModeRequest { mode, success, why } => reporter.line(&format!(
-                "control mode request {mode}: {}{}",
-                if success { "done" } else { "refused" },
-                why.map(|w| format!(" ({w})")).unwrap_or_default()
-            )),
-            VehicleEvent::BusLost(what) => {
-                reporter.line(&format!("bus {what}; commanding on the other"))
-            }
-            VehicleEvent::Stopping => reporter.line("stopping: braking for 1 s"),
-            VehicleEvent::Freshness(why) => {
-                reporter.line(&format!("freshness store: {why}; braking for 1 s"))
-            }
+            other => reporter.line(&other.to_string()),
         },
     );
     stop_vehicle.store(true, std::sync::atomic::Ordering::Relaxed);

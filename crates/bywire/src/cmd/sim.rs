@@ -286,7 +286,6 @@ fn run_over_ros2(
     out: &mut impl Write,
 ) -> Result<()> {
     use bywire_ros::simulation::{self, SimulationConfig};
-    use bywire_ros::vehicle_interface::VehicleEvent;
     let mut node = args.node.open("simulated_tug")?;
     writeln!(
         out,
@@ -306,18 +305,7 @@ fn run_over_ros2(
         &config,
         &interrupt_flag(),
         &mut |event| {
-            let text = match event {
-                VehicleEvent::Refused(why) => format!("refused: {why}"),
-                VehicleEvent::Saturated(why) => why,
-                VehicleEvent::ModeRequest { mode, success, why } => format!(
-                    "control mode request {mode}: {}{}",
-                    if success { "done" } else { "refused" },
-                    why.map(|w| format!(" ({w})")).unwrap_or_default()
-                ),
-                VehicleEvent::BusLost(what) => format!("bus {what}"),
-                VehicleEvent::Freshness(why) => format!("freshness store: {why}"),
-                VehicleEvent::Stopping => "stopping: braking for 1 s".into(),
-            };
+            let text = event.to_string();
             let _ = writeln!(std::io::stderr(), "bywire sim: {text}");
         },
         &mut |tug| {

@@ -129,6 +129,13 @@ class HazardLightsCommand(IdlStruct,
 
 
 @dataclass
+class VehicleEmergencyStamped(IdlStruct,
+                              typename="tier4_vehicle_msgs::msg::dds_::VehicleEmergencyStamped_"):
+    stamp: Time
+    emergency: bool
+
+
+@dataclass
 class HazardLightsReport(IdlStruct,
                          typename="autoware_vehicle_msgs::msg::dds_::HazardLightsReport_"):
     stamp: Time

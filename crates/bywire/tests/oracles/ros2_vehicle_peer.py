@@ -1,7 +1,8 @@
 """An Autoware stand-in for `bywire ros2 vehicle`, on Cyclone DDS: publishes control_cmd at
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
 the vehicle's reports (first for a second before any command), stops publishing (the vehicle
-must stop), then disengages. Prints one
+must stop), then disengages; last, Autoware's emergency: the vehicle's E-stop latched (reported
+disengaged), and still latched once the emergency ends. Prints one
 JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
 lights and reads their status (a profile that has them). Before its readings of the driving
 and the tank turn it waits until the vehicle drives (or turns) as told, engaging again should a
@@ -18,7 +19,8 @@ from ros2_types import (Control, ControlModeCommandRequest, ControlModeCommandRe
                         ControlModeReport, GearCommand, GearReport, HazardLightsCommand,
                         HazardLightsReport, JointState, SteeringReport, StringMsg,
                         TurnIndicatorsCommand, TurnIndicatorsReport, Twist, Vector3,
-                        VelocityReport, control, participant, reader, stamp, writer)
+                        VehicleEmergencyStamped, VelocityReport, control, participant, reader,
+                        stamp, writer)
 
 lights = sys.argv[1:] == ["lights"]
 degradation = sys.argv[1:] == ["degradation"]
@@ -28,6 +30,7 @@ control_cmd = writer(dp, "rt/control/command/control_cmd", Control, depth=1)
 gear_cmd = writer(dp, "rt/control/command/gear_cmd", GearCommand, depth=1)
 steering_mode_cmd = writer(dp, "rt/vehicle/command/steering_mode", StringMsg, depth=1)
 cmd_vel = writer(dp, "rt/cmd_vel", Twist, depth=1)
+emergency_cmd = writer(dp, "rt/control/command/emergency_cmd", VehicleEmergencyStamped, depth=1)
 requests = writer(dp, "rq/control/control_mode_requestRequest", ControlModeCommandRequest)
 replies = reader(dp, "rr/control/control_mode_requestReply", ControlModeCommandResponse)
 topics = {
@@ -269,6 +272,23 @@ try:
     wait_for(lambda: latest("mode").mode == 4, 5)
     result["mode_after"] = latest("mode").mode
     result["refused_mode"] = call(2)
+    # Autoware's emergency at a standstill in manual: the E-stop latches (Autoware sees the
+    # vehicle disengaged); sent at 10 Hz, as vehicle_cmd_gate does, until it shows.
+    emergency_sent = time.monotonic()
+    end = emergency_sent + 5.0
+    while time.monotonic() < end and latest("mode").mode != 5:
+        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=True))
+        time.sleep(0.1)
+    with lock:
+        shown = [t for t, m in seen["mode"] if t > emergency_sent and m.mode == 5]
+    result["emergency_mode"] = latest("mode").mode
+    result["emergency_seconds"] = shown[0] - emergency_sent if shown else None
+    # The emergency ends: the ADS's brake is released, the vehicle's latch is not.
+    for _ in range(5):
+        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=False))
+        time.sleep(0.1)
+    time.sleep(0.5)
+    result["mode_after_emergency"] = latest("mode").mode
 finally:
     running = False
     for t in threads:
