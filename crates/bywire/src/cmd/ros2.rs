@@ -59,7 +59,9 @@ In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle
      /vehicle/command/steering_mode (std_msgs/String: normal, crab, tank), /cmd_vel
      (geometry_msgs/Twist through the 4WS kinematics), /control/command/
      {turn_indicators_cmd, hazard_lights_cmd} where the profile's [command] has
-     turn_indicators and hazard_lights, and the service /control/control_mode_request
+     turn_indicators and hazard_lights, /control/command/emergency_cmd
+     (tier4_vehicle_msgs/VehicleEmergencyStamped: the emergency brake while it holds; the
+     vehicle's E-stop stays latched after it), and the service /control/control_mode_request
      (autoware_vehicle_msgs/ControlModeCommand: 1 engages, answered when the vehicle reports
      autonomous; 4 disengages).
 Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,
