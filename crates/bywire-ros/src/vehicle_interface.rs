@@ -5,8 +5,8 @@
 //! In: `control_cmd` (`Control`), `gear_cmd`, a steering mode (`std_msgs/String`: normal,
 //! crab, tank), `cmd_vel` (`Twist`, through the 4WS kinematics), `turn_indicators_cmd` and
 //! `hazard_lights_cmd` where the profile's command has them, `emergency_cmd`
-//! (`VehicleEmergencyStamped`: the emergency brake at the vehicle's hardest deceleration, the
-//! vehicle's E-stop latched; clearing it releases the ADS's brake, not the latch), and the
+//! (`VehicleEmergencyStamped`: the emergency brake at the vehicle's hardest deceleration and a
+//! stop, disengaged; its end releases the brake, and driving again takes an engage), and the
 //! `ControlModeCommand`
 //! service (engage: answered once the vehicle reports autonomous with its watchdog not
 //! braking, or `false` after [`VehicleInterfaceConfig::engage_timeout`]; disengage). The
@@ -151,8 +151,8 @@ pub enum VehicleEvent {
     BusLost(String),
     /// The run is ending: braking.
     Stopping,
-    /// Autoware's emergency began (the emergency brake) or ended (the brake released; the
-    /// vehicle's E-stop stays latched until an operator resets it).
+    /// Autoware's emergency began (the emergency brake, disengaged) or ended (the brake
+    /// released; driving again takes an engage).
     Emergency(bool),
     /// The freshness store cannot keep what is signed next: braking, then the end.
     Freshness(String),
@@ -177,10 +177,12 @@ impl std::fmt::Display for VehicleEvent {
             VehicleEvent::Freshness(why) => {
                 write!(f, "freshness store: {why}; braking for 1 s")
             }
-            VehicleEvent::Emergency(true) => f.write_str("emergency_cmd: emergency brake"),
-            VehicleEvent::Emergency(false) => f.write_str(
-                "emergency_cmd cleared: brake released; the vehicle stays stopped until an operator resets its E-stop",
-            ),
+            VehicleEvent::Emergency(true) => {
+                f.write_str("emergency_cmd: emergency brake, disengaged")
+            }
+            VehicleEvent::Emergency(false) => {
+                f.write_str("emergency_cmd cleared: brake released; engage to drive again")
+            }
         }
     }
 }
@@ -265,6 +267,8 @@ impl VehicleInterface<'_> {
     /// Take a new command (or refuse it) and hand it to the node.
     fn command(&mut self, ads: &mut AdsSide, now: Timestamp, next: Result<map::Mapped, String>) {
         match next {
+            // Held at a stop until the emergency ends.
+            Ok(_) if self.emergency => {}
             Ok(map::Mapped { command, warning }) => {
                 if let Some(warning) = warning {
                     (self.report)(VehicleEvent::Saturated(warning));
@@ -400,6 +404,10 @@ impl VehicleInterface<'_> {
 
     fn mode_request(&mut self, ads: &mut AdsSide, now: Timestamp, id: RmwRequestId, mode: u8) {
         match mode {
+            control_mode::AUTONOMOUS if self.emergency => {
+                let why = Some("emergency_cmd holds: engage once it ends".to_string());
+                self.answer(id, mode, false, why);
+            }
             control_mode::AUTONOMOUS => {
                 self.command.mode = ControlMode::Autonomous;
                 // A newer request replaces one still waiting, which is answered now.
@@ -580,20 +588,33 @@ impl VehicleInterface<'_> {
         self.last_report = Some(now);
     }
 
-    /// Autoware's emergency: the emergency brake at the hardest the vehicle may brake (which
-    /// latches its E-stop), sent until the emergency ends; then released on the ADS's side
-    /// only (the vehicle stays stopped until an operator resets it).
+    /// Autoware's emergency: the emergency brake at the hardest the vehicle may brake and a
+    /// stop, disengaged, while it holds (control_cmd and engage requests wait); when it ends
+    /// the brake is released but the vehicle stays disengaged, as after an E-stop: driving
+    /// again takes an engage.
     fn set_emergency(&mut self, ads: &mut AdsSide, now: Timestamp, emergency: bool) {
         if emergency == self.emergency {
             return;
         }
         self.emergency = emergency;
-        if emergency {
-            ads.emergency_brake(now, self.limits.deceleration_m_s2);
-        } else {
-            ads.release_brake();
-        }
         (self.report)(VehicleEvent::Emergency(emergency));
+        if !emergency {
+            ads.release_brake();
+            return;
+        }
+        ads.emergency_brake(now, self.limits.deceleration_m_s2);
+        self.command = AdsCommand {
+            velocity: 0.0,
+            brake: 100.0,
+            mode: ControlMode::Manual,
+            ..self.command
+        };
+        if let Some((waiting, _, _)) = self.engage.take() {
+            let why = Some("emergency_cmd".to_string());
+            self.answer(waiting, control_mode::AUTONOMOUS, false, why);
+        }
+        self.commanding = true;
+        self.send(ads, now);
     }
 
     fn begin_braking(&mut self, ads: &mut AdsSide, now: Timestamp) {

@@ -612,6 +612,35 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
         "{tank}"
     );
 
+    // Autoware's emergency while driving: braking within a report period or two (real time
+    // on a shared machine: a wide band), disengaged, an engage refused while it holds; its
+    // end leaves the tug stopped and disengaged.
+    let emergency = &seen["emergency"];
+    let slowing = emergency["slowing_after"].as_f64().unwrap();
+    assert!(
+        slowing < 0.5,
+        "slowing {slowing} s after the emergency: {emergency}"
+    );
+    assert!(
+        emergency["manual_after"].as_f64().unwrap() < 1.0,
+        "{emergency}"
+    );
+    assert!(
+        emergency["velocity"].as_f64().unwrap() < 0.05,
+        "{emergency}"
+    );
+    assert_eq!(emergency["refused_engage"], false, "{emergency}");
+    assert_eq!(emergency["mode_after"], 4, "{emergency}");
+    assert!(
+        emergency["velocity_after"].as_f64().unwrap() < 0.05,
+        "{emergency}"
+    );
+    assert!(
+        err.contains("emergency_cmd: emergency brake, disengaged"),
+        "{err}"
+    );
+    assert!(err.contains("emergency_cmd cleared"), "{err}");
+
     // A stopped publisher: the vehicle slows within the staleness (200 ms) and a report
     // period, and stops.
     let after: Vec<(f64, f64)> = seen["after_stop"]
@@ -634,15 +663,6 @@ fn drive_over_cyclone_dds(profile: &str, peer_args: &[&str]) -> (Value, String) 
     assert_eq!(seen["refused_mode"], false);
     assert!(err.contains("mode 2: this interface engages"), "{err}");
 
-    // Autoware's emergency: the emergency brake latches the E-stop, which Autoware sees as
-    // disengaged (a report period and DDS on a shared machine: well within a second), and
-    // the emergency's end releases the ADS's brake, never the vehicle's latch.
-    assert_eq!(seen["emergency_mode"], 5, "{seen}");
-    let took = seen["emergency_seconds"].as_f64().unwrap();
-    assert!(took < 1.0, "E-stop shown after {took} s");
-    assert_eq!(seen["mode_after_emergency"], 5, "{seen}");
-    assert!(err.contains("emergency_cmd: emergency brake"), "{err}");
-    assert!(err.contains("emergency_cmd cleared"), "{err}");
     (seen, err)
 }
 

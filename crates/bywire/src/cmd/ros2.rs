@@ -60,8 +60,8 @@ In:  /control/command/control_cmd (autoware_control_msgs/Control: the tire angle
      (geometry_msgs/Twist through the 4WS kinematics), /control/command/
      {turn_indicators_cmd, hazard_lights_cmd} where the profile's [command] has
      turn_indicators and hazard_lights, /control/command/emergency_cmd
-     (tier4_vehicle_msgs/VehicleEmergencyStamped: the emergency brake while it holds; the
-     vehicle's E-stop stays latched after it), and the service /control/control_mode_request
+     (tier4_vehicle_msgs/VehicleEmergencyStamped: the emergency brake and a stop, disengaged,
+     while it holds; driving again takes an engage), and the service /control/control_mode_request
      (autoware_vehicle_msgs/ControlModeCommand: 1 engages, answered when the vehicle reports
      autonomous; 4 disengages).
 Out: /vehicle/status/{steering_status, velocity_status, gear_status, control_mode,

@@ -1,8 +1,8 @@
 """An Autoware stand-in for `bywire ros2 vehicle`, on Cyclone DDS: publishes control_cmd at
 40 Hz, engages through the ControlModeCommand service (rmw_cyclonedds's request header), reads
 the vehicle's reports (first for a second before any command), stops publishing (the vehicle
-must stop), then disengages; last, Autoware's emergency: the vehicle's E-stop latched (reported
-disengaged), and still latched once the emergency ends. Prints one
+must stop), then disengages. Midway, Autoware's emergency while driving: the tug stops,
+disengaged, stays so when the emergency ends, and drives again once engaged. Prints one
 JSON object of what it saw. With `lights`, also commands the turn indicators and hazard
 lights and reads their status (a profile that has them). Before its readings of the driving
 and the tank turn it waits until the vehicle drives (or turns) as told, engaging again should a
@@ -233,6 +233,33 @@ try:
     wait_for(slowed, 3)
     result["braked_to"] = lowest[0]
     keep_driving(moving, 10)
+    # Autoware's emergency while driving, sent at 10 Hz as vehicle_cmd_gate does (control_cmd
+    # goes on): the tug stops and is disengaged; the emergency's end does not resume driving.
+    emergency_sent = time.monotonic()
+    end = emergency_sent + 8.0
+    while time.monotonic() < end and not (latest("mode").mode == 4
+                                          and latest("velocity").longitudinal_velocity < 0.05):
+        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=True))
+        time.sleep(0.1)
+    with lock:
+        slowing = [t for t, v in seen["velocity"]
+                   if t > emergency_sent and v.longitudinal_velocity < 1.4]
+        manual = [t for t, m in seen["mode"] if t > emergency_sent and m.mode == 4]
+    result["emergency"] = {"slowing_after": slowing[0] - emergency_sent if slowing else None,
+                           "manual_after": manual[0] - emergency_sent if manual else None,
+                           "velocity": latest("velocity").longitudinal_velocity,
+                           "refused_engage": call(1)}
+    for _ in range(5):
+        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=False))
+        time.sleep(0.1)
+    time.sleep(0.5)
+    result["emergency"]["mode_after"] = latest("mode").mode
+    result["emergency"]["velocity_after"] = latest("velocity").longitudinal_velocity
+    # Engaged again, it drives on.
+    for _ in range(10):
+        if call(1, timeout=3.0):
+            break
+    keep_driving(moving, 10)
     # Crab on our steering-mode topic: the same control_cmd now moves the tug sideways too.
     def steering_mode_is(mode):
         return latest("steering_mode") is not None and latest("steering_mode").data == mode
@@ -272,23 +299,6 @@ try:
     wait_for(lambda: latest("mode").mode == 4, 5)
     result["mode_after"] = latest("mode").mode
     result["refused_mode"] = call(2)
-    # Autoware's emergency at a standstill in manual: the E-stop latches (Autoware sees the
-    # vehicle disengaged); sent at 10 Hz, as vehicle_cmd_gate does, until it shows.
-    emergency_sent = time.monotonic()
-    end = emergency_sent + 5.0
-    while time.monotonic() < end and latest("mode").mode != 5:
-        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=True))
-        time.sleep(0.1)
-    with lock:
-        shown = [t for t, m in seen["mode"] if t > emergency_sent and m.mode == 5]
-    result["emergency_mode"] = latest("mode").mode
-    result["emergency_seconds"] = shown[0] - emergency_sent if shown else None
-    # The emergency ends: the ADS's brake is released, the vehicle's latch is not.
-    for _ in range(5):
-        emergency_cmd.write(VehicleEmergencyStamped(stamp=stamp(0), emergency=False))
-        time.sleep(0.1)
-    time.sleep(0.5)
-    result["mode_after_emergency"] = latest("mode").mode
 finally:
     running = False
     for t in threads:
