@@ -281,6 +281,9 @@ fn a_planted_defect_in_the_2oo3_voter_is_found() {
 #[test]
 fn a_channel_that_dissents_for_the_persistence_is_latched_out_and_a_silent_one_at_once() {
     let mut voter = TripleVoter::new(TRIPLE, ms(0));
+    assert_eq!(voter.reading(1), None, "nothing read yet");
+    voter.receive(1, ms(0), 9.5);
+    assert_eq!(voter.reading(1), Some(9.5));
     for t in (0..=20).step_by(10) {
         let expected = if t == 0 {
             ChannelHealth::Healthy

@@ -82,6 +82,22 @@ fn an_estop_frame_only_where_the_profile_has_the_message() {
     assert_eq!(shuttle.estop_frame(true, 0), None);
 }
 
+/// The command's identifier is the command's; the wheel angles go out where a profile has them.
+#[test]
+fn the_command_is_known_by_its_identifier_and_the_wheel_angles_are_sent() {
+    let loaded = bywire_tug::profile().unwrap();
+    let mut tug = ProfileWire::new(&loaded).unwrap();
+    assert!(tug.is_command(Id::standard(0x100).unwrap()));
+    assert!(!tug.is_command(Id::standard(0x101).unwrap()));
+    let frame = tug.wheel_angles_frame([1.0, -2.0, 3.0, -4.0], 3).unwrap();
+    assert_eq!(
+        frame,
+        ReferenceWire
+            .wheel_angles_frame([1.0, -2.0, 3.0, -4.0], 3)
+            .unwrap()
+    );
+}
+
 proptest! {
 
 #[test]
