@@ -595,10 +595,10 @@ impl<N: Node> Node for Signing<N> {
     }
 }
 
+// The table's freshness store and the test's collections need the standard library.
 #[cfg(test)]
+#[cfg(feature = "std")]
 mod tests {
-    // The table's freshness store and the test's collections need the standard library.
-    #![cfg(feature = "std")]
     #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
     use super::*;
