@@ -414,3 +414,68 @@ fn state_frame_bits() {
     let f = state_frame(&mut s, t);
     assert_eq!((f.steering_enabled_raw(), f.estop_state_raw()), (0, 4));
 }
+
+/// The supervisor over a secured wire: signed commands taken, forged ones refused (read
+/// anyway once SecOC is switched off, as a campaign's proof needs), its state frames signed.
+#[cfg(feature = "secoc")]
+#[test]
+fn a_supervisor_over_a_secured_wire_takes_signed_commands_and_signs_its_state() {
+    use bywire_secoc::{Key, Layout};
+    use bywire_vehicle::mechanism::Mechanism;
+    use bywire_vehicle::secured::{Checked, Secured, SecuredTable};
+    use bywire_vehicle::supervisor::Rejection;
+    use bywire_vehicle::wire::{Counters, VehicleWire};
+    let (command_id, state_id) = (
+        Id::standard(AdsToVehicleControl::ID).unwrap(),
+        Id::standard(VehicleToAdsState::ID).unwrap(),
+    );
+    let table = |key: u8| {
+        let mut table = SecuredTable::new(&Key::new([key; 16]), 1 << 10);
+        let layout = |data_id| Layout::new(data_id, 8, 32, 8, 24).unwrap();
+        table.secure(command_id, layout(1), 1).unwrap();
+        table.secure(state_id, layout(2), 1).unwrap();
+        table
+    };
+    let wire = Secured::new(ReferenceWire, table(7));
+    assert_eq!(
+        wire.state_counter_bits(),
+        ReferenceWire.state_counter_bits()
+    );
+    assert!(wire.table().is_some());
+    let mut s = Supervisor::with_wire(SupervisorConfig::default(), wire);
+    let (mut ads, mut forger) = (table(7), table(8));
+    s.on_frame(ms(0), Port::MAIN, &ads.protect(command(0, |_| {})).unwrap());
+    s.on_frame(
+        ms(20),
+        Port::MAIN,
+        &forger.protect(command(1, |_| {})).unwrap(),
+    );
+    s.on_frame(ms(40), Port::MAIN, &command(1, |_| {}));
+    let stats = s.stats();
+    assert_eq!(stats.accepted, 1);
+    assert_eq!(stats.rejected_for(Rejection::Authentication), 2);
+    // Its state goes out signed, its payload the plain wire's 8 bytes.
+    let mut sent = Vec::new();
+    s.poll(ms(100), &mut |_, f| sent.push(f));
+    let state = sent
+        .iter()
+        .find(|f| f.id() == Some(state_id))
+        .expect("a state frame");
+    assert!(state.data().len() > 8);
+    match ads.check(bywire_vehicle::redundancy::Channel::A, state) {
+        Checked::Authentic(payload) => {
+            assert!(matches!(payload, Frame::Classic(_)));
+            assert_eq!(payload.data(), &state.data()[..8]);
+        }
+        other => panic!("{other:?}"),
+    }
+    // SecOC switched off: a forged command is read as if it were authentic.
+    s.wire_mut()
+        .switch_off([Mechanism::Secoc].into_iter().collect());
+    s.on_frame(
+        ms(60),
+        Port::MAIN,
+        &forger.protect(command(1, |_| {})).unwrap(),
+    );
+    assert_eq!(s.stats().accepted, 2);
+}
