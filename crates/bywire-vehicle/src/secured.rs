@@ -725,6 +725,74 @@ mod tests {
         assert!(reserved > 500 + RESERVE_MARGIN, "{reserved}");
     }
 
+    /// A sender that restarted behind the receiver is told where to go on, by a signed sync
+    /// frame at most every `SYNC_INTERVAL`; its next frame is then accepted.
+    #[test]
+    fn a_restarted_sender_is_synchronised_and_accepted_again() {
+        let sync = SyncMessage {
+            id: id(0x7F0),
+            data_id: 99,
+        };
+        let mut receiver = table().with_sync(sync).unwrap();
+        let frame = || Frame::classic(id(0x100), &[1, 2, 3, 4]).unwrap();
+        let mut sender = table().with_sync(sync).unwrap();
+        for _ in 0..3 {
+            let signed = sender.protect(frame()).unwrap();
+            assert!(matches!(
+                receiver.check(Channel::A, &signed),
+                Checked::Authentic(_)
+            ));
+        }
+        assert_eq!(
+            receiver.sync_frame(Timestamp::ZERO),
+            None,
+            "nothing to answer"
+        );
+        // Restarted without its freshness: stale, so a sync is due.
+        let mut restarted = table().with_sync(sync).unwrap();
+        let stale = restarted.protect(frame()).unwrap();
+        assert_eq!(
+            receiver.check(Channel::A, &stale),
+            Checked::Rejected(Rejection::Stale)
+        );
+        let at = Timestamp::from_millis(1_000);
+        let answer = receiver.sync_frame(at).unwrap();
+        assert_eq!(answer.id(), Some(sync.id));
+        assert_eq!(receiver.stats().syncs_sent, 1);
+        assert_eq!(restarted.check(Channel::A, &answer), Checked::Sync);
+        assert_eq!(restarted.stats().syncs_taken, 1);
+        assert_eq!(
+            restarted.next_freshness(id(0x100)),
+            Some(4),
+            "after the 3 accepted"
+        );
+        let signed = restarted.protect(frame()).unwrap();
+        assert!(matches!(
+            receiver.check(Channel::A, &signed),
+            Checked::Authentic(_)
+        ));
+        // Another stale frame: the next sync waits out the interval, then goes.
+        assert!(matches!(
+            receiver.check(Channel::A, &stale),
+            Checked::Rejected(Rejection::Stale)
+        ));
+        let just_before = at.saturating_add(SYNC_INTERVAL - core::time::Duration::from_nanos(1));
+        assert_eq!(receiver.sync_frame(just_before), None);
+        assert!(receiver
+            .sync_frame(at.saturating_add(SYNC_INTERVAL))
+            .is_some());
+        // A sync frame not signed with the key is refused.
+        let mut other = SecuredTable::new(&Key::new([1; 16]), 1 << 10)
+            .with_sync(sync)
+            .unwrap();
+        other.secure(id(0x100), layout(1), 1).unwrap();
+        assert_eq!(other.check(Channel::A, &answer), Checked::Sync);
+        assert_eq!(
+            (other.stats().syncs_taken, other.stats().syncs_refused),
+            (0, 1)
+        );
+    }
+
     /// Sends one frame of the secured message (of the given length) and one other, each poll.
     struct Talker(usize);
 
