@@ -396,6 +396,24 @@ fn dual_voter_follows_the_reference_logic() {
     assert_eq!(v.vote(ms(101)), Vote::Failed(VoteFailure::Disagree));
 }
 
+/// A copy whose partner came within the timeout is fresh from its own arrival; one whose
+/// partner came longer ago goes stale with the partner (its bus was that late).
+#[test]
+fn dual_voter_a_copy_is_fresh_from_its_arrival_only_within_the_timeout_of_its_partner() {
+    let timeout = Duration::from_millis(50);
+    let one_ns = Duration::from_nanos(1);
+    for (late, stale_at) in [
+        (50, ms(100).saturating_add(one_ns)),
+        (51, ms(50).saturating_add(one_ns)),
+    ] {
+        let mut v = DualVoter::new(timeout, Duration::from_millis(5))
+            .paired_by(|a: &(u8, u8), b: &(u8, u8)| a.1 == b.1);
+        v.receive(Channel::A, ms(0), (7, 1));
+        v.receive(Channel::B, ms(late), (7, 1));
+        assert_eq!(v.stale_at(Channel::B), Some(stale_at), "{late} ms late");
+    }
+}
+
 /// Verifies: REQ-RED-1.
 #[test]
 fn dual_voter_pairs_the_copies_of_one_command() {
