@@ -233,7 +233,9 @@ fn a_restart_after_silence_is_accepted_but_not_the_frozen_value() {
 #[test]
 fn takeover_and_standstill_thresholds_are_inclusive_of_the_driver() {
     let (mut s, _, _) = engaged();
+    assert!(!s.driver_input());
     s.set_driver_input(3.0, 0.0);
+    assert!(s.driver_input());
     assert_eq!(
         s.mode(),
         ControlMode::Manual,
@@ -301,9 +303,10 @@ fn with_the_safe_state_switched_off_the_last_command_goes_on() {
             (
                 a.motors_enabled,
                 a.velocity == driving.velocity,
+                a.motor_rpm == driving.motor_rpm && a.motor_rpm > 0.0,
                 a.brake == 0.0
             ),
-            (keeps_driving, keeps_driving, keeps_driving),
+            (keeps_driving, keeps_driving, keeps_driving, keeps_driving),
             "{a:?}"
         );
     }
