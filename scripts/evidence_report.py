@@ -27,7 +27,9 @@ if runs:
             finished = outcomes.get("end_time") is not None
         for kind in ("caught", "missed", "timeout", "unviable"):
             for line in open(os.path.join(run, f"{kind}.txt")):
-                outcome_of[line.strip()] = kind
+                # A later run re-judges the first run's mutants; others it tried are not counted.
+                if run == runs[0] or line.strip() in outcome_of:
+                    outcome_of[line.strip()] = kind
     names = {
         kind: sorted(m for m, k in outcome_of.items() if k == kind)
         for kind in ("caught", "missed", "timeout", "unviable")
