@@ -151,28 +151,21 @@ fn an_unauthenticated_state_frame_is_counted_and_not_read() {
     use bywire_secoc::{Key, Layout};
     use bywire_vehicle::secured::{Secured, SecuredTable};
     let state_id = Id::standard(VehicleToAdsState::ID).unwrap();
-    let table = || {
-        let mut table = SecuredTable::new(&Key::new([4; 16]), 1 << 10);
+    let table = |key| {
+        let mut table = SecuredTable::new(&Key::new([key; 16]), 1 << 10);
         table
             .secure(state_id, Layout::new(0x42, 8, 32, 8, 24).unwrap(), 1)
             .unwrap();
         table
     };
-    let mut ads = Ads::with_wire(AdsConfig::default(), Secured::new(ReferenceWire, table()));
-    ads.set_command(ms(0), drive(1.0));
-    for t in 0..=40 {
-        ads.poll(ms(t), &mut |_, _| {});
-    }
+    let mut ads = commanded(Secured::new(ReferenceWire, table(4)));
     // The plain frame, and one signed with another key.
     ads.on_frame(
         ms(41),
         Port::MAIN,
         &state_frame(0, 2, ControlMode::Autonomous),
     );
-    let mut forger = SecuredTable::new(&Key::new([5; 16]), 1 << 10);
-    forger
-        .secure(state_id, Layout::new(0x42, 8, 32, 8, 24).unwrap(), 1)
-        .unwrap();
+    let mut forger = table(5);
     let forged = forger
         .protect(state_frame(0, 2, ControlMode::Autonomous))
         .unwrap();
@@ -180,7 +173,7 @@ fn an_unauthenticated_state_frame_is_counted_and_not_read() {
     assert_eq!((ads.stats().authentication, ads.stats().accepted), (2, 0));
     assert_eq!(ads.state().mode.value, None, "nothing read");
     // Signed with the right key, it is read.
-    let signed = table()
+    let signed = table(4)
         .protect(state_frame(0, 2, ControlMode::Autonomous))
         .unwrap();
     ads.on_frame(ms(43), Port::MAIN, &signed);
@@ -303,6 +296,16 @@ fn emergency_brake_burst_is_three_frames_in_10_ms_then_20_hz() {
     assert_eq!(after, 0);
 }
 
+/// An ADS over `wire` that has sent its first three commands (at 0, 20 and 40 ms).
+fn commanded<W: bywire_vehicle::wire::AdsWire>(wire: W) -> Ads<W> {
+    let mut ads = Ads::with_wire(AdsConfig::default(), wire);
+    ads.set_command(ms(0), drive(1.0));
+    for t in 0..=40 {
+        ads.poll(ms(t), &mut |_, _| {});
+    }
+    ads
+}
+
 fn state_frame(counter: u8, echo: u8, mode: ControlMode) -> Frame {
     let mut m = VehicleToAdsState::default();
     m.set_velocity_actual(1.0).unwrap();
@@ -316,11 +319,7 @@ fn state_frame(counter: u8, echo: u8, mode: ControlMode) -> Frame {
 
 #[test]
 fn feedback_is_validated_and_times_out() {
-    let mut ads = Ads::with_wire(AdsConfig::default(), ReferenceWire);
-    ads.set_command(ms(0), drive(1.0));
-    for t in 0..=40 {
-        ads.poll(ms(t), &mut |_, _| {});
-    }
+    let mut ads = commanded(ReferenceWire);
     // Commands 0, 1, 2 were sent at 0, 20, 40 ms.
     ads.on_frame(
         ms(41),
