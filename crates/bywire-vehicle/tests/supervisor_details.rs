@@ -279,6 +279,38 @@ fn deadlines_follow_the_last_command_and_the_state_frame() {
     assert_eq!(s.next_deadline(), Some(ms(55)), "the second tick");
 }
 
+/// A degradation level steers in the modes its limits allow: crab goes on when degraded,
+/// and becomes normal steering at the minimal-risk level.
+#[test]
+fn the_degradation_levels_limits_choose_the_steering_mode() {
+    use bywire_vehicle::command::{FaultClass, SteeringMode};
+    use bywire_vehicle::degradation::{DegradationPolicy, Fault};
+    for (class, expected) in [
+        (FaultClass::SensorChannelOut, SteeringMode::Crab),
+        (FaultClass::ControlTakeover, SteeringMode::Normal),
+    ] {
+        let config = SupervisorConfig {
+            degradation: Some(DegradationPolicy::default()),
+            ..SupervisorConfig::default()
+        };
+        let (mut s, k, t) = engaged_with(config);
+        s.on_frame(
+            ms(t),
+            Port::MAIN,
+            &command(k, |m| {
+                m.set_steering_mode_cmd_raw(SteeringMode::Crab.raw().into())
+            }),
+        );
+        assert_eq!(s.actuators(ms(t)).steering_mode, SteeringMode::Crab);
+        s.report_fault(Fault {
+            class,
+            source: 1,
+            at: ms(t),
+        });
+        assert_eq!(s.actuators(ms(t)).steering_mode, expected, "{class:?}");
+    }
+}
+
 /// A campaign's proof that a cell would notice the safe state missing: switched off, the
 /// commands lost leave the last one in force; switched on, the same loss brakes.
 #[test]
