@@ -297,9 +297,7 @@ fn the_degradation_levels_limits_choose_the_steering_mode() {
         s.on_frame(
             ms(t),
             Port::MAIN,
-            &command(k, |m| {
-                m.set_steering_mode_cmd_raw(SteeringMode::Crab.raw().into())
-            }),
+            &command(k, |m| m.set_steering_mode_cmd_raw(SteeringMode::Crab.raw())),
         );
         assert_eq!(s.actuators(ms(t)).steering_mode, SteeringMode::Crab);
         s.report_fault(Fault {
