@@ -279,6 +279,33 @@ fn deadlines_follow_the_last_command_and_the_state_frame() {
     assert_eq!(s.next_deadline(), Some(ms(55)), "the second tick");
 }
 
+/// On two buses, a command whose copy came on one bus only waits for its partner until the
+/// other bus's last copy is stale: the supervisor asks to be polled then, not later.
+#[test]
+fn a_copy_waiting_for_its_partner_is_due_when_the_other_bus_goes_stale() {
+    use bywire_vehicle::redundancy::Channel;
+    use bywire_vehicle::supervisor::Redundancy;
+    let cycle = std::time::Duration::from_millis(20);
+    let config = SupervisorConfig {
+        redundancy: Some(Redundancy::for_cycle(cycle)),
+        ..SupervisorConfig::default()
+    };
+    let mut s = Supervisor::with_wire(config, ReferenceWire);
+    let mut t = 0;
+    for k in 0..12u8 {
+        let frame = command(k, |_| {});
+        s.on_frame(ms(t), Channel::A.port(), &frame);
+        s.on_frame(ms(t), Channel::B.port(), &frame);
+        s.poll(ms(t), &mut |_, _| {});
+        t += 20;
+    }
+    s.on_frame(ms(t), Channel::A.port(), &command(12, |_| {}));
+    s.poll(ms(t), &mut |_, _| {});
+    // B's last copy came 20 ms ago and counts for the redundancy's 30 ms.
+    let b_stale = ms(t + 10).saturating_add(std::time::Duration::from_nanos(1));
+    assert_eq!(s.next_deadline(), Some(b_stale));
+}
+
 /// A degradation level steers in the modes its limits allow: crab goes on when degraded,
 /// and becomes normal steering at the minimal-risk level.
 #[test]
