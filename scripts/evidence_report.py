@@ -111,7 +111,8 @@ else:
         "|---|---|",
     ]
     for s in mutation["survivors"]:
-        md.append(f"| `{s['mutant']}` | {s['equivalent'] or 'not explained yet'} |")
+        name = s["mutant"].replace("|", "\\|")  # a table cell
+        md.append(f"| `{name}` | {s['equivalent'] or 'not explained yet'} |")
 md += [
     "",
     "## 5. Core-only build",
