@@ -18,6 +18,9 @@ cd "$(dirname "$0")/.."
 rm -rf target/evidence
 back_to_back_cases=${BACK_TO_BACK_CASES:-1000000}
 mutants_out=${MUTANTS_OUT:-target/mutants}
+# Coverage first: its instrumented run records the state-space figures too, and the plain
+# runs below then replace them with uninstrumented timings.
+scripts/coverage.sh
 cargo test -q -p bywire-vehicle --all-features --test state_space
 cargo test -q -p bywire-vehicle --all-features --test fail_operational 2oo3
 started=$(date +%s)
@@ -28,7 +31,6 @@ back_to_back_seconds=$(($(date +%s) - started))
 cargo test -q -p bywire --test lints
 core_only=failed
 cargo build -q --manifest-path core-only/Cargo.toml --locked && core_only=built
-scripts/coverage.sh
 case "${EVIDENCE_MUTANTS:-}" in
     sample) MUTANTS_OUT=$mutants_out scripts/mutants.sh --shard 0/5 --sharding round-robin || true ;;
     all) MUTANTS_OUT=$mutants_out scripts/mutants.sh || true ;;

@@ -86,6 +86,19 @@ impl Loop {
             .set_command(now, c));
     }
 
+    /// At 400 ms (after the run of valid commands a recovery needs): an engage, then plain
+    /// commands at 1.5 m/s until 600 ms.
+    fn engage_at_400(&mut self) {
+        self.run_to(400);
+        self.command(AdsCommand {
+            engage: true,
+            ..drive(1.5)
+        });
+        self.run_to(440);
+        self.command(drive(1.5));
+        self.run_to(600);
+    }
+
     fn ads(&self) -> &Ads<ReferenceWire> {
         self.net.node(self.ads_node).unwrap()
     }
@@ -108,14 +121,7 @@ fn drive(velocity: f64) -> AdsCommand {
 fn ads_engages_and_drives_the_supervisor_with_valid_feedback() {
     let mut l = Loop::new();
     l.command(drive(1.5));
-    l.run_to(400);
-    l.command(AdsCommand {
-        engage: true,
-        ..drive(1.5)
-    });
-    l.run_to(440);
-    l.command(drive(1.5));
-    l.run_to(600);
+    l.engage_at_400();
     assert_eq!(l.vcu().watchdog(), Watchdog::Normal);
     assert_eq!(l.vcu().mode(), ControlMode::Autonomous);
     assert_eq!(l.vcu().stats().rejected(), 0);
@@ -196,13 +202,7 @@ fn the_blocker_names_what_keeps_the_vehicle_from_following() {
         l.ads().blocker(ms(l.now)),
         Some(Blocker::Watchdog(WatchdogLevel::AwaitingEngage))
     );
-    l.command(AdsCommand {
-        engage: true,
-        ..drive(1.5)
-    });
-    l.run_to(440);
-    l.command(drive(1.5));
-    l.run_to(600);
+    l.engage_at_400();
     assert_eq!(l.ads().blocker(ms(l.now)), None);
     l.command(AdsCommand {
         mode: ControlMode::Manual,
