@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,10 +41,14 @@ def run(
     payload: float | None = None,
     secoc: bool = False,
     max_seconds: float = 300.0,
+    start_time: float | None = None,
 ) -> Run:
     """Run ``scenario`` (built in, or a TOML file) with ``seed`` as fast as possible, as
-    ``bywire sim --fast`` does (the same seed gives the same logs, byte for byte). ``payload``
-    in kg replaces the scenario's; ``out`` defaults to a new temporary folder."""
+    ``bywire sim --fast`` does (the same seed and ``start_time`` give the same logs, byte for
+    byte). ``payload`` in kg replaces the scenario's; ``start_time`` is the logs' time at the
+    start, Unix seconds (default: now); ``out`` defaults to a new temporary folder."""
     folder = os.fspath(out) if out is not None else tempfile.mkdtemp(prefix="bywire-sim-")
-    report, files = _native.run_sim(scenario, seed, folder, payload, secoc, max_seconds)
+    if start_time is None:
+        start_time = time.time()
+    report, files = _native.run_sim(scenario, seed, folder, payload, secoc, max_seconds, start_time)
     return Run(report=json.loads(report), out=folder, files=list(files))

@@ -675,7 +675,7 @@ impl LogBatches {
 /// Run a scenario as fast as possible: `(report_json, files)`, the bus logs (candump) and
 /// `metrics.json` written into `out`.
 #[pyfunction]
-#[pyo3(signature = (scenario, seed, out, payload = None, secoc = false, max_seconds = 300.0))]
+#[pyo3(signature = (scenario, seed, out, payload = None, secoc = false, max_seconds = 300.0, start_time = 0.0))]
 fn run_sim(
     scenario: &str,
     seed: u64,
@@ -683,6 +683,7 @@ fn run_sim(
     payload: Option<f64>,
     secoc: bool,
     max_seconds: f64,
+    start_time: f64,
 ) -> PyResult<(String, Vec<String>)> {
     use bywire_sim::scenario::Scenario;
     let scenario = match Scenario::builtin(scenario) {
@@ -709,6 +710,16 @@ fn run_sim(
             "max_seconds {max_seconds}: more than 0, at most 86400"
         )));
     }
+    // Unix seconds to nanoseconds since the epoch (1970 to 2262).
+    let start = std::time::Duration::try_from_secs_f64(start_time)
+        .ok()
+        .and_then(|since_epoch| u64::try_from(since_epoch.as_nanos()).ok())
+        .map(Timestamp::from_nanos)
+        .ok_or_else(|| {
+            ScenarioError::new_err(format!(
+                "start_time {start_time}: Unix seconds from 1970 to 2262"
+            ))
+        })?;
     let mut params = scenario.params(seed, payload);
     params.secoc |= secoc;
     let mut tug =
@@ -717,8 +728,14 @@ fn run_sim(
     let limit = Timestamp::from_nanos(u64::try_from(limit).unwrap_or(u64::MAX));
     let wall = std::time::Instant::now();
     let completed = scenario.run_fast(&mut tug, limit);
-    let report =
-        bywire_sim::report::RunReport::of(&tug, &scenario.name, seed, completed, wall.elapsed());
+    let report = bywire_sim::report::RunReport::of(
+        &tug,
+        &scenario.name,
+        seed,
+        start,
+        completed,
+        wall.elapsed(),
+    );
     let files = bywire_sim::output::write_run(&tug, &report, &out)
         .map_err(|e| PyOSError::new_err(e.to_string()))?
         .iter()

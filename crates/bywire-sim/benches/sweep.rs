@@ -17,7 +17,14 @@ fn four_runs_on_two_threads(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("4 apron-loop runs, 2 threads", |b| {
         b.iter(|| {
-            let outcomes = sweep::run(&jobs, 2, Timestamp::from_millis(300_000), &out, &|_, _| {});
+            let outcomes = sweep::run(
+                &jobs,
+                2,
+                Timestamp::from_millis(300_000),
+                Timestamp::ZERO,
+                &out,
+                &|_, _| {},
+            );
             assert!(outcomes
                 .iter()
                 .all(|o| o.as_ref().is_ok_and(|(_, r)| r.completed)));

@@ -29,6 +29,10 @@ const EVENT_CAPACITY: usize = 64;
 /// The mission's gentle deceleration toward a stop or a lower speed, m/s².
 const GENTLE: f64 = 0.5;
 
+/// The crab approach's speed, m/s: a stand is approached slowly, and the wheels turn to the
+/// crab angle at the approach's start without the tug running ahead of them.
+const CRAB_SPEED: f64 = 1.0;
+
 /// The speed from which braking at [`GENTLE`] over `distance` (m) ends at `v_next` (m/s):
 /// v² = v_next² + 2·a·d.
 fn approach(v_next: f64, distance: f64) -> f64 {
@@ -64,8 +68,13 @@ pub struct MissionParams {
     pub degraded_speeds: (f64, f64),
 }
 
-/// The built-in `apron-loop` route: out along the stand row, a 15 m turn, up the service
-/// road, a second turn and back toward the start (about 140 m).
+/// How far the stand at the end of `apron-loop` lies to the side of the service road, m: the
+/// crab approach's sideways travel.
+pub const STAND_OFFSET: f64 = 2.5;
+
+/// The built-in `apron-loop` route: out along the stand row, a 15 m turn, back along the
+/// service road, and the last 10 m to a stand 2.5 m to the side (about 117 m), which the tug
+/// reaches in crab.
 pub fn apron_loop() -> Vec<Point> {
     let mut points: Vec<Point> = (0..=40)
         .map(|x| Point {
@@ -84,10 +93,19 @@ pub fn apron_loop() -> Vec<Point> {
     };
     // A half circle to the left brings the route back parallel, 30 m over.
     arc(40.0, 15.0, -core::f64::consts::FRAC_PI_2, &mut points);
-    for x in (10..40).rev() {
+    for x in (20..40).rev() {
         points.push(Point {
             x: f64::from(x),
             y: 30.0,
+        });
+    }
+    // Ten metres on a slant to the stand, in 1 m steps.
+    let along = libm::sqrt(100.0 - STAND_OFFSET * STAND_OFFSET);
+    for k in 1..=10 {
+        let share = f64::from(k) / 10.0;
+        points.push(Point {
+            x: 20.0 - along * share,
+            y: 30.0 - STAND_OFFSET * share,
         });
     }
     points
@@ -119,9 +137,49 @@ pub fn service_loop() -> Vec<Point> {
     points
 }
 
+/// The part of the mission under way, as the live view, the events, the report and the
+/// plot name it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Waiting for the vehicle to report autonomous mode.
+    Engaging,
+    /// The steering step test at a standstill.
+    StepTest,
+    /// Driving the route in normal steering (stops included).
+    Cruise,
+    /// The last metres to the stand in crab, the heading held.
+    CrabApproach,
+    /// The tank turn in place at the end of the route.
+    TankTurn,
+    /// Standing at the end of the route.
+    Stop,
+}
+
+impl Phase {
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Engaging => "engaging",
+            Phase::StepTest => "step test",
+            Phase::Cruise => "cruise",
+            Phase::CrabApproach => "crab approach",
+            Phase::TankTurn => "tank turn",
+            Phase::Stop => "stop",
+        }
+    }
+}
+
+impl core::fmt::Display for Phase {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Something the mission did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MissionEvent {
+    /// A new phase began.
+    Phase(Phase),
     /// The steering mode it asks for changed.
     SteeringMode(SteeringMode),
     /// It stopped at a stop, for a dwell.
@@ -155,6 +213,7 @@ impl MissionEvent {
     /// The event's kind, as run reports name it.
     pub fn kind(&self) -> &'static str {
         match self {
+            MissionEvent::Phase(_) => "phase",
             MissionEvent::SteeringMode(_) => "steering_mode",
             MissionEvent::Stop { .. } => "stop",
             MissionEvent::Depart { .. } => "depart",
@@ -168,6 +227,7 @@ impl MissionEvent {
 impl core::fmt::Display for MissionEvent {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
+            MissionEvent::Phase(phase) => write!(f, "{phase}"),
             MissionEvent::SteeringMode(mode) => write!(f, "{mode:?}"),
             MissionEvent::Stop { at, dwell } => {
                 write!(f, "at {at:.1} m for {:.1} s", dwell.as_secs_f64())
@@ -198,9 +258,50 @@ pub struct ActiveStep {
     pub started: Timestamp,
 }
 
+/// The route the follower steers along before the crab approach: the route up to where the
+/// crab approach begins, then straight on (`crab_final_m` of 0: the route). Aiming no further
+/// than that, the tug reaches the crab approach on the road's heading and the crab makes the
+/// sideways move, not an early turn.
+fn approach_route(route: &[Point], crab_final_m: f64) -> Vec<Point> {
+    let Some(path) = Path::new(route) else {
+        return route.to_vec();
+    };
+    let crab_start = path.length() - crab_final_m;
+    if crab_final_m <= 0.0 || crab_start <= 1.0 {
+        return route.to_vec();
+    }
+    let (before, at) = (
+        path.at_station(crab_start - 1.0),
+        path.at_station(crab_start),
+    );
+    let mut walked = 0.0;
+    let mut points: Vec<Point> = route.first().copied().into_iter().collect();
+    for pair in route.windows(2) {
+        if let [a, b] = pair {
+            walked += libm::hypot(b.x - a.x, b.y - a.y);
+            if walked >= crab_start {
+                break;
+            }
+            points.push(*b);
+        }
+    }
+    // On past the crab approach's start along the road's direction, further than any
+    // lookahead.
+    points.push(at);
+    points.push(Point {
+        x: at.x + 20.0 * (at.x - before.x),
+        y: at.y + 20.0 * (at.y - before.y),
+    });
+    points
+}
+
 /// The route and what to do along it, planned from the ADS's own estimate.
 pub struct Mission {
     params: MissionParams,
+    /// The route the follower steers along until the crab approach ([`approach_route`]).
+    approach: Vec<Point>,
+    /// Its segment the tug was last found on.
+    approach_segment: Option<usize>,
     follower: PurePursuit,
     /// The route's length, m (the route does not change).
     route_length: f64,
@@ -215,6 +316,7 @@ pub struct Mission {
     tank_done: bool,
     remaining: f64,
     steering_mode: SteeringMode,
+    phase: Phase,
     /// A minimal-risk manoeuvre under way: where it ends (m along the route; the station
     /// where it began plus the braking distance when no safe stop point is ahead), and
     /// whether it has ended there.
@@ -262,6 +364,8 @@ impl Mission {
                 &[WheelState::default(); 4],
             ),
             route_length: Path::new(&params.route).map_or(0.0, |path| path.length()),
+            approach: approach_route(&params.route, params.crab_final_m),
+            approach_segment: None,
             last_segment: None,
             params,
             stop_index: 0,
@@ -271,6 +375,7 @@ impl Mission {
             tank_done: false,
             remaining: f64::INFINITY,
             steering_mode: SteeringMode::Normal,
+            phase: Phase::Engaging,
             minimal_risk: None,
         }
     }
@@ -356,6 +461,11 @@ impl Mission {
         self.params.tank_turn_deg == 0.0 || self.tank_done
     }
 
+    /// The phase under way.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
     /// The step of the step test now being commanded.
     pub fn active_step(&self) -> Option<ActiveStep> {
         self.step
@@ -378,12 +488,15 @@ impl Mission {
             .rev()
             .find(|(from, _)| *from <= station)
             .map_or(self.params.speed, |(_, v)| *v);
-        let target = speeds
-            .iter()
-            .filter(|(from, _)| *from > station)
-            .fold(here.min(approach(0.0, remaining)), |v, (from, next)| {
-                v.min(approach(*next, from - station))
-            });
+        let crab = if self.params.crab_final_m > 0.0 {
+            approach(CRAB_SPEED, remaining - self.params.crab_final_m)
+        } else {
+            f64::INFINITY
+        };
+        let target = speeds.iter().filter(|(from, _)| *from > station).fold(
+            here.min(approach(0.0, remaining)).min(crab),
+            |v, (from, next)| v.min(approach(*next, from - station)),
+        );
         let Some(&(at, dwell)) = self.params.stops.get(self.stop_index) else {
             return target;
         };
@@ -504,8 +617,11 @@ impl Mission {
                         .clamp(-self.follower.max_steer, self.follower.max_steer)
                         .to_degrees()
                 } else {
+                    let approach = Path::new(&self.approach).unwrap_or(path);
+                    let near = approach.project_near(here, self.approach_segment);
+                    self.approach_segment = Some(near.segment);
                     self.follower
-                        .steer_from(pose, speed, &path, &projection)
+                        .steer_from(pose, speed, &approach, &near)
                         .front
                         .to_degrees()
                 };
@@ -548,6 +664,23 @@ impl Mission {
         if mode != self.steering_mode {
             self.steering_mode = mode;
             events(MissionEvent::SteeringMode(mode));
+        }
+        let at_end = remaining < 0.3;
+        let phase = match (engaged, step, mode) {
+            (None, _, _) => Phase::Engaging,
+            (Some(_), Some(_), _) => Phase::StepTest,
+            (Some(_), None, SteeringMode::Tank) => Phase::TankTurn,
+            (Some(_), None, SteeringMode::Crab) => Phase::CrabApproach,
+            // At the end, waiting to stand still before the tank turn is part of it.
+            (Some(_), None, SteeringMode::Normal) if at_end && !self.tank_done() && !degraded => {
+                Phase::TankTurn
+            }
+            (Some(_), None, SteeringMode::Normal) if at_end => Phase::Stop,
+            (Some(_), None, SteeringMode::Normal) => Phase::Cruise,
+        };
+        if phase != self.phase {
+            self.phase = phase;
+            events(MissionEvent::Phase(phase));
         }
         Plan {
             steering,

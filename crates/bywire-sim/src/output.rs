@@ -6,10 +6,14 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use bywire_core::Timestamp;
+use core::time::Duration;
+
 use crate::report::RunReport;
 use crate::tug::Tug;
 
-/// Write `tug`'s logs, truth and `report` into `dir` (created if needed); the paths written.
+/// Write `tug`'s logs, truth and `report` into `dir` (created if needed), the logs' and the
+/// truth's times from the report's start time; the paths written.
 /// `metrics.json` comes last, written whole or not at all: a reader that finds it finds the
 /// rest complete.
 pub fn write_run(tug: &Tug, report: &RunReport, dir: &Path) -> io::Result<Vec<PathBuf>> {
@@ -17,13 +21,18 @@ pub fn write_run(tug: &Tug, report: &RunReport, dir: &Path) -> io::Result<Vec<Pa
         |path: &Path, e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", path.display()));
     std::fs::create_dir_all(dir).map_err(|e| named(dir, e))?;
     let mut written = Vec::new();
+    let start = Timestamp::from_nanos(report.start_time_ns);
     for (name, log) in tug.bus_logs() {
         let path = dir.join(format!("{name}.log"));
         let file = File::create(&path).map_err(|e| named(&path, e))?;
         let mut writer = bywire_log::Writer::new(BufWriter::new(file));
         for (timestamp, frame) in log {
             writer
-                .write(*timestamp, name, frame)
+                .write(
+                    start.saturating_add(Duration::from_nanos(timestamp.as_nanos())),
+                    name,
+                    frame,
+                )
                 .map_err(|e| named(&path, e))?;
         }
         writer.flush().map_err(|e| named(&path, e))?;
@@ -31,7 +40,7 @@ pub fn write_run(tug: &Tug, report: &RunReport, dir: &Path) -> io::Result<Vec<Pa
     }
     let path = dir.join("truth.csv");
     let mut truth = BufWriter::new(File::create(&path).map_err(|e| named(&path, e))?);
-    crate::truth::write_csv(&tug.truth, &mut truth)
+    crate::truth::write_csv(&tug.truth, start, &mut truth)
         .and_then(|()| truth.flush())
         .map_err(|e| named(&path, e))?;
     written.push(path);

@@ -28,6 +28,9 @@ pub struct Sample {
     pub speed: f64,
     /// The ADS's steering command, degrees.
     pub steering_command: f64,
+    /// The front-left wheel's target as the vehicle control ECU works it out from the command
+    /// (in a tank turn the wheel's own angle, whatever the steering command), degrees.
+    pub steering_target: f64,
     /// The front-left wheel's angle, degrees.
     pub steering_actual: f64,
     /// How long each bus (bus 1, 2, 3, 1b) has been busy since the start, ns.

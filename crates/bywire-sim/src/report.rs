@@ -7,9 +7,13 @@ use core::time::Duration;
 
 use serde::Serialize;
 
+use bywire_core::Timestamp;
+
 use crate::attacker::Attacker;
+use crate::event::{Happening, SimEvent};
 use crate::fail_operational::FailOperationalRecord;
-use crate::record::{ResponseTimes, StepResponse};
+use crate::mission::{MissionEvent, Phase};
+use crate::record::{ResponseTimes, StepResponse, TruthSample};
 use crate::tug::Tug;
 
 /// One event of the run.
@@ -97,6 +101,86 @@ pub struct TankTurnRecord {
     pub hold_peak_to_peak_deg: f64,
     /// How long the turn took, s.
     pub duration_s: f64,
+}
+
+/// One phase of the mission: from when to when, s (the last ends with the run).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PhaseRecord {
+    /// Its name (`step test`, `cruise`, `crab approach`, `tank turn`, `stop`).
+    pub name: &'static str,
+    /// When it began.
+    pub from_s: f64,
+    /// When the next began, or the run ended.
+    pub to_s: f64,
+}
+
+impl PhaseRecord {
+    /// The phases of `events`, a run that ended at `end`.
+    pub fn all(events: &[SimEvent], end: Timestamp) -> Vec<PhaseRecord> {
+        let starts: Vec<(Timestamp, Phase)> = events
+            .iter()
+            .filter_map(|e| match e.what {
+                Happening::Mission(MissionEvent::Phase(phase)) => Some((e.t, phase)),
+                _ => None,
+            })
+            .collect();
+        let ends = starts.iter().skip(1).map(|(t, _)| *t).chain([end]);
+        starts
+            .iter()
+            .zip(ends)
+            .map(|((from, phase), to)| PhaseRecord {
+                name: phase.name(),
+                from_s: seconds(*from),
+                to_s: seconds(to),
+            })
+            .collect()
+    }
+}
+
+/// The crab approach as the plant made it: how far the tug moved sideways and forward of the
+/// heading it held, and how much that heading changed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CrabRecord {
+    /// Sideways (+ left of the heading at its start), m.
+    pub lateral_m: f64,
+    /// Along the heading, m.
+    pub forward_m: f64,
+    /// The heading's change, degrees (0: held).
+    pub heading_change_deg: f64,
+    /// The front-left wheel's largest angle, degrees.
+    pub max_wheel_angle_deg: f64,
+    /// How long it took, s.
+    pub duration_s: f64,
+}
+
+impl CrabRecord {
+    /// The first crab approach among `phases`, from the plant's `truth`.
+    pub fn of(phases: &[PhaseRecord], truth: &[TruthSample]) -> Option<CrabRecord> {
+        let phase = phases
+            .iter()
+            .find(|p| p.name == Phase::CrabApproach.name())?;
+        let during: Vec<&TruthSample> = truth
+            .iter()
+            .filter(|s| (phase.from_s..=phase.to_s).contains(&seconds(s.t)))
+            .collect();
+        let (first, last) = (during.first()?, during.last()?);
+        let (dx, dy) = (last.pose.x - first.pose.x, last.pose.y - first.pose.y);
+        let (sin, cos) = (libm::sin(first.pose.yaw), libm::cos(first.pose.yaw));
+        let turned = libm::remainder(last.pose.yaw - first.pose.yaw, 2.0 * core::f64::consts::PI);
+        Some(CrabRecord {
+            lateral_m: -dx * sin + dy * cos,
+            forward_m: dx * cos + dy * sin,
+            heading_change_deg: turned.to_degrees(),
+            max_wheel_angle_deg: during
+                .iter()
+                .filter_map(|s| s.wheel_angles_deg.first())
+                .fold(
+                    0.0,
+                    |max: f64, a| if a.abs() > max.abs() { *a } else { max },
+                ),
+            duration_s: phase.to_s - phase.from_s,
+        })
+    }
 }
 
 /// Latencies as nearest-rank percentiles, ms.
@@ -200,6 +284,8 @@ pub struct RunReport {
     pub scenario: String,
     /// The seed.
     pub seed: u64,
+    /// The logs' time of the run's start, ns since the Unix epoch (event times are from it).
+    pub start_time_ns: u64,
     /// Simulated time, s.
     pub sim_seconds: f64,
     /// The route was completed.
@@ -210,6 +296,10 @@ pub struct RunReport {
     pub tracking_error_m: Tracking,
     /// The step test's steps.
     pub steering_steps: Vec<StepRecord>,
+    /// The mission's phases in turn.
+    pub phases: Vec<PhaseRecord>,
+    /// The crab approach (`None`: the run made none).
+    pub crab_approach: Option<CrabRecord>,
     /// The tank turn's front-left wheel, from its angle before to its tank angle (`None`: the
     /// run made no tank turn).
     pub tank_turn: Option<TankTurnRecord>,
@@ -328,13 +418,21 @@ impl SecurityCounts {
 }
 
 /// A run's time in seconds, as reports write it.
-pub(crate) fn seconds(t: bywire_core::Timestamp) -> f64 {
+pub(crate) fn seconds(t: Timestamp) -> f64 {
     t.as_nanos() as f64 / 1e9
 }
 
 impl RunReport {
-    /// The report of `tug`'s run so far.
-    pub fn of(tug: &Tug, scenario: &str, seed: u64, completed: bool, wall: Duration) -> Self {
+    /// The report of `tug`'s run so far, its logs' clock starting at `start` (since the Unix
+    /// epoch).
+    pub fn of(
+        tug: &Tug,
+        scenario: &str,
+        seed: u64,
+        start: Timestamp,
+        completed: bool,
+        wall: Duration,
+    ) -> Self {
         let errors = &tug.tracking_errors;
         let max = errors.iter().copied().fold(0.0, f64::max);
         let mean = if errors.is_empty() {
@@ -375,16 +473,21 @@ impl RunReport {
                 hold_peak_to_peak_deg: response.hold_peak_to_peak(),
                 duration_s: response.times.last().copied().unwrap_or(0.0),
             });
+        let phases = PhaseRecord::all(&tug.events, tug.now());
+        let crab_approach = CrabRecord::of(&phases, &tug.truth);
         let [bus1, bus2, bus3, bus1b] = tug.bus_loads();
         let stats = tug.ecu().map(|e| e.stats()).unwrap_or_default();
         RunReport {
             scenario: scenario.to_string(),
             seed,
+            start_time_ns: start.as_nanos(),
             sim_seconds: seconds(tug.now()),
             completed,
             events,
             tracking_error_m: Tracking { max, mean },
             steering_steps,
+            phases,
+            crab_approach,
             tank_turn,
             echo_latency_ms: Percentiles::of(&tug.echo_latencies),
             bus_load: PerBus {

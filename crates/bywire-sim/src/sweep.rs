@@ -87,13 +87,14 @@ pub fn jobs(
 /// What one run gave: its folder and report, or why it failed.
 pub type Outcome = Result<(PathBuf, RunReport), String>;
 
-/// Run `jobs` on `threads` threads, each for at most `limit` simulated time, into folders
-/// under `out`; `done(index, outcome)` is told of each as it ends (from the worker threads,
-/// one at a time). The outcomes in the jobs' order.
+/// Run `jobs` on `threads` threads, each for at most `limit` simulated time (logs timed from
+/// `start`, since the Unix epoch), into folders under `out`; `done(index, outcome)` is told of
+/// each as it ends (from the worker threads, one at a time). The outcomes in the jobs' order.
 pub fn run(
     jobs: &[Job],
     threads: usize,
     limit: Timestamp,
+    start: Timestamp,
     out: &Path,
     done: &(dyn Fn(usize, &Outcome) + Sync),
 ) -> Vec<Outcome> {
@@ -104,7 +105,7 @@ pub fn run(
             scope.spawn(|| loop {
                 let index = next.fetch_add(1, Ordering::Relaxed);
                 let Some(job) = jobs.get(index) else { break };
-                let outcome = run_one(job, limit, out);
+                let outcome = run_one(job, limit, start, out);
                 // Told and stored under the lock: reports come one at a time.
                 if let Ok(mut outcomes) = outcomes.lock() {
                     done(index, &outcome);
@@ -123,7 +124,7 @@ pub fn run(
         .collect()
 }
 
-fn run_one(job: &Job, limit: Timestamp, out: &Path) -> Outcome {
+fn run_one(job: &Job, limit: Timestamp, start: Timestamp, out: &Path) -> Outcome {
     let mut params = job.scenario.params(job.seed, job.payload);
     params.grade = job.grade;
     let mut tug = Tug::new(params).map_err(|e| e.to_string())?;
@@ -133,6 +134,7 @@ fn run_one(job: &Job, limit: Timestamp, out: &Path) -> Outcome {
         &tug,
         &job.scenario.name,
         job.seed,
+        start,
         completed,
         wall.elapsed(),
     );

@@ -7,6 +7,8 @@
 
 use std::io::{self, Write};
 
+use bywire_core::Timestamp;
+
 use crate::record::TruthSample;
 
 /// The columns, in order (units in the names).
@@ -30,13 +32,19 @@ pub const COLUMNS: [&str; 16] = [
 ];
 
 /// Write `truth` as CSV with a header row; numbers as Rust prints them (they read back equal).
-pub fn write_csv(truth: &[TruthSample], out: &mut impl Write) -> io::Result<()> {
+/// Times are `start` on (since the Unix epoch), in seconds with six decimals as candump
+/// writes them.
+pub fn write_csv(truth: &[TruthSample], start: Timestamp, out: &mut impl Write) -> io::Result<()> {
     writeln!(out, "{}", COLUMNS.join(","))?;
     for s in truth {
+        let t = start
+            .saturating_add(core::time::Duration::from_nanos(s.t.as_nanos()))
+            .as_nanos();
         write!(
             out,
-            "{},{},{},{},{},{},{}",
-            s.t.as_nanos() as f64 / 1e9,
+            "{}.{:06},{},{},{},{},{},{}",
+            t / 1_000_000_000,
+            t % 1_000_000_000 / 1_000,
             s.pose.x,
             s.pose.y,
             s.pose.yaw,

@@ -66,7 +66,7 @@ use crate::chassis::{Chassis, ChassisParams, WheelInput};
 use crate::drive::{DriveParams, WheelDrive};
 use crate::event::{Happening, SimEvent};
 use crate::fault::{ActuatorFailure, Fault};
-use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams};
+use crate::mission::{apron_loop, AdsDriver, Mission, MissionParams, Phase};
 use crate::nodes::{
     self, AngleModule, BatteryReading, Bms, ImuNode, IoNode, IoReading, SafetyController,
 };
@@ -1096,6 +1096,11 @@ impl Tug {
         self.ads().map(|ads| ads.mission().remaining())
     }
 
+    /// The mission's phase (`None`: no built-in ADS drives).
+    pub fn phase(&self) -> Option<Phase> {
+        self.ads().map(|ads| ads.mission().phase())
+    }
+
     /// When the vehicle first reported autonomous mode to the ADS.
     pub fn engaged_at(&self) -> Option<Timestamp> {
         self.ads().and_then(AdsDriver::engaged_at)
@@ -1471,6 +1476,10 @@ impl Tug {
                 pose,
                 speed: self.pose_speed(),
                 steering_command: self.ads().map_or(0.0, AdsDriver::steering_command),
+                steering_target: self
+                    .vehicle_control_ecu()
+                    .and_then(|e| e.wheel_targets().first().map(|w| w.angle.to_degrees()))
+                    .unwrap_or(0.0),
                 steering_actual,
                 busy_ns: self.busy_ns(),
             });

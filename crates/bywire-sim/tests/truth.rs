@@ -2,6 +2,7 @@
 //! the run's trace where both have a sample, and read back to the same numbers.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
+use bywire_core::Timestamp;
 use bywire_sim::truth::{write_csv, COLUMNS};
 use bywire_sim::tug::{Tug, TugParams};
 
@@ -29,8 +30,10 @@ fn truth_is_the_plants_state_every_10_ms() {
     assert!(last.pose.x.hypot(last.pose.y) > 1.0, "{:?}", last.pose);
     assert!(tug.truth.iter().any(|t| t.wheel_speeds[0] > 0.5));
 
+    // On the logs' clock: from a start time given (2026-12-07T08:00:00Z), to the microsecond.
+    let start = Timestamp::from_nanos(1_796_630_400_000_000_000);
     let mut csv = Vec::new();
-    write_csv(&tug.truth, &mut csv).unwrap();
+    write_csv(&tug.truth, start, &mut csv).unwrap();
     let text = String::from_utf8(csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next().unwrap(), COLUMNS.join(","));
@@ -38,7 +41,11 @@ fn truth_is_the_plants_state_every_10_ms() {
         let cells: Vec<&str> = line.split(',').collect();
         assert_eq!(cells.len(), COLUMNS.len());
         let number = |i: usize| cells[i].parse::<f64>().unwrap();
-        assert_eq!(number(0), s.t.as_nanos() as f64 / 1e9);
+        let t = 1_796_630_400_000_000_000 + s.t.as_nanos();
+        assert_eq!(
+            cells[0],
+            format!("{}.{:06}", t / 1_000_000_000, t % 1_000_000_000 / 1_000)
+        );
         assert_eq!(
             (number(1), number(2), number(3)),
             (s.pose.x, s.pose.y, s.pose.yaw)

@@ -16,8 +16,8 @@ use std::process::Command;
 
 use serde_json::{json, Value};
 
-/// `bywire sim --fast` with `args`, into `out`; its metrics.
-fn sim_with(out: &std::path::Path, args: &[&str]) -> Value {
+/// `bywire sim --fast` with `args`, into `out`; its metrics and what it printed.
+fn sim_said(out: &std::path::Path, args: &[&str]) -> (Value, String) {
     let status = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args(["sim", "--fast", "--out", out.to_str().unwrap()])
         .args(args)
@@ -28,11 +28,22 @@ fn sim_with(out: &std::path::Path, args: &[&str]) -> Value {
         "{}",
         String::from_utf8_lossy(&status.stderr)
     );
-    serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap()
+    let metrics =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    (metrics, String::from_utf8(status.stdout).unwrap())
 }
 
+/// `bywire sim --fast` with `args`, into `out`; its metrics.
+fn sim_with(out: &std::path::Path, args: &[&str]) -> Value {
+    sim_said(out, args).0
+}
+
+/// The logs' clock at the start of the runs compared byte for byte: 2026-12-07T08:00:00Z.
+const START: &str = "2026-12-07T08:00:00Z";
+const START_NS: u64 = 1_796_630_400_000_000_000;
+
 fn sim(out: &std::path::Path, seed: &str) -> Value {
-    sim_with(out, &["--seed", seed])
+    sim_with(out, &["--seed", seed, "--start-time", START])
 }
 
 /// A run's picture: its size and how many pixels within `region` (width, height from the
@@ -75,8 +86,19 @@ const MAP: (u32, u32) = (620, 600);
 fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     let dir = Scratch::new("sim");
     let (a, b, c) = (dir.join("a"), dir.join("b"), dir.join("c"));
-    let metrics = sim(&a, "5");
+    let (metrics, said) = sim_said(&a, &["--seed", "5", "--start-time", START]);
     assert_eq!(metrics["completed"], true, "{metrics}");
+    // The summary tells the story's figures.
+    let summary = said.lines().last().unwrap();
+    for part in [
+        "route completed after",
+        "step test 3 of 3 settled",
+        "m sideways",
+        "tank turn in",
+        "tracking error max",
+    ] {
+        assert!(summary.contains(part), "{part}: {summary}");
+    }
     assert!(
         metrics["tracking_error_m"]["max"].as_f64().unwrap() < 0.5,
         "{metrics}"
@@ -92,8 +114,8 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
         .iter()
         .map(|e| e["kind"].as_str().unwrap())
         .collect();
-    // Start-up: the watchdog's recovery run, autonomous mode; then the crab stand approach, the
-    // tank turn at the end and arrival.
+    // Start-up: the watchdog's recovery run, autonomous mode; then the step test, the cruise,
+    // the crab stand approach, the tank turn at the end and arrival.
     assert_eq!(
         kinds,
         [
@@ -101,13 +123,40 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
             "watchdog",
             "mode",
             "engaged",
+            "phase",
+            "phase",
             "steering_mode",
+            "phase",
             "steering_mode",
+            "phase",
             "steering_mode",
+            "phase",
             "arrived"
         ],
         "{metrics}"
     );
+    let phases: Vec<&str> = metrics["phases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        phases,
+        ["step test", "cruise", "crab approach", "tank turn", "stop"]
+    );
+    // The crab approach moves sideways to the stand, its heading held.
+    let crab = &metrics["crab_approach"];
+    assert!(crab["lateral_m"].as_f64().unwrap().abs() >= 1.0, "{crab}");
+    assert!(
+        crab["heading_change_deg"].as_f64().unwrap().abs() < 2.0,
+        "{crab}"
+    );
+    assert!(
+        crab["max_wheel_angle_deg"].as_f64().unwrap().abs() > 5.0,
+        "{crab}"
+    );
+    assert_eq!(metrics["start_time_ns"], START_NS);
     let modes: Vec<&str> = metrics["events"]
         .as_array()
         .unwrap()
@@ -153,6 +202,19 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
             records.windows(2).all(|w| w[0].timestamp <= w[1].timestamp),
             "in time order"
         );
+        // On the clock asked for: from the start time on, for the run's length.
+        let (first, last) = (
+            records[0].timestamp.as_nanos(),
+            records.last().unwrap().timestamp.as_nanos(),
+        );
+        assert!(
+            (START_NS..START_NS + 1_000_000_000).contains(&first),
+            "{first}"
+        );
+        assert!(
+            last <= START_NS + (sim_seconds * 1e9) as u64 + 1_000_000,
+            "{last}"
+        );
     }
     // Another seed changes the sensor noise, so the drives' traffic.
     sim(&c, "6");
@@ -169,7 +231,13 @@ fn the_simulated_tug_completes_the_apron_loop_deterministically() {
     // A scenario file: its own route, load and grade, and an event.
     let file = dir.join("short.toml");
     std::fs::write(&file, "name = \"short\"\nwaypoints = [[0, 0], [25, 0]]\nspeed = 2.0\npayload = 4500\ngrade = 0.02\n\n[[event]]\nat_s = 6\nfault = \"driver_takeover\"\nduration_s = 0.5\n").unwrap();
+    let before = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap();
     let metrics = sim_with(&dir.join("d"), &["--scenario", file.to_str().unwrap()]);
+    // Without --start-time the logs start now.
+    let start = std::time::Duration::from_nanos(metrics["start_time_ns"].as_u64().unwrap());
+    assert!(start >= before && start < before + std::time::Duration::from_secs(600));
     assert_eq!(
         (metrics["scenario"].as_str(), metrics["completed"].as_bool()),
         (Some("short"), Some(true)),

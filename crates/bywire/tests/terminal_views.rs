@@ -192,6 +192,9 @@ fn sim_live_view_in_a_terminal() {
     );
     session.wait_for("keys: e E-stop");
     session.wait_for("mode       Autonomous");
+    // The view names what the tug does: first the steering step test, then the cruise.
+    session.wait_for("phase      step test");
+    session.wait_for("phase      cruise");
     // Driving: 2.5 m/s and more.
     let moving = Instant::now() + Duration::from_secs(15);
     while !["2.5", "2.6", "2.7", "2.8", "2.9", "3.0"]

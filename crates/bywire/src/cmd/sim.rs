@@ -19,7 +19,7 @@ use crate::support::sim_serve::Shared;
     after_help = "Examples:\n  bywire sim                          (real time, the apron-loop route)\n  bywire sim --fast --seed 7 --out run1\n  bywire sim --scenario fault-tour --serve   (then: bywire dump socketcand:127.0.0.1:29536/bus2)\n\nWrites into --out: bus1.log (vehicle control, 500 kbit/s), bus2.log (CANopen drives,\n1 Mbit/s), bus3.log (sensors, 500 kbit/s) and bus1b.log (the redundant command bus) in\ncandump -L form, metrics.json (sim_seconds, completed, events, route tracking error,\nsteering steps, the tank turn, command-echo latency, bus loads, battery, the supervisor's\ncounts, security: what an attack achieved and what SecOC refused, response times per identifier,
 fail_operational: the redundant tug's ECU faults, one record each),
 truth.csv (the plant's true pose, motion, wheel angles and speeds and steering mode every
-10 ms, on the logs' clock) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed gives the same logs, byte for byte."
+10 ms, on the logs' clock) and run.png (route and path,\nbus loads, speed, steering command and actual, heading, faults marked). The same seed and --start-time give the same logs, byte for byte."
 )]
 pub struct Args {
     /// Run as fast as possible instead of in real time.
@@ -41,6 +41,10 @@ pub struct Args {
     /// emergency brake and the vehicle's reports authenticated (SecOC), CAN FD on bus 1 and 1b.
     #[arg(long)]
     secoc: bool,
+    /// The logs' time at the run's start (default: now): 2026-12-07T08:00:00Z, 2026-12-07
+    /// or Unix seconds. The same seed and start time give the same files.
+    #[arg(long, value_name = "TIME", value_parser = crate::support::numbers::moment)]
+    start_time: Option<Timestamp>,
     /// Stop after this many simulated seconds at most.
     #[arg(long, default_value_t = 600.0, value_parser = crate::support::numbers::positive_seconds)]
     max_seconds: f64,
@@ -99,6 +103,16 @@ pub struct Args {
     node: crate::support::ros2::NodeArgs,
 }
 
+/// `--start-time`, or now.
+fn start_time(args: &Args) -> Timestamp {
+    args.start_time.unwrap_or_else(|| {
+        let since_epoch = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        Timestamp::from_nanos(u64::try_from(since_epoch.as_nanos()).unwrap_or(u64::MAX))
+    })
+}
+
 /// A built-in scenario or one from a file.
 fn load_scenario(name: &str, option: &str) -> Result<Scenario> {
     match Scenario::builtin(name) {
@@ -148,6 +162,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
+    let logs_start = start_time(args);
     // In a terminal, in real time: the live view.
     let live = !args.fast
         && !args.no_view
@@ -174,16 +189,89 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     } else {
         run_plain(&mut tug, &scenario, args, limit, start, &mut shared, out)?
     };
-    let report = RunReport::of(&tug, &scenario.name, args.seed, completed, start.elapsed());
+    let report = RunReport::of(
+        &tug,
+        &scenario.name,
+        args.seed,
+        logs_start,
+        completed,
+        start.elapsed(),
+    );
     crate::plot::sim::write(&tug, &args.out.join("run.png"))?;
     bywire_sim::output::write_run(&tug, &report, &args.out)?;
     if let Some(summary) = shared.summary() {
         writeln!(out, "socketcand: {summary}")?;
     }
-    let (tracking, load) = (report.tracking_error_m, report.bus_load);
-    writeln!(out, "{} after {:.1} s: tracking error max {:.2} m, mean {:.2} m; bus loads {:.1} %, {:.1} %, {:.1} %; logs and metrics in {}",
-        if completed { "route completed" } else { "stopped" }, report.sim_seconds, tracking.max, tracking.mean, load.bus1 * 100.0, load.bus2 * 100.0, load.bus3 * 100.0, args.out.display())?;
+    writeln!(out, "{}", summary(&report, &args.out))?;
     Ok(())
+}
+
+/// The run in a line: how it ended, what the step test, the crab approach and the tank turn
+/// gave, tracking and loads, and where the files are.
+fn summary(report: &RunReport, folder: &std::path::Path) -> String {
+    use bywire_sim::report::StepRecord;
+    let (tracking, load) = (report.tracking_error_m, report.bus_load);
+    let mut parts = Vec::new();
+    let settled: Vec<(f64, f64)> = report
+        .steering_steps
+        .iter()
+        .filter_map(|step| match step {
+            StepRecord::Measured {
+                settling_s,
+                overshoot_percent,
+                ..
+            } => Some((*settling_s, *overshoot_percent)),
+            StepRecord::Failed { .. } => None,
+        })
+        .collect();
+    if !report.steering_steps.is_empty() {
+        let worst = |pick: fn(&(f64, f64)) -> f64| settled.iter().map(pick).fold(0.0, f64::max);
+        parts.push(format!(
+            "step test {} of {} settled (at most {:.2} s, overshoot {:.1} %)",
+            settled.len(),
+            report.steering_steps.len(),
+            worst(|s| s.0),
+            worst(|s| s.1)
+        ));
+    }
+    if let Some(crab) = report.crab_approach {
+        parts.push(format!(
+            "crab approach {:.1} m sideways over {:.1} m",
+            crab.lateral_m.abs(),
+            crab.forward_m.abs()
+        ));
+    }
+    if let Some(tank) = &report.tank_turn {
+        let settling = match &tank.step {
+            StepRecord::Measured { settling_s, .. } => format!("wheels set in {settling_s:.2} s"),
+            StepRecord::Failed { error, .. } => format!("wheels not measured: {error}"),
+        };
+        parts.push(format!(
+            "tank turn in {:.1} s ({settling}, holding within {:.2}°)",
+            tank.duration_s, tank.hold_peak_to_peak_deg
+        ));
+    }
+    parts.push(format!(
+        "tracking error max {:.2} m, mean {:.2} m",
+        tracking.max, tracking.mean
+    ));
+    parts.push(format!(
+        "bus loads {:.1} %, {:.1} %, {:.1} %",
+        load.bus1 * 100.0,
+        load.bus2 * 100.0,
+        load.bus3 * 100.0
+    ));
+    format!(
+        "{} after {:.1} s: {}; logs and metrics in {}",
+        if report.completed {
+            "route completed"
+        } else {
+            "stopped"
+        },
+        report.sim_seconds,
+        parts.join("; "),
+        folder.display()
+    )
 }
 
 /// `--sweep`: every combination on `--jobs` threads, a line per finished run, sweep.csv.
@@ -248,7 +336,14 @@ fn sweep(args: &Args, out: &mut impl Write) -> Result<()> {
         // Progress goes to standard error; the summary is the file.
         let _ = writeln!(std::io::stderr(), "[{n}/{total}] {name}: {what}");
     };
-    let outcomes = bywire_sim::sweep::run(&jobs, threads, limit, &args.out, &report_line);
+    let outcomes = bywire_sim::sweep::run(
+        &jobs,
+        threads,
+        limit,
+        start_time(args),
+        &args.out,
+        &report_line,
+    );
     let wall = start.elapsed().as_secs_f64();
     let mut csv = String::from(bywire_sim::sweep::SUMMARY_COLUMNS);
     csv.push('\n');

@@ -5,6 +5,7 @@ use anyhow::{anyhow, Result};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub mod latency;
 pub mod sim;
@@ -151,13 +152,22 @@ pub(crate) fn draw_panel<DB: DrawingBackend>(
         chart
             .draw_series(LineSeries::new(line, marker.color.stroke_width(1)))
             .map_err(plot_error)?;
-        // Staggered on three heights, so close neighbours stay readable.
+        // Staggered on three heights, so close neighbours stay readable; in the last fifth,
+        // written leftward from the line, so the panel's edge does not cut it.
         let height = y_high - (y_high - y_low) * (0.04 + 0.07 * (k % 3) as f64);
+        let side = if marker.t > 0.8 * x_max {
+            HPos::Right
+        } else {
+            HPos::Left
+        };
         chart
             .draw_series(std::iter::once(Text::new(
                 marker.label.clone(),
                 (marker.t, height),
-                ("sans-serif", 12).into_font().color(&marker.color),
+                ("sans-serif", 12)
+                    .into_font()
+                    .color(&marker.color)
+                    .pos(Pos::new(side, VPos::Top)),
             )))
             .map_err(plot_error)?;
     }

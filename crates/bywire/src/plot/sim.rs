@@ -1,7 +1,7 @@
 //! The picture of a `bywire sim` run (`run.png`): the route and the path driven, with where
 //! each fault struck; the buses' loads over the run; speed, the ADS's steering command against
-//! the front-left wheel's angle, and the heading over time — faults and steering-mode changes
-//! marked on every time panel.
+//! the front-left wheel's target and angle, and the heading over time — faults and the
+//! mission's phases marked on every time panel.
 
 use std::path::Path;
 
@@ -19,8 +19,9 @@ use crate::support::files::write_atomically;
 
 /// Faults: on the map and on every time panel (a colour no series uses).
 pub const FAULT_COLOR: RGBColor = RGBColor(190, 0, 110);
-/// Steering-mode changes (crab, tank turn) on the time panels.
-const MODE_COLOR: RGBColor = RGBColor(110, 110, 110);
+/// The mission's phases (step test, cruise, crab approach, tank turn, stop) on the time
+/// panels.
+const PHASE_COLOR: RGBColor = RGBColor(110, 110, 110);
 /// The redundant tug's changes of control and degradation level.
 const FAIL_OPERATIONAL_COLOR: RGBColor = RGBColor(220, 120, 0);
 /// The route on the map, and the path driven.
@@ -66,16 +67,17 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, tug: &Tug) -> Result<(
     draw_panel(&loads, &bus_loads, &[0, 1, 2, 3], &markers)?;
     let over_time = time_series(&tug.trace);
     let panels = bottom.split_evenly((3, 1));
-    for (area, members) in panels.iter().zip([&[0][..], &[1, 2], &[3]]) {
+    for (area, members) in panels.iter().zip([&[0][..], &[1, 2, 3], &[4]]) {
         draw_panel(area, &over_time, members, &markers)?;
     }
     root.present().map_err(plot_error)?;
     Ok(())
 }
 
-/// Speed, steering command, the front-left wheel's angle and the heading (unwrapped: a loop
-/// reads as 360°, not a jump at ±180°).
-fn time_series(trace: &[Sample]) -> [Series; 4] {
+/// Speed, the ADS's steering command, the front-left wheel's target (the ECU's, from the
+/// command and the steering mode: in a tank turn the wheel's own angle) and angle, and the
+/// heading (unwrapped: a loop reads as 360°, not a jump at ±180°).
+fn time_series(trace: &[Sample]) -> [Series; 5] {
     let series = |label: &str, unit: &str, value: &dyn Fn(&Sample) -> f64| Series {
         label: label.to_string(),
         unit: unit.to_string(),
@@ -96,12 +98,13 @@ fn time_series(trace: &[Sample]) -> [Series; 4] {
     [
         series("speed", "m/s", &|s| s.speed),
         series("steering command", "deg", &|s| s.steering_command),
+        series("front-left wheel target", "deg", &|s| s.steering_target),
         series("front-left wheel angle", "deg", &|s| s.steering_actual),
         heading,
     ]
 }
 
-/// The faults injected (numbered as on the map) and the steering-mode changes, as markers.
+/// The faults injected (numbered as on the map) and the mission's phases, as markers.
 fn markers(tug: &Tug) -> Vec<Marker> {
     let mut faults = 0;
     tug.events
@@ -115,10 +118,10 @@ fn markers(tug: &Tug) -> Vec<Marker> {
                     color: FAULT_COLOR,
                 })
             }
-            Happening::Mission(MissionEvent::SteeringMode(mode)) => Some(Marker {
+            Happening::Mission(MissionEvent::Phase(phase)) => Some(Marker {
                 t: seconds(event.t),
-                label: format!("{mode:?}"),
-                color: MODE_COLOR,
+                label: phase.to_string(),
+                color: PHASE_COLOR,
             }),
             // The redundant tug: the ECU in control and the degradation level.
             Happening::Control(side) => Some(Marker {

@@ -41,6 +41,31 @@ pub fn seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A moment for a log's clock: an RFC 3339 time (`2026-12-07T08:00:00Z`, any offset), a UTC
+/// date (`2026-12-07`, its midnight) or Unix seconds (`1796630400.5`), from 1970 to 2262
+/// (what nanoseconds since the epoch hold).
+pub fn moment(text: &str) -> Result<bywire_core::Timestamp, String> {
+    let trimmed = text.trim();
+    let nanos = if let Ok(time) = chrono::DateTime::parse_from_rfc3339(trimmed) {
+        time.timestamp_nanos_opt()
+    } else if let Ok(date) = chrono::NaiveDate::parse_from_str(trimmed, "%Y-%m-%d") {
+        date.and_hms_opt(0, 0, 0)
+            .and_then(|t| t.and_utc().timestamp_nanos_opt())
+    } else {
+        let seconds = number(trimmed).map_err(|_| {
+            format!("'{text}' is not a time: 2026-12-07T08:00:00Z, 2026-12-07 or Unix seconds")
+        })?;
+        // Whole nanoseconds below 2^63: the range checked before the conversion.
+        (0.0..9.2e9)
+            .contains(&seconds)
+            .then(|| (seconds * 1e9).round() as i64)
+    };
+    nanos
+        .and_then(|n| u64::try_from(n).ok())
+        .map(bywire_core::Timestamp::from_nanos)
+        .ok_or_else(|| format!("'{text}': not between 1970 and 2262"))
+}
+
 /// `10m` as (`10`, `m`): the number, then the letters from the first one.
 fn number_and_unit(text: &str) -> (&str, &str) {
     let trimmed = text.trim();
@@ -229,6 +254,26 @@ pub fn extended_addressing(text: &str) -> anyhow::Result<bywire_diag::isotp::Add
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn moments_are_rfc_3339_times_dates_or_unix_seconds() {
+        let nanos = |text| moment(text).map(bywire_core::Timestamp::as_nanos);
+        assert_eq!(nanos("2026-12-07T08:00:00Z"), Ok(1_796_630_400_000_000_000));
+        assert_eq!(
+            nanos("2026-12-07T09:00:00.25+01:00"),
+            Ok(1_796_630_400_250_000_000)
+        );
+        assert_eq!(nanos("2026-12-07"), Ok(1_796_601_600_000_000_000));
+        assert_eq!(nanos("1796630400.5"), Ok(1_796_630_400_500_000_000));
+        assert_eq!(nanos("0"), Ok(0));
+        assert!(moment("-1")
+            .unwrap_err()
+            .contains("not between 1970 and 2262"));
+        assert!(moment("1969-12-31T23:59:59Z").is_err());
+        assert!(moment("3000-01-01").is_err());
+        assert!(moment("tomorrow").unwrap_err().contains("is not a time"));
+        assert!(moment("nan").is_err());
+    }
 
     #[test]
     fn out_of_range_numbers_are_refused_with_their_value() {

@@ -1,5 +1,5 @@
-//! The live view of `bywire sim` in a terminal: the route with the tug on it, speed, wheel
-//! angles, mode, watchdog and E-stop state, bus loads and the event log; keys for E-stop,
+//! The live view of `bywire sim` in a terminal: the route with the tug on it, the mission's
+//! phase, speed, wheel angles, mode, watchdog and E-stop state, bus loads and the event log; keys for E-stop,
 //! the operator's reset, pause, quit, and 1–9 to inject the scenario's faults by hand.
 
 use std::time::{Duration, Instant};
@@ -154,6 +154,10 @@ fn draw(frame: &mut ratatui::Frame<'_>, tug: &Tug, scenario: &Scenario, paused: 
     let [b1, b2, b3, b1b] = tug.bus_loads();
     let faults: Vec<String> = tug.active_faults().map(|f| f.to_string()).collect();
     let mut lines = vec![
+        Line::from(format!(
+            "phase      {}",
+            tug.phase().map_or("-".to_string(), |p| p.to_string())
+        )),
         Line::from(format!("speed      {:5.2} m/s", tug.pose_speed())),
         Line::from(format!("position   x {:7.2}  y {:7.2}", pose.x, pose.y)),
         Line::from(format!(
