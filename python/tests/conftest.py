@@ -53,3 +53,20 @@ def env_for_spark() -> dict:
     env = dict(os.environ)
     env["SPARK_LOCAL_IP"] = "127.0.0.1"
     return env
+
+
+@pytest.fixture(scope="module")
+def spark():
+    """A local Spark session (two threads) with bywire's data source registered."""
+    import sys
+
+    os.environ.update(env_for_spark())
+    os.environ["PYSPARK_PYTHON"] = sys.executable
+    from pyspark.sql import SparkSession
+
+    import bywire.spark
+
+    session = SparkSession.builder.master("local[2]").config("spark.ui.enabled", "false").getOrCreate()
+    bywire.spark.register(session)
+    yield session
+    session.stop()

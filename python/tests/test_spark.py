@@ -35,20 +35,6 @@ def fleet(sim_run, tmp_path_factory):
     return root
 
 
-@pytest.fixture(scope="module")
-def spark():
-    os.environ.update(env_for_spark())
-    os.environ["PYSPARK_PYTHON"] = sys.executable
-    from pyspark.sql import SparkSession
-
-    import bywire.spark
-
-    session = SparkSession.builder.master("local[2]").config("spark.ui.enabled", "false").getOrCreate()
-    bywire.spark.register(session)
-    yield session
-    session.stop()
-
-
 def cantools_rows(fleet) -> list[tuple]:
     """(vehicle, date, channel, message, signal, value) for every signal of every frame, as
     python-can reads the files and cantools decodes them."""

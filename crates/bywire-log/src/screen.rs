@@ -25,6 +25,11 @@ pub struct View {
     pub ascii: bool,
     /// Error frames' classes and details on the following lines (`candump -e`).
     pub error_details: bool,
+    /// Data bytes in binary, `10101010` (`candump -i`).
+    pub binary: bool,
+    /// Data bytes last to first, joined by a backquote (`candump -S`: a little-endian value
+    /// read as a number).
+    pub swap: bool,
 }
 
 /// A frame in the screen form with a view.
@@ -68,21 +73,41 @@ impl fmt::Display for FrameView<'_> {
                 return f.write_str(" remote request");
             }
         }
-        for byte in data {
-            write!(f, " {byte:02X}")?;
+        // Swapped, the bytes run last to first, a backquote between them.
+        let between = if view.swap { '`' } else { ' ' };
+        let ordered = || {
+            (0..data.len()).filter_map(move |i| {
+                let at = if view.swap { data.len() - 1 - i } else { i };
+                data.get(at)
+            })
+        };
+        for (i, byte) in ordered().enumerate() {
+            f.write_char(if i == 0 { ' ' } else { between })?;
+            if view.binary {
+                write!(f, "{byte:08b}")?;
+            } else {
+                write!(f, "{byte:02X}")?;
+            }
         }
         // The ASCII and ERRORFRAME columns start at a fixed place behind 8 bytes of data.
         let Some(missing) = 8usize.checked_sub(data.len()) else {
             return Ok(());
         };
+        let byte_width = if view.binary { 9 } else { 3 };
         if let Frame::Error(e) = frame {
-            write!(f, "{:>width$}", "ERRORFRAME", width = 3 * missing + 13)?;
+            write!(
+                f,
+                "{:>width$}",
+                "ERRORFRAME",
+                width = byte_width * missing + 13
+            )?;
             if view.error_details {
                 write!(f, "\n\t{}", e.describe_with("\n\t"))?;
             }
         } else if view.ascii {
-            write!(f, "{:>width$}", "'", width = 3 * missing + 4)?;
-            for byte in data {
+            let quote = if view.swap { '`' } else { '\'' };
+            write!(f, "{:>width$}", quote, width = byte_width * missing + 4)?;
+            for byte in ordered() {
                 let c = if (0x20..0x7F).contains(byte) {
                     char::from(*byte)
                 } else {
@@ -90,7 +115,7 @@ impl fmt::Display for FrameView<'_> {
                 };
                 f.write_char(c)?;
             }
-            f.write_char('\'')?;
+            f.write_char(quote)?;
         }
         Ok(())
     }
@@ -210,6 +235,34 @@ mod tests {
             view,
         }
         .to_string()
+    }
+
+    #[test]
+    fn binary_and_swapped_views_are_candumps() {
+        let binary = View {
+            binary: true,
+            ..View::default()
+        };
+        let swapped = View {
+            swap: true,
+            ascii: true,
+            ..View::default()
+        };
+        assert_eq!(show("123#A501", binary), "123   [2]  10100101 00000001");
+        assert_eq!(
+            show("123#414243", swapped),
+            "123   [3]  43`42`41                  `CBA`"
+        );
+        assert_eq!(
+            show(
+                "123#A501",
+                View {
+                    swap: true,
+                    ..binary
+                }
+            ),
+            "123   [2]  00000001`10100101"
+        );
     }
 
     #[test]

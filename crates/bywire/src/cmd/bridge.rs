@@ -31,7 +31,7 @@ use serde_json::json;
 #[derive(clap::Args)]
 #[command(
     after_help = "Commands on stdin, one JSON object per line (fields optional; the latest \
-command wins):\n  {\"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"turn_indicators\": \"left\", \"hazard_lights\": true}   (where the profile has lights)\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²;\n   beyond the vehicle's, its hardest)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A setpoint beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging; a brake beyond the vehicle's is taken\nas its hardest (stderr and a saturated event).\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
+command wins; \"at_s\": when to take the line, seconds from the start, so a file plays at\nits own pace):\n  {\"at_s\": 0.5, \"steering\": 5.0, \"velocity\": 1.5, \"brake\": 0, \"gear\": \"drive\", \"mode\": \"autonomous\",\n   \"steering_mode\": \"normal\", \"engage\": true, \"operator_reset\": false}\n  {\"turn_indicators\": \"left\", \"hazard_lights\": true}   (where the profile has lights)\n  {\"emergency_brake\": 4.0}   start the emergency-brake burst (deceleration m/s²;\n   beyond the vehicle's, its hardest)\n  {\"release_brake\": true}\nKeep sending: a command older than the profile's staleness (200 ms for reference-tug) is\nreplaced by a controlled stop. A setpoint beyond the profile's limits is refused (stderr and a\nbad_command event) and the last valid one goes on aging; a brake beyond the vehicle's is taken\nas its hardest (stderr and a saturated event).\n\nTo engage: send commands with \"mode\": \"autonomous\" for a moment (the vehicle wants a run of\nvalid ones), then one with \"engage\": true. While the vehicle is not following, each state\nline's \"reason\" says why and what to do (an E-stop latched since start wants the operator\nreset sequence: \"operator_reset\": true twice, then engage).\n\nExamples:\n  bywire bridge --profile reference-tug socketcan:can0 < commands.jsonl\n  bywire bridge --profile reference-tug sim:demo@500000 --with-vehicle --estop-on-eof\n  bywire bridge --profile ./my-tug.toml socketcan:can0 --rate 20\n\nAny profile with [command] and [state] drives its vehicle's own messages, by role (and
 --with-vehicle simulates that vehicle)."
 )]
 pub struct Args {
@@ -73,6 +73,27 @@ struct CommandLine {
     hazard_lights: Option<bool>,
     emergency_brake: Option<f64>,
     release_brake: Option<bool>,
+    /// When to take the line, seconds after the bridge started (the stdin thread holds it
+    /// until then): a file of commands plays back at its own pace.
+    at_s: Option<f64>,
+}
+
+/// The longest a line may ask to wait (`at_s`): a day (more is a typo).
+const LONGEST_WAIT_S: f64 = 86_400.0;
+
+/// Only a line's `at_s`, read before the line is handed over.
+#[derive(Deserialize)]
+struct Pace {
+    at_s: Option<f64>,
+}
+
+/// When the line `text` asks to be taken, from `start`: `None` for now (no `at_s`, or one
+/// not in 0..=a day, which the line's own check then refuses).
+fn taken_at(text: &str, start: std::time::Instant) -> Option<std::time::Instant> {
+    let at_s = serde_json::from_str::<Pace>(text).ok()?.at_s?;
+    (0.0..=LONGEST_WAIT_S)
+        .contains(&at_s)
+        .then(|| start + Duration::from_secs_f64(at_s))
 }
 
 /// A command line's command, and what was taken as less than asked (a brake beyond the
@@ -219,6 +240,13 @@ impl Bridge<'_> {
             Ok(line) => line,
             Err(e) => return self.refuse(now, number, &e.to_string()),
         };
+        if let Some(at_s) = line.at_s.filter(|t| !(0.0..=LONGEST_WAIT_S).contains(t)) {
+            return self.refuse(
+                now,
+                number,
+                &format!("at_s {at_s}: seconds from the start, 0 to {LONGEST_WAIT_S}"),
+            );
+        }
         // A stop is carried out whatever else the line asks for.
         if let Some(deceleration) = line.emergency_brake {
             match self.limits.emergency_deceleration(deceleration) {
@@ -345,14 +373,23 @@ impl Hooks<Ads<Wire>> for Bridge<'_> {
     }
 }
 
-/// Read stdin on a thread, a line at a time in bounded memory, waking the runner per line.
+/// Read stdin on a thread, a line at a time in bounded memory, waking the runner per line; a
+/// line with `at_s` is held until then (and the lines after it with it).
 fn stdin_thread(waker: bywire_bus::runner::Waker) -> Receiver<Input> {
     let (send, inputs) = mpsc::sync_channel(1024);
+    let start = std::time::Instant::now();
     std::thread::spawn(move || {
         let mut lines = CappedLines::new(std::io::stdin().lock());
         let end = loop {
             match lines.next_line() {
                 Some(Ok((number, line))) => {
+                    if let Line::Text(text) = &line {
+                        if let Some(at) = taken_at(text, start) {
+                            std::thread::sleep(
+                                at.saturating_duration_since(std::time::Instant::now()),
+                            );
+                        }
+                    }
                     if send.send(Input::Line(number, line)).is_err() {
                         return;
                     }

@@ -350,9 +350,12 @@ pub fn decode(args: &DecodeArgs, input: impl Read + 'static, out: &mut impl Writ
     // constant memory. The output is written in blocks, but flushed whenever no whole line is
     // waiting in the input, so a live bus piped in (`candump -L can0 | bywire decode`) shows
     // each frame as it comes.
+    // Ctrl-C or SIGTERM (which reach the whole pipeline, its writer too) end it as the end of
+    // input does: what was decoded is written, exit 0, as candump ends.
+    let stop = crate::support::interrupt::interrupt_flag();
     let mut out = std::io::BufWriter::with_capacity(1 << 16, out);
     let mut lines = bywire_log::lines::CappedLines::new(input);
-    loop {
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         if !lines.line_waiting() {
             out.flush()?;
         }

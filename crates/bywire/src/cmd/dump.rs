@@ -208,9 +208,9 @@ fn print_frames(
             .max()
             .unwrap_or(0),
         view: View {
-            indent_standard: false,
             ascii: args.ascii,
             error_details: args.error_details,
+            ..View::default()
         },
         first: None,
         last: None,

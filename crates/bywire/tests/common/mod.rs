@@ -4,6 +4,7 @@
 
 use std::io::Write;
 use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 /// Run `command` with `input` on standard input: (exit code, stdout, stderr).
 pub fn run_with_input(command: &mut Command, input: &str) -> (i32, String, String) {
@@ -210,5 +211,92 @@ impl Drop for Scratch {
 impl AsRef<std::ffi::OsStr> for Scratch {
     fn as_ref(&self) -> &std::ffi::OsStr {
         self.0.as_os_str()
+    }
+}
+
+/// A session running `command` on a tmux server of its own, closed when dropped. Its own server
+/// (`-L`): tests run in parallel, and several clients starting the one default server at the
+/// same moment can fail to reach it.
+pub struct Session(String);
+
+impl Session {
+    pub fn start(name: &str, command: &str) -> Session {
+        let session = Session(format!("{name}-{}", std::process::id()));
+        let (ok, err) = session.tmux(&[
+            "new-session",
+            "-d",
+            "-s",
+            &session.0,
+            "-x",
+            "120",
+            "-y",
+            "30",
+            command,
+        ]);
+        assert!(ok, "tmux new-session: {err}");
+        session
+    }
+
+    /// Runs tmux on this session's server: whether it succeeded, and its output (stdout on
+    /// success, stderr otherwise).
+    pub fn tmux(&self, args: &[&str]) -> (bool, String) {
+        let out = Command::new("tmux")
+            .args(["-L", &self.0])
+            .args(args)
+            .output()
+            .expect("tmux is installed (scripts/install-test-deps.sh)");
+        let text = if out.status.success() {
+            &out.stdout
+        } else {
+            &out.stderr
+        };
+        (
+            out.status.success(),
+            String::from_utf8_lossy(text).into_owned(),
+        )
+    }
+
+    pub fn screen(&self) -> String {
+        self.tmux(&["capture-pane", "-p", "-t", &self.0]).1
+    }
+
+    /// Wait until the screen contains `text`.
+    pub fn wait_for(&self, text: &str) -> String {
+        let deadline = Instant::now() + Duration::from_secs(15);
+        loop {
+            let screen = self.screen();
+            if screen.contains(text) {
+                return screen;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "'{text}' never appeared:\n{screen}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    pub fn keys(&self, keys: &str) {
+        let (ok, err) = self.tmux(&["send-keys", "-t", &self.0, keys]);
+        assert!(ok, "tmux send-keys: {err}");
+    }
+
+    pub fn wait_closed(&self) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while self.tmux(&["has-session", "-t", &self.0]).0 {
+            assert!(
+                Instant::now() < deadline,
+                "still running:\n{}",
+                self.screen()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        // The server goes with its only session.
+        let _ = self.tmux(&["kill-server"]);
     }
 }
