@@ -198,6 +198,13 @@ pub trait Bus: BusTx + BusRx {
     fn status(&self) -> Result<Option<BusStatus>, BusError> {
         Ok(None)
     }
+    /// Ask for a receive buffer of `bytes` (candump's `-r`): only a kernel socket has one.
+    fn set_receive_buffer(&mut self, bytes: usize) -> Result<(), BusError> {
+        let _ = bytes;
+        Err(BusError::Unsupported(
+            "a receive buffer size (SocketCAN's alone)".into(),
+        ))
+    }
     /// Split into a sending and a receiving half (for two threads).
     fn split(self: Box<Self>) -> (Box<dyn BusTx>, Box<dyn BusRx>);
 }

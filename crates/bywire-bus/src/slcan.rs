@@ -334,6 +334,7 @@ impl SharedEndpoint for Shared {
                             frame,
                             timestamp: crate::monotonic_unix_now(),
                             own: false,
+                            local: false,
                             hardware: adapter_millis(&text, &frame).map(Timestamp::from_millis),
                         }));
                     }

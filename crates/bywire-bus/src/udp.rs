@@ -333,6 +333,8 @@ impl SharedEndpoint for Shared {
                 frame,
                 timestamp,
                 own,
+                // Multicast does not say which host sent a datagram.
+                local: own,
                 hardware: None,
             }));
         }

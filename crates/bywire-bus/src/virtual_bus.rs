@@ -163,6 +163,7 @@ impl SharedEndpoint for Membership {
                 frame: *frame,
                 timestamp,
                 own,
+                local: true,
                 hardware: None,
             });
         }

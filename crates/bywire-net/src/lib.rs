@@ -28,6 +28,9 @@ pub struct Received {
     /// transmit confirmation: its timestamp is when it left (SocketCAN echoes it after the
     /// controller sent it; the bit-timed bus at its end of frame).
     pub own: bool,
+    /// Whether a program on this host sent it (this endpoint or another): SocketCAN marks
+    /// such frames `MSG_DONTROUTE`, which candump `-x` shows as TX. In-process buses: always.
+    pub local: bool,
     /// The controller's own timestamp, on its clock, where the backend has one.
     pub hardware: Option<Timestamp>,
 }

@@ -809,6 +809,7 @@ impl SimBus {
                     frame: report,
                     timestamp: at,
                     own: false,
+                    local: true,
                     hardware: None,
                 };
                 if routed {
@@ -1085,6 +1086,7 @@ impl SimBus {
                 frame,
                 timestamp: eof,
                 own: false,
+                local: true,
                 hardware: None,
             };
             let mut routed_to = 0u64;

@@ -53,9 +53,33 @@ cansend vcan0 20000008#00000A1900000000; cansend vcan0 123#414243
 cansend vcan1 1F334455##3112233445566778899; cansend vcan0 000#00
 ";
 
+/// Every form of output the VM's candump has (it predates `-N` and `-8`), byte for byte.
 #[test]
 fn dump_prints_what_candump_prints() {
-    let forms = ["", "-L", "-ta", "-tA", "-a", "-e", "-td", "-tz"];
+    let forms = [
+        "",
+        "-L",
+        "-ta",
+        "-tA",
+        "-a",
+        "-e",
+        "-td",
+        "-tz",
+        "-i",
+        "-S",
+        "-a -S",
+        "-i -S -a",
+        "-c",
+        "-c -c",
+        "-c -c -c -ta",
+        "-x",
+        "-L -x",
+        "-ta -H",
+        "-s 1",
+        "-d",
+        "-r 65536",
+        "-D",
+    ];
     let mut script = String::new();
     for (i, form) in forms.iter().enumerate() {
         script += &format!(
@@ -74,12 +98,29 @@ fn dump_prints_what_candump_prints() {
     script += "sleep 0.5\nkill -INT $P; sleep 0.5\n";
     for (i, form) in forms.iter().enumerate() {
         script += &format!(
-            "echo '== candump {form}'; cat c{i}.txt; echo '== bywire {form}'; cat b{i}.txt\n"
+            "echo '== candump {form}'; cat c{i}.txt; echo; echo '== bywire {form}'; cat b{i}.txt; echo\n"
         );
     }
     script += "echo '== decoded'; cat decoded.txt; echo '== end'\n";
     let out = in_vm_with(&script, &[&dbc]);
     for form in forms {
+        if form == "-s 1" {
+            // A spinning character a frame, each followed by a backspace: the same cycle
+            // (how many turns depends on when each started listening).
+            for who in ["candump", "bywire"] {
+                let spun = section(&out, &format!("{who} {form}")).trim_end_matches('\n');
+                let turns: Vec<char> = spun.chars().collect();
+                assert!(turns.len() >= 24, "{who} -s 1: {spun:?}");
+                for (k, pair) in turns.chunks(2).enumerate() {
+                    assert_eq!(
+                        pair,
+                        [['|', '/', '-', '\\'][k % 4], '\x08'],
+                        "{who}: {spun:?}"
+                    );
+                }
+            }
+            continue;
+        }
         let theirs = after_marker(section(&out, &format!("candump {form}")));
         let ours = after_marker(section(&out, &format!("bywire {form}")));
         assert!(
@@ -96,9 +137,11 @@ fn dump_prints_what_candump_prints() {
             assert_eq!(strip(ours), strip(theirs), "dump {form}");
             // (SSS.UUUUUU): at least three digits of seconds, six of microseconds.
             assert!(
-                ours.lines().all(|l| l.starts_with(" (")
-                    && l.find('.')
-                        .is_some_and(|d| d >= 5 && l[d + 7..].starts_with(") "))),
+                ours.lines()
+                    .filter(|l| !l.is_empty())
+                    .all(|l| l.starts_with(" (")
+                        && l.find('.')
+                            .is_some_and(|d| d >= 5 && l[d + 7..].starts_with(") "))),
                 "{ours}"
             );
         } else {
@@ -116,6 +159,32 @@ fn dump_prints_what_candump_prints() {
     assert!(after_marker(section(&out, "bywire -e")).contains(
         "\tprotocol-violation{{frame-format-error,tx-dominant-bit-error}{acknowledge-slot}}"
     ));
+}
+
+/// `-D`: an interface that goes down and comes back is read on (said on stderr); without it
+/// the dump ends with an error, as candump's.
+#[test]
+fn dump_goes_on_over_an_interface_that_went_down_with_minus_d() {
+    let script = "\
+$B dump -D vcan0 > on.txt 2> on.err & P1=$!
+$B dump vcan0 > off.txt 2> off.err & P2=$!
+ready on.txt vcan0; ready off.txt vcan0
+ip link set vcan0 down; sleep 0.3; ip link set vcan0 up
+cansend vcan0 321#01
+for i in $(seq 50); do grep -q ' 321 ' on.txt && break; sleep 0.1; done
+wait $P2; echo \"without exit $?\"
+kill -INT $P1; wait $P1; echo \"with exit $?\"
+echo '== on'; cat on.txt; cat on.err; echo '== off'; cat off.err; echo '== end'
+";
+    let out = in_vm(script);
+    assert!(out.contains("with exit 0"), "{out}");
+    assert!(out.contains("without exit 1"), "{out}");
+    let on = section(&out, "on");
+    assert!(
+        on.contains("vcan0  321   [1]  01") && on.contains("going on: -D"),
+        "{out}"
+    );
+    assert!(section(&out, "off").contains("bus 'vcan0'"), "{out}");
 }
 
 #[test]

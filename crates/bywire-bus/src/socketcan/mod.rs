@@ -198,6 +198,7 @@ fn receive_ready(shared: &Shared) -> Result<Option<Received>, BusError> {
         frame,
         timestamp: since_epoch(software),
         own: message.confirm,
+        local: message.local || message.confirm,
         hardware: message.hardware.map(since_epoch),
     }))
 }
@@ -278,6 +279,10 @@ impl Bus for SocketCan {
 
     fn set_loopback(&mut self, on: bool) -> Result<(), BusError> {
         Ok(self.shared.socket.set_loopback(on)?)
+    }
+
+    fn set_receive_buffer(&mut self, bytes: usize) -> Result<(), BusError> {
+        SocketCan::set_receive_buffer(self, bytes)
     }
 
     /// From netlink; `None` for interfaces without a controller (vcan).

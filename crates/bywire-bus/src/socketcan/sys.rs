@@ -21,6 +21,8 @@ pub struct Message {
     pub len: usize,
     /// `MSG_CONFIRM`: this socket sent the frame (the echo of our own transmission).
     pub confirm: bool,
+    /// `MSG_DONTROUTE`: a socket of this host sent the frame.
+    pub local: bool,
     /// Software receive time, since the Unix epoch.
     pub software: Option<Duration>,
     /// The controller's raw hardware time.
@@ -60,6 +62,7 @@ pub fn receive(fd: BorrowedFd<'_>, buf: &mut [u8]) -> io::Result<Message> {
     let mut out = Message {
         len,
         confirm: msg.msg_flags & libc::MSG_CONFIRM != 0,
+        local: msg.msg_flags & libc::MSG_DONTROUTE != 0,
         ..Message::default()
     };
     let timestamps_len = 3 * size_of::<libc::timespec>();

@@ -199,6 +199,7 @@ impl crate::SharedEndpoint for ClientShared {
                         frame,
                         timestamp,
                         own: false,
+                        local: false,
                         hardware: None,
                     }));
                 }

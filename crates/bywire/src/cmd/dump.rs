@@ -4,17 +4,17 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
 use bywire_bus::Received;
-use bywire_core::Frame;
+use bywire_core::{Frame, Timestamp};
 use bywire_log::candump::{frame_text, timestamp_text};
 use bywire_log::format::{Format, ParquetOptions, RecordWriter};
 use bywire_log::{FrameView, LogRecord, Precision, View};
 
-use crate::support::busarg::{self, BusArg, Event, Readers};
+use crate::support::busarg::{self, BusArg, Readers};
 use crate::support::interrupt::interrupt_flag;
 use crate::support::logs::{CompressionArg, TimeUnitArg};
 use crate::support::signals::Dbc;
@@ -43,6 +43,37 @@ pub struct Args {
     /// Print printable data bytes as ASCII after the data.
     #[arg(short = 'a')]
     ascii: bool,
+    /// Data bytes in binary (10100101).
+    #[arg(short = 'i')]
+    binary: bool,
+    /// Data bytes last to first, joined by a backquote (a little-endian value as a number).
+    #[arg(short = 'S')]
+    swap: bool,
+    /// Colour each bus's lines (repeat for more): -c the bus's name, -cc the line from it,
+    /// -ccc the whole line.
+    #[arg(short = 'c', action = clap::ArgAction::Count)]
+    color: u8,
+    /// Extra information: RX or TX (sent from this host), and an FD frame's BRS and ESI; in
+    /// log lines R or T at the end.
+    #[arg(short = 'x')]
+    extra: bool,
+    /// Silent: 0 prints every frame, 1 a spinning character, 2 nothing (default 2 with -l or
+    /// -f, else 0).
+    #[arg(short = 's', value_name = "LEVEL", value_parser = clap::value_parser!(u8).range(0..=2))]
+    silent: Option<u8>,
+    /// The controller's hardware timestamps instead of the system's (0 where the interface has
+    /// none, as candump shows them).
+    #[arg(short = 'H')]
+    hardware_timestamps: bool,
+    /// The socket's receive buffer, bytes (SocketCAN; beyond net.core.rmem_max as root).
+    #[arg(short = 'r', value_name = "SIZE")]
+    receive_buffer: Option<usize>,
+    /// Go on when a bus fails or its interface goes down (said on stderr), instead of exiting.
+    #[arg(short = 'D')]
+    keep_on_down: bool,
+    /// Say when frames were dropped before they were read (DROPCOUNT lines, as candump).
+    #[arg(short = 'd')]
+    drops: bool,
     /// Print error frames' classes and details in words.
     #[arg(short = 'e')]
     error_details: bool,
@@ -74,7 +105,7 @@ pub struct Args {
     #[arg(short = '8')]
     raw_dlc: bool,
     /// Timestamps with nanoseconds in log lines and files.
-    #[arg(long)]
+    #[arg(short = 'N', long)]
     nanoseconds: bool,
     /// Decode frames with this DBC file and print their signals under each frame.
     #[arg(long, value_name = "FILE")]
@@ -85,6 +116,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if args.dbc.is_some() && args.log_format {
         return Err(anyhow!(
             "--dbc decodes on screen; with -L pipe the log through `bywire decode` instead"
+        ));
+    }
+    if args.log_format && (args.ascii || args.binary || args.swap) {
+        return Err(anyhow!(
+            "-L writes log lines: -a, -i and -S change only the screen form"
         ));
     }
     let buses: Vec<BusArg> = args
@@ -119,18 +155,24 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         compression: CompressionArg::for_output(args.compression, log_format, &what)?,
         times: TimeUnitArg::for_output(args.time_unit, log_format, &what)?.into(),
     };
-    let opened = busarg::open_all(&buses)?;
+    let mut opened = busarg::open_all(&buses)?;
+    if let Some(bytes) = args.receive_buffer {
+        for (bus, arg) in opened.iter_mut().zip(&buses) {
+            bus.set_receive_buffer(bytes)
+                .map_err(|e| anyhow!("-r {bytes}: bus '{}': {e}", arg.name))?;
+        }
+    }
     let mut log = match log_path {
         Some(path) => Some(create_log(path, log_format, parquet)?),
         None => None,
     };
     let stop = interrupt_flag();
-    let readers = Readers::start(opened);
+    let readers = Readers::start_with(opened, args.keep_on_down);
     let result = print_frames(
         args,
         &buses,
         decoder.as_ref(),
-        &readers.events,
+        &readers,
         &stop,
         out,
         &mut log,
@@ -181,6 +223,21 @@ fn create_log(path: PathBuf, format: Format, parquet: ParquetOptions) -> Result<
     })
 }
 
+/// candump's colours, a bus each in the order they are given (bold blue, red, green, bold,
+/// magenta, cyan; candump takes them in the order its sockets first deliver, which is that
+/// order unless the buses start at the same moment), and the reset.
+const COLORS: [&str; 6] = [
+    "\x1b[1m\x1b[34m",
+    "\x1b[1m\x1b[31m",
+    "\x1b[1m\x1b[32m",
+    "\x1b[1m",
+    "\x1b[1m\x1b[35m",
+    "\x1b[1m\x1b[36m",
+];
+const COLOR_OFF: &str = "\x1b[0m";
+/// `-s 1`'s spinning character, a step a frame.
+const SPINNER: [char; 4] = ['|', '/', '-', '\\'];
+
 /// What the printing loop remembers between frames.
 struct Printer<'a> {
     args: &'a Args,
@@ -189,17 +246,20 @@ struct Printer<'a> {
     first: Option<u64>,
     last: Option<u64>,
     line: String,
+    /// Each bus's drop count as last said (`-d`).
+    drops: Vec<u64>,
 }
 
 fn print_frames(
     args: &Args,
     buses: &[BusArg],
     decoder: Option<&Dbc>,
-    rx: &mpsc::Receiver<Event>,
+    readers: &Readers,
     stop: &AtomicBool,
     out: &mut impl Write,
     log: &mut Option<LogFile>,
 ) -> Result<()> {
+    let rx = &readers.events;
     let mut printer = Printer {
         args,
         width: buses
@@ -210,16 +270,20 @@ fn print_frames(
         view: View {
             ascii: args.ascii,
             error_details: args.error_details,
-            ..View::default()
+            binary: args.binary,
+            swap: args.swap,
+            indent_standard: false,
         },
         first: None,
         last: None,
         line: String::new(),
+        drops: vec![0; buses.len()],
     };
     let idle = args.idle_timeout.map(Duration::from_millis);
     let mut last_frame = Instant::now();
     let mut count = 0u64;
-    let silent = log.is_some();
+    let silent = args.silent.unwrap_or(if log.is_some() { 2 } else { 0 });
+    let mut spins = 0usize;
     while args.count.is_none_or(|n| count < n) {
         let event = match rx.recv_timeout(Duration::from_millis(50)) {
             Ok(event) => event,
@@ -239,9 +303,36 @@ fn print_frames(
         };
         let (index, received) = event;
         let name = buses.get(index).map_or("?", |b| b.name.as_str());
-        let received = received.map_err(|e| anyhow!("bus '{name}': {e}"))?;
+        let received = match received {
+            Ok(received) => received,
+            Err(e) if args.keep_on_down => {
+                let _ = writeln!(std::io::stderr(), "{name}: {e} (going on: -D)");
+                continue;
+            }
+            Err(e) => return Err(anyhow!("bus '{name}': {e}")),
+        };
         last_frame = Instant::now();
         count += 1;
+        if args.drops {
+            let now = readers
+                .dropped
+                .get(index)
+                .map_or(0, |d| d.load(Ordering::Relaxed));
+            if let Some(said) = printer.drops.get_mut(index).filter(|said| now > **said) {
+                let dropped = now - *said;
+                *said = now;
+                let text = format!(
+                    "DROPCOUNT: dropped {dropped} CAN frame{} on '{name}' socket (total drops {now})\n",
+                    if dropped > 1 { "s" } else { "" }
+                );
+                if silent != 2 {
+                    out.write_all(text.as_bytes())?;
+                }
+                if let Some(LogFile::Candump(file)) = log.as_mut() {
+                    file.write_all(text.as_bytes())?;
+                }
+            }
+        }
         match log.as_mut() {
             Some(LogFile::Candump(file)) => {
                 printer.log_line(name, &received);
@@ -255,13 +346,20 @@ fn print_frames(
             })?,
             None => {}
         }
-        if silent {
-            continue;
+        match silent {
+            2 => continue,
+            1 => {
+                let spin = SPINNER.get(spins % SPINNER.len()).copied().unwrap_or('|');
+                spins = spins.wrapping_add(1);
+                write!(out, "{spin}\x08")?;
+                continue;
+            }
+            _ => {}
         }
         if args.log_format {
             printer.log_line(name, &received);
         } else {
-            printer.screen_line(name, &received, decoder);
+            printer.screen_line(index, name, &received, decoder);
         }
         out.write_all(printer.line.as_bytes())?;
     }
@@ -277,31 +375,60 @@ impl Printer<'_> {
         }
     }
 
-    /// `(secs.usecs) name frame` with the name right-aligned to the longest, as candump -L.
+    /// The frame's time: the system's, or with `-H` the controller's (0 without one).
+    fn time_of(&self, received: &Received) -> Timestamp {
+        if self.args.hardware_timestamps {
+            received.hardware.unwrap_or(Timestamp::ZERO)
+        } else {
+            received.timestamp
+        }
+    }
+
+    /// `(secs.usecs) name frame` with the name right-aligned to the longest, as candump -L
+    /// (with `-x`, R or T at the end).
     fn log_line(&mut self, name: &str, received: &Received) {
         use std::fmt::Write as _;
         self.line.clear();
-        let _ = writeln!(
+        let _ = write!(
             self.line,
             "({}) {name:>width$} {}",
-            timestamp_text(received.timestamp, self.precision()),
+            timestamp_text(self.time_of(received), self.precision()),
             frame_text(&received.frame, self.args.raw_dlc),
             width = self.width
         );
+        if self.args.extra {
+            self.line.push_str(if received.local { " T" } else { " R" });
+        }
+        self.line.push('\n');
     }
 
-    /// candump's screen line: ` (timestamp)  name  frame`.
-    fn screen_line(&mut self, name: &str, received: &Received, decoder: Option<&Dbc>) {
+    /// candump's screen line: ` (timestamp)  name  frame`, coloured with `-c` as candump does
+    /// (-c the name, -cc from the name on, -ccc all of it), `TX`/`RX` and BRS/ESI with `-x`.
+    fn screen_line(
+        &mut self,
+        index: usize,
+        name: &str,
+        received: &Received,
+        decoder: Option<&Dbc>,
+    ) {
         use std::fmt::Write as _;
+        let level = self.args.color;
+        let color = match level {
+            0 => "",
+            _ => COLORS.get(index % COLORS.len()).copied().unwrap_or(""),
+        };
         self.line.clear();
-        let ts = received.timestamp.as_nanos();
+        let ts = self.time_of(received).as_nanos();
         self.line.push(' ');
+        if level > 2 {
+            self.line.push_str(color);
+        }
         match self.args.timestamp.as_deref() {
             Some("a") => {
                 let _ = write!(
                     self.line,
                     "({}) ",
-                    timestamp_text(received.timestamp, self.precision())
+                    timestamp_text(self.time_of(received), self.precision())
                 );
             }
             Some("A") => {
@@ -332,14 +459,34 @@ impl Printer<'_> {
         if received.frame.id().is_some_and(|id| id.is_extended()) {
             self.view.indent_standard = true;
         }
+        let _ = write!(
+            self.line,
+            " {}{name:>width$}",
+            if level == 1 || level == 2 { color } else { "" },
+            width = self.width
+        );
+        if self.args.extra {
+            let (brs, esi) = match &received.frame {
+                Frame::Fd(fd) => (fd.brs(), fd.esi()),
+                _ => (false, false),
+            };
+            let _ = write!(
+                self.line,
+                "  {} {} {}",
+                if received.local { "TX" } else { "RX" },
+                if brs { 'B' } else { '-' },
+                if esi { 'E' } else { '-' }
+            );
+        }
         let _ = writeln!(
             self.line,
-            " {name:>width$}  {}",
+            "{}  {}{}",
+            if level == 1 { COLOR_OFF } else { "" },
             FrameView {
                 frame: &received.frame,
                 view: self.view
             },
-            width = self.width
+            if level > 1 { COLOR_OFF } else { "" },
         );
         if let Some(decoded) = decoder.and_then(|d| decode_for_screen(d, &received.frame)) {
             self.line.push_str(&decoded);

@@ -203,6 +203,7 @@ mod tests {
             frame: text.parse().unwrap(),
             timestamp: Timestamp::from_millis(at_ms),
             own: false,
+            local: false,
             hardware: None,
         }
     }

@@ -18,8 +18,9 @@ use bywire_core::filter::FilterItem;
 pub struct BusArg {
     /// The full spec (`socketcan:can0` for a plain `can0`).
     pub spec: String,
-    /// The name shown in output and written to logs: the interface for SocketCAN, the spec
-    /// as given otherwise.
+    /// The name shown in output and written to logs: the interface for SocketCAN, what
+    /// follows the last `/` where there is one, up to an `@` (`socketcand:HOST:PORT/bus1` is
+    /// `bus1`, `slcan:/dev/ttyACM0@500000` is `ttyACM0`), the spec as given otherwise.
     pub name: String,
     /// The filters, when any were given.
     pub filtering: Option<Filtering>,
@@ -42,7 +43,15 @@ pub fn parse(text: &str) -> Result<BusArg> {
         return Err(anyhow!("bus '{text}': no bus before the filters"));
     }
     let spec = full_spec(given);
-    let name = spec.strip_prefix("socketcan:").unwrap_or(given).to_string();
+    let name = match spec.strip_prefix("socketcan:") {
+        Some(interface) => interface,
+        None => given
+            .rsplit_once('/')
+            .map(|(_, last)| last.split('@').next().unwrap_or(last))
+            .filter(|last| !last.is_empty())
+            .unwrap_or(given),
+    }
+    .to_string();
     let mut filtering: Option<Filtering> = None;
     let mut data_filters = Vec::new();
     for item in parts {
@@ -117,8 +126,15 @@ pub struct Readers {
 }
 
 impl Readers {
-    /// Start reading `buses` (already opened, in the order their indexes refer to).
+    /// Start reading `buses` (already opened, in the order their indexes refer to); a bus's
+    /// reader ends at its first error.
     pub fn start(buses: Vec<Box<dyn Bus>>) -> Readers {
+        Readers::start_with(buses, false)
+    }
+
+    /// The same; with `keep_going`, a bus's reader goes on after an error (reported as an
+    /// event, then a pause of 100 ms): an interface that went down may come back (candump -D).
+    pub fn start_with(buses: Vec<Box<dyn Bus>>, keep_going: bool) -> Readers {
         let stop = Arc::new(AtomicBool::new(false));
         // Bounded: a stalled printer holds the readers back instead of growing without end
         // (the buses' own receive queues count what is lost then).
@@ -147,8 +163,11 @@ impl Readers {
                             dropped.store(bus.stats().rx_dropped, Ordering::Relaxed);
                         }
                         let failed = event.is_err();
-                        if tx.send((index, event)).is_err() || failed {
+                        if tx.send((index, event)).is_err() || (failed && !keep_going) {
                             break;
+                        }
+                        if failed {
+                            std::thread::sleep(Duration::from_millis(100));
                         }
                     }
                 })
@@ -228,5 +247,14 @@ mod tests {
         let e = parse("can0,12G:7FF").unwrap_err();
         assert!(format!("{e:#}").contains("filter '12G:7FF'"), "{e:#}");
         assert!(parse(",123:7FF").is_err());
+    }
+
+    #[test]
+    fn remote_buses_are_named_by_what_follows_their_last_slash() {
+        let name = |text| parse(text).unwrap().name;
+        assert_eq!(name("socketcand:127.0.0.1:29536/bus1,123:7FF"), "bus1");
+        assert_eq!(name("slcan:/dev/ttyACM0@500000"), "ttyACM0");
+        assert_eq!(name("udp:239.0.0.1:43113"), "udp:239.0.0.1:43113");
+        assert_eq!(name("socketcand:host:29536/"), "socketcand:host:29536/");
     }
 }

@@ -100,6 +100,7 @@ fn replay(path: &Path, stop: Arc<AtomicBool>) -> Result<Source> {
                         frame: r.frame,
                         timestamp: r.timestamp,
                         own: false,
+                        local: false,
                         hardware: None,
                     })
                 }
