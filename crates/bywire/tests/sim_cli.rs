@@ -559,7 +559,10 @@ fn udsoncan_reads_the_fault_tours_dtcs_from_the_served_sim() {
 /// front-left steering sensor is stuck.
 #[test]
 fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
-    let (code, out, err) = common::bywire(&["check", "--profile", "reference-tug", "tug"], "");
+    let (code, out, err) = common::bywire(
+        &["check", "--profile", "reference-tug", "--with-vehicle"],
+        "",
+    );
     assert_eq!(code, 0, "{out}{err}");
     let names: Vec<&str> = out
         .lines()
@@ -579,7 +582,7 @@ fn acceptance_checks_pass_on_the_tug_and_name_a_broken_sensor() {
             "check",
             "--profile",
             "reference-tug",
-            "tug",
+            "tug", // the older spelling of --with-vehicle
             "--tug-fault",
             "stuck-sensor",
         ],

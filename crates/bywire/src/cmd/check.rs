@@ -16,15 +16,24 @@ use crate::support::interrupt::interrupt_flag;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  bywire check --profile reference-tug tug                      (the simulated tug)\n  bywire check --profile reference-tug tug --tug-fault stuck-sensor\n  bywire check --profile ./my-tug.toml socketcan:can0              (a real vehicle, in real time)\n\nChecks, in order: engage, feedback rate, steering sweep (±40° in 1° steps, each within\n2.0° after 0.6 s), speed steps (1.0 and 2.5 m/s within 10 % after 6 s), watchdog (commands\nstop: holding and full braking at their cycle counts), re-engage, and with an EmergencyStop\nmessage: E-stop reaction, latch, and the operator's reset. Exit 1 when any check fails.\nOn a real vehicle the tug moves: run it where it may."
+    after_help = "Examples:\n  bywire check --profile reference-tug --with-vehicle           (the simulated tug)\n  bywire check --profile reference-tug --with-vehicle --tug-fault stuck-sensor\n  bywire check --profile ./my-tug.toml socketcan:can0              (a real vehicle, in real time)\n\nChecks, in order: engage, feedback rate, steering sweep (±40° in 1° steps, each within\n2.0° after 0.6 s), speed steps (1.0 and 2.5 m/s within 10 % after 6 s), watchdog (commands\nstop: holding and full braking at their cycle counts), re-engage, and with an EmergencyStop\nmessage: E-stop reaction, latch, and the operator's reset. Exit 1 when any check fails.\nOn a real vehicle the tug moves: run it where it may."
 )]
 pub struct Args {
     /// A shipped profile or a profile file.
     #[arg(long)]
     profile: String,
-    /// The bus, or `tug` for the simulated tug.
-    bus: String,
-    /// With `tug`: a fault to give it (stuck-sensor: the front-left steering sensor reads 0°).
+    /// The vehicle's bus (`tug`: the same as --with-vehicle).
+    #[arg(
+        required_unless_present = "with_vehicle",
+        conflicts_with = "with_vehicle"
+    )]
+    bus: Option<String>,
+    /// Check the simulated vehicle instead of one on a bus: the reference tug, its plant and
+    /// buses in simulated time (as `bridge` and `ros2 vehicle` take --with-vehicle).
+    #[arg(long)]
+    with_vehicle: bool,
+    /// With --with-vehicle: a fault to give it (stuck-sensor: the front-left steering sensor
+    /// reads 0°).
     #[arg(long)]
     tug_fault: Option<String>,
     /// Sweep range, degrees (±).
@@ -47,7 +56,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     };
     let mut checker =
         Checker::new(&loaded, config).with_context(|| format!("--profile {}", args.profile))?;
-    if args.bus == "tug" {
+    let bus = args.bus.as_deref().filter(|bus| *bus != "tug");
+    if args.with_vehicle || bus.is_none() {
         let mut tug = Tug::new(TugParams::default())?;
         match args.tug_fault.as_deref() {
             None => {}
@@ -66,10 +76,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         }
     } else {
         if args.tug_fault.is_some() {
-            bail!("--tug-fault is for the simulated tug (bus `tug`)");
+            bail!("--tug-fault is for the simulated vehicle (--with-vehicle)");
         }
-        let bus = crate::support::busarg::open(&args.bus)
-            .with_context(|| format!("bus '{}'", args.bus))?;
+        let name = bus.unwrap_or_default();
+        let bus = crate::support::busarg::open(name).with_context(|| format!("bus '{name}'"))?;
         runner::run_until(
             bus,
             &mut checker,
@@ -77,7 +87,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             Some(Duration::from_secs(600)),
             |c| c.is_done(),
         )
-        .with_context(|| format!("bus '{}'", args.bus))?;
+        .with_context(|| format!("bus '{name}'"))?;
     }
     let mut failed = Vec::new();
     for result in checker.results() {
