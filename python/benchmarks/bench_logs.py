@@ -6,8 +6,8 @@
 
 The input is random traffic of the DBC's messages (their identifiers and lengths, random
 payloads, 100 µs apart on two interfaces), written once as a candump log. Each bywire figure is
-the best of 5 runs, each peer figure the best of 2. Needs the release CLI
-(`cargo build --release -p bywire`), python-can and cantools; does not need the package.
+the best of 5 runs, each peer figure the best of 2. Needs the CLI as it ships
+(`cargo build --profile dist -p bywire`), python-can and cantools; does not need the package.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 FORD = ROOT.parent / "shared" / "corpus" / "dbc" / "opendbc" / "opendbc__dbc__ford_lincoln_base_pt.dbc"
-CLI = ROOT / "target" / "release" / "bywire"
+CLI = ROOT / "target" / "dist" / "bywire"
 
 
 def candump_log(path: pathlib.Path, dbc: pathlib.Path, frames: int) -> None:
@@ -53,7 +53,7 @@ def main() -> None:
     frames = int(sys.argv[1]) if len(sys.argv) > 1 else 200_000
     dbc = pathlib.Path(sys.argv[2]) if len(sys.argv) > 2 else FORD
     if not CLI.exists():
-        sys.exit(f"{CLI}: build it first (cargo build --release -p bywire)")
+        sys.exit(f"{CLI}: build it first (cargo build --profile dist -p bywire)")
     folder = pathlib.Path(tempfile.mkdtemp(prefix="bywire-bench-logs-"))
     log = folder / "in.log"
     candump_log(log, dbc, frames)

@@ -2,8 +2,8 @@
 //! run for N simulated seconds (20 by default), its final pose printed. Counted, not timed:
 //!
 //! ```text
-//! cargo build --release -p bywire-sim --example instructions
-//! valgrind --tool=callgrind target/release/examples/instructions 20
+//! cargo build --profile dist -p bywire-sim --example instructions
+//! valgrind --tool=callgrind target/dist/examples/instructions 20
 //! ```
 //!
 //! Two builds compared this way differ only by what changed (a timed benchmark varies by a

@@ -246,23 +246,25 @@ fn run_until_stopped(dir: &Path, bin: &Path, command: &str) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Ready once it has said something (a server names where it listens), or after 10 s.
-    let mut stderr = child.stderr.take().unwrap();
+    // Ready once it has said something on either stream (a server names where it listens),
+    // or after 10 s; what it says after that is read and dropped.
     let (said, heard) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let mut first = [0u8; 1];
-        let _ = said.send(stderr.read(&mut first).is_ok_and(|n| n > 0));
-        let _ = std::io::copy(&mut stderr, &mut std::io::sink());
-    });
-    let mut stdout = child.stdout.take().unwrap();
-    let (out_said, out_heard) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let mut first = [0u8; 1];
-        let _ = out_said.send(stdout.read(&mut first).is_ok_and(|n| n > 0));
-        let _ = std::io::copy(&mut stdout, &mut std::io::sink());
-    });
+    let streams: [Box<dyn Read + Send>; 2] = [
+        Box::new(child.stdout.take().unwrap()),
+        Box::new(child.stderr.take().unwrap()),
+    ];
+    for mut stream in streams {
+        let said = said.clone();
+        std::thread::spawn(move || {
+            let mut first = [0u8; 1];
+            if stream.read(&mut first).is_ok_and(|n| n > 0) {
+                let _ = said.send(());
+            }
+            let _ = std::io::copy(&mut stream, &mut std::io::sink());
+        });
+    }
     let deadline = Instant::now() + Duration::from_secs(10);
-    while Instant::now() < deadline && heard.try_recv().is_err() && out_heard.try_recv().is_err() {
+    while Instant::now() < deadline && heard.try_recv().is_err() {
         std::thread::sleep(Duration::from_millis(50));
     }
     assert!(
