@@ -300,8 +300,6 @@ pub struct Mission {
     params: MissionParams,
     /// The route the follower steers along until the crab approach ([`approach_route`]).
     approach: Vec<Point>,
-    /// Its segment the tug was last found on.
-    approach_segment: Option<usize>,
     follower: PurePursuit,
     /// The route's length, m (the route does not change).
     route_length: f64,
@@ -365,7 +363,6 @@ impl Mission {
             ),
             route_length: Path::new(&params.route).map_or(0.0, |path| path.length()),
             approach: approach_route(&params.route, params.crab_final_m),
-            approach_segment: None,
             last_segment: None,
             params,
             stop_index: 0,
@@ -617,11 +614,11 @@ impl Mission {
                         .clamp(-self.follower.max_steer, self.follower.max_steer)
                         .to_degrees()
                 } else {
+                    // Up to where the crab begins the approach route is the route, station for
+                    // station: the route's projection serves it.
                     let approach = Path::new(&self.approach).unwrap_or(path);
-                    let near = approach.project_near(here, self.approach_segment);
-                    self.approach_segment = Some(near.segment);
                     self.follower
-                        .steer_from(pose, speed, &approach, &near)
+                        .steer_from(pose, speed, &approach, &projection)
                         .front
                         .to_degrees()
                 };
