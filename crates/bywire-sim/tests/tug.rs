@@ -341,6 +341,14 @@ fn a_tank_turn_at_the_end_rotates_the_tug_in_place() {
         })
         .collect();
     assert_eq!(modes, [SteeringMode::Tank, SteeringMode::Normal]);
+    // The trace follows the ECU's target for the wheel, not the ADS's steering command (0°
+    // in a tank turn): what run.png plots beside the wheel's angle.
+    assert!(
+        tug.trace
+            .iter()
+            .any(|s| s.steering_command == 0.0 && (s.steering_target + 60.6).abs() < 0.5),
+        "the tank angle as the wheel's target"
+    );
     // The front-left wheel goes to its tank angle and holds it (it used to hunt ±2° around
     // −60° for the whole turn: the linkage doubles the loop's gain there).
     let (_, turn) = tug
