@@ -4,12 +4,11 @@ logs under `logs/vehicle=…/date=…/` and the DBC, as the blocks name them).""
 
 from __future__ import annotations
 
-import os
 import shutil
+import subprocess
+import sys
 
-import pytest
-
-from conftest import ROOT
+from conftest import ROOT, env_for_spark
 
 
 def blocks() -> list[str]:
@@ -39,17 +38,27 @@ def test_the_pandas_block_runs_from_the_root(capsys, monkeypatch):
     assert "VelocityActual" in printed and "Gear_choice" in printed
 
 
-def test_the_spark_blocks_write_their_lake(spark, tmp_path, monkeypatch):
+def test_the_spark_blocks_write_their_lake(tmp_path):
+    """In a Python of their own started in the folder the blocks name their paths from (Spark
+    resolves a relative path from where it started), with a local session as `spark`."""
     logs = tmp_path / "logs" / "vehicle=tug1" / "date=2026-12-07"
     logs.mkdir(parents=True)
     shutil.copy(ROOT / "examples" / "data" / "drive.blf", logs / "drive.blf")
     shutil.copy(ROOT / "examples" / "data" / "reference-tug.dbc", tmp_path / "reference-tug.dbc")
-    monkeypatch.chdir(tmp_path)
     _, spark_block, lake_block = blocks()
-    exec(spark_block, {"spark": spark})
-    written = sorted(p.relative_to(tmp_path / "lake") for p in (tmp_path / "lake").rglob("*.parquet"))
-    assert any(str(p).startswith("vehicle=tug1/date=2026-12-07/message=VehicleToAds_State") for p in written), written
-    shutil.rmtree(tmp_path / "lake")
-    exec(lake_block, {"spark": spark, "bywire": __import__("bywire.spark")})
-    assert (tmp_path / "lake" / "_SUCCESS").exists()
-    assert any((tmp_path / "lake").rglob("*.parquet"))
+    script = "\n".join([
+        "import pathlib, shutil",
+        "from pyspark.sql import SparkSession",
+        'spark = SparkSession.builder.master("local[2]").config("spark.ui.enabled", "false").getOrCreate()',
+        spark_block,
+        'found = sorted(str(p) for p in pathlib.Path("lake").rglob("*.parquet"))',
+        'assert any(p.startswith("lake/vehicle=tug1/date=2026-12-07/message=VehicleToAds_State") for p in found), found',
+        'shutil.rmtree("lake")',
+        lake_block,
+        'assert pathlib.Path("lake/_SUCCESS").exists() and any(pathlib.Path("lake").rglob("*.parquet"))',
+        'spark.stop()',
+        'print("lakes written")',
+    ])
+    env = {**env_for_spark(), "PYSPARK_PYTHON": sys.executable}
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0 and "lakes written" in done.stdout, done.stderr[-3000:]
