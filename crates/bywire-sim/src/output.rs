@@ -12,6 +12,11 @@ use core::time::Duration;
 use crate::report::RunReport;
 use crate::tug::Tug;
 
+/// A simulated time on the logs' clock, which reads `start` at the run's start.
+pub(crate) fn on_logs_clock(start: Timestamp, simulated: Timestamp) -> Timestamp {
+    start.saturating_add(Duration::from_nanos(simulated.as_nanos()))
+}
+
 /// Write `tug`'s logs, truth and `report` into `dir` (created if needed), the logs' and the
 /// truth's times from the report's start time; the paths written.
 /// `metrics.json` comes last, written whole or not at all: a reader that finds it finds the
@@ -28,11 +33,7 @@ pub fn write_run(tug: &Tug, report: &RunReport, dir: &Path) -> io::Result<Vec<Pa
         let mut writer = bywire_log::Writer::new(BufWriter::new(file));
         for (timestamp, frame) in log {
             writer
-                .write(
-                    start.saturating_add(Duration::from_nanos(timestamp.as_nanos())),
-                    name,
-                    frame,
-                )
+                .write(on_logs_clock(start, *timestamp), name, frame)
                 .map_err(|e| named(&path, e))?;
         }
         writer.flush().map_err(|e| named(&path, e))?;

@@ -8,7 +8,10 @@
 use std::io::{self, Write};
 
 use bywire_core::Timestamp;
+use bywire_log::candump::timestamp_text;
+use bywire_log::Precision;
 
+use crate::output::on_logs_clock;
 use crate::record::TruthSample;
 
 /// The columns, in order (units in the names).
@@ -37,14 +40,10 @@ pub const COLUMNS: [&str; 16] = [
 pub fn write_csv(truth: &[TruthSample], start: Timestamp, out: &mut impl Write) -> io::Result<()> {
     writeln!(out, "{}", COLUMNS.join(","))?;
     for s in truth {
-        let t = start
-            .saturating_add(core::time::Duration::from_nanos(s.t.as_nanos()))
-            .as_nanos();
         write!(
             out,
-            "{}.{:06},{},{},{},{},{},{}",
-            t / 1_000_000_000,
-            t % 1_000_000_000 / 1_000,
+            "{},{},{},{},{},{},{}",
+            timestamp_text(on_logs_clock(start, s.t), Precision::Micros),
             s.pose.x,
             s.pose.y,
             s.pose.yaw,

@@ -169,7 +169,9 @@ fn dump_goes_on_over_an_interface_that_went_down_with_minus_d() {
 $B dump -D vcan0 > on.txt 2> on.err & P1=$!
 $B dump vcan0 > off.txt 2> off.err & P2=$!
 ready on.txt vcan0; ready off.txt vcan0
-ip link set vcan0 down; sleep 0.3; ip link set vcan0 up
+ip link set vcan0 down
+for i in $(seq 50); do grep -q 'going on' on.err && break; sleep 0.1; done
+ip link set vcan0 up
 cansend vcan0 321#01
 for i in $(seq 50); do grep -q ' 321 ' on.txt && break; sleep 0.1; done
 wait $P2; echo \"without exit $?\"

@@ -129,7 +129,7 @@ fn commands(readme: &str) -> Vec<String> {
             last.truncate(last.trim_end_matches('\\').trim_end().len());
             last.push(' ');
             last.push_str(code);
-        } else if COMMANDS.iter().any(|c| code.starts_with(c)) || code == "bywire --version" {
+        } else if COMMANDS.iter().any(|c| code.starts_with(c)) {
             commands.push(code.to_string());
         } else {
             continue;

@@ -81,6 +81,11 @@ struct CommandLine {
 /// The longest a line may ask to wait (`at_s`): a day (more is a typo).
 const LONGEST_WAIT_S: f64 = 86_400.0;
 
+/// Whether `at_s` is a time a line may ask for: 0 to a day after the start.
+fn pace_in_range(at_s: f64) -> bool {
+    (0.0..=LONGEST_WAIT_S).contains(&at_s)
+}
+
 /// Only a line's `at_s`, read before the line is handed over.
 #[derive(Deserialize)]
 struct Pace {
@@ -91,9 +96,7 @@ struct Pace {
 /// not in 0..=a day, which the line's own check then refuses).
 fn taken_at(text: &str, start: std::time::Instant) -> Option<std::time::Instant> {
     let at_s = serde_json::from_str::<Pace>(text).ok()?.at_s?;
-    (0.0..=LONGEST_WAIT_S)
-        .contains(&at_s)
-        .then(|| start + Duration::from_secs_f64(at_s))
+    pace_in_range(at_s).then(|| start + Duration::from_secs_f64(at_s))
 }
 
 /// A command line's command, and what was taken as less than asked (a brake beyond the
@@ -240,7 +243,7 @@ impl Bridge<'_> {
             Ok(line) => line,
             Err(e) => return self.refuse(now, number, &e.to_string()),
         };
-        if let Some(at_s) = line.at_s.filter(|t| !(0.0..=LONGEST_WAIT_S).contains(t)) {
+        if let Some(at_s) = line.at_s.filter(|t| !pace_in_range(*t)) {
             return self.refuse(
                 now,
                 number,

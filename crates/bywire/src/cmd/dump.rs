@@ -418,18 +418,15 @@ impl Printer<'_> {
             _ => COLORS.get(index % COLORS.len()).copied().unwrap_or(""),
         };
         self.line.clear();
-        let ts = self.time_of(received).as_nanos();
+        let at = self.time_of(received);
+        let ts = at.as_nanos();
         self.line.push(' ');
         if level > 2 {
             self.line.push_str(color);
         }
         match self.args.timestamp.as_deref() {
             Some("a") => {
-                let _ = write!(
-                    self.line,
-                    "({}) ",
-                    timestamp_text(self.time_of(received), self.precision())
-                );
+                let _ = write!(self.line, "({}) ", timestamp_text(at, self.precision()));
             }
             Some("A") => {
                 let secs = i64::try_from(ts / 1_000_000_000).unwrap_or(i64::MAX);
