@@ -29,6 +29,8 @@ pub mod codegen;
 pub mod condition;
 pub mod decoder;
 pub mod e2e;
+pub mod format;
+mod kcd;
 mod lexer;
 pub mod lint;
 pub mod model;
@@ -38,8 +40,10 @@ pub mod schedule;
 #[cfg(feature = "secoc")]
 pub mod secoc;
 pub mod select;
+mod sym;
 mod writer;
 
+pub use format::Format;
 pub use model::*;
 pub use parser::{parse, parse_str, Diagnostic, Mode, ParseError, Severity, INDEPENDENT_SIGNALS};
 pub use writer::write;

@@ -1114,9 +1114,18 @@ impl Parser<'_> {
 
     /// Layout problems a codec cannot resolve silently: signals past the end, overlaps.
     fn check_layout(&mut self) {
+        self.diags.extend(layout_diagnostics(&self.db));
+    }
+}
+
+/// Signals past their message's end or overlapping another, names defined twice in a message,
+/// and a file without messages: the checks every format's reader makes once the database is
+/// read.
+pub(crate) fn layout_diagnostics(db: &Database) -> Vec<Diagnostic> {
+    let mut diags = Vec::new();
+    {
         let mut found: Vec<(Position, String)> = Vec::new();
-        for m in self
-            .db
+        for m in db
             .messages
             .iter()
             .filter(|m| m.name != INDEPENDENT_SIGNALS)
@@ -1151,7 +1160,7 @@ impl Parser<'_> {
             }
         }
         let mut warnings: Vec<(Position, String, &str)> = Vec::new();
-        for m in &self.db.messages {
+        for m in &db.messages {
             // Bounded by the message's signals (at most a few hundred).
             for (j, s) in m.signals.iter().enumerate() {
                 if m.signals.iter().take(j).any(|o| o.name == s.name) {
@@ -1163,8 +1172,7 @@ impl Parser<'_> {
                 }
             }
         }
-        if self
-            .db
+        if db
             .messages
             .iter()
             .all(|m| m.name == INDEPENDENT_SIGNALS)
@@ -1176,7 +1184,7 @@ impl Parser<'_> {
             ));
         }
         for (at, message, resolution) in warnings {
-            self.diags.push(Diagnostic {
+            diags.push(Diagnostic {
                 line: at.line,
                 column: at.column,
                 severity: Severity::Warning,
@@ -1185,7 +1193,7 @@ impl Parser<'_> {
             });
         }
         for (at, message) in found {
-            self.diags.push(Diagnostic {
+            diags.push(Diagnostic {
                 line: at.line,
                 column: at.column,
                 severity: Severity::Error,
@@ -1195,6 +1203,7 @@ impl Parser<'_> {
             });
         }
     }
+    diags
 }
 
 type BitMap = [u64; 8];

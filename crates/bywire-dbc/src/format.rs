@@ -1,0 +1,573 @@
+//! Every database format, read into the one [`Database`] model and written back from it.
+//!
+//! DBC is the model's native form; KCD (Kayak's XML) and SYM (PCAN Symbol Editor 6.0) map onto
+//! it the way cantools maps them onto its own model, so a database converted from one to the
+//! other decodes every frame to the same values. Facts a format has and DBC lacks become the
+//! attributes DBC files use for them (a cycle time is `GenMsgCycleTime`, a CAN FD frame
+//! `VFrameFormat`, a long name `SystemSignalLongSymbol`). A writer first reduces a database to
+//! what its format can say ([`expressible`]) and lists everything that reduction dropped as an
+//! [`Omission`]: nothing is lost without a word.
+
+use std::fmt;
+use std::path::Path;
+
+use crate::model::*;
+use crate::parser::{Diagnostic, Mode, ParseError, Severity};
+
+/// A database file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// Vector's DBC.
+    Dbc,
+    /// Kayak's KCD (XML).
+    Kcd,
+    /// PEAK's PCAN Symbol Editor format, version 6.0.
+    Sym,
+}
+
+impl Format {
+    /// Every format, in the order `--db-format` lists them.
+    pub const ALL: [Format; 3] = [Format::Dbc, Format::Kcd, Format::Sym];
+
+    /// The format's name as `--db-format` takes it, and its file extension.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Dbc => "dbc",
+            Format::Kcd => "kcd",
+            Format::Sym => "sym",
+        }
+    }
+
+    /// The format a name (`dbc`, `kcd`, `sym`, any case) stands for.
+    pub fn from_name(name: &str) -> Option<Format> {
+        Format::ALL
+            .into_iter()
+            .find(|f| f.name().eq_ignore_ascii_case(name))
+    }
+
+    /// The format a file's extension names.
+    pub fn from_path(path: &Path) -> Option<Format> {
+        Format::from_name(path.extension()?.to_str()?)
+    }
+
+    /// The format the content looks like: a KCD root element, a SYM version line, else DBC.
+    pub fn sniff(bytes: &[u8]) -> Format {
+        let head = &bytes[..bytes.len().min(4096)];
+        let text = String::from_utf8_lossy(head);
+        let body = text.trim_start_matches('\u{feff}').trim_start();
+        if body.starts_with('<') && text.contains("NetworkDefinition") {
+            Format::Kcd
+        } else if text
+            .lines()
+            .any(|l| l.trim_start().starts_with("FormatVersion="))
+        {
+            Format::Sym
+        } else {
+            Format::Dbc
+        }
+    }
+
+    /// The format of a file: forced, else by extension, else by content.
+    pub fn of_file(forced: Option<Format>, path: &Path, bytes: &[u8]) -> Format {
+        forced
+            .or_else(|| Format::from_path(path))
+            .unwrap_or_else(|| Format::sniff(bytes))
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Format::Dbc => "DBC",
+            Format::Kcd => "KCD",
+            Format::Sym => "SYM",
+        })
+    }
+}
+
+/// Read a database in `format` (UTF-8, or cp1252 when not valid UTF-8), leniently or strictly.
+pub fn load(
+    bytes: &[u8],
+    format: Format,
+    mode: Mode,
+) -> Result<(Database, Vec<Diagnostic>), ParseError> {
+    match format {
+        Format::Dbc => crate::parser::parse(bytes, mode),
+        Format::Kcd => crate::kcd::read(&text_of(bytes), mode),
+        Format::Sym => crate::sym::read(&text_of(bytes), mode),
+    }
+}
+
+/// `bytes` as text: UTF-8 when valid, else cp1252 (what PCAN and Vector tools write).
+pub(crate) fn text_of(bytes: &[u8]) -> std::borrow::Cow<'_, str> {
+    match std::str::from_utf8(bytes) {
+        Ok(t) => std::borrow::Cow::Borrowed(t),
+        Err(_) => std::borrow::Cow::Owned(bywire_core::text::cp1252_chars(bytes).collect()),
+    }
+}
+
+/// Something a target format cannot say, left out of the written file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Omission {
+    /// What was left out, naming its object.
+    pub what: String,
+}
+
+impl fmt::Display for Omission {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.what)
+    }
+}
+
+/// `db` as text in `format`, with what the format could not say.
+pub fn write(db: &Database, format: Format) -> (String, Vec<Omission>) {
+    match format {
+        Format::Dbc => (crate::writer::write(db), Vec::new()),
+        Format::Kcd => crate::kcd::write(db),
+        Format::Sym => crate::sym::write(db),
+    }
+}
+
+/// `db` reduced to what `format` can say (the database its file reads back as), and what the
+/// reduction dropped.
+pub fn expressible(db: &Database, format: Format) -> (Database, Vec<Omission>) {
+    match format {
+        Format::Dbc => (db.clone(), Vec::new()),
+        Format::Kcd => crate::kcd::expressible(db),
+        Format::Sym => crate::sym::expressible(db),
+    }
+}
+
+/// The node name DBC uses for "no node".
+pub(crate) const NO_NODE: &str = "Vector__XXX";
+
+/// The attributes other formats' facts become, with their DBC definitions.
+pub(crate) mod attrs {
+    use crate::model::*;
+
+    /// `GenMsgCycleTime`, milliseconds.
+    pub const CYCLE_TIME: &str = "GenMsgCycleTime";
+    /// `VFrameFormat`, the frame's format.
+    pub const FRAME_FORMAT: &str = "VFrameFormat";
+    /// `VFrameFormat`'s values, by index.
+    pub const FRAME_FORMATS: [&str; 4] = [
+        "StandardCAN",
+        "ExtendedCAN",
+        "StandardCAN_FD",
+        "ExtendedCAN_FD",
+    ];
+    /// `SystemSignalLongSymbol`, a signal's name beyond 32 characters.
+    pub const LONG_NAME: &str = "SystemSignalLongSymbol";
+    /// `GenSigStartValue`, a signal's raw value before anything was received.
+    pub const START_VALUE: &str = "GenSigStartValue";
+    /// `SPN`, a J1939 suspect parameter number.
+    pub const SPN: &str = "SPN";
+
+    /// The definition a reader gives each of these when a file uses it.
+    pub fn definition(name: &str) -> Option<AttrDef> {
+        let int = |scope, max: i128| AttrType::Int(Num::Int(0), Num::Int(max)).with(scope);
+        let (scope, kind) = match name {
+            CYCLE_TIME => int(AttrScope::Message, 3_600_000),
+            SPN => int(AttrScope::Signal, 524_287),
+            START_VALUE => (
+                AttrScope::Signal,
+                AttrType::Float(Num::Float(-1.0e300), Num::Float(1.0e300)),
+            ),
+            LONG_NAME => (AttrScope::Signal, AttrType::Str),
+            FRAME_FORMAT => (
+                AttrScope::Message,
+                AttrType::Enum(FRAME_FORMATS.iter().map(|s| s.to_string()).collect()),
+            ),
+            _ => return None,
+        };
+        let default = match &kind {
+            AttrType::Str => AttrValue::Str(String::new()),
+            AttrType::Float(..) => AttrValue::Number(Num::Float(0.0)),
+            _ => AttrValue::Number(Num::Int(0)),
+        };
+        Some(AttrDef {
+            scope,
+            name: name.to_string(),
+            kind,
+            default: Some(default),
+        })
+    }
+
+    trait With {
+        fn with(self, scope: AttrScope) -> (AttrScope, AttrType);
+    }
+    impl With for AttrType {
+        fn with(self, scope: AttrScope) -> (AttrScope, AttrType) {
+            (scope, self)
+        }
+    }
+
+    /// Define every attribute of this family that `db` uses, in a fixed order, replacing
+    /// whatever definitions it had: the form every reader gives and [`super::expressible`]
+    /// reduces to.
+    pub fn define_used(db: &mut Database) {
+        let used = |name: &str| {
+            db.attributes.iter().any(|(n, _)| n == name)
+                || db.messages.iter().any(|m| {
+                    m.attributes.iter().any(|(n, _)| n == name)
+                        || m.signals
+                            .iter()
+                            .any(|s| s.attributes.iter().any(|(n, _)| n == name))
+                })
+        };
+        db.attribute_defs = [CYCLE_TIME, FRAME_FORMAT, LONG_NAME, START_VALUE, SPN]
+            .into_iter()
+            .filter(|name| used(name))
+            .filter_map(definition)
+            .collect();
+    }
+}
+
+/// Diagnostics as a reader collects them: each with its position; in strict mode the first
+/// one ends the read.
+pub(crate) struct Report {
+    mode: Mode,
+    pub(crate) items: Vec<Diagnostic>,
+}
+
+impl Report {
+    pub(crate) fn new(mode: Mode) -> Report {
+        Report {
+            mode,
+            items: Vec::new(),
+        }
+    }
+
+    /// Record a problem; in strict mode, stop the read with it.
+    pub(crate) fn add(
+        &mut self,
+        severity: Severity,
+        at: Position,
+        message: impl Into<String>,
+        resolution: &str,
+    ) -> Result<(), ParseError> {
+        let d = Diagnostic {
+            line: at.line,
+            column: at.column,
+            severity,
+            message: message.into(),
+            resolution: resolution.into(),
+        };
+        if self.mode == Mode::Strict {
+            return Err(ParseError(d));
+        }
+        self.items.push(d);
+        Ok(())
+    }
+
+    /// A problem that stops the read whatever the mode.
+    pub(crate) fn fatal(at: Position, message: impl Into<String>) -> ParseError {
+        ParseError(Diagnostic {
+            line: at.line,
+            column: at.column,
+            severity: Severity::Error,
+            message: message.into(),
+            resolution: "nothing loaded".into(),
+        })
+    }
+
+    /// The layout checks every format shares (signals past the end, overlaps, names twice),
+    /// then the diagnostics.
+    pub(crate) fn finish(
+        mut self,
+        db: Database,
+    ) -> Result<(Database, Vec<Diagnostic>), ParseError> {
+        for d in crate::parser::layout_diagnostics(&db) {
+            if self.mode == Mode::Strict {
+                return Err(ParseError(d));
+            }
+            self.items.push(d);
+        }
+        Ok((db, self.items))
+    }
+}
+
+/// Omissions gathered while reducing a database, each kind of thing named once with a count.
+#[derive(Default)]
+pub(crate) struct Omissions(Vec<Omission>);
+
+impl Omissions {
+    pub(crate) fn add(&mut self, what: impl Into<String>) {
+        self.0.push(Omission { what: what.into() });
+    }
+
+    /// Name the attributes dropped from `count` objects of a kind, once.
+    pub(crate) fn attributes<'a>(
+        &mut self,
+        kind: &str,
+        names: impl Iterator<Item = &'a str>,
+        count: usize,
+    ) {
+        let mut list: Vec<&str> = names.collect();
+        list.sort_unstable();
+        list.dedup();
+        if list.is_empty() {
+            return;
+        }
+        self.add(if count == 0 {
+            format!("{kind}s ({})", list.join(", "))
+        } else {
+            format!("{kind} attributes ({}) on {count} {kind}s", list.join(", "))
+        });
+    }
+
+    pub(crate) fn into_vec(self) -> Vec<Omission> {
+        self.0
+    }
+}
+
+/// The message's cycle time in whole milliseconds, the file's default counted.
+pub(crate) fn cycle_time_ms(db: &Database, m: &Message) -> Option<u64> {
+    let ms: f64 = db
+        .message_attribute_text(m, attrs::CYCLE_TIME)?
+        .parse()
+        .ok()?;
+    (ms.is_finite() && ms >= 1.0 && ms.fract() == 0.0 && ms < 3_600_001.0).then(|| {
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let whole = ms as u64;
+        whole
+    })
+}
+
+/// Only the attributes of the family in [`attrs`] a format keeps; the others named once.
+pub(crate) fn keep_attributes(
+    db: &Database,
+    kept: &[&str],
+    omissions: &mut Omissions,
+    keep_message: impl Fn(&Database, &Message) -> Vec<(String, AttrValue)>,
+) -> Database {
+    let mut out = db.clone();
+    let signals = || db.messages.iter().flat_map(|m| &m.signals);
+    let dropped = |list: &[(String, AttrValue)]| {
+        list.iter()
+            .filter(|(n, _)| !kept.contains(&n.as_str()))
+            .count()
+            > 0
+    };
+    omissions.attributes(
+        "network",
+        db.attributes.iter().map(|(n, _)| n.as_str()),
+        usize::from(!db.attributes.is_empty()),
+    );
+    omissions.attributes(
+        "node",
+        db.nodes.iter().flat_map(|n| &n.attributes).map(|(n, _)| n.as_str()),
+        db.nodes.iter().filter(|n| !n.attributes.is_empty()).count(),
+    );
+    omissions.attributes(
+        "message",
+        db.messages
+            .iter()
+            .flat_map(|m| &m.attributes)
+            .map(|(n, _)| n.as_str())
+            .filter(|n| !kept.contains(n)),
+        db.messages
+            .iter()
+            .filter(|m| dropped(&m.attributes))
+            .count(),
+    );
+    omissions.attributes(
+        "signal",
+        signals()
+            .flat_map(|s| &s.attributes)
+            .map(|(n, _)| n.as_str())
+            .filter(|n| !kept.contains(n)),
+        signals().filter(|s| dropped(&s.attributes)).count(),
+    );
+    omissions.attributes(
+        "attribute definition",
+        db.attribute_defs
+            .iter()
+            .map(|d| d.name.as_str())
+            .filter(|n| !kept.contains(n)),
+        0,
+    );
+    out.attributes.clear();
+    for n in &mut out.nodes {
+        n.attributes.clear();
+    }
+    for (m, original) in out.messages.iter_mut().zip(&db.messages) {
+        m.attributes = keep_message(db, original);
+        for s in &mut m.signals {
+            s.attributes.retain(|(n, _)| kept.contains(&n.as_str()));
+        }
+    }
+    attrs::define_used(&mut out);
+    out
+}
+
+/// Drop what none of the non-DBC formats say: value tables, environment variables, signal
+/// groups, statements kept verbatim, bit timing and node comments.
+pub(crate) fn drop_dbc_only(db: &mut Database, omissions: &mut Omissions) {
+    if !db.value_tables.is_empty() {
+        omissions.add(format!("{} value tables", db.value_tables.len()));
+    }
+    if !db.env_vars.is_empty() {
+        omissions.add(format!("{} environment variables", db.env_vars.len()));
+    }
+    if !db.signal_groups.is_empty() {
+        omissions.add(format!("{} signal groups", db.signal_groups.len()));
+    }
+    if !db.unknown.is_empty() {
+        omissions.add(format!(
+            "{} statements kept verbatim from the DBC",
+            db.unknown.len()
+        ));
+    }
+    if !db.bit_timing.trim().is_empty() {
+        omissions.add("the bit timing (BS_)");
+    }
+    let commented = db.nodes.iter().filter(|n| n.comment.is_some()).count();
+    if commented > 0 {
+        omissions.add(format!("comments on {commented} nodes"));
+    }
+    db.value_tables.clear();
+    db.env_vars.clear();
+    db.signal_groups.clear();
+    db.unknown.clear();
+    db.bit_timing.clear();
+    db.new_symbols.clear();
+    for n in &mut db.nodes {
+        n.comment = None;
+    }
+}
+
+/// Extended multiplexing (`SG_MUL_VAL_`) and multiplexors inside a multiplexed group reduced to
+/// simple multiplexing, each reduction named.
+pub(crate) fn simple_multiplexing(db: &mut Database, omissions: &mut Omissions) {
+    for m in &mut db.messages {
+        for s in &mut m.signals {
+            if let Some(c) = s.mux_condition.take() {
+                let simple = matches!(s.multiplexing, Multiplexing::Multiplexed(v) if c.ranges == [(v, v)]);
+                if !simple {
+                    omissions.add(format!(
+                        "extended multiplexing of signal {} in message {}",
+                        s.name, m.name
+                    ));
+                }
+            }
+            if let Multiplexing::MultiplexedMultiplexor(v) = s.multiplexing {
+                omissions.add(format!(
+                    "signal {} in message {} as a multiplexor (it stays multiplexed by {v})",
+                    s.name, m.name
+                ));
+                s.multiplexing = Multiplexing::Multiplexed(v);
+            }
+        }
+    }
+}
+
+/// A message's signals in the order a multiplexing format writes them: each multiplexor
+/// followed by its groups, in the order their values first appear, the others where they were.
+pub(crate) fn grouped_signal_order(signals: &[Signal]) -> Vec<Signal> {
+    let mut out: Vec<Signal> = Vec::with_capacity(signals.len());
+    let muxed = |s: &Signal| matches!(s.multiplexing, Multiplexing::Multiplexed(_));
+    let has_multiplexor = signals
+        .iter()
+        .any(|s| s.multiplexing == Multiplexing::Multiplexor);
+    for s in signals {
+        if muxed(s) && has_multiplexor {
+            continue;
+        }
+        out.push(s.clone());
+        if s.multiplexing == Multiplexing::Multiplexor {
+            let mut values: Vec<u64> = Vec::new();
+            for o in signals {
+                if let Multiplexing::Multiplexed(v) = o.multiplexing {
+                    if !values.contains(&v) {
+                        values.push(v);
+                    }
+                }
+            }
+            for v in values {
+                out.extend(
+                    signals
+                        .iter()
+                        .filter(|o| o.multiplexing == Multiplexing::Multiplexed(v))
+                        .cloned(),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// Nodes that transmitters and receivers name but the node list lacks, appended to it.
+pub(crate) fn declare_referenced_nodes(db: &mut Database, omissions: &mut Omissions) {
+    let mut missing: Vec<String> = Vec::new();
+    for m in &db.messages {
+        let names = std::iter::once(&m.transmitter)
+            .chain(&m.senders)
+            .chain(m.signals.iter().flat_map(|s| &s.receivers));
+        for name in names {
+            if name != NO_NODE
+                && !db.nodes.iter().any(|n| &n.name == name)
+                && !missing.contains(name)
+            {
+                missing.push(name.clone());
+            }
+        }
+    }
+    if !missing.is_empty() {
+        omissions.add(format!(
+            "nodes {} are named but not declared; declared in the written file",
+            missing.join(", ")
+        ));
+    }
+    db.nodes.extend(missing.into_iter().map(|name| Node {
+        name,
+        comment: None,
+        attributes: Vec::new(),
+    }));
+}
+
+/// Escape text for an XML attribute or element.
+pub(crate) fn xml_escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            '\n' => out.push_str("&#10;"),
+            '\r' => out.push_str("&#13;"),
+            '\t' => out.push_str("&#9;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_named_by_extension_and_recognised_by_content() {
+        assert_eq!(
+            Format::from_path(Path::new("a/b.KCD")),
+            Some(Format::Kcd)
+        );
+        assert_eq!(Format::from_path(Path::new("x.txt")), None);
+        assert_eq!(
+            Format::sniff(b"<?xml version=\"1.0\"?>\n<NetworkDefinition xmlns=\"x\"/>"),
+            Format::Kcd
+        );
+        assert_eq!(
+            Format::sniff(b"FormatVersion=6.0 // Do not edit\n"),
+            Format::Sym
+        );
+        assert_eq!(Format::sniff(b"VERSION \"\"\n"), Format::Dbc);
+        assert_eq!(
+            Format::of_file(Some(Format::Dbc), Path::new("x.kcd"), b""),
+            Format::Dbc
+        );
+    }
+}
