@@ -138,6 +138,15 @@ pub fn expressible(db: &Database, format: Format) -> (Database, Vec<Omission>) {
     }
 }
 
+/// The largest identifier of a frame format.
+pub(crate) fn id_limit(extended: bool) -> u32 {
+    if extended {
+        0x1FFF_FFFF
+    } else {
+        0x7FF
+    }
+}
+
 /// The node name DBC uses for "no node".
 pub(crate) const NO_NODE: &str = "Vector__XXX";
 
@@ -356,7 +365,10 @@ pub(crate) fn keep_attributes(
     );
     omissions.attributes(
         "node",
-        db.nodes.iter().flat_map(|n| &n.attributes).map(|(n, _)| n.as_str()),
+        db.nodes
+            .iter()
+            .flat_map(|n| &n.attributes)
+            .map(|(n, _)| n.as_str()),
         db.nodes.iter().filter(|n| !n.attributes.is_empty()).count(),
     );
     omissions.attributes(
@@ -426,6 +438,16 @@ pub(crate) fn drop_dbc_only(db: &mut Database, omissions: &mut Omissions) {
     if commented > 0 {
         omissions.add(format!("comments on {commented} nodes"));
     }
+    let before = db.messages.len();
+    db.messages
+        .retain(|m| m.name != crate::INDEPENDENT_SIGNALS && m.id <= id_limit(m.extended));
+    if db.messages.len() < before {
+        omissions.add(format!(
+            "{} messages without a valid identifier ({} and the like)",
+            before - db.messages.len(),
+            crate::INDEPENDENT_SIGNALS
+        ));
+    }
     db.value_tables.clear();
     db.env_vars.clear();
     db.signal_groups.clear();
@@ -435,6 +457,19 @@ pub(crate) fn drop_dbc_only(db: &mut Database, omissions: &mut Omissions) {
     for n in &mut db.nodes {
         n.comment = None;
     }
+    // An empty comment and none are the same thing in the other formats.
+    let blank = |c: &mut Option<String>| {
+        if c.as_deref().is_some_and(|t| t.trim().is_empty()) {
+            *c = None;
+        }
+    };
+    blank(&mut db.comment);
+    for m in &mut db.messages {
+        blank(&mut m.comment);
+        for s in &mut m.signals {
+            blank(&mut s.comment);
+        }
+    }
 }
 
 /// Extended multiplexing (`SG_MUL_VAL_`) and multiplexors inside a multiplexed group reduced to
@@ -443,7 +478,8 @@ pub(crate) fn simple_multiplexing(db: &mut Database, omissions: &mut Omissions) 
     for m in &mut db.messages {
         for s in &mut m.signals {
             if let Some(c) = s.mux_condition.take() {
-                let simple = matches!(s.multiplexing, Multiplexing::Multiplexed(v) if c.ranges == [(v, v)]);
+                let simple =
+                    matches!(s.multiplexing, Multiplexing::Multiplexed(v) if c.ranges == [(v, v)]);
                 if !simple {
                     omissions.add(format!(
                         "extended multiplexing of signal {} in message {}",
@@ -551,10 +587,7 @@ mod tests {
 
     #[test]
     fn formats_are_named_by_extension_and_recognised_by_content() {
-        assert_eq!(
-            Format::from_path(Path::new("a/b.KCD")),
-            Some(Format::Kcd)
-        );
+        assert_eq!(Format::from_path(Path::new("a/b.KCD")), Some(Format::Kcd));
         assert_eq!(Format::from_path(Path::new("x.txt")), None);
         assert_eq!(
             Format::sniff(b"<?xml version=\"1.0\"?>\n<NetworkDefinition xmlns=\"x\"/>"),

@@ -136,7 +136,11 @@ impl<'input> Reader<'_, 'input> {
             let id = r.attribute("id").unwrap_or_default();
             match self.node_ids.iter().find(|(i, _)| i == id) {
                 Some((_, name)) => names.push(name.clone()),
-                None => self.problem(r, format!("NodeRef {id} names no Node"), "reference skipped")?,
+                None => self.problem(
+                    r,
+                    format!("NodeRef {id} names no Node"),
+                    "reference skipped",
+                )?,
             }
         }
         Ok(names)
@@ -245,7 +249,11 @@ impl<'input> Reader<'_, 'input> {
         let name = s.attribute("name").unwrap_or_default().to_string();
         let number = |key: &str, default: u32| s.attribute(key).map_or(Ok(default), str::parse);
         let (Ok(offset), Ok(length)) = (number("offset", 0), number("length", 1)) else {
-            self.problem(s, format!("signal {name}'s offset or length is not a number"), "signal skipped")?;
+            self.problem(
+                s,
+                format!("signal {name}'s offset or length is not a number"),
+                "signal skipped",
+            )?;
             return Ok(None);
         };
         if s.attribute("offset").is_none() || !(1..=64).contains(&length) || offset >= 512 {
@@ -260,7 +268,11 @@ impl<'input> Reader<'_, 'input> {
             Some("big") => ByteOrder::BigEndian,
             None | Some("little") => ByteOrder::LittleEndian,
             Some(other) => {
-                self.problem(s, format!("signal {name}'s endianess {other} is neither little nor big"), "read as little")?;
+                self.problem(
+                    s,
+                    format!("signal {name}'s endianess {other} is neither little nor big"),
+                    "read as little",
+                )?;
                 ByteOrder::LittleEndian
             }
         };
@@ -300,10 +312,21 @@ impl<'input> Reader<'_, 'input> {
                                 (Some(v), Some(n)) => {
                                     signal.value_descriptions.push((v, n.to_string()));
                                 }
-                                _ => self.problem(label, "a Label without an integer value and a name", "label skipped")?,
+                                _ => self.problem(
+                                    label,
+                                    "a Label without an integer value and a name",
+                                    "label skipped",
+                                )?,
                             }
                         } else if is(&label, "LabelGroup") {
-                            self.problem(label, format!("signal {}'s LabelGroup (a range of values under one name)", signal.name), "group skipped, as cantools does")?;
+                            self.problem(
+                                label,
+                                format!(
+                                    "signal {}'s LabelGroup (a range of values under one name)",
+                                    signal.name
+                                ),
+                                "group skipped, as cantools does",
+                            )?;
                         }
                     }
                 }
@@ -346,7 +369,12 @@ impl<'input> Reader<'_, 'input> {
                 Some(n) => *field = n,
                 None => self.problem(
                     v,
-                    format!("signal {}'s {} {} is not a number", signal.name, attribute.name(), attribute.value()),
+                    format!(
+                        "signal {}'s {} {} is not a number",
+                        signal.name,
+                        attribute.name(),
+                        attribute.value()
+                    ),
                     "default kept",
                 )?,
             }
@@ -359,7 +387,10 @@ impl<'input> Reader<'_, 'input> {
         if let Some(bits) = float_length.filter(|&b| b != signal.length) {
             self.problem(
                 v,
-                format!("signal {} is a {bits}-bit float but {} bits long", signal.name, signal.length),
+                format!(
+                    "signal {} is a {bits}-bit float but {} bits long",
+                    signal.name, signal.length
+                ),
                 "read as an integer",
             )?;
             signal.value_type = ValueType::Integer { signed: false };
@@ -629,7 +660,10 @@ mod tests {
         assert_eq!(speed.multiplexing, Multiplexing::Multiplexed(1));
         assert_eq!(speed.factor, Num::Float(0.1));
         assert_eq!(speed.receivers, ["Display"]);
-        assert_eq!(m.signal("Page").unwrap().multiplexing, Multiplexing::Multiplexor);
+        assert_eq!(
+            m.signal("Page").unwrap().multiplexing,
+            Multiplexing::Multiplexor
+        );
         assert_eq!(m.signal("Mode").unwrap().value_descriptions.len(), 2);
     }
 

@@ -1125,11 +1125,7 @@ pub(crate) fn layout_diagnostics(db: &Database) -> Vec<Diagnostic> {
     let mut diags = Vec::new();
     {
         let mut found: Vec<(Position, String)> = Vec::new();
-        for m in db
-            .messages
-            .iter()
-            .filter(|m| m.name != INDEPENDENT_SIGNALS)
-        {
+        for m in db.messages.iter().filter(|m| m.name != INDEPENDENT_SIGNALS) {
             let mut used: Vec<(&Signal, BitMap)> = Vec::new();
             for s in &m.signals {
                 let Some((bits, last_byte)) = signal_bits(s) else {
@@ -1172,11 +1168,7 @@ pub(crate) fn layout_diagnostics(db: &Database) -> Vec<Diagnostic> {
                 }
             }
         }
-        if db
-            .messages
-            .iter()
-            .all(|m| m.name == INDEPENDENT_SIGNALS)
-        {
+        if db.messages.iter().all(|m| m.name == INDEPENDENT_SIGNALS) {
             warnings.push((
                 Position { line: 1, column: 1 },
                 "the file defines no messages".to_string(),

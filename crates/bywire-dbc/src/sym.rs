@@ -150,7 +150,12 @@ fn hex(text: &str) -> Option<u64> {
 }
 
 impl Reader {
-    fn problem(&mut self, at: Position, message: impl Into<String>, resolution: &str) -> Result<(), ParseError> {
+    fn problem(
+        &mut self,
+        at: Position,
+        message: impl Into<String>,
+        resolution: &str,
+    ) -> Result<(), ParseError> {
         self.report.add(Severity::Error, at, message, resolution)
     }
 
@@ -197,15 +202,28 @@ impl Reader {
                     "RECEIVE" => Some(Section::Receive),
                     "SENDRECEIVE" => Some(Section::SendReceive),
                     other => {
-                        self.problem(at, format!("unknown section {{{other}}}"), "its statements skipped")?;
+                        self.problem(
+                            at,
+                            format!("unknown section {{{other}}}"),
+                            "its statements skipped",
+                        )?;
                         None
                     }
                 };
                 continue;
             }
             if let Some(name) = body.strip_prefix('[').and_then(|b| b.strip_suffix(']')) {
-                if !matches!(section, Some(Section::Send | Section::Receive | Section::SendReceive)) {
-                    self.problem(at, format!("symbol [{name}] outside {{SEND}}, {{RECEIVE}} and {{SENDRECEIVE}}"), "symbol skipped")?;
+                if !matches!(
+                    section,
+                    Some(Section::Send | Section::Receive | Section::SendReceive)
+                ) {
+                    self.problem(
+                        at,
+                        format!(
+                            "symbol [{name}] outside {{SEND}}, {{RECEIVE}} and {{SENDRECEIVE}}"
+                        ),
+                        "symbol skipped",
+                    )?;
                 }
                 self.symbols.push(Symbol {
                     name: name.trim_matches('"').to_string(),
@@ -216,7 +234,11 @@ impl Reader {
                 continue;
             }
             let Some((key, value)) = body.split_once('=') else {
-                self.problem(at, format!("'{body}' is not a statement (key=value)"), "line skipped")?;
+                self.problem(
+                    at,
+                    format!("'{body}' is not a statement (key=value)"),
+                    "line skipped",
+                )?;
                 continue;
             };
             let statement = Statement {
@@ -230,9 +252,17 @@ impl Reader {
                     return Err(Report::fatal(at, "a SYM file begins with FormatVersion="));
                 }
                 version_seen = true;
-                let version = words(&statement.value).into_iter().next().unwrap_or_default();
+                let version = words(&statement.value)
+                    .into_iter()
+                    .next()
+                    .unwrap_or_default();
                 if version != "6.0" {
-                    self.report.add(Severity::Warning, at, format!("SYM version {version}; this reader knows 6.0"), "read as 6.0")?;
+                    self.report.add(
+                        Severity::Warning,
+                        at,
+                        format!("SYM version {version}; this reader knows 6.0"),
+                        "read as 6.0",
+                    )?;
                 }
                 self.db.version = version;
                 continue;
@@ -240,14 +270,19 @@ impl Reader {
             self.statement(section, statement)?;
         }
         if !version_seen {
-            return Err(Report::fatal(position(0, 0), "a SYM file begins with FormatVersion="));
+            return Err(Report::fatal(
+                position(0, 0),
+                "a SYM file begins with FormatVersion=",
+            ));
         }
         Ok(())
     }
 
     fn statement(&mut self, section: Option<Section>, s: Statement<'_>) -> Result<(), ParseError> {
         match (section, s.key) {
-            (None, "Title") => self.db.comment = Some(words(&s.value).join(" ")).filter(|t| !t.is_empty()),
+            (None, "Title") => {
+                self.db.comment = Some(words(&s.value).join(" ")).filter(|t| !t.is_empty())
+            }
             (None, _) => {}
             (Some(Section::Enums), "Enum") => self.enumeration(&s)?,
             (Some(Section::Signals), "Sig") => {
@@ -255,8 +290,14 @@ impl Reader {
                     self.declared.insert(d.signal.name.clone(), d);
                 }
             }
-            (Some(Section::Send | Section::Receive | Section::SendReceive), _) => self.symbol_statement(s)?,
-            (Some(_), key) => self.problem(s.at, format!("{key}= does not belong in this section"), "statement skipped")?,
+            (Some(Section::Send | Section::Receive | Section::SendReceive), _) => {
+                self.symbol_statement(s)?
+            }
+            (Some(_), key) => self.problem(
+                s.at,
+                format!("{key}= does not belong in this section"),
+                "statement skipped",
+            )?,
         }
         Ok(())
     }
@@ -277,33 +318,56 @@ impl Reader {
                 .and_then(|(v, d)| Some((v.trim().parse::<i128>().ok()?, words(d).join(" "))));
             match parsed {
                 Some(pair) => values.push(pair),
-                None => self.problem(s.at, format!("enum {}'s entry '{item}' is not number=\"name\"", name.trim()), "entry skipped")?,
+                None => self.problem(
+                    s.at,
+                    format!(
+                        "enum {}'s entry '{item}' is not number=\"name\"",
+                        name.trim()
+                    ),
+                    "entry skipped",
+                )?,
             }
         }
-        self.enums.insert(name.trim().trim_matches('"').to_string(), values);
+        self.enums
+            .insert(name.trim().trim_matches('"').to_string(), values);
         Ok(())
     }
 
     /// A `Sig=` (name, type, length, flags, attributes) or `Var=` (name, type, start,length,
     /// flags, attributes); a `Var`'s start comes back in the signal's start bit as written.
-    fn declaration(&mut self, s: &Statement<'_>, variable: bool) -> Result<Option<Declared>, ParseError> {
+    fn declaration(
+        &mut self,
+        s: &Statement<'_>,
+        variable: bool,
+    ) -> Result<Option<Declared>, ParseError> {
         let words = words(&s.value);
         let mut it = words.iter().peekable();
         let (Some(name), Some(kind)) = (it.next(), it.next()) else {
-            self.problem(s.at, format!("{}= needs a name and a type", s.key), "signal skipped")?;
+            self.problem(
+                s.at,
+                format!("{}= needs a name and a type", s.key),
+                "signal skipped",
+            )?;
             return Ok(None);
         };
         let mut start = 0;
         let mut length: Option<u32> = None;
         if variable {
             let place = it.next().map(String::as_str).unwrap_or_default();
-            match place.split_once(',').map(|(a, b)| (a.trim().parse(), b.trim().parse())) {
+            match place
+                .split_once(',')
+                .map(|(a, b)| (a.trim().parse(), b.trim().parse()))
+            {
                 Some((Ok(a), Ok(b))) => {
                     start = a;
                     length = Some(b);
                 }
                 _ => {
-                    self.problem(s.at, format!("variable {name}'s place '{place}' is not start,length"), "signal skipped")?;
+                    self.problem(
+                        s.at,
+                        format!("variable {name}'s place '{place}' is not start,length"),
+                        "signal skipped",
+                    )?;
                     return Ok(None);
                 }
             }
@@ -333,19 +397,25 @@ impl Reader {
                 Some(1)
             }
             "char" => Some(8),
-            other => match self.enums.get(other) {
-                Some(values) => {
-                    enumeration = Some(values.clone());
-                    length
+            other => {
+                match self.enums.get(other) {
+                    Some(values) => {
+                        enumeration = Some(values.clone());
+                        length
+                    }
+                    None => {
+                        self.problem(s.at, format!("signal {name}'s type {other} is no type or enum declared before it"), "signal skipped")?;
+                        return Ok(None);
+                    }
                 }
-                None => {
-                    self.problem(s.at, format!("signal {name}'s type {other} is no type or enum declared before it"), "signal skipped")?;
-                    return Ok(None);
-                }
-            },
+            }
         };
         let Some(length) = length.filter(|l| (1..=64).contains(l)) else {
-            self.problem(s.at, format!("signal {name} needs a length of 1 to 64 bits"), "signal skipped")?;
+            self.problem(
+                s.at,
+                format!("signal {name} needs a length of 1 to 64 bits"),
+                "signal skipped",
+            )?;
             return Ok(None);
         };
         let mut signal = Signal {
@@ -377,7 +447,11 @@ impl Reader {
                 continue; // display flags: -h hexadecimal, -b binary, -v, -s
             }
             let Some((key, value)) = word.strip_prefix('/').and_then(|w| w.split_once(':')) else {
-                self.problem(s.at, format!("signal {name}'s '{word}' is not a /key:value"), "ignored")?;
+                self.problem(
+                    s.at,
+                    format!("signal {name}'s '{word}' is not a /key:value"),
+                    "ignored",
+                )?;
                 continue;
             };
             let number = parse_num(value);
@@ -389,13 +463,25 @@ impl Reader {
                 ("max", Some(n)) => maximum = n,
                 ("d", Some(n)) => default = Some(n),
                 ("d", None) | ("p", _) => {}
-                ("spn", Some(Num::Int(n))) => signal.attributes.push((attrs::SPN.into(), AttrValue::Number(Num::Int(n)))),
-                ("ln", _) => signal.attributes.push((attrs::LONG_NAME.into(), AttrValue::Str(value.to_string()))),
+                ("spn", Some(Num::Int(n))) => signal
+                    .attributes
+                    .push((attrs::SPN.into(), AttrValue::Number(Num::Int(n)))),
+                ("ln", _) => signal
+                    .attributes
+                    .push((attrs::LONG_NAME.into(), AttrValue::Str(value.to_string()))),
                 ("e", _) => match self.enums.get(value) {
                     Some(values) => signal.value_descriptions = values.clone(),
-                    None => self.problem(s.at, format!("signal {name}'s enum {value} is not declared"), "no value names")?,
+                    None => self.problem(
+                        s.at,
+                        format!("signal {name}'s enum {value} is not declared"),
+                        "no value names",
+                    )?,
                 },
-                (_, _) => self.problem(s.at, format!("signal {name}'s /{key}:{value} is not understood"), "ignored")?,
+                (_, _) => self.problem(
+                    s.at,
+                    format!("signal {name}'s /{key}:{value} is not understood"),
+                    "ignored",
+                )?,
             }
         }
         signal.minimum = minimum;
@@ -405,18 +491,30 @@ impl Reader {
 
     fn symbol_statement(&mut self, s: Statement<'_>) -> Result<(), ParseError> {
         if self.symbols.is_empty() {
-            return self.problem(s.at, format!("{}= before any [symbol]", s.key), "statement skipped");
+            return self.problem(
+                s.at,
+                format!("{}= before any [symbol]", s.key),
+                "statement skipped",
+            );
         }
         match s.key {
             "ID" => self.identifier(&s)?,
             "Len" | "DLC" => match s.value.parse::<u32>() {
                 Ok(n) if n <= 64 => self.current().length = Some(n),
-                _ => self.problem(s.at, format!("length {} is not 0 to 64 bytes", s.value), "8 bytes")?,
+                _ => self.problem(
+                    s.at,
+                    format!("length {} is not 0 to 64 bytes", s.value),
+                    "8 bytes",
+                )?,
             },
             "Type" => self.current().kind = Some(s.value.clone()),
             "CycleTime" => match words(&s.value).first().map(|w| w.parse::<u64>()) {
                 Some(Ok(ms)) => self.current().cycle_ms = Some(ms).filter(|&ms| ms > 0),
-                _ => self.problem(s.at, format!("cycle time {} is not whole milliseconds", s.value), "no cycle time")?,
+                _ => self.problem(
+                    s.at,
+                    format!("cycle time {} is not whole milliseconds", s.value),
+                    "no cycle time",
+                )?,
             },
             "Mux" => self.multiplexor(&s)?,
             "Var" => {
@@ -427,8 +525,15 @@ impl Reader {
             }
             "Sig" => {
                 let words = words(&s.value);
-                let (Some(name), Some(start)) = (words.first(), words.get(1).and_then(|w| w.parse::<u32>().ok())) else {
-                    return self.problem(s.at, "Sig= in a symbol needs a name and a start bit", "signal skipped");
+                let (Some(name), Some(start)) = (
+                    words.first(),
+                    words.get(1).and_then(|w| w.parse::<u32>().ok()),
+                ) else {
+                    return self.problem(
+                        s.at,
+                        "Sig= in a symbol needs a name and a start bit",
+                        "signal skipped",
+                    );
                 };
                 match self.declared.get(name).cloned() {
                     Some(mut d) => {
@@ -437,11 +542,19 @@ impl Reader {
                         let signal = self.placed(d);
                         self.current().signals.push(signal);
                     }
-                    None => self.problem(s.at, format!("signal {name} is not declared under {{SIGNALS}}"), "signal skipped")?,
+                    None => self.problem(
+                        s.at,
+                        format!("signal {name} is not declared under {{SIGNALS}}"),
+                        "signal skipped",
+                    )?,
                 }
             }
             "Timeout" | "MinInterval" | "Color" => {}
-            key => self.problem(s.at, format!("{key}= is not a symbol's statement"), "ignored")?,
+            key => self.problem(
+                s.at,
+                format!("{key}= is not a symbol's statement"),
+                "ignored",
+            )?,
         }
         Ok(())
     }
@@ -461,7 +574,9 @@ impl Reader {
             signal.start_bit = reverse_bits_in_byte(signal.start_bit);
         }
         if let Some(default) = d.default.and_then(|p| raw_of_physical(&signal, p)) {
-            signal.attributes.push((attrs::START_VALUE.into(), AttrValue::Number(default)));
+            signal
+                .attributes
+                .push((attrs::START_VALUE.into(), AttrValue::Number(default)));
         }
         signal
     }
@@ -473,15 +588,29 @@ impl Reader {
             None => (text.clone(), None),
         };
         let Some(lo) = hex(&low).and_then(|v| u32::try_from(v).ok()) else {
-            return self.problem(s.at, format!("identifier {text} is not hexadecimal ending in h"), "symbol skipped");
+            return self.problem(
+                s.at,
+                format!("identifier {text} is not hexadecimal ending in h"),
+                "symbol skipped",
+            );
         };
         let hi = match high.as_deref().map(hex) {
             None => lo,
             Some(Some(h)) => u32::try_from(h).unwrap_or(u32::MAX),
-            Some(None) => return self.problem(s.at, format!("identifier range {text} does not end in hexadecimal"), "symbol skipped"),
+            Some(None) => {
+                return self.problem(
+                    s.at,
+                    format!("identifier range {text} does not end in hexadecimal"),
+                    "symbol skipped",
+                )
+            }
         };
         if hi < lo || hi - lo >= MAX_RANGE {
-            return self.problem(s.at, format!("identifier range {text} is empty or over {MAX_RANGE} identifiers"), "symbol skipped");
+            return self.problem(
+                s.at,
+                format!("identifier range {text} is empty or over {MAX_RANGE} identifiers"),
+                "symbol skipped",
+            );
         }
         let eight_digits = low.len() == 9;
         let comment = s.comment.clone();
@@ -494,15 +623,30 @@ impl Reader {
     fn multiplexor(&mut self, s: &Statement<'_>) -> Result<(), ParseError> {
         let words = words(&s.value);
         let name = words.first().cloned().unwrap_or_default();
-        let place = words.get(1).and_then(|p| p.split_once(',')).map(|(a, b)| (a.trim().parse::<u32>(), b.trim().parse::<u32>()));
+        let place = words
+            .get(1)
+            .and_then(|p| p.split_once(','))
+            .map(|(a, b)| (a.trim().parse::<u32>(), b.trim().parse::<u32>()));
         let value = words.get(2).and_then(|v| hex(v).or_else(|| v.parse().ok()));
         let (Some((Ok(start), Ok(length))), Some(value)) = (place, value) else {
-            return self.problem(s.at, format!("Mux={} is not name start,length value", s.value), "symbol's multiplexing skipped");
+            return self.problem(
+                s.at,
+                format!("Mux={} is not name start,length value", s.value),
+                "symbol's multiplexing skipped",
+            );
         };
         if !(1..=64).contains(&length) {
-            return self.problem(s.at, format!("multiplexor {name} needs 1 to 64 bits"), "symbol's multiplexing skipped");
+            return self.problem(
+                s.at,
+                format!("multiplexor {name} needs 1 to 64 bits"),
+                "symbol's multiplexing skipped",
+            );
         }
-        let byte_order = if words.iter().any(|w| w == "-m") { ByteOrder::BigEndian } else { ByteOrder::LittleEndian };
+        let byte_order = if words.iter().any(|w| w == "-m") {
+            ByteOrder::BigEndian
+        } else {
+            ByteOrder::LittleEndian
+        };
         let start_bit = match byte_order {
             ByteOrder::LittleEndian => start,
             ByteOrder::BigEndian => reverse_bits_in_byte(start),
@@ -536,10 +680,19 @@ impl Reader {
         let mut db = std::mem::take(&mut self.db);
         let symbols = std::mem::take(&mut self.symbols);
         for section in [Section::Send, Section::Receive, Section::SendReceive] {
-            let in_section: Vec<&Symbol> = symbols.iter().filter(|s| s.section == Some(section)).collect();
+            let in_section: Vec<&Symbol> = symbols
+                .iter()
+                .filter(|s| s.section == Some(section))
+                .collect();
             for symbol in &in_section {
-                let Some((lo, hi, eight_digits)) = symbol.id else { continue };
-                let kind = symbol.kind.as_deref().unwrap_or("Standard").to_ascii_lowercase();
+                let Some((lo, hi, eight_digits)) = symbol.id else {
+                    continue;
+                };
+                let kind = symbol
+                    .kind
+                    .as_deref()
+                    .unwrap_or("Standard")
+                    .to_ascii_lowercase();
                 let extended = eight_digits || kind.contains("extended");
                 let fd = kind.starts_with("fd");
                 let signals = self.message_signals(symbol, &in_section)?;
@@ -550,13 +703,26 @@ impl Reader {
                 };
                 let mut attributes = Vec::new();
                 if let Some(ms) = symbol.cycle_ms {
-                    attributes.push((attrs::CYCLE_TIME.to_string(), AttrValue::Number(Num::Int(i128::from(ms)))));
+                    attributes.push((
+                        attrs::CYCLE_TIME.to_string(),
+                        AttrValue::Number(Num::Int(i128::from(ms))),
+                    ));
                 }
                 if fd {
-                    attributes.push((attrs::FRAME_FORMAT.to_string(), AttrValue::Number(Num::Int(if extended { 3 } else { 2 }))));
+                    attributes.push((
+                        attrs::FRAME_FORMAT.to_string(),
+                        AttrValue::Number(Num::Int(if extended { 3 } else { 2 })),
+                    ));
                 }
                 if extended && hi > 0x1FFF_FFFF || !extended && hi > 0x7FF {
-                    self.problem(symbol.at, format!("message {}'s identifier {hi:#X} is too large for its format", symbol.name), "message skipped")?;
+                    self.problem(
+                        symbol.at,
+                        format!(
+                            "message {}'s identifier {hi:#X} is too large for its format",
+                            symbol.name
+                        ),
+                        "message skipped",
+                    )?;
                     continue;
                 }
                 for id in lo..=hi {
@@ -579,16 +745,32 @@ impl Reader {
         Ok(db)
     }
 
-    fn message_signals(&mut self, symbol: &Symbol, section: &[&Symbol]) -> Result<Vec<Signal>, ParseError> {
+    fn message_signals(
+        &mut self,
+        symbol: &Symbol,
+        section: &[&Symbol],
+    ) -> Result<Vec<Signal>, ParseError> {
         let Some((multiplexor, _)) = &symbol.mux else {
             return Ok(symbol.signals.clone());
         };
         // The symbol's own section, then every other of its name in the same section.
         let mut groups: Vec<(u64, &[Signal])> = Vec::new();
-        for other in std::iter::once(symbol).chain(section.iter().copied().filter(|o| o.name == symbol.name && !std::ptr::eq(*o, symbol))) {
+        for other in std::iter::once(symbol).chain(
+            section
+                .iter()
+                .copied()
+                .filter(|o| o.name == symbol.name && !std::ptr::eq(*o, symbol)),
+        ) {
             match &other.mux {
                 Some((_, value)) => groups.push((*value, &other.signals)),
-                None => self.problem(other.at, format!("symbol {} is multiplexed but this section of it has no Mux=", other.name), "its signals skipped")?,
+                None => self.problem(
+                    other.at,
+                    format!(
+                        "symbol {} is multiplexed but this section of it has no Mux=",
+                        other.name
+                    ),
+                    "its signals skipped",
+                )?,
             }
         }
         let mut values: Vec<u64> = groups.iter().map(|(v, _)| *v).collect();
@@ -607,10 +789,14 @@ impl Reader {
                 }
             }
         }
-        let mut out = vec![multiplexor.clone()];
-        for (mut s, mut in_groups) in merged {
+        for (_, in_groups) in &mut merged {
             in_groups.sort_unstable();
-            set_groups(&mut s, &multiplexor.name, &in_groups, values.len());
+        }
+        let all_groups: Vec<&[u64]> = merged.iter().map(|(_, g)| g.as_slice()).collect();
+        let common = common_is_none(&values, &all_groups);
+        let mut out = vec![multiplexor.clone()];
+        for (mut s, in_groups) in merged {
+            set_groups(&mut s, &multiplexor.name, &in_groups, values.len(), common);
             out.push(s);
         }
         Ok(out)
@@ -618,9 +804,10 @@ impl Reader {
 }
 
 /// Make `s` present for the multiplexor values `in_groups` of `all` values there are.
-fn set_groups(s: &mut Signal, switch: &str, in_groups: &[u64], all: usize) {
+/// A signal in every group is an ordinary signal when `common_is_none`.
+fn set_groups(s: &mut Signal, switch: &str, in_groups: &[u64], all: usize, common_is_none: bool) {
     match in_groups {
-        _ if all >= 2 && in_groups.len() == all => s.multiplexing = Multiplexing::None,
+        _ if common_is_none && in_groups.len() == all => s.multiplexing = Multiplexing::None,
         [one] => s.multiplexing = Multiplexing::Multiplexed(*one),
         [first, ..] => {
             s.multiplexing = Multiplexing::Multiplexed(*first);
@@ -638,6 +825,18 @@ fn set_groups(s: &mut Signal, switch: &str, in_groups: &[u64], all: usize) {
         }
         [] => {}
     }
+}
+
+/// Whether the signals in every group can be ordinary signals: only when each value also
+/// selects a signal of its own, so that the values the multiplexor may take stay known (a
+/// frame with any other value does not decode).
+fn common_is_none(values: &[u64], groups: &[&[u64]]) -> bool {
+    values.len() >= 2
+        && values.iter().all(|v| {
+            groups
+                .iter()
+                .any(|g| g.len() < values.len() && g.contains(v))
+        })
 }
 
 /// Two placements of one signal: equal but for their multiplexing and where they were read.
@@ -678,12 +877,14 @@ fn raw_of_physical(s: &Signal, physical: Num) -> Option<Num> {
     }
     let raw = (physical.as_f64() - s.offset.as_f64()) / factor;
     let nearest = raw.round();
-    Some(if (raw - nearest).abs() < 1e-6 * nearest.abs().max(1.0) && nearest.abs() < 9.0e15 {
-        #[allow(clippy::cast_possible_truncation)]
-        Num::Int(nearest as i128)
-    } else {
-        Num::Float(raw)
-    })
+    Some(
+        if (raw - nearest).abs() < 1e-6 * nearest.abs().max(1.0) && nearest.abs() < 9.0e15 {
+            #[allow(clippy::cast_possible_truncation)]
+            Num::Int(nearest as i128)
+        } else {
+            Num::Float(raw)
+        },
+    )
 }
 
 /// A raw start value as the physical default SYM writes.
@@ -708,42 +909,82 @@ fn section_of(m: &Message) -> Section {
 
 /// `db` reduced to what SYM says.
 pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
+    let (out, omissions, _) = reduce(db);
+    (out, omissions)
+}
+
+/// `db` reduced to what SYM says, what that dropped, and each message's multiplexor values
+/// (a value may select only the signals every value selects, so the signals alone do not tell).
+fn reduce(db: &Database) -> (Database, Vec<Omission>, Vec<Vec<u64>>) {
     let mut omissions = Omissions::default();
     // In the order the reader gives them: `/ln:` and `/spn:` as written, the start value last.
     let kept = [attrs::LONG_NAME, attrs::SPN, attrs::START_VALUE];
-    let family = [attrs::CYCLE_TIME, attrs::FRAME_FORMAT, attrs::LONG_NAME, attrs::SPN, attrs::START_VALUE];
+    let family = [
+        attrs::CYCLE_TIME,
+        attrs::FRAME_FORMAT,
+        attrs::LONG_NAME,
+        attrs::SPN,
+        attrs::START_VALUE,
+    ];
     let mut out = keep_attributes(db, &family, &mut omissions, |db, m| {
         let mut list = Vec::new();
         if let Some(ms) = cycle_time_ms(db, m) {
-            list.push((attrs::CYCLE_TIME.to_string(), AttrValue::Number(Num::Int(i128::from(ms)))));
+            list.push((
+                attrs::CYCLE_TIME.to_string(),
+                AttrValue::Number(Num::Int(i128::from(ms))),
+            ));
         }
         if db.fd_format(m).0 {
-            list.push((attrs::FRAME_FORMAT.to_string(), AttrValue::Number(Num::Int(if m.extended { 3 } else { 2 }))));
+            list.push((
+                attrs::FRAME_FORMAT.to_string(),
+                AttrValue::Number(Num::Int(if m.extended { 3 } else { 2 })),
+            ));
         }
         list
     });
     drop_dbc_only(&mut out, &mut omissions);
-    let no_brs = db.messages.iter().filter(|m| db.fd_format(m) == (true, false)).count();
+    let no_brs = db
+        .messages
+        .iter()
+        .filter(|m| db.fd_format(m) == (true, false))
+        .count();
     if no_brs > 0 {
-        omissions.add(format!("CAN FD without bit rate switching on {no_brs} messages"));
+        omissions.add(format!(
+            "CAN FD without bit rate switching on {no_brs} messages"
+        ));
     }
     if !out.nodes.is_empty() {
-        omissions.add(format!("{} nodes (SYM knows only messages sent, received or both)", out.nodes.len()));
+        omissions.add(format!(
+            "{} nodes (SYM knows only messages sent, received or both)",
+            out.nodes.len()
+        ));
         out.nodes.clear();
     }
     if !out.version.is_empty() && out.version != "6.0" {
         omissions.add(format!("the version {}", out.version));
     }
     out.version = "6.0".into();
-    if out.comment.as_deref().is_some_and(|c| c.contains(['\n', '"'])) {
+    if out
+        .comment
+        .as_deref()
+        .is_some_and(|c| c.contains(['\n', '"']))
+    {
         omissions.add("line breaks and quotes in the network comment");
     }
-    out.comment = out.comment.map(|c| one_line(&c).replace('"', "'")).filter(|c| !c.is_empty());
+    out.comment = out
+        .comment
+        .map(|c| one_line(&c).replace('"', "'"))
+        .filter(|c| !c.is_empty());
     let mut re_sent = 0;
     let mut receivers = 0;
     let mut comments = 0;
+    let mut values_of = Vec::with_capacity(out.messages.len());
     for m in &mut out.messages {
-        if !matches!((m.transmitter.as_str(), m.senders.as_slice()), (SENDER, []) | (RECEIVER, [])) && !(m.transmitter == SENDER && m.senders == [RECEIVER]) {
+        if !matches!(
+            (m.transmitter.as_str(), m.senders.as_slice()),
+            (SENDER, []) | (RECEIVER, [])
+        ) && !(m.transmitter == SENDER && m.senders == [RECEIVER])
+        {
             re_sent += 1;
             m.transmitter = SENDER.into();
             m.senders = vec![RECEIVER.into()];
@@ -757,7 +998,11 @@ pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
             s.receivers = vec![NO_NODE.to_string()];
             comments += usize::from(s.comment.as_deref().is_some_and(|c| c.contains('\n')));
             s.comment = s.comment.as_deref().map(one_line).filter(|c| !c.is_empty());
-            if let Some(at) = s.attributes.iter().position(|(n, _)| n == attrs::START_VALUE) {
+            if let Some(at) = s
+                .attributes
+                .iter()
+                .position(|(n, _)| n == attrs::START_VALUE)
+            {
                 let raw = match s.attributes.get(at) {
                     Some((_, AttrValue::Number(n))) => raw_of_physical(s, physical_of_raw(s, *n)),
                     _ => None,
@@ -778,9 +1023,10 @@ pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
                 AttrValue::Number(_) => n != attrs::SPN && n != attrs::LONG_NAME,
                 AttrValue::Str(_) => n == attrs::LONG_NAME,
             });
-            s.attributes.sort_by_key(|(n, _)| kept.iter().position(|k| k == n));
+            s.attributes
+                .sort_by_key(|(n, _)| kept.iter().position(|k| k == n));
         }
-        multiplexing(m, &mut omissions);
+        values_of.push(multiplexing(m, &mut omissions));
     }
     if re_sent > 0 {
         omissions.add(format!("the senders of {re_sent} messages (SYM says only sent, received or both; written as both)"));
@@ -796,9 +1042,12 @@ pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
         Section::Receive => 1,
         _ => 2,
     };
-    out.messages.sort_by_key(order);
+    let mut paired: Vec<(Message, Vec<u64>)> = out.messages.drain(..).zip(values_of).collect();
+    paired.sort_by_key(|(m, _)| order(m));
+    let (messages, values_of) = paired.into_iter().unzip();
+    out.messages = messages;
     attrs::define_used(&mut out);
-    (out, omissions.into_vec())
+    (out, omissions.into_vec(), values_of)
 }
 
 fn one_line(text: &str) -> String {
@@ -807,40 +1056,67 @@ fn one_line(text: &str) -> String {
 
 /// A message's multiplexing reduced to one multiplexor whose values select groups of
 /// signals, in the order the reader gives them back: the multiplexor, the signals present
-/// for every value, then each value's own.
-fn multiplexing(m: &mut Message, omissions: &mut Omissions) {
-    let Some(first) = m.signals.iter().position(|s| s.multiplexing == Multiplexing::Multiplexor) else {
+/// for every value, then each value's own. Gives the multiplexor's values.
+fn multiplexing(m: &mut Message, omissions: &mut Omissions) -> Vec<u64> {
+    let Some(first) = m
+        .signals
+        .iter()
+        .position(|s| s.multiplexing == Multiplexing::Multiplexor)
+    else {
         for s in &mut m.signals {
             if s.multiplexing != Multiplexing::None || s.mux_condition.is_some() {
-                omissions.add(format!("the multiplexing of signal {} in message {} (it has no multiplexor)", s.name, m.name));
+                omissions.add(format!(
+                    "the multiplexing of signal {} in message {} (it has no multiplexor)",
+                    s.name, m.name
+                ));
                 s.multiplexing = Multiplexing::None;
                 s.mux_condition = None;
             }
         }
-        return;
+        return Vec::new();
     };
-    let switch = m.signals.get(first).map(|s| s.name.clone()).unwrap_or_default();
+    let switch = m
+        .signals
+        .get(first)
+        .map(|s| s.name.clone())
+        .unwrap_or_default();
     let mut groups_of: Vec<Vec<u64>> = Vec::with_capacity(m.signals.len());
     for (i, s) in m.signals.iter_mut().enumerate() {
         if s.multiplexing == Multiplexing::Multiplexor && i != first {
-            omissions.add(format!("signal {} in message {} as a second multiplexor", s.name, m.name));
+            omissions.add(format!(
+                "signal {} in message {} as a second multiplexor",
+                s.name, m.name
+            ));
             s.multiplexing = Multiplexing::None;
         }
         let groups = match (s.multiplexing, &s.mux_condition) {
-            (Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v), None) => vec![v],
+            (Multiplexing::Multiplexed(v) | Multiplexing::MultiplexedMultiplexor(v), None) => {
+                vec![v]
+            }
             (Multiplexing::Multiplexed(_) | Multiplexing::MultiplexedMultiplexor(_), Some(c))
-                if c.switch == switch && c.ranges.iter().map(|(a, b)| b.saturating_sub(*a).saturating_add(1)).sum::<u64>() <= MAX_GROUPS_PER_SIGNAL =>
+                if c.switch == switch
+                    && c.ranges
+                        .iter()
+                        .map(|(a, b)| b.saturating_sub(*a).saturating_add(1))
+                        .sum::<u64>()
+                        <= MAX_GROUPS_PER_SIGNAL =>
             {
                 c.ranges.iter().flat_map(|&(a, b)| a..=b).collect()
             }
             (Multiplexing::None | Multiplexing::Multiplexor, None) => vec![],
             _ => {
-                omissions.add(format!("the multiplexing of signal {} in message {} (not by its multiplexor {switch})", s.name, m.name));
+                omissions.add(format!(
+                    "the multiplexing of signal {} in message {} (not by its multiplexor {switch})",
+                    s.name, m.name
+                ));
                 vec![]
             }
         };
         if matches!(s.multiplexing, Multiplexing::MultiplexedMultiplexor(_)) {
-            omissions.add(format!("signal {} in message {} as a multiplexor", s.name, m.name));
+            omissions.add(format!(
+                "signal {} in message {} as a multiplexor",
+                s.name, m.name
+            ));
         }
         groups_of.push(groups);
     }
@@ -848,10 +1124,17 @@ fn multiplexing(m: &mut Message, omissions: &mut Omissions) {
     values.sort_unstable();
     values.dedup();
     if values.is_empty() {
-        omissions.add(format!("the multiplexor role of {switch} in message {} (it selects no signals)", m.name));
-    } else if values.len() == 1 && m.signals.iter().enumerate().any(|(i, _)| i != first && groups_of.get(i).is_some_and(Vec::is_empty)) {
-        omissions.add(format!("in message {}, the signals outside the one multiplexor value's group (they are read back as in it)", m.name));
+        omissions.add(format!(
+            "the multiplexor role of {switch} in message {} (it selects no signals)",
+            m.name
+        ));
     }
+    let own: Vec<&[u64]> = groups_of
+        .iter()
+        .filter(|g| !g.is_empty())
+        .map(Vec::as_slice)
+        .collect();
+    let common = common_is_none(&values, &own);
     let mut placed: Vec<(Signal, usize)> = Vec::new();
     for (i, (mut s, groups)) in m.signals.drain(..).zip(groups_of).enumerate() {
         s.mux_condition = None;
@@ -890,23 +1173,27 @@ fn multiplexing(m: &mut Message, omissions: &mut Omissions) {
             s.multiplexing = Multiplexing::Multiplexor;
             0
         } else if groups.is_empty() {
-            set_groups(&mut s, &switch, &values, values.len());
+            set_groups(&mut s, &switch, &values, values.len(), common);
             if values.is_empty() {
                 s.multiplexing = Multiplexing::None;
             }
             1
         } else {
-            set_groups(&mut s, &switch, &groups, values.len());
+            set_groups(&mut s, &switch, &groups, values.len(), common);
             if s.multiplexing == Multiplexing::None {
                 1
             } else {
-                2 + groups.first().and_then(|g| values.iter().position(|v| v == g)).unwrap_or(0)
+                2 + groups
+                    .first()
+                    .and_then(|g| values.iter().position(|v| v == g))
+                    .unwrap_or(0)
             }
         };
         placed.push((s, rank));
     }
     placed.sort_by_key(|(_, rank)| *rank);
     m.signals = placed.into_iter().map(|(s, _)| s).collect();
+    values
 }
 
 /// A name as SYM writes it: bare when it is a plain word, else quoted.
@@ -926,16 +1213,33 @@ fn quote(text: &str) -> String {
 /// message's own variable (`Var=`), so two signals of one name in different messages keep
 /// their own scaling.
 pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
-    let (db, omissions) = expressible(db);
+    let (db, omissions, values_of) = reduce(db);
     let mut o = String::from("FormatVersion=6.0 // Do not edit this line!\n");
-    o.push_str(&format!("Title={}\n", quote(db.comment.as_deref().unwrap_or_default())));
+    o.push_str(&format!(
+        "Title={}\n",
+        quote(db.comment.as_deref().unwrap_or_default())
+    ));
     // Value tables, one per distinct list, named after the first signal that uses it.
     let mut enums: Vec<(String, &[(i128, String)])> = Vec::new();
     for s in db.messages.iter().flat_map(|m| &m.signals) {
-        if s.value_descriptions.is_empty() || enums.iter().any(|(_, v)| *v == s.value_descriptions.as_slice()) {
+        if s.value_descriptions.is_empty()
+            || enums
+                .iter()
+                .any(|(_, v)| *v == s.value_descriptions.as_slice())
+        {
             continue;
         }
-        let base: String = s.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
+        let base: String = s
+            .name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
         let mut candidate = base.clone();
         let mut n = 1;
         while enums.iter().any(|(e, _)| *e == candidate) {
@@ -947,13 +1251,21 @@ pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
     if !enums.is_empty() {
         o.push_str("\n{ENUMS}\n");
         for (enum_name, values) in &enums {
-            let list: Vec<String> = values.iter().map(|(v, d)| format!("{v}={}", quote(d))).collect();
+            let list: Vec<String> = values
+                .iter()
+                .map(|(v, d)| format!("{v}={}", quote(d)))
+                .collect();
             o.push_str(&format!("Enum={enum_name}({})\n", list.join(", ")));
         }
     }
-    let enum_of = |s: &Signal| enums.iter().find(|(_, v)| *v == s.value_descriptions.as_slice()).map(|(n, _)| n.as_str());
+    let enum_of = |s: &Signal| {
+        enums
+            .iter()
+            .find(|(_, v)| *v == s.value_descriptions.as_slice())
+            .map(|(n, _)| n.as_str())
+    };
     let mut current: Option<Section> = None;
-    for m in &db.messages {
+    for (m, values) in db.messages.iter().zip(&values_of) {
         let section = section_of(m);
         if current != Some(section) {
             o.push_str(match section {
@@ -963,11 +1275,15 @@ pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
             });
             current = Some(section);
         }
-        let multiplexor = m.signals.iter().find(|s| s.multiplexing == Multiplexing::Multiplexor);
-        let common: Vec<&Signal> = m.signals.iter().filter(|s| s.multiplexing == Multiplexing::None).collect();
-        let mut values: Vec<u64> = m.signals.iter().flat_map(groups_of).collect();
-        values.sort_unstable();
-        values.dedup();
+        let multiplexor = m
+            .signals
+            .iter()
+            .find(|s| s.multiplexing == Multiplexing::Multiplexor);
+        let common: Vec<&Signal> = m
+            .signals
+            .iter()
+            .filter(|s| s.multiplexing == Multiplexing::None)
+            .collect();
         let sections: Vec<Option<u64>> = match multiplexor {
             Some(_) if !values.is_empty() => values.iter().copied().map(Some).collect(),
             _ => vec![None],
@@ -995,7 +1311,12 @@ pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
             }
             let in_group: Vec<&Signal> = match (value, multiplexor) {
                 (Some(v), Some(mux)) => {
-                    o.push_str(&format!("Mux={} {},{} {v:X}h", name(&mux.name), sym_start(mux), mux.length));
+                    o.push_str(&format!(
+                        "Mux={} {},{} {v:X}h",
+                        name(&mux.name),
+                        sym_start(mux),
+                        mux.length
+                    ));
                     if mux.byte_order == ByteOrder::BigEndian {
                         o.push_str(" -m");
                     }
@@ -1003,7 +1324,11 @@ pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
                         o.push_str(&format!(" // {c}"));
                     }
                     o.push('\n');
-                    common.iter().copied().chain(m.signals.iter().filter(|s| groups_of(s).contains(v))).collect()
+                    common
+                        .iter()
+                        .copied()
+                        .chain(m.signals.iter().filter(|s| groups_of(s).contains(v)))
+                        .collect()
                 }
                 _ => m.signals.iter().collect(),
             };
@@ -1038,7 +1363,12 @@ fn variable(o: &mut String, s: &Signal, enumeration: Option<&str>) {
         ValueType::Float32 => "float",
         ValueType::Float64 => "double",
     };
-    o.push_str(&format!("Var={} {kind} {},{}", name(&s.name), sym_start(s), s.length));
+    o.push_str(&format!(
+        "Var={} {kind} {},{}",
+        name(&s.name),
+        sym_start(s),
+        s.length
+    ));
     if s.byte_order == ByteOrder::BigEndian {
         o.push_str(" -m");
     }
@@ -1056,8 +1386,12 @@ fn variable(o: &mut String, s: &Signal, enumeration: Option<&str>) {
     }
     for (key, value) in &s.attributes {
         match (key.as_str(), value) {
-            (attrs::START_VALUE, AttrValue::Number(raw)) => o.push_str(&format!(" /d:{}", physical_of_raw(s, *raw))),
-            (attrs::LONG_NAME, AttrValue::Str(long)) => o.push_str(&format!(" /ln:{}", quote(long))),
+            (attrs::START_VALUE, AttrValue::Number(raw)) => {
+                o.push_str(&format!(" /d:{}", physical_of_raw(s, *raw)))
+            }
+            (attrs::LONG_NAME, AttrValue::Str(long)) => {
+                o.push_str(&format!(" /ln:{}", quote(long)))
+            }
             (attrs::SPN, AttrValue::Number(n)) => o.push_str(&format!(" /spn:{n}")),
             _ => {}
         }
@@ -1115,22 +1449,46 @@ Sig=Flag 20
         assert!(diagnostics.is_empty(), "{diagnostics:?}");
         assert_eq!(db.messages.len(), 3);
         let status = &db.messages[0];
-        assert_eq!((status.id, status.size, status.transmitter.as_str()), (0x123, 4, "ECU"));
+        assert_eq!(
+            (status.id, status.size, status.transmitter.as_str()),
+            (0x123, 4, "ECU")
+        );
         assert_eq!(status.comment.as_deref(), Some("status frame"));
         let speed = status.signal("Speed").unwrap();
-        assert_eq!((speed.factor, speed.unit.as_str()), (Num::Float(0.01), "km/h"));
+        assert_eq!(
+            (speed.factor, speed.unit.as_str()),
+            (Num::Float(0.01), "km/h")
+        );
         assert_eq!(speed.comment.as_deref(), Some("vehicle speed"));
         let gear = status.signal("Gear").unwrap();
         assert_eq!(gear.value_descriptions.len(), 3);
-        assert_eq!(gear.attributes, [(attrs::START_VALUE.to_string(), AttrValue::Number(Num::Int(1)))]);
+        assert_eq!(
+            gear.attributes,
+            [(
+                attrs::START_VALUE.to_string(),
+                AttrValue::Number(Num::Int(1))
+            )]
+        );
         let paged = &db.messages[1];
         assert!(paged.extended);
         assert_eq!(db.messages[2].id, 0x401);
-        assert_eq!(paged.signal("Page").unwrap().multiplexing, Multiplexing::Multiplexor);
-        assert_eq!(paged.signal("A").unwrap().multiplexing, Multiplexing::Multiplexed(1));
+        assert_eq!(
+            paged.signal("Page").unwrap().multiplexing,
+            Multiplexing::Multiplexor
+        );
+        assert_eq!(
+            paged.signal("A").unwrap().multiplexing,
+            Multiplexing::Multiplexed(1)
+        );
         assert_eq!(paged.signal("A").unwrap().start_bit, 15);
-        assert_eq!(paged.signal("B").unwrap().multiplexing, Multiplexing::Multiplexed(2));
-        assert_eq!(paged.signal("Flag").unwrap().multiplexing, Multiplexing::None);
+        assert_eq!(
+            paged.signal("B").unwrap().multiplexing,
+            Multiplexing::Multiplexed(2)
+        );
+        assert_eq!(
+            paged.signal("Flag").unwrap().multiplexing,
+            Multiplexing::None
+        );
     }
 
     #[test]
