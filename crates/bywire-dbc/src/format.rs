@@ -4,7 +4,7 @@
 //! it the way cantools maps them onto its own model, so a database converted from one to the
 //! other decodes every frame to the same values. Facts a format has and DBC lacks become the
 //! attributes DBC files use for them (a cycle time is `GenMsgCycleTime`, a CAN FD frame
-//! `VFrameFormat`, a long name `SystemSignalLongSymbol`). A writer first reduces a database to
+//! `VFrameFormat`, a default `GenSigStartValue`). A writer first reduces a database to
 //! what its format can say ([`expressible`]) and lists everything that reduction dropped as an
 //! [`Omission`]: nothing is lost without a word.
 
@@ -165,8 +165,9 @@ pub(crate) mod attrs {
         "StandardCAN_FD",
         "ExtendedCAN_FD",
     ];
-    /// `SystemSignalLongSymbol`, a signal's name beyond 32 characters.
-    pub const LONG_NAME: &str = "SystemSignalLongSymbol";
+    /// `LongName`, a SYM signal's long name (`/ln:`), as canmatrix calls it. Not DBC's
+    /// `SystemSignalLongSymbol`: that replaces the signal's name, this one only describes it.
+    pub const LONG_NAME: &str = "LongName";
     /// `GenSigStartValue`, a signal's raw value before anything was received.
     pub const START_VALUE: &str = "GenSigStartValue";
     /// `SPN`, a J1939 suspect parameter number.
@@ -391,12 +392,19 @@ pub(crate) fn keep_attributes(
             .filter(|n| !kept.contains(n)),
         signals().filter(|s| dropped(&s.attributes)).count(),
     );
+    let valued = |name: &str| {
+        let has = |list: &[(String, AttrValue)]| list.iter().any(|(n, _)| n == name);
+        has(&db.attributes)
+            || db.nodes.iter().any(|n| has(&n.attributes))
+            || db.messages.iter().any(|m| has(&m.attributes))
+            || signals().any(|s| has(&s.attributes))
+    };
     omissions.attributes(
         "attribute definition",
         db.attribute_defs
             .iter()
             .map(|d| d.name.as_str())
-            .filter(|n| !kept.contains(n)),
+            .filter(|n| !kept.contains(n) && !valued(n)),
         0,
     );
     out.attributes.clear();
@@ -533,8 +541,9 @@ pub(crate) fn grouped_signal_order(signals: &[Signal]) -> Vec<Signal> {
     out
 }
 
-/// Nodes that transmitters and receivers name but the node list lacks, appended to it.
-pub(crate) fn declare_referenced_nodes(db: &mut Database, omissions: &mut Omissions) {
+/// Nodes that transmitters and receivers name but the node list lacks, appended to it (a
+/// format that refers to nodes by number must declare them).
+pub(crate) fn declare_referenced_nodes(db: &mut Database) {
     let mut missing: Vec<String> = Vec::new();
     for m in &db.messages {
         let names = std::iter::once(&m.transmitter)
@@ -548,12 +557,6 @@ pub(crate) fn declare_referenced_nodes(db: &mut Database, omissions: &mut Omissi
                 missing.push(name.clone());
             }
         }
-    }
-    if !missing.is_empty() {
-        omissions.add(format!(
-            "nodes {} are named but not declared; declared in the written file",
-            missing.join(", ")
-        ));
     }
     db.nodes.extend(missing.into_iter().map(|name| Node {
         name,

@@ -468,7 +468,7 @@ pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
             }
         }
     }
-    declare_referenced_nodes(&mut out, &mut omissions);
+    declare_referenced_nodes(&mut out);
     (out, omissions.into_vec())
 }
 

@@ -162,10 +162,18 @@ struct Database {
     diagnostics: Vec<String>,
 }
 
+fn format_named(name: &str) -> PyResult<bywire_dbc::Format> {
+    bywire_dbc::Format::from_name(name).ok_or_else(|| {
+        pyo3::exceptions::PyValueError::new_err(format!(
+            "{name} is not a database format (dbc, kcd, sym)"
+        ))
+    })
+}
+
 impl Database {
-    fn new(bytes: &[u8], strict: bool, origin: &str) -> PyResult<Self> {
+    fn new(bytes: &[u8], strict: bool, origin: &str, format: bywire_dbc::Format) -> PyResult<Self> {
         let mode = if strict { Mode::Strict } else { Mode::Lenient };
-        let (db, diagnostics) = bywire_dbc::parse(bytes, mode).map_err(|e| {
+        let (db, diagnostics) = bywire_dbc::format::load(bytes, format, mode).map_err(|e| {
             ParseError::new_err(format!(
                 "{origin}:{}:{}: {}",
                 e.0.line, e.0.column, e.0.message
@@ -412,21 +420,29 @@ impl Database {
 
 #[pymethods]
 impl Database {
-    /// Load a DBC file (`strict`: the first problem is an error; otherwise what a reasonable
-    /// engineer accepts loads, each problem in `diagnostics`).
+    /// Load a database file: DBC, KCD or SYM, by `database_format` (`"dbc"`, `"kcd"`,
+    /// `"sym"`), else the extension, else the content (`strict`: the first problem is an
+    /// error; otherwise what a reasonable engineer accepts loads, each problem in
+    /// `diagnostics`).
     #[staticmethod]
-    #[pyo3(signature = (path, strict = false))]
-    fn load(path: PathBuf, strict: bool) -> PyResult<Self> {
+    #[pyo3(signature = (path, strict = false, database_format = None))]
+    fn load(path: PathBuf, strict: bool, database_format: Option<&str>) -> PyResult<Self> {
         let bytes = std::fs::read(&path)
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?;
-        Database::new(&bytes, strict, &path.display().to_string())
+        let forced = database_format.map(format_named).transpose()?;
+        let format = bywire_dbc::Format::of_file(forced, &path, &bytes);
+        Database::new(&bytes, strict, &path.display().to_string(), format)
     }
 
-    /// Load DBC text.
+    /// Load database text: DBC, KCD or SYM, by `database_format`, else by its content.
     #[staticmethod]
-    #[pyo3(signature = (text, strict = false))]
-    fn load_string(text: &str, strict: bool) -> PyResult<Self> {
-        Database::new(text.as_bytes(), strict, "<string>")
+    #[pyo3(signature = (text, strict = false, database_format = None))]
+    fn load_string(text: &str, strict: bool, database_format: Option<&str>) -> PyResult<Self> {
+        let format = match database_format {
+            Some(name) => format_named(name)?,
+            None => bywire_dbc::Format::sniff(text.as_bytes()),
+        };
+        Database::new(text.as_bytes(), strict, "<string>", format)
     }
 
     /// The problems found while loading, `FILE:LINE:COLUMN: what`.

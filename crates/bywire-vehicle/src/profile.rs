@@ -559,8 +559,14 @@ impl Profile {
             reason,
         };
         let dbc_text = read_dbc(&profile.dbc).map_err(dbc_error)?;
-        let (database, _) = bywire_dbc::parse_str(&dbc_text, bywire_dbc::Mode::Lenient)
-            .map_err(|e| dbc_error(format!("{}: {e}", profile.dbc)))?;
+        let format = bywire_dbc::Format::of_file(
+            None,
+            std::path::Path::new(&profile.dbc),
+            dbc_text.as_bytes(),
+        );
+        let (database, _) =
+            bywire_dbc::format::load(dbc_text.as_bytes(), format, bywire_dbc::Mode::Lenient)
+                .map_err(|e| dbc_error(format!("{}: {e}", profile.dbc)))?;
         let bindings = bind(&profile, &database, file)?;
         Checker {
             file,

@@ -38,9 +38,9 @@ pub enum DbcCommand {
         /// The DBC file.
         file: PathBuf,
     },
-    /// Convert between DBC and JSON, chosen by the files' extensions (.dbc, .json).
+    /// Convert among DBC, KCD, SYM and JSON, chosen by the files' extensions.
     #[command(
-        after_help = "Examples:\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc convert vehicle.json vehicle.dbc\n\nThe output is written to a temporary file and renamed, so a failed conversion leaves no\nhalf-written file."
+        after_help = "Examples:\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc convert vehicle.json vehicle.dbc\n  bywire dbc convert vehicle.sym vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.kcd\n\nWhat the output format cannot say (attributes, nodes, extended multiplexing, ...) is named\non stderr, one warning each, and left out. The output is written to a temporary file and\nrenamed, so a failed conversion leaves no half-written file."
     )]
     Convert {
         /// The input file.
@@ -132,13 +132,20 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             };
             let text = if is_json(output) {
                 serde_json::to_string_pretty(&db)? + "\n"
-            } else if output
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("dbc"))
-            {
-                bywire_dbc::write(&db)
+            } else if let Some(format) = bywire_dbc::Format::from_path(output) {
+                let (text, omissions) = bywire_dbc::format::write(&db, format);
+                for omission in &omissions {
+                    eprintln!(
+                        "{}: warning: left out what {format} cannot say: {omission}",
+                        output.display()
+                    );
+                }
+                text
             } else {
-                anyhow::bail!("{}: the output must end in .dbc or .json", output.display());
+                anyhow::bail!(
+                    "{}: the output must end in .dbc, .kcd, .sym or .json",
+                    output.display()
+                );
             };
             // Whole or not at all, and named by what was asked for (it said `x.partial`).
             crate::support::files::write_atomically(output, |tmp| {

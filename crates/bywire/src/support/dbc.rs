@@ -1,22 +1,45 @@
-//! DBC files as the commands load them: leniently, each diagnostic on stderr as
+//! Databases as the commands load them: any format bywire reads (by `--db-format`, else the
+//! extension, else the content), leniently, each diagnostic on stderr as
 //! `file:line:column`, errors counted.
 
 use std::path::Path;
+use std::sync::OnceLock;
 
 use anyhow::{Context, Result};
-use bywire_dbc::{Database, Mode};
+use bywire_dbc::{Database, Format, Mode};
 
-/// Load a DBC file (strictly: the first problem is an error), its diagnostics on stderr.
+static FORCED: OnceLock<Option<Format>> = OnceLock::new();
+
+/// Read every database as `format` from now on (`--db-format`).
+pub fn force_format(format: Option<Format>) {
+    let _ = FORCED.set(format);
+}
+
+/// `--db-format`'s value.
+pub fn parse_format(name: &str) -> Result<Format, String> {
+    Format::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
+        format!("{name} is not a database format ({})", names.join(", "))
+    })
+}
+
+/// The format `path` is read as.
+pub fn format_of(path: &Path, bytes: &[u8]) -> Format {
+    Format::of_file(FORCED.get().copied().flatten(), path, bytes)
+}
+
+/// Load a database (strictly: the first problem is an error), its diagnostics on stderr.
 pub fn load(path: &Path, strict: bool) -> Result<Database> {
     Ok(load_counting_errors(path, strict)?.0)
 }
 
-/// Load a DBC file, its diagnostics on stderr, with how many of them were errors (what the
-/// lenient parser had to drop or guess).
+/// Load a database, its diagnostics on stderr, with how many of them were errors (what the
+/// lenient reader had to drop or guess).
 pub fn load_counting_errors(path: &Path, strict: bool) -> Result<(Database, usize)> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mode = if strict { Mode::Strict } else { Mode::Lenient };
-    let (db, diagnostics) = bywire_dbc::parse(&bytes, mode)
+    let format = format_of(path, &bytes);
+    let (db, diagnostics) = bywire_dbc::format::load(&bytes, format, mode)
         .map_err(|e| anyhow::anyhow!("{}:{}", path.display(), e.0))?;
     for d in &diagnostics {
         eprintln!("{}:{d}", path.display());
