@@ -54,6 +54,16 @@ fi
 # python-can and cantools for Debian's Python inside the VM (tests include the folder there): an
 # ADS written with them drives `bywire vehicle` over the kernel's vcan.
 python3 -m pip install -q --disable-pip-version-check --upgrade --target target/vm-python python-can==4.6.1 cantools==45.1.0
+# cantools' own test databases (its source release's tests/files: KCD, SYM, ARXML, CDD), read
+# by our readers beside cantools'; canmatrix reads our KCD and SYM output.
+python3 -m pip install -q --disable-pip-version-check canmatrix==1.3.3
+if [ ! -d target/cantools-files ]; then
+  sdist="$(mktemp -d)"
+  python3 -m pip download -q --disable-pip-version-check --no-deps --no-binary :all: cantools==45.1.0 -d "$sdist"
+  mkdir -p target/cantools-files
+  tar xzf "$sdist"/cantools-45.1.0.tar.gz -C target/cantools-files --strip-components=3 cantools-45.1.0/tests/files/
+  rm -rf "$sdist"
+fi
 # python-can's own test logs (its source release's test/data), read by our readers beside its.
 if [ ! -d target/python-can-data ]; then
   sdist="$(mktemp -d)"

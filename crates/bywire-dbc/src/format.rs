@@ -52,7 +52,7 @@ impl Format {
 
     /// The format the content looks like: a KCD root element, a SYM version line, else DBC.
     pub fn sniff(bytes: &[u8]) -> Format {
-        let head = &bytes[..bytes.len().min(4096)];
+        let head = bytes.get(..bytes.len().min(4096)).unwrap_or(bytes);
         let text = String::from_utf8_lossy(head);
         let body = text.trim_start_matches('\u{feff}').trim_start();
         if body.starts_with('<') && text.contains("NetworkDefinition") {

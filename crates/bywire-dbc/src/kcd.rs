@@ -193,6 +193,7 @@ impl<'input> Reader<'_, 'input> {
                 _ => {}
             }
         }
+        name_switches(&mut signals);
         let size = match m.attribute("length") {
             None | Some("auto") => signals
                 .iter()
@@ -399,6 +400,31 @@ impl<'input> Reader<'_, 'input> {
     }
 }
 
+/// Of several multiplexors in a message, each multiplexed signal names the one whose group it
+/// stands in (as extended multiplexing does); with one, simple multiplexing says it all.
+fn name_switches(signals: &mut [Signal]) {
+    let multiplexors = signals
+        .iter()
+        .filter(|s| s.multiplexing == Multiplexing::Multiplexor)
+        .count();
+    if multiplexors < 2 {
+        return;
+    }
+    let mut switch = String::new();
+    for s in signals {
+        match s.multiplexing {
+            Multiplexing::Multiplexor => switch.clone_from(&s.name),
+            Multiplexing::Multiplexed(v) => {
+                s.mux_condition = Some(MuxCondition {
+                    switch: switch.clone(),
+                    ranges: vec![(v, v)],
+                });
+            }
+            _ => {}
+        }
+    }
+}
+
 /// Whether `n` is an element of this local name (in any namespace: files in the wild differ).
 fn is(n: &XmlNode<'_, '_>, local: &str) -> bool {
     n.is_element() && n.tag_name().name() == local
@@ -461,6 +487,7 @@ pub(crate) fn expressible(db: &Database) -> (Database, Vec<Omission>) {
     for m in &mut out.messages {
         m.signals.retain(|s| s.start_bit < 512);
         m.signals = grouped_signal_order(&m.signals);
+        name_switches(&mut m.signals);
         for s in &mut m.signals {
             s.receivers.retain(|r| r != NO_NODE);
             if s.receivers.is_empty() {

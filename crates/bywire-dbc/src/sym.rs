@@ -980,11 +980,12 @@ fn reduce(db: &Database) -> (Database, Vec<Omission>, Vec<Vec<u64>>) {
     let mut comments = 0;
     let mut values_of = Vec::with_capacity(out.messages.len());
     for m in &mut out.messages {
-        if !matches!(
-            (m.transmitter.as_str(), m.senders.as_slice()),
-            (SENDER, []) | (RECEIVER, [])
-        ) && !(m.transmitter == SENDER && m.senders == [RECEIVER])
-        {
+        let sayable = match (m.transmitter.as_str(), m.senders.as_slice()) {
+            (SENDER | RECEIVER, []) => true,
+            (SENDER, [other]) => other == RECEIVER,
+            _ => false,
+        };
+        if !sayable {
             re_sent += 1;
             m.transmitter = SENDER.into();
             m.senders = vec![RECEIVER.into()];
