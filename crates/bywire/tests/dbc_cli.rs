@@ -270,7 +270,7 @@ fn convert_dbc_to_json_and_back() {
         "",
     );
     assert_eq!(code, 1);
-    assert!(err.contains("must end in .dbc or .json"));
+    assert!(err.contains("must end in .dbc, .kcd, .sym or .json"));
     assert!(!dir.join("m.txt").exists() && !dir.join("m.partial").exists());
     // Broken JSON names its line and column.
     std::fs::write(&json, "{\n  \"version\": 3\n}").unwrap();
@@ -378,4 +378,60 @@ fn a_signal_name_used_twice_keeps_both_values() {
     assert_eq!(value["signals"], serde_json::json!({"S": 10, "S#2": 11}));
     let (_, out, _) = run(&["decode", dbc, "--single-line"], input);
     assert!(out.contains("M(S: 10, S: 11)"), "{out}");
+}
+
+/// KCD and SYM through the command line: a DBC converted to each (what it cannot say named on
+/// stderr), every command reading the result by its extension, `--db-format` forcing a reader.
+#[test]
+fn kcd_and_sym_convert_and_decode_like_the_dbc() {
+    let dir = Scratch::new("dbc-formats");
+    let frames = "(1.000000) can0 1F0#A5E0C8FF12345678\n(1.100000) can0 1F0#0000000000000000\n";
+    let (code, from_dbc, err) = run(&["decode", &corpus(MOTOHAWK)], frames);
+    assert_eq!(code, 0, "{err}");
+    for extension in ["kcd", "sym"] {
+        let converted = dir.join(format!("motohawk.{extension}"));
+        let (code, _, err) = run(
+            &[
+                "dbc",
+                "convert",
+                &corpus(MOTOHAWK),
+                converted.to_str().unwrap(),
+            ],
+            "",
+        );
+        assert_eq!(code, 0, "{err}");
+        // SYM has no nodes; KCD says all motohawk.dbc says.
+        assert_eq!(
+            err.contains("left out what SYM cannot say: 2 nodes"),
+            extension == "sym",
+            "{err}"
+        );
+        let (code, decoded, err) = run(&["decode", converted.to_str().unwrap()], frames);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(decoded, from_dbc, "{extension}");
+        // Named otherwise, the file is still found by its content, or by --db-format.
+        let renamed = dir.join(format!("motohawk-{extension}.db"));
+        std::fs::copy(&converted, &renamed).unwrap();
+        let (_, decoded, _) = run(&["decode", renamed.to_str().unwrap()], frames);
+        assert_eq!(decoded, from_dbc, "{extension} by content");
+        let (_, decoded, _) = run(
+            &[
+                "--db-format",
+                extension,
+                "decode",
+                renamed.to_str().unwrap(),
+            ],
+            frames,
+        );
+        assert_eq!(decoded, from_dbc, "{extension} forced");
+    }
+    let (code, _, err) = run(
+        &["--db-format", "arxml", "dbc", "dump", &corpus(MOTOHAWK)],
+        "",
+    );
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("not a database format (dbc, kcd, sym)"),
+        "{err}"
+    );
 }
