@@ -138,6 +138,45 @@ pub fn expressible(db: &Database, format: Format) -> (Database, Vec<Omission>) {
     }
 }
 
+/// DBC's start bit of a signal whose start KCD and SYM give counted in network order (a
+/// big-endian signal's most significant bit with each byte's bits numbered from the top): the
+/// inverse of [`Signal::network_start_bit`], which is what their writers write.
+pub(crate) fn start_bit_from_network(byte_order: ByteOrder, start: u32) -> u32 {
+    match byte_order {
+        ByteOrder::LittleEndian => start,
+        ByteOrder::BigEndian => 8 * (start / 8) + (7 - start % 8),
+    }
+}
+
+/// An unsigned, unscaled signal with no range, unit, receiver, comment or value names: what a
+/// reader starts from before the file says more.
+pub(crate) fn plain_signal(
+    name: String,
+    (start_bit, length, byte_order): (u32, u32, ByteOrder),
+    multiplexing: Multiplexing,
+    position: Position,
+) -> Signal {
+    Signal {
+        name,
+        start_bit,
+        length,
+        byte_order,
+        value_type: ValueType::Integer { signed: false },
+        factor: Num::Int(1),
+        offset: Num::Int(0),
+        minimum: Num::Int(0),
+        maximum: Num::Int(0),
+        unit: String::new(),
+        receivers: vec![NO_NODE.to_string()],
+        multiplexing,
+        mux_condition: None,
+        comment: None,
+        attributes: Vec::new(),
+        value_descriptions: Vec::new(),
+        position,
+    }
+}
+
 /// The largest identifier of a frame format.
 pub(crate) fn id_limit(extended: bool) -> u32 {
     if extended {
@@ -175,7 +214,7 @@ pub(crate) mod attrs {
 
     /// The definition a reader gives each of these when a file uses it.
     pub fn definition(name: &str) -> Option<AttrDef> {
-        let int = |scope, max: i128| AttrType::Int(Num::Int(0), Num::Int(max)).with(scope);
+        let int = |scope, max: i128| (scope, AttrType::Int(Num::Int(0), Num::Int(max)));
         let (scope, kind) = match name {
             CYCLE_TIME => int(AttrScope::Message, 3_600_000),
             SPN => int(AttrScope::Signal, 524_287),
@@ -201,15 +240,6 @@ pub(crate) mod attrs {
             kind,
             default: Some(default),
         })
-    }
-
-    trait With {
-        fn with(self, scope: AttrScope) -> (AttrScope, AttrType);
-    }
-    impl With for AttrType {
-        fn with(self, scope: AttrScope) -> (AttrScope, AttrType) {
-            (scope, self)
-        }
     }
 
     /// Define every attribute of this family that `db` uses, in a fixed order, replacing

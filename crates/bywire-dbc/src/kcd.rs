@@ -10,7 +10,8 @@ use roxmltree::{Document, Node as XmlNode, ParsingOptions};
 
 use crate::format::{
     attrs, cycle_time_ms, declare_referenced_nodes, drop_dbc_only, grouped_signal_order,
-    keep_attributes, simple_multiplexing, xml_escape, Omission, Omissions, Report, NO_NODE,
+    keep_attributes, plain_signal, simple_multiplexing, start_bit_from_network, xml_escape,
+    Omission, Omissions, Report, NO_NODE,
 };
 use crate::model::*;
 use crate::parser::{parse_num, Diagnostic, Mode, ParseError, Severity};
@@ -19,11 +20,6 @@ const NAMESPACE: &str = "http://kayak.2codeornot2code.org/1.0";
 
 /// Elements a KCD file may hold before it is refused (a 10 MB file has about a million).
 const MAX_NODES: u32 = 20_000_000;
-
-/// A big-endian offset as KCD counts it turned into DBC's start bit, and back (the same map).
-fn reverse_bits_in_byte(bit: u32) -> u32 {
-    8 * (bit / 8) + (7 - bit % 8)
-}
 
 /// Read KCD text.
 pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>), ParseError> {
@@ -277,29 +273,13 @@ impl<'input> Reader<'_, 'input> {
                 ByteOrder::LittleEndian
             }
         };
-        let start_bit = match byte_order {
-            ByteOrder::LittleEndian => offset,
-            ByteOrder::BigEndian => reverse_bits_in_byte(offset),
-        };
-        let mut signal = Signal {
+        let start_bit = start_bit_from_network(byte_order, offset);
+        let mut signal = plain_signal(
             name,
-            start_bit,
-            length,
-            byte_order,
-            value_type: ValueType::Integer { signed: false },
-            factor: Num::Int(1),
-            offset: Num::Int(0),
-            minimum: Num::Int(0),
-            maximum: Num::Int(0),
-            unit: String::new(),
-            receivers: Vec::new(),
+            (start_bit, length, byte_order),
             multiplexing,
-            mux_condition: None,
-            comment: None,
-            attributes: Vec::new(),
-            value_descriptions: Vec::new(),
-            position: self.at(s),
-        };
+            self.at(s),
+        );
         for child in s.children().filter(XmlNode::is_element) {
             match child.tag_name().name() {
                 "Notes" => signal.comment = text(child),
@@ -601,10 +581,7 @@ fn signal(o: &mut String, indent: &str, element: &str, s: &Signal, node_refs: &N
 
 /// A signal's element and its contents, left open (a `Multiplex` goes on with its groups).
 fn signal_open(o: &mut String, indent: &str, element: &str, s: &Signal, node_refs: &NodeRefs<'_>) {
-    let offset = match s.byte_order {
-        ByteOrder::LittleEndian => s.start_bit,
-        ByteOrder::BigEndian => reverse_bits_in_byte(s.start_bit),
-    };
+    let offset = s.network_start_bit();
     o.push_str(&format!(
         "{indent}<{element} name=\"{}\" offset=\"{offset}\" length=\"{}\"",
         xml_escape(&s.name),

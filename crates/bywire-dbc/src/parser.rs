@@ -63,11 +63,7 @@ pub struct ParseError(pub Diagnostic);
 
 /// Parse DBC bytes (UTF-8, or cp1252 when not valid UTF-8).
 pub fn parse(bytes: &[u8], mode: Mode) -> Result<(Database, Vec<Diagnostic>), ParseError> {
-    let text = match std::str::from_utf8(bytes) {
-        Ok(t) => std::borrow::Cow::Borrowed(t),
-        Err(_) => std::borrow::Cow::Owned(bywire_core::text::cp1252_chars(bytes).collect()),
-    };
-    parse_str(&text, mode)
+    parse_str(&crate::format::text_of(bytes), mode)
 }
 
 /// Parse DBC text.

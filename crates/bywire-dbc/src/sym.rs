@@ -13,7 +13,8 @@
 use std::collections::HashMap;
 
 use crate::format::{
-    attrs, cycle_time_ms, drop_dbc_only, keep_attributes, Omission, Omissions, Report, NO_NODE,
+    attrs, cycle_time_ms, drop_dbc_only, keep_attributes, plain_signal, start_bit_from_network,
+    Omission, Omissions, Report, NO_NODE,
 };
 use crate::model::*;
 use crate::parser::{parse_num, Diagnostic, Mode, ParseError, Severity};
@@ -418,25 +419,15 @@ impl Reader {
             )?;
             return Ok(None);
         };
-        let mut signal = Signal {
-            name: name.clone(),
-            start_bit: start,
-            length,
-            byte_order: ByteOrder::LittleEndian,
-            value_type,
-            factor: Num::Int(1),
-            offset: Num::Int(0),
-            minimum,
-            maximum,
-            unit: String::new(),
-            receivers: vec![NO_NODE.to_string()],
-            multiplexing: Multiplexing::None,
-            mux_condition: None,
-            comment: s.comment.clone(),
-            attributes: Vec::new(),
-            value_descriptions: enumeration.unwrap_or_default(),
-            position: s.at,
-        };
+        let mut signal = plain_signal(
+            name.clone(),
+            (start, length, ByteOrder::LittleEndian),
+            Multiplexing::None,
+            s.at,
+        );
+        signal.value_type = value_type;
+        signal.comment.clone_from(&s.comment);
+        signal.value_descriptions = enumeration.unwrap_or_default();
         let mut default = None;
         for word in it {
             if word == "-m" {
@@ -570,9 +561,7 @@ impl Reader {
     /// A declared signal placed at its start bit, its default turned into a raw start value.
     fn placed(&self, d: Declared) -> Signal {
         let mut signal = d.signal;
-        if signal.byte_order == ByteOrder::BigEndian {
-            signal.start_bit = reverse_bits_in_byte(signal.start_bit);
-        }
+        signal.start_bit = start_bit_from_network(signal.byte_order, signal.start_bit);
         if let Some(default) = d.default.and_then(|p| raw_of_physical(&signal, p)) {
             signal
                 .attributes
@@ -647,29 +636,17 @@ impl Reader {
         } else {
             ByteOrder::LittleEndian
         };
-        let start_bit = match byte_order {
-            ByteOrder::LittleEndian => start,
-            ByteOrder::BigEndian => reverse_bits_in_byte(start),
-        };
-        let signal = Signal {
+        let mut signal = plain_signal(
             name,
-            start_bit,
-            length,
-            byte_order,
-            value_type: ValueType::Integer { signed: false },
-            factor: Num::Int(1),
-            offset: Num::Int(0),
-            minimum: Num::Int(0),
-            maximum: Num::Int(0),
-            unit: String::new(),
-            receivers: vec![NO_NODE.to_string()],
-            multiplexing: Multiplexing::Multiplexor,
-            mux_condition: None,
-            comment: s.comment.clone(),
-            attributes: Vec::new(),
-            value_descriptions: Vec::new(),
-            position: s.at,
-        };
+            (
+                start_bit_from_network(byte_order, start),
+                length,
+                byte_order,
+            ),
+            Multiplexing::Multiplexor,
+            s.at,
+        );
+        signal.comment.clone_from(&s.comment);
         self.current().mux = Some((signal, value));
         Ok(())
     }
@@ -863,10 +840,6 @@ fn split_outside_quotes(text: &str, separator: char) -> Vec<&str> {
     }
     out.push(text.get(begin..).unwrap_or_default());
     out
-}
-
-fn reverse_bits_in_byte(bit: u32) -> u32 {
-    8 * (bit / 8) + (7 - bit % 8)
 }
 
 /// A physical default as the raw start value DBC keeps (`GenSigStartValue`).
@@ -1140,25 +1113,13 @@ fn multiplexing(m: &mut Message, omissions: &mut Omissions) -> Vec<u64> {
     for (i, (mut s, groups)) in m.signals.drain(..).zip(groups_of).enumerate() {
         s.mux_condition = None;
         let rank = if i == first {
-            let bare = Signal {
-                name: s.name.clone(),
-                start_bit: s.start_bit,
-                length: s.length,
-                byte_order: s.byte_order,
-                value_type: ValueType::Integer { signed: false },
-                factor: Num::Int(1),
-                offset: Num::Int(0),
-                minimum: Num::Int(0),
-                maximum: Num::Int(0),
-                unit: String::new(),
-                receivers: s.receivers.clone(),
-                multiplexing: s.multiplexing,
-                mux_condition: None,
-                comment: s.comment.clone(),
-                attributes: Vec::new(),
-                value_descriptions: Vec::new(),
-                position: s.position,
-            };
+            let mut bare = plain_signal(
+                s.name.clone(),
+                (s.start_bit, s.length, s.byte_order),
+                s.multiplexing,
+                s.position,
+            );
+            bare.comment.clone_from(&s.comment);
             if !values.is_empty() && s != bare {
                 omissions.add(format!(
                     "the sign, scaling, range, unit, value names and attributes of multiplexor {} in message {} (a Mux= has none)",
@@ -1315,7 +1276,7 @@ pub(crate) fn write(db: &Database) -> (String, Vec<Omission>) {
                     o.push_str(&format!(
                         "Mux={} {},{} {v:X}h",
                         name(&mux.name),
-                        sym_start(mux),
+                        mux.network_start_bit(),
                         mux.length
                     ));
                     if mux.byte_order == ByteOrder::BigEndian {
@@ -1350,13 +1311,6 @@ fn groups_of(s: &Signal) -> Vec<u64> {
     }
 }
 
-fn sym_start(s: &Signal) -> u32 {
-    match s.byte_order {
-        ByteOrder::LittleEndian => s.start_bit,
-        ByteOrder::BigEndian => reverse_bits_in_byte(s.start_bit),
-    }
-}
-
 fn variable(o: &mut String, s: &Signal, enumeration: Option<&str>) {
     let kind = match s.value_type {
         ValueType::Integer { signed: false } => "unsigned",
@@ -1367,7 +1321,7 @@ fn variable(o: &mut String, s: &Signal, enumeration: Option<&str>) {
     o.push_str(&format!(
         "Var={} {kind} {},{}",
         name(&s.name),
-        sym_start(s),
+        s.network_start_bit(),
         s.length
     ));
     if s.byte_order == ByteOrder::BigEndian {
