@@ -64,6 +64,18 @@ if [ ! -d target/cantools-files ]; then
   tar xzf "$sdist"/cantools-45.1.0.tar.gz -C target/cantools-files --strip-components=3 cantools-45.1.0/tests/files/
   rm -rf "$sdist"
 fi
+# cantools' own database tests, run against bywire.database (python/tests/test_cantools_suite.py):
+# its test_database.py beside its files, and the package that test imports.
+python3 -m pip install -q --disable-pip-version-check parameterized==0.9.0
+if [ ! -f target/cantools-tests/tests/test_database.py ]; then
+  sdist="$(mktemp -d)"
+  python3 -m pip download -q --disable-pip-version-check --no-deps --no-binary :all: cantools==45.1.0 -d "$sdist"
+  mkdir -p target/cantools-tests/tests
+  tar xzf "$sdist"/cantools-45.1.0.tar.gz -C target/cantools-tests/tests --strip-components=2 \
+    cantools-45.1.0/tests/test_database.py cantools-45.1.0/tests/__init__.py
+  ln -sfn ../../cantools-files target/cantools-tests/tests/files
+  rm -rf "$sdist"
+fi
 # python-can's own test logs (its source release's test/data), read by our readers beside its.
 if [ ! -d target/python-can-data ]; then
   sdist="$(mktemp -d)"

@@ -14,6 +14,7 @@ Decode a log into pandas::
 from __future__ import annotations
 
 import os
+from importlib import metadata as _metadata
 from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
@@ -23,8 +24,16 @@ from . import _native
 from ._native import DecodeError, EncodeError, Error, LogError, ParseError, ScenarioError
 from ._values import NamedSignalValue
 
+# The native exceptions say where they live, so that they pickle (multiprocessing, Spark).
+for _error in (DecodeError, EncodeError, Error, LogError, ParseError, ScenarioError):
+    _error.__module__ = "bywire._native"
+
 __all__ = [
     "Database",
+    "__version__",
+    "database",
+    "sim",
+    "spark",
     "DecodeError",
     "DecodedLog",
     "EncodeError",
@@ -71,130 +80,36 @@ class DecodedLog(dict):
     undecodable: dict[str, tuple[int, str]]
 
 
-class Database:
-    r"""A DBC database. The common calls of cantools' ``Database`` with the same arguments,
-    values and errors (``decode_message``, ``encode_message``, ``get_message_by_name``...),
-    and Arrow decoding (``decode_arrow``, ``decode_log``).
+def _decode_all_batches(native: _native.Database, frames: pa.RecordBatch | pa.Table) -> DecodedLog:
+    batches = frames.to_batches() if isinstance(frames, pa.Table) else [frames]
+    return _decode_all(native, batches)
 
-    Where two messages share a frame identifier or a name, the lookups here find the last, as
-    cantools does (bywire's command line decodes with the first and says so when loading).
 
-    >>> db = Database.load_string('''
-    ... BO_ 256 Speed: 2 ECU
-    ...  SG_ Kph : 0|16@1+ (0.01,0) [0|655.35] "km/h" Vector__XXX
-    ... ''')
-    >>> db.encode_message("Speed", {"Kph": 12.5})
-    b'\xe2\x04'
-    >>> db.decode_message(256, b'\xe2\x04')
-    {'Kph': 12.5}
-    """
+def _decode_log(native: _native.Database, path: str | os.PathLike[str], batch_rows: int) -> DecodedLog:
+    return _decode_all(native, read_log(path, batch_rows))
 
-    def __init__(self, native: _native.Database) -> None:
-        self._db = native
 
-    @classmethod
-    def load(cls, path: str | os.PathLike[str], strict: bool = False) -> Database:
-        """Load a DBC file. Lenient unless ``strict``: what cantools rejects but a reasonable
-        engineer accepts loads, each problem listed in :attr:`diagnostics`. A file that
-        cannot be loaded raises :class:`ParseError` naming the file, line and column."""
-        return cls(_native.Database.load(os.fspath(path), strict))
+def _iter_decoded(native: _native.Database, frames: Iterable[pa.RecordBatch]) -> Iterator[tuple[str, pa.RecordBatch]]:
+    for batch in frames:
+        decoded, _, _ = native.decode_arrow(_native_frames(batch))
+        yield from decoded
 
-    @classmethod
-    def load_string(cls, text: str, strict: bool = False) -> Database:
-        """Load DBC text."""
-        return cls(_native.Database.load_string(text, strict))
 
-    @property
-    def diagnostics(self) -> list[str]:
-        """The problems found while loading, ``FILE:LINE:COLUMN: what``."""
-        return self._db.diagnostics
-
-    @property
-    def message_names(self) -> list[str]:
-        """The messages' names, in the file's order."""
-        return self._db.message_names
-
-    def message_info(self, frame_id_or_name: int | str) -> dict[str, Any]:
-        """A message's description: name, frame_id, is_extended_frame, length, cycle_time,
-        senders and its signals."""
-        return self._db.message_info(frame_id_or_name)
-
-    def decode_message(
-        self,
-        frame_id_or_name: int | str,
-        data: bytes,
-        decode_choices: bool = True,
-        scaling: bool = True,
-        decode_containers: bool = False,
-        allow_truncated: bool = False,
-        allow_excess: bool = True,
-    ) -> dict[str, int | float | NamedSignalValue]:
-        """Decode ``data`` as cantools does: ``{signal: value}``; :class:`DecodeError` for
-        data of the wrong size or an unknown multiplexer value, ``KeyError`` for an unknown
-        message."""
-        return self._db.decode_message(
-            frame_id_or_name,
-            data,
-            decode_choices,
-            scaling,
-            decode_containers,
-            allow_truncated,
-            allow_excess,
-        )
-
-    def encode_message(
-        self,
-        frame_id_or_name: int | str,
-        data: Mapping[str, int | float | str | NamedSignalValue],
-        scaling: bool = True,
-        padding: bool = False,
-        strict: bool = True,
-    ) -> bytes:
-        """Encode signal values as cantools does (``strict``: every needed signal, no other,
-        each within its range; choices by name)."""
-        return self._db.encode_message(frame_id_or_name, dict(data), scaling, padding, strict)
-
-    def decode_arrow(self, frames: pa.RecordBatch | pa.Table) -> DecodedLog:
-        """Decode a batch or table of frames (:func:`read_log`'s layout; ``id`` may be any
-        integer type, ``channel`` plain strings, flags left out are false) into one table per
-        message: ``ts``, ``channel``, one typed column per signal (int64 where the signal's
-        values are whole numbers, else float64; null where a multiplexed signal is absent) and
-        ``NAME_choice`` beside each signal with value descriptions."""
-        batches = frames.to_batches() if isinstance(frames, pa.Table) else [frames]
-        return self._decode_all(batches)
-
-    def decode_log(self, path: str | os.PathLike[str], batch_rows: int = BATCH_ROWS) -> DecodedLog:
-        """Decode every frame of the log at ``path``: one table per message, as
-        :meth:`decode_arrow` gives them."""
-        return self._decode_all(read_log(path, batch_rows))
-
-    def iter_decoded(
-        self, frames: Iterable[pa.RecordBatch]
-    ) -> Iterator[tuple[str, pa.RecordBatch]]:
-        """Decode a stream of frame batches: ``(message, batch)`` pairs as they come (memory
-        bounded by one input batch)."""
-        for batch in frames:
-            decoded, _, _ = self._db.decode_arrow(_native_frames(batch))
-            yield from decoded
-
-    def _decode_all(self, frames: Iterable[pa.RecordBatch]) -> DecodedLog:
-        out = DecodedLog()
-        out.unknown, out.undecodable = 0, {}
-        parts: dict[str, list[pa.RecordBatch]] = {}
-        for batch in frames:
-            decoded, unknown, undecodable = self._db.decode_arrow(_native_frames(batch))
-            out.unknown += unknown
-            for name, (count, why) in undecodable.items():
-                before = out.undecodable.get(name, (0, why))
-                out.undecodable[name] = (before[0] + count, before[1])
-            for name, part in decoded:
-                parts.setdefault(name, []).append(part)
-        for name, batches in parts.items():
-            out[name] = pa.Table.from_batches(batches)
-        return out
-
-    def __repr__(self) -> str:
-        return repr(self._db)
+def _decode_all(native: _native.Database, frames: Iterable[pa.RecordBatch]) -> DecodedLog:
+    out = DecodedLog()
+    out.unknown, out.undecodable = 0, {}
+    parts: dict[str, list[pa.RecordBatch]] = {}
+    for batch in frames:
+        decoded, unknown, undecodable = native.decode_arrow(_native_frames(batch))
+        out.unknown += unknown
+        for name, (count, why) in undecodable.items():
+            before = out.undecodable.get(name, (0, why))
+            out.undecodable[name] = (before[0] + count, before[1])
+        for name, part in decoded:
+            parts.setdefault(name, []).append(part)
+    for name, batches in parts.items():
+        out[name] = pa.Table.from_batches(batches)
+    return out
 
 
 def _native_frames(batch: pa.RecordBatch) -> pa.RecordBatch:
@@ -210,3 +125,14 @@ def _native_frames(batch: pa.RecordBatch) -> pa.RecordBatch:
         columns.append(column)
         fields.append(field)
     return pa.RecordBatch.from_arrays(columns, schema=pa.schema(fields))
+
+
+# The cantools-shaped database is the package's Database; sim and spark (whose pyspark parts
+# load only when used) come with `import bywire`.
+from . import database, sim, spark  # noqa: E402
+from .database import Database  # noqa: E402
+
+try:
+    __version__ = _metadata.version("bywire")
+except _metadata.PackageNotFoundError:  # run from a source tree without installing
+    __version__ = "0.0.0"

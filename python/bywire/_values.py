@@ -3,16 +3,32 @@ creates them)."""
 
 from __future__ import annotations
 
+from typing import Any
 
-class NamedSignalValue:
+
+class NamedSignalValue(str):
     """A raw value with its description (a DBC's ``VAL_``), as cantools' class of that name:
-    equal to its name as a string, ``value`` the raw number."""
+    ``name`` the description, ``value`` the raw number, equal to its name as a string.
 
-    __slots__ = ("value", "name")
+    It is a ``str`` (its name), so that cantools takes it wherever it takes a choice's name
+    and cantools' own ``NamedSignalValue`` compares equal to it both ways: ``cantools_value ==
+    bywire_value`` and ``bywire_dict == cantools_dict`` hold when the names are equal."""
 
-    def __init__(self, value: int, name: str) -> None:
+    value: int
+    name: str
+    _comments: dict[str | None, str]
+
+    def __new__(cls, value: int, name: str, comments: dict[str | None, str] | None = None) -> NamedSignalValue:
+        self = super().__new__(cls, name)
         self.value = value
         self.name = name
+        self._comments = comments or {}
+        return self
+
+    @property
+    def comments(self) -> dict[str | None, str]:
+        """The value's descriptions by language (ARXML gives several)."""
+        return self._comments
 
     def __str__(self) -> str:
         return self.name
@@ -21,15 +37,17 @@ class NamedSignalValue:
         return f"'{self.name}'"
 
     def __eq__(self, other: object) -> bool:
-        if isinstance(other, str):
-            return other == self.name
-        if isinstance(other, NamedSignalValue):
-            return other.value == self.value and other.name == self.name
-        # cantools' class (or any with value and name) compares by both.
-        value, name = getattr(other, "value", None), getattr(other, "name", None)
-        if name is not None:
-            return value == self.value and name == self.name
-        return False
+        number = getattr(other, "value", None)
+        if not isinstance(other, str) or isinstance(other, NamedSignalValue):
+            # Ours or cantools' class: the number and the name.
+            name = getattr(other, "name", None)
+            return name is not None and number == self.value and name == self.name
+        return str.__eq__(self, other)
 
-    def __hash__(self) -> int:
-        return hash(self.name)
+    def __ne__(self, other: object) -> bool:
+        return not self.__eq__(other)
+
+    __hash__ = str.__hash__
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (NamedSignalValue, (self.value, self.name, self._comments or None))

@@ -533,7 +533,7 @@ def _lake_task(parts, tasks, dbc, staging, job, pattern, compression, batch_rows
         db = bywire.Database.load(dbc)
         labelled = [(path, byte_range, *path_labels(path, pattern)) for path, byte_range in (parts[i] for i in tasks[task])]
         return bywire._native.write_lake_files(
-            db._db, labelled, staging, f"part-{task:05d}-{job}", compression, batch_rows, open_files
+            db._native, labelled, staging, f"part-{task:05d}-{job}", compression, batch_rows, open_files
         )
 
     return write

@@ -33,7 +33,8 @@ pub struct SignalValue<'a> {
 
 impl SignalValue<'_> {
     /// The raw value as value descriptions number it: sign applied for signed integers; for a
-    /// float, the number itself when it is integral.
+    /// float, the raw float when it is integral (cantools looks a float's raw value up, before
+    /// scaling).
     pub fn description_key(&self) -> Option<i128> {
         match self.signal.value_type {
             ValueType::Integer { signed: true } => {
@@ -43,7 +44,11 @@ impl SignalValue<'_> {
                 Some(i128::from(bits >> unused))
             }
             ValueType::Integer { signed: false } => Some(i128::from(self.value.raw)),
-            ValueType::Float32 | ValueType::Float64 => self.value.physical.as_i128(),
+            ValueType::Float32 => {
+                let bits = u32::try_from(self.value.raw & u64::from(u32::MAX)).unwrap_or(0);
+                integral(f64::from(f32::from_bits(bits)))
+            }
+            ValueType::Float64 => integral(f64::from_bits(self.value.raw)),
         }
     }
 
@@ -56,6 +61,14 @@ impl SignalValue<'_> {
             .find(|(k, _)| *k == key)
             .map(|(_, name)| name.as_str())
     }
+}
+
+/// A float that is a whole number within i64, as that integer.
+fn integral(value: f64) -> Option<i128> {
+    // i64's range as floats: -2^63 is exact, 2^63 is the first float past the top.
+    const LIMIT: f64 = 9_223_372_036_854_775_808.0;
+    #[allow(clippy::cast_possible_truncation)]
+    (value.fract() == 0.0 && (-LIMIT..LIMIT).contains(&value)).then(|| i128::from(value as i64))
 }
 
 /// A frame decoded with its message.

@@ -614,6 +614,22 @@ pub(crate) fn xml_escape(text: &str) -> String {
     out
 }
 
+/// Set a signal's range from the bounds a file gave: both, none (0 and 0, DBC's "no range"), or
+/// one, the other then as far as the signal reaches (a missing bound read as 0 would put every
+/// value on that side out of range).
+pub(crate) fn set_range(signal: &mut Signal, minimum: Option<Num>, maximum: Option<Num>) {
+    let (low, high) = signal.reachable_range().unwrap_or(match signal.value_type {
+        ValueType::Float32 => (f64::from(f32::MIN), f64::from(f32::MAX)),
+        _ => (f64::MIN, f64::MAX),
+    });
+    (signal.minimum, signal.maximum) = match (minimum, maximum) {
+        (Some(min), Some(max)) => (min, max),
+        (None, None) => (Num::Int(0), Num::Int(0)),
+        (Some(min), None) => (min, Num::Float(high)),
+        (None, Some(max)) => (Num::Float(low), max),
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,7 +9,7 @@
 use roxmltree::{Document, Node as XmlNode, ParsingOptions};
 
 use crate::format::{
-    attrs, cycle_time_ms, declare_referenced_nodes, drop_dbc_only, grouped_signal_order,
+    self, attrs, cycle_time_ms, declare_referenced_nodes, drop_dbc_only, grouped_signal_order,
     keep_attributes, plain_signal, simple_multiplexing, start_bit_from_network, xml_escape,
     Omission, Omissions, Report, NO_NODE,
 };
@@ -321,12 +321,32 @@ impl<'input> Reader<'_, 'input> {
     }
 
     fn value(&mut self, v: XmlNode<'_, 'input>, signal: &mut Signal) -> Result<(), ParseError> {
+        let (mut minimum, mut maximum) = (None, None);
         for attribute in v.attributes() {
             let field = match attribute.name() {
                 "slope" => &mut signal.factor,
                 "intercept" => &mut signal.offset,
-                "min" => &mut signal.minimum,
-                "max" => &mut signal.maximum,
+                "min" | "max" => {
+                    let bound = parse_num(attribute.value().trim());
+                    if bound.is_none() {
+                        self.problem(
+                            v,
+                            format!(
+                                "signal {}'s {} {} is not a number",
+                                signal.name,
+                                attribute.name(),
+                                attribute.value()
+                            ),
+                            "no bound",
+                        )?;
+                    }
+                    *(if attribute.name() == "min" {
+                        &mut minimum
+                    } else {
+                        &mut maximum
+                    }) = bound;
+                    continue;
+                }
                 "unit" => {
                     signal.unit = attribute.value().to_string();
                     continue;
@@ -360,6 +380,7 @@ impl<'input> Reader<'_, 'input> {
                 )?,
             }
         }
+        format::set_range(signal, minimum, maximum);
         let float_length = match signal.value_type {
             ValueType::Float32 => Some(32),
             ValueType::Float64 => Some(64),

@@ -348,19 +348,33 @@ pub fn encode_named(
     values: &[Named<'_>],
     encoding: Encoding,
 ) -> Result<Vec<u8>, NamedError> {
-    let signals = &message.signals;
     // Each value's signal, found once.
     let positions: Vec<Option<usize>> = values
         .iter()
         .map(|named| {
-            signals
+            message
+                .signals
                 .iter()
-                .position(|s| s.display_name() == named.signal || s.name == named.signal)
+                .position(|s| s.name == named.signal || s.display_name() == named.signal)
         })
         .collect();
+    encode_named_at(message, codec, values, &positions, encoding)
+}
+
+/// [`encode_named`] with each value's signal already found (`positions`, one per value: the
+/// signal's index, None for a name the message does not have), for callers that keep an
+/// index of names.
+pub fn encode_named_at(
+    message: &Message,
+    codec: &MessageCodec,
+    values: &[Named<'_>],
+    positions: &[Option<usize>],
+    encoding: Encoding,
+) -> Result<Vec<u8>, NamedError> {
+    let signals = &message.signals;
     // Each signal's value (the last given for it wins, as in a dict).
     let mut given: Vec<Option<&Named<'_>>> = vec![None; signals.len()];
-    for (named, position) in values.iter().zip(&positions) {
+    for (named, position) in values.iter().zip(positions) {
         if let Some(slot) = position.and_then(|i| given.get_mut(i)) {
             *slot = Some(named);
         }
@@ -370,7 +384,7 @@ pub fn encode_named(
     if encoding.refuse_unused {
         let unused: Vec<String> = values
             .iter()
-            .zip(&positions)
+            .zip(positions)
             .filter(|(_, at)| at.is_none_or(|i| needed.get(i) != Some(&true)))
             .map(|(n, _)| n.signal.to_string())
             .collect();
@@ -475,7 +489,10 @@ pub fn encode_named(
             *byte |= !cover;
         }
     }
-    if let (Some(counter), Some(protection)) = (encoding.counter, Protection::of(message)) {
+    let protection = encoding
+        .counter
+        .and_then(|counter| Some((counter, Protection::of(message)?)));
+    if let Some((counter, protection)) = protection {
         protection
             .fill(codec, counter, &mut payload)
             .map_err(|error| NamedError::Protection {

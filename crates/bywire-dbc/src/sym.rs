@@ -13,8 +13,8 @@
 use std::collections::HashMap;
 
 use crate::format::{
-    attrs, cycle_time_ms, drop_dbc_only, keep_attributes, plain_signal, start_bit_from_network,
-    Omission, Omissions, Report, NO_NODE,
+    self, attrs, cycle_time_ms, drop_dbc_only, keep_attributes, plain_signal,
+    start_bit_from_network, Omission, Omissions, Report, NO_NODE,
 };
 use crate::model::*;
 use crate::parser::{parse_num, Diagnostic, Mode, ParseError, Severity};
@@ -378,7 +378,7 @@ impl Reader {
         }
         let mut value_type = ValueType::Integer { signed: false };
         let mut enumeration = None;
-        let (mut minimum, mut maximum) = (Num::Int(0), Num::Int(0));
+        let (mut minimum, mut maximum) = (None, None);
         let length = match kind.as_str() {
             "signed" => {
                 value_type = ValueType::Integer { signed: true };
@@ -394,7 +394,7 @@ impl Reader {
                 Some(64)
             }
             "bit" => {
-                maximum = Num::Int(1);
+                (minimum, maximum) = (Some(Num::Int(0)), Some(Num::Int(1)));
                 Some(1)
             }
             "char" => Some(8),
@@ -450,8 +450,8 @@ impl Reader {
                 ("u", _) => signal.unit = value.to_string(),
                 ("f", Some(n)) => signal.factor = n,
                 ("o", Some(n)) => signal.offset = n,
-                ("min", Some(n)) => minimum = n,
-                ("max", Some(n)) => maximum = n,
+                ("min", Some(n)) => minimum = Some(n),
+                ("max", Some(n)) => maximum = Some(n),
                 ("d", Some(n)) => default = Some(n),
                 ("d", None) | ("p", _) => {}
                 ("spn", Some(Num::Int(n))) => signal
@@ -475,8 +475,7 @@ impl Reader {
                 )?,
             }
         }
-        signal.minimum = minimum;
-        signal.maximum = maximum;
+        format::set_range(&mut signal, minimum, maximum);
         Ok(Some(Declared { signal, default }))
     }
 

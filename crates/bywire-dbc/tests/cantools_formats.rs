@@ -48,6 +48,16 @@ fn number(json: &Json) -> f64 {
     json.as_f64().unwrap_or(0.0)
 }
 
+/// A range bound cantools gives, or, where it gives only the other bound, as far as the signal
+/// reaches (bywire's reading of a KCD `Value` with one bound; cantools leaves it None).
+fn bound(this: &Json, other: &Json, reach: f64) -> f64 {
+    if this.is_null() && !other.is_null() {
+        reach
+    } else {
+        number(this)
+    }
+}
+
 /// The multiplexor values a signal is present for (empty: always).
 fn values_of(s: &Signal, all: &BTreeSet<u64>) -> BTreeSet<u64> {
     match (&s.mux_condition, s.multiplexing) {
@@ -133,6 +143,7 @@ fn compare(ours: &Database, overlapping: &BTreeSet<String>, theirs: &Json) -> Ve
                 .iter()
                 .map(|(k, v)| (k.clone(), v.as_str().unwrap().to_string()))
                 .collect();
+            let reach = s.reachable_range().unwrap_or((f64::MIN, f64::MAX));
             let facts = [
                 (
                     u64::from(s.start_bit) == ts["start"].as_u64().unwrap(),
@@ -161,8 +172,14 @@ fn compare(ours: &Database, overlapping: &BTreeSet<String>, theirs: &Json) -> Ve
                 ),
                 (s.factor.as_f64() == number(&ts["scale"]), "scale"),
                 (s.offset.as_f64() == number(&ts["offset"]), "offset"),
-                (s.minimum.as_f64() == number(&ts["minimum"]), "minimum"),
-                (s.maximum.as_f64() == number(&ts["maximum"]), "maximum"),
+                (
+                    s.minimum.as_f64() == bound(&ts["minimum"], &ts["maximum"], reach.0),
+                    "minimum",
+                ),
+                (
+                    s.maximum.as_f64() == bound(&ts["maximum"], &ts["minimum"], reach.1),
+                    "maximum",
+                ),
                 (s.unit == ts["unit"].as_str().unwrap(), "unit"),
                 (choices == theirs_choices, "choices"),
                 (

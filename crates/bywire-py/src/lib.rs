@@ -6,7 +6,9 @@
 //!   batches of frames decoded into one batch per message (`decode_arrow`);
 //! - `LogBatches`: a log of any format bywire-log reads, as Arrow record batches of its
 //!   frames (the raw frames' table layout);
-//! - `run_sim`: a simulator run as fast as possible, its bus logs and report written.
+//! - `run_sim`: a simulator run as fast as possible, its bus logs and report written;
+//! - `run_cli`: the `bywire` command line, for the package's console script;
+//! - `CanBus`: a bus endpoint of any backend, for python-can's `interface="bywire"`.
 //!
 //! Arrow crosses to pyarrow through the Arrow C data interface (`arrow-pyarrow`): no copy.
 
@@ -23,18 +25,18 @@ use bywire_data::long::{self, LongLabels};
 use bywire_dbc::codec::{DecodeError as CodecError, MessageCodec, Value};
 use bywire_dbc::decoder::{Decoder, SignalValue};
 use bywire_dbc::named::{
-    encode_named, selected_by, selector_values, Encoding, Given, Named, NamedError,
+    encode_named_at, selected_by, selector_values, Encoding, Given, Named, NamedError,
 };
 use bywire_dbc::{ByteOrder, Message, Mode, Multiplexing, Signal, ValueType};
 use bywire_log::batches::FrameBatches;
 use bywire_log::format::Format;
 use bywire_log::parquet::raw_schema;
 use pyo3::exceptions::{
-    PyException, PyKeyError, PyOSError, PyOverflowError, PyTypeError, PyValueError,
+    PyException, PyIndexError, PyKeyError, PyOSError, PyOverflowError, PyTypeError, PyValueError,
 };
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{PyByteArray, PyBytes, PyDict, PyString, PyType};
+use pyo3::types::{PyByteArray, PyBytes, PyDict, PyFloat, PyInt, PyString, PyType};
 
 /// The columns handed to Python are megabytes allocated and freed on every call. The system
 /// allocator gives such blocks back to the kernel when they are freed and faults them in again
@@ -150,16 +152,178 @@ fn failing_multiplexor(
     })
 }
 
-/// A DBC database: cantools' `Database` for the common calls, and Arrow decoding.
+/// A value to encode, as Python gave it (`key: value` of the dict).
+struct Item<'py> {
+    key: Bound<'py, PyString>,
+    choice: Option<Choice<'py>>,
+    number: Option<Value>,
+    /// The signal's index in its message (None: no signal of that name).
+    position: Option<usize>,
+    /// The value's `str()` and type name, filled only to report an error.
+    shown: String,
+    type_name: String,
+}
+
+/// A choice given by name: a Python string (`NamedSignalValue` of bywire is one) or the name
+/// of cantools' `NamedSignalValue`.
+enum Choice<'py> {
+    Text(Bound<'py, PyString>),
+    Named(String),
+}
+
+impl Choice<'_> {
+    fn as_str(&self) -> PyResult<&str> {
+        match self {
+            Choice::Text(text) => text.to_str(),
+            Choice::Named(name) => Ok(name),
+        }
+    }
+}
+
+/// A value given to encode: the choice it names (a string, bywire's `NamedSignalValue` or
+/// cantools' — whose number must be the one its name has, as cantools checks) or its number.
+fn given_value<'py>(
+    message: &Message,
+    signal: &str,
+    value: &Bound<'py, PyAny>,
+) -> PyResult<(Option<Choice<'py>>, Option<Value>)> {
+    if let Ok(text) = value.cast::<PyString>() {
+        return Ok((Some(Choice::Text(text.clone())), None));
+    }
+    if let Ok(f) = value.cast::<PyFloat>() {
+        return Ok((None, Some(Value::Float(f.value()))));
+    }
+    if value.cast::<PyInt>().is_ok() {
+        if let Ok(i) = value.extract::<i64>() {
+            return Ok((None, Some(Value::Int(i))));
+        }
+        if let Ok(u) = value.extract::<u64>() {
+            return Ok((None, Some(Value::UInt(u))));
+        }
+        return Ok((None, value.extract::<f64>().ok().map(Value::Float)));
+    }
+    // cantools' NamedSignalValue (or anything with a name and a value).
+    if let (Ok(name), Ok(number)) = (value.getattr("name"), value.getattr("value")) {
+        if let (Ok(name), Ok(number)) = (name.extract::<String>(), number.extract::<i128>()) {
+            let declared = message
+                .signals
+                .iter()
+                .filter(|s| s.display_name() == signal)
+                .any(|s| s.value_descriptions.contains(&(number, name.clone())));
+            if !declared {
+                return Err(EncodeError::new_err(format!(
+                    "Invalid 'NamedSignalValue' name/value pair not found! Name {name}, value {number}"
+                )));
+            }
+            return Ok((Some(Choice::Named(name)), None));
+        }
+    }
+    Ok((None, value.extract::<f64>().ok().map(Value::Float)))
+}
+
+/// A DBC database: cantools `Database` for the common calls, and Arrow decoding.
 #[pyclass(frozen, module = "bywire._native")]
 struct Database {
     decoder: Arc<Decoder>,
     codecs: Vec<MessageCodec>,
-    /// Frame identifier → message, as cantools looks it up (the last message with it).
+    /// Frame identifier (bit 31 set for an extended one) → message, as cantools looks it up
+    /// (the last message with it).
     by_frame_id: HashMap<u32, usize>,
     /// Name → message (the last with it, as in cantools).
     by_name: HashMap<String, usize>,
     diagnostics: Vec<String>,
+    /// Each message's keys, decode order and choice objects, made on its first decode.
+    prepared: Vec<PyOnceLock<Prepared>>,
+}
+
+/// What decoding a message into a dict needs from Python, made once: the signals' names as
+/// Python strings, the order cantools fills the dict in, and each value description as the
+/// `NamedSignalValue` every decode returns.
+struct Prepared {
+    keys: Vec<Py<PyString>>,
+    order: Vec<usize>,
+    choices: Vec<Vec<(i128, Py<PyAny>)>>,
+    /// The keys in order with None values, for a message without multiplexing.
+    template: Option<Py<PyDict>>,
+    /// Each signal's name → its index (the first signal of a name).
+    index_of: Py<PyDict>,
+}
+
+impl Prepared {
+    fn new(py: Python<'_>, message: &Message, codec: &MessageCodec) -> PyResult<Self> {
+        let named = NAMED_VALUE.import(py, "bywire._values", "NamedSignalValue")?;
+        let keys: Vec<Py<PyString>> = message
+            .signals
+            .iter()
+            .map(|s| PyString::intern(py, s.display_name()).unbind())
+            .collect();
+        let mut choices = Vec::with_capacity(message.signals.len());
+        for signal in &message.signals {
+            let mut objects = Vec::with_capacity(signal.value_descriptions.len());
+            for (key, name) in &signal.value_descriptions {
+                objects.push((*key, named.call1((*key, name))?.unbind()));
+            }
+            choices.push(objects);
+        }
+        let order = dict_order(codec, message.signals.len());
+        let multiplexed = (0..message.signals.len()).any(|i| codec.switch_of(i).is_some());
+        let template = if multiplexed {
+            None
+        } else {
+            let template = PyDict::new(py);
+            for &i in &order {
+                if let Some(key) = keys.get(i) {
+                    template.set_item(key.bind(py), py.None())?;
+                }
+            }
+            Some(template.unbind())
+        };
+        // By full name, then by the DBC's short name where it differs (as encode_named finds).
+        let index_of = PyDict::new(py);
+        for (i, key) in keys.iter().enumerate() {
+            if !index_of.contains(key.bind(py))? {
+                index_of.set_item(key.bind(py), i)?;
+            }
+        }
+        for (i, signal) in message.signals.iter().enumerate() {
+            if !index_of.contains(&signal.name)? {
+                index_of.set_item(&signal.name, i)?;
+            }
+        }
+        Ok(Prepared {
+            keys,
+            order,
+            choices,
+            template,
+            index_of: index_of.unbind(),
+        })
+    }
+}
+
+/// The order cantools fills a decoded dict in: the signals no multiplexor selects, in the
+/// message's order, then what each of those multiplexors selects, depth first.
+fn dict_order(codec: &MessageCodec, count: usize) -> Vec<usize> {
+    let mut order = Vec::with_capacity(count);
+    let mut listed = vec![false; count];
+    // Each pass appends the children of one parent; a parent is expanded once, so the loop
+    // runs at most count + 1 times.
+    let mut parents: Vec<Option<usize>> = vec![None];
+    while let Some(parent) = parents.pop() {
+        let children: Vec<usize> = (0..count)
+            .filter(|&i| codec.switch_of(i) == parent && !listed.get(i).copied().unwrap_or(true))
+            .collect();
+        for &child in &children {
+            if let Some(seen) = listed.get_mut(child) {
+                *seen = true;
+            }
+        }
+        order.extend(&children);
+        // Expanded in the children's order: pushed reversed onto the stack.
+        for &child in children.iter().rev() {
+            parents.push(Some(child));
+        }
+    }
+    order
 }
 
 fn format_named(name: &str) -> PyResult<bywire_dbc::Format> {
@@ -179,68 +343,165 @@ impl Database {
                 e.0.line, e.0.column, e.0.message
             ))
         })?;
+        let diagnostics = diagnostics
+            .iter()
+            .map(|d| format!("{origin}:{}:{}: {}", d.line, d.column, d.message))
+            .collect();
+        Ok(Database::of(db, diagnostics))
+    }
+
+    fn of(db: bywire_dbc::Database, diagnostics: Vec<String>) -> Self {
         let codecs = db.messages.iter().map(MessageCodec::new).collect();
-        let by_frame_id = db.messages.iter().enumerate().map(|(i, m)| (m.id, i));
+        let by_frame_id = db.messages.iter().enumerate().map(|(i, m)| (m.raw_id(), i));
         let by_name = db
             .messages
             .iter()
             .enumerate()
             .map(|(i, m)| (m.display_name().to_string(), i));
-        Ok(Database {
+        Database {
+            prepared: db.messages.iter().map(|_| PyOnceLock::new()).collect(),
             by_frame_id: by_frame_id.collect(),
             by_name: by_name.collect(),
             codecs,
-            diagnostics: diagnostics
-                .iter()
-                .map(|d| format!("{origin}:{}:{}: {}", d.line, d.column, d.message))
-                .collect(),
+            diagnostics,
             decoder: Arc::new(Decoder::new(db)),
-        })
+        }
     }
 
     fn messages(&self) -> &[Message] {
         &self.decoder.database().messages
     }
 
-    /// The message a frame identifier or name stands for; `KeyError` as cantools raises.
-    fn lookup(&self, frame_id_or_name: &Bound<'_, PyAny>) -> PyResult<(&Message, &MessageCodec)> {
-        let index = if let Ok(name) = frame_id_or_name.cast::<PyString>() {
-            self.by_name.get(name.to_str()?).copied()
-        } else {
-            let id: u64 = frame_id_or_name.extract().map_err(|_| {
-                PyTypeError::new_err("a frame identifier (int) or a message name (str)")
-            })?;
-            u32::try_from(id)
-                .ok()
-                .and_then(|id| self.by_frame_id.get(&id).copied())
+    /// The index of the message a frame identifier or name stands for, as cantools finds it
+    /// (an identifier above 0x7FF, or any with `force_extended`, is an extended one);
+    /// `KeyError` naming what was looked up, as cantools raises.
+    fn lookup(&self, frame_id_or_name: &Bound<'_, PyAny>, force_extended: bool) -> PyResult<usize> {
+        if let Ok(name) = frame_id_or_name.cast::<PyString>() {
+            return self
+                .by_name
+                .get(name.to_str()?)
+                .copied()
+                .ok_or_else(|| PyKeyError::new_err(frame_id_or_name.clone().unbind()));
+        }
+        let Ok(id) = frame_id_or_name.extract::<u64>() else {
+            return Err(PyValueError::new_err(format!(
+                "Invalid frame_id_or_name '{}'",
+                frame_id_or_name.str()?
+            )));
         };
-        index
-            .and_then(|i| Some((self.messages().get(i)?, self.codecs.get(i)?)))
-            .ok_or_else(|| PyKeyError::new_err(frame_id_or_name.clone().unbind()))
+        let key = if force_extended || id > 0x7FF {
+            id | 0x8000_0000
+        } else {
+            id
+        };
+        u32::try_from(key)
+            .ok()
+            .and_then(|key| self.by_frame_id.get(&key).copied())
+            .ok_or_else(|| PyKeyError::new_err(key))
+    }
+
+    fn message_at(&self, index: usize) -> PyResult<(&Message, &MessageCodec)> {
+        self.messages()
+            .get(index)
+            .zip(self.codecs.get(index))
+            .ok_or_else(|| PyIndexError::new_err(index))
+    }
+
+    fn prepared_at(&self, py: Python<'_>, index: usize) -> PyResult<&Prepared> {
+        let (message, codec) = self.message_at(index)?;
+        let cell = self
+            .prepared
+            .get(index)
+            .ok_or_else(|| PyIndexError::new_err(index))?;
+        if let Some(prepared) = cell.get(py) {
+            return Ok(prepared);
+        }
+        let prepared = Prepared::new(py, message, codec)?;
+        Ok(cell.get_or_init(py, || prepared))
+    }
+
+    /// [`Database::decode_with`] on any bytes-like object (bytes and bytearray without a copy).
+    #[allow(clippy::too_many_arguments)]
+    fn decode_bytes<'py>(
+        &self,
+        py: Python<'py>,
+        index: usize,
+        data: &Bound<'py, PyAny>,
+        decode_choices: bool,
+        scaling: bool,
+        allow_truncated: bool,
+        allow_excess: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if let Ok(bytes) = data.cast::<PyBytes>() {
+            let bytes = bytes.as_bytes();
+            return self.decode_with(
+                py,
+                index,
+                bytes,
+                decode_choices,
+                scaling,
+                allow_truncated,
+                allow_excess,
+            );
+        }
+        let bytes = bytes_of(data)?;
+        self.decode_with(
+            py,
+            index,
+            &bytes,
+            decode_choices,
+            scaling,
+            allow_truncated,
+            allow_excess,
+        )
+    }
+
+    fn encode_dict<'py>(
+        &self,
+        py: Python<'py>,
+        index: usize,
+        data: &Bound<'py, PyAny>,
+        scaling: bool,
+        padding: bool,
+        strict: bool,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let (message, codec) = self.message_at(index)?;
+        let Ok(values) = data.cast::<PyDict>() else {
+            return Err(EncodeError::new_err(
+                "The payload for encoding non-container messages must be a signal name to signal value dictionary",
+            ));
+        };
+        let payload =
+            self.encode_with(py, index, message, codec, values, scaling, padding, strict)?;
+        Ok(PyBytes::new(py, &payload))
     }
 
     #[allow(clippy::too_many_arguments)]
     fn decode_with<'py>(
         &self,
         py: Python<'py>,
-        message: &Message,
-        codec: &MessageCodec,
+        index: usize,
         data: &[u8],
         decode_choices: bool,
         scaling: bool,
         allow_truncated: bool,
         allow_excess: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let (message, codec) = self.message_at(index)?;
         let size = codec.size();
-        let mut payload = data.to_vec();
+        // Copied only when it must change (cut or padded, or a multiplexor rewritten).
+        let mut payload = std::borrow::Cow::Borrowed(data);
         if payload.len() != size {
+            let payload = payload.to_mut();
             if allow_truncated && payload.len() < size {
                 payload.resize(size, 0xFF);
             }
             if allow_excess {
                 payload.truncate(size);
             }
-            if payload.len() != size {
+        }
+        if payload.len() != size {
+            {
                 return Err(DecodeError::new_err(format!(
                     "Wrong data size: {} instead of {size} bytes",
                     data.len()
@@ -274,7 +535,7 @@ impl Database {
             match accepted.first() {
                 Some(valid) if truncated && past => {
                     let bits = u64::from_ne_bytes(i64::try_from(*valid).unwrap_or(0).to_ne_bytes());
-                    codec.write_raw(index, bits, &mut payload);
+                    codec.write_raw(index, bits, payload.to_mut());
                 }
                 _ => {
                     let expected: Vec<String> = accepted.iter().map(i128::to_string).collect();
@@ -305,11 +566,23 @@ impl Database {
                 }
             }
         }
-        let named = NAMED_VALUE.import(py, "bywire._values", "NamedSignalValue")?;
-        let dict = PyDict::new(py);
-        for (signal, decoded) in message.signals.iter().zip(&out) {
-            let Some(decoded) = decoded else { continue };
-            let choice = decode_choices
+        let prepared = self.prepared_at(py, index)?;
+        // Every signal present: a copy of the message's dict of keys, whose values are then
+        // replaced (no growing the dict key by key).
+        let dict = match &prepared.template {
+            Some(template) if out.iter().all(Option::is_some) => template.bind(py).copy()?,
+            _ => PyDict::new(py),
+        };
+        for &i in &prepared.order {
+            let (Some(Some(decoded)), Some(signal), Some(key), Some(choices)) = (
+                out.get(i),
+                message.signals.get(i),
+                prepared.keys.get(i),
+                prepared.choices.get(i),
+            ) else {
+                continue;
+            };
+            let choice = (decode_choices && !choices.is_empty())
                 .then(|| {
                     SignalValue {
                         signal,
@@ -318,73 +591,96 @@ impl Database {
                     .description_key()
                 })
                 .flatten()
-                .and_then(|key| signal.value_descriptions.iter().find(|(k, _)| *k == key));
+                .and_then(|key| {
+                    choices
+                        .iter()
+                        .find(|(k, _)| *k == key)
+                        .map(|(_, object)| object.bind(py).clone())
+                });
             let value = match choice {
-                Some((key, name)) => named.call1((*key, name))?,
+                Some(object) => object,
                 None if scaling => number(py, decoded.physical)?,
                 None => number(py, raw_number(signal, decoded.raw))?,
             };
-            dict.set_item(signal.display_name(), value)?;
+            dict.set_item(key.bind(py), value)?;
         }
         Ok(dict)
     }
 
-    /// cantools' `encode_message` for one message, by [`encode_named`]: each value taken as
-    /// Python gives it (a number, a choice's name or a `NamedSignalValue`), each error raised
-    /// as cantools raises it.
-    fn encode_with(
+    /// cantools' `encode_message` for one message, by [`encode_named_at`]: each value taken
+    /// as Python gives it (a number, a choice's name or a `NamedSignalValue`), each error
+    /// raised as cantools raises it.
+    #[allow(clippy::too_many_arguments)]
+    fn encode_with<'py>(
         &self,
+        py: Python<'py>,
+        index: usize,
         message: &Message,
         codec: &MessageCodec,
-        data: &Bound<'_, PyDict>,
+        data: &Bound<'py, PyDict>,
         scaling: bool,
         padding: bool,
         strict: bool,
     ) -> PyResult<Vec<u8>> {
-        let named = NAMED_VALUE.import(data.py(), "bywire._values", "NamedSignalValue")?;
-        // Each value with its name, its choice name if it is one, and its text and type as
-        // Python shows them (the errors quote them).
+        let index_of = self.prepared_at(py, index)?.index_of.bind(py);
+        // Each value with its signal, its choice name if it is one, and (only to report an
+        // error, in a second pass) its text and type as Python shows them.
         let mut items = Vec::with_capacity(data.len());
         for (key, value) in data.iter() {
-            let name: String = key.extract()?;
-            let choice = if value.is_instance(named)? {
-                Some(value.getattr("name")?.extract::<String>()?)
-            } else if let Ok(text) = value.cast::<PyString>() {
-                Some(text.to_str()?.to_string())
-            } else {
-                None
+            let key = key.cast_into::<PyString>()?;
+            let position = match index_of.get_item(&key)? {
+                Some(i) => Some(i.extract::<usize>()?),
+                None => None,
             };
-            let number = if choice.is_some() {
-                None
-            } else if let Ok(i) = value.extract::<i64>() {
-                Some(Value::Int(i))
-            } else if let Ok(u) = value.extract::<u64>() {
-                Some(Value::UInt(u))
-            } else {
-                value.extract::<f64>().ok().map(Value::Float)
-            };
-            let shown = value.str()?.to_string();
-            let type_name = value.get_type().name()?.to_string();
-            items.push((name, choice, number, shown, type_name));
+            let (choice, number) = given_value(message, key.to_str()?, &value)?;
+            items.push(Item {
+                key,
+                choice,
+                number,
+                position,
+                shown: String::new(),
+                type_name: String::new(),
+            });
         }
-        let values: Vec<Named<'_>> = items
-            .iter()
-            .map(|(name, choice, number, shown, _)| Named {
-                signal: name,
-                value: match (choice, number) {
-                    (Some(choice), _) => Given::Choice(choice),
-                    (None, Some(number)) => Given::Number(*number),
+        let result = self.encode_items(message, codec, &items, scaling, padding, strict);
+        if result.is_ok() {
+            return result;
+        }
+        for ((_, value), item) in data.iter().zip(items.iter_mut()) {
+            item.shown = value.str()?.to_string();
+            item.type_name = value.get_type().name()?.to_string();
+        }
+        self.encode_items(message, codec, &items, scaling, padding, strict)
+    }
+
+    fn encode_items(
+        &self,
+        message: &Message,
+        codec: &MessageCodec,
+        items: &[Item<'_>],
+        scaling: bool,
+        padding: bool,
+        strict: bool,
+    ) -> PyResult<Vec<u8>> {
+        let mut values = Vec::with_capacity(items.len());
+        for item in items {
+            values.push(Named {
+                signal: item.key.to_str()?,
+                value: match (&item.choice, item.number) {
+                    (Some(choice), _) => Given::Choice(choice.as_str()?),
+                    (None, Some(number)) => Given::Number(number),
                     (None, None) => Given::Unusable,
                 },
-                shown,
-            })
-            .collect();
+                shown: &item.shown,
+            });
+        }
+        let positions: Vec<Option<usize>> = items.iter().map(|item| item.position).collect();
         let encoding = Encoding {
             scaling,
             padding,
             ..Encoding::cantools(strict)
         };
-        encode_named(message, codec, &values, encoding).map_err(|error| match error {
+        encode_named_at(message, codec, &values, &positions, encoding).map_err(|error| match error {
             NamedError::Unused { names, .. } => {
                 let quoted: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
                 EncodeError::new_err(format!(
@@ -396,8 +692,8 @@ impl Database {
             NamedError::Unusable { signal } => {
                 let type_name = items
                     .iter()
-                    .find(|item| item.0 == signal)
-                    .map_or("object", |item| item.4.as_str());
+                    .find(|item| item.key.to_str().is_ok_and(|key| key == signal))
+                    .map_or("object", |item| item.type_name.as_str());
                 PyTypeError::new_err(format!(
                     "Unable to encode signal '{signal}' with type '{type_name}'."
                 ))
@@ -445,6 +741,72 @@ impl Database {
         Database::new(text.as_bytes(), strict, "<string>", format)
     }
 
+    /// Load a database from its bytes: DBC, KCD or SYM, by `database_format`, else by its
+    /// content; `origin` names it in errors and diagnostics.
+    #[staticmethod]
+    #[pyo3(signature = (data, origin, strict = false, database_format = None))]
+    fn load_bytes(
+        data: &[u8],
+        origin: &str,
+        strict: bool,
+        database_format: Option<&str>,
+    ) -> PyResult<Self> {
+        let format = match database_format {
+            Some(name) => format_named(name)?,
+            None => bywire_dbc::Format::sniff(data),
+        };
+        Database::new(data, strict, origin, format)
+    }
+
+    /// A database from its model as JSON (what `to_json` gives), messages and signals in the
+    /// order given; the loaded file's diagnostics are kept when `diagnostics` is passed.
+    #[staticmethod]
+    #[pyo3(signature = (text, diagnostics = Vec::new()))]
+    fn from_json(text: &str, diagnostics: Vec<String>) -> PyResult<Self> {
+        let db: bywire_dbc::Database = serde_json::from_str(text)
+            .map_err(|e| ParseError::new_err(format!("database model: {e}")))?;
+        Ok(Database::of(db, diagnostics))
+    }
+
+    /// The database's model as JSON: everything the file said (`bywire dbc convert`'s JSON).
+    fn to_json(&self) -> PyResult<String> {
+        serde_json::to_string(self.decoder.database())
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// The database written as `database_format` (dbc, kcd, sym): `(text, left_out)`, what the
+    /// format cannot say listed in `left_out`.
+    fn write(&self, database_format: &str) -> PyResult<(String, Vec<String>)> {
+        let format = format_named(database_format)?;
+        let (text, omissions) = bywire_dbc::format::write(self.decoder.database(), format);
+        Ok((text, omissions.iter().map(ToString::to_string).collect()))
+    }
+
+    /// The layout errors cantools refuses when strict: `(code, sentence)` for each signal past
+    /// its message's end (`past-end`) or sharing bits with another (`overlap`).
+    fn layout_errors(&self) -> Vec<(&'static str, String)> {
+        bywire_dbc::lint::lint(self.decoder.database())
+            .into_iter()
+            .filter(|f| matches!(f.code, "past-end" | "overlap"))
+            .map(|f| (f.code, f.text))
+            .collect()
+    }
+
+    /// The index of the message with this frame identifier or name (`KeyError` if none).
+    fn index_of(&self, frame_id_or_name: &Bound<'_, PyAny>) -> PyResult<usize> {
+        self.lookup(frame_id_or_name, false)
+    }
+
+    /// The message at `index` as an object whose `decode` and `encode` are cantools'
+    /// `Message.decode` and `Message.encode`.
+    fn message(slf: Bound<'_, Self>, index: usize) -> PyResult<MessageCodecs> {
+        slf.get().message_at(index)?;
+        Ok(MessageCodecs {
+            database: slf.unbind(),
+            index,
+        })
+    }
+
     /// The problems found while loading, `FILE:LINE:COLUMN: what`.
     #[getter]
     fn diagnostics(&self) -> Vec<String> {
@@ -469,7 +831,7 @@ impl Database {
         py: Python<'py>,
         frame_id_or_name: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (message, codec) = self.lookup(frame_id_or_name)?;
+        let (message, codec) = self.message_at(self.lookup(frame_id_or_name, false)?)?;
         let info = PyDict::new(py);
         info.set_item("name", message.display_name())?;
         info.set_item("frame_id", message.id)?;
@@ -541,7 +903,9 @@ impl Database {
 
     /// Decode `data` as the message with this frame identifier or name: a dict of signal
     /// values, as cantools' `Database.decode_message` gives it.
-    #[pyo3(signature = (frame_id_or_name, data, decode_choices = true, scaling = true, decode_containers = false, allow_truncated = false, allow_excess = true))]
+    /// `allow_excess` (last, by name) is `Message.decode`'s: cantools' `Database` passes its
+    /// default.
+    #[pyo3(signature = (frame_id_or_name, data, decode_choices = true, scaling = true, decode_containers = false, allow_truncated = false, force_extended_id = false, allow_excess = true))]
     #[allow(clippy::too_many_arguments)]
     fn decode_message<'py>(
         &self,
@@ -552,17 +916,16 @@ impl Database {
         scaling: bool,
         decode_containers: bool,
         allow_truncated: bool,
+        force_extended_id: bool,
         allow_excess: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
-        // DBC files have no container messages: the flag changes nothing.
+        // The formats read have no container messages: the flag changes nothing.
         let _ = decode_containers;
-        let (message, codec) = self.lookup(frame_id_or_name)?;
-        let bytes = bytes_of(data)?;
-        self.decode_with(
+        let index = self.lookup(frame_id_or_name, force_extended_id)?;
+        self.decode_bytes(
             py,
-            message,
-            codec,
-            &bytes,
+            index,
+            data,
             decode_choices,
             scaling,
             allow_truncated,
@@ -572,7 +935,8 @@ impl Database {
 
     /// Encode signal values as the message with this frame identifier or name, as cantools'
     /// `Database.encode_message` does.
-    #[pyo3(signature = (frame_id_or_name, data, scaling = true, padding = false, strict = true))]
+    #[pyo3(signature = (frame_id_or_name, data, scaling = true, padding = false, strict = true, force_extended_id = false))]
+    #[allow(clippy::too_many_arguments)]
     fn encode_message<'py>(
         &self,
         py: Python<'py>,
@@ -581,15 +945,10 @@ impl Database {
         scaling: bool,
         padding: bool,
         strict: bool,
+        force_extended_id: bool,
     ) -> PyResult<Bound<'py, PyBytes>> {
-        let (message, codec) = self.lookup(frame_id_or_name)?;
-        let Ok(values) = data.cast::<PyDict>() else {
-            return Err(EncodeError::new_err(
-                "The payload for encoding non-container messages must be a signal name to signal value dictionary",
-            ));
-        };
-        let payload = self.encode_with(message, codec, values, scaling, padding, strict)?;
-        Ok(PyBytes::new(py, &payload))
+        let index = self.lookup(frame_id_or_name, force_extended_id)?;
+        self.encode_dict(py, index, data, scaling, padding, strict)
     }
 
     /// Decode a batch of raw frames (the layout `read_log` gives) into one batch per message:
@@ -623,6 +982,257 @@ impl Database {
     fn __repr__(&self) -> String {
         format!("<bywire.Database: {} messages>", self.messages().len())
     }
+}
+
+/// One message of a [`Database`]: cantools' `Message.decode` and `Message.encode`.
+#[pyclass(frozen, module = "bywire._native")]
+struct MessageCodecs {
+    database: Py<Database>,
+    index: usize,
+}
+
+#[pymethods]
+impl MessageCodecs {
+    /// Decode `data` as cantools' `Message.decode` does.
+    #[pyo3(signature = (data, decode_choices = true, scaling = true, decode_containers = false, allow_truncated = false, allow_excess = true))]
+    #[allow(clippy::too_many_arguments)]
+    fn decode<'py>(
+        &self,
+        py: Python<'py>,
+        data: &Bound<'py, PyAny>,
+        decode_choices: bool,
+        scaling: bool,
+        decode_containers: bool,
+        allow_truncated: bool,
+        allow_excess: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let _ = decode_containers;
+        let database = self.database.get();
+        database.decode_bytes(
+            py,
+            self.index,
+            data,
+            decode_choices,
+            scaling,
+            allow_truncated,
+            allow_excess,
+        )
+    }
+
+    /// Encode signal values as cantools' `Message.encode` does.
+    #[pyo3(signature = (data, scaling = true, padding = false, strict = true))]
+    fn encode<'py>(
+        &self,
+        py: Python<'py>,
+        data: &Bound<'py, PyAny>,
+        scaling: bool,
+        padding: bool,
+        strict: bool,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        self.database
+            .get()
+            .encode_dict(py, self.index, data, scaling, padding, strict)
+    }
+}
+
+/// The most a single wait inside `CanBus::recv` lasts before Python gets to run its signal
+/// handlers (Ctrl-C interrupts a `recv` that waits forever).
+const RECV_SLICE: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// A frame as it crosses to Python: `(timestamp_s, id, extended, remote, error, fd, brs, esi,
+/// dlc, data, own)`.
+type PyFrame = (
+    f64,
+    u32,
+    bool,
+    bool,
+    bool,
+    bool,
+    bool,
+    bool,
+    u8,
+    Vec<u8>,
+    bool,
+);
+
+/// A bus endpoint opened by its spec (any backend `bywire_bus::spec` opens), for python-can's
+/// `interface="bywire"`: sending and receiving halves apart, so that python-can's notifier
+/// thread receives while another thread sends.
+#[pyclass(frozen, module = "bywire._native")]
+struct CanBus {
+    tx: std::sync::Mutex<Option<Box<dyn bywire_bus::BusTx>>>,
+    rx: std::sync::Mutex<Option<Box<dyn bywire_bus::BusRx>>>,
+    spec: String,
+}
+
+fn bus_error(spec: &str, error: impl std::fmt::Display) -> PyErr {
+    PyOSError::new_err(format!("{spec}: {error}"))
+}
+
+#[pymethods]
+impl CanBus {
+    /// Open the bus `spec` names (`virtual:NAME`, `sim:NAME@BITRATE`, `socketcan:IFACE`,
+    /// `socketcand:HOST:PORT/BUS`, `slcan:PORT@BITRATE`, `udp:[GROUP[:PORT]]`); with
+    /// `receive_own`, this endpoint's own frames come back (as transmit confirmations).
+    #[new]
+    #[pyo3(signature = (spec, receive_own = false))]
+    fn new(spec: &str, receive_own: bool) -> PyResult<Self> {
+        let mut bus = bywire_bus::open(spec).map_err(|e| match e {
+            bywire_bus::OpenError::Spec(_) => PyValueError::new_err(e.to_string()),
+            other => PyOSError::new_err(other.to_string()),
+        })?;
+        bus.set_receive_own(receive_own)
+            .map_err(|e| bus_error(spec, e))?;
+        let (tx, rx) = bus.split();
+        Ok(CanBus {
+            tx: std::sync::Mutex::new(Some(tx)),
+            rx: std::sync::Mutex::new(Some(rx)),
+            spec: spec.to_string(),
+        })
+    }
+
+    /// Send a frame: a classic data or remote frame, or an FD frame (`data` its payload,
+    /// `dlc` a classic frame's DLC above 8 or a remote frame's, else from the data).
+    #[pyo3(signature = (id, extended, remote, fd, brs, esi, data, dlc = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn send(
+        &self,
+        py: Python<'_>,
+        id: u32,
+        extended: bool,
+        remote: bool,
+        fd: bool,
+        brs: bool,
+        esi: bool,
+        data: Vec<u8>,
+        dlc: Option<u8>,
+    ) -> PyResult<()> {
+        use bywire_core::{Dlc, Frame, Id};
+        let invalid = |e: &dyn std::fmt::Display| PyValueError::new_err(e.to_string());
+        let id = if extended {
+            Id::extended(id)
+        } else {
+            Id::standard(id)
+        }
+        .map_err(|e| invalid(&e))?;
+        let frame = if fd {
+            Frame::fd(id, &data, brs, esi).map_err(|e| invalid(&e))?
+        } else if remote {
+            let dlc = dlc.or(u8::try_from(data.len()).ok()).unwrap_or(0);
+            Frame::remote(
+                id,
+                Dlc::new(dlc).ok_or_else(|| invalid(&format!("DLC {dlc}: 0 to 15")))?,
+            )
+        } else {
+            match dlc.and_then(Dlc::new) {
+                Some(dlc) if data.len() == 8 && dlc.as_raw() > 8 => {
+                    bywire_core::ClassicFrame::with_dlc(id, dlc, &data)
+                        .map(Frame::Classic)
+                        .map_err(|e| invalid(&e))?
+                }
+                _ => Frame::classic(id, &data).map_err(|e| invalid(&e))?,
+            }
+        };
+        let mut tx = self
+            .tx
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some(tx) = tx.as_mut() else {
+            return Err(bus_error(&self.spec, "the bus is shut down"));
+        };
+        py.detach(|| tx.send(&frame))
+            .map_err(|e| bus_error(&self.spec, e))
+    }
+
+    /// The next frame, waiting up to `timeout` seconds (None: until one comes); None when none
+    /// came in time. Ctrl-C interrupts the wait.
+    #[pyo3(signature = (timeout = None))]
+    fn recv(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<Option<PyFrame>> {
+        let deadline = match timeout {
+            None => None,
+            Some(t) if t.is_finite() && t >= 0.0 => Some(
+                std::time::Instant::now()
+                    + std::time::Duration::try_from_secs_f64(t)
+                        .unwrap_or(std::time::Duration::MAX)
+                        .min(std::time::Duration::from_secs(86_400 * 365)),
+            ),
+            Some(t) => {
+                return Err(PyValueError::new_err(format!(
+                    "timeout {t}: 0 or more seconds"
+                )))
+            }
+        };
+        let mut rx = self
+            .rx
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some(rx) = rx.as_mut() else {
+            return Err(bus_error(&self.spec, "the bus is shut down"));
+        };
+        // One slice at a time, so that Python's signal handlers run between them; the number of
+        // slices is bounded by the deadline (or, without one, by the caller's patience).
+        loop {
+            let slice = deadline.map_or(RECV_SLICE, |d| {
+                d.saturating_duration_since(std::time::Instant::now())
+                    .min(RECV_SLICE)
+            });
+            let received = py
+                .detach(|| rx.recv(Some(slice)))
+                .map_err(|e| bus_error(&self.spec, e))?;
+            if let Some(received) = received {
+                return Ok(Some(py_frame(&received)));
+            }
+            if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                return Ok(None);
+            }
+            py.check_signals()?;
+        }
+    }
+
+    /// Close the endpoint (both halves); sending or receiving afterwards raises.
+    fn shutdown(&self) {
+        *self
+            .tx
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+        *self
+            .rx
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+    }
+
+    /// The spec the bus was opened with.
+    #[getter]
+    fn spec(&self) -> &str {
+        &self.spec
+    }
+}
+
+fn py_frame(received: &bywire_bus::Received) -> PyFrame {
+    use bywire_core::Frame;
+    let frame = &received.frame;
+    let (brs, esi) = match frame {
+        Frame::Fd(fd) => (fd.brs(), fd.esi()),
+        _ => (false, false),
+    };
+    // Nanoseconds since the Unix epoch to seconds, as python-can stamps messages.
+    #[allow(clippy::cast_precision_loss)]
+    let seconds = received.timestamp.as_nanos() as f64 / 1e9;
+    (
+        seconds,
+        frame
+            .id()
+            .map_or(frame.socketcan_id() & 0x1FFF_FFFF, bywire_core::Id::as_raw),
+        frame.id().is_some_and(bywire_core::Id::is_extended),
+        frame.is_remote(),
+        frame.is_error(),
+        frame.is_fd(),
+        brs,
+        esi,
+        frame.dlc().as_raw(),
+        frame.data().to_vec(),
+        received.own,
+    )
 }
 
 /// A log's frames as Arrow record batches (the raw frames' table layout); an iterator.
@@ -849,6 +1459,14 @@ fn partition_folder(column: &str, value: Option<&str>) -> String {
     lake::partition_folder(column, value)
 }
 
+/// Run the `bywire` command line on `argv` (the program's name first): its exit status. The
+/// package's `bywire` console script (`bywire._cli`) calls it, so the wheel carries the whole
+/// command line.
+#[pyfunction]
+fn run_cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
+    py.detach(|| bywire::run(argv))
+}
+
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -856,8 +1474,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // A malformed Parquet page raises LogError without parquet-rs's panic message on stderr.
     bywire_log::parquet::quiet_panics_taken_as_errors();
     m.add_class::<Database>()?;
+    m.add_class::<MessageCodecs>()?;
+    m.add_class::<CanBus>()?;
     m.add_class::<LogBatches>()?;
     m.add_function(wrap_pyfunction!(run_sim, m)?)?;
+    m.add_function(wrap_pyfunction!(run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(signals_long, m)?)?;
     m.add_function(wrap_pyfunction!(write_lake_files, m)?)?;
     m.add_function(wrap_pyfunction!(partition_folder, m)?)?;
