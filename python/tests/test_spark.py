@@ -287,7 +287,7 @@ def test_lake_files_are_read_by_pyarrow_as_written(fleet, tmp_path):
     parts = [(str(p), None, *bywire.spark.path_labels(str(p), None)) for p in logs]
     for compression, extension in [("snappy", ".snappy"), ("zstd", ".zstd"), ("gzip", ".gz"), ("none", "")]:
         staging = tmp_path / compression
-        written = bywire._native.write_lake_files(db._db, parts, str(staging), "part-00007-job", compression)
+        written = bywire._native.write_lake_files(db._native, parts, str(staging), "part-00007-job", compression)
         assert sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file()) == sorted(f for f, _ in written)
         assert all(f.endswith(f"/part-00007-job.c000{extension}.parquet") for f, _ in written)
         table = ds.dataset(str(staging), format="parquet", partitioning="hive").to_table()
@@ -300,7 +300,7 @@ def test_lake_files_are_read_by_pyarrow_as_written(fleet, tmp_path):
         )
         assert rows == Counter((v, str(d), t, m, s, x) for v, d, t, m, s, x in cantools_rows(fleet)), compression
     with pytest.raises(ValueError, match="compression lz4"):
-        bywire._native.write_lake_files(db._db, parts, str(tmp_path / "x"), "p", "lz4")
+        bywire._native.write_lake_files(db._native, parts, str(tmp_path / "x"), "p", "lz4")
 
 
 def test_a_commit_moves_only_the_job_s_files_and_new_folders_whole(tmp_path):
@@ -411,3 +411,21 @@ def test_the_sweep_example(tmp_path):
             signals = [c for c in table_.column_names if c not in ("ts", "channel") and not c.endswith("_choice")]
             values += sum(table_.num_rows - table_.column(c).null_count for c in signals)
     assert runs[(2, 1500.0)] == values
+
+
+def test_spark_finds_the_data_source_without_register(fleet):
+    """pyspark 4 looks up `pyspark_*` packages at start-up: a fresh session reads
+    format("bywire") with no call to bywire.spark.register."""
+    script = (
+        "import sys\n"
+        "from pyspark.sql import SparkSession\n"
+        "spark = SparkSession.builder.master('local[1]').config('spark.ui.enabled', 'false').getOrCreate()\n"
+        "print(spark.read.format('bywire').load(sys.argv[1]).count())\n"
+        "spark.stop()\n"
+    )
+    env = {**os.environ, **env_for_spark(), "PYSPARK_PYTHON": sys.executable}
+    run = subprocess.run([sys.executable, "-c", script, str(fleet / "vehicle=tug1" / "date=2026-12-01" / "bus1.log")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    frames = sum(1 for _ in can.LogReader(str(fleet / "vehicle=tug1" / "date=2026-12-01" / "bus1.log")))
+    assert int(run.stdout.strip().splitlines()[-1]) == frames

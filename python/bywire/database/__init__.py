@@ -338,9 +338,30 @@ class Database:
         model["messages"] = messages + self._hidden
         return model
 
-    def as_dbc_string(self, *, sort_signals: Any = SORT_SIGNALS_DEFAULT, shorten_long_names: bool = True, **_: Any) -> str:
+    def as_dbc_string(
+        self,
+        *,
+        sort_signals: Any = SORT_SIGNALS_DEFAULT,
+        sort_attribute_signals: Any = SORT_SIGNALS_DEFAULT,
+        sort_attributes: Any = None,
+        sort_choices: Any = None,
+        shorten_long_names: bool = True,
+    ) -> str:
         """The database as a DBC file (signals in reverse start-bit order unless
-        ``sort_signals`` says otherwise, as cantools writes them)."""
+        ``sort_signals`` says otherwise, as cantools writes them). Long names a file gave
+        (``System…LongSymbol``) are kept as it gave them; a name made longer than DBC's 32
+        characters is written whole (cantools and bywire read it; Vector's tools may not).
+        cantools' ordering hooks for attributes and choices, and ``shorten_long_names=False``,
+        are not offered: asked for, they raise rather than be ignored."""
+        unsupported = {
+            "sort_attribute_signals": sort_attribute_signals != SORT_SIGNALS_DEFAULT,
+            "sort_attributes": sort_attributes is not None,
+            "sort_choices": sort_choices is not None,
+            "shorten_long_names=False": not shorten_long_names,
+        }
+        asked = [name for name, given in unsupported.items() if given]
+        if asked:
+            raise NotImplementedError(f"as_dbc_string: {', '.join(asked)} is not offered by bywire's DBC writer")
         if sort_signals == SORT_SIGNALS_DEFAULT:
             sort_signals = sort_signals_by_start_bit_reversed if self._sort_signals else None
         return _native_of(self._to_model(sort_signals), []).write("dbc")[0]
@@ -580,6 +601,9 @@ def _load(
     except ParseError as error:
         sniffed = database_format or _sniffed(data)
         raise UnsupportedDatabaseFormatError(**{f"e_{sniffed}": error}) from error
+    if not database_format and native.message_names == [] and native.diagnostics and not json.loads(native.to_json())["nodes"]:
+        # Lenient reading found nothing it knows: not a database of any format read.
+        raise UnsupportedDatabaseFormatError(e_dbc=ParseError(native.diagnostics[0]))
     db = _of_native(native, frame_id_mask, sort_signals)
     if prune_choices:
         for message in db.messages:

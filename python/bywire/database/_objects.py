@@ -10,6 +10,7 @@ objects' current values."""
 from __future__ import annotations
 
 import json
+from collections import OrderedDict
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -118,12 +119,13 @@ class Conversion:
 
 
 def _named_choices(choices: Mapping[int, Any] | None) -> dict[int, NamedSignalValue] | None:
+    # An OrderedDict, as cantools gives them (printed, it shows as one).
     if not choices:
         return None
-    return {
-        number: name if isinstance(name, NamedSignalValue) else NamedSignalValue(number, str(name))
+    return OrderedDict(
+        (number, name if isinstance(name, NamedSignalValue) else NamedSignalValue(number, str(name)))
         for number, name in choices.items()
-    }
+    )
 
 
 class Attribute:
