@@ -17,6 +17,7 @@ from pathlib import Path
 
 import can
 import pytest
+from crccheck.crc import Crc8SaeJ1850
 
 import bywire
 import bywire.database
@@ -139,12 +140,8 @@ def test_bywire_tools_in_another_process_over_udp_multicast():
 
 
 def crc8_sae_j1850(data: bytes) -> int:
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+    """The reference tug's E2E checksum, by crccheck (an implementation independent of bywire)."""
+    return Crc8SaeJ1850.calc(data)
 
 
 def test_steering_range_of_the_simulated_tug_over_python_can():

@@ -251,32 +251,25 @@ class Database:
 
     # -- reading and writing ---------------------------------------------------------------
 
-    def add_dbc_string(self, string: str) -> None:
-        self._add(string.encode("utf-8"), "dbc", "<string>")
+    def _adders(database_format: str, encoding: str) -> tuple[Any, Any, Any]:  # type: ignore[misc]
+        """cantools' add_FORMAT_string, add_FORMAT (an open file) and add_FORMAT_file: the
+        format's messages appended, its nodes, version and definitions taken."""
 
-    def add_dbc(self, fp: IO[str]) -> None:
-        self.add_dbc_string(fp.read())
+        def add_string(self: Database, string: str) -> None:
+            self._add(string.encode("utf-8"), database_format, "<string>")
 
-    def add_dbc_file(self, filename: str | os.PathLike[str], encoding: str = "cp1252") -> None:
-        self._add(_read(filename, encoding), "dbc", os.fspath(filename))
+        def add(self: Database, fp: IO[str]) -> None:
+            add_string(self, fp.read())
 
-    def add_kcd_string(self, string: str) -> None:
-        self._add(string.encode("utf-8"), "kcd", "<string>")
+        def add_file(self: Database, filename: str | os.PathLike[str], encoding: str = encoding) -> None:
+            self._add(_read(filename, encoding), database_format, os.fspath(filename))
 
-    def add_kcd(self, fp: IO[str]) -> None:
-        self.add_kcd_string(fp.read())
+        return add_string, add, add_file
 
-    def add_kcd_file(self, filename: str | os.PathLike[str], encoding: str = "utf-8") -> None:
-        self._add(_read(filename, encoding), "kcd", os.fspath(filename))
-
-    def add_sym_string(self, string: str) -> None:
-        self._add(string.encode("utf-8"), "sym", "<string>")
-
-    def add_sym(self, fp: IO[str]) -> None:
-        self.add_sym_string(fp.read())
-
-    def add_sym_file(self, filename: str | os.PathLike[str], encoding: str = "utf-8") -> None:
-        self._add(_read(filename, encoding), "sym", os.fspath(filename))
+    add_dbc_string, add_dbc, add_dbc_file = _adders("dbc", "cp1252")
+    add_kcd_string, add_kcd, add_kcd_file = _adders("kcd", "utf-8")
+    add_sym_string, add_sym, add_sym_file = _adders("sym", "utf-8")
+    del _adders
 
     def _add(self, data: bytes, database_format: str | None, origin: str) -> None:
         native = _native.Database.load_bytes(data, origin, False, database_format)

@@ -187,7 +187,25 @@ def _specifics(attributes: list, definitions: dict[str, AttributeDefinition]) ->
     )
 
 
-class Signal:
+class _Commented:
+    """cantools' ``comments`` (by language) and ``comment`` (the one it shows: unnamed, then
+    FOR-ALL, then EN; set, it replaces them all)."""
+
+    comments: dict[str | None, str] | None
+
+    @property
+    def comment(self) -> str | None:
+        for language in (None, "FOR-ALL", "EN"):
+            if self.comments and self.comments.get(language) is not None:
+                return self.comments[language]
+        return None
+
+    @comment.setter
+    def comment(self, value: str | None) -> None:
+        self.comments = None if value is None else {None: value}
+
+
+class Signal(_Commented):
     """A signal with cantools' attributes: ``name``, ``start``, ``length``, ``byte_order``
     (``'little_endian'``/``'big_endian'``), ``is_signed``, ``is_float``, ``scale``, ``offset``,
     ``minimum``, ``maximum``, ``unit``, ``choices``, ``raw_initial``/``initial``,
@@ -279,14 +297,6 @@ class Signal:
     @is_float.setter
     def is_float(self, value: bool) -> None:
         self.conversion = Conversion(self.scale, self.offset, self.choices, value)
-
-    @property
-    def comment(self) -> str | None:
-        return _preferred(self.comments)
-
-    @comment.setter
-    def comment(self, value: str | None) -> None:
-        self.comments = None if value is None else {None: value}
 
     def raw_to_scaled(self, raw_value: int | float, decode_choices: bool = True) -> Any:
         return self.conversion.raw_to_scaled(raw_value, decode_choices)
@@ -399,14 +409,6 @@ class Signal:
         return model
 
 
-def _preferred(comments: dict[str | None, str] | None) -> str | None:
-    """The comment cantools shows of several languages: unnamed, then FOR-ALL, then EN."""
-    for language in (None, "FOR-ALL", "EN"):
-        if comments and comments.get(language) is not None:
-            return comments[language]
-    return None
-
-
 def _number(value: Any) -> int | float | None:
     return value if isinstance(value, (int, float)) else None
 
@@ -442,7 +444,7 @@ def _new_signal_model() -> dict[str, Any]:
     }
 
 
-class Message:
+class Message(_Commented):
     """A message with cantools' attributes (``frame_id``, ``name``, ``length``,
     ``is_extended_frame``, ``is_fd``, ``senders``, ``receivers``, ``send_type``,
     ``cycle_time``, ``signals``, ``comment``, ``protocol``, ``signal_tree``, ``dbc``) and its
@@ -501,14 +503,6 @@ class Message:
         self._loaded: dict[str, Any] = {}
         self._codecs: Any = None
         self.refresh(strict)
-
-    @property
-    def comment(self) -> str | None:
-        return _preferred(self.comments)
-
-    @comment.setter
-    def comment(self, value: str | None) -> None:
-        self.comments = None if value is None else {None: value}
 
     @property
     def is_container(self) -> bool:
