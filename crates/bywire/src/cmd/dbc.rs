@@ -109,7 +109,15 @@ fn is_json(path: &Path) -> bool {
 pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
     match command {
         DbcCommand::Dump { file, strict } => {
-            let db = crate::support::dbc::load(file, *strict)?;
+            let (db, _, format) = crate::support::dbc::load_with_format(file, *strict)?;
+            // Which reader read it: a file's extension does not always say.
+            writeln!(
+                out,
+                "Database:   {} ({}, {} messages)\n",
+                file.display(),
+                format.name().to_uppercase(),
+                db.messages.len()
+            )?;
             dump(&db, out)
         }
         DbcCommand::Convert { input, output } => {

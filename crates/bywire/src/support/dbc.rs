@@ -36,6 +36,12 @@ pub fn load(path: &Path, strict: bool) -> Result<Database> {
 /// Load a database, its diagnostics on stderr, with how many of them were errors (what the
 /// lenient reader had to drop or guess).
 pub fn load_counting_errors(path: &Path, strict: bool) -> Result<(Database, usize)> {
+    let (db, errors, _) = load_with_format(path, strict)?;
+    Ok((db, errors))
+}
+
+/// [`load_counting_errors`] with the format the file was read as.
+pub fn load_with_format(path: &Path, strict: bool) -> Result<(Database, usize, Format)> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mode = if strict { Mode::Strict } else { Mode::Lenient };
     let format = format_of(path, &bytes);
@@ -48,5 +54,5 @@ pub fn load_counting_errors(path: &Path, strict: bool) -> Result<(Database, usiz
         .iter()
         .filter(|d| d.severity == bywire_dbc::Severity::Error)
         .count();
-    Ok((db, errors))
+    Ok((db, errors, format))
 }
