@@ -481,29 +481,51 @@ fn decode_records(
         return Ok(());
     }
     let records = logs::records(&name, input, Skip::NonLogLines);
+    // Rows written in blocks (standard output would take a write per line), flushed at least
+    // every 100 ms so a live bus piped in shows as it comes; each frame's rows built in one
+    // reused line, its time and channel formatted once.
+    let mut out = std::io::BufWriter::with_capacity(1 << 16, out);
+    let mut flushed = std::time::Instant::now();
     writeln!(out, "ts,channel,message,signal,value,choice,unit")?;
     let choices = !args.no_decode_choices;
+    let mut rows = String::new();
     pump.run(records, |record| {
         let Some(decoded) = decoder.decoder().decode(&record.frame) else {
             return Ok(());
         };
         let ts =
             bywire_log::candump::timestamp_text(record.timestamp, bywire_log::Precision::Nanos);
-        let channel = csv_field(&record.interface);
-        let message = csv_field(decoded.message.display_name());
+        let mut prefix = String::with_capacity(64);
+        {
+            use std::fmt::Write as _;
+            // (Writing to a String cannot fail.)
+            let _ = write!(prefix, "{ts},");
+        }
+        prefix.push_str(&csv_field(&record.interface));
+        prefix.push(',');
+        prefix.push_str(&csv_field(decoded.message.display_name()));
+        prefix.push(',');
+        rows.clear();
         for signal in &decoded.signals {
             let choice = signal.description().filter(|_| choices).unwrap_or("");
-            writeln!(
-                out,
-                "{ts},{channel},{message},{},{},{},{}",
-                csv_field(signal.signal.display_name()),
-                crate::support::signals::number_text(signal.value.physical),
-                csv_field(choice),
-                csv_field(&signal.signal.unit)
-            )?;
+            rows.push_str(&prefix);
+            rows.push_str(&csv_field(signal.signal.display_name()));
+            rows.push(',');
+            crate::support::signals::push_number_text(&mut rows, signal.value.physical);
+            rows.push(',');
+            rows.push_str(&csv_field(choice));
+            rows.push(',');
+            rows.push_str(&csv_field(&signal.signal.unit));
+            rows.push('\n');
+        }
+        out.write_all(rows.as_bytes())?;
+        if flushed.elapsed() >= std::time::Duration::from_millis(100) {
+            out.flush()?;
+            flushed = std::time::Instant::now();
         }
         Ok(())
     })?;
+    out.flush()?;
     pump.progress.finish();
     Ok(())
 }

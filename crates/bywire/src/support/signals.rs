@@ -325,41 +325,96 @@ pub fn number_text(v: Value) -> String {
 }
 
 /// Push what [`number_text`] gives.
-fn push_number_text(line: &mut String, v: Value) {
-    use std::fmt::Write as _;
-    // Writing to a String cannot fail.
-    let _ = match v {
-        Value::Int(i) => write!(line, "{i}"),
-        Value::UInt(u) => write!(line, "{u}"),
-        Value::Float(f) => {
-            line.push_str(&python_float(f));
-            Ok(())
-        }
-    };
+pub fn push_number_text(line: &mut String, v: Value) {
+    match v {
+        Value::Int(i) => line.push_str(itoa::Buffer::new().format(i)),
+        Value::UInt(u) => line.push_str(itoa::Buffer::new().format(u)),
+        Value::Float(f) => push_python_float(line, f),
+    }
 }
 
-/// Python's `repr` of a float: the shortest digits that read back the same (Rust finds the
-/// same ones), in fixed notation for decimal exponents -4 to 15 and as `1.5e+20` otherwise.
-fn python_float(f: f64) -> String {
+/// Python's `repr` of a float: the shortest digits that read back the same, in fixed notation
+/// for decimal exponents -4 to 15 and as `1.5e+20` otherwise. One shortest-digits conversion
+/// (ryu: the digits Python's repr finds too), laid out in place: no allocation.
+fn push_python_float(line: &mut String, f: f64) {
     if f.is_nan() {
-        return "nan".into();
+        return line.push_str("nan");
     }
     if f.is_infinite() {
-        return if f > 0.0 { "inf" } else { "-inf" }.into();
+        return line.push_str(if f > 0.0 { "inf" } else { "-inf" });
     }
-    let scientific = format!("{f:e}");
-    let (mantissa, exponent) = scientific.split_once('e').unwrap_or((&scientific, "0"));
-    let exponent: i32 = exponent.parse().unwrap_or(0);
-    if (-4..16).contains(&exponent) {
-        let fixed = format!("{f}");
-        if fixed.contains('.') {
-            fixed
+    let mut buffer = ryu::Buffer::new();
+    let text = buffer.format_finite(f);
+    let (negative, text) = match text.strip_prefix('-') {
+        Some(rest) => (true, rest),
+        None => (false, text),
+    };
+    // ryu writes `123.45`, `1e16` or `1.5e-7`: its digits, and where the decimal point
+    // falls among them (`point` digits before it), whatever notation it chose.
+    let (mantissa, exponent) = match text.split_once('e') {
+        Some((mantissa, exponent)) => (mantissa, exponent.parse::<i32>().unwrap_or(0)),
+        None => (text, 0),
+    };
+    let (whole, fraction) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+    let mut digits = [0u8; 40];
+    let mut count = 0usize;
+    let mut point = i32::try_from(whole.len()).unwrap_or(0) + exponent;
+    for &d in whole.as_bytes().iter().chain(fraction.as_bytes()) {
+        if count == 0 && d == b'0' {
+            point -= 1; // a leading zero: the point moves left of the first real digit
+            continue;
+        }
+        if let Some(slot) = digits.get_mut(count) {
+            *slot = d;
+            count += 1;
+        }
+    }
+    while count > 0 && digits.get(count - 1) == Some(&b'0') {
+        count -= 1;
+    }
+    let digits = digits.get(..count).unwrap_or_default();
+    if negative {
+        line.push('-');
+    }
+    if digits.is_empty() {
+        return line.push_str("0.0");
+    }
+    let push_digits = |line: &mut String, d: &[u8]| {
+        line.extend(d.iter().map(|&b| char::from(b)));
+    };
+    let decimal_exponent = point - 1;
+    if (-4..16).contains(&decimal_exponent) {
+        let split = usize::try_from(point).unwrap_or(0);
+        if point <= 0 {
+            line.push_str("0.");
+            line.extend(std::iter::repeat_n(
+                '0',
+                usize::try_from(-point).unwrap_or(0),
+            ));
+            push_digits(line, digits);
+        } else if split >= digits.len() {
+            push_digits(line, digits);
+            line.extend(std::iter::repeat_n('0', split - digits.len()));
+            line.push_str(".0");
         } else {
-            fixed + ".0"
+            let (before, after) = digits.split_at(split);
+            push_digits(line, before);
+            line.push('.');
+            push_digits(line, after);
         }
     } else {
-        let sign = if exponent < 0 { '-' } else { '+' };
-        format!("{mantissa}e{sign}{:02}", exponent.unsigned_abs())
+        let (first, rest) = digits.split_at(1);
+        push_digits(line, first);
+        if !rest.is_empty() {
+            line.push('.');
+            push_digits(line, rest);
+        }
+        line.push_str(if decimal_exponent < 0 { "e-" } else { "e+" });
+        let magnitude = decimal_exponent.unsigned_abs();
+        if magnitude < 10 {
+            line.push('0');
+        }
+        line.push_str(itoa::Buffer::new().format(magnitude));
     }
 }
 
@@ -381,7 +436,65 @@ mod tests {
             (1.561_586_132_418_2e36, "1.5615861324182e+36"),
             (f64::INFINITY, "inf"),
         ] {
-            assert_eq!(super::python_float(f), text);
+            assert_eq!(python_float(f), text);
+        }
+    }
+
+    fn python_float(f: f64) -> String {
+        let mut text = String::new();
+        super::push_python_float(&mut text, f);
+        text
+    }
+
+    /// Python's own `repr` of 200,000 floats of every magnitude (random bit patterns, and
+    /// decoded-looking values: integers times decimal scales), one per line from `python3`.
+    #[test]
+    fn floats_print_as_python_itself_prints_them() {
+        use std::io::Write as _;
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut floats = Vec::new();
+        for i in 0..200_000u32 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let scale = [0.1, 0.01, 0.001, 0.5, 1e-6, 1e9][i as usize % 6];
+            let f = if i % 2 == 0 {
+                f64::from_bits(state)
+            } else {
+                (state % 100_000) as f64 * scale
+            };
+            if f.is_finite() {
+                floats.push(f);
+            }
+        }
+        let mut python = std::process::Command::new("python3")
+            .args([
+                "-c",
+                "import struct,sys\nfor l in sys.stdin: print(repr(struct.unpack('<d', bytes.fromhex(l.strip()))[0]))",
+            ])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("python3 (installed on every machine the tests run on)");
+        let mut input = python.stdin.take().unwrap();
+        let hex: String = floats
+            .iter()
+            .map(|f| {
+                f.to_le_bytes()
+                    .iter()
+                    .map(|b| format!("{b:02x}"))
+                    .collect::<String>()
+                    + "\n"
+            })
+            .collect();
+        let writer = std::thread::spawn(move || input.write_all(hex.as_bytes()));
+        let output = python.wait_with_output().unwrap();
+        writer.join().unwrap().unwrap();
+        let theirs = String::from_utf8(output.stdout).unwrap();
+        let theirs: Vec<&str> = theirs.lines().collect();
+        assert_eq!(theirs.len(), floats.len());
+        for (f, text) in floats.iter().zip(theirs) {
+            assert_eq!(python_float(*f), text, "{f:e}");
         }
     }
 
