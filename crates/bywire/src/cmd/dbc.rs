@@ -3,7 +3,7 @@ use std::path::{Path, PathBuf};
 
 use crate::support::logs::Skip;
 use crate::support::signals::FrameText;
-use crate::support::signals::{Dbc, DecodedFrame, JsonLines};
+use crate::support::signals::{Dbc, JsonLines, TextLines};
 use anyhow::{Context, Result};
 use bywire_dbc::{ByteOrder, Database, Message, Multiplexing, ValueType};
 use serde_json::json;
@@ -324,6 +324,7 @@ pub fn decode(args: &DecodeArgs, input: impl Read + 'static, out: &mut impl Writ
     let decoder = Dbc::new(crate::support::dbc::load(&args.file, args.strict)?);
     let input = std::io::BufReader::with_capacity(1 << 16, input);
     let mut json = args.json.then(|| JsonLines::new(&decoder));
+    let mut lines_out = TextLines::new(&decoder);
     if args.csv || args.parquet.is_some() {
         return decode_records(args, &decoder, Box::new(input), out);
     }
@@ -352,6 +353,7 @@ pub fn decode(args: &DecodeArgs, input: impl Read + 'static, out: &mut impl Writ
                     args,
                     &decoder,
                     json.as_mut(),
+                    &mut lines_out,
                     &text,
                     &record.frame,
                     &mut out,
@@ -387,7 +389,15 @@ pub fn decode(args: &DecodeArgs, input: impl Read + 'static, out: &mut impl Writ
             }
         };
         match bywire_log::screen::parse_line(text) {
-            Some(frame) => write_decoded(args, &decoder, json.as_mut(), text, &frame, &mut out)?,
+            Some(frame) => write_decoded(
+                args,
+                &decoder,
+                json.as_mut(),
+                &mut lines_out,
+                text,
+                &frame,
+                &mut out,
+            )?,
             None if !args.json => writeln!(out, "{text}")?,
             None => {}
         }
@@ -401,6 +411,7 @@ fn write_decoded(
     args: &DecodeArgs,
     decoder: &Dbc,
     json: Option<&mut JsonLines<'_>>,
+    lines: &mut TextLines<'_>,
     text: &str,
     frame: &bywire_core::Frame,
     out: &mut impl Write,
@@ -430,13 +441,7 @@ fn write_decoded(
         writeln!(out, "{o}")?;
         return Ok(());
     }
-    let choices = !args.no_decode_choices;
-    match decoder.decoder().decode(frame) {
-        None => writeln!(out, "{text}")?,
-        Some(DecodedFrame { error: Some(e), .. }) => writeln!(out, "{text} :: {e}")?,
-        Some(d) if args.single_line => writeln!(out, "{text} :: {}", d.single_line(choices))?,
-        Some(d) => writeln!(out, "{text} ::\n{}", d.multi_line(choices, ""))?,
-    }
+    lines.write(out, text, frame, args.single_line, !args.no_decode_choices)?;
     Ok(())
 }
 

@@ -28,7 +28,9 @@ impl ValueText for SignalValue<'_> {
 
 /// Push what [`ValueText::text`] gives.
 fn push_value_text(line: &mut String, value: &SignalValue<'_>, choices: bool) {
-    match value.description().filter(|_| choices) {
+    // (Most signals have no value descriptions: none looked up.)
+    let described = choices && !value.signal.value_descriptions.is_empty();
+    match described.then(|| value.description()).flatten() {
         Some(name) => line.push_str(name),
         None => {
             push_number_text(line, value.value.physical);
@@ -199,6 +201,100 @@ impl FrameText for DecodedFrame<'_> {
     }
 }
 
+/// `decode`'s text lines (cantools' multi-line and single-line forms, after the frame's own
+/// line) written straight out: each message's name and its signals in cantools' order (by
+/// start bit in network order, the file's order among equals), found once, not per frame;
+/// values written into one reused line.
+pub struct TextLines<'a> {
+    dbc: &'a Dbc,
+    /// By message index: its name and its signals' indices and names in cantools' order.
+    messages: Vec<(String, Vec<(usize, String)>)>,
+    values: Vec<Option<bywire_dbc::codec::Decoded>>,
+    line: String,
+}
+
+impl<'a> TextLines<'a> {
+    /// Lines of frames decoded with `dbc`, one per frame (`single_line`) or one per signal.
+    pub fn new(dbc: &'a Dbc) -> Self {
+        let messages = dbc
+            .decoder()
+            .database()
+            .messages
+            .iter()
+            .map(|message| {
+                let mut order: Vec<(usize, String)> = message
+                    .signals
+                    .iter()
+                    .map(|s| s.display_name().to_string())
+                    .enumerate()
+                    .collect();
+                order.sort_by_key(|(i, _)| message.signals.get(*i).map(Signal::network_start_bit));
+                (message.display_name().to_string(), order)
+            })
+            .collect();
+        TextLines {
+            dbc,
+            messages,
+            values: Vec::new(),
+            line: String::new(),
+        }
+    }
+
+    /// Write `text` (the frame's line) and what `frame` decodes to, as [`FrameText`] gives it:
+    /// `text ::\nName(\n    a: 1,\n ...\n)`, `text :: Name(a: 1, ...)`, `text :: error`, or
+    /// `text` alone for a frame of no message.
+    pub fn write(
+        &mut self,
+        out: &mut impl std::io::Write,
+        text: &str,
+        frame: &Frame,
+        single_line: bool,
+        choices: bool,
+    ) -> std::io::Result<()> {
+        let line = &mut self.line;
+        line.clear();
+        line.push_str(text);
+        match self.dbc.decoder().decode_into(frame, &mut self.values) {
+            None => {}
+            Some((_, _, Err(error))) => {
+                line.push_str(" :: ");
+                line.push_str(&error.to_string());
+            }
+            Some((index, message, Ok(()))) => {
+                let (name, order) = self
+                    .messages
+                    .get(index)
+                    .map_or(("", &[][..]), |(n, o)| (n.as_str(), o.as_slice()));
+                line.push_str(if single_line { " :: " } else { " ::\n" });
+                line.push_str(name);
+                line.push_str(if single_line { "(" } else { "(\n    " });
+                let mut first = true;
+                for (i, signal_name) in order {
+                    let (Some(Some(value)), Some(signal)) =
+                        (self.values.get(*i), message.signals.get(*i))
+                    else {
+                        continue;
+                    };
+                    if !first {
+                        line.push_str(if single_line { ", " } else { ",\n    " });
+                    }
+                    first = false;
+                    line.push_str(signal_name);
+                    line.push_str(": ");
+                    let value = SignalValue {
+                        signal,
+                        value: *value,
+                    };
+                    push_value_text(line, &value, choices);
+                }
+                line.push_str(if single_line { ")" } else { "\n)" });
+            }
+        }
+        line.push('\n');
+        out.write_all(line.as_bytes())
+    }
+}
+
 /// `decode --json` lines written straight out: the bytes `serde_json` makes of the same object
 /// (keys in its sorted order, its number and string forms) without a map, a value or a sort per
 /// frame. Each message's signals are put in name order, their names quoted, once.
@@ -317,14 +413,7 @@ pub fn json_number(v: Value) -> serde_json::Value {
     }
 }
 
-/// A value as Python prints it (what cantools shows): integers plainly, floats as `repr`.
-pub fn number_text(v: Value) -> String {
-    let mut text = String::new();
-    push_number_text(&mut text, v);
-    text
-}
-
-/// Push what [`number_text`] gives.
+/// Push a value as Python prints it (what cantools shows): integers plainly, floats as `repr`.
 pub fn push_number_text(line: &mut String, v: Value) {
     match v {
         Value::Int(i) => line.push_str(itoa::Buffer::new().format(i)),
@@ -345,6 +434,11 @@ fn push_python_float(line: &mut String, f: f64) {
     }
     let mut buffer = ryu::Buffer::new();
     let text = buffer.format_finite(f);
+    // From 1e-4 to 1e15 Python's digits stand in fixed notation, as ryu writes them when it
+    // writes no exponent: the text as it is (most decoded values).
+    if (1e-4..=1e15).contains(&f.abs()) && !text.as_bytes().contains(&b'e') {
+        return line.push_str(text);
+    }
     let (negative, text) = match text.strip_prefix('-') {
         Some(rest) => (true, rest),
         None => (false, text),
@@ -379,8 +473,9 @@ fn push_python_float(line: &mut String, f: f64) {
     if digits.is_empty() {
         return line.push_str("0.0");
     }
+    // The digits are ASCII: as text whole.
     let push_digits = |line: &mut String, d: &[u8]| {
-        line.extend(d.iter().map(|&b| char::from(b)));
+        line.push_str(std::str::from_utf8(d).unwrap_or_default());
     };
     let decimal_exponent = point - 1;
     if (-4..16).contains(&decimal_exponent) {
