@@ -494,8 +494,34 @@ fn decode_records(
     writeln!(out, "ts,channel,message,signal,value,choice,unit")?;
     let choices = !args.no_decode_choices;
     let mut rows = String::new();
+    // Each message's name and its signals' names and units as CSV fields, made once.
+    let fields: Vec<(String, Vec<(String, String)>)> = decoder
+        .decoder()
+        .database()
+        .messages
+        .iter()
+        .map(|m| {
+            let signals = m
+                .signals
+                .iter()
+                .map(|s| {
+                    (
+                        csv_field(s.display_name()).into_owned(),
+                        csv_field(&s.unit).into_owned(),
+                    )
+                })
+                .collect();
+            (csv_field(m.display_name()).into_owned(), signals)
+        })
+        .collect();
+    let mut values = Vec::new();
     pump.run(records, |record| {
-        let Some(decoded) = decoder.decoder().decode(&record.frame) else {
+        // A frame that does not decode whole gives the rows of the signals it did decode.
+        let Some((index, message, _)) = decoder.decoder().decode_into(&record.frame, &mut values)
+        else {
+            return Ok(());
+        };
+        let Some((message_field, signal_fields)) = fields.get(index) else {
             return Ok(());
         };
         let ts =
@@ -508,19 +534,30 @@ fn decode_records(
         }
         prefix.push_str(&csv_field(&record.interface));
         prefix.push(',');
-        prefix.push_str(&csv_field(decoded.message.display_name()));
+        prefix.push_str(message_field);
         prefix.push(',');
         rows.clear();
-        for signal in &decoded.signals {
-            let choice = signal.description().filter(|_| choices).unwrap_or("");
+        for ((signal, value), (name, unit)) in
+            message.signals.iter().zip(&values).zip(signal_fields)
+        {
+            let Some(value) = value else { continue };
+            let value = crate::support::signals::SignalValue {
+                signal,
+                value: *value,
+            };
+            let described = choices && !signal.value_descriptions.is_empty();
+            let choice = described
+                .then(|| value.description())
+                .flatten()
+                .unwrap_or("");
             rows.push_str(&prefix);
-            rows.push_str(&csv_field(signal.signal.display_name()));
+            rows.push_str(name);
             rows.push(',');
-            crate::support::signals::push_number_text(&mut rows, signal.value.physical);
+            crate::support::signals::push_number_text(&mut rows, value.value.physical);
             rows.push(',');
             rows.push_str(&csv_field(choice));
             rows.push(',');
-            rows.push_str(&csv_field(&signal.signal.unit));
+            rows.push_str(unit);
             rows.push('\n');
         }
         out.write_all(rows.as_bytes())?;
@@ -537,7 +574,11 @@ fn decode_records(
 
 /// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
 fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
-    if text.contains([',', '"', '\n', '\r']) {
+    // (Bytes, not chars: the four are ASCII, and this runs for every field of every row.)
+    if text
+        .bytes()
+        .any(|b| matches!(b, b',' | b'"' | b'\n' | b'\r'))
+    {
         format!("\"{}\"", text.replace('"', "\"\"")).into()
     } else {
         text.into()
