@@ -23,9 +23,8 @@ import pyarrow as pa
 
 import bywire
 import bywire.database
-from common import ROOT, TUG_DBC, fleet
+from common import GM_DBC, TUG_DBC, fleet, gm_messages
 
-GM_DBC = ROOT.parent / "shared" / "corpus" / "dbc" / "opendbc" / "opendbc__dbc__gm_global_a_object.dbc"
 FRAMES = 100_000
 
 
@@ -86,16 +85,8 @@ def tug_frames(folder: pathlib.Path) -> list[tuple[int, bytes]]:
 
 
 def gm_frames() -> list[tuple[int, bytes]]:
-    db = cantools.database.load_file(str(GM_DBC), strict=False)
     rng = random.Random(7)
-    usable = []
-    for message in db.messages:
-        try:
-            for _ in range(20):
-                db.decode_message(message.frame_id, rng.randbytes(message.length))
-            usable.append(message)
-        except cantools.database.DecodeError:
-            continue
+    _, usable = gm_messages(rng)
     frames = []
     for _ in range(FRAMES):
         message = rng.choice(usable)

@@ -21,11 +21,8 @@ import subprocess
 import sys
 import tempfile
 
-import cantools
+from common import GM_DBC, cli, gm_messages
 
-from common import ROOT, cli
-
-GM_DBC = ROOT.parent / "shared" / "corpus" / "dbc" / "opendbc" / "opendbc__dbc__gm_global_a_object.dbc"
 LINES = 1_000_000
 
 PEER_JSON = """
@@ -58,16 +55,8 @@ for m in can.CanutilsLogReader(sys.stdin):
 
 
 def make_log(path: pathlib.Path) -> None:
-    db = cantools.database.load_file(str(GM_DBC), strict=False)
     rng = random.Random(1)
-    usable = []
-    for message in db.messages:
-        try:
-            for _ in range(20):
-                db.decode_message(message.frame_id, rng.randbytes(message.length))
-            usable.append(message)
-        except cantools.database.DecodeError:
-            continue
+    _, usable = gm_messages(rng)
     with open(path, "w") as out:
         t = 1_700_000_000.0
         for _ in range(LINES):

@@ -36,3 +36,23 @@ def fleet(folder: pathlib.Path, vehicles: int = 4, seconds: float = 120.0) -> pa
         subprocess.run([cli(), "log", "convert", run.bus_logs["bus3"], str(target / "bus3.blf")], check=True, capture_output=True)
     done.write_text("")
     return folder
+
+
+GM_DBC = ROOT.parent / "shared" / "corpus" / "dbc" / "opendbc" / "opendbc__dbc__gm_global_a_object.dbc"
+
+
+def gm_messages(rng):
+    """cantools' database of GM's object DBC and the messages every random payload of which
+    it decodes (59 of them): the benchmarks' float-heavy traffic."""
+    import cantools
+
+    db = cantools.database.load_file(str(GM_DBC), strict=False)
+    usable = []
+    for message in db.messages:
+        try:
+            for _ in range(20):
+                db.decode_message(message.frame_id, rng.randbytes(message.length))
+            usable.append(message)
+        except cantools.database.DecodeError:
+            continue
+    return db, usable
