@@ -62,9 +62,7 @@ class BywireBus(can.BusABC):
                 bytes(msg.data),
                 msg.dlc,
             )
-        except ValueError as error:
-            raise can.CanOperationError(str(error)) from error
-        except OSError as error:
+        except (ValueError, OSError) as error:
             raise can.CanOperationError(str(error)) from error
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:

@@ -6,7 +6,6 @@ shape an ADS developer writes against ``bywire vehicle``."""
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import subprocess
@@ -204,4 +203,3 @@ def test_the_console_script_is_the_command_line():
         capture_output=True, text=True, check=True,
     )
     assert "VehicleToAds_State" in decoded.stdout
-    assert os.environ.get("PATH") is not None

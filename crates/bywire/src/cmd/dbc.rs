@@ -515,6 +515,7 @@ fn decode_records(
         })
         .collect();
     let mut values = Vec::new();
+    let mut prefix = String::new();
     pump.run(records, |record| {
         // A frame that does not decode whole gives the rows of the signals it did decode.
         let Some((index, message, _)) = decoder.decoder().decode_into(&record.frame, &mut values)
@@ -526,7 +527,7 @@ fn decode_records(
         };
         let ts =
             bywire_log::candump::timestamp_text(record.timestamp, bywire_log::Precision::Nanos);
-        let mut prefix = String::with_capacity(64);
+        prefix.clear();
         {
             use std::fmt::Write as _;
             // (Writing to a String cannot fail.)
