@@ -64,7 +64,7 @@ impl SignalValue<'_> {
 }
 
 /// A float that is a whole number within i64, as that integer.
-fn integral(value: f64) -> Option<i128> {
+pub(crate) fn integral(value: f64) -> Option<i128> {
     // i64's range as floats: -2^63 is exact, 2^63 is the first float past the top.
     const LIMIT: f64 = 9_223_372_036_854_775_808.0;
     #[allow(clippy::cast_possible_truncation)]

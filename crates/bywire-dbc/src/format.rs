@@ -23,11 +23,16 @@ pub enum Format {
     Kcd,
     /// PEAK's PCAN Symbol Editor format, version 6.0.
     Sym,
+    /// An AUTOSAR system description (3.x or 4.x); read, not written.
+    Arxml,
 }
 
 impl Format {
     /// Every format, in the order `--db-format` lists them.
-    pub const ALL: [Format; 3] = [Format::Dbc, Format::Kcd, Format::Sym];
+    pub const ALL: [Format; 4] = [Format::Dbc, Format::Kcd, Format::Sym, Format::Arxml];
+
+    /// The formats bywire writes.
+    pub const WRITTEN: [Format; 3] = [Format::Dbc, Format::Kcd, Format::Sym];
 
     /// The format's name as `--db-format` takes it, and its file extension.
     pub fn name(self) -> &'static str {
@@ -35,7 +40,13 @@ impl Format {
             Format::Dbc => "dbc",
             Format::Kcd => "kcd",
             Format::Sym => "sym",
+            Format::Arxml => "arxml",
         }
+    }
+
+    /// Whether bywire writes this format.
+    pub fn is_written(self) -> bool {
+        Format::WRITTEN.contains(&self)
     }
 
     /// The format a name (`dbc`, `kcd`, `sym`, any case) stands for.
@@ -50,13 +61,16 @@ impl Format {
         Format::from_name(path.extension()?.to_str()?)
     }
 
-    /// The format the content looks like: a KCD root element, a SYM version line, else DBC.
+    /// The format the content looks like: a KCD or AUTOSAR root element, a SYM version line,
+    /// else DBC.
     pub fn sniff(bytes: &[u8]) -> Format {
         let head = bytes.get(..bytes.len().min(4096)).unwrap_or(bytes);
         let text = String::from_utf8_lossy(head);
         let body = text.trim_start_matches('\u{feff}').trim_start();
         if body.starts_with('<') && text.contains("NetworkDefinition") {
             Format::Kcd
+        } else if body.starts_with('<') && text.contains("<AUTOSAR") {
+            Format::Arxml
         } else if text
             .lines()
             .any(|l| l.trim_start().starts_with("FormatVersion="))
@@ -81,6 +95,7 @@ impl fmt::Display for Format {
             Format::Dbc => "DBC",
             Format::Kcd => "KCD",
             Format::Sym => "SYM",
+            Format::Arxml => "ARXML",
         })
     }
 }
@@ -91,11 +106,37 @@ pub fn load(
     format: Format,
     mode: Mode,
 ) -> Result<(Database, Vec<Diagnostic>), ParseError> {
-    match format {
+    load_bus(bytes, format, mode, None)
+}
+
+/// [`load`], keeping only the bus named `bus` of a file that describes several (an ARXML
+/// system's CAN clusters; a file of one bus must name it). Without `bus`, every bus, each
+/// message's in its `BusName` attribute when there are several.
+pub fn load_bus(
+    bytes: &[u8],
+    format: Format,
+    mode: Mode,
+    bus: Option<&str>,
+) -> Result<(Database, Vec<Diagnostic>), ParseError> {
+    let (db, diagnostics) = match format {
         Format::Dbc => crate::parser::parse(bytes, mode),
         Format::Kcd => crate::kcd::read(&text_of(bytes), mode),
         Format::Sym => crate::sym::read(&text_of(bytes), mode),
+        Format::Arxml => return crate::arxml::read(&text_of(bytes), mode, bus),
+    }?;
+    if let Some(wanted) = bus {
+        let name = db.attributes.iter().find_map(|(n, v)| match v {
+            AttrValue::Str(s) if n == "DBName" => Some(s.as_str()),
+            _ => None,
+        });
+        if let Some(name) = name.filter(|n| *n != wanted) {
+            return Err(Report::fatal(
+                Position::default(),
+                format!("the database is bus {name}, not {wanted}"),
+            ));
+        }
     }
+    Ok((db, diagnostics))
 }
 
 /// `bytes` as text: UTF-8 when valid, else cp1252 (what PCAN and Vector tools write).
@@ -119,23 +160,45 @@ impl fmt::Display for Omission {
     }
 }
 
-/// `db` as text in `format`, with what the format could not say.
+/// `db` as text in `format`, with what the format could not say; DBC for a format bywire
+/// only reads ([`Format::is_written`]).
 pub fn write(db: &Database, format: Format) -> (String, Vec<Omission>) {
-    match format {
-        Format::Dbc => (crate::writer::write(db), Vec::new()),
-        Format::Kcd => crate::kcd::write(db),
-        Format::Sym => crate::sym::write(db),
+    let (db, mut omissions) = without_containers(db);
+    let (text, more) = match format {
+        Format::Dbc | Format::Arxml => (crate::writer::write(&db), Vec::new()),
+        Format::Kcd => crate::kcd::write(&db),
+        Format::Sym => crate::sym::write(&db),
+    };
+    omissions.extend(more);
+    (text, omissions)
+}
+
+/// The database less its container PDUs (no written format has them), and that omission.
+fn without_containers(db: &Database) -> (std::borrow::Cow<'_, Database>, Vec<Omission>) {
+    if db.containers.is_empty() {
+        return (std::borrow::Cow::Borrowed(db), Vec::new());
     }
+    let mut out = db.clone();
+    let pdus: usize = out.containers.iter().map(|c| c.pdus.len()).sum();
+    let what = format!(
+        "{} container frames' {pdus} contained PDUs (the frames stay, without signals)",
+        out.containers.len()
+    );
+    out.containers.clear();
+    (std::borrow::Cow::Owned(out), vec![Omission { what }])
 }
 
 /// `db` reduced to what `format` can say (the database its file reads back as), and what the
 /// reduction dropped.
 pub fn expressible(db: &Database, format: Format) -> (Database, Vec<Omission>) {
-    match format {
-        Format::Dbc => (db.clone(), Vec::new()),
-        Format::Kcd => crate::kcd::expressible(db),
-        Format::Sym => crate::sym::expressible(db),
-    }
+    let (db, mut omissions) = without_containers(db);
+    let (out, more) = match format {
+        Format::Dbc | Format::Arxml => (db.into_owned(), Vec::new()),
+        Format::Kcd => crate::kcd::expressible(&db),
+        Format::Sym => crate::sym::expressible(&db),
+    };
+    omissions.extend(more);
+    (out, omissions)
 }
 
 /// DBC's start bit of a signal whose start KCD and SYM give counted in network order (a

@@ -24,6 +24,7 @@
 //! assert_eq!(out[0].unwrap().physical.as_f64(), 100.0);
 //! ```
 
+mod arxml;
 pub mod codec;
 pub mod codegen;
 pub mod condition;

@@ -427,6 +427,43 @@ pub struct Database {
     pub signal_groups: Vec<SignalGroup>,
     /// Statements this parser does not interpret, kept verbatim in file order.
     pub unknown: Vec<String>,
+    /// Frames that carry other PDUs behind headers (AUTOSAR container PDUs; DBC has none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub containers: Vec<Container>,
+}
+
+/// The header in front of each PDU in a container frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ContainerHeader {
+    /// A 3-byte identifier and a 1-byte length.
+    Short,
+    /// A 4-byte identifier and a 4-byte length.
+    Long,
+}
+
+impl ContainerHeader {
+    /// The header's bytes: (identifier, length).
+    pub fn sizes(self) -> (usize, usize) {
+        match self {
+            ContainerHeader::Short => (3, 1),
+            ContainerHeader::Long => (4, 4),
+        }
+    }
+}
+
+/// A frame that carries PDUs, each behind a header naming it and its length (an AUTOSAR
+/// container I-PDU with dynamic layout): the frame is a message of the database without
+/// signals; the PDUs it may carry are listed here.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Container {
+    /// The name of the frame's message.
+    pub message: String,
+    /// The header's kind.
+    pub header: ContainerHeader,
+    /// The byte order of the header's fields.
+    pub header_byte_order: ByteOrder,
+    /// The PDUs the frame may carry: each a message whose `id` is its header identifier.
+    pub pdus: Vec<Message>,
 }
 
 impl Database {

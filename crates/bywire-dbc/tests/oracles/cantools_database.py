@@ -49,18 +49,23 @@ for path in sys.argv[1:]:
         print(json.dumps({"file": path, "error": f"{type(error).__name__}: {error}"}))
         continue
     rng = random.Random(path)
-    messages = [
-        {
+
+    def message(m, frame_id):
+        return {
             "name": m.name,
-            "frame_id": m.frame_id,
-            "extended": m.is_extended_frame,
+            "frame_id": frame_id,
+            "extended": bool(m.is_extended_frame),
+            "fd": bool(m.is_fd),
             "length": m.length,
             "cycle_time": m.cycle_time,
             "senders": list(m.senders),
             "comment": m.comment,
             "signals": [signal(s) for s in m.signals],
-            "frames": decoded(m, rng),
+            # A container decodes only into its PDUs, which are listed with their header IDs.
+            "frames": [] if m.is_container else decoded(m, rng),
+            "contained": [message(c, c.header_id) for c in m.contained_messages or []],
+            "container": bool(m.is_container),
         }
-        for m in db.messages
-    ]
+
+    messages = [message(m, m.frame_id) for m in db.messages]
     print(json.dumps({"file": path, "messages": messages}))
