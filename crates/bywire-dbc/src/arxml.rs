@@ -199,6 +199,8 @@ struct E2e {
     data_ids: Vec<i128>,
     crc_offset: Option<u32>,
     counter_offset: Option<u32>,
+    /// How the data ID enters the CRC (`ALL-16-BIT`: both bytes, low first).
+    data_id_mode: Option<String>,
     at: Position,
 }
 
@@ -476,9 +478,11 @@ impl<'a, 'input> Reader<'a, 'input> {
                 .filter(|n| is(*n, "CAN-FRAME-TRIGGERING"))
                 .collect();
             for t in triggerings {
+                let first = units.len();
                 self.frame(t, &mut units, &mut db.containers)?;
                 if several {
-                    if let Some(unit) = units.last_mut() {
+                    // The frame's own unit (a container's PDUs follow it).
+                    if let Some(unit) = units.get_mut(first) {
                         unit.message
                             .attributes
                             .push((BUS_NAME.to_string(), AttrValue::Str(cluster_name.clone())));
@@ -1564,6 +1568,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             data_ids,
             crc_offset,
             counter_offset,
+            data_id_mode: description.and_then(data_id_mode),
             at: self.at(props),
         }))
     }
@@ -1614,6 +1619,7 @@ impl<'a, 'input> Reader<'a, 'input> {
                 data_ids,
                 crc_offset,
                 counter_offset,
+                data_id_mode: data_id_mode(profile),
                 at: self.at(protection),
             };
             let pdus = self.walk_all(
@@ -1722,11 +1728,17 @@ impl<'a, 'input> Reader<'a, 'input> {
     /// An E2E protection as the counter and checksum attributes, when bywire computes its
     /// profile; a warning when it does not.
     fn declare_e2e(&mut self, message: &mut Message, e2e: &E2e) -> Result<(), ParseError> {
+        // Profile 1 with both data ID bytes (its default), the CRC checked against the
+        // autosar-e2e package; other profiles and data ID modes are named, not guessed.
         let profile = e2e.profile.to_ascii_uppercase().replace(['-', ' '], "_");
+        let both_bytes = e2e
+            .data_id_mode
+            .as_deref()
+            .is_none_or(|m| m == "ALL-16-BIT");
         let crc8 = matches!(
             profile.as_str(),
-            "PROFILE_01" | "PROFILE01" | "PROFILE1" | "P01" | "PROFILE_11" | "P11" | "PROFILE11"
-        );
+            "PROFILE_01" | "PROFILE01" | "PROFILE1" | "P01"
+        ) && both_bytes;
         let name = message.name.clone();
         let find = |m: &Message, bit: u32, length: u32| {
             m.signals.iter().position(|s| {
@@ -1740,7 +1752,7 @@ impl<'a, 'input> Reader<'a, 'input> {
             let why = if crc8 {
                 "it needs one data ID and a 4-bit counter and an 8-bit CRC at their offsets"
             } else {
-                "bywire computes profiles 1 and 11 (CRC-8 SAE J1850 over the data ID and data)"
+                "bywire computes profile 1 with both data ID bytes (ALL-16-BIT)"
             };
             self.report.add(
                 Severity::Warning,
@@ -1760,7 +1772,7 @@ impl<'a, 'input> Reader<'a, 'input> {
         if let Some(s) = checksum.and_then(|i| message.signals.get_mut(i)) {
             s.attributes.push((
                 "ChecksumAlgorithm".to_string(),
-                AttrValue::Str("crc8_sae_j1850".to_string()),
+                AttrValue::Str("e2e_profile1".to_string()),
             ));
             if let Some(id) = e2e.data_ids.first() {
                 s.attributes.push(("ChecksumDataId".to_string(), int(*id)));
@@ -1768,6 +1780,11 @@ impl<'a, 'input> Reader<'a, 'input> {
         }
         Ok(())
     }
+}
+
+/// An E2E profile's or description's data ID mode.
+fn data_id_mode(n: XmlNode<'_, '_>) -> Option<String> {
+    child(n, "DATA-ID-MODE").and_then(text).map(str::to_string)
 }
 
 /// An ECUC container's parameter value, by the last part of its definition's path.

@@ -20,6 +20,7 @@ use core::time::Duration;
 use bywire_core::Frame;
 
 use crate::codec::{DecodeError, Decoded, MessageCodec};
+use crate::container::{split, ContainedPdu, ContainerError};
 use crate::{Database, Message, Signal, ValueType};
 
 /// One signal of a decoded frame.
@@ -110,6 +111,20 @@ pub struct Decoder {
     standard: Vec<Option<usize>>,
     /// Extended identifiers with their message index, sorted for binary search.
     extended: Vec<(u32, usize)>,
+    /// Container frames: by message index, the container's index in the database.
+    containers: Vec<(usize, usize)>,
+    /// Each container's PDUs' codecs, in the database's order.
+    contained_codecs: Vec<Vec<MessageCodec>>,
+}
+
+/// One PDU of a container frame, with its message and codec when the database knows its
+/// header identifier.
+#[derive(Debug, Clone, Copy)]
+pub struct Contained<'a, 'd> {
+    /// The PDU's header identifier and bytes.
+    pub pdu: ContainedPdu<'d>,
+    /// Its message (a PDU of the container) and codec.
+    pub message: Option<(&'a Message, &'a MessageCodec)>,
 }
 
 /// Standard identifiers: 11 bits.
@@ -136,12 +151,59 @@ impl Decoder {
         // Stable: among equal identifiers the first message stays first.
         extended.sort_by_key(|(id, _)| *id);
         extended.dedup_by_key(|(id, _)| *id);
+        let containers = db
+            .containers
+            .iter()
+            .enumerate()
+            .filter_map(|(c, container)| {
+                let index = db
+                    .messages
+                    .iter()
+                    .position(|m| m.name == container.message)?;
+                Some((index, c))
+            })
+            .collect();
+        let contained_codecs = db
+            .containers
+            .iter()
+            .map(|c| c.pdus.iter().map(MessageCodec::new).collect())
+            .collect();
         Decoder {
             db,
             codecs,
             standard,
             extended,
+            containers,
+            contained_codecs,
         }
+    }
+
+    /// Whether the message at `index` is a container frame.
+    pub fn is_container(&self, index: usize) -> bool {
+        self.containers.iter().any(|(i, _)| *i == index)
+    }
+
+    /// The PDUs a frame of the container message at `index` carries, each with its message
+    /// when known; `None` when that message is no container.
+    pub fn contained<'s, 'd>(
+        &'s self,
+        index: usize,
+        data: &'d [u8],
+    ) -> Option<impl Iterator<Item = Result<Contained<'s, 'd>, ContainerError>> + use<'s, 'd>> {
+        let (_, c) = self.containers.iter().find(|(i, _)| *i == index)?;
+        let container = self.db.containers.get(*c)?;
+        let codecs = self.contained_codecs.get(*c)?;
+        Some(
+            split(container.header, container.header_byte_order, data).map(move |pdu| {
+                let pdu = pdu?;
+                let message = container
+                    .pdus
+                    .iter()
+                    .zip(codecs)
+                    .find(|(m, _)| m.id == pdu.header_id);
+                Ok(Contained { pdu, message })
+            }),
+        )
     }
 
     /// The index of the message with identifier `raw` (extended or standard).

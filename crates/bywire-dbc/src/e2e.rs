@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! BA_DEF_ SG_ "RollingCounter" INT 0 1;        1 marks the counter
-//! BA_DEF_ SG_ "ChecksumAlgorithm" STRING;      xor8, sum8, crc8_sae_j1850 or crc8_h2f
+//! BA_DEF_ SG_ "ChecksumAlgorithm" STRING;      xor8, sum8, crc8_sae_j1850, crc8_h2f or e2e_profile1
 //! BA_DEF_ SG_ "ChecksumDataId" INT 0 65535;    optional data ID fed to the CRC first (low, high)
 //! ```
 //!
@@ -29,8 +29,11 @@ pub enum ChecksumAlgorithm {
     Xor8,
     /// Sum of the bytes modulo 256.
     Sum8,
-    /// CRC-8 SAE J1850 (AUTOSAR E2E Profile 1's CRC).
+    /// CRC-8 SAE J1850 as the standard gives it (initial value and final XOR 0xFF).
     Crc8SaeJ1850,
+    /// AUTOSAR E2E Profile 1's CRC: SAE J1850's polynomial chained as `Crc_CalculateCRC8`
+    /// from a start value of 0xFF, the result inverted (an initial value and final XOR of 0).
+    E2eProfile1,
     /// CRC-8H2F (AUTOSAR E2E Profile 2's CRC).
     Crc8H2f,
 }
@@ -43,6 +46,7 @@ impl ChecksumAlgorithm {
             "sum8" | "sum" => ChecksumAlgorithm::Sum8,
             "crc8_sae_j1850" | "crc8" | "sae_j1850" => ChecksumAlgorithm::Crc8SaeJ1850,
             "crc8_h2f" | "crc8h2f" => ChecksumAlgorithm::Crc8H2f,
+            "e2e_profile1" | "e2e_p01" | "profile1" => ChecksumAlgorithm::E2eProfile1,
             _ => return None,
         })
     }
@@ -72,6 +76,9 @@ impl ChecksumAlgorithm {
                 &mut bytes,
             ),
             ChecksumAlgorithm::Crc8H2f => chain(crc::crc8_h2f, crc::crc8_h2f_continue, &mut bytes),
+            ChecksumAlgorithm::E2eProfile1 => {
+                bytes.fold(0xFF, |c, b| crc::crc8_sae_j1850_continue(c, &[b])) ^ 0xFF
+            }
         }
     }
 }

@@ -28,6 +28,7 @@ mod arxml;
 pub mod codec;
 pub mod codegen;
 pub mod condition;
+pub mod container;
 pub mod decoder;
 pub mod e2e;
 pub mod format;
@@ -44,6 +45,7 @@ pub mod select;
 mod sym;
 mod writer;
 
+pub use arxml::BUS_NAME;
 pub use format::Format;
 pub use model::*;
 pub use parser::{parse, parse_str, Diagnostic, Mode, ParseError, Severity, INDEPENDENT_SIGNALS};

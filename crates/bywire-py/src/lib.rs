@@ -329,7 +329,7 @@ fn dict_order(codec: &MessageCodec, count: usize) -> Vec<usize> {
 fn format_named(name: &str) -> PyResult<bywire_dbc::Format> {
     bywire_dbc::Format::from_name(name).ok_or_else(|| {
         pyo3::exceptions::PyValueError::new_err(format!(
-            "{name} is not a database format (dbc, kcd, sym)"
+            "{name} is not a database format (dbc, kcd, sym, arxml)"
         ))
     })
 }
@@ -716,8 +716,8 @@ impl Database {
 
 #[pymethods]
 impl Database {
-    /// Load a database file: DBC, KCD or SYM, by `database_format` (`"dbc"`, `"kcd"`,
-    /// `"sym"`), else the extension, else the content (`strict`: the first problem is an
+    /// Load a database file: DBC, KCD, SYM or ARXML, by `database_format` (`"dbc"`, `"kcd"`,
+    /// `"sym"`, `"arxml"`), else the extension, else the content (`strict`: the first problem is an
     /// error; otherwise what a reasonable engineer accepts loads, each problem in
     /// `diagnostics`).
     #[staticmethod]
@@ -730,7 +730,7 @@ impl Database {
         Database::new(&bytes, strict, &path.display().to_string(), format)
     }
 
-    /// Load database text: DBC, KCD or SYM, by `database_format`, else by its content.
+    /// Load database text: DBC, KCD, SYM or ARXML, by `database_format`, else by its content.
     #[staticmethod]
     #[pyo3(signature = (text, strict = false, database_format = None))]
     fn load_string(text: &str, strict: bool, database_format: Option<&str>) -> PyResult<Self> {
@@ -741,7 +741,7 @@ impl Database {
         Database::new(text.as_bytes(), strict, "<string>", format)
     }
 
-    /// Load a database from its bytes: DBC, KCD or SYM, by `database_format`, else by its
+    /// Load a database from its bytes: DBC, KCD, SYM or ARXML, by `database_format`, else by its
     /// content; `origin` names it in errors and diagnostics.
     #[staticmethod]
     #[pyo3(signature = (data, origin, strict = false, database_format = None))]
@@ -778,6 +778,11 @@ impl Database {
     /// format cannot say listed in `left_out`.
     fn write(&self, database_format: &str) -> PyResult<(String, Vec<String>)> {
         let format = format_named(database_format)?;
+        if !format.is_written() {
+            return Err(PyValueError::new_err(format!(
+                "{format} is read, not written (dbc, kcd, sym are written)"
+            )));
+        }
         let (text, omissions) = bywire_dbc::format::write(self.decoder.database(), format);
         Ok((text, omissions.iter().map(ToString::to_string).collect()))
     }

@@ -34,10 +34,14 @@ Exit status: 0 on success (and when the reader of the output goes away), 1 on an
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Read every database as this format (dbc, kcd, sym) instead of by its extension or
-    /// content.
+    /// Read every database as this format (dbc, kcd, sym, arxml) instead of by its extension
+    /// or content.
     #[arg(long, global = true, value_name = "FORMAT", value_parser = support::dbc::parse_format)]
     db_format: Option<bywire_dbc::Format>,
+    /// Of a database describing several buses (an ARXML system's CAN clusters), read only this
+    /// one; without it every bus is read, each message's in its BusName attribute.
+    #[arg(long, global = true, value_name = "NAME")]
+    db_bus: Option<String>,
 }
 
 #[derive(Subcommand)]
@@ -46,8 +50,8 @@ enum Command {
     Wire(cmd::wire::Args),
     /// Compute bit-timing registers for a bitrate and sample point on a controller.
     Bittiming(cmd::bittiming::Args),
-    /// Work with databases (DBC, KCD, SYM): dump, lint, convert among them and JSON, generate
-    /// Rust.
+    /// Work with databases (DBC, KCD, SYM, ARXML): dump, lint, convert among them and JSON,
+    /// generate Rust.
     #[command(
         after_help = "Examples:\n  bywire dbc dump vehicle.dbc\n  bywire dbc lint vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc gen-rust vehicle.dbc > src/vehicle.rs"
     )]
@@ -157,6 +161,7 @@ where
     bywire_log::parquet::quiet_panics_taken_as_errors();
     let cli = Cli::parse_from(args);
     support::dbc::force_format(cli.db_format);
+    support::dbc::select_bus(cli.db_bus);
     let mut out = io::stdout().lock();
     let result = match cli.command {
         Command::Wire(args) => cmd::wire::run(&args, &mut out),

@@ -38,7 +38,7 @@ pub enum DbcCommand {
         /// The DBC file.
         file: PathBuf,
     },
-    /// Convert among DBC, KCD, SYM and JSON, chosen by the files' extensions.
+    /// Convert among DBC, KCD, SYM and JSON (and from ARXML), chosen by the files' extensions.
     #[command(
         after_help = "Examples:\n  bywire dbc convert vehicle.dbc vehicle.json\n  bywire dbc convert vehicle.json vehicle.dbc\n  bywire dbc convert vehicle.sym vehicle.dbc\n  bywire dbc convert vehicle.dbc vehicle.kcd\n\nWhat the output format cannot say (attributes, nodes, extended multiplexing, ...) is named\non stderr, one warning each, and left out. The output is written to a temporary file and\nrenamed, so a failed conversion leaves no half-written file."
     )]
@@ -140,7 +140,9 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
             };
             let text = if is_json(output) {
                 serde_json::to_string_pretty(&db)? + "\n"
-            } else if let Some(format) = bywire_dbc::Format::from_path(output) {
+            } else if let Some(format) =
+                bywire_dbc::Format::from_path(output).filter(|f| f.is_written())
+            {
                 let (text, omissions) = bywire_dbc::format::write(&db, format);
                 for omission in &omissions {
                     eprintln!(
@@ -151,7 +153,7 @@ pub fn run(command: &DbcCommand, out: &mut impl Write) -> Result<()> {
                 text
             } else {
                 anyhow::bail!(
-                    "{}: the output must end in .dbc, .kcd, .sym or .json",
+                    "{}: the output must end in .dbc, .kcd, .sym or .json (ARXML is read, not written)",
                     output.display()
                 );
             };
@@ -215,56 +217,117 @@ fn dump(db: &Database, out: &mut impl Write) -> Result<()> {
             m.id,
             if m.extended { " (extended)" } else { "" }
         )?;
-        writeln!(out, "  Length:     {} bytes", m.size)?;
-        if let Some(bywire_dbc::AttrValue::Number(n)) = m.attribute("GenMsgCycleTime") {
-            writeln!(out, "  Cycle time: {n} ms")?;
+        if let Some(bywire_dbc::AttrValue::Str(bus)) = m.attribute(bywire_dbc::BUS_NAME) {
+            writeln!(out, "  Bus:        {bus}")?;
         }
-        let senders: Vec<&str> = std::iter::once(m.transmitter.as_str())
-            .chain(m.senders.iter().map(String::as_str))
-            .collect();
-        writeln!(out, "  Senders:    {}", senders.join(", "))?;
-        if let Some(c) = &m.comment {
-            writeln!(out, "  Comment:    {c}")?;
+        message_body(m, out)?;
+        let Some(container) = db.containers.iter().find(|c| c.message == m.name) else {
+            continue;
+        };
+        let order = match container.header_byte_order {
+            ByteOrder::LittleEndian => "little",
+            ByteOrder::BigEndian => "big",
+        };
+        let (id_bytes, length_bytes) = container.header.sizes();
+        writeln!(
+            out,
+            "  Contains:   PDUs behind {id_bytes}-byte identifiers and {length_bytes}-byte lengths ({order}-endian)"
+        )?;
+        for pdu in &container.pdus {
+            writeln!(out)?;
+            writeln!(out, "  PDU:        {}", pdu.display_name())?;
+            writeln!(out, "  Header ID:  0x{:06x}", pdu.id)?;
+            message_body(pdu, out)?;
         }
-        layout(m, out)?;
-        writeln!(out, "  Signals:")?;
-        for s in &m.signals {
-            let order = match s.byte_order {
-                ByteOrder::LittleEndian => "little",
-                ByteOrder::BigEndian => "big",
-            };
-            let kind = match s.value_type {
-                ValueType::Integer { signed: true } => "signed",
-                ValueType::Integer { signed: false } => "unsigned",
-                ValueType::Float32 => "float32",
-                ValueType::Float64 => "float64",
-            };
-            let mux = match s.multiplexing {
-                Multiplexing::None => String::new(),
-                Multiplexing::Multiplexor => " multiplexor".into(),
-                Multiplexing::Multiplexed(v) => format!(" when multiplexor = {v}"),
-                Multiplexing::MultiplexedMultiplexor(v) => {
-                    format!(" multiplexor, when multiplexor = {v}")
-                }
-            };
+    }
+    Ok(())
+}
+
+/// A message's (or contained PDU's) length, timing, senders, comment, protection, layout and
+/// signals.
+fn message_body(m: &Message, out: &mut impl Write) -> Result<()> {
+    writeln!(out, "  Length:     {} bytes", m.size)?;
+    if let Some(bywire_dbc::AttrValue::Number(n)) = m.attribute("GenMsgCycleTime") {
+        writeln!(out, "  Cycle time: {n} ms")?;
+    }
+    let senders: Vec<&str> = std::iter::once(m.transmitter.as_str())
+        .chain(m.senders.iter().map(String::as_str))
+        .collect();
+    writeln!(out, "  Senders:    {}", senders.join(", "))?;
+    if let Some(c) = &m.comment {
+        writeln!(out, "  Comment:    {c}")?;
+    }
+    if let Some(p) = bywire_dbc::e2e::Protection::of(m) {
+        let name = |i: usize| m.signals.get(i).map_or("?", |s| s.display_name());
+        let mut parts = Vec::new();
+        if let Some((i, _)) = p.counter {
+            parts.push(format!("counter {}", name(i)));
+        }
+        if let Some((i, algorithm)) = p.checksum {
+            let how = algorithm.map_or("no declared algorithm".to_string(), |a| format!("{a:?}"));
+            let id = p
+                .data_id
+                .map(|d| format!(", data ID 0x{d:04x}"))
+                .unwrap_or_default();
+            parts.push(format!("checksum {} ({how}{id})", name(i)));
+        }
+        writeln!(out, "  Protected:  {}", parts.join(", "))?;
+    }
+    match bywire_dbc::secoc::Secured::of(m) {
+        Ok(Some(secured)) => {
+            let l = secured.layout;
             writeln!(
                 out,
-                "    {} [{}|{} {order}-endian {kind}]{mux}",
-                s.display_name(),
-                s.start_bit,
-                s.length
+                "  Secured:    SecOC data ID 0x{:04x}, {} payload bytes, freshness {} of {} bits, MAC {} bits, key {}",
+                l.data_id,
+                l.payload_length,
+                l.fv_tx_length,
+                l.fv_length,
+                l.mac_tx_length,
+                secured.key_id
             )?;
-            writeln!(
-                out,
-                "      scale {} offset {} range [{}, {}] {}",
-                s.factor, s.offset, s.minimum, s.maximum, s.unit
-            )?;
-            if let Some(c) = &s.comment {
-                writeln!(out, "      {c}")?;
+        }
+        Ok(None) => {}
+        Err(e) => writeln!(out, "  Secured:    unusable: {e}")?,
+    }
+    layout(m, out)?;
+    writeln!(out, "  Signals:")?;
+    for s in &m.signals {
+        let order = match s.byte_order {
+            ByteOrder::LittleEndian => "little",
+            ByteOrder::BigEndian => "big",
+        };
+        let kind = match s.value_type {
+            ValueType::Integer { signed: true } => "signed",
+            ValueType::Integer { signed: false } => "unsigned",
+            ValueType::Float32 => "float32",
+            ValueType::Float64 => "float64",
+        };
+        let mux = match s.multiplexing {
+            Multiplexing::None => String::new(),
+            Multiplexing::Multiplexor => " multiplexor".into(),
+            Multiplexing::Multiplexed(v) => format!(" when multiplexor = {v}"),
+            Multiplexing::MultiplexedMultiplexor(v) => {
+                format!(" multiplexor, when multiplexor = {v}")
             }
-            for (v, d) in &s.value_descriptions {
-                writeln!(out, "        {v}: {d}")?;
-            }
+        };
+        writeln!(
+            out,
+            "    {} [{}|{} {order}-endian {kind}]{mux}",
+            s.display_name(),
+            s.start_bit,
+            s.length
+        )?;
+        writeln!(
+            out,
+            "      scale {} offset {} range [{}, {}] {}",
+            s.factor, s.offset, s.minimum, s.maximum, s.unit
+        )?;
+        if let Some(c) = &s.comment {
+            writeln!(out, "      {c}")?;
+        }
+        for (v, d) in &s.value_descriptions {
+            writeln!(out, "        {v}: {d}")?;
         }
     }
     Ok(())
@@ -274,7 +337,7 @@ fn dump(db: &Database, out: &mut impl Write) -> Result<()> {
 /// significant bit marked with `>`.
 fn layout(m: &Message, out: &mut impl Write) -> Result<()> {
     let size = usize::try_from(m.size).unwrap_or(0).min(64);
-    if size == 0 {
+    if size == 0 || m.signals.is_empty() {
         return Ok(());
     }
     let letters: Vec<char> = ('A'..='Z').chain('a'..='z').collect();

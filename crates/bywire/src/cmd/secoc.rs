@@ -267,9 +267,27 @@ fn verify_one(one: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
 struct Checked {
     name: String,
     id: bywire_core::Id,
+    /// For a PDU of a container frame, its header identifier.
+    header_id: Option<u32>,
     layout: Layout,
     auth: Authenticator,
     receiver: Receiver,
+}
+
+/// A message's identifier as a frame's.
+fn frame_id(message: &bywire_dbc::Message) -> Result<bywire_core::Id> {
+    if message.extended {
+        bywire_core::Id::extended(message.id)
+    } else {
+        bywire_core::Id::standard(message.id)
+    }
+    .map_err(|_| {
+        anyhow!(
+            "message {}: identifier {:#x} out of range",
+            message.name,
+            message.id
+        )
+    })
 }
 
 fn verify_logs(options: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
@@ -277,7 +295,19 @@ fn verify_logs(options: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
     let db = crate::support::dbc::load(path, false)?;
     let keys = KeyFile::load(&options.key)?;
     let mut checked = Vec::new();
-    for message in &db.messages {
+    // Secured messages, and secured PDUs of container frames (with the frame and header).
+    let mut containers = Vec::new();
+    let mut secured_messages: Vec<(&bywire_dbc::Message, Option<(bywire_core::Id, u32)>)> =
+        db.messages.iter().map(|m| (m, None)).collect();
+    for container in &db.containers {
+        let Some(frame) = db.message_by_name(&container.message) else {
+            continue;
+        };
+        let id = frame_id(frame)?;
+        containers.push((id, container.header, container.header_byte_order));
+        secured_messages.extend(container.pdus.iter().map(|p| (p, Some((id, p.id)))));
+    }
+    for (message, contained) in secured_messages {
         let Some(secured) = Secured::of(message).with_context(|| path.display().to_string())?
         else {
             continue;
@@ -292,21 +322,14 @@ fn verify_logs(options: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
                 options.key.display()
             )
         })?;
-        let id = if message.extended {
-            bywire_core::Id::extended(message.id)
-        } else {
-            bywire_core::Id::standard(message.id)
-        }
-        .map_err(|_| {
-            anyhow!(
-                "message {}: identifier {:#x} out of range",
-                message.name,
-                message.id
-            )
-        })?;
+        let (id, header_id) = match contained {
+            Some((id, header_id)) => (id, Some(header_id)),
+            None => (frame_id(message)?, None),
+        };
         checked.push(Checked {
             name: message.name.clone(),
             id,
+            header_id,
             layout: secured.layout,
             auth: Authenticator::new(key),
             receiver: Receiver::new(options.freshness_start, options.window),
@@ -322,22 +345,50 @@ fn verify_logs(options: &OneFrameOrLog, out: &mut dyn Write) -> Result<()> {
     for (name, input) in logs::inputs(&files)? {
         for (index, record) in logs::records(&name, input, logs::Skip::Unreadable).enumerate() {
             let record = record?;
-            let Some(message) = checked.iter_mut().find(|c| record.frame.id() == Some(c.id)) else {
-                continue;
-            };
-            if let Err(reason) =
-                message
-                    .receiver
-                    .accept(&message.auth, &message.layout, record.frame.data())
+            let frame_id = record.frame.id();
+            // A container frame: each secured PDU it carries checked on its own.
+            let pdus: Vec<(Option<u32>, &[u8])> = match containers
+                .iter()
+                .find(|(id, ..)| frame_id == Some(*id))
             {
-                writeln!(
-                    out,
-                    "{name}: record {}: {} {} {}: {reason}",
-                    index + 1,
-                    record.interface,
-                    record.frame,
-                    message.name
-                )?;
+                Some((_, header, order)) => {
+                    let mut pdus = Vec::new();
+                    for pdu in bywire_dbc::container::split(*header, *order, record.frame.data()) {
+                        match pdu {
+                            Ok(pdu) => pdus.push((Some(pdu.header_id), pdu.data)),
+                            Err(error) => writeln!(
+                                out,
+                                "{name}: record {}: {} {}: {error}",
+                                index + 1,
+                                record.interface,
+                                record.frame
+                            )?,
+                        }
+                    }
+                    pdus
+                }
+                None => vec![(None, record.frame.data())],
+            };
+            for (header_id, data) in pdus {
+                let Some(message) = checked
+                    .iter_mut()
+                    .find(|c| frame_id == Some(c.id) && c.header_id == header_id)
+                else {
+                    continue;
+                };
+                if let Err(reason) = message
+                    .receiver
+                    .accept(&message.auth, &message.layout, data)
+                {
+                    writeln!(
+                        out,
+                        "{name}: record {}: {} {} {}: {reason}",
+                        index + 1,
+                        record.interface,
+                        record.frame,
+                        message.name
+                    )?;
+                }
             }
         }
     }

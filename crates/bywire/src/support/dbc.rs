@@ -15,6 +15,13 @@ pub fn force_format(format: Option<Format>) {
     let _ = FORCED.set(format);
 }
 
+static BUS: OnceLock<Option<String>> = OnceLock::new();
+
+/// Read only this bus of every database from now on (`--db-bus`).
+pub fn select_bus(bus: Option<String>) {
+    let _ = BUS.set(bus);
+}
+
 /// `--db-format`'s value.
 pub fn parse_format(name: &str) -> Result<Format, String> {
     Format::from_name(name).ok_or_else(|| {
@@ -45,7 +52,8 @@ pub fn load_with_format(path: &Path, strict: bool) -> Result<(Database, usize, F
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mode = if strict { Mode::Strict } else { Mode::Lenient };
     let format = format_of(path, &bytes);
-    let (db, diagnostics) = bywire_dbc::format::load(&bytes, format, mode)
+    let bus = BUS.get().and_then(Option::as_deref);
+    let (db, diagnostics) = bywire_dbc::format::load_bus(&bytes, format, mode, bus)
         .map_err(|e| anyhow::anyhow!("{}:{}", path.display(), e.0))?;
     for d in &diagnostics {
         eprintln!("{}:{d}", path.display());

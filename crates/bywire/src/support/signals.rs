@@ -221,16 +221,7 @@ impl<'a> TextLines<'a> {
             .database()
             .messages
             .iter()
-            .map(|message| {
-                let mut order: Vec<(usize, String)> = message
-                    .signals
-                    .iter()
-                    .map(|s| s.display_name().to_string())
-                    .enumerate()
-                    .collect();
-                order.sort_by_key(|(i, _)| message.signals.get(*i).map(Signal::network_start_bit));
-                (message.display_name().to_string(), order)
-            })
+            .map(shown_order)
             .collect();
         TextLines {
             dbc,
@@ -265,33 +256,175 @@ impl<'a> TextLines<'a> {
                     .messages
                     .get(index)
                     .map_or(("", &[][..]), |(n, o)| (n.as_str(), o.as_slice()));
-                line.push_str(if single_line { " :: " } else { " ::\n" });
-                line.push_str(name);
-                line.push_str(if single_line { "(" } else { "(\n    " });
-                let mut first = true;
-                for (i, signal_name) in order {
-                    let (Some(Some(value)), Some(signal)) =
-                        (self.values.get(*i), message.signals.get(*i))
-                    else {
-                        continue;
+                if let Some(pdus) = self.dbc.decoder().contained(index, frame.data()) {
+                    let shape = Shape {
+                        single_line,
+                        choices,
+                        indent: "    ",
                     };
-                    if !first {
-                        line.push_str(if single_line { ", " } else { ",\n    " });
-                    }
-                    first = false;
-                    line.push_str(signal_name);
-                    line.push_str(": ");
-                    let value = SignalValue {
-                        signal,
-                        value: *value,
+                    push_container(line, name, pdus, &shape);
+                } else {
+                    line.push_str(if single_line { " :: " } else { " ::\n" });
+                    let shape = Shape {
+                        single_line,
+                        choices,
+                        indent: "",
                     };
-                    push_value_text(line, &value, choices);
+                    push_message(line, name, order, message, &self.values, &shape);
                 }
-                line.push_str(if single_line { ")" } else { "\n)" });
             }
         }
         line.push('\n');
         out.write_all(line.as_bytes())
+    }
+}
+
+/// A message's name and its signals' indices and names in cantools' order (by start bit in
+/// network order, the file's order among equals).
+fn shown_order(message: &bywire_dbc::Message) -> (String, Vec<(usize, String)>) {
+    let mut order: Vec<(usize, String)> = message
+        .signals
+        .iter()
+        .map(|s| s.display_name().to_string())
+        .enumerate()
+        .collect();
+    order.sort_by_key(|(i, _)| message.signals.get(*i).map(Signal::network_start_bit));
+    (message.display_name().to_string(), order)
+}
+
+/// How `decode` lays a message out: on one line or one signal per line (indented by `indent`
+/// more inside a container), value names or numbers.
+struct Shape {
+    single_line: bool,
+    choices: bool,
+    indent: &'static str,
+}
+
+/// `Name(a: 1, b: 2)` or, one signal per line, `Name(\n    a: 1,\n    b: 2\n)`.
+fn push_message(
+    line: &mut String,
+    name: &str,
+    order: &[(usize, String)],
+    message: &bywire_dbc::Message,
+    values: &[Option<bywire_dbc::codec::Decoded>],
+    shape: &Shape,
+) {
+    line.push_str(name);
+    line.push('(');
+    if !shape.single_line {
+        line.push('\n');
+        line.push_str(shape.indent);
+        line.push_str("    ");
+    }
+    let mut first = true;
+    for (i, signal_name) in order {
+        let (Some(Some(value)), Some(signal)) = (values.get(*i), message.signals.get(*i)) else {
+            continue;
+        };
+        if !first {
+            line.push(',');
+            if shape.single_line {
+                line.push(' ');
+            } else {
+                line.push('\n');
+                line.push_str(shape.indent);
+                line.push_str("    ");
+            }
+        }
+        first = false;
+        line.push_str(signal_name);
+        line.push_str(": ");
+        let value = SignalValue {
+            signal,
+            value: *value,
+        };
+        push_value_text(line, &value, shape.choices);
+    }
+    if !shape.single_line {
+        line.push('\n');
+        line.push_str(shape.indent);
+    }
+    line.push(')');
+}
+
+/// A container frame's PDUs as cantools shows them: `Container(A(x: 1), B(y: 2))` or, one per
+/// block, each PDU's header ID and bytes (`000001##0a0b ::`) above its signals; a PDU the
+/// database does not know, or cannot decode, said so; a frame that does not split, its error.
+fn push_container<'d>(
+    line: &mut String,
+    name: &str,
+    pdus: impl Iterator<
+        Item = Result<
+            bywire_dbc::decoder::Contained<'d, 'd>,
+            bywire_dbc::container::ContainerError,
+        >,
+    >,
+    shape: &Shape,
+) {
+    use std::fmt::Write as _;
+    let mut parts = String::new();
+    let mut values = Vec::new();
+    for (n, pdu) in pdus.enumerate() {
+        let pdu = match pdu {
+            Ok(pdu) => pdu,
+            Err(error) => {
+                line.push_str(" :: ");
+                line.push_str(&error.to_string());
+                return;
+            }
+        };
+        if n > 0 {
+            parts.push_str(if shape.single_line { ", " } else { ",\n" });
+        }
+        let hex = |sep: &str| {
+            pdu.pdu
+                .data
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect::<Vec<_>>()
+                .join(sep)
+        };
+        // (Writing to a String cannot fail.)
+        if !shape.single_line {
+            let _ = write!(parts, "    {:06x}##{} ::\n    ", pdu.pdu.header_id, hex(""));
+        }
+        let Some((message, codec)) = pdu.message else {
+            if shape.single_line {
+                let _ = write!(
+                    parts,
+                    "(Unknown contained message: Header ID: 0x{:x}, Data: {})",
+                    pdu.pdu.header_id,
+                    hex("")
+                );
+            } else {
+                parts.push_str("Unknown contained message");
+            }
+            continue;
+        };
+        values.clear();
+        values.resize(codec.signal_count(), None);
+        if codec.decode(pdu.pdu.data, &mut values).is_err() {
+            let _ = write!(parts, "{}: Undecodable data", message.display_name());
+            if shape.single_line {
+                let _ = write!(parts, ": {}", hex(" "));
+            }
+            continue;
+        }
+        let (pdu_name, order) = shown_order(message);
+        push_message(&mut parts, &pdu_name, &order, message, &values, shape);
+    }
+    if shape.single_line {
+        line.push_str(" :: ");
+        line.push_str(name);
+        line.push('(');
+        line.push_str(&parts);
+        line.push(')');
+    } else {
+        line.push_str(" ::\n");
+        line.push_str(name);
+        line.push_str("(\n");
+        line.push_str(&parts);
+        line.push_str("\n)");
     }
 }
 
@@ -361,6 +494,17 @@ impl<'a> JsonLines<'a> {
             )?;
             return Ok(true);
         };
+        if let Some(pdus) = self.dbc.decoder().contained(index, frame.data()) {
+            let name = self
+                .dbc
+                .decoder()
+                .database()
+                .messages
+                .get(index)
+                .map(bywire_dbc::Message::display_name);
+            writeln!(out, "{}", container_json(id, extended, name, pdus))?;
+            return Ok(true);
+        }
         let Some(Some(message)) = self.messages.get(index) else {
             return Ok(false);
         };
@@ -400,6 +544,64 @@ impl<'a> JsonLines<'a> {
         out.write_all(b"}}\n")?;
         Ok(true)
     }
+}
+
+/// A container frame as JSON: the frame's object with its PDUs under `contained`, each with
+/// its header ID, name (`null` when unknown), signals and any error; a frame that does not
+/// split has the error.
+fn container_json<'d>(
+    id: u32,
+    extended: bool,
+    name: Option<&str>,
+    pdus: impl Iterator<
+        Item = Result<
+            bywire_dbc::decoder::Contained<'d, 'd>,
+            bywire_dbc::container::ContainerError,
+        >,
+    >,
+) -> serde_json::Value {
+    let mut contained = Vec::new();
+    let mut error = None;
+    for pdu in pdus {
+        let pdu = match pdu {
+            Ok(pdu) => pdu,
+            Err(e) => {
+                error = Some(e.to_string());
+                break;
+            }
+        };
+        let mut object = json!({"header_id": pdu.pdu.header_id, "name": null, "signals": {}});
+        if let Some((message, codec)) = pdu.message {
+            let mut values = vec![None; codec.signal_count()];
+            let decoded = codec.decode(pdu.pdu.data, &mut values);
+            let frame = DecodedFrame {
+                message,
+                signals: message
+                    .signals
+                    .iter()
+                    .zip(values)
+                    .filter_map(|(signal, value)| {
+                        Some(SignalValue {
+                            signal,
+                            value: value?,
+                        })
+                    })
+                    .collect(),
+                error: None,
+            };
+            object["name"] = json!(message.display_name());
+            object["signals"] = serde_json::Value::Object(frame.json_signals());
+            if let Err(e) = decoded {
+                object["error"] = json!(e.to_string());
+            }
+        }
+        contained.push(object);
+    }
+    let mut object = json!({"id": id, "extended": extended, "name": name, "signals": {}, "contained": contained});
+    if let Some(e) = error {
+        object["error"] = json!(e);
+    }
+    object
 }
 
 /// A value as JSON (non-finite floats as strings, which JSON has no number for).
