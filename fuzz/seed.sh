@@ -32,4 +32,7 @@ for compression in zstd snappy none; do
     --compression "$compression" > /dev/null
 done
 bywire log convert "$work/frames.log" corpus/parquet_reader/seed-us.parquet --time-unit us > /dev/null
-echo "seeded: candump_log, log_readers (5 formats), mf4_reader, parquet_reader (4 files)"
+# database_formats: the first byte picks the format (2: ARXML); the example system.
+mkdir -p corpus/database_formats
+{ printf '\x02'; cat ../examples/data/powertrain.arxml; } > corpus/database_formats/seed-powertrain.arxml
+echo "seeded: candump_log, log_readers (5 formats), mf4_reader, parquet_reader (4 files), database_formats (ARXML)"

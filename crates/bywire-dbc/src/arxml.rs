@@ -24,7 +24,7 @@ use std::collections::HashMap;
 
 use roxmltree::{Document, Node as XmlNode, NodeId, ParsingOptions};
 
-use crate::format::{attrs, plain_signal, Report, NO_NODE};
+use crate::format::{attrs, plain_signal, LineIndex, Report, NO_NODE};
 use crate::model::*;
 use crate::parser::{Diagnostic, Mode, ParseError, Severity};
 
@@ -60,9 +60,11 @@ pub(crate) fn read(
         )
     })?;
     let root = doc.root_element();
-    let version = version_of(&doc, root)?;
+    let lines = LineIndex::new(text);
+    let version = version_of(&lines, root)?;
     let mut reader = Reader {
         doc: &doc,
+        lines: &lines,
         report: Report::new(mode),
         version,
         by_path: HashMap::new(),
@@ -74,8 +76,8 @@ pub(crate) fn read(
 }
 
 /// The AUTOSAR major version the root element's namespace names (3 or 4).
-fn version_of(doc: &Document<'_>, root: XmlNode<'_, '_>) -> Result<u8, ParseError> {
-    let at = position(doc, root);
+fn version_of(lines: &LineIndex<'_>, root: XmlNode<'_, '_>) -> Result<u8, ParseError> {
+    let at = lines.position(root.range().start);
     let namespace = root.tag_name().namespace().unwrap_or_default();
     if root.tag_name().name() != "AUTOSAR" {
         return Err(Report::fatal(
@@ -99,14 +101,6 @@ fn version_of(doc: &Document<'_>, root: XmlNode<'_, '_>) -> Result<u8, ParseErro
             at,
             format!("the namespace \"{namespace}\" is not AUTOSAR 3 or 4's"),
         )),
-    }
-}
-
-fn position(doc: &Document<'_>, n: XmlNode<'_, '_>) -> Position {
-    let pos = doc.text_pos_at(n.range().start);
-    Position {
-        line: pos.row,
-        column: pos.col,
     }
 }
 
@@ -219,6 +213,7 @@ struct Pdu {
 
 struct Reader<'a, 'input> {
     doc: &'a Document<'input>,
+    lines: &'a LineIndex<'input>,
     report: Report,
     version: u8,
     by_path: HashMap<String, NodeId>,
@@ -227,7 +222,7 @@ struct Reader<'a, 'input> {
 
 impl<'a, 'input> Reader<'a, 'input> {
     fn at(&self, n: XmlNode<'_, 'input>) -> Position {
-        position(self.doc, n)
+        self.lines.position(n.range().start)
     }
 
     fn problem(
@@ -989,7 +984,7 @@ impl<'a, 'input> Reader<'a, 'input> {
         let start = payload_length.saturating_mul(8);
         let fv_bits = fv_tx.and_then(|n| u32::try_from(n).ok()).unwrap_or(0);
         let mut truncated = |suffix: &str, network_start: u32, length: u32| {
-            if length == 0 || length > 64 {
+            if length == 0 || length > 64 || network_start >= 512 {
                 return;
             }
             let mut s = plain_signal(

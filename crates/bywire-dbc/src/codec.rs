@@ -365,7 +365,8 @@ fn plan(s: &Signal, size: usize) -> Plan {
         ByteOrder::BigEndian => {
             // Linear numbering: bit 0 is the MSB of byte 0.
             let msb = (s.start_bit / 8) * 8 + (7 - s.start_bit % 8);
-            let lsb = msb + length - 1;
+            // (Saturating: a model read from JSON may put a signal anywhere.)
+            let lsb = msb.saturating_add(length - 1);
             let window = usize::try_from(msb / 8).unwrap_or(usize::MAX);
             let lsb_in_window = lsb - (msb / 8) * 8;
             (window, 127 - lsb_in_window, true)
@@ -1037,6 +1038,26 @@ fn to_raw(p: &Plan, v: Value) -> u64 {
 mod tests {
     use super::*;
     use crate::{parse_str, Mode};
+
+    #[test]
+    fn a_signal_placed_anywhere_compiles_and_decodes_as_past_the_end() {
+        // A model from JSON is not checked as a file is: the last bits a u32 can name.
+        let (mut db, _) = parse_str(
+            "BO_ 1 M: 8 X\n SG_ S : 7|16@0+ (1,0) [0|0] \"\" X\n",
+            Mode::Lenient,
+        )
+        .unwrap();
+        for start in [u32::MAX, u32::MAX - 7, 1 << 31] {
+            for order in [ByteOrder::BigEndian, ByteOrder::LittleEndian] {
+                db.messages[0].signals[0].start_bit = start;
+                db.messages[0].signals[0].byte_order = order;
+                let c = MessageCodec::new(&db.messages[0]);
+                let mut out = vec![None; 1];
+                let _ = c.decode(&[0; 8], &mut out);
+                assert!(out[0].is_none());
+            }
+        }
+    }
 
     fn codec(sg: &str) -> MessageCodec {
         let text = format!("BO_ 1 M: 8 X\n{sg}\n");

@@ -326,6 +326,37 @@ pub(crate) mod attrs {
     }
 }
 
+/// Line and column of byte offsets in a text, found by binary search over where its lines
+/// start (an XML library's own lookup counts lines from the top on every call: a position for
+/// each object of a large file made reading quadratic).
+pub(crate) struct LineIndex<'t> {
+    text: &'t str,
+    starts: Vec<usize>,
+}
+
+impl<'t> LineIndex<'t> {
+    pub(crate) fn new(text: &'t str) -> Self {
+        let starts = std::iter::once(0)
+            .chain(text.match_indices('\n').map(|(i, _)| i + 1))
+            .collect();
+        LineIndex { text, starts }
+    }
+
+    /// The 1-based line and column (in characters) of byte `offset`.
+    pub(crate) fn position(&self, offset: usize) -> Position {
+        let line = self.starts.partition_point(|&s| s <= offset).max(1);
+        let start = self.starts.get(line - 1).copied().unwrap_or(0);
+        let column = self
+            .text
+            .get(start..offset.min(self.text.len()))
+            .map_or(0, |t| t.chars().count());
+        Position {
+            line: u32::try_from(line).unwrap_or(u32::MAX),
+            column: u32::try_from(column + 1).unwrap_or(u32::MAX),
+        }
+    }
+}
+
 /// Diagnostics as a reader collects them: each with its position; in strict mode the first
 /// one ends the read.
 pub(crate) struct Report {
@@ -696,6 +727,18 @@ pub(crate) fn set_range(signal: &mut Signal, minimum: Option<Num>, maximum: Opti
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn line_index_positions_are_the_xml_parsers() {
+        let text = "<a>\n  <b x=\"é\"/>\r\n\n<c>ü<d/></c>\n</a>";
+        let doc = roxmltree::Document::parse(text).unwrap();
+        let lines = LineIndex::new(text);
+        for n in doc.descendants() {
+            let theirs = doc.text_pos_at(n.range().start);
+            let ours = lines.position(n.range().start);
+            assert_eq!((ours.line, ours.column), (theirs.row, theirs.col), "{n:?}");
+        }
+    }
 
     #[test]
     fn formats_are_named_by_extension_and_recognised_by_content() {

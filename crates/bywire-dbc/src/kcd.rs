@@ -11,7 +11,7 @@ use roxmltree::{Document, Node as XmlNode, ParsingOptions};
 use crate::format::{
     self, attrs, cycle_time_ms, declare_referenced_nodes, drop_dbc_only, grouped_signal_order,
     keep_attributes, plain_signal, simple_multiplexing, start_bit_from_network, xml_escape,
-    Omission, Omissions, Report, NO_NODE,
+    LineIndex, Omission, Omissions, Report, NO_NODE,
 };
 use crate::model::*;
 use crate::parser::{parse_num, Diagnostic, Mode, ParseError, Severity};
@@ -38,8 +38,10 @@ pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>)
             format!("not well-formed XML: {e}"),
         )
     })?;
+    let lines = LineIndex::new(text);
     let mut reader = Reader {
         doc: &doc,
+        lines: &lines,
         report: Report::new(mode),
         node_ids: Vec::new(),
     };
@@ -49,17 +51,14 @@ pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>)
 
 struct Reader<'a, 'input> {
     doc: &'a Document<'input>,
+    lines: &'a LineIndex<'input>,
     report: Report,
     node_ids: Vec<(String, String)>,
 }
 
 impl<'input> Reader<'_, 'input> {
     fn at(&self, n: XmlNode<'_, 'input>) -> Position {
-        let pos = self.doc.text_pos_at(n.range().start);
-        Position {
-            line: pos.row,
-            column: pos.col,
-        }
+        self.lines.position(n.range().start)
     }
 
     fn problem(

@@ -1,6 +1,6 @@
 """CAN databases shaped like ``cantools.database``: ``load_file``, ``load_string``, ``load``,
 ``dump_file``, and ``Database``, ``Message``, ``Signal``, ``Node`` with cantools' names,
-arguments and meanings, read by bywire's own readers (DBC, KCD, SYM) and decoded and encoded
+arguments and meanings, read by bywire's own readers (DBC, KCD, SYM, ARXML) and decoded and encoded
 natively. A cantools user changes the import::
 
     import bywire.database as database   # was: import cantools.database as database
@@ -65,8 +65,8 @@ __all__ = [
     "sort_signals_by_start_bit",
 ]
 
-#: The formats read (cantools also reads ARXML and CDD; bywire does not yet).
-FORMATS = ("dbc", "kcd", "sym")
+#: The formats read (cantools also reads CDD; bywire does not yet).
+FORMATS = ("dbc", "kcd", "sym", "arxml")
 _ALL_MASK = 0xFFFFFFFF
 _EXTENDED = 0x80000000
 
@@ -269,6 +269,7 @@ class Database:
     add_dbc_string, add_dbc, add_dbc_file = _adders("dbc", "cp1252")
     add_kcd_string, add_kcd, add_kcd_file = _adders("kcd", "utf-8")
     add_sym_string, add_sym, add_sym_file = _adders("sym", "utf-8")
+    add_arxml_string, add_arxml, add_arxml_file = _adders("arxml", "utf-8")
     del _adders
 
     def _add(self, data: bytes, database_format: str | None, origin: str) -> None:
@@ -297,6 +298,24 @@ class Database:
                     _frame_format(message, definitions),
                 )
             )
+        by_name = {m.name: m for m in self._messages}
+        for container in model.get("containers", []):
+            frame = by_name.get(container["message"])
+            if frame is None:
+                continue
+            contained = []
+            for pdu in container["pdus"]:
+                message = Message._of_model(
+                    pdu, definitions, node_names, self._sort_signals, _cycle_time(pdu, definitions), None, None
+                )
+                message.header_id = pdu["id"]
+                contained.append(message)
+            frame.contained_messages = contained
+            frame.header_byte_order = "little_endian" if container["header_byte_order"] == "LittleEndian" else "big_endian"
+            frame._container = container
+        database_name = _attribute(model["attributes"], "DBName")
+        for message in self._messages:
+            message.bus_name = _attribute(message._model["attributes"], "BusName") or database_name or None
         self._nodes = []
         for node_model in model["nodes"]:
             node = Node(node_names[node_model["name"]], node_model["comment"])
@@ -587,7 +606,7 @@ def _load(
     strict: bool,
     sort_signals: Any,
 ) -> Database:
-    if database_format in ("arxml", "cdd"):
+    if database_format == "cdd":
         raise UnsupportedDatabaseFormatError(**{f"e_{database_format}": Error(f"{database_format.upper()} is not read yet")})
     try:
         native = _native.Database.load_bytes(data, origin, False, database_format)
@@ -612,7 +631,7 @@ def _load(
 def _sniffed(data: bytes) -> str:
     head = data.lstrip()[:200]
     if head.startswith(b"<"):
-        return "kcd"
+        return "arxml" if b"<AUTOSAR" in data[:4096] else "kcd"
     if b"FormatVersion" in data[:4096]:
         return "sym"
     return "dbc"
@@ -628,7 +647,7 @@ def load_file(
     cache_dir: str | None = None,
     sort_signals: Any = SORT_SIGNALS_DEFAULT,
 ) -> Database:
-    """Load a database file (DBC, KCD or SYM, by ``database_format``, else the extension,
+    """Load a database file (DBC, KCD, SYM or ARXML, by ``database_format``, else the extension,
     else the content). A missing file raises ``FileNotFoundError``; a file no format reads
     :class:`UnsupportedDatabaseFormatError` naming the file, line and column. ``strict``
     refuses signals past their message's end or sharing bits (cantools' strictness);

@@ -16,7 +16,7 @@ from typing import Any
 
 from .. import _native
 from .._values import NamedSignalValue
-from .errors import Error
+from .errors import DecodeError, Error
 
 NO_NODE = "Vector__XXX"
 
@@ -554,8 +554,82 @@ class Message(_Commented):
         allow_excess: bool = True,
     ) -> dict[str, Any]:
         """``{signal: value}`` as cantools decodes: choices as :class:`NamedSignalValue`,
-        ordered as cantools orders them."""
+        ordered as cantools orders them; a container frame (with ``decode_containers``) as
+        :meth:`decode_container` gives it."""
+        if self.is_container():
+            if not decode_containers:
+                raise DecodeError(
+                    f'Message "{self.name}" is a container message, but decoding such messages has not been enabled!'
+                )
+            return self.decode_container(data, decode_choices, scaling, allow_truncated, allow_excess)  # type: ignore[return-value]
         return self._codec().decode(data, decode_choices, scaling, decode_containers, allow_truncated, allow_excess)
+
+    def get_contained_message_by_header_id(self, header_id: int) -> Message | None:
+        found = [m for m in self.contained_messages or [] if m.header_id == header_id]
+        if len(found) > 1:
+            raise Error(f'Container message "{self.name}" contains multiple contained messages exhibiting id 0x{header_id:x}')
+        return found[0] if found else None
+
+    def get_contained_message_by_name(self, name: str) -> Message | None:
+        found = [m for m in self.contained_messages or [] if m.name == name]
+        if len(found) > 1:
+            raise Error(f'Container message "{self.name}" contains multiple contained messages named "{name}"')
+        return found[0] if found else None
+
+    def unpack_container(self, data: bytes, allow_truncated: bool = False) -> list[tuple[Any, bytes]]:
+        """The PDUs of a container frame: ``(message, bytes)``, or ``(header_id, bytes)`` for
+        a header the database does not know. A header of ID 0, or too few bytes left for a
+        header, ends the frame (AUTOSAR's padding)."""
+        if not self.is_container():
+            raise DecodeError(f'Cannot unpack non-container message "{self.name}"')
+        if len(data) > self.length:
+            raise DecodeError(
+                f'Container message "{self.name}" specified as exhibiting at most {self.length} but received a {len(data)} bytes long frame'
+            )
+        container = getattr(self, "_container", None) or {}
+        id_size, length_size = (4, 4) if container.get("header") == "Long" else (3, 1)
+        order = "little" if self.header_byte_order == "little_endian" else "big"
+        result: list[tuple[Any, bytes]] = []
+        pos = 0
+        while pos + id_size + length_size <= len(data):
+            header_id = int.from_bytes(data[pos : pos + id_size], order)
+            if header_id == 0:
+                break
+            length = int.from_bytes(data[pos + id_size : pos + id_size + length_size], order)
+            start = pos + id_size + length_size
+            if start + length > len(data):
+                if not allow_truncated:
+                    raise DecodeError(
+                        f'Malformed container message "{self.name}": Contained message {len(result) + 1} would exceed total message size.'
+                    )
+                length = len(data) - start
+            contained = self.get_contained_message_by_header_id(header_id)
+            result.append((contained if contained is not None else header_id, bytes(data[start : start + length])))
+            pos = start + length
+        return result
+
+    def decode_container(
+        self,
+        data: bytes,
+        decode_choices: bool = True,
+        scaling: bool = True,
+        allow_truncated: bool = False,
+        allow_excess: bool = True,
+    ) -> list[tuple[Any, Any]]:
+        """Each PDU of a container frame decoded: ``(message, {signal: value})``; its bytes
+        where the PDU is unknown or does not decode."""
+        if not self.is_container():
+            raise DecodeError(f'Message "{self.name}" is not a container')
+        result: list[tuple[Any, Any]] = []
+        for contained, pdu in self.unpack_container(data, allow_truncated):
+            if not isinstance(contained, Message):
+                result.append((contained, pdu))
+                continue
+            try:
+                result.append((contained, contained.decode(pdu, decode_choices, scaling, False, allow_truncated, allow_excess)))
+            except (ValueError, DecodeError):
+                result.append((contained, pdu))
+        return result
 
     def encode(self, data: Mapping[str, Any], scaling: bool = True, padding: bool = False, strict: bool = True) -> bytes:
         """The payload of these signal values, as cantools encodes it."""
