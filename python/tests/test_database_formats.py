@@ -1,6 +1,7 @@
 """bywire's KCD and SYM writers read by an independent implementation: DBC files converted by
 ``bywire dbc convert`` are loaded by canmatrix, and canmatrix's decode of random payloads equals
-cantools' decode of the original DBC, signal for signal."""
+cantools' decode of the original DBC, signal for signal. And an ARXML system read through
+``bywire.database`` as cantools reads it, container frames included."""
 
 from __future__ import annotations
 
@@ -69,3 +70,27 @@ def test_canmatrix_decodes_our_kcd_and_sym_as_cantools_decodes_the_dbc(source, e
                 assert math.isclose(ours, number(value), rel_tol=1e-9, abs_tol=1e-9), (message.name, name, payload.hex(), ours, value)
             compared += 1
     assert compared > 0
+
+
+def test_arxml_loads_in_python_as_in_cantools():
+    """An AUTOSAR system through ``bywire.database``: the same messages, buses and container
+    PDUs as cantools reads, and random container frames unpack and decode alike."""
+    import bywire.database
+
+    path = ROOT / "examples" / "data" / "powertrain.arxml"
+    ours = bywire.database.load_file(path)
+    theirs = cantools.database.load_file(path)
+    assert [m.name for m in ours.messages] == [m.name for m in theirs.messages]
+    assert [m.bus_name for m in ours.messages] == [m.bus_name for m in theirs.messages]
+    container, their_container = ours.get_message_by_name("Bundle"), theirs.get_message_by_name("Bundle")
+    assert [(m.name, m.header_id) for m in container.contained_messages] == [
+        (m.name, m.header_id) for m in their_container.contained_messages
+    ]
+    rng = random.Random(58)
+    for _ in range(200):
+        # Three PDUs of random content behind valid headers: Lights, Steer, Lights.
+        beam, steer, beam2 = bytes([rng.getrandbits(2)]), rng.randbytes(6), bytes([rng.getrandbits(2)])
+        data = b"\x00\x00\x10\x01" + beam + b"\x00\x00\x20\x06" + steer + b"\x00\x00\x10\x01" + beam2
+        decoded = ours.decode_message(0x300, data, decode_containers=True)
+        expected = theirs.decode_message(0x300, data, decode_containers=True)
+        assert [(m.name, dict(values)) for m, values in decoded] == [(m.name, dict(values)) for m, values in expected]

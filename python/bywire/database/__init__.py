@@ -401,9 +401,11 @@ class Database:
         }
         for index, message in enumerate(self._messages):
             message._codecs = self._native.message(index)
-            message.decode = message._codecs.decode
+            # A container frame decodes into its PDUs, in Python (Message.decode).
+            if not message.is_container:
+                message.decode = message._codecs.decode
             message.encode = message._codecs.encode
-        if self._frame_id_mask == _ALL_MASK:
+        if self._frame_id_mask == _ALL_MASK and not any(m.is_container for m in self._messages):
             # The native calls take a name or an identifier themselves: no Python in between.
             self.decode_message = self._native.decode_message  # type: ignore[method-assign]
             self.encode_message = self._native.encode_message  # type: ignore[method-assign]

@@ -556,7 +556,7 @@ class Message(_Commented):
         """``{signal: value}`` as cantools decodes: choices as :class:`NamedSignalValue`,
         ordered as cantools orders them; a container frame (with ``decode_containers``) as
         :meth:`decode_container` gives it."""
-        if self.is_container():
+        if self.is_container:
             if not decode_containers:
                 raise DecodeError(
                     f'Message "{self.name}" is a container message, but decoding such messages has not been enabled!'
@@ -580,7 +580,7 @@ class Message(_Commented):
         """The PDUs of a container frame: ``(message, bytes)``, or ``(header_id, bytes)`` for
         a header the database does not know. A header of ID 0, or too few bytes left for a
         header, ends the frame (AUTOSAR's padding)."""
-        if not self.is_container():
+        if not self.is_container:
             raise DecodeError(f'Cannot unpack non-container message "{self.name}"')
         if len(data) > self.length:
             raise DecodeError(
@@ -618,7 +618,7 @@ class Message(_Commented):
     ) -> list[tuple[Any, Any]]:
         """Each PDU of a container frame decoded: ``(message, {signal: value})``; its bytes
         where the PDU is unknown or does not decode."""
-        if not self.is_container():
+        if not self.is_container:
             raise DecodeError(f'Message "{self.name}" is not a container')
         result: list[tuple[Any, Any]] = []
         for contained, pdu in self.unpack_container(data, allow_truncated):
