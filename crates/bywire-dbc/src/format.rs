@@ -25,11 +25,19 @@ pub enum Format {
     Sym,
     /// An AUTOSAR system description (3.x or 4.x); read, not written.
     Arxml,
+    /// A CANdela diagnostic description: its DIDs as messages; read, not written.
+    Cdd,
 }
 
 impl Format {
     /// Every format, in the order `--db-format` lists them.
-    pub const ALL: [Format; 4] = [Format::Dbc, Format::Kcd, Format::Sym, Format::Arxml];
+    pub const ALL: [Format; 5] = [
+        Format::Dbc,
+        Format::Kcd,
+        Format::Sym,
+        Format::Arxml,
+        Format::Cdd,
+    ];
 
     /// The formats bywire writes.
     pub const WRITTEN: [Format; 3] = [Format::Dbc, Format::Kcd, Format::Sym];
@@ -41,6 +49,7 @@ impl Format {
             Format::Kcd => "kcd",
             Format::Sym => "sym",
             Format::Arxml => "arxml",
+            Format::Cdd => "cdd",
         }
     }
 
@@ -71,6 +80,8 @@ impl Format {
             Format::Kcd
         } else if body.starts_with('<') && text.contains("<AUTOSAR") {
             Format::Arxml
+        } else if body.starts_with('<') && text.contains("<CANDELA") {
+            Format::Cdd
         } else if text
             .lines()
             .any(|l| l.trim_start().starts_with("FormatVersion="))
@@ -96,6 +107,7 @@ impl fmt::Display for Format {
             Format::Kcd => "KCD",
             Format::Sym => "SYM",
             Format::Arxml => "ARXML",
+            Format::Cdd => "CDD",
         })
     }
 }
@@ -123,6 +135,7 @@ pub fn load_bus(
         Format::Kcd => crate::kcd::read(&text_of(bytes), mode),
         Format::Sym => crate::sym::read(&text_of(bytes), mode),
         Format::Arxml => return crate::arxml::read(&text_of(bytes), mode, bus),
+        Format::Cdd => crate::cdd::read(&text_of(bytes), mode),
     }?;
     if let Some(wanted) = bus {
         let name = db.attributes.iter().find_map(|(n, v)| match v {
@@ -165,7 +178,7 @@ impl fmt::Display for Omission {
 pub fn write(db: &Database, format: Format) -> (String, Vec<Omission>) {
     let (db, mut omissions) = without_containers(db);
     let (text, more) = match format {
-        Format::Dbc | Format::Arxml => (crate::writer::write(&db), Vec::new()),
+        Format::Dbc | Format::Arxml | Format::Cdd => (crate::writer::write(&db), Vec::new()),
         Format::Kcd => crate::kcd::write(&db),
         Format::Sym => crate::sym::write(&db),
     };
@@ -193,7 +206,7 @@ fn without_containers(db: &Database) -> (std::borrow::Cow<'_, Database>, Vec<Omi
 pub fn expressible(db: &Database, format: Format) -> (Database, Vec<Omission>) {
     let (db, mut omissions) = without_containers(db);
     let (out, more) = match format {
-        Format::Dbc | Format::Arxml => (db.into_owned(), Vec::new()),
+        Format::Dbc | Format::Arxml | Format::Cdd => (db.into_owned(), Vec::new()),
         Format::Kcd => crate::kcd::expressible(&db),
         Format::Sym => crate::sym::expressible(&db),
     };

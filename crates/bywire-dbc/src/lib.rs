@@ -25,6 +25,7 @@
 //! ```
 
 mod arxml;
+mod cdd;
 pub mod codec;
 pub mod codegen;
 pub mod condition;

@@ -267,3 +267,43 @@ impl Drop for KillOnDrop {
         let _ = self.0.wait();
     }
 }
+
+/// A CANdela CDD (cantools' example) describes the DIDs read: the record split into its fields,
+/// each value as cantools decodes that DID's record.
+#[test]
+fn a_cdd_describes_the_dids_read_field_by_field() {
+    if !inside_lonet("a_cdd_describes_the_dids_read_field_by_field") {
+        return;
+    }
+    let cdd = format!(
+        "{}/../../target/cantools-files/cdd/example.cdd",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let bus = "udp:239.74.163.9:43571";
+    let record = "0102030405060708090A";
+    let server = Background::start(&["uds", "serve", bus, "--did", &format!("0090=hex:{record}")]);
+    // Ready when it answers: each attempt waits out its own P2 timeout.
+    let mut answer = None;
+    for _ in 0..50 {
+        let (code, out, _) = bywire(
+            &["uds", "read-did", bus, "0090", "--describe", &cdd, "--json"],
+            "",
+        );
+        if code == 0 {
+            answer = Some(out);
+            break;
+        }
+    }
+    let _ = server.stop();
+    let answer: Value = serde_json::from_str(answer.expect("the server answers").trim()).unwrap();
+    let script = format!(
+        "import json, warnings, cantools\nwarnings.simplefilter('ignore')\n\
+         db = cantools.database.load_file({cdd:?})\n\
+         print(json.dumps(db.get_did_by_identifier(0x90).decode(bytes.fromhex({record:?}))))"
+    );
+    let theirs = Command::new("python3").args(["-c", &script]).output().unwrap();
+    assert!(theirs.status.success(), "{}", String::from_utf8_lossy(&theirs.stderr));
+    let theirs: Value = serde_json::from_slice(&theirs.stdout).unwrap();
+    assert_eq!(answer["0090"]["name"], "ECU_Identification");
+    assert_eq!(answer["0090"]["value"], theirs, "{answer}");
+}

@@ -3,6 +3,7 @@ what it decodes from random frames of every message (or the error that stopped i
 import json
 import random
 import sys
+import warnings
 
 import cantools
 
@@ -25,8 +26,8 @@ def signal(s):
         "maximum": number(s.maximum),
         "unit": s.unit or "",
         "choices": {str(k): str(v) for k, v in (s.choices or {}).items()},
-        "multiplexer": s.is_multiplexer,
-        "multiplexer_ids": s.multiplexer_ids or [],
+        "multiplexer": getattr(s, "is_multiplexer", False),
+        "multiplexer_ids": getattr(s, "multiplexer_ids", None) or [],
     }
 
 
@@ -42,7 +43,35 @@ def decoded(message, rng):
     return out
 
 
+def did(d, rng):
+    """A CDD's DID in the shape of a message: its identifier, length, data and decodes."""
+    out = []
+    for _ in range(32):
+        data = bytes(rng.getrandbits(8) for _ in range(d.length))
+        try:
+            values = d.decode(data, decode_choices=False)
+            out.append([data.hex(), {k: float(v) for k, v in values.items()}])
+        except Exception:  # a DID cantools cannot decode
+            out.append([data.hex(), None])
+    return {
+        "name": d.name, "frame_id": d.identifier, "extended": False, "fd": False, "length": d.length,
+        "cycle_time": None, "senders": [], "comment": None,
+        "signals": [signal(s) | {"multiplexer": False, "multiplexer_ids": []} for s in d.datas],
+        "frames": out, "contained": [], "container": False,
+    }
+
+
+warnings.simplefilter("ignore", DeprecationWarning)
 for path in sys.argv[1:]:
+    if path.endswith(".cdd"):
+        try:
+            db = cantools.database.load_file(path)
+        except Exception as error:
+            print(json.dumps({"file": path, "error": f"{type(error).__name__}: {error}"}))
+            continue
+        rng = random.Random(path)
+        print(json.dumps({"file": path, "messages": [did(d, rng) for d in db.dids]}))
+        continue
     try:
         db = cantools.database.load_file(path, strict=False)
     except Exception as error:

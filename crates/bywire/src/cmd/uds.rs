@@ -41,7 +41,8 @@ pub struct Tester {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
-    /// The ECU's DIDs and DTCs: a TOML description file, or `tug` (the reference tug).
+    /// The ECU's DIDs and DTCs: a TOML description file, a CANdela CDD (its DIDs' records
+    /// decoded field by field), or `tug` (the reference tug).
     #[arg(long, value_name = "FILE|tug")]
     describe: Option<String>,
     /// Change to this session first (1 default, 2 programming, 3 extended).
@@ -530,22 +531,76 @@ impl UdsCommand {
     }
 }
 
-/// The ECU description `spec` names: `tug` (the reference tug's), or a TOML file.
-fn description(spec: &str) -> Result<Description> {
+/// The ECU description `spec` names: `tug` (the reference tug's), a TOML file, or a database
+/// of DIDs (a CDD): its records, to decode field by field, beside the description their names
+/// and lengths make.
+fn description(spec: &str) -> Result<(Description, Option<bywire_dbc::Database>)> {
     if spec == "tug" {
-        return Ok(bywire_tug::diagnostics::description());
+        return Ok((bywire_tug::diagnostics::description(), None));
     }
-    let text = std::fs::read_to_string(spec).with_context(|| format!("--describe {spec}"))?;
-    Description::from_toml(&text, spec).map_err(|e| anyhow!("--describe {e}"))
+    let bytes = std::fs::read(spec).with_context(|| format!("--describe {spec}"))?;
+    let path = std::path::Path::new(spec);
+    if crate::support::dbc::format_of(path, &bytes) == bywire_dbc::Format::Cdd {
+        let records = crate::support::dbc::load(path, false)?;
+        let mut d = Description::iso14229();
+        for m in &records.messages {
+            let Ok(id) = u16::try_from(m.id) else { continue };
+            d.dids.insert(
+                id,
+                describe::DidInfo {
+                    name: m.name.clone(),
+                    length: usize::try_from(m.size).ok(),
+                    kind: describe::ValueKind::Bytes,
+                },
+            );
+        }
+        return Ok((d, Some(records)));
+    }
+    let text = String::from_utf8_lossy(&bytes);
+    let d = Description::from_toml(&text, spec).map_err(|e| anyhow!("--describe {e}"))?;
+    Ok((d, None))
+}
+
+/// A DID's record decoded by its fields (a CDD's): `Name(field: value unit, ...)` and the
+/// fields as JSON.
+fn record_fields(
+    records: Option<&bywire_dbc::Database>,
+    id: u16,
+    value: &[u8],
+) -> Option<(String, Value)> {
+    use crate::support::signals::FrameText;
+    let m = records?.messages.iter().find(|m| m.id == u32::from(id))?;
+    let codec = bywire_dbc::codec::MessageCodec::new(m);
+    let mut values = vec![None; codec.signal_count()];
+    let error = codec.decode(value, &mut values).err();
+    let decoded = bywire_dbc::decoder::DecodedFrame {
+        message: m,
+        signals: m
+            .signals
+            .iter()
+            .zip(values)
+            .filter_map(|(signal, value)| {
+                Some(bywire_dbc::decoder::SignalValue {
+                    signal,
+                    value: value?,
+                })
+            })
+            .collect(),
+        error: error.map(|e| e.to_string()),
+    };
+    Some((
+        decoded.single_line(true),
+        Value::Object(decoded.json_signals()),
+    ))
 }
 
 fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
     let tester = command
         .tester()
         .ok_or_else(|| anyhow!("not a tester command"))?;
-    let description = match &tester.describe {
+    let (description, records) = match &tester.describe {
         Some(spec) => description(spec)?,
-        None => Description::iso14229(),
+        None => (Description::iso14229(), None),
     };
     let mut script = Script::new(command.plan(tester)?, |level: u8, seed: &[u8]| {
         tester.key(level, seed)
@@ -609,7 +664,13 @@ fn run_tester(command: &UdsCommand, out: &mut dyn Write) -> Result<()> {
     if ended != bywire_bus::runner::Ended::ByHooks {
         bail!("interrupted");
     }
-    report(command, tester, &description, script.answers(), out)
+    report(
+        command,
+        tester,
+        (&description, records.as_ref()),
+        script.answers(),
+        out,
+    )
 }
 
 /// A script's error as the command line says it: a key function's own error as it is.
@@ -628,7 +689,7 @@ fn request_error(request: &[u8], error: &ClientError) -> anyhow::Error {
 fn report(
     command: &UdsCommand,
     tester: &Tester,
-    d: &Description,
+    (d, records): (&Description, Option<&bywire_dbc::Database>),
     answers: &[Vec<u8>],
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -659,6 +720,14 @@ fn report(
             let mut object = serde_json::Map::new();
             for (id, value) in values {
                 let name = d.dids.get(&id).map(|i| i.name.clone());
+                if let Some((shown, fields)) = record_fields(records, id, &value) {
+                    lines.push(format!("{id:04X} {shown}"));
+                    object.insert(
+                        format!("{id:04X}"),
+                        json!({"name": name, "value": fields, "hex": describe::hex(&value)}),
+                    );
+                    continue;
+                }
                 let shown = d.show(id, &value);
                 lines.push(match &name {
                     Some(name) => format!("{id:04X} {name}: {shown}"),
