@@ -1,6 +1,7 @@
-//! Any bytes as a KCD, SYM or ARXML file (the first byte picks): lenient and strict reading
-//! never panic; whatever KCD or SYM loads, written in its own format, reads back as what the
-//! format says; whatever ARXML loads decodes any frame of its messages and container frames.
+//! Any bytes as a KCD, SYM, ARXML or CDD file (the first byte picks): lenient and strict
+//! reading never panic; whatever KCD or SYM loads, written in its own format, reads back as
+//! what the format says; whatever ARXML or CDD loads decodes any frame of its messages and
+//! container frames.
 #![no_main]
 
 use bywire_core::{Frame, Id};
@@ -10,16 +11,17 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let Some((&pick, file)) = data.split_first() else { return };
-    let kind = match pick % 3 {
+    let kind = match pick % 4 {
         0 => Format::Kcd,
         1 => Format::Sym,
-        _ => Format::Arxml,
+        2 => Format::Arxml,
+        _ => Format::Cdd,
     };
     let _ = format::load(file, kind, Mode::Strict);
     let Ok((db, _)) = format::load(file, kind, Mode::Lenient) else {
         return;
     };
-    if kind == Format::Arxml {
+    if !kind.is_written() {
         let decoder = Decoder::new(db);
         let payload = file.get(..file.len().min(64)).unwrap_or_default();
         for (index, m) in decoder.database().messages.iter().enumerate() {

@@ -94,3 +94,27 @@ def test_arxml_loads_in_python_as_in_cantools():
         decoded = ours.decode_message(0x300, data, decode_containers=True)
         expected = theirs.decode_message(0x300, data, decode_containers=True)
         assert [(m.name, dict(values)) for m, values in decoded] == [(m.name, dict(values)) for m, values in expected]
+
+
+@pytest.mark.parametrize("name", ["example.cdd", "le-example.cdd", "example-diddatarefs.cdd"])
+def test_cdd_dids_decode_and_encode_as_cantools(name):
+    """A CANdela CDD through ``bywire.database``: the same DIDs as cantools' diagnostics
+    database, random records decoded, and the decoded values encoded, alike."""
+    import warnings
+
+    import bywire.database
+
+    path = ROOT / "target" / "cantools-files" / "cdd" / name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        theirs = cantools.database.load_file(path)
+    ours = bywire.database.load_file(path)
+    assert [(d.name, d.identifier, d.length) for d in ours.dids] == [(d.name, d.identifier, d.length) for d in theirs.dids]
+    rng = random.Random(name)
+    for o, t in zip(ours.dids, theirs.dids):
+        assert [d.name for d in o.datas] == [d.name for d in t.datas]
+        for _ in range(20):
+            record = rng.randbytes(o.length)
+            decoded, expected = o.decode(record), t.decode(record)
+            assert {k: str(v) for k, v in decoded.items()} == {k: str(v) for k, v in expected.items()}, o.name
+            assert o.encode(decoded) == t.encode(expected), o.name

@@ -298,7 +298,10 @@ impl<'input> Reader<'_, 'input> {
             return Ok(None);
         };
         let mut objects = all(instance, &["SIMPLECOMPCONT", "DATAOBJ"]);
-        objects.extend(all(instance, &["SIMPLECOMPCONT", "UNION", "STRUCT", "DATAOBJ"]));
+        objects.extend(all(
+            instance,
+            &["SIMPLECOMPCONT", "UNION", "STRUCT", "DATAOBJ"],
+        ));
         let references = all(instance, &["SIMPLECOMPCONT", "DIDDATAREF"]);
         // A structure beside a DID data reference is not part of the record (an I/O control's
         // enable mask).

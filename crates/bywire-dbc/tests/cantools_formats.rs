@@ -467,8 +467,7 @@ fn kcd_sym_and_arxml_files_read_as_cantools_reads_them() {
         "{} has no cantools test files: run scripts/install-test-deps.sh",
         dir.display()
     );
-    let (mut differences, mut compared) =
-        differences_in(&dir, &["kcd", "sym", "arxml", "cdd"], "");
+    let (mut differences, mut compared) = differences_in(&dir, &["kcd", "sym", "arxml", "cdd"], "");
     // canmatrix's test files, shipped packed with its licence.
     let unpacked = tempfile::tempdir().unwrap();
     let archive = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/canmatrix/files.tar.xz");

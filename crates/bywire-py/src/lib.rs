@@ -329,7 +329,7 @@ fn dict_order(codec: &MessageCodec, count: usize) -> Vec<usize> {
 fn format_named(name: &str) -> PyResult<bywire_dbc::Format> {
     bywire_dbc::Format::from_name(name).ok_or_else(|| {
         pyo3::exceptions::PyValueError::new_err(format!(
-            "{name} is not a database format (dbc, kcd, sym, arxml)"
+            "{name} is not a database format (dbc, kcd, sym, arxml, cdd)"
         ))
     })
 }

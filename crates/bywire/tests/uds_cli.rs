@@ -301,8 +301,15 @@ fn a_cdd_describes_the_dids_read_field_by_field() {
          db = cantools.database.load_file({cdd:?})\n\
          print(json.dumps(db.get_did_by_identifier(0x90).decode(bytes.fromhex({record:?}))))"
     );
-    let theirs = Command::new("python3").args(["-c", &script]).output().unwrap();
-    assert!(theirs.status.success(), "{}", String::from_utf8_lossy(&theirs.stderr));
+    let theirs = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(
+        theirs.status.success(),
+        "{}",
+        String::from_utf8_lossy(&theirs.stderr)
+    );
     let theirs: Value = serde_json::from_slice(&theirs.stdout).unwrap();
     assert_eq!(answer["0090"]["name"], "ECU_Identification");
     assert_eq!(answer["0090"]["value"], theirs, "{answer}");

@@ -65,8 +65,8 @@ __all__ = [
     "sort_signals_by_start_bit",
 ]
 
-#: The formats read (cantools also reads CDD; bywire does not yet).
-FORMATS = ("dbc", "kcd", "sym", "arxml")
+#: The formats read (a CDD loads as a diagnostic database of DIDs, as in cantools).
+FORMATS = ("dbc", "kcd", "sym", "arxml", "cdd")
 _ALL_MASK = 0xFFFFFFFF
 _EXTENDED = 0x80000000
 
@@ -608,8 +608,6 @@ def _load(
     strict: bool,
     sort_signals: Any,
 ) -> Database:
-    if database_format == "cdd":
-        raise UnsupportedDatabaseFormatError(**{f"e_{database_format}": Error(f"{database_format.upper()} is not read yet")})
     try:
         native = _native.Database.load_bytes(data, origin, False, database_format)
     except ParseError as error:
@@ -618,6 +616,13 @@ def _load(
     if not database_format and native.message_names == [] and native.diagnostics and not json.loads(native.to_json())["nodes"]:
         # Lenient reading found nothing it knows: not a database of any format read.
         raise UnsupportedDatabaseFormatError(e_dbc=ParseError(native.diagnostics[0]))
+    if (database_format or _sniffed(data)) == "cdd":
+        # A diagnostic description: its DIDs, their data in the file's order, as cantools
+        # gives a CDD.
+        from .diagnostics import Database as Diagnostics, Did
+
+        dids = _of_native(native, frame_id_mask, None)
+        return Diagnostics([Did(m) for m in dids.messages])  # type: ignore[return-value]
     db = _of_native(native, frame_id_mask, sort_signals)
     if prune_choices:
         for message in db.messages:
@@ -633,7 +638,8 @@ def _load(
 def _sniffed(data: bytes) -> str:
     head = data.lstrip()[:200]
     if head.startswith(b"<"):
-        return "arxml" if b"<AUTOSAR" in data[:4096] else "kcd"
+        start = data[:4096]
+        return "arxml" if b"<AUTOSAR" in start else "cdd" if b"<CANDELA" in start else "kcd"
     if b"FormatVersion" in data[:4096]:
         return "sym"
     return "dbc"

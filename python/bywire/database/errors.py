@@ -12,7 +12,7 @@ __all__ = ["DecodeError", "EncodeError", "Error", "ParseError", "UnsupportedData
 class UnsupportedDatabaseFormatError(ParseError):
     """Text that no database format reads (a :class:`ParseError`, as cantools' is an
     :class:`Error`): the reason each format gave (``e_arxml``, ``e_dbc``, ``e_kcd``,
-    ``e_sym``; ``e_cdd`` is ``None``, a format not read yet)."""
+    ``e_sym``, ``e_cdd``)."""
 
     def __init__(
         self,

@@ -544,7 +544,9 @@ fn description(spec: &str) -> Result<(Description, Option<bywire_dbc::Database>)
         let records = crate::support::dbc::load(path, false)?;
         let mut d = Description::iso14229();
         for m in &records.messages {
-            let Ok(id) = u16::try_from(m.id) else { continue };
+            let Ok(id) = u16::try_from(m.id) else {
+                continue;
+            };
             d.dids.insert(
                 id,
                 describe::DidInfo {
