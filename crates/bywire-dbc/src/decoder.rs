@@ -284,10 +284,47 @@ impl Decoder {
         Some((index, message, codec.decode(data, values)))
     }
 
-    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame).
+    /// Decode `frame`; `None` when no message has its identifier (or it is an error frame). A
+    /// container frame gives the signals of the PDUs it carries that the database knows, one
+    /// after another.
     pub fn decode(&self, frame: &Frame) -> Option<DecodedFrame<'_>> {
         let mut values = Vec::new();
-        let (_, message, decoded) = self.decode_into(frame, &mut values)?;
+        let (index, message, decoded) = self.decode_into(frame, &mut values)?;
+        if let Some(pdus) = self.contained(index, frame.data()) {
+            let mut signals = Vec::new();
+            let mut error = None;
+            for pdu in pdus {
+                let pdu = match pdu {
+                    Ok(pdu) => pdu,
+                    Err(e) => {
+                        error = Some(e.to_string());
+                        break;
+                    }
+                };
+                let Some((pdu_message, codec)) = pdu.message else {
+                    continue;
+                };
+                values.clear();
+                values.resize(codec.signal_count(), None);
+                // A PDU that does not decode adds nothing (its bytes are the frame's).
+                if codec.decode(pdu.pdu.data, &mut values).is_err() {
+                    continue;
+                }
+                signals.extend(pdu_message.signals.iter().zip(&values).filter_map(
+                    |(signal, value)| {
+                        Some(SignalValue {
+                            signal,
+                            value: (*value)?,
+                        })
+                    },
+                ));
+            }
+            return Some(DecodedFrame {
+                message,
+                signals,
+                error,
+            });
+        }
         let error = decoded.err().map(|e| e.to_string());
         let signals = message
             .signals
@@ -356,6 +393,45 @@ mod tests {
         assert_eq!(name(0x800, false), None);
         assert_eq!(name(u32::MAX, false), None);
         assert_eq!(name(u32::MAX, true), None);
+    }
+
+    #[test]
+    fn a_container_frame_decodes_to_its_pdus_signals() {
+        let text = include_str!("../../../examples/data/powertrain.arxml");
+        let (db, _) =
+            crate::format::load(text.as_bytes(), crate::Format::Arxml, crate::Mode::Strict)
+                .unwrap();
+        let decoder = Decoder::new(db);
+        let data = [
+            0, 0, 0x10, 1, 2, 0, 0, 0x20, 6, 0x85, 0xFF, 1, 2, 3, 4, 0, 0, 0x10, 1, 1,
+        ];
+        let frame = Frame::fd(Id::standard(0x300).unwrap(), &data, false, false).unwrap();
+        let decoded = decoder.decode(&frame).unwrap();
+        assert_eq!(decoded.message.name, "Bundle");
+        let names: Vec<&str> = decoded
+            .signals
+            .iter()
+            .map(|s| s.signal.name.as_str())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "Beam",
+                "Angle",
+                "Steer_Freshness",
+                "Steer_Authenticator",
+                "Beam"
+            ]
+        );
+        assert_eq!(decoded.signals[1].value.physical.as_f64(), -12.3);
+        assert!(decoded.error.is_none());
+        // A header that claims more than the frame holds: the PDUs before it, and the error.
+        let mut cut = data;
+        cut[8] = 60;
+        let frame = Frame::fd(Id::standard(0x300).unwrap(), &cut, false, false).unwrap();
+        let decoded = decoder.decode(&frame).unwrap();
+        assert_eq!(decoded.signals.len(), 1);
+        assert!(decoded.error.unwrap().contains("claims 60 bytes"));
     }
 
     #[test]

@@ -96,6 +96,10 @@ fn frames_and_container_frames_decode_as_cantools_decodes_them() {
     assert_eq!(bundle["contained"][1]["header_id"], 32);
     assert_eq!(bundle["contained"][1]["signals"]["Angle"], -12.3);
     assert_eq!(bundle["contained"][0]["signals"]["Beam"], 2);
+    // CSV: each PDU's rows under its own name.
+    let (_, csv, _) = bywire(&["decode", "--csv", &arxml()], &log);
+    assert!(csv.contains(",can0,Steer,Angle,-12.3,,deg\n"), "{csv}");
+    assert!(csv.contains(",can0,Lights,Beam,2,High,\n"), "{csv}");
     // A header whose length runs past the frame: the error, not a guess.
     let overrun = format!("(1.0) can0 300##000001090{}\n", "00".repeat(16));
     let (_, out, _) = bywire(&["decode", &arxml()], &overrun);

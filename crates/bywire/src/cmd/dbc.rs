@@ -598,9 +598,42 @@ fn decode_records(
         }
         prefix.push_str(&csv_field(&record.interface));
         prefix.push(',');
+        rows.clear();
+        // A container frame: each PDU's rows under the PDU's name.
+        if let Some(pdus) = decoder.decoder().contained(index, record.frame.data()) {
+            let channel = prefix.clone();
+            for pdu in pdus.flatten() {
+                let Some((pdu_message, codec)) = pdu.message else {
+                    continue;
+                };
+                let mut pdu_values = vec![None; codec.signal_count()];
+                if codec.decode(pdu.pdu.data, &mut pdu_values).is_err() {
+                    continue;
+                }
+                prefix.clear();
+                prefix.push_str(&channel);
+                prefix.push_str(&csv_field(pdu_message.display_name()));
+                prefix.push(',');
+                for (signal, value) in pdu_message.signals.iter().zip(&pdu_values) {
+                    let Some(value) = value else { continue };
+                    let value = crate::support::signals::SignalValue {
+                        signal,
+                        value: *value,
+                    };
+                    push_row(
+                        &mut rows,
+                        &prefix,
+                        &value,
+                        choices,
+                        (&csv_field(signal.display_name()), &csv_field(&signal.unit)),
+                    );
+                }
+            }
+            out.write_all(rows.as_bytes())?;
+            return Ok(());
+        }
         prefix.push_str(message_field);
         prefix.push(',');
-        rows.clear();
         for ((signal, value), (name, unit)) in
             message.signals.iter().zip(&values).zip(signal_fields)
         {
@@ -609,20 +642,7 @@ fn decode_records(
                 signal,
                 value: *value,
             };
-            let described = choices && !signal.value_descriptions.is_empty();
-            let choice = described
-                .then(|| value.description())
-                .flatten()
-                .unwrap_or("");
-            rows.push_str(&prefix);
-            rows.push_str(name);
-            rows.push(',');
-            crate::support::signals::push_number_text(&mut rows, value.value.physical);
-            rows.push(',');
-            rows.push_str(&csv_field(choice));
-            rows.push(',');
-            rows.push_str(unit);
-            rows.push('\n');
+            push_row(&mut rows, &prefix, &value, choices, (name, unit));
         }
         out.write_all(rows.as_bytes())?;
         if flushed.elapsed() >= std::time::Duration::from_millis(100) {
@@ -634,6 +654,31 @@ fn decode_records(
     out.flush()?;
     pump.progress.finish();
     Ok(())
+}
+
+/// One `decode --csv` row: the frame's `prefix` (time, channel, message), then the signal's
+/// CSV-ready name, value, value name and unit.
+fn push_row(
+    rows: &mut String,
+    prefix: &str,
+    value: &crate::support::signals::SignalValue<'_>,
+    choices: bool,
+    (name, unit): (&str, &str),
+) {
+    let described = choices && !value.signal.value_descriptions.is_empty();
+    let choice = described
+        .then(|| value.description())
+        .flatten()
+        .unwrap_or("");
+    rows.push_str(prefix);
+    rows.push_str(name);
+    rows.push(',');
+    crate::support::signals::push_number_text(rows, value.value.physical);
+    rows.push(',');
+    rows.push_str(&csv_field(choice));
+    rows.push(',');
+    rows.push_str(unit);
+    rows.push('\n');
 }
 
 /// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
