@@ -392,9 +392,14 @@ class Database:
 
     def refresh(self) -> None:
         """Take the messages' current values into the lookups and the native codecs."""
-        self._native = _native_of(self._to_model(), self._diagnostics)
+        native = _native_of(self._to_model(), self._diagnostics)
         if self._strict:
-            _refuse_layout(self._native)
+            _refuse_layout(native)
+        self._bind(native)
+
+    def _bind(self, native: Any) -> None:
+        """Decode and encode with ``native``, a database of these messages in this order."""
+        self._native = native
         self._by_name = {m.name: m for m in self._messages}
         self._by_frame_id = {
             (m.frame_id & self._frame_id_mask) | (_EXTENDED if m.is_extended_frame else 0): m for m in self._messages
@@ -528,7 +533,15 @@ def _fields(thing: Any) -> list[str]:
 def _of_native(native: Any, frame_id_mask: int | None = None, sort_signals: Any = SORT_SIGNALS_DEFAULT) -> Database:
     db = Database(frame_id_mask=frame_id_mask, strict=False, sort_signals=sort_signals)
     db._take(native)
-    db.refresh()
+    # Just loaded, the native database is these messages already, unless messages were kept
+    # aside (its indices differ) or signals were sorted (its decode order follows theirs).
+    as_loaded = not db._hidden and all(
+        [id(s._model) for s in m.signals] == [id(s) for s in m._model["signals"]] for m in db._messages
+    )
+    if as_loaded:
+        db._bind(native)
+    else:
+        db.refresh()
     return db
 
 
