@@ -10,11 +10,11 @@ SUDO=""
 # can-utils: the SocketCAN peers the VM tests copy in (installed here, once, because test
 # binaries start several VMs at a time and apt cannot run twice at once); tshark: Wireshark's
 # reader, the peer of the pcapng logs; llvm-22: LLVM's coverage tools of rustc's LLVM version
-# (scripts/coverage.sh).
+# (scripts/coverage.sh); xz-utils: canmatrix's test files ship packed (crates/bywire-dbc/tests/canmatrix).
 if ! command -v sigrok-cli >/dev/null || ! command -v tmux >/dev/null || ! command -v candump >/dev/null \
-  || ! command -v tshark >/dev/null || ! [ -x /usr/lib/llvm-22/bin/llvm-cov ]; then
+  || ! command -v tshark >/dev/null || ! [ -x /usr/lib/llvm-22/bin/llvm-cov ] || ! command -v xz >/dev/null; then
   $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux can-utils tshark llvm-22 >/dev/null
+  $SUDO apt-get install -y -qq --no-install-recommends sigrok-cli tmux can-utils tshark llvm-22 xz-utils >/dev/null
 fi
 # The udp: tests send bursts of 500 datagrams; the receive buffer they need is capped by
 # net.core.rmem_max (global, not settable inside the test's network namespace).
