@@ -18,6 +18,10 @@
 //! numbered after the others); `Dir` is 0 received, 1 sent. Error frames keep their SocketCAN
 //! class in `ID` and their 8 bytes in `DataBytes`.
 //!
+//! Decoded values may go beside the frames ([`Mf4Writer::add_decoded_group`]): a data group a
+//! message, its master channel of time and a 64-bit float channel a signal, with its unit and
+//! its value names as a value-to-text conversion, which asammdf's `to_dataframe` shows.
+//!
 //! The reader takes sorted files (a data group a channel group) and unsorted ones (record IDs,
 //! as loggers write them), data in plain blocks (`##DT`), zipped ones (`##DZ`, deflate with or
 //! without transposition, as python-can writes by default) and lists of them (`##DL`, `##HL`),
@@ -37,6 +41,10 @@ use crate::fields::{u16_at, u32_at, u64_at};
 
 /// The records a writer's data block holds, in bytes.
 pub const BLOCK_SIZE: usize = 512 * 1024;
+/// A decoded message's block (smaller: a database may have hundreds of messages).
+const DECODED_BLOCK_SIZE: usize = 64 * 1024;
+/// `##CC` type: value to text.
+const CC_VALUE_TO_TEXT: u8 = 7;
 /// Metadata blocks (groups, channels, texts, lists) larger than this are refused.
 const MAX_BLOCK: u64 = 4 << 20;
 /// A zipped block may unpack to at most this.
@@ -132,6 +140,35 @@ impl Kind {
     }
 }
 
+/// A decoded signal's channel: its name, unit and the names of its values (physical value →
+/// name, a value-to-text conversion).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// The signal's name.
+    pub name: String,
+    /// Its unit ("" for none).
+    pub unit: String,
+    /// Its values' names.
+    pub value_names: Vec<(f64, String)>,
+}
+
+/// A decoded message's data group: its name, columns, records and (once written) its first
+/// channel and acquisition name.
+#[derive(Debug)]
+struct DecodedOut {
+    name: String,
+    columns: Vec<Column>,
+    out: GroupOut,
+    channels: Option<(u64, u64)>,
+}
+
+/// Where records go: a kind of frame's group, or a decoded message's.
+#[derive(Debug, Clone, Copy)]
+enum Slot {
+    Raw(Kind),
+    Decoded(usize),
+}
+
 /// One kind's records: the block being filled and the blocks written.
 #[derive(Debug, Default)]
 struct GroupOut {
@@ -152,6 +189,8 @@ pub struct Mf4Writer<W: Write + Seek> {
     channels: BTreeMap<String, u32>,
     /// The blocks every checkpoint links to unchanged, written at the first.
     fixed: Option<Fixed>,
+    /// Decoded messages' groups, in the order they were added.
+    decoded: Vec<DecodedOut>,
 }
 
 /// Blocks that do not change between checkpoints: written once, linked from each.
@@ -215,6 +254,62 @@ impl<W: Write + Seek> Mf4Writer<W> {
         }
     }
 
+    /// The records of `slot` (a decoded group that does not exist has none: an empty one).
+    fn slot(&mut self, slot: Slot) -> Option<&mut GroupOut> {
+        match slot {
+            Slot::Raw(kind) => Some(self.group(kind)),
+            Slot::Decoded(i) => self.decoded.get_mut(i).map(|d| &mut d.out),
+        }
+    }
+
+    /// Add a data group of decoded values, a message's (time, then one 64-bit float channel a
+    /// column): its number for [`Mf4Writer::write_decoded`].
+    pub fn add_decoded_group(&mut self, name: &str, columns: Vec<Column>) -> usize {
+        self.decoded.push(DecodedOut {
+            name: name.to_string(),
+            columns,
+            out: GroupOut::default(),
+            channels: None,
+        });
+        self.decoded.len() - 1
+    }
+
+    /// Write one row of a decoded group: the frame's time and a value a column (NaN where a
+    /// signal is absent, as a multiplexed one is). A row of the wrong width is refused.
+    pub fn write_decoded(
+        &mut self,
+        group: usize,
+        timestamp: Timestamp,
+        values: &[f64],
+    ) -> io::Result<()> {
+        let at = timestamp.as_nanos();
+        let start = *self.start.get_or_insert(at - at % 1_000);
+        let invalid = || io::Error::new(io::ErrorKind::InvalidInput, "no such decoded group");
+        let out = self.decoded.get_mut(group).ok_or_else(invalid)?;
+        if values.len() != out.columns.len() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{} values for {} columns of {}",
+                    values.len(),
+                    out.columns.len(),
+                    out.name
+                ),
+            ));
+        }
+        #[allow(clippy::cast_precision_loss)]
+        let seconds = (i128::from(at) - i128::from(start)) as f64 / 1e9;
+        out.out.records.extend_from_slice(&seconds.to_le_bytes());
+        for v in values {
+            out.out.records.extend_from_slice(&v.to_le_bytes());
+        }
+        out.out.count += 1;
+        if out.out.records.len() >= DECODED_BLOCK_SIZE {
+            self.flush(Slot::Decoded(group))?;
+        }
+        Ok(())
+    }
+
     /// A writer to `out` (the identification and a placeholder header are written now).
     pub fn new(mut out: W) -> io::Result<Self> {
         out.write_all(&identification(false))?;
@@ -226,6 +321,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
             groups: Default::default(),
             channels: BTreeMap::new(),
             fixed: None,
+            decoded: Vec::new(),
         })
     }
 
@@ -283,7 +379,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
             .extend_from_slice(row.get(..kind.record_len()).unwrap_or(&row));
         group.count += 1;
         if group.records.len() >= BLOCK_SIZE {
-            self.flush_group(kind)?;
+            self.flush(Slot::Raw(kind))?;
         }
         Ok(())
     }
@@ -298,8 +394,11 @@ impl<W: Write + Seek> Mf4Writer<W> {
         Ok(at)
     }
 
-    fn flush_group(&mut self, kind: Kind) -> io::Result<()> {
-        let records = std::mem::take(&mut self.group(kind).records);
+    fn flush(&mut self, slot: Slot) -> io::Result<()> {
+        let records = self
+            .slot(slot)
+            .map(|g| std::mem::take(&mut g.records))
+            .unwrap_or_default();
         if records.is_empty() {
             return Ok(());
         }
@@ -311,11 +410,14 @@ impl<W: Write + Seek> Mf4Writer<W> {
         self.out.write_all(&head)?;
         self.at += 24;
         self.append(&records)?;
-        self.group(kind).blocks.push((at, records.len() as u64));
-        // The buffer is reused: its capacity stays.
-        let mut records = records;
-        records.clear();
-        self.group(kind).records = records;
+        let len = records.len() as u64;
+        if let Some(group) = self.slot(slot) {
+            group.blocks.push((at, len));
+            // The buffer is reused: its capacity stays.
+            let mut records = records;
+            records.clear();
+            group.records = records;
+        }
         Ok(())
     }
 
@@ -403,27 +505,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
         fixed: &Fixed,
         index: usize,
     ) -> io::Result<u64> {
-        let group = self.group(kind);
-        let count = group.count;
-        let data = match group.blocks.as_slice() {
-            [] => 0,
-            [(one, _)] => *one,
-            many => {
-                let mut data = Vec::with_capacity(8 + 8 * many.len());
-                data.extend_from_slice(&[0; 4]); // flags: each block's offset listed
-                data.extend_from_slice(
-                    &u32::try_from(many.len()).unwrap_or(u32::MAX).to_le_bytes(),
-                );
-                let mut offset = 0u64;
-                for (_, len) in many {
-                    data.extend_from_slice(&offset.to_le_bytes());
-                    offset += len;
-                }
-                let mut links = vec![0u64];
-                links.extend(many.iter().map(|(at, _)| *at));
-                self.append(&block(b"##DL", &links, &data))?
-            }
-        };
+        let (count, data) = self.data_link(Slot::Raw(kind))?;
         let (time, acquisition) = fixed.channels.get(index).copied().unwrap_or_default();
         let record_len = u32::try_from(kind.record_len()).unwrap_or(0);
         let mut cg = Vec::with_capacity(32);
@@ -442,6 +524,119 @@ impl<W: Write + Seek> Mf4Writer<W> {
         self.append(&block(b"##DG", &[next, cg, data, 0], &[0; 8]))
     }
 
+    /// A group's record count and the link to its data: its one block, or a list of them.
+    fn data_link(&mut self, slot: Slot) -> io::Result<(u64, u64)> {
+        let (count, blocks) = match self.slot(slot) {
+            Some(group) => (group.count, group.blocks.clone()),
+            None => (0, Vec::new()),
+        };
+        let data = match blocks.as_slice() {
+            [] => 0,
+            [(one, _)] => *one,
+            many => {
+                let mut data = Vec::with_capacity(8 + 8 * many.len());
+                data.extend_from_slice(&[0; 4]); // flags: each block's offset listed
+                data.extend_from_slice(
+                    &u32::try_from(many.len()).unwrap_or(u32::MAX).to_le_bytes(),
+                );
+                let mut offset = 0u64;
+                for (_, len) in many {
+                    data.extend_from_slice(&offset.to_le_bytes());
+                    offset += len;
+                }
+                let mut links = vec![0u64];
+                links.extend(many.iter().map(|(at, _)| *at));
+                self.append(&block(b"##DL", &links, &data))?
+            }
+        };
+        Ok((count, data))
+    }
+
+    /// A decoded group's channels (time, then a float a column, each with its unit and value
+    /// names), written once: (first channel, acquisition name).
+    fn decoded_channels(&mut self, group: usize) -> io::Result<(u64, u64)> {
+        let Some(decoded) = self.decoded.get(group) else {
+            return Ok((0, 0));
+        };
+        if let Some(channels) = decoded.channels {
+            return Ok(channels);
+        }
+        let (name, columns) = (decoded.name.clone(), decoded.columns.clone());
+        let mut next = 0;
+        for (i, column) in columns.iter().enumerate().rev() {
+            let name = self.text(b"##TX", &column.name)?;
+            let unit = match column.unit.is_empty() {
+                true => 0,
+                false => self.text(b"##TX", &column.unit)?,
+            };
+            let conversion = self.value_names(&column.value_names)?;
+            let offset = u32::try_from(8 + 8 * i).unwrap_or(u32::MAX);
+            next = self.append(&channel_converted(
+                [next, 0, name, unit],
+                conversion,
+                (0, 0),
+                DT_FLOAT_LE,
+                offset,
+                64,
+            ))?;
+        }
+        let time_name = self.text(b"##TX", "time")?;
+        let unit = self.text(b"##TX", "s")?;
+        let time = self.append(&channel(
+            [next, 0, time_name, unit],
+            (CN_MASTER, SYNC_TIME),
+            DT_FLOAT_LE,
+            0,
+            64,
+        ))?;
+        let acquisition = self.text(b"##TX", &name)?;
+        if let Some(decoded) = self.decoded.get_mut(group) {
+            decoded.channels = Some((time, acquisition));
+        }
+        Ok((time, acquisition))
+    }
+
+    /// A value-to-text conversion (`##CC` of type 7) naming these values; 0 when none.
+    fn value_names(&mut self, names: &[(f64, String)]) -> io::Result<u64> {
+        if names.is_empty() {
+            return Ok(0);
+        }
+        let mut links = vec![0u64; 4]; // name, unit, comment, inverse
+        for (_, text) in names {
+            links.push(self.text(b"##TX", text)?);
+        }
+        links.push(0); // no default text: other values stay numbers
+        let count = u16::try_from(names.len()).unwrap_or(u16::MAX);
+        let mut data = Vec::with_capacity(24 + 8 * names.len());
+        data.extend_from_slice(&[CC_VALUE_TO_TEXT, 0, 0, 0]); // type, precision, flags
+        data.extend_from_slice(&count.saturating_add(1).to_le_bytes());
+        data.extend_from_slice(&count.to_le_bytes());
+        data.extend_from_slice(&0f64.to_le_bytes()); // physical range (not given)
+        data.extend_from_slice(&0f64.to_le_bytes());
+        for (value, _) in names {
+            data.extend_from_slice(&value.to_le_bytes());
+        }
+        self.append(&block(b"##CC", &links, &data))
+    }
+
+    /// A decoded group's data group: its channels, count and data.
+    fn write_decoded_group(&mut self, group: usize, next: u64) -> io::Result<u64> {
+        let (time, acquisition) = self.decoded_channels(group)?;
+        let (count, data) = self.data_link(Slot::Decoded(group))?;
+        let columns = self.decoded.get(group).map_or(0, |d| d.columns.len());
+        let record_len = u32::try_from(8 + 8 * columns).unwrap_or(u32::MAX);
+        let mut cg = Vec::with_capacity(32);
+        cg.extend_from_slice(&0u64.to_le_bytes()); // record ID
+        cg.extend_from_slice(&count.to_le_bytes());
+        cg.extend_from_slice(&0u16.to_le_bytes()); // flags: plain values
+        cg.extend_from_slice(&u16::from(b'.').to_le_bytes());
+        cg.extend_from_slice(&[0; 4]);
+        cg.extend_from_slice(&record_len.to_le_bytes());
+        cg.extend_from_slice(&0u32.to_le_bytes());
+        let cg = self.append(&block(b"##CG", &[0, time, acquisition, 0, 0, 0], &cg))?;
+        self.append(&block(b"##DG", &[next, cg, data, 0], &[0; 8]))
+    }
+
     /// Make the file complete as it stands, and go on writing after: the records so far are
     /// written, then new groups that list them, then the header is pointed at those groups.
     /// Everything is appended, and the header's links are the last thing to change, so a file
@@ -449,10 +644,17 @@ impl<W: Write + Seek> Mf4Writer<W> {
     /// Each checkpoint costs a few hundred bytes plus the data lists (8 bytes a data block).
     pub fn checkpoint(&mut self) -> io::Result<()> {
         for kind in Kind::ALL {
-            self.flush_group(kind)?;
+            self.flush(Slot::Raw(kind))?;
+        }
+        for group in 0..self.decoded.len() {
+            self.flush(Slot::Decoded(group))?;
         }
         let fixed = self.fixed()?;
         let mut next = 0;
+        // The decoded groups after the frames' groups.
+        for group in (0..self.decoded.len()).rev() {
+            next = self.write_decoded_group(group, next)?;
+        }
         for (index, kind) in Kind::ALL.iter().enumerate().rev() {
             next = self.write_group(*kind, next, &fixed, index)?;
         }
@@ -482,6 +684,18 @@ fn channel(
     byte_offset: u32,
     bits: u32,
 ) -> Vec<u8> {
+    channel_converted(links, 0, (kind, sync), data_type, byte_offset, bits)
+}
+
+/// A channel block with a conversion (0 for none).
+fn channel_converted(
+    links: [u64; 4],
+    conversion: u64,
+    (kind, sync): (u8, u8),
+    data_type: u8,
+    byte_offset: u32,
+    bits: u32,
+) -> Vec<u8> {
     let [next, composition, name, unit] = links;
     let mut data = Vec::with_capacity(72);
     data.extend_from_slice(&[kind, sync, data_type, 0]);
@@ -491,7 +705,11 @@ fn channel(
     data.extend_from_slice(&0u32.to_le_bytes()); // invalidation bit
     data.extend_from_slice(&[0, 0, 0, 0]); // precision, reserved, attachments
     data.extend_from_slice(&[0; 48]); // ranges and limits
-    block(b"##CN", &[next, composition, name, 0, 0, 0, unit, 0], &data)
+    block(
+        b"##CN",
+        &[next, composition, name, 0, conversion, 0, unit, 0],
+        &data,
+    )
 }
 
 // ---------------------------------------------------------------------------------------------

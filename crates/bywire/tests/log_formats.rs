@@ -700,6 +700,61 @@ print("same", len(ours))
     assert_eq!(compared.trim(), "same 300");
 }
 
+/// `log convert --dbc` into MF4: beside the frames, one channel group a message, which
+/// asammdf reads as cantools decodes the same frames (values, value names, units), while the
+/// frames still read back whole.
+#[test]
+fn decoded_mf4_channel_groups_read_by_asammdf_as_cantools_decodes() {
+    let dir = scratch("mf4-decoded");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/data");
+    let (log, dbc) = (root.join("candump.log"), root.join("reference-tug.dbc"));
+    let mf4 = dir.join("decoded.mf4");
+    let said = convert_decoded(&log, &mf4, &dbc, &[]);
+    assert!(said.contains("6200 frames"), "{said}");
+    let stats = bywire(&["log", "stats", mf4.to_str().unwrap()]);
+    assert!(stats.starts_with("6200 frames"), "{stats}");
+    let compared = python(
+        r#"
+import sys, warnings
+warnings.simplefilter("ignore")
+import cantools, can
+from asammdf import MDF
+mdf = MDF(sys.argv[1])
+db = cantools.database.load_file(sys.argv[3])
+expected = {}
+for msg in can.CanutilsLogReader(sys.argv[2]):
+    try:
+        m = db.get_message_by_frame_id(msg.arbitration_id)
+    except KeyError:
+        continue
+    expected.setdefault(m.name, []).append(m.decode(msg.data))
+seen = 0
+for index, group in enumerate(mdf.groups):
+    name = group.channel_group.acq_name
+    if name not in expected:
+        continue
+    message = db.get_message_by_name(name)
+    df = mdf.get_group(index)
+    assert len(df) == len(expected[name]), (name, len(df), len(expected[name]))
+    for channel in group.channels[1:]:
+        signal = message.get_signal_by_name(channel.name)
+        assert (channel.unit or None) == signal.unit, (channel.name, channel.unit, signal.unit)
+    for row, want in zip(df.itertuples(index=False), expected[name]):
+        for key, value in want.items():
+            got = getattr(row, key)
+            if isinstance(got, bytes):
+                assert got.decode() == str(value), (name, key, got, value)
+            else:
+                assert abs(got - float(value)) < 1e-9, (name, key, got, value)
+    seen += 1
+assert seen == len(expected), (seen, sorted(expected))
+print("same", seen)
+"#,
+        &[&mf4, &log, &dbc],
+    );
+    assert!(compared.trim().starts_with("same "), "{compared}");
+}
+
 /// The commands that read logs take any format: `decode -I` of a BLF gives what `decode` of the
 /// candump text gives, and `play -I` of an ASC replays the same lines.
 #[test]

@@ -65,6 +65,8 @@ Every line is checked; a malformed one is an error naming its file, line and col
   bywire log convert drive.log lake --dbc vehicle.dbc --time-unit us   (times Spark reads as such)
   bywire log convert drive.blf drive.parquet --time-unit us
   bywire log convert drive.log drive.mcap --dbc vehicle.dbc   (+ JSON channels for Foxglove)
+  bywire log convert drive.log drive.mf4 --dbc vehicle.dbc    (+ a channel group per message,
+                                                  with units and value tables, for asammdf)
   candump -L can0 | bywire log convert - out.asc
   bywire log convert a.blf b.asc merged.log --channel can0 --channel can3=can1 --from 10 --to 70
 
@@ -256,12 +258,12 @@ fn convert(
     let times = TimeUnitArg::for_output(decoding.time_unit, format, &output.display().to_string())?;
     let decoder = match decoding.dbc {
         None => None,
-        Some(path) if matches!(format, Format::Parquet | Format::Mcap) => Some(
+        Some(path) if matches!(format, Format::Parquet | Format::Mcap | Format::Mf4) => Some(
             bywire_dbc::decoder::Decoder::new(crate::support::dbc::load(path, decoding.strict)?),
         ),
         Some(_) => {
             return Err(anyhow!(
-                "--dbc decodes into Parquet tables or MCAP JSON channels; {} is neither",
+                "--dbc decodes into Parquet tables, MCAP JSON channels or MF4 channel groups; {} is none of them",
                 output.display()
             ))
         }
@@ -297,6 +299,38 @@ fn convert(
                 })
             })?;
         }
+        (Some(decoder), Format::Mf4) => write_atomically(output, |tmp| {
+            let file = std::fs::File::create(tmp).with_context(cannot_write)?;
+            let mut writer = bywire_log::mf4::Mf4Writer::new(std::io::BufWriter::new(file))
+                .with_context(cannot_write)?;
+            let messages = decoder.database().messages.len();
+            let mut groups: Vec<Option<usize>> = vec![None; messages];
+            let (mut values, mut row) = (Vec::new(), Vec::new());
+            pump.run(bywire_log::merge::merge(readers), |r| {
+                writer.write(r).with_context(cannot_write)?;
+                let Some((index, message, Ok(()))) = decoder.decode_into(&r.frame, &mut values)
+                else {
+                    return Ok(());
+                };
+                let Some(slot) = groups.get_mut(index) else {
+                    return Ok(());
+                };
+                let group = *slot.get_or_insert_with(|| {
+                    writer.add_decoded_group(message.display_name(), mf4_columns(message))
+                });
+                row.clear();
+                row.extend(
+                    values
+                        .iter()
+                        .map(|v| v.map_or(f64::NAN, |d| d.physical.as_f64())),
+                );
+                writer
+                    .write_decoded(group, r.timestamp, &row)
+                    .with_context(cannot_write)
+            })?;
+            writer.finish().with_context(cannot_write)?;
+            Ok(())
+        })?,
         (Some(decoder), _) => write_atomically(output, |tmp| {
             let file = std::fs::File::create(tmp).with_context(cannot_write)?;
             let mut writer = DecodedMcapWriter::new(std::io::BufWriter::new(file), decoder)
@@ -362,6 +396,30 @@ fn convert(
         left_out,
         &notes,
     )
+}
+
+/// A message's signals as MF4 channels: their table names, units and value names at the
+/// physical values they stand for.
+fn mf4_columns(message: &bywire_dbc::Message) -> Vec<bywire_log::mf4::Column> {
+    let names = bywire_dbc::decoder::field_names(message);
+    message
+        .signals
+        .iter()
+        .zip(names)
+        .map(|(s, name)| {
+            let (factor, offset) = (s.factor.as_f64(), s.offset.as_f64());
+            bywire_log::mf4::Column {
+                name,
+                unit: s.unit.clone(),
+                #[allow(clippy::cast_precision_loss)]
+                value_names: s
+                    .value_descriptions
+                    .iter()
+                    .map(|(raw, text)| (*raw as f64 * factor + offset, text.clone()))
+                    .collect(),
+            }
+        })
+        .collect()
 }
 
 /// Write `records` (through the pump's selection and progress) into `file` as `format`;
