@@ -536,7 +536,7 @@ impl<'a> DecodedDataset<'a> {
             open: HashMap::default(),
             parts: HashMap::new(),
             decoded: Vec::new(),
-            rows: vec![0; decoder.database().messages.len()],
+            rows: vec![0; decoder.message_count()],
             summary: DatasetSummary::default(),
             clock: 0,
             held_budget: HELD_CHUNKS,
@@ -573,6 +573,36 @@ impl<'a> DecodedDataset<'a> {
             self.summary.unknown += 1;
             return Ok(());
         };
+        // A container frame: a row in each of its PDUs' tables.
+        if let Some(pdus) = decoder.contained(index, data) {
+            for pdu in pdus {
+                match pdu {
+                    Ok(pdu) => match pdu.message {
+                        Some((pdu_message, pdu_codec, pdu_index)) => {
+                            self.add_row(
+                                record,
+                                (pdu_index, pdu_message, pdu_codec),
+                                pdu.pdu.data,
+                            )?;
+                        }
+                        None => self.summary.unknown += 1,
+                    },
+                    Err(e) => self.summary.count_undecodable(message, &e),
+                }
+            }
+            return Ok(());
+        }
+        self.add_row(record, (index, message, codec), data)
+    }
+
+    /// A row of `message` (its index in the decoder's numbering, the message, its codec) from
+    /// `data`, in its table.
+    fn add_row(
+        &mut self,
+        record: &LogRecordRef<'_>,
+        (index, message, codec): (usize, &'a Message, &'a MessageCodec),
+        data: &[u8],
+    ) -> std::io::Result<()> {
         let row = match decode_row(codec, data, &mut self.decoded) {
             Ok(row) => row,
             Err(e) => {
@@ -724,8 +754,9 @@ impl<'a> DecodedDataset<'a> {
         for (_, table) in open {
             close(table, self.decoder)?;
         }
-        let messages = &self.decoder.database().messages;
-        for (message, rows) in messages.iter().zip(&self.rows) {
+        let decoder = self.decoder;
+        let messages = (0..).map_while(|i| decoder.message_at(i).map(|(m, _)| m));
+        for (message, rows) in messages.zip(&self.rows) {
             if *rows > 0 {
                 *self
                     .summary

@@ -123,8 +123,9 @@ pub struct Decoder {
 pub struct Contained<'a, 'd> {
     /// The PDU's header identifier and bytes.
     pub pdu: ContainedPdu<'d>,
-    /// Its message (a PDU of the container) and codec.
-    pub message: Option<(&'a Message, &'a MessageCodec)>,
+    /// Its message (a PDU of the container) and codec, and the message's index in
+    /// [`Decoder::message_at`]'s numbering.
+    pub message: Option<(&'a Message, &'a MessageCodec, usize)>,
 }
 
 /// Standard identifiers: 11 bits.
@@ -193,6 +194,15 @@ impl Decoder {
         let (_, c) = self.containers.iter().find(|(i, _)| *i == index)?;
         let container = self.db.containers.get(*c)?;
         let codecs = self.contained_codecs.get(*c)?;
+        // This container's first PDU in message_at's numbering.
+        let first = self.db.messages.len()
+            + self
+                .db
+                .containers
+                .iter()
+                .take(*c)
+                .map(|c| c.pdus.len())
+                .sum::<usize>();
         Some(
             split(container.header, container.header_byte_order, data).map(move |pdu| {
                 let pdu = pdu?;
@@ -200,7 +210,9 @@ impl Decoder {
                     .pdus
                     .iter()
                     .zip(codecs)
-                    .find(|(m, _)| m.id == pdu.header_id);
+                    .enumerate()
+                    .find(|(_, (m, _))| m.id == pdu.header_id)
+                    .map(|(k, (m, codec))| (m, codec, first + k));
                 Ok(Contained { pdu, message })
             }),
         )
@@ -224,9 +236,31 @@ impl Decoder {
         &self.db
     }
 
-    /// The message at `index` in the database and its codec.
+    /// The message at `index` and its codec: the database's messages, then every container's
+    /// PDUs in order (numbered after the messages).
     pub fn message_at(&self, index: usize) -> Option<(&Message, &MessageCodec)> {
-        Some((self.db.messages.get(index)?, self.codecs.get(index)?))
+        if let Some(message) = self.db.messages.get(index) {
+            return Some((message, self.codecs.get(index)?));
+        }
+        let mut k = index.checked_sub(self.db.messages.len())?;
+        for (container, codecs) in self.db.containers.iter().zip(&self.contained_codecs) {
+            if let (Some(pdu), Some(codec)) = (container.pdus.get(k), codecs.get(k)) {
+                return Some((pdu, codec));
+            }
+            k = k.checked_sub(container.pdus.len())?;
+        }
+        None
+    }
+
+    /// How many messages [`Decoder::message_at`] numbers (messages and contained PDUs).
+    pub fn message_count(&self) -> usize {
+        self.db.messages.len()
+            + self
+                .db
+                .containers
+                .iter()
+                .map(|c| c.pdus.len())
+                .sum::<usize>()
     }
 
     /// The codec of `message` (a message of this database).
@@ -301,7 +335,7 @@ impl Decoder {
                         break;
                     }
                 };
-                let Some((pdu_message, codec)) = pdu.message else {
+                let Some((pdu_message, codec, _)) = pdu.message else {
                     continue;
                 };
                 values.clear();

@@ -63,7 +63,7 @@ proptest! {
                 }
                 if let Some(pdus) = decoder.contained(index, &payload) {
                     for pdu in pdus.flatten() {
-                        if let Some((_, codec)) = pdu.message {
+                        if let Some((_, codec, _)) = pdu.message {
                             let mut values = vec![None; codec.signal_count()];
                             let _ = codec.decode(pdu.pdu.data, &mut values);
                         }

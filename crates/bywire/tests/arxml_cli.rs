@@ -100,6 +100,39 @@ fn frames_and_container_frames_decode_as_cantools_decodes_them() {
     let (_, csv, _) = bywire(&["decode", "--csv", &arxml()], &log);
     assert!(csv.contains(",can0,Steer,Angle,-12.3,,deg\n"), "{csv}");
     assert!(csv.contains(",can0,Lights,Beam,2,High,\n"), "{csv}");
+    // Parquet: a table a PDU, read back by pyarrow.
+    let dir = Scratch::new("arxml-parquet");
+    let log_file = dir.join("bundle.log");
+    std::fs::write(&log_file, &log).unwrap();
+    let lake = dir.join("lake");
+    let (code, _, err) = bywire(
+        &[
+            "decode",
+            &arxml(),
+            "-I",
+            log_file.to_str().unwrap(),
+            "--parquet",
+            lake.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let script = format!(
+        "import pyarrow.parquet as pq\nrows = pq.read_table({:?}).to_pylist()\n\
+         print(rows[0]['Angle'], pq.read_table({:?}).num_rows)",
+        lake.join("message=Steer").display().to_string(),
+        lake.join("message=Lights").display().to_string()
+    );
+    let read = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&read.stdout).trim(),
+        "-12.3 2",
+        "{}",
+        String::from_utf8_lossy(&read.stderr)
+    );
     // A header whose length runs past the frame: the error, not a guess.
     let overrun = format!("(1.0) can0 300##000001090{}\n", "00".repeat(16));
     let (_, out, _) = bywire(&["decode", &arxml()], &overrun);

@@ -603,7 +603,7 @@ fn decode_records(
         if let Some(pdus) = decoder.decoder().contained(index, record.frame.data()) {
             let channel = prefix.clone();
             for pdu in pdus.flatten() {
-                let Some((pdu_message, codec)) = pdu.message else {
+                let Some((pdu_message, codec, _)) = pdu.message else {
                     continue;
                 };
                 let mut pdu_values = vec![None; codec.signal_count()];

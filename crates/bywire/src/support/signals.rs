@@ -388,7 +388,7 @@ fn push_container<'d>(
         if !shape.single_line {
             let _ = write!(parts, "    {:06x}##{} ::\n    ", pdu.pdu.header_id, hex(""));
         }
-        let Some((message, codec)) = pdu.message else {
+        let Some((message, codec, _)) = pdu.message else {
             if shape.single_line {
                 let _ = write!(
                     parts,
@@ -571,7 +571,7 @@ fn container_json<'d>(
             }
         };
         let mut object = json!({"header_id": pdu.pdu.header_id, "name": null, "signals": {}});
-        if let Some((message, codec)) = pdu.message {
+        if let Some((message, codec, _)) = pdu.message {
             let mut values = vec![None; codec.signal_count()];
             let decoded = codec.decode(pdu.pdu.data, &mut values);
             let frame = DecodedFrame {
