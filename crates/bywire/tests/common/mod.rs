@@ -55,13 +55,21 @@ pub fn in_canvm(options: &[&str], script: &str) -> String {
     // The guest's files live in its memory: the debug binary (about 300 MB with DDS), what a
     // test includes and what it writes need more than the default 1 GiB (a test's own
     // `--mem` comes later and wins).
-    let out = Command::new(canvm)
-        .arg("run")
-        .args(["--mem", "2048"])
-        .args(options)
-        .args(["--timeout", "300", "--", "/bin/sh", "-c", script])
-        .output()
-        .expect("canvm.sh runs (see ../shared/tools/README.md)");
+    let run = || {
+        Command::new(&canvm)
+            .arg("run")
+            .args(["--mem", "2048"])
+            .args(options)
+            .args(["--timeout", "300", "--", "/bin/sh", "-c", script])
+            .output()
+            .expect("canvm.sh runs (see ../shared/tools/README.md)")
+    };
+    let mut out = run();
+    // Two VMs started at once on a fresh machine both build canvm's cache and one loses the
+    // race for its file (`mv: cannot stat .../canvm-cache/...tmp`): the cache is there now.
+    if !out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canvm-cache/") {
+        out = run();
+    }
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
