@@ -67,7 +67,12 @@ pub fn in_canvm(options: &[&str], script: &str) -> String {
     let mut out = run();
     // Two VMs started at once on a fresh machine both build canvm's cache and one loses the
     // race for its file (`mv: cannot stat .../canvm-cache/...tmp`): the cache is there now.
-    if !out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canvm-cache/") {
+    let lost_race = |out: &std::process::Output| {
+        [&out.stdout, &out.stderr]
+            .iter()
+            .any(|o| String::from_utf8_lossy(o).contains("canvm-cache/"))
+    };
+    if !out.status.success() && lost_race(&out) {
         out = run();
     }
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
