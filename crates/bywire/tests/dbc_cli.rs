@@ -433,12 +433,19 @@ fn kcd_and_sym_convert_and_decode_like_the_dbc() {
         assert_eq!(decoded, from_dbc, "{extension} forced");
     }
     let (code, _, err) = run(
-        &["--db-format", "arxml", "dbc", "dump", &corpus(MOTOHAWK)],
+        &["--db-format", "xls", "dbc", "dump", &corpus(MOTOHAWK)],
         "",
     );
     assert_eq!(code, 2);
     assert!(
-        err.contains("not a database format (dbc, kcd, sym)"),
+        err.contains("not a database format (dbc, kcd, sym, arxml, cdd)"),
         "{err}"
     );
+    // A DBC forced to be read as ARXML: the XML error, with its position.
+    let (code, _, err) = run(
+        &["--db-format", "arxml", "dbc", "dump", &corpus(MOTOHAWK)],
+        "",
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains(":1:1: error: not well-formed XML"), "{err}");
 }
