@@ -501,15 +501,46 @@ impl<'a, W: Write + Seek> DecodedMcapWriter<'a, W> {
     /// Write one record: raw, and decoded when the DBC has its message.
     pub fn write(&mut self, record: &LogRecord) -> std::io::Result<()> {
         self.raw.write(record)?;
-        let Some((index, message, decoded)) =
-            self.decoder.decode_into(&record.frame, &mut self.decoded)
+        let decoder = self.decoder;
+        let Some((index, message, decoded)) = decoder.decode_into(&record.frame, &mut self.decoded)
         else {
             return Ok(());
         };
+        // A container frame: each PDU on its own channel.
+        if let Some(pdus) = decoder.contained(index, record.frame.data()) {
+            for pdu in pdus {
+                let Ok(pdu) = pdu else {
+                    self.undecodable += 1;
+                    continue;
+                };
+                let Some((pdu_message, codec, pdu_index)) = pdu.message else {
+                    continue;
+                };
+                self.decoded.clear();
+                self.decoded.resize(codec.signal_count(), None);
+                if codec.decode(pdu.pdu.data, &mut self.decoded).is_err() {
+                    self.undecodable += 1;
+                    continue;
+                }
+                self.write_json(pdu_index, pdu_message, record)?;
+            }
+            return Ok(());
+        }
         if decoded.is_err() {
             self.undecodable += 1;
             return Ok(());
         }
+        self.write_json(index, message, record)
+    }
+
+    /// The decoded values of `message` (at `index` in the decoder's numbering) as a JSON
+    /// message on its channel.
+    fn write_json(
+        &mut self,
+        index: usize,
+        message: &Message,
+        record: &LogRecord,
+    ) -> std::io::Result<()> {
         let Some(channel) = self.channel(index, message, &record.interface)? else {
             self.over_limit += 1;
             return Ok(());

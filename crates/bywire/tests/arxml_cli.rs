@@ -133,6 +133,40 @@ fn frames_and_container_frames_decode_as_cantools_decodes_them() {
         "{}",
         String::from_utf8_lossy(&read.stderr)
     );
+    // MCAP: a JSON channel a PDU, read back by the mcap package.
+    let mcap = dir.join("bundle.mcap");
+    let (code, _, err) = bywire(
+        &[
+            "log",
+            "convert",
+            log_file.to_str().unwrap(),
+            mcap.to_str().unwrap(),
+            "--dbc",
+            &arxml(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let script = format!(
+        "from mcap.reader import make_reader\n\
+         for _, channel, message in make_reader(open({:?}, 'rb')).iter_messages():\n    \
+         print(channel.topic, message.data.decode(errors='replace') if channel.topic != '/from_can_bus' else '')",
+        mcap.display().to_string()
+    );
+    let read = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    let topics = String::from_utf8_lossy(&read.stdout);
+    assert!(
+        topics.contains("/can0/Steer {\"Angle\":-12.3,"),
+        "{topics}{}",
+        String::from_utf8_lossy(&read.stderr)
+    );
+    assert!(
+        topics.contains("/can0/Lights {\"Beam\":2,\"Beam_choice\":\"High\"}"),
+        "{topics}"
+    );
     // A header whose length runs past the frame: the error, not a guess.
     let overrun = format!("(1.0) can0 300##000001090{}\n", "00".repeat(16));
     let (_, out, _) = bywire(&["decode", &arxml()], &overrun);
