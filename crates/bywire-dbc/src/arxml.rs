@@ -27,6 +27,7 @@ use roxmltree::{Document, Node as XmlNode, NodeId, ParsingOptions};
 use crate::format::{attrs, plain_signal, LineIndex, Report, NO_NODE};
 use crate::model::*;
 use crate::parser::{Diagnostic, Mode, ParseError, Severity};
+use crate::xml::{child, children};
 
 /// Elements a file may hold before it is refused (a 10 MB file has about a quarter million).
 const MAX_NODES: u32 = 50_000_000;
@@ -102,21 +103,6 @@ fn version_of(lines: &LineIndex<'_>, root: XmlNode<'_, '_>) -> Result<u8, ParseE
             format!("the namespace \"{namespace}\" is not AUTOSAR 3 or 4's"),
         )),
     }
-}
-
-/// The first child element named `tag`.
-fn child<'a, 'input>(n: XmlNode<'a, 'input>, tag: &str) -> Option<XmlNode<'a, 'input>> {
-    n.children()
-        .find(|c| c.is_element() && c.tag_name().name() == tag)
-}
-
-/// Every child element named `tag`.
-fn children<'a, 'input>(
-    n: XmlNode<'a, 'input>,
-    tag: &'a str,
-) -> impl Iterator<Item = XmlNode<'a, 'input>> + 'a {
-    n.children()
-        .filter(move |c| c.is_element() && c.tag_name().name() == tag)
 }
 
 /// An element's text, trimmed; `None` when it has none.

@@ -16,6 +16,7 @@ use roxmltree::{Document, Node as XmlNode, ParsingOptions};
 use crate::format::{plain_signal, LineIndex, Report, NO_NODE};
 use crate::model::*;
 use crate::parser::{Diagnostic, Mode, ParseError, Severity};
+use crate::xml::{child, children};
 
 /// Elements a file may hold before it is refused.
 const MAX_NODES: u32 = 20_000_000;
@@ -59,19 +60,6 @@ pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>)
     };
     let db = reader.database(doc.root_element())?;
     reader.report.finish(db)
-}
-
-fn child<'a, 'input>(n: XmlNode<'a, 'input>, tag: &str) -> Option<XmlNode<'a, 'input>> {
-    n.children()
-        .find(|c| c.is_element() && c.tag_name().name() == tag)
-}
-
-fn children<'a, 'input>(
-    n: XmlNode<'a, 'input>,
-    tag: &'a str,
-) -> impl Iterator<Item = XmlNode<'a, 'input>> + 'a {
-    n.children()
-        .filter(move |c| c.is_element() && c.tag_name().name() == tag)
 }
 
 /// The elements at `path` below `n` (each step all children of that name).

@@ -45,6 +45,7 @@ pub mod secoc;
 pub mod select;
 mod sym;
 mod writer;
+mod xml;
 
 pub use arxml::BUS_NAME;
 pub use format::Format;
