@@ -15,7 +15,9 @@
 //! file's size. The groups, channels and the header's links are written at
 //! [`Mf4Writer::finish`]; until then the file is marked unfinished (`UnFinMF`). `BusChannel` is
 //! the interface's number (`can0` is 0, as python-can numbers it; names without one are
-//! numbered after the others); `Dir` is 0 received, 1 sent. Error frames keep their SocketCAN
+//! numbered after the others), and the header's comment names each number's interface
+//! (`<e name="BusChannel 1">bus1</e>`), which the reader gives back; `Dir` is 0 received, 1
+//! sent. Error frames keep their SocketCAN
 //! class in `ID` and their 8 bytes in `DataBytes`.
 //!
 //! Decoded values may go beside the frames ([`Mf4Writer::add_decoded_group`]): a data group a
@@ -45,6 +47,47 @@ pub const BLOCK_SIZE: usize = 512 * 1024;
 const DECODED_BLOCK_SIZE: usize = 64 * 1024;
 /// `##CC` type: value to text.
 const CC_VALUE_TO_TEXT: u8 = 7;
+/// The header comment's property naming a bus channel's interface (`BusChannel 1` → `bus1`).
+const CHANNEL_NAME: &str = "BusChannel ";
+/// Channel names a header may give.
+const MAX_CHANNEL_NAMES: usize = 256;
+
+/// Text for an XML element's content.
+fn xml_escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// The channel names a header comment gives (see [`Mf4Writer`]): each `<e name="BusChannel N">`
+/// property that names an interface (letters, digits and `_-.:/`, at most 64 characters).
+fn channel_names(comment: &str) -> BTreeMap<u64, String> {
+    let mut names = BTreeMap::new();
+    let key = format!("<e name=\"{CHANNEL_NAME}");
+    for part in comment.split(key.as_str()).skip(1).take(MAX_CHANNEL_NAMES) {
+        let Some((number, rest)) = part.split_once("\">") else {
+            continue;
+        };
+        let Some((value, _)) = rest.split_once("</e>") else {
+            continue;
+        };
+        let value = value
+            .replace("&lt;", "<")
+            .replace("&gt;", ">")
+            .replace("&quot;", "\"")
+            .replace("&amp;", "&");
+        let fits = !value.is_empty()
+            && value.len() <= 64
+            && value
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_-.:/".contains(c));
+        if let (Ok(number), true) = (number.parse::<u64>(), fits) {
+            names.insert(number, value);
+        }
+    }
+    names
+}
 /// Metadata blocks (groups, channels, texts, lists) larger than this are refused.
 const MAX_BLOCK: u64 = 4 << 20;
 /// A zipped block may unpack to at most this.
@@ -637,6 +680,21 @@ impl<W: Write + Seek> Mf4Writer<W> {
         self.append(&block(b"##DG", &[next, cg, data, 0], &[0; 8]))
     }
 
+    /// The header's comment: each bus channel's interface name (`BusChannel` holds numbers,
+    /// as python-can writes them), so names come back when the file is read.
+    fn channel_names(&mut self) -> io::Result<u64> {
+        let mut text = String::from("<HDcomment><TX>CAN bus log</TX><common_properties>");
+        for (name, number) in &self.channels {
+            text.push_str(&format!(
+                "<e name=\"{CHANNEL_NAME}{}\">{}</e>",
+                number.saturating_sub(1),
+                xml_escape(name)
+            ));
+        }
+        text.push_str("</common_properties></HDcomment>");
+        self.text(b"##MD", &text)
+    }
+
     /// Make the file complete as it stands, and go on writing after: the records so far are
     /// written, then new groups that list them, then the header is pointed at those groups.
     /// Everything is appended, and the header's links are the last thing to change, so a file
@@ -658,10 +716,11 @@ impl<W: Write + Seek> Mf4Writer<W> {
         for (index, kind) in Kind::ALL.iter().enumerate().rev() {
             next = self.write_group(*kind, next, &fixed, index)?;
         }
+        let names = self.channel_names()?;
         let start = self.start.unwrap_or(0);
         self.out.seek(SeekFrom::Start(HEADER_AT))?;
         self.out
-            .write_all(&header([next, fixed.history, 0, 0, 0, 0], start))?;
+            .write_all(&header([next, fixed.history, 0, 0, 0, names], start))?;
         self.out.seek(SeekFrom::Start(0))?;
         self.out.write_all(&identification(true))?;
         self.out.seek(SeekFrom::Start(self.at))?;
@@ -1300,6 +1359,8 @@ struct GroupReader {
 pub struct Mf4Reader<R: Read + Seek> {
     file: R,
     start: u64,
+    /// Interface names by bus channel, from the header's comment.
+    names: BTreeMap<u64, String>,
     groups: Vec<GroupReader>,
     heads: Vec<Option<LogRecord>>,
     started: bool,
@@ -1341,6 +1402,13 @@ impl<R: Read + Seek> Mf4Reader<R> {
             ));
         }
         let start = start_time(&header.data);
+        // A comment that cannot be read names no channel: the frames are what matter.
+        let names = match link(&header, 5) {
+            0 => BTreeMap::new(),
+            at => read_text(&mut file, at)
+                .map(|text| channel_names(&text))
+                .unwrap_or_default(),
+        };
         let mut groups = Vec::new();
         let mut seen = HashSet::new();
         let mut at = link(&header, 0);
@@ -1365,6 +1433,7 @@ impl<R: Read + Seek> Mf4Reader<R> {
         Ok(Mf4Reader {
             file,
             start,
+            names,
             groups,
             heads,
             started: false,
@@ -1503,7 +1572,7 @@ impl<R: Read + Seek> Mf4Reader<R> {
             *left = left.map(|n| n - 1);
             *read += 1;
             let n = *read;
-            return decode(layout, record, start)
+            return decode(layout, record, start, &self.names)
                 .map(Some)
                 .map_err(|what| malformed(*at, format!("frame {n}: {what}")));
         }
@@ -1529,7 +1598,12 @@ fn start_time(hd: &[u8]) -> u64 {
 }
 
 /// A record of a frame group as a log record.
-fn decode(layout: &FrameLayout, record: &[u8], start: u64) -> Result<LogRecord, String> {
+fn decode(
+    layout: &FrameLayout,
+    record: &[u8],
+    start: u64,
+    names: &BTreeMap<u64, String>,
+) -> Result<LogRecord, String> {
     let value = |f: Option<Field>| f.and_then(|f| f.integer(record));
     let flag = |f: Option<Field>| f.and_then(|f| f.flag(record, b"1")).unwrap_or(false);
     let seconds = layout
@@ -1623,7 +1697,10 @@ fn decode(layout: &FrameLayout, record: &[u8], start: u64) -> Result<LogRecord, 
     };
     Ok(LogRecord {
         timestamp,
-        interface: format!("can{channel}"),
+        interface: names
+            .get(&channel)
+            .cloned()
+            .unwrap_or_else(|| format!("can{channel}")),
         frame,
         direction,
     })
@@ -1708,6 +1785,31 @@ mod tests {
 
     fn read(bytes: &[u8]) -> Result<Vec<LogRecord>, LogError> {
         Mf4Reader::open(io::Cursor::new(bytes))?.collect()
+    }
+
+    #[test]
+    fn interface_names_come_back_and_bus_channels_stay_numbers() {
+        let text = "(1700000000.000100) bus1 123#01\n(1700000000.000200) front 124#02\n\
+                    (1700000000.000300) can0 125#03\n";
+        let records: Vec<LogRecord> = Reader::new(text.as_bytes())
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let bytes = written(&records);
+        let names: Vec<String> = read(&bytes)
+            .unwrap()
+            .into_iter()
+            .map(|r| r.interface)
+            .collect();
+        assert_eq!(names, ["bus1", "front", "can0"]);
+        // The header's properties, as asammdf shows them; a name that is no interface name is
+        // passed over.
+        let comment = "<HDcomment><common_properties><e name=\"BusChannel 1\">bus1</e>\
+                       <e name=\"BusChannel 2\">a b</e><e name=\"BusChannel x\">c</e>\
+                       </common_properties></HDcomment>";
+        assert_eq!(
+            channel_names(comment),
+            BTreeMap::from([(1, "bus1".to_string())])
+        );
     }
 
     #[test]
