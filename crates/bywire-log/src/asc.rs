@@ -11,7 +11,9 @@
 //!
 //! Dates are read and written as UTC (the format has no time zone; Vector tools write local
 //! time). Channels are numbered from 1: channel N is interface `can{N-1}`, and an interface
-//! whose name ends in a number M is written as channel M+1 (as python-can maps them).
+//! whose name ends in a number M is written as channel M+1 (as python-can maps them); an
+//! interface the number does not name is given by a comment before its channel's first frame
+//! (`// channel 2 = bus1`), which the reader takes and other readers pass over.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -146,6 +148,8 @@ pub struct AscReader<R> {
     last: u64,
     /// The number of the line read last.
     line: u64,
+    /// Interface names by channel number, from `// channel N = NAME` comments.
+    names: BTreeMap<u32, String>,
 }
 
 impl<R: BufRead> AscReader<R> {
@@ -158,8 +162,28 @@ impl<R: BufRead> AscReader<R> {
             start: 0,
             last: 0,
             line: 0,
+            names: BTreeMap::new(),
         }
     }
+}
+
+/// The comment naming a channel's interface (`// channel 2 = bus1`), which bywire writes before
+/// a channel's first frame: other readers pass comments over.
+const CHANNEL_COMMENT: &str = "// channel ";
+/// Channel names a file may give.
+const MAX_CHANNEL_NAMES: usize = 256;
+
+/// A `// channel N = NAME` comment's number and name, when the name is an interface's (letters,
+/// digits and `_-.:/`, at most 64 characters).
+fn channel_comment(text: &str) -> Option<(u32, &str)> {
+    let (number, name) = text.strip_prefix(CHANNEL_COMMENT)?.split_once(" = ")?;
+    let name = name.trim();
+    let fits = !name.is_empty()
+        && name.len() <= 64
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_-.:/".contains(c));
+    Some((number.trim().parse().ok()?, name)).filter(|_| fits)
 }
 
 /// Seconds with a fraction (`0.100000`) as nanoseconds.
@@ -178,6 +202,12 @@ enum Event {
 impl<R: BufRead> AscReader<R> {
     /// Header lines and trigger blocks change the reader's state; `Some` for an event line.
     fn header(&mut self, number: u64, text: &str) -> Result<bool, LogError> {
+        if let Some((channel, name)) = channel_comment(text) {
+            if self.names.len() < MAX_CHANNEL_NAMES {
+                self.names.insert(channel, name.to_string());
+            }
+            return Ok(true);
+        }
         let lower = text.to_ascii_lowercase();
         let date = |rest: &str| {
             parse_date(rest)
@@ -248,7 +278,11 @@ impl<R: BufRead> AscReader<R> {
         })?;
         Ok(Event::Frame(LogRecord {
             timestamp: Timestamp::from_nanos(at),
-            interface: format!("can{}", n.saturating_sub(1)),
+            interface: self
+                .names
+                .get(&n)
+                .cloned()
+                .unwrap_or_else(|| format!("can{}", n.saturating_sub(1))),
             frame,
             direction,
         }))
@@ -602,7 +636,19 @@ impl<W: Write> AscWriter<W> {
         if let Some(start) = started {
             self.header(start)?;
         }
+        let known = self.channels.len();
         let channel = self.channel(&record.interface);
+        // A channel's first frame: its interface's name first, unless the number says it
+        // (`can1` is channel 2).
+        if self.channels.len() > known
+            && record.interface != format!("can{}", channel.saturating_sub(1))
+        {
+            writeln!(
+                self.output,
+                "{CHANNEL_COMMENT}{channel} = {}",
+                record.interface
+            )?;
+        }
         let direction = if record.direction == Some('T') {
             "Tx"
         } else {
@@ -875,12 +921,10 @@ mod tests {
             assert_eq!(record.timestamp.as_nanos(), expected);
             assert_eq!(record.frame, frame.parse::<Frame>().unwrap());
             assert_eq!(record.direction, Some(direction.unwrap_or('R')));
-            let channel = if interface == "vcan3" {
-                "can3"
-            } else {
-                interface
-            };
-            assert_eq!(record.interface, channel);
+            // A name the number does not say comes back from its comment.
+            assert_eq!(record.interface, interface);
         }
+        assert!(text.contains("\n// channel 4 = vcan3\n"), "{text}");
+        assert!(!text.contains("= can0"), "{text}");
     }
 }
