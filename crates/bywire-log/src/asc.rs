@@ -24,7 +24,10 @@ use bywire_core::{Frame, Id, Timestamp};
 
 use crate::calendar::{civil_from_days, days_from_civil};
 use crate::candump::{LogError, LogRecord};
-use crate::fields::{channel_number, column_of, data_bytes, dlc, fixed_point, syntax, WriteClock};
+use crate::fields::{
+    channel_comment, channel_comment_text, channel_number, column_of, data_bytes, dlc, fixed_point,
+    syntax, WriteClock, MAX_CHANNEL_NAMES,
+};
 use crate::lines::CappedLines;
 
 const NANOS_PER_SECOND: u64 = 1_000_000_000;
@@ -170,21 +173,6 @@ impl<R: BufRead> AscReader<R> {
 /// The comment naming a channel's interface (`// channel 2 = bus1`), which bywire writes before
 /// a channel's first frame: other readers pass comments over.
 const CHANNEL_COMMENT: &str = "// channel ";
-/// Channel names a file may give.
-const MAX_CHANNEL_NAMES: usize = 256;
-
-/// A `// channel N = NAME` comment's number and name, when the name is an interface's (letters,
-/// digits and `_-.:/`, at most 64 characters).
-fn channel_comment(text: &str) -> Option<(u32, &str)> {
-    let (number, name) = text.strip_prefix(CHANNEL_COMMENT)?.split_once(" = ")?;
-    let name = name.trim();
-    let fits = !name.is_empty()
-        && name.len() <= 64
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || "_-.:/".contains(c));
-    Some((number.trim().parse().ok()?, name)).filter(|_| fits)
-}
 
 /// Seconds with a fraction (`0.100000`) as nanoseconds.
 fn parse_seconds(text: &str) -> Option<u64> {
@@ -202,7 +190,7 @@ enum Event {
 impl<R: BufRead> AscReader<R> {
     /// Header lines and trigger blocks change the reader's state; `Some` for an event line.
     fn header(&mut self, number: u64, text: &str) -> Result<bool, LogError> {
-        if let Some((channel, name)) = channel_comment(text) {
+        if let Some((channel, name)) = channel_comment(text, CHANNEL_COMMENT) {
             if self.names.len() < MAX_CHANNEL_NAMES {
                 self.names.insert(channel, name.to_string());
             }
@@ -640,14 +628,11 @@ impl<W: Write> AscWriter<W> {
         let channel = self.channel(&record.interface);
         // A channel's first frame: its interface's name first, unless the number says it
         // (`can1` is channel 2).
-        if self.channels.len() > known
-            && record.interface != format!("can{}", channel.saturating_sub(1))
-        {
-            writeln!(
-                self.output,
-                "{CHANNEL_COMMENT}{channel} = {}",
-                record.interface
-            )?;
+        if self.channels.len() > known {
+            if let Some(comment) = channel_comment_text(CHANNEL_COMMENT, channel, &record.interface)
+            {
+                writeln!(self.output, "{comment}")?;
+            }
         }
         let direction = if record.direction == Some('T') {
             "Tx"

@@ -88,6 +88,34 @@ pub(crate) fn dlc(line: u64, text: &str, word: &str, radix: u32) -> Result<Dlc, 
 
 /// The channel (bus) number of an interface for ASC, TRC and BLF: its trailing number plus one
 /// (`can0` is 1), else the next number not taken; remembered in `taken`.
+/// Channel names a file may give (each a comment or property).
+pub(crate) const MAX_CHANNEL_NAMES: usize = 256;
+
+/// Whether a name a file gives a channel can be an interface's: letters, digits and `_-.:/`,
+/// at most 64 characters.
+pub(crate) fn is_interface_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_-.:/".contains(c))
+}
+
+/// A comment naming a channel's interface (`PREFIX2 = bus1`, which text logs carry before a
+/// channel's first frame): its number and name.
+pub(crate) fn channel_comment<'t>(text: &'t str, prefix: &str) -> Option<(u32, &'t str)> {
+    let (number, name) = text.strip_prefix(prefix)?.split_once(" = ")?;
+    let name = name.trim();
+    Some((number.trim().parse().ok()?, name)).filter(|_| is_interface_name(name))
+}
+
+/// The comment [`channel_comment`] reads, when `interface` is one its channel number does not
+/// name (`can1` is channel 2).
+pub(crate) fn channel_comment_text(prefix: &str, channel: u32, interface: &str) -> Option<String> {
+    (interface != format!("can{}", channel.saturating_sub(1)))
+        .then(|| format!("{prefix}{channel} = {interface}"))
+}
+
 pub(crate) fn channel_number(taken: &mut BTreeMap<String, u32>, interface: &str) -> u32 {
     if let Some(n) = taken.get(interface) {
         return *n;

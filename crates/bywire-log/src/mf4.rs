@@ -39,7 +39,7 @@ use bywire_core::{Frame, Id, Timestamp};
 use flate2::read::ZlibDecoder;
 
 use crate::candump::{LogError, LogRecord};
-use crate::fields::{u16_at, u32_at, u64_at};
+use crate::fields::{is_interface_name, u16_at, u32_at, u64_at, MAX_CHANNEL_NAMES};
 
 /// The records a writer's data block holds, in bytes.
 pub const BLOCK_SIZE: usize = 512 * 1024;
@@ -49,8 +49,6 @@ const DECODED_BLOCK_SIZE: usize = 64 * 1024;
 const CC_VALUE_TO_TEXT: u8 = 7;
 /// The header comment's property naming a bus channel's interface (`BusChannel 1` → `bus1`).
 const CHANNEL_NAME: &str = "BusChannel ";
-/// Channel names a header may give.
-const MAX_CHANNEL_NAMES: usize = 256;
 
 /// Text for an XML element's content.
 fn xml_escape(text: &str) -> String {
@@ -77,12 +75,7 @@ fn channel_names(comment: &str) -> BTreeMap<u64, String> {
             .replace("&gt;", ">")
             .replace("&quot;", "\"")
             .replace("&amp;", "&");
-        let fits = !value.is_empty()
-            && value.len() <= 64
-            && value
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "_-.:/".contains(c));
-        if let (Ok(number), true) = (number.parse::<u64>(), fits) {
+        if let (Ok(number), true) = (number.parse::<u64>(), is_interface_name(&value)) {
             names.insert(number, value);
         }
     }

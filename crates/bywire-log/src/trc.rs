@@ -16,7 +16,10 @@ use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame, FdFrame};
 use bywire_core::{Frame, Id, Timestamp};
 
 use crate::candump::{LogError, LogRecord};
-use crate::fields::{channel_number, column_of, data_bytes, dlc, fixed_point, syntax, WriteClock};
+use crate::fields::{
+    channel_comment, channel_comment_text, channel_number, column_of, data_bytes, dlc, fixed_point,
+    syntax, WriteClock, MAX_CHANNEL_NAMES,
+};
 use crate::lines::CappedLines;
 
 /// Days from the OLE epoch (1899-12-30) to the Unix epoch.
@@ -41,7 +44,13 @@ pub struct TrcReader<R> {
     /// 2.x: where each column stands.
     columns: BTreeMap<char, usize>,
     line: u64,
+    /// Interface names by bus number, from `; bus N = NAME` comments.
+    names: BTreeMap<u32, String>,
 }
+
+/// The comment naming a bus's interface (`; bus 2 = bus1`), which bywire writes before a bus's
+/// first frame: other readers pass comments over.
+const BUS_COMMENT: &str = "; bus ";
 
 impl<R: BufRead> TrcReader<R> {
     /// A reader over `input`.
@@ -52,6 +61,7 @@ impl<R: BufRead> TrcReader<R> {
             start: 0,
             columns: BTreeMap::new(),
             line: 0,
+            names: BTreeMap::new(),
         }
     }
 }
@@ -82,6 +92,12 @@ fn error_frame() -> Frame {
 
 impl<R: BufRead> TrcReader<R> {
     fn header(&mut self, number: u64, text: &str) -> Result<(), LogError> {
+        if let Some((bus, name)) = channel_comment(text, BUS_COMMENT) {
+            if self.names.len() < MAX_CHANNEL_NAMES {
+                self.names.insert(bus, name.to_string());
+            }
+            return Ok(());
+        }
         let Some((key, value)) = text.trim_start_matches(';').split_once('=') else {
             return Ok(());
         };
@@ -330,7 +346,11 @@ impl<R: BufRead> TrcReader<R> {
         })?;
         Ok(LogRecord {
             timestamp: Timestamp::from_nanos(at),
-            interface: format!("can{}", n.saturating_sub(1)),
+            interface: self
+                .names
+                .get(&n)
+                .cloned()
+                .unwrap_or_else(|| format!("can{}", n.saturating_sub(1))),
             frame,
             direction,
         })
@@ -426,7 +446,14 @@ impl<W: Write> TrcWriter<W> {
         }
         let micros = offset / 1_000;
         self.number += 1;
+        let known = self.buses.len();
         let bus = self.bus(&record.interface);
+        // A bus's first frame: its interface's name first, unless the number says it.
+        if self.buses.len() > known {
+            if let Some(comment) = channel_comment_text(BUS_COMMENT, bus, &record.interface) {
+                write!(self.output, "{comment}\r\n")?;
+            }
+        }
         let direction = if record.direction == Some('T') {
             "Tx"
         } else {
@@ -603,6 +630,29 @@ mod tests {
             .next()
             .unwrap()
             .is_err());
+    }
+
+    #[test]
+    fn interface_names_come_back_from_their_comments() {
+        let mut writer = TrcWriter::new(Vec::new());
+        for (i, interface) in ["bus1", "front", "can0", "bus1"].iter().enumerate() {
+            writer
+                .write(&LogRecord {
+                    timestamp: Timestamp::from_nanos(1_700_000_000_000_000_000 + i as u64),
+                    interface: (*interface).to_string(),
+                    frame: "123#01".parse().unwrap(),
+                    direction: None,
+                })
+                .unwrap();
+        }
+        let text = String::from_utf8(writer.finish().unwrap()).unwrap();
+        assert!(text.contains("\r\n; bus 2 = bus1\r\n"), "{text}");
+        assert_eq!(text.matches("; bus ").count(), 2, "{text}");
+        let names: Vec<String> = read(&text)
+            .into_iter()
+            .map(|r| r.unwrap().interface)
+            .collect();
+        assert_eq!(names, ["bus1", "front", "can0", "bus1"]);
     }
 
     #[test]
