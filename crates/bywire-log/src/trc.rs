@@ -6,7 +6,8 @@
 //! bus, identifier, direction, reserved, DLC, data). Types: `DT` data, `RR` remote request,
 //! `FD`/`FB`/`FE`/`BI` CAN FD (BRS with `FB` and `FE`, ESI with `FE` and `BI`), `ER` an error
 //! frame; status and other events are passed over. Version 1.x lines are `N) OFFSET [BUS] [Rx|Tx]
-//! ID [-] DLC DATA|RTR`. Buses are numbered from 1: bus N is interface `can{N-1}`.
+//! ID [-] DLC DATA|RTR`. Buses are numbered from 1: bus N is interface `can{N-1}`, or
+//! the interface a comment before the bus's first frame names (`; bus 2 = bus1`).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
