@@ -22,7 +22,7 @@
 
 use std::collections::HashMap;
 
-use roxmltree::{Document, Node as XmlNode, NodeId, ParsingOptions};
+use roxmltree::{Document, Node as XmlNode, NodeId};
 
 use crate::format::{attrs, plain_signal, LineIndex, Report, NO_NODE};
 use crate::model::*;
@@ -45,21 +45,7 @@ pub(crate) fn read(
     mode: Mode,
     bus: Option<&str>,
 ) -> Result<(Database, Vec<Diagnostic>), ParseError> {
-    let options = ParsingOptions {
-        allow_dtd: false,
-        nodes_limit: MAX_NODES,
-        ..ParsingOptions::default()
-    };
-    let doc = Document::parse_with_options(text, options).map_err(|e| {
-        let pos = e.pos();
-        Report::fatal(
-            Position {
-                line: pos.row,
-                column: pos.col,
-            },
-            format!("not well-formed XML: {e}"),
-        )
-    })?;
+    let doc = crate::xml::parse(text, false, MAX_NODES)?;
     let root = doc.root_element();
     let lines = LineIndex::new(text);
     let version = version_of(&lines, root)?;
@@ -1833,15 +1819,6 @@ fn receive(units: &mut [Unit], path: &str, ecu: &str) {
 /// Define every attribute the reader gave a value.
 fn define_attributes(db: &mut Database) {
     attrs::define_used(db);
-    let used = |name: &str| {
-        db.attributes.iter().any(|(n, _)| n == name)
-            || db.messages.iter().any(|m| {
-                m.attributes.iter().any(|(n, _)| n == name)
-                    || m.signals
-                        .iter()
-                        .any(|s| s.attributes.iter().any(|(n, _)| n == name))
-            })
-    };
     let int = |scope, name: &str, max: i128| AttrDef {
         scope,
         name: name.to_string(),
@@ -1866,7 +1843,10 @@ fn define_attributes(db: &mut Database) {
         int(AttrScope::Message, "SecOCAuthInfoTxLength", 128),
         int(AttrScope::Message, "SecOCAuthenticPduLength", 64),
     ];
-    let defs: Vec<AttrDef> = extra.into_iter().filter(|d| used(&d.name)).collect();
+    let defs: Vec<AttrDef> = extra
+        .into_iter()
+        .filter(|d| attrs::used(db, &d.name))
+        .collect();
     db.attribute_defs.extend(defs);
 }
 

@@ -11,7 +11,7 @@
 
 use std::collections::HashMap;
 
-use roxmltree::{Document, Node as XmlNode, ParsingOptions};
+use roxmltree::Node as XmlNode;
 
 use crate::format::{plain_signal, LineIndex, Report, NO_NODE};
 use crate::model::*;
@@ -37,23 +37,9 @@ struct DataType {
 
 /// Read CDD text.
 pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>), ParseError> {
-    // CANdela files name their DTD; it is not fetched, and entities stay within the node limit.
-    let options = ParsingOptions {
-        allow_dtd: true,
-        nodes_limit: MAX_NODES,
-        ..ParsingOptions::default()
-    };
+    // CANdela files name their DTD.
     let lines = LineIndex::new(text);
-    let doc = Document::parse_with_options(text, options).map_err(|e| {
-        let pos = e.pos();
-        Report::fatal(
-            Position {
-                line: pos.row,
-                column: pos.col,
-            },
-            format!("not well-formed XML: {e}"),
-        )
-    })?;
+    let doc = crate::xml::parse(text, true, MAX_NODES)?;
     let mut reader = Reader {
         lines: &lines,
         report: Report::new(mode),

@@ -83,6 +83,24 @@ pub struct DecodedFrame<'a> {
     pub error: Option<String>,
 }
 
+/// The signals of `message` that `values` (one slot a signal, as a codec decodes) holds a
+/// value for.
+pub fn signal_values<'a, 'v>(
+    message: &'a Message,
+    values: &'v [Option<Decoded>],
+) -> impl Iterator<Item = SignalValue<'a>> + use<'a, 'v> {
+    message
+        .signals
+        .iter()
+        .zip(values)
+        .filter_map(|(signal, value)| {
+            Some(SignalValue {
+                signal,
+                value: (*value)?,
+            })
+        })
+}
+
 /// The names a message's signals go by in tables and JSON, in signal order: each signal's
 /// display name, and a name used twice (a warning when the DBC loads) as `NAME#2`, `NAME#3`.
 pub fn field_names(message: &Message) -> Vec<String> {
@@ -111,8 +129,9 @@ pub struct Decoder {
     standard: Vec<Option<usize>>,
     /// Extended identifiers with their message index, sorted for binary search.
     extended: Vec<(u32, usize)>,
-    /// Container frames: by message index, the container's index in the database.
-    containers: Vec<(usize, usize)>,
+    /// Container frames: their message's index, the container's index in the database and
+    /// its first PDU's index in [`Decoder::message_at`]'s numbering.
+    containers: Vec<(usize, usize, usize)>,
     /// Each container's PDUs' codecs, in the database's order.
     contained_codecs: Vec<Vec<MessageCodec>>,
 }
@@ -152,18 +171,14 @@ impl Decoder {
         // Stable: among equal identifiers the first message stays first.
         extended.sort_by_key(|(id, _)| *id);
         extended.dedup_by_key(|(id, _)| *id);
-        let containers = db
-            .containers
-            .iter()
-            .enumerate()
-            .filter_map(|(c, container)| {
-                let index = db
-                    .messages
-                    .iter()
-                    .position(|m| m.name == container.message)?;
-                Some((index, c))
-            })
-            .collect();
+        let mut first = db.messages.len();
+        let mut containers = Vec::new();
+        for (c, container) in db.containers.iter().enumerate() {
+            if let Some(index) = db.messages.iter().position(|m| m.name == container.message) {
+                containers.push((index, c, first));
+            }
+            first += container.pdus.len();
+        }
         let contained_codecs = db
             .containers
             .iter()
@@ -181,7 +196,7 @@ impl Decoder {
 
     /// Whether the message at `index` is a container frame.
     pub fn is_container(&self, index: usize) -> bool {
-        self.containers.iter().any(|(i, _)| *i == index)
+        self.containers.iter().any(|(i, ..)| *i == index)
     }
 
     /// The PDUs a frame of the container message at `index` carries, each with its message
@@ -191,18 +206,9 @@ impl Decoder {
         index: usize,
         data: &'d [u8],
     ) -> Option<impl Iterator<Item = Result<Contained<'s, 'd>, ContainerError>> + use<'s, 'd>> {
-        let (_, c) = self.containers.iter().find(|(i, _)| *i == index)?;
-        let container = self.db.containers.get(*c)?;
-        let codecs = self.contained_codecs.get(*c)?;
-        // This container's first PDU in message_at's numbering.
-        let first = self.db.messages.len()
-            + self
-                .db
-                .containers
-                .iter()
-                .take(*c)
-                .map(|c| c.pdus.len())
-                .sum::<usize>();
+        let &(_, c, first) = self.containers.iter().find(|(i, ..)| *i == index)?;
+        let container = self.db.containers.get(c)?;
+        let codecs = self.contained_codecs.get(c)?;
         Some(
             split(container.header, container.header_byte_order, data).map(move |pdu| {
                 let pdu = pdu?;
@@ -344,14 +350,7 @@ impl Decoder {
                 if codec.decode(pdu.pdu.data, &mut values).is_err() {
                     continue;
                 }
-                signals.extend(pdu_message.signals.iter().zip(&values).filter_map(
-                    |(signal, value)| {
-                        Some(SignalValue {
-                            signal,
-                            value: (*value)?,
-                        })
-                    },
-                ));
+                signals.extend(signal_values(pdu_message, &values));
             }
             return Some(DecodedFrame {
                 message,
@@ -360,17 +359,7 @@ impl Decoder {
             });
         }
         let error = decoded.err().map(|e| e.to_string());
-        let signals = message
-            .signals
-            .iter()
-            .zip(values)
-            .filter_map(|(signal, value)| {
-                Some(SignalValue {
-                    signal,
-                    value: value?,
-                })
-            })
-            .collect();
+        let signals = signal_values(message, &values).collect();
         Some(DecodedFrame {
             message,
             signals,

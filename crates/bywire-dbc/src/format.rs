@@ -322,20 +322,22 @@ pub(crate) mod attrs {
     /// whatever definitions it had: the form every reader gives and [`super::expressible`]
     /// reduces to.
     pub fn define_used(db: &mut Database) {
-        let used = |name: &str| {
-            db.attributes.iter().any(|(n, _)| n == name)
-                || db.messages.iter().any(|m| {
-                    m.attributes.iter().any(|(n, _)| n == name)
-                        || m.signals
-                            .iter()
-                            .any(|s| s.attributes.iter().any(|(n, _)| n == name))
-                })
-        };
         db.attribute_defs = [CYCLE_TIME, FRAME_FORMAT, LONG_NAME, START_VALUE, SPN]
             .into_iter()
-            .filter(|name| used(name))
+            .filter(|name| used(db, name))
             .filter_map(definition)
             .collect();
+    }
+
+    /// Whether the network, a message or a signal of `db` has a value of attribute `name`.
+    pub fn used(db: &Database, name: &str) -> bool {
+        db.attributes.iter().any(|(n, _)| n == name)
+            || db.messages.iter().any(|m| {
+                m.attributes.iter().any(|(n, _)| n == name)
+                    || m.signals
+                        .iter()
+                        .any(|s| s.attributes.iter().any(|(n, _)| n == name))
+            })
     }
 }
 

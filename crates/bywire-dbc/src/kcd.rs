@@ -6,7 +6,7 @@
 //! signal's least significant bit; a big-endian one's most significant bit with the bits of
 //! each byte numbered from the top, which is DBC's start bit with the byte's bits reversed.
 
-use roxmltree::{Document, Node as XmlNode, ParsingOptions};
+use roxmltree::{Document, Node as XmlNode};
 
 use crate::format::{
     self, attrs, cycle_time_ms, declare_referenced_nodes, drop_dbc_only, grouped_signal_order,
@@ -23,21 +23,7 @@ const MAX_NODES: u32 = 20_000_000;
 
 /// Read KCD text.
 pub(crate) fn read(text: &str, mode: Mode) -> Result<(Database, Vec<Diagnostic>), ParseError> {
-    let options = ParsingOptions {
-        allow_dtd: false,
-        nodes_limit: MAX_NODES,
-        ..ParsingOptions::default()
-    };
-    let doc = Document::parse_with_options(text, options).map_err(|e| {
-        let pos = e.pos();
-        Report::fatal(
-            Position {
-                line: pos.row,
-                column: pos.col,
-            },
-            format!("not well-formed XML: {e}"),
-        )
-    })?;
+    let doc = crate::xml::parse(text, false, MAX_NODES)?;
     let lines = LineIndex::new(text);
     let mut reader = Reader {
         doc: &doc,

@@ -387,6 +387,22 @@ fn compare(ours: &Database, overlapping: &BTreeSet<String>, theirs: &Json) -> Ve
     problems
 }
 
+/// canmatrix's test files (`tests/canmatrix`, shipped packed with its licence), unpacked into
+/// a folder that goes when dropped.
+fn canmatrix_files() -> tempfile::TempDir {
+    let unpacked = tempfile::tempdir().unwrap();
+    let archive = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/canmatrix/files.tar.xz");
+    let status = Command::new("tar")
+        .arg("xJf")
+        .arg(&archive)
+        .arg("-C")
+        .arg(unpacked.path())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    unpacked
+}
+
 /// Every database file under `dir`'s `subs`, read by bywire and by cantools: the differences
 /// (each file named with `prefix`) and how many files both read.
 fn differences_in(dir: &Path, subs: &[&str], prefix: &str) -> (Vec<(String, String)>, usize) {
@@ -468,17 +484,7 @@ fn kcd_sym_and_arxml_files_read_as_cantools_reads_them() {
         dir.display()
     );
     let (mut differences, mut compared) = differences_in(&dir, &["kcd", "sym", "arxml", "cdd"], "");
-    // canmatrix's test files, shipped packed with its licence.
-    let unpacked = tempfile::tempdir().unwrap();
-    let archive = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/canmatrix/files.tar.xz");
-    let status = Command::new("tar")
-        .arg("xJf")
-        .arg(&archive)
-        .arg("-C")
-        .arg(unpacked.path())
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let unpacked = canmatrix_files();
     for root in ["files", "reference"] {
         let base = unpacked.path().join(root);
         let mut subs: Vec<String> = vec!["kcd".into(), "sym".into(), "arxml".into()];
@@ -521,16 +527,7 @@ fn kcd_sym_and_arxml_files_read_as_cantools_reads_them() {
 /// does not write it.
 #[test]
 fn canmatrix_conversions_of_one_database_agree() {
-    let unpacked = tempfile::tempdir().unwrap();
-    let archive = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/canmatrix/files.tar.xz");
-    let status = Command::new("tar")
-        .arg("xJf")
-        .arg(&archive)
-        .arg("-C")
-        .arg(unpacked.path())
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let unpacked = canmatrix_files();
     // The xls family is left out: canmatrix's converter lost its extended identifiers (every
     // file has 29-bit identifiers on standard frames, which bywire and cantools refuse).
     let families: &[&[&str]] = &[

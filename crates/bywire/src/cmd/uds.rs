@@ -577,17 +577,7 @@ fn record_fields(
     let error = codec.decode(value, &mut values).err();
     let decoded = bywire_dbc::decoder::DecodedFrame {
         message: m,
-        signals: m
-            .signals
-            .iter()
-            .zip(values)
-            .filter_map(|(signal, value)| {
-                Some(bywire_dbc::decoder::SignalValue {
-                    signal,
-                    value: value?,
-                })
-            })
-            .collect(),
+        signals: bywire_dbc::decoder::signal_values(m, &values).collect(),
         error: error.map(|e| e.to_string()),
     };
     Some((

@@ -207,7 +207,8 @@ impl FrameText for DecodedFrame<'_> {
 /// values written into one reused line.
 pub struct TextLines<'a> {
     dbc: &'a Dbc,
-    /// By message index: its name and its signals' indices and names in cantools' order.
+    /// By message index (contained PDUs after the messages, as the decoder numbers them): its
+    /// name and its signals' indices and names in cantools' order.
     messages: Vec<(String, Vec<(usize, String)>)>,
     values: Vec<Option<bywire_dbc::codec::Decoded>>,
     line: String,
@@ -216,12 +217,10 @@ pub struct TextLines<'a> {
 impl<'a> TextLines<'a> {
     /// Lines of frames decoded with `dbc`, one per frame (`single_line`) or one per signal.
     pub fn new(dbc: &'a Dbc) -> Self {
-        let messages = dbc
-            .decoder()
-            .database()
-            .messages
-            .iter()
-            .map(shown_order)
+        let decoder = dbc.decoder();
+        let messages = (0..decoder.message_count())
+            .filter_map(|i| decoder.message_at(i))
+            .map(|(message, _)| shown_order(message))
             .collect();
         TextLines {
             dbc,
@@ -262,7 +261,7 @@ impl<'a> TextLines<'a> {
                         choices,
                         indent: "    ",
                     };
-                    push_container(line, name, pdus, &shape);
+                    push_container(line, name, pdus, &self.messages, &shape);
                 } else {
                     line.push_str(if single_line { " :: " } else { " ::\n" });
                     let shape = Shape {
@@ -359,6 +358,7 @@ fn push_container<'d>(
             bywire_dbc::container::ContainerError,
         >,
     >,
+    orders: &[(String, Vec<(usize, String)>)],
     shape: &Shape,
 ) {
     use std::fmt::Write as _;
@@ -388,7 +388,7 @@ fn push_container<'d>(
         if !shape.single_line {
             let _ = write!(parts, "    {:06x}##{} ::\n    ", pdu.pdu.header_id, hex(""));
         }
-        let Some((message, codec, _)) = pdu.message else {
+        let Some((message, codec, index)) = pdu.message else {
             if shape.single_line {
                 let _ = write!(
                     parts,
@@ -410,8 +410,10 @@ fn push_container<'d>(
             }
             continue;
         }
-        let (pdu_name, order) = shown_order(message);
-        push_message(&mut parts, &pdu_name, &order, message, &values, shape);
+        let Some((pdu_name, order)) = orders.get(index) else {
+            continue;
+        };
+        push_message(&mut parts, pdu_name, order, message, &values, shape);
     }
     if shape.single_line {
         line.push_str(" :: ");
@@ -576,17 +578,7 @@ fn container_json<'d>(
             let decoded = codec.decode(pdu.pdu.data, &mut values);
             let frame = DecodedFrame {
                 message,
-                signals: message
-                    .signals
-                    .iter()
-                    .zip(values)
-                    .filter_map(|(signal, value)| {
-                        Some(SignalValue {
-                            signal,
-                            value: value?,
-                        })
-                    })
-                    .collect(),
+                signals: bywire_dbc::decoder::signal_values(message, &values).collect(),
                 error: None,
             };
             object["name"] = json!(message.display_name());
