@@ -7,7 +7,9 @@
 //! and classic frames logged in the FD form) and `CAN_ERROR_EXT` (an error frame; read as a
 //! bus error, its detail not kept). Each object's time counts from the header's start time, in
 //! nanoseconds or 10 µs. Other objects are passed over. Channels are numbered from 1: channel N
-//! is interface `can{N-1}`.
+//! is interface `can{N-1}`, unless an `APP_TEXT` measurement comment `channel N = NAME`, which
+//! the writer puts before a channel's first frame when its interface is not `can{N-1}`, names
+//! it (Vector's tools show it as a comment, python-can passes it over).
 //!
 //! The writer keeps at most one container (128 KiB) in memory, writes `CAN_MESSAGE`,
 //! `CAN_FD_MESSAGE` and `CAN_ERROR_EXT` objects with nanosecond times, and fills in the header
@@ -23,7 +25,9 @@ use flate2::write::ZlibEncoder;
 use flate2::Compression;
 
 use crate::candump::{LogError, LogRecord};
-use crate::fields::{u16_at, u32_at, u64_at};
+use crate::fields::{
+    channel_comment, channel_comment_text, u16_at, u32_at, u64_at, MAX_CHANNEL_NAMES,
+};
 
 const FILE_HEADER_SIZE: usize = 144;
 const OBJECT_HEADER_BASE: usize = 16;
@@ -33,6 +37,11 @@ const CAN_ERROR_EXT: u32 = 73;
 const CAN_MESSAGE2: u32 = 86;
 const CAN_FD_MESSAGE: u32 = 100;
 const CAN_FD_MESSAGE_64: u32 = 101;
+const APP_TEXT: u32 = 65;
+/// `APP_TEXT`'s source for a measurement comment.
+const MEASUREMENT_COMMENT: u32 = 0;
+/// The comment naming a channel's interface, as ASC writes it.
+const CHANNEL_COMMENT: &str = "channel ";
 const CAN_MSG_EXT: u32 = 0x8000_0000;
 const TIME_TEN_MICROS: u32 = 1;
 const TIME_NANOS: u32 = 2;
@@ -97,6 +106,8 @@ pub struct BlfReader<R> {
     /// Where the container began in the file (for errors).
     container: u64,
     failed: bool,
+    /// Interface names by channel number, from `channel N = NAME` comments.
+    names: BTreeMap<u32, String>,
 }
 
 impl<R: Read> BlfReader<R> {
@@ -111,6 +122,7 @@ impl<R: Read> BlfReader<R> {
             at: 0,
             container: 0,
             failed: false,
+            names: BTreeMap::new(),
         }
     }
 
@@ -288,6 +300,10 @@ impl<R: Read> BlfReader<R> {
             _ => timestamp,
         };
         let timestamp = Timestamp::from_nanos(self.start.saturating_add(offset));
+        if kind == APP_TEXT {
+            channel_name(&mut self.names, body);
+            return Ok(Some(None));
+        }
         let frame = match kind {
             CAN_MESSAGE | CAN_MESSAGE2 => classic(body),
             CAN_FD_MESSAGE => fd(body),
@@ -304,10 +320,31 @@ impl<R: Read> BlfReader<R> {
         })?;
         Ok(Some(Some(LogRecord {
             timestamp,
-            interface: format!("can{}", channel.saturating_sub(1)),
+            interface: self
+                .names
+                .get(&u32::from(channel))
+                .cloned()
+                .unwrap_or_else(|| format!("can{}", channel.saturating_sub(1))),
             frame,
             direction,
         })))
+    }
+}
+
+/// An `APP_TEXT` object's body (source, reserved, text length, reserved, text): a
+/// measurement comment naming a channel is kept; any other text is passed over.
+fn channel_name(names: &mut BTreeMap<u32, String>, body: &[u8]) {
+    let (Some(MEASUREMENT_COMMENT), Some(length)) = (u32_at(body, 0), u32_at(body, 8)) else {
+        return;
+    };
+    let text = usize::try_from(length)
+        .ok()
+        .and_then(|length| body.get(16..16usize.saturating_add(length)))
+        .and_then(|text| std::str::from_utf8(text).ok());
+    if let Some((channel, name)) = text.and_then(|t| channel_comment(t, CHANNEL_COMMENT)) {
+        if names.len() < MAX_CHANNEL_NAMES {
+            names.insert(channel, name.to_string());
+        }
     }
 }
 
@@ -551,11 +588,15 @@ impl<W: Write + Seek> BlfWriter<W> {
         // The header's start time has milliseconds: the objects count from there.
         let start = *self.start.get_or_insert(at - at % 1_000_000);
         self.stop = self.stop.max(at);
-        let channel = u16::try_from(crate::fields::channel_number(
-            &mut self.channels,
-            &record.interface,
-        ))
-        .unwrap_or(1);
+        let known = self.channels.len();
+        let number = crate::fields::channel_number(&mut self.channels, &record.interface);
+        if self.channels.len() > known {
+            if let Some(comment) = channel_comment_text(CHANNEL_COMMENT, number, &record.interface)
+            {
+                self.write_comment(&comment, at.saturating_sub(start));
+            }
+        }
+        let channel = u16::try_from(number).unwrap_or(1);
         let tx = u8::from(record.direction == Some('T'));
         let mut body = Vec::with_capacity(84);
         let kind = match &record.frame {
@@ -600,15 +641,32 @@ impl<W: Write + Seek> BlfWriter<W> {
         };
         // A frame from before the first one (an unsorted log) is put at the start, as
         // python-can does: BLF times cannot be negative.
-        let header = object_header(kind, body.len(), TIME_NANOS, at.saturating_sub(start));
-        self.buffer.extend_from_slice(&header);
-        self.buffer.extend_from_slice(&body);
-        self.buffer.resize(self.buffer.len() + body.len() % 4, 0);
-        self.objects += 1;
+        self.push_object(kind, &body, at.saturating_sub(start));
         if self.buffer.len() >= CONTAINER_SIZE {
             self.flush_container()?;
         }
         Ok(())
+    }
+
+    /// An `APP_TEXT` measurement comment into the current container.
+    fn write_comment(&mut self, text: &str, offset: u64) {
+        let length = u32::try_from(text.len()).unwrap_or(0);
+        let mut body = Vec::with_capacity(16 + text.len());
+        body.extend_from_slice(&MEASUREMENT_COMMENT.to_le_bytes());
+        body.extend_from_slice(&0u32.to_le_bytes());
+        body.extend_from_slice(&length.to_le_bytes());
+        body.extend_from_slice(&0u32.to_le_bytes());
+        body.extend_from_slice(text.as_bytes());
+        self.push_object(APP_TEXT, &body, offset);
+    }
+
+    /// One object (header, body, python-can's padding) into the current container.
+    fn push_object(&mut self, kind: u32, body: &[u8], offset: u64) {
+        let header = object_header(kind, body.len(), TIME_NANOS, offset);
+        self.buffer.extend_from_slice(&header);
+        self.buffer.extend_from_slice(body);
+        self.buffer.resize(self.buffer.len() + body.len() % 4, 0);
+        self.objects += 1;
     }
 
     fn flush_container(&mut self) -> io::Result<()> {
@@ -750,6 +808,20 @@ mod tests {
             .collect::<Result<_, _>>()
             .unwrap();
         assert_eq!(back, original, "nanoseconds, channels, directions, frames");
+    }
+
+    #[test]
+    fn interface_names_come_back_from_their_comments() {
+        let mut original = records();
+        for (record, interface) in original.iter_mut().zip(["bus1", "front", "can0", "bus1"]) {
+            record.interface = interface.into();
+        }
+        let bytes = write(&original);
+        assert_eq!(u32_at(&bytes, 32), Some(5 + 2), "frames and two comments");
+        let back: Vec<LogRecord> = BlfReader::new(bytes.as_slice())
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(back, original);
     }
 
     #[test]

@@ -1732,3 +1732,47 @@ with Writer(Path(sys.argv[1]), version=9, storage_plugin=StoragePlugin.MCAP) as 
         "(1700000000.000000) can1 123#DEADBEEF\n(1700000000.001000) can1 1ABCDEF0#0102\n"
     );
 }
+
+/// Interface names that no channel number gives (`bus1`, `front`) survive `log convert` into
+/// ASC, TRC, BLF and MF4 and back, while python-can reads the same files frame for frame.
+#[test]
+fn interface_names_survive_every_channel_numbered_format() {
+    const NAMED: &str = "\
+(1700000000.100000) bus1 123#01
+(1700000000.200000) front 124#02
+(1700000000.300000) can0 125#03
+(1700000000.400000) bus1 126#04
+";
+    let dir = scratch("names");
+    let log = dir.join("in.log");
+    std::fs::write(&log, NAMED).unwrap();
+    let wanted: Vec<LogRecord> = bywire_log::Reader::new(NAMED.as_bytes())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    for extension in ["asc", "trc", "blf", "mf4"] {
+        let out = dir.join(format!("named.{extension}"));
+        bywire(&[
+            "log",
+            "convert",
+            log.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ]);
+        let (_, back) = bywire_log::format::Format::open_file(&out).unwrap();
+        let back: Vec<LogRecord> = back.collect::<Result<_, _>>().unwrap();
+        let names: Vec<&str> = back.iter().map(|r| r.interface.as_str()).collect();
+        assert_eq!(names, ["bus1", "front", "can0", "bus1"], "{extension}");
+        for (g, w) in back.iter().zip(&wanted) {
+            assert_eq!(g.frame, w.frame, "{extension}");
+        }
+        let said = python(
+            r#"
+import can, sys
+reader = {"asc": lambda p: can.ASCReader(p, relative_timestamp=False), "trc": can.TRCReader,
+          "blf": can.BLFReader, "mf4": can.MF4Reader}[sys.argv[2]]
+print([bytes(m.data).hex() for m in reader(sys.argv[1])])
+"#,
+            &[&out, Path::new(extension)],
+        );
+        assert_eq!(said.trim(), "['01', '02', '03', '04']", "{extension}");
+    }
+}

@@ -764,7 +764,7 @@ fn dump_and_send_across_processes_over_udp() {
         "/../../../shared/tools/lonet.sh"
     );
     let script = format!(
-        "{bin} dump -T 1500 udp:ipv4 > /tmp/udp-dump-$$.txt & P=$!\n\
+        "{bin} dump -T 1500 front=udp:ipv4 > /tmp/udp-dump-$$.txt & P=$!\n\
          for i in $(seq 20); do {bin} send udp:ipv4 7FE#00; sleep 0.1; [ -s /tmp/udp-dump-$$.txt ] && break; done\n\
          {bin} send udp:ipv4 123#DEADBEEF; {bin} send udp:ipv4 1ABCDEF0##5AA\n\
          wait $P; grep -v 7FE /tmp/udp-dump-$$.txt; rm -f /tmp/udp-dump-$$.txt"
@@ -782,13 +782,10 @@ fn dump_and_send_across_processes_over_udp() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(
         lines.last().copied(),
-        Some("  udp:ipv4  1ABCDEF0  [01]  AA"),
+        Some("  front  1ABCDEF0  [01]  AA"),
         "{text}"
     );
-    assert!(
-        text.contains("  udp:ipv4  123   [4]  DE AD BE EF\n"),
-        "{text}"
-    );
+    assert!(text.contains("  front  123   [4]  DE AD BE EF\n"), "{text}");
 }
 
 /// `bywire serve` on a virtual bus, python-can's socketcand interface as two clients, and a raw

@@ -29,12 +29,14 @@ use crate::support::signals::FrameText;
   bywire dump -f drive.parquet --compression snappy can0 can1
   bywire dump -f drive.parquet --time-unit us can0   (times Spark reads as such)
   bywire dump --dbc vehicle.dbc can0,100:7F0
+  bywire dump front=socketcand:10.0.0.2:29536/can0 rear=can1
 
 Filters follow the bus as in candump: ID:MASK matches when id & mask == ID & mask, ID~MASK
 when it does not, #ERRMASK receives those error classes as error frames, j joins the filters
-(all must match). An 8-digit ID is extended. A plain interface name (can0) means socketcan:can0.")]
+(all must match). An 8-digit ID is extended. A plain interface name (can0) means socketcan:can0.
+LABEL= names a bus in the output and in logs (front=socketcand:10.0.0.2:29536/can0 is front).")]
 pub struct Args {
-    /// Buses to listen on, each with optional filters: BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
+    /// Buses to listen on, each with optional filters and a label: [LABEL=]BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
     #[arg(required = true, num_args = 1..=16)]
     buses: Vec<String>,
     /// Timestamps: a (absolute), d (delta), z (from the first frame), A (absolute with date).

@@ -75,10 +75,10 @@ sniffed from its content, the output's taken from its extension (.log
 or .candump: candump; .asc: ASC; .blf: BLF; .trc: TRC 2.1; .pcapng: pcapng; .mf4: MF4;
 .mcap: MCAP; .parquet: Parquet) unless --format names it; with --dbc, an output without a known extension is
 a new directory for the decoded Parquet dataset (message=NAME/[channel=C/][date=D/]part-N.parquet).
-A progress bar shows on a terminal. ASC channels and
+A progress bar shows on a terminal. ASC and BLF channels and
 TRC buses are numbered from 1: can0 is 1 (an interface ending in N is N+1), and N reads back as
-can{N-1}, unless a comment (ASC's `// channel 2 = bus1`, TRC's `; bus 2 = bus1`, written
-before a channel's first frame) names it; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
+can{N-1}, unless a comment (ASC's `// channel 2 = bus1`, TRC's `; bus 2 = bus1`, BLF's measurement
+comment `channel 2 = bus1`, written before a channel's first frame) names it; dates are UTC. ASC, BLF and TRC keep no SocketCAN detail of an error frame: it reads
 back as a bus error. MF4 numbers buses as python-can does (can0 is BusChannel 0), names them in its header (the names
 come back when bywire reads it) and keeps error classes. pcapng keeps everything: interface names, nanoseconds, directions, error classes. The output is written to a temporary file and renamed, so a failed
 conversion leaves no half-written file.")]

@@ -49,7 +49,7 @@ name; needs --dbc or --profile), error-frame, bus-off, key (Enter on standard in
 --pre/--post only the windows around triggers are kept, a file each; without, triggers are
 noted in the metadata.")]
 pub struct Args {
-    /// Buses to record, each with optional candump filters: BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
+    /// Buses to record, each with optional candump filters and a label: [LABEL=]BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
     #[arg(required = true, num_args = 1..=16)]
     buses: Vec<String>,
     /// The folder the files go to (created if missing).

@@ -102,7 +102,7 @@ recover. Ctrl-C quick-stops every drive before exiting.")]
 
 #[derive(clap::Args)]
 pub struct CanArgs {
-    /// Buses, each with optional candump filters: BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
+    /// Buses, each with optional candump filters and a label: [LABEL=]BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
     #[arg(required = true, num_args = 1..=16)]
     buses: Vec<String>,
     #[command(flatten)]

@@ -1,6 +1,7 @@
 //! Bus arguments as the can-utils commands take them: a bus spec (`socketcan:can0`,
 //! `virtual:test`, `sim:a@500000`, or a plain interface name such as `can0` for SocketCAN),
-//! optionally followed by candump's filters (`can0,123:7FF,1F0~7F0,#FFFFFFFF,j`).
+//! optionally followed by candump's filters (`can0,123:7FF,1F0~7F0,#FFFFFFFF,j`), and
+//! optionally preceded by the label it is shown and logged under (`front=socketcan:can0`).
 
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -18,9 +19,10 @@ use bywire_core::filter::FilterItem;
 pub struct BusArg {
     /// The full spec (`socketcan:can0` for a plain `can0`).
     pub spec: String,
-    /// The name shown in output and written to logs: the interface for SocketCAN, what
-    /// follows the last `/` where there is one, up to an `@` (`socketcand:HOST:PORT/bus1` is
-    /// `bus1`, `slcan:/dev/ttyACM0@500000` is `ttyACM0`), the spec as given otherwise.
+    /// The name shown in output and written to logs: the label given (`front=can0`), else the
+    /// interface for SocketCAN, what follows the last `/` where there is one, up to an `@`
+    /// (`socketcand:HOST:PORT/bus1` is `bus1`, `slcan:/dev/ttyACM0@500000` is `ttyACM0`), the
+    /// spec as given otherwise.
     pub name: String,
     /// The filters, when any were given.
     pub filtering: Option<Filtering>,
@@ -35,17 +37,28 @@ pub fn full_spec(text: &str) -> String {
     }
 }
 
-/// Parse `SPEC[,FILTER]*`.
+/// Parse `[LABEL=]SPEC[,FILTER]*`.
 pub fn parse(text: &str) -> Result<BusArg> {
     let mut parts = text.split(',');
-    let given = parts.next().unwrap_or_default();
+    let first = parts.next().unwrap_or_default();
+    let (label, given) = match first.split_once('=') {
+        Some((label, given)) => (Some(label), given),
+        None => (None, first),
+    };
     if given.is_empty() {
         return Err(anyhow!("bus '{text}': no bus before the filters"));
     }
+    if let Some(label) = label.filter(|l| !is_label(l)) {
+        return Err(anyhow!(
+            "bus '{text}': label '{label}' is not a name (letters, digits, '_', '-', '.'; at \
+             most 32)"
+        ));
+    }
     let spec = full_spec(given);
-    let name = match spec.strip_prefix("socketcan:") {
-        Some(interface) => interface,
-        None => given
+    let name = match (label, spec.strip_prefix("socketcan:")) {
+        (Some(label), _) => label,
+        (None, Some(interface)) => interface,
+        (None, None) => given
             .rsplit_once('/')
             .map(|(_, last)| last.split('@').next().unwrap_or(last))
             .filter(|last| !last.is_empty())
@@ -197,6 +210,14 @@ impl Drop for Readers {
     }
 }
 
+/// A label a bus can be given: what logs and columns can carry as an interface name.
+fn is_label(label: &str) -> bool {
+    (1..=32).contains(&label.len())
+        && label
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))
+}
+
 /// Open every bus argument (all before any is read, so a bad one fails before output starts).
 pub fn open_all(buses: &[BusArg]) -> Result<Vec<Box<dyn Bus>>> {
     buses
@@ -256,5 +277,19 @@ mod tests {
         assert_eq!(name("slcan:/dev/ttyACM0@500000"), "ttyACM0");
         assert_eq!(name("udp:239.0.0.1:43113"), "udp:239.0.0.1:43113");
         assert_eq!(name("socketcand:host:29536/"), "socketcand:host:29536/");
+    }
+
+    #[test]
+    fn a_label_names_the_bus_it_precedes() {
+        let a = parse("front=socketcand:127.0.0.1:29536/bus1,123:7FF").unwrap();
+        assert_eq!(
+            (a.spec.as_str(), a.name.as_str()),
+            ("socketcand:127.0.0.1:29536/bus1", "front")
+        );
+        assert_eq!(a.filtering.unwrap().filters.len(), 1);
+        assert_eq!(parse("rear=can1").unwrap().spec, "socketcan:can1");
+        for bad in ["=can0", "a b=can0", "front=", "front=,123:7FF"] {
+            assert!(parse(bad).is_err(), "{bad}");
+        }
     }
 }
