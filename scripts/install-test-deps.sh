@@ -84,3 +84,14 @@ if [ ! -d target/python-can-data ]; then
   tar xzf "$sdist"/python_can-4.6.1.tar.gz -C target/python-can-data --strip-components=3 python_can-4.6.1/test/data/
   rm -rf "$sdist"
 fi
+# The web page's tests: Debian's Chromium, driven by Playwright (which uses it, not a browser
+# of its own); Foxglove's WebSocket client in Node (`@foxglove/ws-protocol`, with `ws`).
+if ! command -v chromium >/dev/null || ! command -v node >/dev/null; then
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends chromium nodejs npm >/dev/null
+fi
+python3 -m pip install -q --disable-pip-version-check playwright==1.49.0
+if [ ! -d target/node/node_modules/@foxglove/ws-protocol ]; then
+  mkdir -p target/node
+  npm install --silent --no-audit --no-fund --prefix target/node @foxglove/ws-protocol@0.8.0 ws@8.18.3 >/dev/null
+fi

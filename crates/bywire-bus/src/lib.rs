@@ -34,7 +34,7 @@ use bywire_core::{Frame, Timestamp};
 /// Unix time in nanoseconds from a monotonic clock: the wall clock is read once per process and
 /// the monotonic time since then added, so in-process buses stamp frames as SocketCAN does
 /// (since the Unix epoch) without going backwards when the wall clock is set.
-pub(crate) fn monotonic_unix_now() -> Timestamp {
+pub fn monotonic_unix_now() -> Timestamp {
     static ANCHOR: OnceLock<(Instant, Duration)> = OnceLock::new();
     let (instant, unix) = *ANCHOR.get_or_init(|| {
         let unix = SystemTime::now()

@@ -33,6 +33,7 @@ pub mod container;
 pub mod decoder;
 pub mod e2e;
 pub mod format;
+pub mod json;
 mod kcd;
 mod lexer;
 pub mod lint;

@@ -9,8 +9,9 @@
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Read, Seek, Write};
 
-use bywire_dbc::codec::{whole_scaling, Decoded, Value};
-use bywire_dbc::decoder::{field_names, Decoder, SignalValue};
+use bywire_dbc::codec::Decoded;
+use bywire_dbc::decoder::Decoder;
+use bywire_dbc::json::MessageJson;
 use bywire_dbc::Message;
 
 use bywire_core::frame::{ClassicFrame, Dlc, ErrorFrame};
@@ -477,7 +478,7 @@ pub struct DecodedMcapWriter<'a, W: Write + Seek> {
     raw: McapWriter<W>,
     decoder: &'a Decoder,
     /// Per message index: its schema's id and field names.
-    schemas: HashMap<usize, (u16, Vec<String>)>,
+    schemas: HashMap<usize, (u16, MessageJson)>,
     channels: HashMap<(usize, String), u16>,
     decoded: Vec<Option<Decoded>>,
     undecodable: u64,
@@ -545,25 +546,10 @@ impl<'a, W: Write + Seek> DecodedMcapWriter<'a, W> {
             self.over_limit += 1;
             return Ok(());
         };
-        let names = self
-            .schemas
-            .get(&index)
-            .map(|(_, n)| n.as_slice())
-            .unwrap_or(&[]);
-        let mut object = serde_json::Map::new();
-        for ((signal, name), value) in message.signals.iter().zip(names).zip(&self.decoded) {
-            let Some(value) = value else { continue };
-            object.insert(name.clone(), json_value(value.physical));
-            if !signal.value_descriptions.is_empty() {
-                let text = SignalValue {
-                    signal,
-                    value: *value,
-                }
-                .description()
-                .map_or(serde_json::Value::Null, |d| d.into());
-                object.insert(format!("{name}_choice"), text);
-            }
-        }
+        let object = match self.schemas.get(&index) {
+            Some((_, json)) => json.object(message, &self.decoded),
+            None => serde_json::Map::new(),
+        };
         let json = serde_json::Value::Object(object).to_string();
         let at = record.timestamp.as_nanos();
         self.raw.sequence = self.raw.sequence.wrapping_add(1);
@@ -597,14 +583,14 @@ impl<'a, W: Write + Seek> DecodedMcapWriter<'a, W> {
         let schema = match self.schemas.get(&index) {
             Some((schema, _)) => *schema,
             None => {
-                let names = field_names(message);
-                let text = json_schema(message, &names).to_string();
+                let json = MessageJson::new(message);
+                let text = json.schema(message).to_string();
                 let schema = self
                     .raw
                     .writer
                     .add_schema(message.display_name(), "jsonschema", text.as_bytes())
                     .map_err(io_error)?;
-                self.schemas.insert(index, (schema, names));
+                self.schemas.insert(index, (schema, json));
                 schema
             }
         };
@@ -634,60 +620,6 @@ impl<'a, W: Write + Seek> DecodedMcapWriter<'a, W> {
     pub fn finish(self) -> std::io::Result<W> {
         self.raw.finish()
     }
-}
-
-/// A physical value as JSON: integers exact, non-finite floats `null` (JSON has no number for
-/// them).
-fn json_value(value: Value) -> serde_json::Value {
-    match value {
-        Value::Int(i) => i.into(),
-        Value::UInt(u) => u.into(),
-        Value::Float(f) => {
-            serde_json::Number::from_f64(f).map_or(serde_json::Value::Null, Into::into)
-        }
-    }
-}
-
-/// The JSON Schema of a message's decoded object.
-fn json_schema(message: &Message, names: &[String]) -> serde_json::Value {
-    let mut properties = serde_json::Map::new();
-    for (signal, name) in message.signals.iter().zip(names) {
-        let integer = whole_scaling(signal).is_some();
-        let mut property = serde_json::Map::new();
-        let kind = if integer {
-            serde_json::json!("integer")
-        } else {
-            serde_json::json!(["number", "null"])
-        };
-        property.insert("type".into(), kind);
-        let description = match (&signal.comment, signal.unit.is_empty()) {
-            (Some(comment), _) => Some(comment.clone()),
-            (None, false) => Some(format!("[{}]", signal.unit)),
-            (None, true) => None,
-        };
-        if let Some(description) = description {
-            property.insert("description".into(), description.into());
-        }
-        properties.insert(name.clone(), property.into());
-        if !signal.value_descriptions.is_empty() {
-            let labels: Vec<&str> = signal
-                .value_descriptions
-                .iter()
-                .map(|(_, l)| l.as_str())
-                .collect();
-            properties.insert(
-                format!("{name}_choice"),
-                serde_json::json!({"type": ["string", "null"], "enum": labels.into_iter().map(serde_json::Value::from).chain([serde_json::Value::Null]).collect::<Vec<_>>()}),
-            );
-        }
-    }
-    serde_json::json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": message.display_name(),
-        "type": "object",
-        "properties": properties,
-        "additionalProperties": false,
-    })
 }
 
 #[cfg(test)]

@@ -113,6 +113,9 @@ enum Command {
     },
     /// Serve a bus over the socketcand protocol (python-can, SavvyCAN and other clients).
     Serve(cmd::serve::Args),
+    /// A CAN analyser in the browser over live buses (trace, signals, plots, bus load,
+    /// transmit), and a Foxglove WebSocket server on the same port.
+    Web(cmd::web::Args),
     /// Emulate an SLCAN adapter for a bus on a pseudo terminal (for SLCAN tools).
     SlcanAdapter(cmd::slcan_adapter::Args),
     /// ISO-TP on any bus, like can-utils' isotpsend and isotprecv (same options).
@@ -179,6 +182,7 @@ where
         Command::Monitor(args) => cmd::monitor::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Serve(args) => cmd::serve::run(&args, &mut out),
+        Command::Web(args) => cmd::web::run(&args, &mut out),
         Command::Canopen { command } => cmd::canopen::run(&command, &mut out),
         Command::Sim(args) => cmd::sim::run(&args, &mut out),
         Command::Check(args) => cmd::check::run(&args, &mut out),

@@ -29,4 +29,5 @@ pub mod slcan_adapter;
 pub mod sniff;
 pub mod uds;
 pub mod vehicle;
+pub mod web;
 pub mod wire;

@@ -8,15 +8,11 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{Context, Result};
 use bywire_bus::socketcand::{self, Limits, Server};
 
 use crate::support::interrupt::interrupt_flag;
-use crate::support::{busarg, numbers};
-
-/// The environment variable a token may come from (a command line is visible to every user of
-/// the host; the environment and a file are not).
-const TOKEN_VARIABLE: &str = "BYWIRE_SERVE_TOKEN";
+use crate::support::{access, busarg, numbers};
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -96,46 +92,17 @@ impl Args {
             write_timeout: Duration::from_secs_f64(self.write_timeout),
         }
     }
-
-    /// The token from --token-file or the environment; `None` for an open server.
-    fn token(&self) -> Result<Option<String>> {
-        if self.token.is_some() {
-            return Err(anyhow!(
-                "--token: a token on the command line is visible to every user of this host; put it in a file (--token-file PATH) or in {TOKEN_VARIABLE}"
-            ));
-        }
-        let token = match &self.token_file {
-            Some(path) => {
-                let text = std::fs::read_to_string(path)
-                    .with_context(|| format!("--token-file {}", path.display()))?;
-                Some(text.lines().next().unwrap_or("").trim().to_string())
-            }
-            None => std::env::var(TOKEN_VARIABLE).ok(),
-        };
-        match token {
-            Some(token) if token.chars().count() < 8 || token.contains(char::is_whitespace) => Err(
-                anyhow!("the token must be at least 8 characters, without spaces"),
-            ),
-            other => Ok(other),
-        }
-    }
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let token = args.token()?;
-    if !args.listen.ip().is_loopback() {
-        if !args.allow_remote {
-            return Err(anyhow!(
-                "--listen {}: not a loopback address; socketcand has no authentication, so add --allow-remote and a token to serve other hosts",
-                args.listen
-            ));
-        }
-        if token.is_none() {
-            return Err(anyhow!(
-                "--allow-remote: other hosts may reach this server only with a token (--token-file PATH or {TOKEN_VARIABLE})"
-            ));
-        }
-    }
+    let token = access::token(args.token.is_some(), args.token_file.as_deref())?;
+    access::check_listen(
+        "--listen",
+        args.listen,
+        args.allow_remote,
+        token.as_deref(),
+        "socketcand has no authentication",
+    )?;
     let spec = busarg::full_spec(&args.bus);
     // Open once now, so a bad spec fails before anyone connects; the endpoint keeps an
     // in-process bus alive between clients.

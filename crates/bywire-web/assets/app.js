@@ -1,0 +1,375 @@
+// bywire's page: a Foxglove WebSocket client (the protocol the server speaks to Foxglove too)
+// with a trace, a signal tree, plots (uPlot) and a transmit panel. Data arrive at bus speed;
+// the page draws at most ten times a second, so a busy bus costs the page a bounded effort.
+"use strict";
+
+const token = new URLSearchParams(location.search).get("token");
+const withToken = (path) => (token ? `${path}?token=${encodeURIComponent(token)}` : path);
+const $ = (id) => document.getElementById(id);
+const hex = (n, width) => n.toString(16).toUpperCase().padStart(width, "0");
+
+const state = {
+  channels: new Map(),      // channel id -> channel
+  capabilities: [],
+  database: { buses: [], messages: [] },
+  rows: new Map(),          // fixed mode: "bus/id" -> row
+  scroll: [],               // scrolling mode: the latest frames
+  decodedLatest: new Map(), // "bus/name" -> decoded object
+  stats: new Map(),         // bus -> statistics
+  paused: false,
+  fixed: true,
+  filter: [],
+  panels: [],
+  current: null,
+  received: 0,
+  start: null,              // the first frame's time: the trace counts from it
+  dirty: true,
+};
+const SCROLL_ROWS = 500;
+const PLOT_POINTS = 20000;
+
+// ---- the protocol --------------------------------------------------------------------------
+let socket = null;
+const clientChannels = new Map(); // topic -> client channel id
+
+function connect() {
+  const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/${token ? `?token=${encodeURIComponent(token)}` : ""}`;
+  socket = new WebSocket(url, ["foxglove.websocket.v1"]);
+  socket.binaryType = "arraybuffer";
+  socket.onopen = () => say("connected");
+  socket.onclose = () => { say("disconnected: reload the page to connect again", true); $("server").textContent = "disconnected"; };
+  socket.onmessage = (event) => (typeof event.data === "string" ? onText(JSON.parse(event.data)) : onBinary(event.data));
+}
+
+function onText(message) {
+  switch (message.op) {
+    case "serverInfo":
+      state.capabilities = message.capabilities || [];
+      $("server").textContent = message.name;
+      $("send-pane").hidden = !state.capabilities.includes("clientPublish");
+      break;
+    case "advertise": {
+      const subscriptions = [];
+      for (const channel of message.channels) {
+        state.channels.set(channel.id, channel);
+        subscriptions.push({ id: channel.id, channelId: channel.id });
+      }
+      socket.send(JSON.stringify({ op: "subscribe", subscriptions }));
+      break;
+    }
+    case "status":
+      say(message.message, message.level >= 2);
+      break;
+  }
+}
+
+const decoder = new TextDecoder();
+function onBinary(buffer) {
+  const view = new DataView(buffer);
+  if (view.getUint8(0) !== 1) return;
+  const channel = state.channels.get(view.getUint32(1, true));
+  if (!channel) return;
+  const time = Number(view.getBigUint64(5, true)) / 1e9;
+  const message = JSON.parse(decoder.decode(new Uint8Array(buffer, 13)));
+  const topic = channel.topic;
+  const slash = topic.lastIndexOf("/");
+  const bus = topic.slice(1, slash);
+  const leaf = topic.slice(slash + 1);
+  if (leaf === "frames" && channel.schemaName === "bywire.CanFrame") onFrame(time, message);
+  else if (leaf === "stats" && channel.schemaName === "bywire.BusStats") state.stats.set(bus, message);
+  else onDecoded(time, bus, leaf, message);
+}
+
+function publish(topic, object) {
+  let id = clientChannels.get(topic);
+  if (id === undefined) {
+    id = clientChannels.size + 1;
+    clientChannels.set(topic, id);
+    socket.send(JSON.stringify({ op: "advertise", channels: [{ id, topic, encoding: "json", schemaName: "" }] }));
+  }
+  const body = new TextEncoder().encode(JSON.stringify(object));
+  const data = new Uint8Array(5 + body.length);
+  data[0] = 1;
+  new DataView(data.buffer).setUint32(1, id, true);
+  data.set(body, 5);
+  socket.send(data);
+}
+
+// ---- frames, decoded values, statistics ----------------------------------------------------
+function onFrame(time, f) {
+  state.received++;
+  if (state.start === null) state.start = time;
+  if (state.paused) return;
+  const key = `${f.bus}/${f.id}/${f.extended}`;
+  const previous = state.rows.get(key);
+  const row = {
+    time, bus: f.bus, id: f.id, extended: f.extended, name: f.name, dlc: f.dlc, data: f.data,
+    error: f.error, remote: f.remote, fd: f.fd,
+    count: previous ? previous.count + 1 : 1,
+    period: previous ? (time - previous.time) * 1e3 : null,
+    changedAt: previous ? previous.changedAt.slice() : f.data.map(() => -1e9),
+    decoded: previous ? previous.decoded : null,
+  };
+  if (previous) f.data.forEach((b, i) => { if (previous.data[i] !== b) row.changedAt[i] = time; });
+  state.rows.set(key, row);
+  state.scroll.push({ ...row });
+  if (state.scroll.length > SCROLL_ROWS * 2) state.scroll.splice(0, state.scroll.length - SCROLL_ROWS);
+  state.dirty = true;
+}
+
+function onDecoded(time, bus, name, values) {
+  state.decodedLatest.set(`${bus}/${name}`, values);
+  if (!state.paused) {
+    // The frame it came from arrived just before it, on the raw channel.
+    for (const row of state.rows.values()) if (row.bus === bus && row.name === name) row.decoded = values;
+    const last = state.scroll[state.scroll.length - 1];
+    if (last && last.bus === bus && last.name === name) last.decoded = values;
+  }
+  for (const panel of state.panels) {
+    for (const series of panel.series) {
+      if (series.bus === bus && series.message === name && series.signal in values) {
+        const v = values[series.signal];
+        series.x.push(time);
+        series.y.push(typeof v === "number" ? v : null);
+        if (series.x.length > PLOT_POINTS) { series.x.splice(0, PLOT_POINTS / 10); series.y.splice(0, PLOT_POINTS / 10); }
+        panel.dirty = true;
+      }
+    }
+  }
+}
+
+// ---- filters: an identifier (hex), a name, or SIGNAL=|<|>VALUE; all must match -------------
+function parseFilter(text) {
+  return text.trim().split(/\s+/).filter(Boolean).map((term) => {
+    const m = term.match(/^([A-Za-z_][\w#]*)(<=|>=|=|<|>)(.+)$/);
+    if (m) return { signal: m[1], op: m[2], value: m[3] };
+    const id = term.replace(/^0x/i, "");
+    return { text: term.toLowerCase(), id: /^[0-9a-f]+$/i.test(id) ? parseInt(id, 16) : null };
+  });
+}
+
+function matches(row) {
+  return state.filter.every((t) => {
+    if (t.signal) {
+      if (!row.decoded || !(t.signal in row.decoded)) return false;
+      const v = row.decoded[t.signal];
+      const n = Number(t.value);
+      const choice = row.decoded[`${t.signal}_choice`];
+      switch (t.op) {
+        case "=": return Number.isNaN(n) ? choice === t.value : v === n;
+        case "<": return v < n;
+        case ">": return v > n;
+        case "<=": return v <= n;
+        case ">=": return v >= n;
+      }
+      return false;
+    }
+    return row.id === t.id || (row.name || "").toLowerCase().includes(t.text);
+  });
+}
+
+// ---- drawing -------------------------------------------------------------------------------
+function signalsText(decoded) {
+  if (!decoded) return "";
+  return Object.entries(decoded)
+    .filter(([k]) => !k.endsWith("_choice"))
+    .map(([k, v]) => {
+      const choice = decoded[`${k}_choice`];
+      return `${k}: ${choice != null ? choice : v}`;
+    })
+    .join(", ");
+}
+
+function rowHtml(row, now) {
+  const data = row.remote ? "remote" : row.data.map((b, i) =>
+    (state.fixed && now - row.changedAt[i] < 1 ? `<span class="changed">${hex(b, 2)}</span>` : hex(b, 2))).join(" ");
+  const id = row.error ? "ERROR" : hex(row.id, row.extended ? 8 : 3);
+  const cells = [
+    (row.time - state.start).toFixed(6), row.bus, id, row.name || "", row.data.length, data,
+    state.fixed ? row.count : "", state.fixed && row.period != null ? row.period.toFixed(1) : "",
+  ];
+  const escape = (s) => String(s).replace(/[&<>]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;" })[c]);
+  return `<tr${row.error ? ' class="error-row"' : ""} data-id="${id}" title="${new Date(row.time * 1e3).toISOString()}">${cells.map((c, i) => `<td>${i === 5 ? c : escape(c)}</td>`).join("")}<td class="signals">${escape(signalsText(row.decoded))}</td></tr>`;
+}
+
+function drawTrace() {
+  const now = Math.max(0, ...[...state.rows.values()].map((r) => r.time));
+  let rows = state.fixed
+    ? [...state.rows.values()].sort((a, b) => a.bus.localeCompare(b.bus) || a.id - b.id)
+    : state.scroll.slice(-SCROLL_ROWS);
+  rows = rows.filter(matches);
+  document.querySelector("#trace tbody").innerHTML = rows.map((r) => rowHtml(r, now)).join("");
+}
+
+function drawBuses() {
+  $("buses").innerHTML = [...state.stats.values()].map((s) => {
+    const load = s.load_percent != null ? ` · ${s.load_percent.toFixed(1)} %` : "";
+    const errors = s.errors ? ` · ${s.errors} errors` : "";
+    const dropped = s.dropped ? ` · ${s.dropped} dropped` : "";
+    return `<span class="bus-chip${s.closed ? " closed" : ""}" data-bus="${s.bus}">${s.bus}: ${Math.round(s.frames_per_s)} frames/s${load}${errors}${dropped}</span>`;
+  }).join(" ");
+}
+
+// ---- plots ---------------------------------------------------------------------------------
+const COLOURS = ["#4fb3ff", "#ffb347", "#7ee787", "#ff6b6b", "#d2a8ff", "#f2cc60"];
+
+function addPanel() {
+  const element = document.createElement("div");
+  element.className = "panel";
+  element.innerHTML = `<div class="bar"><span class="title">(click a signal)</span><span class="spacer"></span><button class="close">×</button></div><div class="chart"></div>`;
+  $("plots").appendChild(element);
+  const panel = { element, series: [], plot: null, dirty: false, following: true };
+  element.addEventListener("click", () => selectPanel(panel));
+  element.querySelector(".close").addEventListener("click", (e) => {
+    e.stopPropagation();
+    if (panel.plot) panel.plot.destroy();
+    element.remove();
+    state.panels = state.panels.filter((p) => p !== panel);
+    if (state.current === panel) state.current = state.panels[0] || null;
+  });
+  state.panels.push(panel);
+  selectPanel(panel);
+  return panel;
+}
+
+function selectPanel(panel) {
+  state.current = panel;
+  for (const p of state.panels) p.element.classList.toggle("current", p === panel);
+}
+
+function plotSignal(bus, message, signal, unit) {
+  const panel = state.current || addPanel();
+  if (panel.series.some((s) => s.bus === bus && s.message === message && s.signal === signal)) return;
+  panel.series.push({ bus, message, signal, unit, x: [], y: [] });
+  panel.element.querySelector(".title").textContent = panel.series.map((s) => `${s.message}.${s.signal}`).join(", ");
+  if (panel.plot) { panel.plot.destroy(); panel.plot = null; }
+  panel.dirty = true;
+}
+
+function drawPlot(panel) {
+  if (!panel.series.length) return;
+  const tables = panel.series.map((s) => [s.x, s.y]);
+  const data = tables.length === 1 ? [tables[0][0].slice(), tables[0][1].slice()] : uPlot.join(tables);
+  if (!panel.plot) {
+    const chart = panel.element.querySelector(".chart");
+    panel.plot = new uPlot({
+      width: Math.max(300, chart.clientWidth || 600), height: 220,
+      scales: { x: { time: true } },
+      axes: [{ stroke: "#8a93a0", grid: { stroke: "#2c323c" } }, { stroke: "#8a93a0", grid: { stroke: "#2c323c" } }],
+      series: [{}, ...panel.series.map((s, i) => ({
+        label: `${s.message}.${s.signal}${s.unit ? ` [${s.unit}]` : ""}`, stroke: COLOURS[i % COLOURS.length], spanGaps: true, width: 1.5,
+      }))],
+      hooks: { setSelect: [() => { panel.following = false; }] },
+      cursor: { drag: { x: true, y: false } },
+    }, data, chart);
+    panel.plot.over.addEventListener("dblclick", () => { panel.following = true; panel.dirty = true; });
+  } else if (panel.following) {
+    panel.plot.setData(data);
+  } else {
+    panel.plot.setData(data, false);
+  }
+}
+
+// ---- the tree and the transmit panel -------------------------------------------------------
+function buildTree() {
+  const tree = $("tree");
+  const buses = state.database.buses;
+  tree.innerHTML = "";
+  for (const message of state.database.messages) {
+    const details = document.createElement("details");
+    details.innerHTML = `<summary title="${message.name}">${message.name} <span class="unit">${hex(message.id, message.extended ? 8 : 3)}</span></summary>`;
+    for (const signal of message.signals) {
+      for (const bus of buses) {
+        const item = document.createElement("div");
+        item.className = "signal";
+        item.dataset.signal = `${bus}/${message.name}/${signal.name}`;
+        item.innerHTML = `${signal.name}${buses.length > 1 ? ` (${bus})` : ""} <span class="unit">${signal.unit || ""}</span>`;
+        item.addEventListener("click", () => plotSignal(bus, message.name, signal.name, signal.unit));
+        details.appendChild(item);
+      }
+    }
+    tree.appendChild(details);
+  }
+  const busSelect = $("send-bus");
+  busSelect.innerHTML = buses.map((b) => `<option>${b}</option>`).join("");
+  const messageSelect = $("send-message");
+  for (const message of state.database.messages) {
+    const option = document.createElement("option");
+    option.value = option.textContent = message.name;
+    messageSelect.appendChild(option);
+  }
+  messageSelect.addEventListener("change", showSendFields);
+}
+
+function showSendFields() {
+  const name = $("send-message").value;
+  $("send-raw").hidden = name !== "";
+  const message = state.database.messages.find((m) => m.name === name);
+  $("send-signals").innerHTML = message ? message.signals.map((s) => {
+    const options = s.choices.length ? ` list="choices-${s.name}"` : "";
+    const list = s.choices.length ? `<datalist id="choices-${s.name}">${s.choices.map(([, l]) => `<option value="${l}">`).join("")}</datalist>` : "";
+    return `<label>${s.name} <span class="unit">${s.unit || ""}</span> <input data-signal="${s.name}" placeholder="start value"${options} size="10">${list}</label>`;
+  }).join("") : "";
+}
+
+function sendOnce() {
+  const bus = $("send-bus").value;
+  const name = $("send-message").value;
+  if (name === "") {
+    const data = $("send-data").value.replace(/\s+/g, "");
+    publish(`/${bus}/frames`, { id: $("send-id").value.trim(), data, extended: $("send-ext").checked, fd: $("send-fd").checked });
+  } else {
+    const values = {};
+    for (const input of document.querySelectorAll("#send-signals input")) {
+      if (input.value.trim() !== "") values[input.dataset.signal] = Number.isNaN(Number(input.value)) ? input.value : Number(input.value);
+    }
+    publish(`/${bus}/${name}`, values);
+  }
+  $("send-said").textContent = `sent at ${new Date().toLocaleTimeString()}`;
+}
+
+let periodic = null;
+function startPeriodic() {
+  const period = Math.max(1, Number($("send-period").value) || 100);
+  stopPeriodic();
+  periodic = setInterval(sendOnce, period);
+  $("send-start").disabled = true;
+  $("send-stop").disabled = false;
+}
+function stopPeriodic() {
+  if (periodic) clearInterval(periodic);
+  periodic = null;
+  $("send-start").disabled = false;
+  $("send-stop").disabled = true;
+}
+
+function say(text, error) {
+  const status = $("status");
+  status.textContent = text;
+  status.classList.toggle("error", !!error);
+}
+
+// ---- start ---------------------------------------------------------------------------------
+$("pause").addEventListener("click", () => { state.paused = !state.paused; $("pause").classList.toggle("on", state.paused); });
+$("mode").addEventListener("click", () => { state.fixed = !state.fixed; $("mode").textContent = state.fixed ? "fixed" : "scrolling"; state.dirty = true; });
+$("filter").addEventListener("input", (e) => { state.filter = parseFilter(e.target.value); state.dirty = true; });
+$("add-panel").addEventListener("click", addPanel);
+$("send-once").addEventListener("click", sendOnce);
+$("send-start").addEventListener("click", startPeriodic);
+$("send-stop").addEventListener("click", stopPeriodic);
+
+setInterval(() => {
+  if (state.dirty && !state.paused) { drawTrace(); state.dirty = false; }
+  drawBuses();
+}, 100);
+setInterval(() => { for (const p of state.panels) if (p.dirty) { drawPlot(p); p.dirty = false; } }, 250);
+
+// What tests and scripts read of the page.
+window.bywire = {
+  state,
+  rows: () => [...document.querySelectorAll("#trace tbody tr")].map((tr) => [...tr.children].map((td) => td.textContent)),
+  series: (panel) => state.panels[panel].series.map((s) => ({ signal: s.signal, x: s.x.slice(), y: s.y.slice() })),
+  plotSignal,
+};
+
+fetch(withToken("/api/database")).then((r) => r.json()).then((db) => { state.database = db; buildTree(); showSendFields(); connect(); });

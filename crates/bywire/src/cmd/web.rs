@@ -1,0 +1,116 @@
+//! `bywire web`: a CAN analyser in the browser over live buses, with a database; the same
+//! port speaks the Foxglove WebSocket protocol.
+
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use anyhow::Result;
+use bywire_dbc::decoder::Decoder;
+
+use crate::support::busarg::{self, BusArg};
+use crate::support::interrupt::interrupt_flag;
+use crate::support::live::{Live, LiveConfig};
+use crate::support::{access, dbc};
+
+#[derive(clap::Args)]
+#[command(after_help = "Examples:
+  bywire web can0 --db vehicle.dbc                (then open http://127.0.0.1:8080/)
+  bywire web front=can0 rear=can1 --db vehicle.dbc --allow-send --bitrate 500000
+  bywire web socketcand:127.0.0.1:29536/bus1 --db examples/data/reference-tug.dbc --listen 127.0.0.1:0
+  BYWIRE_SERVE_TOKEN=... bywire web can0 --listen 0.0.0.0:8080 --allow-remote   (open /?token=...)
+
+The page (served from the binary: no internet needed) shows a trace (one row per identifier
+with changed bytes highlighted, or every frame), filters (an identifier, a name, or
+SIGNAL>VALUE), the database's messages and signals, plots of any signals (several panels,
+drag to zoom, a cursor with values), each bus's rate, load and errors, and with --allow-send a
+transmit panel (a raw frame, or a message by its signals with counters and checksums filled
+in from the database), once or periodically.
+
+The same port speaks the Foxglove WebSocket protocol: in Foxglove, open a connection to
+ws://ADDRESS. Channels: /BUS/frames (every frame), /BUS/stats (once a second) and /BUS/MESSAGE
+(each message of the database, decoded). A client that reads too slowly loses messages
+(counted and told), never the bus or the other clients. A page of another site cannot
+connect (browsers say where a page comes from) unless --allow-origin names it.")]
+pub struct Args {
+    /// Buses to watch, each with optional candump filters and a label:
+    /// [LABEL=]BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
+    #[arg(required = true, num_args = 1..=16)]
+    buses: Vec<String>,
+    /// Decode with this database (DBC, KCD, SYM, ARXML, JSON).
+    #[arg(long, alias = "dbc", value_name = "FILE")]
+    db: Option<PathBuf>,
+    /// Address and port to serve on (port 0: any free port, printed).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    listen: SocketAddr,
+    /// Let clients (the page's transmit panel, Foxglove's publish) send frames on the buses.
+    #[arg(long)]
+    allow_send: bool,
+    /// The buses' bitrate, for their load.
+    #[arg(long, value_name = "BIT/S", value_parser = clap::value_parser!(u32).range(1_000..=16_000_000))]
+    bitrate: Option<u32>,
+    /// Pages of this origin may connect without the token (https://app.foxglove.dev).
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    origins: Vec<String>,
+    /// Allow listening on an address other hosts can reach (needs a token).
+    #[arg(long)]
+    allow_remote: bool,
+    /// Require the token in this file's first line (or BYWIRE_SERVE_TOKEN) of every request:
+    /// open the page as /?token=TOKEN; Foxglove clients add ?token=TOKEN to the address.
+    #[arg(long, value_name = "PATH")]
+    token_file: Option<PathBuf>,
+    /// Refused: a token on the command line is visible to every user of the host.
+    #[arg(long, value_name = "TOKEN", hide = true)]
+    token: Option<String>,
+}
+
+pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
+    let token = access::token(args.token.is_some(), args.token_file.as_deref())?;
+    access::check_listen(
+        "--listen",
+        args.listen,
+        args.allow_remote,
+        token.as_deref(),
+        "the page can send frames",
+    )?;
+    let buses: Vec<BusArg> = args
+        .buses
+        .iter()
+        .map(|b| busarg::parse(b))
+        .collect::<Result<_>>()?;
+    let decoder = match &args.db {
+        Some(path) => Some(Decoder::new(dbc::load(path, false)?)),
+        None => None,
+    };
+    let live = Live::start(
+        &buses,
+        decoder,
+        LiveConfig {
+            name: "bywire web",
+            listen: args.listen,
+            access: bywire_web::Access {
+                token,
+                origins: args.origins.clone(),
+                allow_send: args.allow_send,
+            },
+            bitrate: args.bitrate,
+        },
+    )?;
+    let address = live.address();
+    writeln!(
+        out,
+        "serving http://{address}/ (Foxglove: ws://{address}); Ctrl-C stops"
+    )?;
+    out.flush()?;
+    let stop = interrupt_flag();
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let dropped = live.stop();
+    if dropped > 0 {
+        writeln!(out, "clients lost {dropped} messages by reading too slowly")?;
+    }
+    Ok(())
+}

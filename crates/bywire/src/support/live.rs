@@ -1,0 +1,120 @@
+//! The live web page and Foxglove WebSocket server over buses (`bywire web`, `serve
+//! --foxglove`): the buses opened, a reader thread per bus feeding the hub, a ticker for the
+//! statistics, the server on its port.
+
+use std::net::{SocketAddr, TcpListener};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context, Result};
+use bywire_dbc::decoder::Decoder;
+use bywire_web::{Access, Hub, HubBuilder, WebServer};
+
+use crate::support::busarg::BusArg;
+
+/// What the server is given.
+pub struct LiveConfig<'a> {
+    /// The name clients see.
+    pub name: &'a str,
+    /// Where to listen.
+    pub listen: SocketAddr,
+    /// Who may connect, and whether they may send.
+    pub access: Access,
+    /// Each bus's bitrate (for the load), when known.
+    pub bitrate: Option<u32>,
+}
+
+/// A running hub and server; [`Live::stop`] ends both.
+pub struct Live {
+    server: WebServer,
+    hub: Arc<Hub>,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Live {
+    /// Open `buses`, decode with `decoder`, and serve.
+    pub fn start(
+        buses: &[BusArg],
+        decoder: Option<Decoder>,
+        config: LiveConfig<'_>,
+    ) -> Result<Self> {
+        let opened = crate::support::busarg::open_all(buses)?;
+        let listener = TcpListener::bind(config.listen)
+            .with_context(|| format!("cannot listen on {}", config.listen))?;
+        let mut builder = HubBuilder::new(config.name).metadata("program", "bywire");
+        let mut receivers = Vec::with_capacity(buses.len());
+        for (mut bus, arg) in opened.into_iter().zip(buses) {
+            // What clients send shows in the trace as the bus's other traffic does.
+            let _ = bus.set_receive_own(config.access.allow_send);
+            let (tx, rx) = bus.split();
+            let tx = config.access.allow_send.then_some(tx);
+            builder = builder.bus(&arg.name, tx, config.bitrate);
+            receivers.push(rx);
+        }
+        if let Some(decoder) = decoder {
+            builder = builder.decoder(decoder);
+        }
+        let hub = builder.build().map_err(|e| anyhow!(e))?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut threads = Vec::new();
+        for (index, rx) in receivers.into_iter().enumerate() {
+            let (hub, stop) = (Arc::clone(&hub), Arc::clone(&stop));
+            threads.push(
+                std::thread::Builder::new()
+                    .name(format!("web-bus-{index}"))
+                    .spawn(move || hub.read_bus(index, rx, &stop))?,
+            );
+        }
+        let (ticking, ticker_stop) = (Arc::clone(&hub), Arc::clone(&stop));
+        threads.push(
+            std::thread::Builder::new()
+                .name("web-stats".into())
+                .spawn(move || tick(&ticking, &ticker_stop))?,
+        );
+        let server = WebServer::start(Arc::clone(&hub), listener, config.access)
+            .context("cannot start the web server")?;
+        Ok(Live {
+            server,
+            hub,
+            stop,
+            threads,
+        })
+    }
+
+    /// Where the server listens.
+    pub fn address(&self) -> SocketAddr {
+        self.server.address()
+    }
+
+    /// Stop serving and reading; what clients lost, in all.
+    pub fn stop(self) -> u64 {
+        self.stop.store(true, Ordering::Relaxed);
+        self.server.stop();
+        for thread in self.threads {
+            let _ = thread.join();
+        }
+        self.hub.dropped()
+    }
+}
+
+/// The statistics once a second, until `stop`.
+fn tick(hub: &Hub, stop: &AtomicBool) {
+    let mut last = Vec::new();
+    let mut previous = Instant::now();
+    // Bounded by `stop`.
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(50));
+        let elapsed = previous.elapsed();
+        if elapsed >= Duration::from_secs(1) {
+            previous = Instant::now();
+            hub.tick(
+                bywire_bus::monotonic_unix_now(),
+                elapsed.as_secs_f64(),
+                &mut last,
+            );
+        }
+    }
+}

@@ -1,0 +1,332 @@
+//! `bywire web` against real clients: its page in Debian's Chromium (driven by Playwright)
+//! while python-can sends frames cantools encoded, and its Foxglove WebSocket side with
+//! Foxglove's own client (`@foxglove/ws-protocol` in Node). Inside `lonet.sh` (multicast).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+
+use common::{inside_lonet, Scratch};
+
+fn dbc() -> String {
+    format!(
+        "{}/../../examples/data/reference-tug.dbc",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+/// Where the install script puts the Node packages (`@foxglove/ws-protocol`, `ws`).
+fn node_modules() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/node/node_modules")
+}
+
+/// `bywire web ARGS` started, with the address it serves on (read from its first line: the
+/// server is listening once it is printed).
+struct Web {
+    child: Child,
+    address: String,
+}
+
+impl Web {
+    fn start(args: &[&str]) -> Web {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_bywire"))
+            .arg("web")
+            .args(args)
+            .args(["--listen", "127.0.0.1:0"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let address = line
+            .strip_prefix("serving http://")
+            .and_then(|rest| rest.split('/').next())
+            .unwrap_or_else(|| panic!("no address in {line:?}"))
+            .to_string();
+        Web { child, address }
+    }
+
+    /// Stop it as Ctrl-C does: it must end cleanly.
+    fn stop(mut self) {
+        Command::new("kill")
+            .args(["-INT", &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "bywire web ended with {status}");
+    }
+}
+
+impl Drop for Web {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `bywire dump -L BUS` into a file, until stopped.
+fn dump_to(bus: &str, file: &std::path::Path) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["dump", "-L", bus])
+        .stdout(std::fs::File::create(file).unwrap())
+        .spawn()
+        .unwrap()
+}
+
+/// Wait (bounded) until `file` holds `count` lines containing `needle`.
+fn wait_for_lines(file: &std::path::Path, needle: &str, count: usize) -> String {
+    for _ in 0..200 {
+        let text = std::fs::read_to_string(file).unwrap_or_default();
+        if text.lines().filter(|l| l.contains(needle)).count() >= count {
+            return text;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    panic!(
+        "{needle} never seen {count} times: {}",
+        std::fs::read_to_string(file).unwrap_or_default()
+    );
+}
+
+#[test]
+fn the_page_shows_decodes_plots_and_sends_as_cantools_and_dump_agree() {
+    if !inside_lonet("the_page_shows_decodes_plots_and_sends_as_cantools_and_dump_agree") {
+        return;
+    }
+    let (group, port) = ("239.74.163.2", "43620");
+    let bus = format!("udp:{group}:{port}");
+    let scratch = Scratch::new("web-page");
+    let shots = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/web-screenshots");
+    std::fs::create_dir_all(&shots).unwrap();
+    let dumped = scratch.join("dump.log");
+    let mut dump = dump_to(&bus, &dumped);
+    let web = Web::start(&[&bus, "--db", &dbc(), "--allow-send", "--bitrate", "500000"]);
+    let out = Command::new("python3")
+        .arg(format!("{}/web_page.py", common::oracles()))
+        .args([
+            &format!("http://{}/", web.address),
+            group,
+            port,
+            &dbc(),
+            shots.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // What the transmit panel sent, as `bywire dump` saw it on the bus.
+    let text = wait_for_lines(&dumped, " 100#", 1);
+    let _ = dump.kill();
+    let _ = dump.wait();
+    web.stop();
+    assert!(
+        text.lines()
+            .any(|l| l.ends_with(&format!("{bus} 123#DEADBEEF"))),
+        "{text}"
+    );
+    let control = text
+        .lines()
+        .find(|l| l.contains(" 100#"))
+        .unwrap()
+        .rsplit('#')
+        .next()
+        .unwrap()
+        .to_string();
+    let decoded = Command::new("python3")
+        .args([
+            "-c",
+            "import cantools, sys; db = cantools.database.load_file(sys.argv[1]); \
+             m = db.get_message_by_name('AdsToVehicle_Control'); \
+             d = m.decode(bytes.fromhex(sys.argv[2])); \
+             print(d['VelocityCmd'], d['SteeringAngleCmd'], d['GearCmd'])",
+            &dbc(),
+            &control,
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&decoded.stdout).trim(),
+        "1.5 -12.5 Drive",
+        "{control}: {}",
+        String::from_utf8_lossy(&decoded.stderr)
+    );
+}
+
+/// Foxglove's own client (`@foxglove/ws-protocol` in Node) lists the channels, receives the
+/// raw frames and a decoded message equal to what `bywire dump --dbc` prints of the same bus,
+/// and publishes a raw frame and a message by its signals, which `bywire dump` sees.
+#[test]
+fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
+    if !inside_lonet("foxglove_clients_see_what_dump_prints_and_publish_frames") {
+        return;
+    }
+    let bus = "udp:239.74.163.2:43621";
+    let scratch = Scratch::new("web-foxglove");
+    let dumped = scratch.join("dump.txt");
+    let web = Web::start(&[&format!("tug={bus}"), "--db", &dbc(), "--allow-send"]);
+    let mut dump = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["dump", "--dbc", &dbc(), &format!("tug={bus}")])
+        .stdout(std::fs::File::create(&dumped).unwrap())
+        .spawn()
+        .unwrap();
+    let mut client = Command::new("node")
+        .arg(format!("{}/foxglove_client.js", common::oracles()))
+        .args([
+            &format!("ws://{}", web.address),
+            "tug",
+            "VehicleToAds_State",
+            "3",
+            "1",
+        ])
+        .env("NODE_PATH", node_modules())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(client.stdout.take().unwrap()).lines();
+    assert_eq!(lines.next().unwrap().unwrap(), "ready");
+    let send = |args: &[&str]| {
+        let (code, _, err) = common::bywire(&[&["send"], args].concat(), "");
+        assert_eq!(code, 0, "{err}");
+    };
+    // Probes until dump listens (the client passes them over).
+    for _ in 0..100 {
+        send(&[bus, "7FE#00"]);
+        if std::fs::metadata(&dumped).map(|m| m.len()).unwrap_or(0) > 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    send(&[
+        "--dbc",
+        &dbc(),
+        bus,
+        "VehicleToAds_State",
+        "VelocityActual=3.5",
+        "Gear=Drive",
+        "SteeringAngleActual=-7.2",
+        "ControlMode=Autonomous",
+    ]);
+    send(&[bus, "1ABCDEF0#0102"]);
+    send(&[bus, "7FF#00"]);
+    let said: serde_json::Value =
+        serde_json::from_str(&lines.next().expect("the client's result").unwrap()).unwrap();
+    assert!(client.wait().unwrap().success());
+    let text = wait_for_lines(&dumped, " 123 ", 1);
+    let text = wait_for_lines(&dumped, " 100 ", 1).max(text);
+    let _ = dump.kill();
+    let _ = dump.wait();
+    web.stop();
+
+    // The channels: raw, statistics and one per message, with their schemas.
+    let topics: Vec<&str> = said["topics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["topic"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        topics[..3],
+        ["/tug/frames", "/tug/stats", "/tug/EmergencyBrake"]
+    );
+    assert!(topics.contains(&"/tug/VehicleToAds_State"), "{topics:?}");
+    for topic in said["topics"].as_array().unwrap() {
+        assert_eq!(topic["encoding"], "json");
+        let schema: serde_json::Value =
+            serde_json::from_str(topic["schema"].as_str().unwrap()).unwrap();
+        assert_eq!(schema["type"], "object", "{topic}");
+    }
+    assert_eq!(said["serverInfo"]["capabilities"][0], "clientPublish");
+
+    // Raw frames: as dump printed them (bus label, identifier, length, bytes).
+    let dump_frames: Vec<Vec<String>> = text
+        .lines()
+        .filter(|l| l.starts_with("  ") && !l.starts_with("      ") && !l.contains(" 7FE "))
+        .map(|l| l.split_whitespace().map(String::from).collect())
+        .collect();
+    let raw: Vec<Vec<String>> = said["raw"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            let m = &r["message"];
+            let id = m["id"].as_u64().unwrap();
+            let id = if m["extended"].as_bool().unwrap() {
+                format!("{id:08X}")
+            } else {
+                format!("{id:03X}")
+            };
+            let data: Vec<String> = m["data"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|b| format!("{:02X}", b.as_u64().unwrap()))
+                .collect();
+            [
+                vec![
+                    m["bus"].as_str().unwrap().to_string(),
+                    id,
+                    format!("[{}]", data.len()),
+                ],
+                data,
+            ]
+            .concat()
+        })
+        .collect();
+    // (What the client then published is in the trace too, after the three frames sent.)
+    assert_eq!(raw, dump_frames, "{text}");
+
+    // The decoded message: each signal as dump printed it (value names for named values).
+    let decoded = &said["decoded"][0]["message"];
+    let block: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.contains("VehicleToAds_State("))
+        .skip(1)
+        .take_while(|l| !l.trim().starts_with(')'))
+        .collect();
+    assert_eq!(block.len(), 13, "{text}");
+    for line in block {
+        let (name, value) = line.trim().trim_end_matches(',').split_once(": ").unwrap();
+        let shown = value.split(' ').next().unwrap();
+        match decoded.get(format!("{name}_choice")) {
+            Some(serde_json::Value::String(choice)) => assert_eq!(choice, shown, "{name}"),
+            _ => assert_eq!(
+                decoded[name].as_f64().unwrap(),
+                shown.parse::<f64>().unwrap(),
+                "{name}"
+            ),
+        }
+    }
+    assert_eq!(decoded["VelocityActual"], 3.5);
+    assert_eq!(decoded["ControlMode_choice"], "Autonomous");
+
+    // What it published: on the bus; the value out of range refused with a status.
+    assert!(
+        dump_frames
+            .iter()
+            .any(|f| f.join(" ") == "tug 123 [4] DE AD BE EF"),
+        "{text}"
+    );
+    assert!(
+        text.contains("VelocityCmd: 2.5 m/s") && text.contains("GearCmd: Reverse"),
+        "{text}"
+    );
+    assert_eq!(text.matches("AdsToVehicle_Control(").count(), 1, "{text}");
+    let statuses = said["statuses"].to_string();
+    assert!(statuses.contains("VelocityCmd"), "{statuses}");
+}
