@@ -30,7 +30,7 @@ const MAX_HEAD: usize = 16 * 1024;
 /// The largest WebSocket message a client may send.
 const MAX_CLIENT_MESSAGE: usize = 1 << 20;
 /// What may wait unsent to one client before it counts as slow.
-const MAX_WRITE_BUFFER: usize = 4 << 20;
+const MAX_WRITE_BUFFER: usize = 1 << 20;
 
 /// Who may connect and what they may do.
 #[derive(Debug, Clone, Default)]
