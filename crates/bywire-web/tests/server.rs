@@ -15,12 +15,11 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use bywire_bus::open;
-use bywire_web::{Access, Hub, HubBuilder, WebServer};
+use bywire_web::{Access, HubBuilder, WebServer};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::{Message, WebSocket};
 
 struct Running {
-    hub: Arc<Hub>,
     server: Option<WebServer>,
     address: SocketAddr,
     stop: Arc<AtomicBool>,
@@ -42,7 +41,6 @@ impl Running {
         let (reading, flag) = (Arc::clone(&hub), Arc::clone(&stop));
         let reader = std::thread::spawn(move || reading.read_bus(0, rx, &flag));
         Running {
-            hub,
             server: Some(server),
             address,
             stop,
