@@ -11,7 +11,7 @@ const hex = (n, width) => n.toString(16).toUpperCase().padStart(width, "0");
 const state = {
   channels: new Map(),      // channel id -> channel
   capabilities: [],
-  database: { buses: [], messages: [] },
+  database: { buses: [] },   // each bus with its database's messages
   rows: new Map(),          // fixed mode: "bus/id" -> row
   scroll: [],               // scrolling mode: the latest frames
   decodedLatest: new Map(), // "bus/name" -> decoded object
@@ -271,40 +271,59 @@ function drawPlot(panel) {
 }
 
 // ---- the tree and the transmit panel -------------------------------------------------------
+function busDatabase(name) {
+  return state.database.buses.find((b) => b.name === name) || { name, messages: [] };
+}
+
 function buildTree() {
   const tree = $("tree");
   const buses = state.database.buses;
   tree.innerHTML = "";
-  for (const message of state.database.messages) {
-    const details = document.createElement("details");
-    details.innerHTML = `<summary title="${message.name}">${message.name} <span class="unit">${hex(message.id, message.extended ? 8 : 3)}</span></summary>`;
-    for (const signal of message.signals) {
-      for (const bus of buses) {
+  for (const bus of buses) {
+    let parent = tree;
+    if (buses.length > 1) {
+      const group = document.createElement("details");
+      group.open = true;
+      group.innerHTML = `<summary>${bus.name}</summary>`;
+      tree.appendChild(group);
+      parent = group;
+    }
+    for (const message of bus.messages) {
+      const details = document.createElement("details");
+      details.innerHTML = `<summary title="${message.name}">${message.name} <span class="unit">${hex(message.id, message.extended ? 8 : 3)}</span></summary>`;
+      for (const signal of message.signals) {
         const item = document.createElement("div");
         item.className = "signal";
-        item.dataset.signal = `${bus}/${message.name}/${signal.name}`;
-        item.innerHTML = `${signal.name}${buses.length > 1 ? ` (${bus})` : ""} <span class="unit">${signal.unit || ""}</span>`;
-        item.addEventListener("click", () => plotSignal(bus, message.name, signal.name, signal.unit));
+        item.dataset.signal = `${bus.name}/${message.name}/${signal.name}`;
+        item.innerHTML = `${signal.name} <span class="unit">${signal.unit || ""}</span>`;
+        item.addEventListener("click", () => plotSignal(bus.name, message.name, signal.name, signal.unit));
         details.appendChild(item);
       }
+      parent.appendChild(details);
     }
-    tree.appendChild(details);
   }
   const busSelect = $("send-bus");
-  busSelect.innerHTML = buses.map((b) => `<option>${b}</option>`).join("");
-  const messageSelect = $("send-message");
-  for (const message of state.database.messages) {
+  busSelect.innerHTML = buses.map((b) => `<option>${b.name}</option>`).join("");
+  busSelect.addEventListener("change", showSendMessages);
+  $("send-message").addEventListener("change", showSendFields);
+  showSendMessages();
+}
+
+function showSendMessages() {
+  const select = $("send-message");
+  select.innerHTML = '<option value="">raw frame</option>';
+  for (const message of busDatabase($("send-bus").value).messages) {
     const option = document.createElement("option");
     option.value = option.textContent = message.name;
-    messageSelect.appendChild(option);
+    select.appendChild(option);
   }
-  messageSelect.addEventListener("change", showSendFields);
+  showSendFields();
 }
 
 function showSendFields() {
   const name = $("send-message").value;
   $("send-raw").hidden = name !== "";
-  const message = state.database.messages.find((m) => m.name === name);
+  const message = busDatabase($("send-bus").value).messages.find((m) => m.name === name);
   $("send-signals").innerHTML = message ? message.signals.map((s) => {
     const options = s.choices.length ? ` list="choices-${s.name}"` : "";
     const list = s.choices.length ? `<datalist id="choices-${s.name}">${s.choices.map(([, l]) => `<option value="${l}">`).join("")}</datalist>` : "";
@@ -372,4 +391,4 @@ window.bywire = {
   plotSignal,
 };
 
-fetch(withToken("/api/database")).then((r) => r.json()).then((db) => { state.database = db; buildTree(); showSendFields(); connect(); });
+fetch(withToken("/api/database")).then((r) => r.json()).then((db) => { state.database = db; buildTree(); connect(); });

@@ -2,6 +2,8 @@
 
 use serde_json::{json, Value as Json};
 
+use bywire_dbc::decoder::Decoder;
+
 use crate::hub::Hub;
 
 const INDEX: &str = include_str!("../assets/index.html");
@@ -25,52 +27,54 @@ pub fn asset(path: &str) -> Option<(&'static str, &'static [u8])> {
     Some((kind, text.as_bytes()))
 }
 
-/// The buses and the database's messages and signals (each signal by the name its decoded
-/// channel gives it, with unit, range and value names), for the page's tree and its
+/// The buses, each with its database's messages and signals (each signal by the name its
+/// decoded channel gives it, with unit, range and value names), for the page's tree and its
 /// transmit panel.
 pub fn database_json(hub: &Hub) -> Json {
-    let messages: Vec<Json> = hub.decoder().map_or_else(Vec::new, |decoder| {
-        (0..decoder.message_count())
-            .filter_map(|i| decoder.message_at(i))
-            .map(|(message, _)| {
-                let names = bywire_dbc::decoder::field_names(message);
-                let signals: Vec<Json> = message
-                    .signals
-                    .iter()
-                    .zip(&names)
-                    .map(|(s, name)| {
-                        let choices: Vec<Json> = s
-                            .value_descriptions
-                            .iter()
-                            .map(|(value, label)| json!([value.to_string(), label]))
-                            .collect();
-                        json!({
-                            "name": name,
-                            "unit": s.unit,
-                            "minimum": s.minimum.as_f64(),
-                            "maximum": s.maximum.as_f64(),
-                            "choices": choices,
-                            "comment": s.comment,
-                        })
+    let buses: Vec<Json> = hub
+        .buses()
+        .map(|(name, decoder)| json!({"name": name, "messages": decoder.map_or_else(Vec::new, messages_json)}))
+        .collect();
+    json!({ "buses": buses })
+}
+
+fn messages_json(decoder: &Decoder) -> Vec<Json> {
+    (0..decoder.message_count())
+        .filter_map(|i| decoder.message_at(i))
+        .map(|(message, _)| {
+            let names = bywire_dbc::decoder::field_names(message);
+            let signals: Vec<Json> = message
+                .signals
+                .iter()
+                .zip(&names)
+                .map(|(s, name)| {
+                    let choices: Vec<Json> = s
+                        .value_descriptions
+                        .iter()
+                        .map(|(value, label)| json!([value.to_string(), label]))
+                        .collect();
+                    json!({
+                        "name": name,
+                        "unit": s.unit,
+                        "minimum": s.minimum.as_f64(),
+                        "maximum": s.maximum.as_f64(),
+                        "choices": choices,
+                        "comment": s.comment,
                     })
-                    .collect();
-                let cycle = decoder
-                    .database()
-                    .cycle_time(message)
-                    .map(|d| d.as_secs_f64() * 1e3);
-                json!({
-                    "name": message.display_name(),
-                    "id": message.id,
-                    "extended": message.extended,
-                    "size": message.size,
-                    "cycle_ms": cycle,
-                    "signals": signals,
                 })
+                .collect();
+            let cycle = decoder
+                .database()
+                .cycle_time(message)
+                .map(|d| d.as_secs_f64() * 1e3);
+            json!({
+                "name": message.display_name(),
+                "id": message.id,
+                "extended": message.extended,
+                "size": message.size,
+                "cycle_ms": cycle,
+                "signals": signals,
             })
-            .collect()
-    });
-    json!({
-        "buses": hub.bus_names(),
-        "messages": messages,
-    })
+        })
+        .collect()
 }

@@ -59,11 +59,50 @@ struct BusSlot {
     tx: Option<Mutex<Box<dyn BusTx>>>,
     bitrate: Option<u32>,
     counters: Counters,
+    /// The bus's database (buses may share one).
+    database: Option<Arc<Database>>,
+    /// Its first channel's index: raw frames, then statistics, then a channel per message.
+    base: usize,
+}
+
+/// A database compiled for decoding, with each message's JSON form.
+pub struct Database {
+    decoder: Decoder,
+    json: Vec<MessageJson>,
+}
+
+impl Database {
+    /// `decoder`, with its messages' JSON forms worked out once.
+    pub fn new(decoder: Decoder) -> Self {
+        let json = (0..decoder.message_count())
+            .filter_map(|i| decoder.message_at(i))
+            .map(|(message, _)| MessageJson::new(message))
+            .collect();
+        Database { decoder, json }
+    }
+
+    /// The decoder.
+    pub fn decoder(&self) -> &Decoder {
+        &self.decoder
+    }
+
+    fn messages(&self) -> usize {
+        self.json.len()
+    }
+}
+
+impl BusSlot {
+    /// How many channels it has.
+    fn channels(&self) -> usize {
+        2 + self.database.as_ref().map_or(0, |d| d.messages())
+    }
 }
 
 /// Where a client channel's messages go.
 #[derive(Debug, Clone, Copy)]
 enum Target {
+    /// The hub's owner (a command topic, by its index: the simulated tug's fault buttons).
+    Inbox { topic: usize },
     /// Raw frames (`/BUS/frames`).
     Frames { bus: usize },
     /// A message by its signals (`/BUS/MESSAGE`), its counter counting up.
@@ -99,10 +138,14 @@ impl Client {
 pub struct HubBuilder {
     name: String,
     buses: Vec<BusSlot>,
-    decoder: Option<Decoder>,
     extra: Vec<(String, String, Json)>,
+    commands: Vec<String>,
     metadata: Map<String, Json>,
 }
+
+/// Commands clients published on command topics, waiting for the hub's owner; past this,
+/// more are refused.
+const MAX_INBOX: usize = 256;
 
 impl HubBuilder {
     /// A hub the clients know as `name`.
@@ -110,27 +153,37 @@ impl HubBuilder {
         HubBuilder {
             name: name.into(),
             buses: Vec::new(),
-            decoder: None,
             extra: Vec::new(),
+            commands: Vec::new(),
             metadata: Map::new(),
         }
     }
 
-    /// Add a bus: its name, the half that sends (when clients may send on it) and its bitrate
-    /// (for the load). Its index is the order of adding.
-    pub fn bus(mut self, name: &str, tx: Option<Box<dyn BusTx>>, bitrate: Option<u32>) -> Self {
+    /// A topic clients may publish JSON objects on for the hub's owner to take
+    /// ([`Hub::take_commands`]), when they may send.
+    pub fn command_topic(mut self, topic: &str) -> Self {
+        self.commands.push(topic.into());
+        self
+    }
+
+    /// Add a bus: its name, the half that sends (when clients may send on it), its bitrate
+    /// (for the load) and the database its frames are decoded with. Its index is the order of
+    /// adding.
+    pub fn bus(
+        mut self,
+        name: &str,
+        tx: Option<Box<dyn BusTx>>,
+        bitrate: Option<u32>,
+        database: Option<Arc<Database>>,
+    ) -> Self {
         self.buses.push(BusSlot {
             name: name.into(),
             tx: tx.map(Mutex::new),
             bitrate,
             counters: Counters::default(),
+            database,
+            base: 0,
         });
-        self
-    }
-
-    /// Decode with this database.
-    pub fn decoder(mut self, decoder: Decoder) -> Self {
-        self.decoder = Some(decoder);
         self
     }
 
@@ -148,48 +201,43 @@ impl HubBuilder {
     }
 
     /// The hub.
-    pub fn build(self) -> Result<Arc<Hub>, String> {
-        let messages = self.decoder.as_ref().map_or(0, Decoder::message_count);
-        let per_bus = messages + 2;
+    pub fn build(mut self) -> Result<Arc<Hub>, String> {
         let total = self
             .buses
-            .len()
-            .saturating_mul(per_bus)
-            .saturating_add(self.extra.len());
+            .iter()
+            .map(BusSlot::channels)
+            .fold(self.extra.len(), usize::saturating_add);
         if total > MAX_CHANNELS {
             return Err(format!(
-                "{total} channels ({} buses, {messages} messages): at most {MAX_CHANNELS}",
+                "{total} channels ({} buses and their messages): at most {MAX_CHANNELS}",
                 self.buses.len()
             ));
         }
-        let json: Vec<MessageJson> = (0..messages)
-            .filter_map(|i| self.decoder.as_ref()?.message_at(i))
-            .map(|(message, _)| MessageJson::new(message))
-            .collect();
         let mut channels = Vec::with_capacity(total);
-        for bus in &self.buses {
-            let id = next_id(&channels);
+        for bus in &mut self.buses {
+            bus.base = channels.len();
             channels.push(Channel::json(
-                id,
+                next_id(&channels),
                 format!("/{}/frames", bus.name),
                 "bywire.CanFrame",
                 &frame_schema(),
             ));
             channels.push(Channel::json(
-                id + 1,
+                next_id(&channels),
                 format!("/{}/stats", bus.name),
                 "bywire.BusStats",
                 &stats_schema(),
             ));
-            for (index, json) in json.iter().enumerate() {
-                if let Some((message, _)) = self.decoder.as_ref().and_then(|d| d.message_at(index))
-                {
-                    channels.push(Channel::json(
-                        next_id(&channels),
-                        format!("/{}/{}", bus.name, message.display_name()),
-                        message.display_name(),
-                        &json.schema(message),
-                    ));
+            if let Some(database) = &bus.database {
+                for (index, json) in database.json.iter().enumerate() {
+                    if let Some((message, _)) = database.decoder.message_at(index) {
+                        channels.push(Channel::json(
+                            next_id(&channels),
+                            format!("/{}/{}", bus.name, message.display_name()),
+                            message.display_name(),
+                            &json.schema(message),
+                        ));
+                    }
                 }
             }
         }
@@ -207,12 +255,11 @@ impl HubBuilder {
             name: self.name,
             metadata: self.metadata,
             buses: self.buses,
-            decoder: self.decoder,
-            json,
-            per_bus,
             extra_base,
             channels,
             subscribers,
+            commands: self.commands,
+            inbox: Mutex::new(Vec::new()),
             clients: Mutex::new(Vec::new()),
             next_client: AtomicU64::new(1),
         }))
@@ -229,13 +276,12 @@ pub struct Hub {
     name: String,
     metadata: Map<String, Json>,
     buses: Vec<BusSlot>,
-    decoder: Option<Decoder>,
-    json: Vec<MessageJson>,
-    per_bus: usize,
     extra_base: usize,
     channels: Vec<Channel>,
     /// Subscribers per channel (by index), so nobody's channel costs nothing.
     subscribers: Vec<AtomicU32>,
+    commands: Vec<String>,
+    inbox: Mutex<Vec<(String, Map<String, Json>)>>,
     clients: Mutex<Vec<Client>>,
     next_client: AtomicU64,
 }
@@ -260,14 +306,11 @@ impl Hub {
         &self.channels
     }
 
-    /// The database, when there is one.
-    pub fn decoder(&self) -> Option<&Decoder> {
-        self.decoder.as_ref()
-    }
-
-    /// The buses' names.
-    pub fn bus_names(&self) -> Vec<&str> {
-        self.buses.iter().map(|b| b.name.as_str()).collect()
+    /// The buses: each one's name and database.
+    pub fn buses(&self) -> impl Iterator<Item = (&str, Option<&Decoder>)> {
+        self.buses
+            .iter()
+            .map(|b| (b.name.as_str(), b.database.as_ref().map(|d| d.decoder())))
     }
 
     /// Whether a client may send on bus `bus`.
@@ -432,13 +475,24 @@ impl Hub {
         if client.publishing.len() >= MAX_CLIENT_CHANNELS {
             return Err(format!("more than {MAX_CLIENT_CHANNELS} client channels"));
         }
+        if let Some(topic) = self.commands.iter().position(|t| *t == channel.topic) {
+            client
+                .publishing
+                .insert(channel.id, Target::Inbox { topic });
+            return Ok(());
+        }
         let index = self
             .channels
             .iter()
             .take(self.extra_base)
             .position(|c| c.topic == channel.topic)
             .ok_or_else(|| format!("{}: no such channel to send on", channel.topic))?;
-        let (bus, within) = (index / self.per_bus, index % self.per_bus);
+        let bus = self
+            .buses
+            .iter()
+            .rposition(|b| b.base <= index)
+            .ok_or("no bus")?;
+        let within = index - self.buses.get(bus).map_or(0, |b| b.base);
         if !self.can_send_on(bus) {
             return Err(format!("{}: its bus does not take frames", channel.topic));
         }
@@ -460,13 +514,14 @@ impl Hub {
         let object: Map<String, Json> = serde_json::from_slice(data)
             .map_err(|e| format!("a published message that is not a JSON object: {e}"))?;
         let (bus, frame) = match target {
+            Target::Inbox { topic } => return self.to_inbox(*topic, object),
             Target::Frames { bus } => (*bus, frame_from_json(&object)?),
             Target::Message {
                 bus,
                 message,
                 counter,
             } => {
-                let frame = self.encode(*message, &object, *counter)?;
+                let frame = self.encode(*bus, *message, &object, *counter)?;
                 *counter = counter.wrapping_add(1);
                 (*bus, frame)
             }
@@ -478,15 +533,44 @@ impl Hub {
             .map_err(|e| format!("sending {frame} on {}: {e}", slot.name))
     }
 
+    fn to_inbox(&self, topic: usize, object: Map<String, Json>) -> Result<(), String> {
+        let mut inbox = self
+            .inbox
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if inbox.len() >= MAX_INBOX {
+            return Err(format!("more than {MAX_INBOX} commands waiting: refused"));
+        }
+        let topic = self.commands.get(topic).cloned().unwrap_or_default();
+        inbox.push((topic, object));
+        Ok(())
+    }
+
+    /// The commands clients published since the last call, in order.
+    pub fn take_commands(&self) -> Vec<(String, Map<String, Json>)> {
+        std::mem::take(
+            &mut *self
+                .inbox
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+
     /// A message's frame from its signals' values (names as in the database, numbers or value
     /// names), its counter and checksum filled in as the database declares them.
     fn encode(
         &self,
+        bus: usize,
         index: usize,
         object: &Map<String, Json>,
         counter: u64,
     ) -> Result<Frame, String> {
-        let decoder = self.decoder.as_ref().ok_or("no database")?;
+        let decoder = self
+            .buses
+            .get(bus)
+            .and_then(|b| b.database.as_ref())
+            .map(|d| d.decoder())
+            .ok_or("no database")?;
         let (message, codec) = decoder.message_at(index).ok_or("no such message")?;
         let texts: Vec<(&str, String)> = object
             .iter()
@@ -572,12 +656,10 @@ impl Hub {
                 Ordering::Relaxed,
             );
         }
-        let base = bus * self.per_bus;
+        let base = slot.base;
         let time = received.timestamp.as_nanos();
-        let decoded = self
-            .decoder
-            .as_ref()
-            .and_then(|d| d.decode_into(frame, scratch));
+        let database = slot.database.as_deref();
+        let decoded = database.and_then(|d| d.decoder.decode_into(frame, scratch));
         let name = decoded.as_ref().map(|(_, m, _)| m.display_name());
         self.publish(base, time, || {
             frame_json(&slot.name, received.timestamp, frame, name)
@@ -587,10 +669,10 @@ impl Hub {
         let Some((index, message, result)) = decoded else {
             return;
         };
-        let Some(decoder) = self.decoder.as_ref() else {
+        let Some(database) = database else {
             return;
         };
-        if let Some(pdus) = decoder.contained(index, frame.data()) {
+        if let Some(pdus) = database.decoder.contained(index, frame.data()) {
             for pdu in pdus.flatten() {
                 let Some((pdu_message, codec, pdu_index)) = pdu.message else {
                     continue;
@@ -598,25 +680,26 @@ impl Hub {
                 scratch.clear();
                 scratch.resize(codec.signal_count(), None);
                 if codec.decode(pdu.pdu.data, scratch).is_ok() {
-                    self.publish_decoded(base, pdu_index, pdu_message, scratch, time);
+                    self.publish_decoded(database, base, pdu_index, pdu_message, scratch, time);
                 }
             }
             return;
         }
         if result.is_ok() {
-            self.publish_decoded(base, index, message, scratch, time);
+            self.publish_decoded(database, base, index, message, scratch, time);
         }
     }
 
     fn publish_decoded(
         &self,
+        database: &Database,
         base: usize,
         index: usize,
         message: &bywire_dbc::Message,
         values: &[Option<Decoded>],
         time: u64,
     ) {
-        let Some(json) = self.json.get(index) else {
+        let Some(json) = database.json.get(index) else {
             return;
         };
         self.publish(base + 2 + index, time, || {
@@ -654,7 +737,7 @@ impl Hub {
     /// messages since the last tick. `last` holds the previous counts between calls.
     pub fn tick(&self, now: Timestamp, seconds: f64, last: &mut Vec<(u64, u64)>) {
         last.resize(self.buses.len(), (0, 0));
-        for (bus, (slot, previous)) in self.buses.iter().zip(last.iter_mut()).enumerate() {
+        for (slot, previous) in self.buses.iter().zip(last.iter_mut()) {
             let c = &slot.counters;
             let (frames, bits) = (
                 c.frames.load(Ordering::Relaxed),
@@ -676,7 +759,7 @@ impl Hub {
                 "dropped": c.dropped.load(Ordering::Relaxed),
                 "closed": c.closed.load(Ordering::Relaxed),
             });
-            self.publish(bus * self.per_bus + 1, now.as_nanos(), || {
+            self.publish(slot.base + 1, now.as_nanos(), || {
                 stats.to_string().into_bytes()
             });
         }

@@ -11,7 +11,7 @@
 //! use bywire_web::{Access, HubBuilder, WebServer};
 //! let bus = bywire_bus::open("virtual:doc").unwrap();
 //! let (tx, rx) = bus.split();
-//! let hub = HubBuilder::new("doc").bus("doc", Some(tx), Some(500_000)).build().unwrap();
+//! let hub = HubBuilder::new("doc").bus("doc", Some(tx), Some(500_000), None).build().unwrap();
 //! let listener = std::net::TcpListener::bind("127.0.0.1:8080").unwrap();
 //! let server = WebServer::start(Arc::clone(&hub), listener, Access::default()).unwrap();
 //! let stop = std::sync::atomic::AtomicBool::new(false);
@@ -24,5 +24,5 @@ pub mod foxglove;
 pub mod hub;
 pub mod server;
 
-pub use hub::{Hub, HubBuilder, Outgoing, Session};
+pub use hub::{Database, Hub, HubBuilder, Outgoing, Session};
 pub use server::{Access, WebServer};

@@ -31,7 +31,7 @@ impl Running {
         let endpoint = open(&format!("virtual:{bus}")).unwrap();
         let (tx, rx) = endpoint.split();
         let hub = HubBuilder::new("test")
-            .bus(bus, Some(tx), Some(500_000))
+            .bus(bus, Some(tx), Some(500_000), None)
             .build()
             .unwrap();
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
@@ -126,7 +126,7 @@ fn the_page_its_database_and_bad_requests() {
     let (status, body) = get(server.address, "/api/database");
     assert_eq!(status, "HTTP/1.1 200 OK");
     let database: serde_json::Value = serde_json::from_str(&body).unwrap();
-    assert_eq!(database["buses"][0], "web-http");
+    assert_eq!(database["buses"][0]["name"], "web-http");
     assert_eq!(get(server.address, "/nothing").0, "HTTP/1.1 404 Not Found");
     assert_eq!(
         http(server.address, "POST / HTTP/1.1\r\nHost: x\r\n\r\n").0,
@@ -252,7 +252,7 @@ fn more_clients_than_the_limit_are_told_to_come_back() {
 #[test]
 fn a_full_queue_drops_and_counts() {
     let hub = HubBuilder::new("test")
-        .bus("queue", None, None)
+        .bus("queue", None, None, None)
         .build()
         .unwrap();
     let session = hub.connect(false).unwrap();

@@ -5,14 +5,16 @@ use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Result;
 use bywire_dbc::decoder::Decoder;
+use bywire_web::Database;
 
 use crate::support::busarg::{self, BusArg};
 use crate::support::interrupt::interrupt_flag;
-use crate::support::live::{Live, LiveConfig};
+use crate::support::live::{Live, LiveBus, LiveConfig};
 use crate::support::{access, dbc};
 
 #[derive(clap::Args)]
@@ -80,13 +82,22 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         .iter()
         .map(|b| busarg::parse(b))
         .collect::<Result<_>>()?;
-    let decoder = match &args.db {
-        Some(path) => Some(Decoder::new(dbc::load(path, false)?)),
+    let database = match &args.db {
+        Some(path) => Some(Arc::new(Database::new(Decoder::new(dbc::load(
+            path, false,
+        )?)))),
         None => None,
     };
+    let buses: Vec<LiveBus> = buses
+        .into_iter()
+        .map(|arg| LiveBus {
+            arg,
+            bitrate: args.bitrate,
+            database: database.clone(),
+        })
+        .collect();
     let live = Live::start(
         &buses,
-        decoder,
         LiveConfig {
             name: "bywire web",
             listen: args.listen,
@@ -95,8 +106,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                 origins: args.origins.clone(),
                 allow_send: args.allow_send,
             },
-            bitrate: args.bitrate,
         },
+        |hub| hub,
     )?;
     let address = live.address();
     writeln!(

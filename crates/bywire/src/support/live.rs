@@ -9,8 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
-use bywire_dbc::decoder::Decoder;
-use bywire_web::{Access, Hub, HubBuilder, WebServer};
+use bywire_web::{Access, Database, Hub, HubBuilder, WebServer};
 
 use crate::support::busarg::BusArg;
 
@@ -22,8 +21,16 @@ pub struct LiveConfig<'a> {
     pub listen: SocketAddr,
     /// Who may connect, and whether they may send.
     pub access: Access,
-    /// Each bus's bitrate (for the load), when known.
+}
+
+/// A bus to serve: its argument, its bitrate (for the load) and its database.
+pub struct LiveBus {
+    /// The bus argument (its name labels the channels).
+    pub arg: BusArg,
+    /// The bitrate, when known.
     pub bitrate: Option<u32>,
+    /// The database its frames are decoded with.
+    pub database: Option<Arc<Database>>,
 }
 
 /// A running hub and server; [`Live::stop`] ends both.
@@ -37,27 +44,25 @@ pub struct Live {
 impl Live {
     /// Open `buses`, decode with `decoder`, and serve.
     pub fn start(
-        buses: &[BusArg],
-        decoder: Option<Decoder>,
+        buses: &[LiveBus],
         config: LiveConfig<'_>,
+        extend: impl FnOnce(HubBuilder) -> HubBuilder,
     ) -> Result<Self> {
-        let opened = crate::support::busarg::open_all(buses)?;
+        let args: Vec<BusArg> = buses.iter().map(|b| b.arg.clone()).collect();
+        let opened = crate::support::busarg::open_all(&args)?;
         let listener = TcpListener::bind(config.listen)
             .with_context(|| format!("cannot listen on {}", config.listen))?;
         let mut builder = HubBuilder::new(config.name).metadata("program", "bywire");
         let mut receivers = Vec::with_capacity(buses.len());
-        for (mut bus, arg) in opened.into_iter().zip(buses) {
+        for (mut endpoint, bus) in opened.into_iter().zip(buses) {
             // What clients send shows in the trace as the bus's other traffic does.
-            let _ = bus.set_receive_own(config.access.allow_send);
-            let (tx, rx) = bus.split();
+            let _ = endpoint.set_receive_own(config.access.allow_send);
+            let (tx, rx) = endpoint.split();
             let tx = config.access.allow_send.then_some(tx);
-            builder = builder.bus(&arg.name, tx, config.bitrate);
+            builder = builder.bus(&bus.arg.name, tx, bus.bitrate, bus.database.clone());
             receivers.push(rx);
         }
-        if let Some(decoder) = decoder {
-            builder = builder.decoder(decoder);
-        }
-        let hub = builder.build().map_err(|e| anyhow!(e))?;
+        let hub = extend(builder).build().map_err(|e| anyhow!(e))?;
         let stop = Arc::new(AtomicBool::new(false));
         let mut threads = Vec::new();
         for (index, rx) in receivers.into_iter().enumerate() {
@@ -82,6 +87,11 @@ impl Live {
             stop,
             threads,
         })
+    }
+
+    /// The hub (for the caller's channels and commands).
+    pub fn hub(&self) -> &Hub {
+        &self.hub
     }
 
     /// Where the server listens.
