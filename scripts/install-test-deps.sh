@@ -85,13 +85,14 @@ if [ ! -d target/python-can-data ]; then
   rm -rf "$sdist"
 fi
 # The web page's tests: Debian's Chromium, driven by Playwright (which uses it, not a browser
-# of its own); Foxglove's WebSocket client in Node (`@foxglove/ws-protocol`, with `ws`).
+# of its own); Foxglove's WebSocket client in Node (`@foxglove/ws-protocol`, with `ws`) and its
+# message schemas (`@foxglove/schemas`), which the simulated tug's pose is validated against.
 if ! command -v chromium >/dev/null || ! command -v node >/dev/null; then
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq --no-install-recommends chromium nodejs npm >/dev/null
 fi
 python3 -m pip install -q --disable-pip-version-check playwright==1.49.0
-if [ ! -d target/node/node_modules/@foxglove/ws-protocol ]; then
+if [ ! -d target/node/node_modules/@foxglove/schemas ]; then
   mkdir -p target/node
-  npm install --silent --no-audit --no-fund --prefix target/node @foxglove/ws-protocol@0.8.0 ws@8.18.3 >/dev/null
+  npm install --silent --no-audit --no-fund --prefix target/node @foxglove/ws-protocol@0.8.0 @foxglove/schemas@2.1.0 ws@8.18.3 >/dev/null
 fi

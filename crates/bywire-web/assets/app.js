@@ -49,6 +49,7 @@ function onText(message) {
       $("send-pane").hidden = !state.capabilities.includes("clientPublish");
       break;
     case "advertise": {
+      if (message.channels.some((c) => c.topic === "/tug/state")) $("tug-pane").hidden = false;
       const subscriptions = [];
       for (const channel of message.channels) {
         state.channels.set(channel.id, channel);
@@ -75,9 +76,11 @@ function onBinary(buffer) {
   const slash = topic.lastIndexOf("/");
   const bus = topic.slice(1, slash);
   const leaf = topic.slice(slash + 1);
-  if (leaf === "frames" && channel.schemaName === "bywire.CanFrame") onFrame(time, message);
+  if (channel.schemaName === "foxglove.PosesInFrame" && topic === "/tug/route") state.route = message.poses;
+  else if (channel.schemaName === "bywire.TugState") { state.tug = message; state.tugDirty = true; }
+  else if (leaf === "frames" && channel.schemaName === "bywire.CanFrame") onFrame(time, message);
   else if (leaf === "stats" && channel.schemaName === "bywire.BusStats") state.stats.set(bus, message);
-  else onDecoded(time, bus, leaf, message);
+  else if (channel.schemaName !== "foxglove.PoseInFrame") onDecoded(time, bus, leaf, message);
 }
 
 function publish(topic, object) {
@@ -362,6 +365,62 @@ function stopPeriodic() {
   $("send-stop").disabled = true;
 }
 
+// ---- the simulated tug: its route, where it is, its state, the fault buttons --------------
+function drawTug() {
+  const tug = state.tug;
+  if (!tug || !state.tugDirty) return;
+  state.tugDirty = false;
+  const canvas = $("map");
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  const points = (state.route || []).map((p) => p.position).concat([{ x: tug.x, y: tug.y }]);
+  const xs = points.map((p) => p.x), ys = points.map((p) => p.y);
+  const [x0, x1, y0, y1] = [Math.min(...xs) - 5, Math.max(...xs) + 5, Math.min(...ys) - 5, Math.max(...ys) + 5];
+  const scale = Math.min(canvas.width / (x1 - x0), canvas.height / (y1 - y0));
+  const at = (p) => [(p.x - x0) * scale, canvas.height - (p.y - y0) * scale];
+  g.strokeStyle = "#4a5260";
+  g.lineWidth = 2;
+  g.beginPath();
+  (state.route || []).forEach((p, i) => { const [x, y] = at(p.position); i ? g.lineTo(x, y) : g.moveTo(x, y); });
+  g.stroke();
+  const [x, y] = at(tug);
+  const yaw = (tug.yaw_deg * Math.PI) / 180;
+  g.save();
+  g.translate(x, y);
+  g.rotate(-yaw);
+  g.fillStyle = "#ffb347";
+  g.beginPath();
+  g.moveTo(9, 0); g.lineTo(-6, 5); g.lineTo(-6, -5); g.closePath();
+  g.fill();
+  g.restore();
+  const rows = [
+    ["phase", tug.phase || "-"], ["speed", `${tug.speed_mps.toFixed(2)} m/s`],
+    ["wheels", tug.wheels_deg.map((w) => `${w.toFixed(1)}°`).join(" ")],
+    ["mode", tug.mode || "-"], ["watchdog", tug.watchdog || "-"], ["E-stop", tug.estop || "-"],
+    ["level", tug.level || "-"], ["redundancy", tug.redundancy || "-"],
+    ["faults", tug.faults.length ? tug.faults.join(", ") : "none"], ["battery", `${tug.soc_percent.toFixed(1)} %`],
+  ];
+  $("tug-state").innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td${k === "level" && v !== "nominal" && v !== "-" ? ' class="level-bad"' : ""}>${v}</td></tr>`).join("");
+  const buttons = $("tug-buttons");
+  if (buttons.querySelectorAll(".fault").length !== tug.buttons.length) {
+    buttons.querySelectorAll(".fault").forEach((b) => b.remove());
+    for (const b of tug.buttons) {
+      const button = document.createElement("button");
+      button.className = "fault";
+      button.dataset.fault = b.number;
+      button.textContent = `${b.number} ${b.fault}`;
+      buttons.appendChild(button);
+    }
+  }
+}
+
+$("tug-buttons").addEventListener("click", (e) => {
+  const b = e.target.closest("button");
+  if (!b) return;
+  if (b.dataset.fault) publish("/tug/command", { fault: Number(b.dataset.fault) });
+  else publish("/tug/command", { [b.dataset.command]: true });
+});
+
 function say(text, error) {
   const status = $("status");
   status.textContent = text;
@@ -380,6 +439,7 @@ $("send-stop").addEventListener("click", stopPeriodic);
 setInterval(() => {
   if (state.dirty && !state.paused) { drawTrace(); state.dirty = false; }
   drawBuses();
+  drawTug();
 }, 100);
 setInterval(() => { for (const p of state.panels) if (p.dirty) { drawPlot(p); p.dirty = false; } }, 250);
 

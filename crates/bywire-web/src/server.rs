@@ -82,6 +82,13 @@ impl WebServer {
     }
 }
 
+impl Drop for WebServer {
+    /// A server dropped without [`WebServer::stop`] still stops (without waiting).
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
 fn accept(listener: &TcpListener, hub: &Arc<Hub>, access: &Arc<Access>, stop: &Arc<AtomicBool>) {
     let active = Arc::new(AtomicUsize::new(0));
     let mut threads: Vec<JoinHandle<()>> = Vec::new();

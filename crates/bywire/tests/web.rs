@@ -330,3 +330,84 @@ fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
     let statuses = said["statuses"].to_string();
     assert!(statuses.contains("VelocityCmd"), "{statuses}");
 }
+
+/// `bywire sim --web`: Foxglove's own client receives the tug's pose and route, valid against
+/// Foxglove's own schemas (`@foxglove/schemas`, checked with python's jsonschema), and the
+/// page's E-stop (a message on `/tug/command`) stops the tug.
+#[test]
+fn the_simulated_tug_reaches_foxglove_and_takes_the_pages_estop() {
+    let scratch = Scratch::new("web-sim");
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args([
+            "sim",
+            "--web",
+            "127.0.0.1:0",
+            "--no-view",
+            "--max-seconds",
+            "300",
+        ])
+        .args(["--out", scratch.join("run").to_str().unwrap()])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(sim.stdout.take().unwrap()).lines();
+    let address = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| {
+            l.strip_prefix("the page on http://")
+                .map(|rest| rest.split('/').next().unwrap().to_string())
+        })
+        .expect("the sim says where its page is");
+    let client = Command::new("node")
+        .arg(format!("{}/foxglove_sim.js", common::oracles()))
+        .arg(format!("ws://{address}"))
+        .env("NODE_PATH", node_modules())
+        .output()
+        .unwrap();
+    Command::new("kill")
+        .args(["-INT", &sim.id().to_string()])
+        .status()
+        .unwrap();
+    // The rest of its output, then its end.
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    assert!(sim.wait().unwrap().success(), "{rest:?}");
+    assert!(
+        client.status.success(),
+        "{}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    let said = String::from_utf8_lossy(&client.stdout).into_owned();
+    let result: serde_json::Value = serde_json::from_str(said.trim()).unwrap();
+    assert_eq!(result["channels"]["/tug/pose"], "foxglove.PoseInFrame");
+    assert_eq!(result["channels"]["/tug/route"], "foxglove.PosesInFrame");
+    let states = result["states"].as_array().unwrap();
+    assert_ne!(states.last().unwrap()["estop"], "Normal", "{states:?}");
+    // Every pose and the route, against Foxglove's own schemas.
+    let file = scratch.join("received.json");
+    std::fs::write(&file, &said).unwrap();
+    let checked = Command::new("python3")
+        .args([
+            "-c",
+            "import json, sys, jsonschema\n\
+             r = json.load(open(sys.argv[1]))\n\
+             for pose in r['poses']:\n\
+             \x20   jsonschema.validate(pose, r['schemas']['PoseInFrame'])\n\
+             \x20   q = pose['pose']['orientation']\n\
+             \x20   assert abs(q['x']**2 + q['y']**2 + q['z']**2 + q['w']**2 - 1) < 1e-9, q\n\
+             jsonschema.validate(r['route'], r['schemas']['PosesInFrame'])\n\
+             assert len(r['route']['poses']) > 10\n\
+             times = [p['timestamp']['sec'] * 10**9 + p['timestamp']['nsec'] for p in r['poses']]\n\
+             assert times == sorted(times) and len(set(times)) == len(times), times\n\
+             print(len(r['poses']))",
+            file.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+}

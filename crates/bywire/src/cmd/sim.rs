@@ -55,6 +55,12 @@ pub struct Args {
     /// programs watch and inject traffic (loopback only).
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:29536")]
     serve: Option<std::net::SocketAddr>,
+    /// Serve the live page and the Foxglove WebSocket protocol while it runs (loopback only):
+    /// the four buses decoded, the tug on a map of its route with its mode, degradation level
+    /// and the live view's fault buttons; in Foxglove, the tug's pose (foxglove.PoseInFrame
+    /// on /tug/pose) and route (/tug/route) for the 3D panel.
+    #[arg(long, alias = "foxglove", value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8080")]
+    web: Option<std::net::SocketAddr>,
     /// With --serve: send socketcand's discovery beacon (naming the four buses) every 3 s, to
     /// 127.0.0.1:42000 or to ADDR:PORT, as socketcand does (python-can's detect_beacon reads it).
     #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:42000", requires = "serve")]
@@ -72,7 +78,7 @@ pub struct Args {
     /// Sweep: run these scenarios (comma-separated; built in or files) × --seeds × --payloads
     /// × --grades as fast as possible on --jobs threads, each into its own folder under --out,
     /// with sweep.csv summarising the runs.
-    #[arg(long, value_name = "SCENARIOS", value_delimiter = ',', conflicts_with_all = ["serve", "attach", "linger"])]
+    #[arg(long, value_name = "SCENARIOS", value_delimiter = ',', conflicts_with_all = ["serve", "attach", "linger", "web"])]
     sweep: Vec<String>,
     /// The sweep's seeds: A..B (inclusive) or one seed.
     #[arg(long, value_name = "A..B", requires = "sweep")]
@@ -152,6 +158,16 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             crate::support::busarg::open(spec).with_context(|| format!("--attach {attach}"))?;
         shared.attach(&mut tug, bus, endpoint);
     }
+    let logs_start = start_time(args);
+    if let Some(listen) = args.web {
+        let faults = scenario.events.iter().map(|(_, f, d)| (*f, *d)).collect();
+        let address = shared.web(&mut tug, listen, logs_start, faults)?;
+        writeln!(
+            out,
+            "the page on http://{address}/ (Foxglove: ws://{address})"
+        )?;
+        out.flush()?;
+    }
     if let Some(listen) = args.serve {
         let address = shared.serve(&mut tug, listen, args.beacon)?;
         writeln!(
@@ -162,7 +178,6 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     }
     let limit = Timestamp::from_nanos((args.max_seconds * 1e9) as u64);
     let start = Instant::now();
-    let logs_start = start_time(args);
     // In a terminal, in real time: the live view.
     let live = !args.fast
         && !args.no_view
@@ -201,6 +216,12 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     bywire_sim::output::write_run(&tug, &report, &args.out)?;
     if let Some(summary) = shared.summary() {
         writeln!(out, "socketcand: {summary}")?;
+    }
+    if let Some(lost) = shared.stop_web().filter(|lost| *lost > 0) {
+        writeln!(
+            out,
+            "web: clients lost {lost} messages by reading too slowly"
+        )?;
     }
     writeln!(out, "{}", summary(&report, &args.out))?;
     Ok(())

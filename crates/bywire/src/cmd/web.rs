@@ -94,6 +94,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             arg,
             bitrate: args.bitrate,
             database: database.clone(),
+            fed: false,
         })
         .collect();
     let live = Live::start(

@@ -31,11 +31,15 @@ pub struct LiveBus {
     pub bitrate: Option<u32>,
     /// The database its frames are decoded with.
     pub database: Option<Arc<Database>>,
+    /// The caller hands the hub this bus's frames itself ([`Hub::on_frame`], with times of its
+    /// own: the simulator's); the bus only carries what clients send.
+    pub fed: bool,
 }
 
 /// A running hub and server; [`Live::stop`] ends both.
 pub struct Live {
-    server: WebServer,
+    address: SocketAddr,
+    server: Option<WebServer>,
     hub: Arc<Hub>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
@@ -56,16 +60,17 @@ impl Live {
         let mut receivers = Vec::with_capacity(buses.len());
         for (mut endpoint, bus) in opened.into_iter().zip(buses) {
             // What clients send shows in the trace as the bus's other traffic does.
-            let _ = endpoint.set_receive_own(config.access.allow_send);
+            let _ = endpoint.set_receive_own(config.access.allow_send && !bus.fed);
             let (tx, rx) = endpoint.split();
             let tx = config.access.allow_send.then_some(tx);
             builder = builder.bus(&bus.arg.name, tx, bus.bitrate, bus.database.clone());
-            receivers.push(rx);
+            receivers.push((!bus.fed).then_some(rx));
         }
         let hub = extend(builder).build().map_err(|e| anyhow!(e))?;
         let stop = Arc::new(AtomicBool::new(false));
         let mut threads = Vec::new();
         for (index, rx) in receivers.into_iter().enumerate() {
+            let Some(rx) = rx else { continue };
             let (hub, stop) = (Arc::clone(&hub), Arc::clone(&stop));
             threads.push(
                 std::thread::Builder::new()
@@ -82,7 +87,8 @@ impl Live {
         let server = WebServer::start(Arc::clone(&hub), listener, config.access)
             .context("cannot start the web server")?;
         Ok(Live {
-            server,
+            address: server.address(),
+            server: Some(server),
             hub,
             stop,
             threads,
@@ -96,17 +102,27 @@ impl Live {
 
     /// Where the server listens.
     pub fn address(&self) -> SocketAddr {
-        self.server.address()
+        self.address
     }
 
     /// Stop serving and reading; what clients lost, in all.
-    pub fn stop(self) -> u64 {
+    pub fn stop(mut self) -> u64 {
         self.stop.store(true, Ordering::Relaxed);
-        self.server.stop();
-        for thread in self.threads {
+        if let Some(server) = self.server.take() {
+            server.stop();
+        }
+        for thread in std::mem::take(&mut self.threads) {
             let _ = thread.join();
         }
         self.hub.dropped()
+    }
+}
+
+impl Drop for Live {
+    /// Readers and the ticker end with the hub's owner even when it did not call
+    /// [`Live::stop`] (an error ended the run).
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
     }
 }
 

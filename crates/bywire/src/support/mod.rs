@@ -15,5 +15,6 @@ pub mod progress;
 pub mod ros2;
 pub mod signals;
 pub mod sim_serve;
+pub mod sim_web;
 pub mod vehicles;
 pub mod words;

@@ -1,7 +1,7 @@
 //! The simulated buses shared with other programs while `bywire sim` runs: `--serve` puts each
 //! through a socketcand server (for `bywire dump`, python-can and other socketcand clients),
 //! `--attach` carries one to another bus (a SocketCAN interface such as vcan0, for candump
-//! and the like). Each
+//! and the like), `--web` onto the live page and the Foxglove server. Each
 //! share is a port on the simulated bus linked to an endpoint; [`Shared::exchange`] carries
 //! frames between the two after every step.
 
@@ -14,7 +14,10 @@ use bywire_bus::socketcand::{self, Access, Config, Server};
 use bywire_bus::virtual_bus::VirtualBus;
 use bywire_bus::{Bus, BusError, BusRx, BusTx};
 use bywire_net::sim::NodeId;
+use bywire_sim::fault::Fault;
 use bywire_sim::tug::{Tug, TugBus};
+
+use crate::support::sim_web::SimWeb;
 
 /// One link: a port on a simulated bus and the endpoint its frames go to and come from.
 struct Link {
@@ -24,11 +27,12 @@ struct Link {
     rx: Box<dyn BusRx>,
 }
 
-/// The links of a run and the server, if it serves.
+/// The links of a run and the servers, if it serves.
 #[derive(Default)]
 pub struct Shared {
     links: Vec<Link>,
     server: Option<Server>,
+    web: Option<SimWeb>,
 }
 
 impl Shared {
@@ -92,6 +96,26 @@ impl Shared {
         Ok(address)
     }
 
+    /// Serve the page and the Foxglove WebSocket protocol on `listen` (loopback only: the page
+    /// sends frames and injects faults); `faults`: the scenario's, for the page's buttons.
+    pub fn web(
+        &mut self,
+        tug: &mut Tug,
+        listen: SocketAddr,
+        start: bywire_core::Timestamp,
+        faults: Vec<(Fault, Option<Duration>)>,
+    ) -> Result<SocketAddr> {
+        if !listen.ip().is_loopback() {
+            return Err(anyhow!(
+                "--web {listen}: not a loopback address (the page sends frames and injects faults; use `bywire web` with --allow-remote and a token to reach other hosts)"
+            ));
+        }
+        let web = SimWeb::start(tug, listen, start, faults).context("--web")?;
+        let address = web.address();
+        self.web = Some(web);
+        Ok(address)
+    }
+
     /// Carry frames both ways: what the simulated buses carried out to the endpoints, what the
     /// endpoints received onto the simulated buses. Bounded by what arrived since the last call.
     /// An error when the server stopped serving (the run must not go on as if it served).
@@ -114,11 +138,19 @@ impl Shared {
                 tug.send(link.bus, link.port, received.frame);
             }
         }
+        if let Some(web) = &mut self.web {
+            web.step(tug);
+        }
         Ok(())
     }
 
-    /// The server's counts, for the end of the run.
+    /// The socketcand server's counts, for the end of the run.
     pub fn summary(&self) -> Option<String> {
         self.server.as_ref().map(|s| s.stats().summary())
+    }
+
+    /// Stop the page's server: what its clients lost by reading too slowly.
+    pub fn stop_web(&mut self) -> Option<u64> {
+        self.web.take().map(SimWeb::stop)
     }
 }
