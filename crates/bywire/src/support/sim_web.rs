@@ -149,7 +149,7 @@ impl SimWeb {
                 // On the simulated bus, and in the trace as the bus's other frames.
                 hub.on_frame(
                     index,
-                    &received(sent.frame.clone(), at(tug.now())),
+                    &received(sent.frame, at(tug.now())),
                     &mut self.scratch,
                 );
                 tug.send(port.bus, port.port, sent.frame);
