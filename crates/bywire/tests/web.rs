@@ -51,7 +51,7 @@ impl Web {
             .read_line(&mut line)
             .unwrap();
         let address = line
-            .strip_prefix("serving http://")
+            .strip_prefix("the page on http://")
             .and_then(|rest| rest.split('/').next())
             .unwrap_or_else(|| panic!("no address in {line:?}"))
             .to_string();
@@ -410,4 +410,158 @@ fn the_simulated_tug_reaches_foxglove_and_takes_the_pages_estop() {
         "{}",
         String::from_utf8_lossy(&checked.stderr)
     );
+}
+
+/// Start Foxglove's client (`foxglove_client.js`) on `address` for `bus` and `message`; its
+/// output lines, the first being "ready".
+fn foxglove_client(
+    address: &str,
+    bus: &str,
+    message: &str,
+    raw: usize,
+) -> (Child, std::io::Lines<BufReader<std::process::ChildStdout>>) {
+    let mut client = Command::new("node")
+        .arg(format!("{}/foxglove_client.js", common::oracles()))
+        .args([
+            &format!("ws://{address}"),
+            bus,
+            message,
+            &raw.to_string(),
+            "1",
+        ])
+        .env("NODE_PATH", node_modules())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(client.stdout.take().unwrap()).lines();
+    assert_eq!(lines.next().unwrap().unwrap(), "ready");
+    (client, lines)
+}
+
+/// The address a `bywire` command announces its page on, from its output.
+fn announced(lines: &mut impl Iterator<Item = std::io::Result<String>>) -> String {
+    lines
+        .map_while(Result::ok)
+        .find_map(|l| {
+            l.strip_prefix("the page on http://")
+                .map(|rest| rest.split('/').next().unwrap().to_string())
+        })
+        .expect("the page's address")
+}
+
+/// `bywire record --foxglove`: what it records, Foxglove's client sees decoded; it sends
+/// nothing (a recorder only listens).
+#[test]
+fn record_shows_what_it_records_to_foxglove_and_sends_nothing() {
+    if !inside_lonet("record_shows_what_it_records_to_foxglove_and_sends_nothing") {
+        return;
+    }
+    let bus = "udp:239.74.163.2:43622";
+    let scratch = Scratch::new("web-record");
+    let mut record = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["record", &format!("tug={bus}"), "--quiet", "--dbc", &dbc()])
+        .args(["--out", scratch.join("logs").to_str().unwrap()])
+        .args(["--foxglove", "127.0.0.1:0"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut record_out = BufReader::new(record.stdout.take().unwrap()).lines();
+    let address = announced(&mut record_out);
+    let (client, mut lines) = foxglove_client(&address, "tug", "VehicleToAds_State", 2);
+    let send = |args: &[&str]| {
+        let (code, _, err) = common::bywire(&[&["send"], args].concat(), "");
+        assert_eq!(code, 0, "{err}");
+    };
+    send(&[
+        "--dbc",
+        &dbc(),
+        bus,
+        "VehicleToAds_State",
+        "VelocityActual=1.25",
+    ]);
+    send(&[bus, "1ABCDEF0#0102"]);
+    let said: serde_json::Value =
+        serde_json::from_str(&lines.next().expect("the client's result").unwrap()).unwrap();
+    assert!(client.wait_with_output().unwrap().status.success());
+    Command::new("kill")
+        .args(["-INT", &record.id().to_string()])
+        .status()
+        .unwrap();
+    let files: Vec<String> = record_out.map_while(Result::ok).collect();
+    assert!(record.wait().unwrap().success(), "{files:?}");
+    assert_eq!(said["decoded"][0]["message"]["VelocityActual"], 1.25);
+    let ids: Vec<u64> = said["raw"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["message"]["id"].as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        ids,
+        [0x101, 0x1ABC_DEF0],
+        "nothing sent by the client: {said}"
+    );
+    assert_eq!(said["serverInfo"]["capabilities"], serde_json::json!([]));
+    assert!(
+        said["statuses"].to_string().contains("--allow-send"),
+        "{said}"
+    );
+    assert!(files.iter().any(|f| f.contains(" 2 frames")), "{files:?}");
+}
+
+/// `bywire serve --foxglove`: socketcand clients and Foxglove's client on one bus; what the
+/// Foxglove client publishes goes on the bus.
+#[test]
+fn serve_speaks_socketcand_and_foxglove_on_one_bus() {
+    let mut serve = Command::new(env!("CARGO_BIN_EXE_bywire"))
+        .args(["serve", "virtual:web-serve", "--listen", "127.0.0.1:0"])
+        .args(["--foxglove", "127.0.0.1:0", "--db", &dbc(), "--allow-send"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(serve.stdout.take().unwrap()).lines();
+    let socketcand = out
+        .next()
+        .unwrap()
+        .unwrap()
+        .rsplit(" on ")
+        .next()
+        .unwrap()
+        .trim_end_matches(" (socketcand)")
+        .to_string();
+    let address = announced(&mut out);
+    let (client, mut lines) =
+        foxglove_client(&address, "virtual:web-serve", "VehicleToAds_State", 1);
+    let bus = format!("socketcand:{socketcand}/web-serve");
+    let (code, _, err) = common::bywire(
+        &[
+            "send",
+            "--dbc",
+            &dbc(),
+            &bus,
+            "VehicleToAds_State",
+            "Gear=Reverse",
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let said: serde_json::Value =
+        serde_json::from_str(&lines.next().expect("the client's result").unwrap()).unwrap();
+    assert!(client.wait_with_output().unwrap().status.success());
+    Command::new("kill")
+        .args(["-INT", &serve.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(serve.wait().unwrap().success());
+    assert_eq!(said["decoded"][0]["message"]["Gear_choice"], "Reverse");
+    let frames: Vec<String> = said["raw"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| format!("{:03X}", r["message"]["id"].as_u64().unwrap()))
+        .collect();
+    // Its own frames, as the bus carried them: the raw one and the encoded message.
+    assert_eq!(frames, ["101", "123", "100"], "{said}");
 }

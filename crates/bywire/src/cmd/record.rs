@@ -5,6 +5,7 @@ use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -17,10 +18,12 @@ use bywire_dbc::decoder::Decoder;
 use bywire_log::format::Format;
 use bywire_log::recorder::{Config, Layout, Recorder, Rotation, Window};
 use bywire_log::LogRecord;
+use bywire_web::Database;
 use serde_json::json;
 
 use crate::support::busarg::{self, BusArg, Readers};
 use crate::support::interrupt::interrupt_flag;
+use crate::support::live::{Live, LiveBus, LiveConfig};
 use crate::support::logs::CompressionArg;
 use crate::support::numbers;
 
@@ -111,6 +114,11 @@ pub struct Args {
     /// No status line.
     #[arg(long)]
     quiet: bool,
+    /// While recording, serve the page and the Foxglove WebSocket protocol here (loopback
+    /// only): every recorded frame, decoded with --dbc. Nothing is sent: the recorder only
+    /// listens.
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8080")]
+    foxglove: Option<std::net::SocketAddr>,
 }
 
 /// What starts a capture (or is noted).
@@ -381,6 +389,10 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         .iter()
         .any(|t| matches!(t, Trigger::Key))
         .then(key_presses);
+    let live = match args.foxglove {
+        Some(listen) => Some(serve_live(listen, &buses, decoder.as_ref(), out)?),
+        None => None,
+    };
     let readers = Readers::start(opened);
     let result = record(
         args,
@@ -390,7 +402,11 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         &triggers,
         decoder.as_ref(),
         &mut recorder,
+        live.as_ref(),
     );
+    if let Some(live) = live {
+        live.stop();
+    }
     let dropped: Vec<u64> = readers
         .dropped
         .iter()
@@ -422,8 +438,42 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     result
 }
 
+/// The page and Foxglove server of `--foxglove`: fed the recorded frames.
+fn serve_live(
+    listen: std::net::SocketAddr,
+    buses: &[BusArg],
+    decoder: Option<&Decoder>,
+    out: &mut impl Write,
+) -> Result<Live> {
+    if !listen.ip().is_loopback() {
+        bail!("--foxglove {listen}: not a loopback address (use `bywire web` with --allow-remote and a token to reach other hosts)");
+    }
+    let database = decoder.map(|d| Arc::new(Database::new(d.clone())));
+    let fed: Vec<LiveBus> = buses
+        .iter()
+        .map(|arg| LiveBus {
+            arg: arg.clone(),
+            bitrate: None,
+            database: database.clone(),
+            fed: true,
+        })
+        .collect();
+    let live = Live::start(
+        &fed,
+        LiveConfig {
+            name: "bywire record",
+            listen,
+            access: bywire_web::Access::default(),
+        },
+        |hub| hub,
+    )?;
+    crate::support::live::announce(out, live.address())?;
+    Ok(live)
+}
+
 /// The recording loop: frames in, triggers checked, time passed to the recorder, the status
 /// line. Ends at Ctrl-C, at --duration, or when every bus is lost.
+#[allow(clippy::too_many_arguments)]
 fn record(
     args: &Args,
     buses: &[BusArg],
@@ -432,8 +482,10 @@ fn record(
     triggers: &[Trigger],
     decoder: Option<&Decoder>,
     recorder: &mut Recorder,
+    live: Option<&Live>,
 ) -> Result<()> {
     let stop = interrupt_flag();
+    let mut scratch = Vec::new();
     let began = Instant::now();
     let end = args.duration.map(Duration::from_secs_f64);
     let mut status = Status::new(buses.len(), !args.quiet);
@@ -472,6 +524,9 @@ fn record(
                     }
                     // Error frames are events: each one is a trigger of its own.
                     *holding = holds && matches!(trigger, Trigger::Signal(_));
+                }
+                if let Some(live) = live {
+                    live.hub().on_frame(index, &received, &mut scratch);
                 }
                 recorder.record(LogRecord {
                     timestamp: received.timestamp,

@@ -12,6 +12,7 @@ use anyhow::{Context, Result};
 use bywire_bus::socketcand::{self, Limits, Server};
 
 use crate::support::interrupt::interrupt_flag;
+use crate::support::live::{self, Live, LiveBus, LiveConfig};
 use crate::support::{access, busarg, numbers};
 
 #[derive(clap::Args)]
@@ -75,6 +76,19 @@ pub struct Args {
     /// Seconds a connection may take to open a bus before it is closed.
     #[arg(long, value_name = "SECONDS", default_value = "10", value_parser = numbers::positive_seconds)]
     handshake_timeout: f64,
+    /// Also serve the page and the Foxglove WebSocket protocol here (the bus's frames, decoded
+    /// with --db; the same token rules).
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8080")]
+    foxglove: Option<SocketAddr>,
+    /// With --foxglove: decode with this database (DBC, KCD, SYM, ARXML, JSON).
+    #[arg(long, alias = "dbc", value_name = "FILE", requires = "foxglove")]
+    db: Option<PathBuf>,
+    /// With --foxglove: let its clients send frames (socketcand clients always may).
+    #[arg(long, requires = "foxglove")]
+    allow_send: bool,
+    /// With --foxglove: pages of this origin may connect without the token.
+    #[arg(long = "allow-origin", value_name = "ORIGIN", requires = "foxglove")]
+    origins: Vec<String>,
     /// Seconds a client may accept no data before it is closed.
     #[arg(long, value_name = "SECONDS", default_value = "10", value_parser = numbers::positive_seconds)]
     write_timeout: f64,
@@ -103,6 +117,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         token.as_deref(),
         "socketcand has no authentication",
     )?;
+    if let Some(listen) = args.foxglove {
+        access::check_listen(
+            "--foxglove",
+            listen,
+            args.allow_remote,
+            token.as_deref(),
+            "the page shows the bus",
+        )?;
+    }
     let spec = busarg::full_spec(&args.bus);
     // Open once now, so a bad spec fails before anyone connects; the endpoint keeps an
     // in-process bus alive between clients.
@@ -116,7 +139,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     let config = socketcand::Config {
         access: socketcand::Access {
             names: args.names.clone(),
-            token,
+            token: token.clone(),
         },
         limits: args.limits(),
     };
@@ -147,9 +170,38 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             .start_beacon(xml, to)
             .context("cannot send the beacon")?;
     }
+    let live = match args.foxglove {
+        Some(listen) => {
+            let database = live::database(args.db.as_deref())?;
+            let live = Live::start(
+                &[LiveBus {
+                    arg: busarg::parse(&args.bus)?,
+                    bitrate: None,
+                    database,
+                    fed: false,
+                }],
+                LiveConfig {
+                    name: "bywire serve",
+                    listen,
+                    access: bywire_web::Access {
+                        token: token.clone(),
+                        origins: args.origins.clone(),
+                        allow_send: args.allow_send,
+                    },
+                },
+                |hub| hub,
+            )?;
+            live::announce(out, live.address())?;
+            Some(live)
+        }
+        None => None,
+    };
     let stop = interrupt_flag();
     while !stop.load(Ordering::Relaxed) && server.is_running() {
         std::thread::sleep(Duration::from_millis(50));
+    }
+    if let Some(live) = live {
+        live.stop();
     }
     let ended = server.stop();
     drop(keep);

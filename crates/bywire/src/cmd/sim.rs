@@ -162,11 +162,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
     if let Some(listen) = args.web {
         let faults = scenario.events.iter().map(|(_, f, d)| (*f, *d)).collect();
         let address = shared.web(&mut tug, listen, logs_start, faults)?;
-        writeln!(
-            out,
-            "the page on http://{address}/ (Foxglove: ws://{address})"
-        )?;
-        out.flush()?;
+        crate::support::live::announce(out, address)?;
     }
     if let Some(listen) = args.serve {
         let address = shared.serve(&mut tug, listen, args.beacon)?;

@@ -5,17 +5,14 @@ use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Result;
-use bywire_dbc::decoder::Decoder;
-use bywire_web::Database;
 
+use crate::support::access;
 use crate::support::busarg::{self, BusArg};
 use crate::support::interrupt::interrupt_flag;
-use crate::support::live::{Live, LiveBus, LiveConfig};
-use crate::support::{access, dbc};
+use crate::support::live::{self, Live, LiveBus, LiveConfig};
 
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
@@ -82,12 +79,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         .iter()
         .map(|b| busarg::parse(b))
         .collect::<Result<_>>()?;
-    let database = match &args.db {
-        Some(path) => Some(Arc::new(Database::new(Decoder::new(dbc::load(
-            path, false,
-        )?)))),
-        None => None,
-    };
+    let database = live::database(args.db.as_deref())?;
     let buses: Vec<LiveBus> = buses
         .into_iter()
         .map(|arg| LiveBus {
@@ -110,12 +102,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         },
         |hub| hub,
     )?;
-    let address = live.address();
-    writeln!(
-        out,
-        "serving http://{address}/ (Foxglove: ws://{address}); Ctrl-C stops"
-    )?;
-    out.flush()?;
+    live::announce(out, live.address())?;
     let stop = interrupt_flag();
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));

@@ -52,19 +52,37 @@ impl Live {
         config: LiveConfig<'_>,
         extend: impl FnOnce(HubBuilder) -> HubBuilder,
     ) -> Result<Self> {
-        let args: Vec<BusArg> = buses.iter().map(|b| b.arg.clone()).collect();
-        let opened = crate::support::busarg::open_all(&args)?;
+        // A fed bus is opened only to take what clients send.
+        let opening: Vec<BusArg> = buses
+            .iter()
+            .filter(|b| !b.fed || config.access.allow_send)
+            .map(|b| b.arg.clone())
+            .collect();
+        let mut opened = crate::support::busarg::open_all(&opening)?.into_iter();
         let listener = TcpListener::bind(config.listen)
             .with_context(|| format!("cannot listen on {}", config.listen))?;
         let mut builder = HubBuilder::new(config.name).metadata("program", "bywire");
         let mut receivers = Vec::with_capacity(buses.len());
-        for (mut endpoint, bus) in opened.into_iter().zip(buses) {
-            // What clients send shows in the trace as the bus's other traffic does.
-            let _ = endpoint.set_receive_own(config.access.allow_send && !bus.fed);
-            let (tx, rx) = endpoint.split();
-            let tx = config.access.allow_send.then_some(tx);
+        for bus in buses {
+            let endpoint = if !bus.fed || config.access.allow_send {
+                opened.next()
+            } else {
+                None
+            };
+            let (tx, rx) = match endpoint {
+                Some(mut endpoint) => {
+                    // What clients send shows in the trace as the bus's other traffic does.
+                    let _ = endpoint.set_receive_own(config.access.allow_send && !bus.fed);
+                    let (tx, rx) = endpoint.split();
+                    (
+                        config.access.allow_send.then_some(tx),
+                        (!bus.fed).then_some(rx),
+                    )
+                }
+                None => (None, None),
+            };
             builder = builder.bus(&bus.arg.name, tx, bus.bitrate, bus.database.clone());
-            receivers.push((!bus.fed).then_some(rx));
+            receivers.push(rx);
         }
         let hub = extend(builder).build().map_err(|e| anyhow!(e))?;
         let stop = Arc::new(AtomicBool::new(false));
@@ -124,6 +142,27 @@ impl Drop for Live {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
     }
+}
+
+/// The database at `path` (any format), ready for the hub.
+pub fn database(path: Option<&std::path::Path>) -> Result<Option<Arc<Database>>> {
+    path.map(|path| {
+        let db = crate::support::dbc::load(path, false)?;
+        Ok(Arc::new(Database::new(bywire_dbc::decoder::Decoder::new(
+            db,
+        ))))
+    })
+    .transpose()
+}
+
+/// Say where the page and the Foxglove server are.
+pub fn announce(out: &mut impl std::io::Write, address: SocketAddr) -> Result<()> {
+    writeln!(
+        out,
+        "the page on http://{address}/ (Foxglove: ws://{address})"
+    )?;
+    out.flush()?;
+    Ok(())
 }
 
 /// The statistics once a second, until `stop`.
