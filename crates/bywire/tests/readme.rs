@@ -85,7 +85,13 @@ const VM_SERVERS: [&str; 8] = [
 ];
 
 /// Commands on this machine that run until stopped.
-const SERVERS: [&str; 3] = ["bywire serve ", "bywire slcan-adapter ", "bywire dump udp:"];
+const SERVERS: [&str; 5] = [
+    "bywire serve ",
+    "bywire slcan-adapter ",
+    "bywire dump udp:",
+    "bywire web ",
+    "bywire sim --web",
+];
 
 /// What some commands must print (stdout and stderr together), beyond ending well.
 const SAYS: [(&str, &str); 6] = [
