@@ -130,7 +130,7 @@ function onDecoded(time, bus, name, values) {
   }
   for (const panel of state.panels) {
     for (const series of panel.series) {
-      if (series.bus === bus && series.message === name && series.signal in values) {
+      if (series.log === null && series.bus === bus && series.message === name && series.signal in values) {
         const v = values[series.signal];
         series.x.push(time);
         series.y.push(typeof v === "number" ? v : null);
@@ -243,7 +243,14 @@ function selectPanel(panel) {
 function plotSignal(bus, message, signal, unit) {
   const panel = state.current || addPanel();
   if (panel.series.some((s) => s.bus === bus && s.message === message && s.signal === signal)) return;
-  panel.series.push({ bus, message, signal, unit, x: [], y: [] });
+  const series = { bus, message, signal, unit, x: [], y: [], log: null };
+  panel.series.push(series);
+  if (player.log !== null && player.summary) {
+    // A log's bus: the first of its buses the database's message is on (a log names its own).
+    series.log = player.log;
+    series.bus = Object.keys(player.summary.buses).includes(bus) ? bus : Object.keys(player.summary.buses)[0];
+    plotFromLog(panel, series, player.summary.start, player.summary.end);
+  }
   panel.element.querySelector(".title").textContent = panel.series.map((s) => `${s.message}.${s.signal}`).join(", ");
   if (panel.plot) { panel.plot.destroy(); panel.plot = null; }
   panel.dirty = true;
@@ -262,7 +269,12 @@ function drawPlot(panel) {
       series: [{}, ...panel.series.map((s, i) => ({
         label: `${s.message}.${s.signal}${s.unit ? ` [${s.unit}]` : ""}`, stroke: COLOURS[i % COLOURS.length], spanGaps: true, width: 1.5,
       }))],
-      hooks: { setSelect: [() => { panel.following = false; }] },
+      hooks: { setSelect: [(u) => {
+        panel.following = false;
+        // A log's series: the span chosen, read again at full detail.
+        const from = u.posToVal(u.select.left, "x"), to = u.posToVal(u.select.left + u.select.width, "x");
+        for (const s of panel.series) if (s.log !== null && u.select.width > 0) plotFromLog(panel, s, from, to);
+      }] },
       cursor: { drag: { x: true, y: false } },
     }, data, chart);
     panel.plot.over.addEventListener("dblclick", () => { panel.following = true; panel.dirty = true; });
@@ -281,10 +293,11 @@ function busDatabase(name) {
 function buildTree() {
   const tree = $("tree");
   const buses = state.database.buses;
+  const groups = state.database.logs ? [...buses, { name: "logs", messages: state.database.logs.messages }] : buses;
   tree.innerHTML = "";
-  for (const bus of buses) {
+  for (const bus of groups) {
     let parent = tree;
-    if (buses.length > 1) {
+    if (groups.length > 1) {
       const group = document.createElement("details");
       group.open = true;
       group.innerHTML = `<summary>${bus.name}</summary>`;
@@ -427,6 +440,137 @@ function say(text, error) {
   status.classList.toggle("error", !!error);
 }
 
+// ---- logs: a player fed by the server's frames, plots of a whole log, export ---------------
+const api = (path, params) => {
+  const query = new URLSearchParams(params);
+  if (token) query.set("token", token);
+  return fetch(`${path}?${query}`, { headers: { "X-Bywire": "1" } }).then((r) => {
+    if (!r.ok) return r.text().then((t) => { throw new Error(t.trim()); });
+    return r;
+  });
+};
+const player = { log: null, summary: null, at: 0, playing: false, buffer: [], next: null, fetching: false };
+
+function feed(f) {
+  const time = f.timestamp.sec + f.timestamp.nsec / 1e9;
+  onFrame(time, f);
+  if (f.signals) onDecoded(time, f.bus, f.name, f.signals);
+  player.at = time;
+  $("log-at").value = (time - player.summary.start).toFixed(3);
+}
+
+// The frames after `player.next` into the buffer (the server reads on from where it stopped).
+function refill() {
+  if (player.fetching || player.next === null) return Promise.resolve();
+  player.fetching = true;
+  const from = typeof player.next === "string" ? { from_ns: player.next } : { from: player.next };
+  return api("/api/logs/frames", { log: player.log, ...from, count: 2000 })
+    .then((r) => r.json())
+    .then((answer) => { player.buffer.push(...answer.frames); player.next = answer.next_ns; })
+    .catch((e) => say(e.message, true))
+    .finally(() => { player.fetching = false; });
+}
+
+function jump(at) {
+  player.buffer = [];
+  player.next = at;
+  player.at = at;
+  return refill();
+}
+
+let lastTick = performance.now();
+setInterval(() => {
+  const now = performance.now();
+  const elapsed = (now - lastTick) / 1000;
+  lastTick = now;
+  if (!player.playing || player.log === null) return;
+  const until = player.at + elapsed * Number($("log-speed").value);
+  // Bounded by the buffer.
+  while (player.buffer.length) {
+    const f = player.buffer[0];
+    if (f.timestamp.sec + f.timestamp.nsec / 1e9 > until) break;
+    feed(player.buffer.shift());
+  }
+  player.at = Math.max(player.at, until);
+  if (player.buffer.length < 500) refill();
+  if (!player.buffer.length && player.next === null) { player.playing = false; $("log-play").textContent = "play"; say("the end of the log"); }
+}, 50);
+
+function chooseLog(value) {
+  player.playing = false;
+  $("log-play").textContent = "play";
+  if (value === "") { player.log = null; $("log-summary").textContent = ""; return; }
+  player.log = Number(value);
+  $("log-summary").textContent = "reading…";
+  api("/api/logs/summary", { log: player.log }).then((r) => r.json()).then((summary) => {
+    player.summary = summary;
+    const buses = Object.entries(summary.buses).map(([b, n]) => `${b} (${n})`).join(", ");
+    $("log-summary").textContent = `${summary.format}, ${summary.frames} frames, ${(summary.end - summary.start).toFixed(1)} s; ${buses}`;
+    player.buffer = [];
+    player.next = summary.start_ns;
+    player.at = summary.start;
+    refill();
+  }).catch((e) => say(e.message, true));
+}
+
+/// A signal over the whole log (or the span shown), decimated by the server.
+function plotFromLog(panel, series, from, to) {
+  const width = panel.element.querySelector(".chart").clientWidth || 800;
+  return api("/api/logs/series", {
+    log: series.log, bus: series.bus, message: series.message, signal: series.signal,
+    from, to, points: Math.max(200, Math.round(width * 2)),
+  }).then((r) => r.json()).then((answer) => {
+    series.x = answer.x;
+    series.y = answer.y;
+    series.samples = answer.samples;
+    panel.dirty = true;
+  }).catch((e) => say(e.message, true));
+}
+
+function setupLogs() {
+  return api("/api/logs", {}).then((r) => r.json()).then((answer) => {
+    if (!answer.logs.length) return;
+    $("logs-pane").hidden = false;
+    for (const log of answer.logs) {
+      const option = document.createElement("option");
+      option.value = log.id;
+      option.textContent = log.name;
+      $("log-select").appendChild(option);
+    }
+  });
+}
+
+$("log-select").addEventListener("change", (e) => chooseLog(e.target.value));
+$("log-play").addEventListener("click", () => {
+  if (player.log === null) return;
+  player.playing = !player.playing;
+  $("log-play").textContent = player.playing ? "pause" : "play";
+});
+$("log-step").addEventListener("click", () => {
+  if (player.log === null) return;
+  player.playing = false;
+  $("log-play").textContent = "play";
+  (player.buffer.length ? Promise.resolve() : refill()).then(() => { if (player.buffer.length) feed(player.buffer.shift()); });
+});
+$("log-jump").addEventListener("click", () => {
+  if (player.summary) jump(player.summary.start + Number($("log-at").value || 0));
+});
+$("log-export").addEventListener("click", () => {
+  if (!player.summary) return;
+  const shown = state.current && state.current.plot ? state.current.plot.scales.x : null;
+  const zoomed = shown && shown.min != null && !state.current.following;
+  const [from, to] = zoomed ? [shown.min, shown.max] : [player.summary.start, player.summary.end];
+  const span = zoomed ? { from, to } : { from_ns: player.summary.start_ns, to_ns: player.summary.end_ns };
+  const format = $("log-format").value;
+  api("/api/logs/export", { log: player.log, ...span, format }).then((r) => r.blob()).then((blob) => {
+    const link = document.createElement("a");
+    link.href = URL.createObjectURL(blob);
+    link.download = `${$("log-select").selectedOptions[0].textContent.replace(/\.[^.]*$/, "")}-${from.toFixed(3)}-${to.toFixed(3)}.${format === "candump" ? "log" : format}`;
+    link.click();
+    say(`exported ${blob.size} bytes`);
+  }).catch((e) => say(e.message, true));
+});
+
 // ---- start ---------------------------------------------------------------------------------
 $("pause").addEventListener("click", () => { state.paused = !state.paused; $("pause").classList.toggle("on", state.paused); });
 $("mode").addEventListener("click", () => { state.fixed = !state.fixed; $("mode").textContent = state.fixed ? "fixed" : "scrolling"; state.dirty = true; });
@@ -447,8 +591,10 @@ setInterval(() => { for (const p of state.panels) if (p.dirty) { drawPlot(p); p.
 window.bywire = {
   state,
   rows: () => [...document.querySelectorAll("#trace tbody tr")].map((tr) => [...tr.children].map((td) => td.textContent)),
-  series: (panel) => state.panels[panel].series.map((s) => ({ signal: s.signal, x: s.x.slice(), y: s.y.slice() })),
+  series: (panel) => state.panels[panel].series.map((s) => ({ signal: s.signal, x: s.x.slice(), y: s.y.slice(), samples: s.samples })),
+  player,
+  chooseLog,
   plotSignal,
 };
 
-fetch(withToken("/api/database")).then((r) => r.json()).then((db) => { state.database = db; buildTree(); connect(); });
+fetch(withToken("/api/database")).then((r) => r.json()).then((db) => { state.database = db; buildTree(); connect(); setupLogs(); });

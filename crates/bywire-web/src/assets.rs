@@ -5,6 +5,7 @@ use serde_json::{json, Value as Json};
 use bywire_dbc::decoder::Decoder;
 
 use crate::hub::Hub;
+use crate::logs::Logs;
 
 const INDEX: &str = include_str!("../assets/index.html");
 const APP_JS: &str = include_str!("../assets/app.js");
@@ -30,12 +31,16 @@ pub fn asset(path: &str) -> Option<(&'static str, &'static [u8])> {
 /// The buses, each with its database's messages and signals (each signal by the name its
 /// decoded channel gives it, with unit, range and value names), for the page's tree and its
 /// transmit panel.
-pub fn database_json(hub: &Hub) -> Json {
+pub fn database_json(hub: &Hub, logs: &Logs) -> Json {
     let buses: Vec<Json> = hub
         .buses()
         .map(|(name, decoder)| json!({"name": name, "messages": decoder.map_or_else(Vec::new, messages_json)}))
         .collect();
-    json!({ "buses": buses })
+    let logs = (!logs.is_empty())
+        .then(|| logs.database())
+        .flatten()
+        .map(|d| json!({"messages": messages_json(d.decoder())}));
+    json!({ "buses": buses, "logs": logs })
 }
 
 fn messages_json(decoder: &Decoder) -> Vec<Json> {

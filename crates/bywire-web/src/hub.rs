@@ -89,6 +89,16 @@ impl Database {
     fn messages(&self) -> usize {
         self.json.len()
     }
+
+    /// Message `index`'s decoded `values` (in the decoder's numbering) as a JSON object.
+    pub fn object(
+        &self,
+        index: usize,
+        message: &bywire_dbc::Message,
+        values: &[Option<Decoded>],
+    ) -> Option<Map<String, Json>> {
+        Some(self.json.get(index)?.object(message, values))
+    }
 }
 
 impl BusSlot {

@@ -13,7 +13,8 @@
 //! let (tx, rx) = bus.split();
 //! let hub = HubBuilder::new("doc").bus("doc", Some(tx), Some(500_000), None).build().unwrap();
 //! let listener = std::net::TcpListener::bind("127.0.0.1:8080").unwrap();
-//! let server = WebServer::start(Arc::clone(&hub), listener, Access::default()).unwrap();
+//! let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None));
+//! let server = WebServer::start(Arc::clone(&hub), logs, listener, Access::default()).unwrap();
 //! let stop = std::sync::atomic::AtomicBool::new(false);
 //! hub.read_bus(0, rx, &stop);
 //! server.stop();
@@ -22,7 +23,9 @@
 pub mod assets;
 pub mod foxglove;
 pub mod hub;
+pub mod logs;
 pub mod server;
 
 pub use hub::{Database, Hub, HubBuilder, Outgoing, Session};
+pub use logs::Logs;
 pub use server::{Access, WebServer};

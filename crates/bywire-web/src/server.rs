@@ -22,6 +22,8 @@ use tungstenite::{Message, WebSocket};
 use crate::assets;
 use crate::foxglove;
 use crate::hub::{Hub, Outgoing};
+use crate::logs::{self, Logs};
+use bywire_log::format::Format;
 
 /// Connections at once (pages, their requests, WebSocket clients).
 pub const MAX_CONNECTIONS: usize = 64;
@@ -51,8 +53,13 @@ pub struct WebServer {
 }
 
 impl WebServer {
-    /// Serve `hub` on `listener` until [`WebServer::stop`].
-    pub fn start(hub: Arc<Hub>, listener: TcpListener, access: Access) -> io::Result<Self> {
+    /// Serve `hub` and `logs` on `listener` until [`WebServer::stop`].
+    pub fn start(
+        hub: Arc<Hub>,
+        logs: Arc<Logs>,
+        listener: TcpListener,
+        access: Access,
+    ) -> io::Result<Self> {
         let address = listener.local_addr()?;
         listener.set_nonblocking(true)?;
         let stop = Arc::new(AtomicBool::new(false));
@@ -60,7 +67,7 @@ impl WebServer {
         let access = Arc::new(access);
         let acceptor = std::thread::Builder::new()
             .name("web-accept".into())
-            .spawn(move || accept(&listener, &hub, &access, &flag))?;
+            .spawn(move || accept(&listener, &hub, &logs, &access, &flag))?;
         Ok(WebServer {
             address,
             stop,
@@ -89,7 +96,13 @@ impl Drop for WebServer {
     }
 }
 
-fn accept(listener: &TcpListener, hub: &Arc<Hub>, access: &Arc<Access>, stop: &Arc<AtomicBool>) {
+fn accept(
+    listener: &TcpListener,
+    hub: &Arc<Hub>,
+    logs: &Arc<Logs>,
+    access: &Arc<Access>,
+    stop: &Arc<AtomicBool>,
+) {
     let active = Arc::new(AtomicUsize::new(0));
     let mut threads: Vec<JoinHandle<()>> = Vec::new();
     // Bounded by `stop`.
@@ -112,8 +125,9 @@ fn accept(listener: &TcpListener, hub: &Arc<Hub>, access: &Arc<Access>, stop: &A
             continue;
         }
         active.fetch_add(1, Ordering::Relaxed);
-        let (hub, access, stop, counted) = (
+        let (hub, logs, access, stop, counted) = (
             Arc::clone(hub),
+            Arc::clone(logs),
             Arc::clone(access),
             Arc::clone(stop),
             Arc::clone(&active),
@@ -121,7 +135,7 @@ fn accept(listener: &TcpListener, hub: &Arc<Hub>, access: &Arc<Access>, stop: &A
         let spawned = std::thread::Builder::new()
             .name("web-client".into())
             .spawn(move || {
-                let _ = connection(stream, &hub, &access, &stop);
+                let _ = connection(stream, &hub, &logs, &access, &stop);
                 counted.fetch_sub(1, Ordering::Relaxed);
             });
         match spawned {
@@ -233,6 +247,7 @@ fn same_token(given: &str, wanted: &str) -> bool {
 fn connection(
     mut stream: TcpStream,
     hub: &Arc<Hub>,
+    logs: &Logs,
     access: &Access,
     stop: &AtomicBool,
 ) -> io::Result<()> {
@@ -298,9 +313,36 @@ fn connection(
     if upgrade {
         return websocket(stream, &request, hub, access, stop);
     }
+    if let Some(what) = request.path.strip_prefix("/api/logs") {
+        // A request a page of another site could make without asking (a link, an image)
+        // carries no such header: only the page's own requests read logs.
+        if request.header("x-bywire").is_none() {
+            return respond(
+                &mut stream,
+                "403 Forbidden",
+                "text/plain",
+                b"the page's requests carry X-Bywire\n",
+            );
+        }
+        return match log_request(logs, what, &request) {
+            Ok(Answer::Json(body)) => respond(
+                &mut stream,
+                "200 OK",
+                "application/json",
+                body.to_string().as_bytes(),
+            ),
+            Ok(Answer::File(file, name)) => send_file(&mut stream, file, &name),
+            Err(problem) => respond(
+                &mut stream,
+                "400 Bad Request",
+                "text/plain",
+                format!("{problem}\n").as_bytes(),
+            ),
+        };
+    }
     match request.path.as_str() {
         "/api/database" => {
-            let body = assets::database_json(hub).to_string();
+            let body = assets::database_json(hub, logs).to_string();
             respond(&mut stream, "200 OK", "application/json", body.as_bytes())
         }
         path => match assets::asset(path) {
@@ -308,6 +350,113 @@ fn connection(
             None => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n"),
         },
     }
+}
+
+/// What a log request is answered with.
+enum Answer {
+    Json(serde_json::Value),
+    File(tempfile::NamedTempFile, String),
+}
+
+/// `/api/logs[/summary|/frames|/series|/export]?log=N&...`.
+fn log_request(logs: &Logs, what: &str, request: &Request) -> Result<Answer, String> {
+    let text = |key: &str| -> Result<String, String> {
+        request
+            .query_value(key)
+            .map(percent_decoded)
+            .ok_or_else(|| format!("'{key}' is missing"))
+    };
+    let number = |key: &str| -> Result<usize, String> {
+        text(key)?
+            .parse()
+            .map_err(|_| format!("'{key}' is not a number"))
+    };
+    // A time: exact as `KEY_ns` (nanoseconds), or `KEY` in seconds.
+    let time = |key: &str| -> Result<u64, String> {
+        let exact = format!("{key}_ns");
+        match request.query_value(&exact) {
+            Some(ns) => ns
+                .parse()
+                .map_err(|_| format!("'{exact}' is not a number of nanoseconds")),
+            None => {
+                logs::seconds_to_nanos(&text(key)?).ok_or_else(|| format!("'{key}' is not a time"))
+            }
+        }
+    };
+    match what {
+        "" => Ok(Answer::Json(logs.list())),
+        "/summary" => logs.summary_json(number("log")?).map(Answer::Json),
+        "/frames" => logs
+            .frames(number("log")?, time("from")?, number("count")?)
+            .map(Answer::Json),
+        "/series" => logs
+            .series(
+                number("log")?,
+                &text("bus")?,
+                &text("message")?,
+                &text("signal")?,
+                time("from")?,
+                time("to")?,
+                number("points")?,
+            )
+            .map(Answer::Json),
+        "/export" => {
+            let name = text("format")?;
+            let format = Format::named(&name).ok_or_else(|| {
+                let names: Vec<&str> = Format::ALL.iter().map(|(_, n)| *n).collect();
+                format!("format '{name}': one of {}", names.join(", "))
+            })?;
+            let log = number("log")?;
+            let (file, _) = logs.export(log, time("from")?, time("to")?, format)?;
+            Ok(Answer::File(file, format!("log{log}.{name}")))
+        }
+        other => Err(format!("no such request: /api/logs{other}")),
+    }
+}
+
+/// `%XX` escapes and `+` as a browser's query string has them.
+fn percent_decoded(text: &str) -> String {
+    let bytes = text.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    // Bounded by the text's length.
+    while let Some(&byte) = bytes.get(i) {
+        let escaped = (byte == b'%')
+            .then(|| bytes.get(i + 1..i + 3))
+            .flatten()
+            .and_then(|hex| std::str::from_utf8(hex).ok())
+            .and_then(|hex| u8::from_str_radix(hex, 16).ok());
+        match (escaped, byte) {
+            (Some(value), _) => {
+                out.push(value);
+                i += 3;
+            }
+            (None, b'+') => {
+                out.push(b' ');
+                i += 1;
+            }
+            (None, other) => {
+                out.push(other);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// A file as a download.
+fn send_file(stream: &mut TcpStream, file: tempfile::NamedTempFile, name: &str) -> io::Result<()> {
+    let mut input = file.reopen()?;
+    let length = input.metadata()?.len();
+    let head = format!(
+        "HTTP/1.1 200 OK\r\nContent-Type: application/octet-stream\r\nContent-Length: {length}\r\n\
+         Content-Disposition: attachment; filename=\"{name}\"\r\nCache-Control: no-store\r\n\
+         X-Content-Type-Options: nosniff\r\nConnection: close\r\n\r\n"
+    );
+    stream.set_write_timeout(Some(Duration::from_secs(60)))?;
+    stream.write_all(head.as_bytes())?;
+    io::copy(&mut input, stream)?;
+    stream.flush()
 }
 
 /// The WebSocket handshake (RFC 6455 §4.2.2, the Foxglove subprotocol), then the session.

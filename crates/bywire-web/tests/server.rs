@@ -35,7 +35,8 @@ impl Running {
             .build()
             .unwrap();
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-        let server = WebServer::start(Arc::clone(&hub), listener, access).unwrap();
+        let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None));
+        let server = WebServer::start(Arc::clone(&hub), logs, listener, access).unwrap();
         let address = server.address();
         let stop = Arc::new(AtomicBool::new(false));
         let (reading, flag) = (Arc::clone(&hub), Arc::clone(&stop));

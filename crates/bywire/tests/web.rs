@@ -565,3 +565,58 @@ fn serve_speaks_socketcand_and_foxglove_on_one_bus() {
     // Its own frames, as the bus carried them: the raw one and the encoded message.
     assert_eq!(frames, ["101", "123", "100"], "{said}");
 }
+
+/// Logs on the page: one of each format (converted from the example candump log) opens with
+/// its frames; a signal plotted from a log has cantools' values; play, step and export work
+/// (`web_logs.py`, in Chromium).
+#[test]
+fn logs_of_every_format_open_play_plot_and_export_on_the_page() {
+    let scratch = Scratch::new("web-logs");
+    let example = format!(
+        "{}/../../examples/data/candump.log",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let candump = scratch.join("candump.log");
+    std::fs::copy(&example, &candump).unwrap();
+    let mut logs = vec![candump.clone()];
+    for extension in ["asc", "blf", "trc", "pcapng", "mf4", "mcap", "parquet"] {
+        let out = scratch.join(format!("drive.{extension}"));
+        let (code, _, err) = common::bywire(
+            &[
+                "log",
+                "convert",
+                candump.to_str().unwrap(),
+                out.to_str().unwrap(),
+            ],
+            "",
+        );
+        assert_eq!(code, 0, "{err}");
+        logs.push(out);
+    }
+    let mut args: Vec<String> = vec!["--db".into(), dbc()];
+    for log in &logs {
+        args.push("-I".into());
+        args.push(log.to_str().unwrap().into());
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let web = Web::start(&args);
+    let shots = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/web-screenshots");
+    std::fs::create_dir_all(&shots).unwrap();
+    let out = Command::new("python3")
+        .arg(format!("{}/web_logs.py", common::oracles()))
+        .args([
+            &format!("http://{}/", web.address),
+            candump.to_str().unwrap(),
+            &dbc(),
+            shots.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    web.stop();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -464,6 +464,8 @@ fn serve_live(
             name: "bywire record",
             listen,
             access: bywire_web::Access::default(),
+            logs: Vec::new(),
+            logs_database: None,
         },
         |hub| hub,
     )?;

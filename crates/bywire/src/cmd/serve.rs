@@ -188,6 +188,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                         origins: args.origins.clone(),
                         allow_send: args.allow_send,
                     },
+                    logs: Vec::new(),
+                    logs_database: None,
                 },
                 |hub| hub,
             )?;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::support::access;
 use crate::support::busarg::{self, BusArg};
@@ -19,6 +19,7 @@ use crate::support::live::{self, Live, LiveBus, LiveConfig};
   bywire web can0 --db vehicle.dbc                (then open http://127.0.0.1:8080/)
   bywire web front=can0 rear=can1 --db vehicle.dbc --allow-send --bitrate 500000
   bywire web socketcand:127.0.0.1:29536/bus1 --db examples/data/reference-tug.dbc --listen 127.0.0.1:0
+  bywire web -I drive.blf -I run1/bus1.log --db vehicle.dbc     (logs: play, step, plot, export)
   BYWIRE_SERVE_TOKEN=... bywire web can0 --listen 0.0.0.0:8080 --allow-remote   (open /?token=...)
 
 The page (served from the binary: no internet needed) shows a trace (one row per identifier
@@ -36,8 +37,12 @@ connect (browsers say where a page comes from) unless --allow-origin names it.")
 pub struct Args {
     /// Buses to watch, each with optional candump filters and a label:
     /// [LABEL=]BUS[,ID:MASK|ID~MASK|#ERRMASK|j]*
-    #[arg(required = true, num_args = 1..=16)]
+    #[arg(required_unless_present = "logs", num_args = 0..=16)]
     buses: Vec<String>,
+    /// Logs the page may open (any format bywire reads): played, stepped through, plotted
+    /// whole (decimated on the server) and exported, a span of them, to any format.
+    #[arg(short = 'I', long = "input", value_name = "LOG")]
+    logs: Vec<PathBuf>,
     /// Decode with this database (DBC, KCD, SYM, ARXML, JSON).
     #[arg(long, alias = "dbc", value_name = "FILE")]
     db: Option<PathBuf>,
@@ -79,6 +84,9 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
         .iter()
         .map(|b| busarg::parse(b))
         .collect::<Result<_>>()?;
+    for log in &args.logs {
+        std::fs::File::open(log).with_context(|| format!("-I {}", log.display()))?;
+    }
     let database = live::database(args.db.as_deref())?;
     let buses: Vec<LiveBus> = buses
         .into_iter()
@@ -99,6 +107,8 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                 origins: args.origins.clone(),
                 allow_send: args.allow_send,
             },
+            logs: args.logs.clone(),
+            logs_database: database,
         },
         |hub| hub,
     )?;

@@ -9,7 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context, Result};
-use bywire_web::{Access, Database, Hub, HubBuilder, WebServer};
+use bywire_web::{Access, Database, Hub, HubBuilder, Logs, WebServer};
 
 use crate::support::busarg::BusArg;
 
@@ -21,6 +21,10 @@ pub struct LiveConfig<'a> {
     pub listen: SocketAddr,
     /// Who may connect, and whether they may send.
     pub access: Access,
+    /// Logs the page may open, decoded with the database given.
+    pub logs: Vec<std::path::PathBuf>,
+    /// The logs' database.
+    pub logs_database: Option<Arc<Database>>,
 }
 
 /// A bus to serve: its argument, its bitrate (for the load) and its database.
@@ -102,7 +106,8 @@ impl Live {
                 .name("web-stats".into())
                 .spawn(move || tick(&ticking, &ticker_stop))?,
         );
-        let server = WebServer::start(Arc::clone(&hub), listener, config.access)
+        let logs = Arc::new(Logs::new(config.logs, config.logs_database));
+        let server = WebServer::start(Arc::clone(&hub), logs, listener, config.access)
             .context("cannot start the web server")?;
         Ok(Live {
             address: server.address(),

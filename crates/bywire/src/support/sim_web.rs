@@ -96,6 +96,8 @@ impl SimWeb {
                     origins: Vec::new(),
                     allow_send: true,
                 },
+                logs: Vec::new(),
+                logs_database: None,
             },
             |hub| {
                 hub.channel("/tug/pose", "foxglove.PoseInFrame", pose_schema())
