@@ -527,18 +527,39 @@ function plotFromLog(panel, series, from, to) {
   }).catch((e) => say(e.message, true));
 }
 
+function addLogOption(id, name) {
+  const option = document.createElement("option");
+  option.value = id;
+  option.textContent = name;
+  $("log-select").appendChild(option);
+}
+
 function setupLogs() {
   return api("/api/logs", {}).then((r) => r.json()).then((answer) => {
-    if (!answer.logs.length) return;
+    if (!answer.logs.length && !answer.upload) return;
     $("logs-pane").hidden = false;
-    for (const log of answer.logs) {
-      const option = document.createElement("option");
-      option.value = log.id;
-      option.textContent = log.name;
-      $("log-select").appendChild(option);
-    }
+    $("log-upload-label").hidden = !answer.upload;
+    for (const log of answer.logs) addLogOption(log.id, log.name);
   });
 }
+
+// Uploaded logs: sent as they are; the server reads their format from their content.
+$("log-upload").addEventListener("change", (e) => {
+  for (const file of e.target.files) {
+    say(`uploading ${file.name}…`);
+    const query = new URLSearchParams({ name: file.name });
+    if (token) query.set("token", token);
+    fetch(`/api/logs/upload?${query}`, { method: "POST", body: file, headers: { "X-Bywire": "1" } })
+      .then((r) => (r.ok ? r.json() : r.text().then((t) => { throw new Error(t.trim()); })))
+      .then((answer) => {
+        addLogOption(answer.id, file.name);
+        $("log-select").value = String(answer.id);
+        chooseLog(String(answer.id));
+        say(`${file.name} uploaded`);
+      })
+      .catch((error) => say(`${file.name}: ${error.message}`, true));
+  }
+});
 
 $("log-select").addEventListener("change", (e) => chooseLog(e.target.value));
 $("log-play").addEventListener("click", () => {

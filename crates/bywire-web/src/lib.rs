@@ -13,7 +13,7 @@
 //! let (tx, rx) = bus.split();
 //! let hub = HubBuilder::new("doc").bus("doc", Some(tx), Some(500_000), None).build().unwrap();
 //! let listener = std::net::TcpListener::bind("127.0.0.1:8080").unwrap();
-//! let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None));
+//! let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None, false));
 //! let server = WebServer::start(Arc::clone(&hub), logs, listener, Access::default()).unwrap();
 //! let stop = std::sync::atomic::AtomicBool::new(false);
 //! hub.read_bus(0, rx, &stop);

@@ -59,15 +59,42 @@ struct FramesRequest {
 /// One log.
 struct Entry {
     path: PathBuf,
+    /// What the page calls it (its file name, or the name it was uploaded under).
+    name: String,
     summary: Mutex<Option<Summary>>,
     /// Its reading thread, started at the first request for frames.
     reader: Mutex<Option<std::sync::mpsc::Sender<FramesRequest>>>,
 }
 
-/// The logs the server was given, with the database their frames are decoded with.
+/// The logs the server was given, with the database their frames are decoded with, and those
+/// uploaded (kept in a temporary folder removed when the server ends).
 pub struct Logs {
-    entries: Vec<Entry>,
+    entries: std::sync::RwLock<Vec<Arc<Entry>>>,
     database: Option<Arc<Database>>,
+    uploads: Option<Mutex<Uploads>>,
+}
+
+/// Where uploaded logs go, and how much has gone there.
+struct Uploads {
+    folder: Option<tempfile::TempDir>,
+    files: usize,
+    bytes: u64,
+}
+
+/// The largest log one upload may be.
+pub const MAX_UPLOAD: u64 = 2 << 30;
+/// What all uploads together may fill.
+pub const MAX_UPLOADS_BYTES: u64 = 8 << 30;
+/// Uploads in all.
+pub const MAX_UPLOADS: usize = 64;
+
+fn entry(path: PathBuf, name: String) -> Arc<Entry> {
+    Arc::new(Entry {
+        path,
+        name,
+        summary: Mutex::new(None),
+        reader: Mutex::new(None),
+    })
 }
 
 fn reading(path: &std::path::Path, e: impl std::fmt::Display) -> String {
@@ -75,19 +102,111 @@ fn reading(path: &std::path::Path, e: impl std::fmt::Display) -> String {
 }
 
 impl Logs {
-    /// The files at `paths`, decoded with `database`.
-    pub fn new(paths: Vec<PathBuf>, database: Option<Arc<Database>>) -> Self {
+    /// The files at `paths`, decoded with `database`; `uploads`: whether the page may add
+    /// logs of its own.
+    pub fn new(paths: Vec<PathBuf>, database: Option<Arc<Database>>, uploads: bool) -> Self {
         Logs {
-            entries: paths
-                .into_iter()
-                .map(|path| Entry {
-                    path,
-                    summary: Mutex::new(None),
-                    reader: Mutex::new(None),
-                })
-                .collect(),
+            entries: std::sync::RwLock::new(
+                paths
+                    .into_iter()
+                    .map(|path| {
+                        let name = path.file_name().map_or_else(
+                            || path.display().to_string(),
+                            |n| n.to_string_lossy().into_owned(),
+                        );
+                        entry(path, name)
+                    })
+                    .collect(),
+            ),
             database,
+            uploads: uploads.then(|| {
+                Mutex::new(Uploads {
+                    folder: None,
+                    files: 0,
+                    bytes: 0,
+                })
+            }),
         }
+    }
+
+    fn entries(&self) -> std::sync::RwLockReadGuard<'_, Vec<Arc<Entry>>> {
+        self.entries
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Whether the page may upload logs.
+    pub fn takes_uploads(&self) -> bool {
+        self.uploads.is_some()
+    }
+
+    /// An uploaded log, `length` bytes read from `body`, under `name`: its number. Refused past
+    /// [`MAX_UPLOAD`], [`MAX_UPLOADS_BYTES`] or [`MAX_UPLOADS`], or when uploads are off; a
+    /// body cut short leaves nothing behind.
+    pub fn upload(
+        &self,
+        name: &str,
+        length: u64,
+        body: &mut impl std::io::Read,
+    ) -> Result<usize, String> {
+        let uploads = self
+            .uploads
+            .as_ref()
+            .ok_or("this server takes no uploads")?;
+        let mut uploads = uploads
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if length > MAX_UPLOAD {
+            return Err(format!(
+                "{length} bytes: a log of at most {MAX_UPLOAD} bytes"
+            ));
+        }
+        if uploads.files >= MAX_UPLOADS || uploads.bytes + length > MAX_UPLOADS_BYTES {
+            return Err(format!(
+                "the uploads are full ({} logs, {} bytes)",
+                uploads.files, uploads.bytes
+            ));
+        }
+        if uploads.folder.is_none() {
+            uploads.folder = Some(
+                tempfile::Builder::new()
+                    .prefix("bywire-web-")
+                    .tempdir()
+                    .map_err(|e| e.to_string())?,
+            );
+        }
+        let folder = uploads
+            .folder
+            .as_ref()
+            .ok_or("no folder")?
+            .path()
+            .to_path_buf();
+        // The name only as far as a file name can take it; the number keeps names apart.
+        let safe: String = name
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric() || "._-".contains(*c))
+            .take(64)
+            .collect();
+        let path = folder.join(format!(
+            "{}-{}",
+            uploads.files,
+            safe.trim_start_matches('.')
+        ));
+        let mut file = std::fs::File::create(&path).map_err(|e| e.to_string())?;
+        let copied = std::io::copy(&mut std::io::Read::take(body, length), &mut file)
+            .map_err(|e| e.to_string())?;
+        if copied != length {
+            let _ = std::fs::remove_file(&path);
+            return Err(format!("the upload ended after {copied} of {length} bytes"));
+        }
+        uploads.files += 1;
+        uploads.bytes += length;
+        let mut entries = self
+            .entries
+            .write()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        entries.push(entry(path, name.chars().take(128).collect()));
+        Ok(entries.len() - 1)
     }
 
     /// The logs' database.
@@ -95,32 +214,34 @@ impl Logs {
         self.database.as_deref()
     }
 
-    /// Whether there are none.
+    /// Whether there are none and none can be added.
     pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
+        self.entries().is_empty() && !self.takes_uploads()
     }
 
-    fn entry(&self, log: usize) -> Result<&Entry, String> {
-        self.entries
+    fn entry(&self, log: usize) -> Result<Arc<Entry>, String> {
+        let entries = self.entries();
+        entries
             .get(log)
-            .ok_or_else(|| format!("no log {log} (there are {})", self.entries.len()))
+            .cloned()
+            .ok_or_else(|| format!("no log {log} (there are {})", entries.len()))
     }
 
-    /// The logs, by number: name and size.
+    /// The logs, by number: name and size; and whether the page may upload more.
     pub fn list(&self) -> Json {
         let logs: Vec<Json> = self
-            .entries
+            .entries()
             .iter()
             .enumerate()
             .map(|(id, e)| {
                 json!({
                     "id": id,
-                    "name": e.path.file_name().map(|n| n.to_string_lossy().into_owned()),
+                    "name": e.name,
                     "bytes": std::fs::metadata(&e.path).map(|m| m.len()).ok(),
                 })
             })
             .collect();
-        json!({ "logs": logs })
+        json!({ "logs": logs, "upload": self.takes_uploads() })
     }
 
     fn open(entry: &Entry) -> Result<(Format, Records<'static>), String> {
@@ -137,7 +258,7 @@ impl Logs {
         if let Some(summary) = kept.as_ref() {
             return Ok(summary.clone());
         }
-        let (format, records) = Self::open(entry)?;
+        let (format, records) = Self::open(&entry)?;
         let mut summary = Summary {
             format,
             frames: 0,
@@ -251,7 +372,7 @@ impl Logs {
             .position(|n| n == signal)
             .ok_or_else(|| format!("message {message} has no signal {signal}"))?;
         let points = points.clamp(2, MAX_POINTS);
-        let (_, records) = Self::open(entry)?;
+        let (_, records) = Self::open(&entry)?;
         let mut scratch: Vec<Option<Decoded>> = Vec::new();
         let mut all: Vec<Sample> = Vec::new();
         let buckets = points / 2;
@@ -325,7 +446,7 @@ impl Logs {
         format: Format,
     ) -> Result<(tempfile::NamedTempFile, u64), String> {
         let entry = self.entry(log)?;
-        let (_, records) = Self::open(entry)?;
+        let (_, records) = Self::open(&entry)?;
         let file = tempfile::NamedTempFile::new().map_err(|e| e.to_string())?;
         let output = file.reopen().map_err(|e| e.to_string())?;
         let mut writer = format

@@ -182,8 +182,9 @@ impl Request {
     }
 }
 
-/// The request head from `stream` (bounded in size; the socket's timeout bounds the time).
-fn read_head(stream: &mut TcpStream) -> io::Result<Request> {
+/// The request head from `stream` (bounded in size; the socket's timeout bounds the time),
+/// and the bytes of the body read with it.
+fn read_head(stream: &mut TcpStream) -> io::Result<(Request, Vec<u8>)> {
     let mut head = Vec::with_capacity(1024);
     let mut buffer = [0u8; 1024];
     // Bounded by MAX_HEAD.
@@ -204,7 +205,12 @@ fn read_head(stream: &mut TcpStream) -> io::Result<Request> {
         .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()))?;
     let target = request.path.unwrap_or("/");
     let (path, query) = target.split_once('?').unwrap_or((target, ""));
-    Ok(Request {
+    let body_start = head
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .map_or(head.len(), |at| at + 4);
+    let body = head.get(body_start..).unwrap_or_default().to_vec();
+    let request = Request {
         method: request.method.unwrap_or("").to_string(),
         path: path.to_string(),
         query: query.to_string(),
@@ -218,7 +224,8 @@ fn read_head(stream: &mut TcpStream) -> io::Result<Request> {
                 )
             })
             .collect(),
-    })
+    };
+    Ok((request, body))
 }
 
 fn respond(stream: &mut TcpStream, status: &str, kind: &str, body: &[u8]) -> io::Result<()> {
@@ -253,8 +260,8 @@ fn connection(
 ) -> io::Result<()> {
     stream.set_read_timeout(Some(Duration::from_secs(5)))?;
     stream.set_write_timeout(Some(Duration::from_secs(5)))?;
-    let request = match read_head(&mut stream) {
-        Ok(request) => request,
+    let (request, body_start) = match read_head(&mut stream) {
+        Ok(read) => read,
         Err(_) => {
             return respond(
                 &mut stream,
@@ -291,7 +298,8 @@ fn connection(
                 || (access.token.is_some() && token_ok)
         }
     };
-    if request.method != "GET" {
+    let upload = request.path == "/api/logs/upload";
+    if request.method != "GET" && !(upload && request.method == "POST") {
         return respond(
             &mut stream,
             "405 Method Not Allowed",
@@ -323,6 +331,9 @@ fn connection(
                 "text/plain",
                 b"the page's requests carry X-Bywire\n",
             );
+        }
+        if upload {
+            return upload_log(stream, logs, &request, body_start);
         }
         return match log_request(logs, what, &request) {
             Ok(Answer::Json(body)) => respond(
@@ -411,6 +422,46 @@ fn log_request(logs: &Logs, what: &str, request: &Request) -> Result<Answer, Str
             Ok(Answer::File(file, format!("log{log}.{name}")))
         }
         other => Err(format!("no such request: /api/logs{other}")),
+    }
+}
+
+/// `POST /api/logs/upload?name=NAME` with the log as its body (its length given).
+fn upload_log(
+    mut stream: TcpStream,
+    logs: &Logs,
+    request: &Request,
+    body_start: Vec<u8>,
+) -> io::Result<()> {
+    let Some(length) = request
+        .header("content-length")
+        .and_then(|l| l.trim().parse::<u64>().ok())
+    else {
+        return respond(
+            &mut stream,
+            "411 Length Required",
+            "text/plain",
+            b"an upload gives its length\n",
+        );
+    };
+    let name = request
+        .query_value("name")
+        .map_or_else(|| "upload".to_string(), percent_decoded);
+    // A slow sender gets a minute between reads, not five seconds.
+    stream.set_read_timeout(Some(Duration::from_secs(60)))?;
+    let mut body = io::Cursor::new(body_start).chain(&mut stream);
+    match logs.upload(&name, length, &mut body) {
+        Ok(id) => respond(
+            &mut stream,
+            "200 OK",
+            "application/json",
+            serde_json::json!({"id": id}).to_string().as_bytes(),
+        ),
+        Err(problem) => respond(
+            &mut stream,
+            "400 Bad Request",
+            "text/plain",
+            format!("{problem}\n").as_bytes(),
+        ),
     }
 }
 

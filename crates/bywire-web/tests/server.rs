@@ -35,7 +35,7 @@ impl Running {
             .build()
             .unwrap();
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-        let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None));
+        let logs = Arc::new(bywire_web::Logs::new(Vec::new(), None, true));
         let server = WebServer::start(Arc::clone(&hub), logs, listener, access).unwrap();
         let address = server.address();
         let stop = Arc::new(AtomicBool::new(false));
@@ -358,4 +358,66 @@ fn a_client_that_stops_reading_stalls_nobody() {
     // The fast client may lose the few frames sent before its subscription took effect.
     assert!(fast_got + 1_000 >= u64::from(total), "{fast_got}");
     drop(slow);
+}
+
+#[test]
+fn uploads_need_the_pages_header_a_length_and_the_whole_body() {
+    let server = Running::new("web-upload", Access::default());
+    let address = server.address;
+    let log = "(1700000000.000000) can0 123#01\n";
+    let post = |headers: &str, body: &str| {
+        http(
+            address,
+            &format!(
+                "POST /api/logs/upload?name=..%2Fevil.log HTTP/1.1\r\nHost: {address}\r\n{headers}\r\n{body}"
+            ),
+        )
+    };
+    assert_eq!(
+        post(&format!("Content-Length: {}\r\n", log.len()), log).0,
+        "HTTP/1.1 403 Forbidden"
+    );
+    assert_eq!(
+        post("X-Bywire: 1\r\n", log).0,
+        "HTTP/1.1 411 Length Required"
+    );
+    // Cut short: the connection closes before the length given.
+    let mut stream = TcpStream::connect(address).unwrap();
+    stream
+        .write_all(
+            format!(
+                "POST /api/logs/upload?name=a.log HTTP/1.1\r\nHost: {address}\r\nX-Bywire: 1\r\nContent-Length: 1000\r\n\r\n{log}"
+            )
+            .as_bytes(),
+        )
+        .unwrap();
+    stream.shutdown(std::net::Shutdown::Write).unwrap();
+    let mut answer = String::new();
+    stream.read_to_string(&mut answer).unwrap();
+    assert!(answer.starts_with("HTTP/1.1 400"), "{answer}");
+    let list = |address| {
+        http(
+            address,
+            &format!("GET /api/logs HTTP/1.1\r\nHost: {address}\r\nX-Bywire: 1\r\n\r\n"),
+        )
+        .1
+    };
+    assert_eq!(
+        serde_json::from_str::<serde_json::Value>(&list(address)).unwrap()["logs"],
+        serde_json::json!([])
+    );
+    let (status, body) = post(
+        &format!("X-Bywire: 1\r\nContent-Length: {}\r\n", log.len()),
+        log,
+    );
+    assert_eq!(status, "HTTP/1.1 200 OK", "{body}");
+    let listed: serde_json::Value = serde_json::from_str(&list(address)).unwrap();
+    assert_eq!(listed["logs"][0]["name"], "../evil.log");
+    assert_eq!(listed["logs"][0]["bytes"], log.len());
+    let (status, summary) = http(
+        address,
+        &format!("GET /api/logs/summary?log=0 HTTP/1.1\r\nHost: {address}\r\nX-Bywire: 1\r\n\r\n"),
+    );
+    assert_eq!(status, "HTTP/1.1 200 OK");
+    assert!(summary.contains("\"frames\":1"), "{summary}");
 }

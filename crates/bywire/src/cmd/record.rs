@@ -466,6 +466,7 @@ fn serve_live(
             access: bywire_web::Access::default(),
             logs: Vec::new(),
             logs_database: None,
+            uploads: false,
         },
         |hub| hub,
     )?;

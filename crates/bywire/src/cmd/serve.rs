@@ -190,6 +190,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                     },
                     logs: Vec::new(),
                     logs_database: None,
+                    uploads: false,
                 },
                 |hub| hub,
             )?;

@@ -43,6 +43,10 @@ pub struct Args {
     /// whole (decimated on the server) and exported, a span of them, to any format.
     #[arg(short = 'I', long = "input", value_name = "LOG")]
     logs: Vec<PathBuf>,
+    /// The page may not upload logs (uploads go to a temporary folder removed at the end, at
+    /// most 2 GiB each and 8 GiB in all).
+    #[arg(long)]
+    no_upload: bool,
     /// Decode with this database (DBC, KCD, SYM, ARXML, JSON).
     #[arg(long, alias = "dbc", value_name = "FILE")]
     db: Option<PathBuf>,
@@ -109,6 +113,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             },
             logs: args.logs.clone(),
             logs_database: database,
+            uploads: !args.no_upload,
         },
         |hub| hub,
     )?;

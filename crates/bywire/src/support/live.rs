@@ -25,6 +25,8 @@ pub struct LiveConfig<'a> {
     pub logs: Vec<std::path::PathBuf>,
     /// The logs' database.
     pub logs_database: Option<Arc<Database>>,
+    /// Whether the page may upload logs.
+    pub uploads: bool,
 }
 
 /// A bus to serve: its argument, its bitrate (for the load) and its database.
@@ -106,7 +108,7 @@ impl Live {
                 .name("web-stats".into())
                 .spawn(move || tick(&ticking, &ticker_stop))?,
         );
-        let logs = Arc::new(Logs::new(config.logs, config.logs_database));
+        let logs = Arc::new(Logs::new(config.logs, config.logs_database, config.uploads));
         let server = WebServer::start(Arc::clone(&hub), logs, listener, config.access)
             .context("cannot start the web server")?;
         Ok(Live {

@@ -98,6 +98,7 @@ impl SimWeb {
                 },
                 logs: Vec::new(),
                 logs_database: None,
+                uploads: false,
             },
             |hub| {
                 hub.channel("/tug/pose", "foxglove.PoseInFrame", pose_schema())

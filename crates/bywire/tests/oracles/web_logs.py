@@ -71,7 +71,14 @@ with sync_playwright() as p:
     page.screenshot(path=f"{shots}/logs.png")
     assert not errors, errors
 
+    # A log of the user's, uploaded through the page: it opens as the others.
+    page.set_input_files("#log-upload", candump)
+    wait(page, f"window.bywire.player.summary && window.bywire.player.summary.log === {len(names)}", "the uploaded log")
+    assert page.evaluate("window.bywire.player.summary.frames") == len(frames)
+
     # The whole log exported as BLF (the page's request, made here as it makes it).
+    page.select_option("#log-select", str(first))
+    wait(page, f"window.bywire.player.summary && window.bywire.player.summary.log === {first}", "the summary")
     summary = page.evaluate("window.bywire.player.summary")
     browser.close()
 
