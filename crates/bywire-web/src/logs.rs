@@ -578,7 +578,7 @@ mod tests {
         std::fs::write(&path, text).unwrap();
         let (db, _) = bywire_dbc::parse_str(DBC, bywire_dbc::Mode::Strict).unwrap();
         let database = Arc::new(Database::new(bywire_dbc::decoder::Decoder::new(db)));
-        (dir, Logs::new(vec![path], Some(database)))
+        (dir, Logs::new(vec![path], Some(database), false))
     }
 
     #[test]
