@@ -278,6 +278,29 @@ function drawPlot(panel) {
       cursor: { drag: { x: true, y: false } },
     }, data, chart);
     panel.plot.over.addEventListener("dblclick", () => { panel.following = true; panel.dirty = true; });
+    // The wheel zooms about the cursor; with shift it pans.
+    panel.plot.over.addEventListener("wheel", (e) => {
+      e.preventDefault();
+      const u = panel.plot;
+      const { min, max } = u.scales.x;
+      if (min == null || max == null) return;
+      const width = max - min;
+      let [from, to] = [min, max];
+      if (e.shiftKey) {
+        const shift = (width * Math.sign(e.deltaY)) / 10;
+        [from, to] = [min + shift, max + shift];
+      } else {
+        const at = u.posToVal(e.offsetX, "x");
+        const factor = e.deltaY > 0 ? 1.25 : 0.8;
+        [from, to] = [at - (at - min) * factor, at + (max - at) * factor];
+      }
+      panel.following = false;
+      u.setScale("x", { min: from, max: to });
+      clearTimeout(panel.refetch);
+      panel.refetch = setTimeout(() => {
+        for (const s of panel.series) if (s.log !== null) plotFromLog(panel, s, from, to);
+      }, 200);
+    }, { passive: false });
   } else if (panel.following) {
     panel.plot.setData(data);
   } else {
