@@ -209,7 +209,8 @@ function drawBuses() {
     const load = s.load_percent != null ? ` · ${s.load_percent.toFixed(1)} %` : "";
     const errors = s.errors ? ` · ${s.errors} errors` : "";
     const dropped = s.dropped ? ` · ${s.dropped} dropped` : "";
-    return `<span class="bus-chip${s.closed ? " closed" : ""}" data-bus="${s.bus}">${s.bus}: ${Math.round(s.frames_per_s)} frames/s${load}${errors}${dropped}</span>`;
+    const controller = s.state ? ` · ${s.state}${s.tec != null ? ` (TEC ${s.tec}, REC ${s.rec})` : ""}` : "";
+    return `<span class="bus-chip${s.closed || s.state === "bus-off" || s.state === "error-passive" ? " closed" : ""}" data-bus="${s.bus}">${s.bus}: ${Math.round(s.frames_per_s)} frames/s${load}${errors}${dropped}${controller}</span>`;
   }).join(" ");
 }
 

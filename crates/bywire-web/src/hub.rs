@@ -52,6 +52,40 @@ struct Counters {
     bits: AtomicU64,
     dropped: AtomicU64,
     closed: AtomicBool,
+    /// The controller's state as its error frames last said it ([`STATES`]; 0: not said).
+    state: std::sync::atomic::AtomicU8,
+    /// Its error counters as its error frames last gave them (transmit << 8 | receive; and
+    /// whether any did, in bit 16).
+    counters: AtomicU32,
+}
+
+/// Controller states, as SocketCAN's error frames tell them.
+const STATES: [&str; 5] = [
+    "",
+    "error-active",
+    "error-warning",
+    "error-passive",
+    "bus-off",
+];
+
+/// The controller state an error frame tells, if it tells one.
+fn state_told(error: &bywire_core::frame::ErrorFrame) -> Option<u8> {
+    use bywire_core::frame::ErrorClass;
+    let problems = error.data().get(1).copied().unwrap_or(0);
+    if error.has(ErrorClass::BusOff) {
+        Some(4)
+    } else if error.has(ErrorClass::Restarted) {
+        Some(1)
+    } else if error.has(ErrorClass::Controller) {
+        match problems {
+            p if p & 0x30 != 0 => Some(3),
+            p if p & 0x0C != 0 => Some(2),
+            p if p & 0x40 != 0 => Some(1),
+            _ => None,
+        }
+    } else {
+        None
+    }
 }
 
 struct BusSlot {
@@ -658,8 +692,15 @@ impl Hub {
         let frame = &received.frame;
         let counters = &slot.counters;
         counters.frames.fetch_add(1, Ordering::Relaxed);
-        if matches!(frame, Frame::Error(_)) {
+        if let Frame::Error(error) = frame {
             counters.errors.fetch_add(1, Ordering::Relaxed);
+            if let Some(state) = state_told(error) {
+                counters.state.store(state, Ordering::Relaxed);
+            }
+            if let Some((tec, rec)) = error.counters() {
+                let packed = 1 << 16 | u32::from(tec) << 8 | u32::from(rec);
+                counters.counters.store(packed, Ordering::Relaxed);
+            }
         } else {
             counters.bits.fetch_add(
                 u64::from(frame_bits(frame, Stuffing::Exact)),
@@ -758,8 +799,20 @@ impl Hub {
                 100.0 * per_second(bits.saturating_sub(previous.1), seconds) / f64::from(b)
             });
             *previous = (frames, bits);
+            let state = STATES
+                .get(usize::from(c.state.load(Ordering::Relaxed)))
+                .filter(|s| !s.is_empty());
+            let packed = c.counters.load(Ordering::Relaxed);
+            let (tec, rec) = if packed >> 16 == 0 {
+                (None, None)
+            } else {
+                (Some(packed >> 8 & 0xFF), Some(packed & 0xFF))
+            };
             let stats = json!({
                 "timestamp": time_json(now),
+                "state": state,
+                "tec": tec,
+                "rec": rec,
                 "bus": slot.name,
                 "frames": frames,
                 "errors": c.errors.load(Ordering::Relaxed),
@@ -933,6 +986,9 @@ fn stats_schema() -> Json {
             "bitrate": {"type": ["integer", "null"]},
             "dropped": {"type": "integer", "description": "frames the receiving queue dropped"},
             "closed": {"type": "boolean"},
+            "state": {"type": ["string", "null"], "description": "the controller's state, as its error frames said it"},
+            "tec": {"type": ["integer", "null"], "description": "transmit error counter"},
+            "rec": {"type": ["integer", "null"], "description": "receive error counter"},
         },
     })
 }
@@ -940,6 +996,61 @@ fn stats_schema() -> Json {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn error_frames_tell_the_controllers_state_and_counters() {
+        use bywire_core::frame::{ErrorClass, ErrorFrame};
+        let hub = HubBuilder::new("t")
+            .bus("can0", None, None, None)
+            .build()
+            .unwrap();
+        let session = hub.connect(false).unwrap();
+        hub.handle(
+            session.id,
+            ClientMessage::Subscribe(vec![foxglove::Subscription {
+                id: 5,
+                channel_id: 2,
+            }]),
+        );
+        let stats = |frames: &[ErrorFrame]| -> Json {
+            let mut scratch = Vec::new();
+            for error in frames {
+                let received = Received {
+                    frame: Frame::Error(*error),
+                    timestamp: Timestamp::from_nanos(1),
+                    own: false,
+                    local: false,
+                    hardware: None,
+                };
+                hub.on_frame(0, &received, &mut scratch);
+            }
+            hub.tick(Timestamp::from_nanos(2), 1.0, &mut Vec::new());
+            let last = session
+                .queue
+                .try_iter()
+                .filter_map(|m| match m {
+                    Outgoing::Binary(data) => Some(data),
+                    Outgoing::Text(_) => None,
+                })
+                .last()
+                .unwrap();
+            serde_json::from_slice(&last[13..]).unwrap()
+        };
+        let class = |classes: &[ErrorClass]| classes.iter().map(|c| c.bit()).sum::<u32>();
+        let passive = ErrorFrame::from_array(
+            class(&[ErrorClass::Controller, ErrorClass::Counters]),
+            [0, 0x20, 0, 0, 0, 0, 130, 5],
+        );
+        let said = stats(&[passive]);
+        assert_eq!(
+            (&said["state"], &said["tec"], &said["rec"], &said["errors"]),
+            (&json!("error-passive"), &json!(130), &json!(5), &json!(1))
+        );
+        let off = ErrorFrame::from_array(class(&[ErrorClass::BusOff]), [0; 8]);
+        assert_eq!(stats(&[off])["state"], "bus-off");
+        let back = ErrorFrame::from_array(class(&[ErrorClass::Restarted]), [0; 8]);
+        assert_eq!(stats(&[back])["state"], "error-active");
+    }
 
     #[test]
     fn published_frames_read_as_written() {
