@@ -41,6 +41,20 @@ pub enum Given<'a> {
     Unusable,
 }
 
+impl<'a> Given<'a> {
+    /// A value as written (`12`, `-0.5`, `Drive`): a whole number, a finite number, or else a
+    /// value description's name.
+    pub fn from_text(text: &'a str) -> Self {
+        if let Ok(i) = text.parse::<i64>() {
+            return Given::Number(Value::Int(i));
+        }
+        match text.parse::<f64>() {
+            Ok(f) if f.is_finite() => Given::Number(Value::Float(f)),
+            _ => Given::Choice(text),
+        }
+    }
+}
+
 /// One signal's value, by name (its name or its display name), and the value as the caller
 /// wrote it, for errors.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -18,7 +18,7 @@ use bywire_bus::{BusError, BusRx, BusTx, Received};
 use bywire_core::busload::{frame_bits, Stuffing};
 use bywire_core::frame::FdFrame;
 use bywire_core::{Frame, Id, Timestamp};
-use bywire_dbc::codec::{Decoded, EncodeMode, Value};
+use bywire_dbc::codec::{Decoded, EncodeMode};
 use bywire_dbc::decoder::Decoder;
 use bywire_dbc::json::MessageJson;
 use bywire_dbc::named::{encode_named, Encoding, Given, Named};
@@ -631,7 +631,7 @@ impl Hub {
             .iter()
             .map(|(signal, text)| Named {
                 signal,
-                value: given(text),
+                value: Given::from_text(text),
                 shown: text,
             })
             .collect();
@@ -858,17 +858,6 @@ fn per_second(count: u64, seconds: f64) -> f64 {
         count / seconds
     } else {
         0.0
-    }
-}
-
-/// A value as written: a whole number, a finite number, or else a value description's name.
-fn given(text: &str) -> Given<'_> {
-    if let Ok(i) = text.parse::<i64>() {
-        return Given::Number(Value::Int(i));
-    }
-    match text.parse::<f64>() {
-        Ok(f) if f.is_finite() => Given::Number(Value::Float(f)),
-        _ => Given::Choice(text),
     }
 }
 

@@ -76,6 +76,12 @@ impl Drop for Web {
     }
 }
 
+/// `bywire send ARGS`, which must succeed.
+fn send(args: &[&str]) {
+    let (code, _, err) = common::bywire(&[&["send"], args].concat(), "");
+    assert_eq!(code, 0, "{err}");
+}
+
 /// `bywire dump -L BUS` into a file, until stopped.
 fn dump_to(bus: &str, file: &std::path::Path) -> Child {
     Command::new(env!("CARGO_BIN_EXE_bywire"))
@@ -185,25 +191,7 @@ fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
         .stdout(std::fs::File::create(&dumped).unwrap())
         .spawn()
         .unwrap();
-    let mut client = Command::new("node")
-        .arg(format!("{}/foxglove_client.js", common::oracles()))
-        .args([
-            &format!("ws://{}", web.address),
-            "tug",
-            "VehicleToAds_State",
-            "3",
-            "1",
-        ])
-        .env("NODE_PATH", node_modules())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(client.stdout.take().unwrap()).lines();
-    assert_eq!(lines.next().unwrap().unwrap(), "ready");
-    let send = |args: &[&str]| {
-        let (code, _, err) = common::bywire(&[&["send"], args].concat(), "");
-        assert_eq!(code, 0, "{err}");
-    };
+    let (client, mut lines) = foxglove_client(&web.address, "tug", "VehicleToAds_State", 3);
     // Probes until dump listens (the client passes them over).
     for _ in 0..100 {
         send(&[bus, "7FE#00"]);
@@ -226,7 +214,7 @@ fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
     send(&[bus, "7FF#00"]);
     let said: serde_json::Value =
         serde_json::from_str(&lines.next().expect("the client's result").unwrap()).unwrap();
-    assert!(client.wait().unwrap().success());
+    assert!(client.wait_with_output().unwrap().status.success());
     let text = wait_for_lines(&dumped, " 123 ", 1);
     let text = wait_for_lines(&dumped, " 100 ", 1).max(text);
     let _ = dump.kill();
@@ -469,10 +457,6 @@ fn record_shows_what_it_records_to_foxglove_and_sends_nothing() {
     let mut record_out = BufReader::new(record.stdout.take().unwrap()).lines();
     let address = announced(&mut record_out);
     let (client, mut lines) = foxglove_client(&address, "tug", "VehicleToAds_State", 2);
-    let send = |args: &[&str]| {
-        let (code, _, err) = common::bywire(&[&["send"], args].concat(), "");
-        assert_eq!(code, 0, "{err}");
-    };
     send(&[
         "--dbc",
         &dbc(),

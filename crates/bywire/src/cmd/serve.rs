@@ -39,18 +39,8 @@ pub struct Args {
     /// Bus names clients may open (any when none is given).
     #[arg(long = "name", value_name = "NAME")]
     names: Vec<String>,
-    /// Allow listening on an address other hosts can reach (needs a token).
-    #[arg(long)]
-    allow_remote: bool,
-    /// Require clients to send `< auth TOKEN >` first, the token read from the first line of
-    /// this file (or from BYWIRE_SERVE_TOKEN). Plain socketcand clients cannot; for bywire
-    /// clients and scripts on other hosts. A wrong token closes the connection; attempts are
-    /// paced to ten a second.
-    #[arg(long, value_name = "PATH")]
-    token_file: Option<PathBuf>,
-    /// Refused: a token on the command line is visible to every user of the host.
-    #[arg(long, value_name = "TOKEN", hide = true)]
-    token: Option<String>,
+    #[command(flatten)]
+    remote: access::Remote,
     /// Send socketcand's discovery beacon every 3 s (to 255.255.255.255:42000 when listening
     /// beyond this host, else to 127.0.0.1:42000).
     #[arg(long)]
@@ -109,19 +99,17 @@ impl Args {
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let token = access::token(args.token.is_some(), args.token_file.as_deref())?;
-    access::check_listen(
+    let token = args.remote.token()?;
+    args.remote.check(
         "--listen",
         args.listen,
-        args.allow_remote,
         token.as_deref(),
         "socketcand has no authentication",
     )?;
     if let Some(listen) = args.foxglove {
-        access::check_listen(
+        args.remote.check(
             "--foxglove",
             listen,
-            args.allow_remote,
             token.as_deref(),
             "the page shows the bus",
         )?;

@@ -62,24 +62,15 @@ pub struct Args {
     /// Pages of this origin may connect without the token (https://app.foxglove.dev).
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     origins: Vec<String>,
-    /// Allow listening on an address other hosts can reach (needs a token).
-    #[arg(long)]
-    allow_remote: bool,
-    /// Require the token in this file's first line (or BYWIRE_SERVE_TOKEN) of every request:
-    /// open the page as /?token=TOKEN; Foxglove clients add ?token=TOKEN to the address.
-    #[arg(long, value_name = "PATH")]
-    token_file: Option<PathBuf>,
-    /// Refused: a token on the command line is visible to every user of the host.
-    #[arg(long, value_name = "TOKEN", hide = true)]
-    token: Option<String>,
+    #[command(flatten)]
+    remote: access::Remote,
 }
 
 pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
-    let token = access::token(args.token.is_some(), args.token_file.as_deref())?;
-    access::check_listen(
+    let token = args.remote.token()?;
+    args.remote.check(
         "--listen",
         args.listen,
-        args.allow_remote,
         token.as_deref(),
         "the page can send frames",
     )?;

@@ -10,6 +10,41 @@ use anyhow::{anyhow, Context, Result};
 /// The environment variable a token may come from.
 pub const TOKEN_VARIABLE: &str = "BYWIRE_SERVE_TOKEN";
 
+/// The options of a server that may listen beyond this host.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct Remote {
+    /// Allow listening on an address other hosts can reach (needs a token).
+    #[arg(long)]
+    pub allow_remote: bool,
+    /// Require a token, read from this file's first line (or from BYWIRE_SERVE_TOKEN):
+    /// socketcand clients send `< auth TOKEN >` first (plain ones cannot: for bywire clients
+    /// and scripts), pages are opened as /?token=TOKEN and Foxglove clients add ?token=TOKEN
+    /// to the address. A wrong token closes the connection; attempts are paced.
+    #[arg(long, value_name = "PATH")]
+    pub token_file: Option<std::path::PathBuf>,
+    /// Refused: a token on the command line is visible to every user of the host.
+    #[arg(long, value_name = "TOKEN", hide = true)]
+    pub token: Option<String>,
+}
+
+impl Remote {
+    /// The token, as [`token`] reads it.
+    pub fn token(&self) -> Result<Option<String>> {
+        token(self.token.is_some(), self.token_file.as_deref())
+    }
+
+    /// Refuse `listen` (of option `option`) as [`check_listen`] does.
+    pub fn check(
+        &self,
+        option: &str,
+        listen: SocketAddr,
+        token: Option<&str>,
+        protocol: &str,
+    ) -> Result<()> {
+        check_listen(option, listen, self.allow_remote, token, protocol)
+    }
+}
+
 /// The token from `token_file` (its first line) or the environment; `None` for an open
 /// server. `on_command_line`: a token given as an option, which is refused.
 pub fn token(on_command_line: bool, token_file: Option<&Path>) -> Result<Option<String>> {

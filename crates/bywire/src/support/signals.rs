@@ -99,7 +99,7 @@ impl Dbc {
                     .ok_or_else(|| anyhow!("'{assignment}' is not SIGNAL=VALUE"))?;
                 Ok(Named {
                     signal,
-                    value: given(text),
+                    value: Given::from_text(text),
                     shown: text,
                 })
             })
@@ -118,17 +118,6 @@ impl Dbc {
             Frame::classic(id, &payload)?
         };
         Ok(frame)
-    }
-}
-
-/// A value as written: a whole number, a finite number, or else a value description's name.
-fn given(text: &str) -> Given<'_> {
-    if let Ok(i) = text.parse::<i64>() {
-        return Given::Number(Value::Int(i));
-    }
-    match text.parse::<f64>() {
-        Ok(f) if f.is_finite() => Given::Number(Value::Float(f)),
-        _ => Given::Choice(text),
     }
 }
 
