@@ -33,6 +33,8 @@ fn node_modules() -> PathBuf {
 struct Web {
     child: Child,
     address: String,
+    /// The rest of what it says.
+    lines: std::io::Lines<BufReader<std::process::ChildStdout>>,
 }
 
 impl Web {
@@ -46,16 +48,18 @@ impl Web {
             .stderr(Stdio::inherit())
             .spawn()
             .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
+        let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+        let line = lines.next().unwrap().unwrap();
         let address = line
             .strip_prefix("the page on http://")
             .and_then(|rest| rest.split('/').next())
             .unwrap_or_else(|| panic!("no address in {line:?}"))
             .to_string();
-        Web { child, address }
+        Web {
+            child,
+            address,
+            lines,
+        }
     }
 
     /// Stop it as Ctrl-C does: it must end cleanly.
@@ -185,13 +189,29 @@ fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
     let bus = "udp:239.74.163.2:43621";
     let scratch = Scratch::new("web-foxglove");
     let dumped = scratch.join("dump.txt");
-    let web = Web::start(&[&format!("tug={bus}"), "--db", &dbc(), "--allow-send"]);
+    // Foxglove on a port of its own as well: the client connects there.
+    let mut web = Web::start(&[
+        &format!("tug={bus}"),
+        "--db",
+        &dbc(),
+        "--allow-send",
+        "--foxglove",
+        "127.0.0.1:0",
+    ]);
+    let foxglove = web
+        .lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .strip_prefix("Foxglove also on ws://")
+        .unwrap()
+        .to_string();
     let mut dump = Command::new(env!("CARGO_BIN_EXE_bywire"))
         .args(["dump", "--dbc", &dbc(), &format!("tug={bus}")])
         .stdout(std::fs::File::create(&dumped).unwrap())
         .spawn()
         .unwrap();
-    let (client, mut lines) = foxglove_client(&web.address, "tug", "VehicleToAds_State", 3);
+    let (client, mut lines) = foxglove_client(&foxglove, "tug", "VehicleToAds_State", 3);
     // Probes until dump listens (the client passes them over).
     for _ in 0..100 {
         send(&[bus, "7FE#00"]);

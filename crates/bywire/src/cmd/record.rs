@@ -467,6 +467,7 @@ fn serve_live(
             logs: Vec::new(),
             logs_database: None,
             uploads: false,
+            also: None,
         },
         |hub| hub,
     )?;

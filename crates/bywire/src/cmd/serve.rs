@@ -179,6 +179,7 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                     logs: Vec::new(),
                     logs_database: None,
                     uploads: false,
+                    also: None,
                 },
                 |hub| hub,
             )?;

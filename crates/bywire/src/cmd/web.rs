@@ -53,6 +53,10 @@ pub struct Args {
     /// Address and port to serve on (port 0: any free port, printed).
     #[arg(long, default_value = "127.0.0.1:8080")]
     listen: SocketAddr,
+    /// Serve the Foxglove WebSocket protocol on this address too (the page's port speaks it
+    /// already): for a Foxglove layout that expects its own port, such as 8765.
+    #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    foxglove: Option<SocketAddr>,
     /// Let clients (the page's transmit panel, Foxglove's publish) send frames on the buses.
     #[arg(long)]
     allow_send: bool,
@@ -105,10 +109,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
             logs: args.logs.clone(),
             logs_database: database,
             uploads: !args.no_upload,
+            also: args.foxglove,
         },
         |hub| hub,
     )?;
     live::announce(out, live.address())?;
+    if let Some(also) = live.also() {
+        writeln!(out, "Foxglove also on ws://{also}")?;
+        out.flush()?;
+    }
     let stop = interrupt_flag();
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));

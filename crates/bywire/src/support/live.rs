@@ -27,6 +27,8 @@ pub struct LiveConfig<'a> {
     pub logs_database: Option<Arc<Database>>,
     /// Whether the page may upload logs.
     pub uploads: bool,
+    /// A second address serving the same (`web --foxglove`: Foxglove on a port of its own).
+    pub also: Option<SocketAddr>,
 }
 
 /// A bus to serve: its argument, its bitrate (for the load) and its database.
@@ -46,6 +48,7 @@ pub struct LiveBus {
 pub struct Live {
     address: SocketAddr,
     server: Option<WebServer>,
+    second: Option<WebServer>,
     hub: Arc<Hub>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
@@ -67,6 +70,12 @@ impl Live {
         let mut opened = crate::support::busarg::open_all(&opening)?.into_iter();
         let listener = TcpListener::bind(config.listen)
             .with_context(|| format!("cannot listen on {}", config.listen))?;
+        let also = config
+            .also
+            .map(|address| {
+                TcpListener::bind(address).with_context(|| format!("cannot listen on {address}"))
+            })
+            .transpose()?;
         let mut builder = HubBuilder::new(config.name).metadata("program", "bywire");
         let mut receivers = Vec::with_capacity(buses.len());
         for bus in buses {
@@ -109,10 +118,22 @@ impl Live {
                 .spawn(move || tick(&ticking, &ticker_stop))?,
         );
         let logs = Arc::new(Logs::new(config.logs, config.logs_database, config.uploads));
+        let second = also
+            .map(|listener| {
+                WebServer::start(
+                    Arc::clone(&hub),
+                    Arc::clone(&logs),
+                    listener,
+                    config.access.clone(),
+                )
+            })
+            .transpose()
+            .context("cannot start the second server")?;
         let server = WebServer::start(Arc::clone(&hub), logs, listener, config.access)
             .context("cannot start the web server")?;
         Ok(Live {
             address: server.address(),
+            second,
             server: Some(server),
             hub,
             stop,
@@ -130,10 +151,18 @@ impl Live {
         self.address
     }
 
+    /// Where the second server listens, if there is one.
+    pub fn also(&self) -> Option<SocketAddr> {
+        self.second.as_ref().map(WebServer::address)
+    }
+
     /// Stop serving and reading; what clients lost, in all.
     pub fn stop(mut self) -> u64 {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(server) = self.server.take() {
+        for server in [self.server.take(), self.second.take()]
+            .into_iter()
+            .flatten()
+        {
             server.stop();
         }
         for thread in std::mem::take(&mut self.threads) {

@@ -99,6 +99,7 @@ impl SimWeb {
                 logs: Vec::new(),
                 logs_database: None,
                 uploads: false,
+                also: None,
             },
             |hub| {
                 hub.channel("/tug/pose", "foxglove.PoseInFrame", pose_schema())
