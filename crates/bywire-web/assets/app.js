@@ -13,6 +13,7 @@ const state = {
   capabilities: [],
   database: { buses: [] },   // each bus with its database's messages
   rows: new Map(),          // fixed mode: "bus/id" -> row
+  byName: new Map(),        // "bus/message" -> its row
   scroll: [],               // scrolling mode: the latest frames
   decodedLatest: new Map(), // "bus/name" -> decoded object
   stats: new Map(),         // bus -> statistics
@@ -23,9 +24,13 @@ const state = {
   current: null,
   received: 0,
   start: null,              // the first frame's time: the trace counts from it
+  latest: 0,                // the newest frame's time
   dirty: true,
 };
 const SCROLL_ROWS = 500;
+// Rows the trace draws at most (a bus of 2,000 identifiers would otherwise cost the page more
+// than its frames do); a filter narrows what they are.
+const TRACE_ROWS = 200;
 const PLOT_POINTS = 20000;
 
 // ---- the protocol --------------------------------------------------------------------------
@@ -50,10 +55,13 @@ function onText(message) {
       break;
     case "advertise": {
       if (message.channels.some((c) => c.topic === "/tug/state")) $("tug-pane").hidden = false;
+      // Each bus's batches (every frame with its signals, 20 messages a second however busy
+      // the bus) and statistics, and the channels that are not a bus's: not a message per frame.
+      const wanted = ["bywire.CanFrames", "bywire.BusStats", "bywire.TugState", "foxglove.PosesInFrame"];
       const subscriptions = [];
       for (const channel of message.channels) {
         state.channels.set(channel.id, channel);
-        subscriptions.push({ id: channel.id, channelId: channel.id });
+        if (wanted.includes(channel.schemaName)) subscriptions.push({ id: channel.id, channelId: channel.id });
       }
       socket.send(JSON.stringify({ op: "subscribe", subscriptions }));
       break;
@@ -78,9 +86,14 @@ function onBinary(buffer) {
   const leaf = topic.slice(slash + 1);
   if (channel.schemaName === "foxglove.PosesInFrame" && topic === "/tug/route") state.route = message.poses;
   else if (channel.schemaName === "bywire.TugState") { state.tug = message; state.tugDirty = true; }
-  else if (leaf === "frames" && channel.schemaName === "bywire.CanFrame") onFrame(time, message);
-  else if (leaf === "stats" && channel.schemaName === "bywire.BusStats") state.stats.set(bus, message);
-  else if (channel.schemaName !== "foxglove.PoseInFrame") onDecoded(time, bus, leaf, message);
+  else if (channel.schemaName === "bywire.CanFrames") {
+    for (const f of message.frames) {
+      const at = f.timestamp.sec + f.timestamp.nsec / 1e9;
+      onFrame(at, f);
+      if (f.signals) onDecoded(at, f.bus, f.name, f.signals);
+      for (const pdu of f.pdus || []) onDecoded(at, f.bus, pdu.name, pdu.signals);
+    }
+  } else if (leaf === "stats" && channel.schemaName === "bywire.BusStats") state.stats.set(bus, message);
 }
 
 function publish(topic, object) {
@@ -102,20 +115,33 @@ function publish(topic, object) {
 function onFrame(time, f) {
   state.received++;
   if (state.start === null) state.start = time;
+  if (time > state.latest) state.latest = time;
   if (state.paused) return;
+  // One row per identifier, updated in place (a busy bus allocates nothing per frame here).
   const key = `${f.bus}/${f.id}/${f.extended}`;
-  const previous = state.rows.get(key);
-  const row = {
-    time, bus: f.bus, id: f.id, extended: f.extended, name: f.name, dlc: f.dlc, data: f.data,
-    error: f.error, remote: f.remote, fd: f.fd,
-    count: previous ? previous.count + 1 : 1,
-    period: previous ? (time - previous.time) * 1e3 : null,
-    changedAt: previous ? previous.changedAt.slice() : f.data.map(() => -1e9),
-    decoded: previous ? previous.decoded : null,
-  };
-  if (previous) f.data.forEach((b, i) => { if (previous.data[i] !== b) row.changedAt[i] = time; });
-  state.rows.set(key, row);
-  state.scroll.push({ ...row });
+  let row = state.rows.get(key);
+  if (!row) {
+    row = { bus: f.bus, id: f.id, extended: f.extended, name: f.name, count: 0, period: null, time, data: [], changedAt: [], decoded: null };
+    state.rows.set(key, row);
+    if (f.name) state.byName.set(`${f.bus}/${f.name}`, row);
+  } else {
+    row.period = (time - row.time) * 1e3;
+  }
+  const first = row.count === 0;
+  for (let i = 0; i < f.data.length; i++) {
+    if (first) row.changedAt[i] = -1e9;
+    else if (row.data[i] !== f.data[i]) row.changedAt[i] = time;
+  }
+  row.count++;
+  row.time = time;
+  row.data = f.data;
+  row.error = f.error;
+  row.remote = f.remote;
+  row.fd = f.fd;
+  // The scrolling trace keeps the frames themselves.
+  f.time = time;
+  f.decoded = null;
+  state.scroll.push(f);
   if (state.scroll.length > SCROLL_ROWS * 2) state.scroll.splice(0, state.scroll.length - SCROLL_ROWS);
   state.dirty = true;
 }
@@ -124,7 +150,8 @@ function onDecoded(time, bus, name, values) {
   state.decodedLatest.set(`${bus}/${name}`, values);
   if (!state.paused) {
     // The frame it came from arrived just before it, on the raw channel.
-    for (const row of state.rows.values()) if (row.bus === bus && row.name === name) row.decoded = values;
+    const row = state.byName.get(`${bus}/${name}`);
+    if (row) row.decoded = values;
     const last = state.scroll[state.scroll.length - 1];
     if (last && last.bus === bus && last.name === name) last.decoded = values;
   }
@@ -186,9 +213,10 @@ function signalsText(decoded) {
 function rowHtml(row, now) {
   const data = row.remote ? "remote" : row.data.map((b, i) =>
     (state.fixed && now - row.changedAt[i] < 1 ? `<span class="changed">${hex(b, 2)}</span>` : hex(b, 2))).join(" ");
+  const shownTime = row.time;
   const id = row.error ? "ERROR" : hex(row.id, row.extended ? 8 : 3);
   const cells = [
-    (row.time - state.start).toFixed(6), row.bus, id, row.name || "", row.data.length, data,
+    (shownTime - state.start).toFixed(6), row.bus, id, row.name || "", row.data.length, data,
     state.fixed ? row.count : "", state.fixed && row.period != null ? row.period.toFixed(1) : "",
   ];
   const escape = (s) => String(s).replace(/[&<>]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;" })[c]);
@@ -196,12 +224,16 @@ function rowHtml(row, now) {
 }
 
 function drawTrace() {
-  const now = Math.max(0, ...[...state.rows.values()].map((r) => r.time));
+  const now = state.latest;
   let rows = state.fixed
     ? [...state.rows.values()].sort((a, b) => a.bus.localeCompare(b.bus) || a.id - b.id)
     : state.scroll.slice(-SCROLL_ROWS);
   rows = rows.filter(matches);
-  document.querySelector("#trace tbody").innerHTML = rows.map((r) => rowHtml(r, now)).join("");
+  const more = rows.length - TRACE_ROWS;
+  if (more > 0) rows = state.fixed ? rows.slice(0, TRACE_ROWS) : rows.slice(-TRACE_ROWS);
+  const html = rows.map((r) => rowHtml(r, now));
+  if (more > 0) html.push(`<tr><td colspan="9" class="hint">${more} more rows: a filter narrows them</td></tr>`);
+  document.querySelector("#trace tbody").innerHTML = html.join("");
 }
 
 function drawBuses() {

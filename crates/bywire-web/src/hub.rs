@@ -4,9 +4,11 @@
 //! queue — a slow client loses messages (counted and told), never stalls a bus or another
 //! client. What clients publish becomes frames on a bus, when sending is allowed.
 //!
-//! Channels per bus: `/BUS/frames` (every frame), `/BUS/stats` (once a second) and
-//! `/BUS/MESSAGE` for each message of the database (as the MCAP decoded channels); more
-//! channels (the simulated tug's pose) can be added before the hub starts.
+//! Channels per bus: `/BUS/frames` (every frame), `/BUS/stats` (once a second), `/BUS/batch`
+//! (every frame of the last 50 ms with its decoded signals, in one message: for viewers that
+//! draw at their own pace, as the page does — a message per frame costs a browser more than
+//! the frame) and `/BUS/MESSAGE` for each message of the database (as the MCAP decoded
+//! channels); more channels (the simulated tug's pose) can be added before the hub starts.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
@@ -34,6 +36,11 @@ pub const MAX_CLIENTS: usize = 32;
 const MAX_CLIENT_CHANNELS: usize = 256;
 /// Channels in all (buses × messages and added ones).
 const MAX_CHANNELS: usize = 1 << 20;
+/// Within a bus's channels: the batches, and the first message's.
+const BATCH: usize = 2;
+const FIRST_MESSAGE: usize = 3;
+/// Frames one batch holds; more before it is sent are left out of it (and counted).
+const MAX_BATCH: usize = 20_000;
 
 /// A message for a client's socket.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -57,6 +64,8 @@ struct Counters {
     /// Its error counters as its error frames last gave them (transmit << 8 | receive; and
     /// whether any did, in bit 16).
     counters: AtomicU32,
+    /// Frames left out of a full batch.
+    unbatched: AtomicU64,
 }
 
 /// Controller states, as SocketCAN's error frames tell them.
@@ -95,8 +104,10 @@ struct BusSlot {
     counters: Counters,
     /// The bus's database (buses may share one).
     database: Option<Arc<Database>>,
-    /// Its first channel's index: raw frames, then statistics, then a channel per message.
+    /// Its first channel's index: raw frames, then statistics, batches, a channel per message.
     base: usize,
+    /// The frames of the batch being gathered.
+    batch: Mutex<Vec<Json>>,
 }
 
 /// A database compiled for decoding, with each message's JSON form.
@@ -138,7 +149,7 @@ impl Database {
 impl BusSlot {
     /// How many channels it has.
     fn channels(&self) -> usize {
-        2 + self.database.as_ref().map_or(0, |d| d.messages())
+        FIRST_MESSAGE + self.database.as_ref().map_or(0, |d| d.messages())
     }
 }
 
@@ -227,6 +238,7 @@ impl HubBuilder {
             counters: Counters::default(),
             database,
             base: 0,
+            batch: Mutex::new(Vec::new()),
         });
         self
     }
@@ -271,6 +283,12 @@ impl HubBuilder {
                 format!("/{}/stats", bus.name),
                 "bywire.BusStats",
                 &stats_schema(),
+            ));
+            channels.push(Channel::json(
+                next_id(&channels),
+                format!("/{}/batch", bus.name),
+                "bywire.CanFrames",
+                &batch_schema(),
             ));
             if let Some(database) = &bus.database {
                 for (index, json) in database.json.iter().enumerate() {
@@ -542,10 +560,12 @@ impl Hub {
         }
         let target = match within {
             0 => Target::Frames { bus },
-            1 => return Err(format!("{}: statistics cannot be sent", channel.topic)),
+            n if n < FIRST_MESSAGE => {
+                return Err(format!("{}: not a channel to send on", channel.topic))
+            }
             n => Target::Message {
                 bus,
-                message: n - 2,
+                message: n - FIRST_MESSAGE,
                 counter: 0,
             },
         };
@@ -717,27 +737,72 @@ impl Hub {
                 .to_string()
                 .into_bytes()
         });
-        let Some((index, message, result)) = decoded else {
-            return;
-        };
-        let Some(database) = database else {
-            return;
-        };
-        if let Some(pdus) = database.decoder.contained(index, frame.data()) {
-            for pdu in pdus.flatten() {
-                let Some((pdu_message, codec, pdu_index)) = pdu.message else {
-                    continue;
-                };
-                scratch.clear();
-                scratch.resize(codec.signal_count(), None);
-                if codec.decode(pdu.pdu.data, scratch).is_ok() {
-                    self.publish_decoded(database, base, pdu_index, pdu_message, scratch, time);
+        let batching = self.subscribed(base + BATCH);
+        let mut signals = None;
+        let mut pdus = Vec::new();
+        if let (Some((index, message, result)), Some(database)) = (decoded, database) {
+            if let Some(contained) = database.decoder.contained(index, frame.data()) {
+                for pdu in contained.flatten() {
+                    let Some((pdu_message, codec, pdu_index)) = pdu.message else {
+                        continue;
+                    };
+                    scratch.clear();
+                    scratch.resize(codec.signal_count(), None);
+                    if codec.decode(pdu.pdu.data, scratch).is_ok() {
+                        self.publish_decoded(database, base, pdu_index, pdu_message, scratch, time);
+                        if let Some(object) = batching
+                            .then(|| database.object(pdu_index, pdu_message, scratch))
+                            .flatten()
+                        {
+                            pdus.push(
+                                json!({"name": pdu_message.display_name(), "signals": object}),
+                            );
+                        }
+                    }
+                }
+            } else if result.is_ok() {
+                self.publish_decoded(database, base, index, message, scratch, time);
+                signals = batching
+                    .then(|| database.object(index, message, scratch))
+                    .flatten();
+            }
+        }
+        if batching {
+            let mut entry = frame_json(&slot.name, received.timestamp, frame, name);
+            if let Json::Object(object) = &mut entry {
+                if let Some(signals) = signals {
+                    object.insert("signals".into(), Json::Object(signals));
+                }
+                if !pdus.is_empty() {
+                    object.insert("pdus".into(), Json::Array(pdus));
                 }
             }
-            return;
+            let mut batch = slot
+                .batch
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if batch.len() < MAX_BATCH {
+                batch.push(entry);
+            } else {
+                counters.unbatched.fetch_add(1, Ordering::Relaxed);
+            }
         }
-        if result.is_ok() {
-            self.publish_decoded(database, base, index, message, scratch, time);
+    }
+
+    /// Send each bus's batch of frames gathered since the last call (every 50 ms).
+    pub fn flush(&self, now: Timestamp) {
+        for slot in &self.buses {
+            let frames = std::mem::take(
+                &mut *slot
+                    .batch
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner),
+            );
+            if !frames.is_empty() {
+                self.publish(slot.base + BATCH, now.as_nanos(), || {
+                    json!({ "frames": frames }).to_string().into_bytes()
+                });
+            }
         }
     }
 
@@ -753,7 +818,7 @@ impl Hub {
         let Some(json) = database.json.get(index) else {
             return;
         };
-        self.publish(base + 2 + index, time, || {
+        self.publish(base + FIRST_MESSAGE + index, time, || {
             Json::Object(json.object(message, values))
                 .to_string()
                 .into_bytes()
@@ -820,6 +885,7 @@ impl Hub {
                 "load_percent": load,
                 "bitrate": slot.bitrate,
                 "dropped": c.dropped.load(Ordering::Relaxed),
+                "unbatched": c.unbatched.load(Ordering::Relaxed),
                 "closed": c.closed.load(Ordering::Relaxed),
             });
             self.publish(slot.base + 1, now.as_nanos(), || {
@@ -960,6 +1026,17 @@ fn frame_schema() -> Json {
     })
 }
 
+fn batch_schema() -> Json {
+    json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": "bywire.CanFrames",
+        "type": "object",
+        "properties": {
+            "frames": {"type": "array", "items": {"type": "object", "description": "a bywire.CanFrame, with its decoded `signals` (and a container's `pdus`) when the database knows it"}},
+        },
+    })
+}
+
 fn stats_schema() -> Json {
     json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -974,6 +1051,7 @@ fn stats_schema() -> Json {
             "load_percent": {"type": ["number", "null"], "description": "of the bitrate, when known"},
             "bitrate": {"type": ["integer", "null"]},
             "dropped": {"type": "integer", "description": "frames the receiving queue dropped"},
+            "unbatched": {"type": "integer", "description": "frames left out of full batches"},
             "closed": {"type": "boolean"},
             "state": {"type": ["string", "null"], "description": "the controller's state, as its error frames said it"},
             "tec": {"type": ["integer", "null"], "description": "transmit error counter"},

@@ -249,8 +249,13 @@ fn foxglove_clients_see_what_dump_prints_and_publish_frames() {
         .map(|t| t["topic"].as_str().unwrap())
         .collect();
     assert_eq!(
-        topics[..3],
-        ["/tug/frames", "/tug/stats", "/tug/EmergencyBrake"]
+        topics[..4],
+        [
+            "/tug/frames",
+            "/tug/stats",
+            "/tug/batch",
+            "/tug/EmergencyBrake"
+        ]
     );
     assert!(topics.contains(&"/tug/VehicleToAds_State"), "{topics:?}");
     for topic in said["topics"].as_array().unwrap() {

@@ -201,13 +201,14 @@ pub fn announce(out: &mut impl std::io::Write, address: SocketAddr) -> Result<()
     Ok(())
 }
 
-/// The statistics once a second, until `stop`.
+/// The batches every 50 ms and the statistics once a second, until `stop`.
 fn tick(hub: &Hub, stop: &AtomicBool) {
     let mut last = Vec::new();
     let mut previous = Instant::now();
     // Bounded by `stop`.
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
+        hub.flush(bywire_bus::monotonic_unix_now());
         let elapsed = previous.elapsed();
         if elapsed >= Duration::from_secs(1) {
             previous = Instant::now();
