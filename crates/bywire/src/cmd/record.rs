@@ -460,15 +460,7 @@ fn serve_live(
         .collect();
     let live = Live::start(
         &fed,
-        LiveConfig {
-            name: "bywire record",
-            listen,
-            access: bywire_web::Access::default(),
-            logs: Vec::new(),
-            logs_database: None,
-            uploads: false,
-            also: None,
-        },
+        LiveConfig::new("bywire record", listen, bywire_web::Access::default()),
         |hub| hub,
     )?;
     crate::support::live::announce(out, live.address())?;

@@ -168,19 +168,15 @@ pub fn run(args: &Args, out: &mut impl Write) -> Result<()> {
                     database,
                     fed: false,
                 }],
-                LiveConfig {
-                    name: "bywire serve",
+                LiveConfig::new(
+                    "bywire serve",
                     listen,
-                    access: bywire_web::Access {
+                    bywire_web::Access {
                         token: token.clone(),
                         origins: args.origins.clone(),
                         allow_send: args.allow_send,
                     },
-                    logs: Vec::new(),
-                    logs_database: None,
-                    uploads: false,
-                    also: None,
-                },
+                ),
                 |hub| hub,
             )?;
             live::announce(out, live.address())?;

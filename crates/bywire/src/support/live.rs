@@ -31,6 +31,21 @@ pub struct LiveConfig<'a> {
     pub also: Option<SocketAddr>,
 }
 
+impl<'a> LiveConfig<'a> {
+    /// A server of buses alone: no logs, no uploads, one port.
+    pub fn new(name: &'a str, listen: SocketAddr, access: Access) -> Self {
+        LiveConfig {
+            name,
+            listen,
+            access,
+            logs: Vec::new(),
+            logs_database: None,
+            uploads: false,
+            also: None,
+        }
+    }
+}
+
 /// A bus to serve: its argument, its bitrate (for the load) and its database.
 pub struct LiveBus {
     /// The bus argument (its name labels the channels).

@@ -87,20 +87,16 @@ impl SimWeb {
             .collect::<Result<Vec<_>>>()?;
         let live = Live::start(
             &buses,
-            LiveConfig {
-                name: "bywire sim",
+            LiveConfig::new(
+                "bywire sim",
                 listen,
                 // A simulation: the page's buttons and transmit panel act on it alone.
-                access: Access {
+                Access {
                     token: None,
                     origins: Vec::new(),
                     allow_send: true,
                 },
-                logs: Vec::new(),
-                logs_database: None,
-                uploads: false,
-                also: None,
-            },
+            ),
             |hub| {
                 hub.channel("/tug/pose", "foxglove.PoseInFrame", pose_schema())
                     .channel("/tug/route", "foxglove.PosesInFrame", route_schema())
