@@ -349,7 +349,9 @@ function busDatabase(name) {
 function buildTree() {
   const tree = $("tree");
   const buses = state.database.buses;
-  const groups = state.database.logs ? [...buses, { name: "logs", messages: state.database.logs.messages }] : buses;
+  // The logs' database has a group of its own only without live buses: with them, a signal
+  // clicked while a log is chosen is plotted from the log.
+  const groups = state.database.logs && !buses.length ? [{ name: "logs", messages: state.database.logs.messages }] : buses;
   tree.innerHTML = "";
   for (const bus of groups) {
     let parent = tree;
