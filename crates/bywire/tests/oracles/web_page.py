@@ -93,9 +93,9 @@ with sync_playwright() as p:
             if name + "_choice" in row["decoded"]:
                 assert row["decoded"][name + "_choice"] == str(last_named[name]), name
         assert bytes(row["data"]) == sent_state[-1]
-        cells = page.evaluate("window.bywire.rows()")
-        shown = [c for c in cells if c[3] == "VehicleToAds_State"]
-        assert shown and "Gear: Drive" in shown[0][8], shown
+        # What the trace shows (drawn ten times a second) follows.
+        wait(page, "window.bywire.rows().some((r) => r[3] === 'VehicleToAds_State' && r[8].includes('Gear: Drive'))",
+             "the state message's decoded row")
 
         # A filter on a signal's value: only the state message's row passes.
         page.fill("#filter", "VelocityActual>5")
