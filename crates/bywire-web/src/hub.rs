@@ -732,12 +732,13 @@ impl Hub {
         let database = slot.database.as_deref();
         let decoded = database.and_then(|d| d.decoder.decode_into(frame, scratch));
         let name = decoded.as_ref().map(|(_, m, _)| m.display_name());
-        self.publish(base, time, || {
-            frame_json(&slot.name, received.timestamp, frame, name)
-                .to_string()
-                .into_bytes()
-        });
         let batching = self.subscribed(base + BATCH);
+        // The frame as JSON once, for the raw channel and the batch alike.
+        let entry = (batching || self.subscribed(base))
+            .then(|| frame_json(&slot.name, received.timestamp, frame, name));
+        if let Some(entry) = &entry {
+            self.publish(base, time, || entry.to_string().into_bytes());
+        }
         let mut signals = None;
         let mut pdus = Vec::new();
         if let (Some((index, message, result)), Some(database)) = (decoded, database) {
@@ -767,8 +768,7 @@ impl Hub {
                     .flatten();
             }
         }
-        if batching {
-            let mut entry = frame_json(&slot.name, received.timestamp, frame, name);
+        if let Some(mut entry) = entry.filter(|_| batching) {
             if let Json::Object(object) = &mut entry {
                 if let Some(signals) = signals {
                     object.insert("signals".into(), Json::Object(signals));
@@ -928,7 +928,7 @@ fn per_second(count: u64, seconds: f64) -> f64 {
 }
 
 /// A time as Foxglove's JSON messages carry one.
-fn time_json(at: Timestamp) -> Json {
+pub fn time_json(at: Timestamp) -> Json {
     let nanos = at.as_nanos();
     json!({"sec": nanos / 1_000_000_000, "nsec": nanos % 1_000_000_000})
 }

@@ -16,6 +16,7 @@ use bywire_dbc::decoder::Decoder;
 use bywire_net::sim::NodeId;
 use bywire_sim::fault::Fault;
 use bywire_sim::tug::{Tug, TugBus};
+use bywire_web::hub::time_json;
 use bywire_web::{Access, Database};
 use serde_json::{json, Value as Json};
 
@@ -222,11 +223,6 @@ impl SimWeb {
     pub fn stop(self) -> u64 {
         self.live.stop()
     }
-}
-
-fn time_json(at: Timestamp) -> Json {
-    let nanos = at.as_nanos();
-    json!({"sec": nanos / 1_000_000_000, "nsec": nanos % 1_000_000_000})
 }
 
 /// A heading about the vertical axis as a quaternion.

@@ -2,7 +2,8 @@
 // `bywire web`: it lists the channels, subscribes to a bus's raw frames and to one decoded
 // message, prints "ready", collects what arrives until it has RAW frames and DECODED
 // messages (frames with identifier 0x7FE are the test's readiness probes), then publishes a
-// raw frame and a message by its signals, and prints one JSON object with everything.
+// raw frame and a message by its signals, waits for their answers, and prints one JSON object
+// with everything.
 //
 // usage: node foxglove_client.js URL BUS MESSAGE RAW DECODED
 "use strict";
@@ -61,9 +62,18 @@ function publishAndFinish() {
   client.sendMessage(control, encoder.encode(JSON.stringify({ VelocityCmd: 2.5, GearCmd: "Reverse" })));
   // A message that cannot be encoded: answered with an error status, nothing sent.
   client.sendMessage(control, encoder.encode(JSON.stringify({ VelocityCmd: 99 })));
-  setTimeout(() => {
+  // Done when the answers are in: with sending allowed, the two frames back from the bus and
+  // the refusal of the third; without, the refusals of both channels (the timeout above
+  // bounds the wait).
+  const sends = (result.serverInfo.capabilities || []).includes("clientPublish");
+  const answered = () => sends
+    ? result.raw.length >= Number(rawWanted) + 2 && result.statuses.some((s) => s.message.includes("VelocityCmd"))
+    : result.statuses.length >= 2;
+  const check = setInterval(() => {
+    if (!answered()) return;
+    clearInterval(check);
     console.log(JSON.stringify(result));
     client.close();
     process.exit(0);
-  }, 500);
+  }, 20);
 }

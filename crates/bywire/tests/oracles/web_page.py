@@ -113,8 +113,8 @@ with sync_playwright() as p:
         page.fill("input[data-signal='SteeringAngleCmd']", "-12.5")
         page.fill("input[data-signal='GearCmd']", "Drive")
         page.click("#send-once")
+        wait(page, "document.getElementById('send-said').textContent.startsWith('sent at')", "the send said")
         page.screenshot(path=f"{shots}/transmit.png")
-        time.sleep(0.2)
         status = page.evaluate("document.getElementById('status').textContent")
     assert not errors, errors
     browser.close()
