@@ -17,6 +17,8 @@ import can
 import cantools
 from playwright.sync_api import sync_playwright
 
+import web_browser
+
 url, candump, dbc_path, shots = sys.argv[1:5]
 db = cantools.database.load_file(dbc_path)
 state = db.get_message_by_name("VehicleToAds_State")
@@ -25,20 +27,12 @@ wanted = [state.decode(bytes(m.data), decode_choices=False)["VelocityActual"]
           for m in frames if m.arbitration_id == state.frame_id]
 
 
-def wait(page, expression, what, timeout=30.0):
-    try:
-        page.wait_for_function(expression, timeout=timeout * 1000)
-    except Exception as error:  # noqa: BLE001 — say what was awaited
-        page.screenshot(path=f"{shots}/failed-logs.png")
-        raise SystemExit(f"the page never showed {what}: {error}")
+def wait(page, expression, what):
+    web_browser.wait(page, expression, what, f"{shots}/failed-logs.png")
 
 
 with sync_playwright() as p:
-    browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
-    page = browser.new_context(bypass_csp=True, viewport={"width": 1500, "height": 900}).new_page()
-    errors = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url)
+    browser, page, errors = web_browser.open_page(p, url)
     wait(page, "document.querySelectorAll('#log-select option').length > 1", "the logs")
     names = page.evaluate("[...document.querySelectorAll('#log-select option')].slice(1).map((o) => o.textContent)")
     counts = {}

@@ -16,6 +16,8 @@ import can
 import cantools
 from playwright.sync_api import sync_playwright
 
+import web_browser
+
 url, group, port, dbc_path, shots = sys.argv[1:6]
 port = int(port)
 db = cantools.database.load_file(dbc_path)
@@ -24,24 +26,13 @@ state = db.get_message_by_name("VehicleToAds_State")
 sensors = db.get_message_by_name("VehicleToAds_Sensors")
 
 
-def wait(page, expression, what, timeout=20.0):
-    """Wait until `expression` (JavaScript) is true in the page."""
-    try:
-        page.wait_for_function(expression, timeout=timeout * 1000)
-    except Exception as error:  # noqa: BLE001 — say what was awaited
-        page.screenshot(path=f"{shots}/failed.png")
-        raise SystemExit(f"the page never showed {what}: {error}")
+def wait(page, expression, what):
+    web_browser.wait(page, expression, what, f"{shots}/failed.png")
 
 
 sent_state = []
 with sync_playwright() as p:
-    browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
-    # Playwright evaluates its expressions with eval, which the page's policy forbids.
-    context = browser.new_context(bypass_csp=True, viewport={"width": 1500, "height": 900})
-    page = context.new_page()
-    errors = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url)
+    browser, page, errors = web_browser.open_page(p, url)
     wait(page, "document.getElementById('status').textContent === 'connected'", "its connection")
     wait(page, "window.bywire.state.channels.size > 0", "the channels")
     page.evaluate(f"window.bywire.plotSignal({json.dumps(bus_name)}, 'VehicleToAds_State', 'VelocityActual', 'm/s')")
